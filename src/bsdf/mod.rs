@@ -1,0 +1,1 @@
+//! BSDFs: evaluation, sampling and densities (twin of `shaders/lib/bsdf.glsl`).

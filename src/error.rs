@@ -1,0 +1,120 @@
+//! The crate's error type: every failure carries the context a user needs to act on it.
+
+use std::path::PathBuf;
+
+use ash::vk;
+
+/// `Result` with [`Error`] as the default error type.
+pub type Result<T, E = Error> = std::result::Result<T, E>;
+
+/// Everything that can go wrong in pathgrad.
+///
+/// Scene problems name the file (and line where there is one), device problems the Vulkan call,
+/// I/O problems the path. The library never panics on bad input; it returns one of these.
+#[derive(Debug, thiserror::Error)]
+pub enum Error {
+    /// The Vulkan loader or an ICD could not be found at all.
+    #[error("no Vulkan device found ({reason}) — install mesa-vulkan-drivers (lavapipe) or a GPU driver")]
+    NoDevice {
+        /// What the loader or the device enumeration said.
+        reason: String,
+    },
+    /// The chosen device lacks a feature pathgrad needs.
+    #[error("Vulkan device '{device}' lacks {feature}; pathgrad needs it ({hint})")]
+    MissingFeature {
+        /// Device name as reported by the driver.
+        device: String,
+        /// The feature or extension that is missing.
+        feature: String,
+        /// What to do about it.
+        hint: String,
+    },
+    /// `--device` / `PATHGRAD_DEVICE` named a device that does not exist.
+    #[error("no Vulkan device matches '{selector}' (available: {available})")]
+    DeviceNotFound {
+        /// The index or UUID the user gave.
+        selector: String,
+        /// A summary of the devices that exist.
+        available: String,
+    },
+    /// A Vulkan call failed.
+    #[error("{call} failed: {result}")]
+    Vulkan {
+        /// The name of the Vulkan call, e.g. `vkCreateBuffer`.
+        call: &'static str,
+        /// The result code.
+        result: vk::Result,
+    },
+    /// A device memory allocation failed.
+    #[error("allocating '{name}' ({size} bytes) failed: {message}")]
+    Allocation {
+        /// The allocation's name.
+        name: String,
+        /// Requested size in bytes.
+        size: u64,
+        /// gpu-allocator's message.
+        message: String,
+    },
+    /// The GPU did not finish in time (lavapipe has no watchdog, so waits are bounded).
+    #[error("GPU work did not finish within {seconds} s ({what})")]
+    Timeout {
+        /// What was being waited for.
+        what: String,
+        /// The timeout in seconds.
+        seconds: u64,
+    },
+    /// A kernel exhausted lavapipe's per-invocation loop budget, so its result would be truncated.
+    #[error(
+        "{kernel}: an invocation ran out of the driver's loop-iteration budget (llvmpipe truncates \
+         loops silently at ~65 535 iterations); the result would be wrong, so it was discarded — \
+         lower --max-depth or simplify the scene"
+    )]
+    LoopBudget {
+        /// The kernel that hit the limit.
+        kernel: &'static str,
+    },
+    /// A scene is invalid.
+    #[error("{location}: {message}")]
+    Scene {
+        /// `file:line:col`, or `builtin:NAME`, or the parameter at fault.
+        location: String,
+        /// What is wrong.
+        message: String,
+    },
+    /// An option or argument is out of range.
+    #[error("invalid {parameter}: {message}")]
+    InvalidArgument {
+        /// The option or parameter name, e.g. `--spp`.
+        parameter: String,
+        /// What is wrong with it.
+        message: String,
+    },
+    /// Reading or writing a file failed.
+    #[error("{}: {source}", path.display())]
+    Io {
+        /// The file.
+        path: PathBuf,
+        /// The underlying error.
+        source: std::io::Error,
+    },
+    /// Encoding or decoding an image failed.
+    #[error("{}: {message}", path.display())]
+    Image {
+        /// The image file.
+        path: PathBuf,
+        /// What went wrong.
+        message: String,
+    },
+}
+
+/// Attaches the name of the Vulkan call to a raw `vk::Result`.
+pub(crate) trait VkResultExt<T> {
+    /// Converts the error into [`Error::Vulkan`] naming `call`.
+    fn vk(self, call: &'static str) -> Result<T>;
+}
+
+impl<T> VkResultExt<T> for std::result::Result<T, vk::Result> {
+    fn vk(self, call: &'static str) -> Result<T> {
+        self.map_err(|result| Error::Vulkan { call, result })
+    }
+}

@@ -1,0 +1,9 @@
+//! pathgrad: a differentiable path tracer on Vulkan compute shaders.
+
+pub mod bsdf;
+pub mod error;
+pub mod image;
+pub mod sampling;
+pub mod stats;
+
+pub use error::{Error, Result};

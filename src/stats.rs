@@ -1,0 +1,1 @@
+//! Statistical tests: chi-square goodness of fit and the special functions it needs.
