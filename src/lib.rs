@@ -2,7 +2,9 @@
 
 pub mod bsdf;
 pub mod error;
+pub mod gpu;
 pub mod image;
+pub mod rng;
 pub mod sampling;
 pub mod stats;
 

@@ -1,1 +1,5 @@
-fn main(){}
+//! The integration tests: one binary, every test runnable on lavapipe.
+
+mod support;
+
+mod twins;

@@ -1,0 +1,86 @@
+// Constants shared by Rust and GLSL: binding numbers, tags, random-number slots, limits.
+//
+// This file is `include!`d by both `src/gpu/abi.rs` and `build.rs`; build.rs hands the table to
+// shaderc as macro definitions, so no `.glsl` file spells any of these numbers. Keep it free of
+// `use` items and of anything but the macro call below.
+
+macro_rules! abi_constants {
+    ($($(#[$doc:meta])* $name:ident = $value:expr;)*) => {
+        $( $(#[$doc])* pub const $name: u32 = $value; )*
+        /// Every constant as (name, value), in declaration order: the macro definitions of the shaders.
+        pub const ABI_CONSTANTS: &[(&str, u32)] = &[$((stringify!($name), $value)),*];
+    };
+}
+
+abi_constants! {
+    /// Invocations per workgroup of the 1-D kernels.
+    WORKGROUP_SIZE = 64;
+
+    /// Binding: per-frame constants (`Frame`).
+    BINDING_FRAME = 0;
+    /// Binding: BVH nodes (`BvhNode[]`).
+    BINDING_NODES = 1;
+    /// Binding: triangle positions in BVH leaf order (`TriPositions[]`).
+    BINDING_TRIS = 2;
+    /// Binding: the original triangle id of each leaf slot (`uint[]`).
+    BINDING_PRIM_IDS = 3;
+    /// Binding: per-triangle shading data by original id (`TriShading[]`).
+    BINDING_SHADING = 4;
+    /// Binding: materials (`Material[]`).
+    BINDING_MATERIALS = 5;
+    /// Binding: emissive triangles with their area CDF (`EmitterTri[]`).
+    BINDING_EMITTERS = 6;
+    /// Binding: the parameter table's values (`float[]`).
+    BINDING_PARAMS = 7;
+    /// Binding: RGB accumulation image (`float[]`, 3 per pixel).
+    BINDING_ACCUM = 8;
+    /// Binding: status flags written by kernels (`uint[]`).
+    BINDING_STATUS = 9;
+    /// Binding: test-probe input (`uint[]`/`float[]`, probe kernels only).
+    BINDING_PROBE_IN = 10;
+    /// Binding: test-probe output (probe kernels only).
+    BINDING_PROBE_OUT = 11;
+
+    /// Material tag: Lambertian diffuse.
+    MAT_DIFFUSE = 0;
+    /// Material tag: rough conductor.
+    MAT_ROUGH_CONDUCTOR = 1;
+    /// Material tag: blend of two leaf materials.
+    MAT_BLEND = 2;
+    /// Leaf BSDF kind: Lambertian diffuse (same value as the material tag).
+    LEAF_DIFFUSE = 0;
+    /// Leaf BSDF kind: rough conductor (same value as the material tag).
+    LEAF_ROUGH_CONDUCTOR = 1;
+    /// Microfacet distribution: Beckmann.
+    DIST_BECKMANN = 0;
+    /// Microfacet distribution: GGX (Trowbridge–Reitz).
+    DIST_GGX = 1;
+
+    /// `TriShading::emitter` of a triangle that does not emit.
+    NO_EMITTER = 0xFFFF_FFFF;
+
+    /// Status bit: an invocation exhausted lavapipe's loop budget (a loop exited early).
+    STATUS_LOOP_BUDGET = 1;
+    /// Status bit: the BVH traversal stack overflowed.
+    STATUS_STACK_OVERFLOW = 2;
+
+    /// Entries of the traversal stack (the BVH depth is checked against it on the host).
+    BVH_STACK_SIZE = 64;
+
+    /// Pass tag of plain renders and loss images (ALGORITHMS.md §2.3).
+    PASS_PRIMAL = 1;
+    /// Stream of per-vertex decisions.
+    STREAM_MAIN = 0;
+    /// Camera vertex, block 0: pixel jitter in dims 0 and 1.
+    DIM_PIXEL_JITTER = 0;
+    /// Surface vertex, block 0: emitter selection.
+    DIM_EMITTER_SELECT = 0;
+    /// Surface vertex, block 0: position on the emitter (dims 1 and 2).
+    DIM_EMITTER_POS = 1;
+    /// Surface vertex, block 1: lobe selection (dim 4).
+    DIM_LOBE = 4;
+    /// Surface vertex, block 1: direction sample (dims 5 and 6).
+    DIM_DIRECTION = 5;
+    /// Surface vertex, block 2: Russian roulette (dim 9).
+    DIM_ROULETTE = 9;
+}

@@ -1,0 +1,113 @@
+// Structs shared by Rust and GLSL, declared once.
+//
+// `src/gpu/abi.rs` expands this into `#[repr(C)]` bytemuck structs; `build.rs` expands the same
+// declarations into the GLSL twins (`generated/abi_structs.glsl`), used by every storage buffer with
+// `layout(scalar)`. Scalar layout inserts no padding and `Pod` refuses implicit padding, so the
+// offsets agree by construction (STYLE.md §3). Field types: u32, f32, Vec2, Vec3 only.
+
+abi_structs! {
+    /// Per-dispatch constants: image size, random-number key, path options, camera.
+    struct Frame {
+        /// Image width in pixels.
+        width: u32,
+        /// Image height in pixels.
+        height: u32,
+        /// Philox key word 0: the user seed.
+        key0: u32,
+        /// Philox key word 1: `(iteration << 8) | pass_tag`.
+        key1: u32,
+        /// Maximum number of surface interactions; `u32::MAX` is unbounded.
+        max_depth: u32,
+        /// Russian roulette starts once `vertex - 1 >= rr_depth`; `u32::MAX` disables it.
+        rr_depth: u32,
+        /// Number of emissive triangles.
+        emitter_count: u32,
+        /// Total area of the emissive triangles (area-proportional emitter sampling).
+        emitter_total_area: f32,
+        /// Pinhole position.
+        cam_origin: Vec3,
+        /// Camera right axis scaled by tan(horizontal half field of view).
+        cam_right: Vec3,
+        /// Camera up axis scaled by tan(vertical half field of view).
+        cam_up: Vec3,
+        /// Camera viewing direction (unit).
+        cam_forward: Vec3,
+    }
+
+    /// One BVH2 node: a leaf when `count > 0` (triangles `first .. first+count` of the leaf-ordered
+    /// arrays), else an inner node with children `first` and `first + 1`.
+    struct BvhNode {
+        /// Box minimum.
+        bmin: Vec3,
+        /// Triangle count of a leaf; 0 for inner nodes.
+        count: u32,
+        /// Box maximum.
+        bmax: Vec3,
+        /// First child (inner) or first leaf slot (leaf).
+        first: u32,
+    }
+
+    /// Triangle vertex positions, in BVH leaf order.
+    struct TriPositions {
+        /// Vertex 0.
+        v0: Vec3,
+        /// Vertex 1.
+        v1: Vec3,
+        /// Vertex 2.
+        v2: Vec3,
+    }
+
+    /// Per-triangle shading data, indexed by the original triangle id.
+    struct TriShading {
+        /// Vertex normal 0 (unit).
+        n0: Vec3,
+        /// Vertex normal 1 (unit).
+        n1: Vec3,
+        /// Vertex normal 2 (unit).
+        n2: Vec3,
+        /// Texture coordinate 0.
+        uv0: Vec2,
+        /// Texture coordinate 1.
+        uv1: Vec2,
+        /// Texture coordinate 2.
+        uv2: Vec2,
+        /// Index into the material array.
+        material: u32,
+        /// Index into the emitter array, or `NO_EMITTER`.
+        emitter: u32,
+    }
+
+    /// A material; its differentiable values are offsets into the parameter array.
+    struct Material {
+        /// `MAT_DIFFUSE`, `MAT_ROUGH_CONDUCTOR` or `MAT_BLEND`.
+        tag: u32,
+        /// `DIST_BECKMANN` or `DIST_GGX` (rough conductor).
+        distribution: u32,
+        /// Blend: material index of child 0 (weight 1 − w).
+        child0: u32,
+        /// Blend: material index of child 1 (weight w).
+        child1: u32,
+        /// Parameter offset of the RGB albedo (diffuse) or specular reflectance (conductor).
+        p_color: u32,
+        /// Parameter offset of the roughness alpha (conductor).
+        p_alpha: u32,
+        /// Parameter offset of the blend weight (blend).
+        p_weight: u32,
+        /// Real part of the conductor's complex index of refraction (RGB).
+        eta: Vec3,
+        /// Imaginary part of the conductor's complex index of refraction (RGB).
+        k: Vec3,
+    }
+
+    /// One emissive triangle, in the order of its area CDF.
+    struct EmitterTri {
+        /// Original triangle id.
+        tri: u32,
+        /// Parameter offset of the RGB radiance.
+        p_radiance: u32,
+        /// Cumulative area fraction up to and including this triangle.
+        cdf: f32,
+        /// Triangle area.
+        area: f32,
+    }
+}

@@ -1,0 +1,195 @@
+//! `Buffer`: a storage buffer with its named allocation, freed on drop; uploads and read-backs go
+//! through staging buffers, so device-local memory is never mapped (PLATFORM.md §6.6).
+
+use std::sync::Arc;
+
+use ash::vk;
+use gpu_allocator::MemoryLocation;
+use gpu_allocator::vulkan::{Allocation, AllocationCreateDesc, AllocationScheme};
+
+use crate::error::{Error, Result, VkResultExt};
+use crate::gpu::context::Context;
+
+/// Vulkan forbids empty buffers; empty arrays (a scene without emitters) get this many bytes.
+const MIN_BUFFER_BYTES: u64 = 16;
+
+/// A buffer and its memory.
+pub struct Buffer {
+    ctx: Arc<Context>,
+    raw: vk::Buffer,
+    allocation: Option<Allocation>,
+    size: u64,
+    name: String,
+}
+
+impl std::fmt::Debug for Buffer {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Buffer").field("name", &self.name).field("size", &self.size).finish()
+    }
+}
+
+impl Buffer {
+    /// Creates a buffer of `size` bytes (at least 16) in `location`, named `name` for allocation
+    /// tracking and validation messages.
+    ///
+    /// # Errors
+    /// Vulkan or allocation failures, naming the buffer.
+    pub fn new(ctx: &Arc<Context>, name: &str, size: u64, usage: vk::BufferUsageFlags, location: MemoryLocation) -> Result<Buffer> {
+        let size = size.max(MIN_BUFFER_BYTES);
+        let info = vk::BufferCreateInfo::default().size(size).usage(usage).sharing_mode(vk::SharingMode::EXCLUSIVE);
+        let device = ctx.device();
+        // SAFETY: valid device and create-info.
+        let raw = unsafe { device.create_buffer(&info, None) }.vk("vkCreateBuffer")?;
+        // SAFETY: `raw` was just created.
+        let requirements = unsafe { device.get_buffer_memory_requirements(raw) };
+        let allocation = ctx.with_allocator(|a| {
+            a.allocate(&AllocationCreateDesc { name, requirements, location, linear: true, allocation_scheme: AllocationScheme::GpuAllocatorManaged })
+        });
+        let allocation = match allocation {
+            Ok(a) => a,
+            Err(e) => {
+                // SAFETY: the buffer has no memory and is not in use.
+                unsafe { device.destroy_buffer(raw, None) };
+                return Err(Error::Allocation { name: name.to_string(), size, message: e.to_string() });
+            }
+        };
+        // SAFETY: the allocation satisfies the buffer's requirements.
+        if let Err(result) = unsafe { device.bind_buffer_memory(raw, allocation.memory(), allocation.offset()) } {
+            ctx.with_allocator(|a| a.free(allocation)).ok();
+            // SAFETY: not in use.
+            unsafe { device.destroy_buffer(raw, None) };
+            return Err(Error::Vulkan { call: "vkBindBufferMemory", result });
+        }
+        ctx.set_name(raw, name);
+        ctx.object_created();
+        Ok(Buffer { ctx: ctx.clone(), raw, allocation: Some(allocation), size, name: name.to_string() })
+    }
+
+    /// A device-local storage buffer that can be copied to and from.
+    ///
+    /// # Errors
+    /// As [`Buffer::new`].
+    pub fn storage(ctx: &Arc<Context>, name: &str, size: u64) -> Result<Buffer> {
+        let usage = vk::BufferUsageFlags::STORAGE_BUFFER | vk::BufferUsageFlags::TRANSFER_SRC | vk::BufferUsageFlags::TRANSFER_DST;
+        Buffer::new(ctx, name, size, usage, MemoryLocation::GpuOnly)
+    }
+
+    /// A device-local storage buffer holding `data`.
+    ///
+    /// # Errors
+    /// As [`Buffer::new`] and [`Buffer::upload`].
+    pub fn storage_with<T: bytemuck::Pod>(ctx: &Arc<Context>, name: &str, data: &[T]) -> Result<Buffer> {
+        let buffer = Buffer::storage(ctx, name, std::mem::size_of_val(data) as u64)?;
+        buffer.upload(data)?;
+        Ok(buffer)
+    }
+
+    /// The Vulkan handle.
+    pub fn raw(&self) -> vk::Buffer {
+        self.raw
+    }
+
+    /// Size in bytes.
+    pub fn size(&self) -> u64 {
+        self.size
+    }
+
+    /// The allocation's name.
+    pub fn name(&self) -> &str {
+        &self.name
+    }
+
+    fn mapped_mut(&mut self) -> Option<&mut [u8]> {
+        self.allocation.as_mut().and_then(Allocation::mapped_slice_mut)
+    }
+
+    /// Copies `data` to the start of the buffer through a staging buffer and waits.
+    ///
+    /// # Errors
+    /// [`Error::InvalidArgument`] if `data` is larger than the buffer; Vulkan failures.
+    pub fn upload<T: bytemuck::Pod>(&self, data: &[T]) -> Result<()> {
+        let bytes: &[u8] = bytemuck::cast_slice(data);
+        if bytes.is_empty() {
+            return Ok(());
+        }
+        if bytes.len() as u64 > self.size {
+            return Err(Error::InvalidArgument { parameter: self.name.clone(), message: format!("{} bytes do not fit in {}", bytes.len(), self.size) });
+        }
+        let mut staging = Buffer::new(&self.ctx, &format!("{} (upload)", self.name), bytes.len() as u64, vk::BufferUsageFlags::TRANSFER_SRC, MemoryLocation::CpuToGpu)?;
+        staging.mapped_mut().expect("CpuToGpu memory is host visible")[..bytes.len()].copy_from_slice(bytes);
+        let device = self.ctx.device();
+        self.ctx.submit_and_wait(&format!("upload {}", self.name), |cmd| {
+            let region = [vk::BufferCopy::default().size(bytes.len() as u64)];
+            let barrier = [vk::MemoryBarrier::default()
+                .src_access_mask(vk::AccessFlags::TRANSFER_WRITE)
+                .dst_access_mask(vk::AccessFlags::SHADER_READ | vk::AccessFlags::SHADER_WRITE)];
+            // SAFETY: both buffers are alive until the submission is waited on.
+            unsafe {
+                device.cmd_copy_buffer(cmd, staging.raw, self.raw, &region);
+                device.cmd_pipeline_barrier(cmd, vk::PipelineStageFlags::TRANSFER, vk::PipelineStageFlags::COMPUTE_SHADER, vk::DependencyFlags::empty(), &barrier, &[], &[]);
+            }
+        })
+    }
+
+    /// Fills the whole buffer with zeros and waits.
+    ///
+    /// # Errors
+    /// Vulkan failures.
+    pub fn clear(&self) -> Result<()> {
+        let device = self.ctx.device();
+        self.ctx.submit_and_wait(&format!("clear {}", self.name), |cmd| {
+            let barrier = [vk::MemoryBarrier::default()
+                .src_access_mask(vk::AccessFlags::TRANSFER_WRITE)
+                .dst_access_mask(vk::AccessFlags::SHADER_READ | vk::AccessFlags::SHADER_WRITE)];
+            // SAFETY: the buffer is alive until the submission is waited on.
+            unsafe {
+                device.cmd_fill_buffer(cmd, self.raw, 0, vk::WHOLE_SIZE, 0);
+                device.cmd_pipeline_barrier(cmd, vk::PipelineStageFlags::TRANSFER, vk::PipelineStageFlags::COMPUTE_SHADER, vk::DependencyFlags::empty(), &barrier, &[], &[]);
+            }
+        })
+    }
+
+    /// Reads the first `count` elements back through a staging buffer.
+    ///
+    /// # Errors
+    /// [`Error::InvalidArgument`] if the buffer holds fewer; Vulkan failures.
+    pub fn download<T: bytemuck::Pod>(&self, count: usize) -> Result<Vec<T>> {
+        let len = (count * size_of::<T>()) as u64;
+        if len > self.size {
+            return Err(Error::InvalidArgument { parameter: self.name.clone(), message: format!("{len} bytes requested from {}", self.size) });
+        }
+        if len == 0 {
+            return Ok(Vec::new());
+        }
+        let staging = Buffer::new(&self.ctx, &format!("{} (read-back)", self.name), len, vk::BufferUsageFlags::TRANSFER_DST, MemoryLocation::GpuToCpu)?;
+        let device = self.ctx.device();
+        self.ctx.submit_and_wait(&format!("read back {}", self.name), |cmd| {
+            let before = [vk::MemoryBarrier::default().src_access_mask(vk::AccessFlags::SHADER_WRITE).dst_access_mask(vk::AccessFlags::TRANSFER_READ)];
+            let after = [vk::MemoryBarrier::default().src_access_mask(vk::AccessFlags::TRANSFER_WRITE).dst_access_mask(vk::AccessFlags::HOST_READ)];
+            let region = [vk::BufferCopy::default().size(len)];
+            // SAFETY: both buffers are alive until the submission is waited on.
+            unsafe {
+                device.cmd_pipeline_barrier(cmd, vk::PipelineStageFlags::COMPUTE_SHADER, vk::PipelineStageFlags::TRANSFER, vk::DependencyFlags::empty(), &before, &[], &[]);
+                device.cmd_copy_buffer(cmd, self.raw, staging.raw, &region);
+                device.cmd_pipeline_barrier(cmd, vk::PipelineStageFlags::TRANSFER, vk::PipelineStageFlags::HOST, vk::DependencyFlags::empty(), &after, &[], &[]);
+            }
+        })?;
+        let bytes = staging.allocation.as_ref().and_then(Allocation::mapped_slice).expect("GpuToCpu memory is host visible");
+        let mut out = vec![T::zeroed(); count];
+        bytemuck::cast_slice_mut(&mut out).copy_from_slice(&bytes[..len as usize]);
+        Ok(out)
+    }
+}
+
+impl Drop for Buffer {
+    fn drop(&mut self) {
+        if let Some(allocation) = self.allocation.take()
+            && let Err(e) = self.ctx.with_allocator(|a| a.free(allocation))
+        {
+            tracing::error!(buffer = %self.name, "freeing buffer memory failed: {e}");
+        }
+        // SAFETY: every submission using this buffer was waited on before the owner let it go.
+        unsafe { self.ctx.device().destroy_buffer(self.raw, None) };
+        self.ctx.object_destroyed();
+    }
+}

@@ -1,0 +1,11 @@
+//! The Vulkan back end: context, buffers, pipelines, scene upload and the renderer.
+
+pub mod abi;
+pub mod buffer;
+pub mod context;
+pub mod pipeline;
+pub mod shaders;
+
+pub use buffer::Buffer;
+pub use context::{Context, ContextDesc, DeviceChoice, DeviceInfo};
+pub use pipeline::{BindGroup, Kernel};
