@@ -16,8 +16,8 @@ abi_constants! {
     /// Invocations per workgroup of the 1-D kernels.
     WORKGROUP_SIZE = 64;
 
-    /// Binding: per-frame constants (`Frame`).
-    BINDING_FRAME = 0;
+    /// Binding: per-dispatch constants (`Globals`).
+    BINDING_GLOBALS = 0;
     /// Binding: BVH nodes (`BvhNode[]`).
     BINDING_NODES = 1;
     /// Binding: triangle positions in BVH leaf order (`TriPositions[]`).

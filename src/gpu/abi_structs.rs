@@ -7,7 +7,7 @@
 
 abi_structs! {
     /// Per-dispatch constants: image size, random-number key, path options, camera.
-    struct Frame {
+    struct Globals {
         /// Image width in pixels.
         width: u32,
         /// Image height in pixels.
@@ -109,5 +109,11 @@ abi_structs! {
         cdf: f32,
         /// Triangle area.
         area: f32,
+        /// Vertex 0 (counter-clockwise seen from the emitting side).
+        v0: Vec3,
+        /// Vertex 1.
+        v1: Vec3,
+        /// Vertex 2.
+        v2: Vec3,
     }
 }

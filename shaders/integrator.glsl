@@ -1,0 +1,94 @@
+// The one path loop (ALGORITHMS.md §3.1): BSDF sampling, next-event estimation on area emitters,
+// power-heuristic MIS and Russian roulette. Twin: src/cpu/path.rs, phase by phase.
+//
+// Random numbers are addressed, never consumed: vertex v reads block 0 (emitter choice and point),
+// block 1 (lobe and direction) and block 2 (roulette) of stream MAIN (ALGORITHMS.md §2.3), so a
+// replay of the path recomputes exactly the same draws.
+#ifndef PATHGRAD_INTEGRATOR_GLSL
+#define PATHGRAD_INTEGRATOR_GLSL
+
+#include "lib/rng.glsl"
+#include "lib/surface.glsl"
+#include "lib/emitter.glsl"
+
+#define FLOAT_MAX 3.402823466e38
+
+vec4 draw_block(uint pixel, uint sample_index, uint vertex, uint block) {
+    return uniform4(uvec2(globals.key0, globals.key1), pixel, sample_index, vertex, STREAM_MAIN, block, 0u);
+}
+
+// Radiance L of one camera path through `pixel` (row-major index) for sample `sample_index`.
+vec3 trace_path(uint pixel, uint sample_index) {
+    // ---- camera ray ----
+    vec4 u_cam = draw_block(pixel, sample_index, 0u, DIM_PIXEL_JITTER / 4u);
+    uint px = pixel % globals.width;
+    uint py = pixel / globals.width;
+    float sx = 2.0 * (float(px) + u_cam.x) / float(globals.width) - 1.0;
+    float sy = 1.0 - 2.0 * (float(py) + u_cam.y) / float(globals.height);
+    Ray ray = make_ray(globals.cam_origin, normalize(globals.cam_forward + sx * globals.cam_right + sy * globals.cam_up));
+
+    vec3 throughput = vec3(1.0);  // β (ALGORITHMS.md §3.1)
+    vec3 radiance = vec3(0.0);    // L
+    float prev_pdf_f = 0.0;       // density with which the previous vertex sampled ray.dir
+    bool finished = false;
+    for (uint vertex = 1u; vertex <= globals.max_depth; vertex++) {
+        // ---- intersection ----
+        Hit hit = bvh_closest_hit(ray, 0.0, FLOAT_MAX);
+        if (!hit.valid) { finished = true; break; }
+        Surface s = surface_at(hit);
+        vec3 wi_world = -ray.dir;
+
+        // ---- emitter hit ----
+        float cos_emit = dot(s.ng, wi_world);
+        if (s.emitter != NO_EMITTER && cos_emit > 0.0) {
+            float w_b = 1.0;
+            if (vertex > 1u) w_b = mis_power(prev_pdf_f, emitter_pdf_solid_angle(hit.t, cos_emit));
+            radiance += throughput * w_b * param_rgb(emitters[s.emitter].p_radiance);
+        }
+        if (vertex >= globals.max_depth) { finished = true; break; }
+
+        Bsdf bsdf = resolve_bsdf(s.material);
+        ShadingFrame frame = shading_frame(s.ns);
+        vec3 wi = to_local(frame, wi_world);
+
+        // ---- emitter sampling ----
+        vec4 u_em = draw_block(pixel, sample_index, vertex, DIM_EMITTER_SELECT / 4u);
+        EmitterSample es = sample_emitter(u_em[DIM_EMITTER_SELECT % 4u], vec2(u_em[DIM_EMITTER_POS % 4u], u_em[DIM_EMITTER_POS % 4u + 1u]));
+        if (es.valid) {
+            vec3 origin = offset_origin(s.p, s.ng, es.point - s.p);
+            vec3 to_light = es.point - origin;
+            float dist = length(to_light);
+            vec3 wl = to_light / dist;
+            float p_e = emitter_pdf_solid_angle(dist, dot(es.normal, -wl));
+            vec3 wo = to_local(frame, wl);
+            vec3 f = bsdf_eval(bsdf, wi, wo);
+            if (p_e > 0.0 && max_component(f) > 0.0 && !bvh_occluded(make_ray(origin, wl), 0.0, dist * (1.0 - SHADOW_EPSILON))) {
+                float w_n = mis_power(p_e, bsdf_pdf(bsdf, wi, wo));
+                radiance += throughput * w_n * f * es.radiance / p_e;
+            }
+        }
+
+        // ---- BSDF sampling ----
+        vec4 u_bs = draw_block(pixel, sample_index, vertex, DIM_LOBE / 4u);
+        BsdfSample bs = bsdf_sample(bsdf, wi, u_bs[DIM_LOBE % 4u], vec2(u_bs[DIM_DIRECTION % 4u], u_bs[DIM_DIRECTION % 4u + 1u]));
+        if (!bs.valid || !(bs.pdf > 0.0)) { finished = true; break; }
+        throughput *= bs.value / bs.pdf;
+        prev_pdf_f = bs.pdf;
+
+        // ---- Russian roulette ----
+        if (vertex - 1u >= globals.rr_depth) {
+            float u_rr = draw_block(pixel, sample_index, vertex, DIM_ROULETTE / 4u)[DIM_ROULETTE % 4u];
+            float p_rr = min(max_component(throughput), 0.95);
+            if (!(u_rr < p_rr)) { finished = true; break; }
+            throughput /= p_rr;
+        }
+        if (!(max_component(throughput) > 0.0)) { finished = true; break; }
+
+        vec3 wo_world = to_world(frame, bs.wo);
+        ray = make_ray(offset_origin(s.p, s.ng, wo_world), wo_world);
+    }
+    if (!finished) raise_status(STATUS_LOOP_BUDGET);
+    return radiance;
+}
+
+#endif

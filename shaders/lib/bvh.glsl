@@ -1,0 +1,105 @@
+// In-shader BVH2 traversal: closest hit and shadow any-hit (twin of src/bvh.rs).
+//
+// lavapipe truncates loops silently once an invocation batch has spent ~65 535 iterations
+// (PLATFORM.md §6.1). Every loop here checks after it ends whether it ended for its own reason;
+// if not, the budget ran out and STATUS_LOOP_BUDGET is raised, so a truncated result is never used.
+#ifndef PATHGRAD_BVH_GLSL
+#define PATHGRAD_BVH_GLSL
+
+#include "abi.glsl"
+
+#define MIN_DIR_COMPONENT 1e-20
+
+struct Ray { vec3 origin; vec3 dir; vec3 inv_dir; };
+struct Hit { float t; uint slot; float b1; float b2; bool valid; };
+
+float safe_component(float x) {
+    return abs(x) < MIN_DIR_COMPONENT ? (x < 0.0 ? -MIN_DIR_COMPONENT : MIN_DIR_COMPONENT) : x;
+}
+
+Ray make_ray(vec3 origin, vec3 dir) {
+    vec3 safe = vec3(safe_component(dir.x), safe_component(dir.y), safe_component(dir.z));
+    return Ray(origin, dir, vec3(1.0) / safe);
+}
+
+// Möller–Trumbore; returns (t, b1, b2) in xyz and w = 1 on a hit with tmin < t < tmax.
+vec4 intersect_triangle(Ray ray, TriPositions tri, float tmin, float tmax) {
+    precise vec3 e1 = tri.v1 - tri.v0;
+    precise vec3 e2 = tri.v2 - tri.v0;
+    precise vec3 p = cross(ray.dir, e2);
+    precise float det = dot(e1, p);
+    if (det == 0.0) return vec4(0.0);
+    precise float inv_det = 1.0 / det;
+    precise vec3 s = ray.origin - tri.v0;
+    precise float b1 = dot(s, p) * inv_det;
+    if (!(b1 >= 0.0 && b1 <= 1.0)) return vec4(0.0);
+    precise vec3 q = cross(s, e1);
+    precise float b2 = dot(ray.dir, q) * inv_det;
+    if (b2 < 0.0 || b1 + b2 > 1.0) return vec4(0.0);
+    precise float t = dot(e2, q) * inv_det;
+    return (t > tmin && t < tmax) ? vec4(t, b1, b2, 1.0) : vec4(0.0);
+}
+
+// Entry distance into the node's box, or -1 when the ray misses it within [tmin, tmax] (tmin >= 0).
+float slab(Ray ray, BvhNode node, float tmin, float tmax) {
+    precise vec3 t0 = (node.bmin - ray.origin) * ray.inv_dir;
+    precise vec3 t1 = (node.bmax - ray.origin) * ray.inv_dir;
+    vec3 lo = min(t0, t1);
+    vec3 hi = max(t0, t1);
+    float near = max(max(max(lo.x, lo.y), lo.z), tmin);
+    float far = min(min(min(hi.x, hi.y), hi.z), tmax);
+    return near <= far ? near : -1.0;
+}
+
+Hit bvh_traverse(Ray ray, float tmin, float tmax, bool any_hit) {
+    Hit best = Hit(0.0, 0u, 0.0, 0.0, false);
+    if (slab(ray, nodes[0], tmin, tmax) < 0.0) return best;
+    uint stack[BVH_STACK_SIZE];
+    stack[0] = 0u;
+    uint sp = 1u;
+    bool stopped = false;
+    while (sp > 0u) {
+        sp -= 1u;
+        BvhNode node = nodes[stack[sp]];
+        if (node.count > 0u) {
+            uint end = node.first + node.count;
+            uint slot = node.first;
+            for (; slot < end; slot++) {
+                vec4 h = intersect_triangle(ray, tris[slot], tmin, tmax);
+                if (h.w != 0.0) {
+                    tmax = h.x;
+                    best = Hit(h.x, slot, h.y, h.z, true);
+                    if (any_hit) break;
+                }
+            }
+            if (any_hit && best.valid) { stopped = true; break; }
+            if (slot < end) { raise_status(STATUS_LOOP_BUDGET); break; }
+        } else {
+            uint a = node.first;
+            uint b = node.first + 1u;
+            float ta = slab(ray, nodes[a], tmin, tmax);
+            float tb = slab(ray, nodes[b], tmin, tmax);
+            bool ha = ta >= 0.0;
+            bool hb = tb >= 0.0;
+            if (sp + 2u > BVH_STACK_SIZE) { raise_status(STATUS_STACK_OVERFLOW); break; }
+            // Push the farther child first so the nearer one is visited next.
+            if (ha && hb) {
+                bool b_nearer = tb < ta;
+                stack[sp] = b_nearer ? a : b;
+                stack[sp + 1u] = b_nearer ? b : a;
+                sp += 2u;
+            } else if (ha) {
+                stack[sp] = a; sp += 1u;
+            } else if (hb) {
+                stack[sp] = b; sp += 1u;
+            }
+        }
+    }
+    if (sp > 0u && !stopped) raise_status(STATUS_LOOP_BUDGET);
+    return best;
+}
+
+Hit bvh_closest_hit(Ray ray, float tmin, float tmax) { return bvh_traverse(ray, tmin, tmax, false); }
+bool bvh_occluded(Ray ray, float tmin, float tmax) { return bvh_traverse(ray, tmin, tmax, true).valid; }
+
+#endif

@@ -1,0 +1,38 @@
+// Area emitters on triangles: area-proportional sampling and densities (twin of src/cpu/emitter.rs).
+#ifndef PATHGRAD_EMITTER_GLSL
+#define PATHGRAD_EMITTER_GLSL
+
+#include "abi.glsl"
+#include "sampling.glsl"
+
+struct EmitterSample { vec3 point; vec3 normal; vec3 radiance; bool valid; };
+
+// Chooses an emissive triangle with probability proportional to its area (u_select), then a
+// uniform point on it (u_pos). The area density is therefore 1 / total emissive area everywhere.
+EmitterSample sample_emitter(float u_select, vec2 u_pos) {
+    EmitterSample s = EmitterSample(vec3(0.0), vec3(0.0), vec3(0.0), false);
+    uint count = globals.emitter_count;
+    if (count == 0u) return s;
+    uint lo = 0u;
+    uint hi = count - 1u;
+    while (lo < hi) {
+        uint mid = (lo + hi) / 2u;
+        if (emitters[mid].cdf > u_select) hi = mid; else lo = mid + 1u;
+    }
+    if (lo < hi) { raise_status(STATUS_LOOP_BUDGET); return s; }
+    EmitterTri e = emitters[lo];
+    vec2 b = sample_uniform_triangle(u_pos);
+    s.point = (1.0 - b.x - b.y) * e.v0 + b.x * e.v1 + b.y * e.v2;
+    s.normal = normalize(cross(e.v1 - e.v0, e.v2 - e.v0));
+    s.radiance = param_rgb(e.p_radiance);
+    s.valid = true;
+    return s;
+}
+
+// Solid-angle density of reaching an emitter point at distance `dist` whose normal makes cosine
+// `cos_emitter` with the direction back to the shading point.
+float emitter_pdf_solid_angle(float dist, float cos_emitter) {
+    return cos_emitter > 0.0 ? dist * dist / (cos_emitter * globals.emitter_total_area) : 0.0;
+}
+
+#endif

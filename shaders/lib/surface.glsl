@@ -1,0 +1,75 @@
+// Surface interactions and material resolution: hit → position, normals, BSDF (twin of src/cpu/surface.rs).
+#ifndef PATHGRAD_SURFACE_GLSL
+#define PATHGRAD_SURFACE_GLSL
+
+#include "abi.glsl"
+#include "bvh.glsl"
+#include "bsdf.glsl"
+
+// Spawned rays start this far (relative to the largest coordinate, at least 1) off the surface on
+// the side they leave to, so they do not re-hit the triangle they start on.
+#define RAY_OFFSET 1e-4
+// Shadow rays stop this fraction short of the emitter point so the emitter itself never occludes.
+#define SHADOW_EPSILON 1e-4
+
+struct Surface { vec3 p; vec3 ng; vec3 ns; uint material; uint emitter; };
+
+Surface surface_at(Hit hit) {
+    TriPositions tri = tris[hit.slot];
+    TriShading sh = shading[prim_ids[hit.slot]];
+    float b0 = 1.0 - hit.b1 - hit.b2;
+    Surface s;
+    s.p = b0 * tri.v0 + hit.b1 * tri.v1 + hit.b2 * tri.v2;
+    s.ng = normalize(cross(tri.v1 - tri.v0, tri.v2 - tri.v0));
+    vec3 n = b0 * sh.n0 + hit.b1 * sh.n1 + hit.b2 * sh.n2;
+    s.ns = dot(n, n) > 0.0 ? normalize(n) : s.ng;
+    s.material = sh.material;
+    s.emitter = sh.emitter;
+    return s;
+}
+
+vec3 offset_origin(vec3 p, vec3 ng, vec3 dir) {
+    vec3 a = abs(p);
+    float scale = RAY_OFFSET * max(1.0, max(max(a.x, a.y), a.z));
+    return p + ng * (dot(ng, dir) > 0.0 ? scale : -scale);
+}
+
+Leaf leaf_from_material(Material m) {
+    Leaf l;
+    l.kind = m.tag == MAT_ROUGH_CONDUCTOR ? LEAF_ROUGH_CONDUCTOR : LEAF_DIFFUSE;
+    l.distribution = m.distribution;
+    l.alpha = m.tag == MAT_ROUGH_CONDUCTOR ? params[m.p_alpha] : 0.0;
+    l.color = param_rgb(m.p_color);
+    l.eta = m.eta;
+    l.k = m.k;
+    return l;
+}
+
+// The BSDF of a material with its current parameter values.
+Bsdf resolve_bsdf(uint material_id) {
+    Material m = materials[material_id];
+    Bsdf b;
+    if (m.tag == MAT_BLEND) {
+        b.leaf0 = leaf_from_material(materials[m.child0]);
+        b.leaf1 = leaf_from_material(materials[m.child1]);
+        b.weight = params[m.p_weight];
+        b.blend = true;
+    } else {
+        b.leaf0 = leaf_from_material(m);
+        b.leaf1 = b.leaf0;
+        b.weight = 0.0;
+        b.blend = false;
+    }
+    return b;
+}
+
+// Power heuristic a² / (a² + b²), written so that huge densities neither overflow nor give NaN.
+float mis_power(float a, float b) {
+    if (a <= 0.0) return 0.0;
+    float r = b / a;
+    return 1.0 / (1.0 + r * r);
+}
+
+float max_component(vec3 v) { return max(max(v.x, v.y), v.z); }
+
+#endif

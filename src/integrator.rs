@@ -1,0 +1,88 @@
+//! Options shared by the GPU renderer and the CPU reference: image size, samples, depth, seed.
+
+use crate::error::{Error, Result};
+use crate::gpu::abi::{Globals, PASS_PRIMAL};
+use crate::rng::{PassTag, RngKey};
+use crate::scene::Scene;
+use crate::scene::flat::FlatScene;
+
+/// Bounce cap used when `max_depth` is unbounded: a path that survives Russian roulette this long
+/// is ended (its expected contribution beyond is negligible at any sane albedo).
+pub const UNBOUNDED_DEPTH_CAP: u32 = 1024;
+
+/// Russian roulette starts after this many bounces by default (Mitsuba's `rr_depth`).
+pub const DEFAULT_RR_DEPTH: u32 = 5;
+
+/// What to render.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct RenderOptions {
+    /// Image width in pixels.
+    pub width: u32,
+    /// Image height in pixels.
+    pub height: u32,
+    /// Samples per pixel.
+    pub spp: u32,
+    /// Maximum surface interactions per path (1: emitters only, 2: direct light); `None` unbounded
+    /// (up to [`UNBOUNDED_DEPTH_CAP`]).
+    pub max_depth: Option<u32>,
+    /// Russian roulette starts once the vertex index minus one reaches this; `None` disables it.
+    pub rr_depth: Option<u32>,
+    /// Random seed (Philox key word 0).
+    pub seed: u32,
+}
+
+impl RenderOptions {
+    /// The scene's defaults: its camera's resolution and max depth, 16 spp, seed 0.
+    pub fn for_scene(scene: &Scene) -> RenderOptions {
+        RenderOptions { width: scene.camera.width, height: scene.camera.height, spp: 16, max_depth: Some(scene.max_depth), rr_depth: Some(DEFAULT_RR_DEPTH), seed: 0 }
+    }
+
+    /// Checks ranges.
+    ///
+    /// # Errors
+    /// [`Error::InvalidArgument`] naming the option.
+    pub fn validate(&self) -> Result<()> {
+        let bad = |p: &str, m: &str| Err(Error::InvalidArgument { parameter: p.into(), message: m.into() });
+        if self.width == 0 || self.height == 0 || self.width > 16_384 || self.height > 16_384 {
+            return bad("--width/--height", "must be between 1 and 16384");
+        }
+        if self.spp == 0 {
+            return bad("--spp", "must be at least 1");
+        }
+        if self.max_depth == Some(0) {
+            return bad("--max-depth", "must be at least 1 (or -1 for unbounded)");
+        }
+        Ok(())
+    }
+
+    /// The Philox key of a plain render.
+    pub fn key(&self) -> RngKey {
+        RngKey::new(self.seed, 0, PassTag::Primal)
+    }
+
+    /// The per-dispatch constants for `scene` (flattened as `flat`).
+    pub fn globals(&self, scene: &Scene, flat: &FlatScene) -> Globals {
+        let c = &scene.camera;
+        let forward = (c.target - c.position).normalize();
+        let right = forward.cross(c.up).normalize();
+        let up = right.cross(forward);
+        let tan_y = (c.fov_y_degrees.to_radians() * 0.5).tan();
+        let tan_x = tan_y * self.width as f32 / self.height as f32;
+        let key = self.key();
+        debug_assert_eq!(key.0[1] & 0xFF, PASS_PRIMAL);
+        Globals {
+            width: self.width,
+            height: self.height,
+            key0: key.0[0],
+            key1: key.0[1],
+            max_depth: self.max_depth.unwrap_or(UNBOUNDED_DEPTH_CAP).min(UNBOUNDED_DEPTH_CAP),
+            rr_depth: self.rr_depth.unwrap_or(u32::MAX),
+            emitter_count: flat.emitters.len() as u32,
+            emitter_total_area: flat.emitter_total_area,
+            cam_origin: c.position,
+            cam_right: right * tan_x,
+            cam_up: up * tan_y,
+            cam_forward: forward,
+        }
+    }
+}

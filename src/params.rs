@@ -1,0 +1,128 @@
+//! `ParamTable`: every differentiable value of a scene as a named range of one `f32` array
+//! (ARCHITECTURE.md decision 1). Materials and emitters refer to parameters by offset.
+
+use crate::error::{Error, Result};
+
+/// A handle to one parameter: its index in the table.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub struct ParamId(pub u32);
+
+/// One named parameter: a slice `offset .. offset + len` of the value array.
+#[derive(Clone, Debug, PartialEq)]
+pub struct ParamEntry {
+    /// Stable name, e.g. `red.reflectance.value`.
+    pub name: String,
+    /// First element in the value array.
+    pub offset: u32,
+    /// Number of elements (3 for RGB, 1 for scalars).
+    pub len: u32,
+    /// Inclusive bounds every element must stay within.
+    pub bounds: (f32, f32),
+}
+
+/// The names, shapes and bounds of a scene's parameters, and their current values.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct ParamTable {
+    entries: Vec<ParamEntry>,
+    values: Vec<f32>,
+}
+
+impl ParamTable {
+    /// Adds a parameter with initial `values`.
+    ///
+    /// # Errors
+    /// [`Error::Scene`] naming the parameter if the name is taken, a value is not finite or lies
+    /// outside `bounds`.
+    pub fn add(&mut self, name: &str, values: &[f32], bounds: (f32, f32)) -> Result<ParamId> {
+        if self.entries.iter().any(|e| e.name == name) {
+            return Err(Error::Scene { location: format!("parameter {name}"), message: "defined twice".into() });
+        }
+        for &v in values {
+            if !v.is_finite() || v < bounds.0 || v > bounds.1 {
+                return Err(Error::Scene {
+                    location: format!("parameter {name}"),
+                    message: format!("value {v} is outside [{}, {}]", bounds.0, bounds.1),
+                });
+            }
+        }
+        let id = ParamId(self.entries.len() as u32);
+        self.entries.push(ParamEntry { name: name.to_string(), offset: self.values.len() as u32, len: values.len() as u32, bounds });
+        self.values.extend_from_slice(values);
+        Ok(id)
+    }
+
+    /// The entry of `id`.
+    pub fn entry(&self, id: ParamId) -> &ParamEntry {
+        &self.entries[id.0 as usize]
+    }
+
+    /// Every entry in definition order.
+    pub fn entries(&self) -> &[ParamEntry] {
+        &self.entries
+    }
+
+    /// The flat value array that the GPU sees.
+    pub fn values(&self) -> &[f32] {
+        &self.values
+    }
+
+    /// The values of one parameter.
+    pub fn get(&self, id: ParamId) -> &[f32] {
+        let e = self.entry(id);
+        &self.values[e.offset as usize..(e.offset + e.len) as usize]
+    }
+
+    /// Looks a parameter up by name.
+    pub fn find(&self, name: &str) -> Option<ParamId> {
+        self.entries.iter().position(|e| e.name == name).map(|i| ParamId(i as u32))
+    }
+
+    /// Sets the values of the parameter called `name`.
+    ///
+    /// # Errors
+    /// [`Error::InvalidArgument`] for an unknown name, a wrong number of values, or values outside
+    /// the parameter's bounds.
+    pub fn set(&mut self, name: &str, values: &[f32]) -> Result<()> {
+        let id = self.find(name).ok_or_else(|| Error::InvalidArgument {
+            parameter: name.to_string(),
+            message: format!("no such parameter (known: {})", self.entries.iter().map(|e| e.name.as_str()).collect::<Vec<_>>().join(", ")),
+        })?;
+        let e = self.entry(id).clone();
+        if values.len() != e.len as usize {
+            return Err(Error::InvalidArgument { parameter: name.to_string(), message: format!("expects {} values, got {}", e.len, values.len()) });
+        }
+        if let Some(v) = values.iter().find(|v| !v.is_finite() || **v < e.bounds.0 || **v > e.bounds.1) {
+            return Err(Error::InvalidArgument { parameter: name.to_string(), message: format!("value {v} is outside [{}, {}]", e.bounds.0, e.bounds.1) });
+        }
+        self.values[e.offset as usize..(e.offset + e.len) as usize].copy_from_slice(values);
+        Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn entries_are_contiguous_ranges_of_one_array() {
+        let mut t = ParamTable::default();
+        let a = t.add("a.reflectance.value", &[0.1, 0.2, 0.3], (0.0, 1.0)).unwrap();
+        let b = t.add("b.alpha.value", &[0.5], (1e-3, 1.0)).unwrap();
+        assert_eq!(t.entry(a).offset, 0);
+        assert_eq!(t.entry(b).offset, 3);
+        assert_eq!(t.values(), &[0.1, 0.2, 0.3, 0.5]);
+        t.set("b.alpha.value", &[0.25]).unwrap();
+        assert_eq!(t.get(b), &[0.25]);
+    }
+
+    #[test]
+    fn bad_values_are_rejected_with_the_name() {
+        let mut t = ParamTable::default();
+        let e = t.add("x.alpha.value", &[0.0], (1e-3, 1.0)).unwrap_err().to_string();
+        assert!(e.contains("x.alpha.value") && e.contains("outside"), "{e}");
+        t.add("y", &[1.0], (0.0, 2.0)).unwrap();
+        assert!(t.set("y", &[f32::NAN]).is_err());
+        assert!(t.set("y", &[1.0, 2.0]).unwrap_err().to_string().contains("expects 1"));
+        assert!(t.set("z", &[1.0]).unwrap_err().to_string().contains("no such parameter"));
+    }
+}

@@ -1,0 +1,229 @@
+//! `Scene`: plain data — triangle meshes, materials, area emitters, a pinhole camera and the
+//! parameter table that holds every differentiable value.
+
+pub mod builtin;
+pub mod flat;
+pub mod shapes;
+
+use glam::{Vec2, Vec3};
+
+use crate::bsdf::Distribution;
+use crate::error::{Error, Result};
+use crate::params::{ParamId, ParamTable};
+
+/// Index of a material in [`Scene::materials`].
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct MaterialId(pub u32);
+
+/// A surface material. Differentiable values are parameters; the rest are constants.
+#[derive(Clone, Debug, PartialEq)]
+pub enum Material {
+    /// Lambertian diffuse with RGB albedo (ALGORITHMS.md §4.1).
+    Diffuse {
+        /// RGB albedo, 3 values in [0, 1].
+        albedo: ParamId,
+    },
+    /// Isotropic rough conductor (ALGORITHMS.md §4.2).
+    RoughConductor {
+        /// Microfacet distribution.
+        distribution: Distribution,
+        /// Roughness alpha, 1 value.
+        alpha: ParamId,
+        /// RGB specular reflectance multiplying the Fresnel term.
+        specular: ParamId,
+        /// Real part of the complex index of refraction (RGB).
+        eta: Vec3,
+        /// Imaginary part of the complex index of refraction (RGB); eta = 0, k = 1 gives F ≡ 1.
+        k: Vec3,
+    },
+    /// `(1 − w)·child0 + w·child1` of two non-blend materials (ALGORITHMS.md §4.3).
+    Blend {
+        /// Weight w of child 1, 1 value in [0, 1].
+        weight: ParamId,
+        /// The two children; neither may itself be a blend.
+        children: [MaterialId; 2],
+    },
+}
+
+/// A triangle mesh with one material, optionally emitting.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Mesh {
+    /// Name (used in parameter names and messages).
+    pub name: String,
+    /// Vertex positions.
+    pub positions: Vec<Vec3>,
+    /// Unit vertex normals (one per position); `None` shades with face normals.
+    pub normals: Option<Vec<Vec3>>,
+    /// Texture coordinates (one per position), if any.
+    pub uvs: Option<Vec<Vec2>>,
+    /// Triangles as vertex-index triples; the winding defines the front face (counter-clockwise seen
+    /// from the front), which is the side an area emitter emits to.
+    pub indices: Vec<[u32; 3]>,
+    /// The material.
+    pub material: MaterialId,
+    /// RGB radiance parameter if the mesh is an area emitter.
+    pub emitter: Option<ParamId>,
+}
+
+/// A perspective pinhole camera.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Camera {
+    /// Pinhole position.
+    pub position: Vec3,
+    /// A point the camera looks at.
+    pub target: Vec3,
+    /// The up direction (need not be orthogonal to the viewing direction).
+    pub up: Vec3,
+    /// Vertical field of view in degrees.
+    pub fov_y_degrees: f32,
+    /// Default image width.
+    pub width: u32,
+    /// Default image height.
+    pub height: u32,
+}
+
+/// Everything a render needs.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Scene {
+    /// Where the scene came from (`builtin:NAME` or a path): used in messages.
+    pub source: String,
+    /// Meshes.
+    pub meshes: Vec<Mesh>,
+    /// Materials.
+    pub materials: Vec<Material>,
+    /// The camera.
+    pub camera: Camera,
+    /// Every differentiable value.
+    pub params: ParamTable,
+    /// Default maximum path depth (surface interactions) for this scene.
+    pub max_depth: u32,
+}
+
+/// Bounds of the parameter kinds: reflectances and weights in [0, 1]; roughness above the value
+/// where the microfacet distribution degenerates (ALGORITHMS.md §1, PRB blind spot); radiance ≥ 0.
+pub mod bounds {
+    /// Albedo and specular reflectance.
+    pub const REFLECTANCE: (f32, f32) = (0.0, 1.0);
+    /// Roughness alpha.
+    pub const ALPHA: (f32, f32) = (1e-3, f32::MAX);
+    /// Blend weight.
+    pub const WEIGHT: (f32, f32) = (0.0, 1.0);
+    /// Emitted radiance.
+    pub const RADIANCE: (f32, f32) = (0.0, f32::MAX);
+}
+
+impl Scene {
+    /// An empty scene with `camera`.
+    pub fn new(source: &str, camera: Camera) -> Scene {
+        Scene { source: source.to_string(), meshes: Vec::new(), materials: Vec::new(), camera, params: ParamTable::default(), max_depth: 6 }
+    }
+
+    /// Adds a material and returns its id.
+    pub fn add_material(&mut self, material: Material) -> MaterialId {
+        self.materials.push(material);
+        MaterialId(self.materials.len() as u32 - 1)
+    }
+
+    /// Adds a Lambertian material with parameter `{name}.reflectance.value`.
+    ///
+    /// # Errors
+    /// As [`ParamTable::add`].
+    pub fn add_diffuse(&mut self, name: &str, albedo: Vec3) -> Result<MaterialId> {
+        let albedo = self.params.add(&format!("{name}.reflectance.value"), &albedo.to_array(), bounds::REFLECTANCE)?;
+        Ok(self.add_material(Material::Diffuse { albedo }))
+    }
+
+    /// Adds a rough conductor with parameters `{name}.alpha.value` and
+    /// `{name}.specular_reflectance.value`.
+    ///
+    /// # Errors
+    /// As [`ParamTable::add`].
+    pub fn add_rough_conductor(&mut self, name: &str, distribution: Distribution, alpha: f32, specular: Vec3, eta: Vec3, k: Vec3) -> Result<MaterialId> {
+        let alpha = self.params.add(&format!("{name}.alpha.value"), &[alpha], bounds::ALPHA)?;
+        let specular = self.params.add(&format!("{name}.specular_reflectance.value"), &specular.to_array(), bounds::REFLECTANCE)?;
+        Ok(self.add_material(Material::RoughConductor { distribution, alpha, specular, eta, k }))
+    }
+
+    /// Adds a blend with parameter `{name}.weight.value`.
+    ///
+    /// # Errors
+    /// As [`ParamTable::add`].
+    pub fn add_blend(&mut self, name: &str, weight: f32, children: [MaterialId; 2]) -> Result<MaterialId> {
+        let weight = self.params.add(&format!("{name}.weight.value"), &[weight], bounds::WEIGHT)?;
+        Ok(self.add_material(Material::Blend { weight, children }))
+    }
+
+    /// Adds a mesh; with `radiance`, it becomes an area emitter with parameter
+    /// `{name}.emitter.radiance.value`.
+    ///
+    /// # Errors
+    /// As [`ParamTable::add`].
+    pub fn add_mesh(&mut self, name: &str, geometry: shapes::Geometry, material: MaterialId, radiance: Option<Vec3>) -> Result<()> {
+        let emitter = match radiance {
+            Some(r) => Some(self.params.add(&format!("{name}.emitter.radiance.value"), &r.to_array(), bounds::RADIANCE)?),
+            None => None,
+        };
+        self.meshes.push(Mesh { name: name.to_string(), positions: geometry.positions, normals: geometry.normals, uvs: geometry.uvs, indices: geometry.indices, material, emitter });
+        Ok(())
+    }
+
+    /// Total triangle count.
+    pub fn triangle_count(&self) -> usize {
+        self.meshes.iter().map(|m| m.indices.len()).sum()
+    }
+
+    /// Checks the invariants the renderer relies on.
+    ///
+    /// # Errors
+    /// [`Error::Scene`] naming the scene and the mesh or material at fault: an empty scene, indices
+    /// out of range, non-finite positions, normal/uv counts that do not match, unknown materials,
+    /// nested blends, emitters of zero area, a degenerate camera.
+    pub fn validate(&self) -> Result<()> {
+        let err = |what: String, message: String| Error::Scene { location: format!("{}: {what}", self.source), message };
+        if self.triangle_count() == 0 {
+            return Err(err("scene".into(), "has no triangles".into()));
+        }
+        for (i, m) in self.materials.iter().enumerate() {
+            if let Material::Blend { children, .. } = m {
+                for c in children {
+                    match self.materials.get(c.0 as usize) {
+                        None => return Err(err(format!("material {i}"), format!("blend child {} does not exist", c.0))),
+                        Some(Material::Blend { .. }) => return Err(err(format!("material {i}"), "a blend's children must not be blends".into())),
+                        Some(_) => {}
+                    }
+                }
+            }
+        }
+        for m in &self.meshes {
+            let n = m.positions.len();
+            let at = || format!("mesh '{}'", m.name);
+            if m.material.0 as usize >= self.materials.len() {
+                return Err(err(at(), format!("material {} does not exist", m.material.0)));
+            }
+            if let Some(p) = m.positions.iter().find(|p| !p.is_finite()) {
+                return Err(err(at(), format!("non-finite vertex position {p}")));
+            }
+            if m.normals.as_ref().is_some_and(|v| v.len() != n) || m.uvs.as_ref().is_some_and(|v| v.len() != n) {
+                return Err(err(at(), "normal or uv count differs from the position count".into()));
+            }
+            if let Some(t) = m.indices.iter().find(|t| t.iter().any(|&i| i as usize >= n)) {
+                return Err(err(at(), format!("triangle {t:?} indexes past {n} vertices")));
+            }
+            if m.emitter.is_some() {
+                let area: f32 = m.indices.iter().map(|t| shapes::triangle_area(m.positions[t[0] as usize], m.positions[t[1] as usize], m.positions[t[2] as usize])).sum();
+                if area <= 0.0 {
+                    return Err(err(at(), "is an emitter with zero area".into()));
+                }
+            }
+        }
+        let c = &self.camera;
+        let forward = c.target - c.position;
+        if !(c.fov_y_degrees > 0.0 && c.fov_y_degrees < 180.0) || forward.length_squared() == 0.0 || forward.cross(c.up).length_squared() == 0.0 {
+            return Err(err("camera".into(), "needs 0 < fov < 180, a target distinct from the position and an up vector not parallel to the view".into()));
+        }
+        if c.width == 0 || c.height == 0 {
+            return Err(err("camera".into(), "image size must be at least 1×1".into()));
+        }
+        Ok(())
+    }
+}

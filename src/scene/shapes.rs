@@ -1,0 +1,122 @@
+//! Triangle-mesh generators for the analytic shapes scenes use: quads, boxes, spheres.
+
+use glam::{Vec2, Vec3};
+
+/// Positions, normals, uvs and triangles of one generated shape.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Geometry {
+    /// Vertex positions.
+    pub positions: Vec<Vec3>,
+    /// Unit vertex normals.
+    pub normals: Option<Vec<Vec3>>,
+    /// Texture coordinates.
+    pub uvs: Option<Vec<Vec2>>,
+    /// Triangles, counter-clockwise seen from the side the normals point to.
+    pub indices: Vec<[u32; 3]>,
+}
+
+/// Area of the triangle (a, b, c).
+pub fn triangle_area(a: Vec3, b: Vec3, c: Vec3) -> f32 {
+    0.5 * (b - a).cross(c - a).length()
+}
+
+/// A parallelogram centred at `center` spanned by `u` and `v` (from −u−v to +u+v); its front face
+/// and normals point along `u × v`.
+pub fn quad(center: Vec3, u: Vec3, v: Vec3) -> Geometry {
+    let n = u.cross(v).normalize();
+    let positions = vec![center - u - v, center + u - v, center + u + v, center - u + v];
+    Geometry {
+        positions,
+        normals: Some(vec![n; 4]),
+        uvs: Some(vec![Vec2::new(0.0, 0.0), Vec2::new(1.0, 0.0), Vec2::new(1.0, 1.0), Vec2::new(0.0, 1.0)]),
+        indices: vec![[0, 1, 2], [0, 2, 3]],
+    }
+}
+
+/// An axis-aligned box of half-extents `half` around `center` with outward faces and flat normals.
+pub fn cuboid(center: Vec3, half: Vec3) -> Geometry {
+    let (x, y, z) = (Vec3::X * half.x, Vec3::Y * half.y, Vec3::Z * half.z);
+    let faces = [
+        quad(center + x, y, z),
+        quad(center - x, z, y),
+        quad(center + y, z, x),
+        quad(center - y, x, z),
+        quad(center + z, x, y),
+        quad(center - z, y, x),
+    ];
+    merge(&faces)
+}
+
+/// A UV sphere with `rings` latitude bands and `segments` longitude bands, smooth outward normals
+/// (inward with `inward`, flipping the winding too).
+pub fn sphere(center: Vec3, radius: f32, rings: u32, segments: u32, inward: bool) -> Geometry {
+    let mut g = Geometry { normals: Some(Vec::new()), uvs: Some(Vec::new()), ..Default::default() };
+    for r in 0..=rings {
+        let theta = std::f32::consts::PI * r as f32 / rings as f32;
+        for s in 0..=segments {
+            let phi = 2.0 * std::f32::consts::PI * s as f32 / segments as f32;
+            let n = Vec3::new(theta.sin() * phi.cos(), theta.cos(), theta.sin() * phi.sin());
+            g.positions.push(center + radius * n);
+            g.normals.as_mut().expect("set above").push(if inward { -n } else { n });
+            g.uvs.as_mut().expect("set above").push(Vec2::new(s as f32 / segments as f32, r as f32 / rings as f32));
+        }
+    }
+    let row = segments + 1;
+    for r in 0..rings {
+        for s in 0..segments {
+            let (a, b, c, d) = (r * row + s, r * row + s + 1, (r + 1) * row + s + 1, (r + 1) * row + s);
+            // Counter-clockwise seen from outside; the pole rows would give zero-area triangles.
+            let tris = [[a, b, c], [a, c, d]];
+            for (i, t) in tris.into_iter().enumerate() {
+                if (r == 0 && i == 0) || (r == rings - 1 && i == 1) {
+                    continue;
+                }
+                g.indices.push(if inward { [t[0], t[2], t[1]] } else { t });
+            }
+        }
+    }
+    g
+}
+
+/// Concatenates geometries into one.
+pub fn merge(parts: &[Geometry]) -> Geometry {
+    let mut g = Geometry { normals: Some(Vec::new()), uvs: Some(Vec::new()), ..Default::default() };
+    for p in parts {
+        let base = g.positions.len() as u32;
+        g.positions.extend_from_slice(&p.positions);
+        let n = p.positions.len();
+        g.normals.as_mut().expect("set above").extend(p.normals.clone().unwrap_or_else(|| vec![Vec3::ZERO; n]));
+        g.uvs.as_mut().expect("set above").extend(p.uvs.clone().unwrap_or_else(|| vec![Vec2::ZERO; n]));
+        g.indices.extend(p.indices.iter().map(|t| t.map(|i| i + base)));
+    }
+    g
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn face_normal(g: &Geometry, t: [u32; 3]) -> Vec3 {
+        let p = |i: u32| g.positions[i as usize];
+        (p(t[1]) - p(t[0])).cross(p(t[2]) - p(t[0]))
+    }
+
+    #[test]
+    fn winding_agrees_with_normals() {
+        for g in [quad(Vec3::ZERO, Vec3::X, Vec3::Z), cuboid(Vec3::ONE, Vec3::splat(0.5)), sphere(Vec3::ZERO, 2.0, 16, 32, false), sphere(Vec3::ZERO, 2.0, 16, 32, true)] {
+            let normals = g.normals.as_ref().unwrap();
+            for &t in &g.indices {
+                let f = face_normal(&g, t);
+                assert!(f.length() > 0.0, "degenerate triangle {t:?}");
+                assert!(f.dot(normals[t[0] as usize]) > 0.0, "triangle {t:?} winds against its normal");
+            }
+        }
+    }
+
+    #[test]
+    fn sphere_area_converges() {
+        let g = sphere(Vec3::ZERO, 1.0, 64, 128, false);
+        let area: f32 = g.indices.iter().map(|t| triangle_area(g.positions[t[0] as usize], g.positions[t[1] as usize], g.positions[t[2] as usize])).sum();
+        assert!((area / (4.0 * std::f32::consts::PI) - 1.0).abs() < 2e-3, "area {area}");
+    }
+}
