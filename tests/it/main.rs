@@ -2,4 +2,5 @@
 
 mod support;
 
+mod embree_smoke;
 mod twins;
