@@ -2,6 +2,7 @@
 
 pub mod bsdf;
 pub mod bvh;
+pub mod cpu;
 pub mod error;
 pub mod gpu;
 pub mod image;

@@ -1,1 +1,215 @@
-fn main(){}
+//! The `pathgrad` command line: `render` and `devices`.
+
+use std::path::{Path, PathBuf};
+use std::process::ExitCode;
+use std::time::Instant;
+
+use anyhow::{Context as _, Result, bail};
+use clap::{Args, Parser, Subcommand};
+use pathgrad::gpu::{Context, ContextDesc, DeviceChoice, Renderer};
+use pathgrad::image::Image;
+use pathgrad::integrator::RenderOptions;
+
+/// A differentiable path tracer on Vulkan compute shaders.
+#[derive(Parser, Debug)]
+#[command(name = "pathgrad", version, about)]
+struct Cli {
+    /// Log more (repeat for debug output); `RUST_LOG` overrides.
+    #[arg(short, long, global = true, action = clap::ArgAction::Count)]
+    verbose: u8,
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Subcommand, Debug)]
+enum Command {
+    /// Render a scene to an EXR (plus a PNG preview) or a PNG.
+    Render(RenderArgs),
+    /// List the Vulkan devices and whether pathgrad can use them.
+    Devices {
+        /// Print JSON instead of text.
+        #[arg(long)]
+        json: bool,
+    },
+}
+
+/// Options every rendering command accepts.
+#[derive(Args, Debug)]
+struct RenderFlags {
+    /// Samples per pixel.
+    #[arg(long, default_value_t = 16)]
+    spp: u32,
+    /// Image width (default: the scene's).
+    #[arg(long)]
+    width: Option<u32>,
+    /// Image height (default: the scene's).
+    #[arg(long)]
+    height: Option<u32>,
+    /// Maximum surface interactions per path; -1 is unbounded (default: the scene's).
+    #[arg(long, allow_negative_numbers = true)]
+    max_depth: Option<i64>,
+    /// Random seed.
+    #[arg(long, default_value_t = 0)]
+    seed: u32,
+    /// Vulkan device: an index or UUID from `pathgrad devices`, or `cpu` (env: PATHGRAD_DEVICE).
+    #[arg(long)]
+    device: Option<String>,
+}
+
+#[derive(Args, Debug)]
+struct RenderArgs {
+    /// The scene: builtin:cornell-box, builtin:furnace or builtin:blend.
+    scene: String,
+    /// Output file, .exr or .png.
+    #[arg(short, long)]
+    output: PathBuf,
+    #[command(flatten)]
+    flags: RenderFlags,
+    /// With an .exr output, do not write the .png preview beside it.
+    #[arg(long)]
+    no_preview: bool,
+    /// Exposure of PNG output in stops.
+    #[arg(long, default_value_t = 0.0)]
+    exposure: f32,
+    /// Render with the CPU reference implementation instead of Vulkan.
+    #[arg(long)]
+    cpu: bool,
+    /// Print a JSON summary instead of text.
+    #[arg(long)]
+    json: bool,
+}
+
+fn main() -> ExitCode {
+    let cli = Cli::parse();
+    let default_level = match cli.verbose {
+        0 => "warn",
+        1 => "info",
+        _ => "debug",
+    };
+    let filter = tracing_subscriber::EnvFilter::try_from_default_env().unwrap_or_else(|_| tracing_subscriber::EnvFilter::new(default_level));
+    tracing_subscriber::fmt().with_env_filter(filter).with_writer(std::io::stderr).init();
+    match run(cli) {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("error: {e:#}");
+            ExitCode::FAILURE
+        }
+    }
+}
+
+fn run(cli: Cli) -> Result<()> {
+    match cli.command {
+        Command::Devices { json } => devices(json),
+        Command::Render(args) => render(&args),
+    }
+}
+
+fn devices(json: bool) -> Result<()> {
+    let list = pathgrad::gpu::context::list_devices()?;
+    if json {
+        let items: Vec<_> = list
+            .iter()
+            .map(|d| serde_json::json!({"index": d.index, "name": d.name, "type": format!("{:?}", d.device_type), "driver": d.driver, "uuid": d.uuid, "subgroup_size": d.subgroup_size, "usable": d.missing.is_empty(), "missing": d.missing}))
+            .collect();
+        println!("{}", serde_json::to_string_pretty(&items)?);
+    } else {
+        for d in &list {
+            println!("{}", d.summary());
+        }
+    }
+    Ok(())
+}
+
+fn context(device: &Option<String>) -> Result<std::sync::Arc<Context>> {
+    let validation = std::env::var("PATHGRAD_VALIDATION").is_ok_and(|v| v == "1");
+    let device = device.as_deref().map(DeviceChoice::parse).unwrap_or_default();
+    Ok(Context::new(&ContextDesc { device, validation })?)
+}
+
+fn options(scene: &pathgrad::scene::Scene, flags: &RenderFlags) -> Result<RenderOptions> {
+    let mut o = RenderOptions::for_scene(scene);
+    o.spp = flags.spp;
+    o.seed = flags.seed;
+    if let Some(w) = flags.width {
+        o.width = w;
+        if flags.height.is_none() {
+            o.height = ((u64::from(w) * u64::from(scene.camera.height)) / u64::from(scene.camera.width)).max(1) as u32;
+        }
+    }
+    if let Some(h) = flags.height {
+        o.height = h;
+    }
+    o.max_depth = match flags.max_depth {
+        None => Some(scene.max_depth),
+        Some(-1) => None,
+        Some(d) if d >= 1 && d <= i64::from(u32::MAX) => Some(d as u32),
+        Some(d) => bail!("invalid --max-depth {d}: must be at least 1, or -1 for unbounded"),
+    };
+    o.validate()?;
+    Ok(o)
+}
+
+fn check_output(path: &Path) -> Result<bool> {
+    match path.extension().and_then(|e| e.to_str()).map(str::to_ascii_lowercase).as_deref() {
+        Some("exr") => Ok(true),
+        Some("png") => Ok(false),
+        _ => bail!("invalid -o {}: the output must end in .exr or .png", path.display()),
+    }
+}
+
+fn render(args: &RenderArgs) -> Result<()> {
+    let is_exr = check_output(&args.output)?;
+    let scene = pathgrad::scene::load(&args.scene)?;
+    let opts = options(&scene, &args.flags)?;
+    let progress = indicatif::ProgressBar::new(u64::from(opts.spp));
+    if args.json {
+        progress.set_draw_target(indicatif::ProgressDrawTarget::hidden());
+    }
+    progress.set_style(indicatif::ProgressStyle::with_template("{spinner} rendering [{bar:40}] {pos}/{len} spp ({elapsed}, eta {eta})").expect("the template is valid").progress_chars("=> "));
+    let start = Instant::now();
+    let (image, device) = if args.cpu {
+        let image = pathgrad::cpu::render(&scene, &opts).with_context(|| format!("rendering {} on the CPU", args.scene))?;
+        (image, "CPU reference".to_string())
+    } else {
+        let ctx = context(&args.flags.device)?;
+        let device = ctx.info().name.clone();
+        let mut renderer = Renderer::new(&ctx, &scene).with_context(|| format!("loading {}", args.scene))?;
+        let image = renderer.render_with_progress(&opts, &mut |done, _| progress.set_position(u64::from(done))).with_context(|| format!("rendering {}", args.scene))?;
+        (image, device)
+    };
+    let seconds = start.elapsed().as_secs_f64();
+    progress.finish_and_clear();
+    let mut written = vec![args.output.clone()];
+    save(&image, &args.output, is_exr, args.exposure)?;
+    if is_exr && !args.no_preview {
+        let preview = args.output.with_extension("png");
+        image.write_png(&preview, args.exposure)?;
+        written.push(preview);
+    }
+    let samples = f64::from(opts.width) * f64::from(opts.height) * f64::from(opts.spp);
+    if args.json {
+        let summary = serde_json::json!({
+            "scene": args.scene, "device": device, "width": opts.width, "height": opts.height, "spp": opts.spp,
+            "max_depth": opts.max_depth, "seed": opts.seed, "time_s": seconds, "samples_per_second": samples / seconds,
+            "mean": image.mean(), "outputs": written,
+        });
+        println!("{summary}");
+    } else {
+        let names: Vec<_> = written.iter().map(|p| p.display().to_string()).collect();
+        println!(
+            "rendered {} at {}×{}, {} spp on {device} in {seconds:.2} s ({:.3} M samples/s) → {}",
+            args.scene,
+            opts.width,
+            opts.height,
+            opts.spp,
+            samples / seconds / 1e6,
+            names.join(", ")
+        );
+    }
+    Ok(())
+}
+
+fn save(image: &Image, path: &Path, is_exr: bool, exposure: f32) -> Result<()> {
+    if is_exr { image.write_exr(path)? } else { image.write_png(path, exposure)? }
+    Ok(())
+}

@@ -3,9 +3,11 @@
 pub mod abi;
 pub mod buffer;
 pub mod context;
+pub mod renderer;
 pub mod pipeline;
 pub mod shaders;
 
 pub use buffer::Buffer;
 pub use context::{Context, ContextDesc, DeviceChoice, DeviceInfo};
 pub use pipeline::{BindGroup, Kernel};
+pub use renderer::Renderer;

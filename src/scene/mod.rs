@@ -112,6 +112,23 @@ pub mod bounds {
     pub const RADIANCE: (f32, f32) = (0.0, f32::MAX);
 }
 
+/// Loads the scene `spec` names: `builtin:NAME` (see [`builtin::BUILTIN_SCENES`]).
+///
+/// # Errors
+/// [`Error::Scene`] for an unknown built-in or a file path (scene files are not supported yet).
+pub fn load(spec: &str) -> Result<Scene> {
+    if let Some(name) = spec.strip_prefix("builtin:") {
+        return builtin::load(name);
+    }
+    Err(Error::Scene {
+        location: spec.to_string(),
+        message: format!(
+            "scene files are not supported yet; use builtin:NAME (known: {})",
+            builtin::BUILTIN_SCENES.iter().map(|(n, _)| *n).collect::<Vec<_>>().join(", ")
+        ),
+    })
+}
+
 impl Scene {
     /// An empty scene with `camera`.
     pub fn new(source: &str, camera: Camera) -> Scene {

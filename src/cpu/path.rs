@@ -1,0 +1,102 @@
+//! The one path loop on the CPU (twin of `shaders/integrator.glsl`, phase by phase): BSDF sampling,
+//! next-event estimation, power-heuristic MIS, Russian roulette (ALGORITHMS.md §3.1).
+
+use glam::{Vec2, Vec3};
+
+use crate::bsdf::{bsdf_eval, bsdf_pdf, bsdf_sample};
+use crate::bvh::{Ray, closest_hit, occluded};
+use crate::cpu::emitter::{emitter_pdf_solid_angle, sample_emitter};
+use crate::cpu::surface::{SHADOW_EPSILON, mis_power, offset_origin, param_color, resolve_bsdf, surface_at};
+use crate::gpu::abi::{DIM_DIRECTION, DIM_EMITTER_POS, DIM_EMITTER_SELECT, DIM_LOBE, DIM_PIXEL_JITTER, DIM_ROULETTE, Globals, NO_EMITTER};
+use crate::rng::{RngKey, Stream, uniform4};
+use crate::sampling::Frame;
+use crate::scene::flat::FlatScene;
+
+fn draw_block(globals: &Globals, pixel: u32, sample: u32, vertex: u32, block: u32) -> [f32; 4] {
+    uniform4(RngKey([globals.key0, globals.key1]), pixel, sample, vertex, Stream::Main, block, 0)
+}
+
+fn max_component(v: Vec3) -> f32 {
+    v.x.max(v.y).max(v.z)
+}
+
+/// Radiance L of one camera path through `pixel` (row-major index) for sample `sample`.
+pub fn trace_path(flat: &FlatScene, globals: &Globals, pixel: u32, sample: u32) -> Vec3 {
+    // ---- camera ray ----
+    let u_cam = draw_block(globals, pixel, sample, 0, DIM_PIXEL_JITTER / 4);
+    let (px, py) = (pixel % globals.width, pixel / globals.width);
+    let sx = 2.0 * (px as f32 + u_cam[0]) / globals.width as f32 - 1.0;
+    let sy = 1.0 - 2.0 * (py as f32 + u_cam[1]) / globals.height as f32;
+    let mut ray = Ray::new(globals.cam_origin, (globals.cam_forward + sx * globals.cam_right + sy * globals.cam_up).normalize());
+
+    let mut throughput = Vec3::ONE; // β (ALGORITHMS.md §3.1)
+    let mut radiance = Vec3::ZERO; // L
+    let mut prev_pdf_f = 0.0f32; // density with which the previous vertex sampled ray.dir
+    for vertex in 1..=globals.max_depth {
+        // ---- intersection ----
+        let Some(hit) = closest_hit(&flat.bvh, &ray, 0.0, f32::MAX) else { break };
+        let s = surface_at(flat, &hit);
+        let wi_world = -ray.dir;
+
+        // ---- emitter hit ----
+        let cos_emit = s.ng.dot(wi_world);
+        if s.emitter != NO_EMITTER && cos_emit > 0.0 {
+            let mut w_b = 1.0;
+            if vertex > 1 {
+                w_b = mis_power(prev_pdf_f, emitter_pdf_solid_angle(globals, hit.t, cos_emit));
+            }
+            radiance += throughput * w_b * param_color(flat, flat.emitters[s.emitter as usize].p_radiance);
+        }
+        if vertex >= globals.max_depth {
+            break;
+        }
+
+        let bsdf = resolve_bsdf(flat, s.material);
+        let frame = Frame::from_normal(s.ns);
+        let wi = frame.to_local(wi_world);
+
+        // ---- emitter sampling ----
+        let u_em = draw_block(globals, pixel, sample, vertex, DIM_EMITTER_SELECT / 4);
+        let pos = (DIM_EMITTER_POS % 4) as usize;
+        if let Some(es) = sample_emitter(flat, u_em[(DIM_EMITTER_SELECT % 4) as usize], Vec2::new(u_em[pos], u_em[pos + 1])) {
+            let origin = offset_origin(s.p, s.ng, es.point - s.p);
+            let to_light = es.point - origin;
+            let dist = to_light.length();
+            let wl = to_light / dist;
+            let p_e = emitter_pdf_solid_angle(globals, dist, es.normal.dot(-wl));
+            let wo = frame.to_local(wl);
+            let f = bsdf_eval(&bsdf, wi, wo);
+            if p_e > 0.0 && max_component(f) > 0.0 && !occluded(&flat.bvh, &Ray::new(origin, wl), 0.0, dist * (1.0 - SHADOW_EPSILON)) {
+                let w_n = mis_power(p_e, bsdf_pdf(&bsdf, wi, wo));
+                radiance += throughput * w_n * f * es.radiance / p_e;
+            }
+        }
+
+        // ---- BSDF sampling ----
+        let u_bs = draw_block(globals, pixel, sample, vertex, DIM_LOBE / 4);
+        let dir = (DIM_DIRECTION % 4) as usize;
+        let Some(bs) = bsdf_sample(&bsdf, wi, u_bs[(DIM_LOBE % 4) as usize], Vec2::new(u_bs[dir], u_bs[dir + 1])) else { break };
+        if !(bs.pdf > 0.0) {
+            break;
+        }
+        throughput *= bs.value / bs.pdf;
+        prev_pdf_f = bs.pdf;
+
+        // ---- Russian roulette ----
+        if vertex - 1 >= globals.rr_depth {
+            let u_rr = draw_block(globals, pixel, sample, vertex, DIM_ROULETTE / 4)[(DIM_ROULETTE % 4) as usize];
+            let p_rr = max_component(throughput).min(0.95);
+            if !(u_rr < p_rr) {
+                break;
+            }
+            throughput /= p_rr;
+        }
+        if !(max_component(throughput) > 0.0) {
+            break;
+        }
+
+        let wo_world = frame.to_world(bs.wo);
+        ray = Ray::new(offset_origin(s.p, s.ng, wo_world), wo_world);
+    }
+    radiance
+}

@@ -1,0 +1,89 @@
+//! Surface interactions and material resolution (twin of `shaders/lib/surface.glsl`).
+
+use glam::Vec3;
+
+use crate::bsdf::{Bsdf, Distribution, Leaf};
+use crate::bvh::Hit;
+use crate::gpu::abi::{MAT_BLEND, MAT_ROUGH_CONDUCTOR, Material};
+use crate::scene::flat::FlatScene;
+
+/// Offset of spawned rays, relative to the largest coordinate (at least 1): they must not re-hit
+/// the triangle they start on.
+pub const RAY_OFFSET: f32 = 1e-4;
+/// Shadow rays stop this fraction short of the emitter point so the emitter never occludes itself.
+pub const SHADOW_EPSILON: f32 = 1e-4;
+
+/// A hit resolved to position, normals, material and emitter.
+#[derive(Clone, Copy, Debug)]
+pub struct Surface {
+    /// Position (from barycentrics).
+    pub p: Vec3,
+    /// Geometric (winding) normal.
+    pub ng: Vec3,
+    /// Interpolated shading normal.
+    pub ns: Vec3,
+    /// Material index.
+    pub material: u32,
+    /// Emitter index or `NO_EMITTER`.
+    pub emitter: u32,
+}
+
+/// Resolves `hit`.
+pub fn surface_at(flat: &FlatScene, hit: &Hit) -> Surface {
+    let tri = &flat.bvh.tris[hit.slot as usize];
+    let sh = &flat.shading[flat.bvh.prim_ids[hit.slot as usize] as usize];
+    let b0 = 1.0 - hit.b1 - hit.b2;
+    let p = b0 * tri.v0 + hit.b1 * tri.v1 + hit.b2 * tri.v2;
+    let ng = (tri.v1 - tri.v0).cross(tri.v2 - tri.v0).normalize();
+    let n = b0 * sh.n0 + hit.b1 * sh.n1 + hit.b2 * sh.n2;
+    let ns = if n.dot(n) > 0.0 { n.normalize() } else { ng };
+    Surface { p, ng, ns, material: sh.material, emitter: sh.emitter }
+}
+
+/// `p` moved off the surface to the side `dir` leaves to.
+pub fn offset_origin(p: Vec3, ng: Vec3, dir: Vec3) -> Vec3 {
+    let a = p.abs();
+    let scale = RAY_OFFSET * 1f32.max(a.x.max(a.y).max(a.z));
+    p + ng * if ng.dot(dir) > 0.0 { scale } else { -scale }
+}
+
+fn param_rgb(params: &[f32], offset: u32) -> Vec3 {
+    let o = offset as usize;
+    Vec3::new(params[o], params[o + 1], params[o + 2])
+}
+
+fn leaf_from_material(params: &[f32], m: &Material) -> Leaf {
+    if m.tag == MAT_ROUGH_CONDUCTOR {
+        let distribution = if m.distribution == Distribution::Ggx as u32 { Distribution::Ggx } else { Distribution::Beckmann };
+        Leaf::RoughConductor { distribution, alpha: params[m.p_alpha as usize], specular: param_rgb(params, m.p_color), eta: m.eta, k: m.k }
+    } else {
+        Leaf::Diffuse { albedo: param_rgb(params, m.p_color) }
+    }
+}
+
+/// The BSDF of material `id` with the current parameter values.
+pub fn resolve_bsdf(flat: &FlatScene, id: u32) -> Bsdf {
+    let m = &flat.materials[id as usize];
+    if m.tag == MAT_BLEND {
+        let a = leaf_from_material(&flat.params, &flat.materials[m.child0 as usize]);
+        let b = leaf_from_material(&flat.params, &flat.materials[m.child1 as usize]);
+        Bsdf { leaves: [a, b], weight: flat.params[m.p_weight as usize], blend: true }
+    } else {
+        let a = leaf_from_material(&flat.params, m);
+        Bsdf { leaves: [a, a], weight: 0.0, blend: false }
+    }
+}
+
+/// Power heuristic a²/(a² + b²), safe for huge densities.
+pub fn mis_power(a: f32, b: f32) -> f32 {
+    if a <= 0.0 {
+        return 0.0;
+    }
+    let r = b / a;
+    1.0 / (1.0 + r * r)
+}
+
+/// RGB parameter at `offset`.
+pub fn param_color(flat: &FlatScene, offset: u32) -> Vec3 {
+    param_rgb(&flat.params, offset)
+}
