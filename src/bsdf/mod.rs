@@ -1,11 +1,116 @@
 //! BSDFs: evaluation, sampling and densities (twin of `shaders/lib/bsdf.glsl`).
+//!
+//! Conventions (ALGORITHMS.md §0): local frame with the shading normal on +z; `wi` points back
+//! toward the camera side, `wo` toward the light side; `eval` returns the cosine-weighted value
+//! f̂ = f·max(0, cos θo); densities are solid-angle densities of `wo`. All BSDFs are one-sided:
+//! zero when cos θi ≤ 0 or cos θo ≤ 0.
 
-/// Microfacet distribution (placeholder until the BSDF module lands).
-#[repr(u32)]
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum Distribution {
-    /// Beckmann.
-    Beckmann = 0,
-    /// GGX.
-    Ggx = 1,
+pub mod blend;
+pub mod diffuse;
+pub mod rough_conductor;
+
+use glam::{Vec2, Vec3};
+
+pub use rough_conductor::Distribution;
+
+/// A BSDF without children: what one material of the scene resolves to.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Leaf {
+    /// Lambertian diffuse.
+    Diffuse {
+        /// RGB albedo.
+        albedo: Vec3,
+    },
+    /// Isotropic rough conductor.
+    RoughConductor {
+        /// Microfacet distribution.
+        distribution: Distribution,
+        /// Roughness alpha.
+        alpha: f32,
+        /// RGB specular reflectance (multiplies the Fresnel term).
+        specular: Vec3,
+        /// Real part of the complex index of refraction.
+        eta: Vec3,
+        /// Imaginary part of the complex index of refraction.
+        k: Vec3,
+    },
 }
+
+/// A resolved BSDF: one leaf, or the blend `(1 − w)·leaves[0] + w·leaves[1]`.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Bsdf {
+    /// The leaves; only `leaves[0]` is used unless `blend`.
+    pub leaves: [Leaf; 2],
+    /// Blend weight w of `leaves[1]` (clamped to [0, 1] when used).
+    pub weight: f32,
+    /// Whether this is a blend.
+    pub blend: bool,
+}
+
+impl Bsdf {
+    /// A single-leaf BSDF.
+    pub fn leaf(leaf: Leaf) -> Bsdf {
+        Bsdf { leaves: [leaf, leaf], weight: 0.0, blend: false }
+    }
+}
+
+/// A sampled direction.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct BsdfSample {
+    /// The sampled direction (local frame).
+    pub wo: Vec3,
+    /// Density of the whole BSDF's sampling at `wo`.
+    pub pdf: f32,
+    /// f̂(wi, wo) of the whole BSDF, so the throughput weight is `value / pdf`.
+    pub value: Vec3,
+}
+
+/// f̂ of one leaf.
+pub fn leaf_eval(leaf: &Leaf, wi: Vec3, wo: Vec3) -> Vec3 {
+    match *leaf {
+        Leaf::Diffuse { albedo } => diffuse::diffuse_eval(albedo, wi, wo),
+        Leaf::RoughConductor { distribution, alpha, specular, eta, k } => rough_conductor::microfacet_eval(distribution, alpha, specular, eta, k, wi, wo),
+    }
+}
+
+/// Sampling density of one leaf.
+pub fn leaf_pdf(leaf: &Leaf, wi: Vec3, wo: Vec3) -> f32 {
+    match *leaf {
+        Leaf::Diffuse { .. } => diffuse::diffuse_pdf(wi, wo),
+        Leaf::RoughConductor { distribution, alpha, .. } => rough_conductor::microfacet_pdf(distribution, alpha, wi, wo),
+    }
+}
+
+/// A direction sampled from one leaf with the direction uniforms `u`, or `None` if invalid.
+pub fn leaf_sample(leaf: &Leaf, wi: Vec3, u: Vec2) -> Option<Vec3> {
+    match *leaf {
+        Leaf::Diffuse { .. } => diffuse::diffuse_sample(wi, u),
+        Leaf::RoughConductor { distribution, alpha, .. } => rough_conductor::microfacet_sample(distribution, alpha, wi, u),
+    }
+}
+
+/// f̂(wi, wo) of the whole BSDF.
+pub fn bsdf_eval(b: &Bsdf, wi: Vec3, wo: Vec3) -> Vec3 {
+    if b.blend { blend::blend_eval(b, wi, wo) } else { leaf_eval(&b.leaves[0], wi, wo) }
+}
+
+/// Sampling density of the whole BSDF at `wo`.
+pub fn bsdf_pdf(b: &Bsdf, wi: Vec3, wo: Vec3) -> f32 {
+    if b.blend { blend::blend_pdf(b, wi, wo) } else { leaf_pdf(&b.leaves[0], wi, wo) }
+}
+
+/// Samples a direction: `u_lobe` picks the blend child (RNG dim 4), `u` drives the direction
+/// (dims 5, 6). Returns `None` for an invalid sample (the path ends). The returned value and pdf
+/// are the whole BSDF's, re-evaluated at the sampled direction.
+pub fn bsdf_sample(b: &Bsdf, wi: Vec3, u_lobe: f32, u: Vec2) -> Option<BsdfSample> {
+    let leaf = if b.blend && u_lobe <= blend::blend_weight(b) { &b.leaves[1] } else { &b.leaves[0] };
+    let wo = leaf_sample(leaf, wi, u)?;
+    let pdf = bsdf_pdf(b, wi, wo);
+    if !(pdf > 0.0) {
+        return None;
+    }
+    Some(BsdfSample { wo, pdf, value: bsdf_eval(b, wi, wo) })
+}
+
+#[cfg(test)]
+mod tests;

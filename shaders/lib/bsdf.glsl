@@ -1,0 +1,186 @@
+// BSDFs: Lambertian, rough conductor (Beckmann/GGX, VNDF sampling), blend (twin of src/bsdf/).
+// Local frame, normal +z; eval returns f̂ = f·max(0, cos θo); pdfs are solid-angle densities of wo.
+#ifndef PATHGRAD_BSDF_GLSL
+#define PATHGRAD_BSDF_GLSL
+
+#include "sampling.glsl"
+
+#define D_UNDERFLOW 1e-20
+#define AZIMUTH_EPSILON 1e-7
+#define BECKMANN_U_CLAMP 1e-6
+#define BECKMANN_NORMAL_INCIDENCE 0.99999
+
+struct Leaf { uint kind; uint distribution; float alpha; vec3 color; vec3 eta; vec3 k; };
+struct Bsdf { Leaf leaf0; Leaf leaf1; float weight; bool blend; };
+struct BsdfSample { vec3 wo; float pdf; vec3 value; bool valid; };
+
+// ---- Lambertian (ALGORITHMS.md §4.1) ----
+vec3 diffuse_eval(vec3 albedo, vec3 wi, vec3 wo) {
+    return (wi.z > 0.0 && wo.z > 0.0) ? albedo * (wo.z * INV_PI) : vec3(0.0);
+}
+float diffuse_pdf(vec3 wi, vec3 wo) {
+    return (wi.z > 0.0 && wo.z > 0.0) ? wo.z * INV_PI : 0.0;
+}
+
+// ---- rough conductor (ALGORITHMS.md §4.2) ----
+float tan2_theta(vec3 v) { return (v.x * v.x + v.y * v.y) / (v.z * v.z); }
+
+float microfacet_d(uint distribution, float alpha, vec3 h) {
+    float c = h.z;
+    if (c <= 0.0) return 0.0;
+    float c2 = c * c;
+    float t = (h.x * h.x + h.y * h.y) / c2;
+    float a2 = alpha * alpha;
+    float d;
+    if (distribution == DIST_BECKMANN) {
+        d = exp(-t / a2) / (PI * a2 * c2 * c2);
+    } else {
+        float s = a2 + t;
+        d = a2 / (PI * c2 * c2 * s * s);
+    }
+    return d * c > D_UNDERFLOW ? d : 0.0;
+}
+
+float microfacet_g1(uint distribution, float alpha, vec3 v, vec3 h) {
+    if (dot(v, h) * v.z <= 0.0) return 0.0;
+    float tan2 = tan2_theta(v);
+    if (tan2 == 0.0) return 1.0;
+    float s2 = alpha * alpha * tan2;
+    if (distribution == DIST_BECKMANN) {
+        // Exact Smith Λ (not the rational fit): see src/bsdf/rough_conductor.rs.
+        float a = 1.0 / sqrt(s2);
+        float lambda = 0.5 * (erf_approx(a) - 1.0) + exp(-a * a) / (2.0 * a * sqrt(PI));
+        return 1.0 / (1.0 + lambda);
+    }
+    return 2.0 / (1.0 + sqrt(1.0 + s2));
+}
+
+vec3 fresnel_conductor(float c, vec3 eta, vec3 k) {
+    float c2 = c * c;
+    float s2 = 1.0 - c2;
+    float s4 = s2 * s2;
+    vec3 t1 = eta * eta - k * k - vec3(s2);
+    vec3 q = sqrt(t1 * t1 + 4.0 * eta * eta * k * k);
+    vec3 a = sqrt(max((q + t1) * 0.5, vec3(0.0)));
+    vec3 rs = (q + vec3(c2) - 2.0 * c * a) / (q + vec3(c2) + 2.0 * c * a);
+    vec3 rp = rs * (q * c2 + vec3(s4) - 2.0 * c * a * s2) / (q * c2 + vec3(s4) + 2.0 * c * a * s2);
+    return (rs + rp) * 0.5;
+}
+
+vec3 microfacet_eval(Leaf l, vec3 wi, vec3 wo) {
+    if (wi.z <= 0.0 || wo.z <= 0.0) return vec3(0.0);
+    vec3 h = normalize(wi + wo);
+    float d = microfacet_d(l.distribution, l.alpha, h);
+    if (d == 0.0) return vec3(0.0);
+    float g = microfacet_g1(l.distribution, l.alpha, wi, h) * microfacet_g1(l.distribution, l.alpha, wo, h);
+    return fresnel_conductor(dot(wi, h), l.eta, l.k) * l.color * (d * g / (4.0 * wi.z));
+}
+
+float microfacet_pdf(uint distribution, float alpha, vec3 wi, vec3 wo) {
+    if (wi.z <= 0.0 || wo.z <= 0.0) return 0.0;
+    vec3 h = normalize(wi + wo);
+    if (dot(wi, h) <= 0.0 || dot(wo, h) <= 0.0) return 0.0;
+    return microfacet_d(distribution, alpha, h) * microfacet_g1(distribution, alpha, wi, h) / (4.0 * wi.z);
+}
+
+vec2 sample_ggx_slopes(float cos_theta, vec2 u) {
+    vec2 p = sample_concentric_disk(u);
+    float s = 0.5 * (1.0 + cos_theta);
+    p.y = (1.0 - s) * sqrt(max(1.0 - p.x * p.x, 0.0)) + s * p.y;
+    float z = sqrt(max(1.0 - p.x * p.x - p.y * p.y, 0.0));
+    float sin_theta = sqrt(max(1.0 - cos_theta * cos_theta, 0.0));
+    float norm = 1.0 / (sin_theta * p.y + cos_theta * z);
+    return vec2((cos_theta * p.y - sin_theta * z) * norm, p.x * norm);
+}
+
+vec2 sample_beckmann_slopes(float cos_theta, vec2 u) {
+    u = clamp(u, vec2(BECKMANN_U_CLAMP), vec2(1.0 - BECKMANN_U_CLAMP));
+    if (cos_theta > BECKMANN_NORMAL_INCIDENCE) {
+        float r = sqrt(-log(1.0 - u.x));
+        float phi = 2.0 * PI * u.y;
+        return vec2(r * cos(phi), r * sin(phi));
+    }
+    float inv_sqrt_pi = sqrt(INV_PI);
+    float tan_theta = sqrt(max(1.0 - cos_theta * cos_theta, 0.0)) / cos_theta;
+    float cot_theta = 1.0 / tan_theta;
+    float m = erf_approx(cot_theta);
+    float x = m - (m + 1.0) * erf_approx(sqrt(-log(u.x)));
+    float target = u.x * (1.0 + m + inv_sqrt_pi * tan_theta * exp(-cot_theta * cot_theta));
+    // Three Newton steps, written out (no loop spends lavapipe's loop budget).
+    float slope = erfinv_approx(x);
+    x -= (1.0 + x + inv_sqrt_pi * tan_theta * exp(-slope * slope) - target) / (1.0 - slope * tan_theta);
+    slope = erfinv_approx(x);
+    x -= (1.0 + x + inv_sqrt_pi * tan_theta * exp(-slope * slope) - target) / (1.0 - slope * tan_theta);
+    slope = erfinv_approx(x);
+    x -= (1.0 + x + inv_sqrt_pi * tan_theta * exp(-slope * slope) - target) / (1.0 - slope * tan_theta);
+    return vec2(erfinv_approx(x), erfinv_approx(2.0 * u.y - 1.0));
+}
+
+// A reflected direction about a visible normal; valid = false when it falls below the surface.
+bool microfacet_sample(uint distribution, float alpha, vec3 wi, vec2 u, out vec3 wo) {
+    wo = vec3(0.0);
+    if (wi.z <= 0.0) return false;
+    vec3 ws = normalize(vec3(alpha * wi.x, alpha * wi.y, wi.z));
+    float sin2 = ws.x * ws.x + ws.y * ws.y;
+    float sin_phi = 0.0;
+    float cos_phi = 1.0;
+    if (sin2 > AZIMUTH_EPSILON * AZIMUTH_EPSILON) {
+        float inv = 1.0 / sqrt(sin2);
+        sin_phi = clamp(ws.y * inv, -1.0, 1.0);
+        cos_phi = clamp(ws.x * inv, -1.0, 1.0);
+    }
+    vec2 slope = distribution == DIST_BECKMANN ? sample_beckmann_slopes(ws.z, u) : sample_ggx_slopes(ws.z, u);
+    float mx = (cos_phi * slope.x - sin_phi * slope.y) * alpha;
+    float my = (sin_phi * slope.x + cos_phi * slope.y) * alpha;
+    if (isnan(mx) || isinf(mx) || isnan(my) || isinf(my)) return false;
+    vec3 h = normalize(vec3(-mx, -my, 1.0));
+    wo = 2.0 * dot(wi, h) * h - wi;
+    return wo.z > 0.0 && dot(wi, h) > 0.0;
+}
+
+// ---- leaves ----
+vec3 leaf_eval(Leaf l, vec3 wi, vec3 wo) {
+    return l.kind == LEAF_DIFFUSE ? diffuse_eval(l.color, wi, wo) : microfacet_eval(l, wi, wo);
+}
+float leaf_pdf(Leaf l, vec3 wi, vec3 wo) {
+    return l.kind == LEAF_DIFFUSE ? diffuse_pdf(wi, wo) : microfacet_pdf(l.distribution, l.alpha, wi, wo);
+}
+bool leaf_sample(Leaf l, vec3 wi, vec2 u, out vec3 wo) {
+    if (l.kind == LEAF_DIFFUSE) {
+        wo = vec3(0.0);
+        if (wi.z <= 0.0) return false;
+        wo = sample_cosine_hemisphere(u);
+        return wo.z > 0.0;
+    }
+    return microfacet_sample(l.distribution, l.alpha, wi, u, wo);
+}
+
+// ---- blend (ALGORITHMS.md §4.3) and the whole BSDF ----
+float blend_weight(Bsdf b) { return clamp(b.weight, 0.0, 1.0); }
+
+vec3 bsdf_eval(Bsdf b, vec3 wi, vec3 wo) {
+    if (!b.blend) return leaf_eval(b.leaf0, wi, wo);
+    float w = blend_weight(b);
+    return leaf_eval(b.leaf0, wi, wo) * (1.0 - w) + leaf_eval(b.leaf1, wi, wo) * w;
+}
+
+float bsdf_pdf(Bsdf b, vec3 wi, vec3 wo) {
+    if (!b.blend) return leaf_pdf(b.leaf0, wi, wo);
+    float w = blend_weight(b);
+    return leaf_pdf(b.leaf0, wi, wo) * (1.0 - w) + leaf_pdf(b.leaf1, wi, wo) * w;
+}
+
+// u_lobe picks the blend child (RNG dim 4); u drives the direction (dims 5, 6).
+BsdfSample bsdf_sample(Bsdf b, vec3 wi, float u_lobe, vec2 u) {
+    BsdfSample s = BsdfSample(vec3(0.0), 0.0, vec3(0.0), false);
+    Leaf leaf = (b.blend && u_lobe <= blend_weight(b)) ? b.leaf1 : b.leaf0;
+    vec3 wo;
+    if (!leaf_sample(leaf, wi, u, wo)) return s;
+    s.wo = wo;
+    s.pdf = bsdf_pdf(b, wi, wo);
+    s.value = bsdf_eval(b, wi, wo);
+    s.valid = s.pdf > 0.0;
+    return s;
+}
+
+#endif

@@ -1,0 +1,183 @@
+//! Isotropic rough conductor with a Beckmann or GGX microfacet distribution, Smith masking,
+//! conductor Fresnel and visible-normal sampling (ALGORITHMS.md §4.2).
+
+use std::f32::consts::{FRAC_1_PI, PI};
+
+use glam::{Vec2, Vec3};
+
+use crate::sampling::{erf_approx, erfinv_approx, sample_concentric_disk};
+
+/// Microfacet distribution.
+#[repr(u32)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Distribution {
+    /// Beckmann.
+    Beckmann = 0,
+    /// GGX (Trowbridge–Reitz).
+    Ggx = 1,
+}
+
+/// D is set to 0 where D·cos θh falls below this: the value underflows and its derivative is noise.
+pub const D_UNDERFLOW: f32 = 1e-20;
+/// Below this |sin θ| the azimuth of the stretched incident direction is taken as 0.
+const AZIMUTH_EPSILON: f32 = 1e-7;
+/// The Beckmann slope sampler clamps its uniforms into [ε, 1 − ε] (logarithms and erfinv stay finite).
+const BECKMANN_U_CLAMP: f32 = 1e-6;
+/// Above this cos θi the Beckmann visible slopes are sampled as the plain (Gaussian) slopes: the
+/// Newton inversion degenerates as tan θi → 0 while the two distributions coincide.
+const BECKMANN_NORMAL_INCIDENCE: f32 = 0.99999;
+
+fn sqrt3(v: Vec3) -> Vec3 {
+    Vec3::new(v.x.sqrt(), v.y.sqrt(), v.z.sqrt())
+}
+
+fn tan2_theta(v: Vec3) -> f32 {
+    (v.x * v.x + v.y * v.y) / (v.z * v.z)
+}
+
+/// The normal distribution D(h).
+pub fn microfacet_d(distribution: Distribution, alpha: f32, h: Vec3) -> f32 {
+    let cos = h.z;
+    if cos <= 0.0 {
+        return 0.0;
+    }
+    let cos2 = cos * cos;
+    let t = (h.x * h.x + h.y * h.y) / cos2;
+    let a2 = alpha * alpha;
+    let d = match distribution {
+        Distribution::Beckmann => (-t / a2).exp() / (PI * a2 * cos2 * cos2),
+        Distribution::Ggx => {
+            let s = a2 + t;
+            a2 / (PI * cos2 * cos2 * s * s)
+        }
+    };
+    if d * cos > D_UNDERFLOW { d } else { 0.0 }
+}
+
+/// Smith's masking G1(v, h) = 1 / (1 + Λ(a)), a = 1 / (α tan θv), exact for both distributions.
+///
+/// ALGORITHMS.md §4.2 (like Mitsuba) uses a rational fit for Beckmann (< 0.35 % error). The visible-
+/// normal sampler draws from the *exact* distribution, so with the fit in the pdf the sampler and its
+/// density disagree: the chi-square test measured 0.9736 valid samples against an integrated pdf of
+/// 0.9707 at α = 0.1, cos θi = 0.05. We use the exact Λ = (erf(a) − 1)/2 + e^{−a²}/(2a√π).
+pub fn microfacet_g1(distribution: Distribution, alpha: f32, v: Vec3, h: Vec3) -> f32 {
+    if v.dot(h) * v.z <= 0.0 {
+        return 0.0;
+    }
+    let tan2 = tan2_theta(v);
+    if tan2 == 0.0 {
+        return 1.0;
+    }
+    let s2 = alpha * alpha * tan2;
+    match distribution {
+        Distribution::Beckmann => {
+            let a = 1.0 / s2.sqrt();
+            let lambda = 0.5 * (erf_approx(a) - 1.0) + (-a * a).exp() / (2.0 * a * PI.sqrt());
+            1.0 / (1.0 + lambda)
+        }
+        Distribution::Ggx => 2.0 / (1.0 + (1.0 + s2).sqrt()),
+    }
+}
+
+/// Fresnel reflectance of a conductor with complex index eta + i·k at cos θ = `c` (per channel).
+pub fn fresnel_conductor(c: f32, eta: Vec3, k: Vec3) -> Vec3 {
+    let c2 = c * c;
+    let s2 = 1.0 - c2;
+    let s4 = s2 * s2;
+    let t1 = eta * eta - k * k - Vec3::splat(s2);
+    let q = sqrt3(t1 * t1 + 4.0 * eta * eta * k * k);
+    let a = sqrt3(((q + t1) * 0.5).max(Vec3::ZERO));
+    let rs = (q + Vec3::splat(c2) - 2.0 * c * a) / (q + Vec3::splat(c2) + 2.0 * c * a);
+    let rp = rs * (q * c2 + Vec3::splat(s4) - 2.0 * c * a * s2) / (q * c2 + Vec3::splat(s4) + 2.0 * c * a * s2);
+    (rs + rp) * 0.5
+}
+
+/// f̂ = F D G1(wi) G1(wo) / (4 cos θi).
+pub fn microfacet_eval(distribution: Distribution, alpha: f32, specular: Vec3, eta: Vec3, k: Vec3, wi: Vec3, wo: Vec3) -> Vec3 {
+    if wi.z <= 0.0 || wo.z <= 0.0 {
+        return Vec3::ZERO;
+    }
+    let h = (wi + wo).normalize();
+    let d = microfacet_d(distribution, alpha, h);
+    if d == 0.0 {
+        return Vec3::ZERO;
+    }
+    let g = microfacet_g1(distribution, alpha, wi, h) * microfacet_g1(distribution, alpha, wo, h);
+    fresnel_conductor(wi.dot(h), eta, k) * specular * (d * g / (4.0 * wi.z))
+}
+
+/// Visible-normal sampling density D(h) G1(wi, h) / (4 cos θi).
+pub fn microfacet_pdf(distribution: Distribution, alpha: f32, wi: Vec3, wo: Vec3) -> f32 {
+    if wi.z <= 0.0 || wo.z <= 0.0 {
+        return 0.0;
+    }
+    let h = (wi + wo).normalize();
+    if wi.dot(h) <= 0.0 || wo.dot(h) <= 0.0 {
+        return 0.0;
+    }
+    microfacet_d(distribution, alpha, h) * microfacet_g1(distribution, alpha, wi, h) / (4.0 * wi.z)
+}
+
+/// Slopes of the visible normals of the α = 1 GGX distribution seen at cos θ (Heitz & d'Eon 2014).
+fn sample_ggx_slopes(cos_theta: f32, u: Vec2) -> Vec2 {
+    let mut p = sample_concentric_disk(u);
+    let s = 0.5 * (1.0 + cos_theta);
+    p.y = (1.0 - s) * (1.0 - p.x * p.x).max(0.0).sqrt() + s * p.y;
+    let z = (1.0 - p.x * p.x - p.y * p.y).max(0.0).sqrt();
+    let sin_theta = (1.0 - cos_theta * cos_theta).max(0.0).sqrt();
+    let norm = 1.0 / (sin_theta * p.y + cos_theta * z);
+    Vec2::new((cos_theta * p.y - sin_theta * z) * norm, p.x * norm)
+}
+
+/// Slopes of the visible normals of the α = 1 Beckmann distribution seen at cos θ: a numerical
+/// inversion of the marginal CDF (three Newton steps from a good first guess), as in Mitsuba.
+fn sample_beckmann_slopes(cos_theta: f32, u: Vec2) -> Vec2 {
+    let u = u.clamp(Vec2::splat(BECKMANN_U_CLAMP), Vec2::splat(1.0 - BECKMANN_U_CLAMP));
+    if cos_theta > BECKMANN_NORMAL_INCIDENCE {
+        let r = (-(1.0 - u.x).ln()).sqrt();
+        let phi = 2.0 * PI * u.y;
+        return Vec2::new(r * phi.cos(), r * phi.sin());
+    }
+    let inv_sqrt_pi = FRAC_1_PI.sqrt();
+    let tan_theta = (1.0 - cos_theta * cos_theta).max(0.0).sqrt() / cos_theta;
+    let cot_theta = 1.0 / tan_theta;
+    let m = erf_approx(cot_theta);
+    let mut x = m - (m + 1.0) * erf_approx((-u.x.ln()).sqrt());
+    let target = u.x * (1.0 + m + inv_sqrt_pi * tan_theta * (-cot_theta * cot_theta).exp());
+    for _ in 0..3 {
+        let slope = erfinv_approx(x);
+        let value = 1.0 + x + inv_sqrt_pi * tan_theta * (-slope * slope).exp() - target;
+        let derivative = 1.0 - slope * tan_theta;
+        x -= value / derivative;
+    }
+    Vec2::new(erfinv_approx(x), erfinv_approx(2.0 * u.y - 1.0))
+}
+
+/// A reflected direction about a visible normal, or `None` if it falls below the surface.
+pub fn microfacet_sample(distribution: Distribution, alpha: f32, wi: Vec3, u: Vec2) -> Option<Vec3> {
+    if wi.z <= 0.0 {
+        return None;
+    }
+    // Stretch wi to the α = 1 configuration.
+    let ws = Vec3::new(alpha * wi.x, alpha * wi.y, wi.z).normalize();
+    let sin2 = ws.x * ws.x + ws.y * ws.y;
+    let (sin_phi, cos_phi) = if sin2 <= AZIMUTH_EPSILON * AZIMUTH_EPSILON {
+        (0.0, 1.0)
+    } else {
+        let inv = 1.0 / sin2.sqrt();
+        ((ws.y * inv).clamp(-1.0, 1.0), (ws.x * inv).clamp(-1.0, 1.0))
+    };
+    let slope = match distribution {
+        Distribution::Beckmann => sample_beckmann_slopes(ws.z, u),
+        Distribution::Ggx => sample_ggx_slopes(ws.z, u),
+    };
+    // Rotate back to wi's azimuth and unstretch.
+    let mx = (cos_phi * slope.x - sin_phi * slope.y) * alpha;
+    let my = (sin_phi * slope.x + cos_phi * slope.y) * alpha;
+    if !(mx.is_finite() && my.is_finite()) {
+        return None;
+    }
+    let h = Vec3::new(-mx, -my, 1.0).normalize();
+    let wo = 2.0 * wi.dot(h) * h - wi;
+    (wo.z > 0.0 && wi.dot(h) > 0.0).then_some(wo)
+}

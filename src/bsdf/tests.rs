@@ -1,0 +1,132 @@
+//! BSDF tests: sample/pdf/eval consistency and chi-square goodness of fit of every sampler.
+
+use glam::{Vec2, Vec3};
+
+use super::*;
+use crate::rng::{PassTag, RngKey, Stream, uniform4};
+use crate::stats::{Chi2Config, chi2_directions, dump_table, sidak};
+
+/// Every chi-square test in this file, for the Šidák correction of the 1 % family-wise level.
+const CHI2_TESTS: usize = 1 + 2 * 3 * 3 + 3;
+const FAMILY_ALPHA: f64 = 0.01;
+
+fn uniforms(test: u32, i: usize) -> (f32, Vec2) {
+    let u = uniform4(RngKey::new(test, 0, PassTag::Test), i as u32, 0, 1, Stream::Main, 1, 0);
+    (u[0], Vec2::new(u[1], u[2]))
+}
+
+fn incident(cos_theta: f32) -> Vec3 {
+    let sin = (1.0 - cos_theta * cos_theta).max(0.0).sqrt();
+    Vec3::new(sin * 0.8, sin * 0.6, cos_theta)
+}
+
+fn conductor(distribution: Distribution, alpha: f32) -> Leaf {
+    Leaf::RoughConductor { distribution, alpha, specular: Vec3::ONE, eta: Vec3::ZERO, k: Vec3::ONE }
+}
+
+fn check_chi2(name: &str, test: u32, bsdf: &Bsdf, wi: Vec3) {
+    let cfg = Chi2Config { cos_bins: 16, phi_bins: 32, samples: 1_000_000, significance: sidak(FAMILY_ALPHA, CHI2_TESTS) };
+    let r = chi2_directions(
+        &cfg,
+        |i| {
+            let (ul, u) = uniforms(test, i);
+            bsdf_sample(bsdf, wi, ul, u).map(|s| s.wo)
+        },
+        |wo| f64::from(bsdf_pdf(bsdf, wi, wo)),
+    );
+    if !r.passed(cfg.significance) {
+        let path = dump_table(name, &r);
+        panic!("{name}: chi2 {} with {} dof, p = {:.3e} < {:.3e}; table in {}", r.statistic, r.dof, r.p_value, cfg.significance, path.display());
+    }
+}
+
+#[test]
+fn chi2_diffuse() {
+    check_chi2("diffuse", 1, &Bsdf::leaf(Leaf::Diffuse { albedo: Vec3::splat(0.5) }), incident(0.6));
+}
+
+#[test]
+fn chi2_rough_conductors() {
+    let mut test = 10;
+    for distribution in [Distribution::Beckmann, Distribution::Ggx] {
+        for alpha in [0.1, 0.3, 0.8] {
+            for cos_i in [0.999, 0.5, 0.05] {
+                test += 1;
+                check_chi2(&format!("{distribution:?}-alpha{alpha}-cos{cos_i}"), test, &Bsdf::leaf(conductor(distribution, alpha)), incident(cos_i));
+            }
+        }
+    }
+}
+
+#[test]
+fn chi2_blend() {
+    for (i, w) in [0.1f32, 0.5, 0.9].into_iter().enumerate() {
+        let b = Bsdf { leaves: [Leaf::Diffuse { albedo: Vec3::new(0.1, 0.6, 0.35) }, conductor(Distribution::Ggx, 0.2)], weight: w, blend: true };
+        check_chi2(&format!("blend-w{w}"), 40 + i as u32, &b, incident(0.7));
+    }
+}
+
+fn all_bsdfs() -> Vec<Bsdf> {
+    let mut v = vec![Bsdf::leaf(Leaf::Diffuse { albedo: Vec3::new(0.2, 0.5, 0.9) })];
+    for d in [Distribution::Beckmann, Distribution::Ggx] {
+        for a in [0.01, 0.05, 0.3, 0.8] {
+            v.push(Bsdf::leaf(conductor(d, a)));
+        }
+    }
+    v.push(Bsdf { leaves: [Leaf::Diffuse { albedo: Vec3::splat(0.5) }, conductor(Distribution::Ggx, 0.1)], weight: 0.3, blend: true });
+    v
+}
+
+/// The pdf and value a sample reports are what `bsdf_pdf` and `bsdf_eval` give at its direction.
+#[test]
+fn sample_agrees_with_pdf_and_eval() {
+    for (k, b) in all_bsdfs().iter().enumerate() {
+        for cos_i in [1.0, 0.7, 0.2, 0.05] {
+            let wi = incident(cos_i);
+            for i in 0..2000 {
+                let (ul, u) = uniforms(100 + k as u32, i);
+                if let Some(s) = bsdf_sample(b, wi, ul, u) {
+                    assert!(s.wo.is_finite() && (s.wo.length() - 1.0).abs() < 1e-4, "{b:?}: wo {:?}", s.wo);
+                    assert_eq!(s.pdf, bsdf_pdf(b, wi, s.wo));
+                    assert_eq!(s.value, bsdf_eval(b, wi, s.wo));
+                    assert!(s.pdf > 0.0 && s.value.is_finite());
+                }
+            }
+        }
+    }
+}
+
+/// Reciprocity of f = f̂ / cos θo, and energy conservation ∫f̂ ≤ 1 (estimated by importance sampling).
+#[test]
+fn reciprocal_and_energy_conserving() {
+    for (k, b) in all_bsdfs().iter().enumerate() {
+        for cos_i in [0.9, 0.4] {
+            let wi = incident(cos_i);
+            let n = 20_000;
+            let mut albedo = Vec3::ZERO;
+            for i in 0..n {
+                let (ul, u) = uniforms(200 + k as u32, i);
+                if let Some(s) = bsdf_sample(b, wi, ul, u) {
+                    albedo += s.value / s.pdf;
+                    let f_ab = bsdf_eval(b, wi, s.wo) / s.wo.z;
+                    let f_ba = bsdf_eval(b, s.wo, wi) / wi.z;
+                    assert!((f_ab - f_ba).abs().max_element() <= 1e-3 * f_ab.abs().max_element().max(1e-3), "{b:?}: {f_ab} vs {f_ba}");
+                }
+            }
+            albedo /= n as f32;
+            // Monte Carlo estimate: allow 3 % for noise (the estimator's relative error at 20k samples).
+            assert!(albedo.max_element() <= 1.03, "{b:?} at cos {cos_i}: albedo {albedo}");
+        }
+    }
+}
+
+/// With F ≡ 1 (eta 0, k 1) the conductor Fresnel term is exactly 1; for a real metal it is in (0, 1).
+#[test]
+fn fresnel_conductor_limits() {
+    for c in [1.0, 0.5, 0.1] {
+        assert!((rough_conductor::fresnel_conductor(c, Vec3::ZERO, Vec3::ONE) - Vec3::ONE).abs().max_element() < 1e-6);
+        let gold = rough_conductor::fresnel_conductor(c, Vec3::new(0.143, 0.374, 1.442), Vec3::new(3.983, 2.385, 1.603));
+        assert!(gold.min_element() > 0.0 && gold.max_element() < 1.0, "{gold}");
+    }
+}
+
