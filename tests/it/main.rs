@@ -2,5 +2,7 @@
 
 mod support;
 
+mod cpu_vs_gpu;
 mod embree_smoke;
+mod furnace;
 mod twins;
