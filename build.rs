@@ -101,7 +101,8 @@ fn main() {
         std::fs::write(&spv, artifact.as_binary_u8()).unwrap_or_else(|e| panic!("{}: {e}", spv.display()));
         entries.push((name, spv));
     }
-    let mut table = String::from("/// Every compiled kernel: (name, SPIR-V bytes).\npub const SHADERS: &[(&str, &[u8])] = &[\n");
+    let mut table =
+        String::from("/// Every compiled kernel: (name, SPIR-V bytes).\npub const SHADERS: &[(&str, &[u8])] = &[\n");
     for (name, spv) in &entries {
         let _ = writeln!(table, "    ({name:?}, include_bytes!({:?})),", spv.display().to_string());
     }

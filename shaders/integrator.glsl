@@ -76,7 +76,8 @@ vec3 trace_path(uint pixel, uint sample_index) {
         prev_pdf_f = bs.pdf;
 
         // ---- Russian roulette ----
-        if (vertex - 1u >= globals.rr_depth) {
+        // vertex - 1 >= rr_depth (ALGORITHMS.md §3.1), written without the subtraction.
+        if (vertex > globals.rr_depth) {
             float u_rr = draw_block(pixel, sample_index, vertex, DIM_ROULETTE / 4u)[DIM_ROULETTE % 4u];
             float p_rr = min(max_component(throughput), 0.95);
             if (!(u_rr < p_rr)) { finished = true; break; }

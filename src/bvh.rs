@@ -33,13 +33,19 @@ pub struct Bvh {
 /// # Errors
 /// [`Error::Scene`] if the tree is deeper than the GPU traversal stack allows.
 pub fn build(triangles: &[[Vec3; 3]]) -> Result<Bvh> {
-    let tris: Vec<Triangle> = triangles.iter().map(|t| Triangle { v0: t[0].into(), v1: t[1].into(), v2: t[2].into() }).collect();
+    let tris: Vec<Triangle> =
+        triangles.iter().map(|t| Triangle { v0: t[0].into(), v1: t[1].into(), v2: t[2].into() }).collect();
     let mut build_time = Duration::ZERO;
     let bvh2 = build_bvh2_from_tris(&tris, BvhBuildParams::medium_build(), &mut build_time);
     let nodes: Vec<BvhNode> = bvh2
         .nodes
         .iter()
-        .map(|n| BvhNode { bmin: n.aabb.min.into(), count: n.prim_count, bmax: n.aabb.max.into(), first: n.first_index })
+        .map(|n| BvhNode {
+            bmin: n.aabb.min.into(),
+            count: n.prim_count,
+            bmax: n.aabb.max.into(),
+            first: n.first_index,
+        })
         .collect();
     let prim_ids = bvh2.primitive_indices.clone();
     let tris = prim_ids
@@ -52,7 +58,10 @@ pub fn build(triangles: &[[Vec3; 3]]) -> Result<Bvh> {
     let depth = tree_depth(&nodes);
     // Traversal pushes at most one entry per level plus the root's children.
     if depth + 1 >= BVH_STACK_SIZE {
-        return Err(Error::Scene { location: "BVH".into(), message: format!("depth {depth} exceeds the traversal stack ({BVH_STACK_SIZE})") });
+        return Err(Error::Scene {
+            location: "BVH".into(),
+            message: format!("depth {depth} exceeds the traversal stack ({BVH_STACK_SIZE})"),
+        });
     }
     tracing::debug!(triangles = triangles.len(), nodes = nodes.len(), depth, ?build_time, "BVH built");
     Ok(Bvh { nodes, tris, prim_ids, depth })

@@ -39,11 +39,8 @@ const RGB_NAMES: [&str; 3] = ["R", "G", "B"];
 /// Lossless EXR encoding: ZIP over 16-line blocks, scan lines top to bottom. ZIP is lossless for
 /// f32 (bit-exact round trips) and compresses rendered images well; scan lines are readable by
 /// every OpenEXR reader.
-const EXR_ENCODING: Encoding = Encoding {
-    compression: Compression::ZIP16,
-    blocks: Blocks::ScanLines,
-    line_order: LineOrder::Increasing,
-};
+const EXR_ENCODING: Encoding =
+    Encoding { compression: Compression::ZIP16, blocks: Blocks::ScanLines, line_order: LineOrder::Increasing };
 
 /// Below this linear value the sRGB transfer function is linear (IEC 61966-2-1).
 const SRGB_LINEAR_THRESHOLD: f64 = 0.003_130_8;
@@ -123,11 +120,7 @@ impl Image {
     /// If `3 * width * height` does not fit in `usize` (or the allocation fails).
     pub fn new(width: u32, height: u32) -> Image {
         let len = float_count(width, height).expect("image size 3·width·height must fit in usize");
-        Image {
-            width,
-            height,
-            data: vec![0.0; len],
-        }
+        Image { width, height, data: vec![0.0; len] }
     }
 
     /// Wraps `data` (row-major, top row first, `[r, g, b]` per pixel) as a `width` × `height`
@@ -138,11 +131,7 @@ impl Image {
     /// [`Error::InvalidArgument`] naming both sizes if `data.len() != 3 * width * height`.
     pub fn from_rgb(width: u32, height: u32, data: Vec<f32>) -> Result<Image> {
         match float_count(width, height) {
-            Some(expected) if expected == data.len() => Ok(Image {
-                width,
-                height,
-                data,
-            }),
+            Some(expected) if expected == data.len() => Ok(Image { width, height, data }),
             expected => Err(Error::InvalidArgument {
                 parameter: "image data".into(),
                 message: format!(
@@ -221,20 +210,14 @@ impl Image {
     /// [`Error::Image`] if the extension is neither `exr` nor `png`; otherwise those of the writer.
     pub fn save(&self, path: impl AsRef<Path>) -> Result<()> {
         let path = path.as_ref();
-        let extension = path
-            .extension()
-            .map(|e| e.to_string_lossy().to_ascii_lowercase());
+        let extension = path.extension().map(|e| e.to_string_lossy().to_ascii_lowercase());
         match extension.as_deref() {
             Some("exr") => self.write_exr(path),
             Some("png") => self.write_png(path, 0.0),
-            Some(other) => Err(image_error(
-                path,
-                format!("unsupported image extension '.{other}': expected .exr or .png"),
-            )),
-            None => Err(image_error(
-                path,
-                "no file extension to choose the format by: expected .exr or .png",
-            )),
+            Some(other) => {
+                Err(image_error(path, format!("unsupported image extension '.{other}': expected .exr or .png")))
+            }
+            None => Err(image_error(path, "no file extension to choose the format by: expected .exr or .png")),
         }
     }
 
@@ -289,16 +272,9 @@ impl Image {
                 ));
             }
             for (c, suffix) in RGB_NAMES.iter().enumerate() {
-                let full = if name.is_empty() {
-                    (*suffix).to_string()
-                } else {
-                    format!("{name}.{suffix}")
-                };
+                let full = if name.is_empty() { (*suffix).to_string() } else { format!("{name}.{suffix}") };
                 let text = Text::new_or_none(&full).ok_or_else(|| {
-                    image_error(
-                        path,
-                        format!("channel name '{full}' is not Latin-1, which OpenEXR requires"),
-                    )
+                    image_error(path, format!("channel name '{full}' is not Latin-1, which OpenEXR requires"))
                 })?;
                 let mut channel = AnyChannel::new(text, FlatSamples::F32(image.channel(c)));
                 // `new` guesses `pLinear` from the name, so `color.R` would get it and `R` would
@@ -316,10 +292,7 @@ impl Image {
         );
         let exr_image = exr::image::Image::from_layer(layer);
         write_atomically(path, |out| {
-            exr_image
-                .write()
-                .to_buffered(out)
-                .map_err(|e| exr_error(path, Direction::Write, e))
+            exr_image.write().to_buffered(out).map_err(|e| exr_error(path, Direction::Write, e))
         })
     }
 
@@ -335,8 +308,8 @@ impl Image {
     /// has), stores them as integers, or subsamples them.
     pub fn read_exr(path: impl AsRef<Path>) -> Result<Image> {
         let path = path.as_ref();
-        let exr_image = exr::prelude::read_first_flat_layer_from_file(path)
-            .map_err(|e| exr_error(path, Direction::Read, e))?;
+        let exr_image =
+            exr::prelude::read_first_flat_layer_from_file(path).map_err(|e| exr_error(path, Direction::Read, e))?;
         let layer = exr_image.layer_data;
         let (width, height) = (layer.size.x(), layer.size.y());
         let too_big = || image_error(path, format!("{width}×{height} pixels is too large"));
@@ -355,11 +328,7 @@ impl Image {
                     format!(
                         "no '{name}' channel; pathgrad reads RGB or RGBA images (channels found: \
                          {})",
-                        if found.is_empty() {
-                            "none".to_string()
-                        } else {
-                            found.join(", ")
-                        }
+                        if found.is_empty() { "none".to_string() } else { found.join(", ") }
                     ),
                 ));
             };
@@ -379,20 +348,11 @@ impl Image {
                     ),
                 ));
             }
-            for (dst, v) in data
-                .iter_mut()
-                .skip(c)
-                .step_by(3)
-                .zip(channel.sample_data.values_as_f32())
-            {
+            for (dst, v) in data.iter_mut().skip(c).step_by(3).zip(channel.sample_data.values_as_f32()) {
                 *dst = v;
             }
         }
-        Ok(Image {
-            width: width_u32,
-            height: height_u32,
-            data,
-        })
+        Ok(Image { width: width_u32, height: height_u32, data })
     }
 
     /// Writes a tone-mapped 8-bit sRGB PNG: each value is multiplied by `2^exposure`, clamped to
@@ -415,11 +375,7 @@ impl Image {
         }
         self.check_writable(path)?;
         let gain = f64::from(exposure).exp2();
-        let bytes: Vec<u8> = self
-            .data
-            .iter()
-            .map(|&v| linear_to_srgb8(f64::from(v) * gain))
-            .collect();
+        let bytes: Vec<u8> = self.data.iter().map(|&v| linear_to_srgb8(f64::from(v) * gain)).collect();
         write_rgb8_png(path, self.width, self.height, &bytes)
     }
 
@@ -468,12 +424,8 @@ impl Image {
     /// Never 0: if that percentile is 0 the largest finite |r + g + b| is used, and if that is 0
     /// too (or no pixel is finite) the result is 1.
     pub fn signed_scale(&self) -> f32 {
-        let mut magnitudes: Vec<f32> = self
-            .data
-            .chunks_exact(3)
-            .map(|rgb| pixel_sum(rgb).abs())
-            .filter(|m| m.is_finite())
-            .collect();
+        let mut magnitudes: Vec<f32> =
+            self.data.chunks_exact(3).map(|rgb| pixel_sum(rgb).abs()).filter(|m| m.is_finite()).collect();
         if magnitudes.is_empty() {
             return 1.0;
         }
@@ -509,10 +461,7 @@ impl Image {
         if self.width == 0 || self.height == 0 {
             return Err(image_error(
                 path,
-                format!(
-                    "cannot write a {}×{} image: it has no pixels",
-                    self.width, self.height
-                ),
+                format!("cannot write a {}×{} image: it has no pixels", self.width, self.height),
             ));
         }
         Ok(())
@@ -521,9 +470,7 @@ impl Image {
 
 /// `3 · width · height`, if it fits in `usize`.
 fn float_count(width: u32, height: u32) -> Option<usize> {
-    (width as usize)
-        .checked_mul(height as usize)?
-        .checked_mul(3)
+    (width as usize).checked_mul(height as usize)?.checked_mul(3)
 }
 
 /// The signed quantity [`Image::write_signed_png`] draws for one pixel: `r + g + b`.
@@ -533,19 +480,13 @@ fn pixel_sum(rgb: &[f32]) -> f32 {
 
 /// An [`Error::Image`] for `path`.
 fn image_error(path: &Path, message: impl Into<String>) -> Error {
-    Error::Image {
-        path: path.to_path_buf(),
-        message: message.into(),
-    }
+    Error::Image { path: path.to_path_buf(), message: message.into() }
 }
 
 /// Converts an `exr` error that happened while reading or writing `path`.
 fn exr_error(path: &Path, direction: Direction, error: exr::error::Error) -> Error {
     match error {
-        exr::error::Error::Io(source) => Error::Io {
-            path: path.to_path_buf(),
-            source,
-        },
+        exr::error::Error::Io(source) => Error::Io { path: path.to_path_buf(), source },
         other => image_error(
             path,
             match direction {
@@ -569,10 +510,7 @@ fn write_rgb8_png(path: &Path, width: u32, height: u32, bytes: &[u8]) -> Result<
         image::codecs::png::PngEncoder::new(out)
             .write_image(bytes, width, height, image::ExtendedColorType::Rgb8)
             .map_err(|e| match e {
-                image::ImageError::IoError(source) => Error::Io {
-                    path: path.to_path_buf(),
-                    source,
-                },
+                image::ImageError::IoError(source) => Error::Io { path: path.to_path_buf(), source },
                 other => image_error(path, format!("writing PNG: {other}")),
             })
     })
@@ -581,14 +519,8 @@ fn write_rgb8_png(path: &Path, width: u32, height: u32, bytes: &[u8]) -> Result<
 /// Runs `write` on a temporary file next to `path` and renames it to `path` once `write`
 /// succeeded and the data is on disk; on any failure the temporary file is removed and `path` is
 /// left as it was.
-fn write_atomically(
-    path: &Path,
-    write: impl FnOnce(&mut BufWriter<File>) -> Result<()>,
-) -> Result<()> {
-    let io_error = |source| Error::Io {
-        path: path.to_path_buf(),
-        source,
-    };
+fn write_atomically(path: &Path, write: impl FnOnce(&mut BufWriter<File>) -> Result<()>) -> Result<()> {
+    let io_error = |source| Error::Io { path: path.to_path_buf(), source };
     let Some(file_name) = path.file_name() else {
         return Err(image_error(path, "not a file path"));
     };
@@ -598,21 +530,10 @@ fn write_atomically(
     };
     let mut temp_name = OsString::from(".");
     temp_name.push(file_name);
-    temp_name.push(format!(
-        ".{}-{}.tmp",
-        std::process::id(),
-        TEMP_COUNTER.fetch_add(1, Ordering::Relaxed)
-    ));
-    let temp = TempFile {
-        path: dir.join(temp_name),
-        kept: false,
-    };
+    temp_name.push(format!(".{}-{}.tmp", std::process::id(), TEMP_COUNTER.fetch_add(1, Ordering::Relaxed)));
+    let temp = TempFile { path: dir.join(temp_name), kept: false };
 
-    let file = OpenOptions::new()
-        .write(true)
-        .create_new(true)
-        .open(&temp.path)
-        .map_err(io_error)?;
+    let file = OpenOptions::new().write(true).create_new(true).open(&temp.path).map_err(io_error)?;
     let mut out = BufWriter::new(file);
     write(&mut out)?;
     out.flush().map_err(io_error)?;
@@ -665,19 +586,11 @@ fn linear_to_srgb8(linear: f64) -> u8 {
 /// Oklab `[L, a, b]` of the diverging map at `t` ∈ [-1, 1]: the straight line from white to the
 /// red end (`t > 0`) or the blue end (`t < 0`).
 fn diverging_oklab(t: f64) -> [f64; 3] {
-    let hue_deg = if t >= 0.0 {
-        DIVERGING_POSITIVE_HUE_DEG
-    } else {
-        DIVERGING_NEGATIVE_HUE_DEG
-    };
+    let hue_deg = if t >= 0.0 { DIVERGING_POSITIVE_HUE_DEG } else { DIVERGING_NEGATIVE_HUE_DEG };
     let s = t.abs().min(1.0);
     let chroma = s * DIVERGING_END_CHROMA;
     let hue = hue_deg.to_radians();
-    [
-        1.0 - s * (1.0 - DIVERGING_END_LIGHTNESS),
-        chroma * hue.cos(),
-        chroma * hue.sin(),
-    ]
+    [1.0 - s * (1.0 - DIVERGING_END_LIGHTNESS), chroma * hue.cos(), chroma * hue.sin()]
 }
 
 /// Oklab → linear sRGB (Björn Ottosson's published matrices, "A perceptual color space for image
@@ -713,10 +626,8 @@ mod tests {
 
     /// Names of the entries of `dir`.
     fn entries(dir: &Path) -> Vec<String> {
-        let mut names: Vec<String> = fs::read_dir(dir)
-            .unwrap()
-            .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
-            .collect();
+        let mut names: Vec<String> =
+            fs::read_dir(dir).unwrap().map(|e| e.unwrap().file_name().to_string_lossy().into_owned()).collect();
         names.sort();
         names
     }
@@ -750,13 +661,8 @@ mod tests {
 
     #[test]
     fn from_rgb_checks_the_length_and_names_the_sizes() {
-        let err = Image::from_rgb(4, 2, vec![0.0; 23])
-            .unwrap_err()
-            .to_string();
-        assert!(
-            err.contains("4×2") && err.contains("24") && err.contains("23"),
-            "{err}"
-        );
+        let err = Image::from_rgb(4, 2, vec![0.0; 23]).unwrap_err().to_string();
+        assert!(err.contains("4×2") && err.contains("24") && err.contains("23"), "{err}");
         let image = Image::from_rgb(2, 1, vec![1.0, 2.0, 3.0, 4.0, 5.0, 6.0]).unwrap();
         assert_eq!(image.pixel(1, 0), [4.0, 5.0, 6.0]);
         assert_eq!(image.mean(), [2.5, 3.5, 4.5]);
@@ -778,26 +684,10 @@ mod tests {
 
     /// Values that a lossy path would change: negatives, subnormals, huge, NaN and infinities.
     fn awkward_image() -> Image {
-        let specials = [
-            -1.5,
-            -0.0,
-            0.1,
-            1e-42,
-            -3.0e38,
-            f32::INFINITY,
-            f32::NEG_INFINITY,
-            f32::NAN,
-            f32::MIN_POSITIVE,
-        ];
+        let specials = [-1.5, -0.0, 0.1, 1e-42, -3.0e38, f32::INFINITY, f32::NEG_INFINITY, f32::NAN, f32::MIN_POSITIVE];
         let (width, height) = (7, 5);
         let data = (0..width * height * 3)
-            .map(|i| {
-                if (i as usize) < specials.len() {
-                    specials[i as usize]
-                } else {
-                    (i as f32 * 0.37).sin() * 10.0
-                }
-            })
+            .map(|i| if (i as usize) < specials.len() { specials[i as usize] } else { (i as f32 * 0.37).sin() * 10.0 })
             .collect();
         Image::from_rgb(width, height, data).unwrap()
     }
@@ -841,38 +731,16 @@ mod tests {
         Image::write_layers_exr(&path, &[("color", &color), ("grad.roughness", &grad)]).unwrap();
 
         let file = exr::prelude::read_first_flat_layer_from_file(&path).unwrap();
-        let names: Vec<String> = file
-            .layer_data
-            .channel_data
-            .list
-            .iter()
-            .map(|c| c.name.to_string())
-            .collect();
+        let names: Vec<String> = file.layer_data.channel_data.list.iter().map(|c| c.name.to_string()).collect();
         assert_eq!(
             names,
-            [
-                "color.B",
-                "color.G",
-                "color.R",
-                "grad.roughness.B",
-                "grad.roughness.G",
-                "grad.roughness.R"
-            ]
+            ["color.B", "color.G", "color.R", "grad.roughness.B", "grad.roughness.G", "grad.roughness.R"]
         );
-        let grad_g = file
-            .layer_data
-            .channel_data
-            .list
-            .iter()
-            .find(|c| c.name == *"grad.roughness.G")
-            .unwrap();
+        let grad_g = file.layer_data.channel_data.list.iter().find(|c| c.name == *"grad.roughness.G").unwrap();
         assert_eq!(grad_g.sample_data.values_as_f32().nth(4 * 7 + 3), Some(2.0));
 
         let err = Image::read_exr(&path).unwrap_err().to_string();
-        assert!(
-            err.contains("grad.exr") && err.contains("no 'R' channel") && err.contains("color.R"),
-            "{err}"
-        );
+        assert!(err.contains("grad.exr") && err.contains("no 'R' channel") && err.contains("color.R"), "{err}");
     }
 
     #[test]
@@ -888,9 +756,7 @@ mod tests {
             (&[("grad.σ", &a)], "Latin-1"),
         ];
         for (layers, expected) in cases {
-            let err = Image::write_layers_exr(&path, layers)
-                .unwrap_err()
-                .to_string();
+            let err = Image::write_layers_exr(&path, layers).unwrap_err().to_string();
             assert!(err.contains("bad.exr") && err.contains(expected), "{err}");
         }
         assert!(entries(dir.path()).is_empty());
@@ -923,11 +789,7 @@ mod tests {
         let png = read_png(&path);
         assert_eq!(png.dimensions(), (2, 2));
         assert_eq!(png.get_pixel(0, 0).0, [0, 188, 255]);
-        assert_eq!(
-            png.get_pixel(1, 0).0,
-            [255, 0, 0],
-            ">1 clamps, negative and NaN are 0"
-        );
+        assert_eq!(png.get_pixel(1, 0).0, [255, 0, 0], ">1 clamps, negative and NaN are 0");
         // 0.001 is on the linear segment: 12.92 · 0.001 · 255 = 3.29; 0.25 → 0.5371 · 255 = 137.0.
         assert_eq!(png.get_pixel(0, 1).0, [3, 137, 255]);
         // 0.2 → 0.4845 · 255 = 123.55.
@@ -944,10 +806,7 @@ mod tests {
         let dir = temp_dir();
         let image = awkward_image();
         image.save(dir.path().join("x.EXR")).unwrap();
-        assert_eq!(
-            bits(&Image::read_exr(dir.path().join("x.EXR")).unwrap()),
-            bits(&image)
-        );
+        assert_eq!(bits(&Image::read_exr(dir.path().join("x.EXR")).unwrap()), bits(&image));
         image.save(dir.path().join("x.Png")).unwrap();
         assert_eq!(read_png(&dir.path().join("x.Png")).dimensions(), (7, 5));
         for bad in ["x.jpg", "x"] {
@@ -961,11 +820,7 @@ mod tests {
     fn diverging_map_stays_in_gamut() {
         for i in -1000..=1000 {
             let rgb = oklab_to_linear_srgb(diverging_oklab(f64::from(i) / 1000.0));
-            assert!(
-                rgb.iter().all(|&c| (-1e-6..=1.0 + 1e-6).contains(&c)),
-                "t = {}: {rgb:?}",
-                f64::from(i) / 1000.0
-            );
+            assert!(rgb.iter().all(|&c| (-1e-6..=1.0 + 1e-6).contains(&c)), "t = {}: {rgb:?}", f64::from(i) / 1000.0);
         }
     }
 
@@ -987,22 +842,13 @@ mod tests {
         assert_eq!(px(8), px(6));
         for pair in [(1, 2), (3, 4), (5, 6)] {
             let (pos, neg) = (px(pair.0), px(pair.1));
-            assert!(
-                pos[0] > pos[2] && neg[2] > neg[0],
-                "red for +, blue for -: {pos:?} {neg:?}"
-            );
+            assert!(pos[0] > pos[2] && neg[2] > neg[0], "red for +, blue for -: {pos:?} {neg:?}");
             let lab_pos = linear_srgb_to_oklab(pos.map(srgb8_to_linear));
             let lab_neg = linear_srgb_to_oklab(neg.map(srgb8_to_linear));
             let chroma = |lab: [f64; 3]| lab[1].hypot(lab[2]);
             // One 8-bit step moves Oklab L and chroma by at most ~0.01.
-            assert!(
-                (lab_pos[0] - lab_neg[0]).abs() < 0.01,
-                "{lab_pos:?} {lab_neg:?}"
-            );
-            assert!(
-                (chroma(lab_pos) - chroma(lab_neg)).abs() < 0.01,
-                "{lab_pos:?} {lab_neg:?}"
-            );
+            assert!((lab_pos[0] - lab_neg[0]).abs() < 0.01, "{lab_pos:?} {lab_neg:?}");
+            assert!((chroma(lab_pos) - chroma(lab_neg)).abs() < 0.01, "{lab_pos:?} {lab_neg:?}");
         }
         // Stronger values are darker on both arms.
         let lightness = |i| linear_srgb_to_oklab(px(i).map(srgb8_to_linear))[0];
@@ -1027,9 +873,7 @@ mod tests {
         assert_eq!(nan.signed_scale(), 1.0);
         // With no scale given, the automatic one is used and the write succeeds.
         let dir = temp_dir();
-        Image::new(4, 4)
-            .write_signed_png(dir.path().join("zero.png"), None)
-            .unwrap();
+        Image::new(4, 4).write_signed_png(dir.path().join("zero.png"), None).unwrap();
     }
 
     #[test]
@@ -1043,9 +887,7 @@ mod tests {
             assert!(matches!(err, Error::Io { .. }), "{err:?}");
             assert!(err.to_string().contains(&*path.to_string_lossy()), "{err}");
         }
-        let signed = image
-            .write_signed_png(missing.join("s.png"), None)
-            .unwrap_err();
+        let signed = image.write_signed_png(missing.join("s.png"), None).unwrap_err();
         assert!(signed.to_string().contains("no such dir"), "{signed}");
         assert!(!missing.exists());
         assert!(entries(dir.path()).is_empty(), "nothing is left behind");
@@ -1056,17 +898,11 @@ mod tests {
         fs::create_dir(&target).unwrap();
         let err = image.write_exr(&target).unwrap_err().to_string();
         assert!(err.contains("taken.exr"), "{err}");
-        assert_eq!(
-            entries(dir.path()),
-            ["taken.exr"],
-            "the temporary file is removed"
-        );
+        assert_eq!(entries(dir.path()), ["taken.exr"], "the temporary file is removed");
         assert!(target.is_dir());
 
         // An empty image cannot be written, and says so.
-        let err = Image::new(0, 3)
-            .write_png(dir.path().join("e.png"), 0.0)
-            .unwrap_err();
+        let err = Image::new(0, 3).write_png(dir.path().join("e.png"), 0.0).unwrap_err();
         assert!(err.to_string().contains("0×3"), "{err}");
     }
 
@@ -1074,17 +910,12 @@ mod tests {
     fn reading_a_non_exr_file_names_it() {
         let dir = temp_dir();
         let path = dir.path().join("not-really.exr");
-        Image::new(2, 2)
-            .write_png(path.with_extension("png"), 0.0)
-            .unwrap();
+        Image::new(2, 2).write_png(path.with_extension("png"), 0.0).unwrap();
         fs::rename(path.with_extension("png"), &path).unwrap();
         let err = Image::read_exr(&path).unwrap_err();
         assert!(matches!(err, Error::Image { .. }), "{err:?}");
         let message = err.to_string();
-        assert!(
-            message.contains("not-really.exr") && message.contains("not a readable OpenEXR file"),
-            "{message}"
-        );
+        assert!(message.contains("not-really.exr") && message.contains("not a readable OpenEXR file"), "{message}");
 
         let missing = dir.path().join("missing.exr");
         let err = Image::read_exr(&missing).unwrap_err();

@@ -34,7 +34,14 @@ pub struct RenderOptions {
 impl RenderOptions {
     /// The scene's defaults: its camera's resolution and max depth, 16 spp, seed 0.
     pub fn for_scene(scene: &Scene) -> RenderOptions {
-        RenderOptions { width: scene.camera.width, height: scene.camera.height, spp: 16, max_depth: Some(scene.max_depth), rr_depth: Some(DEFAULT_RR_DEPTH), seed: 0 }
+        RenderOptions {
+            width: scene.camera.width,
+            height: scene.camera.height,
+            spp: 16,
+            max_depth: Some(scene.max_depth),
+            rr_depth: Some(DEFAULT_RR_DEPTH),
+            seed: 0,
+        }
     }
 
     /// Checks ranges.

@@ -46,7 +46,12 @@ impl ParamTable {
             }
         }
         let id = ParamId(self.entries.len() as u32);
-        self.entries.push(ParamEntry { name: name.to_string(), offset: self.values.len() as u32, len: values.len() as u32, bounds });
+        self.entries.push(ParamEntry {
+            name: name.to_string(),
+            offset: self.values.len() as u32,
+            len: values.len() as u32,
+            bounds,
+        });
         self.values.extend_from_slice(values);
         Ok(id)
     }
@@ -85,14 +90,23 @@ impl ParamTable {
     pub fn set(&mut self, name: &str, values: &[f32]) -> Result<()> {
         let id = self.find(name).ok_or_else(|| Error::InvalidArgument {
             parameter: name.to_string(),
-            message: format!("no such parameter (known: {})", self.entries.iter().map(|e| e.name.as_str()).collect::<Vec<_>>().join(", ")),
+            message: format!(
+                "no such parameter (known: {})",
+                self.entries.iter().map(|e| e.name.as_str()).collect::<Vec<_>>().join(", ")
+            ),
         })?;
         let e = self.entry(id).clone();
         if values.len() != e.len as usize {
-            return Err(Error::InvalidArgument { parameter: name.to_string(), message: format!("expects {} values, got {}", e.len, values.len()) });
+            return Err(Error::InvalidArgument {
+                parameter: name.to_string(),
+                message: format!("expects {} values, got {}", e.len, values.len()),
+            });
         }
         if let Some(v) = values.iter().find(|v| !v.is_finite() || **v < e.bounds.0 || **v > e.bounds.1) {
-            return Err(Error::InvalidArgument { parameter: name.to_string(), message: format!("value {v} is outside [{}, {}]", e.bounds.0, e.bounds.1) });
+            return Err(Error::InvalidArgument {
+                parameter: name.to_string(),
+                message: format!("value {v} is outside [{}, {}]", e.bounds.0, e.bounds.1),
+            });
         }
         self.values[e.offset as usize..(e.offset + e.len) as usize].copy_from_slice(values);
         Ok(())

@@ -94,15 +94,7 @@ impl RngKey {
 /// assert!(u.iter().all(|&x| x > 0.0 && x < 1.0));
 /// ```
 #[inline]
-pub fn uniform4(
-    key: RngKey,
-    pixel: u32,
-    sample: u32,
-    vertex: u32,
-    stream: Stream,
-    block: u32,
-    step: u32,
-) -> [f32; 4] {
+pub fn uniform4(key: RngKey, pixel: u32, sample: u32, vertex: u32, stream: Stream, block: u32, step: u32) -> [f32; 4] {
     let c2 = (vertex & 0xFFFF) | ((stream as u32) << 16) | (block << 24);
     philox4x32_10([pixel, sample, c2, step], key.0).map(u32_to_unit_f32)
 }
@@ -115,15 +107,9 @@ mod tests {
     #[test]
     fn philox_known_answers() {
         assert_eq!(philox4x32_10([0; 4], [0; 2]), [0x6627e8d5, 0xe169c58d, 0xbc57ac4c, 0x9b00dbd8]);
+        assert_eq!(philox4x32_10([u32::MAX; 4], [u32::MAX; 2]), [0x408f276d, 0x41c83b0e, 0xa20bc7c6, 0x6d5451fd]);
         assert_eq!(
-            philox4x32_10([u32::MAX; 4], [u32::MAX; 2]),
-            [0x408f276d, 0x41c83b0e, 0xa20bc7c6, 0x6d5451fd]
-        );
-        assert_eq!(
-            philox4x32_10(
-                [0x243f6a88, 0x85a308d3, 0x13198a2e, 0x03707344],
-                [0xa4093822, 0x299f31d0]
-            ),
+            philox4x32_10([0x243f6a88, 0x85a308d3, 0x13198a2e, 0x03707344], [0xa4093822, 0x299f31d0]),
             [0xd16cfe09, 0x94fdcceb, 0x5001e420, 0x24126ea1]
         );
     }

@@ -26,7 +26,11 @@ impl Frame {
         let sign = if n.z >= 0.0 { 1.0 } else { -1.0 };
         let a = -1.0 / (sign + n.z);
         let b = n.x * n.y * a;
-        Frame { t: Vec3::new(1.0 + sign * n.x * n.x * a, sign * b, -sign * n.x), b: Vec3::new(b, sign + n.y * n.y * a, -n.y), n }
+        Frame {
+            t: Vec3::new(1.0 + sign * n.x * n.x * a, sign * b, -sign * n.x),
+            b: Vec3::new(b, sign + n.y * n.y * a, -n.y),
+            n,
+        }
     }
 
     /// `v` in frame coordinates.
@@ -46,7 +50,8 @@ pub fn sample_concentric_disk(u: Vec2) -> Vec2 {
     if a.x == 0.0 && a.y == 0.0 {
         return Vec2::ZERO;
     }
-    let (r, theta) = if a.x.abs() > a.y.abs() { (a.x, FRAC_PI_4 * (a.y / a.x)) } else { (a.y, FRAC_PI_2 - FRAC_PI_4 * (a.x / a.y)) };
+    let (r, theta) =
+        if a.x.abs() > a.y.abs() { (a.x, FRAC_PI_4 * (a.y / a.x)) } else { (a.y, FRAC_PI_2 - FRAC_PI_4 * (a.x / a.y)) };
     Vec2::new(r * theta.cos(), r * theta.sin())
 }
 
@@ -77,6 +82,7 @@ pub fn erf_approx(x: f32) -> f32 {
 }
 
 /// The inverse error function for x in (−1, 1), Giles' single-precision polynomials (2010).
+#[allow(clippy::excessive_precision, reason = "the coefficients as published, shared verbatim with GLSL")]
 pub fn erfinv_approx(x: f32) -> f32 {
     let w = -((1.0 - x) * (1.0 + x)).ln();
     let p = if w < 5.0 {

@@ -86,7 +86,8 @@ fn main() -> ExitCode {
         1 => "info",
         _ => "debug",
     };
-    let filter = tracing_subscriber::EnvFilter::try_from_default_env().unwrap_or_else(|_| tracing_subscriber::EnvFilter::new(default_level));
+    let filter = tracing_subscriber::EnvFilter::try_from_default_env()
+        .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new(default_level));
     tracing_subscriber::fmt().with_env_filter(filter).with_writer(std::io::stderr).init();
     match run(cli) {
         Ok(()) => ExitCode::SUCCESS,
@@ -165,16 +166,25 @@ fn render(args: &RenderArgs) -> Result<()> {
     if args.json {
         progress.set_draw_target(indicatif::ProgressDrawTarget::hidden());
     }
-    progress.set_style(indicatif::ProgressStyle::with_template("{spinner} rendering [{bar:40}] {pos}/{len} spp ({elapsed}, eta {eta})").expect("the template is valid").progress_chars("=> "));
+    progress.set_style(
+        indicatif::ProgressStyle::with_template(
+            "{spinner} rendering [{bar:40}] {pos}/{len} spp ({elapsed}, eta {eta})",
+        )
+        .expect("the template is valid")
+        .progress_chars("=> "),
+    );
     let start = Instant::now();
     let (image, device) = if args.cpu {
-        let image = pathgrad::cpu::render(&scene, &opts).with_context(|| format!("rendering {} on the CPU", args.scene))?;
+        let image =
+            pathgrad::cpu::render(&scene, &opts).with_context(|| format!("rendering {} on the CPU", args.scene))?;
         (image, "CPU reference".to_string())
     } else {
         let ctx = context(&args.flags.device)?;
         let device = ctx.info().name.clone();
         let mut renderer = Renderer::new(&ctx, &scene).with_context(|| format!("loading {}", args.scene))?;
-        let image = renderer.render_with_progress(&opts, &mut |done, _| progress.set_position(u64::from(done))).with_context(|| format!("rendering {}", args.scene))?;
+        let image = renderer
+            .render_with_progress(&opts, &mut |done, _| progress.set_position(u64::from(done)))
+            .with_context(|| format!("rendering {}", args.scene))?;
         (image, device)
     };
     let seconds = start.elapsed().as_secs_f64();
@@ -210,6 +220,10 @@ fn render(args: &RenderArgs) -> Result<()> {
 }
 
 fn save(image: &Image, path: &Path, is_exr: bool, exposure: f32) -> Result<()> {
-    if is_exr { image.write_exr(path)? } else { image.write_png(path, exposure)? }
+    if is_exr {
+        image.write_exr(path)?
+    } else {
+        image.write_png(path, exposure)?
+    }
     Ok(())
 }

@@ -69,7 +69,9 @@ pub struct BsdfSample {
 pub fn leaf_eval(leaf: &Leaf, wi: Vec3, wo: Vec3) -> Vec3 {
     match *leaf {
         Leaf::Diffuse { albedo } => diffuse::diffuse_eval(albedo, wi, wo),
-        Leaf::RoughConductor { distribution, alpha, specular, eta, k } => rough_conductor::microfacet_eval(distribution, alpha, specular, eta, k, wi, wo),
+        Leaf::RoughConductor { distribution, alpha, specular, eta, k } => {
+            rough_conductor::microfacet_eval(distribution, alpha, specular, eta, k, wi, wo)
+        }
     }
 }
 
@@ -77,7 +79,9 @@ pub fn leaf_eval(leaf: &Leaf, wi: Vec3, wo: Vec3) -> Vec3 {
 pub fn leaf_pdf(leaf: &Leaf, wi: Vec3, wo: Vec3) -> f32 {
     match *leaf {
         Leaf::Diffuse { .. } => diffuse::diffuse_pdf(wi, wo),
-        Leaf::RoughConductor { distribution, alpha, .. } => rough_conductor::microfacet_pdf(distribution, alpha, wi, wo),
+        Leaf::RoughConductor { distribution, alpha, .. } => {
+            rough_conductor::microfacet_pdf(distribution, alpha, wi, wo)
+        }
     }
 }
 
@@ -85,7 +89,9 @@ pub fn leaf_pdf(leaf: &Leaf, wi: Vec3, wo: Vec3) -> f32 {
 pub fn leaf_sample(leaf: &Leaf, wi: Vec3, u: Vec2) -> Option<Vec3> {
     match *leaf {
         Leaf::Diffuse { .. } => diffuse::diffuse_sample(wi, u),
-        Leaf::RoughConductor { distribution, alpha, .. } => rough_conductor::microfacet_sample(distribution, alpha, wi, u),
+        Leaf::RoughConductor { distribution, alpha, .. } => {
+            rough_conductor::microfacet_sample(distribution, alpha, wi, u)
+        }
     }
 }
 

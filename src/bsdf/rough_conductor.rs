@@ -93,7 +93,15 @@ pub fn fresnel_conductor(c: f32, eta: Vec3, k: Vec3) -> Vec3 {
 }
 
 /// f̂ = F D G1(wi) G1(wo) / (4 cos θi).
-pub fn microfacet_eval(distribution: Distribution, alpha: f32, specular: Vec3, eta: Vec3, k: Vec3, wi: Vec3, wo: Vec3) -> Vec3 {
+pub fn microfacet_eval(
+    distribution: Distribution,
+    alpha: f32,
+    specular: Vec3,
+    eta: Vec3,
+    k: Vec3,
+    wi: Vec3,
+    wo: Vec3,
+) -> Vec3 {
     if wi.z <= 0.0 || wo.z <= 0.0 {
         return Vec3::ZERO;
     }

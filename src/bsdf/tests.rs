@@ -25,7 +25,8 @@ fn conductor(distribution: Distribution, alpha: f32) -> Leaf {
 }
 
 fn check_chi2(name: &str, test: u32, bsdf: &Bsdf, wi: Vec3) {
-    let cfg = Chi2Config { cos_bins: 16, phi_bins: 32, samples: 1_000_000, significance: sidak(FAMILY_ALPHA, CHI2_TESTS) };
+    let cfg =
+        Chi2Config { cos_bins: 16, phi_bins: 32, samples: 1_000_000, significance: sidak(FAMILY_ALPHA, CHI2_TESTS) };
     let r = chi2_directions(
         &cfg,
         |i| {
@@ -36,7 +37,14 @@ fn check_chi2(name: &str, test: u32, bsdf: &Bsdf, wi: Vec3) {
     );
     if !r.passed(cfg.significance) {
         let path = dump_table(name, &r);
-        panic!("{name}: chi2 {} with {} dof, p = {:.3e} < {:.3e}; table in {}", r.statistic, r.dof, r.p_value, cfg.significance, path.display());
+        panic!(
+            "{name}: chi2 {} with {} dof, p = {:.3e} < {:.3e}; table in {}",
+            r.statistic,
+            r.dof,
+            r.p_value,
+            cfg.significance,
+            path.display()
+        );
     }
 }
 
@@ -52,7 +60,12 @@ fn chi2_rough_conductors() {
         for alpha in [0.1, 0.3, 0.8] {
             for cos_i in [0.999, 0.5, 0.05] {
                 test += 1;
-                check_chi2(&format!("{distribution:?}-alpha{alpha}-cos{cos_i}"), test, &Bsdf::leaf(conductor(distribution, alpha)), incident(cos_i));
+                check_chi2(
+                    &format!("{distribution:?}-alpha{alpha}-cos{cos_i}"),
+                    test,
+                    &Bsdf::leaf(conductor(distribution, alpha)),
+                    incident(cos_i),
+                );
             }
         }
     }
@@ -61,7 +74,11 @@ fn chi2_rough_conductors() {
 #[test]
 fn chi2_blend() {
     for (i, w) in [0.1f32, 0.5, 0.9].into_iter().enumerate() {
-        let b = Bsdf { leaves: [Leaf::Diffuse { albedo: Vec3::new(0.1, 0.6, 0.35) }, conductor(Distribution::Ggx, 0.2)], weight: w, blend: true };
+        let b = Bsdf {
+            leaves: [Leaf::Diffuse { albedo: Vec3::new(0.1, 0.6, 0.35) }, conductor(Distribution::Ggx, 0.2)],
+            weight: w,
+            blend: true,
+        };
         check_chi2(&format!("blend-w{w}"), 40 + i as u32, &b, incident(0.7));
     }
 }
@@ -73,7 +90,11 @@ fn all_bsdfs() -> Vec<Bsdf> {
             v.push(Bsdf::leaf(conductor(d, a)));
         }
     }
-    v.push(Bsdf { leaves: [Leaf::Diffuse { albedo: Vec3::splat(0.5) }, conductor(Distribution::Ggx, 0.1)], weight: 0.3, blend: true });
+    v.push(Bsdf {
+        leaves: [Leaf::Diffuse { albedo: Vec3::splat(0.5) }, conductor(Distribution::Ggx, 0.1)],
+        weight: 0.3,
+        blend: true,
+    });
     v
 }
 
@@ -110,7 +131,10 @@ fn reciprocal_and_energy_conserving() {
                     albedo += s.value / s.pdf;
                     let f_ab = bsdf_eval(b, wi, s.wo) / s.wo.z;
                     let f_ba = bsdf_eval(b, s.wo, wi) / wi.z;
-                    assert!((f_ab - f_ba).abs().max_element() <= 1e-3 * f_ab.abs().max_element().max(1e-3), "{b:?}: {f_ab} vs {f_ba}");
+                    assert!(
+                        (f_ab - f_ba).abs().max_element() <= 1e-3 * f_ab.abs().max_element().max(1e-3),
+                        "{b:?}: {f_ab} vs {f_ba}"
+                    );
                 }
             }
             albedo /= n as f32;
@@ -125,8 +149,8 @@ fn reciprocal_and_energy_conserving() {
 fn fresnel_conductor_limits() {
     for c in [1.0, 0.5, 0.1] {
         assert!((rough_conductor::fresnel_conductor(c, Vec3::ZERO, Vec3::ONE) - Vec3::ONE).abs().max_element() < 1e-6);
-        let gold = rough_conductor::fresnel_conductor(c, Vec3::new(0.143, 0.374, 1.442), Vec3::new(3.983, 2.385, 1.603));
+        let gold =
+            rough_conductor::fresnel_conductor(c, Vec3::new(0.143, 0.374, 1.442), Vec3::new(3.983, 2.385, 1.603));
         assert!(gold.min_element() > 0.0 && gold.max_element() < 1.0, "{gold}");
     }
 }
-

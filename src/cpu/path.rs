@@ -7,7 +7,9 @@ use crate::bsdf::{bsdf_eval, bsdf_pdf, bsdf_sample};
 use crate::bvh::{Ray, closest_hit, occluded};
 use crate::cpu::emitter::{emitter_pdf_solid_angle, sample_emitter};
 use crate::cpu::surface::{SHADOW_EPSILON, mis_power, offset_origin, param_color, resolve_bsdf, surface_at};
-use crate::gpu::abi::{DIM_DIRECTION, DIM_EMITTER_POS, DIM_EMITTER_SELECT, DIM_LOBE, DIM_PIXEL_JITTER, DIM_ROULETTE, Globals, NO_EMITTER};
+use crate::gpu::abi::{
+    DIM_DIRECTION, DIM_EMITTER_POS, DIM_EMITTER_SELECT, DIM_LOBE, DIM_PIXEL_JITTER, DIM_ROULETTE, Globals, NO_EMITTER,
+};
 use crate::rng::{RngKey, Stream, uniform4};
 use crate::sampling::Frame;
 use crate::scene::flat::FlatScene;
@@ -27,7 +29,8 @@ pub fn trace_path(flat: &FlatScene, globals: &Globals, pixel: u32, sample: u32) 
     let (px, py) = (pixel % globals.width, pixel / globals.width);
     let sx = 2.0 * (px as f32 + u_cam[0]) / globals.width as f32 - 1.0;
     let sy = 1.0 - 2.0 * (py as f32 + u_cam[1]) / globals.height as f32;
-    let mut ray = Ray::new(globals.cam_origin, (globals.cam_forward + sx * globals.cam_right + sy * globals.cam_up).normalize());
+    let mut ray =
+        Ray::new(globals.cam_origin, (globals.cam_forward + sx * globals.cam_right + sy * globals.cam_up).normalize());
 
     let mut throughput = Vec3::ONE; // β (ALGORITHMS.md §3.1)
     let mut radiance = Vec3::ZERO; // L
@@ -58,7 +61,9 @@ pub fn trace_path(flat: &FlatScene, globals: &Globals, pixel: u32, sample: u32) 
         // ---- emitter sampling ----
         let u_em = draw_block(globals, pixel, sample, vertex, DIM_EMITTER_SELECT / 4);
         let pos = (DIM_EMITTER_POS % 4) as usize;
-        if let Some(es) = sample_emitter(flat, u_em[(DIM_EMITTER_SELECT % 4) as usize], Vec2::new(u_em[pos], u_em[pos + 1])) {
+        if let Some(es) =
+            sample_emitter(flat, u_em[(DIM_EMITTER_SELECT % 4) as usize], Vec2::new(u_em[pos], u_em[pos + 1]))
+        {
             let origin = offset_origin(s.p, s.ng, es.point - s.p);
             let to_light = es.point - origin;
             let dist = to_light.length();
@@ -66,7 +71,10 @@ pub fn trace_path(flat: &FlatScene, globals: &Globals, pixel: u32, sample: u32) 
             let p_e = emitter_pdf_solid_angle(globals, dist, es.normal.dot(-wl));
             let wo = frame.to_local(wl);
             let f = bsdf_eval(&bsdf, wi, wo);
-            if p_e > 0.0 && max_component(f) > 0.0 && !occluded(&flat.bvh, &Ray::new(origin, wl), 0.0, dist * (1.0 - SHADOW_EPSILON)) {
+            if p_e > 0.0
+                && max_component(f) > 0.0
+                && !occluded(&flat.bvh, &Ray::new(origin, wl), 0.0, dist * (1.0 - SHADOW_EPSILON))
+            {
                 let w_n = mis_power(p_e, bsdf_pdf(&bsdf, wi, wo));
                 radiance += throughput * w_n * f * es.radiance / p_e;
             }
@@ -75,7 +83,10 @@ pub fn trace_path(flat: &FlatScene, globals: &Globals, pixel: u32, sample: u32) 
         // ---- BSDF sampling ----
         let u_bs = draw_block(globals, pixel, sample, vertex, DIM_LOBE / 4);
         let dir = (DIM_DIRECTION % 4) as usize;
-        let Some(bs) = bsdf_sample(&bsdf, wi, u_bs[(DIM_LOBE % 4) as usize], Vec2::new(u_bs[dir], u_bs[dir + 1])) else { break };
+        let Some(bs) = bsdf_sample(&bsdf, wi, u_bs[(DIM_LOBE % 4) as usize], Vec2::new(u_bs[dir], u_bs[dir + 1]))
+        else {
+            break;
+        };
         if !(bs.pdf > 0.0) {
             break;
         }
@@ -83,7 +94,8 @@ pub fn trace_path(flat: &FlatScene, globals: &Globals, pixel: u32, sample: u32) 
         prev_pdf_f = bs.pdf;
 
         // ---- Russian roulette ----
-        if vertex - 1 >= globals.rr_depth {
+        // vertex − 1 ≥ rr_depth (ALGORITHMS.md §3.1), written without the subtraction.
+        if vertex > globals.rr_depth {
             let u_rr = draw_block(globals, pixel, sample, vertex, DIM_ROULETTE / 4)[(DIM_ROULETTE % 4) as usize];
             let p_rr = max_component(throughput).min(0.95);
             if !(u_rr < p_rr) {

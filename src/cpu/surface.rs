@@ -54,8 +54,15 @@ fn param_rgb(params: &[f32], offset: u32) -> Vec3 {
 
 fn leaf_from_material(params: &[f32], m: &Material) -> Leaf {
     if m.tag == MAT_ROUGH_CONDUCTOR {
-        let distribution = if m.distribution == Distribution::Ggx as u32 { Distribution::Ggx } else { Distribution::Beckmann };
-        Leaf::RoughConductor { distribution, alpha: params[m.p_alpha as usize], specular: param_rgb(params, m.p_color), eta: m.eta, k: m.k }
+        let distribution =
+            if m.distribution == Distribution::Ggx as u32 { Distribution::Ggx } else { Distribution::Beckmann };
+        Leaf::RoughConductor {
+            distribution,
+            alpha: params[m.p_alpha as usize],
+            specular: param_rgb(params, m.p_color),
+            eta: m.eta,
+            k: m.k,
+        }
     } else {
         Leaf::Diffuse { albedo: param_rgb(params, m.p_color) }
     }

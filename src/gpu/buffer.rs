@@ -34,7 +34,13 @@ impl Buffer {
     ///
     /// # Errors
     /// Vulkan or allocation failures, naming the buffer.
-    pub fn new(ctx: &Arc<Context>, name: &str, size: u64, usage: vk::BufferUsageFlags, location: MemoryLocation) -> Result<Buffer> {
+    pub fn new(
+        ctx: &Arc<Context>,
+        name: &str,
+        size: u64,
+        usage: vk::BufferUsageFlags,
+        location: MemoryLocation,
+    ) -> Result<Buffer> {
         let size = size.max(MIN_BUFFER_BYTES);
         let info = vk::BufferCreateInfo::default().size(size).usage(usage).sharing_mode(vk::SharingMode::EXCLUSIVE);
         let device = ctx.device();
@@ -43,7 +49,13 @@ impl Buffer {
         // SAFETY: `raw` was just created.
         let requirements = unsafe { device.get_buffer_memory_requirements(raw) };
         let allocation = ctx.with_allocator(|a| {
-            a.allocate(&AllocationCreateDesc { name, requirements, location, linear: true, allocation_scheme: AllocationScheme::GpuAllocatorManaged })
+            a.allocate(&AllocationCreateDesc {
+                name,
+                requirements,
+                location,
+                linear: true,
+                allocation_scheme: AllocationScheme::GpuAllocatorManaged,
+            })
         });
         let allocation = match allocation {
             Ok(a) => a,
@@ -70,7 +82,9 @@ impl Buffer {
     /// # Errors
     /// As [`Buffer::new`].
     pub fn storage(ctx: &Arc<Context>, name: &str, size: u64) -> Result<Buffer> {
-        let usage = vk::BufferUsageFlags::STORAGE_BUFFER | vk::BufferUsageFlags::TRANSFER_SRC | vk::BufferUsageFlags::TRANSFER_DST;
+        let usage = vk::BufferUsageFlags::STORAGE_BUFFER
+            | vk::BufferUsageFlags::TRANSFER_SRC
+            | vk::BufferUsageFlags::TRANSFER_DST;
         Buffer::new(ctx, name, size, usage, MemoryLocation::GpuOnly)
     }
 
@@ -113,9 +127,18 @@ impl Buffer {
             return Ok(());
         }
         if bytes.len() as u64 > self.size {
-            return Err(Error::InvalidArgument { parameter: self.name.clone(), message: format!("{} bytes do not fit in {}", bytes.len(), self.size) });
+            return Err(Error::InvalidArgument {
+                parameter: self.name.clone(),
+                message: format!("{} bytes do not fit in {}", bytes.len(), self.size),
+            });
         }
-        let mut staging = Buffer::new(&self.ctx, &format!("{} (upload)", self.name), bytes.len() as u64, vk::BufferUsageFlags::TRANSFER_SRC, MemoryLocation::CpuToGpu)?;
+        let mut staging = Buffer::new(
+            &self.ctx,
+            &format!("{} (upload)", self.name),
+            bytes.len() as u64,
+            vk::BufferUsageFlags::TRANSFER_SRC,
+            MemoryLocation::CpuToGpu,
+        )?;
         staging.mapped_mut().expect("CpuToGpu memory is host visible")[..bytes.len()].copy_from_slice(bytes);
         let device = self.ctx.device();
         self.ctx.submit_and_wait(&format!("upload {}", self.name), |cmd| {
@@ -126,7 +149,15 @@ impl Buffer {
             // SAFETY: both buffers are alive until the submission is waited on.
             unsafe {
                 device.cmd_copy_buffer(cmd, staging.raw, self.raw, &region);
-                device.cmd_pipeline_barrier(cmd, vk::PipelineStageFlags::TRANSFER, vk::PipelineStageFlags::COMPUTE_SHADER, vk::DependencyFlags::empty(), &barrier, &[], &[]);
+                device.cmd_pipeline_barrier(
+                    cmd,
+                    vk::PipelineStageFlags::TRANSFER,
+                    vk::PipelineStageFlags::COMPUTE_SHADER,
+                    vk::DependencyFlags::empty(),
+                    &barrier,
+                    &[],
+                    &[],
+                );
             }
         })
     }
@@ -144,7 +175,15 @@ impl Buffer {
             // SAFETY: the buffer is alive until the submission is waited on.
             unsafe {
                 device.cmd_fill_buffer(cmd, self.raw, 0, vk::WHOLE_SIZE, 0);
-                device.cmd_pipeline_barrier(cmd, vk::PipelineStageFlags::TRANSFER, vk::PipelineStageFlags::COMPUTE_SHADER, vk::DependencyFlags::empty(), &barrier, &[], &[]);
+                device.cmd_pipeline_barrier(
+                    cmd,
+                    vk::PipelineStageFlags::TRANSFER,
+                    vk::PipelineStageFlags::COMPUTE_SHADER,
+                    vk::DependencyFlags::empty(),
+                    &barrier,
+                    &[],
+                    &[],
+                );
             }
         })
     }
@@ -156,25 +195,55 @@ impl Buffer {
     pub fn download<T: bytemuck::Pod>(&self, count: usize) -> Result<Vec<T>> {
         let len = (count * size_of::<T>()) as u64;
         if len > self.size {
-            return Err(Error::InvalidArgument { parameter: self.name.clone(), message: format!("{len} bytes requested from {}", self.size) });
+            return Err(Error::InvalidArgument {
+                parameter: self.name.clone(),
+                message: format!("{len} bytes requested from {}", self.size),
+            });
         }
         if len == 0 {
             return Ok(Vec::new());
         }
-        let staging = Buffer::new(&self.ctx, &format!("{} (read-back)", self.name), len, vk::BufferUsageFlags::TRANSFER_DST, MemoryLocation::GpuToCpu)?;
+        let staging = Buffer::new(
+            &self.ctx,
+            &format!("{} (read-back)", self.name),
+            len,
+            vk::BufferUsageFlags::TRANSFER_DST,
+            MemoryLocation::GpuToCpu,
+        )?;
         let device = self.ctx.device();
         self.ctx.submit_and_wait(&format!("read back {}", self.name), |cmd| {
-            let before = [vk::MemoryBarrier::default().src_access_mask(vk::AccessFlags::SHADER_WRITE).dst_access_mask(vk::AccessFlags::TRANSFER_READ)];
-            let after = [vk::MemoryBarrier::default().src_access_mask(vk::AccessFlags::TRANSFER_WRITE).dst_access_mask(vk::AccessFlags::HOST_READ)];
+            let before = [vk::MemoryBarrier::default()
+                .src_access_mask(vk::AccessFlags::SHADER_WRITE)
+                .dst_access_mask(vk::AccessFlags::TRANSFER_READ)];
+            let after = [vk::MemoryBarrier::default()
+                .src_access_mask(vk::AccessFlags::TRANSFER_WRITE)
+                .dst_access_mask(vk::AccessFlags::HOST_READ)];
             let region = [vk::BufferCopy::default().size(len)];
             // SAFETY: both buffers are alive until the submission is waited on.
             unsafe {
-                device.cmd_pipeline_barrier(cmd, vk::PipelineStageFlags::COMPUTE_SHADER, vk::PipelineStageFlags::TRANSFER, vk::DependencyFlags::empty(), &before, &[], &[]);
+                device.cmd_pipeline_barrier(
+                    cmd,
+                    vk::PipelineStageFlags::COMPUTE_SHADER,
+                    vk::PipelineStageFlags::TRANSFER,
+                    vk::DependencyFlags::empty(),
+                    &before,
+                    &[],
+                    &[],
+                );
                 device.cmd_copy_buffer(cmd, self.raw, staging.raw, &region);
-                device.cmd_pipeline_barrier(cmd, vk::PipelineStageFlags::TRANSFER, vk::PipelineStageFlags::HOST, vk::DependencyFlags::empty(), &after, &[], &[]);
+                device.cmd_pipeline_barrier(
+                    cmd,
+                    vk::PipelineStageFlags::TRANSFER,
+                    vk::PipelineStageFlags::HOST,
+                    vk::DependencyFlags::empty(),
+                    &after,
+                    &[],
+                    &[],
+                );
             }
         })?;
-        let bytes = staging.allocation.as_ref().and_then(Allocation::mapped_slice).expect("GpuToCpu memory is host visible");
+        let bytes =
+            staging.allocation.as_ref().and_then(Allocation::mapped_slice).expect("GpuToCpu memory is host visible");
         let mut out = vec![T::zeroed(); count];
         bytemuck::cast_slice_mut(&mut out).copy_from_slice(&bytes[..len as usize]);
         Ok(out)

@@ -97,7 +97,11 @@ impl DeviceInfo {
             vk::api_version_patch(self.api_version),
             self.subgroup_size,
             self.uuid,
-            if self.missing.is_empty() { String::new() } else { format!(" — unusable: lacks {}", self.missing.join(", ")) }
+            if self.missing.is_empty() {
+                String::new()
+            } else {
+                format!(" — unusable: lacks {}", self.missing.join(", "))
+            }
         )
     }
 
@@ -136,9 +140,9 @@ unsafe extern "system" fn debug_callback(
         .and_then(|d| (!d.p_message.is_null()).then(|| unsafe { CStr::from_ptr(d.p_message) }))
         .map(|m| m.to_string_lossy().into_owned())
         .unwrap_or_default();
-    let counts = severity.intersects(
-        vk::DebugUtilsMessageSeverityFlagsEXT::WARNING | vk::DebugUtilsMessageSeverityFlagsEXT::ERROR,
-    ) && types.contains(vk::DebugUtilsMessageTypeFlagsEXT::VALIDATION);
+    let counts = severity
+        .intersects(vk::DebugUtilsMessageSeverityFlagsEXT::WARNING | vk::DebugUtilsMessageSeverityFlagsEXT::ERROR)
+        && types.contains(vk::DebugUtilsMessageTypeFlagsEXT::VALIDATION);
     if counts {
         // SAFETY: `user` is the counter that the context keeps alive until the messenger is destroyed.
         if let Some(counter) = unsafe { (user as *const ValidationCounter).as_ref() } {
@@ -183,9 +187,15 @@ fn load_entry() -> Result<ash::Entry> {
     unsafe { ash::Entry::load() }.map_err(|e| Error::NoDevice { reason: format!("cannot load libvulkan.so.1: {e}") })
 }
 
-fn create_instance(entry: &ash::Entry, validation: bool, counter: &Arc<ValidationCounter>) -> Result<(ash::Instance, bool, bool)> {
+fn create_instance(
+    entry: &ash::Entry,
+    validation: bool,
+    counter: &Arc<ValidationCounter>,
+) -> Result<(ash::Instance, bool, bool)> {
     // SAFETY: plain queries of the loader.
-    let version = unsafe { entry.try_enumerate_instance_version() }.vk("vkEnumerateInstanceVersion")?.unwrap_or(vk::API_VERSION_1_0);
+    let version = unsafe { entry.try_enumerate_instance_version() }
+        .vk("vkEnumerateInstanceVersion")?
+        .unwrap_or(vk::API_VERSION_1_0);
     if version < vk::API_VERSION_1_2 {
         return Err(Error::NoDevice { reason: "the Vulkan loader is older than 1.2".into() });
     }
@@ -193,11 +203,15 @@ fn create_instance(entry: &ash::Entry, validation: bool, counter: &Arc<Validatio
     let layers = unsafe { entry.enumerate_instance_layer_properties() }.vk("vkEnumerateInstanceLayerProperties")?;
     let has_layer = layers.iter().any(|l| l.layer_name_as_c_str().is_ok_and(|n| n == VALIDATION_LAYER));
     // SAFETY: plain query of the loader.
-    let extensions = unsafe { entry.enumerate_instance_extension_properties(None) }.vk("vkEnumerateInstanceExtensionProperties")?;
-    let has_debug_utils = extensions.iter().any(|e| e.extension_name_as_c_str().is_ok_and(|n| n == ash::ext::debug_utils::NAME));
+    let extensions =
+        unsafe { entry.enumerate_instance_extension_properties(None) }.vk("vkEnumerateInstanceExtensionProperties")?;
+    let has_debug_utils =
+        extensions.iter().any(|e| e.extension_name_as_c_str().is_ok_and(|n| n == ash::ext::debug_utils::NAME));
     let use_validation = validation && has_layer && has_debug_utils;
     if validation && !use_validation {
-        tracing::warn!("validation requested but VK_LAYER_KHRONOS_validation is not installed (apt-get install vulkan-validationlayers)");
+        tracing::warn!(
+            "validation requested but VK_LAYER_KHRONOS_validation is not installed (apt-get install vulkan-validationlayers)"
+        );
     }
     let layer_ptrs: Vec<*const i8> = if use_validation { vec![VALIDATION_LAYER.as_ptr()] } else { vec![] };
     let ext_ptrs: Vec<*const i8> = if has_debug_utils { vec![ash::ext::debug_utils::NAME.as_ptr()] } else { vec![] };
@@ -247,7 +261,8 @@ fn describe(instance: &ash::Instance, index: usize, pd: vk::PhysicalDevice) -> D
     let mut id = vk::PhysicalDeviceIDProperties::default();
     let mut subgroup = vk::PhysicalDeviceSubgroupProperties::default();
     let props = {
-        let mut p2 = vk::PhysicalDeviceProperties2::default().push_next(&mut driver).push_next(&mut id).push_next(&mut subgroup);
+        let mut p2 =
+            vk::PhysicalDeviceProperties2::default().push_next(&mut driver).push_next(&mut id).push_next(&mut subgroup);
         // SAFETY: `pd` came from this instance; the chain lives across the call.
         unsafe { instance.get_physical_device_properties2(pd, &mut p2) };
         p2.properties
@@ -261,7 +276,8 @@ fn describe(instance: &ash::Instance, index: usize, pd: vk::PhysicalDevice) -> D
     }
     // SAFETY: as above.
     let extensions = unsafe { instance.enumerate_device_extension_properties(pd) }.unwrap_or_default();
-    let has_atomic_ext = extensions.iter().any(|e| e.extension_name_as_c_str().is_ok_and(|n| n == ash::ext::shader_atomic_float::NAME));
+    let has_atomic_ext =
+        extensions.iter().any(|e| e.extension_name_as_c_str().is_ok_and(|n| n == ash::ext::shader_atomic_float::NAME));
     let mut missing = Vec::new();
     if props.api_version < vk::API_VERSION_1_2 {
         missing.push("Vulkan 1.2".to_string());
@@ -272,8 +288,11 @@ fn describe(instance: &ash::Instance, index: usize, pd: vk::PhysicalDevice) -> D
     if !has_atomic_ext || atomic.shader_buffer_float32_atomic_add == vk::FALSE {
         missing.push("VK_EXT_shader_atomic_float (shaderBufferFloat32AtomicAdd)".to_string());
     }
-    let needed_ops = vk::SubgroupFeatureFlags::BASIC | vk::SubgroupFeatureFlags::ARITHMETIC | vk::SubgroupFeatureFlags::VOTE;
-    if !subgroup.supported_stages.contains(vk::ShaderStageFlags::COMPUTE) || !subgroup.supported_operations.contains(needed_ops) {
+    let needed_ops =
+        vk::SubgroupFeatureFlags::BASIC | vk::SubgroupFeatureFlags::ARITHMETIC | vk::SubgroupFeatureFlags::VOTE;
+    if !subgroup.supported_stages.contains(vk::ShaderStageFlags::COMPUTE)
+        || !subgroup.supported_operations.contains(needed_ops)
+    {
         missing.push("compute subgroup basic/vote/arithmetic operations".to_string());
     }
     let name = props.device_name_as_c_str().map(|c| c.to_string_lossy().into_owned()).unwrap_or_default();
@@ -315,7 +334,11 @@ fn choose(devices: &[DeviceInfo], choice: &DeviceChoice) -> Result<usize> {
         if d.missing.is_empty() {
             Ok(d.index)
         } else {
-            Err(Error::MissingFeature { device: d.name.clone(), feature: d.missing.join(", "), hint: "update the driver (Mesa ≥ 22 for lavapipe) or choose another --device".into() })
+            Err(Error::MissingFeature {
+                device: d.name.clone(),
+                feature: d.missing.join(", "),
+                hint: "update the driver (Mesa ≥ 22 for lavapipe) or choose another --device".into(),
+            })
         }
     };
     let choice = match choice {
@@ -326,20 +349,26 @@ fn choose(devices: &[DeviceInfo], choice: &DeviceChoice) -> Result<usize> {
         other => other.clone(),
     };
     match &choice {
-        DeviceChoice::Index(i) => devices.get(*i).ok_or_else(|| Error::DeviceNotFound { selector: i.to_string(), available: available() }).and_then(usable),
+        DeviceChoice::Index(i) => devices
+            .get(*i)
+            .ok_or_else(|| Error::DeviceNotFound { selector: i.to_string(), available: available() })
+            .and_then(usable),
         DeviceChoice::Uuid(u) => {
             let want = u.replace('-', "").to_ascii_lowercase();
-            devices.iter().find(|d| d.uuid == want).ok_or_else(|| Error::DeviceNotFound { selector: u.clone(), available: available() }).and_then(usable)
+            devices
+                .iter()
+                .find(|d| d.uuid == want)
+                .ok_or_else(|| Error::DeviceNotFound { selector: u.clone(), available: available() })
+                .and_then(usable)
         }
         DeviceChoice::Auto | DeviceChoice::PreferCpu => {
             let prefer_cpu = choice == DeviceChoice::PreferCpu;
-            let best = devices
-                .iter()
-                .filter(|d| d.missing.is_empty())
-                .min_by_key(|d| {
-                    let cpu_first = u32::from(!(d.device_type == vk::PhysicalDeviceType::CPU || d.driver_id == vk::DriverId::MESA_LLVMPIPE));
-                    if prefer_cpu { (cpu_first, d.rank(), d.index) } else { (0, d.rank(), d.index) }
-                });
+            let best = devices.iter().filter(|d| d.missing.is_empty()).min_by_key(|d| {
+                let cpu_first = u32::from(
+                    !(d.device_type == vk::PhysicalDeviceType::CPU || d.driver_id == vk::DriverId::MESA_LLVMPIPE),
+                );
+                if prefer_cpu { (cpu_first, d.rank(), d.index) } else { (0, d.rank(), d.index) }
+            });
             match best {
                 Some(d) => Ok(d.index),
                 None => match devices.first() {
@@ -404,22 +433,33 @@ impl Context {
         let info = infos[chosen].clone();
         // SAFETY: valid physical device.
         let families = unsafe { instance.get_physical_device_queue_family_properties(physical_device) };
-        let queue_family = families
-            .iter()
-            .position(|f| f.queue_flags.contains(vk::QueueFlags::COMPUTE))
-            .ok_or_else(|| Error::MissingFeature { device: info.name.clone(), feature: "a compute queue".into(), hint: "choose another --device".into() })? as u32;
+        let queue_family =
+            families.iter().position(|f| f.queue_flags.contains(vk::QueueFlags::COMPUTE)).ok_or_else(|| {
+                Error::MissingFeature {
+                    device: info.name.clone(),
+                    feature: "a compute queue".into(),
+                    hint: "choose another --device".into(),
+                }
+            })? as u32;
         let priorities = [1.0f32];
-        let queue_info = [vk::DeviceQueueCreateInfo::default().queue_family_index(queue_family).queue_priorities(&priorities)];
+        let queue_info =
+            [vk::DeviceQueueCreateInfo::default().queue_family_index(queue_family).queue_priorities(&priorities)];
         let ext_ptrs = [ash::ext::shader_atomic_float::NAME.as_ptr()];
         let mut v12 = vk::PhysicalDeviceVulkan12Features::default().scalar_block_layout(true);
-        let mut atomic = vk::PhysicalDeviceShaderAtomicFloatFeaturesEXT::default().shader_buffer_float32_atomic_add(true);
+        let mut atomic =
+            vk::PhysicalDeviceShaderAtomicFloatFeaturesEXT::default().shader_buffer_float32_atomic_add(true);
         let mut features = vk::PhysicalDeviceFeatures2::default().push_next(&mut v12).push_next(&mut atomic);
-        let device_info = vk::DeviceCreateInfo::default().queue_create_infos(&queue_info).enabled_extension_names(&ext_ptrs).push_next(&mut features);
+        let device_info = vk::DeviceCreateInfo::default()
+            .queue_create_infos(&queue_info)
+            .enabled_extension_names(&ext_ptrs)
+            .push_next(&mut features);
         // SAFETY: every feature and extension requested was checked by `describe`.
         let device = unsafe { instance.create_device(physical_device, &device_info, None) }.vk("vkCreateDevice")?;
         // SAFETY: the queue family was created with one queue.
         let queue = unsafe { device.get_device_queue(queue_family, 0) };
-        let pool_info = vk::CommandPoolCreateInfo::default().queue_family_index(queue_family).flags(vk::CommandPoolCreateFlags::RESET_COMMAND_BUFFER);
+        let pool_info = vk::CommandPoolCreateInfo::default()
+            .queue_family_index(queue_family)
+            .flags(vk::CommandPoolCreateFlags::RESET_COMMAND_BUFFER);
         // SAFETY: valid device.
         let command_pool = match unsafe { device.create_command_pool(&pool_info, None) } {
             Ok(p) => p,
@@ -538,7 +578,10 @@ impl Context {
     /// Vulkan failures, or [`Error::Timeout`] if the GPU does not finish in [`FENCE_TIMEOUT_SECONDS`].
     pub fn submit_and_wait(&self, what: &str, record: impl FnOnce(vk::CommandBuffer)) -> Result<()> {
         let pool = self.command_pool.lock().unwrap_or_else(|p| p.into_inner());
-        let alloc = vk::CommandBufferAllocateInfo::default().command_pool(*pool).level(vk::CommandBufferLevel::PRIMARY).command_buffer_count(1);
+        let alloc = vk::CommandBufferAllocateInfo::default()
+            .command_pool(*pool)
+            .level(vk::CommandBufferLevel::PRIMARY)
+            .command_buffer_count(1);
         // SAFETY: the pool belongs to this device and is guarded by the mutex.
         let cmd = unsafe { self.device.allocate_command_buffers(&alloc) }.vk("vkAllocateCommandBuffers")?[0];
         let result = self.record_submit(cmd, what, record);
@@ -567,7 +610,9 @@ impl Context {
             // SAFETY: the fence was submitted above.
             match unsafe { self.device.wait_for_fences(&[fence], true, FENCE_TIMEOUT_SECONDS * 1_000_000_000) } {
                 Ok(()) => Ok(()),
-                Err(vk::Result::TIMEOUT) => Err(Error::Timeout { what: what.to_string(), seconds: FENCE_TIMEOUT_SECONDS }),
+                Err(vk::Result::TIMEOUT) => {
+                    Err(Error::Timeout { what: what.to_string(), seconds: FENCE_TIMEOUT_SECONDS })
+                }
                 Err(result) => Err(Error::Vulkan { call: "vkWaitForFences", result }),
             }
         });

@@ -3,8 +3,8 @@
 pub mod abi;
 pub mod buffer;
 pub mod context;
-pub mod renderer;
 pub mod pipeline;
+pub mod renderer;
 pub mod shaders;
 
 pub use buffer::Buffer;

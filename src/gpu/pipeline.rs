@@ -35,20 +35,45 @@ impl Kernel {
     /// # Errors
     /// [`Error::InvalidArgument`] for an unknown kernel; Vulkan failures.
     pub fn new(ctx: &Arc<Context>, name: &'static str, bindings: &[u32], push_size: u32) -> Result<Kernel> {
-        let bytes = shaders::spirv(name).ok_or_else(|| Error::InvalidArgument { parameter: "kernel".into(), message: format!("no kernel named {name}") })?;
-        let words = ash::util::read_spv(&mut Cursor::new(bytes)).map_err(|e| Error::InvalidArgument { parameter: "kernel".into(), message: format!("{name}: bad SPIR-V: {e}") })?;
+        let bytes = shaders::spirv(name).ok_or_else(|| Error::InvalidArgument {
+            parameter: "kernel".into(),
+            message: format!("no kernel named {name}"),
+        })?;
+        let words = ash::util::read_spv(&mut Cursor::new(bytes)).map_err(|e| Error::InvalidArgument {
+            parameter: "kernel".into(),
+            message: format!("{name}: bad SPIR-V: {e}"),
+        })?;
         let device = ctx.device();
         let layout_bindings: Vec<_> = bindings
             .iter()
-            .map(|&b| vk::DescriptorSetLayoutBinding::default().binding(b).descriptor_type(vk::DescriptorType::STORAGE_BUFFER).descriptor_count(1).stage_flags(vk::ShaderStageFlags::COMPUTE))
+            .map(|&b| {
+                vk::DescriptorSetLayoutBinding::default()
+                    .binding(b)
+                    .descriptor_type(vk::DescriptorType::STORAGE_BUFFER)
+                    .descriptor_count(1)
+                    .stage_flags(vk::ShaderStageFlags::COMPUTE)
+            })
             .collect();
         // Objects are created in order and destroyed by `Kernel::drop`; a failure part-way destroys
         // what exists through this partially filled value.
-        let mut kernel = Kernel { ctx: ctx.clone(), name, set_layout: vk::DescriptorSetLayout::null(), layout: vk::PipelineLayout::null(), pipeline: vk::Pipeline::null(), bindings: bindings.to_vec(), push_size };
+        let mut kernel = Kernel {
+            ctx: ctx.clone(),
+            name,
+            set_layout: vk::DescriptorSetLayout::null(),
+            layout: vk::PipelineLayout::null(),
+            pipeline: vk::Pipeline::null(),
+            bindings: bindings.to_vec(),
+            push_size,
+        };
         ctx.object_created();
         // SAFETY: valid device and create-infos; each handle is owned by `kernel` as soon as it exists.
         unsafe {
-            kernel.set_layout = device.create_descriptor_set_layout(&vk::DescriptorSetLayoutCreateInfo::default().bindings(&layout_bindings), None).vk("vkCreateDescriptorSetLayout")?;
+            kernel.set_layout = device
+                .create_descriptor_set_layout(
+                    &vk::DescriptorSetLayoutCreateInfo::default().bindings(&layout_bindings),
+                    None,
+                )
+                .vk("vkCreateDescriptorSetLayout")?;
             let ranges = [vk::PushConstantRange::default().stage_flags(vk::ShaderStageFlags::COMPUTE).size(push_size)];
             let set_layouts = [kernel.set_layout];
             let mut layout_info = vk::PipelineLayoutCreateInfo::default().set_layouts(&set_layouts);
@@ -56,12 +81,18 @@ impl Kernel {
                 layout_info = layout_info.push_constant_ranges(&ranges);
             }
             kernel.layout = device.create_pipeline_layout(&layout_info, None).vk("vkCreatePipelineLayout")?;
-            let module = device.create_shader_module(&vk::ShaderModuleCreateInfo::default().code(&words), None).vk("vkCreateShaderModule")?;
-            let stage = vk::PipelineShaderStageCreateInfo::default().stage(vk::ShaderStageFlags::COMPUTE).module(module).name(c"main");
+            let module = device
+                .create_shader_module(&vk::ShaderModuleCreateInfo::default().code(&words), None)
+                .vk("vkCreateShaderModule")?;
+            let stage = vk::PipelineShaderStageCreateInfo::default()
+                .stage(vk::ShaderStageFlags::COMPUTE)
+                .module(module)
+                .name(c"main");
             let info = [vk::ComputePipelineCreateInfo::default().stage(stage).layout(kernel.layout)];
             let created = device.create_compute_pipelines(vk::PipelineCache::null(), &info, None);
             device.destroy_shader_module(module, None);
-            kernel.pipeline = created.map_err(|(_, result)| Error::Vulkan { call: "vkCreateComputePipelines", result })?[0];
+            kernel.pipeline =
+                created.map_err(|(_, result)| Error::Vulkan { call: "vkCreateComputePipelines", result })?[0];
         }
         ctx.set_name(kernel.pipeline, name);
         Ok(kernel)
@@ -80,27 +111,52 @@ impl Kernel {
     pub fn bind(&self, buffers: &[(u32, &Buffer)]) -> Result<BindGroup> {
         for &b in &self.bindings {
             if buffers.iter().filter(|(x, _)| *x == b).count() != 1 {
-                return Err(Error::InvalidArgument { parameter: format!("{} binding {b}", self.name), message: "must be given exactly once".into() });
+                return Err(Error::InvalidArgument {
+                    parameter: format!("{} binding {b}", self.name),
+                    message: "must be given exactly once".into(),
+                });
             }
         }
         if let Some((x, _)) = buffers.iter().find(|(x, _)| !self.bindings.contains(x)) {
-            return Err(Error::InvalidArgument { parameter: format!("{} binding {x}", self.name), message: "the kernel has no such binding".into() });
+            return Err(Error::InvalidArgument {
+                parameter: format!("{} binding {x}", self.name),
+                message: "the kernel has no such binding".into(),
+            });
         }
         let device = self.ctx.device();
-        let sizes = [vk::DescriptorPoolSize::default().ty(vk::DescriptorType::STORAGE_BUFFER).descriptor_count(self.bindings.len().max(1) as u32)];
+        let sizes = [vk::DescriptorPoolSize::default()
+            .ty(vk::DescriptorType::STORAGE_BUFFER)
+            .descriptor_count(self.bindings.len().max(1) as u32)];
         // SAFETY: valid device and create-info.
-        let pool = unsafe { device.create_descriptor_pool(&vk::DescriptorPoolCreateInfo::default().max_sets(1).pool_sizes(&sizes), None) }.vk("vkCreateDescriptorPool")?;
+        let pool = unsafe {
+            device.create_descriptor_pool(&vk::DescriptorPoolCreateInfo::default().max_sets(1).pool_sizes(&sizes), None)
+        }
+        .vk("vkCreateDescriptorPool")?;
         self.ctx.object_created();
         let mut group = BindGroup { ctx: self.ctx.clone(), pool, set: vk::DescriptorSet::null() };
         let layouts = [self.set_layout];
         // SAFETY: the pool has room for one set of this layout.
-        let set = unsafe { device.allocate_descriptor_sets(&vk::DescriptorSetAllocateInfo::default().descriptor_pool(pool).set_layouts(&layouts)) }.vk("vkAllocateDescriptorSets")?[0];
+        let set = unsafe {
+            device.allocate_descriptor_sets(
+                &vk::DescriptorSetAllocateInfo::default().descriptor_pool(pool).set_layouts(&layouts),
+            )
+        }
+        .vk("vkAllocateDescriptorSets")?[0];
         group.set = set;
-        let infos: Vec<[vk::DescriptorBufferInfo; 1]> = buffers.iter().map(|(_, b)| [vk::DescriptorBufferInfo::default().buffer(b.raw()).offset(0).range(vk::WHOLE_SIZE)]).collect();
+        let infos: Vec<[vk::DescriptorBufferInfo; 1]> = buffers
+            .iter()
+            .map(|(_, b)| [vk::DescriptorBufferInfo::default().buffer(b.raw()).offset(0).range(vk::WHOLE_SIZE)])
+            .collect();
         let writes: Vec<_> = buffers
             .iter()
             .zip(&infos)
-            .map(|((binding, _), info)| vk::WriteDescriptorSet::default().dst_set(set).dst_binding(*binding).descriptor_type(vk::DescriptorType::STORAGE_BUFFER).buffer_info(info))
+            .map(|((binding, _), info)| {
+                vk::WriteDescriptorSet::default()
+                    .dst_set(set)
+                    .dst_binding(*binding)
+                    .descriptor_type(vk::DescriptorType::STORAGE_BUFFER)
+                    .buffer_info(info)
+            })
             .collect();
         // SAFETY: every buffer is alive; the set is not in use yet.
         unsafe { device.update_descriptor_sets(&writes, &[]) };
@@ -130,7 +186,15 @@ pub fn compute_barrier(ctx: &Context, cmd: vk::CommandBuffer) {
         .dst_access_mask(vk::AccessFlags::SHADER_READ | vk::AccessFlags::SHADER_WRITE)];
     // SAFETY: `cmd` is recording.
     unsafe {
-        ctx.device().cmd_pipeline_barrier(cmd, vk::PipelineStageFlags::COMPUTE_SHADER, vk::PipelineStageFlags::COMPUTE_SHADER, vk::DependencyFlags::empty(), &barrier, &[], &[]);
+        ctx.device().cmd_pipeline_barrier(
+            cmd,
+            vk::PipelineStageFlags::COMPUTE_SHADER,
+            vk::PipelineStageFlags::COMPUTE_SHADER,
+            vk::DependencyFlags::empty(),
+            &barrier,
+            &[],
+            &[],
+        );
     }
 }
 

@@ -113,7 +113,10 @@ impl Renderer {
     /// [`Error::InvalidArgument`] if the layout differs; Vulkan failures.
     pub fn set_params(&mut self, params: &ParamTable) -> Result<()> {
         if params.entries() != self.scene.params.entries() {
-            return Err(Error::InvalidArgument { parameter: "params".into(), message: "the table's layout differs from the scene's".into() });
+            return Err(Error::InvalidArgument {
+                parameter: "params".into(),
+                message: "the table's layout differs from the scene's".into(),
+            });
         }
         self.scene.params = params.clone();
         self.flat.params = params.values().to_vec();
@@ -132,11 +135,20 @@ impl Renderer {
     ///
     /// # Errors
     /// As [`Renderer::render`].
-    pub fn render_with_progress(&mut self, options: &RenderOptions, progress: &mut dyn FnMut(u32, u32)) -> Result<Image> {
+    pub fn render_with_progress(
+        &mut self,
+        options: &RenderOptions,
+        progress: &mut dyn FnMut(u32, u32),
+    ) -> Result<Image> {
         options.validate()?;
-        let _span = tracing::info_span!("primal", width = options.width, height = options.height, spp = options.spp).entered();
+        let _span =
+            tracing::info_span!("primal", width = options.width, height = options.height, spp = options.spp).entered();
         let pixels = options.width * options.height;
-        let globals = Buffer::storage_with(&self.ctx, "globals", std::slice::from_ref(&options.globals(&self.scene, &self.flat)))?;
+        let globals = Buffer::storage_with(
+            &self.ctx,
+            "globals",
+            std::slice::from_ref(&options.globals(&self.scene, &self.flat)),
+        )?;
         let accum = Buffer::storage(&self.ctx, "accumulation image", u64::from(pixels) * 12)?;
         let status = Buffer::storage(&self.ctx, "status flags", 4)?;
         accum.clear()?;

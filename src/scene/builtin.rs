@@ -31,7 +31,10 @@ pub fn load(name: &str) -> Result<Scene> {
         "blend" => blend(),
         _ => Err(Error::Scene {
             location: format!("builtin:{name}"),
-            message: format!("unknown built-in scene (known: {})", BUILTIN_SCENES.iter().map(|(n, _)| *n).collect::<Vec<_>>().join(", ")),
+            message: format!(
+                "unknown built-in scene (known: {})",
+                BUILTIN_SCENES.iter().map(|(n, _)| *n).collect::<Vec<_>>().join(", ")
+            ),
         }),
     }
 }
@@ -41,7 +44,14 @@ const PERFECT_ETA: Vec3 = Vec3::ZERO;
 const PERFECT_K: Vec3 = Vec3::ONE;
 
 fn cornell_box() -> Result<Scene> {
-    let camera = Camera { position: Vec3::new(0.0, 0.0, 3.9), target: Vec3::ZERO, up: Vec3::Y, fov_y_degrees: 38.0, width: 256, height: 256 };
+    let camera = Camera {
+        position: Vec3::new(0.0, 0.0, 3.9),
+        target: Vec3::ZERO,
+        up: Vec3::Y,
+        fov_y_degrees: 38.0,
+        width: 256,
+        height: 256,
+    };
     let mut s = Scene::new("builtin:cornell-box", camera);
     let white = s.add_diffuse("white", Vec3::new(0.725, 0.71, 0.68))?;
     let red = s.add_diffuse("red", Vec3::new(0.63, 0.065, 0.05))?;
@@ -54,7 +64,12 @@ fn cornell_box() -> Result<Scene> {
     s.add_mesh("back", quad(Vec3::new(0.0, 0.0, -1.0), Vec3::X, Vec3::Y), white, None)?;
     s.add_mesh("left", quad(Vec3::new(-1.0, 0.0, 0.0), Vec3::Y, Vec3::Z), red, None)?;
     s.add_mesh("right", quad(Vec3::new(1.0, 0.0, 0.0), Vec3::Z, Vec3::Y), green, None)?;
-    s.add_mesh("light", quad(Vec3::new(0.0, 0.995, 0.0), Vec3::X * 0.25, Vec3::Z * 0.2), black, Some(Vec3::new(17.0, 12.0, 4.0)))?;
+    s.add_mesh(
+        "light",
+        quad(Vec3::new(0.0, 0.995, 0.0), Vec3::X * 0.25, Vec3::Z * 0.2),
+        black,
+        Some(Vec3::new(17.0, 12.0, 4.0)),
+    )?;
     s.add_mesh("sphere", sphere(Vec3::new(0.35, -0.55, 0.1), 0.45, 48, 96, false), metal, None)?;
     s.add_mesh("block", cuboid(Vec3::new(-0.4, -0.4, -0.35), Vec3::new(0.3, 0.6, 0.3)), white, None)?;
     Ok(s)
@@ -64,7 +79,14 @@ fn cornell_box() -> Result<Scene> {
 pub const FURNACE_RADIANCE: f32 = 1.0;
 
 fn furnace() -> Result<Scene> {
-    let camera = Camera { position: Vec3::new(0.0, 0.0, 3.0), target: Vec3::ZERO, up: Vec3::Y, fov_y_degrees: 40.0, width: 64, height: 64 };
+    let camera = Camera {
+        position: Vec3::new(0.0, 0.0, 3.0),
+        target: Vec3::ZERO,
+        up: Vec3::Y,
+        fov_y_degrees: 40.0,
+        width: 64,
+        height: 64,
+    };
     let mut s = Scene::new("builtin:furnace", camera);
     let white = s.add_diffuse("object", Vec3::ONE)?;
     let black = s.add_diffuse("walls", Vec3::ZERO)?;
@@ -80,7 +102,8 @@ fn furnace() -> Result<Scene> {
     s.add_mesh("walls", inward, black, Some(Vec3::splat(FURNACE_RADIANCE)))?;
     // Flat-shaded: interpolated normals would make the albedo-1 surface lose a little energy to
     // directions inside the shading hemisphere but below the geometric one (measured ~3e-4).
-    let ball = crate::scene::shapes::Geometry { normals: None, ..sphere(Vec3::new(-0.7, 0.0, 0.0), 0.8, 32, 64, false) };
+    let ball =
+        crate::scene::shapes::Geometry { normals: None, ..sphere(Vec3::new(-0.7, 0.0, 0.0), 0.8, 32, 64, false) };
     s.add_mesh("sphere", ball, white, None)?;
     s.add_mesh("box", cuboid(Vec3::new(0.75, -0.2, 0.2), Vec3::new(0.5, 0.8, 0.5)), white, None)?;
     s.max_depth = 64;
@@ -88,7 +111,14 @@ fn furnace() -> Result<Scene> {
 }
 
 fn blend() -> Result<Scene> {
-    let camera = Camera { position: Vec3::new(0.0, 1.2, 3.6), target: Vec3::new(0.0, 0.1, 0.0), up: Vec3::Y, fov_y_degrees: 35.0, width: 256, height: 192 };
+    let camera = Camera {
+        position: Vec3::new(0.0, 1.2, 3.6),
+        target: Vec3::new(0.0, 0.1, 0.0),
+        up: Vec3::Y,
+        fov_y_degrees: 35.0,
+        width: 256,
+        height: 192,
+    };
     let mut s = Scene::new("builtin:blend", camera);
     let floor = s.add_diffuse("floor", Vec3::new(0.5, 0.5, 0.5))?;
     let base = s.add_diffuse("base", Vec3::new(0.1, 0.6, 0.35))?;

@@ -5,7 +5,9 @@ use glam::Vec3;
 
 use crate::bvh::{self, Bvh};
 use crate::error::Result;
-use crate::gpu::abi::{EmitterTri, MAT_BLEND, MAT_DIFFUSE, MAT_ROUGH_CONDUCTOR, Material as GpuMaterial, NO_EMITTER, TriShading};
+use crate::gpu::abi::{
+    EmitterTri, MAT_BLEND, MAT_DIFFUSE, MAT_ROUGH_CONDUCTOR, Material as GpuMaterial, NO_EMITTER, TriShading,
+};
 use crate::scene::shapes::triangle_area;
 use crate::scene::{Material, Scene};
 
@@ -52,13 +54,30 @@ impl FlatScene {
                 let area = triangle_area(p[0], p[1], p[2]);
                 let emitter = match mesh.emitter {
                     Some(radiance) if area > 0.0 => {
-                        emitters.push(EmitterTri { tri: id, p_radiance: scene.params.entry(radiance).offset, cdf: 0.0, area, v0: p[0], v1: p[1], v2: p[2] });
+                        emitters.push(EmitterTri {
+                            tri: id,
+                            p_radiance: scene.params.entry(radiance).offset,
+                            cdf: 0.0,
+                            area,
+                            v0: p[0],
+                            v1: p[1],
+                            v2: p[2],
+                        });
                         emitters.len() as u32 - 1
                     }
                     _ => NO_EMITTER,
                 };
                 triangles.push(p);
-                shading.push(TriShading { n0: n[0], n1: n[1], n2: n[2], uv0: uv[0], uv1: uv[1], uv2: uv[2], material: mesh.material.0, emitter });
+                shading.push(TriShading {
+                    n0: n[0],
+                    n1: n[1],
+                    n2: n[2],
+                    uv0: uv[0],
+                    uv1: uv[1],
+                    uv2: uv[2],
+                    material: mesh.material.0,
+                    emitter,
+                });
             }
         }
         let total: f64 = emitters.iter().map(|e| f64::from(e.area)).sum();
@@ -72,7 +91,14 @@ impl FlatScene {
         }
         let materials = scene.materials.iter().map(|m| flatten_material(scene, m)).collect();
         let bvh = bvh::build(&triangles)?;
-        Ok(FlatScene { bvh, shading, materials, emitters, emitter_total_area: total as f32, params: scene.params.values().to_vec() })
+        Ok(FlatScene {
+            bvh,
+            shading,
+            materials,
+            emitters,
+            emitter_total_area: total as f32,
+            params: scene.params.values().to_vec(),
+        })
     }
 
     /// The geometric (winding) normal of the triangle in leaf slot `slot`, unit length.
@@ -95,6 +121,12 @@ fn flatten_material(scene: &Scene, m: &Material) -> GpuMaterial {
             k,
             ..Default::default()
         },
-        Material::Blend { weight, children } => GpuMaterial { tag: MAT_BLEND, child0: children[0].0, child1: children[1].0, p_weight: offset(weight), ..Default::default() },
+        Material::Blend { weight, children } => GpuMaterial {
+            tag: MAT_BLEND,
+            child0: children[0].0,
+            child1: children[1].0,
+            p_weight: offset(weight),
+            ..Default::default()
+        },
     }
 }

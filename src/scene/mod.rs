@@ -132,7 +132,14 @@ pub fn load(spec: &str) -> Result<Scene> {
 impl Scene {
     /// An empty scene with `camera`.
     pub fn new(source: &str, camera: Camera) -> Scene {
-        Scene { source: source.to_string(), meshes: Vec::new(), materials: Vec::new(), camera, params: ParamTable::default(), max_depth: 6 }
+        Scene {
+            source: source.to_string(),
+            meshes: Vec::new(),
+            materials: Vec::new(),
+            camera,
+            params: ParamTable::default(),
+            max_depth: 6,
+        }
     }
 
     /// Adds a material and returns its id.
@@ -155,9 +162,21 @@ impl Scene {
     ///
     /// # Errors
     /// As [`ParamTable::add`].
-    pub fn add_rough_conductor(&mut self, name: &str, distribution: Distribution, alpha: f32, specular: Vec3, eta: Vec3, k: Vec3) -> Result<MaterialId> {
+    pub fn add_rough_conductor(
+        &mut self,
+        name: &str,
+        distribution: Distribution,
+        alpha: f32,
+        specular: Vec3,
+        eta: Vec3,
+        k: Vec3,
+    ) -> Result<MaterialId> {
         let alpha = self.params.add(&format!("{name}.alpha.value"), &[alpha], bounds::ALPHA)?;
-        let specular = self.params.add(&format!("{name}.specular_reflectance.value"), &specular.to_array(), bounds::REFLECTANCE)?;
+        let specular = self.params.add(
+            &format!("{name}.specular_reflectance.value"),
+            &specular.to_array(),
+            bounds::REFLECTANCE,
+        )?;
         Ok(self.add_material(Material::RoughConductor { distribution, alpha, specular, eta, k }))
     }
 
@@ -175,12 +194,28 @@ impl Scene {
     ///
     /// # Errors
     /// As [`ParamTable::add`].
-    pub fn add_mesh(&mut self, name: &str, geometry: shapes::Geometry, material: MaterialId, radiance: Option<Vec3>) -> Result<()> {
+    pub fn add_mesh(
+        &mut self,
+        name: &str,
+        geometry: shapes::Geometry,
+        material: MaterialId,
+        radiance: Option<Vec3>,
+    ) -> Result<()> {
         let emitter = match radiance {
-            Some(r) => Some(self.params.add(&format!("{name}.emitter.radiance.value"), &r.to_array(), bounds::RADIANCE)?),
+            Some(r) => {
+                Some(self.params.add(&format!("{name}.emitter.radiance.value"), &r.to_array(), bounds::RADIANCE)?)
+            }
             None => None,
         };
-        self.meshes.push(Mesh { name: name.to_string(), positions: geometry.positions, normals: geometry.normals, uvs: geometry.uvs, indices: geometry.indices, material, emitter });
+        self.meshes.push(Mesh {
+            name: name.to_string(),
+            positions: geometry.positions,
+            normals: geometry.normals,
+            uvs: geometry.uvs,
+            indices: geometry.indices,
+            material,
+            emitter,
+        });
         Ok(())
     }
 
@@ -196,7 +231,8 @@ impl Scene {
     /// out of range, non-finite positions, normal/uv counts that do not match, unknown materials,
     /// nested blends, emitters of zero area, a degenerate camera.
     pub fn validate(&self) -> Result<()> {
-        let err = |what: String, message: String| Error::Scene { location: format!("{}: {what}", self.source), message };
+        let err =
+            |what: String, message: String| Error::Scene { location: format!("{}: {what}", self.source), message };
         if self.triangle_count() == 0 {
             return Err(err("scene".into(), "has no triangles".into()));
         }
@@ -204,8 +240,12 @@ impl Scene {
             if let Material::Blend { children, .. } = m {
                 for c in children {
                     match self.materials.get(c.0 as usize) {
-                        None => return Err(err(format!("material {i}"), format!("blend child {} does not exist", c.0))),
-                        Some(Material::Blend { .. }) => return Err(err(format!("material {i}"), "a blend's children must not be blends".into())),
+                        None => {
+                            return Err(err(format!("material {i}"), format!("blend child {} does not exist", c.0)));
+                        }
+                        Some(Material::Blend { .. }) => {
+                            return Err(err(format!("material {i}"), "a blend's children must not be blends".into()));
+                        }
                         Some(_) => {}
                     }
                 }
@@ -227,7 +267,17 @@ impl Scene {
                 return Err(err(at(), format!("triangle {t:?} indexes past {n} vertices")));
             }
             if m.emitter.is_some() {
-                let area: f32 = m.indices.iter().map(|t| shapes::triangle_area(m.positions[t[0] as usize], m.positions[t[1] as usize], m.positions[t[2] as usize])).sum();
+                let area: f32 = m
+                    .indices
+                    .iter()
+                    .map(|t| {
+                        shapes::triangle_area(
+                            m.positions[t[0] as usize],
+                            m.positions[t[1] as usize],
+                            m.positions[t[2] as usize],
+                        )
+                    })
+                    .sum();
                 if area <= 0.0 {
                     return Err(err(at(), "is an emitter with zero area".into()));
                 }
@@ -235,8 +285,15 @@ impl Scene {
         }
         let c = &self.camera;
         let forward = c.target - c.position;
-        if !(c.fov_y_degrees > 0.0 && c.fov_y_degrees < 180.0) || forward.length_squared() == 0.0 || forward.cross(c.up).length_squared() == 0.0 {
-            return Err(err("camera".into(), "needs 0 < fov < 180, a target distinct from the position and an up vector not parallel to the view".into()));
+        if !(c.fov_y_degrees > 0.0 && c.fov_y_degrees < 180.0)
+            || forward.length_squared() == 0.0
+            || forward.cross(c.up).length_squared() == 0.0
+        {
+            return Err(err(
+                "camera".into(),
+                "needs 0 < fov < 180, a target distinct from the position and an up vector not parallel to the view"
+                    .into(),
+            ));
         }
         if c.width == 0 || c.height == 0 {
             return Err(err("camera".into(), "image size must be at least 1×1".into()));

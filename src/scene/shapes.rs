@@ -103,7 +103,12 @@ mod tests {
 
     #[test]
     fn winding_agrees_with_normals() {
-        for g in [quad(Vec3::ZERO, Vec3::X, Vec3::Z), cuboid(Vec3::ONE, Vec3::splat(0.5)), sphere(Vec3::ZERO, 2.0, 16, 32, false), sphere(Vec3::ZERO, 2.0, 16, 32, true)] {
+        for g in [
+            quad(Vec3::ZERO, Vec3::X, Vec3::Z),
+            cuboid(Vec3::ONE, Vec3::splat(0.5)),
+            sphere(Vec3::ZERO, 2.0, 16, 32, false),
+            sphere(Vec3::ZERO, 2.0, 16, 32, true),
+        ] {
             let normals = g.normals.as_ref().unwrap();
             for &t in &g.indices {
                 let f = face_normal(&g, t);
@@ -116,7 +121,11 @@ mod tests {
     #[test]
     fn sphere_area_converges() {
         let g = sphere(Vec3::ZERO, 1.0, 64, 128, false);
-        let area: f32 = g.indices.iter().map(|t| triangle_area(g.positions[t[0] as usize], g.positions[t[1] as usize], g.positions[t[2] as usize])).sum();
+        let area: f32 = g
+            .indices
+            .iter()
+            .map(|t| triangle_area(g.positions[t[0] as usize], g.positions[t[1] as usize], g.positions[t[2] as usize]))
+            .sum();
         assert!((area / (4.0 * std::f32::consts::PI) - 1.0).abs() < 2e-3, "area {area}");
     }
 }

@@ -42,7 +42,9 @@ fn gpu_equals_cpu_per_path_on_every_builtin_scene() {
             }
         }
         let paths = (opts.width * opts.height) as f64;
-        println!("{name}: {mismatched} of {paths} paths differ beyond tolerance; worst relative difference on the rest {worst:.2e}");
+        println!(
+            "{name}: {mismatched} of {paths} paths differ beyond tolerance; worst relative difference on the rest {worst:.2e}"
+        );
         assert!(f64::from(mismatched) <= MISMATCH_BUDGET * paths, "{name}: {mismatched} mismatched paths");
     }
 }

@@ -32,7 +32,9 @@ fn rng_gpu_equals_cpu_bitwise() {
     let kernel = Kernel::new(&gpu.ctx, "rng_probe", &[BINDING_PROBE_IN, BINDING_PROBE_OUT], 4).unwrap();
     let group = kernel.bind(&[(BINDING_PROBE_IN, &input), (BINDING_PROBE_OUT, &output)]).unwrap();
     let n = cases.len() as u32;
-    gpu.ctx.submit_and_wait("rng probe", |cmd| kernel.record(cmd, &group, bytemuck::bytes_of(&n), groups_for(n))).unwrap();
+    gpu.ctx
+        .submit_and_wait("rng probe", |cmd| kernel.record(cmd, &group, bytemuck::bytes_of(&n), groups_for(n)))
+        .unwrap();
     let got: Vec<u32> = output.download(cases.len() * 8).unwrap();
     for (i, case) in cases.iter().enumerate() {
         let want = philox4x32_10([case[0], case[1], case[2], case[3]], [case[4], case[5]]);

@@ -7,9 +7,7 @@
 //! direction's length: directions need not be normalised. Rays are traced one at a time with an
 //! incoherent context, which is what a randomised test sends.
 
-use embree3::{
-    BufferUsage, Device, Format, GeometryKind, IntersectContext, Ray, RayHit, Scene, SceneFlags,
-};
+use embree3::{BufferUsage, Device, Format, GeometryKind, IntersectContext, Ray, RayHit, Scene, SceneFlags};
 
 /// A committed Embree scene holding one triangle mesh; primitive ids are triangle indices.
 pub struct EmbreeScene {
@@ -35,9 +33,7 @@ impl EmbreeScene {
             );
         }
         let device = Device::new().unwrap_or_else(|e| panic!("creating the Embree device: {e:?}"));
-        let mut scene = device
-            .create_scene()
-            .unwrap_or_else(|e| panic!("creating an Embree scene: {e:?}"));
+        let mut scene = device.create_scene().unwrap_or_else(|e| panic!("creating an Embree scene: {e:?}"));
         scene.set_flags(SceneFlags::ROBUST);
 
         // Embree refuses zero-sized buffers, so an empty mesh is simply not attached.
@@ -74,21 +70,13 @@ impl EmbreeScene {
 
     /// The closest hit of each `(origin, direction)` ray with `t` in `[tmin, ∞)`: `Some((t, primitive
     /// id))`, or `None` for a miss.
-    pub fn closest_hits(
-        &self,
-        rays: &[([f32; 3], [f32; 3])],
-        tmin: f32,
-    ) -> Vec<Option<(f32, u32)>> {
+    pub fn closest_hits(&self, rays: &[([f32; 3], [f32; 3])], tmin: f32) -> Vec<Option<(f32, u32)>> {
         let mut context = IntersectContext::incoherent();
         rays.iter()
             .map(|&(origin, direction)| {
-                let mut ray_hit =
-                    RayHit::from(Ray::segment(origin, direction, tmin, f32::INFINITY));
+                let mut ray_hit = RayHit::from(Ray::segment(origin, direction, tmin, f32::INFINITY));
                 self.scene.intersect(&mut context, &mut ray_hit);
-                ray_hit
-                    .hit
-                    .is_valid()
-                    .then_some((ray_hit.ray.tfar, ray_hit.hit.primID))
+                ray_hit.hit.is_valid().then_some((ray_hit.ray.tfar, ray_hit.hit.primID))
             })
             .collect()
     }
