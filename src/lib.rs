@@ -1,4 +1,26 @@
 //! pathgrad: a differentiable path tracer on Vulkan compute shaders.
+//!
+//! A scene ([`scene::Scene`]: meshes, materials, area emitters, a pinhole camera and the
+//! [`params::ParamTable`] of every differentiable value) is flattened once ([`scene::flat::FlatScene`]),
+//! uploaded, and rendered by one GLSL megakernel ([`gpu::Renderer`]) on any Vulkan 1.2 device,
+//! including lavapipe. [`cpu`] is the reference implementation of the same estimators with the same
+//! counter-based random numbers ([`rng`]); tests hold the two together.
+//!
+//! ```no_run
+//! use pathgrad::gpu::{Context, ContextDesc, Renderer};
+//! use pathgrad::integrator::RenderOptions;
+//!
+//! let scene = pathgrad::scene::builtin::load("cornell-box")?;
+//! let ctx = Context::new(&ContextDesc::default())?;
+//! let mut renderer = Renderer::new(&ctx, &scene)?;
+//! let options = RenderOptions { spp: 64, ..RenderOptions::for_scene(&scene) };
+//! let image = renderer.render(&options)?;
+//! image.save("cornell.exr")?;
+//! // The CPU reference renders the same image up to float rounding.
+//! let reference = pathgrad::cpu::render(&scene, &options)?;
+//! assert_eq!(reference.width(), image.width());
+//! # Ok::<(), pathgrad::Error>(())
+//! ```
 
 pub mod bsdf;
 pub mod bvh;

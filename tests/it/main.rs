@@ -2,6 +2,7 @@
 
 mod support;
 
+mod cli;
 mod cpu_vs_gpu;
 mod embree_smoke;
 mod furnace;
