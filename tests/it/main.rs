@@ -3,4 +3,5 @@
 mod support;
 
 mod embree_smoke;
+mod loop_budget;
 mod twins;
