@@ -2,6 +2,7 @@
 
 mod support;
 
+mod bvh_embree;
 mod embree_smoke;
 mod loop_budget;
 mod twins;
