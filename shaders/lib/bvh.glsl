@@ -1,8 +1,11 @@
 // In-shader BVH2 traversal: closest hit and shadow any-hit (twin of src/bvh.rs).
 //
 // lavapipe truncates loops silently once an invocation batch has spent ~65 535 iterations
-// (PLATFORM.md §6.1). Every loop here checks after it ends whether it ended for its own reason;
-// if not, the budget ran out and STATUS_LOOP_BUDGET is raised, so a truncated result is never used.
+// (PLATFORM.md §6.1), and then every loop exits. The traversal records in `finished` whether it ended
+// for its own reason; if not, the budget ran out and STATUS_LOOP_BUDGET is raised, so a truncated
+// result is never used. Only a flag set where the loop ends can say so: re-testing a loop's
+// condition after the loop is provably false to the compiler, which folds the test away (a
+// truncation in the last leaf, with the stack empty, then went unnoticed; tests/it/loop_budget.rs).
 #ifndef PATHGRAD_BVH_GLSL
 #define PATHGRAD_BVH_GLSL
 
@@ -57,14 +60,19 @@ Hit bvh_traverse(Ray ray, float tmin, float tmax, bool any_hit) {
     uint stack[BVH_STACK_SIZE];
     stack[0] = 0u;
     uint sp = 1u;
-    bool stopped = false;
-    while (sp > 0u) {
+    // Every node is popped at most once, so the step bound is never reached; but the compiler cannot
+    // know that, so `finished` is not provably true after the loop and the check survives. A
+    // truncated leaf loop needs no check of its own: the budget is spent, so the outer loop exits
+    // too, before it can set `finished`.
+    uint max_steps = uint(nodes.length());
+    bool finished = false;
+    for (uint step = 0u; step <= max_steps; step++) {
+        if (sp == 0u) { finished = true; break; }
         sp -= 1u;
         BvhNode node = nodes[stack[sp]];
         if (node.count > 0u) {
             uint end = node.first + node.count;
-            uint slot = node.first;
-            for (; slot < end; slot++) {
+            for (uint slot = node.first; slot < end; slot++) {
                 vec4 h = intersect_triangle(ray, tris[slot], tmin, tmax);
                 if (h.w != 0.0) {
                     tmax = h.x;
@@ -72,8 +80,8 @@ Hit bvh_traverse(Ray ray, float tmin, float tmax, bool any_hit) {
                     if (any_hit) break;
                 }
             }
-            if (any_hit && best.valid) { stopped = true; break; }
-            if (slot < end) { raise_status(STATUS_LOOP_BUDGET); break; }
+            // Any hit answers a shadow query, even one found just before the budget ran out.
+            if (any_hit && best.valid) { finished = true; break; }
         } else {
             uint a = node.first;
             uint b = node.first + 1u;
@@ -81,7 +89,7 @@ Hit bvh_traverse(Ray ray, float tmin, float tmax, bool any_hit) {
             float tb = slab(ray, nodes[b], tmin, tmax);
             bool ha = ta >= 0.0;
             bool hb = tb >= 0.0;
-            if (sp + 2u > BVH_STACK_SIZE) { raise_status(STATUS_STACK_OVERFLOW); break; }
+            if (sp + 2u > BVH_STACK_SIZE) { raise_status(STATUS_STACK_OVERFLOW); finished = true; break; }
             // Push the farther child first so the nearer one is visited next.
             if (ha && hb) {
                 bool b_nearer = tb < ta;
@@ -95,7 +103,7 @@ Hit bvh_traverse(Ray ray, float tmin, float tmax, bool any_hit) {
             }
         }
     }
-    if (sp > 0u && !stopped) raise_status(STATUS_LOOP_BUDGET);
+    if (!finished) raise_status(STATUS_LOOP_BUDGET);
     return best;
 }
 

@@ -2,8 +2,10 @@
 
 mod support;
 
+mod bvh_embree;
 mod cli;
 mod cpu_vs_gpu;
 mod embree_smoke;
 mod furnace;
+mod loop_budget;
 mod twins;

@@ -1,5 +1,6 @@
 //! Test harness: a validated device per test, temporary directories, the Embree reference.
 
+pub mod bvh_probe;
 pub mod embree;
 
 use std::sync::Arc;
