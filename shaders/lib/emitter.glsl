@@ -15,11 +15,16 @@ EmitterSample sample_emitter(float u_select, vec2 u_pos) {
     if (count == 0u) return s;
     uint lo = 0u;
     uint hi = count - 1u;
-    while (lo < hi) {
+    // Binary search for the first cdf > u_select. The flag, set only where the search ends for its
+    // own reason, detects lavapipe's silent loop truncation (a re-check of `lo < hi` after the loop
+    // would be optimised away); 32 steps bound any u32 range.
+    bool found = false;
+    for (uint step = 0u; step < 32u; step++) {
+        if (lo >= hi) { found = true; break; }
         uint mid = (lo + hi) / 2u;
         if (emitters[mid].cdf > u_select) hi = mid; else lo = mid + 1u;
     }
-    if (lo < hi) { raise_status(STATUS_LOOP_BUDGET); return s; }
+    if (!found) { raise_status(STATUS_LOOP_BUDGET); return s; }
     EmitterTri e = emitters[lo];
     vec2 b = sample_uniform_triangle(u_pos);
     s.point = (1.0 - b.x - b.y) * e.v0 + b.x * e.v1 + b.y * e.v2;

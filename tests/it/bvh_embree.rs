@@ -105,9 +105,7 @@ impl Mesh {
     }
 
     fn soup(&self) -> Vec<[Vec3; 3]> {
-        (0..self.triangles.len() as u32)
-            .map(|i| self.corners(i))
-            .collect()
+        (0..self.triangles.len() as u32).map(|i| self.corners(i)).collect()
     }
 }
 
@@ -135,34 +133,23 @@ fn scene(rng: &mut Rng) -> Mesh {
         for i in 0..SPHERE_LON {
             let phi = std::f32::consts::TAU * i as f32 / SPHERE_LON as f32;
             let r = radius(rng, theta, phi);
-            mesh.vertex(
-                r * Vec3::new(
-                    theta.sin() * phi.cos(),
-                    theta.cos(),
-                    theta.sin() * phi.sin(),
-                ),
-            );
+            mesh.vertex(r * Vec3::new(theta.sin() * phi.cos(), theta.cos(), theta.sin() * phi.sin()));
         }
     }
     let at = |j: u32, i: u32| ring0 + (j - 1) * SPHERE_LON + i % SPHERE_LON;
     for i in 0..SPHERE_LON {
         mesh.triangles.push([north, at(1, i + 1), at(1, i)]);
-        mesh.triangles
-            .push([south, at(SPHERE_LAT - 1, i), at(SPHERE_LAT - 1, i + 1)]);
+        mesh.triangles.push([south, at(SPHERE_LAT - 1, i), at(SPHERE_LAT - 1, i + 1)]);
         for j in 1..SPHERE_LAT - 1 {
             mesh.triangles.push([at(j, i), at(j, i + 1), at(j + 1, i)]);
-            mesh.triangles
-                .push([at(j + 1, i), at(j, i + 1), at(j + 1, i + 1)]);
+            mesh.triangles.push([at(j + 1, i), at(j, i + 1), at(j + 1, i + 1)]);
         }
     }
     // Heightfield over x, z ∈ [-2.5, 2.5] at y ≈ -1.5.
     let field0 = mesh.vertices.len() as u32;
     for j in 0..=FIELD_CELLS {
         for i in 0..=FIELD_CELLS {
-            let (x, z) = (
-                -2.5 + 5.0 * i as f32 / FIELD_CELLS as f32,
-                -2.5 + 5.0 * j as f32 / FIELD_CELLS as f32,
-            );
+            let (x, z) = (-2.5 + 5.0 * i as f32 / FIELD_CELLS as f32, -2.5 + 5.0 * j as f32 / FIELD_CELLS as f32);
             let y = -1.5 + 0.1 * (1.3 * x).sin() * (0.7 * z).cos() + 0.02 * rng.range(-1.0, 1.0);
             mesh.vertex(Vec3::new(x, y, z));
         }
@@ -170,10 +157,8 @@ fn scene(rng: &mut Rng) -> Mesh {
     let grid = |j: u32, i: u32| field0 + j * (FIELD_CELLS + 1) + i;
     for j in 0..FIELD_CELLS {
         for i in 0..FIELD_CELLS {
-            mesh.triangles
-                .push([grid(j, i), grid(j + 1, i), grid(j, i + 1)]);
-            mesh.triangles
-                .push([grid(j, i + 1), grid(j + 1, i), grid(j + 1, i + 1)]);
+            mesh.triangles.push([grid(j, i), grid(j + 1, i), grid(j, i + 1)]);
+            mesh.triangles.push([grid(j, i + 1), grid(j + 1, i), grid(j + 1, i + 1)]);
         }
     }
     // Soup: edges up to 0.3; a sliver has its third corner within 1e-3 of its first edge's midpoint.
@@ -206,12 +191,8 @@ enum Kind {
     Shadow,
 }
 
-const KINDS: [(Kind, usize); 4] = [
-    (Kind::Outside, 50_000),
-    (Kind::Inside, 25_000),
-    (Kind::Incoherent, 30_000),
-    (Kind::Shadow, 25_000),
-];
+const KINDS: [(Kind, usize); 4] =
+    [(Kind::Outside, 50_000), (Kind::Inside, 25_000), (Kind::Incoherent, 30_000), (Kind::Shadow, 25_000)];
 
 /// The rays, with their kinds. Directions are unit for every other ray and of random length
 /// otherwise (`t` is in units of the direction's length in all three implementations).
@@ -236,15 +217,7 @@ fn rays(rng: &mut Rng) -> Vec<(Kind, ProbeRay)> {
                 (_, 0) => dir.normalize(),
                 _ => dir.normalize() * rng.range(0.25, 4.0),
             };
-            rays.push((
-                kind,
-                ProbeRay {
-                    origin: origin.to_array(),
-                    tmin: 0.0,
-                    dir: dir.to_array(),
-                    tmax,
-                },
-            ));
+            rays.push((kind, ProbeRay { origin: origin.to_array(), tmin: 0.0, dir: dir.to_array(), tmax }));
         }
     }
     rays
@@ -257,28 +230,17 @@ fn rays(rng: &mut Rng) -> Vec<(Kind, ProbeRay)> {
 /// (small det) and far origins (large |s|) widen the band.
 fn rounding_band(ray: &ProbeRay, tri: [Vec3; 3]) -> f64 {
     let [v0, v1, v2] = tri.map(|v| v.as_dvec3());
-    let (o, d) = (
-        DVec3::from(ray.origin.map(f64::from)),
-        DVec3::from(ray.dir.map(f64::from)),
-    );
+    let (o, d) = (DVec3::from(ray.origin.map(f64::from)), DVec3::from(ray.dir.map(f64::from)));
     let (e1, e2) = (v1 - v0, v2 - v0);
     let det = e1.dot(d.cross(e2)).abs();
-    BARY_ROUNDINGS
-        * f64::from(f32::EPSILON / 2.0)
-        * (o - v0).length()
-        * d.length()
-        * (e1.length() + e2.length())
-        / det
+    BARY_ROUNDINGS * f64::from(f32::EPSILON / 2.0) * (o - v0).length() * d.length() * (e1.length() + e2.length()) / det
 }
 
 /// Möller–Trumbore in f64 without bounds: (t, distance of the crossing point from the triangle's
 /// nearest edge in barycentric units — negative outside).
 fn exact_crossing(ray: &ProbeRay, tri: [Vec3; 3]) -> (f64, f64) {
     let [v0, v1, v2] = tri.map(|v| v.as_dvec3());
-    let (o, d) = (
-        DVec3::from(ray.origin.map(f64::from)),
-        DVec3::from(ray.dir.map(f64::from)),
-    );
+    let (o, d) = (DVec3::from(ray.origin.map(f64::from)), DVec3::from(ray.dir.map(f64::from)));
     let (e1, e2) = (v1 - v0, v2 - v0);
     let p = d.cross(e2);
     let inv_det = 1.0 / e1.dot(p);
@@ -318,10 +280,7 @@ fn judge(
     // Whatever either side reports is really crossed, up to rounding.
     for (side, hit) in [("ours", ours), ("Embree's", embree)] {
         if let Some((_, id)) = hit {
-            let (edge, band) = (
-                exact_crossing(ray, mesh.corners(id)).1,
-                rounding_band(ray, mesh.corners(id)),
-            );
+            let (edge, band) = (exact_crossing(ray, mesh.corners(id)).1, rounding_band(ray, mesh.corners(id)));
             assert!(
                 edge >= -band,
                 "{who}: {side} triangle {id} lies {edge:.2e} outside its edges (rounding band {band:.2e}); ray {ray:?}"
@@ -421,10 +380,7 @@ fn bvh_agrees_with_its_twin_and_embree() {
         .iter()
         .map(|r| {
             let ray = bvh::Ray::new(Vec3::from(r.origin), Vec3::from(r.dir));
-            (
-                bvh::closest_hit(&bvh, &ray, r.tmin, r.tmax),
-                bvh::occluded(&bvh, &ray, r.tmin, r.tmax),
-            )
+            (bvh::closest_hit(&bvh, &ray, r.tmin, r.tmax), bvh::occluded(&bvh, &ray, r.tmin, r.tmax))
         })
         .collect();
     let cpu_ms = clock.elapsed().as_secs_f64() * 1e3;
@@ -434,28 +390,19 @@ fn bvh_agrees_with_its_twin_and_embree() {
     let lavapipe = gpu.ctx.info().driver_id == vk::DriverId::MESA_LLVMPIPE;
     let probe = BvhProbe::new(&gpu, &bvh);
     // lavapipe compiles the kernel at its first dispatch (PLATFORM.md §6.3): warm up before timing.
-    probe.trace(
-        &probe_rays[..64],
-        bvh_probe::CLOSEST | bvh_probe::OCCLUDED,
-        0,
-    );
+    probe.trace(&probe_rays[..64], bvh_probe::CLOSEST | bvh_probe::OCCLUDED, 0);
     let clock = Instant::now();
     let (gpu_hits, status): (Vec<ProbeHit>, u32) =
         probe.trace(&probe_rays, bvh_probe::CLOSEST | bvh_probe::OCCLUDED, 0);
     let gpu_ms = clock.elapsed().as_secs_f64() * 1e3;
-    assert_eq!(
-        status, 0,
-        "the traversal raised status {status:#x} (1: loop budget, 2: stack overflow)"
-    );
+    assert_eq!(status, 0, "the traversal raised status {status:#x} (1: loop budget, 2: stack overflow)");
 
     // ---- Embree ----
     let clock = Instant::now();
     let embree = EmbreeScene::new(&mesh.vertices, &mesh.triangles);
-    let segments: Vec<([f32; 3], [f32; 3])> =
-        probe_rays.iter().map(|r| (r.origin, r.dir)).collect();
+    let segments: Vec<([f32; 3], [f32; 3])> = probe_rays.iter().map(|r| (r.origin, r.dir)).collect();
     let embree_hits = embree.closest_hits(&segments, 0.0);
-    let (open, shadow): (Vec<usize>, Vec<usize>) =
-        (0..rays.len()).partition(|&i| probe_rays[i].tmax.is_infinite());
+    let (open, shadow): (Vec<usize>, Vec<usize>) = (0..rays.len()).partition(|&i| probe_rays[i].tmax.is_infinite());
     assert!(shadow.iter().all(|&i| probe_rays[i].tmax == 1.0));
     let mut embree_occluded = vec![false; rays.len()];
     for (subset, tmax) in [(&open, f32::INFINITY), (&shadow, 1.0)] {
@@ -479,8 +426,7 @@ fn bvh_agrees_with_its_twin_and_embree() {
         .iter()
         .zip(&embree_hits)
         .filter_map(|((_, ray), hit)| {
-            hit.filter(|&(t, _)| t < ray.tmax)
-                .map(|(_, id)| 6.0 * rounding_band(ray, mesh.corners(id)).min(1.0 / 6.0))
+            hit.filter(|&(t, _)| t < ray.tmax).map(|(_, id)| 6.0 * rounding_band(ray, mesh.corners(id)).min(1.0 / 6.0))
         })
         .sum();
     let budget = (lambda + 4.0 * lambda.sqrt() + 1.0).floor() as usize;
@@ -490,32 +436,19 @@ fn bvh_agrees_with_its_twin_and_embree() {
     let (mut twin_diffs, mut t_bitwise, mut bary_bitwise, mut max_ulps, mut cpu_gpu_hits) =
         (0usize, 0usize, 0usize, 0u32, 0usize);
     for (i, ((cpu_hit, cpu_occ), g)) in cpu.iter().zip(&gpu_hits).enumerate() {
-        assert_eq!(
-            g.occluded == 1,
-            g.hit == 1,
-            "ray {i}: the GPU's occlusion and closest-hit answers disagree"
-        );
-        assert_eq!(
-            *cpu_occ,
-            cpu_hit.is_some(),
-            "ray {i}: the CPU's occlusion and closest-hit answers disagree"
-        );
+        assert_eq!(g.occluded == 1, g.hit == 1, "ray {i}: the GPU's occlusion and closest-hit answers disagree");
+        assert_eq!(*cpu_occ, cpu_hit.is_some(), "ray {i}: the CPU's occlusion and closest-hit answers disagree");
         match cpu_hit {
             Some(h) if g.hit == 1 && h.slot == g.slot => {
                 cpu_gpu_hits += 1;
                 max_ulps = max_ulps.max(ulps(h.t, g.t));
                 t_bitwise += usize::from(h.t.to_bits() == g.t.to_bits());
-                bary_bitwise += usize::from(
-                    h.b1.to_bits() == g.b1.to_bits() && h.b2.to_bits() == g.b2.to_bits(),
-                );
+                bary_bitwise += usize::from(h.b1.to_bits() == g.b1.to_bits() && h.b2.to_bits() == g.b2.to_bits());
             }
             None if g.hit == 0 => {}
             _ => {
                 twin_diffs += 1;
-                assert!(
-                    !lavapipe,
-                    "ray {i}: CPU {cpu_hit:?} vs GPU {g:?}; the twins must agree exactly on lavapipe"
-                );
+                assert!(!lavapipe, "ray {i}: CPU {cpu_hit:?} vs GPU {g:?}; the twins must agree exactly on lavapipe");
             }
         }
     }
@@ -523,28 +456,17 @@ fn bvh_agrees_with_its_twin_and_embree() {
         "CPU vs GPU: {} rays, {cpu_gpu_hits} common hits, {twin_diffs} hit/slot differences; t bitwise equal {t_bitwise}/{cpu_gpu_hits} (max {max_ulps} ulp), barycentrics bitwise equal {bary_bitwise}/{cpu_gpu_hits}",
         rays.len()
     );
-    assert!(
-        max_ulps <= TWIN_T_ULPS,
-        "CPU and GPU t differ by {max_ulps} ulps"
-    );
-    assert!(
-        twin_diffs <= budget,
-        "{twin_diffs} hit/slot differences between the twins, budget {budget}"
-    );
+    assert!(max_ulps <= TWIN_T_ULPS, "CPU and GPU t differ by {max_ulps} ulps");
+    assert!(twin_diffs <= budget, "{twin_diffs} hit/slot differences between the twins, budget {budget}");
 
     // ---- both vs Embree ----
     for who in ["CPU", "GPU"] {
-        let mut tally: Vec<(Kind, Tally)> =
-            KINDS.iter().map(|&(k, _)| (k, Tally::default())).collect();
+        let mut tally: Vec<(Kind, Tally)> = KINDS.iter().map(|&(k, _)| (k, Tally::default())).collect();
         for (i, (kind, ray)) in rays.iter().enumerate() {
             let (ours, occluded) = match who {
-                "CPU" => (
-                    cpu[i].0.map(|h| (h.t, bvh.prim_ids[h.slot as usize])),
-                    cpu[i].1,
-                ),
+                "CPU" => (cpu[i].0.map(|h| (h.t, bvh.prim_ids[h.slot as usize])), cpu[i].1),
                 _ => (
-                    (gpu_hits[i].hit == 1)
-                        .then(|| (gpu_hits[i].t, bvh.prim_ids[gpu_hits[i].slot as usize])),
+                    (gpu_hits[i].hit == 1).then(|| (gpu_hits[i].t, bvh.prim_ids[gpu_hits[i].slot as usize])),
                     gpu_hits[i].occluded == 1,
                 ),
             };
@@ -578,21 +500,11 @@ fn bvh_agrees_with_its_twin_and_embree() {
         for (kind, t) in &tally {
             println!(
                 "{who} vs Embree, {kind:?}: {} rays, {} hits, max t error {:.1e}; {} ties, {} edge cases (max {:.1e} from the edge), {} at tmax, {} occlusion differences",
-                t.rays,
-                t.hits,
-                t.max_t_rel,
-                t.ties,
-                t.edges,
-                t.max_edge_dist,
-                t.at_tmax,
-                t.occlusion_diffs
+                t.rays, t.hits, t.max_t_rel, t.ties, t.edges, t.max_edge_dist, t.at_tmax, t.occlusion_diffs
             );
         }
         let edges: usize = tally.iter().map(|(_, t)| t.edges).sum();
-        assert!(
-            edges <= budget,
-            "{who}: {edges} edge cases against Embree, budget {budget}"
-        );
+        assert!(edges <= budget, "{who}: {edges} edge cases against Embree, budget {budget}");
     }
     println!("whole test {:.1} s", started.elapsed().as_secs_f64());
 }

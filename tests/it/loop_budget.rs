@@ -40,27 +40,13 @@ fn xorshift32(seed: u32, iterations: u32) -> u32 {
 /// invocation (iterations run, final state)).
 fn run_probe(gpu: &TestGpu, iterations: u32) -> (u32, Vec<[u32; 2]>) {
     let status = Buffer::storage_with(&gpu.ctx, "loop probe status", &[0u32]).unwrap();
-    let output =
-        Buffer::storage(&gpu.ctx, "loop probe output", u64::from(INVOCATIONS) * 8).unwrap();
-    let kernel = Kernel::new(
-        &gpu.ctx,
-        "loop_budget_probe",
-        &[BINDING_STATUS, BINDING_PROBE_OUT],
-        8,
-    )
-    .unwrap();
-    let group = kernel
-        .bind(&[(BINDING_STATUS, &status), (BINDING_PROBE_OUT, &output)])
-        .unwrap();
+    let output = Buffer::storage(&gpu.ctx, "loop probe output", u64::from(INVOCATIONS) * 8).unwrap();
+    let kernel = Kernel::new(&gpu.ctx, "loop_budget_probe", &[BINDING_STATUS, BINDING_PROBE_OUT], 8).unwrap();
+    let group = kernel.bind(&[(BINDING_STATUS, &status), (BINDING_PROBE_OUT, &output)]).unwrap();
     let push = [INVOCATIONS, iterations];
     gpu.ctx
         .submit_and_wait("loop budget probe", |cmd| {
-            kernel.record(
-                cmd,
-                &group,
-                bytemuck::bytes_of(&push),
-                groups_for(INVOCATIONS),
-            )
+            kernel.record(cmd, &group, bytemuck::bytes_of(&push), groups_for(INVOCATIONS))
         })
         .unwrap();
     let out: Vec<[u32; 2]> = output.download(INVOCATIONS as usize).unwrap();
@@ -71,11 +57,7 @@ fn run_probe(gpu: &TestGpu, iterations: u32) -> (u32, Vec<[u32; 2]>) {
 /// count: the loop really ran that many times and was neither folded nor shortened by the compiler.
 fn check_states(out: &[[u32; 2]]) {
     for (i, &[count, state]) in out.iter().enumerate() {
-        assert_eq!(
-            state,
-            xorshift32(i as u32 + 1, count),
-            "invocation {i}: state after {count} iterations"
-        );
+        assert_eq!(state, xorshift32(i as u32 + 1, count), "invocation {i}: state after {count} iterations");
     }
 }
 
@@ -86,11 +68,7 @@ fn loop_budget_guard_fires_on_lavapipe_only() {
 
     let (status, out) = run_probe(&gpu, UNDER_BUDGET);
     check_states(&out);
-    assert!(
-        out.iter().all(|o| o[0] == UNDER_BUDGET),
-        "{UNDER_BUDGET} iterations must complete: {:?}",
-        &out[..4]
-    );
+    assert!(out.iter().all(|o| o[0] == UNDER_BUDGET), "{UNDER_BUDGET} iterations must complete: {:?}", &out[..4]);
     assert_eq!(status, 0, "the guard fired on a loop that completed");
 
     let (status, out) = run_probe(&gpu, OVER_BUDGET);
@@ -122,10 +100,7 @@ fn loop_budget_guard_fires_on_lavapipe_only() {
             counts.iter().all(|&c| c == OVER_BUDGET),
             "{OVER_BUDGET} iterations must complete off lavapipe: {counts:?}"
         );
-        assert_eq!(
-            status, 0,
-            "the guard fired on a driver without a loop budget"
-        );
+        assert_eq!(status, 0, "the guard fired on a driver without a loop budget");
     }
 }
 
@@ -141,19 +116,11 @@ fn stacked_triangles() -> Vec<[glam::Vec3; 3]> {
     let mut tris: Vec<[glam::Vec3; 3]> = (0..STACKED_TRIANGLES)
         .map(|i| {
             let x = i as f32 * 0.01;
-            [
-                glam::Vec3::new(x, -0.9, 1.0),
-                glam::Vec3::new(x, 1.0, 1.0),
-                glam::Vec3::new(x, 1.0, -0.9),
-            ]
+            [glam::Vec3::new(x, -0.9, 1.0), glam::Vec3::new(x, 1.0, 1.0), glam::Vec3::new(x, 1.0, -0.9)]
         })
         .collect();
     let x = 1_001.0;
-    tris.push([
-        glam::Vec3::new(x, -1.0, -1.0),
-        glam::Vec3::new(x, 2.0, -1.0),
-        glam::Vec3::new(x, -1.0, 2.0),
-    ]);
+    tris.push([glam::Vec3::new(x, -1.0, -1.0), glam::Vec3::new(x, 2.0, -1.0), glam::Vec3::new(x, -1.0, 2.0)]);
     tris
 }
 
@@ -166,12 +133,7 @@ fn bvh_traversal_guard_fires_on_lavapipe_only() {
     let lavapipe = gpu.ctx.info().driver_id == vk::DriverId::MESA_LLVMPIPE;
     let tris = stacked_triangles();
     let bvh = bvh::build(&tris).unwrap();
-    let ray = ProbeRay {
-        origin: [-1.0, 0.0, 0.0],
-        tmin: 0.0,
-        dir: [1.0, 0.0, 0.0],
-        tmax: f32::INFINITY,
-    };
+    let ray = ProbeRay { origin: [-1.0, 0.0, 0.0], tmin: 0.0, dir: [1.0, 0.0, 0.0], tmax: f32::INFINITY };
 
     // The host twin has no budget: it visits every node and finds the far triangle.
     let host = bvh::closest_hit(
@@ -182,18 +144,10 @@ fn bvh_traversal_guard_fires_on_lavapipe_only() {
     )
     .expect("the far triangle");
     assert_eq!(bvh.prim_ids[host.slot as usize] as usize, STACKED_TRIANGLES);
-    println!(
-        "deep ray: {} nodes, depth {}, host hit at t = {}",
-        bvh.nodes.len(),
-        bvh.depth,
-        host.t
-    );
+    println!("deep ray: {} nodes, depth {}, host hit at t = {}", bvh.nodes.len(), bvh.depth, host.t);
 
     let probe = BvhProbe::new(&gpu, &bvh);
-    for (queries, name) in [
-        (bvh_probe::CLOSEST, "closest hit"),
-        (bvh_probe::OCCLUDED, "occlusion"),
-    ] {
+    for (queries, name) in [(bvh_probe::CLOSEST, "closest hit"), (bvh_probe::OCCLUDED, "occlusion")] {
         let (hits, status) = probe.trace(&[ray], queries, 0);
         println!("{name}: status {status:#x}, {:?}", hits[0]);
         if lavapipe {
@@ -203,10 +157,7 @@ fn bvh_traversal_guard_fires_on_lavapipe_only() {
                 "{name}: lavapipe cut the traversal short and the guard did not fire (or lavapipe lost its loop budget: revisit PLATFORM.md §6.1)"
             );
         } else {
-            assert_eq!(
-                status, 0,
-                "{name}: the guard fired on a driver without a loop budget"
-            );
+            assert_eq!(status, 0, "{name}: the guard fired on a driver without a loop budget");
             let found = if queries == bvh_probe::CLOSEST {
                 hits[0].hit == 1 && hits[0].slot == host.slot && hits[0].t == host.t
             } else {
@@ -224,20 +175,10 @@ const LAVAPIPE_BUDGET: u32 = 65_535;
 /// of 7 misses and the only triangle the ray hits, all with the same bounding box, so the hit sits
 /// in a full leaf that is popped with the stack empty. Returns the triangles and the hit's id.
 fn last_leaf_scene() -> (Vec<[glam::Vec3; 3]>, usize) {
-    let miss = |x: f32| {
-        [
-            glam::Vec3::new(x, -0.9, 1.0),
-            glam::Vec3::new(x, 1.0, 1.0),
-            glam::Vec3::new(x, 1.0, -0.9),
-        ]
-    };
+    let miss = |x: f32| [glam::Vec3::new(x, -0.9, 1.0), glam::Vec3::new(x, 1.0, 1.0), glam::Vec3::new(x, 1.0, -0.9)];
     let mut tris: Vec<[glam::Vec3; 3]> = (0..64).map(|i| miss(i as f32 * 0.01)).collect();
     tris.extend((1..8).map(|j| miss(10.0 - 0.001 * j as f32)));
-    tris.push([
-        glam::Vec3::new(10.0, -0.9, -0.9),
-        glam::Vec3::new(10.0, 1.0, -0.9),
-        glam::Vec3::new(10.0, -0.9, 1.0),
-    ]);
+    tris.push([glam::Vec3::new(10.0, -0.9, -0.9), glam::Vec3::new(10.0, 1.0, -0.9), glam::Vec3::new(10.0, -0.9, 1.0)]);
     let hit = tris.len() - 1;
     (tris, hit)
 }
@@ -253,39 +194,20 @@ fn bvh_guard_catches_truncation_at_every_step() {
     let lavapipe = gpu.ctx.info().driver_id == vk::DriverId::MESA_LLVMPIPE;
     let (tris, hit_id) = last_leaf_scene();
     let bvh = bvh::build(&tris).unwrap();
-    let slot = bvh
-        .prim_ids
-        .iter()
-        .position(|&p| p as usize == hit_id)
-        .unwrap() as u32;
-    let leaf = bvh
-        .nodes
-        .iter()
-        .find(|n| n.count > 0 && (n.first..n.first + n.count).contains(&slot))
-        .unwrap();
+    let slot = bvh.prim_ids.iter().position(|&p| p as usize == hit_id).unwrap() as u32;
+    let leaf = bvh.nodes.iter().find(|n| n.count > 0 && (n.first..n.first + n.count).contains(&slot)).unwrap();
     assert!(
         leaf.count > 1 && slot == leaf.first + leaf.count - 1,
         "the scene no longer puts the hit last in a shared leaf: {leaf:?}, slot {slot}"
     );
 
     let probe = BvhProbe::new(&gpu, &bvh);
-    let ray = ProbeRay {
-        origin: [-1.0, 0.0, 0.0],
-        tmin: 0.0,
-        dir: [1.0, 0.0, 0.0],
-        tmax: f32::INFINITY,
-    };
+    let ray = ProbeRay { origin: [-1.0, 0.0, 0.0], tmin: 0.0, dir: [1.0, 0.0, 0.0], tmax: f32::INFINITY };
     let (want, status) = probe.trace(&[ray], bvh_probe::CLOSEST | bvh_probe::OCCLUDED, 0);
-    assert_eq!(
-        (status, want[0].hit, want[0].slot, want[0].occluded),
-        (0, 1, slot, 1)
-    );
+    assert_eq!((status, want[0].hit, want[0].slot, want[0].occluded), (0, 1, slot, 1));
     // 300 iterations cover this traversal (about 90 node and triangle steps) with room to spare.
     let burns = LAVAPIPE_BUDGET - 300..=LAVAPIPE_BUDGET + 1;
-    for (queries, name) in [
-        (bvh_probe::CLOSEST, "closest hit"),
-        (bvh_probe::OCCLUDED, "occlusion"),
-    ] {
+    for (queries, name) in [(bvh_probe::CLOSEST, "closest hit"), (bvh_probe::OCCLUDED, "occlusion")] {
         let runs = probe.trace_burning(ray, queries, burns.clone());
         // '.' complete and quiet, 'f' flagged but complete, 'F' flagged and wrong, 'S' silently wrong.
         let marks: String = runs
@@ -304,26 +226,15 @@ fn bvh_guard_catches_truncation_at_every_step() {
                 }
             })
             .collect();
-        println!(
-            "{name}, burn {}..={}: {}",
-            burns.start(),
-            burns.end(),
-            marks.trim_start_matches('.')
-        );
-        assert!(
-            !marks.contains('S'),
-            "{name}: a truncated traversal went unflagged: {marks}"
-        );
+        println!("{name}, burn {}..={}: {}", burns.start(), burns.end(), marks.trim_start_matches('.'));
+        assert!(!marks.contains('S'), "{name}: a truncated traversal went unflagged: {marks}");
         if lavapipe {
             assert!(
                 marks.starts_with('.') && marks.ends_with('F'),
                 "{name}: the sweep must run from complete to truncated (did the budget change? PLATFORM.md §6.1): {marks}"
             );
         } else {
-            assert!(
-                marks.chars().all(|c| c == '.'),
-                "{name}: off lavapipe nothing may be truncated: {marks}"
-            );
+            assert!(marks.chars().all(|c| c == '.'), "{name}: off lavapipe nothing may be truncated: {marks}");
         }
     }
 }

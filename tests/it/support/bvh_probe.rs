@@ -2,9 +2,7 @@
 
 use bytemuck::{Pod, Zeroable};
 use pathgrad::bvh::Bvh;
-use pathgrad::gpu::abi::{
-    BINDING_NODES, BINDING_PROBE_IN, BINDING_PROBE_OUT, BINDING_STATUS, BINDING_TRIS,
-};
+use pathgrad::gpu::abi::{BINDING_NODES, BINDING_PROBE_IN, BINDING_PROBE_OUT, BINDING_STATUS, BINDING_TRIS};
 use pathgrad::gpu::pipeline::groups_for;
 use pathgrad::gpu::{Buffer, Kernel};
 
@@ -60,13 +58,7 @@ pub struct BvhProbe<'a> {
 impl<'a> BvhProbe<'a> {
     /// Uploads `bvh` and builds the kernel.
     pub fn new(gpu: &'a TestGpu, bvh: &Bvh) -> BvhProbe<'a> {
-        let bindings = [
-            BINDING_NODES,
-            BINDING_TRIS,
-            BINDING_STATUS,
-            BINDING_PROBE_IN,
-            BINDING_PROBE_OUT,
-        ];
+        let bindings = [BINDING_NODES, BINDING_TRIS, BINDING_STATUS, BINDING_PROBE_IN, BINDING_PROBE_OUT];
         BvhProbe {
             gpu,
             kernel: Kernel::new(&gpu.ctx, "bvh_probe", &bindings, 12).unwrap(),
@@ -81,12 +73,7 @@ impl<'a> BvhProbe<'a> {
         let ctx = &self.gpu.ctx;
         let status = Buffer::storage_with(ctx, "probe status", &[0u32]).unwrap();
         let input = Buffer::storage_with(ctx, "probe rays", rays).unwrap();
-        let output = Buffer::storage(
-            ctx,
-            "probe hits",
-            (rays.len() * size_of::<ProbeHit>()) as u64,
-        )
-        .unwrap();
+        let output = Buffer::storage(ctx, "probe hits", (rays.len() * size_of::<ProbeHit>()) as u64).unwrap();
         let group = self
             .kernel
             .bind(&[
@@ -100,14 +87,10 @@ impl<'a> BvhProbe<'a> {
         let n = rays.len() as u32;
         let push = [n, queries, burn];
         ctx.submit_and_wait("bvh probe", |cmd| {
-            self.kernel
-                .record(cmd, &group, bytemuck::bytes_of(&push), groups_for(n))
+            self.kernel.record(cmd, &group, bytemuck::bytes_of(&push), groups_for(n))
         })
         .unwrap();
-        (
-            output.download(rays.len()).unwrap(),
-            status.download::<u32>(1).unwrap()[0],
-        )
+        (output.download(rays.len()).unwrap(), status.download::<u32>(1).unwrap()[0])
     }
 
     /// Traces one `ray` once per value of `burns`, reusing every buffer: (answer, status) each.
@@ -137,14 +120,10 @@ impl<'a> BvhProbe<'a> {
                 status.clear().unwrap();
                 let push = [1, queries, burn];
                 ctx.submit_and_wait("bvh probe", |cmd| {
-                    self.kernel
-                        .record(cmd, &group, bytemuck::bytes_of(&push), [1, 1, 1])
+                    self.kernel.record(cmd, &group, bytemuck::bytes_of(&push), [1, 1, 1])
                 })
                 .unwrap();
-                (
-                    output.download::<ProbeHit>(1).unwrap()[0],
-                    status.download::<u32>(1).unwrap()[0],
-                )
+                (output.download::<ProbeHit>(1).unwrap()[0], status.download::<u32>(1).unwrap()[0])
             })
             .collect()
     }
