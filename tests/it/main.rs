@@ -8,4 +8,5 @@ mod cpu_vs_gpu;
 mod embree_smoke;
 mod furnace;
 mod loop_budget;
+mod resources;
 mod twins;
