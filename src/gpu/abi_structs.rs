@@ -116,4 +116,60 @@ abi_structs! {
         /// Vertex 2.
         v2: Vec3,
     }
+
+    /// Test probe input: one BSDF query (`shaders/bsdf_probe.comp`).
+    struct BsdfProbeCase {
+        /// Leaf 0 kind (`LEAF_*`).
+        kind0: u32,
+        /// Leaf 0 distribution (`DIST_*`).
+        dist0: u32,
+        /// Leaf 0 roughness.
+        alpha0: f32,
+        /// Leaf 0 albedo or specular reflectance.
+        color0: Vec3,
+        /// Leaf 0 eta.
+        eta0: Vec3,
+        /// Leaf 0 k.
+        k0: Vec3,
+        /// Leaf 1 kind.
+        kind1: u32,
+        /// Leaf 1 distribution.
+        dist1: u32,
+        /// Leaf 1 roughness.
+        alpha1: f32,
+        /// Leaf 1 albedo or specular reflectance.
+        color1: Vec3,
+        /// Leaf 1 eta.
+        eta1: Vec3,
+        /// Leaf 1 k.
+        k1: Vec3,
+        /// Blend weight.
+        weight: f32,
+        /// 1 for a blend.
+        blend: u32,
+        /// Incident direction (local).
+        wi: Vec3,
+        /// Lobe uniform.
+        u_lobe: f32,
+        /// Direction uniforms.
+        u: Vec2,
+        /// A fixed direction at which eval and pdf are also queried.
+        wo_eval: Vec3,
+    }
+
+    /// Test probe output for one `BsdfProbeCase`.
+    struct BsdfProbeResult {
+        /// Sampled direction.
+        wo: Vec3,
+        /// Its pdf.
+        pdf: f32,
+        /// Its value.
+        value: Vec3,
+        /// 1 if the sample is valid.
+        valid: u32,
+        /// `bsdf_eval` at `wo_eval`.
+        eval: Vec3,
+        /// `bsdf_pdf` at `wo_eval`.
+        eval_pdf: f32,
+    }
 }

@@ -50,7 +50,11 @@ fn same_seed_gives_the_same_image() {
 #[test]
 fn bad_input_gets_a_clear_error_and_no_output() {
     let dir = tempfile::tempdir().unwrap();
-    let cases: [(&[&str], &str); 5] = [
+    let cases: [(&[&str], &str); 6] = [
+        (
+            &["render", "builtin:cornell-box", "--device", "99", "-o", "x.exr"],
+            "no Vulkan device matches '99' (available: [0]",
+        ),
         (&["render", "builtin:nope", "-o", "x.exr"], "unknown built-in scene (known: cornell-box, furnace, blend)"),
         (&["render", "scene.xml", "-o", "x.exr"], "scene files are not supported yet"),
         (&["render", "builtin:cornell-box", "-o", "x.jpg"], "must end in .exr or .png"),
