@@ -1,4 +1,5 @@
-// The one path loop (ALGORITHMS.md §3.1): BSDF sampling, next-event estimation on area emitters,
+// The one path loop (ALGORITHMS.md §3.1): BSDF sampling, next-event estimation on area emitters
+// and a constant environment,
 // power-heuristic MIS and Russian roulette. Twin: src/cpu/path.rs, phase by phase.
 //
 // Random numbers are addressed, never consumed: vertex v reads block 0 (emitter choice and point),
@@ -34,7 +35,16 @@ vec3 trace_path(uint pixel, uint sample_index) {
     for (uint vertex = 1u; vertex <= globals.max_depth; vertex++) {
         // ---- intersection ----
         Hit hit = bvh_closest_hit(ray, 0.0, FLOAT_MAX);
-        if (!hit.valid) { finished = true; break; }
+        if (!hit.valid) {
+            // ---- environment hit ----
+            if (globals.env_param != NO_PARAM) {
+                float w_b = 1.0;
+                if (vertex > 1u) w_b = mis_power(prev_pdf_f, environment_pdf());
+                radiance += throughput * w_b * param_rgb(globals.env_param);
+            }
+            finished = true;
+            break;
+        }
         Surface s = surface_at(hit);
         vec3 wi_world = -ray.dir;
 
@@ -47,7 +57,9 @@ vec3 trace_path(uint pixel, uint sample_index) {
         }
         if (vertex >= globals.max_depth) { finished = true; break; }
 
-        Bsdf bsdf = resolve_bsdf(s.material);
+        Bsdf bsdf = resolve_bsdf(s.material, s.uv);
+        // A two-sided material seen from the back shades with the flipped normal.
+        if (materials[s.material].two_sided != 0u && dot(s.ns, wi_world) < 0.0) s.ns = -s.ns;
         ShadingFrame frame = shading_frame(s.ns);
         vec3 wi = to_local(frame, wi_world);
 
@@ -55,14 +67,26 @@ vec3 trace_path(uint pixel, uint sample_index) {
         vec4 u_em = draw_block(pixel, sample_index, vertex, DIM_EMITTER_SELECT / 4u);
         EmitterSample es = sample_emitter(u_em[DIM_EMITTER_SELECT % 4u], vec2(u_em[DIM_EMITTER_POS % 4u], u_em[DIM_EMITTER_POS % 4u + 1u]));
         if (es.valid) {
-            vec3 origin = offset_origin(s.p, s.ng, es.point - s.p);
-            vec3 to_light = es.point - origin;
-            float dist = length(to_light);
-            vec3 wl = to_light / dist;
-            float p_e = emitter_pdf_solid_angle(dist, dot(es.normal, -wl));
+            vec3 wl;
+            float p_e;
+            float shadow_tmax;
+            vec3 origin;
+            if (es.environment) {
+                wl = es.point;
+                origin = offset_origin(s.p, s.ng, wl);
+                p_e = environment_pdf();
+                shadow_tmax = FLOAT_MAX;
+            } else {
+                origin = offset_origin(s.p, s.ng, es.point - s.p);
+                vec3 to_light = es.point - origin;
+                float dist = length(to_light);
+                wl = to_light / dist;
+                p_e = emitter_pdf_solid_angle(dist, dot(es.normal, -wl));
+                shadow_tmax = dist * (1.0 - SHADOW_EPSILON);
+            }
             vec3 wo = to_local(frame, wl);
             vec3 f = bsdf_eval(bsdf, wi, wo);
-            if (p_e > 0.0 && max_component(f) > 0.0 && !bvh_occluded(make_ray(origin, wl), 0.0, dist * (1.0 - SHADOW_EPSILON))) {
+            if (p_e > 0.0 && max_component(f) > 0.0 && !bvh_occluded(make_ray(origin, wl), 0.0, shadow_tmax)) {
                 float w_n = mis_power(p_e, bsdf_pdf(bsdf, wi, wo));
                 radiance += throughput * w_n * f * es.radiance / p_e;
             }

@@ -1,7 +1,7 @@
 //! Options shared by the GPU renderer and the CPU reference: image size, samples, depth, seed.
 
 use crate::error::{Error, Result};
-use crate::gpu::abi::{Globals, PASS_PRIMAL};
+use crate::gpu::abi::{Globals, NO_PARAM, PASS_PRIMAL};
 use crate::rng::{PassTag, RngKey};
 use crate::scene::Scene;
 use crate::scene::flat::FlatScene;
@@ -9,6 +9,10 @@ use crate::scene::flat::FlatScene;
 /// Bounce cap used when `max_depth` is unbounded: a path that survives Russian roulette this long
 /// is ended (its expected contribution beyond is negligible at any sane albedo).
 pub const UNBOUNDED_DEPTH_CAP: u32 = 1024;
+
+/// With both an environment and area emitters, next-event estimation picks the environment with
+/// this probability (Mitsuba picks among emitters uniformly; two emitter kinds give ½).
+pub const ENV_SELECT_PROB: f32 = 0.5;
 
 /// Russian roulette starts after this many bounces by default (Mitsuba's `rr_depth`).
 pub const DEFAULT_RR_DEPTH: u32 = 5;
@@ -90,6 +94,12 @@ impl RenderOptions {
             cam_right: right * tan_x,
             cam_up: up * tan_y,
             cam_forward: forward,
+            env_param: scene.environment.map_or(NO_PARAM, |p| scene.params.entry(p).offset),
+            env_select_prob: match (scene.environment.is_some(), flat.emitters.is_empty()) {
+                (false, _) => 0.0,
+                (true, true) => 1.0,
+                (true, false) => ENV_SELECT_PROB,
+            },
         }
     }
 }

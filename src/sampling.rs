@@ -4,7 +4,7 @@
 //! Transcendentals that both back ends need bit-close (erf, erfinv) are polynomials written out
 //! here and in GLSL, not libm calls, so CPU and GPU sample the same directions.
 
-use std::f32::consts::{FRAC_1_PI, FRAC_PI_2, FRAC_PI_4};
+use std::f32::consts::{FRAC_1_PI, FRAC_PI_2, FRAC_PI_4, PI};
 
 use glam::{Vec2, Vec3};
 
@@ -65,6 +65,17 @@ pub fn sample_cosine_hemisphere(u: Vec2) -> Vec3 {
 pub fn cosine_hemisphere_pdf(v: Vec3) -> f32 {
     v.z.max(0.0) * FRAC_1_PI
 }
+
+/// Uniform direction on the unit sphere.
+pub fn sample_uniform_sphere(u: Vec2) -> Vec3 {
+    let z = 1.0 - 2.0 * u.x;
+    let r = (1.0 - z * z).max(0.0).sqrt();
+    let phi = 2.0 * PI * u.y;
+    Vec3::new(r * phi.cos(), r * phi.sin(), z)
+}
+
+/// Density of [`sample_uniform_sphere`]: 1 / (4π).
+pub const UNIFORM_SPHERE_PDF: f32 = 0.25 * FRAC_1_PI;
 
 /// Uniform point on a triangle as barycentrics (b1, b2) of vertices 1 and 2.
 pub fn sample_uniform_triangle(u: Vec2) -> Vec2 {

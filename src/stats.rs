@@ -279,4 +279,32 @@ mod tests {
         assert!((gamma_q(50.0, 124.342 / 2.0) - 0.05).abs() < 1e-4);
         assert!((ln_gamma(5.0) - 24f64.ln()).abs() < 1e-12);
     }
+
+    /// The harness has power: a cosine-weighted sampler tested against the uniform-hemisphere
+    /// density, or with a tenth of its samples declared invalid, must fail.
+    #[test]
+    fn chi2_rejects_a_wrong_density_or_missing_mass() {
+        use crate::rng::{PassTag, RngKey, Stream, uniform4};
+        use crate::sampling::{cosine_hemisphere_pdf, sample_cosine_hemisphere};
+        let cfg = Chi2Config { cos_bins: 16, phi_bins: 32, samples: 200_000, significance: 0.01 };
+        let u = |i: usize| {
+            let r = uniform4(RngKey::new(9, 0, PassTag::Test), i as u32, 0, 0, Stream::Main, 0, 0);
+            (r[0], glam::Vec2::new(r[1], r[2]))
+        };
+        let right =
+            chi2_directions(&cfg, |i| Some(sample_cosine_hemisphere(u(i).1)), |v| f64::from(cosine_hemisphere_pdf(v)));
+        assert!(right.passed(cfg.significance), "p = {}", right.p_value);
+        let uniform = |v: Vec3| if v.z > 0.0 { 0.5 / PI } else { 0.0 };
+        let wrong = chi2_directions(&cfg, |i| Some(sample_cosine_hemisphere(u(i).1)), uniform);
+        assert!(!wrong.passed(cfg.significance), "p = {}", wrong.p_value);
+        let lossy = chi2_directions(
+            &cfg,
+            |i| {
+                let (a, b) = u(i);
+                (a > 0.1).then(|| sample_cosine_hemisphere(b))
+            },
+            |v| f64::from(cosine_hemisphere_pdf(v)),
+        );
+        assert!(!lossy.passed(cfg.significance), "p = {}", lossy.p_value);
+    }
 }

@@ -5,14 +5,24 @@
 #include "abi.glsl"
 #include "sampling.glsl"
 
-struct EmitterSample { vec3 point; vec3 normal; vec3 radiance; bool valid; };
+// A next-event sample: a point on an area emitter, or (environment) a direction in `point`.
+struct EmitterSample { vec3 point; vec3 normal; vec3 radiance; bool environment; bool valid; };
 
-// Chooses an emissive triangle with probability proportional to its area (u_select), then a
-// uniform point on it (u_pos). The area density is therefore 1 / total emissive area everywhere.
+// With probability env_select_prob (u_select below it) a uniform direction toward the constant
+// environment; otherwise an emissive triangle with probability proportional to its area, then a
+// uniform point on it (u_pos). The area density is (1 - env_select_prob) / total emissive area.
 EmitterSample sample_emitter(float u_select, vec2 u_pos) {
-    EmitterSample s = EmitterSample(vec3(0.0), vec3(0.0), vec3(0.0), false);
+    EmitterSample s = EmitterSample(vec3(0.0), vec3(0.0), vec3(0.0), false, false);
+    if (u_select < globals.env_select_prob) {
+        s.point = sample_uniform_sphere(u_pos);
+        s.radiance = param_rgb(globals.env_param);
+        s.environment = true;
+        s.valid = true;
+        return s;
+    }
     uint count = globals.emitter_count;
     if (count == 0u) return s;
+    u_select = (u_select - globals.env_select_prob) / (1.0 - globals.env_select_prob);
     uint lo = 0u;
     uint hi = count - 1u;
     // Binary search for the first cdf > u_select. The flag, set only where the search ends for its
@@ -37,7 +47,12 @@ EmitterSample sample_emitter(float u_select, vec2 u_pos) {
 // Solid-angle density of reaching an emitter point at distance `dist` whose normal makes cosine
 // `cos_emitter` with the direction back to the shading point.
 float emitter_pdf_solid_angle(float dist, float cos_emitter) {
-    return cos_emitter > 0.0 ? dist * dist / (cos_emitter * globals.emitter_total_area) : 0.0;
+    return cos_emitter > 0.0 ? (1.0 - globals.env_select_prob) * dist * dist / (cos_emitter * globals.emitter_total_area) : 0.0;
+}
+
+// Solid-angle density with which next-event estimation samples a direction toward the environment.
+float environment_pdf() {
+    return globals.env_select_prob * (0.25 * INV_PI);
 }
 
 #endif

@@ -37,6 +37,14 @@ vec3 sample_cosine_hemisphere(vec2 u) {
 
 float cosine_hemisphere_pdf(vec3 v) { return max(v.z, 0.0) * INV_PI; }
 
+// Uniform direction on the unit sphere; density 1 / (4π).
+vec3 sample_uniform_sphere(vec2 u) {
+    float z = 1.0 - 2.0 * u.x;
+    float r = sqrt(max(1.0 - z * z, 0.0));
+    float phi = 2.0 * PI * u.y;
+    return vec3(r * cos(phi), r * sin(phi), z);
+}
+
 // Uniform point on a triangle as barycentrics (b1, b2) of vertices 1 and 2.
 vec2 sample_uniform_triangle(vec2 u) {
     float su = sqrt(u.x);

@@ -12,7 +12,7 @@
 // Shadow rays stop this fraction short of the emitter point so the emitter itself never occludes.
 #define SHADOW_EPSILON 1e-4
 
-struct Surface { vec3 p; vec3 ng; vec3 ns; uint material; uint emitter; };
+struct Surface { vec3 p; vec3 ng; vec3 ns; vec2 uv; uint material; uint emitter; };
 
 Surface surface_at(Hit hit) {
     TriPositions tri = tris[hit.slot];
@@ -23,6 +23,7 @@ Surface surface_at(Hit hit) {
     s.ng = normalize(cross(tri.v1 - tri.v0, tri.v2 - tri.v0));
     vec3 n = b0 * sh.n0 + hit.b1 * sh.n1 + hit.b2 * sh.n2;
     s.ns = dot(n, n) > 0.0 ? normalize(n) : s.ng;
+    s.uv = b0 * sh.uv0 + hit.b1 * sh.uv1 + hit.b2 * sh.uv2;
     s.material = sh.material;
     s.emitter = sh.emitter;
     return s;
@@ -34,28 +35,49 @@ vec3 offset_origin(vec3 p, vec3 ng, vec3 dir) {
     return p + ng * (dot(ng, dir) > 0.0 ? scale : -scale);
 }
 
-Leaf leaf_from_material(Material m) {
+// Bilinear lookup with repeat wrapping of the RGB texels at params[offset]; row 0 is v = 0.
+vec3 texture_bilinear(uint offset, uint width, uint height, vec2 uv) {
+    float x = uv.x * float(width) - 0.5;
+    float y = uv.y * float(height) - 0.5;
+    float x0 = floor(x);
+    float y0 = floor(y);
+    float fx = x - x0;
+    float fy = y - y0;
+    int w = int(width);
+    int h = int(height);
+    int ix0 = ((int(x0) % w) + w) % w;
+    int iy0 = ((int(y0) % h) + h) % h;
+    int ix1 = (ix0 + 1) % w;
+    int iy1 = (iy0 + 1) % h;
+    vec3 c00 = param_rgb(offset + 3u * uint(iy0 * w + ix0));
+    vec3 c10 = param_rgb(offset + 3u * uint(iy0 * w + ix1));
+    vec3 c01 = param_rgb(offset + 3u * uint(iy1 * w + ix0));
+    vec3 c11 = param_rgb(offset + 3u * uint(iy1 * w + ix1));
+    return (c00 * (1.0 - fx) + c10 * fx) * (1.0 - fy) + (c01 * (1.0 - fx) + c11 * fx) * fy;
+}
+
+Leaf leaf_from_material(Material m, vec2 uv) {
     Leaf l;
     l.kind = m.tag == MAT_ROUGH_CONDUCTOR ? LEAF_ROUGH_CONDUCTOR : LEAF_DIFFUSE;
     l.distribution = m.distribution;
     l.alpha = m.tag == MAT_ROUGH_CONDUCTOR ? params[m.p_alpha] : 0.0;
-    l.color = param_rgb(m.p_color);
+    l.color = m.tex_width > 0u ? texture_bilinear(m.p_color, m.tex_width, m.tex_height, uv) : param_rgb(m.p_color);
     l.eta = m.eta;
     l.k = m.k;
     return l;
 }
 
-// The BSDF of a material with its current parameter values.
-Bsdf resolve_bsdf(uint material_id) {
+// The BSDF of a material with its current parameter values at texture coordinates uv.
+Bsdf resolve_bsdf(uint material_id, vec2 uv) {
     Material m = materials[material_id];
     Bsdf b;
     if (m.tag == MAT_BLEND) {
-        b.leaf0 = leaf_from_material(materials[m.child0]);
-        b.leaf1 = leaf_from_material(materials[m.child1]);
+        b.leaf0 = leaf_from_material(materials[m.child0], uv);
+        b.leaf1 = leaf_from_material(materials[m.child1], uv);
         b.weight = params[m.p_weight];
         b.blend = true;
     } else {
-        b.leaf0 = leaf_from_material(m);
+        b.leaf0 = leaf_from_material(m, uv);
         b.leaf1 = b.leaf0;
         b.weight = 0.0;
         b.blend = false;

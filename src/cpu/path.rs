@@ -5,10 +5,11 @@ use glam::{Vec2, Vec3};
 
 use crate::bsdf::{bsdf_eval, bsdf_pdf, bsdf_sample};
 use crate::bvh::{Ray, closest_hit, occluded};
-use crate::cpu::emitter::{emitter_pdf_solid_angle, sample_emitter};
+use crate::cpu::emitter::{emitter_pdf_solid_angle, environment_pdf, sample_emitter};
 use crate::cpu::surface::{SHADOW_EPSILON, mis_power, offset_origin, param_color, resolve_bsdf, surface_at};
 use crate::gpu::abi::{
     DIM_DIRECTION, DIM_EMITTER_POS, DIM_EMITTER_SELECT, DIM_LOBE, DIM_PIXEL_JITTER, DIM_ROULETTE, Globals, NO_EMITTER,
+    NO_PARAM,
 };
 use crate::rng::{RngKey, Stream, uniform4};
 use crate::sampling::Frame;
@@ -37,7 +38,17 @@ pub fn trace_path(flat: &FlatScene, globals: &Globals, pixel: u32, sample: u32) 
     let mut prev_pdf_f = 0.0f32; // density with which the previous vertex sampled ray.dir
     for vertex in 1..=globals.max_depth {
         // ---- intersection ----
-        let Some(hit) = closest_hit(&flat.bvh, &ray, 0.0, f32::MAX) else { break };
+        let Some(hit) = closest_hit(&flat.bvh, &ray, 0.0, f32::MAX) else {
+            // ---- environment hit ----
+            if globals.env_param != NO_PARAM {
+                let mut w_b = 1.0;
+                if vertex > 1 {
+                    w_b = mis_power(prev_pdf_f, environment_pdf(globals));
+                }
+                radiance += throughput * w_b * param_color(flat, globals.env_param);
+            }
+            break;
+        };
         let s = surface_at(flat, &hit);
         let wi_world = -ray.dir;
 
@@ -54,27 +65,30 @@ pub fn trace_path(flat: &FlatScene, globals: &Globals, pixel: u32, sample: u32) 
             break;
         }
 
-        let bsdf = resolve_bsdf(flat, s.material);
-        let frame = Frame::from_normal(s.ns);
+        let bsdf = resolve_bsdf(flat, s.material, s.uv);
+        // A two-sided material seen from the back shades with the flipped normal.
+        let ns =
+            if flat.materials[s.material as usize].two_sided != 0 && s.ns.dot(wi_world) < 0.0 { -s.ns } else { s.ns };
+        let frame = Frame::from_normal(ns);
         let wi = frame.to_local(wi_world);
 
         // ---- emitter sampling ----
         let u_em = draw_block(globals, pixel, sample, vertex, DIM_EMITTER_SELECT / 4);
         let pos = (DIM_EMITTER_POS % 4) as usize;
-        if let Some(es) =
-            sample_emitter(flat, u_em[(DIM_EMITTER_SELECT % 4) as usize], Vec2::new(u_em[pos], u_em[pos + 1]))
-        {
-            let origin = offset_origin(s.p, s.ng, es.point - s.p);
-            let to_light = es.point - origin;
-            let dist = to_light.length();
-            let wl = to_light / dist;
-            let p_e = emitter_pdf_solid_angle(globals, dist, es.normal.dot(-wl));
+        let u_select = u_em[(DIM_EMITTER_SELECT % 4) as usize];
+        if let Some(es) = sample_emitter(flat, globals, u_select, Vec2::new(u_em[pos], u_em[pos + 1])) {
+            let (wl, p_e, shadow_tmax, origin) = if es.environment {
+                (es.point, environment_pdf(globals), f32::MAX, offset_origin(s.p, s.ng, es.point))
+            } else {
+                let origin = offset_origin(s.p, s.ng, es.point - s.p);
+                let to_light = es.point - origin;
+                let dist = to_light.length();
+                let wl = to_light / dist;
+                (wl, emitter_pdf_solid_angle(globals, dist, es.normal.dot(-wl)), dist * (1.0 - SHADOW_EPSILON), origin)
+            };
             let wo = frame.to_local(wl);
             let f = bsdf_eval(&bsdf, wi, wo);
-            if p_e > 0.0
-                && max_component(f) > 0.0
-                && !occluded(&flat.bvh, &Ray::new(origin, wl), 0.0, dist * (1.0 - SHADOW_EPSILON))
-            {
+            if p_e > 0.0 && max_component(f) > 0.0 && !occluded(&flat.bvh, &Ray::new(origin, wl), 0.0, shadow_tmax) {
                 let w_n = mis_power(p_e, bsdf_pdf(&bsdf, wi, wo));
                 radiance += throughput * w_n * f * es.radiance / p_e;
             }

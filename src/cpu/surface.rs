@@ -22,6 +22,8 @@ pub struct Surface {
     pub ng: Vec3,
     /// Interpolated shading normal.
     pub ns: Vec3,
+    /// Interpolated texture coordinates.
+    pub uv: glam::Vec2,
     /// Material index.
     pub material: u32,
     /// Emitter index or `NO_EMITTER`.
@@ -37,7 +39,8 @@ pub fn surface_at(flat: &FlatScene, hit: &Hit) -> Surface {
     let ng = (tri.v1 - tri.v0).cross(tri.v2 - tri.v0).normalize();
     let n = b0 * sh.n0 + hit.b1 * sh.n1 + hit.b2 * sh.n2;
     let ns = if n.dot(n) > 0.0 { n.normalize() } else { ng };
-    Surface { p, ng, ns, material: sh.material, emitter: sh.emitter }
+    let uv = b0 * sh.uv0 + hit.b1 * sh.uv1 + hit.b2 * sh.uv2;
+    Surface { p, ng, ns, uv, material: sh.material, emitter: sh.emitter }
 }
 
 /// `p` moved off the surface to the side `dir` leaves to.
@@ -52,31 +55,45 @@ fn param_rgb(params: &[f32], offset: u32) -> Vec3 {
     Vec3::new(params[o], params[o + 1], params[o + 2])
 }
 
-fn leaf_from_material(params: &[f32], m: &Material) -> Leaf {
+/// Bilinear lookup with repeat wrapping of the RGB texels at `params[offset..]`; row 0 is v = 0.
+pub fn texture_bilinear(params: &[f32], offset: u32, width: u32, height: u32, uv: glam::Vec2) -> Vec3 {
+    let x = uv.x * width as f32 - 0.5;
+    let y = uv.y * height as f32 - 0.5;
+    let (x0, y0) = (x.floor(), y.floor());
+    let (fx, fy) = (x - x0, y - y0);
+    let (w, h) = (width as i32, height as i32);
+    let ix0 = (x0 as i32).rem_euclid(w);
+    let iy0 = (y0 as i32).rem_euclid(h);
+    let (ix1, iy1) = ((ix0 + 1) % w, (iy0 + 1) % h);
+    let texel = |ix: i32, iy: i32| param_rgb(params, offset + 3 * (iy * w + ix) as u32);
+    (texel(ix0, iy0) * (1.0 - fx) + texel(ix1, iy0) * fx) * (1.0 - fy)
+        + (texel(ix0, iy1) * (1.0 - fx) + texel(ix1, iy1) * fx) * fy
+}
+
+fn leaf_from_material(params: &[f32], m: &Material, uv: glam::Vec2) -> Leaf {
+    let color = if m.tex_width > 0 {
+        texture_bilinear(params, m.p_color, m.tex_width, m.tex_height, uv)
+    } else {
+        param_rgb(params, m.p_color)
+    };
     if m.tag == MAT_ROUGH_CONDUCTOR {
         let distribution =
             if m.distribution == Distribution::Ggx as u32 { Distribution::Ggx } else { Distribution::Beckmann };
-        Leaf::RoughConductor {
-            distribution,
-            alpha: params[m.p_alpha as usize],
-            specular: param_rgb(params, m.p_color),
-            eta: m.eta,
-            k: m.k,
-        }
+        Leaf::RoughConductor { distribution, alpha: params[m.p_alpha as usize], specular: color, eta: m.eta, k: m.k }
     } else {
-        Leaf::Diffuse { albedo: param_rgb(params, m.p_color) }
+        Leaf::Diffuse { albedo: color }
     }
 }
 
-/// The BSDF of material `id` with the current parameter values.
-pub fn resolve_bsdf(flat: &FlatScene, id: u32) -> Bsdf {
+/// The BSDF of material `id` with the current parameter values at texture coordinates `uv`.
+pub fn resolve_bsdf(flat: &FlatScene, id: u32, uv: glam::Vec2) -> Bsdf {
     let m = &flat.materials[id as usize];
     if m.tag == MAT_BLEND {
-        let a = leaf_from_material(&flat.params, &flat.materials[m.child0 as usize]);
-        let b = leaf_from_material(&flat.params, &flat.materials[m.child1 as usize]);
+        let a = leaf_from_material(&flat.params, &flat.materials[m.child0 as usize], uv);
+        let b = leaf_from_material(&flat.params, &flat.materials[m.child1 as usize], uv);
         Bsdf { leaves: [a, b], weight: flat.params[m.p_weight as usize], blend: true }
     } else {
-        let a = leaf_from_material(&flat.params, m);
+        let a = leaf_from_material(&flat.params, m, uv);
         Bsdf { leaves: [a, a], weight: 0.0, blend: false }
     }
 }

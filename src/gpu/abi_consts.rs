@@ -58,6 +58,8 @@ abi_constants! {
 
     /// `TriShading::emitter` of a triangle that does not emit.
     NO_EMITTER = 0xFFFF_FFFF;
+    /// A parameter offset that refers to nothing (e.g. no environment).
+    NO_PARAM = 0xFFFF_FFFF;
 
     /// Status bit: an invocation exhausted lavapipe's loop budget (a loop exited early).
     STATUS_LOOP_BUDGET = 1;

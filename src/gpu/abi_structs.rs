@@ -32,6 +32,10 @@ abi_structs! {
         cam_up: Vec3,
         /// Camera viewing direction (unit).
         cam_forward: Vec3,
+        /// Parameter offset of the constant environment radiance, or `NO_PARAM`.
+        env_param: u32,
+        /// Probability that next-event estimation samples the environment rather than area emitters.
+        env_select_prob: f32,
     }
 
     /// One BVH2 node: a leaf when `count > 0` (triangles `first .. first+count` of the leaf-ordered
@@ -87,8 +91,15 @@ abi_structs! {
         child0: u32,
         /// Blend: material index of child 1 (weight w).
         child1: u32,
-        /// Parameter offset of the RGB albedo (diffuse) or specular reflectance (conductor).
+        /// Parameter offset of the RGB albedo (diffuse; the texels if textured) or specular
+        /// reflectance (conductor).
         p_color: u32,
+        /// Texture width in texels; 0 when the color is constant.
+        tex_width: u32,
+        /// Texture height in texels.
+        tex_height: u32,
+        /// 1 if the material is seen from both sides.
+        two_sided: u32,
         /// Parameter offset of the roughness alpha (conductor).
         p_alpha: u32,
         /// Parameter offset of the blend weight (blend).

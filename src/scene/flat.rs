@@ -9,7 +9,7 @@ use crate::gpu::abi::{
     EmitterTri, MAT_BLEND, MAT_DIFFUSE, MAT_ROUGH_CONDUCTOR, Material as GpuMaterial, NO_EMITTER, TriShading,
 };
 use crate::scene::shapes::triangle_area;
-use crate::scene::{Material, Scene};
+use crate::scene::{Albedo, Material, Scene};
 
 /// The GPU-layout arrays of one scene.
 #[derive(Clone, Debug, Default, PartialEq)]
@@ -111,7 +111,22 @@ impl FlatScene {
 fn flatten_material(scene: &Scene, m: &Material) -> GpuMaterial {
     let offset = |id| scene.params.entry(id).offset;
     match *m {
-        Material::Diffuse { albedo } => GpuMaterial { tag: MAT_DIFFUSE, p_color: offset(albedo), ..Default::default() },
+        Material::Diffuse { albedo: Albedo::Rgb(albedo) } => {
+            GpuMaterial { tag: MAT_DIFFUSE, p_color: offset(albedo), ..Default::default() }
+        }
+        Material::Diffuse { albedo: Albedo::Bitmap(t) } => {
+            let t = &scene.textures[t.0 as usize];
+            GpuMaterial {
+                tag: MAT_DIFFUSE,
+                p_color: offset(t.texels),
+                tex_width: t.width,
+                tex_height: t.height,
+                ..Default::default()
+            }
+        }
+        Material::TwoSided(child) => {
+            GpuMaterial { two_sided: 1, ..flatten_material(scene, &scene.materials[child.0 as usize]) }
+        }
         Material::RoughConductor { distribution, alpha, specular, eta, k } => GpuMaterial {
             tag: MAT_ROUGH_CONDUCTOR,
             distribution: distribution as u32,

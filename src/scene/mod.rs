@@ -15,13 +15,38 @@ use crate::params::{ParamId, ParamTable};
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct MaterialId(pub u32);
 
+/// Index of a texture in [`Scene::textures`].
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct TextureId(pub u32);
+
+/// An RGB bitmap whose linear texels are one parameter (`width × height × 3` values, row 0 at
+/// v = 0), looked up bilinearly with repeat wrapping at the hit's texture coordinates.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Texture {
+    /// Width in texels.
+    pub width: u32,
+    /// Height in texels.
+    pub height: u32,
+    /// The texels, RGB, row-major.
+    pub texels: ParamId,
+}
+
+/// Where a diffuse albedo comes from.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Albedo {
+    /// One RGB parameter.
+    Rgb(ParamId),
+    /// A bitmap texture.
+    Bitmap(TextureId),
+}
+
 /// A surface material. Differentiable values are parameters; the rest are constants.
 #[derive(Clone, Debug, PartialEq)]
 pub enum Material {
-    /// Lambertian diffuse with RGB albedo (ALGORITHMS.md §4.1).
+    /// Lambertian diffuse (ALGORITHMS.md §4.1).
     Diffuse {
-        /// RGB albedo, 3 values in [0, 1].
-        albedo: ParamId,
+        /// RGB albedo in [0, 1], constant or textured.
+        albedo: Albedo,
     },
     /// Isotropic rough conductor (ALGORITHMS.md §4.2).
     RoughConductor {
@@ -36,13 +61,16 @@ pub enum Material {
         /// Imaginary part of the complex index of refraction (RGB); eta = 0, k = 1 gives F ≡ 1.
         k: Vec3,
     },
-    /// `(1 − w)·child0 + w·child1` of two non-blend materials (ALGORITHMS.md §4.3).
+    /// `(1 − w)·child0 + w·child1` of two leaf materials (ALGORITHMS.md §4.3).
     Blend {
         /// Weight w of child 1, 1 value in [0, 1].
         weight: ParamId,
-        /// The two children; neither may itself be a blend.
+        /// The two children; neither may be a blend or two-sided wrapper.
         children: [MaterialId; 2],
     },
+    /// The child seen from both sides (Mitsuba's `twosided`): from the back, the shading frame is
+    /// flipped so the child sees its front.
+    TwoSided(MaterialId),
 }
 
 /// A triangle mesh with one material, optionally emitting.
@@ -93,6 +121,10 @@ pub struct Scene {
     pub materials: Vec<Material>,
     /// The camera.
     pub camera: Camera,
+    /// Bitmap textures.
+    pub textures: Vec<Texture>,
+    /// Constant environment radiance (RGB parameter) seen by rays that leave the scene, if any.
+    pub environment: Option<ParamId>,
     /// Every differentiable value.
     pub params: ParamTable,
     /// Default maximum path depth (surface interactions) for this scene.
@@ -137,6 +169,8 @@ impl Scene {
             meshes: Vec::new(),
             materials: Vec::new(),
             camera,
+            textures: Vec::new(),
+            environment: None,
             params: ParamTable::default(),
             max_depth: 6,
         }
@@ -154,7 +188,7 @@ impl Scene {
     /// As [`ParamTable::add`].
     pub fn add_diffuse(&mut self, name: &str, albedo: Vec3) -> Result<MaterialId> {
         let albedo = self.params.add(&format!("{name}.reflectance.value"), &albedo.to_array(), bounds::REFLECTANCE)?;
-        Ok(self.add_material(Material::Diffuse { albedo }))
+        Ok(self.add_material(Material::Diffuse { albedo: Albedo::Rgb(albedo) }))
     }
 
     /// Adds a rough conductor with parameters `{name}.alpha.value` and
@@ -216,6 +250,35 @@ impl Scene {
             material,
             emitter,
         });
+        Ok(())
+    }
+
+    /// Adds a bitmap texture whose texels become the parameter `name`.
+    ///
+    /// # Errors
+    /// [`Error::Scene`] if the texel count is not `width × height × 3` or a texel is outside [0, 1].
+    pub fn add_texture(&mut self, name: &str, width: u32, height: u32, texels: &[f32]) -> Result<TextureId> {
+        if width == 0 || height == 0 || texels.len() != width as usize * height as usize * 3 {
+            return Err(Error::Scene {
+                location: format!("texture {name}"),
+                message: format!(
+                    "{width}×{height} RGB needs {} texels, got {}",
+                    width as usize * height as usize * 3,
+                    texels.len()
+                ),
+            });
+        }
+        let texels = self.params.add(name, texels, bounds::REFLECTANCE)?;
+        self.textures.push(Texture { width, height, texels });
+        Ok(TextureId(self.textures.len() as u32 - 1))
+    }
+
+    /// Sets the constant environment radiance, parameter `name`.
+    ///
+    /// # Errors
+    /// As [`ParamTable::add`].
+    pub fn set_environment(&mut self, name: &str, radiance: Vec3) -> Result<()> {
+        self.environment = Some(self.params.add(name, &radiance.to_array(), bounds::RADIANCE)?);
         Ok(())
     }
 

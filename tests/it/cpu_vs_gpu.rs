@@ -19,14 +19,17 @@ const ABS_TOL: f32 = 1e-6;
 const MISMATCH_BUDGET: f64 = 1e-3;
 
 #[test]
-fn gpu_equals_cpu_per_path_on_every_builtin_scene() {
+fn gpu_equals_cpu_per_path_on_every_builtin_and_test_scene() {
     let gpu = TestGpu::new();
-    for (name, _) in BUILTIN_SCENES {
-        let scene = builtin::load(name).unwrap();
-        let opts = RenderOptions { width: 96, height: 96, spp: 1, seed: 7, ..RenderOptions::for_scene(&scene) };
-        let mut renderer = Renderer::new(&gpu.ctx, &scene).unwrap();
+    let mut scenes: Vec<_> = BUILTIN_SCENES.iter().map(|(name, _)| builtin::load(name).unwrap()).collect();
+    scenes.push(crate::support::scenes::textured_environment());
+    scenes.push(crate::support::scenes::open_furnace());
+    for scene in &scenes {
+        let name = &scene.source;
+        let opts = RenderOptions { width: 96, height: 96, spp: 1, seed: 7, ..RenderOptions::for_scene(scene) };
+        let mut renderer = Renderer::new(&gpu.ctx, scene).unwrap();
         let g = renderer.render(&opts).unwrap();
-        let c = pathgrad::cpu::render(&scene, &opts).unwrap();
+        let c = pathgrad::cpu::render(scene, &opts).unwrap();
         let mut mismatched = 0;
         let mut worst = 0.0f32;
         for (a, b) in g.as_slice().chunks(3).zip(c.as_slice().chunks(3)) {

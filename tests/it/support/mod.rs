@@ -2,6 +2,7 @@
 
 pub mod bvh_probe;
 pub mod embree;
+pub mod scenes;
 
 use std::sync::Arc;
 

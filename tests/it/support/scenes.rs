@@ -1,0 +1,80 @@
+//! Scenes built for tests: variants that exercise what the built-in scenes do not.
+
+use glam::Vec3;
+use pathgrad::bsdf::Distribution;
+use pathgrad::scene::builtin::FURNACE_RADIANCE;
+use pathgrad::scene::shapes::{Geometry, cuboid, quad, sphere};
+use pathgrad::scene::{Albedo, Camera, Material, Scene};
+
+/// The furnace with its ceiling removed and a constant environment of the same radiance: paths
+/// reach emitted radiance 1 through both next-event techniques (area and environment). Inside: an
+/// albedo-1 sphere, a textured albedo-1 box and a two-sided albedo-1 quad seen from its back.
+pub fn open_furnace() -> Scene {
+    let camera = Camera {
+        position: Vec3::new(0.0, 0.5, 3.0),
+        target: Vec3::ZERO,
+        up: Vec3::Y,
+        fov_y_degrees: 45.0,
+        width: 48,
+        height: 48,
+    };
+    let mut s = Scene::new("test:open-furnace", camera);
+    let white = s.add_diffuse("object", Vec3::ONE).unwrap();
+    let black = s.add_diffuse("walls", Vec3::ZERO).unwrap();
+    let texture = s.add_texture("box.reflectance.data", 2, 2, &[1.0; 12]).unwrap();
+    let textured = s.add_material(Material::Diffuse { albedo: Albedo::Bitmap(texture) });
+    let two_sided = s.add_material(Material::TwoSided(white));
+    let walls = cuboid(Vec3::ZERO, Vec3::splat(4.0));
+    // Drop the +y face (the third quad of `cuboid`: triangles 4 and 5) and turn the rest inwards.
+    let indices: Vec<[u32; 3]> =
+        walls.indices.iter().enumerate().filter(|(i, _)| *i / 2 != 2).map(|(_, t)| [t[0], t[2], t[1]]).collect();
+    let inward = Geometry { normals: walls.normals.map(|n| n.into_iter().map(|v| -v).collect()), indices, ..walls };
+    s.add_mesh("walls", inward, black, Some(Vec3::splat(FURNACE_RADIANCE))).unwrap();
+    s.set_environment("environment.radiance.value", Vec3::splat(FURNACE_RADIANCE)).unwrap();
+    let ball = Geometry { normals: None, ..sphere(Vec3::new(-0.8, 0.0, 0.0), 0.6, 24, 48, false) };
+    s.add_mesh("sphere", ball, white, None).unwrap();
+    s.add_mesh("box", cuboid(Vec3::new(0.8, -0.3, 0.0), Vec3::splat(0.4)), textured, None).unwrap();
+    // Faces away from the camera (normal −z): only its back is seen.
+    s.add_mesh("card", quad(Vec3::new(0.0, 0.3, 1.0), Vec3::Y * 0.3, Vec3::X * 0.3), two_sided, None).unwrap();
+    s.max_depth = 64;
+    s
+}
+
+/// A checker-textured two-sided floor, a GGX sphere and an area light under a coloured environment:
+/// every feature of the path loop with non-trivial values, for the GPU-vs-CPU comparison.
+pub fn textured_environment() -> Scene {
+    let camera = Camera {
+        position: Vec3::new(0.0, 1.0, 3.0),
+        target: Vec3::ZERO,
+        up: Vec3::Y,
+        fov_y_degrees: 40.0,
+        width: 64,
+        height: 48,
+    };
+    let mut s = Scene::new("test:textured-environment", camera);
+    let mut texels = Vec::new();
+    for y in 0..4 {
+        for x in 0..4 {
+            let c = if (x + y) % 2 == 0 { [0.8, 0.7, 0.2] } else { [0.1, 0.2, 0.6] };
+            texels.extend_from_slice(&c);
+        }
+    }
+    let texture = s.add_texture("floor.reflectance.data", 4, 4, &texels).unwrap();
+    let floor = s.add_material(Material::Diffuse { albedo: Albedo::Bitmap(texture) });
+    let floor = s.add_material(Material::TwoSided(floor));
+    let metal = s
+        .add_rough_conductor("ball", Distribution::Ggx, 0.15, Vec3::new(0.9, 0.6, 0.4), Vec3::ZERO, Vec3::ONE)
+        .unwrap();
+    let black = s.add_diffuse("light", Vec3::ZERO).unwrap();
+    s.add_mesh("floor", quad(Vec3::new(0.0, -0.5, 0.0), Vec3::Z * 2.0, Vec3::X * 2.0), floor, None).unwrap();
+    s.add_mesh("ball", sphere(Vec3::new(0.0, 0.1, 0.0), 0.5, 24, 48, false), metal, None).unwrap();
+    s.add_mesh(
+        "light",
+        quad(Vec3::new(0.5, 1.5, 0.5), Vec3::X * 0.3, Vec3::Z * 0.3),
+        black,
+        Some(Vec3::new(6.0, 5.0, 4.0)),
+    )
+    .unwrap();
+    s.set_environment("environment.radiance.value", Vec3::new(0.3, 0.4, 0.6)).unwrap();
+    s
+}
