@@ -129,6 +129,10 @@ pub struct Scene {
     pub params: ParamTable,
     /// Default maximum path depth (surface interactions) for this scene.
     pub max_depth: u32,
+    /// Default samples per pixel, when the scene file names one (Mitsuba's `sample_count`).
+    pub default_spp: Option<u32>,
+    /// Warnings found while loading (unknown properties, dropped triangles, …), also logged.
+    pub warnings: Vec<String>,
 }
 
 /// Bounds of the parameter kinds: reflectances and weights in [0, 1]; roughness above the value
@@ -173,6 +177,8 @@ impl Scene {
             environment: None,
             params: ParamTable::default(),
             max_depth: 6,
+            default_spp: None,
+            warnings: Vec::new(),
         }
     }
 
@@ -224,7 +230,8 @@ impl Scene {
     }
 
     /// Adds a mesh; with `radiance`, it becomes an area emitter with parameter
-    /// `{name}.emitter.radiance.value`.
+    /// `{name}.emitter.radiance.value`. Degenerate (zero-area or non-finite) triangles are dropped
+    /// with a counted warning.
     ///
     /// # Errors
     /// As [`ParamTable::add`].
@@ -235,6 +242,17 @@ impl Scene {
         material: MaterialId,
         radiance: Option<Vec3>,
     ) -> Result<()> {
+        let mut geometry = geometry;
+        let before = geometry.indices.len();
+        geometry.indices.retain(|t| {
+            let p = t.map(|i| geometry.positions.get(i as usize).copied().unwrap_or(Vec3::NAN));
+            let area = shapes::triangle_area(p[0], p[1], p[2]);
+            area.is_finite() && area > 0.0
+        });
+        let dropped = before - geometry.indices.len();
+        if dropped > 0 {
+            self.warn(format!("mesh '{name}': dropped {dropped} degenerate triangle(s) of {before}"));
+        }
         let emitter = match radiance {
             Some(r) => {
                 Some(self.params.add(&format!("{name}.emitter.radiance.value"), &r.to_array(), bounds::RADIANCE)?)
@@ -280,6 +298,12 @@ impl Scene {
     pub fn set_environment(&mut self, name: &str, radiance: Vec3) -> Result<()> {
         self.environment = Some(self.params.add(name, &radiance.to_array(), bounds::RADIANCE)?);
         Ok(())
+    }
+
+    /// Records a loading warning and logs it.
+    pub fn warn(&mut self, message: String) {
+        tracing::warn!("{}: {message}", self.source);
+        self.warnings.push(message);
     }
 
     /// Total triangle count.

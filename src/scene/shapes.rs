@@ -15,6 +15,29 @@ pub struct Geometry {
     pub indices: Vec<[u32; 3]>,
 }
 
+impl Geometry {
+    /// The geometry under the affine transform `m`: positions by `m`, normals by its inverse
+    /// transpose (renormalised); a mirroring transform (negative determinant) also flips the
+    /// winding so the front face stays on the normals' side.
+    pub fn transformed(mut self, m: &glam::Mat4) -> Geometry {
+        for p in &mut self.positions {
+            *p = m.transform_point3(*p);
+        }
+        if let Some(normals) = &mut self.normals {
+            let n_mat = glam::Mat3::from_mat4(*m).inverse().transpose();
+            for n in normals.iter_mut() {
+                *n = (n_mat * *n).normalize_or_zero();
+            }
+        }
+        if m.determinant() < 0.0 {
+            for t in &mut self.indices {
+                t.swap(1, 2);
+            }
+        }
+        self
+    }
+}
+
 /// Area of the triangle (a, b, c).
 pub fn triangle_area(a: Vec3, b: Vec3, c: Vec3) -> f32 {
     0.5 * (b - a).cross(c - a).length()
