@@ -1,4 +1,4 @@
-//! The `pathgrad` command line: `render` and `devices`.
+//! The `pathgrad` command line: `render`, `params` and `devices`.
 
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
@@ -9,6 +9,9 @@ use clap::{Args, Parser, Subcommand};
 use pathgrad::gpu::{Context, ContextDesc, DeviceChoice, Renderer};
 use pathgrad::image::Image;
 use pathgrad::integrator::RenderOptions;
+
+/// Samples per pixel when neither `--spp` nor the scene names a number.
+const DEFAULT_SPP: u32 = 16;
 
 /// A differentiable path tracer on Vulkan compute shaders.
 #[derive(Parser, Debug)]
@@ -25,6 +28,17 @@ struct Cli {
 enum Command {
     /// Render a scene to an EXR (plus a PNG preview) or a PNG.
     Render(RenderArgs),
+    /// List a scene's differentiable parameters: names, sizes, bounds and current values.
+    Params {
+        /// The scene: builtin:NAME or a scene file.
+        scene: String,
+        /// Override a scene file's default: NAME=VALUE (repeatable).
+        #[arg(short = 'D', long = "define", value_name = "NAME=VALUE", value_parser = parse_define)]
+        defines: Vec<(String, String)>,
+        /// Print JSON instead of text.
+        #[arg(long)]
+        json: bool,
+    },
     /// List the Vulkan devices and whether pathgrad can use them.
     Devices {
         /// Print JSON instead of text.
@@ -36,9 +50,9 @@ enum Command {
 /// Options every rendering command accepts.
 #[derive(Args, Debug)]
 struct RenderFlags {
-    /// Samples per pixel.
-    #[arg(long, default_value_t = 16)]
-    spp: u32,
+    /// Samples per pixel (default: the scene's, else 16).
+    #[arg(long)]
+    spp: Option<u32>,
     /// Image width (default: the scene's).
     #[arg(long)]
     width: Option<u32>,
@@ -60,6 +74,9 @@ struct RenderFlags {
 struct RenderArgs {
     /// The scene: builtin:cornell-box, builtin:furnace or builtin:blend.
     scene: String,
+    /// Override a scene file's default: NAME=VALUE (repeatable).
+    #[arg(short = 'D', long = "define", value_name = "NAME=VALUE", value_parser = parse_define)]
+    defines: Vec<(String, String)>,
     /// Output file, .exr or .png.
     #[arg(short, long)]
     output: PathBuf,
@@ -98,11 +115,49 @@ fn main() -> ExitCode {
     }
 }
 
+fn parse_define(text: &str) -> std::result::Result<(String, String), String> {
+    match text.split_once('=') {
+        Some((name, value)) if !name.trim().is_empty() => Ok((name.trim().to_string(), value.to_string())),
+        _ => Err(format!("expected NAME=VALUE, got '{text}'")),
+    }
+}
+
 fn run(cli: Cli) -> Result<()> {
     match cli.command {
+        Command::Params { scene, defines, json } => params(&scene, &defines, json),
         Command::Devices { json } => devices(json),
         Command::Render(args) => render(&args),
     }
+}
+
+fn params(spec: &str, defines: &[(String, String)], json: bool) -> Result<()> {
+    let scene = pathgrad::scene::load(spec, defines)?;
+    let table = &scene.params;
+    if json {
+        let items: Vec<serde_json::Value> = table
+            .entries()
+            .iter()
+            .map(|e| {
+                let values = &table.values()[e.offset as usize..(e.offset + e.len) as usize];
+                // JSON has no infinity: an open upper bound is null.
+                let upper = e.bounds.1.is_finite().then_some(e.bounds.1);
+                serde_json::json!({"name": e.name, "size": e.len, "bounds": [e.bounds.0, upper], "values": values})
+            })
+            .collect();
+        println!("{}", serde_json::to_string_pretty(&items)?);
+    } else {
+        for e in table.entries() {
+            let values = &table.values()[e.offset as usize..(e.offset + e.len) as usize];
+            let shown = if values.len() <= 4 {
+                format!("{values:?}")
+            } else {
+                let mean = values.iter().map(|&v| f64::from(v)).sum::<f64>() / values.len() as f64;
+                format!("[{} values, mean {mean:.4}]", values.len())
+            };
+            println!("{:<48} {:>8}  [{}, {}]  {shown}", e.name, e.len, e.bounds.0, e.bounds.1);
+        }
+    }
+    Ok(())
 }
 
 fn devices(json: bool) -> Result<()> {
@@ -129,7 +184,7 @@ fn context(device: &Option<String>) -> Result<std::sync::Arc<Context>> {
 
 fn options(scene: &pathgrad::scene::Scene, flags: &RenderFlags) -> Result<RenderOptions> {
     let mut o = RenderOptions::for_scene(scene);
-    o.spp = flags.spp;
+    o.spp = flags.spp.or(scene.default_spp).unwrap_or(DEFAULT_SPP);
     o.seed = flags.seed;
     if let Some(w) = flags.width {
         o.width = w;
@@ -160,7 +215,7 @@ fn check_output(path: &Path) -> Result<bool> {
 
 fn render(args: &RenderArgs) -> Result<()> {
     let is_exr = check_output(&args.output)?;
-    let scene = pathgrad::scene::load(&args.scene)?;
+    let scene = pathgrad::scene::load(&args.scene, &args.defines)?;
     let opts = options(&scene, &args.flags)?;
     let progress = indicatif::ProgressBar::new(u64::from(opts.spp));
     if args.json {

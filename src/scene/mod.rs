@@ -141,19 +141,21 @@ pub mod bounds {
     /// Albedo and specular reflectance.
     pub const REFLECTANCE: (f32, f32) = (0.0, 1.0);
     /// Roughness alpha.
-    pub const ALPHA: (f32, f32) = (1e-3, f32::MAX);
+    pub const ALPHA: (f32, f32) = (1e-3, f32::INFINITY);
     /// Blend weight.
     pub const WEIGHT: (f32, f32) = (0.0, 1.0);
     /// Emitted radiance.
-    pub const RADIANCE: (f32, f32) = (0.0, f32::MAX);
+    pub const RADIANCE: (f32, f32) = (0.0, f32::INFINITY);
 }
 
-/// Loads the scene `spec` names: `builtin:NAME` (see [`builtin::BUILTIN_SCENES`]).
+/// Loads the scene `spec` names: `builtin:NAME` (see [`builtin::BUILTIN_SCENES`]); `defines`
+/// override a scene file's `<default>` values (`-D name=value`).
 ///
 /// # Errors
 /// [`Error::Scene`] for an unknown built-in or a file path (scene files are not supported yet).
-pub fn load(spec: &str) -> Result<Scene> {
+pub fn load(spec: &str, defines: &[(String, String)]) -> Result<Scene> {
     if let Some(name) = spec.strip_prefix("builtin:") {
+        let _ = defines;
         return builtin::load(name);
     }
     Err(Error::Scene {
