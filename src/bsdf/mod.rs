@@ -65,6 +65,53 @@ pub struct BsdfSample {
     pub value: Vec3,
 }
 
+/// The gradient of Σ_c adj_c · f̂_c with respect to one leaf's differentiable values.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct LeafGrad {
+    /// With respect to the RGB colour (albedo or specular reflectance), per channel.
+    pub color: Vec3,
+    /// With respect to the roughness α (conductors).
+    pub alpha: f32,
+}
+
+/// The gradient of Σ_c adj_c · f̂_c with respect to every differentiable value of a BSDF.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct BsdfGrad {
+    /// Per leaf (only `leaves[0]` unless a blend).
+    pub leaves: [LeafGrad; 2],
+    /// With respect to the blend weight.
+    pub weight: f32,
+}
+
+/// ∂(adj · f̂)/∂(leaf values) at (wi, wo) (ALGORITHMS.md §4.1–4.2).
+pub fn leaf_eval_grad(leaf: &Leaf, wi: Vec3, wo: Vec3, adj: Vec3) -> LeafGrad {
+    match *leaf {
+        Leaf::Diffuse { .. } => LeafGrad { color: adj * diffuse::diffuse_eval(Vec3::ONE, wi, wo), alpha: 0.0 },
+        Leaf::RoughConductor { distribution, alpha, specular, eta, k } => {
+            let (f, scalar, dscalar) = rough_conductor::microfacet_eval_parts(distribution, alpha, eta, k, wi, wo);
+            LeafGrad { color: adj * f * scalar, alpha: (adj * f * specular).dot(Vec3::ONE) * dscalar }
+        }
+    }
+}
+
+/// ∂(adj · f̂)/∂(every value of `b`) at (wi, wo); the blend weight's derivative is f̂1 − f̂0 inside
+/// (0, 1) and 0 where its clamp is active (ALGORITHMS.md §4.3).
+pub fn bsdf_eval_grad(b: &Bsdf, wi: Vec3, wo: Vec3, adj: Vec3) -> BsdfGrad {
+    if !b.blend {
+        return BsdfGrad { leaves: [leaf_eval_grad(&b.leaves[0], wi, wo, adj), LeafGrad::default()], weight: 0.0 };
+    }
+    let w = blend::blend_weight(b);
+    let weight = if b.weight > 0.0 && b.weight < 1.0 {
+        (adj * (leaf_eval(&b.leaves[1], wi, wo) - leaf_eval(&b.leaves[0], wi, wo))).dot(Vec3::ONE)
+    } else {
+        0.0
+    };
+    BsdfGrad {
+        leaves: [leaf_eval_grad(&b.leaves[0], wi, wo, adj * (1.0 - w)), leaf_eval_grad(&b.leaves[1], wi, wo, adj * w)],
+        weight,
+    }
+}
+
 /// f̂ of one leaf.
 pub fn leaf_eval(leaf: &Leaf, wi: Vec3, wo: Vec3) -> Vec3 {
     match *leaf {

@@ -114,6 +114,72 @@ pub fn microfacet_eval(
     fresnel_conductor(wi.dot(h), eta, k) * specular * (d * g / (4.0 * wi.z))
 }
 
+/// ∂D/∂α (ALGORITHMS.md §4.2); 0 where the underflow guard zeroes D.
+pub fn microfacet_d_dalpha(distribution: Distribution, alpha: f32, h: Vec3) -> f32 {
+    let d = microfacet_d(distribution, alpha, h);
+    if d == 0.0 {
+        return 0.0;
+    }
+    let t = (h.x * h.x + h.y * h.y) / (h.z * h.z);
+    let a2 = alpha * alpha;
+    match distribution {
+        Distribution::Beckmann => d * 2.0 * (t - a2) / (a2 * alpha),
+        Distribution::Ggx => d * 2.0 * (t - a2) / (alpha * (a2 + t)),
+    }
+}
+
+/// ∂G1/∂α of [`microfacet_g1`]; 0 where G1 is constant (masked, or at normal incidence).
+pub fn microfacet_g1_dalpha(distribution: Distribution, alpha: f32, v: Vec3, h: Vec3) -> f32 {
+    if v.dot(h) * v.z <= 0.0 {
+        return 0.0;
+    }
+    let tan2 = tan2_theta(v);
+    if tan2 == 0.0 {
+        return 0.0;
+    }
+    let s2 = alpha * alpha * tan2;
+    match distribution {
+        Distribution::Beckmann => {
+            // G1 = 1/(1 + Λ(a)), a = 1/(α tan θ): dΛ/da = −e^{−a²}/(2a²√π), da/dα = −a/α.
+            let a = 1.0 / s2.sqrt();
+            let g1 = microfacet_g1(distribution, alpha, v, h);
+            -g1 * g1 * (-a * a).exp() / (2.0 * a * alpha * PI.sqrt())
+        }
+        Distribution::Ggx => {
+            let root = (1.0 + s2).sqrt();
+            -2.0 * (alpha * tan2 / root) / ((1.0 + root) * (1.0 + root))
+        }
+    }
+}
+
+/// The parts of f̂ that the gradient needs: Fresnel F, the scalar D·G1·G1/(4 cos θi) and its
+/// α-derivative; f̂ = F · specular · scalar. Zero outside the valid configuration.
+pub fn microfacet_eval_parts(
+    distribution: Distribution,
+    alpha: f32,
+    eta: Vec3,
+    k: Vec3,
+    wi: Vec3,
+    wo: Vec3,
+) -> (Vec3, f32, f32) {
+    if wi.z <= 0.0 || wo.z <= 0.0 {
+        return (Vec3::ZERO, 0.0, 0.0);
+    }
+    let h = (wi + wo).normalize();
+    let d = microfacet_d(distribution, alpha, h);
+    if d == 0.0 {
+        return (Vec3::ZERO, 0.0, 0.0);
+    }
+    let (gi, go) = (microfacet_g1(distribution, alpha, wi, h), microfacet_g1(distribution, alpha, wo, h));
+    let dd = microfacet_d_dalpha(distribution, alpha, h);
+    let (dgi, dgo) =
+        (microfacet_g1_dalpha(distribution, alpha, wi, h), microfacet_g1_dalpha(distribution, alpha, wo, h));
+    let inv = 1.0 / (4.0 * wi.z);
+    let scalar = d * gi * go * inv;
+    let dscalar = (dd * gi * go + d * (dgi * go + gi * dgo)) * inv;
+    (fresnel_conductor(wi.dot(h), eta, k), scalar, dscalar)
+}
+
 /// Visible-normal sampling density D(h) G1(wi, h) / (4 cos θi).
 pub fn microfacet_pdf(distribution: Distribution, alpha: f32, wi: Vec3, wo: Vec3) -> f32 {
     if wi.z <= 0.0 || wo.z <= 0.0 {

@@ -154,3 +154,80 @@ fn fresnel_conductor_limits() {
         assert!(gold.min_element() > 0.0 && gold.max_element() < 1.0, "{gold}");
     }
 }
+
+/// Every parameter derivative against central finite differences of `bsdf_eval` (in f64 around
+/// the f32 evaluation: h = 1e-3 of the value, so truncation error ~h² ≈ 1e-6 relative and f32
+/// rounding ~1e-7/1e-3 = 1e-4 relative of the function's scale — tolerance 2e-3 relative to the
+/// larger of the two derivatives' scale).
+#[test]
+fn derivatives_match_finite_differences() {
+    let adj = Vec3::new(0.7, -0.3, 1.1);
+    let objective = |b: &Bsdf, wi: Vec3, wo: Vec3| f64::from(adj.dot(bsdf_eval(b, wi, wo)));
+    let mut checked = 0;
+    for (k, b) in all_bsdfs().iter().enumerate() {
+        for cos_i in [0.9, 0.5, 0.15] {
+            let wi = incident(cos_i);
+            for i in 0..40 {
+                let (ul, u) = uniforms(300 + k as u32, i);
+                let Some(s) = bsdf_sample(b, wi, ul, u) else { continue };
+                let g = bsdf_eval_grad(b, wi, s.wo, adj);
+                // (analytic derivative, function of a perturbation) per differentiable value.
+                let mut cases: Vec<(f32, Box<dyn Fn(f32) -> Bsdf>, f32)> = Vec::new();
+                for leaf in 0..if b.blend { 2 } else { 1 } {
+                    for c in 0..3 {
+                        let base = *b;
+                        let value = match base.leaves[leaf] {
+                            Leaf::Diffuse { albedo } => albedo[c],
+                            Leaf::RoughConductor { specular, .. } => specular[c],
+                        };
+                        cases.push((
+                            g.leaves[leaf].color[c],
+                            Box::new(move |v| {
+                                let mut x = base;
+                                match &mut x.leaves[leaf] {
+                                    Leaf::Diffuse { albedo } => albedo[c] = v,
+                                    Leaf::RoughConductor { specular, .. } => specular[c] = v,
+                                }
+                                x
+                            }),
+                            value,
+                        ));
+                    }
+                    if let Leaf::RoughConductor { alpha, .. } = b.leaves[leaf] {
+                        let base = *b;
+                        cases.push((
+                            g.leaves[leaf].alpha,
+                            Box::new(move |v| {
+                                let mut x = base;
+                                if let Leaf::RoughConductor { alpha, .. } = &mut x.leaves[leaf] {
+                                    *alpha = v;
+                                }
+                                x
+                            }),
+                            alpha,
+                        ));
+                    }
+                }
+                if b.blend {
+                    let base = *b;
+                    cases.push((g.weight, Box::new(move |v| Bsdf { weight: v, ..base }), b.weight));
+                }
+                let scale = objective(b, wi, s.wo).abs().max(1e-12);
+                for (analytic, with, value) in &cases {
+                    let h = 1e-3 * value.abs().max(1e-2);
+                    let fd = (objective(&with(value + h), wi, s.wo) - objective(&with(value - h), wi, s.wo))
+                        / f64::from(2.0 * h);
+                    let tol =
+                        2e-3 * (fd.abs().max(f64::from(analytic.abs())).max(scale / f64::from(value.abs().max(1e-2))));
+                    assert!(
+                        (fd - f64::from(*analytic)).abs() <= tol,
+                        "{b:?} wi {wi} wo {}: analytic {analytic} vs fd {fd}",
+                        s.wo
+                    );
+                    checked += 1;
+                }
+            }
+        }
+    }
+    assert!(checked > 1000, "only {checked} derivatives checked");
+}
