@@ -155,6 +155,9 @@ fn fresnel_conductor_limits() {
     }
 }
 
+/// A BSDF with one differentiable value replaced.
+type Perturb = Box<dyn Fn(f32) -> Bsdf>;
+
 /// Every parameter derivative against central finite differences of `bsdf_eval` (in f64 around
 /// the f32 evaluation: h = 1e-3 of the value, so truncation error ~h² ≈ 1e-6 relative and f32
 /// rounding ~1e-7/1e-3 = 1e-4 relative of the function's scale — tolerance 2e-3 relative to the
@@ -172,7 +175,7 @@ fn derivatives_match_finite_differences() {
                 let Some(s) = bsdf_sample(b, wi, ul, u) else { continue };
                 let g = bsdf_eval_grad(b, wi, s.wo, adj);
                 // (analytic derivative, function of a perturbation) per differentiable value.
-                let mut cases: Vec<(f32, Box<dyn Fn(f32) -> Bsdf>, f32)> = Vec::new();
+                let mut cases: Vec<(f32, Perturb, f32)> = Vec::new();
                 for leaf in 0..if b.blend { 2 } else { 1 } {
                     for c in 0..3 {
                         let base = *b;
