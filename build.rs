@@ -70,7 +70,8 @@ fn main() {
         opts.set_optimization_level(shaderc::OptimizationLevel::Performance);
         opts.set_generate_debug_info();
         for (macro_name, value) in abi::ABI_CONSTANTS {
-            opts.add_macro_definition(macro_name, Some(&format!("{value}u")));
+            // Plain integers, so `#if` can compare them; GLSL converts them to uint where needed.
+            opts.add_macro_definition(macro_name, Some(&value.to_string()));
         }
         let dir = shader_dir.clone();
         let generated = generated.clone();

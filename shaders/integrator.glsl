@@ -2,11 +2,21 @@
 // and a constant environment,
 // power-heuristic MIS and Russian roulette. Twin: src/cpu/path.rs, phase by phase.
 //
+// Primal mode returns the path's radiance L. Adjoint mode (PRB, ALGORITHMS.md §3.3) replays the
+// same path starting from that L and subtracts each contribution where the primal added it, so
+// `radiance` always holds the radiance still to arrive along the suffix; the GRAD terms scatter
+// δL-weighted parameter derivatives through param_grad. It returns what is left, which must be 0
+// up to rounding. Adjoint-only work sits in `if (adjoint)`, so both modes compile in every kernel.
+//
 // Random numbers are addressed, never consumed: vertex v reads block 0 (emitter choice and point),
 // block 1 (lobe and direction) and block 2 (roulette) of stream MAIN (ALGORITHMS.md §2.3), so a
 // replay of the path recomputes exactly the same draws.
 #ifndef PATHGRAD_INTEGRATOR_GLSL
 #define PATHGRAD_INTEGRATOR_GLSL
+
+#ifndef GRAD_MODE
+#define GRAD_MODE GRAD_MODE_NONE
+#endif
 
 #include "lib/rng.glsl"
 #include "lib/surface.glsl"
@@ -18,8 +28,10 @@ vec4 draw_block(uint pixel, uint sample_index, uint vertex, uint block) {
     return uniform4(uvec2(globals.key0, globals.key1), pixel, sample_index, vertex, STREAM_MAIN, block, 0u);
 }
 
-// Radiance L of one camera path through `pixel` (row-major index) for sample `sample_index`.
-vec3 trace_path(uint pixel, uint sample_index) {
+// One camera path through `pixel` (row-major index) for sample `sample_index`: its radiance
+// (primal), or, replaying from `radiance_total` with adjoint radiance `adj_radiance` (δL), what is
+// left of it at the end (adjoint).
+vec3 trace_path(bool adjoint, uint pixel, uint sample_index, vec3 adj_radiance, vec3 radiance_total) {
     // ---- camera ray ----
     vec4 u_cam = draw_block(pixel, sample_index, 0u, DIM_PIXEL_JITTER / 4u);
     uint px = pixel % globals.width;
@@ -29,7 +41,8 @@ vec3 trace_path(uint pixel, uint sample_index) {
     Ray ray = make_ray(globals.cam_origin, normalize(globals.cam_forward + sx * globals.cam_right + sy * globals.cam_up));
 
     vec3 throughput = vec3(1.0);  // β (ALGORITHMS.md §3.1)
-    vec3 radiance = vec3(0.0);    // L
+    vec3 radiance = adjoint ? radiance_total : vec3(0.0);  // L (adjoint: the suffix still to arrive)
+    float sign = adjoint ? -1.0 : 1.0;
     float prev_pdf_f = 0.0;       // density with which the previous vertex sampled ray.dir
     bool finished = false;
     for (uint vertex = 1u; vertex <= globals.max_depth; vertex++) {
@@ -40,7 +53,8 @@ vec3 trace_path(uint pixel, uint sample_index) {
             if (globals.env_param != NO_PARAM) {
                 float w_b = 1.0;
                 if (vertex > 1u) w_b = mis_power(prev_pdf_f, environment_pdf());
-                radiance += throughput * w_b * param_rgb(globals.env_param);
+                radiance += sign * (throughput * w_b * param_rgb(globals.env_param));
+                if (adjoint) param_grad_rgb(globals.env_param, adj_radiance * throughput * w_b);
             }
             finished = true;
             break;
@@ -53,7 +67,9 @@ vec3 trace_path(uint pixel, uint sample_index) {
         if (s.emitter != NO_EMITTER && cos_emit > 0.0) {
             float w_b = 1.0;
             if (vertex > 1u) w_b = mis_power(prev_pdf_f, emitter_pdf_solid_angle(hit.t, cos_emit));
-            radiance += throughput * w_b * param_rgb(emitters[s.emitter].p_radiance);
+            uint p_radiance = emitters[s.emitter].p_radiance;
+            radiance += sign * (throughput * w_b * param_rgb(p_radiance));
+            if (adjoint) param_grad_rgb(p_radiance, adj_radiance * throughput * w_b);
         }
         if (vertex >= globals.max_depth) { finished = true; break; }
 
@@ -88,7 +104,11 @@ vec3 trace_path(uint pixel, uint sample_index) {
             vec3 f = bsdf_eval(bsdf, wi, wo);
             if (p_e > 0.0 && max_component(f) > 0.0 && !bvh_occluded(make_ray(origin, wl), 0.0, shadow_tmax)) {
                 float w_n = mis_power(p_e, bsdf_pdf(bsdf, wi, wo));
-                radiance += throughput * w_n * f * es.radiance / p_e;
+                radiance += sign * (throughput * w_n * f * es.radiance / p_e);
+                if (adjoint) {
+                    bsdf_backward(s.material, s.uv, bsdf, wi, wo, adj_radiance * throughput * w_n * es.radiance / p_e);
+                    param_grad_rgb(es.param, adj_radiance * throughput * w_n * f / p_e);
+                }
             }
         }
 
@@ -108,6 +128,8 @@ vec3 trace_path(uint pixel, uint sample_index) {
             throughput /= p_rr;
         }
         if (!(max_component(throughput) > 0.0)) { finished = true; break; }
+        // The path continues: everything later in `radiance` carries the factor f̂(wi, wo).
+        if (adjoint) bsdf_backward(s.material, s.uv, bsdf, wi, bs.wo, adj_radiance * safe_div(radiance, bs.value));
 
         vec3 wo_world = to_world(frame, bs.wo);
         ray = make_ray(offset_origin(s.p, s.ng, wo_world), wo_world);

@@ -10,7 +10,7 @@ layout(push_constant) uniform Push { uint sample_index; };
 void main() {
     uint pixel = gl_GlobalInvocationID.y * gl_NumWorkGroups.x * WORKGROUP_SIZE + gl_GlobalInvocationID.x;
     if (pixel >= globals.width * globals.height) return;
-    vec3 radiance = trace_path(pixel, sample_index);
+    vec3 radiance = trace_path(false, pixel, sample_index, vec3(0.0), vec3(0.0));
     accum[3u * pixel] += radiance.x;
     accum[3u * pixel + 1u] += radiance.y;
     accum[3u * pixel + 2u] += radiance.z;

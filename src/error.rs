@@ -73,6 +73,14 @@ pub enum Error {
         /// The kernel that hit the limit.
         kernel: &'static str,
     },
+    /// A kernel detected a numerical failure (replay drift, fixed-point overflow).
+    #[error("{kernel}: {message}")]
+    Numeric {
+        /// The kernel that detected it.
+        kernel: &'static str,
+        /// What happened.
+        message: String,
+    },
     /// A scene is invalid.
     #[error("{location}: {message}")]
     Scene {

@@ -1,7 +1,7 @@
 //! Options shared by the GPU renderer and the CPU reference: image size, samples, depth, seed.
 
 use crate::error::{Error, Result};
-use crate::gpu::abi::{Globals, NO_PARAM, PASS_PRIMAL};
+use crate::gpu::abi::{Globals, NO_PARAM};
 use crate::rng::{PassTag, RngKey};
 use crate::scene::Scene;
 use crate::scene::flat::FlatScene;
@@ -13,6 +13,11 @@ pub const UNBOUNDED_DEPTH_CAP: u32 = 1024;
 /// With both an environment and area emitters, next-event estimation picks the environment with
 /// this probability (Mitsuba picks among emitters uniformly; two emitter kinds give ½).
 pub const ENV_SELECT_PROB: f32 = 0.5;
+
+/// Deterministic gradients accumulate `round(value · FIXED_POINT_SCALE)` in 64-bit integers: a
+/// resolution of 2⁻³² ≈ 2.3e-10 per contribution and sums up to ±2³¹ ≈ 2.1e9 before overflow,
+/// which the kernels detect (sign change of an add) and report as an error.
+pub const FIXED_POINT_SCALE: f32 = 4_294_967_296.0;
 
 /// Russian roulette starts after this many bounces by default (Mitsuba's `rr_depth`).
 pub const DEFAULT_RR_DEPTH: u32 = 5;
@@ -66,21 +71,21 @@ impl RenderOptions {
         Ok(())
     }
 
-    /// The Philox key of a plain render.
-    pub fn key(&self) -> RngKey {
-        RngKey::new(self.seed, 0, PassTag::Primal)
+    /// The Philox key of `pass` (plain renders and loss images use [`PassTag::Primal`]; the fused
+    /// gradient passes [`PassTag::Gradient`], so their paths are independent of the loss image's).
+    pub fn key(&self, pass: PassTag) -> RngKey {
+        RngKey::new(self.seed, 0, pass)
     }
 
-    /// The per-dispatch constants for `scene` (flattened as `flat`).
-    pub fn globals(&self, scene: &Scene, flat: &FlatScene) -> Globals {
+    /// The per-dispatch constants for `scene` (flattened as `flat`) in `pass`.
+    pub fn globals(&self, scene: &Scene, flat: &FlatScene, pass: PassTag) -> Globals {
         let c = &scene.camera;
         let forward = (c.target - c.position).normalize();
         let right = forward.cross(c.up).normalize();
         let up = right.cross(forward);
         let tan_y = (c.fov_y_degrees.to_radians() * 0.5).tan();
         let tan_x = tan_y * self.width as f32 / self.height as f32;
-        let key = self.key();
-        debug_assert_eq!(key.0[1] & 0xFF, PASS_PRIMAL);
+        let key = self.key(pass);
         Globals {
             width: self.width,
             height: self.height,
@@ -95,6 +100,10 @@ impl RenderOptions {
             cam_up: up * tan_y,
             cam_forward: forward,
             env_param: scene.environment.map_or(NO_PARAM, |p| scene.params.entry(p).offset),
+            adjoint_scale: 1.0 / self.spp as f32,
+            fixed_scale: FIXED_POINT_SCALE,
+            forward_begin: 0,
+            forward_end: 0,
             env_select_prob: match (scene.environment.is_some(), flat.emitters.is_empty()) {
                 (false, _) => 0.0,
                 (true, true) => 1.0,

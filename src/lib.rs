@@ -29,6 +29,7 @@ pub mod error;
 pub mod gpu;
 pub mod image;
 pub mod integrator;
+pub mod loss;
 pub mod params;
 pub mod rng;
 pub mod sampling;

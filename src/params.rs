@@ -113,6 +113,95 @@ impl ParamTable {
     }
 }
 
+impl ParamTable {
+    /// The parameters whose names match any of `patterns` (`*` matches any run of characters, `?`
+    /// one character), in table order.
+    ///
+    /// # Errors
+    /// [`Error::InvalidArgument`] naming a pattern that matches nothing.
+    pub fn select(&self, patterns: &[&str]) -> Result<Vec<ParamId>> {
+        let mut chosen = Vec::new();
+        for pattern in patterns {
+            let before = chosen.len();
+            for (i, e) in self.entries.iter().enumerate() {
+                if glob_match(pattern, &e.name) && !chosen.contains(&ParamId(i as u32)) {
+                    chosen.push(ParamId(i as u32));
+                }
+            }
+            if chosen.len() == before && !self.entries.iter().any(|e| glob_match(pattern, &e.name)) {
+                return Err(Error::InvalidArgument {
+                    parameter: pattern.to_string(),
+                    message: format!(
+                        "matches no parameter (known: {})",
+                        self.entries.iter().map(|e| e.name.as_str()).collect::<Vec<_>>().join(", ")
+                    ),
+                });
+            }
+        }
+        chosen.sort_by_key(|p| p.0);
+        Ok(chosen)
+    }
+}
+
+/// Whether `name` matches the glob `pattern` (`*` any run, `?` one character).
+pub fn glob_match(pattern: &str, name: &str) -> bool {
+    let (p, n): (Vec<char>, Vec<char>) = (pattern.chars().collect(), name.chars().collect());
+    let (mut pi, mut ni, mut star, mut mark) = (0, 0, None, 0);
+    while ni < n.len() {
+        if pi < p.len() && (p[pi] == '?' || p[pi] == n[ni]) {
+            pi += 1;
+            ni += 1;
+        } else if pi < p.len() && p[pi] == '*' {
+            star = Some(pi);
+            mark = ni;
+            pi += 1;
+        } else if let Some(sp) = star {
+            pi = sp + 1;
+            mark += 1;
+            ni = mark;
+        } else {
+            return false;
+        }
+    }
+    p[pi..].iter().all(|&c| c == '*')
+}
+
+/// A gradient with the layout of a [`ParamTable`]: one value per parameter value.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Gradients {
+    entries: Vec<ParamEntry>,
+    values: Vec<f32>,
+}
+
+impl Gradients {
+    /// Wraps `values` laid out as `table`.
+    ///
+    /// # Panics
+    /// If the lengths differ (an internal invariant: gradients are made by the renderers).
+    pub fn new(table: &ParamTable, values: Vec<f32>) -> Gradients {
+        assert_eq!(values.len(), table.values().len(), "a gradient has one value per parameter value");
+        Gradients { entries: table.entries().to_vec(), values }
+    }
+
+    /// The gradient of the parameter called `name`.
+    pub fn get(&self, name: &str) -> Option<&[f32]> {
+        self.entries
+            .iter()
+            .find(|e| e.name == name)
+            .map(|e| &self.values[e.offset as usize..(e.offset + e.len) as usize])
+    }
+
+    /// Every value, in the parameter table's layout.
+    pub fn values(&self) -> &[f32] {
+        &self.values
+    }
+
+    /// The parameter entries.
+    pub fn entries(&self) -> &[ParamEntry] {
+        &self.entries
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -138,5 +227,18 @@ mod tests {
         assert!(t.set("y", &[f32::NAN]).is_err());
         assert!(t.set("y", &[1.0, 2.0]).unwrap_err().to_string().contains("expects 1"));
         assert!(t.set("z", &[1.0]).unwrap_err().to_string().contains("no such parameter"));
+    }
+
+    #[test]
+    fn globs_select_parameters() {
+        assert!(glob_match("*.alpha.value", "sphere.alpha.value"));
+        assert!(glob_match("s?here.*", "sphere.alpha.value"));
+        assert!(!glob_match("*.alpha", "sphere.alpha.value"));
+        let mut t = ParamTable::default();
+        t.add("a.alpha.value", &[0.1], (0.0, 1.0)).unwrap();
+        t.add("b.reflectance.value", &[0.1; 3], (0.0, 1.0)).unwrap();
+        t.add("c.alpha.value", &[0.1], (0.0, 1.0)).unwrap();
+        assert_eq!(t.select(&["*.alpha.value"]).unwrap(), vec![ParamId(0), ParamId(2)]);
+        assert!(t.select(&["nope*"]).unwrap_err().to_string().contains("matches no parameter"));
     }
 }

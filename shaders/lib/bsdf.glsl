@@ -76,6 +76,51 @@ vec3 microfacet_eval(Leaf l, vec3 wi, vec3 wo) {
     return fresnel_conductor(dot(wi, h), l.eta, l.k) * l.color * (d * g / (4.0 * wi.z));
 }
 
+// ∂D/∂α (ALGORITHMS.md §4.2); 0 where the underflow guard zeroes D.
+float microfacet_d_dalpha(uint distribution, float alpha, vec3 h) {
+    float d = microfacet_d(distribution, alpha, h);
+    if (d == 0.0) return 0.0;
+    float t = (h.x * h.x + h.y * h.y) / (h.z * h.z);
+    float a2 = alpha * alpha;
+    if (distribution == DIST_BECKMANN) return d * 2.0 * (t - a2) / (a2 * alpha);
+    return d * 2.0 * (t - a2) / (alpha * (a2 + t));
+}
+
+// ∂G1/∂α of microfacet_g1; 0 where G1 is constant (masked, or at normal incidence).
+float microfacet_g1_dalpha(uint distribution, float alpha, vec3 v, vec3 h) {
+    if (dot(v, h) * v.z <= 0.0) return 0.0;
+    float tan2 = tan2_theta(v);
+    if (tan2 == 0.0) return 0.0;
+    float s2 = alpha * alpha * tan2;
+    if (distribution == DIST_BECKMANN) {
+        float a = 1.0 / sqrt(s2);
+        float g1 = microfacet_g1(distribution, alpha, v, h);
+        return -g1 * g1 * exp(-a * a) / (2.0 * a * alpha * sqrt(PI));
+    }
+    float root = sqrt(1.0 + s2);
+    return -2.0 * (alpha * tan2 / root) / ((1.0 + root) * (1.0 + root));
+}
+
+// f̂ = F · specular · scalar with scalar = D G1 G1 / (4 cos θi); also ∂scalar/∂α.
+void microfacet_eval_parts(Leaf l, vec3 wi, vec3 wo, out vec3 f, out float scalar, out float dscalar) {
+    f = vec3(0.0);
+    scalar = 0.0;
+    dscalar = 0.0;
+    if (wi.z <= 0.0 || wo.z <= 0.0) return;
+    vec3 h = normalize(wi + wo);
+    float d = microfacet_d(l.distribution, l.alpha, h);
+    if (d == 0.0) return;
+    float gi = microfacet_g1(l.distribution, l.alpha, wi, h);
+    float go = microfacet_g1(l.distribution, l.alpha, wo, h);
+    float dd = microfacet_d_dalpha(l.distribution, l.alpha, h);
+    float dgi = microfacet_g1_dalpha(l.distribution, l.alpha, wi, h);
+    float dgo = microfacet_g1_dalpha(l.distribution, l.alpha, wo, h);
+    float inv = 1.0 / (4.0 * wi.z);
+    scalar = d * gi * go * inv;
+    dscalar = (dd * gi * go + d * (dgi * go + gi * dgo)) * inv;
+    f = fresnel_conductor(dot(wi, h), l.eta, l.k);
+}
+
 float microfacet_pdf(uint distribution, float alpha, vec3 wi, vec3 wo) {
     if (wi.z <= 0.0 || wo.z <= 0.0) return 0.0;
     vec3 h = normalize(wi + wo);
@@ -155,6 +200,18 @@ bool leaf_sample(Leaf l, vec3 wi, vec2 u, out vec3 wo) {
     return microfacet_sample(l.distribution, l.alpha, wi, u, wo);
 }
 
+// ---- parameter derivatives, kept per image channel (twin of bsdf_eval_grad in src/bsdf/mod.rs) ----
+struct LeafGrad { vec3 color; vec3 alpha; };
+struct BsdfGrad { LeafGrad leaf0; LeafGrad leaf1; vec3 weight; };
+
+LeafGrad leaf_eval_grad(Leaf l, vec3 wi, vec3 wo, vec3 adj) {
+    if (l.kind == LEAF_DIFFUSE) return LeafGrad(adj * diffuse_eval(vec3(1.0), wi, wo), vec3(0.0));
+    vec3 f;
+    float scalar, dscalar;
+    microfacet_eval_parts(l, wi, wo, f, scalar, dscalar);
+    return LeafGrad(adj * f * scalar, adj * f * l.color * dscalar);
+}
+
 // ---- blend (ALGORITHMS.md §4.3) and the whole BSDF ----
 float blend_weight(Bsdf b) { return clamp(b.weight, 0.0, 1.0); }
 
@@ -168,6 +225,15 @@ float bsdf_pdf(Bsdf b, vec3 wi, vec3 wo) {
     if (!b.blend) return leaf_pdf(b.leaf0, wi, wo);
     float w = blend_weight(b);
     return leaf_pdf(b.leaf0, wi, wo) * (1.0 - w) + leaf_pdf(b.leaf1, wi, wo) * w;
+}
+
+// ∂(adj · f̂)/∂(every value of b) at (wi, wo); the weight's derivative is f̂1 − f̂0 inside (0, 1).
+BsdfGrad bsdf_eval_grad(Bsdf b, vec3 wi, vec3 wo, vec3 adj) {
+    LeafGrad none = LeafGrad(vec3(0.0), vec3(0.0));
+    if (!b.blend) return BsdfGrad(leaf_eval_grad(b.leaf0, wi, wo, adj), none, vec3(0.0));
+    float w = blend_weight(b);
+    vec3 weight = (b.weight > 0.0 && b.weight < 1.0) ? adj * (leaf_eval(b.leaf1, wi, wo) - leaf_eval(b.leaf0, wi, wo)) : vec3(0.0);
+    return BsdfGrad(leaf_eval_grad(b.leaf0, wi, wo, adj * (1.0 - w)), leaf_eval_grad(b.leaf1, wi, wo, adj * w), weight);
 }
 
 // u_lobe picks the blend child (RNG dim 4); u drives the direction (dims 5, 6).

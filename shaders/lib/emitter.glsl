@@ -6,16 +6,17 @@
 #include "sampling.glsl"
 
 // A next-event sample: a point on an area emitter, or (environment) a direction in `point`.
-struct EmitterSample { vec3 point; vec3 normal; vec3 radiance; bool environment; bool valid; };
+struct EmitterSample { vec3 point; vec3 normal; vec3 radiance; uint param; bool environment; bool valid; };
 
 // With probability env_select_prob (u_select below it) a uniform direction toward the constant
 // environment; otherwise an emissive triangle with probability proportional to its area, then a
 // uniform point on it (u_pos). The area density is (1 - env_select_prob) / total emissive area.
 EmitterSample sample_emitter(float u_select, vec2 u_pos) {
-    EmitterSample s = EmitterSample(vec3(0.0), vec3(0.0), vec3(0.0), false, false);
+    EmitterSample s = EmitterSample(vec3(0.0), vec3(0.0), vec3(0.0), NO_PARAM, false, false);
     if (u_select < globals.env_select_prob) {
         s.point = sample_uniform_sphere(u_pos);
         s.radiance = param_rgb(globals.env_param);
+        s.param = globals.env_param;
         s.environment = true;
         s.valid = true;
         return s;
@@ -40,6 +41,7 @@ EmitterSample sample_emitter(float u_select, vec2 u_pos) {
     s.point = (1.0 - b.x - b.y) * e.v0 + b.x * e.v1 + b.y * e.v2;
     s.normal = normalize(cross(e.v1 - e.v0, e.v2 - e.v0));
     s.radiance = param_rgb(e.p_radiance);
+    s.param = e.p_radiance;
     s.valid = true;
     return s;
 }

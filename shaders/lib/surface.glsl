@@ -5,6 +5,7 @@
 #include "abi.glsl"
 #include "bvh.glsl"
 #include "bsdf.glsl"
+#include "params.glsl"
 
 // Spawned rays start this far (relative to the largest coordinate, at least 1) off the surface on
 // the side they leave to, so they do not re-hit the triangle they start on.
@@ -83,6 +84,50 @@ Bsdf resolve_bsdf(uint material_id, vec2 uv) {
         b.blend = false;
     }
     return b;
+}
+
+// Scatters ∂/∂(texels) of a bilinear lookup: per-channel gradient `g` split by the four weights.
+void texture_backward(uint offset, uint width, uint height, vec2 uv, vec3 g) {
+    float x = uv.x * float(width) - 0.5;
+    float y = uv.y * float(height) - 0.5;
+    float x0 = floor(x);
+    float y0 = floor(y);
+    float fx = x - x0;
+    float fy = y - y0;
+    int w = int(width);
+    int h = int(height);
+    int ix0 = ((int(x0) % w) + w) % w;
+    int iy0 = ((int(y0) % h) + h) % h;
+    int ix1 = (ix0 + 1) % w;
+    int iy1 = (iy0 + 1) % h;
+    param_grad_rgb(offset + 3u * uint(iy0 * w + ix0), g * ((1.0 - fx) * (1.0 - fy)));
+    param_grad_rgb(offset + 3u * uint(iy0 * w + ix1), g * (fx * (1.0 - fy)));
+    param_grad_rgb(offset + 3u * uint(iy1 * w + ix0), g * ((1.0 - fx) * fy));
+    param_grad_rgb(offset + 3u * uint(iy1 * w + ix1), g * (fx * fy));
+}
+
+void leaf_backward(Material m, vec2 uv, LeafGrad g) {
+    if (m.tex_width > 0u) texture_backward(m.p_color, m.tex_width, m.tex_height, uv, g.color);
+    else param_grad_rgb(m.p_color, g.color);
+    if (m.tag == MAT_ROUGH_CONDUCTOR) param_grad(m.p_alpha, g.alpha);
+}
+
+// GRAD(f̂(wi, wo), adj): the BSDF's parameters at this surface point.
+void bsdf_backward(uint material_id, vec2 uv, Bsdf b, vec3 wi, vec3 wo, vec3 adj) {
+    BsdfGrad g = bsdf_eval_grad(b, wi, wo, adj);
+    Material m = materials[material_id];
+    if (m.tag == MAT_BLEND) {
+        leaf_backward(materials[m.child0], uv, g.leaf0);
+        leaf_backward(materials[m.child1], uv, g.leaf1);
+        param_grad(m.p_weight, g.weight);
+    } else {
+        leaf_backward(m, uv, g.leaf0);
+    }
+}
+
+// Per-channel a / b with 0 where b is 0 (ALGORITHMS.md §3.3: 1/f̂ replaced by 0 when f̂ = 0).
+vec3 safe_div(vec3 a, vec3 b) {
+    return vec3(b.x != 0.0 ? a.x / b.x : 0.0, b.y != 0.0 ? a.y / b.y : 0.0, b.z != 0.0 ? a.z / b.z : 0.0);
 }
 
 // Power heuristic a² / (a² + b²), written so that huge densities neither overflow nor give NaN.

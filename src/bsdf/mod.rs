@@ -65,13 +65,15 @@ pub struct BsdfSample {
     pub value: Vec3,
 }
 
-/// The gradient of Σ_c adj_c · f̂_c with respect to one leaf's differentiable values.
+/// The gradient of Σ_c adj_c · f̂_c with respect to one leaf's differentiable values, kept per
+/// image channel c (the backward pass sums the channels; forward-mode image gradients keep them).
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct LeafGrad {
-    /// With respect to the RGB colour (albedo or specular reflectance), per channel.
+    /// With respect to colour channel c (albedo or specular reflectance): only image channel c
+    /// depends on it, so component c is the whole derivative.
     pub color: Vec3,
-    /// With respect to the roughness α (conductors).
-    pub alpha: f32,
+    /// With respect to the roughness α, per image channel.
+    pub alpha: Vec3,
 }
 
 /// The gradient of Σ_c adj_c · f̂_c with respect to every differentiable value of a BSDF.
@@ -79,17 +81,17 @@ pub struct LeafGrad {
 pub struct BsdfGrad {
     /// Per leaf (only `leaves[0]` unless a blend).
     pub leaves: [LeafGrad; 2],
-    /// With respect to the blend weight.
-    pub weight: f32,
+    /// With respect to the blend weight, per image channel.
+    pub weight: Vec3,
 }
 
 /// ∂(adj · f̂)/∂(leaf values) at (wi, wo) (ALGORITHMS.md §4.1–4.2).
 pub fn leaf_eval_grad(leaf: &Leaf, wi: Vec3, wo: Vec3, adj: Vec3) -> LeafGrad {
     match *leaf {
-        Leaf::Diffuse { .. } => LeafGrad { color: adj * diffuse::diffuse_eval(Vec3::ONE, wi, wo), alpha: 0.0 },
+        Leaf::Diffuse { .. } => LeafGrad { color: adj * diffuse::diffuse_eval(Vec3::ONE, wi, wo), alpha: Vec3::ZERO },
         Leaf::RoughConductor { distribution, alpha, specular, eta, k } => {
             let (f, scalar, dscalar) = rough_conductor::microfacet_eval_parts(distribution, alpha, eta, k, wi, wo);
-            LeafGrad { color: adj * f * scalar, alpha: (adj * f * specular).dot(Vec3::ONE) * dscalar }
+            LeafGrad { color: adj * f * scalar, alpha: adj * f * specular * dscalar }
         }
     }
 }
@@ -98,13 +100,16 @@ pub fn leaf_eval_grad(leaf: &Leaf, wi: Vec3, wo: Vec3, adj: Vec3) -> LeafGrad {
 /// (0, 1) and 0 where its clamp is active (ALGORITHMS.md §4.3).
 pub fn bsdf_eval_grad(b: &Bsdf, wi: Vec3, wo: Vec3, adj: Vec3) -> BsdfGrad {
     if !b.blend {
-        return BsdfGrad { leaves: [leaf_eval_grad(&b.leaves[0], wi, wo, adj), LeafGrad::default()], weight: 0.0 };
+        return BsdfGrad {
+            leaves: [leaf_eval_grad(&b.leaves[0], wi, wo, adj), LeafGrad::default()],
+            weight: Vec3::ZERO,
+        };
     }
     let w = blend::blend_weight(b);
     let weight = if b.weight > 0.0 && b.weight < 1.0 {
-        (adj * (leaf_eval(&b.leaves[1], wi, wo) - leaf_eval(&b.leaves[0], wi, wo))).dot(Vec3::ONE)
+        adj * (leaf_eval(&b.leaves[1], wi, wo) - leaf_eval(&b.leaves[0], wi, wo))
     } else {
-        0.0
+        Vec3::ZERO
     };
     BsdfGrad {
         leaves: [leaf_eval_grad(&b.leaves[0], wi, wo, adj * (1.0 - w)), leaf_eval_grad(&b.leaves[1], wi, wo, adj * w)],

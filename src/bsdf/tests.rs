@@ -199,7 +199,7 @@ fn derivatives_match_finite_differences() {
                     if let Leaf::RoughConductor { alpha, .. } = b.leaves[leaf] {
                         let base = *b;
                         cases.push((
-                            g.leaves[leaf].alpha,
+                            g.leaves[leaf].alpha.dot(Vec3::ONE),
                             Box::new(move |v| {
                                 let mut x = base;
                                 if let Leaf::RoughConductor { alpha, .. } = &mut x.leaves[leaf] {
@@ -213,7 +213,7 @@ fn derivatives_match_finite_differences() {
                 }
                 if b.blend {
                     let base = *b;
-                    cases.push((g.weight, Box::new(move |v| Bsdf { weight: v, ..base }), b.weight));
+                    cases.push((g.weight.dot(Vec3::ONE), Box::new(move |v| Bsdf { weight: v, ..base }), b.weight));
                 }
                 let scale = objective(b, wi, s.wo).abs().max(1e-12);
                 for (analytic, with, value) in &cases {

@@ -17,6 +17,8 @@ pub struct EmitterSample {
     pub normal: Vec3,
     /// Emitted radiance.
     pub radiance: Vec3,
+    /// Parameter offset of the radiance.
+    pub param: u32,
     /// Whether this samples the constant environment.
     pub environment: bool,
 }
@@ -31,6 +33,7 @@ pub fn sample_emitter(flat: &FlatScene, globals: &Globals, u_select: f32, u_pos:
             point: sample_uniform_sphere(u_pos),
             normal: Vec3::ZERO,
             radiance,
+            param: globals.env_param,
             environment: true,
         });
     }
@@ -47,7 +50,13 @@ pub fn sample_emitter(flat: &FlatScene, globals: &Globals, u_select: f32, u_pos:
     let b = sample_uniform_triangle(u_pos);
     let point = (1.0 - b.x - b.y) * e.v0 + b.x * e.v1 + b.y * e.v2;
     let normal = (e.v1 - e.v0).cross(e.v2 - e.v0).normalize();
-    Some(EmitterSample { point, normal, radiance: param_color(flat, e.p_radiance), environment: false })
+    Some(EmitterSample {
+        point,
+        normal,
+        radiance: param_color(flat, e.p_radiance),
+        param: e.p_radiance,
+        environment: false,
+    })
 }
 
 /// Solid-angle density of reaching an emitter point at `dist` whose normal makes cosine

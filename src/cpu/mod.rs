@@ -10,7 +10,11 @@ pub mod emitter;
 pub mod path;
 pub mod surface;
 
+use glam::Vec3;
 use rayon::prelude::*;
+
+use crate::cpu::path::GradSink;
+use crate::rng::PassTag;
 
 use crate::error::Result;
 use crate::image::Image;
@@ -26,14 +30,95 @@ use crate::scene::flat::FlatScene;
 pub fn render(scene: &Scene, options: &RenderOptions) -> Result<Image> {
     options.validate()?;
     let flat = FlatScene::new(scene)?;
-    let globals = options.globals(scene, &flat);
+    let globals = options.globals(scene, &flat, PassTag::Primal);
     let pixels = (options.width * options.height) as usize;
     let data: Vec<f32> = (0..pixels)
         .into_par_iter()
         .flat_map_iter(|pixel| {
-            let mut sum = glam::Vec3::ZERO;
+            let mut sum = Vec3::ZERO;
             for s in 0..options.spp {
-                sum += path::trace_path(&flat, &globals, pixel as u32, s);
+                sum += path::trace_path::<false>(
+                    &flat,
+                    &globals,
+                    pixel as u32,
+                    s,
+                    Vec3::ZERO,
+                    Vec3::ZERO,
+                    &mut GradSink::None,
+                );
+            }
+            (sum / options.spp as f32).to_array()
+        })
+        .collect();
+    Image::from_rgb(options.width, options.height, data)
+}
+
+/// Reverse-mode gradient on the CPU: the twin of [`crate::gpu::Renderer::backward`] (same key,
+/// same fused primal + replay per sample), accumulated in f64 per parameter value.
+///
+/// # Errors
+/// Scene and option errors; an adjoint image of the wrong size.
+pub fn backward(scene: &Scene, options: &RenderOptions, adjoint: &Image) -> Result<Vec<f64>> {
+    options.validate()?;
+    if (adjoint.width(), adjoint.height()) != (options.width, options.height) {
+        return Err(crate::Error::InvalidArgument {
+            parameter: "adjoint image".into(),
+            message: "size differs from the render".into(),
+        });
+    }
+    let flat = FlatScene::new(scene)?;
+    let globals = options.globals(scene, &flat, PassTag::Gradient);
+    let n = flat.params.len();
+    let pixels = (options.width * options.height) as usize;
+    let grads = (0..pixels)
+        .into_par_iter()
+        .fold(
+            || vec![0.0f64; n],
+            |mut grads, pixel| {
+                let a = adjoint.as_slice();
+                let adj = Vec3::new(a[3 * pixel], a[3 * pixel + 1], a[3 * pixel + 2]) * globals.adjoint_scale;
+                for s in 0..options.spp {
+                    let p = pixel as u32;
+                    let total =
+                        path::trace_path::<false>(&flat, &globals, p, s, Vec3::ZERO, Vec3::ZERO, &mut GradSink::None);
+                    let mut sink = GradSink::Backward(&mut grads);
+                    path::trace_path::<true>(&flat, &globals, p, s, adj, total, &mut sink);
+                }
+                grads
+            },
+        )
+        .reduce(|| vec![0.0f64; n], |a, b| a.iter().zip(&b).map(|(x, y)| x + y).collect());
+    Ok(grads)
+}
+
+/// Forward-mode image gradient on the CPU: the twin of [`crate::gpu::Renderer::image_gradient`].
+///
+/// # Errors
+/// Scene and option errors; an unknown parameter.
+pub fn image_gradient(scene: &Scene, options: &RenderOptions, name: &str) -> Result<Image> {
+    options.validate()?;
+    let id = scene.params.find(name).ok_or_else(|| crate::Error::InvalidArgument {
+        parameter: name.to_string(),
+        message: "no such parameter".into(),
+    })?;
+    let entry = scene.params.entry(id).clone();
+    let flat = FlatScene::new(scene)?;
+    let globals = options.globals(scene, &flat, PassTag::Gradient);
+    let pixels = (options.width * options.height) as usize;
+    let data: Vec<f32> = (0..pixels)
+        .into_par_iter()
+        .flat_map_iter(|pixel| {
+            let mut sum = Vec3::ZERO;
+            for s in 0..options.spp {
+                let p = pixel as u32;
+                let total =
+                    path::trace_path::<false>(&flat, &globals, p, s, Vec3::ZERO, Vec3::ZERO, &mut GradSink::None);
+                let mut sink =
+                    GradSink::Forward { begin: entry.offset, end: entry.offset + entry.len, derivative: Vec3::ZERO };
+                path::trace_path::<true>(&flat, &globals, p, s, Vec3::ONE, total, &mut sink);
+                if let GradSink::Forward { derivative, .. } = sink {
+                    sum += derivative;
+                }
             }
             (sum / options.spp as f32).to_array()
         })

@@ -6,7 +6,9 @@ use glam::{Vec2, Vec3};
 use crate::bsdf::{bsdf_eval, bsdf_pdf, bsdf_sample};
 use crate::bvh::{Ray, closest_hit, occluded};
 use crate::cpu::emitter::{emitter_pdf_solid_angle, environment_pdf, sample_emitter};
-use crate::cpu::surface::{SHADOW_EPSILON, mis_power, offset_origin, param_color, resolve_bsdf, surface_at};
+use crate::cpu::surface::{
+    SHADOW_EPSILON, bsdf_backward, mis_power, offset_origin, param_color, resolve_bsdf, safe_div, surface_at,
+};
 use crate::gpu::abi::{
     DIM_DIRECTION, DIM_EMITTER_POS, DIM_EMITTER_SELECT, DIM_LOBE, DIM_PIXEL_JITTER, DIM_ROULETTE, Globals, NO_EMITTER,
     NO_PARAM,
@@ -23,8 +25,61 @@ fn max_component(v: Vec3) -> f32 {
     v.x.max(v.y).max(v.z)
 }
 
-/// Radiance L of one camera path through `pixel` (row-major index) for sample `sample`.
-pub fn trace_path(flat: &FlatScene, globals: &Globals, pixel: u32, sample: u32) -> Vec3 {
+/// Where the GRAD terms of a replay go (the twin of `param_grad` in `shaders/lib/params.glsl`).
+#[derive(Debug)]
+pub enum GradSink<'a> {
+    /// Primal mode: nothing.
+    None,
+    /// Reverse mode: Σ_c of each term added to the gradient of its parameter value (f64).
+    Backward(&'a mut [f64]),
+    /// Forward mode: the per-channel derivative by the values in `begin..end` (tangent 1 each).
+    Forward {
+        /// First value with tangent 1.
+        begin: u32,
+        /// One past the last.
+        end: u32,
+        /// The accumulated derivative of the sample's radiance.
+        derivative: Vec3,
+    },
+}
+
+impl GradSink<'_> {
+    /// Adds a term for parameter value `offset`, kept per image channel.
+    pub fn add(&mut self, offset: u32, by_channel: Vec3) {
+        match self {
+            GradSink::None => {}
+            GradSink::Backward(grads) => {
+                grads[offset as usize] += f64::from(by_channel.x + by_channel.y + by_channel.z)
+            }
+            GradSink::Forward { begin, end, derivative } => {
+                if offset >= *begin && offset < *end {
+                    *derivative += by_channel;
+                }
+            }
+        }
+    }
+
+    /// An RGB parameter: image channel c depends only on value c.
+    pub fn add_rgb(&mut self, offset: u32, by_channel: Vec3) {
+        self.add(offset, Vec3::new(by_channel.x, 0.0, 0.0));
+        self.add(offset + 1, Vec3::new(0.0, by_channel.y, 0.0));
+        self.add(offset + 2, Vec3::new(0.0, 0.0, by_channel.z));
+    }
+}
+
+/// One camera path through `pixel` (row-major index) for sample `sample`: its radiance (primal,
+/// `ADJOINT = false`), or — replaying from `radiance_total` with adjoint radiance `adj_radiance`
+/// (δL) and scattering the GRAD terms into `sink` — what is left of it at the end, 0 up to
+/// rounding (adjoint, ALGORITHMS.md §3.3).
+pub fn trace_path<const ADJOINT: bool>(
+    flat: &FlatScene,
+    globals: &Globals,
+    pixel: u32,
+    sample: u32,
+    adj_radiance: Vec3,
+    radiance_total: Vec3,
+    sink: &mut GradSink<'_>,
+) -> Vec3 {
     // ---- camera ray ----
     let u_cam = draw_block(globals, pixel, sample, 0, DIM_PIXEL_JITTER / 4);
     let (px, py) = (pixel % globals.width, pixel / globals.width);
@@ -34,7 +89,8 @@ pub fn trace_path(flat: &FlatScene, globals: &Globals, pixel: u32, sample: u32) 
         Ray::new(globals.cam_origin, (globals.cam_forward + sx * globals.cam_right + sy * globals.cam_up).normalize());
 
     let mut throughput = Vec3::ONE; // β (ALGORITHMS.md §3.1)
-    let mut radiance = Vec3::ZERO; // L
+    let mut radiance = if ADJOINT { radiance_total } else { Vec3::ZERO }; // L (adjoint: the suffix)
+    let sign = if ADJOINT { -1.0 } else { 1.0 };
     let mut prev_pdf_f = 0.0f32; // density with which the previous vertex sampled ray.dir
     for vertex in 1..=globals.max_depth {
         // ---- intersection ----
@@ -45,7 +101,10 @@ pub fn trace_path(flat: &FlatScene, globals: &Globals, pixel: u32, sample: u32) 
                 if vertex > 1 {
                     w_b = mis_power(prev_pdf_f, environment_pdf(globals));
                 }
-                radiance += throughput * w_b * param_color(flat, globals.env_param);
+                radiance += sign * (throughput * w_b * param_color(flat, globals.env_param));
+                if ADJOINT {
+                    sink.add_rgb(globals.env_param, adj_radiance * throughput * w_b);
+                }
             }
             break;
         };
@@ -59,7 +118,11 @@ pub fn trace_path(flat: &FlatScene, globals: &Globals, pixel: u32, sample: u32) 
             if vertex > 1 {
                 w_b = mis_power(prev_pdf_f, emitter_pdf_solid_angle(globals, hit.t, cos_emit));
             }
-            radiance += throughput * w_b * param_color(flat, flat.emitters[s.emitter as usize].p_radiance);
+            let p_radiance = flat.emitters[s.emitter as usize].p_radiance;
+            radiance += sign * (throughput * w_b * param_color(flat, p_radiance));
+            if ADJOINT {
+                sink.add_rgb(p_radiance, adj_radiance * throughput * w_b);
+            }
         }
         if vertex >= globals.max_depth {
             break;
@@ -90,7 +153,12 @@ pub fn trace_path(flat: &FlatScene, globals: &Globals, pixel: u32, sample: u32) 
             let f = bsdf_eval(&bsdf, wi, wo);
             if p_e > 0.0 && max_component(f) > 0.0 && !occluded(&flat.bvh, &Ray::new(origin, wl), 0.0, shadow_tmax) {
                 let w_n = mis_power(p_e, bsdf_pdf(&bsdf, wi, wo));
-                radiance += throughput * w_n * f * es.radiance / p_e;
+                radiance += sign * (throughput * w_n * f * es.radiance / p_e);
+                if ADJOINT {
+                    let adj = adj_radiance * throughput * w_n * es.radiance / p_e;
+                    bsdf_backward(flat, s.material, s.uv, &bsdf, wi, wo, adj, sink);
+                    sink.add_rgb(es.param, adj_radiance * throughput * w_n * f / p_e);
+                }
             }
         }
 
@@ -119,6 +187,10 @@ pub fn trace_path(flat: &FlatScene, globals: &Globals, pixel: u32, sample: u32) 
         }
         if !(max_component(throughput) > 0.0) {
             break;
+        }
+        // The path continues: everything later in `radiance` carries the factor f̂(wi, wo).
+        if ADJOINT {
+            bsdf_backward(flat, s.material, s.uv, &bsdf, wi, bs.wo, adj_radiance * safe_div(radiance, bs.value), sink);
         }
 
         let wo_world = frame.to_world(bs.wo);

@@ -2,8 +2,9 @@
 
 use glam::Vec3;
 
-use crate::bsdf::{Bsdf, Distribution, Leaf};
+use crate::bsdf::{Bsdf, Distribution, Leaf, LeafGrad, bsdf_eval_grad};
 use crate::bvh::Hit;
+use crate::cpu::path::GradSink;
 use crate::gpu::abi::{MAT_BLEND, MAT_ROUGH_CONDUCTOR, Material};
 use crate::scene::flat::FlatScene;
 
@@ -96,6 +97,64 @@ pub fn resolve_bsdf(flat: &FlatScene, id: u32, uv: glam::Vec2) -> Bsdf {
         let a = leaf_from_material(&flat.params, m, uv);
         Bsdf { leaves: [a, a], weight: 0.0, blend: false }
     }
+}
+
+/// Scatters ∂/∂(texels) of a bilinear lookup: per-channel gradient `g` split by the four weights.
+#[allow(clippy::too_many_arguments, reason = "the twin of the GLSL function, argument for argument")]
+pub fn texture_backward(offset: u32, width: u32, height: u32, uv: glam::Vec2, g: Vec3, sink: &mut GradSink<'_>) {
+    let x = uv.x * width as f32 - 0.5;
+    let y = uv.y * height as f32 - 0.5;
+    let (x0, y0) = (x.floor(), y.floor());
+    let (fx, fy) = (x - x0, y - y0);
+    let (w, h) = (width as i32, height as i32);
+    let ix0 = (x0 as i32).rem_euclid(w);
+    let iy0 = (y0 as i32).rem_euclid(h);
+    let (ix1, iy1) = ((ix0 + 1) % w, (iy0 + 1) % h);
+    let texel = |ix: i32, iy: i32| offset + 3 * (iy * w + ix) as u32;
+    sink.add_rgb(texel(ix0, iy0), g * ((1.0 - fx) * (1.0 - fy)));
+    sink.add_rgb(texel(ix1, iy0), g * (fx * (1.0 - fy)));
+    sink.add_rgb(texel(ix0, iy1), g * ((1.0 - fx) * fy));
+    sink.add_rgb(texel(ix1, iy1), g * (fx * fy));
+}
+
+fn leaf_backward(m: &Material, uv: glam::Vec2, g: &LeafGrad, sink: &mut GradSink<'_>) {
+    if m.tex_width > 0 {
+        texture_backward(m.p_color, m.tex_width, m.tex_height, uv, g.color, sink);
+    } else {
+        sink.add_rgb(m.p_color, g.color);
+    }
+    if m.tag == MAT_ROUGH_CONDUCTOR {
+        sink.add(m.p_alpha, g.alpha);
+    }
+}
+
+/// GRAD(f̂(wi, wo), adj): the BSDF's parameters at this surface point.
+#[allow(clippy::too_many_arguments, reason = "the twin of the GLSL function, argument for argument")]
+pub fn bsdf_backward(
+    flat: &FlatScene,
+    material: u32,
+    uv: glam::Vec2,
+    bsdf: &Bsdf,
+    wi: Vec3,
+    wo: Vec3,
+    adj: Vec3,
+    sink: &mut GradSink<'_>,
+) {
+    let g = bsdf_eval_grad(bsdf, wi, wo, adj);
+    let m = &flat.materials[material as usize];
+    if m.tag == MAT_BLEND {
+        leaf_backward(&flat.materials[m.child0 as usize], uv, &g.leaves[0], sink);
+        leaf_backward(&flat.materials[m.child1 as usize], uv, &g.leaves[1], sink);
+        sink.add(m.p_weight, g.weight);
+    } else {
+        leaf_backward(m, uv, &g.leaves[0], sink);
+    }
+}
+
+/// Per-channel a / b with 0 where b is 0 (ALGORITHMS.md §3.3: 1/f̂ replaced by 0 when f̂ = 0).
+pub fn safe_div(a: Vec3, b: Vec3) -> Vec3 {
+    let d = |x: f32, y: f32| if y != 0.0 { x / y } else { 0.0 };
+    Vec3::new(d(a.x, b.x), d(a.y, b.y), d(a.z, b.z))
 }
 
 /// Power heuristic a²/(a² + b²), safe for huge densities.

@@ -36,6 +36,12 @@ abi_constants! {
     BINDING_ACCUM = 8;
     /// Binding: status flags written by kernels (`uint[]`).
     BINDING_STATUS = 9;
+    /// Binding: the gradient, one float per parameter value (float-atomic mode).
+    BINDING_GRADS = 12;
+    /// Binding: the gradient in 64-bit fixed point (deterministic mode).
+    BINDING_GRADS_FIXED = 13;
+    /// Binding: the adjoint image δL = ∂loss/∂pixel, RGB per pixel.
+    BINDING_ADJOINT = 14;
     /// Binding: test-probe input (`uint[]`/`float[]`, probe kernels only).
     BINDING_PROBE_IN = 10;
     /// Binding: test-probe output (probe kernels only).
@@ -66,11 +72,23 @@ abi_constants! {
     /// Status bit: the BVH traversal stack overflowed.
     STATUS_STACK_OVERFLOW = 2;
 
+    /// Status bit: a replay ended with radiance left over (primal and replay drifted apart).
+    STATUS_REPLAY_RESIDUAL = 4;
+    /// Status bit: a fixed-point gradient sum overflowed.
+    STATUS_FIXED_OVERFLOW = 8;
+
+    /// Kernel variant: no gradient (the primal kernel).
+    GRAD_MODE_NONE = 0;
+    /// Kernel variant: reverse mode, float atomics with subgroup reduction.
+    GRAD_MODE_FLOAT = 1;
+    /// Kernel variant: reverse mode, 64-bit fixed-point integer atomics (bitwise reproducible).
+    GRAD_MODE_FIXED = 2;
+    /// Kernel variant: forward mode, per-pixel derivative of the image by one parameter.
+    GRAD_MODE_FORWARD = 3;
+
     /// Entries of the traversal stack (the BVH depth is checked against it on the host).
     BVH_STACK_SIZE = 64;
 
-    /// Pass tag of plain renders and loss images (ALGORITHMS.md §2.3).
-    PASS_PRIMAL = 1;
     /// Stream of per-vertex decisions.
     STREAM_MAIN = 0;
     /// Camera vertex, block 0: pixel jitter in dims 0 and 1.

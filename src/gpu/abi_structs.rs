@@ -36,6 +36,14 @@ abi_structs! {
         env_param: u32,
         /// Probability that next-event estimation samples the environment rather than area emitters.
         env_select_prob: f32,
+        /// Adjoint kernels: δL of a sample is the adjoint image's pixel times this (1 / spp).
+        adjoint_scale: f32,
+        /// Fixed-point gradients: the integer unit is 1 / fixed_scale.
+        fixed_scale: f32,
+        /// Forward mode: first parameter value with tangent 1.
+        forward_begin: u32,
+        /// Forward mode: one past the last parameter value with tangent 1.
+        forward_end: u32,
     }
 
     /// One BVH2 node: a leaf when `count > 0` (triangles `first .. first+count` of the leaf-ordered

@@ -81,6 +81,8 @@ pub struct DeviceInfo {
     pub subgroup_size: u32,
     /// Everything pathgrad needs that the device lacks (empty when usable).
     pub missing: Vec<String>,
+    /// Whether 64-bit integer atomics on buffers exist (deterministic gradients need them).
+    pub int64_atomics: bool,
 }
 
 impl DeviceInfo {
@@ -269,11 +271,12 @@ fn describe(instance: &ash::Instance, index: usize, pd: vk::PhysicalDevice) -> D
     };
     let mut v12 = vk::PhysicalDeviceVulkan12Features::default();
     let mut atomic = vk::PhysicalDeviceShaderAtomicFloatFeaturesEXT::default();
-    {
+    let core = {
         let mut f2 = vk::PhysicalDeviceFeatures2::default().push_next(&mut v12).push_next(&mut atomic);
         // SAFETY: as above.
         unsafe { instance.get_physical_device_features2(pd, &mut f2) };
-    }
+        f2.features
+    };
     // SAFETY: as above.
     let extensions = unsafe { instance.enumerate_device_extension_properties(pd) }.unwrap_or_default();
     let has_atomic_ext =
@@ -308,6 +311,7 @@ fn describe(instance: &ash::Instance, index: usize, pd: vk::PhysicalDevice) -> D
         api_version: props.api_version,
         subgroup_size: subgroup.subgroup_size,
         missing,
+        int64_atomics: core.shader_int64 == vk::TRUE && v12.shader_buffer_int64_atomics == vk::TRUE,
     }
 }
 
@@ -445,10 +449,15 @@ impl Context {
         let queue_info =
             [vk::DeviceQueueCreateInfo::default().queue_family_index(queue_family).queue_priorities(&priorities)];
         let ext_ptrs = [ash::ext::shader_atomic_float::NAME.as_ptr()];
-        let mut v12 = vk::PhysicalDeviceVulkan12Features::default().scalar_block_layout(true);
+        // Deterministic gradients need 64-bit integer atomics: enabled where the device has them.
+        let int64 = info.int64_atomics;
+        let mut v12 =
+            vk::PhysicalDeviceVulkan12Features::default().scalar_block_layout(true).shader_buffer_int64_atomics(int64);
         let mut atomic =
             vk::PhysicalDeviceShaderAtomicFloatFeaturesEXT::default().shader_buffer_float32_atomic_add(true);
-        let mut features = vk::PhysicalDeviceFeatures2::default().push_next(&mut v12).push_next(&mut atomic);
+        let core = vk::PhysicalDeviceFeatures::default().shader_int64(int64);
+        let mut features =
+            vk::PhysicalDeviceFeatures2::default().features(core).push_next(&mut v12).push_next(&mut atomic);
         let device_info = vk::DeviceCreateInfo::default()
             .queue_create_infos(&queue_info)
             .enabled_extension_names(&ext_ptrs)

@@ -1,5 +1,6 @@
-//! `Renderer`: uploads a scene once and dispatches the primal megakernel, one sample index per
-//! dispatch, accumulating in a fixed order so the same seed gives the same image on the same device.
+//! `Renderer`: uploads a scene once and dispatches the megakernels — the primal render, the fused
+//! adjoint (reverse-mode gradients) and forward-mode image gradients — one sample index per
+//! dispatch, in a fixed order, so the same seed gives the same image on the same device.
 
 use std::sync::Arc;
 
@@ -10,13 +11,25 @@ use crate::gpu::context::Context;
 use crate::gpu::pipeline::{Kernel, compute_barrier, groups_for};
 use crate::image::Image;
 use crate::integrator::RenderOptions;
-use crate::params::ParamTable;
+use crate::loss::{Loss, loss_and_adjoint};
+use crate::params::{Gradients, ParamTable};
+use crate::rng::PassTag;
 use crate::scene::Scene;
 use crate::scene::flat::FlatScene;
 
 /// Path samples per submission: enough work to hide submission overhead, little enough that a
 /// progress bar moves and a fence wait stays far below its timeout.
 const PATHS_PER_SUBMISSION: u64 = 1 << 20;
+
+/// How reverse-mode gradients are accumulated.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum GradMode {
+    /// Float atomics with subgroup reduction: fastest; the last bits vary run to run.
+    #[default]
+    Float,
+    /// 64-bit fixed-point integer atomics (unit 2⁻³²): two runs give bitwise identical gradients.
+    Deterministic,
+}
 
 /// The scene's arrays on the device.
 struct GpuScene {
@@ -29,7 +42,16 @@ struct GpuScene {
     params: Buffer,
 }
 
-/// Renders one scene on one device.
+/// Kernels, built on first use.
+#[derive(Default)]
+struct Kernels {
+    primal: Option<Kernel>,
+    adjoint: Option<Kernel>,
+    adjoint_fixed: Option<Kernel>,
+    image_gradient: Option<Kernel>,
+}
+
+/// Renders one scene on one device: images, gradients and image gradients.
 ///
 /// ```no_run
 /// use pathgrad::gpu::{Context, ContextDesc, Renderer};
@@ -46,7 +68,7 @@ pub struct Renderer {
     scene: Scene,
     flat: FlatScene,
     gpu: GpuScene,
-    primal: Kernel,
+    kernels: Kernels,
 }
 
 impl std::fmt::Debug for Renderer {
@@ -54,6 +76,19 @@ impl std::fmt::Debug for Renderer {
         f.debug_struct("Renderer").field("scene", &self.scene.source).finish_non_exhaustive()
     }
 }
+
+/// The scene bindings every render kernel reads.
+const SCENE_BINDINGS: [u32; 9] = [
+    BINDING_GLOBALS,
+    BINDING_NODES,
+    BINDING_TRIS,
+    BINDING_PRIM_IDS,
+    BINDING_SHADING,
+    BINDING_MATERIALS,
+    BINDING_EMITTERS,
+    BINDING_PARAMS,
+    BINDING_STATUS,
+];
 
 impl Renderer {
     /// Flattens `scene`, builds its BVH and uploads everything.
@@ -75,22 +110,10 @@ impl Renderer {
             emitters: Buffer::storage_with(ctx, "emitters", &flat.emitters)?,
             params: Buffer::storage_with(ctx, "param buffer", &flat.params)?,
         };
-        let primal = Kernel::new(ctx, "primal", &Self::PRIMAL_BINDINGS, 4)?;
-        Ok(Renderer { ctx: ctx.clone(), scene: scene.clone(), flat, gpu, primal })
+        let mut renderer = Renderer { ctx: ctx.clone(), scene: scene.clone(), flat, gpu, kernels: Kernels::default() };
+        renderer.kernel(KernelKind::Primal)?;
+        Ok(renderer)
     }
-
-    const PRIMAL_BINDINGS: [u32; 10] = [
-        BINDING_GLOBALS,
-        BINDING_NODES,
-        BINDING_TRIS,
-        BINDING_PRIM_IDS,
-        BINDING_SHADING,
-        BINDING_MATERIALS,
-        BINDING_EMITTERS,
-        BINDING_PARAMS,
-        BINDING_ACCUM,
-        BINDING_STATUS,
-    ];
 
     /// The scene being rendered.
     pub fn scene(&self) -> &Scene {
@@ -144,18 +167,168 @@ impl Renderer {
         let _span =
             tracing::info_span!("primal", width = options.width, height = options.height, spp = options.spp).entered();
         let pixels = options.width * options.height;
-        let globals = Buffer::storage_with(
-            &self.ctx,
-            "globals",
-            std::slice::from_ref(&options.globals(&self.scene, &self.flat)),
-        )?;
+        let globals = options.globals(&self.scene, &self.flat, PassTag::Primal);
         let accum = Buffer::storage(&self.ctx, "accumulation image", u64::from(pixels) * 12)?;
-        let status = Buffer::storage(&self.ctx, "status flags", 4)?;
         accum.clear()?;
+        self.dispatch(KernelKind::Primal, &globals, options, &[(BINDING_ACCUM, &accum)], progress)?;
+        let sums: Vec<f32> = accum.download(pixels as usize * 3)?;
+        let spp = options.spp as f32;
+        Image::from_rgb(options.width, options.height, sums.into_iter().map(|v| v / spp).collect())
+    }
+
+    /// Reverse-mode gradient of a loss whose adjoint image (∂loss/∂pixel) is `adjoint`: the fused
+    /// primal + replay kernel (PRB) with the gradient key, so its paths are independent of the
+    /// render that produced `adjoint` (ALGORITHMS.md §1, §3.4).
+    ///
+    /// # Errors
+    /// Option errors; [`Error::InvalidArgument`] for an adjoint image of the wrong size or
+    /// deterministic mode without 64-bit atomics; Vulkan failures; [`Error::LoopBudget`];
+    /// [`Error::Numeric`] if a replay drifted from its primal path or a fixed-point sum overflowed.
+    pub fn backward(&mut self, options: &RenderOptions, adjoint: &Image, mode: GradMode) -> Result<Gradients> {
+        options.validate()?;
+        check_size(adjoint, options, "adjoint image")?;
+        let _span = tracing::info_span!("adjoint", spp = options.spp, ?mode).entered();
+        let globals = options.globals(&self.scene, &self.flat, PassTag::Gradient);
+        let adjoint_buf = Buffer::storage_with(&self.ctx, "adjoint image", adjoint.as_slice())?;
+        let n = self.flat.params.len();
+        match mode {
+            GradMode::Float => {
+                let grads = Buffer::storage(&self.ctx, "gradient", (n * 4) as u64)?;
+                grads.clear()?;
+                self.dispatch(
+                    KernelKind::Adjoint,
+                    &globals,
+                    options,
+                    &[(BINDING_ADJOINT, &adjoint_buf), (BINDING_GRADS, &grads)],
+                    &mut |_, _| {},
+                )?;
+                Ok(Gradients::new(&self.scene.params, grads.download(n)?))
+            }
+            GradMode::Deterministic => {
+                if !self.ctx.info().int64_atomics {
+                    return Err(Error::InvalidArgument {
+                        parameter: "--deterministic".into(),
+                        message: format!("device '{}' has no 64-bit integer atomics", self.ctx.info().name),
+                    });
+                }
+                let grads = Buffer::storage(&self.ctx, "gradient (fixed point)", (n * 8) as u64)?;
+                grads.clear()?;
+                self.dispatch(
+                    KernelKind::AdjointFixed,
+                    &globals,
+                    options,
+                    &[(BINDING_ADJOINT, &adjoint_buf), (BINDING_GRADS_FIXED, &grads)],
+                    &mut |_, _| {},
+                )?;
+                let fixed: Vec<i64> = grads.download(n)?;
+                let unit = 1.0 / f64::from(globals.fixed_scale);
+                Ok(Gradients::new(&self.scene.params, fixed.iter().map(|&v| (v as f64 * unit) as f32).collect()))
+            }
+        }
+    }
+
+    /// The loss of a render against `target` and its gradient: pass 1 renders with the primal key
+    /// and gives the loss and its adjoint image; the fused pass then replays independent paths.
+    ///
+    /// # Errors
+    /// As [`Renderer::render`] and [`Renderer::backward`]; a target of the wrong size.
+    pub fn loss_and_gradient(
+        &mut self,
+        options: &RenderOptions,
+        target: &Image,
+        loss: Loss,
+        mode: GradMode,
+    ) -> Result<(f64, Gradients)> {
+        check_size(target, options, "target image")?;
+        let image = self.render(options)?;
+        let (value, adjoint) = loss_and_adjoint(&image, target, loss)?;
+        Ok((value, self.backward(options, &adjoint, mode)?))
+    }
+
+    /// Forward-mode image gradient ∂I/∂θ: per pixel and channel, the derivative of the image by
+    /// the parameter `name` (tangent 1 on each of its values, so for an RGB parameter the
+    /// derivative along scaling all three together), through the same replay with δL = 1.
+    ///
+    /// # Errors
+    /// [`Error::InvalidArgument`] for an unknown parameter; as [`Renderer::backward`].
+    pub fn image_gradient(&mut self, options: &RenderOptions, name: &str) -> Result<Image> {
+        options.validate()?;
+        let id = self.scene.params.find(name).ok_or_else(|| Error::InvalidArgument {
+            parameter: name.to_string(),
+            message: "no such parameter (see `pathgrad params SCENE`)".into(),
+        })?;
+        let entry = self.scene.params.entry(id).clone();
+        let _span = tracing::info_span!("image_gradient", param = name).entered();
+        let mut globals = options.globals(&self.scene, &self.flat, PassTag::Gradient);
+        globals.forward_begin = entry.offset;
+        globals.forward_end = entry.offset + entry.len;
+        let pixels = options.width * options.height;
+        let ones = vec![1.0f32; pixels as usize * 3];
+        let adjoint_buf = Buffer::storage_with(&self.ctx, "adjoint image (ones)", &ones)?;
+        let accum = Buffer::storage(&self.ctx, "image gradient", u64::from(pixels) * 12)?;
+        accum.clear()?;
+        // δL = 1 per sample: the adjoint scale must not divide by spp here; the mean is taken below.
+        globals.adjoint_scale = 1.0;
+        self.dispatch(
+            KernelKind::ImageGradient,
+            &globals,
+            options,
+            &[(BINDING_ADJOINT, &adjoint_buf), (BINDING_ACCUM, &accum)],
+            &mut |_, _| {},
+        )?;
+        let sums: Vec<f32> = accum.download(pixels as usize * 3)?;
+        let spp = options.spp as f32;
+        Image::from_rgb(options.width, options.height, sums.into_iter().map(|v| v / spp).collect())
+    }
+
+    fn kernel(&mut self, kind: KernelKind) -> Result<&Kernel> {
+        let (slot, name, extra): (&mut Option<Kernel>, &'static str, &[u32]) = match kind {
+            KernelKind::Primal => (&mut self.kernels.primal, "primal", &[BINDING_ACCUM]),
+            KernelKind::Adjoint => (&mut self.kernels.adjoint, "adjoint", &[BINDING_ADJOINT, BINDING_GRADS]),
+            KernelKind::AdjointFixed => {
+                (&mut self.kernels.adjoint_fixed, "adjoint_fixed", &[BINDING_ADJOINT, BINDING_GRADS_FIXED])
+            }
+            KernelKind::ImageGradient => {
+                (&mut self.kernels.image_gradient, "image_gradient", &[BINDING_ADJOINT, BINDING_ACCUM])
+            }
+        };
+        if slot.is_none() {
+            let bindings: Vec<u32> = SCENE_BINDINGS.iter().chain(extra).copied().collect();
+            *slot = Some(Kernel::new(&self.ctx, name, &bindings, 4)?);
+        }
+        Ok(slot.as_ref().expect("set above"))
+    }
+
+    /// Builds `kind` if needed, then [`Renderer::run`]s it.
+    fn dispatch(
+        &mut self,
+        kind: KernelKind,
+        globals: &Globals,
+        options: &RenderOptions,
+        extra: &[(u32, &Buffer)],
+        progress: &mut dyn FnMut(u32, u32),
+    ) -> Result<()> {
+        self.kernel(kind)?;
+        self.run(kind, globals, options, extra, progress)
+    }
+
+    /// Dispatches `kind` once per sample index with the scene bindings plus `extra`, then checks
+    /// the kernels' status word.
+    fn run(
+        &self,
+        kind: KernelKind,
+        globals: &Globals,
+        options: &RenderOptions,
+        extra: &[(u32, &Buffer)],
+        progress: &mut dyn FnMut(u32, u32),
+    ) -> Result<()> {
+        let globals_buf = Buffer::storage_with(&self.ctx, "globals", std::slice::from_ref(globals))?;
+        let status = Buffer::storage(&self.ctx, "status flags", 4)?;
         status.clear()?;
+        let ctx = &self.ctx;
         let g = &self.gpu;
-        let group = self.primal.bind(&[
-            (BINDING_GLOBALS, &globals),
+        let mut bindings: Vec<(u32, &Buffer)> = vec![
+            (BINDING_GLOBALS, &globals_buf),
             (BINDING_NODES, &g.nodes),
             (BINDING_TRIS, &g.tris),
             (BINDING_PRIM_IDS, &g.prim_ids),
@@ -163,29 +336,71 @@ impl Renderer {
             (BINDING_MATERIALS, &g.materials),
             (BINDING_EMITTERS, &g.emitters),
             (BINDING_PARAMS, &g.params),
-            (BINDING_ACCUM, &accum),
             (BINDING_STATUS, &status),
-        ])?;
+        ];
+        bindings.extend_from_slice(extra);
+        let pixels = options.width * options.height;
         let per_submit = (PATHS_PER_SUBMISSION / u64::from(pixels)).clamp(1, u64::from(options.spp)) as u32;
         let groups = groups_for(pixels);
+        let name = kind.name();
+        let kernel = match kind {
+            KernelKind::Primal => self.kernels.primal.as_ref(),
+            KernelKind::Adjoint => self.kernels.adjoint.as_ref(),
+            KernelKind::AdjointFixed => self.kernels.adjoint_fixed.as_ref(),
+            KernelKind::ImageGradient => self.kernels.image_gradient.as_ref(),
+        }
+        .expect("run's callers build the kernel first");
+        let group = kernel.bind(&bindings)?;
         let mut done = 0;
         while done < options.spp {
             let end = (done + per_submit).min(options.spp);
-            self.ctx.submit_and_wait("primal render", |cmd| {
+            ctx.submit_and_wait(name, |cmd| {
                 for sample in done..end {
-                    self.primal.record(cmd, &group, bytemuck::bytes_of(&sample), groups);
-                    compute_barrier(&self.ctx, cmd);
+                    kernel.record(cmd, &group, bytemuck::bytes_of(&sample), groups);
+                    compute_barrier(ctx, cmd);
                 }
             })?;
             done = end;
             progress(done, options.spp);
         }
         let flags: Vec<u32> = status.download(1)?;
-        check_status(flags[0], "primal")?;
-        let sums: Vec<f32> = accum.download(pixels as usize * 3)?;
-        let inv = options.spp as f32;
-        Image::from_rgb(options.width, options.height, sums.into_iter().map(|v| v / inv).collect())
+        check_status(flags[0], name)
     }
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum KernelKind {
+    Primal,
+    Adjoint,
+    AdjointFixed,
+    ImageGradient,
+}
+
+impl KernelKind {
+    fn name(self) -> &'static str {
+        match self {
+            KernelKind::Primal => "primal",
+            KernelKind::Adjoint => "adjoint",
+            KernelKind::AdjointFixed => "adjoint_fixed",
+            KernelKind::ImageGradient => "image_gradient",
+        }
+    }
+}
+
+fn check_size(image: &Image, options: &RenderOptions, what: &str) -> Result<()> {
+    if (image.width(), image.height()) != (options.width, options.height) {
+        return Err(Error::InvalidArgument {
+            parameter: what.to_string(),
+            message: format!(
+                "is {}×{} but the render is {}×{}",
+                image.width(),
+                image.height(),
+                options.width,
+                options.height
+            ),
+        });
+    }
+    Ok(())
 }
 
 /// Turns the kernels' status word into an error.
@@ -195,6 +410,18 @@ fn check_status(flags: u32, kernel: &'static str) -> Result<()> {
     }
     if flags & STATUS_STACK_OVERFLOW != 0 {
         return Err(Error::Scene { location: "BVH".into(), message: format!("{kernel}: traversal stack overflow") });
+    }
+    if flags & STATUS_REPLAY_RESIDUAL != 0 {
+        return Err(Error::Numeric {
+            kernel,
+            message: "a replay ended with radiance left over: the replay drifted from its primal path".into(),
+        });
+    }
+    if flags & STATUS_FIXED_OVERFLOW != 0 {
+        return Err(Error::Numeric {
+            kernel,
+            message: "a fixed-point gradient sum overflowed ±2³¹; use float gradients or a smaller loss scale".into(),
+        });
     }
     Ok(())
 }

@@ -7,6 +7,7 @@ mod cli;
 mod cpu_vs_gpu;
 mod embree_smoke;
 mod furnace;
+mod gradients;
 mod loop_budget;
 mod resources;
 mod twins;

@@ -1,0 +1,122 @@
+//! Image losses and their adjoint images A = ∂loss/∂I (ALGORITHMS.md §7.1).
+
+use crate::error::{Error, Result};
+use crate::image::Image;
+
+/// ε of the relative MSE's denominator.
+pub const REL_MSE_EPSILON: f64 = 1e-3;
+
+/// A loss between a rendered image I and a target Ĩ, averaged over all W·H·3 values.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Loss {
+    /// Mean absolute difference; its adjoint is sign(I − Ĩ)/(3WH) (0 where equal).
+    L1,
+    /// Mean squared difference.
+    L2,
+    /// Relative MSE with the target in the denominator: ((I − Ĩ)/(Ĩ + ε))², ε = 1e-3.
+    RelMse,
+}
+
+impl std::str::FromStr for Loss {
+    type Err = Error;
+    fn from_str(s: &str) -> Result<Loss> {
+        match s {
+            "l1" => Ok(Loss::L1),
+            "l2" => Ok(Loss::L2),
+            "relmse" => Ok(Loss::RelMse),
+            _ => Err(Error::InvalidArgument {
+                parameter: "--loss".into(),
+                message: format!("'{s}' (expected relmse, l2 or l1)"),
+            }),
+        }
+    }
+}
+
+/// The loss and its adjoint image, computed on the host in f64.
+///
+/// # Errors
+/// [`Error::InvalidArgument`] if the sizes differ.
+///
+/// ```
+/// use pathgrad::image::Image;
+/// use pathgrad::loss::{loss_and_adjoint, Loss};
+/// let a = Image::from_rgb(1, 1, vec![1.0, 2.0, 3.0]).unwrap();
+/// let b = Image::from_rgb(1, 1, vec![1.0, 2.0, 2.0]).unwrap();
+/// let (l, adj) = loss_and_adjoint(&a, &b, Loss::L2).unwrap();
+/// assert!((l - 1.0 / 3.0).abs() < 1e-12);
+/// assert!((adj.pixel(0, 0)[2] - 2.0 / 3.0).abs() < 1e-7);
+/// ```
+pub fn loss_and_adjoint(image: &Image, target: &Image, loss: Loss) -> Result<(f64, Image)> {
+    if (image.width(), image.height()) != (target.width(), target.height()) {
+        return Err(Error::InvalidArgument {
+            parameter: "target".into(),
+            message: format!(
+                "is {}×{} but the render is {}×{}",
+                target.width(),
+                target.height(),
+                image.width(),
+                image.height()
+            ),
+        });
+    }
+    let n = image.as_slice().len() as f64;
+    let mut total = 0.0f64;
+    let adjoint: Vec<f32> = image
+        .as_slice()
+        .iter()
+        .zip(target.as_slice())
+        .map(|(&i, &t)| {
+            let (i, t) = (f64::from(i), f64::from(t));
+            let d = i - t;
+            let (value, grad) = match loss {
+                Loss::L1 => (
+                    d.abs(),
+                    if d > 0.0 {
+                        1.0
+                    } else if d < 0.0 {
+                        -1.0
+                    } else {
+                        0.0
+                    },
+                ),
+                Loss::L2 => (d * d, 2.0 * d),
+                Loss::RelMse => {
+                    let denom = t + REL_MSE_EPSILON;
+                    (d * d / (denom * denom), 2.0 * d / (denom * denom))
+                }
+            };
+            total += value;
+            (grad / n) as f32
+        })
+        .collect();
+    Ok((total / n, Image::from_rgb(image.width(), image.height(), adjoint)?))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Every adjoint equals the central difference of its loss.
+    #[test]
+    fn adjoints_are_derivatives_of_the_losses() {
+        let image = Image::from_rgb(2, 1, vec![0.5, 0.2, 0.9, 0.05, 0.7, 0.3]).unwrap();
+        let target = Image::from_rgb(2, 1, vec![0.4, 0.25, 0.9, 0.1, 0.5, 0.35]).unwrap();
+        for loss in [Loss::L1, Loss::L2, Loss::RelMse] {
+            let (_, adj) = loss_and_adjoint(&image, &target, loss).unwrap();
+            for k in 0..6 {
+                if image.as_slice()[k] == target.as_slice()[k] {
+                    continue;
+                }
+                let h = 1e-3f32;
+                let shifted = |dx: f32| {
+                    let mut v = image.as_slice().to_vec();
+                    v[k] += dx;
+                    loss_and_adjoint(&Image::from_rgb(2, 1, v).unwrap(), &target, loss).unwrap().0
+                };
+                let fd = (shifted(h) - shifted(-h)) / (2.0 * f64::from(h));
+                let a = f64::from(adj.as_slice()[k]);
+                assert!((fd - a).abs() <= 1e-3 * a.abs() + 1e-6, "{loss:?} value {k}: {a} vs {fd}");
+            }
+        }
+    }
+}
