@@ -1,4 +1,4 @@
-//! The `pathgrad` command line: `render`, `params` and `devices`.
+//! The `pathgrad` command line: `render`, `grad`, `params` and `devices`.
 
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
@@ -28,6 +28,8 @@ struct Cli {
 enum Command {
     /// Render a scene to an EXR (plus a PNG preview) or a PNG.
     Render(RenderArgs),
+    /// Gradients of a loss against a target image, or a forward-mode image gradient.
+    Grad(GradArgs),
     /// List a scene's differentiable parameters: names, sizes, bounds and current values.
     Params {
         /// The scene: builtin:NAME or a scene file.
@@ -96,6 +98,148 @@ struct RenderArgs {
     json: bool,
 }
 
+#[derive(Args, Debug)]
+struct GradArgs {
+    /// The scene: builtin:NAME or a scene file.
+    scene: String,
+    /// Override a scene file's default: NAME=VALUE (repeatable).
+    #[arg(short = 'D', long = "define", value_name = "NAME=VALUE", value_parser = parse_define)]
+    defines: Vec<(String, String)>,
+    /// Parameters to report, by name or glob (`*.alpha.value`); repeatable.
+    #[arg(long = "param", value_name = "NAME")]
+    params: Vec<String>,
+    /// The target image (EXR) the loss compares against.
+    #[arg(long, conflicts_with = "target_set")]
+    target: Option<PathBuf>,
+    /// Render the target at these parameter values instead (NAME=V or NAME=R,G,B; repeatable),
+    /// with 4× the spp (at least 64) and an independent seed.
+    #[arg(long = "target-set", value_name = "NAME=VALUE", value_parser = parse_define)]
+    target_set: Vec<(String, String)>,
+    /// The loss: relmse, l2 or l1.
+    #[arg(long, default_value = "relmse")]
+    loss: String,
+    /// Accumulate gradients in 64-bit fixed point: bitwise reproducible runs.
+    #[arg(long)]
+    deterministic: bool,
+    /// Instead of a loss gradient, write the forward-mode image gradient ∂I/∂NAME to -o.
+    #[arg(long, value_name = "NAME", conflicts_with_all = ["target", "target_set"])]
+    image_gradient: Option<String>,
+    /// Output of --image-gradient: an .exr (a signed false-colour .png is written beside it).
+    #[arg(short, long)]
+    output: Option<PathBuf>,
+    #[command(flatten)]
+    flags: RenderFlags,
+    /// Print JSON: {"loss", "gradients": {name: [..]}, "time_s"}.
+    #[arg(long)]
+    json: bool,
+}
+
+/// The target of `--target-set` gets this many times the gradient render's spp (at least
+/// `TARGET_MIN_SPP`), so its noise is small next to the render's.
+const TARGET_SPP_FACTOR: u32 = 4;
+const TARGET_MIN_SPP: u32 = 64;
+/// The target of `--target-set` uses this seed offset, so its paths are independent of the render's.
+const TARGET_SEED_OFFSET: u32 = 0x5EED;
+
+fn parse_values(name: &str, text: &str) -> Result<Vec<f32>> {
+    text.split(',')
+        .map(|v| {
+            v.trim()
+                .parse::<f32>()
+                .map_err(|_| anyhow::anyhow!("invalid --target-set {name}={text}: '{v}' is not a number"))
+        })
+        .collect()
+}
+
+fn grad(args: &GradArgs) -> Result<()> {
+    use pathgrad::gpu::renderer::GradMode;
+    let scene = pathgrad::scene::load(&args.scene, &args.defines)?;
+    let opts = options(&scene, &args.flags)?;
+    let ctx = context(&args.flags.device)?;
+    let mut renderer = Renderer::new(&ctx, &scene).with_context(|| format!("loading {}", args.scene))?;
+    let start = Instant::now();
+    if let Some(name) = &args.image_gradient {
+        let Some(output) = &args.output else { bail!("--image-gradient needs -o OUT.exr") };
+        if !check_output(output)? {
+            bail!("invalid -o {}: an image gradient is written as .exr (plus a .png preview)", output.display());
+        }
+        let image = renderer.image_gradient(&opts, name).with_context(|| format!("differentiating {}", args.scene))?;
+        let seconds = start.elapsed().as_secs_f64();
+        image.write_exr(output)?;
+        let preview = output.with_extension("png");
+        image.write_signed_png(&preview, None)?;
+        if args.json {
+            println!(
+                "{}",
+                serde_json::json!({"param": name, "time_s": seconds, "outputs": [output, preview], "mean": image.mean()})
+            );
+        } else {
+            println!("∂I/∂{name} in {seconds:.2} s → {}, {}", output.display(), preview.display());
+        }
+        return Ok(());
+    }
+    let loss: pathgrad::loss::Loss = args.loss.parse()?;
+    let target = match (&args.target, args.target_set.is_empty()) {
+        (Some(path), true) => Image::read_exr(path)?,
+        (None, false) => {
+            let mut table = scene.params.clone();
+            for (name, text) in &args.target_set {
+                let ids = table.select(&[name.as_str()])?;
+                for id in ids {
+                    let entry = table.entry(id).clone();
+                    let mut values = parse_values(name, text)?;
+                    if values.len() == 1 {
+                        values = vec![values[0]; entry.len as usize];
+                    }
+                    table.set(&entry.name, &values)?;
+                }
+            }
+            renderer.set_params(&table)?;
+            let target_opts = RenderOptions {
+                spp: (opts.spp * TARGET_SPP_FACTOR).max(TARGET_MIN_SPP),
+                seed: opts.seed.wrapping_add(TARGET_SEED_OFFSET),
+                ..opts
+            };
+            let target = renderer.render(&target_opts).context("rendering the target")?;
+            renderer.set_params(&scene.params)?;
+            target
+        }
+        _ => bail!("give --target REF.exr or --target-set NAME=VALUE (or --image-gradient NAME)"),
+    };
+    let mode = if args.deterministic { GradMode::Deterministic } else { GradMode::Float };
+    let (value, gradients) = renderer
+        .loss_and_gradient(&opts, &target, loss, mode)
+        .with_context(|| format!("differentiating {}", args.scene))?;
+    let seconds = start.elapsed().as_secs_f64();
+    let patterns: Vec<&str> =
+        if args.params.is_empty() { vec!["*"] } else { args.params.iter().map(String::as_str).collect() };
+    let chosen = scene.params.select(&patterns)?;
+    if args.json {
+        let map: serde_json::Map<String, serde_json::Value> = chosen
+            .iter()
+            .map(|&id| {
+                let name = scene.params.entry(id).name.clone();
+                let values = gradients.get(&name).expect("the gradient has the table's layout").to_vec();
+                (name, serde_json::json!(values))
+            })
+            .collect();
+        println!("{}", serde_json::json!({"loss": value, "gradients": map, "time_s": seconds}));
+    } else {
+        println!("loss ({}) = {value:.6e}   ({seconds:.2} s)", args.loss);
+        for id in chosen {
+            let name = &scene.params.entry(id).name;
+            let values = gradients.get(name).expect("the gradient has the table's layout");
+            if values.len() <= 4 {
+                println!("  ∂loss/∂{name} = {values:?}");
+            } else {
+                let norm = values.iter().map(|v| f64::from(*v).powi(2)).sum::<f64>().sqrt();
+                println!("  ∂loss/∂{name} = [{} values, norm {norm:.4e}]", values.len());
+            }
+        }
+    }
+    Ok(())
+}
+
 fn main() -> ExitCode {
     let cli = Cli::parse();
     let default_level = match cli.verbose {
@@ -127,6 +271,7 @@ fn run(cli: Cli) -> Result<()> {
         Command::Params { scene, defines, json } => params(&scene, &defines, json),
         Command::Devices { json } => devices(json),
         Command::Render(args) => render(&args),
+        Command::Grad(args) => grad(&args),
     }
 }
 

@@ -70,6 +70,7 @@ pub fn backward(scene: &Scene, options: &RenderOptions, adjoint: &Image) -> Resu
     let globals = options.globals(scene, &flat, PassTag::Gradient);
     let n = flat.params.len();
     let pixels = (options.width * options.height) as usize;
+    let drifted = std::sync::atomic::AtomicUsize::new(0);
     let grads = (0..pixels)
         .into_par_iter()
         .fold(
@@ -82,12 +83,16 @@ pub fn backward(scene: &Scene, options: &RenderOptions, adjoint: &Image) -> Resu
                     let total =
                         path::trace_path::<false>(&flat, &globals, p, s, Vec3::ZERO, Vec3::ZERO, &mut GradSink::None);
                     let mut sink = GradSink::Backward(&mut grads);
-                    path::trace_path::<true>(&flat, &globals, p, s, adj, total, &mut sink);
+                    let left = path::trace_path::<true>(&flat, &globals, p, s, adj, total, &mut sink);
+                    if !path::replay_returned_to_zero(total, left) {
+                        drifted.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+                    }
                 }
                 grads
             },
         )
         .reduce(|| vec![0.0f64; n], |a, b| a.iter().zip(&b).map(|(x, y)| x + y).collect());
+    check_replays(drifted.into_inner())?;
     Ok(grads)
 }
 
@@ -105,6 +110,7 @@ pub fn image_gradient(scene: &Scene, options: &RenderOptions, name: &str) -> Res
     let flat = FlatScene::new(scene)?;
     let globals = options.globals(scene, &flat, PassTag::Gradient);
     let pixels = (options.width * options.height) as usize;
+    let drifted = std::sync::atomic::AtomicUsize::new(0);
     let data: Vec<f32> = (0..pixels)
         .into_par_iter()
         .flat_map_iter(|pixel| {
@@ -115,7 +121,10 @@ pub fn image_gradient(scene: &Scene, options: &RenderOptions, name: &str) -> Res
                     path::trace_path::<false>(&flat, &globals, p, s, Vec3::ZERO, Vec3::ZERO, &mut GradSink::None);
                 let mut sink =
                     GradSink::Forward { begin: entry.offset, end: entry.offset + entry.len, derivative: Vec3::ZERO };
-                path::trace_path::<true>(&flat, &globals, p, s, Vec3::ONE, total, &mut sink);
+                let left = path::trace_path::<true>(&flat, &globals, p, s, Vec3::ONE, total, &mut sink);
+                if !path::replay_returned_to_zero(total, left) {
+                    drifted.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+                }
                 if let GradSink::Forward { derivative, .. } = sink {
                     sum += derivative;
                 }
@@ -123,5 +132,18 @@ pub fn image_gradient(scene: &Scene, options: &RenderOptions, name: &str) -> Res
             (sum / options.spp as f32).to_array()
         })
         .collect();
+    check_replays(drifted.into_inner())?;
     Image::from_rgb(options.width, options.height, data)
+}
+
+fn check_replays(drifted: usize) -> Result<()> {
+    if drifted > 0 {
+        return Err(crate::Error::Numeric {
+            kernel: "cpu replay",
+            message: format!(
+                "{drifted} replay(s) ended with radiance left over: the replay drifted from its primal path"
+            ),
+        });
+    }
+    Ok(())
 }

@@ -25,6 +25,16 @@ fn max_component(v: Vec3) -> f32 {
     v.x.max(v.y).max(v.z)
 }
 
+/// A replay may leave this much radiance, relative to the path's (plus a floor): the primal sums its
+/// terms and the replay subtracts the same terms in the same order (ALGORITHMS.md §3.3).
+pub const REPLAY_RESIDUAL_TOLERANCE: f32 = 1e-5;
+
+/// Whether what a replay left over (`left`) is rounding of the path's radiance `total`.
+pub fn replay_returned_to_zero(total: Vec3, left: Vec3) -> bool {
+    let bound = REPLAY_RESIDUAL_TOLERANCE * (total.abs() + Vec3::splat(1e-6));
+    left.abs().cmple(bound).all()
+}
+
 /// Where the GRAD terms of a replay go (the twin of `param_grad` in `shaders/lib/params.glsl`).
 #[derive(Debug)]
 pub enum GradSink<'a> {

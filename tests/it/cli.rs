@@ -89,3 +89,54 @@ fn devices_lists_lavapipe() {
     let list: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
     assert!(list.as_array().unwrap().iter().any(|d| d["usable"] == true), "{list}");
 }
+
+#[test]
+fn grad_prints_loss_and_gradients_as_json() {
+    let o = pathgrad()
+        .args(["grad", "builtin:cornell-box", "--target-set", "sphere.alpha.value=0.4", "--param", "sphere.*"])
+        .args(["--spp", "2", "--width", "16", "--json", "--deterministic"])
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let v: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    assert!(v["loss"].as_f64().unwrap() > 0.0);
+    assert!(v["time_s"].as_f64().unwrap() > 0.0);
+    let g = v["gradients"].as_object().unwrap();
+    assert_eq!(g.keys().collect::<Vec<_>>(), ["sphere.alpha.value", "sphere.specular_reflectance.value"]);
+    assert_eq!(g["sphere.specular_reflectance.value"].as_array().unwrap().len(), 3);
+}
+
+#[test]
+fn grad_writes_an_image_gradient_with_a_signed_preview() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("d.exr");
+    let o = pathgrad()
+        .args(["grad", "builtin:blend", "--image-gradient", "object.weight.value", "--spp", "2", "--width", "24", "-o"])
+        .arg(&out)
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let image = pathgrad::image::Image::read_exr(&out).unwrap();
+    assert!(image.as_slice().iter().any(|&v| v != 0.0));
+    assert!(dir.path().join("d.png").exists());
+}
+
+#[test]
+fn grad_errors_name_what_is_wrong() {
+    let dir = tempfile::tempdir().unwrap();
+    let cases: [(&[&str], &str); 4] = [
+        (&["grad", "builtin:cornell-box"], "give --target REF.exr or --target-set"),
+        (&["grad", "builtin:cornell-box", "--target-set", "nope=1"], "nope: matches no parameter"),
+        (&["grad", "builtin:cornell-box", "--target", "missing.exr"], "missing.exr"),
+        (
+            &["grad", "builtin:cornell-box", "--target-set", "sphere.alpha.value=0.3", "--loss", "l3"],
+            "'l3' (expected relmse, l2 or l1)",
+        ),
+    ];
+    for (args, message) in cases {
+        let o = pathgrad().current_dir(dir.path()).args(args).args(["--spp", "1", "--width", "8"]).output().unwrap();
+        let stderr = String::from_utf8_lossy(&o.stderr);
+        assert!(!o.status.success(), "{args:?} should fail");
+        assert!(stderr.contains(message), "{args:?}: expected '{message}' in: {stderr}");
+    }
+}

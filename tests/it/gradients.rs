@@ -197,3 +197,21 @@ fn gradients_match_finite_differences() {
         );
     }
 }
+
+/// Every replay returns to zero radiance, on the GPU and on the CPU, over whole images of every
+/// scene (ALGORITHMS.md §3.3; both back ends report a drifted replay as an error).
+#[test]
+fn replay_returns_to_zero_on_every_path() {
+    let gpu = TestGpu::new();
+    let mut all: Vec<Scene> =
+        pathgrad::scene::builtin::BUILTIN_SCENES.iter().map(|(n, _)| builtin::load(n).unwrap()).collect();
+    all.push(scenes::textured_environment());
+    all.push(scenes::open_furnace());
+    for scene in &all {
+        let opts = RenderOptions { width: 64, height: 64, spp: 2, seed: 1, ..RenderOptions::for_scene(scene) };
+        let adjoint = adjoint_pattern(opts.width, opts.height);
+        let mut renderer = Renderer::new(&gpu.ctx, scene).unwrap();
+        renderer.backward(&opts, &adjoint, GradMode::Float).unwrap_or_else(|e| panic!("{}: {e}", scene.source));
+        pathgrad::cpu::backward(scene, &opts, &adjoint).unwrap_or_else(|e| panic!("{}: {e}", scene.source));
+    }
+}
