@@ -74,6 +74,7 @@ impl Buffer {
         }
         ctx.set_name(raw, name);
         ctx.object_created();
+        ctx.buffer_allocated(size);
         Ok(Buffer { ctx: ctx.clone(), raw, allocation: Some(allocation), size, name: name.to_string() })
     }
 
@@ -260,5 +261,6 @@ impl Drop for Buffer {
         // SAFETY: every submission using this buffer was waited on before the owner let it go.
         unsafe { self.ctx.device().destroy_buffer(self.raw, None) };
         self.ctx.object_destroyed();
+        self.ctx.buffer_freed(self.size);
     }
 }

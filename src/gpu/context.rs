@@ -176,6 +176,8 @@ pub struct Context {
     info: DeviceInfo,
     validation: Arc<ValidationCounter>,
     live_objects: AtomicI64,
+    buffer_bytes: AtomicU64,
+    peak_buffer_bytes: AtomicU64,
 }
 
 impl std::fmt::Debug for Context {
@@ -515,6 +517,8 @@ impl Context {
             info,
             validation,
             live_objects: AtomicI64::new(0),
+            buffer_bytes: AtomicU64::new(0),
+            peak_buffer_bytes: AtomicU64::new(0),
         })
     }
 
@@ -556,6 +560,30 @@ impl Context {
     /// Buffers, pipelines and descriptor sets created from this context and not yet dropped.
     pub fn live_objects(&self) -> i64 {
         self.live_objects.load(Ordering::SeqCst)
+    }
+
+    /// Bytes of buffer memory alive now (scene, parameters, gradients, images, staging).
+    pub fn buffer_bytes(&self) -> u64 {
+        self.buffer_bytes.load(Ordering::SeqCst)
+    }
+
+    /// The most buffer memory alive at once since the context was created or the peak was reset.
+    pub fn peak_buffer_bytes(&self) -> u64 {
+        self.peak_buffer_bytes.load(Ordering::SeqCst)
+    }
+
+    /// Starts a new peak measurement from the current level.
+    pub fn reset_peak_buffer_bytes(&self) {
+        self.peak_buffer_bytes.store(self.buffer_bytes(), Ordering::SeqCst);
+    }
+
+    pub(crate) fn buffer_allocated(&self, bytes: u64) {
+        let now = self.buffer_bytes.fetch_add(bytes, Ordering::SeqCst) + bytes;
+        self.peak_buffer_bytes.fetch_max(now, Ordering::SeqCst);
+    }
+
+    pub(crate) fn buffer_freed(&self, bytes: u64) {
+        self.buffer_bytes.fetch_sub(bytes, Ordering::SeqCst);
     }
 
     pub(crate) fn object_created(&self) {
