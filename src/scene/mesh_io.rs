@@ -80,13 +80,7 @@ pub fn load_obj(path: &Path) -> Result<Geometry> {
     if counts.faces == 0 {
         return Err(scene_error(path, None, "has no faces ('f' statements with 3 or more vertices)"));
     }
-    let options = tobj::LoadOptions {
-        triangulate: true,
-        single_index: true,
-        ignore_points: true,
-        ignore_lines: true,
-        ..Default::default()
-    };
+    let options = tobj::LoadOptions { triangulate: true, single_index: true, ignore_points: true, ignore_lines: true };
     let loaded = catch_panic(|| {
         // Materials are not loaded: the scene file assigns the BSDF.
         tobj::load_obj_buf(&mut std::io::Cursor::new(text.as_bytes()), &options, |_| {

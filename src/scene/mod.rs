@@ -3,6 +3,7 @@
 
 pub mod builtin;
 pub mod flat;
+pub mod gltf;
 pub mod mesh_io;
 pub mod shapes;
 
