@@ -906,7 +906,7 @@ mod tests {
         assert_close(&param(&s, "satin.bsdf_0.reflectance.value"), &[0.2, 0.4, 0.8]);
         assert_close(&param(&s, "satin.bsdf_1.specular_reflectance.value"), &[0.12 / 0.52, 0.22 / 0.52, 0.42 / 0.52]);
         assert_close(&param(&s, "satin.bsdf_1.alpha.value"), &[0.25]);
-        assert_close(&param(&s, "light.emitter.radiance.value"), &[8.0, 7.2, 6.4]);
+        assert_close(&param(&s, "light.emitter.radiance.value"), &[40.0, 36.0, 32.0]);
         assert!(s.meshes[3].emitter.is_some() && s.meshes.iter().take(3).all(|m| m.emitter.is_none()));
 
         // The floor is double-sided and textured; its texels are the linearised checker × factor.
@@ -944,7 +944,7 @@ mod tests {
         assert!(floor.normals.as_ref().unwrap().iter().all(|n| n.abs_diff_eq(Vec3::Y, 1e-6)));
         let light = &s.meshes[3];
         assert!(light.normals.as_ref().unwrap().iter().all(|n| n.abs_diff_eq(-Vec3::Y, 1e-6)));
-        assert_close(&param(&s, "light.emitter.radiance.value"), &[10.0; 3]);
+        assert_close(&param(&s, "light.emitter.radiance.value"), &[30.0; 3]);
         assert_close(&param(&s, "light.specular_reflectance.value"), &[0.0; 3]);
         assert_close(&param(&s, "diffuse.bsdf_1.alpha.value"), &[0.36]);
         assert_close(&param(&s, "metal.alpha.value"), &[0.16]);

@@ -178,7 +178,7 @@ pub(super) fn showcase() -> (Value, Vec<u8>, Vec<u8>, Vec<u8>) {
             { "name": "metal", "pbrMetallicRoughness": { "baseColorFactor": [0.9, 0.6, 0.3, 1.0], "metallicFactor": 1.0, "roughnessFactor": 0.3 } },
             { "name": "satin", "pbrMetallicRoughness": { "baseColorFactor": [0.2, 0.4, 0.8, 1.0], "metallicFactor": 0.5, "roughnessFactor": 0.5 } },
             { "name": "light", "emissiveFactor": [1.0, 0.9, 0.8],
-              "extensions": { "KHR_materials_emissive_strength": { "emissiveStrength": 8.0 } },
+              "extensions": { "KHR_materials_emissive_strength": { "emissiveStrength": 40.0 } },
               "pbrMetallicRoughness": { "baseColorFactor": [0.0, 0.0, 0.0, 1.0], "metallicFactor": 0.0, "roughnessFactor": 1.0 } },
         ],
         "samplers": [{ "magFilter": 9729, "minFilter": 9729 }],
@@ -223,7 +223,7 @@ pub(super) fn twin() -> (Value, Vec<u8>) {
             { "name": "diffuse", "pbrMetallicRoughness": { "baseColorFactor": [0.7, 0.3, 0.2, 1.0], "metallicFactor": 0.0, "roughnessFactor": 0.6 } },
             { "name": "metal", "pbrMetallicRoughness": { "baseColorFactor": [0.9, 0.8, 0.6, 1.0], "metallicFactor": 1.0, "roughnessFactor": 0.4 } },
             { "name": "light", "emissiveFactor": [1.0, 1.0, 1.0],
-              "extensions": { "KHR_materials_emissive_strength": { "emissiveStrength": 10.0 } },
+              "extensions": { "KHR_materials_emissive_strength": { "emissiveStrength": 30.0 } },
               "pbrMetallicRoughness": { "baseColorFactor": [0.0, 0.0, 0.0, 1.0], "metallicFactor": 1.0, "roughnessFactor": 1.0 } },
         ],
     });
