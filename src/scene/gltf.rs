@@ -1,8 +1,9 @@
 //! glTF 2.0 scenes (`.gltf` with external or embedded resources, `.glb`) → [`Scene`].
 //!
-//! The `gltf` crate parses and validates the JSON (and the GLB container); everything after that —
-//! buffers, accessors, images, the node tree — is read here from the validated JSON with every
-//! offset and index checked, because the crate's own readers slice and `unwrap` on malformed files.
+//! The `gltf` crate parses the JSON (and the GLB container) and `gltf-json`'s validator checks
+//! references and enumerations; everything after that — buffers, accessors, images, the node tree —
+//! is read here from the validated JSON with every offset and index checked, because the crate's
+//! own readers slice and `unwrap` on malformed files.
 //!
 //! # What is read
 //! - **Nodes**: the default scene's node trees (`scene`, else `scenes[0]`, else every root node),
@@ -24,7 +25,8 @@
 //! mix of a Lambertian base and a GGX lobe with F0 = 0.04 — and a metal whose GGX lobe is tinted by
 //! the base colour through Schlick's Fresnel, by `metallic`. pathgrad's blend weights are constants,
 //! so the mapping freezes every Fresnel term at its normal-incidence value; the result equals glTF's
-//! BRDF at normal incidence and is darker at grazing angles, where glTF's Schlick terms rise toward 1.
+//! BRDF at normal incidence, and at grazing angles — where glTF's Schlick terms rise toward 1 — its
+//! specular lobes are dimmer and its diffuse part slightly brighter than glTF's.
 //! With b = base colour, m = metallic, r = roughness:
 //!
 //! | glTF material | pathgrad material | parameters (names) |
@@ -53,9 +55,11 @@
 //!
 //! # Errors
 //! Every error names the file and the glTF element (`meshes[2].primitives[0]`, `materials[1]`,
-//! `accessors[3]`); JSON syntax errors name the line and column. No input panics: the one `gltf`
-//! call (parsing) runs under [`std::panic::catch_unwind`] as a backstop, after the GLB header it
-//! would underflow on (a length below 12) has been rejected here.
+//! `accessors[3]`); JSON syntax errors name the line and column. No input panics: the inputs that
+//! `gltf` 1.4 is known to panic on are rejected first (a GLB header length below 12, which it
+//! underflows on; a `POSITION` accessor index out of range, which `gltf-json`'s validator indexes
+//! with before checking it), and parsing and validation still run under
+//! [`std::panic::catch_unwind`] as a backstop.
 
 use std::fmt::Display;
 use std::path::Path;
