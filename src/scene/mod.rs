@@ -3,6 +3,8 @@
 
 pub mod builtin;
 pub mod flat;
+pub mod gltf;
+pub mod mesh_io;
 pub mod shapes;
 
 use glam::{Vec2, Vec3};

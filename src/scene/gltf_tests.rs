@@ -1,0 +1,258 @@
+//! Tests of the glTF loader: the committed scenes, the documented default camera, and the
+//! malformed fixtures under `tests/data/gltf/` with their pinned messages.
+
+use super::*;
+
+#[test]
+fn base64_and_percent_decoding() {
+    assert_eq!(decode_base64("aGVsbG8=").unwrap(), b"hello");
+    assert_eq!(decode_base64("aGVsbG8").unwrap(), b"hello");
+    assert_eq!(decode_base64("AAECAw==").unwrap(), [0, 1, 2, 3]);
+    assert!(decode_base64("a*bc").is_none());
+    assert!(decode_base64("abcde").is_none());
+    assert_eq!(percent_decode("my%20mesh.bin").unwrap(), "my mesh.bin");
+    assert!(percent_decode("%FF").is_none());
+    assert!(percent_decode("%4").is_none());
+}
+
+#[test]
+fn names_are_sanitised_and_deduplicated() {
+    let names = unique_names([Some("Metal Ball"), None, Some("a.b"), Some("a_b"), Some("")].into_iter(), "material");
+    assert_eq!(names, ["Metal_Ball", "material_1", "a_b_2", "a_b_3", "material_4"]);
+}
+
+fn data(name: &str) -> std::path::PathBuf {
+    Path::new("tests/data/gltf").join(name)
+}
+
+fn param(s: &Scene, name: &str) -> Vec<f32> {
+    s.params.get(s.params.find(name).unwrap_or_else(|| panic!("no parameter {name}"))).to_vec()
+}
+
+fn assert_close(a: &[f32], b: &[f32]) {
+    assert!(a.len() == b.len() && a.iter().zip(b).all(|(x, y)| (x - y).abs() < 1e-5), "{a:?} != {b:?}");
+}
+
+#[test]
+fn showcase_scene() {
+    let s = load(Path::new("scenes/gltf/showcase.gltf")).unwrap();
+    let names: Vec<&str> = s.meshes.iter().map(|m| m.name.as_str()).collect();
+    assert_eq!(names, ["floor", "metal_box", "satin_box", "light"]);
+    assert_eq!(s.triangle_count(), 2 + 12 + 12 + 2);
+    assert!(s.warnings.is_empty(), "{:?}", s.warnings);
+
+    // Camera: translation (0, 1.5, 5), rotated −15° about x; yfov 0.6 rad; aspect 1.5.
+    let c = s.camera;
+    assert_eq!(c.position, Vec3::new(0.0, 1.5, 5.0));
+    let forward = (c.target - c.position).normalize();
+    let t = 15f32.to_radians();
+    assert!(forward.abs_diff_eq(Vec3::new(0.0, -t.sin(), -t.cos()), 1e-6), "{forward}");
+    assert!((c.fov_y_degrees - 0.6f32.to_degrees()).abs() < 1e-4);
+    assert_eq!((c.width, c.height), (512, 341));
+
+    // Transforms: the floor scaled ×4 in x and z; the boxes under "group" (+0.5 in y), one by
+    // TRS (−0.8 in x, 30° about y), one by a matrix (+0.8 in x, scale 0.6).
+    let bounds = |m: &crate::scene::Mesh| {
+        let lo = m.positions.iter().fold(Vec3::INFINITY, |a, &p| a.min(p));
+        let hi = m.positions.iter().fold(Vec3::NEG_INFINITY, |a, &p| a.max(p));
+        (lo, hi)
+    };
+    assert_eq!(bounds(&s.meshes[0]), (Vec3::new(-4.0, 0.0, -4.0), Vec3::new(4.0, 0.0, 4.0)));
+    let (lo, hi) = bounds(&s.meshes[1]);
+    let half = 0.5 * (30f32.to_radians().cos() + 30f32.to_radians().sin());
+    assert!(lo.abs_diff_eq(Vec3::new(-0.8 - half, 0.0, -half), 1e-5), "{lo}");
+    assert!(hi.abs_diff_eq(Vec3::new(-0.8 + half, 1.0, half), 1e-5), "{hi}");
+    let (lo, hi) = bounds(&s.meshes[2]);
+    assert!(lo.abs_diff_eq(Vec3::new(0.5, 0.2, -0.3), 1e-6) && hi.abs_diff_eq(Vec3::new(1.1, 0.8, 0.3), 1e-6));
+    // The light quad faces down after no rotation: its quad was built facing −y.
+    assert!(s.meshes[3].normals.as_ref().unwrap().iter().all(|n| *n == -Vec3::Y));
+    assert!(s.meshes[3].positions.iter().all(|p| p.y == 3.0));
+
+    // Materials and parameters, in the order of first use.
+    let names: Vec<&str> = s.params.entries().iter().map(|e| e.name.as_str()).collect();
+    assert_eq!(
+        names,
+        [
+            "floor.base_color.data",
+            "floor.bsdf_1.alpha.value",
+            "floor.bsdf_1.specular_reflectance.value",
+            "floor.weight.value",
+            "metal.alpha.value",
+            "metal.specular_reflectance.value",
+            "satin.bsdf_0.reflectance.value",
+            "satin.bsdf_1.alpha.value",
+            "satin.bsdf_1.specular_reflectance.value",
+            "satin.weight.value",
+            "light.bsdf_0.reflectance.value",
+            "light.bsdf_1.alpha.value",
+            "light.bsdf_1.specular_reflectance.value",
+            "light.weight.value",
+            "light.emitter.radiance.value",
+        ]
+    );
+    assert_close(&param(&s, "floor.bsdf_1.alpha.value"), &[0.64]);
+    assert_close(&param(&s, "floor.bsdf_1.specular_reflectance.value"), &[1.0; 3]);
+    assert_close(&param(&s, "floor.weight.value"), &[0.04]);
+    assert_close(&param(&s, "metal.alpha.value"), &[0.09]);
+    assert_close(&param(&s, "metal.specular_reflectance.value"), &[0.9, 0.6, 0.3]);
+    // m = 0.5: w = 0.04 + 0.96·0.5 = 0.52, s = (0.5·b + 0.02) / 0.52.
+    assert_close(&param(&s, "satin.weight.value"), &[0.52]);
+    assert_close(&param(&s, "satin.bsdf_0.reflectance.value"), &[0.2, 0.4, 0.8]);
+    assert_close(&param(&s, "satin.bsdf_1.specular_reflectance.value"), &[0.12 / 0.52, 0.22 / 0.52, 0.42 / 0.52]);
+    assert_close(&param(&s, "satin.bsdf_1.alpha.value"), &[0.25]);
+    assert_close(&param(&s, "light.emitter.radiance.value"), &[40.0, 36.0, 32.0]);
+    assert!(s.meshes[3].emitter.is_some() && s.meshes.iter().take(3).all(|m| m.emitter.is_none()));
+
+    // The floor is double-sided and textured; its texels are the linearised checker × factor.
+    let Material::TwoSided(inner) = s.materials[s.meshes[0].material.0 as usize] else { panic!("floor not two-sided") };
+    let Material::Blend { children, .. } = &s.materials[inner.0 as usize] else { panic!("floor not a blend") };
+    assert!(matches!(s.materials[children[0].0 as usize], Material::Diffuse { albedo: Albedo::Bitmap(_) }));
+    assert_eq!((s.textures[0].width, s.textures[0].height), (4, 4));
+    let texels = s.params.get(s.textures[0].texels);
+    let expect = |c: [u8; 3]| [0, 1, 2].map(|k| srgb_to_linear(f32::from(c[k]) / 255.0) * [1.0, 1.0, 0.5][k]);
+    assert_close(&texels[0..3], &expect(fixtures::CHECKER[0]));
+    assert_close(&texels[3..6], &expect(fixtures::CHECKER[1]));
+    assert_close(&texels[12..15], &expect(fixtures::CHECKER[1]));
+    // glTF uvs are used as they are: v = 0 is the image's top row, pathgrad's row 0.
+    assert_eq!(s.meshes[0].uvs.as_ref().unwrap()[0], Vec2::new(0.0, 0.0));
+}
+
+#[test]
+fn glb_equals_gltf() {
+    let gltf = load(Path::new("scenes/gltf/showcase.gltf")).unwrap();
+    let glb = load(Path::new("scenes/gltf/showcase.glb")).unwrap();
+    assert_eq!(Scene { source: gltf.source.clone(), ..glb }, gltf);
+}
+
+#[test]
+fn twin_scene() {
+    let s = load(Path::new("scenes/twin/twin.gltf")).unwrap();
+    assert!(s.warnings.is_empty(), "{:?}", s.warnings);
+    assert_eq!(s.camera.position, Vec3::new(0.0, 2.0, 6.0));
+    assert!((s.camera.target - s.camera.position).normalize().abs_diff_eq(-s.camera.position.normalize(), 1e-6));
+    assert!((s.camera.fov_y_degrees - 40.0).abs() < 1e-4);
+    let floor = &s.meshes[0];
+    assert!(floor.positions.iter().all(|p| p.y.abs() < 1e-6 && p.x.abs() <= 3.0 + 1e-6));
+    assert!(floor.normals.as_ref().unwrap().iter().all(|n| n.abs_diff_eq(Vec3::Y, 1e-6)));
+    let light = &s.meshes[3];
+    assert!(light.normals.as_ref().unwrap().iter().all(|n| n.abs_diff_eq(-Vec3::Y, 1e-6)));
+    assert_close(&param(&s, "light.emitter.radiance.value"), &[30.0; 3]);
+    assert_close(&param(&s, "light.specular_reflectance.value"), &[0.0; 3]);
+    assert_close(&param(&s, "diffuse.bsdf_1.alpha.value"), &[0.36]);
+    assert_close(&param(&s, "metal.alpha.value"), &[0.16]);
+    s.validate().unwrap();
+}
+
+#[test]
+fn no_camera_gives_the_documented_default() {
+    let s = load(&data("no_camera.gltf")).unwrap();
+    // The triangle (0,0,0), (1,0,0), (0,1,0): centre (0.5, 0.5, 0), bounding radius √2/2.
+    let distance = 0.5f32.sqrt() / 22.5f32.to_radians().sin();
+    assert!(s.camera.position.abs_diff_eq(Vec3::new(0.5, 0.5, distance), 1e-6));
+    assert_eq!(s.camera.target, Vec3::new(0.5, 0.5, 0.0));
+    assert_eq!((s.camera.fov_y_degrees, s.camera.width, s.camera.height), (45.0, 512, 512));
+    assert_eq!(s.warnings.len(), 1);
+    assert!(s.warnings[0].starts_with("no perspective camera"), "{:?}", s.warnings);
+    // glTF's default material: white, metallic 1, roughness 1.
+    assert_close(&param(&s, "default_material.alpha.value"), &[1.0]);
+    assert_close(&param(&s, "default_material.specular_reflectance.value"), &[1.0; 3]);
+}
+
+/// Every malformed fixture gives exactly this message.
+#[test]
+fn malformed_files_give_pinned_messages() {
+    let cases: &[(&str, &str)] = &[
+        ("bad_json.gltf", "bad_json.gltf:4:3: invalid glTF JSON: trailing comma"),
+        ("not_gltf.gltf", "not_gltf.gltf:1:1: invalid glTF JSON: expected value"),
+        (
+            "missing_buffer.gltf",
+            "missing_buffer.gltf: buffers[0]: cannot read 'nowhere.bin': No such file or directory (os error 2)",
+        ),
+        ("short_buffer.gltf", "short_buffer.gltf: buffers[0]: holds 44 bytes but its byteLength is 100"),
+        ("bad_uri.gltf", "bad_uri.gltf: buffers[0]: URI '%FF.bin' is not valid percent-encoded UTF-8"),
+        (
+            "accessor_overflow.gltf",
+            "accessor_overflow.gltf: accessors[0] (POSITION of meshes[0].primitives[0]): 30 elements of 12 bytes from \
+             offset 0 (stride 12) do not fit in bufferViews[0], which has 36 bytes",
+        ),
+        ("index_reference.gltf", "index_reference.gltf: meshes[0].primitives[0].indices: Index out of bounds"),
+        ("index_value.gltf", "index_value.gltf: meshes[0].primitives[0]: index 5 is out of range (3 vertices)"),
+        (
+            "points.gltf",
+            "points.gltf: meshes[0].primitives[0]: mode 0 (Points) is not supported (only TRIANGLES, mode 4)",
+        ),
+        (
+            "wrong_type.gltf",
+            "wrong_type.gltf: accessors[2] (NORMAL of meshes[0].primitives[0]): expected type VEC3, found VEC2",
+        ),
+        (
+            "cycle.gltf",
+            "cycle.gltf: nodes[0]: is reached twice: a node may have only one parent and the hierarchy must not have cycles",
+        ),
+        ("huge_translation.gltf", "huge_translation.gltf: nodes[0]: transform is not finite"),
+        (
+            "bad_roughness.gltf",
+            "bad_roughness.gltf: materials[0]: metallicFactor 1 and roughnessFactor 1.5 must lie in [0, 1]",
+        ),
+        ("bad_image.gltf", "bad_image.gltf: images[0]: cannot decode: The image format could not be determined"),
+        (
+            "required_extension.gltf",
+            "required_extension.gltf: extensionsRequired[0] = \"KHR_draco_mesh_compression\": Unsupported extension",
+        ),
+        ("empty.gltf", "empty.gltf: scene: has no triangles"),
+        (
+            "short_header.glb",
+            "short_header.glb: not a valid GLB file: the header is truncated or its length is below 12",
+        ),
+        ("truncated.glb", "truncated.glb: not a valid GLB file: could not completely read the object"),
+    ];
+    for (file, expected) in cases {
+        let message = load(&data(file)).expect_err(file).to_string();
+        assert_eq!(message, format!("tests/data/gltf/{expected}"), "{file}");
+    }
+    let missing = load(&data("missing.gltf")).unwrap_err().to_string();
+    assert!(missing.starts_with("tests/data/gltf/missing.gltf: No such file"), "{missing}");
+}
+
+/// Random byte edits of the showcase never panic.
+#[test]
+fn mutated_files_never_panic() {
+    let mut state = 0x2545_f491_4f6c_dd1d_u64;
+    let mut next = move || {
+        state ^= state << 13;
+        state ^= state >> 7;
+        state ^= state << 17;
+        state
+    };
+    let dir = tempfile::tempdir().unwrap();
+    for name in ["showcase.gltf", "showcase.glb"] {
+        let original = std::fs::read(Path::new("scenes/gltf").join(name)).unwrap();
+        for dep in ["showcase.bin", "checker.png"] {
+            std::fs::copy(Path::new("scenes/gltf").join(dep), dir.path().join(dep)).unwrap();
+        }
+        for round in 0..200 {
+            let mut bytes = original.clone();
+            for _ in 0..1 + round % 3 {
+                let at = next() as usize % bytes.len();
+                match next() % 4 {
+                    0 => bytes[at] = next() as u8,
+                    1 => bytes[at] = b"0123456789-.e"[next() as usize % 13],
+                    2 => bytes.truncate(at.max(1)),
+                    _ => bytes[at] = b'9',
+                }
+            }
+            let path = dir.path().join(name);
+            std::fs::write(&path, &bytes).unwrap();
+            if let Err(e) = load(&path) {
+                assert!(!e.to_string().contains("panicked"), "{name} round {round}: {e}");
+            }
+        }
+    }
+}
+
+#[test]
+fn srgb_decoding_endpoints() {
+    assert_eq!(srgb_to_linear(0.0), 0.0);
+    assert!((srgb_to_linear(1.0) - 1.0).abs() < 1e-6);
+    assert!((srgb_to_linear(0.5) - 0.214_041).abs() < 1e-5);
+}
