@@ -3,6 +3,7 @@
 
 pub mod builtin;
 pub mod flat;
+pub mod mitsuba;
 pub mod shapes;
 
 use glam::{Vec2, Vec3};
