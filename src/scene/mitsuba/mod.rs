@@ -60,6 +60,11 @@ mod sensor;
 mod shapes;
 mod xml;
 
+#[cfg(test)]
+mod tests;
+#[cfg(test)]
+mod tests_errors;
+
 use std::path::Path;
 
 pub use shapes::{MAX_CHORD_ERROR_PX, MAX_SEGMENTS, MIN_SEGMENTS, segments_for, unit_disk, unit_sphere};
