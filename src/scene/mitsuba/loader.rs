@@ -15,9 +15,10 @@ use crate::scene::{Camera, MaterialId, Scene, TextureId, bounds};
 /// Deepest nesting of BSDFs and textures (through nested elements and `<ref>`s together).
 pub(super) const MAX_NESTING: usize = 16;
 
-/// Most XML nodes a scene file may have (memory bound for hostile input; a million-triangle scene
-/// keeps its triangles in mesh files, so real scenes stay far below).
-const MAX_NODES: u32 = 1 << 20;
+/// Most XML nodes (elements, attributes' owners, text) a scene file may have: a memory bound for
+/// hostile input (a few hundred MB at most). Real scenes keep triangles in mesh files and stay far
+/// below, even with tens of thousands of shapes.
+const MAX_NODES: u32 = 1 << 22;
 
 /// Object tags that may carry an `id`.
 const ID_TAGS: &[&str] = &["bsdf", "emitter", "film", "integrator", "rfilter", "sampler", "sensor", "shape", "texture"];

@@ -164,6 +164,7 @@ fn element_and_property_errors() {
     let cases: &[(&str, &str)] = &[
         (r#"<ref id="x"/>"#, "<ref id=\"x\">: a <ref> at scene level is not supported"),
         (r#"<bsdf type="diffuse" id=""/>"#, "<bsdf id=\"\">: an id must not be empty"),
+        (r#"<bsdf type="diffuse" colour="red"/>"#, "<bsdf>: unexpected attribute 'colour' (allowed: type, id, name)"),
         (r#"<shape type="cube">oops</shape>"#, "<shape>: unexpected text inside the element"),
         (
             r#"<shape type="cube"><color name="c" value="1"/></shape>"#,

@@ -273,8 +273,10 @@ impl<'a> Props<'a> {
     /// Reads the children of object element `node`.
     ///
     /// # Errors
-    /// Malformed property elements, duplicate names, unsupported element tags.
+    /// Unexpected attributes, malformed property elements, duplicate names, unsupported element
+    /// tags.
     pub fn parse(x: &Xml<'_>, node: El<'a>) -> Result<Props<'a>> {
+        x.check_attrs(node, &["type", "id", "name"])?;
         let kind = x.required(node, "type")?;
         let mut out = Props { node, kind, props: Vec::new(), nested: Vec::new(), finished: Cell::new(false) };
         for c in node.children() {
