@@ -37,7 +37,14 @@ fn main() -> pathgrad::Result<()> {
     println!("device: {} ({})", ctx.info().name, ctx.info().driver);
     let scene = pathgrad::scene::builtin::load("cornell-box")?;
     let mut renderer = Renderer::new(&ctx, &scene)?;
-    let opts = RenderOptions { width: 256, height: 256, spp: 16, max_depth: Some(6), seed: 1, ..RenderOptions::for_scene(&scene) };
+    let opts = RenderOptions {
+        width: 256,
+        height: 256,
+        spp: 16,
+        max_depth: Some(6),
+        seed: 1,
+        ..RenderOptions::for_scene(&scene)
+    };
     let mut target_table = scene.params.clone();
     target_table.set("sphere.alpha.value", &[0.4])?;
     renderer.set_params(&target_table)?;
@@ -55,8 +62,14 @@ fn main() -> pathgrad::Result<()> {
     let loss_host = time(runs, || loss_and_adjoint(&target, &target, Loss::RelMse))?;
     println!("builtin:cornell-box 256x256, 16 spp, max depth 6, median of {runs}:");
     println!("  primal render (pass 1)          {primal:8.3} s");
-    println!("  fused adjoint, float atomics    {adjoint_float:8.3} s   (adjoint/primal {:.2})", adjoint_float / primal);
-    println!("  fused adjoint, deterministic    {adjoint_fixed:8.3} s   (adjoint/primal {:.2})", adjoint_fixed / primal);
+    println!(
+        "  fused adjoint, float atomics    {adjoint_float:8.3} s   (adjoint/primal {:.2})",
+        adjoint_float / primal
+    );
+    println!(
+        "  fused adjoint, deterministic    {adjoint_fixed:8.3} s   (adjoint/primal {:.2})",
+        adjoint_fixed / primal
+    );
     println!("  gradient step (loss_and_gradient) {step:6.3} s");
     println!("  relMSE loss + adjoint image on the host {:.2} ms", loss_host * 1e3);
 

@@ -10,7 +10,7 @@
 //! an OBJ `vt u v` becomes `(u, 1 − v)`, so textures appear as they do in Mitsuba. PLY texture
 //! coordinates are taken as they are, as Mitsuba's `ply` plugin does.
 //!
-//! **Normals.** Vertex normals are used when the file gives them (renormalised); without them the
+//! **Normals.** Vertex normals are used as the file gives them (not renormalised: the renderer normalises the interpolated normal, and keeping the floats exact lets an OBJ twin of a built-in scene render bit for bit the same); without them the
 //! geometry has `normals: None` and the renderer shades with face normals.
 //!
 //! **Errors** name the file and, where the format has lines, the line: an OBJ statement's line,
@@ -97,7 +97,7 @@ pub fn load_obj(path: &Path) -> Result<Geometry> {
         let n = m.positions.len() / 3;
         let base = g.positions.len() as u32;
         g.positions.extend(m.positions.chunks_exact(3).map(|p| Vec3::new(p[0], p[1], p[2])));
-        normals.extend(m.normals.chunks_exact(3).map(|v| Vec3::new(v[0], v[1], v[2]).normalize_or_zero()));
+        normals.extend(m.normals.chunks_exact(3).map(|v| Vec3::new(v[0], v[1], v[2])));
         uvs.extend(m.texcoords.chunks_exact(2).map(|t| Vec2::new(t[0], 1.0 - t[1])));
         if (!m.normals.is_empty() && m.normals.len() != 3 * n)
             || (!m.texcoords.is_empty() && m.texcoords.len() != 2 * n)
@@ -364,7 +364,7 @@ fn parse_ply(path: &Path, bytes: &[u8]) -> Result<Geometry> {
     for (i, e) in vertices.iter().enumerate() {
         g.positions.push(Vec3::new(get(e, i, "x")?, get(e, i, "y")?, get(e, i, "z")?));
         if has_normals {
-            normals.push(Vec3::new(get(e, i, "nx")?, get(e, i, "ny")?, get(e, i, "nz")?).normalize_or_zero());
+            normals.push(Vec3::new(get(e, i, "nx")?, get(e, i, "ny")?, get(e, i, "nz")?));
         }
         if let Some((u, v)) = uv_names {
             uvs.push(Vec2::new(get(e, i, u)?, get(e, i, v)?));

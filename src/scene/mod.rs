@@ -5,6 +5,7 @@ pub mod builtin;
 pub mod flat;
 pub mod gltf;
 pub mod mesh_io;
+pub mod mitsuba;
 pub mod shapes;
 
 use glam::{Vec2, Vec3};
@@ -150,23 +151,34 @@ pub mod bounds {
     pub const RADIANCE: (f32, f32) = (0.0, f32::INFINITY);
 }
 
-/// Loads the scene `spec` names: `builtin:NAME` (see [`builtin::BUILTIN_SCENES`]); `defines`
-/// override a scene file's `<default>` values (`-D name=value`).
+/// Loads the scene `spec` names: `builtin:NAME` (see [`builtin::BUILTIN_SCENES`]), a Mitsuba 3
+/// XML file (`.xml`, whose `<default>` values `defines` override: `-D name=value`), or a glTF 2.0
+/// file (`.gltf`, `.glb`).
 ///
 /// # Errors
-/// [`Error::Scene`] for an unknown built-in or a file path (scene files are not supported yet).
+/// [`Error::Scene`] for an unknown built-in or extension, and every loader error (with its
+/// file:line:col); [`Error::Io`] for unreadable files.
 pub fn load(spec: &str, defines: &[(String, String)]) -> Result<Scene> {
     if let Some(name) = spec.strip_prefix("builtin:") {
-        let _ = defines;
         return builtin::load(name);
     }
-    Err(Error::Scene {
-        location: spec.to_string(),
-        message: format!(
-            "scene files are not supported yet; use builtin:NAME (known: {})",
-            builtin::BUILTIN_SCENES.iter().map(|(n, _)| *n).collect::<Vec<_>>().join(", ")
-        ),
-    })
+    let path = std::path::Path::new(spec);
+    let ext = path.extension().and_then(|e| e.to_str()).map(str::to_ascii_lowercase);
+    let scene = match ext.as_deref() {
+        Some("xml") => mitsuba::load(path, defines)?,
+        Some("gltf" | "glb") => gltf::load(path)?,
+        _ => {
+            return Err(Error::Scene {
+                location: spec.to_string(),
+                message: format!(
+                    "unsupported scene format (supported: .xml (Mitsuba 3), .gltf/.glb, builtin:NAME with NAME one of {})",
+                    builtin::BUILTIN_SCENES.iter().map(|(n, _)| *n).collect::<Vec<_>>().join(", ")
+                ),
+            });
+        }
+    };
+    scene.validate()?;
+    Ok(scene)
 }
 
 impl Scene {

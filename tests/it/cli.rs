@@ -50,13 +50,17 @@ fn same_seed_gives_the_same_image() {
 #[test]
 fn bad_input_gets_a_clear_error_and_no_output() {
     let dir = tempfile::tempdir().unwrap();
-    let cases: [(&[&str], &str); 6] = [
+    let cases: [(&[&str], &str); 7] = [
         (
             &["render", "builtin:cornell-box", "--device", "99", "-o", "x.exr"],
             "no Vulkan device matches '99' (available: [0]",
         ),
         (&["render", "builtin:nope", "-o", "x.exr"], "unknown built-in scene (known: cornell-box, furnace, blend)"),
-        (&["render", "scene.xml", "-o", "x.exr"], "scene files are not supported yet"),
+        (&["render", "scene.xml", "-o", "x.exr"], "scene.xml: No such file"),
+        (
+            &["render", "scene.blend", "-o", "x.exr"],
+            "scene.blend: unsupported scene format (supported: .xml (Mitsuba 3), .gltf/.glb",
+        ),
         (&["render", "builtin:cornell-box", "-o", "x.jpg"], "must end in .exr or .png"),
         (&["render", "builtin:cornell-box", "--spp", "0", "-o", "x.exr"], "invalid --spp"),
         (&["render", "builtin:cornell-box", "--max-depth", "0", "-o", "x.exr"], "--max-depth"),

@@ -10,4 +10,5 @@ mod furnace;
 mod gradients;
 mod loop_budget;
 mod resources;
+mod scene_formats;
 mod twins;

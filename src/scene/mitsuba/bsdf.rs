@@ -1,0 +1,298 @@
+//! `<bsdf>` (diffuse, roughconductor, blendbsdf, twosided) and `<texture type="bitmap">`.
+
+use std::path::Path;
+
+use glam::Vec3;
+
+use super::loader::{Loader, MAX_NESTING};
+use super::xml::{El, Props};
+use crate::bsdf::Distribution;
+use crate::error::Result;
+use crate::scene::{Albedo, Material, MaterialId, TextureId, bounds};
+
+/// The BSDF plugins pathgrad reads.
+const SUPPORTED_BSDFS: &str = "blendbsdf, diffuse, roughconductor, twosided";
+
+/// Conductor presets for `roughconductor`'s `material`: RGB (eta, k) for Au, Ag, Cu, Al and Cr,
+/// the widely used RGB reductions of the measured spectra that Mitsuba tabulates (as in Mitsuba
+/// 0.5's RGB mode and Tungsten), rounded to 4 decimals. Mitsuba 3 in an RGB variant integrates the
+/// spectral curves itself, so colours can differ slightly: give `eta` and `k` explicitly for an
+/// exact match. `none` is Mitsuba's default: eta = 0, k = 1, Fresnel ≡ 1.
+const CONDUCTORS: &[(&str, [f32; 3], [f32; 3])] = &[
+    ("none", [0.0, 0.0, 0.0], [1.0, 1.0, 1.0]),
+    ("Au", [0.1431, 0.375, 1.4425], [3.9832, 2.3857, 1.6032]),
+    ("Ag", [0.1553, 0.1167, 0.1384], [4.8283, 3.1222, 2.147]),
+    ("Cu", [0.2004, 0.924, 1.1022], [3.9129, 2.4528, 2.1422]),
+    ("Al", [1.6575, 0.8804, 0.5212], [9.2239, 6.2695, 4.837]),
+    ("Cr", [4.3697, 2.9167, 1.6547], [5.2064, 4.2314, 3.7549]),
+];
+
+/// The (eta, k) of conductor preset `name`.
+pub(super) fn conductor(name: &str) -> Option<(Vec3, Vec3)> {
+    CONDUCTORS.iter().find(|(n, _, _)| *n == name).map(|(_, eta, k)| (Vec3::from_array(*eta), Vec3::from_array(*k)))
+}
+
+impl<'a> Loader<'a> {
+    /// Builds (once) the BSDF `node` — a `<bsdf>` or a `<ref>` to one — named by its id or else
+    /// `name`.
+    ///
+    /// # Errors
+    /// Anything wrong with the BSDF or its children, reference cycles, nesting past
+    /// [`MAX_NESTING`].
+    pub(super) fn bsdf(&mut self, node: El<'a>, name: String, depth: usize) -> Result<MaterialId> {
+        let target = self.deref(node)?;
+        if !target.has_tag_name("bsdf") {
+            return Err(self.x.err(node, format!("refers to a <{}>, expected a <bsdf>", target.tag_name().name())));
+        }
+        if let Some(&m) = self.materials.get(&target.id()) {
+            return Ok(m);
+        }
+        if self.in_progress.contains(&target.id()) {
+            return Err(self.x.err(node, "reference cycle: this BSDF contains itself"));
+        }
+        if depth > MAX_NESTING {
+            return Err(self.x.err(node, format!("BSDFs and textures nest more than {MAX_NESTING} deep")));
+        }
+        let name = self.name_of(target, name)?;
+        self.in_progress.push(target.id());
+        let built = self.bsdf_body(target, &name, depth);
+        self.in_progress.pop();
+        let m = built?;
+        self.materials.insert(target.id(), m);
+        Ok(m)
+    }
+
+    fn bsdf_body(&mut self, node: El<'a>, name: &str, depth: usize) -> Result<MaterialId> {
+        let p = Props::parse(&self.x, node)?;
+        let m = match p.kind.as_str() {
+            "diffuse" => {
+                if let Some(t) = p.object("reflectance") {
+                    self.finish(&p)?;
+                    let texture = self.texture(t, format!("{name}.reflectance"), depth + 1)?;
+                    self.scene.add_material(Material::Diffuse { albedo: Albedo::Bitmap(texture) })
+                } else {
+                    let albedo = self.color_in(&p, "reflectance", Vec3::splat(0.5), bounds::REFLECTANCE)?;
+                    self.scene.add_diffuse(name, albedo).map_err(|e| self.located(node, e))?
+                }
+            }
+            "roughconductor" => self.rough_conductor(&p, name)?,
+            "blendbsdf" => {
+                let weight = self.float_in(&p, "weight", None, bounds::WEIGHT)?;
+                let children = p.take_nested(&["bsdf", "ref"]);
+                let [c0, c1] = children[..] else {
+                    return Err(self.x.err(node, format!("'blendbsdf' needs 2 nested BSDFs, got {}", children.len())));
+                };
+                self.finish(&p)?;
+                let a = self.bsdf(c0, format!("{name}.bsdf_0"), depth + 1)?;
+                let b = self.bsdf(c1, format!("{name}.bsdf_1"), depth + 1)?;
+                let (ma, mb) = (self.material(a), self.material(b));
+                match (ma, mb) {
+                    (Some(Material::TwoSided(a)), Some(Material::TwoSided(b)))
+                        if self.is_leaf(a) && self.is_leaf(b) =>
+                    {
+                        // blend(twosided(a), twosided(b)) = twosided(blend(a, b)).
+                        let blend = self.scene.add_blend(name, weight, [a, b]).map_err(|e| self.located(node, e))?;
+                        self.scene.add_material(Material::TwoSided(blend))
+                    }
+                    _ if self.is_leaf(a) && self.is_leaf(b) => {
+                        self.scene.add_blend(name, weight, [a, b]).map_err(|e| self.located(node, e))?
+                    }
+                    _ => {
+                        return Err(self.x.err(
+                            node,
+                            "'blendbsdf' children must both be diffuse/roughconductor, or both twosided wrappers \
+                             of those (pathgrad blends two leaf BSDFs)",
+                        ));
+                    }
+                }
+            }
+            "twosided" => {
+                let children = p.take_nested(&["bsdf", "ref"]);
+                let child = match children[..] {
+                    [c] => c,
+                    [_, _] => {
+                        return Err(self
+                            .x
+                            .err(node, "'twosided' with different front and back BSDFs is not supported (give one)"));
+                    }
+                    _ => {
+                        return Err(self
+                            .x
+                            .err(node, format!("'twosided' needs 1 nested BSDF, got {}", children.len())));
+                    }
+                };
+                self.finish(&p)?;
+                let c = self.bsdf(child, format!("{name}.brdf_0"), depth + 1)?;
+                if matches!(self.material(c), Some(Material::TwoSided(_))) {
+                    return Err(self.x.err(child, "a 'twosided' BSDF cannot wrap another twosided one"));
+                }
+                self.scene.add_material(Material::TwoSided(c))
+            }
+            other => {
+                return Err(self.x.err(node, format!("unsupported plugin '{other}' (supported: {SUPPORTED_BSDFS})")));
+            }
+        };
+        self.finish(&p)?;
+        Ok(m)
+    }
+
+    fn material(&self, id: MaterialId) -> Option<Material> {
+        self.scene.materials.get(id.0 as usize).cloned()
+    }
+
+    fn is_leaf(&self, id: MaterialId) -> bool {
+        matches!(self.material(id), Some(Material::Diffuse { .. } | Material::RoughConductor { .. }))
+    }
+
+    fn rough_conductor(&mut self, p: &Props<'a>, name: &str) -> Result<MaterialId> {
+        let x = &self.x;
+        let distribution = match p.string(x, "distribution")? {
+            None => Distribution::Beckmann,
+            Some((s, n)) => match s.as_str() {
+                "beckmann" => Distribution::Beckmann,
+                "ggx" => Distribution::Ggx,
+                _ => return Err(x.err(n, format!("unsupported distribution '{s}' (supported: beckmann, ggx)"))),
+            },
+        };
+        let alpha = if p.has("alpha_u") || p.has("alpha_v") {
+            if p.has("alpha") {
+                return Err(x.err(p.node, "give either 'alpha' or 'alpha_u'/'alpha_v', not both"));
+            }
+            let u = self.float_in(p, "alpha_u", Some(0.1), bounds::ALPHA)?;
+            let v = self.float_in(p, "alpha_v", Some(0.1), bounds::ALPHA)?;
+            if u != v {
+                return Err(x.err(p.node, format!("anisotropic roughness ({u} ≠ {v}) is not supported")));
+            }
+            u
+        } else {
+            self.float_in(p, "alpha", Some(0.1), bounds::ALPHA)?
+        };
+        let specular = self.color_in(p, "specular_reflectance", Vec3::ONE, bounds::REFLECTANCE)?;
+        let material = p.string(x, "material")?;
+        let (eta, k) = match material {
+            Some((m, n)) if m != "none" => {
+                if p.has("eta") || p.has("k") {
+                    return Err(x.err(n, "give either 'material' or 'eta'/'k', not both"));
+                }
+                conductor(&m).ok_or_else(|| {
+                    let known: Vec<&str> = CONDUCTORS.iter().map(|c| c.0).collect();
+                    x.err(n, format!("unknown conductor material '{m}' (supported: {})", known.join(", ")))
+                })?
+            }
+            _ => {
+                let eta = self.color_in(p, "eta", Vec3::ZERO, (0.0, f32::MAX))?;
+                let k = self.color_in(p, "k", Vec3::ONE, (0.0, f32::MAX))?;
+                (eta, k)
+            }
+        };
+        // VNDF sampling is what pathgrad does; `false` would only change the noise.
+        p.boolean(x, "sample_visible", true)?;
+        self.scene.add_rough_conductor(name, distribution, alpha, specular, eta, k).map_err(|e| self.located(p.node, e))
+    }
+
+    /// Builds (once) the texture `node` — a `<texture>` or a `<ref>` to one — named by its id or
+    /// else `name`; its texels become the parameter `NAME.data`.
+    ///
+    /// # Errors
+    /// Unsupported plugins, missing or undecodable files, texels outside [0, 1].
+    pub(super) fn texture(&mut self, node: El<'a>, name: String, depth: usize) -> Result<TextureId> {
+        let target = self.deref(node)?;
+        if !target.has_tag_name("texture") {
+            return Err(self.x.err(node, format!("refers to a <{}>, expected a <texture>", target.tag_name().name())));
+        }
+        if let Some(&t) = self.textures.get(&target.id()) {
+            return Ok(t);
+        }
+        if depth > MAX_NESTING {
+            return Err(self.x.err(node, format!("BSDFs and textures nest more than {MAX_NESTING} deep")));
+        }
+        let name = self.name_of(target, name)?;
+        let p = Props::parse(&self.x, target)?;
+        if p.kind != "bitmap" {
+            return Err(self.x.err(target, format!("unsupported plugin '{}' (supported: bitmap)", p.kind)));
+        }
+        let (file, file_node) = p
+            .string(&self.x, "filename")?
+            .ok_or_else(|| self.x.err(target, "'bitmap' needs the property 'filename'"))?;
+        let raw = p.boolean(&self.x, "raw", false)?;
+        for (prop, default) in [("filter_type", "bilinear"), ("wrap_mode", "repeat")] {
+            if let Some((v, n)) = p.string(&self.x, prop)?
+                && v != default
+            {
+                let w = self
+                    .x
+                    .warning(n, format!("property '{prop}' = '{v}' of 'bitmap' ignored: pathgrad uses '{default}'"));
+                self.scene.warn(w);
+            }
+        }
+        let path = self.dir.join(&file);
+        if !path.is_file() {
+            return Err(self
+                .x
+                .err(file_node, format!("image file '{file}' not found (looked for {})", path.display())));
+        }
+        let (width, height, texels) =
+            read_bitmap(&path, raw).map_err(|m| self.x.err(file_node, format!("reading '{file}': {m}")))?;
+        if let Some((i, v)) = texels.iter().enumerate().find(|(_, v)| !(**v >= 0.0 && **v <= 1.0)) {
+            let texel = i / 3;
+            return Err(self.x.err(
+                file_node,
+                format!(
+                    "'{file}': texel ({}, {}) has value {v} outside [0, 1] (reflectances must be at most 1)",
+                    texel % width as usize,
+                    texel / width as usize
+                ),
+            ));
+        }
+        let t = self
+            .scene
+            .add_texture(&format!("{name}.data"), width, height, &texels)
+            .map_err(|e| self.located(target, e))?;
+        self.finish(&p)?;
+        self.textures.insert(target.id(), t);
+        Ok(t)
+    }
+}
+
+/// Decodes an image into linear RGB texels, row 0 = the file's top row (Mitsuba's v = 0). PNG
+/// (and any other format the `image` crate reads) is sRGB-encoded unless `raw`; EXR is linear.
+fn read_bitmap(path: &Path, raw: bool) -> std::result::Result<(u32, u32, Vec<f32>), String> {
+    let is_exr = path.extension().and_then(|e| e.to_str()).is_some_and(|e| e.eq_ignore_ascii_case("exr"));
+    if is_exr {
+        let image = exr::prelude::read_first_rgba_layer_from_file(
+            path,
+            |size, _| (size.width(), vec![0.0f32; size.width() * size.height() * 3]),
+            |(width, texels): &mut (usize, Vec<f32>), pos, (r, g, b, _a): (f32, f32, f32, f32)| {
+                let i = 3 * (pos.y() * *width + pos.x());
+                if let Some(t) = texels.get_mut(i..i + 3) {
+                    t.copy_from_slice(&[r, g, b]);
+                }
+            },
+        )
+        .map_err(|e| e.to_string())?;
+        let size = image.layer_data.size;
+        let (w, h) = (u32::try_from(size.width()), u32::try_from(size.height()));
+        let (Ok(w), Ok(h)) = (w, h) else { return Err("image too large".into()) };
+        return Ok((w, h, image.layer_data.channel_data.pixels.1));
+    }
+    let image = image::ImageReader::open(path)
+        .map_err(|e| e.to_string())?
+        .with_guessed_format()
+        .map_err(|e| e.to_string())?
+        .decode()
+        .map_err(|e| e.to_string())?
+        .to_rgb32f();
+    let (w, h) = image.dimensions();
+    let mut texels = image.into_raw();
+    if !raw {
+        for t in &mut texels {
+            *t = srgb_to_linear(*t);
+        }
+    }
+    Ok((w, h, texels))
+}
+
+/// The sRGB transfer function's inverse (IEC 61966-2-1).
+pub(super) fn srgb_to_linear(c: f32) -> f32 {
+    if c <= 0.04045 { c / 12.92 } else { ((c + 0.055) / 1.055).powf(2.4) }
+}

@@ -1,0 +1,350 @@
+//! The loader: parses the document, collects defines and ids, walks `<scene>`'s children in order
+//! and builds the [`Scene`].
+
+use std::collections::HashMap;
+use std::path::{Path, PathBuf};
+
+use glam::Vec3;
+use roxmltree::NodeId;
+
+use super::xml::{El, Props, Xml, is_identifier};
+use crate::error::{Error, Result};
+use crate::scene::shapes::Geometry;
+use crate::scene::{Camera, MaterialId, Scene, TextureId, bounds};
+
+/// Deepest nesting of BSDFs and textures (through nested elements and `<ref>`s together).
+pub(super) const MAX_NESTING: usize = 16;
+
+/// Most XML nodes (elements, attributes' owners, text) a scene file may have: a memory bound for
+/// hostile input (a few hundred MB at most). Real scenes keep triangles in mesh files and stay far
+/// below, even with tens of thousands of shapes.
+const MAX_NODES: u32 = 1 << 22;
+
+/// Object tags that may carry an `id`.
+const ID_TAGS: &[&str] = &["bsdf", "emitter", "film", "integrator", "rfilter", "sampler", "sensor", "shape", "texture"];
+
+/// Mesh file formats of `<shape type="obj|ply">`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(crate) enum MeshFormat {
+    /// Wavefront OBJ.
+    Obj,
+    /// Stanford PLY.
+    Ply,
+}
+
+/// Reads a mesh file (the loader checks that the file exists first).
+pub(crate) type MeshLoader = fn(MeshFormat, &Path) -> Result<Geometry>;
+
+/// The mesh reader the public entry points use.
+pub(crate) fn load_mesh_file(format: MeshFormat, path: &Path) -> Result<Geometry> {
+    match format {
+        MeshFormat::Obj => crate::scene::mesh_io::load_obj(path),
+        MeshFormat::Ply => crate::scene::mesh_io::load_ply(path),
+    }
+}
+
+/// Reads `path` and loads it with [`super::load_str`].
+pub(super) fn load_path(path: &Path, defines: &[(String, String)], meshes: MeshLoader) -> Result<Scene> {
+    let bytes = std::fs::read(path).map_err(|source| Error::Io { path: path.to_path_buf(), source })?;
+    let text = String::from_utf8(bytes).map_err(|e| Error::Scene {
+        location: path.display().to_string(),
+        message: format!("not UTF-8 text (invalid byte at offset {})", e.utf8_error().valid_up_to()),
+    })?;
+    load_text(&text, path, defines, meshes)
+}
+
+/// Parses `text` (read from `file`) into a scene.
+pub(super) fn load_text(text: &str, file: &Path, defines: &[(String, String)], meshes: MeshLoader) -> Result<Scene> {
+    let name = file.display().to_string();
+    let options = roxmltree::ParsingOptions { allow_dtd: false, nodes_limit: MAX_NODES, ..Default::default() };
+    let doc = roxmltree::Document::parse_with_options(text, options).map_err(|e| {
+        let pos = e.pos();
+        let message = e.to_string().replace(&format!(" at {pos}"), "");
+        Error::Scene {
+            location: format!("{name}:{}:{}", pos.row, pos.col),
+            message: format!("malformed XML: {message}"),
+        }
+    })?;
+    let placeholder =
+        Camera { position: Vec3::ZERO, target: Vec3::Z, up: Vec3::Y, fov_y_degrees: 45.0, width: 1, height: 1 };
+    let mut loader = Loader {
+        x: Xml::new(name.clone(), &doc),
+        dir: file.parent().map(Path::to_path_buf).unwrap_or_default(),
+        scene: Scene::new(&name, placeholder),
+        ids: HashMap::new(),
+        names: HashMap::new(),
+        materials: HashMap::new(),
+        textures: HashMap::new(),
+        in_progress: Vec::new(),
+        meshes,
+    };
+    loader.run(doc.root_element(), defines)?;
+    loader.scene.validate()?;
+    Ok(loader.scene)
+}
+
+/// State of one load.
+pub(super) struct Loader<'a> {
+    /// The document.
+    pub x: Xml<'a>,
+    /// Directory that relative file names resolve against.
+    pub dir: PathBuf,
+    /// The scene being built.
+    pub scene: Scene,
+    /// Every object with an `id`.
+    ids: HashMap<String, El<'a>>,
+    /// `_unnamed_N` names of top-level objects without an id.
+    names: HashMap<NodeId, String>,
+    /// BSDFs already built, by element.
+    pub materials: HashMap<NodeId, MaterialId>,
+    /// Textures already built, by element.
+    pub textures: HashMap<NodeId, TextureId>,
+    /// BSDFs and textures being built (cycle detection).
+    pub in_progress: Vec<NodeId>,
+    /// The mesh file reader.
+    pub meshes: MeshLoader,
+}
+
+impl<'a> Loader<'a> {
+    fn run(&mut self, root: El<'a>, cli: &[(String, String)]) -> Result<()> {
+        let x = &self.x;
+        if root.tag_name().name() != "scene" {
+            return Err(x.err(root, "the root element must be <scene>"));
+        }
+        x.check_attrs(root, &["version"])?;
+        let version = root
+            .attribute("version")
+            .ok_or_else(|| x.err(root, "missing attribute 'version' (pathgrad reads Mitsuba 2.x and 3.x scenes)"))?;
+        if !matches!(version.split('.').next(), Some("2" | "3")) {
+            return Err(x.err(root, format!("unsupported scene version '{version}' (pathgrad reads 2.x and 3.x)")));
+        }
+        let children: Vec<El<'a>> = root.children().filter(|c| c.is_element()).collect();
+        self.collect_defines(&children, cli)?;
+        self.collect_ids(root)?;
+
+        let mut unnamed = 0;
+        for c in &children {
+            if matches!(c.tag_name().name(), "shape" | "bsdf" | "texture" | "emitter") && !c.has_attribute("id") {
+                self.names.insert(c.id(), format!("_unnamed_{unnamed}"));
+                unnamed += 1;
+            }
+        }
+
+        let sensors: Vec<El<'a>> = children.iter().copied().filter(|c| c.has_tag_name("sensor")).collect();
+        match sensors.first() {
+            Some(&s) => self.sensor(s)?,
+            None => {
+                return Err(self.x.err(
+                    root,
+                    "the scene has no <sensor>; pathgrad needs a perspective sensor (it has no default camera)",
+                ));
+            }
+        }
+        for &s in sensors.iter().skip(1) {
+            let w = self.x.warning(s, "only the first <sensor> is used; this one is ignored");
+            self.scene.warn(w);
+        }
+        let integrators: Vec<El<'a>> = children.iter().copied().filter(|c| c.has_tag_name("integrator")).collect();
+        match integrators[..] {
+            [] => self.scene.max_depth = crate::integrator::UNBOUNDED_DEPTH_CAP,
+            [i] => self.integrator(i)?,
+            [_, second, ..] => return Err(self.x.err(second, "a scene has at most one <integrator>")),
+        }
+
+        for &c in &children {
+            match c.tag_name().name() {
+                "default" | "sensor" | "integrator" => {}
+                "bsdf" => {
+                    let name = self.top_name(c)?;
+                    self.bsdf(c, name, 0)?;
+                }
+                "texture" => {
+                    let name = self.top_name(c)?;
+                    self.texture(c, name, 0)?;
+                }
+                "shape" => self.shape(c)?,
+                "emitter" => self.environment(c)?,
+                tag @ ("film" | "sampler" | "rfilter") => {
+                    return Err(self.x.err(c, format!("a <{tag}> must be inside a <sensor>")));
+                }
+                "ref" => return Err(self.x.err(c, "a <ref> at scene level is not supported")),
+                tag => {
+                    return Err(self.x.err(
+                        c,
+                        format!(
+                            "unsupported element <{tag}> (supported in <scene>: default, bsdf, texture, shape, \
+                             emitter, sensor, integrator)"
+                        ),
+                    ));
+                }
+            }
+        }
+        for t in root.children().filter(|c| c.is_text()) {
+            if t.text().is_some_and(|s| !s.trim().is_empty()) {
+                return Err(self.x.err(root, "unexpected text inside the element"));
+            }
+        }
+        if self.scene.meshes.is_empty() {
+            return Err(self.x.err(root, "the scene has no shapes"));
+        }
+        if self.scene.meshes.iter().all(|m| m.emitter.is_none()) && self.scene.environment.is_none() {
+            let w = self.x.warning(root, "the scene has no emitters: it renders black");
+            self.scene.warn(w);
+        }
+        for name in self.x.unused_defines() {
+            if cli.iter().any(|(n, _)| *n == name) {
+                let w = format!("{}: -D {name} is not used by the scene", self.x.file);
+                self.scene.warn(w);
+            }
+        }
+        Ok(())
+    }
+
+    fn collect_defines(&mut self, children: &[El<'a>], cli: &[(String, String)]) -> Result<()> {
+        let mut seen: Vec<String> = Vec::new();
+        for &d in children.iter().filter(|c| c.has_tag_name("default")) {
+            self.x.check_attrs(d, &["name", "value"])?;
+            let name = d.attribute("name").ok_or_else(|| self.x.err(d, "missing attribute 'name'"))?;
+            let value = d.attribute("value").ok_or_else(|| self.x.err(d, "missing attribute 'value'"))?;
+            if !is_identifier(name) {
+                return Err(self.x.err(d, format!("'{name}' is not a valid parameter name ([A-Za-z_][A-Za-z0-9_]*)")));
+            }
+            if seen.iter().any(|s| s == name) {
+                return Err(self.x.err(d, format!("parameter '{name}' has two defaults")));
+            }
+            seen.push(name.to_string());
+            self.x.define(name, value);
+        }
+        for (name, value) in cli {
+            if !is_identifier(name) {
+                return Err(Error::InvalidArgument {
+                    parameter: format!("-D {name}={value}"),
+                    message: "the name must match [A-Za-z_][A-Za-z0-9_]*".into(),
+                });
+            }
+            self.x.define(name, value);
+        }
+        Ok(())
+    }
+
+    fn collect_ids(&mut self, root: El<'a>) -> Result<()> {
+        for n in root.descendants().filter(|n| n.is_element() && ID_TAGS.contains(&n.tag_name().name())) {
+            let Some(id) = self.x.attr(n, "id")? else { continue };
+            if id.is_empty() {
+                return Err(self.x.err(n, "an id must not be empty"));
+            }
+            if let Some(first) = self.ids.get(&id) {
+                return Err(self.x.err(n, format!("duplicate id '{id}' (first used at {})", self.x.loc(*first))));
+            }
+            self.ids.insert(id, n);
+        }
+        Ok(())
+    }
+
+    /// The name of a top-level object: its id or its `_unnamed_N`.
+    pub(super) fn top_name(&self, node: El<'a>) -> Result<String> {
+        self.name_of(node, self.names.get(&node.id()).cloned().unwrap_or_default())
+    }
+
+    /// The name of `node`: its id, else `fallback`.
+    pub fn name_of(&self, node: El<'a>, fallback: String) -> Result<String> {
+        Ok(self.x.attr(node, "id")?.unwrap_or(fallback))
+    }
+
+    /// The element a `<ref>` points to (any other element is returned as is).
+    ///
+    /// # Errors
+    /// A reference to an unknown id.
+    pub fn deref(&self, node: El<'a>) -> Result<El<'a>> {
+        if !node.has_tag_name("ref") {
+            return Ok(node);
+        }
+        self.x.check_attrs(node, &["id", "name"])?;
+        let id = self.x.required(node, "id")?;
+        self.ids.get(&id).copied().ok_or_else(|| self.x.err(node, format!("reference to unknown id '{id}'")))
+    }
+
+    /// Reports the unread properties of `p` (warnings) and unclaimed nested objects (errors).
+    ///
+    /// # Errors
+    /// An unclaimed nested object.
+    pub fn finish(&mut self, p: &Props<'a>) -> Result<()> {
+        let mut warnings = Vec::new();
+        p.finish(&self.x, &mut warnings)?;
+        for w in warnings {
+            self.scene.warn(w);
+        }
+        Ok(())
+    }
+
+    /// Turns an error of the scene model (parameter names, textures) into one located at `node`.
+    pub fn located(&self, node: El<'a>, e: Error) -> Error {
+        match e {
+            Error::Scene { location, message } => self.x.err(node, format!("{location}: {message}")),
+            other => other,
+        }
+    }
+
+    /// A colour property `name` of `p` in `[lo, hi]`, `default` when absent.
+    ///
+    /// # Errors
+    /// A value outside the range, or of the wrong type.
+    pub fn color_in(&self, p: &Props<'a>, name: &str, default: Vec3, range: (f32, f32)) -> Result<Vec3> {
+        match p.color(&self.x, name)? {
+            None => Ok(default),
+            Some((v, node)) => {
+                if v.to_array().iter().any(|c| !(*c >= range.0 && *c <= range.1)) {
+                    return Err(self.x.err(node, format!("'{name}' must lie in {}, got {v}", show_range(range))));
+                }
+                Ok(v)
+            }
+        }
+    }
+
+    /// A float property `name` of `p` in `[lo, hi]`, `default` when absent (`None`: required).
+    ///
+    /// # Errors
+    /// A missing required value, a value outside the range, or of the wrong type.
+    pub fn float_in(&self, p: &Props<'a>, name: &str, default: Option<f32>, range: (f32, f32)) -> Result<f32> {
+        match (p.float(&self.x, name)?, default) {
+            (None, Some(d)) => Ok(d),
+            (None, None) => Err(self.x.err(p.node, format!("'{}' needs the property '{name}'", p.kind))),
+            (Some((v, node)), _) => {
+                if !(v >= range.0 && v <= range.1) {
+                    return Err(self.x.err(node, format!("'{name}' must lie in {}, got {v}", show_range(range))));
+                }
+                Ok(v)
+            }
+        }
+    }
+
+    /// A top-level `<emitter>`: the constant environment.
+    fn environment(&mut self, node: El<'a>) -> Result<()> {
+        let p = Props::parse(&self.x, node)?;
+        match p.kind.as_str() {
+            "constant" => {}
+            "area" => return Err(self.x.err(node, "an 'area' emitter must be nested in a <shape>")),
+            other => {
+                return Err(self
+                    .x
+                    .err(node, format!("unsupported plugin '{other}' (supported: constant; area inside a <shape>)")));
+            }
+        }
+        if self.scene.environment.is_some() {
+            return Err(self.x.err(node, "a scene has at most one constant emitter"));
+        }
+        let radiance = self.color_in(&p, "radiance", Vec3::ONE, bounds::RADIANCE)?;
+        let name = self.top_name(node)?;
+        self.scene.set_environment(&format!("{name}.radiance.value"), radiance).map_err(|e| self.located(node, e))?;
+        self.finish(&p)
+    }
+}
+
+/// `[lo, hi]`, or `[lo, ∞)` for an open upper bound.
+fn show_range(range: (f32, f32)) -> String {
+    if range.1 == f32::MAX || range.1 == f32::INFINITY {
+        format!("[{}, ∞)", range.0)
+    } else {
+        format!("[{}, {}]", range.0, range.1)
+    }
+}

@@ -1,0 +1,289 @@
+//! `<sensor type="perspective">` with its `<film>` and `<sampler>`, and `<integrator>`: the camera
+//! and the render defaults.
+//!
+//! Mitsuba's camera looks along +z of its `to_world` frame with +y up, and its film maps local +x
+//! to the *left* edge of the image (`perspective_projection` scales x by −½). pathgrad's camera
+//! puts `forward × up` on the right, so with `forward = M·z`, `up = M·y` the two agree exactly
+//! when `det M > 0` (then `M·z × M·y = −M·x`, the image's right). A mirroring `to_world`
+//! (`det M < 0`) would need a mirrored image, which pathgrad's camera cannot express: it is
+//! rejected rather than rendered mirrored.
+
+use glam::{Mat4, Vec3};
+
+use super::loader::Loader;
+use super::xml::{El, Props, Transform};
+use crate::error::Result;
+use crate::integrator::{DEFAULT_RR_DEPTH, UNBOUNDED_DEPTH_CAP};
+use crate::scene::Camera;
+
+/// Mitsuba's default film size.
+const DEFAULT_FILM: (u32, u32) = (768, 576);
+/// Largest film side pathgrad renders (as `RenderOptions::validate`).
+const MAX_FILM: i64 = 16_384;
+/// Mitsuba's default `sample_count` of the `independent` sampler.
+const DEFAULT_SAMPLE_COUNT: i64 = 4;
+/// Mitsuba's default focal length in millimetres (35 mm film equivalent, diagonal field of view).
+const DEFAULT_FOCAL_LENGTH_MM: f32 = 50.0;
+/// Diagonal of 35 mm film (36 × 24 mm), in millimetres.
+const FILM_DIAGONAL_MM: f32 = 43.266_615;
+/// Relative tolerance for "the sensor's `to_world` is a rotation, uniform scale and translation":
+/// looser than f32 rounding of a product of a few matrices (~1e-6), tighter than any deliberate
+/// non-uniform scale.
+const SIMILARITY_TOLERANCE: f32 = 1e-4;
+
+/// Which image axis Mitsuba's `fov` spans.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(super) enum FovAxis {
+    /// Horizontal (Mitsuba's default).
+    X,
+    /// Vertical.
+    Y,
+    /// Diagonal.
+    Diagonal,
+    /// The shorter image side.
+    Smaller,
+    /// The longer image side.
+    Larger,
+}
+
+/// pathgrad's vertical field of view (degrees) for Mitsuba's `fov` along `axis` on a
+/// `width × height` film: `tan(fov_y/2) = tan(fov/2)·h/s` where `s` is the film extent along the
+/// axis (`w`, `h` or `√(w²+h²)`). `smaller`/`larger` pick `y`/`x` as Mitsuba does (`x` on a
+/// square film).
+pub(super) fn vertical_fov(fov: f32, axis: FovAxis, width: u32, height: u32) -> f32 {
+    let (w, h) = (f64::from(width), f64::from(height));
+    let axis = match axis {
+        FovAxis::Smaller if w > h => FovAxis::Y,
+        FovAxis::Smaller => FovAxis::X,
+        FovAxis::Larger if w > h => FovAxis::X,
+        FovAxis::Larger => FovAxis::Y,
+        a => a,
+    };
+    let extent = match axis {
+        FovAxis::Y => return fov,
+        FovAxis::X => w,
+        _ => w.hypot(h),
+    };
+    let tan_y = (f64::from(fov) * 0.5).to_radians().tan() * h / extent;
+    (2.0 * tan_y.atan().to_degrees()) as f32
+}
+
+impl<'a> Loader<'a> {
+    /// Reads the sensor into `scene.camera` (and `default_spp`).
+    pub(super) fn sensor(&mut self, node: El<'a>) -> Result<()> {
+        let p = Props::parse(&self.x, node)?;
+        if p.kind != "perspective" {
+            return Err(self.x.err(node, format!("unsupported plugin '{}' (supported: perspective)", p.kind)));
+        }
+        let films = p.take_nested(&["film"]);
+        let (width, height) = match films[..] {
+            [] => DEFAULT_FILM,
+            [f] => self.film(f)?,
+            [_, second, ..] => return Err(self.x.err(second, "a sensor has at most one <film>")),
+        };
+        match p.take_nested(&["sampler"])[..] {
+            [] => {}
+            [s] => self.sampler(s)?,
+            [_, second, ..] => return Err(self.x.err(second, "a sensor has at most one <sampler>")),
+        }
+        let axis = match p.string(&self.x, "fov_axis")? {
+            None => FovAxis::X,
+            Some((s, n)) => match s.to_ascii_lowercase().as_str() {
+                "x" => FovAxis::X,
+                "y" => FovAxis::Y,
+                "diagonal" => FovAxis::Diagonal,
+                "smaller" => FovAxis::Smaller,
+                "larger" => FovAxis::Larger,
+                _ => {
+                    return Err(self
+                        .x
+                        .err(n, format!("unknown fov_axis '{s}' (supported: x, y, diagonal, smaller, larger)")));
+                }
+            },
+        };
+        let fov = p.float(&self.x, "fov")?;
+        let focal = p.string(&self.x, "focal_length")?;
+        let fov_y = match (fov, focal) {
+            (Some(_), Some((_, n))) => {
+                return Err(self.x.err(n, "give either 'fov' or 'focal_length', not both"));
+            }
+            (Some((f, n)), None) => {
+                if !(f > 0.0 && f < 180.0) {
+                    return Err(self.x.err(n, format!("'fov' must lie in (0, 180) degrees, got {f}")));
+                }
+                vertical_fov(f, axis, width, height)
+            }
+            (None, focal) => {
+                let mm = match focal {
+                    None => DEFAULT_FOCAL_LENGTH_MM,
+                    Some((s, n)) => {
+                        let digits = s.trim().trim_end_matches("mm");
+                        match digits.trim().parse::<f32>() {
+                            Ok(v) if v.is_finite() && v > 0.0 => v,
+                            _ => {
+                                return Err(self.x.err(
+                                    n,
+                                    format!("'focal_length' must be a positive length like '50mm', got '{s}'"),
+                                ));
+                            }
+                        }
+                    }
+                };
+                let diagonal_fov = 2.0 * (FILM_DIAGONAL_MM / (2.0 * mm)).atan().to_degrees();
+                vertical_fov(diagonal_fov, FovAxis::Diagonal, width, height)
+            }
+        };
+        for clip in ["near_clip", "far_clip"] {
+            if let Some((_, n)) = p.float(&self.x, clip)? {
+                let w = self
+                    .x
+                    .warning(n, format!("property '{clip}' of 'perspective' ignored: pathgrad's camera does not clip"));
+                self.scene.warn(w);
+            }
+        }
+        let transform = p.transform(&self.x, "to_world")?;
+        self.finish(&p)?;
+        let (position, target, up) = match transform {
+            None => (Vec3::ZERO, Vec3::Z, Vec3::Y),
+            Some((t, n)) => camera_frame(&t).map_err(|m| self.x.err(n, m))?,
+        };
+        self.scene.camera = Camera { position, target, up, fov_y_degrees: fov_y, width, height };
+        Ok(())
+    }
+
+    fn film(&mut self, node: El<'a>) -> Result<(u32, u32)> {
+        let p = Props::parse(&self.x, node)?;
+        if p.kind != "hdrfilm" {
+            return Err(self.x.err(node, format!("unsupported plugin '{}' (supported: hdrfilm)", p.kind)));
+        }
+        let mut size = [DEFAULT_FILM.0, DEFAULT_FILM.1];
+        for (s, name) in size.iter_mut().zip(["width", "height"]) {
+            if let Some((v, n)) = p.integer(&self.x, name)? {
+                if !(1..=MAX_FILM).contains(&v) {
+                    return Err(self.x.err(n, format!("'{name}' must lie in [1, {MAX_FILM}], got {v}")));
+                }
+                *s = v as u32;
+            }
+        }
+        // Output encoding only: pathgrad picks it from the output file name.
+        for name in ["pixel_format", "component_format", "file_format"] {
+            p.string(&self.x, name)?;
+        }
+        match p.take_nested(&["rfilter"])[..] {
+            [] => {}
+            [f] => {
+                let f = Props::parse(&self.x, f)?;
+                match f.kind.as_str() {
+                    "box" => {}
+                    // Mitsuba's default filter: naming it changes nothing relative to omitting it.
+                    "gaussian" => {
+                        let w = self.x.warning(
+                            f.node,
+                            "rfilter 'gaussian' (Mitsuba's default) replaced by pathgrad's box filter",
+                        );
+                        self.scene.warn(w);
+                        f.float(&self.x, "stddev")?;
+                    }
+                    other => {
+                        return Err(self
+                            .x
+                            .err(f.node, format!("unsupported plugin '{other}' (supported: box, gaussian as box)")));
+                    }
+                }
+                self.finish(&f)?;
+            }
+            [_, second, ..] => return Err(self.x.err(second, "a film has at most one <rfilter>")),
+        }
+        self.finish(&p)?;
+        Ok((size[0], size[1]))
+    }
+
+    fn sampler(&mut self, node: El<'a>) -> Result<()> {
+        let p = Props::parse(&self.x, node)?;
+        if p.kind != "independent" {
+            return Err(self.x.err(node, format!("unsupported plugin '{}' (supported: independent)", p.kind)));
+        }
+        let count = match p.integer(&self.x, "sample_count")? {
+            None => DEFAULT_SAMPLE_COUNT,
+            Some((v, n)) if !(1..=i64::from(u32::MAX)).contains(&v) => {
+                return Err(self.x.err(n, format!("'sample_count' must be at least 1, got {v}")));
+            }
+            Some((v, _)) => v,
+        };
+        self.scene.default_spp = Some(count as u32);
+        if let Some((_, n)) = p.integer(&self.x, "seed")? {
+            let w = self.x.warning(n, "property 'seed' of 'independent' ignored: pathgrad takes the seed from --seed");
+            self.scene.warn(w);
+        }
+        self.finish(&p)
+    }
+
+    /// Reads `<integrator>` into `scene.max_depth` (−1, Mitsuba's default, becomes
+    /// [`UNBOUNDED_DEPTH_CAP`], which the renderer treats as unbounded).
+    pub(super) fn integrator(&mut self, node: El<'a>) -> Result<()> {
+        let p = Props::parse(&self.x, node)?;
+        if !matches!(p.kind.as_str(), "path" | "prb" | "prb_basic") {
+            return Err(self.x.err(node, format!("unsupported plugin '{}' (supported: path, prb, prb_basic)", p.kind)));
+        }
+        self.scene.max_depth = match p.integer(&self.x, "max_depth")? {
+            None | Some((-1, _)) => UNBOUNDED_DEPTH_CAP,
+            Some((v, _)) if v >= 1 => v.min(i64::from(UNBOUNDED_DEPTH_CAP)) as u32,
+            Some((v, n)) => {
+                return Err(self.x.err(n, format!("'max_depth' must be at least 1, or -1 for unbounded, got {v}")));
+            }
+        };
+        if let Some((v, n)) = p.integer(&self.x, "rr_depth")?
+            && v != i64::from(DEFAULT_RR_DEPTH)
+        {
+            let w = self.x.warning(
+                n,
+                format!(
+                    "property 'rr_depth' of '{}' ignored: pathgrad starts Russian roulette at depth {DEFAULT_RR_DEPTH}",
+                    p.kind
+                ),
+            );
+            self.scene.warn(w);
+        }
+        if p.boolean(&self.x, "hide_emitters", false)? {
+            let n = p.node_of("hide_emitters").unwrap_or(node);
+            let w =
+                self.x.warning(n, format!("property 'hide_emitters' of '{}' ignored: pathgrad shows emitters", p.kind));
+            self.scene.warn(w);
+        }
+        self.finish(&p)
+    }
+}
+
+/// Position, target and up of a camera whose `to_world` is `t`; a single `<lookat>` is kept
+/// verbatim.
+///
+/// # Errors
+/// A singular, mirroring, or non-similarity transform.
+pub(super) fn camera_frame(t: &Transform) -> std::result::Result<(Vec3, Vec3, Vec3), String> {
+    let m: Mat4 = t.matrix;
+    let (x, y, z) = (m.x_axis.truncate(), m.y_axis.truncate(), m.z_axis.truncate());
+    let det = x.dot(y.cross(z));
+    if !(det.abs() > 0.0) {
+        return Err("the sensor's to_world is singular".into());
+    }
+    if det < 0.0 {
+        return Err("the sensor's to_world mirrors the image (negative determinant); pathgrad's camera cannot \
+                    render mirrored images"
+            .into());
+    }
+    let (lx, ly, lz) = (x.length(), y.length(), z.length());
+    let scale = lx.max(ly).max(lz);
+    let similar = (lx - ly).abs() <= SIMILARITY_TOLERANCE * scale
+        && (lx - lz).abs() <= SIMILARITY_TOLERANCE * scale
+        && x.dot(y).abs() <= SIMILARITY_TOLERANCE * lx * ly
+        && x.dot(z).abs() <= SIMILARITY_TOLERANCE * lx * lz
+        && y.dot(z).abs() <= SIMILARITY_TOLERANCE * ly * lz;
+    if !similar {
+        return Err("the sensor's to_world must be a rotation, uniform scale and translation".into());
+    }
+    if let Some([origin, target, up]) = t.lookat {
+        return Ok((origin, target, up));
+    }
+    let position = m.w_axis.truncate();
+    Ok((position, position + z / lz, y / ly))
+}

@@ -1,0 +1,280 @@
+//! `<shape>`: mesh files (obj, ply) and the analytic shapes (rectangle, cube, disk, sphere)
+//! tessellated into triangles, with their BSDF and area emitter.
+//!
+//! Curved shapes are tessellated finely enough that, seen through the scene's camera at the film's
+//! resolution, no point of the mesh lies more than [`MAX_CHORD_ERROR_PX`] pixels from the true
+//! surface (see [`segments_for`]).
+
+use std::f32::consts::{PI, TAU};
+
+use glam::{Mat4, Vec2, Vec3};
+
+use super::loader::{Loader, MeshFormat};
+use super::xml::{El, Props};
+use crate::error::Result;
+use crate::scene::shapes::{Geometry, cuboid, merge, quad, triangle_area};
+use crate::scene::{Camera, MaterialId, bounds};
+
+/// The shape plugins pathgrad reads.
+const SUPPORTED_SHAPES: &str = "cube, disk, obj, ply, rectangle, sphere";
+
+/// Largest distance, in pixels of the scene's film, between a tessellated curved shape and the
+/// true surface. A pixel straddling a silhouette of contrast C and coverage p has a 64-spp standard
+/// error of at least C·√(p(1−p)/64) ≈ 0.06·C at p = ½; a boundary displaced by 0.02 px biases it
+/// by at most 0.02·C, a third of that. Inside the silhouette, hit points move by the same distance
+/// and interpolated normals are exact at vertices, so shading errors are smaller still.
+pub const MAX_CHORD_ERROR_PX: f32 = 0.02;
+/// Fewest segments around a curved shape (distant or tiny shapes).
+pub const MIN_SEGMENTS: u32 = 32;
+/// Most segments around a curved shape (a sphere then has 1024 × 512 × 2 ≈ 1 M triangles).
+pub const MAX_SEGMENTS: u32 = 1024;
+
+/// Segments around a circle of radius `radius` centred at `center` (world space) such that the
+/// mesh stays within [`MAX_CHORD_ERROR_PX`] of the curve on `camera`'s film.
+///
+/// A step of Δ radians leaves a chord whose midpoint lies `r(1 − cos Δ/2) ≈ rΔ²/8` inside the
+/// circle (`cell = 1`); a sphere's grid cell spans Δ in both directions, so the middle of its
+/// diagonal lies `≈ rΔ²/4` inside (`cell = 2`). The circle is at least `d = |c − eye| − r` away, so
+/// that distance covers at most `rΔ²k/8 / (d · θpx)` pixels, where θpx is the smallest angle a
+/// pixel subtends (at the film's corner: `2 tan(fov/2)/h / (1 + tan²x + tan²y)`). Solving for the
+/// bound gives `Δ = √(8ε·d·θpx / (k·r))`. Rendering at k× the film's resolution scales the error
+/// by k.
+pub fn segments_for(camera: &Camera, center: Vec3, radius: f32, cell: f32) -> u32 {
+    let tan_y = (camera.fov_y_degrees.to_radians() * 0.5).tan();
+    let tan_x = tan_y * camera.width as f32 / camera.height as f32;
+    let pixel_angle = 2.0 * tan_y / camera.height as f32 / (1.0 + tan_x * tan_x + tan_y * tan_y);
+    let distance = (center - camera.position).length() - radius;
+    let delta = (8.0 * MAX_CHORD_ERROR_PX * distance * pixel_angle / (cell * radius)).sqrt();
+    let n = if delta.is_finite() && delta > 0.0 { (TAU / delta).ceil() } else { MAX_SEGMENTS as f32 };
+    let n = (n as u32).clamp(MIN_SEGMENTS, MAX_SEGMENTS);
+    n + n % 2
+}
+
+/// The unit sphere with Mitsuba's parametrisation: pole on +z, `u = φ/2π` from +x towards +y,
+/// `v = θ/π` from +z; `rings` bands of θ and `segments` of φ, outward normals, counter-clockwise
+/// seen from outside, no zero-area pole triangles.
+pub fn unit_sphere(rings: u32, segments: u32) -> Geometry {
+    let mut positions = Vec::new();
+    let mut uvs = Vec::new();
+    for i in 0..=rings {
+        let theta = PI * i as f32 / rings as f32;
+        for j in 0..=segments {
+            let phi = TAU * j as f32 / segments as f32;
+            positions.push(Vec3::new(theta.sin() * phi.cos(), theta.sin() * phi.sin(), theta.cos()));
+            uvs.push(Vec2::new(j as f32 / segments as f32, i as f32 / rings as f32));
+        }
+    }
+    let row = segments + 1;
+    let mut indices = Vec::new();
+    for i in 0..rings {
+        for j in 0..segments {
+            let (a, b, c, d) = (i * row + j, i * row + j + 1, (i + 1) * row + j + 1, (i + 1) * row + j);
+            if i + 1 < rings {
+                indices.push([a, d, c]);
+            }
+            if i > 0 {
+                indices.push([a, c, b]);
+            }
+        }
+    }
+    Geometry { normals: Some(positions.clone()), positions, uvs: Some(uvs), indices }
+}
+
+/// Mitsuba's unit disk in z = 0 facing +z, as a fan of `segments` triangles; `u` is the radius
+/// and `v = φ/2π`.
+pub fn unit_disk(segments: u32) -> Geometry {
+    let mut positions = vec![Vec3::ZERO];
+    let mut uvs = vec![Vec2::ZERO];
+    for j in 0..=segments {
+        let phi = TAU * j as f32 / segments as f32;
+        positions.push(Vec3::new(phi.cos(), phi.sin(), 0.0));
+        uvs.push(Vec2::new(1.0, j as f32 / segments as f32));
+    }
+    let indices = (1..=segments).map(|j| [0, j, j + 1]).collect();
+    Geometry { normals: Some(vec![Vec3::Z; positions.len()]), positions, uvs: Some(uvs), indices }
+}
+
+/// Mitsuba's `rectangle` ([−1, 1]² in z = 0, facing +z) under `m`. For `det m > 0` this is
+/// `quad(m·0, m·x, m·y)`, arithmetic for arithmetic, so a rectangle placed by an exact matrix
+/// reproduces the built-in scenes' quads bit for bit.
+pub fn rectangle(m: &Mat4) -> Geometry {
+    let (c, x, y, z) = columns(m);
+    if x.dot(y.cross(z)) > 0.0 { quad(c, x, y) } else { quad(Vec3::ZERO, Vec3::X, Vec3::Y).transformed(m) }
+}
+
+/// Mitsuba's `cube` ([−1, 1]³, outward faces) under `m`. For `det m > 0` the faces are built from
+/// the transformed axes exactly as [`cuboid`] builds them, so `cube` under a diagonal scale and a
+/// translation equals `cuboid(translation, scale)` bit for bit.
+pub fn cube(m: &Mat4) -> Geometry {
+    let (c, x, y, z) = columns(m);
+    if x.dot(y.cross(z)) > 0.0 {
+        merge(&[
+            quad(c + x, y, z),
+            quad(c - x, z, y),
+            quad(c + y, z, x),
+            quad(c - y, x, z),
+            quad(c + z, x, y),
+            quad(c - z, y, x),
+        ])
+    } else {
+        cuboid(Vec3::ZERO, Vec3::ONE).transformed(m)
+    }
+}
+
+/// Translation and the three axes of an affine `m`.
+fn columns(m: &Mat4) -> (Vec3, Vec3, Vec3, Vec3) {
+    (m.w_axis.truncate(), m.x_axis.truncate(), m.y_axis.truncate(), m.z_axis.truncate())
+}
+
+/// Sum of triangle areas.
+fn area(g: &Geometry) -> f32 {
+    g.indices
+        .iter()
+        .map(|t| {
+            let p = t.map(|i| g.positions.get(i as usize).copied().unwrap_or(Vec3::ZERO));
+            triangle_area(p[0], p[1], p[2])
+        })
+        .filter(|a| a.is_finite())
+        .sum()
+}
+
+/// Relative tolerance for "a sphere's to_world is a similarity" (as the sensor's).
+const SIMILARITY_TOLERANCE: f32 = 1e-4;
+
+impl<'a> Loader<'a> {
+    /// Adds the mesh of one `<shape>`.
+    pub(super) fn shape(&mut self, node: El<'a>) -> Result<()> {
+        let name = self.top_name(node)?;
+        let p = Props::parse(&self.x, node)?;
+        let transform = p.transform(&self.x, "to_world")?;
+        let (to_world, t_node) = match transform {
+            Some((t, n)) => (t.matrix, n),
+            None => (Mat4::IDENTITY, node),
+        };
+        let det = Mat4::from_mat3(glam::Mat3::from_mat4(to_world)).determinant();
+        if !(det.abs() > 0.0) {
+            return Err(self.x.err(t_node, "to_world is singular (it flattens the shape)"));
+        }
+        let mut geometry = match p.kind.as_str() {
+            "obj" | "ply" => {
+                let format = if p.kind == "obj" { MeshFormat::Obj } else { MeshFormat::Ply };
+                let (file, file_node) = p
+                    .string(&self.x, "filename")?
+                    .ok_or_else(|| self.x.err(node, format!("'{}' needs the property 'filename'", p.kind)))?;
+                let path = self.dir.join(&file);
+                if !path.is_file() {
+                    return Err(self
+                        .x
+                        .err(file_node, format!("mesh file '{file}' not found (looked for {})", path.display())));
+                }
+                let mut g = (self.meshes)(format, &path).map_err(|e| self.located(node, e))?;
+                if p.boolean(&self.x, "face_normals", false)? {
+                    g.normals = None;
+                }
+                if to_world != Mat4::IDENTITY {
+                    g = g.transformed(&to_world);
+                }
+                g
+            }
+            "rectangle" => rectangle(&to_world),
+            "cube" => cube(&to_world),
+            "disk" => {
+                let (c, x, y, _) = columns(&to_world);
+                let n = segments_for(&self.scene.camera, c, x.length().max(y.length()), 1.0);
+                unit_disk(n).transformed(&to_world)
+            }
+            "sphere" => {
+                let center = p.point(&self.x, "center")?.map_or(Vec3::ZERO, |c| c.0);
+                let radius = match p.float(&self.x, "radius")? {
+                    None => 1.0,
+                    Some((r, _)) if r > 0.0 => r,
+                    Some((r, n)) => return Err(self.x.err(n, format!("'radius' must be positive, got {r}"))),
+                };
+                let m = to_world * Mat4::from_translation(center) * Mat4::from_scale(Vec3::splat(radius));
+                let (c, x, y, z) = columns(&m);
+                let (lx, ly, lz) = (x.length(), y.length(), z.length());
+                let tol = SIMILARITY_TOLERANCE * lx.max(ly).max(lz);
+                if (lx - ly).abs() > tol
+                    || (lx - lz).abs() > tol
+                    || x.dot(y).abs() > tol * ly
+                    || x.dot(z).abs() > tol * lz
+                    || y.dot(z).abs() > tol * lz
+                {
+                    return Err(self.x.err(
+                        t_node,
+                        "a sphere's to_world must be a rotation, uniform scale and translation (Mitsuba \
+                         ignores the rest)",
+                    ));
+                }
+                let n = segments_for(&self.scene.camera, c, lx, 2.0);
+                unit_sphere(n / 2, n).transformed(&m)
+            }
+            other => {
+                return Err(self.x.err(node, format!("unsupported plugin '{other}' (supported: {SUPPORTED_SHAPES})")));
+            }
+        };
+        if p.boolean(&self.x, "flip_normals", false)? {
+            for t in &mut geometry.indices {
+                t.swap(1, 2);
+            }
+            if let Some(normals) = &mut geometry.normals {
+                for n in normals {
+                    *n = -*n;
+                }
+            }
+        }
+        if let Some(bad) = geometry.positions.iter().find(|v| !v.is_finite()) {
+            return Err(self.x.err(node, format!("a vertex position is not finite ({bad})")));
+        }
+        let bsdfs = p.take_nested(&["bsdf", "ref"]);
+        let emitters = p.take_nested(&["emitter"]);
+        self.finish(&p)?;
+        let material = match bsdfs[..] {
+            [] => self.default_bsdf(node, &name)?,
+            [b] => self.bsdf(b, format!("{name}.bsdf"), 1)?,
+            [_, second, ..] => return Err(self.x.err(second, "a shape takes one BSDF")),
+        };
+        let emitter = match emitters[..] {
+            [] => None,
+            [e] => Some(self.area_emitter(e, &name)?),
+            [_, second, ..] => return Err(self.x.err(second, "a shape takes one emitter")),
+        };
+        self.scene.add_mesh(&name, geometry, material, None).map_err(|e| self.located(node, e))?;
+        if let Some((e, param, radiance)) = emitter {
+            let mesh = self.scene.meshes.last().expect("add_mesh pushed a mesh");
+            let g = Geometry { positions: mesh.positions.clone(), indices: mesh.indices.clone(), ..Default::default() };
+            if !(area(&g) > 0.0) {
+                return Err(self.x.err(e, format!("area emitter on shape '{name}' of zero area")));
+            }
+            let id = self
+                .scene
+                .params
+                .add(&param, &radiance.to_array(), bounds::RADIANCE)
+                .map_err(|err| self.located(e, err))?;
+            if let Some(mesh) = self.scene.meshes.last_mut() {
+                mesh.emitter = Some(id);
+            }
+        }
+        Ok(())
+    }
+
+    /// Mitsuba's BSDF for shapes without one: diffuse, reflectance 0.5, named `SHAPE.bsdf`.
+    fn default_bsdf(&mut self, node: El<'a>, name: &str) -> Result<MaterialId> {
+        self.scene.add_diffuse(&format!("{name}.bsdf"), Vec3::splat(0.5)).map_err(|e| self.located(node, e))
+    }
+
+    /// Reads a shape's `<emitter type="area">`: its element, parameter name and radiance.
+    fn area_emitter(&mut self, node: El<'a>, shape: &str) -> Result<(El<'a>, String, Vec3)> {
+        let p = Props::parse(&self.x, node)?;
+        if p.kind != "area" {
+            return Err(self.x.err(node, format!("unsupported plugin '{}' (supported on shapes: area)", p.kind)));
+        }
+        let radiance = self.color_in(&p, "radiance", Vec3::ONE, bounds::RADIANCE)?;
+        let param = match self.x.attr(node, "id")? {
+            Some(id) => format!("{id}.radiance.value"),
+            None => format!("{shape}.emitter.radiance.value"),
+        };
+        self.finish(&p)?;
+        Ok((node, param, radiance))
+    }
+}

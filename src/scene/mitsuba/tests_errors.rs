@@ -1,0 +1,543 @@
+//! Every loader error with its exact message, the malformed fixtures under `tests/data/xml/`, and
+//! inputs built to break the parser (truncations, mutations, deep nesting) that must fail cleanly.
+
+use std::path::Path;
+
+use super::loader::{load_path, load_text};
+use super::tests::{SENSOR, load, obj_for_tests, wrap};
+
+/// The message of the error `body` (inside a scene with a sensor, file `test.xml`) gives.
+fn err(body: &str) -> String {
+    match load(body) {
+        Ok(_) => panic!("{body} loaded"),
+        Err(e) => e.to_string(),
+    }
+}
+
+/// The message of the error a whole document gives.
+fn doc_err(text: &str) -> String {
+    match load_text(text, Path::new("doc.xml"), &[], obj_for_tests) {
+        Ok(_) => panic!("{text} loaded"),
+        Err(e) => e.to_string(),
+    }
+}
+
+#[test]
+fn fixtures_give_their_pinned_messages() {
+    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/xml");
+    let d = dir.display().to_string();
+    let cases: &[(&str, String)] = &[
+        (
+            "unsupported_plugin.xml",
+            "5:5: <bsdf id=\"shiny\">: unsupported plugin 'plastic' (supported: blendbsdf, diffuse, roughconductor, twosided)"
+                .into(),
+        ),
+        ("bad_rgb.xml", "7:13: <rgb name=\"reflectance\">: value: expected a number, got 'x'".into()),
+        (
+            "missing_mesh.xml",
+            format!(
+                "6:9: <string name=\"filename\">: mesh file 'meshes/missing.obj' not found (looked for {d}/meshes/missing.obj)"
+            ),
+        ),
+        ("unknown_ref.xml", "6:9: <ref id=\"nope\">: reference to unknown id 'nope'".into()),
+        ("nan_value.xml", "7:13: <float name=\"alpha\">: value: 'nan' is not a finite number".into()),
+        ("no_shapes.xml", "1:1: <scene>: the scene has no shapes".into()),
+        ("bad_version.xml", "1:1: <scene>: unsupported scene version '0.6.0' (pathgrad reads 2.x and 3.x)".into()),
+        ("unclosed_tag.xml", "7:1: malformed XML: expected 'shape' tag, not 'scene'".into()),
+        ("not_xml.xml", "1:1: malformed XML: unknown token".into()),
+        (
+            "negative_value.xml",
+            "7:13: <rgb name=\"reflectance\">: 'reflectance' must lie in [0, 1], got [-0.5, -0.5, -0.5]".into(),
+        ),
+        ("zero_area_emitter.xml", "9:9: <emitter>: area emitter on shape '_unnamed_0' of zero area".into()),
+        ("singular_transform.xml", "6:9: <transform name=\"to_world\">: to_world is singular (it flattens the shape)".into()),
+        (
+            "no_sensor.xml",
+            "1:1: <scene>: the scene has no <sensor>; pathgrad needs a perspective sensor (it has no default camera)".into(),
+        ),
+        (
+            "undefined_parameter.xml",
+            "6:9: <float name=\"radius\">: undefined parameter '$radius' in attribute 'value' (define it with \
+             <default name=\"radius\" value=\"…\"/> or -D radius=VALUE)"
+                .into(),
+        ),
+        ("ref_cycle.xml", "8:9: <ref id=\"loop\">: reference cycle: this BSDF contains itself".into()),
+        (
+            "bad_spectrum.xml",
+            "7:13: <spectrum name=\"reflectance\">: only constant spectra are supported (one number), got \
+             wavelength:value pairs '400:0.1, 700:0.9'"
+                .into(),
+        ),
+        (
+            "mirrored_camera.xml",
+            "3:9: <transform name=\"to_world\">: the sensor's to_world mirrors the image (negative determinant); \
+             pathgrad's camera cannot render mirrored images"
+                .into(),
+        ),
+        ("duplicate_id.xml", format!("6:5: <shape id=\"a\">: duplicate id 'a' (first used at {d}/duplicate_id.xml:5:5)")),
+        (
+            "unsupported_element.xml",
+            "5:5: <medium id=\"fog\">: unsupported element <medium> (supported in <scene>: default, bsdf, texture, \
+             shape, emitter, sensor, integrator)"
+                .into(),
+        ),
+    ];
+    for (file, tail) in cases {
+        let path = dir.join(file);
+        let e = load_path(&path, &[], obj_for_tests).map(|_| ()).unwrap_err().to_string();
+        assert_eq!(e, format!("{}:{tail}", path.display()), "{file}");
+    }
+    // Every fixture is pinned (unknown_property.xml loads, with warnings: below).
+    let mut files: Vec<String> =
+        std::fs::read_dir(&dir).unwrap().map(|e| e.unwrap().file_name().to_string_lossy().into_owned()).collect();
+    files.retain(|f| f != "unknown_property.xml" && !cases.iter().any(|(c, _)| c == f));
+    assert!(files.is_empty(), "fixtures without a pinned message: {files:?}");
+
+    let path = dir.join("unknown_property.xml");
+    let s = load_path(&path, &[], obj_for_tests).unwrap();
+    let p = path.display();
+    assert_eq!(
+        s.warnings,
+        [
+            format!("{p}:6:9: unknown property 'radius' of 'cube' ignored"),
+            format!("{p}:8:13: unknown property 'roughness' of 'diffuse' ignored"),
+        ]
+    );
+}
+
+#[test]
+fn an_all_degenerate_shape_fails_validation() {
+    let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/xml/zero_area_emitter.xml");
+    let text = std::fs::read_to_string(&path).unwrap().replace("<emitter type=\"area\"/>", "");
+    let s = load_text(&text, &path, &[], obj_for_tests).map(|s| s.warnings);
+    // Without the emitter the shape is merely empty, so the scene has no triangles.
+    assert_eq!(
+        s.unwrap_err().to_string(),
+        format!("{}: scene: has no triangles", path.display()),
+        "validation catches an all-degenerate scene"
+    );
+}
+
+#[test]
+fn document_errors() {
+    assert_eq!(
+        doc_err(r#"<scene><shape type="cube"/></scene>"#),
+        "doc.xml:1:1: <scene>: missing attribute 'version' (pathgrad reads Mitsuba 2.x and 3.x scenes)"
+    );
+    assert_eq!(doc_err(r#"<shape version="3.0.0"/>"#), "doc.xml:1:1: <shape>: the root element must be <scene>");
+    assert_eq!(
+        doc_err(r#"<scene version="3.0.0" foo="1"/>"#),
+        "doc.xml:1:1: <scene>: unexpected attribute 'foo' (allowed: version)"
+    );
+    assert_eq!(
+        doc_err(&format!("<scene version=\"3.0.0\">{SENSOR}\n  <film type=\"hdrfilm\"/></scene>")),
+        "doc.xml:2:3: <film>: a <film> must be inside a <sensor>"
+    );
+    assert_eq!(
+        doc_err(&format!(
+            r#"<scene version="3.0.0">{SENSOR}<integrator type="path"/><integrator type="path"/><shape type="cube"/></scene>"#
+        )),
+        format!("doc.xml:1:{}: <integrator>: a scene has at most one <integrator>", SENSOR.len() + 49)
+    );
+    assert_eq!(
+        doc_err(r#"<scene version="3.0.0"><default name="a" value="1"/><default name="a" value="2"/></scene>"#),
+        "doc.xml:1:53: <default name=\"a\">: parameter 'a' has two defaults"
+    );
+    assert_eq!(
+        doc_err(r#"<scene version="3.0.0"><default name="2x" value="1"/></scene>"#),
+        "doc.xml:1:24: <default name=\"2x\">: '2x' is not a valid parameter name ([A-Za-z_][A-Za-z0-9_]*)"
+    );
+    assert_eq!(
+        doc_err(r#"<!DOCTYPE scene [<!ENTITY a "b">]><scene version="3.0.0"/>"#),
+        "doc.xml:1:1: malformed XML: XML with DTD detected"
+    );
+    let ok =
+        load_text(&wrap(r#"<shape type="cube"/><emitter type="constant"/>"#), Path::new("x.xml"), &[], obj_for_tests);
+    let ok = ok.unwrap();
+    assert_eq!(ok.warnings, Vec::<String>::new());
+}
+
+#[test]
+fn element_and_property_errors() {
+    let at = |e: String| e.split_once(": ").map(|(_, m)| m.to_string()).unwrap();
+    // Positions are pinned above; here the messages.
+    let cases: &[(&str, &str)] = &[
+        (r#"<ref id="x"/>"#, "<ref id=\"x\">: a <ref> at scene level is not supported"),
+        (r#"<bsdf type="diffuse" id=""/>"#, "<bsdf id=\"\">: an id must not be empty"),
+        (r#"<bsdf type="diffuse" colour="red"/>"#, "<bsdf>: unexpected attribute 'colour' (allowed: type, id, name)"),
+        (r#"<shape type="cube">oops</shape>"#, "<shape>: unexpected text inside the element"),
+        (
+            r#"<shape type="cube"><color name="c" value="1"/></shape>"#,
+            "<color name=\"c\">: unsupported element <color> (supported inside an object: boolean, float, integer, point, rgb, spectrum, string, transform, vector, bsdf, emitter, film, integrator, ref, rfilter, sampler, sensor, shape, texture)",
+        ),
+        (
+            r#"<shape type="cube"><float name="a" value="1" unit="m"/></shape>"#,
+            "<float name=\"a\">: unexpected attribute 'unit' (allowed: name, value)",
+        ),
+        (r#"<shape type="cube"><float value="1"/></shape>"#, "<float>: missing attribute 'name'"),
+        (r#"<shape type="cube"><float name="a"/></shape>"#, "<float name=\"a\">: missing attribute 'value'"),
+        (
+            r#"<shape type="cube"><float name="a" value="1 2"/></shape>"#,
+            "<float name=\"a\">: value: expected one number, got '1 2'",
+        ),
+        (
+            r#"<shape type="cube"><integer name="a" value="1.5"/></shape>"#,
+            "<integer name=\"a\">: expected an integer, got '1.5'",
+        ),
+        (
+            r#"<shape type="cube"><boolean name="a" value="yes"/></shape>"#,
+            "<boolean name=\"a\">: expected 'true' or 'false', got 'yes'",
+        ),
+        (
+            r#"<shape type="cube"><rgb name="a" value="1 2"/></shape>"#,
+            "<rgb name=\"a\">: value: expected 1 or 3 numbers, got '1 2'",
+        ),
+        (
+            r#"<shape type="cube"><float name="a" value="inf"/></shape>"#,
+            "<float name=\"a\">: value: 'inf' is not a finite number",
+        ),
+        (
+            r#"<shape type="cube"><float name="a" value="1"/><float name="a" value="2"/></shape>"#,
+            "<float name=\"a\">: property 'a' is given twice",
+        ),
+        (
+            r#"<shape type="cube"><point name="p" value="1" x="2"/></shape>"#,
+            "<point name=\"p\">: give either 'value' or 'x'/'y'/'z', not both",
+        ),
+        (
+            r#"<shape type="cube"><rgb name="flip_normals" value="1"/></shape>"#,
+            "<rgb name=\"flip_normals\">: property 'flip_normals' of 'cube' must be a <boolean>",
+        ),
+        (r#"<shape type="cube"><film type="hdrfilm"/></shape>"#, "<film>: a <film> is not expected inside 'cube'"),
+        (r#"<shape/>"#, "<shape>: missing attribute 'type'"),
+        (
+            r#"<shape type="cylinder"/>"#,
+            "<shape>: unsupported plugin 'cylinder' (supported: cube, disk, obj, ply, rectangle, sphere)",
+        ),
+        (r#"<shape type="obj"/>"#, "<shape>: 'obj' needs the property 'filename'"),
+        (
+            r#"<shape type="cube"><bsdf type="diffuse"/><bsdf type="diffuse"/></shape>"#,
+            "<bsdf>: a shape takes one BSDF",
+        ),
+        (
+            r#"<shape type="cube"><emitter type="area"/><emitter type="area"/></shape>"#,
+            "<emitter>: a shape takes one emitter",
+        ),
+        (
+            r#"<shape type="cube"><emitter type="point"/></shape>"#,
+            "<emitter>: unsupported plugin 'point' (supported on shapes: area)",
+        ),
+        (
+            r#"<shape type="cube"><emitter type="area"><rgb name="radiance" value="-1"/></emitter></shape>"#,
+            "<rgb name=\"radiance\">: 'radiance' must lie in [0, ∞), got [-1, -1, -1]",
+        ),
+        (
+            r#"<shape type="sphere"><float name="radius" value="-1"/></shape>"#,
+            "<float name=\"radius\">: 'radius' must be positive, got -1",
+        ),
+        (
+            r#"<shape type="sphere"><transform name="to_world"><scale x="2"/></transform></shape>"#,
+            "<transform name=\"to_world\">: a sphere's to_world must be a rotation, uniform scale and translation (Mitsuba ignores the rest)",
+        ),
+        (
+            r#"<shape type="cube"><transform name="to_world"><shear/></transform></shape>"#,
+            "<shear>: unsupported transform element <shear> (supported: translate, rotate, scale, matrix, lookat)",
+        ),
+        (
+            r#"<shape type="cube"><transform name="to_world"><rotate angle="3"/></transform></shape>"#,
+            "<rotate>: the rotation axis must be a non-zero vector",
+        ),
+        (
+            r#"<shape type="cube"><transform name="to_world"><rotate x="1"/></transform></shape>"#,
+            "<rotate>: missing attribute 'angle'",
+        ),
+        (
+            r#"<shape type="cube"><transform name="to_world"><matrix value="1 2 3"/></transform></shape>"#,
+            "<matrix>: a matrix needs 16 (or 9) numbers, got 3",
+        ),
+        (
+            r#"<shape type="cube"><transform name="to_world"><matrix value="1 0 0 0 0 1 0 0 0 0 1 0 0 0 1 1"/></transform></shape>"#,
+            "<transform name=\"to_world\">: projective transforms are not supported (the last row must be 0 0 0 1)",
+        ),
+        (
+            r#"<shape type="cube"><transform name="to_world"><scale value="1e30"/><scale value="1e30"/></transform></shape>"#,
+            "<transform name=\"to_world\">: the transform is not finite",
+        ),
+        (
+            r#"<shape type="cube"><transform name="to_world"><lookat origin="1 1 1" target="1 1 1"/></transform></shape>"#,
+            "<lookat>: lookat: origin and target coincide",
+        ),
+        (
+            r#"<shape type="cube"><transform name="to_world"><lookat origin="0 0 0" target="0 1 0" up="0 2 0"/></transform></shape>"#,
+            "<lookat>: lookat: 'up' is parallel to the viewing direction",
+        ),
+        (
+            r#"<shape type="cube"><transform name="to_world">x</transform></shape>"#,
+            "<transform name=\"to_world\">: unexpected text inside the element",
+        ),
+        (
+            r#"<shape type="cube"><ref id="c"/></shape><shape type="cube" id="c"/>"#,
+            "<ref id=\"c\">: refers to a <shape>, expected a <bsdf>",
+        ),
+        (r#"<shape type="cube"><ref/></shape>"#, "<ref>: missing attribute 'id'"),
+        (
+            r#"<bsdf type="diffuse"><ref name="reflectance" id="d"/></bsdf><bsdf type="diffuse" id="d"/>"#,
+            "<ref id=\"d\">: refers to a <bsdf>, expected a <texture>",
+        ),
+        (
+            r#"<bsdf type="diffuse"><rgb name="reflectance" value="1.5, 0, 0"/></bsdf>"#,
+            "<rgb name=\"reflectance\">: 'reflectance' must lie in [0, 1], got [1.5, 0, 0]",
+        ),
+        (
+            r#"<bsdf type="roughconductor"><float name="alpha" value="0"/></bsdf>"#,
+            "<float name=\"alpha\">: 'alpha' must lie in [0.001, ∞), got 0",
+        ),
+        (
+            r#"<bsdf type="roughconductor"><rgb name="alpha" value="0.1"/></bsdf>"#,
+            "<rgb name=\"alpha\">: property 'alpha' of 'roughconductor' must be a <float>",
+        ),
+        (
+            r#"<bsdf type="roughconductor"><texture type="bitmap" name="alpha"/></bsdf>"#,
+            "<texture name=\"alpha\">: property 'alpha' of 'roughconductor' must be a <float>",
+        ),
+        (
+            r#"<bsdf type="roughconductor"><float name="alpha_u" value="0.1"/><float name="alpha_v" value="0.2"/></bsdf>"#,
+            "<bsdf>: anisotropic roughness (0.1 ≠ 0.2) is not supported",
+        ),
+        (
+            r#"<bsdf type="roughconductor"><float name="alpha_u" value="0.1"/><float name="alpha" value="0.2"/></bsdf>"#,
+            "<bsdf>: give either 'alpha' or 'alpha_u'/'alpha_v', not both",
+        ),
+        (
+            r#"<bsdf type="roughconductor"><string name="distribution" value="phong"/></bsdf>"#,
+            "<string name=\"distribution\">: unsupported distribution 'phong' (supported: beckmann, ggx)",
+        ),
+        (
+            r#"<bsdf type="roughconductor"><string name="material" value="Au"/><rgb name="eta" value="1"/></bsdf>"#,
+            "<string name=\"material\">: give either 'material' or 'eta'/'k', not both",
+        ),
+        (
+            r#"<bsdf type="roughconductor"><string name="material" value="Unobtainium"/></bsdf>"#,
+            "<string name=\"material\">: unknown conductor material 'Unobtainium' (supported: none, Au, Ag, Cu, Al, Cr)",
+        ),
+        (
+            r#"<bsdf type="roughconductor"><rgb name="k" value="-1"/></bsdf>"#,
+            "<rgb name=\"k\">: 'k' must lie in [0, ∞), got [-1, -1, -1]",
+        ),
+        (
+            r#"<bsdf type="blendbsdf"><bsdf type="diffuse"/><bsdf type="diffuse"/></bsdf>"#,
+            "<bsdf>: 'blendbsdf' needs the property 'weight'",
+        ),
+        (
+            r#"<bsdf type="blendbsdf"><float name="weight" value="2"/></bsdf>"#,
+            "<float name=\"weight\">: 'weight' must lie in [0, 1], got 2",
+        ),
+        (
+            r#"<bsdf type="blendbsdf"><float name="weight" value="0.5"/><bsdf type="diffuse"/></bsdf>"#,
+            "<bsdf>: 'blendbsdf' needs 2 nested BSDFs, got 1",
+        ),
+        (
+            r#"<bsdf type="blendbsdf"><texture type="bitmap" name="weight"/></bsdf>"#,
+            "<texture name=\"weight\">: property 'weight' of 'blendbsdf' must be a <float>",
+        ),
+        (
+            r#"<bsdf type="blendbsdf"><float name="weight" value="0.5"/><bsdf type="diffuse"/><bsdf type="twosided"><bsdf type="diffuse"/></bsdf></bsdf>"#,
+            "<bsdf>: 'blendbsdf' children must both be diffuse/roughconductor, or both twosided wrappers of those (pathgrad blends two leaf BSDFs)",
+        ),
+        (r#"<bsdf type="twosided"/>"#, "<bsdf>: 'twosided' needs 1 nested BSDF, got 0"),
+        (
+            r#"<bsdf type="twosided"><bsdf type="diffuse"/><bsdf type="diffuse"/></bsdf>"#,
+            "<bsdf>: 'twosided' with different front and back BSDFs is not supported (give one)",
+        ),
+        (
+            r#"<bsdf type="twosided"><bsdf type="twosided"><bsdf type="diffuse"/></bsdf></bsdf>"#,
+            "<bsdf>: a 'twosided' BSDF cannot wrap another twosided one",
+        ),
+        (r#"<texture type="checkerboard"/>"#, "<texture>: unsupported plugin 'checkerboard' (supported: bitmap)"),
+        (r#"<texture type="bitmap"/>"#, "<texture>: 'bitmap' needs the property 'filename'"),
+        (r#"<emitter type="area"/>"#, "<emitter>: an 'area' emitter must be nested in a <shape>"),
+        (
+            r#"<emitter type="envmap"/>"#,
+            "<emitter>: unsupported plugin 'envmap' (supported: constant; area inside a <shape>)",
+        ),
+        (
+            r#"<emitter type="constant"/><emitter type="constant"/>"#,
+            "<emitter>: a scene has at most one constant emitter",
+        ),
+        (
+            r#"<integrator type="volpath"/>"#,
+            "<integrator>: unsupported plugin 'volpath' (supported: path, prb, prb_basic)",
+        ),
+        (
+            r#"<integrator type="path"><integer name="max_depth" value="0"/></integrator>"#,
+            "<integer name=\"max_depth\">: 'max_depth' must be at least 1, or -1 for unbounded, got 0",
+        ),
+    ];
+    for (body, expected) in cases {
+        assert_eq!(at(err(body)), *expected, "{body}");
+    }
+}
+
+#[test]
+fn sensor_errors() {
+    let sensor = |inner: &str| {
+        doc_err(&format!(
+            r#"<scene version="3.0.0"><sensor type="perspective">{inner}</sensor><shape type="cube"/></scene>"#
+        ))
+    };
+    let at = |e: String| e.splitn(4, ':').nth(3).unwrap().trim_start().to_string();
+    let cases: &[(&str, &str)] = &[
+        (r#"<float name="fov" value="180"/>"#, "<float name=\"fov\">: 'fov' must lie in (0, 180) degrees, got 180"),
+        (
+            r#"<float name="fov" value="40"/><string name="focal_length" value="35mm"/>"#,
+            "<string name=\"focal_length\">: give either 'fov' or 'focal_length', not both",
+        ),
+        (
+            r#"<string name="focal_length" value="wide"/>"#,
+            "<string name=\"focal_length\">: 'focal_length' must be a positive length like '50mm', got 'wide'",
+        ),
+        (
+            r#"<string name="fov_axis" value="z"/>"#,
+            "<string name=\"fov_axis\">: unknown fov_axis 'z' (supported: x, y, diagonal, smaller, larger)",
+        ),
+        (r#"<film type="ldrfilm"/>"#, "<film>: unsupported plugin 'ldrfilm' (supported: hdrfilm)"),
+        (r#"<film type="hdrfilm"/><film type="hdrfilm"/>"#, "<film>: a sensor has at most one <film>"),
+        (
+            r#"<film type="hdrfilm"><integer name="width" value="0"/></film>"#,
+            "<integer name=\"width\">: 'width' must lie in [1, 16384], got 0",
+        ),
+        (
+            r#"<film type="hdrfilm"><rfilter type="tent"/></film>"#,
+            "<rfilter>: unsupported plugin 'tent' (supported: box, gaussian as box)",
+        ),
+        (r#"<sampler type="stratified"/>"#, "<sampler>: unsupported plugin 'stratified' (supported: independent)"),
+        (
+            r#"<sampler type="independent"><integer name="sample_count" value="0"/></sampler>"#,
+            "<integer name=\"sample_count\">: 'sample_count' must be at least 1, got 0",
+        ),
+        (
+            r#"<transform name="to_world"><scale x="2"/></transform>"#,
+            "<transform name=\"to_world\">: the sensor's to_world must be a rotation, uniform scale and translation",
+        ),
+        (
+            r#"<transform name="to_world"><scale value="0"/></transform>"#,
+            "<transform name=\"to_world\">: the sensor's to_world is singular",
+        ),
+    ];
+    for (inner, expected) in cases {
+        assert_eq!(at(sensor(inner)), *expected, "{inner}");
+    }
+    assert_eq!(
+        doc_err(r#"<scene version="3.0.0"><sensor type="thinlens"/></scene>"#),
+        "doc.xml:1:24: <sensor>: unsupported plugin 'thinlens' (supported: perspective)"
+    );
+}
+
+#[test]
+fn ignored_settings_are_warned_about() {
+    let xml = r#"<scene version="3.0.0">
+<integrator type="path"><integer name="rr_depth" value="3"/><boolean name="hide_emitters" value="true"/></integrator>
+<sensor type="perspective"><float name="near_clip" value="0.1"/>
+<film type="hdrfilm"><rfilter type="gaussian"/><string name="pixel_format" value="rgb"/></film><sampler type="independent"><integer name="seed" value="3"/></sampler></sensor>
+<shape type="cube"><bsdf type="diffuse"><texture type="bitmap" name="reflectance"><string name="filename" value="t.png"/><string name="filter_type" value="nearest"/></texture></bsdf></shape>
+</scene>"#;
+    let dir = tempfile::tempdir().unwrap();
+    image::RgbImage::from_raw(1, 1, vec![1, 2, 3]).unwrap().save(dir.path().join("t.png")).unwrap();
+    let s = load_text(xml, &dir.path().join("w.xml"), &[], obj_for_tests).unwrap();
+    let w: Vec<String> = s.warnings.iter().map(|w| w.split_once("w.xml:").unwrap().1.to_string()).collect();
+    assert_eq!(
+        w,
+        [
+            "4:22: rfilter 'gaussian' (Mitsuba's default) replaced by pathgrad's box filter",
+            "4:124: property 'seed' of 'independent' ignored: pathgrad takes the seed from --seed",
+            "3:28: property 'near_clip' of 'perspective' ignored: pathgrad's camera does not clip",
+            "2:25: property 'rr_depth' of 'path' ignored: pathgrad starts Russian roulette at depth 5",
+            "2:61: property 'hide_emitters' of 'path' ignored: pathgrad shows emitters",
+            "5:122: property 'filter_type' = 'nearest' of 'bitmap' ignored: pathgrad uses 'bilinear'",
+            "1:1: the scene has no emitters: it renders black",
+        ]
+    );
+}
+
+#[test]
+fn missing_and_broken_bitmaps_name_the_file() {
+    let dir = tempfile::tempdir().unwrap();
+    std::fs::write(dir.path().join("bad.png"), b"not a png").unwrap();
+    let body = |f: &str| {
+        wrap(&format!(
+            r#"<shape type="cube"><bsdf type="diffuse"><texture type="bitmap" name="reflectance"><string name="filename" value="{f}"/></texture></bsdf></shape>"#
+        ))
+    };
+    let file = dir.path().join("b.xml");
+    let e = load_text(&body("gone.png"), &file, &[], obj_for_tests).unwrap_err().to_string();
+    let col = SENSOR.len() + 106;
+    assert_eq!(
+        e,
+        format!(
+            "{}:1:{col}: <string name=\"filename\">: image file 'gone.png' not found (looked for {})",
+            file.display(),
+            dir.path().join("gone.png").display()
+        )
+    );
+    let e = load_text(&body("bad.png"), &file, &[], obj_for_tests).unwrap_err().to_string();
+    assert!(
+        e.starts_with(&format!("{}:1:{col}: <string name=\"filename\">: reading 'bad.png': ", file.display())),
+        "{e}"
+    );
+    exr::prelude::write_rgba_file(dir.path().join("hot.exr"), 1, 1, |_, _| (2.0f32, 0.0f32, 0.0f32, 1.0f32)).unwrap();
+    let e = load_text(&body("hot.exr"), &file, &[], obj_for_tests).unwrap_err().to_string();
+    assert!(e.ends_with("'hot.exr': texel (0, 0) has value 2 outside [0, 1] (reflectances must be at most 1)"), "{e}");
+}
+
+#[test]
+fn nesting_is_capped_and_cycles_are_found() {
+    // 20 blends deep: the 17th level is refused before anything is built.
+    let mut body = String::from(r#"<bsdf type="diffuse"/>"#);
+    for _ in 0..20 {
+        body =
+            format!(r#"<bsdf type="blendbsdf"><float name="weight" value="0.5"/>{body}<bsdf type="diffuse"/></bsdf>"#);
+    }
+    let e = err(&format!(r#"<shape type="cube">{body}</shape>"#));
+    assert!(e.ends_with("<bsdf>: BSDFs and textures nest more than 16 deep"), "{e}");
+    // A hundred thousand nested elements: no stack overflow, a clean error.
+    let deep = "<bsdf type=\"twosided\">".repeat(100_000) + &"</bsdf>".repeat(100_000);
+    let e = err(&format!(r#"<shape type="cube">{deep}</shape>"#));
+    assert!(e.ends_with("<bsdf>: BSDFs and textures nest more than 16 deep"), "{e}");
+    // Mutual references.
+    let e =
+        err(r#"<bsdf type="twosided" id="a"><ref id="b"/></bsdf><bsdf type="twosided" id="b"><ref id="a"/></bsdf>"#);
+    assert!(e.ends_with("<ref id=\"a\">: reference cycle: this BSDF contains itself"), "{e}");
+}
+
+/// A mesh reader that returns one triangle, so that thousands of loads stay fast.
+fn one_triangle(_: super::loader::MeshFormat, _: &Path) -> crate::error::Result<crate::scene::shapes::Geometry> {
+    Ok(crate::scene::shapes::quad(glam::Vec3::ZERO, glam::Vec3::X, glam::Vec3::Y))
+}
+
+/// Every prefix of the shipped scenes, and each with single bytes replaced, loads or fails with a
+/// located error — never a panic.
+#[test]
+fn truncated_and_mutated_scenes_fail_cleanly() {
+    for rel in ["scenes/cornell-box/cornell-box.xml", "scenes/blend/blend.xml"] {
+        let path = Path::new(env!("CARGO_MANIFEST_DIR")).join(rel);
+        let text = std::fs::read_to_string(&path).unwrap();
+        let mut cuts: Vec<usize> = (0..text.len()).step_by(7).filter(|&i| text.is_char_boundary(i)).collect();
+        cuts.push(text.len());
+        for cut in cuts {
+            if let Err(e) = load_text(&text[..cut], &path, &[], one_triangle) {
+                assert!(e.to_string().starts_with(&path.display().to_string()), "{e}");
+            }
+        }
+        let bytes = text.as_bytes();
+        for (i, replacement) in
+            (0..bytes.len()).step_by(3).zip([b'<', b'"', b'$', b'0', b'-', b'/', b'>', b'x'].iter().cycle())
+        {
+            let mut m = bytes.to_vec();
+            m[i] = *replacement;
+            let Ok(m) = String::from_utf8(m) else { continue };
+            if let Err(e) = load_text(&m, &path, &[], one_triangle) {
+                assert!(e.to_string().starts_with(&path.display().to_string()), "{e}");
+            }
+        }
+    }
+}
