@@ -19,6 +19,16 @@
 //! // The CPU reference renders the same image up to float rounding.
 //! let reference = pathgrad::cpu::render(&scene, &options)?;
 //! assert_eq!(reference.width(), image.width());
+//!
+//! // Gradients: the loss against a target, differentiated by Path Replay Backpropagation.
+//! use pathgrad::gpu::renderer::GradMode;
+//! use pathgrad::loss::Loss;
+//! let target = pathgrad::image::Image::read_exr("target.exr")?;
+//! let (loss, gradients) = renderer.loss_and_gradient(&options, &target, Loss::RelMse, GradMode::Float)?;
+//! println!("loss {loss}: d/d alpha = {:?}", gradients.get("sphere.alpha.value"));
+//! // Forward mode: how every pixel changes with the sphere's roughness.
+//! let d_image = renderer.image_gradient(&options, "sphere.alpha.value")?;
+//! d_image.write_signed_png("d_alpha.png", None)?;
 //! # Ok::<(), pathgrad::Error>(())
 //! ```
 
