@@ -60,6 +60,8 @@ fn main() -> pathgrad::Result<()> {
     let adjoint_fixed = time(runs, || renderer.backward(&opts, &adjoint, GradMode::Deterministic))?;
     let step = time(runs, || renderer.loss_and_gradient(&opts, &target, Loss::RelMse, GradMode::Float))?;
     let loss_host = time(runs, || loss_and_adjoint(&target, &target, Loss::RelMse))?;
+    pathgrad::loss::loss_and_adjoint_gpu(&ctx, &target, &target, Loss::RelMse)?;
+    let loss_gpu = time(runs, || pathgrad::loss::loss_and_adjoint_gpu(&ctx, &target, &target, Loss::RelMse))?;
     println!("builtin:cornell-box 256x256, 16 spp, max depth 6, median of {runs}:");
     println!("  primal render (pass 1)          {primal:8.3} s");
     println!(
@@ -72,6 +74,7 @@ fn main() -> pathgrad::Result<()> {
     );
     println!("  gradient step (loss_and_gradient) {step:6.3} s");
     println!("  relMSE loss + adjoint image on the host {:.2} ms", loss_host * 1e3);
+    println!("  relMSE loss + adjoint image on the device {:.2} ms (upload, dispatch, read-back)", loss_gpu * 1e3);
 
     // Sweeps on a 64x64 image to keep the run short on lavapipe.
     let small = RenderOptions { width: 64, height: 64, ..opts };

@@ -92,6 +92,44 @@ pub fn loss_and_adjoint(image: &Image, target: &Image, loss: Loss) -> Result<(f6
     Ok((total / n, Image::from_rgb(image.width(), image.height(), adjoint)?))
 }
 
+/// The loss and its adjoint image computed by `shaders/loss.comp` on `ctx`'s device (the loss
+/// summed in f32 with float atomics, so its last bits vary run to run).
+///
+/// # Errors
+/// [`Error::InvalidArgument`] if the sizes differ; Vulkan failures.
+pub fn loss_and_adjoint_gpu(
+    ctx: &std::sync::Arc<crate::gpu::Context>,
+    image: &Image,
+    target: &Image,
+    loss: Loss,
+) -> Result<(f64, Image)> {
+    use crate::gpu::abi::{BINDING_PROBE_IN, BINDING_PROBE_OUT};
+    use crate::gpu::{Buffer, Kernel, pipeline::groups_for};
+    if (image.width(), image.height()) != (target.width(), target.height()) {
+        return Err(Error::InvalidArgument {
+            parameter: "target".into(),
+            message: "size differs from the render".into(),
+        });
+    }
+    let n = image.as_slice().len();
+    let mut both = image.as_slice().to_vec();
+    both.extend_from_slice(target.as_slice());
+    let input = Buffer::storage_with(ctx, "loss input", &both)?;
+    let output = Buffer::storage(ctx, "loss output", ((n + 1) * 4) as u64)?;
+    output.clear()?;
+    let kernel = Kernel::new(ctx, "loss", &[BINDING_PROBE_IN, BINDING_PROBE_OUT], 8)?;
+    let group = kernel.bind(&[(BINDING_PROBE_IN, &input), (BINDING_PROBE_OUT, &output)])?;
+    let kind: u32 = match loss {
+        Loss::L1 => 0,
+        Loss::L2 => 1,
+        Loss::RelMse => 2,
+    };
+    let push = [n as u32, kind];
+    ctx.submit_and_wait("loss", |cmd| kernel.record(cmd, &group, bytemuck::cast_slice(&push), groups_for(n as u32)))?;
+    let out: Vec<f32> = output.download(n + 1)?;
+    Ok((f64::from(out[0]), Image::from_rgb(image.width(), image.height(), out[1..].to_vec())?))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

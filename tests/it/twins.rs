@@ -183,3 +183,26 @@ fn bsdf_gpu_equals_cpu() {
     // directions within ~1e-6 of the horizon: allow 1e-3 of the cases.
     assert!(validity_flips as f64 <= 1e-3 * cases.len() as f64, "{validity_flips} validity flips");
 }
+
+/// The GPU loss kernel equals the host loss: adjoints to f32 rounding, the loss to the rounding of
+/// an f32 sum of 3·W·H terms (relative 1e-5).
+#[test]
+fn loss_gpu_equals_host() {
+    use pathgrad::image::Image;
+    use pathgrad::loss::{Loss, loss_and_adjoint, loss_and_adjoint_gpu};
+    let gpu = TestGpu::new();
+    let (w, h) = (37, 23);
+    let make = |k: f32| {
+        let v: Vec<f32> = (0..w * h * 3).map(|i| ((i as f32 * 0.731 + k).sin() * 0.5 + 0.5) * 2.0).collect();
+        Image::from_rgb(w, h, v).unwrap()
+    };
+    let (image, target) = (make(0.0), make(0.4));
+    for loss in [Loss::L1, Loss::L2, Loss::RelMse] {
+        let (lh, ah) = loss_and_adjoint(&image, &target, loss).unwrap();
+        let (lg, ag) = loss_and_adjoint_gpu(&gpu.ctx, &image, &target, loss).unwrap();
+        assert!((lh - lg).abs() <= 1e-5 * lh.abs(), "{loss:?}: host {lh} vs GPU {lg}");
+        for (a, b) in ah.as_slice().iter().zip(ag.as_slice()) {
+            assert!((a - b).abs() <= 1e-6 * a.abs().max(b.abs()) + 1e-12, "{loss:?}: adjoint {a} vs {b}");
+        }
+    }
+}

@@ -1,0 +1,37 @@
+// Loss and adjoint image on the GPU (ALGORITHMS.md §7.1): per value, the loss term and
+// A = ∂loss/∂I, with the loss summed by a subgroup reduction and one float atomic per subgroup.
+#version 460
+#extension GL_EXT_scalar_block_layout : require
+#extension GL_EXT_shader_atomic_float : require
+#extension GL_KHR_shader_subgroup_arithmetic : require
+#extension GL_KHR_shader_subgroup_basic : require
+
+layout(local_size_x = WORKGROUP_SIZE) in;
+layout(set = 0, binding = BINDING_PROBE_IN, scalar) readonly buffer Images { float values[]; };  // image, then target
+layout(set = 0, binding = BINDING_PROBE_OUT, scalar) buffer Outputs { float outputs[]; };       // loss sum, then adjoint
+layout(push_constant) uniform Push { uint count; uint kind; };
+
+#define REL_MSE_EPSILON 1e-3
+
+void main() {
+    uint i = gl_GlobalInvocationID.y * gl_NumWorkGroups.x * WORKGROUP_SIZE + gl_GlobalInvocationID.x;
+    float term = 0.0;
+    if (i < count) {
+        float d = values[i] - values[count + i];
+        float grad;
+        if (kind == 0u) {
+            term = abs(d);
+            grad = d > 0.0 ? 1.0 : (d < 0.0 ? -1.0 : 0.0);
+        } else if (kind == 1u) {
+            term = d * d;
+            grad = 2.0 * d;
+        } else {
+            float denom = values[count + i] + REL_MSE_EPSILON;
+            term = d * d / (denom * denom);
+            grad = 2.0 * d / (denom * denom);
+        }
+        outputs[1u + i] = grad / float(count);
+    }
+    float total = subgroupAdd(term);
+    if (subgroupElect()) atomicAdd(outputs[0], total / float(count));
+}
