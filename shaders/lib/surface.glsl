@@ -36,8 +36,9 @@ vec3 offset_origin(vec3 p, vec3 ng, vec3 dir) {
     return p + ng * (dot(ng, dir) > 0.0 ? scale : -scale);
 }
 
-// Bilinear lookup with repeat wrapping of the RGB texels at params[offset]; row 0 is v = 0.
-vec3 texture_bilinear(uint offset, uint width, uint height, vec2 uv) {
+// The four texels a bilinear lookup at uv reads (with repeat wrapping; row 0 is v = 0): their
+// parameter offsets (RGB at offset..offset+2) and weights. Shared by the lookup and its gradient.
+void texture_footprint(uint offset, uint width, uint height, vec2 uv, out uint texel[4], out float weight[4]) {
     float x = uv.x * float(width) - 0.5;
     float y = uv.y * float(height) - 0.5;
     float x0 = floor(x);
@@ -50,11 +51,22 @@ vec3 texture_bilinear(uint offset, uint width, uint height, vec2 uv) {
     int iy0 = ((int(y0) % h) + h) % h;
     int ix1 = (ix0 + 1) % w;
     int iy1 = (iy0 + 1) % h;
-    vec3 c00 = param_rgb(offset + 3u * uint(iy0 * w + ix0));
-    vec3 c10 = param_rgb(offset + 3u * uint(iy0 * w + ix1));
-    vec3 c01 = param_rgb(offset + 3u * uint(iy1 * w + ix0));
-    vec3 c11 = param_rgb(offset + 3u * uint(iy1 * w + ix1));
-    return (c00 * (1.0 - fx) + c10 * fx) * (1.0 - fy) + (c01 * (1.0 - fx) + c11 * fx) * fy;
+    texel[0] = offset + 3u * uint(iy0 * w + ix0);
+    texel[1] = offset + 3u * uint(iy0 * w + ix1);
+    texel[2] = offset + 3u * uint(iy1 * w + ix0);
+    texel[3] = offset + 3u * uint(iy1 * w + ix1);
+    weight[0] = (1.0 - fx) * (1.0 - fy);
+    weight[1] = fx * (1.0 - fy);
+    weight[2] = (1.0 - fx) * fy;
+    weight[3] = fx * fy;
+}
+
+vec3 texture_bilinear(uint offset, uint width, uint height, vec2 uv) {
+    uint texel[4];
+    float weight[4];
+    texture_footprint(offset, width, height, uv, texel, weight);
+    return param_rgb(texel[0]) * weight[0] + param_rgb(texel[1]) * weight[1] + param_rgb(texel[2]) * weight[2]
+        + param_rgb(texel[3]) * weight[3];
 }
 
 Leaf leaf_from_material(Material m, vec2 uv) {
@@ -88,22 +100,13 @@ Bsdf resolve_bsdf(uint material_id, vec2 uv) {
 
 // Scatters ∂/∂(texels) of a bilinear lookup: per-channel gradient `g` split by the four weights.
 void texture_backward(uint offset, uint width, uint height, vec2 uv, vec3 g) {
-    float x = uv.x * float(width) - 0.5;
-    float y = uv.y * float(height) - 0.5;
-    float x0 = floor(x);
-    float y0 = floor(y);
-    float fx = x - x0;
-    float fy = y - y0;
-    int w = int(width);
-    int h = int(height);
-    int ix0 = ((int(x0) % w) + w) % w;
-    int iy0 = ((int(y0) % h) + h) % h;
-    int ix1 = (ix0 + 1) % w;
-    int iy1 = (iy0 + 1) % h;
-    param_grad_rgb(offset + 3u * uint(iy0 * w + ix0), g * ((1.0 - fx) * (1.0 - fy)));
-    param_grad_rgb(offset + 3u * uint(iy0 * w + ix1), g * (fx * (1.0 - fy)));
-    param_grad_rgb(offset + 3u * uint(iy1 * w + ix0), g * ((1.0 - fx) * fy));
-    param_grad_rgb(offset + 3u * uint(iy1 * w + ix1), g * (fx * fy));
+    uint texel[4];
+    float weight[4];
+    texture_footprint(offset, width, height, uv, texel, weight);
+    param_grad_rgb(texel[0], g * weight[0]);
+    param_grad_rgb(texel[1], g * weight[1]);
+    param_grad_rgb(texel[2], g * weight[2]);
+    param_grad_rgb(texel[3], g * weight[3]);
 }
 
 void leaf_backward(Material m, vec2 uv, LeafGrad g) {

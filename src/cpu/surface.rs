@@ -56,8 +56,9 @@ fn param_rgb(params: &[f32], offset: u32) -> Vec3 {
     Vec3::new(params[o], params[o + 1], params[o + 2])
 }
 
-/// Bilinear lookup with repeat wrapping of the RGB texels at `params[offset..]`; row 0 is v = 0.
-pub fn texture_bilinear(params: &[f32], offset: u32, width: u32, height: u32, uv: glam::Vec2) -> Vec3 {
+/// The four texels a bilinear lookup at `uv` reads (with repeat wrapping; row 0 is v = 0): their
+/// parameter offsets (RGB at `offset..offset + 2`) and weights. Shared by the lookup and its gradient.
+pub fn texture_footprint(offset: u32, width: u32, height: u32, uv: glam::Vec2) -> ([u32; 4], [f32; 4]) {
     let x = uv.x * width as f32 - 0.5;
     let y = uv.y * height as f32 - 0.5;
     let (x0, y0) = (x.floor(), y.floor());
@@ -66,9 +67,20 @@ pub fn texture_bilinear(params: &[f32], offset: u32, width: u32, height: u32, uv
     let ix0 = (x0 as i32).rem_euclid(w);
     let iy0 = (y0 as i32).rem_euclid(h);
     let (ix1, iy1) = ((ix0 + 1) % w, (iy0 + 1) % h);
-    let texel = |ix: i32, iy: i32| param_rgb(params, offset + 3 * (iy * w + ix) as u32);
-    (texel(ix0, iy0) * (1.0 - fx) + texel(ix1, iy0) * fx) * (1.0 - fy)
-        + (texel(ix0, iy1) * (1.0 - fx) + texel(ix1, iy1) * fx) * fy
+    let texel = |ix: i32, iy: i32| offset + 3 * (iy * w + ix) as u32;
+    (
+        [texel(ix0, iy0), texel(ix1, iy0), texel(ix0, iy1), texel(ix1, iy1)],
+        [(1.0 - fx) * (1.0 - fy), fx * (1.0 - fy), (1.0 - fx) * fy, fx * fy],
+    )
+}
+
+/// Bilinear lookup of the RGB texels at `params[offset..]`.
+pub fn texture_bilinear(params: &[f32], offset: u32, width: u32, height: u32, uv: glam::Vec2) -> Vec3 {
+    let (texel, weight) = texture_footprint(offset, width, height, uv);
+    param_rgb(params, texel[0]) * weight[0]
+        + param_rgb(params, texel[1]) * weight[1]
+        + param_rgb(params, texel[2]) * weight[2]
+        + param_rgb(params, texel[3]) * weight[3]
 }
 
 fn leaf_from_material(params: &[f32], m: &Material, uv: glam::Vec2) -> Leaf {
@@ -100,21 +112,11 @@ pub fn resolve_bsdf(flat: &FlatScene, id: u32, uv: glam::Vec2) -> Bsdf {
 }
 
 /// Scatters ∂/∂(texels) of a bilinear lookup: per-channel gradient `g` split by the four weights.
-#[allow(clippy::too_many_arguments, reason = "the twin of the GLSL function, argument for argument")]
 pub fn texture_backward(offset: u32, width: u32, height: u32, uv: glam::Vec2, g: Vec3, sink: &mut GradSink<'_>) {
-    let x = uv.x * width as f32 - 0.5;
-    let y = uv.y * height as f32 - 0.5;
-    let (x0, y0) = (x.floor(), y.floor());
-    let (fx, fy) = (x - x0, y - y0);
-    let (w, h) = (width as i32, height as i32);
-    let ix0 = (x0 as i32).rem_euclid(w);
-    let iy0 = (y0 as i32).rem_euclid(h);
-    let (ix1, iy1) = ((ix0 + 1) % w, (iy0 + 1) % h);
-    let texel = |ix: i32, iy: i32| offset + 3 * (iy * w + ix) as u32;
-    sink.add_rgb(texel(ix0, iy0), g * ((1.0 - fx) * (1.0 - fy)));
-    sink.add_rgb(texel(ix1, iy0), g * (fx * (1.0 - fy)));
-    sink.add_rgb(texel(ix0, iy1), g * ((1.0 - fx) * fy));
-    sink.add_rgb(texel(ix1, iy1), g * (fx * fy));
+    let (texel, weight) = texture_footprint(offset, width, height, uv);
+    for (t, w) in texel.into_iter().zip(weight) {
+        sink.add_rgb(t, g * w);
+    }
 }
 
 fn leaf_backward(m: &Material, uv: glam::Vec2, g: &LeafGrad, sink: &mut GradSink<'_>) {
