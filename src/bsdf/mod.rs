@@ -6,6 +6,7 @@
 //! zero when cos θi ≤ 0 or cos θo ≤ 0.
 
 pub mod blend;
+pub mod differential;
 pub mod diffuse;
 pub mod rough_conductor;
 

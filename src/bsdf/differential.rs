@@ -1,0 +1,240 @@
+//! Differential samplers (ALGORITHMS.md §4.2–4.3): the positivised α-derivative of the microfacet
+//! half-vector density, split into its signed parts with exact inverse-CDF samplers, and the
+//! BSDF-level differential technique (coin-chosen part for a conductor, ½/½ children for a blend).
+//! Twin of `shaders/lib/differential.glsl`: same names, same f32 operation order.
+
+use std::f32::consts::{E, PI};
+
+use glam::{Vec2, Vec3};
+
+use crate::bsdf::rough_conductor::Distribution;
+use crate::bsdf::{Bsdf, BsdfSample, Leaf, bsdf_eval, leaf_pdf, leaf_sample};
+
+/// The f32 rounding error of e, so that 1 + e·x is computed without cancellation near x = −1/e.
+const E_LO: f32 = (std::f64::consts::E - E as f64) as f32;
+/// Below this distance p = √(2(1 + e·x)) from the branch point the series alone is used (its
+/// truncation error is ~0.026 p⁶ < 3e-8, while Halley's residual loses precision as p → 0).
+const LAMBERT_SERIES_ONLY: f32 = 0.1;
+/// Above this x, W0 starts from x(1 − x) instead of the branch-point series.
+const LAMBERT_W0_SMALL: f32 = -0.25;
+/// Above this x, W−1 starts from the asymptotic ln(−x) − ln(−ln(−x)) + … instead of the series.
+const LAMBERT_WM1_SMALL: f32 = -0.15;
+/// Fixed number of Halley steps (written out in GLSL: no data-dependent loops).
+const LAMBERT_HALLEY_STEPS: usize = 3;
+/// Half vectors with cos θh below this have density 0 (ALGORITHMS.md §4.2).
+pub const DIFF_COS_EPSILON: f32 = 1e-9;
+
+/// 1 + e·x, with e·x formed by a fused multiply-add plus the rounding error of e: no cancellation
+/// near the branch point x = −1/e (clamped at 0 below it).
+fn lambert_branch_offset(x: f32) -> f32 {
+    (x.mul_add(E, 1.0) + E_LO * x).max(0.0)
+}
+
+/// The branch-point series W ≈ −1 + p − p²/3 + 11p³/72 − 43p⁴/540 + 769p⁵/17280 (p > 0: W0,
+/// p < 0: W−1).
+fn lambert_series(p: f32) -> f32 {
+    -1.0 + p * (1.0 + p * (-1.0 / 3.0 + p * (11.0 / 72.0 + p * (-43.0 / 540.0 + p * (769.0 / 17280.0)))))
+}
+
+/// One Halley step on w·e^w − x = 0.
+fn lambert_halley(w: f32, x: f32) -> f32 {
+    let ew = w.exp();
+    let f = w * ew - x;
+    let wp1 = w + 1.0;
+    w - f / (ew * wp1 - (w + 2.0) * f / (2.0 * wp1))
+}
+
+/// Principal branch W0(x) on [−1/e, 0] (W0 ∈ [−1, 0]).
+pub fn lambert_w0(x: f32) -> f32 {
+    let p = (2.0 * lambert_branch_offset(x)).sqrt();
+    let series = lambert_series(p);
+    if p < LAMBERT_SERIES_ONLY {
+        return series;
+    }
+    let mut w = if x > LAMBERT_W0_SMALL { x * (1.0 - x) } else { series };
+    for _ in 0..LAMBERT_HALLEY_STEPS {
+        w = lambert_halley(w, x);
+    }
+    w
+}
+
+/// Lower branch W−1(x) on [−1/e, 0) (W−1 ∈ (−∞, −1]); −∞ at x ≥ 0.
+pub fn lambert_wm1(x: f32) -> f32 {
+    if x >= 0.0 {
+        return f32::NEG_INFINITY;
+    }
+    let p = (2.0 * lambert_branch_offset(x)).sqrt();
+    let series = lambert_series(-p);
+    if p < LAMBERT_SERIES_ONLY {
+        return series;
+    }
+    let mut w = if x > LAMBERT_WM1_SMALL {
+        let l1 = (-x).ln();
+        let l2 = (-l1).ln();
+        l1 - l2 + l2 / l1
+    } else {
+        series
+    };
+    for _ in 0..LAMBERT_HALLEY_STEPS {
+        w = lambert_halley(w, x);
+    }
+    w
+}
+
+/// N_α = ∫|Λ|: 4/(eα) for Beckmann, 1/α for GGX (each signed part holds half).
+pub fn diff_norm(distribution: Distribution, alpha: f32) -> f32 {
+    match distribution {
+        Distribution::Beckmann => 4.0 / (E * alpha),
+        Distribution::Ggx => 1.0 / alpha,
+    }
+}
+
+/// p_abs(h) = |Λ(h)|/N_α, Λ = ∂α[D(h) cos θh], in the NaN-free closed forms of ALGORITHMS.md §4.2;
+/// 0 if cos θh < 1e-9. This is ½p⁺ + ½p⁻.
+pub fn diff_pdf_abs_h(distribution: Distribution, alpha: f32, h: Vec3) -> f32 {
+    let c = h.z;
+    if c < DIFF_COS_EPSILON {
+        return 0.0;
+    }
+    let t = (h.x * h.x + h.y * h.y) / (c * c);
+    let a2 = alpha * alpha;
+    match distribution {
+        Distribution::Beckmann => {
+            let g = (-t / a2).exp();
+            if g == 0.0 {
+                return 0.0;
+            }
+            E * g * (t - a2).abs() / (2.0 * PI * a2 * a2 * c * c * c)
+        }
+        Distribution::Ggx => {
+            let cs = c * (a2 + t);
+            2.0 * a2 * (t - a2).abs() / (PI * cs * cs * cs)
+        }
+    }
+}
+
+/// Half-vector density of one signed part: p⁺ (Λ > 0, tan²θh > α²) or p⁻ (Λ < 0), each 2·p_abs on
+/// its support.
+pub fn diff_pdf_part_h(distribution: Distribution, alpha: f32, h: Vec3, positive: bool) -> f32 {
+    let c = h.z;
+    if c < DIFF_COS_EPSILON {
+        return 0.0;
+    }
+    let t = (h.x * h.x + h.y * h.y) / (c * c);
+    if (t > alpha * alpha) != positive {
+        return 0.0;
+    }
+    2.0 * diff_pdf_abs_h(distribution, alpha, h)
+}
+
+/// x = tan²θh/α² drawn from one signed part's marginal by inverting its closed-form CDF with `u_b`
+/// (ALGORITHMS.md §4.2 table). May be +∞ for the positive parts at u_b = 1.
+pub fn diff_sample_x(distribution: Distribution, positive: bool, u_b: f32) -> f32 {
+    match (distribution, positive) {
+        // F(x) = x e^{1−x} on [0, 1].
+        (Distribution::Beckmann, false) => -lambert_w0(-u_b / E),
+        // F(x) = 1 − x e^{1−x} on [1, ∞).
+        (Distribution::Beckmann, true) => -lambert_wm1((u_b - 1.0) / E),
+        // F(x) = 4x/(1+x)²: x = (1 − s)/(1 + s) = u/(1 + s)², s = √(1 − u).
+        (Distribution::Ggx, false) => {
+            let s = (1.0 - u_b).max(0.0).sqrt();
+            u_b / ((1.0 + s) * (1.0 + s))
+        }
+        // F(x) = ((x − 1)/(x + 1))²: x = (1 + √u)/(1 − √u) = (1 + √u)²/(1 − u).
+        (Distribution::Ggx, true) => {
+            let r = u_b.max(0.0).sqrt();
+            (1.0 + r) * (1.0 + r) / (1.0 - u_b)
+        }
+    }
+}
+
+/// A direction reflected about a half vector drawn from one signed part (φ = 2π u.x, x from u.y),
+/// or `None` if cos θo ≤ 0, wi·h ≤ 0, or cos θh < 1e-9.
+pub fn sample_diff_part(distribution: Distribution, alpha: f32, wi: Vec3, positive: bool, u: Vec2) -> Option<Vec3> {
+    if wi.z <= 0.0 {
+        return None;
+    }
+    let x = diff_sample_x(distribution, positive, u.y);
+    let t = alpha * alpha * x;
+    let cos_h = 1.0 / (1.0 + t).sqrt();
+    if !(cos_h >= DIFF_COS_EPSILON) {
+        return None;
+    }
+    let sin_h = t.sqrt() * cos_h;
+    let phi = 2.0 * PI * u.x;
+    let h = Vec3::new(sin_h * phi.cos(), sin_h * phi.sin(), cos_h);
+    let wih = wi.dot(h);
+    let wo = 2.0 * wih * h - wi;
+    (wo.z > 0.0 && wih > 0.0).then_some(wo)
+}
+
+/// The half vector of (wi, wo) if the configuration is valid for a reflection density (cos θi,
+/// cos θo, wi·h, wo·h all > 0), with wo·h.
+fn reflection_half(wi: Vec3, wo: Vec3) -> Option<(Vec3, f32)> {
+    if wi.z <= 0.0 || wo.z <= 0.0 {
+        return None;
+    }
+    let h = (wi + wo).normalize();
+    let woh = wo.dot(h);
+    (wi.dot(h) > 0.0 && woh > 0.0).then_some((h, woh))
+}
+
+/// Direction density of the coin-mixed differential technique, p_abs(h)/(4 wo·h) = ½p⁺ + ½p⁻,
+/// with the validity of the primal density.
+pub fn diff_pdf(distribution: Distribution, alpha: f32, wi: Vec3, wo: Vec3) -> f32 {
+    match reflection_half(wi, wo) {
+        Some((h, woh)) => diff_pdf_abs_h(distribution, alpha, h) / (4.0 * woh),
+        None => 0.0,
+    }
+}
+
+/// Direction density of one signed part's sampler.
+pub fn diff_pdf_part(distribution: Distribution, alpha: f32, positive: bool, wi: Vec3, wo: Vec3) -> f32 {
+    match reflection_half(wi, wo) {
+        Some((h, woh)) => diff_pdf_part_h(distribution, alpha, h, positive) / (4.0 * woh),
+        None => 0.0,
+    }
+}
+
+/// Whether the BSDF has a differential sampler: conductors and blends do, diffuse does not.
+pub fn bsdf_diff_capable(b: &Bsdf) -> bool {
+    b.blend || matches!(b.leaves[0], Leaf::RoughConductor { .. })
+}
+
+/// Density of the differential technique: ½(p_f0 + p_f1) for a blend, the coin-mixed roughness
+/// density for a conductor, and the primal density for diffuse (ALGORITHMS.md §4.1).
+pub fn bsdf_pdf_diff(b: &Bsdf, wi: Vec3, wo: Vec3) -> f32 {
+    if b.blend {
+        return 0.5 * (leaf_pdf(&b.leaves[0], wi, wo) + leaf_pdf(&b.leaves[1], wi, wo));
+    }
+    match b.leaves[0] {
+        Leaf::RoughConductor { distribution, alpha, .. } => diff_pdf(distribution, alpha, wi, wo),
+        Leaf::Diffuse { .. } => leaf_pdf(&b.leaves[0], wi, wo),
+    }
+}
+
+/// Samples the differential technique. Conductor: the positive part if `u_sign < 0.5`, else the
+/// negative one. Blend: child 1 if `u_lobe ≤ ½`, else child 0, sampled with the child's primal
+/// sampler. Diffuse (not capable): its primal sampler. The value is the whole BSDF's f̂ and the pdf
+/// is [`bsdf_pdf_diff`] at the sampled direction; `None` for an invalid sample.
+pub fn bsdf_sample_diff(b: &Bsdf, wi: Vec3, u_sign: f32, u_lobe: f32, u: Vec2) -> Option<BsdfSample> {
+    let wo = if b.blend {
+        leaf_sample(if u_lobe <= 0.5 { &b.leaves[1] } else { &b.leaves[0] }, wi, u)?
+    } else {
+        match b.leaves[0] {
+            Leaf::RoughConductor { distribution, alpha, .. } => {
+                sample_diff_part(distribution, alpha, wi, u_sign < 0.5, u)?
+            }
+            Leaf::Diffuse { .. } => leaf_sample(&b.leaves[0], wi, u)?,
+        }
+    };
+    let pdf = bsdf_pdf_diff(b, wi, wo);
+    if !(pdf > 0.0) {
+        return None;
+    }
+    Some(BsdfSample { wo, pdf, value: bsdf_eval(b, wi, wo) })
+}
+
+#[cfg(test)]
+#[path = "differential_tests.rs"]
+mod tests;
