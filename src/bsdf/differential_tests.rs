@@ -150,7 +150,7 @@ fn kolmogorov_q(lambda: f64) -> f64 {
     if lambda < 0.2 {
         return 1.0;
     }
-    (1..=100).map(|k| f64::from(k)).map(|k| 2.0 * (-1f64).powf(k - 1.0) * (-2.0 * k * k * lambda * lambda).exp()).sum()
+    (1..=100).map(f64::from).map(|k| 2.0 * (-1f64).powf(k - 1.0) * (-2.0 * k * k * lambda * lambda).exp()).sum()
 }
 
 /// The critical value of the KS statistic D_n at significance `s`: Q((√n + 0.12 + 0.11/√n) D) = s

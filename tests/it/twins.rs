@@ -206,3 +206,128 @@ fn loss_gpu_equals_host() {
         }
     }
 }
+
+/// `shaders/lib/differential.glsl` against `src/bsdf/differential.rs`: the differential sampler and
+/// its density for conductors (both parts, α from 0.01 to 0.8), blends and diffuse, incident angles
+/// down to cos θi = 0.01, plus Lambert W on both branches and the four inversions. The probe passes
+/// `u_lobe` as both `u_sign` and `u_lobe` (each BSDF kind reads only one of them).
+#[test]
+fn diff_gpu_equals_cpu() {
+    use glam::{Vec2, Vec3};
+    use pathgrad::bsdf::differential::{bsdf_pdf_diff, bsdf_sample_diff, diff_sample_x, lambert_w0, lambert_wm1};
+    use pathgrad::bsdf::{Bsdf, Distribution, Leaf, bsdf_eval};
+    use pathgrad::gpu::abi::{BsdfProbeCase, BsdfProbeResult, LEAF_DIFFUSE, LEAF_ROUGH_CONDUCTOR};
+    use pathgrad::rng::{PassTag, RngKey, Stream, uniform4};
+
+    let gpu = TestGpu::new();
+    let mut bsdfs = vec![Bsdf::leaf(Leaf::Diffuse { albedo: Vec3::new(0.2, 0.5, 0.9) })];
+    for distribution in [Distribution::Beckmann, Distribution::Ggx] {
+        for alpha in [0.01, 0.05, 0.3, 0.8] {
+            bsdfs.push(Bsdf::leaf(Leaf::RoughConductor {
+                distribution,
+                alpha,
+                specular: Vec3::new(0.9, 0.8, 0.7),
+                eta: Vec3::ZERO,
+                k: Vec3::ONE,
+            }));
+        }
+    }
+    for weight in [0.1, 0.5, 0.9] {
+        let coat = Leaf::RoughConductor {
+            distribution: Distribution::Ggx,
+            alpha: 0.05,
+            specular: Vec3::ONE,
+            eta: Vec3::ZERO,
+            k: Vec3::ONE,
+        };
+        bsdfs.push(Bsdf { leaves: [Leaf::Diffuse { albedo: Vec3::new(0.1, 0.6, 0.35) }, coat], weight, blend: true });
+    }
+    let leaf_fields = |l: &Leaf| match *l {
+        Leaf::Diffuse { albedo } => (LEAF_DIFFUSE, 0, 0.0, albedo, Vec3::ZERO, Vec3::ZERO),
+        Leaf::RoughConductor { distribution, alpha, specular, eta, k } => {
+            (LEAF_ROUGH_CONDUCTOR, distribution as u32, alpha, specular, eta, k)
+        }
+    };
+    let mut cases = Vec::new();
+    let mut owners = Vec::new();
+    for (bi, b) in bsdfs.iter().enumerate() {
+        for (wi_index, cos_i) in [1.0f32, 0.7, 0.2, 0.05, 0.01].into_iter().enumerate() {
+            let sin_i = (1.0 - cos_i * cos_i).sqrt();
+            let wi = Vec3::new(sin_i * 0.6, -sin_i * 0.8, cos_i);
+            for j in 0..200u32 {
+                let u = uniform4(RngKey::new(bi as u32, wi_index as u32, PassTag::Test), j, 0, 2, Stream::Main, 1, 0);
+                let (u_lobe, uv) = (u[0], Vec2::new(u[1], u[2]));
+                let wo_eval = bsdf_sample_diff(b, wi, u_lobe, u_lobe, uv).map(|s| s.wo).unwrap_or(Vec3::new(
+                    0.3,
+                    0.4,
+                    0.866_025_4,
+                ));
+                let (l0, l1) = (leaf_fields(&b.leaves[0]), leaf_fields(&b.leaves[1]));
+                cases.push(BsdfProbeCase {
+                    kind0: l0.0,
+                    dist0: l0.1,
+                    alpha0: l0.2,
+                    color0: l0.3,
+                    eta0: l0.4,
+                    k0: l0.5,
+                    kind1: l1.0,
+                    dist1: l1.1,
+                    alpha1: l1.2,
+                    color1: l1.3,
+                    eta1: l1.4,
+                    k1: l1.5,
+                    weight: b.weight,
+                    blend: u32::from(b.blend),
+                    wi,
+                    u_lobe,
+                    u: uv,
+                    wo_eval,
+                });
+                owners.push(bi);
+            }
+        }
+    }
+    let input = Buffer::storage_with(&gpu.ctx, "diff probe input", &cases).unwrap();
+    let output =
+        Buffer::storage(&gpu.ctx, "diff probe output", (cases.len() * size_of::<BsdfProbeResult>()) as u64).unwrap();
+    let kernel = Kernel::new(&gpu.ctx, "diff_probe", &[BINDING_PROBE_IN, BINDING_PROBE_OUT], 4).unwrap();
+    let group = kernel.bind(&[(BINDING_PROBE_IN, &input), (BINDING_PROBE_OUT, &output)]).unwrap();
+    let n = cases.len() as u32;
+    gpu.ctx
+        .submit_and_wait("diff probe", |cmd| kernel.record(cmd, &group, bytemuck::bytes_of(&n), groups_for(n)))
+        .unwrap();
+    let got: Vec<BsdfProbeResult> = output.download(cases.len()).unwrap();
+
+    // Same tolerance argument as `bsdf_gpu_equals_cpu`: few-ulp differences of exp/log/sqrt, amplified
+    // at most by the Beckmann exponent: 1e-4 relative. Lambert W and x: 1e-5 (1 + |value|).
+    let close = |a: f32, b: f32| (a - b).abs() <= 1e-4 * a.abs().max(b.abs()) + 1e-30;
+    let close3 = |a: Vec3, b: Vec3| (0..3).all(|c| close(a[c], b[c]));
+    let close_x = |a: f32, b: f32| a == b || (a - b).abs() <= 1e-5 * (1.0 + a.abs().max(b.abs()));
+    let (mut validity_flips, mut worst_dir) = (0, 0.0f32);
+    for ((c, g), &bi) in cases.iter().zip(&got).zip(&owners) {
+        let b = &bsdfs[bi];
+        let want = bsdf_pdf_diff(b, c.wi, c.wo_eval);
+        assert!(close(g.eval_pdf, want), "{b:?} wi {}: pdf_diff {} vs {want}", c.wi, g.eval_pdf);
+        let e = std::f32::consts::E;
+        let want_w = Vec3::new(
+            lambert_w0(-c.u_lobe / e),
+            lambert_wm1((c.u_lobe - 1.0) / e),
+            diff_sample_x(if c.dist0 == 0 { Distribution::Beckmann } else { Distribution::Ggx }, c.u.x < 0.5, c.u.y),
+        );
+        assert!((0..3).all(|k| close_x(g.eval[k], want_w[k])), "u {} {}: W/x {} vs {want_w}", c.u_lobe, c.u, g.eval);
+        match (bsdf_sample_diff(b, c.wi, c.u_lobe, c.u_lobe, c.u), g.valid != 0) {
+            (Some(s), true) => {
+                worst_dir = worst_dir.max((s.wo - g.wo).length());
+                assert!((s.wo - g.wo).length() < 1e-4, "{b:?} wi {}: wo {} vs {}", c.wi, s.wo, g.wo);
+                let want = bsdf_pdf_diff(b, c.wi, g.wo);
+                assert!(close(g.pdf, want), "{b:?}: sample pdf {} vs {want}", g.pdf);
+                let want = bsdf_eval(b, c.wi, g.wo);
+                assert!(close3(g.value, want), "{b:?}: sample value {} vs {want}", g.value);
+            }
+            (None, false) => {}
+            _ => validity_flips += 1,
+        }
+    }
+    println!("{} cases: {validity_flips} validity flips, worst direction difference {worst_dir:.2e}", cases.len());
+    assert!(validity_flips as f64 <= 1e-3 * cases.len() as f64, "{validity_flips} validity flips");
+}
