@@ -207,6 +207,8 @@ fn grad(args: &GradArgs) -> Result<()> {
         _ => bail!("give --target REF.exr or --target-set NAME=VALUE (or --image-gradient NAME)"),
     };
     let mode = if args.deterministic { GradMode::Deterministic } else { GradMode::Float };
+    // time_s is the gradient step (render, loss, fused adjoint), not the --target-set render.
+    let start = Instant::now();
     let (value, gradients) = renderer
         .loss_and_gradient(&opts, &target, loss, mode)
         .with_context(|| format!("differentiating {}", args.scene))?;
