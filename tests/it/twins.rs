@@ -47,11 +47,66 @@ fn rng_gpu_equals_cpu_bitwise() {
 /// `shaders/lib/bsdf.glsl` against `src/bsdf/` (which the chi-square tests pin to its densities):
 /// sampled directions, densities and values for every BSDF kind over α from 0.01 to 0.8 and incident
 /// angles down to cos θi = 0.01.
+/// The probe input for one BSDF query (`shaders/bsdf_probe.comp` and `diff_probe.comp`).
+fn probe_case(
+    b: &pathgrad::bsdf::Bsdf,
+    wi: glam::Vec3,
+    u_lobe: f32,
+    u: glam::Vec2,
+    wo_eval: glam::Vec3,
+) -> pathgrad::gpu::abi::BsdfProbeCase {
+    use glam::Vec3;
+    use pathgrad::bsdf::Leaf;
+    use pathgrad::gpu::abi::{LEAF_DIFFUSE, LEAF_ROUGH_CONDUCTOR};
+    let fields = |l: &Leaf| match *l {
+        Leaf::Diffuse { albedo } => (LEAF_DIFFUSE, 0, 0.0, albedo, Vec3::ZERO, Vec3::ZERO),
+        Leaf::RoughConductor { distribution, alpha, specular, eta, k } => {
+            (LEAF_ROUGH_CONDUCTOR, distribution as u32, alpha, specular, eta, k)
+        }
+    };
+    let (l0, l1) = (fields(&b.leaves[0]), fields(&b.leaves[1]));
+    pathgrad::gpu::abi::BsdfProbeCase {
+        kind0: l0.0,
+        dist0: l0.1,
+        alpha0: l0.2,
+        color0: l0.3,
+        eta0: l0.4,
+        k0: l0.5,
+        kind1: l1.0,
+        dist1: l1.1,
+        alpha1: l1.2,
+        color1: l1.3,
+        eta1: l1.4,
+        k1: l1.5,
+        weight: b.weight,
+        blend: u32::from(b.blend),
+        wi,
+        u_lobe,
+        u,
+        wo_eval,
+    }
+}
+
+/// Runs a BSDF probe kernel over `cases` and reads its results back.
+fn run_bsdf_probe(
+    gpu: &TestGpu,
+    kernel: &'static str,
+    cases: &[pathgrad::gpu::abi::BsdfProbeCase],
+) -> Vec<pathgrad::gpu::abi::BsdfProbeResult> {
+    let input = Buffer::storage_with(&gpu.ctx, "probe input", cases).unwrap();
+    let size = (cases.len() * size_of::<pathgrad::gpu::abi::BsdfProbeResult>()) as u64;
+    let output = Buffer::storage(&gpu.ctx, "probe output", size).unwrap();
+    let k = Kernel::new(&gpu.ctx, kernel, &[BINDING_PROBE_IN, BINDING_PROBE_OUT], 4).unwrap();
+    let group = k.bind(&[(BINDING_PROBE_IN, &input), (BINDING_PROBE_OUT, &output)]).unwrap();
+    let n = cases.len() as u32;
+    gpu.ctx.submit_and_wait(kernel, |cmd| k.record(cmd, &group, bytemuck::bytes_of(&n), groups_for(n))).unwrap();
+    output.download(cases.len()).unwrap()
+}
+
 #[test]
 fn bsdf_gpu_equals_cpu() {
     use glam::{Vec2, Vec3};
     use pathgrad::bsdf::{Bsdf, Distribution, Leaf, bsdf_eval, bsdf_pdf, bsdf_sample};
-    use pathgrad::gpu::abi::{BsdfProbeCase, BsdfProbeResult, LEAF_DIFFUSE, LEAF_ROUGH_CONDUCTOR};
     use pathgrad::rng::{PassTag, RngKey, Stream, uniform4};
 
     let gpu = TestGpu::new();
@@ -80,12 +135,6 @@ fn bsdf_gpu_equals_cpu() {
         };
         bsdfs.push(Bsdf { leaves: [Leaf::Diffuse { albedo: Vec3::new(0.1, 0.6, 0.35) }, coat], weight, blend: true });
     }
-    let leaf_fields = |l: &Leaf| match *l {
-        Leaf::Diffuse { albedo } => (LEAF_DIFFUSE, 0, 0.0, albedo, Vec3::ZERO, Vec3::ZERO),
-        Leaf::RoughConductor { distribution, alpha, specular, eta, k } => {
-            (LEAF_ROUGH_CONDUCTOR, distribution as u32, alpha, specular, eta, k)
-        }
-    };
     let mut cases = Vec::new();
     let mut owners = Vec::new();
     for (bi, b) in bsdfs.iter().enumerate() {
@@ -96,42 +145,12 @@ fn bsdf_gpu_equals_cpu() {
                 let u = uniform4(RngKey::new(bi as u32, wi_index as u32, PassTag::Test), j, 0, 1, Stream::Main, 1, 0);
                 let (u_lobe, uv) = (u[0], Vec2::new(u[1], u[2]));
                 let wo_eval = bsdf_sample(b, wi, u_lobe, uv).map(|s| s.wo).unwrap_or(Vec3::new(0.3, 0.4, 0.866_025_4));
-                let l0 = leaf_fields(&b.leaves[0]);
-                let l1 = leaf_fields(&b.leaves[1]);
-                cases.push(BsdfProbeCase {
-                    kind0: l0.0,
-                    dist0: l0.1,
-                    alpha0: l0.2,
-                    color0: l0.3,
-                    eta0: l0.4,
-                    k0: l0.5,
-                    kind1: l1.0,
-                    dist1: l1.1,
-                    alpha1: l1.2,
-                    color1: l1.3,
-                    eta1: l1.4,
-                    k1: l1.5,
-                    weight: b.weight,
-                    blend: u32::from(b.blend),
-                    wi,
-                    u_lobe,
-                    u: uv,
-                    wo_eval,
-                });
+                cases.push(probe_case(b, wi, u_lobe, uv, wo_eval));
                 owners.push(bi);
             }
         }
     }
-    let input = Buffer::storage_with(&gpu.ctx, "bsdf probe input", &cases).unwrap();
-    let output =
-        Buffer::storage(&gpu.ctx, "bsdf probe output", (cases.len() * size_of::<BsdfProbeResult>()) as u64).unwrap();
-    let kernel = Kernel::new(&gpu.ctx, "bsdf_probe", &[BINDING_PROBE_IN, BINDING_PROBE_OUT], 4).unwrap();
-    let group = kernel.bind(&[(BINDING_PROBE_IN, &input), (BINDING_PROBE_OUT, &output)]).unwrap();
-    let n = cases.len() as u32;
-    gpu.ctx
-        .submit_and_wait("bsdf probe", |cmd| kernel.record(cmd, &group, bytemuck::bytes_of(&n), groups_for(n)))
-        .unwrap();
-    let got: Vec<BsdfProbeResult> = output.download(cases.len()).unwrap();
+    let got = run_bsdf_probe(&gpu, "bsdf_probe", &cases);
 
     // Evaluation at a given direction differs only by the few-ulp rounding of GLSL's exp/sqrt/
     // division, amplified at most by the exponent of the Beckmann NDF (t/α² ≲ 50): 1e-4 relative.
@@ -216,7 +235,6 @@ fn diff_gpu_equals_cpu() {
     use glam::{Vec2, Vec3};
     use pathgrad::bsdf::differential::{bsdf_pdf_diff, bsdf_sample_diff, diff_sample_x, lambert_w0, lambert_wm1};
     use pathgrad::bsdf::{Bsdf, Distribution, Leaf, bsdf_eval};
-    use pathgrad::gpu::abi::{BsdfProbeCase, BsdfProbeResult, LEAF_DIFFUSE, LEAF_ROUGH_CONDUCTOR};
     use pathgrad::rng::{PassTag, RngKey, Stream, uniform4};
 
     let gpu = TestGpu::new();
@@ -242,12 +260,6 @@ fn diff_gpu_equals_cpu() {
         };
         bsdfs.push(Bsdf { leaves: [Leaf::Diffuse { albedo: Vec3::new(0.1, 0.6, 0.35) }, coat], weight, blend: true });
     }
-    let leaf_fields = |l: &Leaf| match *l {
-        Leaf::Diffuse { albedo } => (LEAF_DIFFUSE, 0, 0.0, albedo, Vec3::ZERO, Vec3::ZERO),
-        Leaf::RoughConductor { distribution, alpha, specular, eta, k } => {
-            (LEAF_ROUGH_CONDUCTOR, distribution as u32, alpha, specular, eta, k)
-        }
-    };
     let mut cases = Vec::new();
     let mut owners = Vec::new();
     for (bi, b) in bsdfs.iter().enumerate() {
@@ -262,41 +274,12 @@ fn diff_gpu_equals_cpu() {
                     0.4,
                     0.866_025_4,
                 ));
-                let (l0, l1) = (leaf_fields(&b.leaves[0]), leaf_fields(&b.leaves[1]));
-                cases.push(BsdfProbeCase {
-                    kind0: l0.0,
-                    dist0: l0.1,
-                    alpha0: l0.2,
-                    color0: l0.3,
-                    eta0: l0.4,
-                    k0: l0.5,
-                    kind1: l1.0,
-                    dist1: l1.1,
-                    alpha1: l1.2,
-                    color1: l1.3,
-                    eta1: l1.4,
-                    k1: l1.5,
-                    weight: b.weight,
-                    blend: u32::from(b.blend),
-                    wi,
-                    u_lobe,
-                    u: uv,
-                    wo_eval,
-                });
+                cases.push(probe_case(b, wi, u_lobe, uv, wo_eval));
                 owners.push(bi);
             }
         }
     }
-    let input = Buffer::storage_with(&gpu.ctx, "diff probe input", &cases).unwrap();
-    let output =
-        Buffer::storage(&gpu.ctx, "diff probe output", (cases.len() * size_of::<BsdfProbeResult>()) as u64).unwrap();
-    let kernel = Kernel::new(&gpu.ctx, "diff_probe", &[BINDING_PROBE_IN, BINDING_PROBE_OUT], 4).unwrap();
-    let group = kernel.bind(&[(BINDING_PROBE_IN, &input), (BINDING_PROBE_OUT, &output)]).unwrap();
-    let n = cases.len() as u32;
-    gpu.ctx
-        .submit_and_wait("diff probe", |cmd| kernel.record(cmd, &group, bytemuck::bytes_of(&n), groups_for(n)))
-        .unwrap();
-    let got: Vec<BsdfProbeResult> = output.download(cases.len()).unwrap();
+    let got = run_bsdf_probe(&gpu, "diff_probe", &cases);
 
     // Same tolerance argument as `bsdf_gpu_equals_cpu`: few-ulp differences of exp/log/sqrt, amplified
     // at most by the Beckmann exponent: 1e-4 relative. Lambert W and x: 1e-5 (1 + |value|).
