@@ -9,6 +9,16 @@ use gpu_allocator::vulkan::{Allocation, AllocationCreateDesc, AllocationScheme};
 
 use crate::error::{Error, Result, VkResultExt};
 use crate::gpu::context::Context;
+use crate::gpu::pipeline::memory_barrier;
+
+/// A transfer's writes, as the source side of a barrier.
+const TRANSFER_WRITE: (vk::PipelineStageFlags, vk::AccessFlags) =
+    (vk::PipelineStageFlags::TRANSFER, vk::AccessFlags::TRANSFER_WRITE);
+/// Compute reads and writes, as the destination side of a barrier.
+const SHADER_READ_WRITE: (vk::PipelineStageFlags, vk::AccessFlags) = (
+    vk::PipelineStageFlags::COMPUTE_SHADER,
+    vk::AccessFlags::from_raw(vk::AccessFlags::SHADER_READ.as_raw() | vk::AccessFlags::SHADER_WRITE.as_raw()),
+);
 
 /// Vulkan forbids empty buffers; empty arrays (a scene without emitters) get this many bytes.
 const MIN_BUFFER_BYTES: u64 = 16;
@@ -144,22 +154,9 @@ impl Buffer {
         let device = self.ctx.device();
         self.ctx.submit_and_wait(&format!("upload {}", self.name), |cmd| {
             let region = [vk::BufferCopy::default().size(bytes.len() as u64)];
-            let barrier = [vk::MemoryBarrier::default()
-                .src_access_mask(vk::AccessFlags::TRANSFER_WRITE)
-                .dst_access_mask(vk::AccessFlags::SHADER_READ | vk::AccessFlags::SHADER_WRITE)];
             // SAFETY: both buffers are alive until the submission is waited on.
-            unsafe {
-                device.cmd_copy_buffer(cmd, staging.raw, self.raw, &region);
-                device.cmd_pipeline_barrier(
-                    cmd,
-                    vk::PipelineStageFlags::TRANSFER,
-                    vk::PipelineStageFlags::COMPUTE_SHADER,
-                    vk::DependencyFlags::empty(),
-                    &barrier,
-                    &[],
-                    &[],
-                );
-            }
+            unsafe { device.cmd_copy_buffer(cmd, staging.raw, self.raw, &region) };
+            memory_barrier(&self.ctx, cmd, TRANSFER_WRITE, SHADER_READ_WRITE);
         })
     }
 
@@ -170,22 +167,9 @@ impl Buffer {
     pub fn clear(&self) -> Result<()> {
         let device = self.ctx.device();
         self.ctx.submit_and_wait(&format!("clear {}", self.name), |cmd| {
-            let barrier = [vk::MemoryBarrier::default()
-                .src_access_mask(vk::AccessFlags::TRANSFER_WRITE)
-                .dst_access_mask(vk::AccessFlags::SHADER_READ | vk::AccessFlags::SHADER_WRITE)];
             // SAFETY: the buffer is alive until the submission is waited on.
-            unsafe {
-                device.cmd_fill_buffer(cmd, self.raw, 0, vk::WHOLE_SIZE, 0);
-                device.cmd_pipeline_barrier(
-                    cmd,
-                    vk::PipelineStageFlags::TRANSFER,
-                    vk::PipelineStageFlags::COMPUTE_SHADER,
-                    vk::DependencyFlags::empty(),
-                    &barrier,
-                    &[],
-                    &[],
-                );
-            }
+            unsafe { device.cmd_fill_buffer(cmd, self.raw, 0, vk::WHOLE_SIZE, 0) };
+            memory_barrier(&self.ctx, cmd, TRANSFER_WRITE, SHADER_READ_WRITE);
         })
     }
 
@@ -213,35 +197,16 @@ impl Buffer {
         )?;
         let device = self.ctx.device();
         self.ctx.submit_and_wait(&format!("read back {}", self.name), |cmd| {
-            let before = [vk::MemoryBarrier::default()
-                .src_access_mask(vk::AccessFlags::SHADER_WRITE)
-                .dst_access_mask(vk::AccessFlags::TRANSFER_READ)];
-            let after = [vk::MemoryBarrier::default()
-                .src_access_mask(vk::AccessFlags::TRANSFER_WRITE)
-                .dst_access_mask(vk::AccessFlags::HOST_READ)];
             let region = [vk::BufferCopy::default().size(len)];
+            memory_barrier(
+                &self.ctx,
+                cmd,
+                (vk::PipelineStageFlags::COMPUTE_SHADER, vk::AccessFlags::SHADER_WRITE),
+                (vk::PipelineStageFlags::TRANSFER, vk::AccessFlags::TRANSFER_READ),
+            );
             // SAFETY: both buffers are alive until the submission is waited on.
-            unsafe {
-                device.cmd_pipeline_barrier(
-                    cmd,
-                    vk::PipelineStageFlags::COMPUTE_SHADER,
-                    vk::PipelineStageFlags::TRANSFER,
-                    vk::DependencyFlags::empty(),
-                    &before,
-                    &[],
-                    &[],
-                );
-                device.cmd_copy_buffer(cmd, self.raw, staging.raw, &region);
-                device.cmd_pipeline_barrier(
-                    cmd,
-                    vk::PipelineStageFlags::TRANSFER,
-                    vk::PipelineStageFlags::HOST,
-                    vk::DependencyFlags::empty(),
-                    &after,
-                    &[],
-                    &[],
-                );
-            }
+            unsafe { device.cmd_copy_buffer(cmd, self.raw, staging.raw, &region) };
+            memory_barrier(&self.ctx, cmd, TRANSFER_WRITE, (vk::PipelineStageFlags::HOST, vk::AccessFlags::HOST_READ));
         })?;
         let bytes =
             staging.allocation.as_ref().and_then(Allocation::mapped_slice).expect("GpuToCpu memory is host visible");

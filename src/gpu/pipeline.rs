@@ -179,23 +179,29 @@ impl Kernel {
     }
 }
 
-/// Records a barrier that makes earlier compute writes visible to later compute reads and writes.
-pub fn compute_barrier(ctx: &Context, cmd: vk::CommandBuffer) {
-    let barrier = [vk::MemoryBarrier::default()
-        .src_access_mask(vk::AccessFlags::SHADER_WRITE)
-        .dst_access_mask(vk::AccessFlags::SHADER_READ | vk::AccessFlags::SHADER_WRITE)];
+/// Records a global memory barrier: `src_access` in `src_stage` before `dst_access` in `dst_stage`.
+pub fn memory_barrier(
+    ctx: &Context,
+    cmd: vk::CommandBuffer,
+    (src_stage, src_access): (vk::PipelineStageFlags, vk::AccessFlags),
+    (dst_stage, dst_access): (vk::PipelineStageFlags, vk::AccessFlags),
+) {
+    let barrier = [vk::MemoryBarrier::default().src_access_mask(src_access).dst_access_mask(dst_access)];
     // SAFETY: `cmd` is recording.
     unsafe {
-        ctx.device().cmd_pipeline_barrier(
-            cmd,
-            vk::PipelineStageFlags::COMPUTE_SHADER,
-            vk::PipelineStageFlags::COMPUTE_SHADER,
-            vk::DependencyFlags::empty(),
-            &barrier,
-            &[],
-            &[],
-        );
+        ctx.device().cmd_pipeline_barrier(cmd, src_stage, dst_stage, vk::DependencyFlags::empty(), &barrier, &[], &[]);
     }
+}
+
+/// Records a barrier that makes earlier compute writes visible to later compute reads and writes.
+pub fn compute_barrier(ctx: &Context, cmd: vk::CommandBuffer) {
+    let shader_rw = vk::AccessFlags::SHADER_READ | vk::AccessFlags::SHADER_WRITE;
+    memory_barrier(
+        ctx,
+        cmd,
+        (vk::PipelineStageFlags::COMPUTE_SHADER, vk::AccessFlags::SHADER_WRITE),
+        (vk::PipelineStageFlags::COMPUTE_SHADER, shader_rw),
+    );
 }
 
 /// Workgroup counts covering `invocations` 1-D invocations of `WORKGROUP_SIZE`, folded into a 2-D
