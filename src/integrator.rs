@@ -1,7 +1,8 @@
 //! Options shared by the GPU renderer and the CPU reference: image size, samples, depth, seed.
 
 use crate::error::{Error, Result};
-use crate::gpu::abi::{Globals, NO_PARAM};
+use crate::gpu::abi::{Globals, NO_PARAM, STRATEGY_BSDF, STRATEGY_DIFF};
+use crate::params::ParamId;
 use crate::rng::{PassTag, RngKey};
 use crate::scene::Scene;
 use crate::scene::flat::FlatScene;
@@ -22,8 +23,83 @@ pub const FIXED_POINT_SCALE: f32 = 4_294_967_296.0;
 /// Russian roulette starts after this many bounces by default (Mitsuba's `rr_depth`).
 pub const DEFAULT_RR_DEPTH: u32 = 5;
 
+/// Probability with which the `diff` strategy makes a capable vertex the differential vertex
+/// (ALGORITHMS.md §5.1; the paper's and its code's default).
+pub const DEFAULT_DIFF_Q: f32 = 0.5;
+
+/// How paths choose their directions (ALGORITHMS.md §3, §5). Both are unbiased for the image and for
+/// the gradient of every parameter; they differ in variance.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub enum Strategy {
+    /// Plain PRB: BSDF sampling with power-heuristic MIS against next-event estimation (Mitsuba's
+    /// `prb`), the baseline.
+    #[default]
+    Bsdf,
+    /// Differential path sampling (Su & Gkioulekas): at each vertex whose material's roughness or
+    /// blend weight *is* `target`, until one is chosen, sample the derivative of the BSDF by
+    /// `target` with probability `q`; every contribution is divided by the mixture density of all
+    /// placements (running sums w₁, w₂; Appendix-B weights for next-event estimation).
+    Diff {
+        /// The parameter whose derivative drives the differential sampler.
+        target: ParamId,
+        /// Probability of the differential technique at a capable vertex, in [0, 1].
+        q: f32,
+    },
+}
+
+impl Strategy {
+    /// The strategy named `name` (`bsdf` or `diff`); `diff` samples the derivative by the parameter
+    /// `target` with probability `q`.
+    ///
+    /// # Errors
+    /// [`Error::InvalidArgument`] naming `--strategy`, `--q` or the target for an unknown strategy,
+    /// a q outside [0, 1] or an unknown parameter.
+    pub fn from_name(scene: &Scene, name: &str, q: f32, target: &str) -> Result<Strategy> {
+        match name {
+            "bsdf" => Ok(Strategy::Bsdf),
+            "diff" => {
+                if !(0.0..=1.0).contains(&q) {
+                    return Err(Error::InvalidArgument {
+                        parameter: "--q".into(),
+                        message: format!("{q} is not in [0, 1]"),
+                    });
+                }
+                let target = scene.params.find(target).ok_or_else(|| Error::InvalidArgument {
+                    parameter: target.to_string(),
+                    message: "no such parameter to drive the differential sampler (see `pathgrad params SCENE`)".into(),
+                })?;
+                Ok(Strategy::Diff { target, q })
+            }
+            other => Err(Error::InvalidArgument {
+                parameter: "--strategy".into(),
+                message: format!("unknown strategy '{other}' (expected bsdf or diff)"),
+            }),
+        }
+    }
+
+    /// Short name: `bsdf` or `diff`.
+    pub fn name(&self) -> &'static str {
+        match self {
+            Strategy::Bsdf => "bsdf",
+            Strategy::Diff { .. } => "diff",
+        }
+    }
+
+    /// Whether some material has a differential sampler for `target`: it is the roughness of a
+    /// rough conductor or the weight of a blend. If not, `diff` samples like `bsdf` (with
+    /// balance-heuristic MIS) and brings no variance reduction.
+    pub fn has_differential_sampler(scene: &Scene, target: ParamId) -> bool {
+        use crate::scene::Material;
+        scene.materials.iter().any(|m| match m {
+            Material::RoughConductor { alpha, .. } => *alpha == target,
+            Material::Blend { weight, .. } => *weight == target,
+            _ => false,
+        })
+    }
+}
+
 /// What to render.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, PartialEq)]
 pub struct RenderOptions {
     /// Image width in pixels.
     pub width: u32,
@@ -38,6 +114,11 @@ pub struct RenderOptions {
     pub rr_depth: Option<u32>,
     /// Random seed (Philox key word 0).
     pub seed: u32,
+    /// Next-event estimation (emitter sampling, MIS-weighted against BSDF sampling); off, paths
+    /// find emitters only by hitting them.
+    pub nee: bool,
+    /// Direction-sampling strategy (applies to every pass rendered with these options).
+    pub strategy: Strategy,
 }
 
 impl RenderOptions {
@@ -50,6 +131,8 @@ impl RenderOptions {
             max_depth: Some(scene.max_depth),
             rr_depth: Some(DEFAULT_RR_DEPTH),
             seed: 0,
+            nee: true,
+            strategy: Strategy::Bsdf,
         }
     }
 
@@ -68,6 +151,11 @@ impl RenderOptions {
         if self.max_depth == Some(0) {
             return bad("--max-depth", "must be at least 1 (or -1 for unbounded)");
         }
+        if let Strategy::Diff { q, .. } = self.strategy {
+            if !(0.0..=1.0).contains(&q) {
+                return bad("--q", "must be in [0, 1]");
+            }
+        }
         Ok(())
     }
 
@@ -79,6 +167,13 @@ impl RenderOptions {
 
     /// The per-dispatch constants for `scene` (flattened as `flat`) in `pass`.
     pub fn globals(&self, scene: &Scene, flat: &FlatScene, pass: PassTag) -> Globals {
+        let (strategy, diff_q, diff_begin, diff_end) = match self.strategy {
+            Strategy::Bsdf => (STRATEGY_BSDF, 0.0, 0, 0),
+            Strategy::Diff { target, q } => {
+                let e = scene.params.entry(target);
+                (STRATEGY_DIFF, q, e.offset, e.offset + e.len)
+            }
+        };
         let c = &scene.camera;
         let forward = (c.target - c.position).normalize();
         let right = forward.cross(c.up).normalize();
@@ -104,6 +199,11 @@ impl RenderOptions {
             fixed_scale: FIXED_POINT_SCALE,
             forward_begin: 0,
             forward_end: 0,
+            nee: u32::from(self.nee),
+            strategy,
+            diff_q,
+            diff_begin,
+            diff_end,
             env_select_prob: match (scene.environment.is_some(), flat.emitters.is_empty()) {
                 (false, _) => 0.0,
                 (true, true) => 1.0,

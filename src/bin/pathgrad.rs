@@ -72,6 +72,54 @@ struct RenderFlags {
     device: Option<String>,
 }
 
+/// How gradient passes sample paths: every command that estimates gradients takes these.
+#[derive(Args, Debug, Clone)]
+struct StrategyArgs {
+    /// Gradient sampling strategy: `bsdf` (plain PRB, the baseline) or `diff` (differential path
+    /// sampling of one vertex, Su & Gkioulekas).
+    #[arg(long, default_value = "bsdf")]
+    strategy: String,
+    /// Probability that `diff` makes a capable vertex the differential vertex.
+    #[arg(long, default_value_t = pathgrad::integrator::DEFAULT_DIFF_Q)]
+    q: f32,
+    /// Turn next-event estimation off (for both strategies).
+    #[arg(long)]
+    no_nee: bool,
+    /// The parameter whose derivative drives `diff`'s sampler (default: the first parameter the
+    /// command differentiates).
+    #[arg(long, value_name = "NAME")]
+    diff_param: Option<String>,
+}
+
+impl StrategyArgs {
+    /// Sets `opts.strategy` and `opts.nee`; `default_target` is the parameter the command
+    /// differentiates first. Warns when `diff` has no sampler for the target.
+    fn apply(
+        &self,
+        scene: &pathgrad::scene::Scene,
+        default_target: Option<&str>,
+        opts: &mut RenderOptions,
+    ) -> Result<()> {
+        use pathgrad::integrator::Strategy;
+        opts.nee = !self.no_nee;
+        let target = self.diff_param.as_deref().or(default_target);
+        opts.strategy = match (self.strategy.as_str(), target) {
+            ("diff", None) => bail!("--strategy diff needs --diff-param NAME (the parameter that drives the sampler)"),
+            (name, target) => Strategy::from_name(scene, name, self.q, target.unwrap_or(""))?,
+        };
+        if let Strategy::Diff { target, .. } = opts.strategy {
+            if !Strategy::has_differential_sampler(scene, target) {
+                tracing::warn!(
+                    "{} is neither a roughness nor a blend weight: --strategy diff samples like bsdf (balance heuristic)",
+                    scene.params.entry(target).name
+                );
+            }
+        }
+        opts.validate()?;
+        Ok(())
+    }
+}
+
 #[derive(Args, Debug)]
 struct RenderArgs {
     /// The scene: builtin:cornell-box, builtin:furnace or builtin:blend.
@@ -129,6 +177,8 @@ struct GradArgs {
     output: Option<PathBuf>,
     #[command(flatten)]
     flags: RenderFlags,
+    #[command(flatten)]
+    sampling: StrategyArgs,
     /// Print JSON: {"loss", "gradients": {name: [..]}, "time_s"}.
     #[arg(long)]
     json: bool,
@@ -154,7 +204,9 @@ fn parse_values(name: &str, text: &str) -> Result<Vec<f32>> {
 fn grad(args: &GradArgs) -> Result<()> {
     use pathgrad::gpu::renderer::GradMode;
     let scene = pathgrad::scene::load(&args.scene, &args.defines)?;
-    let opts = options(&scene, &args.flags)?;
+    let mut opts = options(&scene, &args.flags)?;
+    let first_param = args.image_gradient.as_deref().or_else(|| args.params.first().map(String::as_str));
+    args.sampling.apply(&scene, first_param, &mut opts)?;
     let ctx = context(&args.flags.device)?;
     let mut renderer = Renderer::new(&ctx, &scene).with_context(|| format!("loading {}", args.scene))?;
     let start = Instant::now();
@@ -198,6 +250,8 @@ fn grad(args: &GradArgs) -> Result<()> {
             let target_opts = RenderOptions {
                 spp: (opts.spp * TARGET_SPP_FACTOR).max(TARGET_MIN_SPP),
                 seed: opts.seed.wrapping_add(TARGET_SEED_OFFSET),
+                strategy: pathgrad::integrator::Strategy::Bsdf,
+                nee: true,
                 ..opts
             };
             let target = renderer.render(&target_opts).context("rendering the target")?;

@@ -101,6 +101,15 @@ abi_constants! {
     DIM_LOBE = 4;
     /// Surface vertex, block 1: direction sample (dims 5 and 6).
     DIM_DIRECTION = 5;
+    /// Surface vertex, block 1: technique choice of the differential strategy (dim 7).
+    DIM_TECHNIQUE = 7;
+    /// Surface vertex, block 2: signed part of the differential sampler (dim 8).
+    DIM_DIFF_SIGN = 8;
     /// Surface vertex, block 2: Russian roulette (dim 9).
     DIM_ROULETTE = 9;
+
+    /// Strategy: BSDF sampling, power-heuristic MIS (plain PRB).
+    STRATEGY_BSDF = 0;
+    /// Strategy: differential path sampling with mixture MIS (ALGORITHMS.md §5).
+    STRATEGY_DIFF = 1;
 }

@@ -44,6 +44,17 @@ abi_structs! {
         forward_begin: u32,
         /// Forward mode: one past the last parameter value with tangent 1.
         forward_end: u32,
+        /// 1 if next-event estimation is on.
+        nee: u32,
+        /// `STRATEGY_BSDF` or `STRATEGY_DIFF`.
+        strategy: u32,
+        /// Differential strategy: probability of the differential technique at a capable vertex.
+        diff_q: f32,
+        /// Differential strategy: first parameter value of the target parameter; a vertex is
+        /// capable if its material's roughness or blend weight lies in `diff_begin .. diff_end`.
+        diff_begin: u32,
+        /// Differential strategy: one past the target parameter's last value.
+        diff_end: u32,
     }
 
     /// One BVH2 node: a leaf when `count > 0` (triangles `first .. first+count` of the leaf-ordered

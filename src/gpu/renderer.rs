@@ -229,6 +229,8 @@ impl Renderer {
 
     /// The loss of a render against `target` and its gradient: pass 1 renders with the primal key
     /// and gives the loss and its adjoint image; the fused pass then replays independent paths.
+    /// Pass 1 always uses plain BSDF sampling with next-event estimation (as [SG24]'s Algorithm 2);
+    /// `options.strategy` and `options.nee` apply to the gradient pass.
     ///
     /// # Errors
     /// As [`Renderer::render`] and [`Renderer::backward`]; a target of the wrong size.
@@ -240,7 +242,8 @@ impl Renderer {
         mode: GradMode,
     ) -> Result<(f64, Gradients)> {
         check_size(target, options, "target image")?;
-        let image = self.render(options)?;
+        let image =
+            self.render(&RenderOptions { strategy: crate::integrator::Strategy::Bsdf, nee: true, ..*options })?;
         let (value, adjoint) = loss_and_adjoint(&image, target, loss)?;
         Ok((value, self.backward(options, &adjoint, mode)?))
     }

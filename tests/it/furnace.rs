@@ -37,7 +37,15 @@ fn white_furnace_gpu_and_cpu() {
     let scene = builtin::load("furnace").unwrap();
     let mut renderer = Renderer::new(&gpu.ctx, &scene).unwrap();
     for (max_depth, rr_depth) in [(None, Some(1)), (None, Some(5)), (Some(1000), None)] {
-        let opts = RenderOptions { width: 64, height: 64, spp: 16, max_depth, rr_depth, seed: 3 };
+        let opts = RenderOptions {
+            width: 64,
+            height: 64,
+            spp: 16,
+            max_depth,
+            rr_depth,
+            seed: 3,
+            ..RenderOptions::for_scene(&scene)
+        };
         assert_furnace(
             &format!("GPU, max depth {max_depth:?}, roulette from {rr_depth:?}"),
             &renderer.render(&opts).unwrap(),
@@ -56,7 +64,15 @@ fn open_furnace_with_environment_texture_and_two_sided_card() {
     let gpu = TestGpu::new();
     let scene = scenes::open_furnace();
     let mut renderer = Renderer::new(&gpu.ctx, &scene).unwrap();
-    let opts = RenderOptions { width: 48, height: 48, spp: 16, max_depth: None, rr_depth: Some(5), seed: 11 };
+    let opts = RenderOptions {
+        width: 48,
+        height: 48,
+        spp: 16,
+        max_depth: None,
+        rr_depth: Some(5),
+        seed: 11,
+        ..RenderOptions::for_scene(&scene)
+    };
     assert_furnace("GPU, open furnace", &renderer.render(&opts).unwrap());
     assert_furnace("CPU, open furnace", &pathgrad::cpu::render(&scene, &opts).unwrap());
 }
