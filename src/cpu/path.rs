@@ -1,8 +1,9 @@
-//! The one path loop on the CPU (twin of `shaders/integrator.glsl`, phase by phase): BSDF sampling,
-//! next-event estimation, power-heuristic MIS, Russian roulette (ALGORITHMS.md §3.1).
+//! The one path loop on the CPU (twin of `shaders/integrator.glsl`, phase by phase): BSDF or
+//! differential sampling, next-event estimation, MIS, Russian roulette (ALGORITHMS.md §3.1, §5.4).
 
 use glam::{Vec2, Vec3};
 
+use crate::bsdf::differential::{bsdf_pdf_diff, bsdf_sample_diff};
 use crate::bsdf::{bsdf_eval, bsdf_pdf, bsdf_sample};
 use crate::bvh::{Ray, closest_hit, occluded};
 use crate::cpu::emitter::{emitter_pdf_solid_angle, environment_pdf, sample_emitter};
@@ -10,8 +11,8 @@ use crate::cpu::surface::{
     SHADOW_EPSILON, bsdf_backward, mis_power, offset_origin, param_color, resolve_bsdf, safe_div, surface_at,
 };
 use crate::gpu::abi::{
-    DIM_DIRECTION, DIM_EMITTER_POS, DIM_EMITTER_SELECT, DIM_LOBE, DIM_PIXEL_JITTER, DIM_ROULETTE, Globals, NO_EMITTER,
-    NO_PARAM,
+    DIM_DIFF_SIGN, DIM_DIRECTION, DIM_EMITTER_POS, DIM_EMITTER_SELECT, DIM_LOBE, DIM_PIXEL_JITTER, DIM_ROULETTE,
+    DIM_TECHNIQUE, Globals, MAT_BLEND, MAT_ROUGH_CONDUCTOR, NO_EMITTER, NO_PARAM, STRATEGY_DIFF,
 };
 use crate::rng::{RngKey, Stream, uniform4};
 use crate::sampling::Frame;
@@ -23,6 +24,30 @@ fn draw_block(globals: &Globals, pixel: u32, sample: u32, vertex: u32, block: u3
 
 fn max_component(v: Vec3) -> f32 {
     v.x.max(v.y).max(v.z)
+}
+
+/// Whether the differential strategy may place its differential vertex on material `m`: its
+/// roughness (rough conductor) or weight (blend) is the target parameter.
+fn material_capable(flat: &FlatScene, globals: &Globals, m: u32) -> bool {
+    let mat = &flat.materials[m as usize];
+    let p = match mat.tag {
+        MAT_ROUGH_CONDUCTOR => mat.p_alpha,
+        MAT_BLEND => mat.p_weight,
+        _ => NO_PARAM,
+    };
+    p >= globals.diff_begin && p < globals.diff_end
+}
+
+/// MIS weight of radiance reached by BSDF sampling from the previous vertex, whose direction had
+/// density `pdf_f` there and would have had density `pdf_e` under NEE (ALGORITHMS.md §3.1, §5.3).
+fn hit_weight(diff: bool, prev_nee: bool, pdf_f: f32, pdf_e: f32, prev_sum: f32) -> f32 {
+    if !prev_nee {
+        return 1.0;
+    }
+    if !diff {
+        return mis_power(pdf_f, pdf_e);
+    }
+    1.0 / (1.0 + prev_sum * pdf_e / pdf_f)
 }
 
 /// A replay may leave this much radiance, relative to the path's (plus a floor): the primal sums its
@@ -101,16 +126,19 @@ pub fn trace_path<const ADJOINT: bool>(
     let mut throughput = Vec3::ONE; // β (ALGORITHMS.md §3.1)
     let mut radiance = if ADJOINT { radiance_total } else { Vec3::ZERO }; // L (adjoint: the suffix)
     let sign = if ADJOINT { -1.0 } else { 1.0 };
+    let diff = globals.strategy == STRATEGY_DIFF;
+    let nee = globals.nee != 0;
     let mut prev_pdf_f = 0.0f32; // density with which the previous vertex sampled ray.dir
+    let mut prev_nee = false; // whether NEE at the previous vertex could have found this emitter
+    let mut prev_sum = 1.0f32; // w1 + w2 at the previous vertex before its update, rescaled
+    let (mut w1, mut w2) = (0.0f32, 1.0f32); // mixture sums of the differential strategy (§5.2)
+    let mut dx_taken = false; // the differential vertex has been chosen
     for vertex in 1..=globals.max_depth {
         // ---- intersection ----
         let Some(hit) = closest_hit(&flat.bvh, &ray, 0.0, f32::MAX) else {
             // ---- environment hit ----
             if globals.env_param != NO_PARAM {
-                let mut w_b = 1.0;
-                if vertex > 1 {
-                    w_b = mis_power(prev_pdf_f, environment_pdf(globals));
-                }
+                let w_b = hit_weight(diff, prev_nee, prev_pdf_f, environment_pdf(globals), prev_sum);
                 radiance += sign * (throughput * w_b * param_color(flat, globals.env_param));
                 if ADJOINT {
                     sink.add_rgb(globals.env_param, adj_radiance * throughput * w_b);
@@ -124,10 +152,8 @@ pub fn trace_path<const ADJOINT: bool>(
         // ---- emitter hit ----
         let cos_emit = s.ng.dot(wi_world);
         if s.emitter != NO_EMITTER && cos_emit > 0.0 {
-            let mut w_b = 1.0;
-            if vertex > 1 {
-                w_b = mis_power(prev_pdf_f, emitter_pdf_solid_angle(globals, hit.t, cos_emit));
-            }
+            let w_b =
+                hit_weight(diff, prev_nee, prev_pdf_f, emitter_pdf_solid_angle(globals, hit.t, cos_emit), prev_sum);
             let p_radiance = flat.emitters[s.emitter as usize].p_radiance;
             radiance += sign * (throughput * w_b * param_color(flat, p_radiance));
             if ADJOINT {
@@ -145,11 +171,14 @@ pub fn trace_path<const ADJOINT: bool>(
         let frame = Frame::from_normal(ns);
         let wi = frame.to_local(wi_world);
 
+        let capable = diff && material_capable(flat, globals, s.material);
+
         // ---- emitter sampling ----
         let u_em = draw_block(globals, pixel, sample, vertex, DIM_EMITTER_SELECT / 4);
         let pos = (DIM_EMITTER_POS % 4) as usize;
         let u_select = u_em[(DIM_EMITTER_SELECT % 4) as usize];
-        if let Some(es) = sample_emitter(flat, globals, u_select, Vec2::new(u_em[pos], u_em[pos + 1])) {
+        let es = if nee { sample_emitter(flat, globals, u_select, Vec2::new(u_em[pos], u_em[pos + 1])) } else { None };
+        if let Some(es) = es {
             let (wl, p_e, shadow_tmax, origin) = if es.environment {
                 (es.point, environment_pdf(globals), f32::MAX, offset_origin(s.p, s.ng, es.point))
             } else {
@@ -162,7 +191,15 @@ pub fn trace_path<const ADJOINT: bool>(
             let wo = frame.to_local(wl);
             let f = bsdf_eval(&bsdf, wi, wo);
             if p_e > 0.0 && max_component(f) > 0.0 && !occluded(&flat.bvh, &Ray::new(origin, wl), 0.0, shadow_tmax) {
-                let w_n = mis_power(p_e, bsdf_pdf(&bsdf, wi, wo));
+                let pdf_f = bsdf_pdf(&bsdf, wi, wo);
+                let w_n = if !diff {
+                    mis_power(p_e, pdf_f)
+                } else {
+                    // Appendix B: the NEE direction as produced by BSDF or differential sampling here.
+                    let q_here = if capable { globals.diff_q } else { 0.0 };
+                    let pdf_d = if capable { bsdf_pdf_diff(&bsdf, wi, wo) } else { pdf_f };
+                    1.0 / (w1 + w2 + (w1 * pdf_f + q_here * w2 * pdf_d + (1.0 - q_here) * w2 * pdf_f) / p_e)
+                };
                 radiance += sign * (throughput * w_n * f * es.radiance / p_e);
                 if ADJOINT {
                     let adj = adj_radiance * throughput * w_n * es.radiance / p_e;
@@ -172,18 +209,51 @@ pub fn trace_path<const ADJOINT: bool>(
             }
         }
 
-        // ---- BSDF sampling ----
+        // ---- BSDF or differential sampling ----
         let u_bs = draw_block(globals, pixel, sample, vertex, DIM_LOBE / 4);
         let dir = (DIM_DIRECTION % 4) as usize;
-        let Some(bs) = bsdf_sample(&bsdf, wi, u_bs[(DIM_LOBE % 4) as usize], Vec2::new(u_bs[dir], u_bs[dir + 1]))
-        else {
+        let u_lobe = u_bs[(DIM_LOBE % 4) as usize];
+        let u_dir = Vec2::new(u_bs[dir], u_bs[dir + 1]);
+        let use_dx = capable && !dx_taken && u_bs[(DIM_TECHNIQUE % 4) as usize] < globals.diff_q;
+        let (bs, pdf_f, pdf_d) = if use_dx {
+            let u_sign = draw_block(globals, pixel, sample, vertex, DIM_DIFF_SIGN / 4)[(DIM_DIFF_SIGN % 4) as usize];
+            let bs = bsdf_sample_diff(&bsdf, wi, u_sign, u_lobe, u_dir);
+            let pdf_f = bs.as_ref().map_or(0.0, |b| bsdf_pdf(&bsdf, wi, b.wo));
+            let pdf_d = bs.as_ref().map_or(0.0, |b| b.pdf);
+            (bs, pdf_f, pdf_d)
+        } else {
+            let bs = bsdf_sample(&bsdf, wi, u_lobe, u_dir);
+            let pdf_f = bs.as_ref().map_or(0.0, |b| b.pdf);
+            let pdf_d = match &bs {
+                Some(b) if capable => bsdf_pdf_diff(&bsdf, wi, b.wo),
+                _ => 0.0,
+            };
+            (bs, pdf_f, pdf_d)
+        };
+        // An invalid differential sample ends the path unmarked (ALGORITHMS.md §5.5 ruling 3).
+        let Some(bs) = bs else {
             break;
         };
-        if !(bs.pdf > 0.0) {
+        if !(pdf_f > 0.0) {
             break;
         }
-        throughput *= bs.value / bs.pdf;
-        prev_pdf_f = bs.pdf;
+        throughput *= bs.value / pdf_f;
+        prev_pdf_f = pdf_f;
+        prev_nee = nee;
+        prev_sum = w1 + w2;
+        if capable {
+            w1 += globals.diff_q * w2 * pdf_d / pdf_f;
+            w2 *= 1.0 - globals.diff_q;
+            let sum = w1 + w2;
+            if !(sum > 0.0) {
+                break;
+            }
+            w1 /= sum;
+            w2 /= sum;
+            throughput /= sum;
+            prev_sum /= sum;
+        }
+        dx_taken = dx_taken || use_dx;
 
         // ---- Russian roulette ----
         // vertex − 1 ≥ rr_depth (ALGORITHMS.md §3.1), written without the subtraction.

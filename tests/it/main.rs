@@ -11,4 +11,5 @@ mod gradients;
 mod loop_budget;
 mod resources;
 mod scene_formats;
+mod strategies;
 mod twins;
