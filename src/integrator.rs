@@ -151,10 +151,10 @@ impl RenderOptions {
         if self.max_depth == Some(0) {
             return bad("--max-depth", "must be at least 1 (or -1 for unbounded)");
         }
-        if let Strategy::Diff { q, .. } = self.strategy {
-            if !(0.0..=1.0).contains(&q) {
-                return bad("--q", "must be in [0, 1]");
-            }
+        if let Strategy::Diff { q, .. } = self.strategy
+            && !(0.0..=1.0).contains(&q)
+        {
+            return bad("--q", "must be in [0, 1]");
         }
         Ok(())
     }

@@ -107,13 +107,13 @@ impl StrategyArgs {
             ("diff", None) => bail!("--strategy diff needs --diff-param NAME (the parameter that drives the sampler)"),
             (name, target) => Strategy::from_name(scene, name, self.q, target.unwrap_or(""))?,
         };
-        if let Strategy::Diff { target, .. } = opts.strategy {
-            if !Strategy::has_differential_sampler(scene, target) {
-                tracing::warn!(
-                    "{} is neither a roughness nor a blend weight: --strategy diff samples like bsdf (balance heuristic)",
-                    scene.params.entry(target).name
-                );
-            }
+        if let Strategy::Diff { target, .. } = opts.strategy
+            && !Strategy::has_differential_sampler(scene, target)
+        {
+            tracing::warn!(
+                "{} is neither a roughness nor a blend weight: --strategy diff samples like bsdf (balance heuristic)",
+                scene.params.entry(target).name
+            );
         }
         opts.validate()?;
         Ok(())
