@@ -31,5 +31,6 @@ mod tests {
         assert_eq!(size_of::<TriShading>(), 3 * 12 + 3 * 8 + 8);
         assert_eq!(size_of::<Material>(), 10 * 4 + 2 * 12);
         assert_eq!(size_of::<EmitterTri>(), 16 + 36);
+        assert_eq!(size_of::<AliasEntry>(), 8);
     }
 }
