@@ -300,7 +300,7 @@ impl Renderer {
     }
 
     /// The loss of a render against `target` and its gradient with loss-aware adaptive pixel
-    /// sampling (ALGORITHMS.md §6, [SG24]'s Algorithm 2): pass 1 renders `adaptive.spp_primal`
+    /// sampling (ALGORITHMS.md §6, Su & Gkioulekas' Algorithm 2): pass 1 renders `adaptive.spp_primal`
     /// samples per pixel with the primal key (plain BSDF sampling with next-event estimation) and
     /// gives the loss and its adjoint image A; the pixel weights are π_p ∝ Σ_c |A_pc|; the fused
     /// pass then draws N = W·H·`options.spp` samples from them ([`Renderer::backward_adaptive`]).
