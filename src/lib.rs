@@ -32,6 +32,8 @@
 //! # Ok::<(), pathgrad::Error>(())
 //! ```
 
+pub mod adaptive;
+pub mod alias;
 pub mod bsdf;
 pub mod bvh;
 pub mod cpu;

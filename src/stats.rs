@@ -1,5 +1,5 @@
-//! Statistical tests: chi-square goodness of fit of direction samplers against their densities,
-//! and the special functions it needs.
+//! Statistical tests: chi-square goodness of fit of direction samplers against their densities
+//! and of discrete samplers against their probabilities, and the special functions they need.
 //!
 //! The harness bins sampled directions on the sphere over (cos θ, φ) — cells of equal solid angle —
 //! integrates the density over each cell with adaptive Simpson quadrature, adds one cell for invalid
@@ -14,6 +14,10 @@ use glam::Vec3;
 /// Cells expecting fewer samples than this are pooled into one (the chi-square approximation needs
 /// about 5 per cell).
 pub const MIN_EXPECTED: f64 = 5.0;
+
+/// Discrete probabilities that sum to 1 in exact arithmetic may fall short by this much after f64
+/// summation; a shortfall below it is not a cell of its own.
+const MASS_ROUNDING: f64 = 1e-12;
 
 /// Settings of one chi-square test.
 #[derive(Clone, Copy, Debug)]
@@ -241,6 +245,55 @@ pub fn chi2_directions(
     }
     if pooled_exp > 0.0 || pooled_obs > 0.0 {
         // A pooled cell that expects nothing but received samples is an outright failure.
+        statistic += if pooled_exp > 0.0 { (pooled_obs - pooled_exp).powi(2) / pooled_exp } else { f64::INFINITY };
+        dof += 1;
+    }
+    let dof = dof.saturating_sub(1).max(1);
+    let p_value = if statistic.is_finite() { gamma_q(dof as f64 * 0.5, statistic * 0.5) } else { 0.0 };
+    Chi2Result { statistic, dof, p_value, integrated_mass, table }
+}
+
+/// Chi-square test of counts `observed[i]` of a discrete sampler against the probabilities
+/// `expected[i]` it claims (summing to at most 1; the rest is expected nowhere, so a shortfall shows
+/// as missing counts). Cells expecting fewer than [`MIN_EXPECTED`] samples are pooled; a pooled
+/// cell that expects nothing but received samples fails outright. `integrated_mass` is Σ expected.
+///
+/// ```
+/// use pathgrad::stats::chi2_discrete;
+/// let r = chi2_discrete(&[260, 240, 500], &[0.25, 0.25, 0.5]);
+/// assert!(r.passed(0.01) && r.dof == 2);
+/// assert!(!chi2_discrete(&[400, 100, 500], &[0.25, 0.25, 0.5]).passed(0.01));
+/// ```
+///
+/// # Panics
+/// If the slices differ in length (a caller's invariant).
+pub fn chi2_discrete(observed: &[u64], expected: &[f64]) -> Chi2Result {
+    assert_eq!(observed.len(), expected.len(), "one expected probability per observed count");
+    let n: f64 = observed.iter().map(|&o| o as f64).sum();
+    let integrated_mass: f64 = expected.iter().sum();
+    let (mut statistic, mut dof) = (0.0, 0usize);
+    let (mut pooled_obs, mut pooled_exp) = (0.0, 0.0);
+    let mut table = String::new();
+    for (i, (&o, &p)) in observed.iter().zip(expected).enumerate() {
+        let (o, e) = (o as f64, p * n);
+        if i % 16 == 0 {
+            table.push('\n');
+        }
+        let _ = write!(table, "{o:.0}/{e:.1} ");
+        if e < MIN_EXPECTED {
+            pooled_obs += o;
+            pooled_exp += e;
+        } else {
+            statistic += (o - e) * (o - e) / e;
+            dof += 1;
+        }
+    }
+    // Whatever the probabilities leave out is expected nowhere: pool it (beyond f64 summation
+    // rounding of probabilities that add up to 1).
+    if integrated_mass < 1.0 - MASS_ROUNDING {
+        pooled_exp += (1.0 - integrated_mass) * n;
+    }
+    if pooled_exp > 0.0 || pooled_obs > 0.0 {
         statistic += if pooled_exp > 0.0 { (pooled_obs - pooled_exp).powi(2) / pooled_exp } else { f64::INFINITY };
         dof += 1;
     }

@@ -13,8 +13,10 @@ pub mod surface;
 use glam::Vec3;
 use rayon::prelude::*;
 
+use crate::adaptive::{PixelSampling, select_pixel};
 use crate::cpu::path::GradSink;
-use crate::rng::PassTag;
+use crate::gpu::abi::Globals;
+use crate::rng::{PassTag, RngKey};
 
 use crate::error::Result;
 use crate::image::Image;
@@ -76,24 +78,85 @@ pub fn backward(scene: &Scene, options: &RenderOptions, adjoint: &Image) -> Resu
         .fold(
             || vec![0.0f64; n],
             |mut grads, pixel| {
-                let a = adjoint.as_slice();
-                let adj = Vec3::new(a[3 * pixel], a[3 * pixel + 1], a[3 * pixel + 2]) * globals.adjoint_scale;
+                let adj = adjoint_at(adjoint, pixel as u32) * globals.adjoint_scale;
                 for s in 0..options.spp {
-                    let p = pixel as u32;
-                    let total =
-                        path::trace_path::<false>(&flat, &globals, p, s, Vec3::ZERO, Vec3::ZERO, &mut GradSink::None);
-                    let mut sink = GradSink::Backward(&mut grads);
-                    let left = path::trace_path::<true>(&flat, &globals, p, s, adj, total, &mut sink);
-                    if !path::replay_returned_to_zero(total, left) {
-                        drifted.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
-                    }
+                    replay_sample(&flat, &globals, pixel as u32, s, adj, &mut grads, &drifted);
                 }
                 grads
             },
         )
-        .reduce(|| vec![0.0f64; n], |a, b| a.iter().zip(&b).map(|(x, y)| x + y).collect());
+        .reduce(|| vec![0.0f64; n], add_vectors);
     check_replays(drifted.into_inner())?;
     Ok(grads)
+}
+
+/// Reverse-mode gradient with adaptive pixel sampling on the CPU: the twin of
+/// [`crate::gpu::Renderer::backward_adaptive`]. Sample k = 0..N−1 (N = W·H·spp) draws its pixel
+/// p(k) with [`crate::adaptive::select_pixel`] — the same draws as the kernel — and replays the
+/// path (p(k), k) with the δL of [`PixelSampling::sample_adjoint`] (ALGORITHMS.md §6).
+///
+/// # Errors
+/// Scene and option errors; an adjoint image or pixel sampling of another size; more samples
+/// than the 32-bit counter holds.
+pub fn backward_adaptive(
+    scene: &Scene,
+    options: &RenderOptions,
+    adjoint: &Image,
+    sampling: &PixelSampling,
+) -> Result<Vec<f64>> {
+    options.validate()?;
+    let delta = sampling.sample_adjoint(options, adjoint)?;
+    let samples = sampling.sample_count(options)?;
+    let flat = FlatScene::new(scene)?;
+    let mut globals = options.globals(scene, &flat, PassTag::Gradient);
+    // δL is in `delta` already (the kernel's adjoint_scale is 1 too).
+    globals.adjoint_scale = 1.0;
+    let key = RngKey([globals.key0, globals.key1]);
+    let n = flat.params.len();
+    let drifted = std::sync::atomic::AtomicUsize::new(0);
+    let grads = (0..samples)
+        .into_par_iter()
+        .fold(
+            || vec![0.0f64; n],
+            |mut grads, k| {
+                let pixel = select_pixel(sampling.table(), key, k);
+                let adj = adjoint_at(&delta, pixel) * globals.adjoint_scale;
+                replay_sample(&flat, &globals, pixel, k, adj, &mut grads, &drifted);
+                grads
+            },
+        )
+        .reduce(|| vec![0.0f64; n], add_vectors);
+    check_replays(drifted.into_inner())?;
+    Ok(grads)
+}
+
+/// The RGB value of `image` at row-major `pixel`.
+fn adjoint_at(image: &Image, pixel: u32) -> Vec3 {
+    Vec3::from_slice(&image.as_slice()[3 * pixel as usize..3 * pixel as usize + 3])
+}
+
+fn add_vectors(a: Vec<f64>, b: Vec<f64>) -> Vec<f64> {
+    a.iter().zip(&b).map(|(x, y)| x + y).collect()
+}
+
+/// One fused sample of the adjoint kernels: the path (`pixel`, `sample`) in primal mode for its
+/// radiance, then its replay with adjoint radiance `adj`, scattering into `grads`; a replay that
+/// does not return to zero is counted in `drifted`.
+fn replay_sample(
+    flat: &FlatScene,
+    globals: &Globals,
+    pixel: u32,
+    sample: u32,
+    adj: Vec3,
+    grads: &mut [f64],
+    drifted: &std::sync::atomic::AtomicUsize,
+) {
+    let total = path::trace_path::<false>(flat, globals, pixel, sample, Vec3::ZERO, Vec3::ZERO, &mut GradSink::None);
+    let mut sink = GradSink::Backward(grads);
+    let left = path::trace_path::<true>(flat, globals, pixel, sample, adj, total, &mut sink);
+    if !path::replay_returned_to_zero(total, left) {
+        drifted.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+    }
 }
 
 /// Forward-mode image gradient on the CPU: the twin of [`crate::gpu::Renderer::image_gradient`].

@@ -42,6 +42,8 @@ abi_constants! {
     BINDING_GRADS_FIXED = 13;
     /// Binding: the adjoint image δL = ∂loss/∂pixel, RGB per pixel.
     BINDING_ADJOINT = 14;
+    /// Binding: the alias table of adaptive pixel sampling (`AliasEntry[]`, one per pixel).
+    BINDING_ALIAS = 15;
     /// Binding: test-probe input (`uint[]`/`float[]`, probe kernels only).
     BINDING_PROBE_IN = 10;
     /// Binding: test-probe output (probe kernels only).
@@ -91,6 +93,10 @@ abi_constants! {
 
     /// Stream of per-vertex decisions.
     STREAM_MAIN = 0;
+    /// Stream of adaptive pixel selection (ALGORITHMS.md §2.3, §6): counter (0, k), vertex 0, block 0.
+    STREAM_PIXEL = 4;
+    /// Pass tag of the adaptive pixel-selection key: `key1 = (iteration << 8) | PASS_PIXEL_SELECT`.
+    PASS_PIXEL_SELECT = 3;
     /// Camera vertex, block 0: pixel jitter in dims 0 and 1.
     DIM_PIXEL_JITTER = 0;
     /// Surface vertex, block 0: emitter selection.

@@ -147,6 +147,15 @@ abi_structs! {
         v2: Vec3,
     }
 
+    /// One column of an alias table (`crate::alias::AliasTable`): keep the column's own entry
+    /// with probability `prob`, else draw `alias`.
+    struct AliasEntry {
+        /// Probability of keeping the column's own entry.
+        prob: f32,
+        /// The entry drawn otherwise.
+        alias: u32,
+    }
+
     /// Test probe input: one BSDF query (`shaders/bsdf_probe.comp`).
     struct BsdfProbeCase {
         /// Leaf 0 kind (`LEAF_*`).

@@ -1,16 +1,18 @@
 //! `Renderer`: uploads a scene once and dispatches the megakernels — the primal render, the fused
-//! adjoint (reverse-mode gradients) and forward-mode image gradients — one sample index per
-//! dispatch, in a fixed order, so the same seed gives the same image on the same device.
+//! adjoint (reverse-mode gradients, with uniform or loss-aware adaptive pixel sampling) and
+//! forward-mode image gradients — one sample index per dispatch, in a fixed order, so the same seed
+//! gives the same image on the same device.
 
 use std::sync::Arc;
 
+use crate::adaptive::{AdaptiveOptions, PixelSampling};
 use crate::error::{Error, Result};
 use crate::gpu::abi::*;
 use crate::gpu::buffer::Buffer;
 use crate::gpu::context::Context;
 use crate::gpu::pipeline::{Kernel, compute_barrier, groups_for};
 use crate::image::Image;
-use crate::integrator::RenderOptions;
+use crate::integrator::{RenderOptions, Strategy};
 use crate::loss::{Loss, loss_and_adjoint};
 use crate::params::{Gradients, ParamTable};
 use crate::rng::PassTag;
@@ -48,6 +50,8 @@ struct Kernels {
     primal: Option<Kernel>,
     adjoint: Option<Kernel>,
     adjoint_fixed: Option<Kernel>,
+    adjoint_adaptive: Option<Kernel>,
+    adjoint_adaptive_fixed: Option<Kernel>,
     image_gradient: Option<Kernel>,
 }
 
@@ -190,18 +194,69 @@ impl Renderer {
         let _span = tracing::info_span!("adjoint", spp = options.spp, ?mode).entered();
         let globals = options.globals(&self.scene, &self.flat, PassTag::Gradient);
         let adjoint_buf = Buffer::storage_with(&self.ctx, "adjoint image", adjoint.as_slice())?;
+        self.reverse([KernelKind::Adjoint, KernelKind::AdjointFixed], &globals, options, &adjoint_buf, &[], mode)
+    }
+
+    /// Reverse-mode gradient with loss-aware adaptive pixel sampling (ALGORITHMS.md §6): the
+    /// N = W·H·`options.spp` samples of the fused primal + replay kernel draw their pixels from
+    /// `sampling` on the device (sample k: pixel p(k) from the alias table, path counters (p(k), k))
+    /// and carry the adjoint radiance of [`PixelSampling::sample_adjoint`] — A_p/(N·π_p) for the
+    /// unbiased importance estimator, A_p/n_p for the per-pixel mean, whose histogram n_p is drawn
+    /// on the host from the same uniforms before the launch.
+    ///
+    /// # Errors
+    /// As [`Renderer::backward`]; [`Error::InvalidArgument`] if `sampling` is for another image size
+    /// or N exceeds the 32-bit sample counter.
+    pub fn backward_adaptive(
+        &mut self,
+        options: &RenderOptions,
+        adjoint: &Image,
+        sampling: &PixelSampling,
+        mode: GradMode,
+    ) -> Result<Gradients> {
+        options.validate()?;
+        check_size(adjoint, options, "adjoint image")?;
+        let delta = sampling.sample_adjoint(options, adjoint)?;
+        let _span =
+            tracing::info_span!("adjoint_adaptive", spp = options.spp, ?mode, estimator = sampling.estimator().name())
+                .entered();
+        let mut globals = options.globals(&self.scene, &self.flat, PassTag::Gradient);
+        // δL is in `delta` already.
+        globals.adjoint_scale = 1.0;
+        let table = sampling.table();
+        let entries: Vec<AliasEntry> =
+            table.prob().iter().zip(table.alias()).map(|(&prob, &alias)| AliasEntry { prob, alias }).collect();
+        let alias_buf = Buffer::storage_with(&self.ctx, "pixel alias table", &entries)?;
+        let adjoint_buf = Buffer::storage_with(&self.ctx, "adjoint image (per-sample δL)", delta.as_slice())?;
+        self.reverse(
+            [KernelKind::AdjointAdaptive, KernelKind::AdjointAdaptiveFixed],
+            &globals,
+            options,
+            &adjoint_buf,
+            &[(BINDING_ALIAS, &alias_buf)],
+            mode,
+        )
+    }
+
+    /// Runs the reverse-mode kernel of `mode` — `kinds[0]` with float atomics, `kinds[1]` in fixed
+    /// point — over the scene bindings, the adjoint image, the gradient and `extra`.
+    fn reverse(
+        &mut self,
+        kinds: [KernelKind; 2],
+        globals: &Globals,
+        options: &RenderOptions,
+        adjoint_buf: &Buffer,
+        extra: &[(u32, &Buffer)],
+        mode: GradMode,
+    ) -> Result<Gradients> {
         let n = self.flat.params.len();
         match mode {
             GradMode::Float => {
                 let grads = Buffer::storage(&self.ctx, "gradient", (n * 4) as u64)?;
                 grads.clear()?;
-                self.dispatch(
-                    KernelKind::Adjoint,
-                    &globals,
-                    options,
-                    &[(BINDING_ADJOINT, &adjoint_buf), (BINDING_GRADS, &grads)],
-                    &mut |_, _| {},
-                )?;
+                let mut bindings = vec![(BINDING_ADJOINT, adjoint_buf), (BINDING_GRADS, &grads)];
+                bindings.extend_from_slice(extra);
+                self.dispatch(kinds[0], globals, options, &bindings, &mut |_, _| {})?;
                 Ok(Gradients::new(&self.scene.params, grads.download(n)?))
             }
             GradMode::Deterministic => {
@@ -213,13 +268,9 @@ impl Renderer {
                 }
                 let grads = Buffer::storage(&self.ctx, "gradient (fixed point)", (n * 8) as u64)?;
                 grads.clear()?;
-                self.dispatch(
-                    KernelKind::AdjointFixed,
-                    &globals,
-                    options,
-                    &[(BINDING_ADJOINT, &adjoint_buf), (BINDING_GRADS_FIXED, &grads)],
-                    &mut |_, _| {},
-                )?;
+                let mut bindings = vec![(BINDING_ADJOINT, adjoint_buf), (BINDING_GRADS_FIXED, &grads)];
+                bindings.extend_from_slice(extra);
+                self.dispatch(kinds[1], globals, options, &bindings, &mut |_, _| {})?;
                 let fixed: Vec<i64> = grads.download(n)?;
                 let unit = 1.0 / f64::from(globals.fixed_scale);
                 Ok(Gradients::new(&self.scene.params, fixed.iter().map(|&v| (v as f64 * unit) as f32).collect()))
@@ -246,6 +297,38 @@ impl Renderer {
             self.render(&RenderOptions { strategy: crate::integrator::Strategy::Bsdf, nee: true, ..*options })?;
         let (value, adjoint) = loss_and_adjoint(&image, target, loss)?;
         Ok((value, self.backward(options, &adjoint, mode)?))
+    }
+
+    /// The loss of a render against `target` and its gradient with loss-aware adaptive pixel
+    /// sampling (ALGORITHMS.md §6, Su & Gkioulekas' Algorithm 2): pass 1 renders `adaptive.spp_primal`
+    /// samples per pixel with the primal key (plain BSDF sampling with next-event estimation) and
+    /// gives the loss and its adjoint image A; the pixel weights are π_p ∝ Σ_c |A_pc|; the fused
+    /// pass then draws N = W·H·`options.spp` samples from them ([`Renderer::backward_adaptive`]).
+    /// `options.strategy` and `options.nee` apply to the gradient pass. If A is zero everywhere
+    /// the gradient is exactly zero and is returned without a gradient pass.
+    ///
+    /// # Errors
+    /// As [`Renderer::loss_and_gradient`] and [`Renderer::backward_adaptive`];
+    /// [`Error::InvalidArgument`] for `adaptive.spp_primal` = 0 or a non-finite adjoint value.
+    pub fn loss_and_gradient_adaptive(
+        &mut self,
+        options: &RenderOptions,
+        adaptive: &AdaptiveOptions,
+        target: &Image,
+        loss: Loss,
+        mode: GradMode,
+    ) -> Result<(f64, Gradients)> {
+        adaptive.validate()?;
+        options.validate()?;
+        check_size(target, options, "target image")?;
+        let pass1 = RenderOptions { spp: adaptive.spp_primal, strategy: Strategy::Bsdf, nee: true, ..*options };
+        let image = self.render(&pass1)?;
+        let (value, adjoint) = loss_and_adjoint(&image, target, loss)?;
+        if adjoint.as_slice().iter().all(|&a| a == 0.0) {
+            return Ok((value, Gradients::new(&self.scene.params, vec![0.0; self.flat.params.len()])));
+        }
+        let sampling = PixelSampling::from_adjoint(&adjoint, adaptive.estimator)?;
+        Ok((value, self.backward_adaptive(options, &adjoint, &sampling, mode)?))
     }
 
     /// Forward-mode image gradient ∂I/∂θ: per pixel and channel, the derivative of the image by
@@ -291,6 +374,16 @@ impl Renderer {
             KernelKind::AdjointFixed => {
                 (&mut self.kernels.adjoint_fixed, "adjoint_fixed", &[BINDING_ADJOINT, BINDING_GRADS_FIXED])
             }
+            KernelKind::AdjointAdaptive => (
+                &mut self.kernels.adjoint_adaptive,
+                "adjoint_adaptive",
+                &[BINDING_ADJOINT, BINDING_GRADS, BINDING_ALIAS],
+            ),
+            KernelKind::AdjointAdaptiveFixed => (
+                &mut self.kernels.adjoint_adaptive_fixed,
+                "adjoint_adaptive_fixed",
+                &[BINDING_ADJOINT, BINDING_GRADS_FIXED, BINDING_ALIAS],
+            ),
             KernelKind::ImageGradient => {
                 (&mut self.kernels.image_gradient, "image_gradient", &[BINDING_ADJOINT, BINDING_ACCUM])
             }
@@ -350,6 +443,8 @@ impl Renderer {
             KernelKind::Primal => self.kernels.primal.as_ref(),
             KernelKind::Adjoint => self.kernels.adjoint.as_ref(),
             KernelKind::AdjointFixed => self.kernels.adjoint_fixed.as_ref(),
+            KernelKind::AdjointAdaptive => self.kernels.adjoint_adaptive.as_ref(),
+            KernelKind::AdjointAdaptiveFixed => self.kernels.adjoint_adaptive_fixed.as_ref(),
             KernelKind::ImageGradient => self.kernels.image_gradient.as_ref(),
         }
         .expect("run's callers build the kernel first");
@@ -376,6 +471,8 @@ enum KernelKind {
     Primal,
     Adjoint,
     AdjointFixed,
+    AdjointAdaptive,
+    AdjointAdaptiveFixed,
     ImageGradient,
 }
 
@@ -385,6 +482,8 @@ impl KernelKind {
             KernelKind::Primal => "primal",
             KernelKind::Adjoint => "adjoint",
             KernelKind::AdjointFixed => "adjoint_fixed",
+            KernelKind::AdjointAdaptive => "adjoint_adaptive",
+            KernelKind::AdjointAdaptiveFixed => "adjoint_adaptive_fixed",
             KernelKind::ImageGradient => "image_gradient",
         }
     }

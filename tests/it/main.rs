@@ -2,6 +2,7 @@
 
 mod support;
 
+mod adaptive;
 mod bvh_embree;
 mod cli;
 mod cpu_vs_gpu;

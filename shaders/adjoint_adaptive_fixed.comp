@@ -1,0 +1,8 @@
+// Adjoint kernel with adaptive pixel sampling (ALGORITHMS.md §6), deterministic: 64-bit fixed point.
+#version 460
+#extension GL_EXT_scalar_block_layout : require
+#extension GL_EXT_shader_explicit_arithmetic_types_int64 : require
+#extension GL_EXT_shader_atomic_int64 : require
+#define GRAD_MODE GRAD_MODE_FIXED
+#define PIXEL_SELECT 1
+#include "replay.glsl"
