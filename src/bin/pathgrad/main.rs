@@ -191,14 +191,66 @@ const TARGET_MIN_SPP: u32 = 64;
 /// The target of `--target-set` uses this seed offset, so its paths are independent of the render's.
 const TARGET_SEED_OFFSET: u32 = 0x5EED;
 
-fn parse_values(name: &str, text: &str) -> Result<Vec<f32>> {
+fn parse_values(flag: &str, name: &str, text: &str) -> Result<Vec<f32>> {
     text.split(',')
         .map(|v| {
             v.trim()
                 .parse::<f32>()
-                .map_err(|_| anyhow::anyhow!("invalid --target-set {name}={text}: '{v}' is not a number"))
+                .map_err(|_| anyhow::anyhow!("invalid {flag} {name}={text}: '{v}' is not a number"))
         })
         .collect()
+}
+
+/// The image a loss compares against: `--target REF.exr`, or the scene rendered at `--target-set`
+/// values with [`TARGET_SPP_FACTOR`]× the spp (at least [`TARGET_MIN_SPP`]), an independent seed
+/// and plain BSDF sampling with NEE. The renderer's parameters are restored to the scene's after.
+fn target_image(
+    renderer: &mut Renderer,
+    scene: &pathgrad::scene::Scene,
+    opts: &RenderOptions,
+    target: Option<&Path>,
+    target_set: &[(String, String)],
+) -> Result<Image> {
+    Ok(match (target, target_set.is_empty()) {
+        (Some(path), true) => Image::read_exr(path)?,
+        (None, false) => {
+            let table = with_values(&scene.params, target_set, "--target-set")?;
+            renderer.set_params(&table)?;
+            let target_opts = RenderOptions {
+                spp: (opts.spp * TARGET_SPP_FACTOR).max(TARGET_MIN_SPP),
+                seed: opts.seed.wrapping_add(TARGET_SEED_OFFSET),
+                strategy: pathgrad::integrator::Strategy::Bsdf,
+                nee: true,
+                ..*opts
+            };
+            let target = renderer.render(&target_opts).context("rendering the target")?;
+            renderer.set_params(&scene.params)?;
+            target
+        }
+        _ => bail!("give --target REF.exr or --target-set NAME=VALUE"),
+    })
+}
+
+/// `table` with the values of `settings` (NAME=V sets every value of the parameter or glob,
+/// NAME=R,G,B each); `flag` names the option in errors.
+fn with_values(
+    table: &pathgrad::params::ParamTable,
+    settings: &[(String, String)],
+    flag: &str,
+) -> Result<pathgrad::params::ParamTable> {
+    let mut table = table.clone();
+    for (name, text) in settings {
+        let ids = table.select(&[name.as_str()])?;
+        for id in ids {
+            let entry = table.entry(id).clone();
+            let mut values = parse_values(flag, name, text)?;
+            if values.len() == 1 {
+                values = vec![values[0]; entry.len as usize];
+            }
+            table.set(&entry.name, &values)?;
+        }
+    }
+    Ok(table)
 }
 
 fn grad(args: &GradArgs) -> Result<()> {
@@ -231,35 +283,7 @@ fn grad(args: &GradArgs) -> Result<()> {
         return Ok(());
     }
     let loss: pathgrad::loss::Loss = args.loss.parse()?;
-    let target = match (&args.target, args.target_set.is_empty()) {
-        (Some(path), true) => Image::read_exr(path)?,
-        (None, false) => {
-            let mut table = scene.params.clone();
-            for (name, text) in &args.target_set {
-                let ids = table.select(&[name.as_str()])?;
-                for id in ids {
-                    let entry = table.entry(id).clone();
-                    let mut values = parse_values(name, text)?;
-                    if values.len() == 1 {
-                        values = vec![values[0]; entry.len as usize];
-                    }
-                    table.set(&entry.name, &values)?;
-                }
-            }
-            renderer.set_params(&table)?;
-            let target_opts = RenderOptions {
-                spp: (opts.spp * TARGET_SPP_FACTOR).max(TARGET_MIN_SPP),
-                seed: opts.seed.wrapping_add(TARGET_SEED_OFFSET),
-                strategy: pathgrad::integrator::Strategy::Bsdf,
-                nee: true,
-                ..opts
-            };
-            let target = renderer.render(&target_opts).context("rendering the target")?;
-            renderer.set_params(&scene.params)?;
-            target
-        }
-        _ => bail!("give --target REF.exr or --target-set NAME=VALUE (or --image-gradient NAME)"),
-    };
+    let target = target_image(&mut renderer, &scene, &opts, args.target.as_deref(), &args.target_set)?;
     let mode = if args.deterministic { GradMode::Deterministic } else { GradMode::Float };
     // time_s is the gradient step (render, loss, fused adjoint), not the --target-set render.
     let start = Instant::now();
