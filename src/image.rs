@@ -68,6 +68,16 @@ const DIVERGING_POSITIVE_HUE_DEG: f64 = 27.0;
 /// Oklab hue (degrees) of the negative end: a medium blue.
 const DIVERGING_NEGATIVE_HUE_DEG: f64 = 260.0;
 
+/// Oklab lightness of the dark and the light end of the sequential map of
+/// [`Image::write_log_png`]: lightness rises monotonically, so order reads without the colours.
+const SEQUENTIAL_LIGHTNESS: (f64, f64) = (0.18, 0.96);
+/// Oklab chroma of the sequential map at its middle (it falls to a third of this at both ends,
+/// which keeps the ramp inside the sRGB gamut).
+const SEQUENTIAL_CHROMA: f64 = 0.13;
+/// Oklab hue (degrees) of the sequential map's dark and light ends: violet through red and orange
+/// to yellow.
+const SEQUENTIAL_HUE_DEG: (f64, f64) = (300.0, 450.0);
+
 /// Distinguishes temporary files of concurrent writes from one process.
 static TEMP_COUNTER: AtomicU64 = AtomicU64::new(0);
 
@@ -440,6 +450,58 @@ impl Image {
         if max > 0.0 { max } else { 1.0 }
     }
 
+    /// Writes non-negative values, such as a variance map, as an 8-bit PNG on a logarithmic
+    /// scale: each pixel's channel mean `v` is drawn at `t = (log₁₀ v − log₁₀ max)/decades + 1`,
+    /// clamped to [0, 1], on a sequential map whose Oklab lightness rises from dark violet
+    /// (`t = 0`, also every `v ≤ 0`) through red and orange to pale yellow (`t = 1`). NaN pixels are
+    /// magenta, which the map never is.
+    ///
+    /// `max` is the value drawn at full brightness; `None` uses the largest finite channel mean.
+    /// Pass one `max` to several images to make them comparable. The write is atomic.
+    ///
+    /// # Errors
+    ///
+    /// [`Error::InvalidArgument`] if `max` is given and not finite and positive, or `decades` is
+    /// not finite and positive; as [`write_png`](Self::write_png).
+    pub fn write_log_png(&self, path: impl AsRef<Path>, max: Option<f32>, decades: f32) -> Result<()> {
+        let path = path.as_ref();
+        let bad = |parameter: &str, value: f32| Error::InvalidArgument {
+            parameter: parameter.into(),
+            message: format!("must be finite and positive, got {value}"),
+        };
+        if !(decades.is_finite() && decades > 0.0) {
+            return Err(bad("log map decades", decades));
+        }
+        let max = match max {
+            None => self.max_channel_mean(),
+            Some(m) if m.is_finite() && m > 0.0 => m,
+            Some(m) => return Err(bad("log map maximum", m)),
+        };
+        self.check_writable(path)?;
+        let top = f64::from(max).log10();
+        let bytes: Vec<u8> = self
+            .data
+            .chunks_exact(3)
+            .flat_map(|rgb| {
+                let v = f64::from(pixel_sum(rgb)) / 3.0;
+                if v.is_nan() {
+                    return [255, 0, 255];
+                }
+                let t = if v > 0.0 { ((v.log10() - top) / f64::from(decades) + 1.0).clamp(0.0, 1.0) } else { 0.0 };
+                oklab_to_linear_srgb(sequential_oklab(t)).map(linear_to_srgb8)
+            })
+            .collect();
+        write_rgb8_png(path, self.width, self.height, &bytes)
+    }
+
+    /// The largest finite channel mean (r + g + b)/3 of any pixel, or 1 if none is positive: the
+    /// default maximum of [`write_log_png`](Self::write_log_png).
+    pub fn max_channel_mean(&self) -> f32 {
+        let max =
+            self.data.chunks_exact(3).map(|rgb| pixel_sum(rgb) / 3.0).filter(|v| v.is_finite()).fold(0.0f32, f32::max);
+        if max > 0.0 { max } else { 1.0 }
+    }
+
     /// Index of the red value of pixel `(x, y)` in `data`.
     fn index(&self, x: u32, y: u32) -> usize {
         assert!(
@@ -591,6 +653,17 @@ fn diverging_oklab(t: f64) -> [f64; 3] {
     let chroma = s * DIVERGING_END_CHROMA;
     let hue = hue_deg.to_radians();
     [1.0 - s * (1.0 - DIVERGING_END_LIGHTNESS), chroma * hue.cos(), chroma * hue.sin()]
+}
+
+/// Oklab `[L, a, b]` of the sequential map at `t` ∈ [0, 1]: lightness linear in `t`, hue turning
+/// from violet to yellow, chroma largest in the middle.
+fn sequential_oklab(t: f64) -> [f64; 3] {
+    let t = t.clamp(0.0, 1.0);
+    let (l0, l1) = SEQUENTIAL_LIGHTNESS;
+    let (h0, h1) = SEQUENTIAL_HUE_DEG;
+    let chroma = SEQUENTIAL_CHROMA * (1.0 - 2.0 / 3.0 * (2.0 * t - 1.0).powi(2));
+    let hue = (h0 + t * (h1 - h0)).to_radians();
+    [l0 + t * (l1 - l0), chroma * hue.cos(), chroma * hue.sin()]
 }
 
 /// Oklab → linear sRGB (Björn Ottosson's published matrices, "A perceptual color space for image
@@ -857,6 +930,30 @@ mod tests {
 
         assert!(image.write_signed_png(&path, Some(0.0)).is_err());
         assert!(image.write_signed_png(&path, Some(f32::INFINITY)).is_err());
+    }
+
+    #[test]
+    fn log_png_is_monotone_in_lightness_and_marks_nan() {
+        // 1e-6 … 1 over six decades, one pixel each, plus zero, a negative value and NaN.
+        let mut values: Vec<f32> = (0..=6).map(|k| 10f32.powi(k - 6)).collect();
+        values.extend([0.0, -1.0, f32::NAN]);
+        let image = Image::from_rgb(values.len() as u32, 1, values.iter().flat_map(|&v| [v; 3]).collect()).unwrap();
+        let dir = temp_dir();
+        let path = dir.path().join("log.png");
+        image.write_log_png(&path, None, 6.0).unwrap();
+        let png = read_png(&path);
+        let lightness: Vec<f64> =
+            (0..7).map(|x| linear_srgb_to_oklab(png.get_pixel(x, 0).0.map(srgb8_to_linear))[0]).collect();
+        assert!(lightness.windows(2).all(|w| w[1] > w[0] + 0.05), "lightness must rise per decade: {lightness:?}");
+        assert_eq!(png.get_pixel(7, 0), png.get_pixel(0, 0), "zero is drawn as the bottom of the scale");
+        assert_eq!(png.get_pixel(8, 0), png.get_pixel(0, 0), "a negative value is drawn as the bottom");
+        assert_eq!(png.get_pixel(9, 0).0, [255, 0, 255], "NaN is magenta");
+        for t in (0..=100).map(|i| f64::from(i) / 100.0) {
+            let rgb = oklab_to_linear_srgb(sequential_oklab(t));
+            assert!(rgb.iter().all(|&c| (-1e-3..=1.0 + 1e-3).contains(&c)), "t = {t}: {rgb:?} is out of gamut");
+        }
+        assert!(image.write_log_png(&path, Some(0.0), 6.0).is_err());
+        assert!(image.write_log_png(&path, None, f32::NAN).is_err());
     }
 
     #[test]

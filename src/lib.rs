@@ -47,5 +47,6 @@ pub mod rng;
 pub mod sampling;
 pub mod scene;
 pub mod stats;
+pub mod variance;
 
 pub use error::{Error, Result};

@@ -2,7 +2,8 @@
 
 use std::process::Command;
 
-fn pathgrad() -> Command {
+/// The binary under test, on lavapipe unless `PATHGRAD_DEVICE` or `PATHGRAD_TEST_DEVICE` says otherwise.
+pub(crate) fn pathgrad() -> Command {
     let mut c = Command::new(env!("CARGO_BIN_EXE_pathgrad"));
     if std::env::var_os("PATHGRAD_DEVICE").is_none() {
         c.env("PATHGRAD_DEVICE", std::env::var("PATHGRAD_TEST_DEVICE").unwrap_or_else(|_| "cpu".into()));

@@ -14,3 +14,4 @@ mod resources;
 mod scene_formats;
 mod strategies;
 mod twins;
+mod variance;

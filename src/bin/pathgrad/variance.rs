@@ -1,0 +1,330 @@
+//! `pathgrad variance`: the variance of gradient estimators per strategy over independent runs —
+//! image-gradient maps (the paper's Figures 5–7) or loss gradients (Tables 1–2) — with equal-time
+//! efficiency.
+
+use std::path::PathBuf;
+
+use anyhow::{Context as _, Result, bail};
+use clap::Args;
+use pathgrad::adaptive::AdaptiveEstimator;
+use pathgrad::gpu::Renderer;
+use pathgrad::integrator::{RenderOptions, Strategy};
+use pathgrad::variance::{self, LossGradientSetup};
+
+use super::{RenderFlags, context, options, parse_define, target_image};
+
+/// Dynamic range of the variance PNGs: this many decades below the largest variance of any
+/// technique (one scale for all, so the maps compare by eye).
+const PNG_DECADES: f32 = 4.0;
+
+#[derive(Args, Debug)]
+pub(crate) struct VarianceArgs {
+    /// The scene: builtin:NAME or a scene file.
+    scene: String,
+    /// Override a scene file's default: NAME=VALUE (repeatable).
+    #[arg(short = 'D', long = "define", value_name = "NAME=VALUE", value_parser = parse_define)]
+    defines: Vec<(String, String)>,
+    /// The differentiated parameter (exact name); it also drives `diff`'s sampler unless
+    /// --diff-param says otherwise.
+    #[arg(long, value_name = "NAME")]
+    param: String,
+    /// Strategies to compare, comma-separated: bsdf, diff.
+    #[arg(long, value_delimiter = ',', default_value = "bsdf,diff")]
+    strategy: Vec<String>,
+    /// Probabilities of `diff`'s differential vertex, comma-separated (one row each: a q sweep).
+    #[arg(long, value_delimiter = ',', default_value = "0.5")]
+    q: Vec<f32>,
+    /// Turn next-event estimation off for every strategy.
+    #[arg(long)]
+    no_nee: bool,
+    /// The parameter whose derivative drives `diff`'s sampler (default: --param).
+    #[arg(long, value_name = "NAME")]
+    diff_param: Option<String>,
+    /// Independent estimates per strategy (seeds --seed, --seed + 1, …).
+    #[arg(long, default_value_t = 100)]
+    runs: u32,
+    /// Loss-gradient mode: the loss (relmse, l2 or l1) against --target or --target-set.
+    #[arg(long)]
+    loss: Option<String>,
+    /// Loss-gradient mode: the target image (EXR).
+    #[arg(long, conflicts_with = "target_set")]
+    target: Option<PathBuf>,
+    /// Loss-gradient mode: render the target at these values (NAME=V or NAME=R,G,B; repeatable).
+    #[arg(long = "target-set", value_name = "NAME=VALUE", value_parser = parse_define)]
+    target_set: Vec<(String, String)>,
+    /// Loss-gradient mode: samples per pixel of pass 1, the loss image (default: 3 × --spp, the
+    /// 3:1 budget).
+    #[arg(long)]
+    spp_primal: Option<u32>,
+    /// Loss-gradient mode: also run every strategy with adaptive pixel sampling, its pixel weights
+    /// fixed from one pass-1 render (the Tables 1–2 protocol).
+    #[arg(long)]
+    adaptive: bool,
+    /// Weights of adaptive samples: importance (unbiased, default) or pixel_mean (the authors').
+    #[arg(long, default_value = "importance")]
+    adaptive_estimator: String,
+    /// Directory for the variance maps and summary.json.
+    #[arg(short, long, default_value = "variance-out")]
+    output: PathBuf,
+    #[command(flatten)]
+    flags: RenderFlags,
+    /// Print a one-line JSON summary instead of the table.
+    #[arg(long)]
+    json: bool,
+}
+
+/// One row of the comparison: a strategy, with or without adaptive pixel sampling.
+struct Technique {
+    label: String,
+    stem: String,
+    strategy: Strategy,
+    adaptive: bool,
+}
+
+/// The rows `args` asks for, in order: per strategy (per q for `diff`), uniform then adaptive.
+fn techniques(args: &VarianceArgs, scene: &pathgrad::scene::Scene) -> Result<Vec<Technique>> {
+    let target = args.diff_param.as_deref().unwrap_or(&args.param);
+    let mut rows = Vec::new();
+    for name in &args.strategy {
+        let qs: &[f32] = if name == "diff" { &args.q } else { &[0.0] };
+        for &q in qs {
+            let strategy = Strategy::from_name(scene, name, q, target)?;
+            let (label, stem) = match strategy {
+                Strategy::Bsdf => ("bsdf".to_string(), "bsdf".to_string()),
+                Strategy::Diff { q, .. } => (format!("diff q={q}"), format!("diff-q{q}")),
+            };
+            for adaptive in [false, true] {
+                if adaptive && !args.adaptive {
+                    continue;
+                }
+                let (label, stem) = if adaptive {
+                    (format!("{label} adaptive"), format!("{stem}-adaptive"))
+                } else {
+                    (label.clone(), stem.clone())
+                };
+                if rows.iter().any(|r: &Technique| r.stem == stem) {
+                    bail!("--strategy/--q list '{label}' twice");
+                }
+                rows.push(Technique { label, stem, strategy, adaptive });
+            }
+        }
+    }
+    if rows.is_empty() {
+        bail!("--strategy lists no strategy");
+    }
+    if let Strategy::Diff { target, .. } =
+        rows.iter().find(|r| r.strategy != Strategy::Bsdf).map_or(Strategy::Bsdf, |r| r.strategy)
+        && !Strategy::has_differential_sampler(scene, target)
+    {
+        tracing::warn!(
+            "{} is neither a roughness nor a blend weight: --strategy diff samples like bsdf (balance heuristic)",
+            scene.params.entry(target).name
+        );
+    }
+    Ok(rows)
+}
+
+/// What one technique measured, in either mode.
+struct Row {
+    variance: f64,
+    seconds: f64,
+    extra: serde_json::Value,
+}
+
+pub(crate) fn run(args: &VarianceArgs) -> Result<()> {
+    let scene = pathgrad::scene::load(&args.scene, &args.defines)?;
+    let mut opts = options(&scene, &args.flags)?;
+    opts.nee = !args.no_nee;
+    let param = scene.params.find(&args.param).with_context(|| {
+        format!("invalid --param {}: no such parameter (see `pathgrad params {}`)", args.param, args.scene)
+    })?;
+    let rows = techniques(args, &scene)?;
+    let loss_mode = args.target.is_some() || !args.target_set.is_empty();
+    if !loss_mode && (args.loss.is_some() || args.adaptive || args.spp_primal.is_some()) {
+        bail!(
+            "--loss, --spp-primal and --adaptive are for loss-gradient mode: give --target REF.exr or --target-set NAME=VALUE"
+        );
+    }
+    let estimator: AdaptiveEstimator = args.adaptive_estimator.parse()?;
+    if args.runs < 2 {
+        bail!("invalid --runs {}: a variance needs at least 2 runs", args.runs);
+    }
+    if args.output.exists() && !args.output.is_dir() {
+        bail!("invalid -o {}: exists and is not a directory", args.output.display());
+    }
+
+    let ctx = context(&args.flags.device)?;
+    let mut renderer = Renderer::new(&ctx, &scene).with_context(|| format!("loading {}", args.scene))?;
+    let progress = indicatif::ProgressBar::new(u64::from(args.runs) * rows.len() as u64);
+    if args.json {
+        progress.set_draw_target(indicatif::ProgressDrawTarget::hidden());
+    }
+    progress.set_style(
+        indicatif::ProgressStyle::with_template(
+            "{spinner} {msg:>16} [{bar:40}] {pos}/{len} runs ({elapsed}, eta {eta})",
+        )
+        .expect("the template is valid")
+        .progress_chars("=> "),
+    );
+
+    let mut measured = Vec::with_capacity(rows.len());
+    let mode;
+    if loss_mode {
+        mode = "loss";
+        let loss: pathgrad::loss::Loss = args.loss.as_deref().unwrap_or("relmse").parse()?;
+        let target = target_image(&mut renderer, &scene, &opts, args.target.as_deref(), &args.target_set)?;
+        let spp_primal = args.spp_primal.unwrap_or(3 * opts.spp);
+        let params = [param];
+        // Warm-up, untimed: lavapipe compiles each kernel at its first dispatch.
+        for adaptive in [false, true].into_iter().filter(|&a| !a || args.adaptive) {
+            let setup = LossGradientSetup {
+                target: &target,
+                loss,
+                spp_primal: 1,
+                adaptive: adaptive.then_some(estimator),
+                params: &params,
+            };
+            variance::loss_gradient_variance(&mut renderer, &RenderOptions { spp: 1, ..opts }, &setup, 2, &mut |_| {})
+                .context("warming up")?;
+        }
+        for (k, row) in rows.iter().enumerate() {
+            progress.set_message(row.label.clone());
+            let setup = LossGradientSetup {
+                target: &target,
+                loss,
+                spp_primal,
+                adaptive: row.adaptive.then_some(estimator),
+                params: &params,
+            };
+            let base = u64::from(args.runs) * k as u64;
+            let r = variance::loss_gradient_variance(
+                &mut renderer,
+                &RenderOptions { strategy: row.strategy, ..opts },
+                &setup,
+                args.runs,
+                &mut |done| progress.set_position(base + u64::from(done)),
+            )
+            .with_context(|| format!("estimating the loss-gradient variance of {}", row.label))?;
+            measured.push(Row {
+                variance: r.total_variance,
+                seconds: r.seconds_per_estimate,
+                extra: serde_json::json!({"mean_gradient": r.mean, "variance_per_value": r.variance, "mean_loss": r.mean_loss}),
+            });
+        }
+    } else {
+        mode = "image";
+        let mut maps = Vec::with_capacity(rows.len());
+        // Warm-up, untimed: lavapipe compiles each kernel at its first dispatch.
+        renderer.image_gradient(&RenderOptions { spp: 1, ..opts }, &args.param).context("warming up")?;
+        for (k, row) in rows.iter().enumerate() {
+            progress.set_message(row.label.clone());
+            let base = u64::from(args.runs) * k as u64;
+            let r = variance::image_gradient_variance(
+                &mut renderer,
+                &RenderOptions { strategy: row.strategy, ..opts },
+                &args.param,
+                args.runs,
+                &mut |done| progress.set_position(base + u64::from(done)),
+            )
+            .with_context(|| format!("estimating the image-gradient variance of {}", row.label))?;
+            measured.push(Row {
+                variance: r.mean_variance,
+                seconds: r.seconds_per_estimate,
+                extra: serde_json::json!({}),
+            });
+            maps.push(r);
+        }
+        create_output(&args.output)?;
+        let top = maps.iter().map(|m| m.variance.max_channel_mean()).fold(0.0f32, f32::max);
+        let scale = maps.iter().map(|m| m.mean.signed_scale()).fold(0.0f32, f32::max);
+        for (row, (map, m)) in rows.iter().zip(maps.iter().zip(&mut measured)) {
+            let variance_exr = args.output.join(format!("variance-{}.exr", row.stem));
+            let mean_exr = args.output.join(format!("mean-{}.exr", row.stem));
+            map.variance.write_exr(&variance_exr)?;
+            map.variance.write_log_png(variance_exr.with_extension("png"), Some(top), PNG_DECADES)?;
+            map.mean.write_exr(&mean_exr)?;
+            map.mean.write_signed_png(mean_exr.with_extension("png"), Some(scale))?;
+            m.extra = serde_json::json!({"outputs": [variance_exr, variance_exr.with_extension("png"), mean_exr, mean_exr.with_extension("png")]});
+        }
+    }
+    progress.finish_and_clear();
+
+    let baseline = rows.iter().position(|r| r.strategy == Strategy::Bsdf && !r.adaptive).unwrap_or(0);
+    let (base_var, base_eff) =
+        (measured[baseline].variance, variance::efficiency(measured[baseline].variance, measured[baseline].seconds));
+    let ratio = |a: f64, b: f64| if b > 0.0 { a / b } else { f64::NAN };
+    let items: Vec<serde_json::Value> = rows
+        .iter()
+        .zip(&measured)
+        .map(|(row, m)| {
+            let mut item = serde_json::json!({
+                "technique": row.label,
+                "strategy": row.strategy.name(),
+                "q": match row.strategy { Strategy::Diff { q, .. } => Some(q), Strategy::Bsdf => None },
+                "adaptive": row.adaptive,
+                "variance": m.variance,
+                "variance_ratio": ratio(m.variance, base_var),
+                "seconds_per_estimate": m.seconds,
+                "efficiency_ratio": ratio(variance::efficiency(m.variance, m.seconds), base_eff),
+            });
+            if let (Some(item), Some(extra)) = (item.as_object_mut(), m.extra.as_object()) {
+                item.extend(extra.clone());
+            }
+            item
+        })
+        .collect();
+    let summary = serde_json::json!({
+        "scene": args.scene, "param": args.param, "mode": mode, "runs": args.runs, "spp": opts.spp,
+        "spp_primal": loss_mode.then(|| args.spp_primal.unwrap_or(3 * opts.spp)),
+        "nee": opts.nee, "width": opts.width, "height": opts.height, "seed": opts.seed,
+        "baseline": rows[baseline].label, "device": ctx.info().name, "techniques": items,
+    });
+    create_output(&args.output)?;
+    let summary_path = args.output.join("summary.json");
+    std::fs::write(&summary_path, serde_json::to_string_pretty(&summary)? + "\n")
+        .with_context(|| format!("writing {}", summary_path.display()))?;
+    if args.json {
+        println!("{summary}");
+        return Ok(());
+    }
+    let what = if loss_mode {
+        format!("∂loss/∂{}", args.param)
+    } else {
+        format!("∂I/∂{} (mean over pixels)", args.param)
+    };
+    println!(
+        "variance of {what}: {} runs, {} spp{}, NEE {}, {}×{} on {}",
+        args.runs,
+        opts.spp,
+        if loss_mode { format!(" (pass 1: {} spp)", args.spp_primal.unwrap_or(3 * opts.spp)) } else { String::new() },
+        if opts.nee { "on" } else { "off" },
+        opts.width,
+        opts.height,
+        ctx.info().name
+    );
+    println!(
+        "{:<22} {:>12} {:>10} {:>14} {:>16}",
+        "technique",
+        "variance",
+        format!("vs {}", rows[baseline].label),
+        "s / estimate",
+        "var×time ratio"
+    );
+    for (row, m) in rows.iter().zip(&measured) {
+        println!(
+            "{:<22} {:>12.4e} {:>10.4} {:>14.4} {:>16.4}",
+            row.label,
+            m.variance,
+            ratio(m.variance, base_var),
+            m.seconds,
+            ratio(variance::efficiency(m.variance, m.seconds), base_eff)
+        );
+    }
+    println!("→ {}", summary_path.display());
+    Ok(())
+}
+
+/// Creates the output directory (only once every estimate has succeeded: a failed run leaves none).
+fn create_output(dir: &std::path::Path) -> Result<()> {
+    std::fs::create_dir_all(dir).with_context(|| format!("creating -o {}", dir.display()))
+}
