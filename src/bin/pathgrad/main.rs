@@ -442,21 +442,25 @@ fn check_output(path: &Path) -> Result<bool> {
     }
 }
 
+/// A progress bar of `len` steps showing `what` (an indicatif template fragment) with elapsed time
+/// and ETA; hidden when `hidden` (a `--json` run prints nothing but its summary).
+fn progress_bar(len: u64, what: &str, hidden: bool) -> indicatif::ProgressBar {
+    let progress = indicatif::ProgressBar::new(len);
+    if hidden {
+        progress.set_draw_target(indicatif::ProgressDrawTarget::hidden());
+    }
+    let template = format!("{{spinner}} {what} ({{elapsed}}, eta {{eta}})");
+    progress.set_style(
+        indicatif::ProgressStyle::with_template(&template).expect("the template is valid").progress_chars("=> "),
+    );
+    progress
+}
+
 fn render(args: &RenderArgs) -> Result<()> {
     let is_exr = check_output(&args.output)?;
     let scene = pathgrad::scene::load(&args.scene, &args.defines)?;
     let opts = options(&scene, &args.flags)?;
-    let progress = indicatif::ProgressBar::new(u64::from(opts.spp));
-    if args.json {
-        progress.set_draw_target(indicatif::ProgressDrawTarget::hidden());
-    }
-    progress.set_style(
-        indicatif::ProgressStyle::with_template(
-            "{spinner} rendering [{bar:40}] {pos}/{len} spp ({elapsed}, eta {eta})",
-        )
-        .expect("the template is valid")
-        .progress_chars("=> "),
-    );
+    let progress = progress_bar(u64::from(opts.spp), "rendering [{bar:40}] {pos}/{len} spp", args.json);
     let start = Instant::now();
     let (image, device) = if args.cpu {
         let image =

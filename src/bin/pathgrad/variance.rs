@@ -11,7 +11,7 @@ use pathgrad::gpu::Renderer;
 use pathgrad::integrator::{RenderOptions, Strategy};
 use pathgrad::variance::{self, LossGradientSetup};
 
-use super::{RenderFlags, context, options, parse_define, target_image};
+use super::{RenderFlags, context, options, parse_define, progress_bar, target_image};
 
 /// Dynamic range of the variance PNGs: this many decades below the largest variance of any
 /// technique (one scale for all, so the maps compare by eye).
@@ -155,17 +155,8 @@ pub(crate) fn run(args: &VarianceArgs) -> Result<()> {
 
     let ctx = context(&args.flags.device)?;
     let mut renderer = Renderer::new(&ctx, &scene).with_context(|| format!("loading {}", args.scene))?;
-    let progress = indicatif::ProgressBar::new(u64::from(args.runs) * rows.len() as u64);
-    if args.json {
-        progress.set_draw_target(indicatif::ProgressDrawTarget::hidden());
-    }
-    progress.set_style(
-        indicatif::ProgressStyle::with_template(
-            "{spinner} {msg:>16} [{bar:40}] {pos}/{len} runs ({elapsed}, eta {eta})",
-        )
-        .expect("the template is valid")
-        .progress_chars("=> "),
-    );
+    let runs = u64::from(args.runs) * rows.len() as u64;
+    let progress = progress_bar(runs, "{msg:>16} [{bar:40}] {pos}/{len} runs", args.json);
 
     let mut measured = Vec::with_capacity(rows.len());
     let mode;
