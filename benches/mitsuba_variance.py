@@ -22,9 +22,14 @@ Install (Debian 12; Mitsuba from PyPI into a venv outside the repository):
     apt-get install libllvm19
     export DRJIT_LIBLLVM_PATH=/usr/lib/x86_64-linux-gnu/libLLVM.so.19.1
 
-Older releases install the same way (``pip install mitsuba==3.6.4`` into another venv); how
-``blendbsdf`` and ``prb`` changed between releases is described in the report that introduced
-this script and matters for blend-weight gradients.
+Older releases install the same way (``pip install mitsuba==3.6.4`` into another venv). The release
+matters for a ``blendbsdf`` parameter: up to 3.7.1 ``blendbsdf``'s sample() returns the selected
+child's density and weight (3.8.0 on: the mixture's), and up to 3.6.4 ``prb``/``prb_basic`` divide
+the re-evaluated BSDF derivative by the detached product weight x density of that sample (3.7.0 on:
+by the detached re-evaluated BSDF value itself). With both old behaviours (3.6.x, and the Mitsuba
+fork of Su & Gkioulekas 2024) a diffuse-child sample in the specular lobe divides the specular
+derivative by the diffuse child's value alone; up to 3.7.1 the BSDF-sampling MIS weight also uses
+the child's density while NEE uses the mixture's, which biases the NEE estimate.
 
 Example, from the repository root:
 
