@@ -9,7 +9,9 @@
 //!
 //! Equal-time efficiency: an estimator with variance σ² that takes t seconds reaches variance σ²·t/T
 //! in time T by averaging T/t runs, so σ²·t is its cost at equal time; [`efficiency`] is that
-//! product, to be compared as a ratio to the baseline's.
+//! product, to be compared as a ratio to the baseline's. Wall time is what a user waits; on a
+//! machine shared with other work it is noisy, so the process's CPU time (all threads, lavapipe's
+//! included; Linux only) is measured beside it — on a CPU device it is the work an estimate costs.
 
 use std::time::Instant;
 
@@ -75,6 +77,45 @@ impl Moments {
     }
 }
 
+/// Clock ticks per second of `/proc/self/stat`'s CPU times (Linux's USER_HZ, fixed for user space).
+const USER_HZ: f64 = 100.0;
+
+/// CPU time this process has used so far, user and system, over all its threads: fields 14 and
+/// 15 of `/proc/self/stat`. `None` where there is no such file (not Linux).
+pub fn process_cpu_seconds() -> Option<f64> {
+    let stat = std::fs::read_to_string("/proc/self/stat").ok()?;
+    // The command name (field 2) is parenthesised and may hold spaces: count from its end.
+    let rest = &stat[stat.rfind(')')? + 1..];
+    let mut fields = rest.split_whitespace().skip(11);
+    let user: f64 = fields.next()?.parse().ok()?;
+    let system: f64 = fields.next()?.parse().ok()?;
+    Some((user + system) / USER_HZ)
+}
+
+/// Wall and CPU time of a run of estimates.
+struct Stopwatch {
+    wall: f64,
+    cpu: Option<f64>,
+}
+
+impl Stopwatch {
+    fn new() -> Stopwatch {
+        Stopwatch { wall: 0.0, cpu: Some(0.0) }
+    }
+
+    /// Runs `f`, adding its wall and CPU time.
+    fn time<T>(&mut self, f: impl FnOnce() -> Result<T>) -> Result<T> {
+        let (start, cpu) = (Instant::now(), process_cpu_seconds());
+        let value = f()?;
+        self.wall += start.elapsed().as_secs_f64();
+        self.cpu = match (self.cpu, cpu, process_cpu_seconds()) {
+            (Some(sum), Some(a), Some(b)) => Some(sum + (b - a)),
+            _ => None,
+        };
+        Ok(value)
+    }
+}
+
 /// Variance × time per estimate: the variance an estimator reaches in unit time is this divided by
 /// the time (see the [module docs](self)).
 pub fn efficiency(variance: f64, seconds_per_estimate: f64) -> f64 {
@@ -92,6 +133,8 @@ pub struct ImageGradientVariance {
     pub mean_variance: f64,
     /// Mean wall time of one estimate (one forward-mode image gradient), in seconds.
     pub seconds_per_estimate: f64,
+    /// Mean CPU time of the process per estimate, in seconds (see [`process_cpu_seconds`]).
+    pub cpu_seconds_per_estimate: Option<f64>,
 }
 
 /// Checks the run count shared by both protocols.
@@ -140,12 +183,10 @@ pub fn image_gradient_variance(
     check_runs(runs)?;
     options.validate()?;
     let mut moments = Moments::new(options.width as usize * options.height as usize * 3);
-    let mut seconds = 0.0;
+    let mut clock = Stopwatch::new();
     for i in 0..runs {
         let run = RenderOptions { seed: options.seed.wrapping_add(i), ..*options };
-        let start = Instant::now();
-        let gradient = renderer.image_gradient(&run, param)?;
-        seconds += start.elapsed().as_secs_f64();
+        let gradient = clock.time(|| renderer.image_gradient(&run, param))?;
         moments.add(gradient.as_slice().iter().map(|&v| f64::from(v)));
         progress(i + 1);
     }
@@ -157,7 +198,8 @@ pub fn image_gradient_variance(
         mean: to_image(moments.mean())?,
         variance: to_image(&variance)?,
         mean_variance,
-        seconds_per_estimate: seconds / f64::from(runs),
+        seconds_per_estimate: clock.wall / f64::from(runs),
+        cpu_seconds_per_estimate: clock.cpu.map(|c| c / f64::from(runs)),
     })
 }
 
@@ -194,6 +236,8 @@ pub struct LossGradientVariance {
     /// Mean wall time of one estimate (pass 1, loss, gradient pass), in seconds; the one render that
     /// fixes adaptive weights is not counted (Algorithm 2 gets its weights from pass 1 for free).
     pub seconds_per_estimate: f64,
+    /// Mean CPU time of the process per estimate, in seconds (see [`process_cpu_seconds`]).
+    pub cpu_seconds_per_estimate: Option<f64>,
 }
 
 /// The variance of the loss gradient over `runs` estimates with seeds `options.seed + i`: pass 1 at
@@ -232,18 +276,19 @@ pub fn loss_gradient_variance(
     let entries: Vec<_> = setup.params.iter().map(|&id| renderer.scene().params.entry(id).clone()).collect();
     let len: usize = entries.iter().map(|e| e.len as usize).sum();
     let mut moments = Moments::new(len);
-    let (mut seconds, mut loss_sum) = (0.0, 0.0);
+    let (mut clock, mut loss_sum) = (Stopwatch::new(), 0.0);
     for i in 0..runs {
         let seed = options.seed.wrapping_add(i);
-        let start = Instant::now();
-        let image = renderer.render(&RenderOptions { seed, ..pass1 })?;
-        let (loss, adjoint) = loss_and_adjoint(&image, setup.target, setup.loss)?;
-        let run = RenderOptions { seed, ..*options };
-        let gradients = match &sampling {
-            None => renderer.backward(&run, &adjoint, GradMode::Float)?,
-            Some(sampling) => renderer.backward_adaptive(&run, &adjoint, sampling, GradMode::Float)?,
-        };
-        seconds += start.elapsed().as_secs_f64();
+        let (loss, gradients) = clock.time(|| {
+            let image = renderer.render(&RenderOptions { seed, ..pass1 })?;
+            let (loss, adjoint) = loss_and_adjoint(&image, setup.target, setup.loss)?;
+            let run = RenderOptions { seed, ..*options };
+            let gradients = match &sampling {
+                None => renderer.backward(&run, &adjoint, GradMode::Float)?,
+                Some(sampling) => renderer.backward_adaptive(&run, &adjoint, sampling, GradMode::Float)?,
+            };
+            Ok((loss, gradients))
+        })?;
         loss_sum += loss;
         let values = gradients.values();
         moments.add(
@@ -257,7 +302,8 @@ pub fn loss_gradient_variance(
         total_variance: variance.iter().sum(),
         variance,
         mean_loss: loss_sum / f64::from(runs),
-        seconds_per_estimate: seconds / f64::from(runs),
+        seconds_per_estimate: clock.wall / f64::from(runs),
+        cpu_seconds_per_estimate: clock.cpu.map(|c| c / f64::from(runs)),
     })
 }
 
@@ -286,6 +332,22 @@ mod tests {
         let mut m = Moments::new(1);
         m.add([3.0]);
         assert_eq!(m.variance(), vec![0.0]);
+    }
+
+    #[test]
+    fn process_cpu_time_counts_work_not_sleep() {
+        let before = process_cpu_seconds().expect("Linux has /proc/self/stat");
+        std::thread::sleep(std::time::Duration::from_millis(300));
+        let slept = process_cpu_seconds().unwrap() - before;
+        let start = Instant::now();
+        let mut x = 0u64;
+        while start.elapsed().as_secs_f64() < 0.3 {
+            x = std::hint::black_box(x.wrapping_mul(6364136223846793005).wrapping_add(1));
+        }
+        let worked = process_cpu_seconds().unwrap() - before - slept;
+        assert!(slept < 0.1, "sleeping cost {slept} s of CPU");
+        // 0.3 s of spinning; ticks are 10 ms and another process may take the core part of the time.
+        assert!(worked > 0.05, "0.3 s of spinning showed {worked} s of CPU");
     }
 
     #[test]

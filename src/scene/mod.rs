@@ -156,14 +156,24 @@ pub mod bounds {
 /// file (`.gltf`, `.glb`).
 ///
 /// # Errors
-/// [`Error::Scene`] for an unknown built-in or extension, and every loader error (with its
-/// file:line:col); [`Error::Io`] for unreadable files.
+/// [`Error::Scene`] for an unknown built-in or extension, `defines` for a scene that is not XML,
+/// and every loader error (with its file:line:col); [`Error::Io`] for unreadable files.
 pub fn load(spec: &str, defines: &[(String, String)]) -> Result<Scene> {
+    let path = std::path::Path::new(spec);
+    let ext = path.extension().and_then(|e| e.to_str()).map(str::to_ascii_lowercase);
+    if let Some((name, _)) = defines.first()
+        && ext.as_deref() != Some("xml")
+    {
+        return Err(Error::Scene {
+            location: spec.to_string(),
+            message: format!(
+                "-D {name}=…: only a Mitsuba XML scene has <default> values to override (see `pathgrad params` for the parameters of this one)"
+            ),
+        });
+    }
     if let Some(name) = spec.strip_prefix("builtin:") {
         return builtin::load(name);
     }
-    let path = std::path::Path::new(spec);
-    let ext = path.extension().and_then(|e| e.to_str()).map(str::to_ascii_lowercase);
     let scene = match ext.as_deref() {
         Some("xml") => mitsuba::load(path, defines)?,
         Some("gltf" | "glb") => gltf::load(path)?,

@@ -51,7 +51,7 @@ fn same_seed_gives_the_same_image() {
 #[test]
 fn bad_input_gets_a_clear_error_and_no_output() {
     let dir = tempfile::tempdir().unwrap();
-    let cases: [(&[&str], &str); 7] = [
+    let cases: [(&[&str], &str); 8] = [
         (
             &["render", "builtin:cornell-box", "--device", "99", "-o", "x.exr"],
             "no Vulkan device matches '99' (available: [0]",
@@ -65,6 +65,10 @@ fn bad_input_gets_a_clear_error_and_no_output() {
         (&["render", "builtin:cornell-box", "-o", "x.jpg"], "must end in .exr or .png"),
         (&["render", "builtin:cornell-box", "--spp", "0", "-o", "x.exr"], "invalid --spp"),
         (&["render", "builtin:cornell-box", "--max-depth", "0", "-o", "x.exr"], "--max-depth"),
+        (
+            &["render", "builtin:blend", "-D", "weight=0.3", "-o", "x.exr"],
+            "builtin:blend: -D weight=…: only a Mitsuba XML scene has <default> values",
+        ),
     ];
     for (args, message) in cases {
         let o = pathgrad().current_dir(dir.path()).args(args).output().unwrap();

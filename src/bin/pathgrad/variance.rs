@@ -128,6 +128,7 @@ fn techniques(args: &VarianceArgs, scene: &pathgrad::scene::Scene) -> Result<Vec
 struct Row {
     variance: f64,
     seconds: f64,
+    cpu_seconds: Option<f64>,
     extra: serde_json::Value,
 }
 
@@ -199,6 +200,7 @@ pub(crate) fn run(args: &VarianceArgs) -> Result<()> {
             measured.push(Row {
                 variance: r.total_variance,
                 seconds: r.seconds_per_estimate,
+                cpu_seconds: r.cpu_seconds_per_estimate,
                 extra: serde_json::json!({"mean_gradient": r.mean, "variance_per_value": r.variance, "mean_loss": r.mean_loss}),
             });
         }
@@ -221,6 +223,7 @@ pub(crate) fn run(args: &VarianceArgs) -> Result<()> {
             measured.push(Row {
                 variance: r.mean_variance,
                 seconds: r.seconds_per_estimate,
+                cpu_seconds: r.cpu_seconds_per_estimate,
                 extra: serde_json::json!({}),
             });
             maps.push(r);
@@ -241,22 +244,39 @@ pub(crate) fn run(args: &VarianceArgs) -> Result<()> {
     progress.finish_and_clear();
 
     let baseline = rows.iter().position(|r| r.strategy == Strategy::Bsdf && !r.adaptive).unwrap_or(0);
-    let (base_var, base_eff) =
-        (measured[baseline].variance, variance::efficiency(measured[baseline].variance, measured[baseline].seconds));
+    let base = &measured[baseline];
     let ratio = |a: f64, b: f64| if b > 0.0 { a / b } else { f64::NAN };
+    // Per row: variance, wall-time and CPU-time efficiency, each relative to the baseline.
+    let relative: Vec<(f64, f64, Option<f64>)> = measured
+        .iter()
+        .map(|m| {
+            let cpu = match (m.cpu_seconds, base.cpu_seconds) {
+                (Some(c), Some(b)) => {
+                    Some(ratio(variance::efficiency(m.variance, c), variance::efficiency(base.variance, b)))
+                }
+                _ => None,
+            };
+            let wall =
+                ratio(variance::efficiency(m.variance, m.seconds), variance::efficiency(base.variance, base.seconds));
+            (ratio(m.variance, base.variance), wall, cpu)
+        })
+        .collect();
     let items: Vec<serde_json::Value> = rows
         .iter()
         .zip(&measured)
-        .map(|(row, m)| {
+        .zip(&relative)
+        .map(|((row, m), &(variance_ratio, efficiency_ratio, cpu_efficiency_ratio))| {
             let mut item = serde_json::json!({
                 "technique": row.label,
                 "strategy": row.strategy.name(),
                 "q": match row.strategy { Strategy::Diff { q, .. } => Some(q), Strategy::Bsdf => None },
                 "adaptive": row.adaptive,
                 "variance": m.variance,
-                "variance_ratio": ratio(m.variance, base_var),
+                "variance_ratio": variance_ratio,
                 "seconds_per_estimate": m.seconds,
-                "efficiency_ratio": ratio(variance::efficiency(m.variance, m.seconds), base_eff),
+                "efficiency_ratio": efficiency_ratio,
+                "cpu_seconds_per_estimate": m.cpu_seconds,
+                "cpu_efficiency_ratio": cpu_efficiency_ratio,
             });
             if let (Some(item), Some(extra)) = (item.as_object_mut(), m.extra.as_object()) {
                 item.extend(extra.clone());
@@ -294,23 +314,26 @@ pub(crate) fn run(args: &VarianceArgs) -> Result<()> {
         ctx.info().name
     );
     println!(
-        "{:<22} {:>12} {:>10} {:>14} {:>16}",
-        "technique",
-        "variance",
-        format!("vs {}", rows[baseline].label),
-        "s / estimate",
-        "var×time ratio"
+        "{:<22} {:>12} {:>10} {:>10} {:>10} {:>10} {:>10}",
+        "technique", "variance", "ratio", "wall s", "var×wall", "cpu s", "var×cpu"
     );
-    for (row, m) in rows.iter().zip(&measured) {
+    let cell = |v: Option<f64>, precision: usize| v.map_or("-".to_string(), |v| format!("{v:.precision$}"));
+    for ((row, m), &(variance_ratio, wall, cpu)) in rows.iter().zip(&measured).zip(&relative) {
         println!(
-            "{:<22} {:>12.4e} {:>10.4} {:>14.4} {:>16.4}",
+            "{:<22} {:>12.4e} {:>10.4} {:>10.4} {:>10.4} {:>10} {:>10}",
             row.label,
             m.variance,
-            ratio(m.variance, base_var),
+            variance_ratio,
             m.seconds,
-            ratio(variance::efficiency(m.variance, m.seconds), base_eff)
+            wall,
+            cell(m.cpu_seconds, 4),
+            cell(cpu, 4)
         );
     }
+    println!(
+        "ratio, var×wall and var×cpu are relative to {} (var×time: the variance reached in equal time, lower is better)",
+        rows[baseline].label
+    );
     println!("→ {}", summary_path.display());
     Ok(())
 }
