@@ -42,6 +42,7 @@ pub mod gpu;
 pub mod image;
 pub mod integrator;
 pub mod loss;
+pub mod optim;
 pub mod params;
 pub mod rng;
 pub mod sampling;
