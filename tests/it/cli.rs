@@ -2,7 +2,7 @@
 
 use std::process::Command;
 
-fn pathgrad() -> Command {
+pub(crate) fn pathgrad() -> Command {
     let mut c = Command::new(env!("CARGO_BIN_EXE_pathgrad"));
     if std::env::var_os("PATHGRAD_DEVICE").is_none() {
         c.env("PATHGRAD_DEVICE", std::env::var("PATHGRAD_TEST_DEVICE").unwrap_or_else(|_| "cpu".into()));

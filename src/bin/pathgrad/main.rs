@@ -1,4 +1,7 @@
-//! The `pathgrad` command line: `render`, `grad`, `params` and `devices`.
+//! The `pathgrad` command line: `render`, `grad`, `optimize`, `params` and `devices`.
+
+mod curves;
+mod optimize;
 
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
@@ -30,6 +33,8 @@ enum Command {
     Render(RenderArgs),
     /// Gradients of a loss against a target image, or a forward-mode image gradient.
     Grad(GradArgs),
+    /// Recover parameters from a target image: Adam on loss gradients, with CSV, curves and resume.
+    Optimize(optimize::OptimizeArgs),
     /// List a scene's differentiable parameters: names, sizes, bounds and current values.
     Params {
         /// The scene: builtin:NAME or a scene file.
@@ -194,9 +199,7 @@ const TARGET_SEED_OFFSET: u32 = 0x5EED;
 fn parse_values(flag: &str, name: &str, text: &str) -> Result<Vec<f32>> {
     text.split(',')
         .map(|v| {
-            v.trim()
-                .parse::<f32>()
-                .map_err(|_| anyhow::anyhow!("invalid {flag} {name}={text}: '{v}' is not a number"))
+            v.trim().parse::<f32>().map_err(|_| anyhow::anyhow!("invalid {flag} {name}={text}: '{v}' is not a number"))
         })
         .collect()
 }
@@ -352,6 +355,7 @@ fn run(cli: Cli) -> Result<()> {
         Command::Devices { json } => devices(json),
         Command::Render(args) => render(&args),
         Command::Grad(args) => grad(&args),
+        Command::Optimize(args) => optimize::optimize(&args),
     }
 }
 
