@@ -174,7 +174,8 @@ struct Session {
     truth: Option<ParamTable>,
     ids: Vec<ParamId>,
     run: Optimization,
-    elapsed_before: f64,
+    /// Wall time of the iterations done, over every session of the run (seconds).
+    elapsed: f64,
     initial: BTreeMap<String, Vec<f64>>,
     history: History,
 }
@@ -319,7 +320,7 @@ fn start(args: &OptimizeArgs) -> Result<Session> {
         truth: prepared.truth,
         ids,
         run,
-        elapsed_before: 0.0,
+        elapsed: 0.0,
         initial,
         history,
     };
@@ -384,7 +385,7 @@ fn resume(args: &OptimizeArgs, dir: &Path, given: &BTreeSet<String>) -> Result<S
         truth: prepared.truth,
         ids,
         run,
-        elapsed_before: state.elapsed_s,
+        elapsed: state.elapsed_s,
         initial: state.initial,
         history,
     })
@@ -530,25 +531,24 @@ fn iterate(s: &mut Session, json: bool, interrupted: &AtomicBool) -> Result<&'st
     bar.set_position(s.run.iteration());
     let ctx = s.renderer.context().clone();
     log_memory(&ctx, s.run.iteration());
-    let started = Instant::now();
+    let (started, before) = (Instant::now(), s.elapsed);
     let reason = loop {
-        let elapsed = s.elapsed_before + started.elapsed().as_secs_f64();
         if interrupted.load(Ordering::SeqCst) {
             break "interrupted";
         }
         if s.run.iteration() >= s.config.iters {
             break "completed";
         }
-        if s.config.time_budget.is_some_and(|b| elapsed >= b) {
+        if s.config.time_budget.is_some_and(|b| before + started.elapsed().as_secs_f64() >= b) {
             break "time budget";
         }
         let (loss, gradients) =
             s.run.gradient(&mut s.renderer, &s.target).with_context(|| format!("iteration {}", s.run.iteration()))?;
         let report = s.run.apply(loss, &gradients)?;
-        let elapsed = s.elapsed_before + started.elapsed().as_secs_f64();
-        let row = row(s, report.iteration, elapsed, loss, report.gradient_norm);
+        s.elapsed = before + started.elapsed().as_secs_f64();
+        let row = row(s, report.iteration, s.elapsed, loss, report.gradient_norm);
         s.history.append(&s.dir.join("history.csv"), row)?;
-        write_state_at(s, elapsed, "running")?;
+        write_state(s, "running")?;
         bar.set_position(s.run.iteration());
         bar.set_message(progress_message(s, loss));
         if s.run.iteration().is_multiple_of(MEMORY_LOG_EVERY) {
@@ -556,7 +556,6 @@ fn iterate(s: &mut Session, json: bool, interrupted: &AtomicBool) -> Result<&'st
         }
     };
     bar.finish_and_clear();
-    s.elapsed_before += started.elapsed().as_secs_f64();
     log_memory(&ctx, s.run.iteration());
     Ok(reason)
 }
@@ -623,17 +622,14 @@ fn log_memory(ctx: &pathgrad::gpu::Context, iteration: u64) {
     );
 }
 
+/// Replaces `state.json` with the run as it is now.
 fn write_state(s: &Session, stopped: &str) -> Result<()> {
-    write_state_at(s, s.elapsed_before, stopped)
-}
-
-fn write_state_at(s: &Session, elapsed_s: f64, stopped: &str) -> Result<()> {
     let adam = s.run.adam().state();
     let state = State {
         version: STATE_VERSION,
         config: s.config.clone(),
         iteration: s.run.iteration(),
-        elapsed_s,
+        elapsed_s: s.elapsed,
         params: values_of(s.run.params(), &s.ids),
         initial: s.initial.clone(),
         adam_m: adam.m.clone(),
@@ -684,7 +680,7 @@ fn summary(s: &Session, stopped: &str, json: bool) {
         let v = serde_json::json!({
             "iterations": s.run.iteration(),
             "stopped": stopped,
-            "time_s": s.elapsed_before,
+            "time_s": s.elapsed,
             "loss": last.map(|r| r.loss),
             "param_error": last.and_then(|r| r.error),
             "params": params,
@@ -699,7 +695,7 @@ fn summary(s: &Session, stopped: &str, json: bool) {
         println!(
             "{stopped} after {} iterations in {:.2} s{}{} → {}",
             s.run.iteration(),
-            s.elapsed_before,
+            s.elapsed,
             last.map(|r| format!(", loss {:.4e}", r.loss)).unwrap_or_default(),
             last.and_then(|r| r.error).map(|e| format!(", parameter error {e:.4e}")).unwrap_or_default(),
             s.dir.display()
