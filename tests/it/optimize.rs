@@ -1,11 +1,12 @@
-//! Inverse rendering end to end (`pathgrad::optim`): short optimisations on small scenes recover a
+//! Inverse rendering end to end (`pathgrad::optim`): an iteration is pass 1 at spp_primal and the
+//! gradient pass at spp_grad with seed base + t; short optimisations on small scenes recover a
 //! roughness and a blend weight, and a negative control with the gradient's sign flipped fails
 //! the same criterion.
 
 use pathgrad::gpu::Renderer;
 use pathgrad::gpu::renderer::GradMode;
 use pathgrad::integrator::RenderOptions;
-use pathgrad::loss::Loss;
+use pathgrad::loss::{Loss, loss_and_adjoint};
 use pathgrad::optim::{AdamOptions, IterationOptions, Optimization};
 use pathgrad::params::Gradients;
 use pathgrad::scene::builtin;
@@ -27,6 +28,42 @@ const TOLERANCE: f64 = 3.0 * LR;
 const TARGET_SPP: u32 = 512;
 /// The target's seed; the iterations use seeds 0, 1, … (fewer than this), so no pass shares a key.
 const TARGET_SEED: u32 = 1_000;
+
+/// Iteration t of [`Optimization`] is, bit for bit (fixed-point gradients), pass 1 rendered with
+/// spp_primal samples and seed base + t, the loss and adjoint on the host, and the gradient pass
+/// with spp_grad samples and the same seed — also after a step changed the parameters.
+#[test]
+fn an_iteration_is_pass_one_at_spp_primal_then_the_gradient_at_spp_grad_with_seed_base_plus_t() {
+    let gpu = TestGpu::new();
+    if !gpu.ctx.info().int64_atomics {
+        return;
+    }
+    let scene = builtin::load("blend").unwrap();
+    let mut renderer = Renderer::new(&gpu.ctx, &scene).unwrap();
+    let render = RenderOptions { width: 16, height: 12, spp: 1, seed: 7, ..RenderOptions::for_scene(&scene) };
+    let target = renderer.render(&RenderOptions { spp: 8, seed: 99, ..render }).unwrap();
+    let mut start = scene.params.clone();
+    start.set("object.weight.value", &[0.8]).unwrap();
+    let id = start.find("object.weight.value").unwrap();
+    let mode = GradMode::Deterministic;
+    let options = IterationOptions { render, spp_primal: 3, adaptive: None, loss: Loss::RelMse, mode };
+    let mut run = Optimization::new(start, &[id], AdamOptions::default(), options).unwrap();
+    for t in 0..2u32 {
+        let (loss, gradients) = run.gradient(&mut renderer, &target).unwrap();
+        renderer.set_params(run.params()).unwrap();
+        let at_t = RenderOptions { seed: 7 + t, ..render };
+        let image = renderer.render(&RenderOptions { spp: 3, ..at_t }).unwrap();
+        let (want_loss, adjoint) = loss_and_adjoint(&image, &target, Loss::RelMse).unwrap();
+        let want = renderer.backward(&at_t, &adjoint, mode).unwrap();
+        assert_eq!(loss, want_loss, "iteration {t}: pass 1 renders 3 spp with seed 7 + {t}");
+        assert_eq!(gradients.values(), want.values(), "iteration {t}: the gradient pass");
+        // Another seed gives another loss: the seed really is per iteration.
+        let other = renderer.render(&RenderOptions { spp: 3, seed: 7 + t + 1, ..render }).unwrap();
+        assert_ne!(loss_and_adjoint(&other, &target, Loss::RelMse).unwrap().0, loss);
+        run.apply(loss, &gradients).unwrap();
+    }
+    assert_eq!(run.iteration(), 2);
+}
 
 /// Optimises `param` of built-in `scene` from `init` towards a target rendered at `truth`; returns
 /// every iterate. `sign` multiplies the gradient (−1: the negative control).
