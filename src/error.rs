@@ -81,6 +81,22 @@ pub enum Error {
         /// What happened.
         message: String,
     },
+    /// An optimisation step met a NaN or infinite gradient value of an optimised parameter; the
+    /// step was not taken, so the parameters and the optimiser's state are as before it.
+    #[error(
+        "iteration {iteration}: the gradient of {parameter}[{index}] is {value}; the step was not taken \
+         (parameters and Adam state unchanged)"
+    )]
+    NonFiniteGradient {
+        /// The optimisation iteration (0-based; its seed is the base seed + this).
+        iteration: u64,
+        /// The parameter's name.
+        parameter: String,
+        /// The index of the value within the parameter (0 for scalars, the channel for RGB).
+        index: u32,
+        /// The offending value.
+        value: f32,
+    },
     /// A scene is invalid.
     #[error("{location}: {message}")]
     Scene {

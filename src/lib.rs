@@ -4,7 +4,9 @@
 //! [`params::ParamTable`] of every differentiable value) is flattened once ([`scene::flat::FlatScene`]),
 //! uploaded, and rendered by one GLSL megakernel ([`gpu::Renderer`]) on any Vulkan 1.2 device,
 //! including lavapipe. [`cpu`] is the reference implementation of the same estimators with the same
-//! counter-based random numbers ([`rng`]); tests hold the two together.
+//! counter-based random numbers ([`rng`]); tests hold the two together. [`optim`] recovers
+//! parameters from a target image: Adam on loss gradients, optionally with loss-aware adaptive
+//! pixel sampling ([`adaptive`]).
 //!
 //! ```no_run
 //! use pathgrad::gpu::{Context, ContextDesc, Renderer};
@@ -42,6 +44,7 @@ pub mod gpu;
 pub mod image;
 pub mod integrator;
 pub mod loss;
+pub mod optim;
 pub mod params;
 pub mod rng;
 pub mod sampling;

@@ -292,9 +292,33 @@ impl Renderer {
         loss: Loss,
         mode: GradMode,
     ) -> Result<(f64, Gradients)> {
+        self.loss_and_gradient_split(options, options.spp, target, loss, mode)
+    }
+
+    /// As [`Renderer::loss_and_gradient`] with separate sample budgets (ALGORITHMS.md §3.4, §6
+    /// "Budget"): pass 1 renders `spp_primal` samples per pixel, the fused gradient pass
+    /// `options.spp`.
+    ///
+    /// # Errors
+    /// As [`Renderer::loss_and_gradient`]; [`Error::InvalidArgument`] naming `--spp-primal` if it
+    /// is 0.
+    pub fn loss_and_gradient_split(
+        &mut self,
+        options: &RenderOptions,
+        spp_primal: u32,
+        target: &Image,
+        loss: Loss,
+        mode: GradMode,
+    ) -> Result<(f64, Gradients)> {
+        if spp_primal == 0 {
+            return Err(Error::InvalidArgument {
+                parameter: "--spp-primal".into(),
+                message: "must be at least 1".into(),
+            });
+        }
+        options.validate()?;
         check_size(target, options, "target image")?;
-        let image =
-            self.render(&RenderOptions { strategy: crate::integrator::Strategy::Bsdf, nee: true, ..*options })?;
+        let image = self.render(&RenderOptions { spp: spp_primal, strategy: Strategy::Bsdf, nee: true, ..*options })?;
         let (value, adjoint) = loss_and_adjoint(&image, target, loss)?;
         Ok((value, self.backward(options, &adjoint, mode)?))
     }

@@ -138,13 +138,15 @@ pub struct Scene {
     pub warnings: Vec<String>,
 }
 
-/// Bounds of the parameter kinds: reflectances and weights in [0, 1]; roughness above the value
-/// where the microfacet distribution degenerates (ALGORITHMS.md §1, PRB blind spot); radiance ≥ 0.
+/// Bounds of the parameter kinds: reflectances and weights in [0, 1]; roughness between the value
+/// where the microfacet distribution degenerates (ALGORITHMS.md §1, PRB blind spot) and 1;
+/// radiance ≥ 0. The optimiser projects every step onto these ([`crate::optim::Adam`]).
 pub mod bounds {
     /// Albedo and specular reflectance.
     pub const REFLECTANCE: (f32, f32) = (0.0, 1.0);
-    /// Roughness alpha.
-    pub const ALPHA: (f32, f32) = (1e-3, f32::INFINITY);
+    /// Roughness alpha: [1e-3, 1], the range inverse rendering searches (alpha = 1 is already a
+    /// very rough surface; glTF's roughness² never exceeds it).
+    pub const ALPHA: (f32, f32) = (1e-3, 1.0);
     /// Blend weight.
     pub const WEIGHT: (f32, f32) = (0.0, 1.0);
     /// Emitted radiance.

@@ -10,6 +10,8 @@ mod embree_smoke;
 mod furnace;
 mod gradients;
 mod loop_budget;
+mod optimize;
+mod optimize_cli;
 mod resources;
 mod scene_formats;
 mod strategies;

@@ -1,5 +1,7 @@
-//! The `pathgrad` command line: `render`, `grad`, `variance`, `params` and `devices`.
+//! The `pathgrad` command line: `render`, `grad`, `variance`, `optimize`, `params` and `devices`.
 
+mod curves;
+mod optimize;
 mod variance;
 
 use std::path::{Path, PathBuf};
@@ -35,6 +37,8 @@ enum Command {
     /// Variance of gradient estimates per strategy over independent runs: per-pixel image-gradient
     /// variance maps, or the loss gradient's variance (--target), with equal-time efficiency.
     Variance(variance::VarianceArgs),
+    /// Recover parameters from a target image: Adam on loss gradients, with CSV, curves and resume.
+    Optimize(optimize::OptimizeArgs),
     /// List a scene's differentiable parameters: names, sizes, bounds and current values.
     Params {
         /// The scene: builtin:NAME or a scene file.
@@ -356,6 +360,7 @@ fn run(cli: Cli) -> Result<()> {
         Command::Render(args) => render(&args),
         Command::Grad(args) => grad(&args),
         Command::Variance(args) => variance::run(&args),
+        Command::Optimize(args) => optimize::optimize(&args),
     }
 }
 

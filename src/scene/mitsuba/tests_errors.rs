@@ -290,7 +290,7 @@ fn element_and_property_errors() {
         ),
         (
             r#"<bsdf type="roughconductor"><float name="alpha" value="0"/></bsdf>"#,
-            "<float name=\"alpha\">: 'alpha' must lie in [0.001, ∞), got 0",
+            "<float name=\"alpha\">: 'alpha' must lie in [0.001, 1], got 0",
         ),
         (
             r#"<bsdf type="roughconductor"><rgb name="alpha" value="0.1"/></bsdf>"#,

@@ -1,0 +1,234 @@
+//! `pathgrad optimize` as a person uses it: outputs, `--resume`, Ctrl-C and bad input.
+
+use std::path::Path;
+use std::process::{Command, Output, Stdio};
+use std::time::{Duration, Instant};
+
+use crate::cli::pathgrad;
+
+/// A small, fast run on the blend scene: 16×12, 2 + 1 spp, weight 0.8 towards 0.4.
+const SMALL: &[&str] = &[
+    "optimize",
+    "builtin:blend",
+    "--target-set",
+    "object.weight.value=0.4",
+    "--param",
+    "object.weight.value=0.8",
+    "--width",
+    "16",
+    "--spp-primal",
+    "2",
+    "--spp-grad",
+    "1",
+    "--spp",
+    "4",
+];
+
+fn run(args: &[&str], extra: &[&str]) -> Output {
+    pathgrad().args(args).args(extra).output().unwrap()
+}
+
+fn ok(o: &Output) {
+    assert!(o.status.success(), "status {:?}: {}", o.status, String::from_utf8_lossy(&o.stderr));
+}
+
+/// The CSV's data rows, split into fields.
+fn rows(dir: &Path) -> (Vec<String>, Vec<Vec<String>>) {
+    let text = std::fs::read_to_string(dir.join("history.csv")).unwrap();
+    let mut lines = text.lines();
+    let header = lines.next().unwrap().split(',').map(String::from).collect();
+    (header, lines.map(|l| l.split(',').map(String::from).collect()).collect())
+}
+
+fn json(path: &Path) -> serde_json::Value {
+    serde_json::from_str(&std::fs::read_to_string(path).unwrap()).unwrap()
+}
+
+#[test]
+fn optimize_writes_the_history_curves_image_and_parameters() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("run");
+    let o = run(SMALL, &["--iters", "3", "--json", "-o", out.to_str().unwrap()]);
+    ok(&o);
+    let summary: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    assert_eq!(summary["iterations"], 3);
+    assert_eq!(summary["stopped"], "completed");
+    let (header, rows) = rows(&out);
+    assert_eq!(
+        header,
+        [
+            "iteration",
+            "time_s",
+            "loss",
+            "object.weight.value",
+            "error[object.weight.value]",
+            "param_error",
+            "grad_norm"
+        ]
+    );
+    assert_eq!(rows.len(), 3, "one row per iteration");
+    let mut last_time = 0.0;
+    for (t, row) in rows.iter().enumerate() {
+        assert_eq!(row[0], t.to_string());
+        let time: f64 = row[1].parse().unwrap();
+        assert!(time > last_time, "wall time grows: {rows:?}");
+        last_time = time;
+        let weight: f64 = row[3].parse().unwrap();
+        // ALGORITHMS.md §7.1: ((θ − θ*)/(θ* + 1e-3))².
+        let error: f64 = row[4].parse().unwrap();
+        assert!((error - ((weight - 0.4) / 0.401).powi(2)).abs() < 1e-6 * error.max(1.0), "{row:?}");
+        assert_eq!(row[4], row[5], "one parameter: its error is the overall error");
+        assert!(row[2].parse::<f64>().unwrap() > 0.0 && row[6].parse::<f64>().unwrap().is_finite());
+    }
+    let params = json(&out.join("params.json"));
+    let weight = params["object.weight.value"][0].as_f64().unwrap();
+    assert_eq!(rows[2][3].parse::<f64>().unwrap(), weight, "params.json holds the last row's values");
+    assert!(weight < 0.8, "three steps towards 0.4 moved the weight down: {weight}");
+    assert_eq!(summary["params"], params);
+    let image = pathgrad::image::Image::read_exr(out.join("final.exr")).unwrap();
+    assert_eq!((image.width(), image.height()), (16, 12));
+    assert!(out.join("final.png").exists());
+    let svg = std::fs::read_to_string(out.join("curves.svg")).unwrap();
+    assert!(svg.starts_with("<svg") && svg.contains("parameter error against wall time"), "{}", &svg[..200]);
+    let state = json(&out.join("state.json"));
+    assert_eq!(state["iteration"], 3);
+    assert_eq!(state["stopped"], "completed");
+    let leftovers: Vec<_> = std::fs::read_dir(&out)
+        .unwrap()
+        .map(|e| e.unwrap().file_name().into_string().unwrap())
+        .filter(|n| n.ends_with(".tmp"))
+        .collect();
+    assert!(leftovers.is_empty(), "no temporary files are left: {leftovers:?}");
+}
+
+/// Two iterations, then `--resume` to four, give the same parameters as four in one go (with
+/// fixed-point gradients every step is bitwise reproducible) and one CSV numbered 0..3.
+#[test]
+fn resume_continues_the_numbering_and_the_trajectory() {
+    let dir = tempfile::tempdir().unwrap();
+    let whole = dir.path().join("whole");
+    let split = dir.path().join("split");
+    let adaptive = ["--adaptive", "--deterministic", "--seed", "3"];
+    ok(&run(SMALL, &[&adaptive[..], &["--iters", "4", "-o", whole.to_str().unwrap()]].concat()));
+    ok(&run(SMALL, &[&adaptive[..], &["--iters", "2", "-o", split.to_str().unwrap()]].concat()));
+    assert_eq!(rows(&split).1.len(), 2);
+    // Changing what the trajectory depends on is refused, naming the flag and both values.
+    let o = run(&["optimize", "--resume", split.to_str().unwrap(), "--lr", "0.5", "--spp-grad", "1"], &[]);
+    let stderr = String::from_utf8_lossy(&o.stderr);
+    assert!(!o.status.success());
+    assert!(stderr.contains("--lr 0.5 (the run has 0.01)") && !stderr.contains("--spp-grad"), "{stderr}");
+    ok(&run(&["optimize", "--resume", split.to_str().unwrap(), "--iters", "4"], &[]));
+    let (header, resumed) = rows(&split);
+    let (_, straight) = rows(&whole);
+    assert_eq!(header[3], "object.weight.value");
+    assert_eq!(resumed.iter().map(|r| r[0].as_str()).collect::<Vec<_>>(), ["0", "1", "2", "3"]);
+    for (a, b) in resumed.iter().zip(&straight) {
+        // Everything but the wall time agrees bit for bit.
+        assert_eq!((&a[0], &a[2..]), (&b[0], &b[2..]));
+    }
+    assert!(resumed[2][1].parse::<f64>().unwrap() > resumed[1][1].parse::<f64>().unwrap(), "time accumulates");
+    assert_eq!(json(&split.join("params.json")), json(&whole.join("params.json")));
+    assert_eq!(json(&split.join("state.json"))["iteration"], 4);
+}
+
+/// SIGINT in the middle of a long run: the iteration in flight finishes, everything so far is
+/// written, the exit status is 130, and the run resumes where it stopped.
+#[test]
+fn ctrl_c_writes_everything_so_far() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("run");
+    let mut child = pathgrad()
+        .args(SMALL)
+        .args(["--iters", "100000", "-o", out.to_str().unwrap()])
+        .stdout(Stdio::null())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let csv = out.join("history.csv");
+    let start = Instant::now();
+    while std::fs::read_to_string(&csv).map_or(0, |t| t.lines().count()) < 3 {
+        assert!(start.elapsed() < Duration::from_secs(300), "no iterations after 300 s");
+        assert!(child.try_wait().unwrap().is_none(), "the run ended early");
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    let status = Command::new("kill").args(["-INT", &child.id().to_string()]).status().unwrap();
+    assert!(status.success());
+    let o = child.wait_with_output().unwrap();
+    let stderr = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(130), "{stderr}");
+    assert!(stderr.contains("--resume"), "{stderr}");
+    let state = json(&out.join("state.json"));
+    assert_eq!(state["stopped"], "interrupted");
+    let done = state["iteration"].as_u64().unwrap();
+    assert!(done >= 2);
+    assert_eq!(rows(&out).1.len() as u64, done, "the CSV has a row for every iteration the state holds");
+    for file in ["curves.svg", "final.exr", "final.png", "params.json"] {
+        assert!(out.join(file).exists(), "{file} was written");
+    }
+    let more = (done + 1).to_string();
+    ok(&run(&["optimize", "--resume", out.to_str().unwrap(), "--iters", &more], &[]));
+    let (_, rows) = rows(&out);
+    assert_eq!(rows.len() as u64, done + 1);
+    assert_eq!(rows.last().unwrap()[0], done.to_string());
+}
+
+#[test]
+fn optimize_bad_input_names_the_flag_and_leaves_nothing_behind() {
+    let dir = tempfile::tempdir().unwrap();
+    let small = pathgrad::image::Image::new(8, 8);
+    small.write_exr(dir.path().join("small.exr")).unwrap();
+    let base = ["optimize", "builtin:cornell-box", "--width", "16", "--spp-primal", "1"];
+    let cases: [(&[&str], &str); 10] = [
+        (&["--target-set", "sphere.alpha.value=0.1"], "give at least one --param"),
+        (
+            &["--target-set", "sphere.alpha.value=0.1", "--param", "nope=0.3"],
+            "--param: invalid nope: matches no parameter",
+        ),
+        (
+            &["--target-set", "sphere.alpha.value=0.1", "--param", "sphere.alpha.value=1.5"],
+            "--param: invalid sphere.alpha.value: value 1.5 is outside [0.001, 1]",
+        ),
+        (&["--target-set", "sphere.alpha.value=x", "--param", "sphere.alpha.value"], "invalid --target-set"),
+        (&["--param", "sphere.alpha.value"], "give --target REF.exr or --target-set"),
+        (
+            &["--target", "small.exr", "--param", "sphere.alpha.value"],
+            "invalid --target small.exr: it is 8×8 but the render is 16×16",
+        ),
+        (&["--target", "missing.exr", "--param", "sphere.alpha.value"], "missing.exr"),
+        (
+            &["--target-set", "sphere.alpha.value=0.1", "--param", "sphere.alpha.value", "--spp-grad", "0"],
+            "invalid --spp-grad",
+        ),
+        (&["--target-set", "sphere.alpha.value=0.1", "--param", "sphere.alpha.value", "--lr", "0"], "invalid --lr"),
+        (
+            &[
+                "--target-set",
+                "sphere.alpha.value=0.1",
+                "--param",
+                "sphere.alpha.value",
+                "--adaptive-estimator",
+                "pixel_mean",
+            ],
+            "--adaptive",
+        ),
+    ];
+    for (args, message) in cases {
+        let o = pathgrad().current_dir(dir.path()).args(base).args(args).args(["-o", "out"]).output().unwrap();
+        let stderr = String::from_utf8_lossy(&o.stderr);
+        assert!(!o.status.success(), "{args:?} should fail");
+        assert!(stderr.contains(message), "{args:?}: expected '{message}' in: {stderr}");
+        assert!(!stderr.contains("panicked"), "{stderr}");
+        assert!(!dir.path().join("out").exists(), "{args:?} left an output directory");
+    }
+    let o = pathgrad().current_dir(dir.path()).args(["optimize", "--resume", "nowhere"]).output().unwrap();
+    let stderr = String::from_utf8_lossy(&o.stderr);
+    assert!(!o.status.success() && stderr.contains("--resume nowhere: reading nowhere/state.json"), "{stderr}");
+    // A directory that holds a run is not overwritten.
+    ok(&pathgrad().current_dir(dir.path()).args(SMALL).args(["--iters", "0", "-o", "out"]).output().unwrap());
+    let o = pathgrad().current_dir(dir.path()).args(SMALL).args(["--iters", "1", "-o", "out"]).output().unwrap();
+    let stderr = String::from_utf8_lossy(&o.stderr);
+    assert!(!o.status.success() && stderr.contains("already holds a run"), "{stderr}");
+    assert_eq!(rows(&dir.path().join("out")).1.len(), 0);
+    let names: Vec<_> = std::fs::read_dir(dir.path()).unwrap().map(|e| e.unwrap().file_name()).collect();
+    assert_eq!(names.len(), 2, "only small.exr and out/: {names:?}");
+}
