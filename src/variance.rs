@@ -25,7 +25,8 @@ use crate::loss::{Loss, loss_and_adjoint};
 use crate::params::ParamId;
 
 /// Seed offset of the render whose adjoint image fixes the pixel weights of adaptive loss-gradient
-/// runs, far from the runs' own seeds (the reference's `variance_loss.py` uses seed 2000).
+/// runs (the reference's `variance_loss.py` uses seed 2000); it is rendered under the reference
+/// key ([`Renderer::render_reference`]), so no run's pass 1 shares its paths.
 pub const WEIGHTS_SEED_OFFSET: u32 = 2000;
 
 /// Running mean and sum of squared deviations of many values at once (Welford, in f64).
@@ -219,7 +220,8 @@ pub struct LossGradientSetup<'a> {
     pub spp_primal: u32,
     /// `Some(estimator)`: the gradient pass draws its pixels adaptively from weights fixed once, from
     /// the adjoint image of a render at seed `seed + WEIGHTS_SEED_OFFSET` with `spp_primal` (the
-    /// Tables 1–2 protocol); `None`: every pixel gets spp_grad samples.
+    /// Tables 1–2 protocol; [`Renderer::render_reference`]); `None`: every pixel gets spp_grad
+    /// samples.
     pub adaptive: Option<AdaptiveEstimator>,
     /// The parameters whose gradient is recorded.
     pub params: &'a [ParamId],
@@ -272,7 +274,7 @@ pub fn loss_gradient_variance(
         None => None,
         Some(estimator) => {
             let seed = options.seed.wrapping_add(WEIGHTS_SEED_OFFSET);
-            let image = renderer.render(&RenderOptions { seed, ..pass1 })?;
+            let image = renderer.render_reference(&RenderOptions { seed, ..pass1 })?;
             let (_, adjoint) = loss_and_adjoint(&image, setup.target, setup.loss)?;
             Some(PixelSampling::from_adjoint(&adjoint, estimator)?)
         }

@@ -167,11 +167,32 @@ impl Renderer {
         options: &RenderOptions,
         progress: &mut dyn FnMut(u32, u32),
     ) -> Result<Image> {
+        self.render_pass(options, PassTag::Primal, progress)
+    }
+
+    /// Renders a reference (a target image) with `options`: the same estimator as
+    /// [`Renderer::render`] under the [`PassTag::Reference`] key, so its paths are independent of
+    /// every render, loss image and gradient pass of any seed (ALGORITHMS.md §2.3) — an
+    /// optimisation whose iteration t uses seed base + t never replays its target's paths.
+    ///
+    /// # Errors
+    /// As [`Renderer::render`].
+    pub fn render_reference(&mut self, options: &RenderOptions) -> Result<Image> {
+        self.render_pass(options, PassTag::Reference, &mut |_, _| {})
+    }
+
+    /// Renders with `options` under the key of `pass`.
+    fn render_pass(
+        &mut self,
+        options: &RenderOptions,
+        pass: PassTag,
+        progress: &mut dyn FnMut(u32, u32),
+    ) -> Result<Image> {
         options.validate()?;
         let _span =
             tracing::info_span!("primal", width = options.width, height = options.height, spp = options.spp).entered();
         let pixels = options.width * options.height;
-        let globals = options.globals(&self.scene, &self.flat, PassTag::Primal);
+        let globals = options.globals(&self.scene, &self.flat, pass);
         let accum = Buffer::storage(&self.ctx, "accumulation image", u64::from(pixels) * 12)?;
         accum.clear()?;
         self.dispatch(KernelKind::Primal, &globals, options, &[(BINDING_ACCUM, &accum)], progress)?;

@@ -51,3 +51,24 @@ fn gpu_equals_cpu_per_path_on_every_builtin_and_test_scene() {
         assert!(f64::from(mismatched) <= MISMATCH_BUDGET * paths, "{name}: {mismatched} mismatched paths");
     }
 }
+
+/// A reference render draws other paths than a plain render of the same seed (its key's pass tag
+/// differs), is deterministic, and estimates the same image: the two means over the image agree
+/// within 5 standard errors derived from the per-pixel differences.
+#[test]
+fn reference_renders_are_independent_of_plain_renders_of_any_seed() {
+    let gpu = TestGpu::new();
+    let scene = builtin::load("cornell-box").unwrap();
+    let mut renderer = Renderer::new(&gpu.ctx, &scene).unwrap();
+    let opts = RenderOptions { width: 32, height: 32, spp: 4, seed: 11, ..RenderOptions::for_scene(&scene) };
+    let plain = renderer.render(&opts).unwrap();
+    let reference = renderer.render_reference(&opts).unwrap();
+    assert_eq!(reference.as_slice(), renderer.render_reference(&opts).unwrap().as_slice(), "deterministic");
+    let same = plain.as_slice().iter().zip(reference.as_slice()).filter(|(a, b)| a == b && **a != 0.0).count();
+    assert!(same < 10, "{same} lit values are bitwise equal: the reference replays the plain render's paths");
+    let d: Vec<f64> = plain.as_slice().iter().zip(reference.as_slice()).map(|(a, b)| f64::from(a - b)).collect();
+    let n = d.len() as f64;
+    let mean = d.iter().sum::<f64>() / n;
+    let se = (d.iter().map(|x| (x - mean).powi(2)).sum::<f64>() / (n - 1.0) / n).sqrt();
+    assert!(mean.abs() < 5.0 * se, "mean difference {mean} ± {se}");
+}

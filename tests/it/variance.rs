@@ -74,7 +74,7 @@ fn loss_gradient_variance_is_that_of_seeded_estimates_uniform_and_adaptive() {
         assert_eq!(r.mean.len(), 4, "one α and three albedo values");
         let pass1 = RenderOptions { spp: 3, ..opts };
         let sampling = adaptive.map(|estimator| {
-            let image = renderer.render(&RenderOptions { seed: 7 + WEIGHTS_SEED_OFFSET, ..pass1 }).unwrap();
+            let image = renderer.render_reference(&RenderOptions { seed: 7 + WEIGHTS_SEED_OFFSET, ..pass1 }).unwrap();
             PixelSampling::from_adjoint(&loss_and_adjoint(&image, &target, Loss::RelMse).unwrap().1, estimator).unwrap()
         });
         let mut m = Moments::new(4);

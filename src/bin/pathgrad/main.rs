@@ -197,7 +197,7 @@ struct GradArgs {
 /// `TARGET_MIN_SPP`), so its noise is small next to the render's.
 const TARGET_SPP_FACTOR: u32 = 4;
 const TARGET_MIN_SPP: u32 = 64;
-/// The target of `--target-set` uses this seed offset, so its paths are independent of the render's.
+/// The target of `--target-set` uses this seed offset and the reference key ([`Renderer::render_reference`]), so its paths are independent of every render of the run.
 const TARGET_SEED_OFFSET: u32 = 0x5EED;
 
 fn parse_values(flag: &str, name: &str, text: &str) -> Result<Vec<f32>> {
@@ -230,7 +230,7 @@ fn target_image(
                 nee: true,
                 ..*opts
             };
-            let target = renderer.render(&target_opts).context("rendering the target")?;
+            let target = renderer.render_reference(&target_opts).context("rendering the target")?;
             renderer.set_params(&scene.params)?;
             target
         }
