@@ -51,6 +51,8 @@ import tempfile
 import time
 from pathlib import Path
 
+from mitsuba_film import resize_film  # benches/, beside this script
+
 REPO = Path(__file__).resolve().parent.parent
 # pathgrad's `grad --target-set` target: TARGET_SPP_FACTOR x spp, at least TARGET_MIN_SPP, seed + offset.
 TARGET_SPP_FACTOR = 4
@@ -111,7 +113,7 @@ class MitsubaSide:
             for key in self.params.keys():
                 print(key)
             sys.exit(0)
-        self._resize(args.width, args.height)
+        resize_film(self.mi, self.params, args.width, args.height)
         # prb exists in the AD variants only; `path` is the same primal estimator.
         self.integrator_type = "prb" if self.ad else "path"
         self.integrator = mi.load_dict(
@@ -123,20 +125,6 @@ class MitsubaSide:
         self.original = type(self.params[self.key])(self.params[self.key])
         values = [float(v) for v in args.target_value.split(",")]
         self.target_value = type(self.original)(*values)
-
-    def _resize(self, width, height):
-        """Sets the film size, keeping the vertical field of view (as pathgrad's --width/--height do)."""
-        size_keys = [k for k in self.params.keys() if k.endswith("film.size")]
-        fov_keys = [k for k in self.params.keys() if k.endswith("x_fov")]
-        if len(size_keys) != 1 or len(fov_keys) != 1:
-            sys.exit("expected one sensor with a film and an x_fov")
-        w0, h0 = self.params[size_keys[0]]
-        x_fov0 = self.params[fov_keys[0]]
-        x_fov0 = float(x_fov0[0] if hasattr(x_fov0, "__len__") else x_fov0)  # Float, or float in scalar_*
-        tan_y = math.tan(math.radians(x_fov0) / 2) * h0 / w0
-        self.params[size_keys[0]] = self.mi.ScalarVector2u(width, height)
-        self.params[fov_keys[0]] = math.degrees(2 * math.atan(tan_y * width / height))
-        self.params.update()
 
     def _render(self, spp, seed, params=None):
         img = self.mi.render(self.scene, params, integrator=self.integrator, spp=spp, seed=seed)

@@ -52,6 +52,8 @@ from pathlib import Path
 
 import numpy as np
 
+from mitsuba_film import resize_film  # benches/, beside this script
+
 RR_DEPTH = 5  # Mitsuba's default, which pathgrad also uses
 
 
@@ -95,26 +97,9 @@ class Setup:
             sys.exit(0)
         if args.param not in self.params:
             sys.exit(f"no Mitsuba parameter {args.param!r}; --list-params prints them")
-        self.width, self.height = self._resize(args.width, args.height)
+        self.width, self.height = resize_film(self.mi, self.params, args.width, args.height)
         self.key = args.param
         self.value0 = type(self.params[self.key])(self.params[self.key])
-
-    def _resize(self, width, height):
-        """Film size; keeps the vertical field of view (as pathgrad's --width/--height do)."""
-        size_keys = [k for k in self.params.keys() if k.endswith("film.size")]
-        fov_keys = [k for k in self.params.keys() if k.endswith("x_fov")]
-        if len(size_keys) != 1 or len(fov_keys) != 1:
-            sys.exit("expected one sensor with a film and an x_fov")
-        w0, h0 = self.params[size_keys[0]]
-        if height is None:
-            height = max(1, round(width * h0 / w0))
-        x_fov0 = self.params[fov_keys[0]]
-        x_fov0 = float(x_fov0[0] if hasattr(x_fov0, "__len__") else x_fov0)
-        tan_y = math.tan(math.radians(x_fov0) / 2) * h0 / w0
-        self.params[size_keys[0]] = self.mi.ScalarVector2u(width, height)
-        self.params[fov_keys[0]] = math.degrees(2 * math.atan(tan_y * width / height))
-        self.params.update()
-        return width, height
 
     def integrator(self, name):
         return self.mi.load_dict({"type": name, "max_depth": self.args.max_depth, "rr_depth": self.args.rr_depth})
