@@ -26,7 +26,8 @@ void main() {
             term = d * d;
             grad = 2.0 * d;
         } else {
-            float denom = values[count + i] + REL_MSE_EPSILON;
+            float target = values[count + i];
+            float denom = kind == 2u ? target + REL_MSE_EPSILON : max(abs(target), REL_MSE_EPSILON);
             term = d * d / (denom * denom);
             grad = 2.0 * d / (denom * denom);
         }

@@ -13,8 +13,25 @@ pub enum Loss {
     L1,
     /// Mean squared difference.
     L2,
-    /// Relative MSE with the target in the denominator: ((I − Ĩ)/(Ĩ + ε))², ε = 1e-3.
+    /// Relative MSE with the target in the denominator: ((I − Ĩ)/(Ĩ + ε))², ε = 1e-3 (the
+    /// reference's inverse-rendering scripts).
     RelMse,
+    /// Relative MSE with the denominator max(|Ĩ|, ε): ((I − Ĩ)/max(|Ĩ|, ε))², ε = 1e-3 (the
+    /// reference's variance scripts, `variance_loss.py`). Equal to [`Loss::RelMse`] up to
+    /// O(ε/Ĩ) where Ĩ ≫ ε; it differs where the target is dark.
+    RelMseMax,
+}
+
+impl Loss {
+    /// The option's spelling: `l1`, `l2`, `relmse` or `relmse_max`.
+    pub fn name(self) -> &'static str {
+        match self {
+            Loss::L1 => "l1",
+            Loss::L2 => "l2",
+            Loss::RelMse => "relmse",
+            Loss::RelMseMax => "relmse_max",
+        }
+    }
 }
 
 impl std::str::FromStr for Loss {
@@ -24,9 +41,10 @@ impl std::str::FromStr for Loss {
             "l1" => Ok(Loss::L1),
             "l2" => Ok(Loss::L2),
             "relmse" => Ok(Loss::RelMse),
+            "relmse_max" => Ok(Loss::RelMseMax),
             _ => Err(Error::InvalidArgument {
                 parameter: "--loss".into(),
-                message: format!("'{s}' (expected relmse, l2 or l1)"),
+                message: format!("'{s}' (expected relmse, relmse_max, l2 or l1)"),
             }),
         }
     }
@@ -80,8 +98,8 @@ pub fn loss_and_adjoint(image: &Image, target: &Image, loss: Loss) -> Result<(f6
                     },
                 ),
                 Loss::L2 => (d * d, 2.0 * d),
-                Loss::RelMse => {
-                    let denom = t + REL_MSE_EPSILON;
+                Loss::RelMse | Loss::RelMseMax => {
+                    let denom = if loss == Loss::RelMse { t + REL_MSE_EPSILON } else { t.abs().max(REL_MSE_EPSILON) };
                     (d * d / (denom * denom), 2.0 * d / (denom * denom))
                 }
             };
@@ -123,6 +141,7 @@ pub fn loss_and_adjoint_gpu(
         Loss::L1 => 0,
         Loss::L2 => 1,
         Loss::RelMse => 2,
+        Loss::RelMseMax => 3,
     };
     let push = [n as u32, kind];
     ctx.submit_and_wait("loss", |cmd| kernel.record(cmd, &group, bytemuck::cast_slice(&push), groups_for(n as u32)))?;
@@ -134,12 +153,29 @@ pub fn loss_and_adjoint_gpu(
 mod tests {
     use super::*;
 
+    #[test]
+    fn the_two_relative_mses_differ_only_where_the_target_is_dark() {
+        let image = Image::from_rgb(1, 1, vec![0.5, 0.01, 0.3]).unwrap();
+        let target = Image::from_rgb(1, 1, vec![0.4, 0.0, -0.2]).unwrap();
+        let (add, a) = loss_and_adjoint(&image, &target, Loss::RelMse).unwrap();
+        let (max, m) = loss_and_adjoint(&image, &target, Loss::RelMseMax).unwrap();
+        // Value 0: (0.1/0.401)² vs (0.1/0.4)²; value 1: (0.01/0.001)² both; value 2: 0.5/(−0.199) vs 0.5/0.2.
+        let want_add = ((0.1f64 / 0.401).powi(2) + 100.0 + (0.5f64 / -0.199).powi(2)) / 3.0;
+        let want_max = ((0.1f64 / 0.4).powi(2) + 100.0 + (0.5f64 / 0.2).powi(2)) / 3.0;
+        assert!((add - want_add).abs() < 1e-5 * want_add, "{add} vs {want_add}");
+        assert!((max - want_max).abs() < 1e-5 * want_max, "{max} vs {want_max}");
+        assert_eq!(a.as_slice()[1], m.as_slice()[1]);
+        for name in ["l1", "l2", "relmse", "relmse_max"] {
+            assert_eq!(name.parse::<Loss>().unwrap().name(), name);
+        }
+    }
+
     /// Every adjoint equals the central difference of its loss.
     #[test]
     fn adjoints_are_derivatives_of_the_losses() {
         let image = Image::from_rgb(2, 1, vec![0.5, 0.2, 0.9, 0.05, 0.7, 0.3]).unwrap();
         let target = Image::from_rgb(2, 1, vec![0.4, 0.25, 0.9, 0.1, 0.5, 0.35]).unwrap();
-        for loss in [Loss::L1, Loss::L2, Loss::RelMse] {
+        for loss in [Loss::L1, Loss::L2, Loss::RelMse, Loss::RelMseMax] {
             let (_, adj) = loss_and_adjoint(&image, &target, loss).unwrap();
             for k in 0..6 {
                 if image.as_slice()[k] == target.as_slice()[k] {

@@ -139,7 +139,7 @@ fn grad_errors_name_what_is_wrong() {
         (&["grad", "builtin:cornell-box", "--target", "missing.exr"], "missing.exr"),
         (
             &["grad", "builtin:cornell-box", "--target-set", "sphere.alpha.value=0.3", "--loss", "l3"],
-            "'l3' (expected relmse, l2 or l1)",
+            "'l3' (expected relmse, relmse_max, l2 or l1)",
         ),
     ];
     for (args, message) in cases {

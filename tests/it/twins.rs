@@ -216,7 +216,7 @@ fn loss_gpu_equals_host() {
         Image::from_rgb(w, h, v).unwrap()
     };
     let (image, target) = (make(0.0), make(0.4));
-    for loss in [Loss::L1, Loss::L2, Loss::RelMse] {
+    for loss in [Loss::L1, Loss::L2, Loss::RelMse, Loss::RelMseMax] {
         let (lh, ah) = loss_and_adjoint(&image, &target, loss).unwrap();
         let (lg, ag) = loss_and_adjoint_gpu(&gpu.ctx, &image, &target, loss).unwrap();
         assert!((lh - lg).abs() <= 1e-5 * lh.abs(), "{loss:?}: host {lh} vs GPU {lg}");

@@ -172,7 +172,7 @@ struct GradArgs {
     /// with 4× the spp (at least 64) and an independent seed.
     #[arg(long = "target-set", value_name = "NAME=VALUE", value_parser = parse_define)]
     target_set: Vec<(String, String)>,
-    /// The loss: relmse, l2 or l1.
+    /// The loss: relmse, relmse_max, l2 or l1.
     #[arg(long, default_value = "relmse")]
     loss: String,
     /// Accumulate gradients in 64-bit fixed point: bitwise reproducible runs.

@@ -82,7 +82,7 @@ pub(super) struct OptimizeArgs {
     /// Samples per pixel of the gradient pass (adaptive: W·H·N samples in all) [default: 2].
     #[arg(long, value_name = "N")]
     spp_grad: Option<u32>,
-    /// The loss: relmse, l2 or l1 [default: relmse].
+    /// The loss: relmse, relmse_max, l2 or l1 [default: relmse].
     #[arg(long)]
     loss: Option<String>,
     /// Loss-aware adaptive pixel sampling of the gradient pass (Su & Gkioulekas, Algorithm 2).

@@ -43,7 +43,7 @@ pub(crate) struct VarianceArgs {
     /// Independent estimates per strategy (seeds --seed, --seed + 1, …).
     #[arg(long, default_value_t = 100)]
     runs: u32,
-    /// Loss-gradient mode: the loss (relmse, l2 or l1) against --target or --target-set.
+    /// Loss-gradient mode: the loss (relmse, relmse_max, l2 or l1) against --target or --target-set.
     #[arg(long)]
     loss: Option<String>,
     /// Loss-gradient mode: the target image (EXR).
