@@ -232,3 +232,30 @@ fn optimize_bad_input_names_the_flag_and_leaves_nothing_behind() {
     let names: Vec<_> = std::fs::read_dir(dir.path()).unwrap().map(|e| e.unwrap().file_name()).collect();
     assert_eq!(names.len(), 2, "only small.exr and out/: {names:?}");
 }
+
+/// A target with a NaN or an infinity would make every gradient non-finite: it is refused before
+/// anything runs, naming the file, the pixel and the channel, and no output directory is made.
+#[test]
+fn a_non_finite_target_is_refused_with_the_pixel_named() {
+    let dir = tempfile::tempdir().unwrap();
+    for (k, bad) in [f32::NAN, f32::INFINITY].into_iter().enumerate() {
+        let target = dir.path().join(format!("target{k}.exr"));
+        let mut image = pathgrad::image::Image::new(16, 12);
+        image.as_mut_slice().fill(0.2);
+        image.set_pixel(3, 4, [0.2, bad, 0.2]);
+        image.write_exr(&target).unwrap();
+        let out = dir.path().join("run");
+        let o = pathgrad()
+            .args(["optimize", "builtin:blend", "--target"])
+            .arg(&target)
+            .args(["--param", "object.weight.value=0.8", "--width", "16", "--iters", "2", "-o"])
+            .arg(&out)
+            .output()
+            .unwrap();
+        let stderr = String::from_utf8_lossy(&o.stderr);
+        assert!(!o.status.success(), "{stderr}");
+        let want = format!("target{k}.exr: pixel (3, 4) channel G is {bad}");
+        assert!(stderr.contains(&want), "expected '{want}' in: {stderr}");
+        assert!(!out.exists(), "nothing is written for a refused target");
+    }
+}

@@ -219,7 +219,21 @@ fn target_image(
     target_set: &[(String, String)],
 ) -> Result<Image> {
     Ok(match (target, target_set.is_empty()) {
-        (Some(path), true) => Image::read_exr(path)?,
+        (Some(path), true) => {
+            let image = Image::read_exr(path)?;
+            let width = image.width() as usize;
+            if let Some(i) = image.as_slice().iter().position(|v| !v.is_finite()) {
+                let (pixel, channel) = (i / 3, ["R", "G", "B"][i % 3]);
+                bail!(
+                    "invalid --target {}: pixel ({}, {}) channel {channel} is {} (a loss needs finite values)",
+                    path.display(),
+                    pixel % width,
+                    pixel / width,
+                    image.as_slice()[i]
+                );
+            }
+            image
+        }
         (None, false) => {
             let table = with_values(&scene.params, target_set, "--target-set")?;
             renderer.set_params(&table)?;
