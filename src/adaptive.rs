@@ -73,13 +73,7 @@ impl AdaptiveOptions {
     /// # Errors
     /// [`Error::InvalidArgument`] naming `--spp-primal` if it is 0.
     pub fn validate(&self) -> Result<()> {
-        if self.spp_primal == 0 {
-            return Err(Error::InvalidArgument {
-                parameter: "--spp-primal".into(),
-                message: "must be at least 1".into(),
-            });
-        }
-        Ok(())
+        crate::integrator::check_spp_primal(self.spp_primal)
     }
 }
 

@@ -566,6 +566,17 @@ enum Direction {
     Write,
 }
 
+/// Writes `bytes` to `path` atomically, as every image writer here does: into a temporary file
+/// beside it (removed if anything fails), synced, then renamed over `path`, so a reader never sees
+/// a half-written file. For the text outputs of the command line (CSV, JSON, SVG).
+///
+/// # Errors
+/// [`Error::Io`] naming the path if the file cannot be created, written or renamed.
+pub fn write_bytes_atomically(path: impl AsRef<Path>, bytes: &[u8]) -> Result<()> {
+    let path = path.as_ref();
+    write_atomically(path, |out| out.write_all(bytes).map_err(|source| Error::Io { path: path.to_path_buf(), source }))
+}
+
 /// Encodes `width` × `height` RGB bytes as a PNG at `path`, atomically.
 fn write_rgb8_png(path: &Path, width: u32, height: u32, bytes: &[u8]) -> Result<()> {
     write_atomically(path, |out| {

@@ -98,6 +98,17 @@ impl Strategy {
     }
 }
 
+/// Checks the samples per pixel of pass 1 (the loss image of a gradient step).
+///
+/// # Errors
+/// [`Error::InvalidArgument`] naming `--spp-primal` if it is 0.
+pub fn check_spp_primal(spp_primal: u32) -> Result<()> {
+    if spp_primal == 0 {
+        return Err(Error::InvalidArgument { parameter: "--spp-primal".into(), message: "must be at least 1".into() });
+    }
+    Ok(())
+}
+
 /// What to render.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct RenderOptions {
@@ -157,6 +168,17 @@ impl RenderOptions {
             return bad("--q", "must be in [0, 1]");
         }
         Ok(())
+    }
+
+    /// The options of pass 1 of a gradient step (ALGORITHMS.md §3.4, §6): `spp_primal` samples per
+    /// pixel with plain BSDF sampling and next-event estimation (as [SG24]'s Algorithm 2), the rest
+    /// as `self`. Every gradient step and variance protocol renders its loss image with these.
+    ///
+    /// # Errors
+    /// [`Error::InvalidArgument`] naming `--spp-primal` if it is 0.
+    pub fn loss_pass(&self, spp_primal: u32) -> Result<RenderOptions> {
+        check_spp_primal(spp_primal)?;
+        Ok(RenderOptions { spp: spp_primal, strategy: Strategy::Bsdf, nee: true, ..*self })
     }
 
     /// The Philox key of `pass` (plain renders and loss images use [`PassTag::Primal`]; the fused

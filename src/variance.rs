@@ -20,7 +20,7 @@ use crate::error::{Error, Result};
 use crate::gpu::Renderer;
 use crate::gpu::renderer::GradMode;
 use crate::image::Image;
-use crate::integrator::{RenderOptions, Strategy};
+use crate::integrator::RenderOptions;
 use crate::loss::{Loss, loss_and_adjoint};
 use crate::params::ParamId;
 
@@ -263,13 +263,10 @@ pub fn loss_gradient_variance(
 ) -> Result<LossGradientVariance> {
     check_runs(runs)?;
     options.validate()?;
-    if setup.spp_primal == 0 {
-        return Err(Error::InvalidArgument { parameter: "--spp-primal".into(), message: "must be at least 1".into() });
-    }
+    let pass1 = options.loss_pass(setup.spp_primal)?;
     if setup.params.is_empty() {
         return Err(Error::InvalidArgument { parameter: "--param".into(), message: "no parameter to record".into() });
     }
-    let pass1 = RenderOptions { spp: setup.spp_primal, strategy: Strategy::Bsdf, nee: true, ..*options };
     let sampling = match setup.adaptive {
         None => None,
         Some(estimator) => {
@@ -286,9 +283,8 @@ pub fn loss_gradient_variance(
     for i in 0..runs {
         let seed = options.seed.wrapping_add(i);
         let (loss, gradients) = clock.time(|| {
-            let image = renderer.render(&RenderOptions { seed, ..pass1 })?;
-            let (loss, adjoint) = loss_and_adjoint(&image, setup.target, setup.loss)?;
             let run = RenderOptions { seed, ..*options };
+            let (loss, adjoint) = renderer.loss_image(&run, setup.spp_primal, setup.target, setup.loss)?;
             let gradients = match &sampling {
                 None => renderer.backward(&run, &adjoint, GradMode::Float)?,
                 Some(sampling) => renderer.backward_adaptive(&run, &adjoint, sampling, GradMode::Float)?,

@@ -12,7 +12,7 @@ use crate::gpu::buffer::Buffer;
 use crate::gpu::context::Context;
 use crate::gpu::pipeline::{Kernel, compute_barrier, groups_for};
 use crate::image::Image;
-use crate::integrator::{RenderOptions, Strategy};
+use crate::integrator::RenderOptions;
 use crate::loss::{Loss, loss_and_adjoint};
 use crate::params::{Gradients, ParamTable};
 use crate::rng::PassTag;
@@ -331,17 +331,29 @@ impl Renderer {
         loss: Loss,
         mode: GradMode,
     ) -> Result<(f64, Gradients)> {
-        if spp_primal == 0 {
-            return Err(Error::InvalidArgument {
-                parameter: "--spp-primal".into(),
-                message: "must be at least 1".into(),
-            });
-        }
+        let (value, adjoint) = self.loss_image(options, spp_primal, target, loss)?;
+        Ok((value, self.backward(options, &adjoint, mode)?))
+    }
+
+    /// Pass 1 of a gradient step: renders [`RenderOptions::loss_pass`] (`spp_primal` spp, plain
+    /// BSDF sampling with NEE, the primal key) and returns its loss against `target` and the
+    /// adjoint image ∂loss/∂I, computed on the host.
+    ///
+    /// # Errors
+    /// [`Error::InvalidArgument`] naming `--spp-primal` if it is 0, or for a target of the wrong
+    /// size; as [`Renderer::render`].
+    pub fn loss_image(
+        &mut self,
+        options: &RenderOptions,
+        spp_primal: u32,
+        target: &Image,
+        loss: Loss,
+    ) -> Result<(f64, Image)> {
+        let pass1 = options.loss_pass(spp_primal)?;
         options.validate()?;
         check_size(target, options, "target image")?;
-        let image = self.render(&RenderOptions { spp: spp_primal, strategy: Strategy::Bsdf, nee: true, ..*options })?;
-        let (value, adjoint) = loss_and_adjoint(&image, target, loss)?;
-        Ok((value, self.backward(options, &adjoint, mode)?))
+        let image = self.render(&pass1)?;
+        loss_and_adjoint(&image, target, loss)
     }
 
     /// The loss of a render against `target` and its gradient with loss-aware adaptive pixel
@@ -363,12 +375,7 @@ impl Renderer {
         loss: Loss,
         mode: GradMode,
     ) -> Result<(f64, Gradients)> {
-        adaptive.validate()?;
-        options.validate()?;
-        check_size(target, options, "target image")?;
-        let pass1 = RenderOptions { spp: adaptive.spp_primal, strategy: Strategy::Bsdf, nee: true, ..*options };
-        let image = self.render(&pass1)?;
-        let (value, adjoint) = loss_and_adjoint(&image, target, loss)?;
+        let (value, adjoint) = self.loss_image(options, adaptive.spp_primal, target, loss)?;
         if adjoint.as_slice().iter().all(|&a| a == 0.0) {
             return Ok((value, Gradients::new(&self.scene.params, vec![0.0; self.flat.params.len()])));
         }

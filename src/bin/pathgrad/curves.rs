@@ -127,7 +127,7 @@ impl History {
         for row in &self.rows {
             text.push_str(&self.line(row));
         }
-        super::optimize::write_atomic(path, text.as_bytes())?;
+        pathgrad::image::write_bytes_atomically(path, text.as_bytes())?;
         self.file = Some(
             fs::OpenOptions::new().append(true).open(path).with_context(|| format!("opening {}", path.display()))?,
         );
@@ -204,7 +204,7 @@ impl History {
             }
             root.present().map_err(plot_error)?;
         }
-        super::optimize::write_atomic(path, svg.as_bytes())
+        Ok(pathgrad::image::write_bytes_atomically(path, svg.as_bytes())?)
     }
 }
 

@@ -116,16 +116,23 @@ impl StrategyArgs {
             ("diff", None) => bail!("--strategy diff needs --diff-param NAME (the parameter that drives the sampler)"),
             (name, target) => Strategy::from_name(scene, name, self.q, target.unwrap_or(""))?,
         };
-        if let Strategy::Diff { target, .. } = opts.strategy
-            && !Strategy::has_differential_sampler(scene, target)
-        {
-            tracing::warn!(
-                "{} is neither a roughness nor a blend weight: --strategy diff samples like bsdf (balance heuristic)",
-                scene.params.entry(target).name
-            );
-        }
+        warn_without_sampler(scene, opts.strategy);
         opts.validate()?;
         Ok(())
+    }
+}
+
+/// Warns when `strategy` is `diff` driven by a parameter no material has a differential sampler for
+/// (it then samples like `bsdf`, with the balance heuristic).
+fn warn_without_sampler(scene: &pathgrad::scene::Scene, strategy: pathgrad::integrator::Strategy) {
+    use pathgrad::integrator::Strategy;
+    if let Strategy::Diff { target, .. } = strategy
+        && !Strategy::has_differential_sampler(scene, target)
+    {
+        tracing::warn!(
+            "{} is neither a roughness nor a blend weight: --strategy diff samples like bsdf (balance heuristic)",
+            scene.params.entry(target).name
+        );
     }
 }
 

@@ -10,7 +10,6 @@
 
 use std::collections::{BTreeMap, BTreeSet};
 use std::fs;
-use std::io::Write as _;
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -21,7 +20,7 @@ use clap::Args;
 use pathgrad::adaptive::AdaptiveEstimator;
 use pathgrad::gpu::Renderer;
 use pathgrad::gpu::renderer::GradMode;
-use pathgrad::image::Image;
+use pathgrad::image::{Image, write_bytes_atomically};
 use pathgrad::integrator::{RenderOptions, Strategy};
 use pathgrad::loss::Loss;
 use pathgrad::optim::{Adam, AdamOptions, AdamState, IterationOptions, Optimization, parameter_error};
@@ -519,15 +518,7 @@ fn values_of(table: &ParamTable, ids: &[ParamId]) -> BTreeMap<String, Vec<f64>> 
 
 /// Runs iterations until `--iters`, `--time-budget` or Ctrl-C; returns why it stopped.
 fn iterate(s: &mut Session, json: bool, interrupted: &AtomicBool) -> Result<&'static str> {
-    let bar = indicatif::ProgressBar::new(s.config.iters);
-    if json {
-        bar.set_draw_target(indicatif::ProgressDrawTarget::hidden());
-    }
-    bar.set_style(
-        indicatif::ProgressStyle::with_template("{spinner} optimising [{bar:30}] {pos}/{len} it ({elapsed}) {msg}")
-            .expect("the template is valid")
-            .progress_chars("=> "),
-    );
+    let bar = super::progress_bar(s.config.iters, "optimising [{bar:30}] {pos}/{len} it {msg}", json);
     bar.set_position(s.run.iteration());
     let ctx = s.renderer.context().clone();
     log_memory(&ctx, s.run.iteration());
@@ -637,14 +628,14 @@ fn write_state(s: &Session, stopped: &str) -> Result<()> {
         adam_steps: adam.steps.clone(),
         stopped: stopped.to_string(),
     };
-    write_atomic(&s.dir.join("state.json"), serde_json::to_string_pretty(&state)?.as_bytes())
+    Ok(write_bytes_atomically(s.dir.join("state.json"), serde_json::to_string_pretty(&state)?.as_bytes())?)
 }
 
 /// Writes the end-of-run outputs: state, parameters, the final image and the curves.
 fn finish(s: &mut Session, stopped: &str) -> Result<()> {
     write_state(s, stopped)?;
     let params = values_of(s.run.params(), &s.ids);
-    write_atomic(&s.dir.join("params.json"), serde_json::to_string_pretty(&params)?.as_bytes())?;
+    write_bytes_atomically(s.dir.join("params.json"), serde_json::to_string_pretty(&params)?.as_bytes())?;
     s.history.write_svg(&s.dir.join("curves.svg"), &s.initial_point())?;
     s.renderer.set_params(s.run.params())?;
     let opts = RenderOptions { spp: s.config.spp_final, strategy: Strategy::Bsdf, nee: true, ..s.run.options().render };
@@ -709,15 +700,4 @@ fn summary(s: &Session, stopped: &str, json: bool) {
             }
         }
     }
-}
-
-/// Writes `bytes` to a temporary file beside `path` and renames it over `path`.
-pub(super) fn write_atomic(path: &Path, bytes: &[u8]) -> Result<()> {
-    let mut temp = path.as_os_str().to_owned();
-    temp.push(format!(".{}.tmp", std::process::id()));
-    let temp = PathBuf::from(temp);
-    let mut file = fs::File::create(&temp).with_context(|| format!("creating {}", temp.display()))?;
-    file.write_all(bytes).with_context(|| format!("writing {}", temp.display()))?;
-    fs::rename(&temp, path).with_context(|| format!("renaming {} to {}", temp.display(), path.display()))?;
-    Ok(())
 }

@@ -11,7 +11,7 @@ use pathgrad::gpu::Renderer;
 use pathgrad::integrator::{RenderOptions, Strategy};
 use pathgrad::variance::{self, LossGradientSetup};
 
-use super::{RenderFlags, context, options, parse_define, progress_bar, target_image};
+use super::{RenderFlags, context, options, parse_define, progress_bar, target_image, warn_without_sampler};
 
 /// Dynamic range of the variance PNGs: this many decades below the largest variance of any
 /// technique (one scale for all, so the maps compare by eye).
@@ -112,14 +112,8 @@ fn techniques(args: &VarianceArgs, scene: &pathgrad::scene::Scene) -> Result<Vec
     if rows.is_empty() {
         bail!("--strategy lists no strategy");
     }
-    if let Strategy::Diff { target, .. } =
-        rows.iter().find(|r| r.strategy != Strategy::Bsdf).map_or(Strategy::Bsdf, |r| r.strategy)
-        && !Strategy::has_differential_sampler(scene, target)
-    {
-        tracing::warn!(
-            "{} is neither a roughness nor a blend weight: --strategy diff samples like bsdf (balance heuristic)",
-            scene.params.entry(target).name
-        );
+    if let Some(row) = rows.iter().find(|r| r.strategy != Strategy::Bsdf) {
+        warn_without_sampler(scene, row.strategy);
     }
     Ok(rows)
 }
@@ -292,8 +286,10 @@ pub(crate) fn run(args: &VarianceArgs) -> Result<()> {
     });
     create_output(&args.output)?;
     let summary_path = args.output.join("summary.json");
-    std::fs::write(&summary_path, serde_json::to_string_pretty(&summary)? + "\n")
-        .with_context(|| format!("writing {}", summary_path.display()))?;
+    pathgrad::image::write_bytes_atomically(
+        &summary_path,
+        (serde_json::to_string_pretty(&summary)? + "\n").as_bytes(),
+    )?;
     if args.json {
         println!("{summary}");
         return Ok(());
