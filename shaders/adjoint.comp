@@ -6,4 +6,4 @@
 #extension GL_KHR_shader_subgroup_vote : require
 #extension GL_KHR_shader_subgroup_arithmetic : require
 #define GRAD_MODE GRAD_MODE_FLOAT
-#include "replay.glsl"
+#include "kernel.glsl"

@@ -7,4 +7,4 @@
 #extension GL_KHR_shader_subgroup_arithmetic : require
 #define GRAD_MODE GRAD_MODE_FLOAT
 #define PIXEL_SELECT 1
-#include "replay.glsl"
+#include "kernel.glsl"

@@ -5,4 +5,4 @@
 #extension GL_EXT_shader_atomic_int64 : require
 #define GRAD_MODE GRAD_MODE_FIXED
 #define PIXEL_SELECT 1
-#include "replay.glsl"
+#include "kernel.glsl"

@@ -4,4 +4,4 @@
 #extension GL_EXT_shader_explicit_arithmetic_types_int64 : require
 #extension GL_EXT_shader_atomic_int64 : require
 #define GRAD_MODE GRAD_MODE_FIXED
-#include "replay.glsl"
+#include "kernel.glsl"

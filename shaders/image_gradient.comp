@@ -2,4 +2,4 @@
 #version 460
 #extension GL_EXT_scalar_block_layout : require
 #define GRAD_MODE GRAD_MODE_FORWARD
-#include "replay.glsl"
+#include "kernel.glsl"

@@ -27,6 +27,69 @@ pub const DEFAULT_RR_DEPTH: u32 = 5;
 /// (ALGORITHMS.md §5.1; the paper's and its code's default).
 pub const DEFAULT_DIFF_Q: f32 = 0.5;
 
+/// Kinds of parameters, as a set: which gradients a reverse-mode pass computes
+/// ([`RenderOptions::differentiate`]). A kernel is compiled with the derivative code of these
+/// kinds only (issue "Fast kernels"), so asking for fewer makes gradient passes cheaper.
+///
+/// ```
+/// use pathgrad::integrator::ParamKinds;
+/// let k = ParamKinds::ALPHA.union(ParamKinds::WEIGHT);
+/// assert!(k.contains(ParamKinds::ALPHA) && !k.contains(ParamKinds::COLOR));
+/// assert!(ParamKinds::ALL.contains(k));
+/// ```
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub struct ParamKinds(u32);
+
+impl ParamKinds {
+    /// No parameter.
+    pub const NONE: ParamKinds = ParamKinds(0);
+    /// Constant colours: diffuse albedo, conductor specular reflectance.
+    pub const COLOR: ParamKinds = ParamKinds(crate::gpu::abi::G_COLOR);
+    /// Texels of textured colours.
+    pub const TEXTURE: ParamKinds = ParamKinds(crate::gpu::abi::G_TEXTURE);
+    /// Roughness of rough conductors.
+    pub const ALPHA: ParamKinds = ParamKinds(crate::gpu::abi::G_ALPHA);
+    /// Blend weights.
+    pub const WEIGHT: ParamKinds = ParamKinds(crate::gpu::abi::G_WEIGHT);
+    /// Emitted radiance of area emitters.
+    pub const EMISSION: ParamKinds = ParamKinds(crate::gpu::abi::G_EMISSION);
+    /// The constant environment's radiance.
+    pub const ENVIRONMENT: ParamKinds = ParamKinds(crate::gpu::abi::G_ENV);
+    /// Every kind.
+    pub const ALL: ParamKinds = ParamKinds(crate::gpu::abi::G_ANY);
+
+    /// Both sets.
+    pub const fn union(self, other: ParamKinds) -> ParamKinds {
+        ParamKinds(self.0 | other.0)
+    }
+
+    /// What both sets hold.
+    pub const fn intersection(self, other: ParamKinds) -> ParamKinds {
+        ParamKinds(self.0 & other.0)
+    }
+
+    /// Whether every kind of `other` is in `self`.
+    pub const fn contains(self, other: ParamKinds) -> bool {
+        self.0 & other.0 == other.0
+    }
+
+    /// Whether the set is empty.
+    pub const fn is_empty(self) -> bool {
+        self.0 == 0
+    }
+
+    /// The set as `G_*` feature bits of [`crate::gpu::abi`].
+    pub const fn bits(self) -> u32 {
+        self.0
+    }
+}
+
+impl Default for ParamKinds {
+    fn default() -> ParamKinds {
+        ParamKinds::ALL
+    }
+}
+
 /// How paths choose their directions (ALGORITHMS.md §3, §5). Both are unbiased for the image and for
 /// the gradient of every parameter; they differ in variance.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
@@ -130,6 +193,10 @@ pub struct RenderOptions {
     pub nee: bool,
     /// Direction-sampling strategy (applies to every pass rendered with these options).
     pub strategy: Strategy,
+    /// The parameter kinds whose gradients reverse-mode passes compute ([`ParamKinds::ALL`] by
+    /// default); the gradients of other parameters come back as 0. Forward-mode image gradients
+    /// differentiate their one parameter whatever this says.
+    pub differentiate: ParamKinds,
 }
 
 impl RenderOptions {
@@ -144,6 +211,7 @@ impl RenderOptions {
             seed: 0,
             nee: true,
             strategy: Strategy::Bsdf,
+            differentiate: ParamKinds::ALL,
         }
     }
 

@@ -3,9 +3,11 @@
 #define PATHGRAD_ABI_GLSL
 
 #extension GL_EXT_scalar_block_layout : require
+#extension GL_EXT_control_flow_attributes : require
 #include <generated/abi_structs.glsl>
 
-layout(set = 0, binding = BINDING_GLOBALS, scalar) readonly buffer GlobalsBuf { Globals globals; };
+// Per-render constants: a uniform buffer (every lane reads the same values).
+layout(set = 0, binding = BINDING_GLOBALS, scalar) uniform GlobalsBuf { Globals globals; };
 layout(set = 0, binding = BINDING_NODES, scalar) readonly buffer NodeBuf { BvhNode nodes[]; };
 layout(set = 0, binding = BINDING_TRIS, scalar) readonly buffer TriBuf { TriPositions tris[]; };
 layout(set = 0, binding = BINDING_PRIM_IDS, scalar) readonly buffer PrimIdBuf { uint prim_ids[]; };

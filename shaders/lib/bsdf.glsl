@@ -4,6 +4,7 @@
 #define PATHGRAD_BSDF_GLSL
 
 #include "sampling.glsl"
+#include "features.glsl"
 
 #define D_UNDERFLOW 1e-20
 #define AZIMUTH_EPSILON 1e-7
@@ -13,6 +14,16 @@
 struct Leaf { uint kind; uint distribution; float alpha; vec3 color; vec3 eta; vec3 k; };
 struct Bsdf { Leaf leaf0; Leaf leaf1; float weight; bool blend; };
 struct BsdfSample { vec3 wo; float pdf; vec3 value; bool valid; };
+
+// Whether `distribution` is Beckmann, folded to a constant when the kernel has only one of the two.
+bool is_beckmann(uint distribution) {
+    return !HAS(F_GGX) || (HAS(F_BECKMANN) && distribution == DIST_BECKMANN);
+}
+
+// Whether leaf `kind` is Lambertian, folded to a constant when the kernel has only one kind.
+bool is_diffuse(uint kind) {
+    return !HAS(F_CONDUCTOR) || (HAS(F_DIFFUSE) && kind == LEAF_DIFFUSE);
+}
 
 // ---- Lambertian (ALGORITHMS.md §4.1) ----
 vec3 diffuse_eval(vec3 albedo, vec3 wi, vec3 wo) {
@@ -32,7 +43,7 @@ float microfacet_d(uint distribution, float alpha, vec3 h) {
     float t = (h.x * h.x + h.y * h.y) / c2;
     float a2 = alpha * alpha;
     float d;
-    if (distribution == DIST_BECKMANN) {
+    if (is_beckmann(distribution)) {
         d = exp(-t / a2) / (PI * a2 * c2 * c2);
     } else {
         float s = a2 + t;
@@ -46,7 +57,7 @@ float microfacet_g1(uint distribution, float alpha, vec3 v, vec3 h) {
     float tan2 = tan2_theta(v);
     if (tan2 == 0.0) return 1.0;
     float s2 = alpha * alpha * tan2;
-    if (distribution == DIST_BECKMANN) {
+    if (is_beckmann(distribution)) {
         // Exact Smith Λ (not the rational fit): see src/bsdf/rough_conductor.rs.
         float a = 1.0 / sqrt(s2);
         float lambda = 0.5 * (erf_approx(a) - 1.0) + exp(-a * a) / (2.0 * a * sqrt(PI));
@@ -82,7 +93,7 @@ float microfacet_d_dalpha(uint distribution, float alpha, vec3 h) {
     if (d == 0.0) return 0.0;
     float t = (h.x * h.x + h.y * h.y) / (h.z * h.z);
     float a2 = alpha * alpha;
-    if (distribution == DIST_BECKMANN) return d * 2.0 * (t - a2) / (a2 * alpha);
+    if (is_beckmann(distribution)) return d * 2.0 * (t - a2) / (a2 * alpha);
     return d * 2.0 * (t - a2) / (alpha * (a2 + t));
 }
 
@@ -92,7 +103,7 @@ float microfacet_g1_dalpha(uint distribution, float alpha, vec3 v, vec3 h) {
     float tan2 = tan2_theta(v);
     if (tan2 == 0.0) return 0.0;
     float s2 = alpha * alpha * tan2;
-    if (distribution == DIST_BECKMANN) {
+    if (is_beckmann(distribution)) {
         float a = 1.0 / sqrt(s2);
         float g1 = microfacet_g1(distribution, alpha, v, h);
         return -g1 * g1 * exp(-a * a) / (2.0 * a * alpha * sqrt(PI));
@@ -174,7 +185,7 @@ bool microfacet_sample(uint distribution, float alpha, vec3 wi, vec2 u, out vec3
         sin_phi = clamp(ws.y * inv, -1.0, 1.0);
         cos_phi = clamp(ws.x * inv, -1.0, 1.0);
     }
-    vec2 slope = distribution == DIST_BECKMANN ? sample_beckmann_slopes(ws.z, u) : sample_ggx_slopes(ws.z, u);
+    vec2 slope = is_beckmann(distribution) ? sample_beckmann_slopes(ws.z, u) : sample_ggx_slopes(ws.z, u);
     float mx = (cos_phi * slope.x - sin_phi * slope.y) * alpha;
     float my = (sin_phi * slope.x + cos_phi * slope.y) * alpha;
     if (isnan(mx) || isinf(mx) || isnan(my) || isinf(my)) return false;
@@ -185,13 +196,13 @@ bool microfacet_sample(uint distribution, float alpha, vec3 wi, vec2 u, out vec3
 
 // ---- leaves ----
 vec3 leaf_eval(Leaf l, vec3 wi, vec3 wo) {
-    return l.kind == LEAF_DIFFUSE ? diffuse_eval(l.color, wi, wo) : microfacet_eval(l, wi, wo);
+    return is_diffuse(l.kind) ? diffuse_eval(l.color, wi, wo) : microfacet_eval(l, wi, wo);
 }
 float leaf_pdf(Leaf l, vec3 wi, vec3 wo) {
-    return l.kind == LEAF_DIFFUSE ? diffuse_pdf(wi, wo) : microfacet_pdf(l.distribution, l.alpha, wi, wo);
+    return is_diffuse(l.kind) ? diffuse_pdf(wi, wo) : microfacet_pdf(l.distribution, l.alpha, wi, wo);
 }
 bool leaf_sample(Leaf l, vec3 wi, vec2 u, out vec3 wo) {
-    if (l.kind == LEAF_DIFFUSE) {
+    if (is_diffuse(l.kind)) {
         wo = vec3(0.0);
         if (wi.z <= 0.0) return false;
         wo = sample_cosine_hemisphere(u);
@@ -205,7 +216,7 @@ struct LeafGrad { vec3 color; vec3 alpha; };
 struct BsdfGrad { LeafGrad leaf0; LeafGrad leaf1; vec3 weight; };
 
 LeafGrad leaf_eval_grad(Leaf l, vec3 wi, vec3 wo, vec3 adj) {
-    if (l.kind == LEAF_DIFFUSE) return LeafGrad(adj * diffuse_eval(vec3(1.0), wi, wo), vec3(0.0));
+    if (is_diffuse(l.kind)) return LeafGrad(adj * diffuse_eval(vec3(1.0), wi, wo), vec3(0.0));
     vec3 f;
     float scalar, dscalar;
     microfacet_eval_parts(l, wi, wo, f, scalar, dscalar);
@@ -216,13 +227,13 @@ LeafGrad leaf_eval_grad(Leaf l, vec3 wi, vec3 wo, vec3 adj) {
 float blend_weight(Bsdf b) { return clamp(b.weight, 0.0, 1.0); }
 
 vec3 bsdf_eval(Bsdf b, vec3 wi, vec3 wo) {
-    if (!b.blend) return leaf_eval(b.leaf0, wi, wo);
+    if (!HAS(F_BLEND) || !b.blend) return leaf_eval(b.leaf0, wi, wo);
     float w = blend_weight(b);
     return leaf_eval(b.leaf0, wi, wo) * (1.0 - w) + leaf_eval(b.leaf1, wi, wo) * w;
 }
 
 float bsdf_pdf(Bsdf b, vec3 wi, vec3 wo) {
-    if (!b.blend) return leaf_pdf(b.leaf0, wi, wo);
+    if (!HAS(F_BLEND) || !b.blend) return leaf_pdf(b.leaf0, wi, wo);
     float w = blend_weight(b);
     return leaf_pdf(b.leaf0, wi, wo) * (1.0 - w) + leaf_pdf(b.leaf1, wi, wo) * w;
 }
@@ -230,7 +241,7 @@ float bsdf_pdf(Bsdf b, vec3 wi, vec3 wo) {
 // ∂(adj · f̂)/∂(every value of b) at (wi, wo); the weight's derivative is f̂1 − f̂0 inside (0, 1).
 BsdfGrad bsdf_eval_grad(Bsdf b, vec3 wi, vec3 wo, vec3 adj) {
     LeafGrad none = LeafGrad(vec3(0.0), vec3(0.0));
-    if (!b.blend) return BsdfGrad(leaf_eval_grad(b.leaf0, wi, wo, adj), none, vec3(0.0));
+    if (!HAS(F_BLEND) || !b.blend) return BsdfGrad(leaf_eval_grad(b.leaf0, wi, wo, adj), none, vec3(0.0));
     float w = blend_weight(b);
     vec3 weight = (b.weight > 0.0 && b.weight < 1.0) ? adj * (leaf_eval(b.leaf1, wi, wo) - leaf_eval(b.leaf0, wi, wo)) : vec3(0.0);
     return BsdfGrad(leaf_eval_grad(b.leaf0, wi, wo, adj * (1.0 - w)), leaf_eval_grad(b.leaf1, wi, wo, adj * w), weight);
@@ -239,7 +250,7 @@ BsdfGrad bsdf_eval_grad(Bsdf b, vec3 wi, vec3 wo, vec3 adj) {
 // u_lobe picks the blend child (RNG dim 4); u drives the direction (dims 5, 6).
 BsdfSample bsdf_sample(Bsdf b, vec3 wi, float u_lobe, vec2 u) {
     BsdfSample s = BsdfSample(vec3(0.0), 0.0, vec3(0.0), false);
-    Leaf leaf = (b.blend && u_lobe <= blend_weight(b)) ? b.leaf1 : b.leaf0;
+    Leaf leaf = (HAS(F_BLEND) && b.blend && u_lobe <= blend_weight(b)) ? b.leaf1 : b.leaf0;
     vec3 wo;
     if (!leaf_sample(leaf, wi, u, wo)) return s;
     s.wo = wo;

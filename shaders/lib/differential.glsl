@@ -61,7 +61,7 @@ float lambert_wm1(float x) {
 
 // ---- densities ----
 float diff_norm(uint distribution, float alpha) {
-    return distribution == DIST_BECKMANN ? 4.0 / (EULER_E * alpha) : 1.0 / alpha;
+    return is_beckmann(distribution) ? 4.0 / (EULER_E * alpha) : 1.0 / alpha;
 }
 
 // p_abs(h) = |∂α[D cos θh]| / N_α (NaN-free closed forms); 0 if cos θh < 1e-9.
@@ -70,7 +70,7 @@ float diff_pdf_abs_h(uint distribution, float alpha, vec3 h) {
     if (c < DIFF_COS_EPSILON) return 0.0;
     float t = (h.x * h.x + h.y * h.y) / (c * c);
     float a2 = alpha * alpha;
-    if (distribution == DIST_BECKMANN) {
+    if (is_beckmann(distribution)) {
         float g = exp(-t / a2);
         if (g == 0.0) return 0.0;
         return EULER_E * g * abs(t - a2) / (2.0 * PI * a2 * a2 * c * c * c);
@@ -90,7 +90,7 @@ float diff_pdf_part_h(uint distribution, float alpha, vec3 h, bool positive) {
 
 // x = tan²θh/α² by inverting one part's closed-form CDF (+∞ for the positive parts at u_b = 1).
 float diff_sample_x(uint distribution, bool positive, float u_b) {
-    if (distribution == DIST_BECKMANN) return positive ? -lambert_wm1((u_b - 1.0) / EULER_E) : -lambert_w0(-u_b / EULER_E);
+    if (is_beckmann(distribution)) return positive ? -lambert_wm1((u_b - 1.0) / EULER_E) : -lambert_w0(-u_b / EULER_E);
     if (!positive) {
         float s = sqrt(max(1.0 - u_b, 0.0));
         return u_b / ((1.0 + s) * (1.0 + s));
@@ -141,11 +141,11 @@ float diff_pdf_part(uint distribution, float alpha, bool positive, vec3 wi, vec3
 }
 
 // ---- BSDF level (ALGORITHMS.md §4.1, §4.3) ----
-bool bsdf_diff_capable(Bsdf b) { return b.blend || b.leaf0.kind != LEAF_DIFFUSE; }
+bool bsdf_diff_capable(Bsdf b) { return (HAS(F_BLEND) && b.blend) || !is_diffuse(b.leaf0.kind); }
 
 float bsdf_pdf_diff(Bsdf b, vec3 wi, vec3 wo) {
-    if (b.blend) return 0.5 * (leaf_pdf(b.leaf0, wi, wo) + leaf_pdf(b.leaf1, wi, wo));
-    if (b.leaf0.kind == LEAF_DIFFUSE) return leaf_pdf(b.leaf0, wi, wo);
+    if (HAS(F_BLEND) && b.blend) return 0.5 * (leaf_pdf(b.leaf0, wi, wo) + leaf_pdf(b.leaf1, wi, wo));
+    if (is_diffuse(b.leaf0.kind)) return leaf_pdf(b.leaf0, wi, wo);
     return diff_pdf(b.leaf0.distribution, b.leaf0.alpha, wi, wo);
 }
 
@@ -155,9 +155,9 @@ BsdfSample bsdf_sample_diff(Bsdf b, vec3 wi, float u_sign, float u_lobe, vec2 u)
     BsdfSample s = BsdfSample(vec3(0.0), 0.0, vec3(0.0), false);
     vec3 wo;
     bool ok;
-    if (b.blend) {
+    if (HAS(F_BLEND) && b.blend) {
         ok = leaf_sample(u_lobe <= 0.5 ? b.leaf1 : b.leaf0, wi, u, wo);
-    } else if (b.leaf0.kind == LEAF_DIFFUSE) {
+    } else if (is_diffuse(b.leaf0.kind)) {
         ok = leaf_sample(b.leaf0, wi, u, wo);
     } else {
         ok = sample_diff_part(b.leaf0.distribution, b.leaf0.alpha, wi, u_sign < 0.5, u, wo);

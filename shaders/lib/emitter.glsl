@@ -4,6 +4,7 @@
 
 #include "abi.glsl"
 #include "sampling.glsl"
+#include "features.glsl"
 
 // A next-event sample: a point on an area emitter, or (environment) a direction in `point`.
 struct EmitterSample { vec3 point; vec3 normal; vec3 radiance; uint param; bool environment; bool valid; };
@@ -13,7 +14,7 @@ struct EmitterSample { vec3 point; vec3 normal; vec3 radiance; uint param; bool 
 // uniform point on it (u_pos). The area density is (1 - env_select_prob) / total emissive area.
 EmitterSample sample_emitter(float u_select, vec2 u_pos) {
     EmitterSample s = EmitterSample(vec3(0.0), vec3(0.0), vec3(0.0), NO_PARAM, false, false);
-    if (u_select < globals.env_select_prob) {
+    if (HAS(F_ENV) && u_select < globals.env_select_prob) {
         s.point = sample_uniform_sphere(u_pos);
         s.radiance = param_rgb(globals.env_param);
         s.param = globals.env_param;
@@ -22,7 +23,7 @@ EmitterSample sample_emitter(float u_select, vec2 u_pos) {
         return s;
     }
     uint count = globals.emitter_count;
-    if (count == 0u) return s;
+    if (!HAS(F_EMITTERS) || count == 0u) return s;
     u_select = (u_select - globals.env_select_prob) / (1.0 - globals.env_select_prob);
     uint lo = 0u;
     uint hi = count - 1u;

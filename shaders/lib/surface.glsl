@@ -71,10 +71,12 @@ vec3 texture_bilinear(uint offset, uint width, uint height, vec2 uv) {
 
 Leaf leaf_from_material(Material m, vec2 uv) {
     Leaf l;
-    l.kind = m.tag == MAT_ROUGH_CONDUCTOR ? LEAF_ROUGH_CONDUCTOR : LEAF_DIFFUSE;
+    bool conductor = !is_diffuse(m.tag);
+    l.kind = conductor ? LEAF_ROUGH_CONDUCTOR : LEAF_DIFFUSE;
     l.distribution = m.distribution;
-    l.alpha = m.tag == MAT_ROUGH_CONDUCTOR ? params[m.p_alpha] : 0.0;
-    l.color = m.tex_width > 0u ? texture_bilinear(m.p_color, m.tex_width, m.tex_height, uv) : param_rgb(m.p_color);
+    l.alpha = conductor ? params[m.p_alpha] : 0.0;
+    l.color = (HAS(F_TEXTURE) && m.tex_width > 0u) ? texture_bilinear(m.p_color, m.tex_width, m.tex_height, uv)
+                                                   : param_rgb(m.p_color);
     l.eta = m.eta;
     l.k = m.k;
     return l;
@@ -84,7 +86,7 @@ Leaf leaf_from_material(Material m, vec2 uv) {
 Bsdf resolve_bsdf(uint material_id, vec2 uv) {
     Material m = materials[material_id];
     Bsdf b;
-    if (m.tag == MAT_BLEND) {
+    if (HAS(F_BLEND) && m.tag == MAT_BLEND) {
         b.leaf0 = leaf_from_material(materials[m.child0], uv);
         b.leaf1 = leaf_from_material(materials[m.child1], uv);
         b.weight = params[m.p_weight];
@@ -98,34 +100,71 @@ Bsdf resolve_bsdf(uint material_id, vec2 uv) {
     return b;
 }
 
-// Scatters ∂/∂(texels) of a bilinear lookup: per-channel gradient `g` split by the four weights.
-void texture_backward(uint offset, uint width, uint height, vec2 uv, vec3 g) {
-    uint texel[4];
-    float weight[4];
-    texture_footprint(offset, width, height, uv, texel, weight);
-    param_grad_rgb(texel[0], g * weight[0]);
-    param_grad_rgb(texel[1], g * weight[1]);
-    param_grad_rgb(texel[2], g * weight[2]);
-    param_grad_rgb(texel[3], g * weight[3]);
+// ---- the gradient terms of one vertex (ARCHITECTURE decision 5, issue "Fast kernels" item 3) ----
+// A replay step gathers every derivative it produces into `GradTerms`, and `scatter_terms` sends
+// them through the one param_grad site in a loop, instead of one inlined reduction per term: the
+// BSDF's derivative (NEE and the sampled direction summed, they share the material and uv), the
+// radiance of the emitter the step hit (or the environment) and of the emitter NEE reached.
+struct GradTerms {
+    uint material;    // NO_PARAM: no BSDF term
+    vec2 uv;
+    BsdfGrad bsdf;
+    uint hit_param;   // RGB parameter of the emitter or environment hit, or NO_PARAM
+    vec3 hit;
+    uint nee_param;   // RGB parameter of the emitter NEE reached, or NO_PARAM
+    vec3 nee;
+};
+
+GradTerms no_grad_terms() {
+    LeafGrad none = LeafGrad(vec3(0.0), vec3(0.0));
+    return GradTerms(NO_PARAM, vec2(0.0), BsdfGrad(none, none, vec3(0.0)), NO_PARAM, vec3(0.0), NO_PARAM, vec3(0.0));
 }
 
-void leaf_backward(Material m, vec2 uv, LeafGrad g) {
-    if (m.tex_width > 0u) texture_backward(m.p_color, m.tex_width, m.tex_height, uv, g.color);
-    else param_grad_rgb(m.p_color, g.color);
-    if (m.tag == MAT_ROUGH_CONDUCTOR) param_grad(m.p_alpha, g.alpha);
+// Most (offset, per-channel value) entries one vertex can produce: two RGB emitters, two leaves
+// of four RGB texels and a roughness each, a blend weight.
+#define GRAD_ENTRIES 33
+
+// Appends an RGB parameter's entries: image channel c depends only on value c.
+void push_rgb(inout uint n, inout uint off[GRAD_ENTRIES], inout vec3 val[GRAD_ENTRIES], uint offset, vec3 g) {
+    off[n] = offset; val[n] = vec3(g.x, 0.0, 0.0); n++;
+    off[n] = offset + 1u; val[n] = vec3(0.0, g.y, 0.0); n++;
+    off[n] = offset + 2u; val[n] = vec3(0.0, 0.0, g.z); n++;
 }
 
-// GRAD(f̂(wi, wo), adj): the BSDF's parameters at this surface point.
-void bsdf_backward(uint material_id, vec2 uv, Bsdf b, vec3 wi, vec3 wo, vec3 adj) {
-    BsdfGrad g = bsdf_eval_grad(b, wi, wo, adj);
-    Material m = materials[material_id];
-    if (m.tag == MAT_BLEND) {
-        leaf_backward(materials[m.child0], uv, g.leaf0);
-        leaf_backward(materials[m.child1], uv, g.leaf1);
-        param_grad(m.p_weight, g.weight);
-    } else {
-        leaf_backward(m, uv, g.leaf0);
+void push_leaf(inout uint n, inout uint off[GRAD_ENTRIES], inout vec3 val[GRAD_ENTRIES], Material m, vec2 uv, LeafGrad g) {
+    if (HAS(F_TEXTURE) && m.tex_width > 0u) {
+        if (HAS(G_TEXTURE)) {
+            uint texel[4];
+            float weight[4];
+            texture_footprint(m.p_color, m.tex_width, m.tex_height, uv, texel, weight);
+            for (uint k = 0u; k < 4u; k++) push_rgb(n, off, val, texel[k], g.color * weight[k]);
+        }
+    } else if (HAS(G_COLOR)) {
+        push_rgb(n, off, val, m.p_color, g.color);
     }
+    if (HAS(G_ALPHA) && !is_diffuse(m.tag)) {
+        off[n] = m.p_alpha; val[n] = g.alpha; n++;
+    }
+}
+
+// Scatters every term of `t` through one param_grad site.
+void scatter_terms(GradTerms t) {
+    uint off[GRAD_ENTRIES];
+    vec3 val[GRAD_ENTRIES];
+    uint n = 0u;
+    if ((HAS(G_EMISSION) || HAS(G_ENV)) && t.hit_param != NO_PARAM) push_rgb(n, off, val, t.hit_param, t.hit);
+    if (HAS(G_EMISSION) && t.nee_param != NO_PARAM) push_rgb(n, off, val, t.nee_param, t.nee);
+    if ((HAS(G_COLOR) || HAS(G_TEXTURE) || HAS(G_ALPHA) || HAS(G_WEIGHT)) && t.material != NO_PARAM) {
+        Material m = materials[t.material];
+        if (HAS(F_BLEND) && m.tag == MAT_BLEND) {
+            push_leaf(n, off, val, materials[m.child0], t.uv, t.bsdf.leaf0);
+            push_leaf(n, off, val, materials[m.child1], t.uv, t.bsdf.leaf1);
+            if (HAS(G_WEIGHT)) { off[n] = m.p_weight; val[n] = t.bsdf.weight; n++; }
+        } else {
+            push_leaf(n, off, val, m, t.uv, t.bsdf.leaf0);
+        }
+    }
+    [[dont_unroll]] for (uint i = 0u; i < n; i++) param_grad(off[i], val[i]);
 }
 
 // Per-channel a / b with 0 where b is 0 (ALGORITHMS.md §3.3: 1/f̂ replaced by 0 when f̂ = 0).

@@ -118,4 +118,48 @@ abi_constants! {
     STRATEGY_BSDF = 0;
     /// Strategy: differential path sampling with mixture MIS (ALGORITHMS.md §5).
     STRATEGY_DIFF = 1;
+
+    /// Specialisation constant id of `FEATURES` (`shaders/lib/features.glsl`).
+    SPEC_FEATURES = 0;
+    /// Feature bit: next-event estimation.
+    F_NEE = 1 << 0;
+    /// Feature bit: a constant environment emitter.
+    F_ENV = 1 << 1;
+    /// Feature bit: emissive triangles.
+    F_EMITTERS = 1 << 2;
+    /// Feature bit: the differential strategy (ALGORITHMS.md §5).
+    F_DIFF = 1 << 3;
+    /// Feature bit: Lambertian leaves.
+    F_DIFFUSE = 1 << 4;
+    /// Feature bit: rough-conductor leaves.
+    F_CONDUCTOR = 1 << 5;
+    /// Feature bit: blend materials.
+    F_BLEND = 1 << 6;
+    /// Feature bit: textured colours.
+    F_TEXTURE = 1 << 7;
+    /// Feature bit: the Beckmann distribution.
+    F_BECKMANN = 1 << 8;
+    /// Feature bit: the GGX distribution.
+    F_GGX = 1 << 9;
+    /// Feature bit: two-sided materials.
+    F_TWO_SIDED = 1 << 10;
+    /// Feature bit: gradients of constant colours (albedo, specular reflectance).
+    G_COLOR = 1 << 16;
+    /// Feature bit: gradients of texels.
+    G_TEXTURE = 1 << 17;
+    /// Feature bit: gradients of roughness.
+    G_ALPHA = 1 << 18;
+    /// Feature bit: gradients of blend weights.
+    G_WEIGHT = 1 << 19;
+    /// Feature bit: gradients of emitted radiance (triangles).
+    G_EMISSION = 1 << 20;
+    /// Feature bit: gradients of the environment's radiance.
+    G_ENV = 1 << 21;
+    /// Feature bits that differentiate something.
+    G_ANY = (1 << 16) | (1 << 17) | (1 << 18) | (1 << 19) | (1 << 20) | (1 << 21);
+
+    /// Work items one dispatch hands out are taken from this counter (`BINDING_WORK`).
+    BINDING_WORK = 16;
+    /// Pixels of a square screen tile, the unit in which work items walk the image.
+    TILE_SIZE = 8;
 }

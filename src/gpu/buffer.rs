@@ -109,6 +109,17 @@ impl Buffer {
         Ok(buffer)
     }
 
+    /// A device-local uniform buffer holding `data` (per-render constants).
+    ///
+    /// # Errors
+    /// As [`Buffer::new`] and [`Buffer::upload`].
+    pub fn uniform_with<T: bytemuck::Pod>(ctx: &Arc<Context>, name: &str, data: &[T]) -> Result<Buffer> {
+        let usage = vk::BufferUsageFlags::UNIFORM_BUFFER | vk::BufferUsageFlags::TRANSFER_DST;
+        let buffer = Buffer::new(ctx, name, std::mem::size_of_val(data) as u64, usage, MemoryLocation::GpuOnly)?;
+        buffer.upload(data)?;
+        Ok(buffer)
+    }
+
     /// The Vulkan handle.
     pub fn raw(&self) -> vk::Buffer {
         self.raw

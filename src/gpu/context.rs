@@ -83,6 +83,9 @@ pub struct DeviceInfo {
     pub missing: Vec<String>,
     /// Whether 64-bit integer atomics on buffers exist (deterministic gradients need them).
     pub int64_atomics: bool,
+    /// Whether the driver silently cuts loops short after a per-invocation iteration budget
+    /// (lavapipe before Mesa 25, PLATFORM.md §6.1): kernels then trace one path per invocation.
+    pub loop_budget: bool,
 }
 
 impl DeviceInfo {
@@ -314,7 +317,15 @@ fn describe(instance: &ash::Instance, index: usize, pd: vk::PhysicalDevice) -> D
         subgroup_size: subgroup.subgroup_size,
         missing,
         int64_atomics: core.shader_int64 == vk::TRUE && v12.shader_buffer_int64_atomics == vk::TRUE,
+        loop_budget: has_loop_budget(driver.driver_id, props.driver_version),
     }
+}
+
+/// Whether a driver has llvmpipe's loop limiter: Mesa 22.3 (Debian 12) has it, Mesa 25.0
+/// (bookworm-backports) does not (PLATFORM.md §14). Versions between were not measured and are
+/// treated as limited. Mesa reports its version as `VK_MAKE_VERSION(major, minor, patch)`.
+fn has_loop_budget(driver_id: vk::DriverId, driver_version: u32) -> bool {
+    driver_id == vk::DriverId::MESA_LLVMPIPE && (driver_version >> 22) < 25
 }
 
 /// Lists every Vulkan device with what pathgrad needs that it lacks (the `devices` subcommand).

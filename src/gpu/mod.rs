@@ -6,6 +6,7 @@ pub mod context;
 pub mod pipeline;
 pub mod renderer;
 pub mod shaders;
+pub mod variant;
 
 pub use buffer::Buffer;
 pub use context::{Context, ContextDesc, DeviceChoice, DeviceInfo};

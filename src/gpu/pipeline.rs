@@ -11,14 +11,14 @@ use crate::gpu::buffer::Buffer;
 use crate::gpu::context::Context;
 use crate::gpu::shaders;
 
-/// A compute pipeline whose bindings are all storage buffers.
+/// A compute pipeline over storage (and uniform) buffers, optionally specialised.
 pub struct Kernel {
     ctx: Arc<Context>,
     name: &'static str,
     set_layout: vk::DescriptorSetLayout,
     layout: vk::PipelineLayout,
     pipeline: vk::Pipeline,
-    bindings: Vec<u32>,
+    bindings: Vec<(u32, vk::DescriptorType)>,
     push_size: u32,
 }
 
@@ -35,6 +35,23 @@ impl Kernel {
     /// # Errors
     /// [`Error::InvalidArgument`] for an unknown kernel; Vulkan failures.
     pub fn new(ctx: &Arc<Context>, name: &'static str, bindings: &[u32], push_size: u32) -> Result<Kernel> {
+        let typed: Vec<_> = bindings.iter().map(|&b| (b, vk::DescriptorType::STORAGE_BUFFER)).collect();
+        Kernel::specialised(ctx, name, &typed, push_size, None)
+    }
+
+    /// Builds the kernel compiled from `shaders/{name}.comp` with descriptors of the given types
+    /// at `bindings` of set 0, `push_size` bytes of push constants and, if given, `features` as
+    /// the value of its `FEATURES` specialisation constant (`shaders/lib/features.glsl`).
+    ///
+    /// # Errors
+    /// As [`Kernel::new`].
+    pub fn specialised(
+        ctx: &Arc<Context>,
+        name: &'static str,
+        bindings: &[(u32, vk::DescriptorType)],
+        push_size: u32,
+        features: Option<u32>,
+    ) -> Result<Kernel> {
         let bytes = shaders::spirv(name).ok_or_else(|| Error::InvalidArgument {
             parameter: "kernel".into(),
             message: format!("no kernel named {name}"),
@@ -46,10 +63,10 @@ impl Kernel {
         let device = ctx.device();
         let layout_bindings: Vec<_> = bindings
             .iter()
-            .map(|&b| {
+            .map(|&(b, ty)| {
                 vk::DescriptorSetLayoutBinding::default()
                     .binding(b)
-                    .descriptor_type(vk::DescriptorType::STORAGE_BUFFER)
+                    .descriptor_type(ty)
                     .descriptor_count(1)
                     .stage_flags(vk::ShaderStageFlags::COMPUTE)
             })
@@ -84,10 +101,17 @@ impl Kernel {
             let module = device
                 .create_shader_module(&vk::ShaderModuleCreateInfo::default().code(&words), None)
                 .vk("vkCreateShaderModule")?;
-            let stage = vk::PipelineShaderStageCreateInfo::default()
+            let feature_bytes = features.unwrap_or(0).to_ne_bytes();
+            let entries =
+                [vk::SpecializationMapEntry::default().constant_id(crate::gpu::abi::SPEC_FEATURES).offset(0).size(4)];
+            let spec = vk::SpecializationInfo::default().map_entries(&entries).data(&feature_bytes);
+            let mut stage = vk::PipelineShaderStageCreateInfo::default()
                 .stage(vk::ShaderStageFlags::COMPUTE)
                 .module(module)
                 .name(c"main");
+            if features.is_some() {
+                stage = stage.specialization_info(&spec);
+            }
             let info = [vk::ComputePipelineCreateInfo::default().stage(stage).layout(kernel.layout)];
             let created = device.create_compute_pipelines(vk::PipelineCache::null(), &info, None);
             device.destroy_shader_module(module, None);
@@ -109,7 +133,7 @@ impl Kernel {
     /// # Errors
     /// [`Error::InvalidArgument`] for a missing or unknown binding; Vulkan failures.
     pub fn bind(&self, buffers: &[(u32, &Buffer)]) -> Result<BindGroup> {
-        for &b in &self.bindings {
+        for &(b, _) in &self.bindings {
             if buffers.iter().filter(|(x, _)| *x == b).count() != 1 {
                 return Err(Error::InvalidArgument {
                     parameter: format!("{} binding {b}", self.name),
@@ -117,16 +141,22 @@ impl Kernel {
                 });
             }
         }
-        if let Some((x, _)) = buffers.iter().find(|(x, _)| !self.bindings.contains(x)) {
+        if let Some((x, _)) = buffers.iter().find(|(x, _)| !self.bindings.iter().any(|(b, _)| b == x)) {
             return Err(Error::InvalidArgument {
                 parameter: format!("{} binding {x}", self.name),
                 message: "the kernel has no such binding".into(),
             });
         }
         let device = self.ctx.device();
-        let sizes = [vk::DescriptorPoolSize::default()
-            .ty(vk::DescriptorType::STORAGE_BUFFER)
-            .descriptor_count(self.bindings.len().max(1) as u32)];
+        let count = |ty| self.bindings.iter().filter(|(_, t)| *t == ty).count().max(1) as u32;
+        let sizes = [
+            vk::DescriptorPoolSize::default()
+                .ty(vk::DescriptorType::STORAGE_BUFFER)
+                .descriptor_count(count(vk::DescriptorType::STORAGE_BUFFER)),
+            vk::DescriptorPoolSize::default()
+                .ty(vk::DescriptorType::UNIFORM_BUFFER)
+                .descriptor_count(count(vk::DescriptorType::UNIFORM_BUFFER)),
+        ];
         // SAFETY: valid device and create-info.
         let pool = unsafe {
             device.create_descriptor_pool(&vk::DescriptorPoolCreateInfo::default().max_sets(1).pool_sizes(&sizes), None)
@@ -151,10 +181,15 @@ impl Kernel {
             .iter()
             .zip(&infos)
             .map(|((binding, _), info)| {
+                let ty = self
+                    .bindings
+                    .iter()
+                    .find(|(b, _)| b == binding)
+                    .map_or(vk::DescriptorType::STORAGE_BUFFER, |b| b.1);
                 vk::WriteDescriptorSet::default()
                     .dst_set(set)
                     .dst_binding(*binding)
-                    .descriptor_type(vk::DescriptorType::STORAGE_BUFFER)
+                    .descriptor_type(ty)
                     .buffer_info(info)
             })
             .collect();

@@ -3,16 +3,21 @@
 //! forward-mode image gradients — one sample index per dispatch, in a fixed order, so the same seed
 //! gives the same image on the same device.
 
+use std::collections::HashMap;
 use std::sync::Arc;
+use std::time::Instant;
+
+use ash::vk;
 
 use crate::adaptive::{AdaptiveOptions, PixelSampling};
 use crate::error::{Error, Result};
 use crate::gpu::abi::*;
 use crate::gpu::buffer::Buffer;
 use crate::gpu::context::Context;
-use crate::gpu::pipeline::{Kernel, compute_barrier, groups_for};
+use crate::gpu::pipeline::{Kernel, compute_barrier, groups_for, memory_barrier};
+use crate::gpu::variant;
 use crate::image::Image;
-use crate::integrator::RenderOptions;
+use crate::integrator::{ParamKinds, RenderOptions};
 use crate::loss::{Loss, loss_and_adjoint};
 use crate::params::{Gradients, ParamTable};
 use crate::rng::PassTag;
@@ -22,6 +27,13 @@ use crate::scene::flat::FlatScene;
 /// Path samples per submission: enough work to hide submission overhead, little enough that a
 /// progress bar moves and a fence wait stays far below its timeout.
 const PATHS_PER_SUBMISSION: u64 = 1 << 20;
+
+/// Most invocations one dispatch launches when lanes take work from the counter: enough to fill
+/// a large GPU; on lavapipe the lanes of the first few subgroups take all the items.
+const MAX_LANES: u32 = 1 << 16;
+
+/// A first compile that takes longer than this is reported to the compile observer.
+pub const COMPILE_NOTICE_MS: u128 = 300;
 
 /// How reverse-mode gradients are accumulated.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
@@ -44,15 +56,43 @@ struct GpuScene {
     params: Buffer,
 }
 
-/// Kernels, built on first use.
-#[derive(Default)]
-struct Kernels {
-    primal: Option<Kernel>,
-    adjoint: Option<Kernel>,
-    adjoint_fixed: Option<Kernel>,
-    adjoint_adaptive: Option<Kernel>,
-    adjoint_adaptive_fixed: Option<Kernel>,
-    image_gradient: Option<Kernel>,
+/// A kernel variant: which kernel, and the value of its `FEATURES` specialisation constant.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+struct Variant {
+    kind: KernelKind,
+    features: u32,
+}
+
+/// What a compile observer is told (see [`Renderer::set_compile_observer`]).
+#[derive(Clone, Debug)]
+pub enum CompileEvent {
+    /// A kernel variant is about to be built (the driver compiles it now, or loads it from its
+    /// shader cache).
+    Started {
+        /// The kernel's name.
+        kernel: &'static str,
+        /// Its features, as [`variant::describe`] writes them.
+        features: String,
+    },
+    /// The variant is ready.
+    Finished {
+        /// The kernel's name.
+        kernel: &'static str,
+        /// Time spent building it, first dispatch included.
+        seconds: f64,
+    },
+}
+
+/// Receives [`CompileEvent`]s.
+pub type CompileObserver = Box<dyn FnMut(&CompileEvent) + Send>;
+
+/// How a dispatch hands out work.
+#[derive(Clone, Copy, Debug)]
+enum Work {
+    /// Every pixel, `spp` samples each.
+    Pixels { spp: u32 },
+    /// `count` global samples whose pixels the kernel draws (adaptive pixel sampling).
+    Samples { count: u64 },
 }
 
 /// Renders one scene on one device: images, gradients and image gradients.
@@ -72,7 +112,12 @@ pub struct Renderer {
     scene: Scene,
     flat: FlatScene,
     gpu: GpuScene,
-    kernels: Kernels,
+    /// Feature bits of what the scene contains.
+    scene_features: u32,
+    kernels: HashMap<Variant, Kernel>,
+    /// One path per invocation (drivers with a loop budget, PLATFORM.md §6.1).
+    one_path_per_lane: bool,
+    observer: Option<CompileObserver>,
 }
 
 impl std::fmt::Debug for Renderer {
@@ -81,8 +126,9 @@ impl std::fmt::Debug for Renderer {
     }
 }
 
-/// The scene bindings every render kernel reads.
-const SCENE_BINDINGS: [u32; 9] = [
+/// The bindings every render kernel reads: the per-render constants (a uniform buffer), the
+/// scene, the status word and the work counter.
+const SCENE_BINDINGS: [u32; 10] = [
     BINDING_GLOBALS,
     BINDING_NODES,
     BINDING_TRIS,
@@ -92,7 +138,18 @@ const SCENE_BINDINGS: [u32; 9] = [
     BINDING_EMITTERS,
     BINDING_PARAMS,
     BINDING_STATUS,
+    BINDING_WORK,
 ];
+
+/// Push constants of the render kernels (`shaders/kernel.glsl`).
+#[repr(C)]
+#[derive(Clone, Copy, bytemuck::Pod, bytemuck::Zeroable)]
+struct Push {
+    sample_begin: u32,
+    sample_count: u32,
+    item_count: u32,
+    lane_items: u32,
+}
 
 impl Renderer {
     /// Flattens `scene`, builds its BVH and uploads everything.
@@ -114,9 +171,47 @@ impl Renderer {
             emitters: Buffer::storage_with(ctx, "emitters", &flat.emitters)?,
             params: Buffer::storage_with(ctx, "param buffer", &flat.params)?,
         };
-        let mut renderer = Renderer { ctx: ctx.clone(), scene: scene.clone(), flat, gpu, kernels: Kernels::default() };
-        renderer.kernel(KernelKind::Primal)?;
-        Ok(renderer)
+        let env = scene.environment.map_or(NO_PARAM, |p| scene.params.entry(p).offset);
+        let scene_features = variant::scene_features(&flat, env);
+        Ok(Renderer {
+            ctx: ctx.clone(),
+            scene: scene.clone(),
+            flat,
+            gpu,
+            scene_features,
+            kernels: HashMap::new(),
+            one_path_per_lane: ctx.info().loop_budget,
+            observer: None,
+        })
+    }
+
+    /// Calls `observer` when a kernel variant is built (on its first use in this process), so a
+    /// front end can tell its user that a first compile is under way.
+    pub fn set_compile_observer(&mut self, observer: CompileObserver) {
+        self.observer = Some(observer);
+    }
+
+    /// Traces one path per kernel invocation, one dispatch per sample index, instead of letting
+    /// lanes take work until none is left. On by default where the driver cuts long loops short
+    /// ([`crate::gpu::DeviceInfo::loop_budget`]); tests turn it on elsewhere to cover that schedule.
+    pub fn set_one_path_per_invocation(&mut self, on: bool) {
+        self.one_path_per_lane = on;
+    }
+
+    /// The kinds of the parameters `ids` (for [`RenderOptions::differentiate`]).
+    pub fn param_kinds(&self, ids: &[crate::params::ParamId]) -> ParamKinds {
+        let env = self.scene.environment.map_or(NO_PARAM, |p| self.scene.params.entry(p).offset);
+        ids.iter().fold(ParamKinds::NONE, |k, &id| {
+            let e = self.scene.params.entry(id);
+            k.union(variant::param_kinds(&self.flat, env, e.offset, e.offset + e.len))
+        })
+    }
+
+    /// The parameter kinds present in the scene and asked for by `options`.
+    fn grad_kinds(&self, options: &RenderOptions) -> ParamKinds {
+        let n = self.flat.params.len() as u32;
+        let env = self.scene.environment.map_or(NO_PARAM, |p| self.scene.params.entry(p).offset);
+        variant::param_kinds(&self.flat, env, 0, n).intersection(options.differentiate)
     }
 
     /// The scene being rendered.
@@ -195,7 +290,9 @@ impl Renderer {
         let globals = options.globals(&self.scene, &self.flat, pass);
         let accum = Buffer::storage(&self.ctx, "accumulation image", u64::from(pixels) * 12)?;
         accum.clear()?;
-        self.dispatch(KernelKind::Primal, &globals, options, &[(BINDING_ACCUM, &accum)], progress)?;
+        let features = variant::request_features(self.scene_features, options, ParamKinds::NONE);
+        let v = Variant { kind: KernelKind::Primal, features };
+        self.dispatch(v, &globals, options, Work::Pixels { spp: options.spp }, &[(BINDING_ACCUM, &accum)], progress)?;
         let sums: Vec<f32> = accum.download(pixels as usize * 3)?;
         let spp = options.spp as f32;
         Image::from_rgb(options.width, options.height, sums.into_iter().map(|v| v / spp).collect())
@@ -215,7 +312,8 @@ impl Renderer {
         let _span = tracing::info_span!("adjoint", spp = options.spp, ?mode).entered();
         let globals = options.globals(&self.scene, &self.flat, PassTag::Gradient);
         let adjoint_buf = Buffer::storage_with(&self.ctx, "adjoint image", adjoint.as_slice())?;
-        self.reverse([KernelKind::Adjoint, KernelKind::AdjointFixed], &globals, options, &adjoint_buf, &[], mode)
+        let work = Work::Pixels { spp: options.spp };
+        self.reverse([KernelKind::Adjoint, KernelKind::AdjointFixed], &globals, options, work, &adjoint_buf, &[], mode)
     }
 
     /// Reverse-mode gradient with loss-aware adaptive pixel sampling (ALGORITHMS.md §6): the
@@ -249,10 +347,12 @@ impl Renderer {
             table.prob().iter().zip(table.alias()).map(|(&prob, &alias)| AliasEntry { prob, alias }).collect();
         let alias_buf = Buffer::storage_with(&self.ctx, "pixel alias table", &entries)?;
         let adjoint_buf = Buffer::storage_with(&self.ctx, "adjoint image (per-sample δL)", delta.as_slice())?;
+        let count = u64::from(options.width * options.height) * u64::from(options.spp);
         self.reverse(
             [KernelKind::AdjointAdaptive, KernelKind::AdjointAdaptiveFixed],
             &globals,
             options,
+            Work::Samples { count },
             &adjoint_buf,
             &[(BINDING_ALIAS, &alias_buf)],
             mode,
@@ -261,23 +361,27 @@ impl Renderer {
 
     /// Runs the reverse-mode kernel of `mode` — `kinds[0]` with float atomics, `kinds[1]` in fixed
     /// point — over the scene bindings, the adjoint image, the gradient and `extra`.
+    #[allow(clippy::too_many_arguments)]
     fn reverse(
         &mut self,
         kinds: [KernelKind; 2],
         globals: &Globals,
         options: &RenderOptions,
+        work: Work,
         adjoint_buf: &Buffer,
         extra: &[(u32, &Buffer)],
         mode: GradMode,
     ) -> Result<Gradients> {
         let n = self.flat.params.len();
+        let features = variant::request_features(self.scene_features, options, self.grad_kinds(options));
         match mode {
             GradMode::Float => {
                 let grads = Buffer::storage(&self.ctx, "gradient", (n * 4) as u64)?;
                 grads.clear()?;
                 let mut bindings = vec![(BINDING_ADJOINT, adjoint_buf), (BINDING_GRADS, &grads)];
                 bindings.extend_from_slice(extra);
-                self.dispatch(kinds[0], globals, options, &bindings, &mut |_, _| {})?;
+                let v = Variant { kind: kinds[0], features };
+                self.dispatch(v, globals, options, work, &bindings, &mut |_, _| {})?;
                 Ok(Gradients::new(&self.scene.params, grads.download(n)?))
             }
             GradMode::Deterministic => {
@@ -291,7 +395,8 @@ impl Renderer {
                 grads.clear()?;
                 let mut bindings = vec![(BINDING_ADJOINT, adjoint_buf), (BINDING_GRADS_FIXED, &grads)];
                 bindings.extend_from_slice(extra);
-                self.dispatch(kinds[1], globals, options, &bindings, &mut |_, _| {})?;
+                let v = Variant { kind: kinds[1], features };
+                self.dispatch(v, globals, options, work, &bindings, &mut |_, _| {})?;
                 let fixed: Vec<i64> = grads.download(n)?;
                 let unit = 1.0 / f64::from(globals.fixed_scale);
                 Ok(Gradients::new(&self.scene.params, fixed.iter().map(|&v| (v as f64 * unit) as f32).collect()))
@@ -407,10 +512,14 @@ impl Renderer {
         accum.clear()?;
         // δL = 1 per sample: the adjoint scale must not divide by spp here; the mean is taken below.
         globals.adjoint_scale = 1.0;
+        let env = self.scene.environment.map_or(NO_PARAM, |p| self.scene.params.entry(p).offset);
+        let kinds = variant::param_kinds(&self.flat, env, entry.offset, entry.offset + entry.len);
+        let features = variant::request_features(self.scene_features, options, kinds);
         self.dispatch(
-            KernelKind::ImageGradient,
+            Variant { kind: KernelKind::ImageGradient, features },
             &globals,
             options,
+            Work::Pixels { spp: options.spp },
             &[(BINDING_ADJOINT, &adjoint_buf), (BINDING_ACCUM, &accum)],
             &mut |_, _| {},
         )?;
@@ -419,60 +528,94 @@ impl Renderer {
         Image::from_rgb(options.width, options.height, sums.into_iter().map(|v| v / spp).collect())
     }
 
-    fn kernel(&mut self, kind: KernelKind) -> Result<&Kernel> {
-        let (slot, name, extra): (&mut Option<Kernel>, &'static str, &[u32]) = match kind {
-            KernelKind::Primal => (&mut self.kernels.primal, "primal", &[BINDING_ACCUM]),
-            KernelKind::Adjoint => (&mut self.kernels.adjoint, "adjoint", &[BINDING_ADJOINT, BINDING_GRADS]),
-            KernelKind::AdjointFixed => {
-                (&mut self.kernels.adjoint_fixed, "adjoint_fixed", &[BINDING_ADJOINT, BINDING_GRADS_FIXED])
-            }
-            KernelKind::AdjointAdaptive => (
-                &mut self.kernels.adjoint_adaptive,
-                "adjoint_adaptive",
-                &[BINDING_ADJOINT, BINDING_GRADS, BINDING_ALIAS],
-            ),
-            KernelKind::AdjointAdaptiveFixed => (
-                &mut self.kernels.adjoint_adaptive_fixed,
-                "adjoint_adaptive_fixed",
-                &[BINDING_ADJOINT, BINDING_GRADS_FIXED, BINDING_ALIAS],
-            ),
-            KernelKind::ImageGradient => {
-                (&mut self.kernels.image_gradient, "image_gradient", &[BINDING_ADJOINT, BINDING_ACCUM])
-            }
-        };
-        if slot.is_none() {
-            let bindings: Vec<u32> = SCENE_BINDINGS.iter().chain(extra).copied().collect();
-            *slot = Some(Kernel::new(&self.ctx, name, &bindings, 4)?);
+    /// Builds the kernel variant `v` if this renderer has not yet, warming it up with an empty
+    /// dispatch so the driver's compile (or shader-cache load) happens here and is timed.
+    fn kernel(&mut self, v: Variant) -> Result<()> {
+        if self.kernels.contains_key(&v) {
+            return Ok(());
         }
-        Ok(slot.as_ref().expect("set above"))
+        let (name, extra) = v.kind.layout();
+        let features = variant::describe(v.features);
+        let started = Instant::now();
+        if let Some(observer) = self.observer.as_mut() {
+            observer(&CompileEvent::Started { kernel: name, features: features.clone() });
+        }
+        let bindings: Vec<(u32, vk::DescriptorType)> = SCENE_BINDINGS
+            .iter()
+            .chain(extra)
+            .map(|&b| {
+                let ty = if b == BINDING_GLOBALS {
+                    vk::DescriptorType::UNIFORM_BUFFER
+                } else {
+                    vk::DescriptorType::STORAGE_BUFFER
+                };
+                (b, ty)
+            })
+            .collect();
+        let kernel =
+            Kernel::specialised(&self.ctx, name, &bindings, std::mem::size_of::<Push>() as u32, Some(v.features))?;
+        self.kernels.insert(v, kernel);
+        self.warm_up(v)?;
+        let seconds = started.elapsed().as_secs_f64();
+        tracing::info!(kernel = name, features = %features, seconds, "kernel variant built");
+        if let Some(observer) = self.observer.as_mut() {
+            observer(&CompileEvent::Finished { kernel: name, seconds });
+        }
+        Ok(())
     }
 
-    /// Builds `kind` if needed, then [`Renderer::run`]s it.
+    /// One dispatch of `v` with no work: lavapipe compiles a pipeline at its first dispatch.
+    fn warm_up(&self, v: Variant) -> Result<()> {
+        let (_, extra) = v.kind.layout();
+        let scratch = Buffer::storage(&self.ctx, "warm-up scratch", 16)?;
+        let globals = Buffer::uniform_with(
+            &self.ctx,
+            "globals",
+            std::slice::from_ref(&<Globals as bytemuck::Zeroable>::zeroed()),
+        )?;
+        let bindings: Vec<(u32, &Buffer)> = SCENE_BINDINGS
+            .iter()
+            .chain(extra)
+            .map(|&b| (b, if b == BINDING_GLOBALS { &globals } else { &scratch }))
+            .collect();
+        let kernel = &self.kernels[&v];
+        let group = kernel.bind(&bindings)?;
+        let push = Push { sample_begin: 0, sample_count: 0, item_count: 0, lane_items: 0 };
+        self.ctx.submit_and_wait(v.kind.layout().0, |cmd| {
+            kernel.record(cmd, &group, bytemuck::bytes_of(&push), [1, 1, 1]);
+        })
+    }
+
+    /// Builds `v` if needed, then [`Renderer::run`]s it.
     fn dispatch(
         &mut self,
-        kind: KernelKind,
+        v: Variant,
         globals: &Globals,
         options: &RenderOptions,
+        work: Work,
         extra: &[(u32, &Buffer)],
         progress: &mut dyn FnMut(u32, u32),
     ) -> Result<()> {
-        self.kernel(kind)?;
-        self.run(kind, globals, options, extra, progress)
+        self.kernel(v)?;
+        self.run(v, globals, options, work, extra, progress)
     }
 
-    /// Dispatches `kind` once per sample index with the scene bindings plus `extra`, then checks
-    /// the kernels' status word.
+    /// Dispatches `v` over `work` with the scene bindings plus `extra`, in submissions of about
+    /// [`PATHS_PER_SUBMISSION`] paths, then checks the kernels' status word. `progress` hears
+    /// (samples per pixel done, spp) after each submission.
     fn run(
         &self,
-        kind: KernelKind,
+        v: Variant,
         globals: &Globals,
         options: &RenderOptions,
+        work: Work,
         extra: &[(u32, &Buffer)],
         progress: &mut dyn FnMut(u32, u32),
     ) -> Result<()> {
-        let globals_buf = Buffer::storage_with(&self.ctx, "globals", std::slice::from_ref(globals))?;
+        let globals_buf = Buffer::uniform_with(&self.ctx, "globals", std::slice::from_ref(globals))?;
         let status = Buffer::storage(&self.ctx, "status flags", 4)?;
         status.clear()?;
+        let counter = Buffer::storage(&self.ctx, "work counter", 4)?;
         let ctx = &self.ctx;
         let g = &self.gpu;
         let mut bindings: Vec<(u32, &Buffer)> = vec![
@@ -485,40 +628,103 @@ impl Renderer {
             (BINDING_EMITTERS, &g.emitters),
             (BINDING_PARAMS, &g.params),
             (BINDING_STATUS, &status),
+            (BINDING_WORK, &counter),
         ];
         bindings.extend_from_slice(extra);
-        let pixels = options.width * options.height;
-        let per_submit = (PATHS_PER_SUBMISSION / u64::from(pixels)).clamp(1, u64::from(options.spp)) as u32;
-        let groups = groups_for(pixels);
-        let name = kind.name();
-        let kernel = match kind {
-            KernelKind::Primal => self.kernels.primal.as_ref(),
-            KernelKind::Adjoint => self.kernels.adjoint.as_ref(),
-            KernelKind::AdjointFixed => self.kernels.adjoint_fixed.as_ref(),
-            KernelKind::AdjointAdaptive => self.kernels.adjoint_adaptive.as_ref(),
-            KernelKind::AdjointAdaptiveFixed => self.kernels.adjoint_adaptive_fixed.as_ref(),
-            KernelKind::ImageGradient => self.kernels.image_gradient.as_ref(),
-        }
-        .expect("run's callers build the kernel first");
+        let kernel = &self.kernels[&v];
         let group = kernel.bind(&bindings)?;
-        let mut done = 0;
-        while done < options.spp {
-            let end = (done + per_submit).min(options.spp);
-            ctx.submit_and_wait(name, |cmd| {
-                for sample in done..end {
-                    kernel.record(cmd, &group, bytemuck::bytes_of(&sample), groups);
-                    compute_barrier(ctx, cmd);
+        let name = v.kind.layout().0;
+        let pixels = options.width * options.height;
+        // One dispatch: (push constants, lanes).
+        let launch = |push: Push| {
+            let lanes = if self.one_path_per_lane { push.item_count } else { push.item_count.min(MAX_LANES) };
+            (push, groups_for(lanes.max(1)))
+        };
+        let record = |cmd: vk::CommandBuffer, dispatches: &[(Push, [u32; 3])]| {
+            for (push, groups) in dispatches {
+                // SAFETY: `cmd` is recording; the counter is alive until the submission is waited on.
+                unsafe { ctx.device().cmd_fill_buffer(cmd, counter.raw(), 0, vk::WHOLE_SIZE, 0) };
+                memory_barrier(
+                    ctx,
+                    cmd,
+                    (vk::PipelineStageFlags::TRANSFER, vk::AccessFlags::TRANSFER_WRITE),
+                    (
+                        vk::PipelineStageFlags::COMPUTE_SHADER,
+                        vk::AccessFlags::SHADER_READ | vk::AccessFlags::SHADER_WRITE,
+                    ),
+                );
+                kernel.record(cmd, &group, bytemuck::bytes_of(push), *groups);
+                compute_barrier(ctx, cmd);
+                memory_barrier(
+                    ctx,
+                    cmd,
+                    (
+                        vk::PipelineStageFlags::COMPUTE_SHADER,
+                        vk::AccessFlags::SHADER_READ | vk::AccessFlags::SHADER_WRITE,
+                    ),
+                    (vk::PipelineStageFlags::TRANSFER, vk::AccessFlags::TRANSFER_WRITE),
+                );
+            }
+        };
+        match work {
+            Work::Pixels { spp } => {
+                let tiles_x = options.width.div_ceil(TILE_SIZE);
+                let tiles_y = options.height.div_ceil(TILE_SIZE);
+                let items = tiles_x * tiles_y * TILE_SIZE * TILE_SIZE;
+                let per_submit = (PATHS_PER_SUBMISSION / u64::from(pixels)).clamp(1, u64::from(spp)) as u32;
+                let mut done = 0;
+                while done < spp {
+                    let end = (done + per_submit).min(spp);
+                    let dispatches: Vec<_> = if self.one_path_per_lane {
+                        (done..end)
+                            .map(|s| {
+                                launch(Push { sample_begin: s, sample_count: 1, item_count: items, lane_items: 1 })
+                            })
+                            .collect()
+                    } else {
+                        let push = Push {
+                            sample_begin: done,
+                            sample_count: end - done,
+                            item_count: items,
+                            lane_items: u32::MAX,
+                        };
+                        vec![launch(push)]
+                    };
+                    ctx.submit_and_wait(name, |cmd| record(cmd, &dispatches))?;
+                    done = end;
+                    progress(done, spp);
                 }
-            })?;
-            done = end;
-            progress(done, options.spp);
+            }
+            Work::Samples { count } => {
+                if count > u64::from(u32::MAX) {
+                    return Err(Error::InvalidArgument {
+                        parameter: "--spp".into(),
+                        message: format!("{count} samples exceed the 32-bit sample counter"),
+                    });
+                }
+                let chunk = if self.one_path_per_lane { u64::from(pixels) } else { PATHS_PER_SUBMISSION };
+                let mut done = 0u64;
+                while done < count {
+                    let end = (done + chunk).min(count);
+                    let push = Push {
+                        sample_begin: done as u32,
+                        sample_count: 1,
+                        item_count: (end - done) as u32,
+                        lane_items: if self.one_path_per_lane { 1 } else { u32::MAX },
+                    };
+                    let dispatches = [launch(push)];
+                    ctx.submit_and_wait(name, |cmd| record(cmd, &dispatches))?;
+                    done = end;
+                    progress((done * u64::from(options.spp) / count) as u32, options.spp);
+                }
+            }
         }
         let flags: Vec<u32> = status.download(1)?;
         check_status(flags[0], name)
     }
 }
 
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
 enum KernelKind {
     Primal,
     Adjoint,
@@ -529,14 +735,18 @@ enum KernelKind {
 }
 
 impl KernelKind {
-    fn name(self) -> &'static str {
+    /// The kernel table: each kernel's `shaders/*.comp` name and the bindings it adds to
+    /// [`SCENE_BINDINGS`]. Adding a kernel is one entry here.
+    fn layout(self) -> (&'static str, &'static [u32]) {
         match self {
-            KernelKind::Primal => "primal",
-            KernelKind::Adjoint => "adjoint",
-            KernelKind::AdjointFixed => "adjoint_fixed",
-            KernelKind::AdjointAdaptive => "adjoint_adaptive",
-            KernelKind::AdjointAdaptiveFixed => "adjoint_adaptive_fixed",
-            KernelKind::ImageGradient => "image_gradient",
+            KernelKind::Primal => ("primal", &[BINDING_ACCUM]),
+            KernelKind::Adjoint => ("adjoint", &[BINDING_ADJOINT, BINDING_GRADS]),
+            KernelKind::AdjointFixed => ("adjoint_fixed", &[BINDING_ADJOINT, BINDING_GRADS_FIXED]),
+            KernelKind::AdjointAdaptive => ("adjoint_adaptive", &[BINDING_ADJOINT, BINDING_GRADS, BINDING_ALIAS]),
+            KernelKind::AdjointAdaptiveFixed => {
+                ("adjoint_adaptive_fixed", &[BINDING_ADJOINT, BINDING_GRADS_FIXED, BINDING_ALIAS])
+            }
+            KernelKind::ImageGradient => ("image_gradient", &[BINDING_ADJOINT, BINDING_ACCUM]),
         }
     }
 }

@@ -1,0 +1,134 @@
+// The scheduler of every render kernel: which paths a lane traces, in which order, and where
+// their results go. The including .comp sets GRAD_MODE (lib/params.glsl) and PIXEL_SELECT.
+//
+// Work comes in items taken from a counter (`work_next`), one lane at a time, so no lane or
+// thread idles while another has work left (lavapipe's thread pool splits a dispatch in fixed
+// halves; GPUs retire lanes unevenly). An item is one pixel and `sample_count` consecutive
+// samples from `sample_begin` — pixels walk the image in TILE_SIZE² tiles, so a SIMD batch traces
+// neighbouring pixels — or, with PIXEL_SELECT = 1 (adaptive pixel sampling, ALGORITHMS.md §6),
+// one global sample k = sample_begin + item whose pixel p(k) is drawn from the alias table and
+// whose path uses k as its sample index. A lane starts its next path in the same loop iteration
+// in which its current one ends (path regeneration), so a batch no longer waits for its longest
+// path. Each item is traced by one lane in sample order and written only by it, so the result is
+// bitwise the same whichever lane takes it: the same seed gives the same image.
+//
+// Fused adjoint kernels (ARCHITECTURE decision 6) run each sample's primal path for its radiance
+// L, then replay it in adjoint mode from L; nothing per path is stored, so memory is independent
+// of path length and spp. On a driver with a loop budget (lavapipe before Mesa 25, PLATFORM.md
+// §6.1) the host sets `lane_items` = 1 and `sample_count` = 1: one path per invocation, as the
+// budget needs.
+#ifndef PATHGRAD_KERNEL_GLSL
+#define PATHGRAD_KERNEL_GLSL
+
+#ifndef PIXEL_SELECT
+#define PIXEL_SELECT 0
+#endif
+
+#include "integrator.glsl"
+#if PIXEL_SELECT
+#if GRAD_MODE != GRAD_MODE_FLOAT && GRAD_MODE != GRAD_MODE_FIXED
+#error "adaptive pixel selection serves the reverse-mode kernels only"
+#endif
+#include "lib/alias.glsl"
+#endif
+
+layout(local_size_x = WORKGROUP_SIZE) in;
+#if ADJOINT_KERNEL
+layout(set = 0, binding = BINDING_ADJOINT, scalar) readonly buffer AdjointBuf { float adjoint_image[]; };
+#endif
+#if GRAD_MODE == GRAD_MODE_NONE || GRAD_MODE == GRAD_MODE_FORWARD
+layout(set = 0, binding = BINDING_ACCUM, scalar) buffer AccumBuf { float accum[]; };
+#endif
+layout(set = 0, binding = BINDING_WORK, scalar) coherent buffer WorkBuf { uint work_next; };
+layout(push_constant) uniform Push {
+    uint sample_begin;  // first sample index (PIXEL_SELECT: first global sample) of this dispatch
+    uint sample_count;  // samples per item
+    uint item_count;    // items in this dispatch
+    uint lane_items;    // most items one lane takes
+};
+
+// A replay may leave this much radiance (relative to the path's, plus a floor): the primal sums
+// its terms and the replay subtracts the same terms in the same order (ALGORITHMS.md §3.3).
+#define REPLAY_RESIDUAL_TOLERANCE 1e-5
+
+// The pixel (row-major) of item `item`, false for a tile position outside the image.
+bool item_pixel(uint item, out uint pixel) {
+#if PIXEL_SELECT
+    pixel = select_pixel(uvec2(globals.key0, globals.key1), globals.width * globals.height, sample_begin + item);
+    return true;
+#else
+    uint tiles_x = (globals.width + TILE_SIZE - 1u) / TILE_SIZE;
+    uint tile = item / (TILE_SIZE * TILE_SIZE);
+    uint within = item % (TILE_SIZE * TILE_SIZE);
+    uint x = (tile % tiles_x) * TILE_SIZE + within % TILE_SIZE;
+    uint y = (tile / tiles_x) * TILE_SIZE + within / TILE_SIZE;
+    pixel = y * globals.width + x;
+    return x < globals.width && y < globals.height;
+#endif
+}
+
+void main() {
+    PathState st;
+    uint sample_index = 0u;   // of the path in flight
+    uint samples_left = 0u;   // of the item in flight, the one in flight included
+    uint taken = 0u;
+    bool in_flight = false;
+    vec3 sum = vec3(0.0);     // the item's radiance (primal) or derivative (forward), in sample order
+#if ADJOINT_KERNEL
+    vec3 total = vec3(0.0);   // the primal radiance of the path being replayed
+#endif
+    // The flag is set only where the loop ends for its own reason, so a driver's silent loop
+    // truncation (PLATFORM.md §6.1) is reported; the bound is never reached otherwise.
+    bool finished = false;
+    for (uint iteration = 0u; iteration < 0xFFFFFFFFu; iteration++) {
+        if (!in_flight) {
+            if (taken >= lane_items) { finished = true; break; }
+            uint item = atomicAdd(work_next, 1u);
+            if (item >= item_count) { finished = true; break; }
+            taken++;
+            uint pixel;
+            if (!item_pixel(item, pixel)) continue;
+#if PIXEL_SELECT
+            sample_index = sample_begin + item;
+#else
+            sample_index = sample_begin;
+#endif
+            samples_left = sample_count;
+            sum = vec3(0.0);
+            st = path_begin(pixel, sample_index, false, vec3(0.0), vec3(0.0));
+            in_flight = true;
+        }
+        if (!path_step(st)) continue;
+        uint pixel = st.pixel;
+#if ADJOINT_KERNEL
+        if (!st.adjoint) {
+            total = st.radiance;
+            vec3 adj = vec3(adjoint_image[3u * pixel], adjoint_image[3u * pixel + 1u], adjoint_image[3u * pixel + 2u]) * globals.adjoint_scale;
+            st = path_begin(pixel, sample_index, true, adj, total);
+            continue;
+        }
+        if (any(greaterThan(abs(st.radiance), REPLAY_RESIDUAL_TOLERANCE * (abs(total) + vec3(1e-6))))) raise_status(STATUS_REPLAY_RESIDUAL);
+#endif
+#if GRAD_MODE == GRAD_MODE_NONE
+        sum += st.radiance;
+#elif GRAD_MODE == GRAD_MODE_FORWARD
+        sum += forward_derivative;
+        forward_derivative = vec3(0.0);
+#endif
+        samples_left--;
+        if (samples_left > 0u) {
+            sample_index++;
+            st = path_begin(pixel, sample_index, false, vec3(0.0), vec3(0.0));
+            continue;
+        }
+        in_flight = false;
+#if GRAD_MODE == GRAD_MODE_NONE || GRAD_MODE == GRAD_MODE_FORWARD
+        accum[3u * pixel] += sum.x;
+        accum[3u * pixel + 1u] += sum.y;
+        accum[3u * pixel + 2u] += sum.z;
+#endif
+    }
+    if (!finished) raise_status(STATUS_LOOP_BUDGET);
+}
+
+#endif

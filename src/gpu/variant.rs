@@ -1,0 +1,105 @@
+//! Kernel variants: the value of the `FEATURES` specialisation constant for a request on a scene.
+//!
+//! A kernel contains only what its request and scene use (issue "Fast kernels"): the material
+//! kinds and distributions present, textures, two-sided materials, emitters and the environment,
+//! next-event estimation, the strategy, and which parameter kinds are differentiated. Each bit is
+//! an `F_*`/`G_*` constant of [`crate::gpu::abi`], read by `shaders/lib/features.glsl`.
+
+use crate::gpu::abi::*;
+use crate::integrator::{ParamKinds, RenderOptions, Strategy};
+use crate::scene::flat::FlatScene;
+
+/// The feature bits of what `flat` contains; `env_param` is the environment's parameter offset or
+/// `NO_PARAM`.
+pub fn scene_features(flat: &FlatScene, env_param: u32) -> u32 {
+    let mut f = 0;
+    for m in &flat.materials {
+        f |= match m.tag {
+            MAT_DIFFUSE => F_DIFFUSE,
+            MAT_ROUGH_CONDUCTOR => F_CONDUCTOR | if m.distribution == DIST_BECKMANN { F_BECKMANN } else { F_GGX },
+            _ => F_BLEND,
+        };
+        if m.tex_width > 0 {
+            f |= F_TEXTURE;
+        }
+        if m.two_sided != 0 {
+            f |= F_TWO_SIDED;
+        }
+    }
+    if !flat.emitters.is_empty() {
+        f |= F_EMITTERS;
+    }
+    if env_param != NO_PARAM {
+        f |= F_ENV;
+    }
+    f
+}
+
+/// The kinds of the parameter values `begin .. end`, judged by what refers to them.
+pub fn param_kinds(flat: &FlatScene, env_param: u32, begin: u32, end: u32) -> ParamKinds {
+    let overlaps = |offset: u32, len: u32| offset != NO_PARAM && offset < end && begin < offset.saturating_add(len);
+    let mut k = ParamKinds::NONE;
+    for m in &flat.materials {
+        match m.tag {
+            MAT_DIFFUSE | MAT_ROUGH_CONDUCTOR => {
+                let texels = if m.tex_width > 0 { m.tex_width * m.tex_height } else { 1 };
+                if overlaps(m.p_color, 3 * texels) {
+                    k = k.union(if m.tex_width > 0 { ParamKinds::TEXTURE } else { ParamKinds::COLOR });
+                }
+                if m.tag == MAT_ROUGH_CONDUCTOR && overlaps(m.p_alpha, 1) {
+                    k = k.union(ParamKinds::ALPHA);
+                }
+            }
+            _ => {
+                if overlaps(m.p_weight, 1) {
+                    k = k.union(ParamKinds::WEIGHT);
+                }
+            }
+        }
+    }
+    if flat.emitters.iter().any(|e| overlaps(e.p_radiance, 3)) {
+        k = k.union(ParamKinds::EMISSION);
+    }
+    if overlaps(env_param, 3) {
+        k = k.union(ParamKinds::ENVIRONMENT);
+    }
+    k
+}
+
+/// The feature bits of a pass with `options` on a scene with `scene` bits, differentiating
+/// `kinds` (empty for the primal kernel).
+pub fn request_features(scene: u32, options: &RenderOptions, kinds: ParamKinds) -> u32 {
+    let mut f = scene;
+    if options.nee && scene & (F_EMITTERS | F_ENV) != 0 {
+        f |= F_NEE;
+    }
+    if matches!(options.strategy, Strategy::Diff { .. }) {
+        f |= F_DIFF;
+    }
+    f | kinds.bits()
+}
+
+/// A short human-readable name of a variant, for logs: `nee env diffuse conductor[beckmann] ∂alpha`.
+pub fn describe(features: u32) -> String {
+    const NAMES: [(u32, &str); 17] = [
+        (F_NEE, "nee"),
+        (F_ENV, "env"),
+        (F_EMITTERS, "emitters"),
+        (F_DIFF, "diff"),
+        (F_DIFFUSE, "diffuse"),
+        (F_CONDUCTOR, "conductor"),
+        (F_BECKMANN, "beckmann"),
+        (F_GGX, "ggx"),
+        (F_BLEND, "blend"),
+        (F_TEXTURE, "texture"),
+        (F_TWO_SIDED, "two-sided"),
+        (G_COLOR, "∂color"),
+        (G_TEXTURE, "∂texture"),
+        (G_ALPHA, "∂alpha"),
+        (G_WEIGHT, "∂weight"),
+        (G_EMISSION, "∂emission"),
+        (G_ENV, "∂env"),
+    ];
+    let parts: Vec<&str> = NAMES.iter().filter(|(bit, _)| features & bit != 0).map(|(_, n)| *n).collect();
+    parts.join(" ")
+}
