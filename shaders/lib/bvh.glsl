@@ -1,4 +1,5 @@
-// In-shader BVH2 traversal: closest hit and shadow any-hit (twin of src/bvh.rs).
+// In-shader BVH2 traversal over nodes that hold both children's boxes: closest hit and shadow
+// any-hit (twin of src/bvh.rs).
 //
 // lavapipe truncates loops silently once an invocation batch has spent ~65 535 iterations
 // (PLATFORM.md §6.1), and then every loop exits. The traversal records in `finished` whether it ended
@@ -43,36 +44,38 @@ vec4 intersect_triangle(Ray ray, TriPositions tri, float tmin, float tmax) {
     return (t > tmin && t < tmax) ? vec4(t, b1, b2, 1.0) : vec4(0.0);
 }
 
-// Entry distance into the node's box, or -1 when the ray misses it within [tmin, tmax] (tmin >= 0).
-float slab(Ray ray, BvhNode node, float tmin, float tmax) {
-    precise vec3 t0 = (node.bmin - ray.origin) * ray.inv_dir;
-    precise vec3 t1 = (node.bmax - ray.origin) * ray.inv_dir;
-    vec3 lo = min(t0, t1);
-    vec3 hi = max(t0, t1);
-    float near = max(max(max(lo.x, lo.y), lo.z), tmin);
-    float far = min(min(min(hi.x, hi.y), hi.z), tmax);
+// Entry distance into the box lo..hi, or -1 when the ray misses it within [tmin, tmax] (tmin >= 0).
+float slab(Ray ray, vec3 lo, vec3 hi, float tmin, float tmax) {
+    precise vec3 t0 = (lo - ray.origin) * ray.inv_dir;
+    precise vec3 t1 = (hi - ray.origin) * ray.inv_dir;
+    vec3 near3 = min(t0, t1);
+    vec3 far3 = max(t0, t1);
+    float near = max(max(max(near3.x, near3.y), near3.z), tmin);
+    float far = min(min(min(far3.x, far3.y), far3.z), tmax);
     return near <= far ? near : -1.0;
 }
 
+// One stack entry per step (src/bvh.rs, `traverse`): a leaf's triangles are tested, an inner
+// node's two boxes are fetched together and tested, and the children hit are pushed — the farther
+// first for closest hits, in node order for shadow rays. The builder bounds the depth to fit the
+// stack; the overflow check stays as a guard.
 Hit bvh_traverse(Ray ray, float tmin, float tmax, bool any_hit) {
     Hit best = Hit(0.0, 0u, 0.0, 0.0, false);
-    if (slab(ray, nodes[0], tmin, tmax) < 0.0) return best;
     uint stack[BVH_STACK_SIZE];
     stack[0] = 0u;
     uint sp = 1u;
-    // Every node is popped at most once, so the step bound is never reached; but the compiler cannot
-    // know that, so `finished` is not provably true after the loop and the check survives. A
-    // truncated leaf loop needs no check of its own: the budget is spent, so the outer loop exits
-    // too, before it can set `finished`.
-    uint max_steps = uint(nodes.length());
+    // Every entry is pushed at most once, so the step bound is never reached; but the compiler
+    // cannot know that, so `finished` is not provably true after the loop and the check survives.
+    uint max_steps = 2u * uint(nodes.length()) + 1u;
     bool finished = false;
     for (uint step = 0u; step <= max_steps; step++) {
         if (sp == 0u) { finished = true; break; }
         sp -= 1u;
-        BvhNode node = nodes[stack[sp]];
-        if (node.count > 0u) {
-            uint end = node.first + node.count;
-            for (uint slot = node.first; slot < end; slot++) {
+        uint r = stack[sp];
+        if ((r & BVH_LEAF_BIT) != 0u) {
+            uint first = r & BVH_LEAF_FIRST_MASK;
+            uint end = first + ((r & ~BVH_LEAF_BIT) >> BVH_LEAF_COUNT_SHIFT) + 1u;
+            for (uint slot = first; slot < end; slot++) {
                 vec4 h = intersect_triangle(ray, tris[slot], tmin, tmax);
                 if (h.w != 0.0) {
                     tmax = h.x;
@@ -80,26 +83,25 @@ Hit bvh_traverse(Ray ray, float tmin, float tmax, bool any_hit) {
                     if (any_hit) break;
                 }
             }
-            // Any hit answers a shadow query, even one found just before the budget ran out.
+            // Any hit answers a shadow query, even one found just before a loop budget ran out.
             if (any_hit && best.valid) { finished = true; break; }
         } else {
-            uint a = node.first;
-            uint b = node.first + 1u;
-            float ta = slab(ray, nodes[a], tmin, tmax);
-            float tb = slab(ray, nodes[b], tmin, tmax);
+            BvhNode node = nodes[r];
+            float ta = node.child0 != BVH_NO_CHILD ? slab(ray, node.lo0, node.hi0, tmin, tmax) : -1.0;
+            float tb = node.child1 != BVH_NO_CHILD ? slab(ray, node.lo1, node.hi1, tmin, tmax) : -1.0;
             bool ha = ta >= 0.0;
             bool hb = tb >= 0.0;
             if (sp + 2u > BVH_STACK_SIZE) { raise_status(STATUS_STACK_OVERFLOW); finished = true; break; }
-            // Push the farther child first so the nearer one is visited next.
             if (ha && hb) {
-                bool b_nearer = tb < ta;
-                stack[sp] = b_nearer ? a : b;
-                stack[sp + 1u] = b_nearer ? b : a;
+                // Pushed first, visited last.
+                bool b_nearer = !any_hit && tb < ta;
+                stack[sp] = b_nearer ? node.child0 : node.child1;
+                stack[sp + 1u] = b_nearer ? node.child1 : node.child0;
                 sp += 2u;
             } else if (ha) {
-                stack[sp] = a; sp += 1u;
+                stack[sp] = node.child0; sp += 1u;
             } else if (hb) {
-                stack[sp] = b; sp += 1u;
+                stack[sp] = node.child1; sp += 1u;
             }
         }
     }

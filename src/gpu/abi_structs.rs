@@ -57,27 +57,43 @@ abi_structs! {
         diff_end: u32,
     }
 
-    /// One BVH2 node: a leaf when `count > 0` (triangles `first .. first+count` of the leaf-ordered
-    /// arrays), else an inner node with children `first` and `first + 1`.
+    /// One BVH2 node holding both children's boxes, so a traversal step fetches them at once.
+    /// A child reference is an inner node's index, a leaf (`BVH_LEAF_BIT | (count − 1) <<
+    /// BVH_LEAF_COUNT_SHIFT | first`: triangles `first .. first + count` of the leaf-ordered
+    /// arrays), or `BVH_NO_CHILD`.
     struct BvhNode {
-        /// Box minimum.
-        bmin: Vec3,
-        /// Triangle count of a leaf; 0 for inner nodes.
-        count: u32,
-        /// Box maximum.
-        bmax: Vec3,
-        /// First child (inner) or first leaf slot (leaf).
-        first: u32,
+        /// Box minimum of child 0.
+        lo0: Vec3,
+        /// Reference of child 0.
+        child0: u32,
+        /// Box maximum of child 0.
+        hi0: Vec3,
+        /// Reference of child 1.
+        child1: u32,
+        /// Box minimum of child 1.
+        lo1: Vec3,
+        /// Unused: keeps every box corner 16-byte aligned, so a node is four aligned 16-byte loads.
+        pad0: u32,
+        /// Box maximum of child 1.
+        hi1: Vec3,
+        /// Unused, as `pad0`.
+        pad1: u32,
     }
 
-    /// Triangle vertex positions, in BVH leaf order.
+    /// Triangle vertex positions, in BVH leaf order, each vertex 16-byte aligned.
     struct TriPositions {
         /// Vertex 0.
         v0: Vec3,
+        /// Unused: keeps the vertices 16-byte aligned.
+        pad0: u32,
         /// Vertex 1.
         v1: Vec3,
+        /// Unused.
+        pad1: u32,
         /// Vertex 2.
         v2: Vec3,
+        /// Unused.
+        pad2: u32,
     }
 
     /// Per-triangle shading data, indexed by the original triangle id.

@@ -78,3 +78,49 @@ pub fn textured_environment() -> Scene {
     s.set_environment("environment.radiance.value", Vec3::new(0.3, 0.4, 0.6)).unwrap();
     s
 }
+
+/// Meshes whose PLOC trees are deeper than the traversal stack (issue "Fast kernels" item 4): a
+/// 1000-vertex convex polygon triangulated as a fan (the floor) and a 1000-segment cylinder with
+/// 1000-gon fan caps, under an area light. Before the builder bounded the depth these failed with
+/// "BVH: depth 267 exceeds the traversal stack (64)".
+pub fn deep_meshes() -> Scene {
+    const N: u32 = 1000;
+    let camera = Camera {
+        position: Vec3::new(0.0, 2.0, 4.0),
+        target: Vec3::ZERO,
+        up: Vec3::Y,
+        fov_y_degrees: 40.0,
+        width: 64,
+        height: 48,
+    };
+    let mut s = Scene::new("test:deep-meshes", camera);
+    let grey = s.add_diffuse("grey", Vec3::splat(0.6)).unwrap();
+    let black = s.add_diffuse("light", Vec3::ZERO).unwrap();
+    let ring = |r: f32, y: f32| -> Vec<Vec3> {
+        (0..N)
+            .map(|i| {
+                let phi = std::f32::consts::TAU * i as f32 / N as f32;
+                Vec3::new(r * phi.cos(), y, -r * phi.sin())
+            })
+            .collect()
+    };
+    // Counter-clockwise seen from +y: a fan from vertex 0.
+    let fan = |base: u32, up: bool| -> Vec<[u32; 3]> {
+        (1..N - 1).map(|i| if up { [base, base + i, base + i + 1] } else { [base, base + i + 1, base + i] }).collect()
+    };
+    let polygon = Geometry { positions: ring(2.0, -0.5), normals: None, uvs: None, indices: fan(0, true) };
+    s.add_mesh("polygon", polygon, grey, None).unwrap();
+    let mut positions = ring(0.5, -0.5);
+    positions.extend(ring(0.5, 0.5));
+    let mut indices = fan(0, false);
+    indices.extend(fan(N, true));
+    for i in 0..N {
+        let j = (i + 1) % N;
+        indices.push([i, j, N + j]);
+        indices.push([i, N + j, N + i]);
+    }
+    s.add_mesh("cylinder", Geometry { positions, normals: None, uvs: None, indices }, grey, None).unwrap();
+    s.add_mesh("light", quad(Vec3::new(0.0, 2.0, 0.0), Vec3::X * 0.5, -Vec3::Z * 0.5), black, Some(Vec3::splat(8.0)))
+        .unwrap();
+    s
+}
