@@ -289,6 +289,7 @@ fn grad(args: &GradArgs) -> Result<()> {
     args.sampling.apply(&scene, first_param, &mut opts)?;
     let ctx = context(&args.flags.device)?;
     let mut renderer = Renderer::new(&ctx, &scene).with_context(|| format!("loading {}", args.scene))?;
+    announce_compiles(&mut renderer, args.json);
     let start = Instant::now();
     if let Some(name) = &args.image_gradient {
         let Some(output) = &args.output else { bail!("--image-gradient needs -o OUT.exr") };
@@ -468,6 +469,44 @@ fn check_output(path: &Path) -> Result<bool> {
     }
 }
 
+/// Tells the user, on stderr, when building a kernel variant takes more than a moment: lavapipe
+/// compiles each variant on its first use on a machine (later runs load it from Mesa's shader
+/// cache), and a silent wait of seconds looks like a hang. Nothing is printed when `quiet` or when
+/// the build is quick.
+fn announce_compiles(renderer: &mut Renderer, quiet: bool) {
+    use pathgrad::gpu::renderer::{COMPILE_NOTICE_MS, CompileEvent};
+    if quiet {
+        return;
+    }
+    let mut pending: Option<(std::sync::mpsc::Sender<()>, std::thread::JoinHandle<()>)> = None;
+    renderer.set_compile_observer(Box::new(move |event| match event {
+        CompileEvent::Started { kernel, features } => {
+            let (done, wait) = std::sync::mpsc::channel::<()>();
+            let what = format!("{kernel} kernel ({features})");
+            let timer = std::thread::spawn(move || {
+                let delay = std::time::Duration::from_millis(COMPILE_NOTICE_MS as u64);
+                if wait.recv_timeout(delay).is_err() {
+                    eprintln!(
+                        "compiling the {what} for this scene: the driver builds it on first use \
+                         (seconds on lavapipe); later runs load it from the shader cache"
+                    );
+                    let _ = wait.recv();
+                }
+            });
+            pending = Some((done, timer));
+        }
+        CompileEvent::Finished { kernel, seconds } => {
+            if let Some((done, timer)) = pending.take() {
+                let _ = done.send(());
+                let _ = timer.join();
+            }
+            if *seconds * 1e3 > COMPILE_NOTICE_MS as f64 {
+                eprintln!("compiled the {kernel} kernel in {seconds:.1} s");
+            }
+        }
+    }));
+}
+
 /// A progress bar of `len` steps showing `what` (an indicatif template fragment) with elapsed time
 /// and ETA; hidden when `hidden` (a `--json` run prints nothing but its summary).
 fn progress_bar(len: u64, what: &str, hidden: bool) -> indicatif::ProgressBar {
@@ -496,6 +535,7 @@ fn render(args: &RenderArgs) -> Result<()> {
         let ctx = context(&args.flags.device)?;
         let device = ctx.info().name.clone();
         let mut renderer = Renderer::new(&ctx, &scene).with_context(|| format!("loading {}", args.scene))?;
+        announce_compiles(&mut renderer, args.json);
         let image = renderer
             .render_with_progress(&opts, &mut |done, _| progress.set_position(u64::from(done)))
             .with_context(|| format!("rendering {}", args.scene))?;

@@ -306,7 +306,7 @@ fn start(args: &OptimizeArgs) -> Result<Session> {
     }
     let adam = Adam::new(&initial_table, &ids, adam_options(&config)?)?;
     let initial = values_of(&initial_table, &ids);
-    let prepared = prepare(&config, &scene, &args.flags.device)?;
+    let prepared = prepare(&config, &scene, &args.flags.device, args.json)?;
     let history = History::new(&scene.params, &ids, prepared.truth.is_some());
     let run = Optimization::resume(initial_table, adam, 0, prepared.options)?;
     fs::create_dir_all(&dir).with_context(|| format!("creating -o {}", dir.display()))?;
@@ -369,7 +369,7 @@ fn resume(args: &OptimizeArgs, dir: &Path, given: &BTreeSet<String>) -> Result<S
     let adam_state = AdamState { m: state.adam_m.clone(), v: state.adam_v.clone(), steps: state.adam_steps.clone() };
     let adam = Adam::with_state(&table, &ids, adam_options(&config)?, adam_state)
         .with_context(|| format!("{}: Adam state", path.display()))?;
-    let prepared = prepare(&config, &scene, &args.flags.device)?;
+    let prepared = prepare(&config, &scene, &args.flags.device, args.json)?;
     let mut history = History::new(&scene.params, &ids, prepared.truth.is_some());
     let csv = dir.join("history.csv");
     history.read(&csv, state.iteration)?;
@@ -486,7 +486,7 @@ struct Prepared {
 }
 
 /// Checks `config` on `scene`, creates the device and the renderer and renders or reads the target.
-fn prepare(config: &RunConfig, scene: &Scene, device: &Option<String>) -> Result<Prepared> {
+fn prepare(config: &RunConfig, scene: &Scene, device: &Option<String>, quiet: bool) -> Result<Prepared> {
     let options = iteration_options(scene, config)?;
     let truth = if config.target_set.is_empty() {
         None
@@ -495,6 +495,7 @@ fn prepare(config: &RunConfig, scene: &Scene, device: &Option<String>) -> Result
     };
     let ctx = context(device)?;
     let mut renderer = Renderer::new(&ctx, scene).with_context(|| format!("loading {}", config.scene))?;
+    super::announce_compiles(&mut renderer, quiet);
     let final_opts = RenderOptions { spp: config.spp_final, ..options.render };
     let target = target_image(&mut renderer, scene, &final_opts, config.target.as_deref(), &config.target_set)?;
     if (target.width(), target.height()) != (config.width, config.height) {
