@@ -124,47 +124,55 @@ GradTerms no_grad_terms() {
 // of four RGB texels and a roughness each, a blend weight.
 #define GRAD_ENTRIES 33
 
-// Appends an RGB parameter's entries: image channel c depends only on value c.
-void push_rgb(inout uint n, inout uint off[GRAD_ENTRIES], inout vec3 val[GRAD_ENTRIES], uint offset, vec3 g) {
-    off[n] = offset; val[n] = vec3(g.x, 0.0, 0.0); n++;
-    off[n] = offset + 1u; val[n] = vec3(0.0, g.y, 0.0); n++;
-    off[n] = offset + 2u; val[n] = vec3(0.0, 0.0, g.z); n++;
+// The entries of the vertex being scattered. Globals, not parameters: GLSL passes arrays by
+// copy, and copying 33 entries in and out of every helper made the kernel several times larger.
+uint grad_offset[GRAD_ENTRIES];
+vec3 grad_value[GRAD_ENTRIES];
+uint grad_count = 0u;
+
+void push_entry(uint offset, vec3 by_channel) {
+    grad_offset[grad_count] = offset;
+    grad_value[grad_count] = by_channel;
+    grad_count++;
 }
 
-void push_leaf(inout uint n, inout uint off[GRAD_ENTRIES], inout vec3 val[GRAD_ENTRIES], Material m, vec2 uv, LeafGrad g) {
+// An RGB parameter: image channel c depends only on value c.
+void push_rgb(uint offset, vec3 g) {
+    push_entry(offset, vec3(g.x, 0.0, 0.0));
+    push_entry(offset + 1u, vec3(0.0, g.y, 0.0));
+    push_entry(offset + 2u, vec3(0.0, 0.0, g.z));
+}
+
+void push_leaf(Material m, vec2 uv, LeafGrad g) {
     if (HAS(F_TEXTURE) && m.tex_width > 0u) {
         if (HAS(G_TEXTURE)) {
             uint texel[4];
             float weight[4];
             texture_footprint(m.p_color, m.tex_width, m.tex_height, uv, texel, weight);
-            for (uint k = 0u; k < 4u; k++) push_rgb(n, off, val, texel[k], g.color * weight[k]);
+            for (uint k = 0u; k < 4u; k++) push_rgb(texel[k], g.color * weight[k]);
         }
     } else if (HAS(G_COLOR)) {
-        push_rgb(n, off, val, m.p_color, g.color);
+        push_rgb(m.p_color, g.color);
     }
-    if (HAS(G_ALPHA) && !is_diffuse(m.tag)) {
-        off[n] = m.p_alpha; val[n] = g.alpha; n++;
-    }
+    if (HAS(G_ALPHA) && !is_diffuse(m.tag)) push_entry(m.p_alpha, g.alpha);
 }
 
 // Scatters every term of `t` through one param_grad site.
 void scatter_terms(GradTerms t) {
-    uint off[GRAD_ENTRIES];
-    vec3 val[GRAD_ENTRIES];
-    uint n = 0u;
-    if ((HAS(G_EMISSION) || HAS(G_ENV)) && t.hit_param != NO_PARAM) push_rgb(n, off, val, t.hit_param, t.hit);
-    if (HAS(G_EMISSION) && t.nee_param != NO_PARAM) push_rgb(n, off, val, t.nee_param, t.nee);
+    grad_count = 0u;
+    if ((HAS(G_EMISSION) || HAS(G_ENV)) && t.hit_param != NO_PARAM) push_rgb(t.hit_param, t.hit);
+    if ((HAS(G_EMISSION) || HAS(G_ENV)) && t.nee_param != NO_PARAM) push_rgb(t.nee_param, t.nee);
     if ((HAS(G_COLOR) || HAS(G_TEXTURE) || HAS(G_ALPHA) || HAS(G_WEIGHT)) && t.material != NO_PARAM) {
         Material m = materials[t.material];
         if (HAS(F_BLEND) && m.tag == MAT_BLEND) {
-            push_leaf(n, off, val, materials[m.child0], t.uv, t.bsdf.leaf0);
-            push_leaf(n, off, val, materials[m.child1], t.uv, t.bsdf.leaf1);
-            if (HAS(G_WEIGHT)) { off[n] = m.p_weight; val[n] = t.bsdf.weight; n++; }
+            push_leaf(materials[m.child0], t.uv, t.bsdf.leaf0);
+            push_leaf(materials[m.child1], t.uv, t.bsdf.leaf1);
+            if (HAS(G_WEIGHT)) push_entry(m.p_weight, t.bsdf.weight);
         } else {
-            push_leaf(n, off, val, m, t.uv, t.bsdf.leaf0);
+            push_leaf(m, t.uv, t.bsdf.leaf0);
         }
     }
-    [[dont_unroll]] for (uint i = 0u; i < n; i++) param_grad(off[i], val[i]);
+    [[dont_unroll]] for (uint i = 0u; i < grad_count; i++) param_grad(grad_offset[i], grad_value[i]);
 }
 
 // Per-channel a / b with 0 where b is 0 (ALGORITHMS.md §3.3: 1/f̂ replaced by 0 when f̂ = 0).

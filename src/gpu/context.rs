@@ -317,15 +317,38 @@ fn describe(instance: &ash::Instance, index: usize, pd: vk::PhysicalDevice) -> D
         subgroup_size: subgroup.subgroup_size,
         missing,
         int64_atomics: core.shader_int64 == vk::TRUE && v12.shader_buffer_int64_atomics == vk::TRUE,
-        loop_budget: has_loop_budget(driver.driver_id, props.driver_version),
+        loop_budget: has_loop_budget(driver.driver_id, &driver_info),
     }
 }
 
 /// Whether a driver has llvmpipe's loop limiter: Mesa 22.3 (Debian 12) has it, Mesa 25.0
 /// (bookworm-backports) does not (PLATFORM.md §14). Versions between were not measured and are
-/// treated as limited. Mesa reports its version as `VK_MAKE_VERSION(major, minor, patch)`.
-fn has_loop_budget(driver_id: vk::DriverId, driver_version: u32) -> bool {
-    driver_id == vk::DriverId::MESA_LLVMPIPE && (driver_version >> 22) < 25
+/// treated as limited, and so is a lavapipe whose version cannot be read. lavapipe reports
+/// `driverVersion` 0.0.1; its Mesa version is in `driverInfo`, e.g. `Mesa 25.0.7-2~bpo12+1 (LLVM 15.0.6)`.
+pub fn has_loop_budget(driver_id: vk::DriverId, driver_info: &str) -> bool {
+    if driver_id != vk::DriverId::MESA_LLVMPIPE {
+        return false;
+    }
+    let major = driver_info
+        .split_once("Mesa ")
+        .and_then(|(_, v)| v.split(|c: char| !c.is_ascii_digit()).next())
+        .and_then(|m| m.parse::<u32>().ok());
+    major.is_none_or(|m| m < 25)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn loop_budget_follows_the_mesa_version_of_lavapipe_only() {
+        let lvp = vk::DriverId::MESA_LLVMPIPE;
+        assert!(has_loop_budget(lvp, "Mesa 22.3.6"));
+        assert!(!has_loop_budget(lvp, "Mesa 25.0.7-2~bpo12+1 (LLVM 15.0.6)"));
+        assert!(!has_loop_budget(lvp, "Mesa 26.1.0-devel (git-1234)"));
+        assert!(has_loop_budget(lvp, "something else"), "unknown versions are treated as limited");
+        assert!(!has_loop_budget(vk::DriverId::NVIDIA_PROPRIETARY, "580.95.05"));
+    }
 }
 
 /// Lists every Vulkan device with what pathgrad needs that it lacks (the `devices` subcommand).
