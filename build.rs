@@ -20,7 +20,8 @@ fn glsl_type(rust: &str) -> &'static str {
         "f32" => "float",
         "Vec2" => "vec2",
         "Vec3" => "vec3",
-        other => panic!("abi_structs.rs: type {other} has no GLSL twin; use u32, f32, Vec2 or Vec3"),
+        "UVec2" => "uvec2",
+        other => panic!("abi_structs.rs: type {other} has no GLSL twin; use u32, f32, Vec2, Vec3 or UVec2"),
     }
 }
 

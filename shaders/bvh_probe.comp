@@ -4,9 +4,7 @@
 #extension GL_EXT_scalar_block_layout : require
 #include "lib/bvh.glsl"
 
-// Bindings used: NODES, TRIS, STATUS, PROBE_IN, PROBE_OUT. abi.glsl declares the scene's other
-// buffers too; the optimiser drops every buffer the kernel never touches (its SPIR-V keeps only
-// these five), so the kernel's layout need not list them and validation is clean.
+// Bindings used: GLOBALS (node count, node and triangle addresses), STATUS, PROBE_IN, PROBE_OUT.
 
 layout(local_size_x = WORKGROUP_SIZE) in;
 // Input, 8 floats per ray: origin.xyz, tmin, dir.xyz, tmax (both queries use [tmin, tmax]).

@@ -49,7 +49,7 @@ impl Bvh {
 /// path through `d` inner nodes keeps at most `d + 1` entries.
 const MAX_DEPTH: u32 = BVH_STACK_SIZE - 2;
 /// A subtree still too deep at this depth is rebuilt by median splits, whose height is at most
-/// ⌈log₂(n / BVH_LEAF_MAX)⌉ + 1 ≤ 27 for any n < 2²⁸: so every tree fits the stack.
+/// ⌈log₂(n / BVH_LEAF_MAX)⌉ + 1 ≤ 28 for any n < 2²⁸: so every tree fits the stack.
 const REBUILD_DEPTH: u32 = MAX_DEPTH - 30;
 
 /// A node of the tree while it is being shaped: an inner node with two children, or a leaf of
@@ -351,7 +351,8 @@ pub fn occluded(bvh: &Bvh, ray: &Ray, tmin: f32, tmax: f32) -> bool {
 
 /// One stack entry per step: a leaf's triangles are tested, an inner node's two boxes are
 /// tested and the children hit are pushed — the farther first for closest hits, in node order
-/// for shadow rays (any hit will do, so no ordering is paid for).
+/// for shadow rays (any hit will do, so no ordering is paid for). The GLSL twin keeps the entry
+/// it would pop next in a register instead of pushing it; the visiting order is the same.
 fn traverse(bvh: &Bvh, ray: &Ray, tmin: f32, mut tmax: f32, any_hit: bool) -> Option<Hit> {
     let mut best: Option<Hit> = None;
     let mut stack = [0u32; BVH_STACK_SIZE as usize];

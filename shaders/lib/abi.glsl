@@ -1,20 +1,34 @@
-// Scene bindings of the render kernels: the generated struct twins and one storage buffer each.
+// Scene data of the render kernels: the generated struct twins, the per-render constants and the
+// scene arrays behind their device addresses.
 #ifndef PATHGRAD_ABI_GLSL
 #define PATHGRAD_ABI_GLSL
 
 #extension GL_EXT_scalar_block_layout : require
 #extension GL_EXT_control_flow_attributes : require
+#extension GL_EXT_buffer_reference : require
+#extension GL_EXT_buffer_reference_uvec2 : require
 #include <generated/abi_structs.glsl>
 
 // Per-render constants: a uniform buffer (every lane reads the same values).
 layout(set = 0, binding = BINDING_GLOBALS, scalar) uniform GlobalsBuf { Globals globals; };
-layout(set = 0, binding = BINDING_NODES, scalar) readonly buffer NodeBuf { BvhNode nodes[]; };
-layout(set = 0, binding = BINDING_TRIS, scalar) readonly buffer TriBuf { TriPositions tris[]; };
-layout(set = 0, binding = BINDING_PRIM_IDS, scalar) readonly buffer PrimIdBuf { uint prim_ids[]; };
-layout(set = 0, binding = BINDING_SHADING, scalar) readonly buffer ShadingBuf { TriShading shading[]; };
-layout(set = 0, binding = BINDING_MATERIALS, scalar) readonly buffer MaterialBuf { Material materials[]; };
-layout(set = 0, binding = BINDING_EMITTERS, scalar) readonly buffer EmitterBuf { EmitterTri emitters[]; };
-layout(set = 0, binding = BINDING_PARAMS, scalar) readonly buffer ParamBuf { float params[]; };
+// The scene's arrays are read through buffer device addresses (GL_EXT_buffer_reference), not
+// storage-buffer bindings: on lavapipe (Mesa 25.0) a storage-buffer load whose index differs per
+// lane is a branchy per-lane scalar sequence with a bounds check per component, while a
+// buffer-reference load is one masked gather per component. The addresses sit in `globals`.
+layout(buffer_reference, scalar, buffer_reference_align = 4) readonly buffer NodeArray { BvhNode v[]; };
+layout(buffer_reference, scalar, buffer_reference_align = 4) readonly buffer TriArray { TriPositions v[]; };
+layout(buffer_reference, scalar, buffer_reference_align = 4) readonly buffer UintArray { uint v[]; };
+layout(buffer_reference, scalar, buffer_reference_align = 4) readonly buffer ShadingArray { TriShading v[]; };
+layout(buffer_reference, scalar, buffer_reference_align = 4) readonly buffer MaterialArray { Material v[]; };
+layout(buffer_reference, scalar, buffer_reference_align = 4) readonly buffer EmitterArray { EmitterTri v[]; };
+layout(buffer_reference, scalar, buffer_reference_align = 4) readonly buffer FloatArray { float v[]; };
+#define nodes (NodeArray(globals.addr_nodes).v)
+#define tris (TriArray(globals.addr_tris).v)
+#define prim_ids (UintArray(globals.addr_prim_ids).v)
+#define shading (ShadingArray(globals.addr_shading).v)
+#define materials (MaterialArray(globals.addr_materials).v)
+#define emitters (EmitterArray(globals.addr_emitters).v)
+#define params (FloatArray(globals.addr_params).v)
 layout(set = 0, binding = BINDING_STATUS, scalar) coherent buffer StatusBuf { uint status_flags; };
 
 // Raises a status bit that the host checks after the dispatch.

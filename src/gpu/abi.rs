@@ -1,7 +1,7 @@
 //! Host/GPU shared layouts: the structs of `abi_structs.rs` and the constants of `abi_consts.rs`.
 
 use bytemuck::{Pod, Zeroable};
-use glam::{Vec2, Vec3};
+use glam::{UVec2, Vec2, Vec3};
 
 include!("abi_consts.rs");
 
@@ -25,7 +25,7 @@ mod tests {
     /// Scalar layout packs 4-byte scalars and vectors of them with no padding: sizes are field sums.
     #[test]
     fn structs_have_no_padding() {
-        assert_eq!(size_of::<Globals>(), 19 * 4 + 4 * 12);
+        assert_eq!(size_of::<Globals>(), 20 * 4 + 4 * 12 + 7 * 8);
         assert_eq!(size_of::<BvhNode>(), 64);
         assert_eq!(size_of::<TriPositions>(), 48);
         assert_eq!(size_of::<TriShading>(), 3 * 12 + 3 * 8 + 8);

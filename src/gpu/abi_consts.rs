@@ -96,8 +96,9 @@ abi_constants! {
     BVH_LEAF_COUNT_SHIFT = 28;
     /// BVH child reference: mask of a leaf's first triangle.
     BVH_LEAF_FIRST_MASK = 0x0FFF_FFFF;
-    /// Most triangles in one BVH leaf (small leaves keep SIMD lanes in step).
-    BVH_LEAF_MAX = 4;
+    /// Most triangles in one BVH leaf (small leaves keep SIMD lanes in step; 2 measured best of
+    /// 1, 2, 4, 8 on lavapipe, BENCHMARKS.md).
+    BVH_LEAF_MAX = 2;
     /// BVH child reference of an absent child (a root that is a single leaf).
     BVH_NO_CHILD = 0xFFFF_FFFF;
 

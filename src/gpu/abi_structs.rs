@@ -3,7 +3,7 @@
 // `src/gpu/abi.rs` expands this into `#[repr(C)]` bytemuck structs; `build.rs` expands the same
 // declarations into the GLSL twins (`generated/abi_structs.glsl`), used by every storage buffer with
 // `layout(scalar)`. Scalar layout inserts no padding and `Pod` refuses implicit padding, so the
-// offsets agree by construction (STYLE.md §3). Field types: u32, f32, Vec2, Vec3 only.
+// offsets agree by construction (STYLE.md §3). Field types: u32, f32, Vec2, Vec3, UVec2 only.
 
 abi_structs! {
     /// Per-dispatch constants: image size, random-number key, path options, camera.
@@ -55,6 +55,22 @@ abi_structs! {
         diff_begin: u32,
         /// Differential strategy: one past the target parameter's last value.
         diff_end: u32,
+        /// Number of BVH nodes.
+        node_count: u32,
+        /// Device address of the BVH nodes (`shaders/lib/abi.glsl`); 0 on the CPU.
+        addr_nodes: UVec2,
+        /// Device address of the leaf-ordered triangles.
+        addr_tris: UVec2,
+        /// Device address of the leaf slots' triangle ids.
+        addr_prim_ids: UVec2,
+        /// Device address of the per-triangle shading data.
+        addr_shading: UVec2,
+        /// Device address of the materials.
+        addr_materials: UVec2,
+        /// Device address of the emitters.
+        addr_emitters: UVec2,
+        /// Device address of the parameter values.
+        addr_params: UVec2,
     }
 
     /// One BVH2 node holding both children's boxes, so a traversal step fetches them at once.

@@ -94,6 +94,7 @@ impl Buffer {
     /// As [`Buffer::new`].
     pub fn storage(ctx: &Arc<Context>, name: &str, size: u64) -> Result<Buffer> {
         let usage = vk::BufferUsageFlags::STORAGE_BUFFER
+            | vk::BufferUsageFlags::SHADER_DEVICE_ADDRESS
             | vk::BufferUsageFlags::TRANSFER_SRC
             | vk::BufferUsageFlags::TRANSFER_DST;
         Buffer::new(ctx, name, size, usage, MemoryLocation::GpuOnly)
@@ -118,6 +119,16 @@ impl Buffer {
         let buffer = Buffer::new(ctx, name, std::mem::size_of_val(data) as u64, usage, MemoryLocation::GpuOnly)?;
         buffer.upload(data)?;
         Ok(buffer)
+    }
+
+    /// The buffer's device address (`GL_EXT_buffer_reference`), as the two 32-bit halves a shader
+    /// turns back into a reference (low word first).
+    pub fn device_address(&self) -> glam::UVec2 {
+        let info = vk::BufferDeviceAddressInfo::default().buffer(self.raw);
+        // SAFETY: storage buffers are created with SHADER_DEVICE_ADDRESS usage on a device with
+        // the bufferDeviceAddress feature enabled.
+        let address = unsafe { self.ctx.device().get_buffer_device_address(&info) };
+        glam::UVec2::new(address as u32, (address >> 32) as u32)
     }
 
     /// The Vulkan handle.

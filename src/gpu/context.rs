@@ -293,6 +293,9 @@ fn describe(instance: &ash::Instance, index: usize, pd: vk::PhysicalDevice) -> D
     if v12.scalar_block_layout == vk::FALSE {
         missing.push("scalarBlockLayout".to_string());
     }
+    if v12.buffer_device_address == vk::FALSE {
+        missing.push("bufferDeviceAddress".to_string());
+    }
     if !has_atomic_ext || atomic.shader_buffer_float32_atomic_add == vk::FALSE {
         missing.push("VK_EXT_shader_atomic_float (shaderBufferFloat32AtomicAdd)".to_string());
     }
@@ -336,20 +339,6 @@ pub fn has_loop_budget(driver_id: vk::DriverId, driver_info: &str) -> bool {
     major.is_none_or(|m| m < 25)
 }
 
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn loop_budget_follows_the_mesa_version_of_lavapipe_only() {
-        let lvp = vk::DriverId::MESA_LLVMPIPE;
-        assert!(has_loop_budget(lvp, "Mesa 22.3.6"));
-        assert!(!has_loop_budget(lvp, "Mesa 25.0.7-2~bpo12+1 (LLVM 15.0.6)"));
-        assert!(!has_loop_budget(lvp, "Mesa 26.1.0-devel (git-1234)"));
-        assert!(has_loop_budget(lvp, "something else"), "unknown versions are treated as limited");
-        assert!(!has_loop_budget(vk::DriverId::NVIDIA_PROPRIETARY, "580.95.05"));
-    }
-}
 
 /// Lists every Vulkan device with what pathgrad needs that it lacks (the `devices` subcommand).
 ///
@@ -487,8 +476,10 @@ impl Context {
         let ext_ptrs = [ash::ext::shader_atomic_float::NAME.as_ptr()];
         // Deterministic gradients need 64-bit integer atomics: enabled where the device has them.
         let int64 = info.int64_atomics;
-        let mut v12 =
-            vk::PhysicalDeviceVulkan12Features::default().scalar_block_layout(true).shader_buffer_int64_atomics(int64);
+        let mut v12 = vk::PhysicalDeviceVulkan12Features::default()
+            .scalar_block_layout(true)
+            .buffer_device_address(true)
+            .shader_buffer_int64_atomics(int64);
         let mut atomic =
             vk::PhysicalDeviceShaderAtomicFloatFeaturesEXT::default().shader_buffer_float32_atomic_add(true);
         let core = vk::PhysicalDeviceFeatures::default().shader_int64(int64);
@@ -519,7 +510,7 @@ impl Context {
             device: device.clone(),
             physical_device,
             debug_settings: Default::default(),
-            buffer_device_address: false,
+            buffer_device_address: true,
             allocation_sizes: Default::default(),
         })
         .map_err(|e| Error::Allocation { name: "allocator".into(), size: 0, message: e.to_string() });
@@ -712,5 +703,20 @@ impl Drop for Context {
             }
             self.instance.destroy_instance(None);
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn loop_budget_follows_the_mesa_version_of_lavapipe_only() {
+        let lvp = vk::DriverId::MESA_LLVMPIPE;
+        assert!(has_loop_budget(lvp, "Mesa 22.3.6"));
+        assert!(!has_loop_budget(lvp, "Mesa 25.0.7-2~bpo12+1 (LLVM 15.0.6)"));
+        assert!(!has_loop_budget(lvp, "Mesa 26.1.0-devel (git-1234)"));
+        assert!(has_loop_budget(lvp, "something else"), "unknown versions are treated as limited");
+        assert!(!has_loop_budget(vk::DriverId::NVIDIA_PROPRIETARY, "580.95.05"));
     }
 }

@@ -126,20 +126,9 @@ impl std::fmt::Debug for Renderer {
     }
 }
 
-/// The bindings every render kernel reads: the per-render constants (a uniform buffer), the
-/// scene, the status word and the work counter.
-const SCENE_BINDINGS: [u32; 10] = [
-    BINDING_GLOBALS,
-    BINDING_NODES,
-    BINDING_TRIS,
-    BINDING_PRIM_IDS,
-    BINDING_SHADING,
-    BINDING_MATERIALS,
-    BINDING_EMITTERS,
-    BINDING_PARAMS,
-    BINDING_STATUS,
-    BINDING_WORK,
-];
+/// The bindings every render kernel has: the per-render constants (a uniform buffer that also
+/// holds the scene arrays' device addresses), the status word and the work counter.
+const SCENE_BINDINGS: [u32; 3] = [BINDING_GLOBALS, BINDING_STATUS, BINDING_WORK];
 
 /// Push constants of the render kernels (`shaders/kernel.glsl`).
 #[repr(C)]
@@ -612,24 +601,24 @@ impl Renderer {
         extra: &[(u32, &Buffer)],
         progress: &mut dyn FnMut(u32, u32),
     ) -> Result<()> {
-        let globals_buf = Buffer::uniform_with(&self.ctx, "globals", std::slice::from_ref(globals))?;
+        let g = &self.gpu;
+        let globals = Globals {
+            addr_nodes: g.nodes.device_address(),
+            addr_tris: g.tris.device_address(),
+            addr_prim_ids: g.prim_ids.device_address(),
+            addr_shading: g.shading.device_address(),
+            addr_materials: g.materials.device_address(),
+            addr_emitters: g.emitters.device_address(),
+            addr_params: g.params.device_address(),
+            ..*globals
+        };
+        let globals_buf = Buffer::uniform_with(&self.ctx, "globals", std::slice::from_ref(&globals))?;
         let status = Buffer::storage(&self.ctx, "status flags", 4)?;
         status.clear()?;
         let counter = Buffer::storage(&self.ctx, "work counter", 4)?;
         let ctx = &self.ctx;
-        let g = &self.gpu;
-        let mut bindings: Vec<(u32, &Buffer)> = vec![
-            (BINDING_GLOBALS, &globals_buf),
-            (BINDING_NODES, &g.nodes),
-            (BINDING_TRIS, &g.tris),
-            (BINDING_PRIM_IDS, &g.prim_ids),
-            (BINDING_SHADING, &g.shading),
-            (BINDING_MATERIALS, &g.materials),
-            (BINDING_EMITTERS, &g.emitters),
-            (BINDING_PARAMS, &g.params),
-            (BINDING_STATUS, &status),
-            (BINDING_WORK, &counter),
-        ];
+        let mut bindings: Vec<(u32, &Buffer)> =
+            vec![(BINDING_GLOBALS, &globals_buf), (BINDING_STATUS, &status), (BINDING_WORK, &counter)];
         bindings.extend_from_slice(extra);
         let kernel = &self.kernels[&v];
         let group = kernel.bind(&bindings)?;

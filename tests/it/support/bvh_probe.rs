@@ -1,8 +1,9 @@
 //! Runs `shaders/bvh_probe.comp`: the GLSL traversal (`shaders/lib/bvh.glsl`) on a list of rays.
 
+use ash::vk;
 use bytemuck::{Pod, Zeroable};
 use pathgrad::bvh::Bvh;
-use pathgrad::gpu::abi::{BINDING_NODES, BINDING_PROBE_IN, BINDING_PROBE_OUT, BINDING_STATUS, BINDING_TRIS};
+use pathgrad::gpu::abi::{BINDING_GLOBALS, BINDING_PROBE_IN, BINDING_PROBE_OUT, BINDING_STATUS, Globals};
 use pathgrad::gpu::pipeline::groups_for;
 use pathgrad::gpu::{Buffer, Kernel};
 
@@ -51,19 +52,36 @@ pub struct ProbeHit {
 pub struct BvhProbe<'a> {
     gpu: &'a TestGpu,
     kernel: Kernel,
-    nodes: Buffer,
-    tris: Buffer,
+    /// The per-render constants: the node count and the arrays' device addresses.
+    globals: Buffer,
+    _nodes: Buffer,
+    _tris: Buffer,
 }
 
 impl<'a> BvhProbe<'a> {
     /// Uploads `bvh` and builds the kernel.
     pub fn new(gpu: &'a TestGpu, bvh: &Bvh) -> BvhProbe<'a> {
-        let bindings = [BINDING_NODES, BINDING_TRIS, BINDING_STATUS, BINDING_PROBE_IN, BINDING_PROBE_OUT];
+        let storage = vk::DescriptorType::STORAGE_BUFFER;
+        let bindings = [
+            (BINDING_GLOBALS, vk::DescriptorType::UNIFORM_BUFFER),
+            (BINDING_STATUS, storage),
+            (BINDING_PROBE_IN, storage),
+            (BINDING_PROBE_OUT, storage),
+        ];
+        let nodes = Buffer::storage_with(&gpu.ctx, "probe nodes", &bvh.nodes).unwrap();
+        let tris = Buffer::storage_with(&gpu.ctx, "probe tris", &bvh.tris).unwrap();
+        let globals = Globals {
+            node_count: bvh.nodes.len() as u32,
+            addr_nodes: nodes.device_address(),
+            addr_tris: tris.device_address(),
+            ..Globals::default()
+        };
         BvhProbe {
             gpu,
-            kernel: Kernel::new(&gpu.ctx, "bvh_probe", &bindings, 12).unwrap(),
-            nodes: Buffer::storage_with(&gpu.ctx, "probe nodes", &bvh.nodes).unwrap(),
-            tris: Buffer::storage_with(&gpu.ctx, "probe tris", &bvh.tris).unwrap(),
+            kernel: Kernel::specialised(&gpu.ctx, "bvh_probe", &bindings, 12, None).unwrap(),
+            globals: Buffer::uniform_with(&gpu.ctx, "probe globals", &[globals]).unwrap(),
+            _nodes: nodes,
+            _tris: tris,
         }
     }
 
@@ -77,8 +95,7 @@ impl<'a> BvhProbe<'a> {
         let group = self
             .kernel
             .bind(&[
-                (BINDING_NODES, &self.nodes),
-                (BINDING_TRIS, &self.tris),
+                (BINDING_GLOBALS, &self.globals),
                 (BINDING_STATUS, &status),
                 (BINDING_PROBE_IN, &input),
                 (BINDING_PROBE_OUT, &output),
@@ -107,8 +124,7 @@ impl<'a> BvhProbe<'a> {
         let group = self
             .kernel
             .bind(&[
-                (BINDING_NODES, &self.nodes),
-                (BINDING_TRIS, &self.tris),
+                (BINDING_GLOBALS, &self.globals),
                 (BINDING_STATUS, &status),
                 (BINDING_PROBE_IN, &input),
                 (BINDING_PROBE_OUT, &output),
