@@ -1,7 +1,6 @@
-// Adjoint kernel: fused primal + replay, gradients by float atomics with subgroup reduction.
+// Adjoint kernel: fused primal + replay, gradients by float compare-and-swap with subgroup reduction.
 #version 460
 #extension GL_EXT_scalar_block_layout : require
-#extension GL_EXT_shader_atomic_float : require
 #extension GL_KHR_shader_subgroup_basic : require
 #extension GL_KHR_shader_subgroup_vote : require
 #extension GL_KHR_shader_subgroup_arithmetic : require

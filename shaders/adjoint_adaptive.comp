@@ -1,7 +1,6 @@
 // Adjoint kernel with adaptive pixel sampling (ALGORITHMS.md §6): float atomics, pixels from the alias table.
 #version 460
 #extension GL_EXT_scalar_block_layout : require
-#extension GL_EXT_shader_atomic_float : require
 #extension GL_KHR_shader_subgroup_basic : require
 #extension GL_KHR_shader_subgroup_vote : require
 #extension GL_KHR_shader_subgroup_arithmetic : require

@@ -11,13 +11,30 @@
 #include "abi.glsl"
 
 #if GRAD_MODE == GRAD_MODE_FLOAT
-layout(set = 0, binding = BINDING_GRADS, scalar) buffer GradBuf { float grads[]; };
+// The float gradient's bits: added to by compare-and-swap (atomic_add_float below).
+layout(set = 0, binding = BINDING_GRADS, scalar) buffer GradBuf { uint grad_bits[]; };
 #elif GRAD_MODE == GRAD_MODE_FIXED
 layout(set = 0, binding = BINDING_GRADS_FIXED, scalar) buffer GradFixedBuf { int64_t grads_fixed[]; };
 #endif
 
 // Forward mode: ∂L/∂θ of the sample being replayed, per image channel.
 vec3 forward_derivative = vec3(0.0);
+
+#if GRAD_MODE == GRAD_MODE_FLOAT
+// atomicAdd on a float by compare-and-swap. Native float atomics (SPV_EXT_shader_atomic_float_add)
+// are an extension that Debian's SPIRV-Tools 2023.1 optimiser does not know, and it then skips
+// most of its passes for the whole module: the specialised adjoint kept 6 000 unpromoted
+// variables and was 3× the size of the fixed-point one. lavapipe lowers a float atomicAdd to a
+// compare-and-swap loop anyway.
+void atomic_add_float(uint offset, float value) {
+    uint expected = grad_bits[offset];
+    for (uint attempt = 0u; attempt < 0xFFFFFFFFu; attempt++) {
+        uint seen = atomicCompSwap(grad_bits[offset], expected, floatBitsToUint(uintBitsToFloat(expected) + value));
+        if (seen == expected) break;
+        expected = seen;
+    }
+}
+#endif
 
 // Adds Σ_c by_channel[c] to the gradient of parameter value `offset` (by_channel keeps the image
 // channel each part came from, for forward mode).
@@ -30,9 +47,9 @@ void param_grad(uint offset, vec3 by_channel) {
 #if GRAD_MODE == GRAD_MODE_FLOAT
     if (subgroupAllEqual(offset)) {
         float total = subgroupAdd(value);
-        if (subgroupElect()) atomicAdd(grads[offset], total);
+        if (subgroupElect()) atomic_add_float(offset, total);
     } else {
-        atomicAdd(grads[offset], value);
+        atomic_add_float(offset, value);
     }
 #else
     int64_t add = int64_t(round(value * globals.fixed_scale));

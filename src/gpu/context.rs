@@ -339,7 +339,6 @@ pub fn has_loop_budget(driver_id: vk::DriverId, driver_info: &str) -> bool {
     major.is_none_or(|m| m < 25)
 }
 
-
 /// Lists every Vulkan device with what pathgrad needs that it lacks (the `devices` subcommand).
 ///
 /// # Errors

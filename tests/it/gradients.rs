@@ -215,3 +215,32 @@ fn replay_returns_to_zero_on_every_path() {
         pathgrad::cpu::backward(scene, &opts, &adjoint).unwrap_or_else(|e| panic!("{}: {e}", scene.source));
     }
 }
+
+/// A gradient pass asked for some parameter kinds (`RenderOptions::differentiate`) runs a kernel
+/// with only their derivative code: their gradients are bitwise those of the every-kind kernel
+/// (deterministic mode), and every other parameter's gradient is 0.
+#[test]
+fn differentiating_fewer_kinds_gives_the_same_gradients_for_them() {
+    use pathgrad::integrator::ParamKinds;
+    let gpu = TestGpu::new();
+    for (scene, names) in cases() {
+        let mut renderer = Renderer::new(&gpu.ctx, &scene).unwrap();
+        let opts = RenderOptions { width: 24, height: 20, spp: 2, seed: 9, ..RenderOptions::for_scene(&scene) };
+        let adjoint = adjoint_pattern(24, 20);
+        let all = renderer.backward(&opts, &adjoint, GradMode::Deterministic).unwrap();
+        for name in names {
+            let id = scene.params.find(name).unwrap();
+            let kinds = renderer.param_kinds(&[id]);
+            assert!(!kinds.is_empty() && kinds != ParamKinds::ALL, "{}: {name} has kinds {kinds:?}", scene.source);
+            let some = RenderOptions { differentiate: kinds, ..opts };
+            let g = renderer.backward(&some, &adjoint, GradMode::Deterministic).unwrap();
+            assert_eq!(g.get(name), all.get(name), "{}: {name}", scene.source);
+            for other in scene.params.entries() {
+                let other_id = scene.params.find(&other.name).unwrap();
+                if !kinds.contains(renderer.param_kinds(&[other_id])) {
+                    assert!(g.get(&other.name).unwrap().iter().all(|&v| v == 0.0), "{}: {}", scene.source, other.name);
+                }
+            }
+        }
+    }
+}

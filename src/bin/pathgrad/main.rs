@@ -312,6 +312,11 @@ fn grad(args: &GradArgs) -> Result<()> {
         return Ok(());
     }
     let loss: pathgrad::loss::Loss = args.loss.parse()?;
+    let patterns: Vec<&str> =
+        if args.params.is_empty() { vec!["*"] } else { args.params.iter().map(String::as_str).collect() };
+    let chosen = scene.params.select(&patterns)?;
+    // Only the kinds of the parameters reported are compiled into the gradient kernel.
+    opts.differentiate = renderer.param_kinds(&chosen);
     let target = target_image(&mut renderer, &scene, &opts, args.target.as_deref(), &args.target_set)?;
     let mode = if args.deterministic { GradMode::Deterministic } else { GradMode::Float };
     // time_s is the gradient step (render, loss, fused adjoint), not the --target-set render.
@@ -320,9 +325,6 @@ fn grad(args: &GradArgs) -> Result<()> {
         .loss_and_gradient(&opts, &target, loss, mode)
         .with_context(|| format!("differentiating {}", args.scene))?;
     let seconds = start.elapsed().as_secs_f64();
-    let patterns: Vec<&str> =
-        if args.params.is_empty() { vec!["*"] } else { args.params.iter().map(String::as_str).collect() };
-    let chosen = scene.params.select(&patterns)?;
     if args.json {
         let map: serde_json::Map<String, serde_json::Value> = chosen
             .iter()

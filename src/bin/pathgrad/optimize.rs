@@ -306,7 +306,8 @@ fn start(args: &OptimizeArgs) -> Result<Session> {
     }
     let adam = Adam::new(&initial_table, &ids, adam_options(&config)?)?;
     let initial = values_of(&initial_table, &ids);
-    let prepared = prepare(&config, &scene, &args.flags.device, args.json)?;
+    let mut prepared = prepare(&config, &scene, &args.flags.device, args.json)?;
+    prepared.options.render.differentiate = prepared.renderer.param_kinds(&ids);
     let history = History::new(&scene.params, &ids, prepared.truth.is_some());
     let run = Optimization::resume(initial_table, adam, 0, prepared.options)?;
     fs::create_dir_all(&dir).with_context(|| format!("creating -o {}", dir.display()))?;
@@ -369,7 +370,8 @@ fn resume(args: &OptimizeArgs, dir: &Path, given: &BTreeSet<String>) -> Result<S
     let adam_state = AdamState { m: state.adam_m.clone(), v: state.adam_v.clone(), steps: state.adam_steps.clone() };
     let adam = Adam::with_state(&table, &ids, adam_options(&config)?, adam_state)
         .with_context(|| format!("{}: Adam state", path.display()))?;
-    let prepared = prepare(&config, &scene, &args.flags.device, args.json)?;
+    let mut prepared = prepare(&config, &scene, &args.flags.device, args.json)?;
+    prepared.options.render.differentiate = prepared.renderer.param_kinds(&ids);
     let mut history = History::new(&scene.params, &ids, prepared.truth.is_some());
     let csv = dir.join("history.csv");
     history.read(&csv, state.iteration)?;
