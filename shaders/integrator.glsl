@@ -197,7 +197,10 @@ bool path_step(inout PathState st) {
                         st.radiance += sign * (st.throughput * w_n * f * es.radiance / p_e);
                         grad_wo[0] = wo;
                         grad_adj[0] = st.adj * st.throughput * w_n * es.radiance / p_e;
-                        if (HAS(G_EMISSION) || HAS(G_ENV)) { gt.nee_param = es.param; gt.nee = st.adj * st.throughput * w_n * f / p_e; }
+                        if (es.environment ? HAS(G_ENV) : HAS(G_EMISSION)) {
+                            gt.nee_param = es.param;
+                            gt.nee = st.adj * st.throughput * w_n * f / p_e;
+                        }
                     }
                 }
             }
