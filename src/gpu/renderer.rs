@@ -28,9 +28,10 @@ use crate::scene::flat::FlatScene;
 /// progress bar moves and a fence wait stays far below its timeout.
 const PATHS_PER_SUBMISSION: u64 = 1 << 20;
 
-/// Most invocations one dispatch launches when lanes take work from the counter: enough to fill
-/// a large GPU; on lavapipe the lanes of the first few subgroups take all the items.
-const MAX_LANES: u32 = 1 << 16;
+/// Most invocations one dispatch launches when lanes take work from the counter: enough to keep a
+/// large GPU full (an H200 holds ~270 000 resident invocations); on lavapipe the lanes of the
+/// first subgroups take all the items and the rest find the counter exhausted at once.
+const MAX_LANES: u32 = 1 << 18;
 
 /// A first compile that takes longer than this is reported to the compile observer.
 pub const COMPILE_NOTICE_MS: u128 = 300;

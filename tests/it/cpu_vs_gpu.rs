@@ -90,8 +90,9 @@ fn deep_meshes_fit_the_traversal_stack() {
 }
 
 /// Both schedules of the kernels give the same bits: lanes taking work until none is left
-/// (the default) and one path per invocation (drivers with a loop budget), for the image and for
-/// deterministic gradients — which lane traces an item never changes its result.
+/// (the default) and one path per invocation (drivers with a loop budget), for the image, the
+/// forward-mode image gradient and deterministic gradients, uniform and adaptive — which lane
+/// traces an item never changes its result.
 #[test]
 fn both_schedules_give_the_same_bits() {
     let gpu = TestGpu::new();
@@ -100,15 +101,20 @@ fn both_schedules_give_the_same_bits() {
     let opts = RenderOptions { width: 40, height: 28, spp: 3, seed: 5, ..RenderOptions::for_scene(&scene) };
     let adjoint = pathgrad::image::Image::from_rgb(40, 28, vec![1e-2; 40 * 28 * 3]).unwrap();
     let mode = pathgrad::gpu::renderer::GradMode::Deterministic;
+    let sampling = pathgrad::adaptive::PixelSampling::from_adjoint(&adjoint, Default::default()).unwrap();
     let mut run = |one_path: bool| {
         renderer.set_one_path_per_invocation(one_path);
         let image = renderer.render(&opts).unwrap();
+        let forward = renderer.image_gradient(&opts, "sphere.alpha.value").unwrap();
         let grads = renderer.backward(&opts, &adjoint, mode).unwrap();
-        (image.as_slice().to_vec(), grads.values().to_vec())
+        let adaptive = renderer.backward_adaptive(&opts, &adjoint, &sampling, mode).unwrap();
+        [image.as_slice().to_vec(), forward.as_slice().to_vec(), grads.values().to_vec(), adaptive.values().to_vec()]
     };
-    let (image_a, grads_a) = run(false);
-    let (image_b, grads_b) = run(true);
-    assert!(image_a.iter().any(|&v| v > 0.0) && grads_a.iter().any(|&g| g != 0.0));
-    assert_eq!(image_a, image_b, "images");
-    assert_eq!(grads_a, grads_b, "deterministic gradients");
+    let a = run(false);
+    let b = run(true);
+    for (what, (x, y)) in ["images", "image gradients", "gradients", "adaptive gradients"].iter().zip(a.iter().zip(&b))
+    {
+        assert!(x.iter().any(|&v| v != 0.0), "{what}: all zero");
+        assert_eq!(x, y, "{what}");
+    }
 }
