@@ -81,13 +81,15 @@ Hit bvh_traverse(Ray ray, float tmin, float tmax, bool any_hit) {
         have_current = false;
         if ((current & BVH_LEAF_BIT) != 0u) {
             uint first = current & BVH_LEAF_FIRST_MASK;
-            uint end = first + ((current & ~BVH_LEAF_BIT) >> BVH_LEAF_COUNT_SHIFT) + 1u;
-            for (uint slot = first; slot < end; slot++) {
-                vec4 h = intersect_triangle(ray, tris[slot], tmin, tmax);
-                if (h.w != 0.0) {
-                    tmax = h.x;
-                    best = Hit(h.x, slot, h.y, h.z, true);
-                    if (any_hit) break;
+            uint count = ((current & ~BVH_LEAF_BIT) >> BVH_LEAF_COUNT_SHIFT) + 1u;
+            // Unrolled over the few slots a leaf can have: no inner loop to mask and join.
+            [[unroll]] for (uint k = 0u; k < BVH_LEAF_MAX; k++) {
+                if (k < count && !(any_hit && best.valid)) {
+                    vec4 h = intersect_triangle(ray, tris[first + k], tmin, tmax);
+                    if (h.w != 0.0) {
+                        tmax = h.x;
+                        best = Hit(h.x, first + k, h.y, h.z, true);
+                    }
                 }
             }
             // Any hit answers a shadow query, even one found just before a loop budget ran out.
