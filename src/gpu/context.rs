@@ -175,6 +175,9 @@ pub struct Context {
     queue_family: u32,
     queue: Mutex<vk::Queue>,
     command_pool: Mutex<vk::CommandPool>,
+    /// Shared by every pipeline this context builds: a kernel variant built twice in one process
+    /// (two renderers of the same scene) is compiled once where the driver's cache is real.
+    pipeline_cache: vk::PipelineCache,
     allocator: Mutex<Option<Allocator>>,
     info: DeviceInfo,
     validation: Arc<ValidationCounter>,
@@ -526,6 +529,9 @@ impl Context {
         };
         let debug_names = has_debug_utils.then(|| ash::ext::debug_utils::Device::new(&instance, &device));
         guard.0 = None;
+        // SAFETY: valid device; an empty cache. A failure only costs compile time: go without.
+        let pipeline_cache = unsafe { device.create_pipeline_cache(&vk::PipelineCacheCreateInfo::default(), None) }
+            .unwrap_or(vk::PipelineCache::null());
         tracing::info!(device = %info.name, driver = %info.driver, validation = use_validation, "Vulkan device ready");
         Ok(Context {
             _entry: entry,
@@ -537,6 +543,7 @@ impl Context {
             queue_family,
             queue: Mutex::new(queue),
             command_pool: Mutex::new(command_pool),
+            pipeline_cache,
             allocator: Mutex::new(Some(allocator)),
             info,
             validation,
@@ -544,6 +551,11 @@ impl Context {
             buffer_bytes: AtomicU64::new(0),
             peak_buffer_bytes: AtomicU64::new(0),
         })
+    }
+
+    /// The pipeline cache every kernel of this context is built with.
+    pub fn pipeline_cache(&self) -> vk::PipelineCache {
+        self.pipeline_cache
     }
 
     /// The logical device.
@@ -696,6 +708,7 @@ impl Drop for Context {
             let _ = self.device.device_wait_idle();
             drop(self.allocator.lock().unwrap_or_else(|p| p.into_inner()).take());
             self.device.destroy_command_pool(*self.command_pool.get_mut().unwrap_or_else(|p| p.into_inner()), None);
+            self.device.destroy_pipeline_cache(self.pipeline_cache, None);
             self.device.destroy_device(None);
             if let Some((loader, messenger)) = self.debug.take() {
                 loader.destroy_debug_utils_messenger(messenger, None);

@@ -113,7 +113,7 @@ impl Kernel {
                 stage = stage.specialization_info(&spec);
             }
             let info = [vk::ComputePipelineCreateInfo::default().stage(stage).layout(kernel.layout)];
-            let created = device.create_compute_pipelines(vk::PipelineCache::null(), &info, None);
+            let created = device.create_compute_pipelines(ctx.pipeline_cache(), &info, None);
             device.destroy_shader_module(module, None);
             kernel.pipeline =
                 created.map_err(|(_, result)| Error::Vulkan { call: "vkCreateComputePipelines", result })?[0];
