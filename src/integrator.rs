@@ -239,7 +239,7 @@ impl RenderOptions {
     }
 
     /// The options of pass 1 of a gradient step (ALGORITHMS.md §3.4, §6): `spp_primal` samples per
-    /// pixel with plain BSDF sampling and next-event estimation (as [SG24]'s Algorithm 2), the rest
+    /// pixel with plain BSDF sampling and next-event estimation (as \[SG24\]'s Algorithm 2), the rest
     /// as `self`. Every gradient step and variance protocol renders its loss image with these.
     ///
     /// # Errors

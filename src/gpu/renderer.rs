@@ -396,7 +396,7 @@ impl Renderer {
 
     /// The loss of a render against `target` and its gradient: pass 1 renders with the primal key
     /// and gives the loss and its adjoint image; the fused pass then replays independent paths.
-    /// Pass 1 always uses plain BSDF sampling with next-event estimation (as [SG24]'s Algorithm 2);
+    /// Pass 1 always uses plain BSDF sampling with next-event estimation (as \[SG24\]'s Algorithm 2);
     /// `options.strategy` and `options.nee` apply to the gradient pass.
     ///
     /// # Errors
