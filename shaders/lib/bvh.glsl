@@ -26,22 +26,23 @@ Ray make_ray(vec3 origin, vec3 dir) {
     return Ray(origin, dir, vec3(1.0) / safe);
 }
 
-// Möller–Trumbore; returns (t, b1, b2) in xyz and w = 1 on a hit with tmin < t < tmax.
+// Möller–Trumbore; returns (t, b1, b2) in xyz and w = 1 on a hit with tmin < t < tmax. Written
+// without early returns: under SIMD masking every exit is a mask update, and a miss costs the
+// whole test anyway once one lane of the batch goes on. A zero determinant makes the values
+// infinite or NaN, and every comparison then fails, as the early return did.
 vec4 intersect_triangle(Ray ray, TriPositions tri, float tmin, float tmax) {
     precise vec3 e1 = tri.v1 - tri.v0;
     precise vec3 e2 = tri.v2 - tri.v0;
     precise vec3 p = cross(ray.dir, e2);
     precise float det = dot(e1, p);
-    if (det == 0.0) return vec4(0.0);
     precise float inv_det = 1.0 / det;
     precise vec3 s = ray.origin - tri.v0;
     precise float b1 = dot(s, p) * inv_det;
-    if (!(b1 >= 0.0 && b1 <= 1.0)) return vec4(0.0);
     precise vec3 q = cross(s, e1);
     precise float b2 = dot(ray.dir, q) * inv_det;
-    if (b2 < 0.0 || b1 + b2 > 1.0) return vec4(0.0);
     precise float t = dot(e2, q) * inv_det;
-    return (t > tmin && t < tmax) ? vec4(t, b1, b2, 1.0) : vec4(0.0);
+    bool hit = det != 0.0 && b1 >= 0.0 && b1 <= 1.0 && b2 >= 0.0 && b1 + b2 <= 1.0 && t > tmin && t < tmax;
+    return hit ? vec4(t, b1, b2, 1.0) : vec4(0.0);
 }
 
 // Entry distance into the box lo..hi, or -1 when the ray misses it within [tmin, tmax] (tmin >= 0).
