@@ -113,8 +113,12 @@ pub struct Renderer {
     scene: Scene,
     flat: FlatScene,
     gpu: GpuScene,
+    /// Parameter offset of the environment's radiance, or `NO_PARAM`.
+    env_param: u32,
     /// Feature bits of what the scene contains.
     scene_features: u32,
+    /// The parameter kinds the scene has (what refers to its parameters never changes).
+    scene_kinds: ParamKinds,
     kernels: HashMap<Variant, Kernel>,
     /// One path per invocation (drivers with a loop budget, PLATFORM.md §6.1).
     one_path_per_lane: bool,
@@ -161,14 +165,17 @@ impl Renderer {
             emitters: Buffer::storage_with(ctx, "emitters", &flat.emitters)?,
             params: Buffer::storage_with(ctx, "param buffer", &flat.params)?,
         };
-        let env = scene.environment.map_or(NO_PARAM, |p| scene.params.entry(p).offset);
-        let scene_features = variant::scene_features(&flat, env);
+        let env_param = scene.environment.map_or(NO_PARAM, |p| scene.params.entry(p).offset);
+        let scene_features = variant::scene_features(&flat, env_param);
+        let scene_kinds = variant::param_kinds(&flat, env_param, 0, flat.params.len() as u32);
         Ok(Renderer {
             ctx: ctx.clone(),
             scene: scene.clone(),
             flat,
             gpu,
+            env_param,
             scene_features,
+            scene_kinds,
             kernels: HashMap::new(),
             one_path_per_lane: ctx.info().loop_budget,
             observer: None,
@@ -190,18 +197,15 @@ impl Renderer {
 
     /// The kinds of the parameters `ids` (for [`RenderOptions::differentiate`]).
     pub fn param_kinds(&self, ids: &[crate::params::ParamId]) -> ParamKinds {
-        let env = self.scene.environment.map_or(NO_PARAM, |p| self.scene.params.entry(p).offset);
         ids.iter().fold(ParamKinds::NONE, |k, &id| {
             let e = self.scene.params.entry(id);
-            k.union(variant::param_kinds(&self.flat, env, e.offset, e.offset + e.len))
+            k.union(variant::param_kinds(&self.flat, self.env_param, e.offset, e.offset + e.len))
         })
     }
 
     /// The parameter kinds present in the scene and asked for by `options`.
     fn grad_kinds(&self, options: &RenderOptions) -> ParamKinds {
-        let n = self.flat.params.len() as u32;
-        let env = self.scene.environment.map_or(NO_PARAM, |p| self.scene.params.entry(p).offset);
-        variant::param_kinds(&self.flat, env, 0, n).intersection(options.differentiate)
+        self.scene_kinds.intersection(options.differentiate)
     }
 
     /// The scene being rendered.
@@ -502,8 +506,7 @@ impl Renderer {
         accum.clear()?;
         // δL = 1 per sample: the adjoint scale must not divide by spp here; the mean is taken below.
         globals.adjoint_scale = 1.0;
-        let env = self.scene.environment.map_or(NO_PARAM, |p| self.scene.params.entry(p).offset);
-        let kinds = variant::param_kinds(&self.flat, env, entry.offset, entry.offset + entry.len);
+        let kinds = variant::param_kinds(&self.flat, self.env_param, entry.offset, entry.offset + entry.len);
         let features = variant::request_features(self.scene_features, options, kinds);
         self.dispatch(
             Variant { kind: KernelKind::ImageGradient, features },
