@@ -9,6 +9,7 @@ mod cpu_vs_gpu;
 mod embree_smoke;
 mod furnace;
 mod gradients;
+mod hardening;
 mod loop_budget;
 mod optimize;
 mod optimize_cli;

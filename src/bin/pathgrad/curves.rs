@@ -73,34 +73,41 @@ impl History {
     }
 
     /// Reads the rows of an earlier run from `path`, keeping those of iterations before `done`
-    /// (a killed run may have written a row its state does not cover).
+    /// (a killed run may have written a row its state does not cover). Fields are RFC 4180 CSV:
+    /// a parameter name with a comma, quote or line break is a quoted field.
     pub fn read(&mut self, path: &Path, done: u64) -> Result<()> {
-        let text = fs::read_to_string(path).with_context(|| format!("--resume: reading {}", path.display()))?;
-        let mut lines = text.lines();
-        let header = lines.next().unwrap_or("");
-        if header != self.columns.join(",") {
-            bail!("--resume: {} has the columns '{header}', not this run's", path.display());
+        let text = fs::read(path).with_context(|| format!("--resume: reading {}", path.display()))?;
+        let mut reader = csv::ReaderBuilder::new().has_headers(false).flexible(true).from_reader(text.as_slice());
+        let mut records = reader.records();
+        let bad = |e: csv::Error| anyhow!("--resume: {} is not valid CSV ({e})", path.display());
+        let header = records.next().transpose().map_err(bad)?.unwrap_or_default();
+        if header.iter().ne(self.columns.iter().map(String::as_str)) {
+            bail!(
+                "--resume: {} has the columns {:?}, not this run's",
+                path.display(),
+                header.iter().collect::<Vec<_>>()
+            );
         }
         let n_err = if self.truth { self.params.len() } else { 0 };
-        for (i, line) in lines.enumerate() {
-            let fields: Vec<&str> = line.split(',').collect();
+        for record in records {
+            let fields = record.map_err(bad)?;
+            let line = fields.position().map_or(0, |p| p.line());
             if fields.len() != self.columns.len() {
                 bail!(
-                    "--resume: {} line {}: {} fields, expected {}",
+                    "--resume: {} line {line}: {} fields, expected {}",
                     path.display(),
-                    i + 2,
                     fields.len(),
                     self.columns.len()
                 );
             }
             let number = |k: usize| -> Result<f64> {
-                fields[k].parse().map_err(|_| {
-                    anyhow!("--resume: {} line {}: '{}' is not a number", path.display(), i + 2, fields[k])
-                })
+                fields[k]
+                    .parse()
+                    .map_err(|_| anyhow!("--resume: {} line {line}: '{}' is not a number", path.display(), &fields[k]))
             };
             let iteration = fields[0]
                 .parse::<u64>()
-                .map_err(|_| anyhow!("--resume: {} line {}: bad iteration '{}'", path.display(), i + 2, fields[0]))?;
+                .map_err(|_| anyhow!("--resume: {} line {line}: bad iteration '{}'", path.display(), &fields[0]))?;
             if iteration >= done {
                 continue;
             }
@@ -122,8 +129,7 @@ impl History {
 
     /// Replaces the CSV at `path` with the header and the rows held, and opens it for appending.
     pub fn rewrite(&mut self, path: &Path) -> Result<()> {
-        let mut text = self.columns.join(",");
-        text.push('\n');
+        let mut text = csv_line(self.columns.iter().map(String::as_str));
         for row in &self.rows {
             text.push_str(&self.line(row));
         }
@@ -140,9 +146,7 @@ impl History {
         fields.extend(row.errors.iter().map(f64::to_string));
         fields.extend(row.error.map(|e| e.to_string()));
         fields.push(row.grad_norm.to_string());
-        let mut line = fields.join(",");
-        line.push('\n');
-        line
+        csv_line(fields.iter().map(String::as_str))
     }
 
     /// Appends `row` to the CSV at `path` (opened by [`History::create`] or [`History::rewrite`])
@@ -257,4 +261,12 @@ fn plot(
     }
     chart.configure_series_labels().background_style(WHITE.mix(0.8)).border_style(BLACK).draw().map_err(plot_error)?;
     Ok(())
+}
+
+/// One CSV record ending in a newline: fields holding a comma, a quote or a line break are quoted
+/// (RFC 4180), so a parameter named after any XML id keeps its column.
+fn csv_line<'a>(fields: impl IntoIterator<Item = &'a str>) -> String {
+    let mut writer = csv::WriterBuilder::new().terminator(csv::Terminator::Any(b'\n')).from_writer(Vec::new());
+    writer.write_record(fields).expect("writing to memory cannot fail");
+    String::from_utf8(writer.into_inner().expect("writing to memory cannot fail")).expect("the fields are UTF-8")
 }

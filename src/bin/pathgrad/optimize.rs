@@ -165,6 +165,8 @@ struct State {
 
 /// A run ready to iterate: renderer, target, the optimisation and where it writes.
 struct Session {
+    /// The output directory, opened and locked for the run (see [`lock_dir`]).
+    _lock: fs::File,
     config: RunConfig,
     dir: PathBuf,
     scene: Scene,
@@ -295,15 +297,7 @@ fn start(args: &OptimizeArgs) -> Result<Session> {
         diff_param,
     };
     let dir = args.output.clone().unwrap_or_else(|| PathBuf::from(DEFAULT_OUTPUT));
-    for existing in ["state.json", "history.csv"] {
-        if dir.join(existing).exists() {
-            bail!(
-                "invalid -o {}: it already holds a run ({existing}); continue it with --resume {} or choose another -o",
-                dir.display(),
-                dir.display()
-            );
-        }
-    }
+    refuse_existing_run(&dir)?;
     let adam = Adam::new(&initial_table, &ids, adam_options(&config)?)?;
     let initial = values_of(&initial_table, &ids);
     let mut prepared = prepare(&config, &scene, &args.flags.device, args.json)?;
@@ -311,7 +305,11 @@ fn start(args: &OptimizeArgs) -> Result<Session> {
     let history = History::new(&scene.params, &ids, prepared.truth.is_some());
     let run = Optimization::resume(initial_table, adam, 0, prepared.options)?;
     fs::create_dir_all(&dir).with_context(|| format!("creating -o {}", dir.display()))?;
+    // Checked again under the lock: another run may have started in DIR since the first check.
+    let lock = lock_dir(&dir, "-o")?;
+    refuse_existing_run(&dir)?;
     let mut session = Session {
+        _lock: lock,
         config,
         dir,
         scene,
@@ -329,9 +327,44 @@ fn start(args: &OptimizeArgs) -> Result<Session> {
     Ok(session)
 }
 
+/// Refuses an output directory that already holds a run.
+fn refuse_existing_run(dir: &Path) -> Result<()> {
+    for existing in ["state.json", "history.csv"] {
+        if dir.join(existing).exists() {
+            bail!(
+                "invalid -o {}: it already holds a run ({existing}); continue it with --resume {} or choose another -o",
+                dir.display(),
+                dir.display()
+            );
+        }
+    }
+    Ok(())
+}
+
+/// Takes an exclusive advisory lock (`flock`) on the run directory `dir` itself, held until the
+/// returned handle is dropped (the process ends, however it ends), so that two `optimize` runs
+/// never write one directory; nothing is left in the directory. `flag` names the option in errors.
+fn lock_dir(dir: &Path, flag: &str) -> Result<fs::File> {
+    let handle = fs::File::open(dir).with_context(|| format!("{flag} {}: opening the directory", dir.display()))?;
+    match handle.try_lock() {
+        Ok(()) => Ok(handle),
+        Err(fs::TryLockError::WouldBlock) => bail!(
+            "{flag} {}: another pathgrad optimize is running in this directory (it holds its lock)",
+            dir.display()
+        ),
+        Err(fs::TryLockError::Error(e)) => {
+            Err(anyhow::Error::new(e).context(format!("{flag} {}: locking the directory", dir.display())))
+        }
+    }
+}
+
 /// A resumed run: the state's options, checked against those given now.
 fn resume(args: &OptimizeArgs, dir: &Path, given: &BTreeSet<String>) -> Result<Session> {
     let path = dir.join("state.json");
+    if !path.is_file() {
+        bail!("--resume {}: reading {}: there is no run there (no state.json)", dir.display(), path.display());
+    }
+    let lock = lock_dir(dir, "--resume")?;
     let text =
         fs::read_to_string(&path).with_context(|| format!("--resume {}: reading {}", dir.display(), path.display()))?;
     let state: State = serde_json::from_str(&text)
@@ -378,6 +411,7 @@ fn resume(args: &OptimizeArgs, dir: &Path, given: &BTreeSet<String>) -> Result<S
     let run = Optimization::resume(table, adam, state.iteration, prepared.options)?;
     history.rewrite(&csv)?;
     Ok(Session {
+        _lock: lock,
         config,
         dir: dir.to_path_buf(),
         scene,
