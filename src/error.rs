@@ -121,6 +121,14 @@ pub enum Error {
         /// The underlying error.
         source: std::io::Error,
     },
+    /// An output path cannot be written under the rules of [`crate::output`].
+    #[error("{}: {message}", path.display())]
+    Output {
+        /// The destination as given.
+        path: PathBuf,
+        /// What is wrong with it.
+        message: String,
+    },
     /// Encoding or decoding an image failed.
     #[error("{}: {message}", path.display())]
     Image {

@@ -13,17 +13,13 @@
 //!   exposure and the sRGB curve; [`Image::write_signed_png`] shows signed values such as gradients
 //!   in a blue–white–red map.
 //!
-//! Every writer is atomic: it writes a hidden temporary file in the destination directory and
-//! renames it over the destination only once the file is complete, so a failed or interrupted write
-//! never leaves a partial output (and never clobbers a previous good one). Errors name the
-//! destination path.
+//! Every writer is atomic and follows [`crate::output`]'s rules: a hidden temporary file in the
+//! destination directory is renamed over the destination only once it is complete, so a failed or
+//! interrupted write never leaves a partial output (and never clobbers a previous good one);
+//! symbolic links are followed and read-only files refused. Errors name the destination path.
 
-use std::ffi::OsString;
 use std::fmt;
-use std::fs::{self, File, OpenOptions};
-use std::io::{BufWriter, Write};
-use std::path::{Path, PathBuf};
-use std::sync::atomic::{AtomicU64, Ordering};
+use std::path::Path;
 
 use exr::image::{AnyChannel, AnyChannels, Blocks, Encoding, FlatSamples, Layer};
 use exr::meta::attribute::{LineOrder, Text};
@@ -32,6 +28,7 @@ use exr::prelude::{Compression, SmallVec, WritableImage};
 use image::ImageEncoder;
 
 use crate::error::{Error, Result};
+use crate::output::write_atomically;
 
 /// Names of the colour channels, in storage order.
 const RGB_NAMES: [&str; 3] = ["R", "G", "B"];
@@ -77,9 +74,6 @@ const SEQUENTIAL_CHROMA: f64 = 0.13;
 /// Oklab hue (degrees) of the sequential map's dark and light ends: violet through red and orange
 /// to yellow.
 const SEQUENTIAL_HUE_DEG: (f64, f64) = (300.0, 450.0);
-
-/// Distinguishes temporary files of concurrent writes from one process.
-static TEMP_COUNTER: AtomicU64 = AtomicU64::new(0);
 
 /// A linear RGB image of `f32` values: row-major, top row first, three floats per pixel.
 ///
@@ -566,17 +560,6 @@ enum Direction {
     Write,
 }
 
-/// Writes `bytes` to `path` atomically, as every image writer here does: into a temporary file
-/// beside it (removed if anything fails), synced, then renamed over `path`, so a reader never sees
-/// a half-written file. For the text outputs of the command line (CSV, JSON, SVG).
-///
-/// # Errors
-/// [`Error::Io`] naming the path if the file cannot be created, written or renamed.
-pub fn write_bytes_atomically(path: impl AsRef<Path>, bytes: &[u8]) -> Result<()> {
-    let path = path.as_ref();
-    write_atomically(path, |out| out.write_all(bytes).map_err(|source| Error::Io { path: path.to_path_buf(), source }))
-}
-
 /// Encodes `width` × `height` RGB bytes as a PNG at `path`, atomically.
 fn write_rgb8_png(path: &Path, width: u32, height: u32, bytes: &[u8]) -> Result<()> {
     write_atomically(path, |out| {
@@ -587,57 +570,6 @@ fn write_rgb8_png(path: &Path, width: u32, height: u32, bytes: &[u8]) -> Result<
                 other => image_error(path, format!("writing PNG: {other}")),
             })
     })
-}
-
-/// Runs `write` on a temporary file next to `path` and renames it to `path` once `write`
-/// succeeded and the data is on disk; on any failure the temporary file is removed and `path` is
-/// left as it was.
-fn write_atomically(path: &Path, write: impl FnOnce(&mut BufWriter<File>) -> Result<()>) -> Result<()> {
-    let io_error = |source| Error::Io { path: path.to_path_buf(), source };
-    let Some(file_name) = path.file_name() else {
-        return Err(image_error(path, "not a file path"));
-    };
-    let dir = match path.parent() {
-        Some(parent) if !parent.as_os_str().is_empty() => parent,
-        _ => Path::new("."),
-    };
-    let mut temp_name = OsString::from(".");
-    temp_name.push(file_name);
-    temp_name.push(format!(".{}-{}.tmp", std::process::id(), TEMP_COUNTER.fetch_add(1, Ordering::Relaxed)));
-    let temp = TempFile { path: dir.join(temp_name), kept: false };
-
-    let file = OpenOptions::new().write(true).create_new(true).open(&temp.path).map_err(io_error)?;
-    let mut out = BufWriter::new(file);
-    write(&mut out)?;
-    out.flush().map_err(io_error)?;
-    let file = out.into_inner().map_err(|e| io_error(e.into_error()))?;
-    file.sync_all().map_err(io_error)?;
-    drop(file);
-    fs::rename(&temp.path, path).map_err(io_error)?;
-    temp.keep();
-    Ok(())
-}
-
-/// A temporary file that is removed when dropped, unless [`keep`](TempFile::keep) was called.
-struct TempFile {
-    path: PathBuf,
-    kept: bool,
-}
-
-impl TempFile {
-    /// Leaves the file alone on drop (it has been renamed into place).
-    fn keep(mut self) {
-        self.kept = true;
-    }
-}
-
-impl Drop for TempFile {
-    fn drop(&mut self) {
-        if !self.kept {
-            // Best effort: the write has already failed, and that error is the one to report.
-            let _ = fs::remove_file(&self.path);
-        }
-    }
 }
 
 /// The sRGB transfer function (IEC 61966-2-1), linear [0, 1] → encoded [0, 1].
@@ -701,6 +633,8 @@ fn diverging_srgb8(t: f64) -> [u8; 3] {
 
 #[cfg(test)]
 mod tests {
+    use std::fs;
+
     use super::*;
 
     /// A fresh temporary directory per test.
@@ -992,7 +926,7 @@ mod tests {
         for name in ["a.exr", "a.png"] {
             let path = missing.join(name);
             let err = image.save(&path).unwrap_err();
-            assert!(matches!(err, Error::Io { .. }), "{err:?}");
+            assert!(matches!(err, Error::Output { .. }) && err.to_string().contains("does not exist"), "{err:?}");
             assert!(err.to_string().contains(&*path.to_string_lossy()), "{err}");
         }
         let signed = image.write_signed_png(missing.join("s.png"), None).unwrap_err();
@@ -1000,12 +934,11 @@ mod tests {
         assert!(!missing.exists());
         assert!(entries(dir.path()).is_empty(), "nothing is left behind");
 
-        // A failed write leaves an existing file untouched: the destination is a directory here,
-        // so the final rename fails after the temporary file has been written.
+        // A destination that is a directory is refused before anything is written.
         let target = dir.path().join("taken.exr");
         fs::create_dir(&target).unwrap();
         let err = image.write_exr(&target).unwrap_err().to_string();
-        assert!(err.contains("taken.exr"), "{err}");
+        assert!(err.contains("taken.exr: is a directory"), "{err}");
         assert_eq!(entries(dir.path()), ["taken.exr"], "the temporary file is removed");
         assert!(target.is_dir());
 

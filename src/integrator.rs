@@ -11,6 +11,10 @@ use crate::scene::flat::FlatScene;
 /// is ended (its expected contribution beyond is negligible at any sane albedo).
 pub const UNBOUNDED_DEPTH_CAP: u32 = 1024;
 
+/// Most samples per pixel one render takes (2²⁰): more would run for days on any device and come
+/// close to the 32-bit sample counters. For more, average renders of independent seeds.
+pub const MAX_SPP: u32 = 1 << 20;
+
 /// With both an environment and area emitters, next-event estimation picks the environment with
 /// this probability (Mitsuba picks among emitters uniformly; two emitter kinds give ½).
 pub const ENV_SELECT_PROB: f32 = 0.5;
@@ -224,11 +228,21 @@ impl RenderOptions {
         if self.width == 0 || self.height == 0 || self.width > 16_384 || self.height > 16_384 {
             return bad("--width/--height", "must be between 1 and 16384");
         }
-        if self.spp == 0 {
-            return bad("--spp", "must be at least 1");
+        if self.spp == 0 || self.spp > MAX_SPP {
+            return bad("--spp", &format!("must be between 1 and {MAX_SPP} (average independent seeds for more)"));
         }
-        if self.max_depth == Some(0) {
-            return bad("--max-depth", "must be at least 1 (or -1 for unbounded)");
+        match self.max_depth {
+            Some(0) => return bad("--max-depth", "must be at least 1 (or -1 for unbounded)"),
+            Some(d) if d > UNBOUNDED_DEPTH_CAP => {
+                return bad(
+                    "--max-depth",
+                    &format!(
+                        "{d} is more than {UNBOUNDED_DEPTH_CAP}, the most interactions a path can have (-1, unbounded, \
+                         also ends paths there)"
+                    ),
+                );
+            }
+            _ => {}
         }
         if let Strategy::Diff { q, .. } = self.strategy
             && !(0.0..=1.0).contains(&q)

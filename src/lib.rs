@@ -45,6 +45,7 @@ pub mod image;
 pub mod integrator;
 pub mod loss;
 pub mod optim;
+pub mod output;
 pub mod params;
 pub mod rng;
 pub mod sampling;

@@ -96,3 +96,108 @@ fn two_optimize_runs_never_share_a_directory() {
     assert_eq!(text.lines().count(), 13, "a header and 12 rows, numbered once: {text}");
     assert!(!names(&out).iter().any(|n| n.ends_with(".tmp")), "{:?}", names(&out));
 }
+
+/// A failing command leaves nothing new behind: options and output paths are checked before
+/// anything renders (`--device 99`, which does not exist, shows that the check came first).
+#[test]
+fn bad_outputs_and_options_fail_before_rendering_and_leave_nothing() {
+    let dir = tempfile::tempdir().unwrap();
+    std::fs::create_dir(dir.path().join("x.png")).unwrap();
+    let render = ["render", "builtin:cornell-box", "--width", "8", "--spp", "1", "--device", "99"];
+    let cases: [(&[&str], &str); 5] = [
+        (&["-o", "x.exr", "--exposure", "nan"], "invalid --exposure NaN"),
+        (&["-o", "x.exr"], "x.png: is a directory"),
+        (&["-o", "/nonexistent/x.exr"], "/nonexistent/x.exr: the directory /nonexistent does not exist"),
+        (&["-o", "/dev/null"], "must end in .exr or .png"),
+        (&["-o", "d.exr", "--exposure", "inf"], "invalid --exposure inf"),
+    ];
+    for (args, message) in cases {
+        let o = pathgrad().current_dir(dir.path()).args(render).args(args).output().unwrap();
+        let e = stderr(&o);
+        assert!(!o.status.success() && e.contains(message), "{args:?}: expected '{message}' in: {e}");
+        assert_eq!(names(dir.path()), ["x.png"], "{args:?} left a file");
+    }
+    let grad = ["grad", "builtin:cornell-box", "--device", "99", "--target-set", "sphere.alpha.value=0.2"];
+    let o = pathgrad().args(grad).args(["--param", "typo"]).output().unwrap();
+    assert!(stderr(&o).contains("--param: invalid typo: matches no parameter"), "{}", stderr(&o));
+    let o = pathgrad().args(grad).args(["--param", "sphere.alpha.value", "--target-set", "typo=1"]).output().unwrap();
+    assert!(stderr(&o).contains("--target-set: invalid typo"), "{}", stderr(&o));
+    let o = pathgrad()
+        .current_dir(dir.path())
+        .args([
+            "grad",
+            "builtin:cornell-box",
+            "--device",
+            "99",
+            "--image-gradient",
+            "sphere.alpha.value",
+            "-o",
+            "x.exr",
+        ])
+        .output()
+        .unwrap();
+    assert!(stderr(&o).contains("x.png: is a directory"), "{}", stderr(&o));
+    assert_eq!(names(dir.path()), ["x.png"]);
+}
+
+/// Negative exposures are values, not flags.
+#[test]
+fn a_negative_exposure_is_accepted() {
+    let dir = tempfile::tempdir().unwrap();
+    let o = pathgrad()
+        .current_dir(dir.path())
+        .args(["render", "builtin:cornell-box", "--width", "8", "--spp", "1", "-o", "a.png", "--exposure", "-2"])
+        .output()
+        .unwrap();
+    ok(&o);
+    assert_eq!(names(dir.path()), ["a.png"]);
+}
+
+/// A constant environment of 3e38 overflows to infinite pixels: refused, and nothing is written.
+#[test]
+fn non_finite_results_are_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    let scene = dir.path().join("env.xml");
+    std::fs::write(
+        &scene,
+        r#"<scene version="3.0.0">
+    <sensor type="perspective">
+        <float name="fov" value="40"/>
+        <film type="hdrfilm"><integer name="width" value="8"/><integer name="height" value="8"/></film>
+    </sensor>
+    <emitter type="constant"><rgb name="radiance" value="3e38"/></emitter>
+    <shape type="sphere"><point name="center" x="0" y="0" z="5"/><bsdf type="diffuse"/></shape>
+</scene>"#,
+    )
+    .unwrap();
+    for cpu in [false, true] {
+        let mut c = pathgrad();
+        c.current_dir(dir.path()).args(["render", "env.xml", "--spp", "4", "-o", "env.exr"]);
+        if cpu {
+            c.arg("--cpu");
+        }
+        let o = c.output().unwrap();
+        let e = stderr(&o);
+        assert!(!o.status.success() && e.contains("non-finite values") && e.contains("channel R is inf"), "{e}");
+        assert_eq!(names(dir.path()), ["env.xml"], "nothing is written");
+    }
+}
+
+/// Limits are stated and enforced: `--spp` at most 2²⁰, `--max-depth` at most 1024 (the cap of
+/// -1), and `--q`/`--diff-param` only with `--strategy diff`.
+#[test]
+fn limits_are_stated_and_ignored_flags_refused() {
+    let base = ["render", "builtin:cornell-box", "-o", "never.exr", "--device", "99"];
+    let o = pathgrad().args(base).args(["--spp", "4294967295"]).output().unwrap();
+    assert!(stderr(&o).contains("invalid --spp: must be between 1 and 1048576"), "{}", stderr(&o));
+    let o = pathgrad().args(base).args(["--max-depth", "100000"]).output().unwrap();
+    assert!(stderr(&o).contains("invalid --max-depth: 100000 is more than 1024"), "{}", stderr(&o));
+    let help = pathgrad().args(["render", "--help"]).output().unwrap();
+    let help = String::from_utf8_lossy(&help.stdout).into_owned();
+    assert!(help.contains("at most 1048576") && help.contains("at most 1024"), "{help}");
+    let grad = ["grad", "builtin:cornell-box", "--device", "99", "--target-set", "sphere.alpha.value=0.2"];
+    let o = pathgrad().args(grad).args(["--q", "0.3"]).output().unwrap();
+    assert!(stderr(&o).contains("--q 0.3 applies only to --strategy diff"), "{}", stderr(&o));
+    let o = pathgrad().args(grad).args(["--diff-param", "sphere.alpha.value"]).output().unwrap();
+    assert!(stderr(&o).contains("--diff-param sphere.alpha.value applies only to --strategy diff"), "{}", stderr(&o));
+}

@@ -133,7 +133,7 @@ impl History {
         for row in &self.rows {
             text.push_str(&self.line(row));
         }
-        pathgrad::image::write_bytes_atomically(path, text.as_bytes())?;
+        pathgrad::output::write_bytes_atomically(path, text.as_bytes())?;
         self.file = Some(
             fs::OpenOptions::new().append(true).open(path).with_context(|| format!("opening {}", path.display()))?,
         );
@@ -208,7 +208,7 @@ impl History {
             }
             root.present().map_err(plot_error)?;
         }
-        Ok(pathgrad::image::write_bytes_atomically(path, svg.as_bytes())?)
+        Ok(pathgrad::output::write_bytes_atomically(path, svg.as_bytes())?)
     }
 }
 

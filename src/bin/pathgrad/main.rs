@@ -13,6 +13,7 @@ use clap::{Args, Parser, Subcommand};
 use pathgrad::gpu::{Context, ContextDesc, DeviceChoice, Renderer};
 use pathgrad::image::Image;
 use pathgrad::integrator::RenderOptions;
+use pathgrad::output::OutputSet;
 
 /// Samples per pixel when neither `--spp` nor the scene names a number.
 const DEFAULT_SPP: u32 = 16;
@@ -61,7 +62,7 @@ enum Command {
 /// Options every rendering command accepts.
 #[derive(Args, Debug)]
 struct RenderFlags {
-    /// Samples per pixel (default: the scene's, else 16).
+    /// Samples per pixel, at most 1048576 (default: the scene's, else 16).
     #[arg(long)]
     spp: Option<u32>,
     /// Image width (default: the scene's).
@@ -70,7 +71,8 @@ struct RenderFlags {
     /// Image height (default: the scene's).
     #[arg(long)]
     height: Option<u32>,
-    /// Maximum surface interactions per path; -1 is unbounded (default: the scene's).
+    /// Maximum surface interactions per path, at most 1024; -1 is unbounded: Russian roulette
+    /// ends paths, and none goes beyond 1024 (default: the scene's).
     #[arg(long, allow_negative_numbers = true)]
     max_depth: Option<i64>,
     /// Random seed.
@@ -88,9 +90,10 @@ struct StrategyArgs {
     /// sampling of one vertex, Su & Gkioulekas).
     #[arg(long, default_value = "bsdf")]
     strategy: String,
-    /// Probability that `diff` makes a capable vertex the differential vertex.
-    #[arg(long, default_value_t = pathgrad::integrator::DEFAULT_DIFF_Q)]
-    q: f32,
+    /// Probability that `diff` makes a capable vertex the differential vertex [default: 0.5]
+    /// (only with `--strategy diff`).
+    #[arg(long)]
+    q: Option<f32>,
     /// Turn next-event estimation off (for both strategies).
     #[arg(long)]
     no_nee: bool,
@@ -101,6 +104,11 @@ struct StrategyArgs {
 }
 
 impl StrategyArgs {
+    /// `--q`, or its default.
+    fn q(&self) -> f32 {
+        self.q.unwrap_or(pathgrad::integrator::DEFAULT_DIFF_Q)
+    }
+
     /// Sets `opts.strategy` and `opts.nee`; `default_target` is the parameter the command
     /// differentiates first. Warns when `diff` has no sampler for the target.
     fn apply(
@@ -111,10 +119,18 @@ impl StrategyArgs {
     ) -> Result<()> {
         use pathgrad::integrator::Strategy;
         opts.nee = !self.no_nee;
+        if self.strategy != "diff" {
+            if let Some(q) = self.q {
+                bail!("--q {q} applies only to --strategy diff (this run uses {})", self.strategy);
+            }
+            if let Some(name) = &self.diff_param {
+                bail!("--diff-param {name} applies only to --strategy diff (this run uses {})", self.strategy);
+            }
+        }
         let target = self.diff_param.as_deref().or(default_target);
         opts.strategy = match (self.strategy.as_str(), target) {
             ("diff", None) => bail!("--strategy diff needs --diff-param NAME (the parameter that drives the sampler)"),
-            (name, target) => Strategy::from_name(scene, name, self.q, target.unwrap_or(""))?,
+            (name, target) => Strategy::from_name(scene, name, self.q(), target.unwrap_or(""))?,
         };
         warn_without_sampler(scene, opts.strategy);
         opts.validate()?;
@@ -151,8 +167,8 @@ struct RenderArgs {
     /// With an .exr output, do not write the .png preview beside it.
     #[arg(long)]
     no_preview: bool,
-    /// Exposure of PNG output in stops.
-    #[arg(long, default_value_t = 0.0)]
+    /// Exposure of PNG output in stops (negative darkens).
+    #[arg(long, default_value_t = 0.0, allow_negative_numbers = true)]
     exposure: f32,
     /// Render with the CPU reference implementation instead of Vulkan.
     #[arg(long)]
@@ -283,24 +299,46 @@ fn with_values(
 
 fn grad(args: &GradArgs) -> Result<()> {
     use pathgrad::gpu::renderer::GradMode;
+    // The outputs of --image-gradient are checked before anything is loaded or rendered.
+    let image_gradient_outputs = match (&args.image_gradient, &args.output) {
+        (None, Some(_)) => bail!("-o is the output of --image-gradient (a loss gradient is printed)"),
+        (None, None) => None,
+        (Some(_), None) => bail!("--image-gradient needs -o OUT.exr"),
+        (Some(_), Some(output)) => {
+            if !check_output(output)? {
+                bail!("invalid -o {}: an image gradient is written as .exr (plus a .png preview)", output.display());
+            }
+            let mut outputs = OutputSet::new();
+            let exr_file = outputs.stage(output)?;
+            let png_file = outputs.stage(&preview_path(output))?;
+            Some((output, outputs, exr_file, png_file))
+        }
+    };
     let scene = pathgrad::scene::load(&args.scene, &args.defines)?;
     let mut opts = options(&scene, &args.flags)?;
     let first_param = args.image_gradient.as_deref().or_else(|| args.params.first().map(String::as_str));
     args.sampling.apply(&scene, first_param, &mut opts)?;
+    // Names, the loss and the target's values are checked before the device is opened.
+    let loss: pathgrad::loss::Loss = args.loss.parse()?;
+    let patterns: Vec<&str> =
+        if args.params.is_empty() { vec!["*"] } else { args.params.iter().map(String::as_str).collect() };
+    let chosen = scene.params.select(&patterns).context("--param")?;
+    if let Some(name) = &args.image_gradient {
+        scene.params.select(&[name.as_str()]).context("--image-gradient")?;
+    }
+    with_values(&scene.params, &args.target_set, "--target-set").context("--target-set")?;
     let ctx = context(&args.flags.device)?;
     let mut renderer = Renderer::new(&ctx, &scene).with_context(|| format!("loading {}", args.scene))?;
     announce_compiles(&mut renderer, args.json);
     let start = Instant::now();
-    if let Some(name) = &args.image_gradient {
-        let Some(output) = &args.output else { bail!("--image-gradient needs -o OUT.exr") };
-        if !check_output(output)? {
-            bail!("invalid -o {}: an image gradient is written as .exr (plus a .png preview)", output.display());
-        }
+    if let (Some(name), Some((output, outputs, exr_file, png_file))) = (&args.image_gradient, image_gradient_outputs) {
         let image = renderer.image_gradient(&opts, name).with_context(|| format!("differentiating {}", args.scene))?;
         let seconds = start.elapsed().as_secs_f64();
-        image.write_exr(output)?;
-        let preview = output.with_extension("png");
-        image.write_signed_png(&preview, None)?;
+        refuse_non_finite(&image, &format!("the image gradient ∂I/∂{name}"))?;
+        image.write_exr(&exr_file)?;
+        image.write_signed_png(&png_file, None)?;
+        outputs.commit()?;
+        let preview = preview_path(output);
         if args.json {
             println!(
                 "{}",
@@ -311,10 +349,6 @@ fn grad(args: &GradArgs) -> Result<()> {
         }
         return Ok(());
     }
-    let loss: pathgrad::loss::Loss = args.loss.parse()?;
-    let patterns: Vec<&str> =
-        if args.params.is_empty() { vec!["*"] } else { args.params.iter().map(String::as_str).collect() };
-    let chosen = scene.params.select(&patterns)?;
     // Only the kinds of the parameters reported are compiled into the gradient kernel.
     opts.differentiate = renderer.param_kinds(&chosen);
     let target = target_image(&mut renderer, &scene, &opts, args.target.as_deref(), &args.target_set)?;
@@ -524,7 +558,15 @@ fn progress_bar(len: u64, what: &str, hidden: bool) -> indicatif::ProgressBar {
 }
 
 fn render(args: &RenderArgs) -> Result<()> {
+    // Every option and output path is checked before anything is rendered.
     let is_exr = check_output(&args.output)?;
+    if !args.exposure.is_finite() {
+        bail!("invalid --exposure {}: must be a finite number of stops", args.exposure);
+    }
+    let mut outputs = OutputSet::new();
+    let main_file = outputs.stage(&args.output)?;
+    let preview_file =
+        if is_exr && !args.no_preview { Some(outputs.stage(&preview_path(&args.output))?) } else { None };
     let scene = pathgrad::scene::load(&args.scene, &args.defines)?;
     let opts = options(&scene, &args.flags)?;
     let progress = progress_bar(u64::from(opts.spp), "rendering [{bar:40}] {pos}/{len} spp", args.json);
@@ -545,13 +587,13 @@ fn render(args: &RenderArgs) -> Result<()> {
     };
     let seconds = start.elapsed().as_secs_f64();
     progress.finish_and_clear();
-    let mut written = vec![args.output.clone()];
-    save(&image, &args.output, is_exr, args.exposure)?;
-    if is_exr && !args.no_preview {
-        let preview = args.output.with_extension("png");
-        image.write_png(&preview, args.exposure)?;
-        written.push(preview);
+    refuse_non_finite(&image, "the render")?;
+    save(&image, &main_file, is_exr, args.exposure)?;
+    if let Some(preview) = &preview_file {
+        image.write_png(preview, args.exposure)?;
     }
+    let written = outputs.destinations();
+    outputs.commit()?;
     let samples = f64::from(opts.width) * f64::from(opts.height) * f64::from(opts.spp);
     if args.json {
         let summary = serde_json::json!({
@@ -570,6 +612,30 @@ fn render(args: &RenderArgs) -> Result<()> {
             opts.spp,
             samples / seconds / 1e6,
             names.join(", ")
+        );
+    }
+    Ok(())
+}
+
+/// The PNG preview written beside an EXR output.
+fn preview_path(output: &Path) -> PathBuf {
+    output.with_extension("png")
+}
+
+/// Refuses an image with a NaN or an infinite value (`what` names it): such a result is never
+/// written. Radiance beyond the f32 range (a constant environment of 3e38, say) ends up here.
+fn refuse_non_finite(image: &Image, what: &str) -> Result<()> {
+    let values = image.as_slice();
+    let mut bad = values.iter().enumerate().filter(|(_, v)| !v.is_finite());
+    if let Some((i, v)) = bad.next() {
+        let width = image.width() as usize;
+        let (pixel, channel) = (i / 3, ["R", "G", "B"][i % 3]);
+        bail!(
+            "{what} has {} non-finite values (the first: pixel ({}, {}) channel {channel} is {v}); the scene's \
+             values overflow 32-bit floats or are invalid, so nothing was written",
+            1 + bad.count(),
+            pixel % width,
+            pixel / width
         );
     }
     Ok(())

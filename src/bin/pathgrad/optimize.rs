@@ -20,10 +20,11 @@ use clap::Args;
 use pathgrad::adaptive::AdaptiveEstimator;
 use pathgrad::gpu::Renderer;
 use pathgrad::gpu::renderer::GradMode;
-use pathgrad::image::{Image, write_bytes_atomically};
+use pathgrad::image::Image;
 use pathgrad::integrator::{RenderOptions, Strategy};
 use pathgrad::loss::Loss;
 use pathgrad::optim::{Adam, AdamOptions, AdamState, IterationOptions, Optimization, parameter_error};
+use pathgrad::output::write_bytes_atomically;
 use pathgrad::params::{ParamId, ParamTable};
 use pathgrad::scene::Scene;
 use serde::{Deserialize, Serialize};
@@ -292,7 +293,7 @@ fn start(args: &OptimizeArgs) -> Result<Session> {
         max_depth: opts.max_depth,
         seed: opts.seed,
         strategy: args.sampling.strategy.clone(),
-        q: args.sampling.q,
+        q: args.sampling.q(),
         nee: opts.nee,
         diff_param,
     };
@@ -458,7 +459,7 @@ fn check_unchanged(args: &OptimizeArgs, given: &BTreeSet<String>, c: &RunConfig,
     check("max_depth", "--max-depth", args.flags.max_depth.map(|v| text(&v)), text(&c.max_depth.map_or(-1, i64::from)));
     check("seed", "--seed", Some(text(&args.flags.seed)), text(&c.seed));
     check("strategy", "--strategy", Some(args.sampling.strategy.clone()), c.strategy.clone());
-    check("q", "--q", Some(text(&args.sampling.q)), text(&c.q));
+    check("q", "--q", args.sampling.q.map(|q| text(&q)), text(&c.q));
     check("no_nee", "--no-nee", Some(text(&args.sampling.no_nee)), text(&!c.nee));
     check("diff_param", "--diff-param", args.sampling.diff_param.clone(), c.diff_param.clone().unwrap_or_default());
     if !conflicts.is_empty() {

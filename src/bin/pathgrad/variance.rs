@@ -289,7 +289,7 @@ pub(crate) fn run(args: &VarianceArgs) -> Result<()> {
     });
     create_output(&args.output)?;
     let summary_path = args.output.join("summary.json");
-    pathgrad::image::write_bytes_atomically(
+    pathgrad::output::write_bytes_atomically(
         &summary_path,
         (serde_json::to_string_pretty(&summary)? + "\n").as_bytes(),
     )?;

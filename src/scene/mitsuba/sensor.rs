@@ -227,7 +227,18 @@ impl<'a> Loader<'a> {
         }
         self.scene.max_depth = match p.integer(&self.x, "max_depth")? {
             None | Some((-1, _)) => UNBOUNDED_DEPTH_CAP,
-            Some((v, _)) if v >= 1 => v.min(i64::from(UNBOUNDED_DEPTH_CAP)) as u32,
+            Some((v, n)) if v > i64::from(UNBOUNDED_DEPTH_CAP) => {
+                let w = self.x.warning(
+                    n,
+                    format!(
+                        "'max_depth' {v} is capped at {UNBOUNDED_DEPTH_CAP}, the most interactions a path can have in \
+                         pathgrad"
+                    ),
+                );
+                self.scene.warn(w);
+                UNBOUNDED_DEPTH_CAP
+            }
+            Some((v, _)) if v >= 1 => v as u32,
             Some((v, n)) => {
                 return Err(self.x.err(n, format!("'max_depth' must be at least 1, or -1 for unbounded, got {v}")));
             }
