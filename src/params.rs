@@ -1,6 +1,8 @@
 //! `ParamTable`: every differentiable value of a scene as a named range of one `f32` array
 //! (ARCHITECTURE.md decision 1). Materials and emitters refer to parameters by offset.
 
+use std::collections::HashMap;
+
 use crate::error::{Error, Result};
 
 /// A handle to one parameter: its index in the table.
@@ -25,6 +27,9 @@ pub struct ParamEntry {
 pub struct ParamTable {
     entries: Vec<ParamEntry>,
     values: Vec<f32>,
+    /// Entry index by name: adding and finding are O(1), so a scene of 100 000 emitters loads in
+    /// linear time.
+    by_name: HashMap<String, u32>,
 }
 
 impl ParamTable {
@@ -34,7 +39,7 @@ impl ParamTable {
     /// [`Error::Scene`] naming the parameter if the name is taken, a value is not finite or lies
     /// outside `bounds`.
     pub fn add(&mut self, name: &str, values: &[f32], bounds: (f32, f32)) -> Result<ParamId> {
-        if self.entries.iter().any(|e| e.name == name) {
+        if self.by_name.contains_key(name) {
             return Err(Error::Scene { location: format!("parameter {name}"), message: "defined twice".into() });
         }
         for &v in values {
@@ -46,6 +51,7 @@ impl ParamTable {
             }
         }
         let id = ParamId(self.entries.len() as u32);
+        self.by_name.insert(name.to_string(), id.0);
         self.entries.push(ParamEntry {
             name: name.to_string(),
             offset: self.values.len() as u32,
@@ -79,7 +85,7 @@ impl ParamTable {
 
     /// Looks a parameter up by name.
     pub fn find(&self, name: &str) -> Option<ParamId> {
-        self.entries.iter().position(|e| e.name == name).map(|i| ParamId(i as u32))
+        self.by_name.get(name).map(|&i| ParamId(i))
     }
 
     /// Sets the values of the parameter called `name`.

@@ -61,6 +61,7 @@
 //! with before checking it), and parsing and validation still run under
 //! [`std::panic::catch_unwind`] as a backstop.
 
+use std::collections::{HashMap, HashSet};
 use std::fmt::Display;
 use std::path::Path;
 
@@ -104,11 +105,23 @@ pub fn load(path: &Path) -> Result<Scene> {
         materials: vec![None; root.materials.len() + 1],
         material_names: unique_names(root.materials.iter().map(|m| m.name.as_deref()), "material"),
         node_names: unique_names(root.nodes.iter().map(|n| n.name.as_deref()), "node"),
+        taken_names: HashSet::new(),
         scene: Scene::new(&path.display().to_string(), placeholder_camera()),
         camera: None,
     };
-    loader.run()?;
-    let scene = loader.scene;
+    loader.taken_names = loader.node_names.iter().cloned().collect();
+    // Errors raised below the loader (a parameter defined twice, say) get the file's name too.
+    let file = path.display().to_string();
+    loader.run().map_err(|e| match e {
+        Error::Scene { location, message } if !location.starts_with(&file) => {
+            Error::Scene { location: format!("{file}: {location}"), message }
+        }
+        e => e,
+    })?;
+    let mut scene = loader.scene;
+    if scene.meshes.iter().all(|m| m.emitter.is_none()) && scene.environment.is_none() {
+        scene.warn("the scene has no emitters (no material has an emissiveFactor): it renders black".into());
+    }
     scene.validate()?;
     Ok(scene)
 }
@@ -197,11 +210,33 @@ fn unique_names<'a>(names: impl Iterator<Item = Option<&'a str>>, kind: &str) ->
             _ => format!("{kind}_{i}"),
         })
         .collect();
+    let mut counts: HashMap<&str, usize> = HashMap::with_capacity(names.len());
+    for n in &names {
+        *counts.entry(n.as_str()).or_default() += 1;
+    }
+    // Names that occur once keep themselves; a repeated name gets its index, and a further
+    // suffix if even that is taken (`m`, `m`, `m_1` → `m_0`, `m_1_1`, `m_1`).
+    let mut taken: HashSet<String> = names.iter().filter(|n| counts[n.as_str()] == 1).cloned().collect();
     names
         .iter()
         .enumerate()
-        .map(|(i, n)| if names.iter().filter(|m| *m == n).count() > 1 { format!("{n}_{i}") } else { n.clone() })
+        .map(|(i, n)| {
+            if counts[n.as_str()] == 1 {
+                return n.clone();
+            }
+            let name = fresh_name(&taken, format!("{n}_{i}"));
+            taken.insert(name.clone());
+            name
+        })
         .collect()
+}
+
+/// `candidate`, or `candidate_K` for the smallest K ≥ 1 that is not in `taken`.
+fn fresh_name(taken: &HashSet<String>, candidate: String) -> String {
+    if !taken.contains(&candidate) {
+        return candidate;
+    }
+    (1..).map(|k| format!("{candidate}_{k}")).find(|c| !taken.contains(c)).expect("some suffix is free")
 }
 
 /// What a glTF material became.
@@ -225,6 +260,8 @@ struct Loader<'a> {
     materials: Vec<Option<MappedMaterial>>,
     material_names: Vec<String>,
     node_names: Vec<String>,
+    /// Node names and the mesh names made so far (a primitive of a multi-primitive mesh is `node_j`).
+    taken_names: HashSet<String>,
     scene: Scene,
     /// The camera found so far.
     camera: Option<Camera>,
@@ -400,7 +437,10 @@ impl Loader<'_> {
             let material = self.material(primitive.material.map(|m| m.value()))?;
             let geometry = self.geometry(&at, primitive, material.tex_coord)?;
             let name = if mesh.primitives.len() > 1 {
-                format!("{}_{j}", self.node_names[node])
+                // One mesh per primitive: `node_j`, kept apart from every other node's name.
+                let name = fresh_name(&self.taken_names, format!("{}_{j}", self.node_names[node]));
+                self.taken_names.insert(name.clone());
+                name
             } else {
                 self.node_names[node].clone()
             };

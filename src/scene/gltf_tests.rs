@@ -21,6 +21,74 @@ fn names_are_sanitised_and_deduplicated() {
     assert_eq!(names, ["Metal_Ball", "material_1", "a_b_2", "a_b_3", "material_4"]);
 }
 
+#[test]
+fn repeated_names_get_unique_suffixes_even_when_a_suffix_is_taken() {
+    let names = unique_names([Some("m"), Some("m"), Some("m_1")].into_iter(), "material");
+    assert_eq!(names, ["m_0", "m_1_1", "m_1"]);
+    let names = unique_names([Some("m_1"), Some("m"), Some("m"), Some("m_1_1")].into_iter(), "node");
+    assert_eq!(names, ["m_1", "m_1_2", "m_2", "m_1_1"]);
+    // Unnamed entries are named by kind and index, apart from a real name equal to that.
+    let names = unique_names([None, Some("material_0")].into_iter(), "material");
+    assert_eq!(names, ["material_0_0", "material_0_1"]);
+}
+
+/// A glTF scene of `n` emissive nodes named `m`, `m`, `m_1`, … (so every name repeats) and a node
+/// `x` whose mesh has two primitives, beside a node `x_0`; each one triangle.
+fn many_nodes_gltf(n: usize) -> String {
+    let positions: [f32; 9] = [0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0, 0.0];
+    let bytes: Vec<u8> = positions.iter().flat_map(|v| v.to_le_bytes()).collect();
+    let uri = format!("data:application/octet-stream;base64,{}", base64_for_tests(&bytes));
+    let mut nodes: Vec<serde_json::Value> =
+        (0..n).map(|i| serde_json::json!({"name": if i % 3 == 2 { "m_1" } else { "m" }, "mesh": 0})).collect();
+    nodes.push(serde_json::json!({"name": "x", "mesh": 1}));
+    nodes.push(serde_json::json!({"name": "x_0", "mesh": 0}));
+    let primitive = serde_json::json!({"attributes": {"POSITION": 0}, "material": 0});
+    serde_json::json!({
+        "asset": {"version": "2.0"},
+        "scenes": [{"nodes": (0..n + 2).collect::<Vec<_>>()}],
+        "nodes": nodes,
+        "meshes": [{"primitives": [primitive]}, {"primitives": [primitive, primitive]}],
+        "materials": [{"name": "m", "emissiveFactor": [1.0, 1.0, 1.0]}, {"name": "m"}],
+        "accessors": [{"bufferView": 0, "componentType": 5126, "count": 3, "type": "VEC3",
+                       "min": [0.0, 0.0, 0.0], "max": [1.0, 1.0, 0.0]}],
+        "bufferViews": [{"buffer": 0, "byteLength": 36}],
+        "buffers": [{"byteLength": 36, "uri": uri}],
+    })
+    .to_string()
+}
+
+/// Standard base64 with padding (the loader's decoder is the reference it is read back with).
+fn base64_for_tests(bytes: &[u8]) -> String {
+    const ALPHABET: &[u8; 64] = b"ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789+/";
+    let mut out = String::new();
+    for chunk in bytes.chunks(3) {
+        let b = [chunk[0], *chunk.get(1).unwrap_or(&0), *chunk.get(2).unwrap_or(&0)];
+        let v = (u32::from(b[0]) << 16) | (u32::from(b[1]) << 8) | u32::from(b[2]);
+        for k in 0..4 {
+            out.push(if k <= chunk.len() { ALPHABET[(v >> (18 - 6 * k)) as usize & 63] as char } else { '=' });
+        }
+    }
+    out
+}
+
+/// 100 000 nodes with repeated names load (in linear time: names are made unique through hash
+/// sets, and parameters are found by a map), and every mesh and emitter parameter is distinct.
+#[test]
+fn a_hundred_thousand_nodes_with_repeated_names_load() {
+    let n = 100_000;
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("many.gltf");
+    std::fs::write(&path, many_nodes_gltf(n)).unwrap();
+    let s = load(&path).unwrap();
+    assert_eq!(s.meshes.len(), n + 3);
+    let names: HashSet<&str> = s.meshes.iter().map(|m| m.name.as_str()).collect();
+    assert_eq!(names.len(), n + 3, "every mesh name is distinct");
+    // `m` at 0, 1, 3; `m_1` (repeated too) at 2: its own index after it.
+    assert!(["m_0", "m_1", "m_1_2", "m_3"].iter().all(|n| names.contains(n)), "{:?}", &s.meshes[..4]);
+    assert!(names.contains("x_0") && names.contains("x_0_1") && names.contains("x_1"), "x's primitives keep apart");
+    assert_eq!(s.meshes.iter().filter(|m| m.emitter.is_some()).count(), n + 3);
+}
+
 fn data(name: &str) -> std::path::PathBuf {
     Path::new("tests/data/gltf").join(name)
 }
@@ -151,8 +219,9 @@ fn no_camera_gives_the_documented_default() {
     assert!(s.camera.position.abs_diff_eq(Vec3::new(0.5, 0.5, distance), 1e-6));
     assert_eq!(s.camera.target, Vec3::new(0.5, 0.5, 0.0));
     assert_eq!((s.camera.fov_y_degrees, s.camera.width, s.camera.height), (45.0, 512, 512));
-    assert_eq!(s.warnings.len(), 1);
+    assert_eq!(s.warnings.len(), 2);
     assert!(s.warnings[0].starts_with("no perspective camera"), "{:?}", s.warnings);
+    assert!(s.warnings[1].starts_with("the scene has no emitters"), "{:?}", s.warnings);
     // glTF's default material: white, metallic 1, roughness 1.
     assert_close(&param(&s, "default_material.alpha.value"), &[1.0]);
     assert_close(&param(&s, "default_material.specular_reflectance.value"), &[1.0; 3]);

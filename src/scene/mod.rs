@@ -330,7 +330,12 @@ impl Scene {
 
     /// Records a loading warning and logs it.
     pub fn warn(&mut self, message: String) {
-        tracing::warn!("{}: {message}", self.source);
+        // Warnings of a file's loader already begin with its name (and a line).
+        if message.starts_with(&self.source) {
+            tracing::warn!("{message}");
+        } else {
+            tracing::warn!("{}: {message}", self.source);
+        }
         self.warnings.push(message);
     }
 
