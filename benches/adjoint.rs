@@ -46,7 +46,7 @@ fn main() -> pathgrad::Result<()> {
         ..RenderOptions::for_scene(&scene)
     };
     let mut target_table = scene.params.clone();
-    target_table.set("sphere.alpha.value", &[0.4])?;
+    target_table.set("sphere.bsdf.alpha.value", &[0.4])?;
     renderer.set_params(&target_table)?;
     let target = renderer.render(&RenderOptions { seed: 99, ..opts })?;
     renderer.set_params(&scene.params)?;

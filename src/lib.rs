@@ -27,9 +27,9 @@
 //! use pathgrad::loss::Loss;
 //! let target = pathgrad::image::Image::read_exr("target.exr")?;
 //! let (loss, gradients) = renderer.loss_and_gradient(&options, &target, Loss::RelMse, GradMode::Float)?;
-//! println!("loss {loss}: d/d alpha = {:?}", gradients.get("sphere.alpha.value"));
+//! println!("loss {loss}: d/d alpha = {:?}", gradients.get("sphere.bsdf.alpha.value"));
 //! // Forward mode: how every pixel changes with the sphere's roughness.
-//! let d_image = renderer.image_gradient(&options, "sphere.alpha.value")?;
+//! let d_image = renderer.image_gradient(&options, "sphere.bsdf.alpha.value")?;
 //! d_image.write_signed_png("d_alpha.png", None)?;
 //! # Ok::<(), pathgrad::Error>(())
 //! ```

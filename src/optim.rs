@@ -448,7 +448,7 @@ mod tests {
     fn table() -> (ParamTable, ParamId, ParamId, ParamId) {
         let mut t = ParamTable::default();
         let albedo = t.add("wall.reflectance.value", &[0.5, 0.5, 0.5], (0.0, 1.0)).unwrap();
-        let alpha = t.add("sphere.alpha.value", &[0.5], (1e-3, 1.0)).unwrap();
+        let alpha = t.add("sphere.bsdf.alpha.value", &[0.5], (1e-3, 1.0)).unwrap();
         let other = t.add("light.emitter.radiance.value", &[2.0, 2.0, 2.0], (0.0, f32::INFINITY)).unwrap();
         (t, albedo, alpha, other)
     }
@@ -534,7 +534,7 @@ mod tests {
         adam.step_with(&mut t, vec![0.1, 0.2, 0.3, 0.4, 0.0, 0.0, 0.0], 0).unwrap();
         let (t_before, adam_before) = (t.clone(), adam.clone());
         for (bad, index, name) in
-            [(f32::NAN, 2, "wall.reflectance.value[2]"), (f32::INFINITY, 3, "sphere.alpha.value[0]")]
+            [(f32::NAN, 2, "wall.reflectance.value[2]"), (f32::INFINITY, 3, "sphere.bsdf.alpha.value[0]")]
         {
             for value in [bad, -bad] {
                 let mut g = vec![0.1, 0.2, 0.3, 0.4, 0.0, 0.0, 0.0];

@@ -237,9 +237,9 @@ mod tests {
 
     #[test]
     fn globs_select_parameters() {
-        assert!(glob_match("*.alpha.value", "sphere.alpha.value"));
-        assert!(glob_match("s?here.*", "sphere.alpha.value"));
-        assert!(!glob_match("*.alpha", "sphere.alpha.value"));
+        assert!(glob_match("*.alpha.value", "sphere.bsdf.alpha.value"));
+        assert!(glob_match("s?here.*", "sphere.bsdf.alpha.value"));
+        assert!(!glob_match("*.alpha", "sphere.bsdf.alpha.value"));
         let mut t = ParamTable::default();
         t.add("a.alpha.value", &[0.1], (0.0, 1.0)).unwrap();
         t.add("b.reflectance.value", &[0.1; 3], (0.0, 1.0)).unwrap();

@@ -22,7 +22,7 @@ pub const BUILTIN_SCENES: &[(&str, &str)] = &[
 ///
 /// ```
 /// let scene = pathgrad::scene::builtin::load("cornell-box").unwrap();
-/// assert!(scene.params.find("sphere.alpha.value").is_some());
+/// assert!(scene.params.find("sphere.bsdf.alpha.value").is_some());
 /// ```
 pub fn load(name: &str) -> Result<Scene> {
     match name {
@@ -56,8 +56,10 @@ fn cornell_box() -> Result<Scene> {
     let white = s.add_diffuse("white", Vec3::new(0.725, 0.71, 0.68))?;
     let red = s.add_diffuse("red", Vec3::new(0.63, 0.065, 0.05))?;
     let green = s.add_diffuse("green", Vec3::new(0.14, 0.45, 0.091))?;
-    let black = s.add_diffuse("light", Vec3::ZERO)?;
-    let metal = s.add_rough_conductor("sphere", Distribution::Beckmann, 0.2, Vec3::ONE, PERFECT_ETA, PERFECT_K)?;
+    // The light's and the sphere's materials are named as scenes/cornell-box/cornell-box.xml (and Mitsuba)
+    // name an unnamed BSDF nested in a shape: `SHAPE.bsdf`. One scene, one set of names.
+    let black = s.add_diffuse("light.bsdf", Vec3::ZERO)?;
+    let metal = s.add_rough_conductor("sphere.bsdf", Distribution::Beckmann, 0.2, Vec3::ONE, PERFECT_ETA, PERFECT_K)?;
     // The box spans [-1, 1]³ without its front wall; every wall faces inwards.
     s.add_mesh("floor", quad(Vec3::new(0.0, -1.0, 0.0), Vec3::Z, Vec3::X), white, None)?;
     s.add_mesh("ceiling", quad(Vec3::new(0.0, 1.0, 0.0), Vec3::X, Vec3::Z), white, None)?;
@@ -124,7 +126,9 @@ fn blend() -> Result<Scene> {
     let base = s.add_diffuse("base", Vec3::new(0.1, 0.6, 0.35))?;
     let coat = s.add_rough_conductor("coat", Distribution::Ggx, 0.08, Vec3::ONE, PERFECT_ETA, PERFECT_K)?;
     let object = s.add_blend("object", 0.5, [base, coat])?;
-    let black = s.add_diffuse("light", Vec3::ZERO)?;
+    // The light's and the sphere's materials are named as scenes/cornell-box/cornell-box.xml (and Mitsuba)
+    // name an unnamed BSDF nested in a shape: `SHAPE.bsdf`. One scene, one set of names.
+    let black = s.add_diffuse("light.bsdf", Vec3::ZERO)?;
     s.add_mesh("floor", quad(Vec3::new(0.0, -0.5, 0.0), Vec3::Z * 3.0, Vec3::X * 3.0), floor, None)?;
     s.add_mesh("object", sphere(Vec3::new(0.0, 0.1, 0.0), 0.6, 48, 96, false), object, None)?;
     s.add_mesh("light", quad(Vec3::new(-0.8, 2.4, 0.6), Vec3::X * 0.6, Vec3::Z * 0.6), black, Some(Vec3::splat(8.0)))?;

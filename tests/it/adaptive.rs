@@ -208,7 +208,7 @@ fn adaptive_loss_gradients_are_unbiased_against_uniform() {
     let mut renderer = Renderer::new(&gpu.ctx, &scene).unwrap();
     let mut perturbed = scene.params.clone();
     perturbed.set("white.reflectance.value", &[0.45, 0.44, 0.42]).unwrap();
-    perturbed.set("sphere.alpha.value", &[0.5]).unwrap();
+    perturbed.set("sphere.bsdf.alpha.value", &[0.5]).unwrap();
     renderer.set_params(&perturbed).unwrap();
     let target = renderer.render(&RenderOptions { spp: 64, seed: 777, ..opts }).unwrap();
     renderer.set_params(&scene.params).unwrap();

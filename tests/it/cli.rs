@@ -102,7 +102,7 @@ fn devices_lists_lavapipe() {
 #[test]
 fn grad_prints_loss_and_gradients_as_json() {
     let o = pathgrad()
-        .args(["grad", "builtin:cornell-box", "--target-set", "sphere.alpha.value=0.4", "--param", "sphere.*"])
+        .args(["grad", "builtin:cornell-box", "--target-set", "sphere.bsdf.alpha.value=0.4", "--param", "sphere.*"])
         .args(["--spp", "2", "--width", "16", "--json", "--deterministic"])
         .output()
         .unwrap();
@@ -111,8 +111,8 @@ fn grad_prints_loss_and_gradients_as_json() {
     assert!(v["loss"].as_f64().unwrap() > 0.0);
     assert!(v["time_s"].as_f64().unwrap() > 0.0);
     let g = v["gradients"].as_object().unwrap();
-    assert_eq!(g.keys().collect::<Vec<_>>(), ["sphere.alpha.value", "sphere.specular_reflectance.value"]);
-    assert_eq!(g["sphere.specular_reflectance.value"].as_array().unwrap().len(), 3);
+    assert_eq!(g.keys().collect::<Vec<_>>(), ["sphere.bsdf.alpha.value", "sphere.bsdf.specular_reflectance.value"]);
+    assert_eq!(g["sphere.bsdf.specular_reflectance.value"].as_array().unwrap().len(), 3);
 }
 
 #[test]
@@ -138,7 +138,7 @@ fn grad_errors_name_what_is_wrong() {
         (&["grad", "builtin:cornell-box", "--target-set", "nope=1"], "nope: matches no parameter"),
         (&["grad", "builtin:cornell-box", "--target", "missing.exr"], "missing.exr"),
         (
-            &["grad", "builtin:cornell-box", "--target-set", "sphere.alpha.value=0.3", "--loss", "l3"],
+            &["grad", "builtin:cornell-box", "--target-set", "sphere.bsdf.alpha.value=0.3", "--loss", "l3"],
             "'l3' (expected relmse, relmse_max, l2 or l1)",
         ),
     ];

@@ -105,7 +105,7 @@ fn both_schedules_give_the_same_bits() {
     let mut run = |one_path: bool| {
         renderer.set_one_path_per_invocation(one_path);
         let image = renderer.render(&opts).unwrap();
-        let forward = renderer.image_gradient(&opts, "sphere.alpha.value").unwrap();
+        let forward = renderer.image_gradient(&opts, "sphere.bsdf.alpha.value").unwrap();
         let grads = renderer.backward(&opts, &adjoint, mode).unwrap();
         let adaptive = renderer.backward_adaptive(&opts, &adjoint, &sampling, mode).unwrap();
         [image.as_slice().to_vec(), forward.as_slice().to_vec(), grads.values().to_vec(), adaptive.values().to_vec()]

@@ -15,11 +15,11 @@ fn cases() -> Vec<(Scene, Vec<&'static str>)> {
         (
             builtin::load("cornell-box").unwrap(),
             vec![
-                "sphere.alpha.value",
+                "sphere.bsdf.alpha.value",
                 "red.reflectance.value",
                 "white.reflectance.value",
                 "light.emitter.radiance.value",
-                "sphere.specular_reflectance.value",
+                "sphere.bsdf.specular_reflectance.value",
             ],
         ),
         (builtin::load("blend").unwrap(), vec!["object.weight.value", "coat.alpha.value", "base.reflectance.value"]),
@@ -144,7 +144,7 @@ fn gradients_match_finite_differences() {
     const SEEDS: u32 = 24;
     let gpu = TestGpu::new();
     let checks: Vec<(Scene, &str)> = vec![
-        (builtin::load("cornell-box").unwrap(), "sphere.alpha.value"),
+        (builtin::load("cornell-box").unwrap(), "sphere.bsdf.alpha.value"),
         (builtin::load("cornell-box").unwrap(), "white.reflectance.value"),
         (builtin::load("cornell-box").unwrap(), "light.emitter.radiance.value"),
         (builtin::load("blend").unwrap(), "object.weight.value"),

@@ -117,10 +117,10 @@ fn bad_outputs_and_options_fail_before_rendering_and_leave_nothing() {
         assert!(!o.status.success() && e.contains(message), "{args:?}: expected '{message}' in: {e}");
         assert_eq!(names(dir.path()), ["x.png"], "{args:?} left a file");
     }
-    let grad = ["grad", "builtin:cornell-box", "--device", "99", "--target-set", "sphere.alpha.value=0.2"];
+    let grad = ["grad", "builtin:cornell-box", "--device", "99", "--target-set", "sphere.bsdf.alpha.value=0.2"];
     let o = pathgrad().args(grad).args(["--param", "typo"]).output().unwrap();
     assert!(stderr(&o).contains("--param: invalid typo: matches no parameter"), "{}", stderr(&o));
-    let o = pathgrad().args(grad).args(["--param", "sphere.alpha.value", "--target-set", "typo=1"]).output().unwrap();
+    let o = pathgrad().args(grad).args(["--param", "sphere.bsdf.alpha.value", "--target-set", "typo=1"]).output().unwrap();
     assert!(stderr(&o).contains("--target-set: invalid typo"), "{}", stderr(&o));
     let o = pathgrad()
         .current_dir(dir.path())
@@ -130,7 +130,7 @@ fn bad_outputs_and_options_fail_before_rendering_and_leave_nothing() {
             "--device",
             "99",
             "--image-gradient",
-            "sphere.alpha.value",
+            "sphere.bsdf.alpha.value",
             "-o",
             "x.exr",
         ])
@@ -195,9 +195,25 @@ fn limits_are_stated_and_ignored_flags_refused() {
     let help = pathgrad().args(["render", "--help"]).output().unwrap();
     let help = String::from_utf8_lossy(&help.stdout).into_owned();
     assert!(help.contains("at most 1048576") && help.contains("at most 1024"), "{help}");
-    let grad = ["grad", "builtin:cornell-box", "--device", "99", "--target-set", "sphere.alpha.value=0.2"];
+    let grad = ["grad", "builtin:cornell-box", "--device", "99", "--target-set", "sphere.bsdf.alpha.value=0.2"];
     let o = pathgrad().args(grad).args(["--q", "0.3"]).output().unwrap();
     assert!(stderr(&o).contains("--q 0.3 applies only to --strategy diff"), "{}", stderr(&o));
-    let o = pathgrad().args(grad).args(["--diff-param", "sphere.alpha.value"]).output().unwrap();
-    assert!(stderr(&o).contains("--diff-param sphere.alpha.value applies only to --strategy diff"), "{}", stderr(&o));
+    let o = pathgrad().args(grad).args(["--diff-param", "sphere.bsdf.alpha.value"]).output().unwrap();
+    assert!(stderr(&o).contains("--diff-param sphere.bsdf.alpha.value applies only to --strategy diff"), "{}", stderr(&o));
+}
+
+/// The built-in Cornell box and its XML twin are one scene: one set of parameter names (Mitsuba's
+/// keys, `sphere.bsdf.alpha.value`).
+#[test]
+fn the_builtin_cornell_box_and_its_xml_twin_share_parameter_names() {
+    let sorted = |spec: &str| {
+        let scene = pathgrad::scene::load(spec, &[]).unwrap();
+        let mut names: Vec<String> = scene.params.entries().iter().map(|e| e.name.clone()).collect();
+        names.sort();
+        names
+    };
+    let xml = concat!(env!("CARGO_MANIFEST_DIR"), "/scenes/cornell-box/cornell-box.xml");
+    let builtin = sorted("builtin:cornell-box");
+    assert_eq!(builtin, sorted(xml));
+    assert!(builtin.contains(&"sphere.bsdf.alpha.value".to_string()), "{builtin:?}");
 }

@@ -103,7 +103,7 @@ fn tail_mean(iterates: &[f32]) -> f64 {
 /// The Cornell box's sphere roughness from 0.3 to a target rendered at 0.1 in 60 iterations.
 #[test]
 fn a_short_optimisation_recovers_the_sphere_roughness() {
-    let iterates = optimise("cornell-box", "sphere.alpha.value", 0.3, 0.1, 60, 1.0);
+    let iterates = optimise("cornell-box", "sphere.bsdf.alpha.value", 0.3, 0.1, 60, 1.0);
     let mean = tail_mean(&iterates);
     println!("alpha iterates {iterates:?}; mean of the last {TAIL}: {mean}");
     assert!((mean - 0.1).abs() <= TOLERANCE, "alpha ended at {mean} (target 0.1 ± {TOLERANCE})");

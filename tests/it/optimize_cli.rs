@@ -179,33 +179,33 @@ fn optimize_bad_input_names_the_flag_and_leaves_nothing_behind() {
     small.write_exr(dir.path().join("small.exr")).unwrap();
     let base = ["optimize", "builtin:cornell-box", "--width", "16", "--spp-primal", "1"];
     let cases: [(&[&str], &str); 10] = [
-        (&["--target-set", "sphere.alpha.value=0.1"], "give at least one --param"),
+        (&["--target-set", "sphere.bsdf.alpha.value=0.1"], "give at least one --param"),
         (
-            &["--target-set", "sphere.alpha.value=0.1", "--param", "nope=0.3"],
+            &["--target-set", "sphere.bsdf.alpha.value=0.1", "--param", "nope=0.3"],
             "--param: invalid nope: matches no parameter",
         ),
         (
-            &["--target-set", "sphere.alpha.value=0.1", "--param", "sphere.alpha.value=1.5"],
-            "--param: invalid sphere.alpha.value: value 1.5 is outside [0.001, 1]",
+            &["--target-set", "sphere.bsdf.alpha.value=0.1", "--param", "sphere.bsdf.alpha.value=1.5"],
+            "--param: invalid sphere.bsdf.alpha.value: value 1.5 is outside [0.001, 1]",
         ),
-        (&["--target-set", "sphere.alpha.value=x", "--param", "sphere.alpha.value"], "invalid --target-set"),
-        (&["--param", "sphere.alpha.value"], "give --target REF.exr or --target-set"),
+        (&["--target-set", "sphere.bsdf.alpha.value=x", "--param", "sphere.bsdf.alpha.value"], "invalid --target-set"),
+        (&["--param", "sphere.bsdf.alpha.value"], "give --target REF.exr or --target-set"),
         (
-            &["--target", "small.exr", "--param", "sphere.alpha.value"],
+            &["--target", "small.exr", "--param", "sphere.bsdf.alpha.value"],
             "invalid --target small.exr: it is 8×8 but the render is 16×16",
         ),
-        (&["--target", "missing.exr", "--param", "sphere.alpha.value"], "missing.exr"),
+        (&["--target", "missing.exr", "--param", "sphere.bsdf.alpha.value"], "missing.exr"),
         (
-            &["--target-set", "sphere.alpha.value=0.1", "--param", "sphere.alpha.value", "--spp-grad", "0"],
+            &["--target-set", "sphere.bsdf.alpha.value=0.1", "--param", "sphere.bsdf.alpha.value", "--spp-grad", "0"],
             "invalid --spp-grad",
         ),
-        (&["--target-set", "sphere.alpha.value=0.1", "--param", "sphere.alpha.value", "--lr", "0"], "invalid --lr"),
+        (&["--target-set", "sphere.bsdf.alpha.value=0.1", "--param", "sphere.bsdf.alpha.value", "--lr", "0"], "invalid --lr"),
         (
             &[
                 "--target-set",
-                "sphere.alpha.value=0.1",
+                "sphere.bsdf.alpha.value=0.1",
                 "--param",
-                "sphere.alpha.value",
+                "sphere.bsdf.alpha.value",
                 "--adaptive-estimator",
                 "pixel_mean",
             ],

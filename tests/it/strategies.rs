@@ -13,7 +13,7 @@ use crate::support::{TestGpu, scenes};
 /// (scene, the parameter that drives the differential sampler, another parameter of the scene).
 fn cases() -> Vec<(Scene, &'static str, &'static str)> {
     vec![
-        (builtin::load("cornell-box").unwrap(), "sphere.alpha.value", "white.reflectance.value"),
+        (builtin::load("cornell-box").unwrap(), "sphere.bsdf.alpha.value", "white.reflectance.value"),
         (builtin::load("blend").unwrap(), "object.weight.value", "base.reflectance.value"),
         (scenes::textured_environment(), "ball.alpha.value", "environment.radiance.value"),
     ]

@@ -58,12 +58,12 @@ fn loss_gradient_variance_is_that_of_seeded_estimates_uniform_and_adaptive() {
     let gpu = TestGpu::new();
     let scene = builtin::load("cornell-box").unwrap();
     let mut renderer = Renderer::new(&gpu.ctx, &scene).unwrap();
-    let alpha = scene.params.find("sphere.alpha.value").unwrap();
+    let alpha = scene.params.find("sphere.bsdf.alpha.value").unwrap();
     let white = scene.params.find("white.reflectance.value").unwrap();
     let opts = RenderOptions { width: 24, height: 24, spp: 1, seed: 7, ..RenderOptions::for_scene(&scene) };
     // The target: the same scene rendered rougher.
     let mut table = scene.params.clone();
-    table.set("sphere.alpha.value", &[0.3]).unwrap();
+    table.set("sphere.bsdf.alpha.value", &[0.3]).unwrap();
     renderer.set_params(&table).unwrap();
     let target = renderer.render(&RenderOptions { spp: 16, seed: 99, ..opts }).unwrap();
     renderer.set_params(&scene.params).unwrap();
@@ -88,7 +88,7 @@ fn loss_gradient_variance_is_that_of_seeded_estimates_uniform_and_adaptive() {
                 None => renderer.backward(&run, &adjoint, GradMode::Float).unwrap(),
                 Some(s) => renderer.backward_adaptive(&run, &adjoint, s, GradMode::Float).unwrap(),
             };
-            let a = g.get("sphere.alpha.value").unwrap();
+            let a = g.get("sphere.bsdf.alpha.value").unwrap();
             let w = g.get("white.reflectance.value").unwrap();
             m.add(a.iter().chain(w).map(|&v| f64::from(v)));
         }
@@ -170,8 +170,8 @@ fn cli_variance_of_the_loss_gradient_with_adaptive_rows() {
     let dir = tempfile::tempdir().unwrap();
     let o = crate::cli::pathgrad()
         .current_dir(dir.path())
-        .args(["variance", "builtin:cornell-box", "--param", "sphere.alpha.value", "--strategy", "bsdf"])
-        .args(["--target-set", "sphere.alpha.value=0.3", "--adaptive", "--runs", "3", "--spp", "1", "--width", "12"])
+        .args(["variance", "builtin:cornell-box", "--param", "sphere.bsdf.alpha.value", "--strategy", "bsdf"])
+        .args(["--target-set", "sphere.bsdf.alpha.value=0.3", "--adaptive", "--runs", "3", "--spp", "1", "--width", "12"])
         .arg("--json")
         .output()
         .unwrap();
