@@ -73,7 +73,7 @@ use crate::bsdf::Distribution;
 use crate::error::{Error, Result};
 use crate::scene::mesh_io::{catch_panic, read_file};
 use crate::scene::shapes::Geometry;
-use crate::scene::{Albedo, Camera, Material, MaterialId, Scene, bounds};
+use crate::scene::{Albedo, Camera, LoadOptions, Material, MaterialId, Scene, bounds};
 
 /// Width of the image when the camera does not say (pixels).
 pub const DEFAULT_WIDTH: u32 = 512;
@@ -94,6 +94,15 @@ const SUPPORTED_EXTENSIONS: &[&str] = &["KHR_materials_emissive_strength"];
 /// non-finite transforms or values, values outside glTF's ranges, undecodable images, node cycles,
 /// and whatever [`Scene::validate`] rejects (e.g. a scene without triangles).
 pub fn load(path: &Path) -> Result<Scene> {
+    load_with(path, &LoadOptions::default())
+}
+
+/// Loads a `.gltf` or `.glb` file as [`load`], under `options`' folder rule (by default a buffer
+/// or image URI must name a file inside the scene's folder).
+///
+/// # Errors
+/// As [`load`].
+pub fn load_with(path: &Path, options: &LoadOptions) -> Result<Scene> {
     let bytes = read_file(path)?;
     let gltf = parse(path, &bytes)?;
     let root = gltf.document.as_json();
@@ -106,6 +115,7 @@ pub fn load(path: &Path) -> Result<Scene> {
         material_names: unique_names(root.materials.iter().map(|m| m.name.as_deref()), "material"),
         node_names: unique_names(root.nodes.iter().map(|n| n.name.as_deref()), "node"),
         taken_names: HashSet::new(),
+        allow_outside_folder: options.allow_outside_folder,
         scene: Scene::new(&path.display().to_string(), placeholder_camera()),
         camera: None,
     };
@@ -260,6 +270,8 @@ struct Loader<'a> {
     materials: Vec<Option<MappedMaterial>>,
     material_names: Vec<String>,
     node_names: Vec<String>,
+    /// Whether URIs may name files outside the scene's folder.
+    allow_outside_folder: bool,
     /// Node names and the mesh names made so far (a primitive of a multi-primitive mesh is `node_j`).
     taken_names: HashSet<String>,
     scene: Scene,
@@ -536,7 +548,9 @@ impl Loader<'_> {
         }
         let relative = percent_decode(uri)
             .ok_or_else(|| self.error(at, format!("URI '{uri}' is not valid percent-encoded UTF-8")))?;
-        let file = self.path.parent().unwrap_or(Path::new(".")).join(&relative);
+        let dir = self.path.parent().unwrap_or(Path::new("."));
+        let file = crate::scene::load::scene_file(dir, &relative, self.allow_outside_folder)
+            .map_err(|m| self.error(at, format!("URI {m}")))?;
         std::fs::read(&file).map_err(|e| self.error(at, format!("cannot read '{relative}': {e}")))
     }
 

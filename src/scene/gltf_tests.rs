@@ -240,6 +240,18 @@ fn malformed_files_give_pinned_messages() {
         ("short_buffer.gltf", "short_buffer.gltf: buffers[0]: holds 44 bytes but its byteLength is 100"),
         ("bad_uri.gltf", "bad_uri.gltf: buffers[0]: URI '%FF.bin' is not valid percent-encoded UTF-8"),
         (
+            "climbing_uri.gltf",
+            "climbing_uri.gltf: buffers[0]: URI '../../../../../../../../etc/passwd' climbs out of the scene's folder: \
+             a scene reads only files inside its own folder (tests/data/gltf) unless reading outside is allowed \
+             (LoadOptions::allow_outside_folder; on the command line --allow-outside-folder)",
+        ),
+        (
+            "absolute_uri.gltf",
+            "absolute_uri.gltf: buffers[0]: URI '/etc/passwd' is an absolute path: a scene reads only files inside \
+             its own folder (tests/data/gltf) unless reading outside is allowed \
+             (LoadOptions::allow_outside_folder; on the command line --allow-outside-folder)",
+        ),
+        (
             "accessor_overflow.gltf",
             "accessor_overflow.gltf: accessors[0] (POSITION of meshes[0].primitives[0]): 30 elements of 12 bytes from \
              offset 0 (stride 12) do not fit in bufferViews[0], which has 36 bytes",

@@ -4,6 +4,7 @@
 pub mod builtin;
 pub mod flat;
 pub mod gltf;
+pub(crate) mod load;
 pub mod mesh_io;
 pub mod mitsuba;
 pub mod shapes;
@@ -13,6 +14,8 @@ use glam::{Vec2, Vec3};
 use crate::bsdf::Distribution;
 use crate::error::{Error, Result};
 use crate::params::{ParamId, ParamTable};
+
+pub use load::{LoadOptions, load, load_with};
 
 /// Index of a material in [`Scene::materials`].
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -151,46 +154,6 @@ pub mod bounds {
     pub const WEIGHT: (f32, f32) = (0.0, 1.0);
     /// Emitted radiance.
     pub const RADIANCE: (f32, f32) = (0.0, f32::INFINITY);
-}
-
-/// Loads the scene `spec` names: `builtin:NAME` (see [`builtin::BUILTIN_SCENES`]), a Mitsuba 3
-/// XML file (`.xml`, whose `<default>` values `defines` override: `-D name=value`), or a glTF 2.0
-/// file (`.gltf`, `.glb`).
-///
-/// # Errors
-/// [`Error::Scene`] for an unknown built-in or extension, `defines` for a scene that is not XML,
-/// and every loader error (with its file:line:col); [`Error::Io`] for unreadable files.
-pub fn load(spec: &str, defines: &[(String, String)]) -> Result<Scene> {
-    let path = std::path::Path::new(spec);
-    let ext = path.extension().and_then(|e| e.to_str()).map(str::to_ascii_lowercase);
-    if let Some((name, _)) = defines.first()
-        && ext.as_deref() != Some("xml")
-    {
-        return Err(Error::Scene {
-            location: spec.to_string(),
-            message: format!(
-                "-D {name}=…: only a Mitsuba XML scene has <default> values to override (see `pathgrad params` for the parameters of this one)"
-            ),
-        });
-    }
-    if let Some(name) = spec.strip_prefix("builtin:") {
-        return builtin::load(name);
-    }
-    let scene = match ext.as_deref() {
-        Some("xml") => mitsuba::load(path, defines)?,
-        Some("gltf" | "glb") => gltf::load(path)?,
-        _ => {
-            return Err(Error::Scene {
-                location: spec.to_string(),
-                message: format!(
-                    "unsupported scene format (supported: .xml (Mitsuba 3), .gltf/.glb, builtin:NAME with NAME one of {})",
-                    builtin::BUILTIN_SCENES.iter().map(|(n, _)| *n).collect::<Vec<_>>().join(", ")
-                ),
-            });
-        }
-    };
-    scene.validate()?;
-    Ok(scene)
 }
 
 impl Scene {

@@ -120,7 +120,8 @@ fn bad_outputs_and_options_fail_before_rendering_and_leave_nothing() {
     let grad = ["grad", "builtin:cornell-box", "--device", "99", "--target-set", "sphere.bsdf.alpha.value=0.2"];
     let o = pathgrad().args(grad).args(["--param", "typo"]).output().unwrap();
     assert!(stderr(&o).contains("--param: invalid typo: matches no parameter"), "{}", stderr(&o));
-    let o = pathgrad().args(grad).args(["--param", "sphere.bsdf.alpha.value", "--target-set", "typo=1"]).output().unwrap();
+    let o =
+        pathgrad().args(grad).args(["--param", "sphere.bsdf.alpha.value", "--target-set", "typo=1"]).output().unwrap();
     assert!(stderr(&o).contains("--target-set: invalid typo"), "{}", stderr(&o));
     let o = pathgrad()
         .current_dir(dir.path())
@@ -199,7 +200,11 @@ fn limits_are_stated_and_ignored_flags_refused() {
     let o = pathgrad().args(grad).args(["--q", "0.3"]).output().unwrap();
     assert!(stderr(&o).contains("--q 0.3 applies only to --strategy diff"), "{}", stderr(&o));
     let o = pathgrad().args(grad).args(["--diff-param", "sphere.bsdf.alpha.value"]).output().unwrap();
-    assert!(stderr(&o).contains("--diff-param sphere.bsdf.alpha.value applies only to --strategy diff"), "{}", stderr(&o));
+    assert!(
+        stderr(&o).contains("--diff-param sphere.bsdf.alpha.value applies only to --strategy diff"),
+        "{}",
+        stderr(&o)
+    );
 }
 
 /// The built-in Cornell box and its XML twin are one scene: one set of parameter names (Mitsuba's
@@ -216,4 +221,110 @@ fn the_builtin_cornell_box_and_its_xml_twin_share_parameter_names() {
     let builtin = sorted("builtin:cornell-box");
     assert_eq!(builtin, sorted(xml));
     assert!(builtin.contains(&"sphere.bsdf.alpha.value".to_string()), "{builtin:?}");
+}
+
+/// A scene reads only files inside its folder unless allowed: glTF URIs and XML `filename`s that
+/// are absolute or climb out are refused, and `--allow-outside-folder` lets them be read.
+#[test]
+fn scenes_read_only_inside_their_folder_unless_allowed() {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let absolute = root.join("tests/data/gltf/absolute_uri.gltf");
+    let o = pathgrad().arg("params").arg(&absolute).output().unwrap();
+    assert!(stderr(&o).contains("URI '/etc/passwd' is an absolute path"), "{}", stderr(&o));
+    let o = pathgrad().arg("params").arg(&absolute).arg("--allow-outside-folder").output().unwrap();
+    // Allowed, the file is read (and its bytes make no valid mesh: the error comes from the mesh).
+    assert!(!o.status.success() && stderr(&o).contains("meshes[0].primitives[0]"), "{}", stderr(&o));
+
+    let dir = tempfile::tempdir().unwrap();
+    std::fs::create_dir(dir.path().join("scene")).unwrap();
+    std::fs::write(dir.path().join("tri.obj"), "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n").unwrap();
+    let xml = dir.path().join("scene/s.xml");
+    std::fs::write(
+        &xml,
+        r#"<scene version="3.0.0">
+    <sensor type="perspective"><transform name="to_world"><lookat origin="0, 0, -3" target="0, 0, 0" up="0, 1, 0"/></transform></sensor>
+    <shape type="obj"><string name="filename" value="../tri.obj"/><emitter type="area"><rgb name="radiance" value="1"/></emitter></shape>
+</scene>"#,
+    )
+    .unwrap();
+    let o = pathgrad().arg("params").arg(&xml).output().unwrap();
+    assert!(stderr(&o).contains("'../tri.obj' climbs out of the scene's folder"), "{}", stderr(&o));
+    ok(&pathgrad().arg("params").arg(&xml).arg("--allow-outside-folder").output().unwrap());
+}
+
+/// Curved shapes are tessellated for the size rendered: a 16-pixel film rendered at 1024 pixels
+/// gets the 1024-pixel film's mesh, and a 4096-pixel film rendered at 32 the 32-pixel one's.
+#[test]
+fn spheres_are_tessellated_for_the_rendered_size() {
+    use pathgrad::scene::{LoadOptions, load_with};
+    let dir = tempfile::tempdir().unwrap();
+    let scene = |film: u32| {
+        let path = dir.path().join(format!("s{film}.xml"));
+        std::fs::write(
+            &path,
+            format!(
+                r#"<scene version="3.0.0">
+    <sensor type="perspective"><film type="hdrfilm"><integer name="width" value="{film}"/><integer name="height" value="{film}"/></film>
+        <transform name="to_world"><lookat origin="0, 0, -3" target="0, 0, 0" up="0, 1, 0"/></transform></sensor>
+    <shape type="sphere"><emitter type="area"><rgb name="radiance" value="1"/></emitter></shape>
+</scene>"#
+            ),
+        )
+        .unwrap();
+        path.display().to_string()
+    };
+    let triangles = |spec: &str, width: Option<u32>| {
+        let s = load_with(spec, &LoadOptions { width, ..LoadOptions::default() }).unwrap();
+        (s.triangle_count(), s.camera.width, s.camera.height)
+    };
+    let (small, large) = (scene(16), scene(4096));
+    let (fine, _, _) = triangles(&scene(1024), None);
+    let (coarse, _, _) = triangles(&scene(32), None);
+    assert!(fine > 4 * coarse, "{fine} vs {coarse}");
+    assert_eq!(triangles(&small, Some(1024)), (fine, 1024, 1024));
+    assert_eq!(triangles(&large, Some(32)), (coarse, 32, 32));
+}
+
+/// `--resume` works from another working directory (paths are stored absolute) and refuses a
+/// target whose content changed, unless told.
+#[test]
+fn resume_stores_absolute_paths_and_notices_a_changed_target() {
+    let dir = tempfile::tempdir().unwrap();
+    let target = dir.path().join("target.exr");
+    let mut image = pathgrad::image::Image::new(16, 12);
+    image.as_mut_slice().fill(0.3);
+    image.write_exr(&target).unwrap();
+    let start = |cwd: &Path, extra: &[&str]| {
+        pathgrad()
+            .current_dir(cwd)
+            .args(["optimize", "builtin:blend", "--target", "target.exr", "--param", "object.weight.value=0.8"])
+            .args(["--width", "16", "--spp-primal", "1", "--spp-grad", "1", "--spp", "2", "-o", "run"])
+            .args(extra)
+            .output()
+            .unwrap()
+    };
+    ok(&start(dir.path(), &["--iters", "1"]));
+    let elsewhere = tempfile::tempdir().unwrap();
+    let run = dir.path().join("run");
+    let resume = |iters: &str, extra: &[&str]| {
+        pathgrad()
+            .current_dir(elsewhere.path())
+            .args(["optimize", "--resume"])
+            .arg(&run)
+            .args(["--iters", iters])
+            .args(extra)
+            .output()
+            .unwrap()
+    };
+    ok(&resume("2", &[]));
+    image.as_mut_slice().fill(0.6);
+    image.write_exr(&target).unwrap();
+    let o = resume("3", &[]);
+    let e = stderr(&o);
+    assert!(!o.status.success() && e.contains("target.exr changed since the run started"), "{e}");
+    ok(&resume("3", &["--allow-changed-target"]));
+    let state: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(run.join("state.json")).unwrap()).unwrap();
+    assert_eq!(state["iteration"], 3);
+    assert!(Path::new(state["config"]["target"].as_str().unwrap()).is_absolute(), "{state}");
 }

@@ -192,14 +192,17 @@ fn optimize_bad_input_names_the_flag_and_leaves_nothing_behind() {
         (&["--param", "sphere.bsdf.alpha.value"], "give --target REF.exr or --target-set"),
         (
             &["--target", "small.exr", "--param", "sphere.bsdf.alpha.value"],
-            "invalid --target small.exr: it is 8×8 but the render is 16×16",
+            "small.exr: it is 8×8 but the render is 16×16",
         ),
         (&["--target", "missing.exr", "--param", "sphere.bsdf.alpha.value"], "missing.exr"),
         (
             &["--target-set", "sphere.bsdf.alpha.value=0.1", "--param", "sphere.bsdf.alpha.value", "--spp-grad", "0"],
             "invalid --spp-grad",
         ),
-        (&["--target-set", "sphere.bsdf.alpha.value=0.1", "--param", "sphere.bsdf.alpha.value", "--lr", "0"], "invalid --lr"),
+        (
+            &["--target-set", "sphere.bsdf.alpha.value=0.1", "--param", "sphere.bsdf.alpha.value", "--lr", "0"],
+            "invalid --lr",
+        ),
         (
             &[
                 "--target-set",

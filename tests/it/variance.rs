@@ -171,7 +171,17 @@ fn cli_variance_of_the_loss_gradient_with_adaptive_rows() {
     let o = crate::cli::pathgrad()
         .current_dir(dir.path())
         .args(["variance", "builtin:cornell-box", "--param", "sphere.bsdf.alpha.value", "--strategy", "bsdf"])
-        .args(["--target-set", "sphere.bsdf.alpha.value=0.3", "--adaptive", "--runs", "3", "--spp", "1", "--width", "12"])
+        .args([
+            "--target-set",
+            "sphere.bsdf.alpha.value=0.3",
+            "--adaptive",
+            "--runs",
+            "3",
+            "--spp",
+            "1",
+            "--width",
+            "12",
+        ])
         .arg("--json")
         .output()
         .unwrap();

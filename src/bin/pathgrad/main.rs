@@ -50,6 +50,9 @@ enum Command {
         /// Print JSON instead of text.
         #[arg(long)]
         json: bool,
+        /// Let the scene read files outside its own folder (absolute paths, `..`).
+        #[arg(long)]
+        allow_outside_folder: bool,
     },
     /// List the Vulkan devices and whether pathgrad can use them.
     Devices {
@@ -81,6 +84,23 @@ struct RenderFlags {
     /// Vulkan device: an index or UUID from `pathgrad devices`, or `cpu` (env: PATHGRAD_DEVICE).
     #[arg(long)]
     device: Option<String>,
+    /// Let the scene read files outside its own folder (absolute paths, `..`); by default a
+    /// scene reads only the files beside and below it.
+    #[arg(long)]
+    allow_outside_folder: bool,
+}
+
+impl RenderFlags {
+    /// Loads `spec` for these flags: curved shapes are tessellated for the size rendered.
+    fn load(&self, spec: &str, defines: &[(String, String)]) -> Result<pathgrad::scene::Scene> {
+        let options = pathgrad::scene::LoadOptions {
+            defines: defines.to_vec(),
+            width: self.width,
+            height: self.height,
+            allow_outside_folder: self.allow_outside_folder,
+        };
+        Ok(pathgrad::scene::load_with(spec, &options)?)
+    }
 }
 
 /// How gradient passes sample paths: every command that estimates gradients takes these.
@@ -314,7 +334,7 @@ fn grad(args: &GradArgs) -> Result<()> {
             Some((output, outputs, exr_file, png_file))
         }
     };
-    let scene = pathgrad::scene::load(&args.scene, &args.defines)?;
+    let scene = args.flags.load(&args.scene, &args.defines)?;
     let mut opts = options(&scene, &args.flags)?;
     let first_param = args.image_gradient.as_deref().or_else(|| args.params.first().map(String::as_str));
     args.sampling.apply(&scene, first_param, &mut opts)?;
@@ -413,7 +433,9 @@ fn parse_define(text: &str) -> std::result::Result<(String, String), String> {
 
 fn run(cli: Cli) -> Result<()> {
     match cli.command {
-        Command::Params { scene, defines, json } => params(&scene, &defines, json),
+        Command::Params { scene, defines, json, allow_outside_folder } => {
+            params(&scene, &defines, json, allow_outside_folder)
+        }
         Command::Devices { json } => devices(json),
         Command::Render(args) => render(&args),
         Command::Grad(args) => grad(&args),
@@ -422,8 +444,10 @@ fn run(cli: Cli) -> Result<()> {
     }
 }
 
-fn params(spec: &str, defines: &[(String, String)], json: bool) -> Result<()> {
-    let scene = pathgrad::scene::load(spec, defines)?;
+fn params(spec: &str, defines: &[(String, String)], json: bool, allow_outside_folder: bool) -> Result<()> {
+    let options =
+        pathgrad::scene::LoadOptions { defines: defines.to_vec(), allow_outside_folder, ..Default::default() };
+    let scene = pathgrad::scene::load_with(spec, &options)?;
     let table = &scene.params;
     if json {
         let items: Vec<serde_json::Value> = table
@@ -567,7 +591,7 @@ fn render(args: &RenderArgs) -> Result<()> {
     let main_file = outputs.stage(&args.output)?;
     let preview_file =
         if is_exr && !args.no_preview { Some(outputs.stage(&preview_path(&args.output))?) } else { None };
-    let scene = pathgrad::scene::load(&args.scene, &args.defines)?;
+    let scene = args.flags.load(&args.scene, &args.defines)?;
     let opts = options(&scene, &args.flags)?;
     let progress = progress_bar(u64::from(opts.spp), "rendering [{bar:40}] {pos}/{len} spp", args.json);
     let start = Instant::now();

@@ -103,6 +103,10 @@ pub(super) struct OptimizeArgs {
     /// --time-budget, --device and --json may change.
     #[arg(long, value_name = "DIR")]
     resume: Option<PathBuf>,
+    /// With --resume: accept a --target file whose content changed since the run started (the
+    /// run then continues towards the new image).
+    #[arg(long, requires = "resume")]
+    allow_changed_target: bool,
     #[command(flatten)]
     flags: RenderFlags,
     #[command(flatten)]
@@ -121,7 +125,12 @@ struct RunConfig {
     param_args: Vec<String>,
     /// The optimised parameters' full names, in table order.
     params: Vec<String>,
+    /// `--target`, as an absolute path.
     target: Option<PathBuf>,
+    /// A hash of the target file's bytes ([`content_hash`]), so that `--resume` notices a
+    /// changed target.
+    #[serde(default)]
+    target_hash: Option<String>,
     target_set: Vec<(String, String)>,
     iters: u64,
     time_budget: Option<f64>,
@@ -143,6 +152,9 @@ struct RunConfig {
     nee: bool,
     /// The parameter driving `diff`'s sampler (resolved); `None` for `bsdf`.
     diff_param: Option<String>,
+    /// `--allow-outside-folder`.
+    #[serde(default)]
+    allow_outside_folder: bool,
 }
 
 /// `state.json`: a run between two iterations.
@@ -245,7 +257,7 @@ fn start(args: &OptimizeArgs) -> Result<Session> {
     if args.params.is_empty() {
         bail!("give at least one --param NAME[=INIT] to optimise");
     }
-    let scene = pathgrad::scene::load(spec, &args.defines).with_context(|| format!("loading {spec}"))?;
+    let scene = args.flags.load(spec, &args.defines).with_context(|| format!("loading {spec}"))?;
     // --param NAME[=INIT]: the names (globs) to optimise and the initial values.
     let mut patterns = Vec::new();
     let mut inits = Vec::new();
@@ -268,12 +280,15 @@ fn start(args: &OptimizeArgs) -> Result<Session> {
         Strategy::Bsdf => None,
         Strategy::Diff { target, .. } => Some(scene.params.entry(target).name.clone()),
     };
+    let target = args.target.as_deref().map(absolute).transpose()?;
+    let target_hash = target.as_deref().map(content_hash).transpose()?;
     let config = RunConfig {
-        scene: spec.clone(),
+        scene: absolute_scene(spec)?,
         defines: args.defines.clone(),
         param_args: args.params.clone(),
         params: ids.iter().map(|&id| scene.params.entry(id).name.clone()).collect(),
-        target: args.target.clone(),
+        target,
+        target_hash,
         target_set: args.target_set.clone(),
         iters: args.iters.unwrap_or(DEFAULT_ITERS),
         time_budget: args.time_budget,
@@ -296,6 +311,7 @@ fn start(args: &OptimizeArgs) -> Result<Session> {
         q: args.sampling.q(),
         nee: opts.nee,
         diff_param,
+        allow_outside_folder: args.flags.allow_outside_folder,
     };
     let dir = args.output.clone().unwrap_or_else(|| PathBuf::from(DEFAULT_OUTPUT));
     refuse_existing_run(&dir)?;
@@ -326,6 +342,29 @@ fn start(args: &OptimizeArgs) -> Result<Session> {
     session.history.create(&session.dir.join("history.csv"))?;
     write_state(&session, "started")?;
     Ok(session)
+}
+
+/// `path` made absolute (against the working directory), so that a run resumes from anywhere.
+fn absolute(path: &Path) -> Result<PathBuf> {
+    std::path::absolute(path).with_context(|| format!("making {} absolute", path.display()))
+}
+
+/// A scene spec with its file made absolute (`builtin:NAME` as it is).
+fn absolute_scene(spec: &str) -> Result<String> {
+    if spec.starts_with("builtin:") {
+        return Ok(spec.to_string());
+    }
+    Ok(absolute(Path::new(spec))?.display().to_string())
+}
+
+/// A 64-bit FNV-1a hash of the bytes of `path`, as 16 hex digits: enough to notice that a file
+/// changed (it is no defence against a deliberate collision).
+fn content_hash(path: &Path) -> Result<String> {
+    const OFFSET: u64 = 0xcbf2_9ce4_8422_2325;
+    const PRIME: u64 = 0x0000_0100_0000_01b3;
+    let bytes = fs::read(path).with_context(|| format!("reading {}", path.display()))?;
+    let hash = bytes.iter().fold(OFFSET, |h, &b| (h ^ u64::from(b)).wrapping_mul(PRIME));
+    Ok(format!("{hash:016x}"))
 }
 
 /// Refuses an output directory that already holds a run.
@@ -380,13 +419,31 @@ fn resume(args: &OptimizeArgs, dir: &Path, given: &BTreeSet<String>) -> Result<S
     }
     let mut config = state.config.clone();
     check_unchanged(args, given, &config, &path)?;
+    if let (Some(target), Some(stored)) = (&config.target, &config.target_hash) {
+        let now = content_hash(target)?;
+        if now != *stored && !args.allow_changed_target {
+            bail!(
+                "--resume {}: the target {} changed since the run started (its content hash was {stored}, now {now}); \
+                 restore it, or pass --allow-changed-target to continue towards the new image",
+                dir.display(),
+                target.display()
+            );
+        }
+        config.target_hash = Some(now);
+    }
     if let Some(iters) = args.iters {
         config.iters = iters;
     }
     if args.time_budget.is_some() {
         config.time_budget = args.time_budget;
     }
-    let scene = pathgrad::scene::load(&config.scene, &config.defines)
+    let load = pathgrad::scene::LoadOptions {
+        defines: config.defines.clone(),
+        width: Some(config.width),
+        height: Some(config.height),
+        allow_outside_folder: config.allow_outside_folder,
+    };
+    let scene = pathgrad::scene::load_with(&config.scene, &load)
         .with_context(|| format!("loading {} (from {})", config.scene, path.display()))?;
     let mut table = scene.params.clone();
     let mut ids = Vec::new();
@@ -441,10 +498,17 @@ fn check_unchanged(args: &OptimizeArgs, given: &BTreeSet<String>, c: &RunConfig,
     let pairs = |v: &[(String, String)]| v.iter().map(|(n, x)| format!("{n}={x}")).collect::<Vec<_>>().join(" ");
     let path = |p: &Option<PathBuf>| p.as_deref().map_or("none".into(), |p| p.display().to_string());
     let text = |v: &dyn std::fmt::Display| v.to_string();
-    check("scene", "SCENE", args.scene.clone(), c.scene.clone());
+    check("scene", "SCENE", args.scene.as_deref().map(absolute_scene).transpose()?, c.scene.clone());
     check("defines", "-D", Some(pairs(&args.defines)), pairs(&c.defines));
     check("params", "--param", Some(args.params.join(" ")), c.param_args.join(" "));
-    check("target", "--target", Some(path(&args.target)), path(&c.target));
+    let target = args.target.as_deref().map(absolute).transpose()?;
+    check("target", "--target", Some(path(&target)), path(&c.target));
+    check(
+        "allow_outside_folder",
+        "--allow-outside-folder",
+        Some(text(&args.flags.allow_outside_folder)),
+        text(&c.allow_outside_folder),
+    );
     check("target_set", "--target-set", Some(pairs(&args.target_set)), pairs(&c.target_set));
     check("lr", "--lr", args.lr.map(|v| text(&v)), text(&c.lr));
     check("spp_primal", "--spp-primal", args.spp_primal.map(|v| text(&v)), text(&c.spp_primal));

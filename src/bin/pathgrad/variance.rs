@@ -127,7 +127,7 @@ struct Row {
 }
 
 pub(crate) fn run(args: &VarianceArgs) -> Result<()> {
-    let scene = pathgrad::scene::load(&args.scene, &args.defines)?;
+    let scene = args.flags.load(&args.scene, &args.defines)?;
     let mut opts = options(&scene, &args.flags)?;
     opts.nee = !args.no_nee;
     let param = scene.params.find(&args.param).with_context(|| {

@@ -10,7 +10,7 @@ use roxmltree::NodeId;
 use super::xml::{El, Props, Xml, is_identifier};
 use crate::error::{Error, Result};
 use crate::scene::shapes::Geometry;
-use crate::scene::{Camera, MaterialId, Scene, TextureId, bounds};
+use crate::scene::{Camera, LoadOptions, MaterialId, Scene, TextureId, bounds};
 
 /// Deepest nesting of BSDFs and textures (through nested elements and `<ref>`s together).
 pub(super) const MAX_NESTING: usize = 16;
@@ -44,20 +44,27 @@ pub(crate) fn load_mesh_file(format: MeshFormat, path: &Path) -> Result<Geometry
 }
 
 /// Reads `path` and loads it with [`super::load_str`].
-pub(super) fn load_path(path: &Path, defines: &[(String, String)], meshes: MeshLoader) -> Result<Scene> {
+pub(super) fn load_path(path: &Path, options: &LoadOptions, meshes: MeshLoader) -> Result<Scene> {
     let bytes = std::fs::read(path).map_err(|source| Error::Io { path: path.to_path_buf(), source })?;
     let text = String::from_utf8(bytes).map_err(|e| Error::Scene {
         location: path.display().to_string(),
         message: format!("not UTF-8 text (invalid byte at offset {})", e.utf8_error().valid_up_to()),
     })?;
-    load_text(&text, path, defines, meshes)
+    load_text_with(&text, path, options, meshes)
+}
+
+/// Parses `text` (read from `file`) into a scene, with `defines` and otherwise default options.
+#[cfg(test)]
+pub(super) fn load_text(text: &str, file: &Path, defines: &[(String, String)], meshes: MeshLoader) -> Result<Scene> {
+    let options = LoadOptions { defines: defines.to_vec(), ..LoadOptions::default() };
+    load_text_with(text, file, &options, meshes)
 }
 
 /// Parses `text` (read from `file`) into a scene.
-pub(super) fn load_text(text: &str, file: &Path, defines: &[(String, String)], meshes: MeshLoader) -> Result<Scene> {
+pub(super) fn load_text_with(text: &str, file: &Path, options: &LoadOptions, meshes: MeshLoader) -> Result<Scene> {
     let name = file.display().to_string();
-    let options = roxmltree::ParsingOptions { allow_dtd: false, nodes_limit: MAX_NODES, ..Default::default() };
-    let doc = roxmltree::Document::parse_with_options(text, options).map_err(|e| {
+    let parsing = roxmltree::ParsingOptions { allow_dtd: false, nodes_limit: MAX_NODES, ..Default::default() };
+    let doc = roxmltree::Document::parse_with_options(text, parsing).map_err(|e| {
         let pos = e.pos();
         let message = e.to_string().replace(&format!(" at {pos}"), "");
         Error::Scene {
@@ -77,8 +84,9 @@ pub(super) fn load_text(text: &str, file: &Path, defines: &[(String, String)], m
         textures: HashMap::new(),
         in_progress: Vec::new(),
         meshes,
+        options,
     };
-    loader.run(doc.root_element(), defines)?;
+    loader.run(doc.root_element(), &options.defines)?;
     loader.scene.validate()?;
     Ok(loader.scene)
 }
@@ -103,6 +111,8 @@ pub(super) struct Loader<'a> {
     pub in_progress: Vec<NodeId>,
     /// The mesh file reader.
     pub meshes: MeshLoader,
+    /// The rendered size and the folder rule.
+    pub options: &'a LoadOptions,
 }
 
 impl<'a> Loader<'a> {
@@ -132,7 +142,12 @@ impl<'a> Loader<'a> {
 
         let sensors: Vec<El<'a>> = children.iter().copied().filter(|c| c.has_tag_name("sensor")).collect();
         match sensors.first() {
-            Some(&s) => self.sensor(s)?,
+            Some(&s) => {
+                self.sensor(s)?;
+                // Curved shapes are tessellated for the size rendered, not the film's.
+                let camera = &mut self.scene.camera;
+                (camera.width, camera.height) = self.options.size_for((camera.width, camera.height));
+            }
             None => {
                 return Err(self.x.err(
                     root,

@@ -70,7 +70,7 @@ use std::path::Path;
 pub use shapes::{MAX_CHORD_ERROR_PX, MAX_SEGMENTS, MIN_SEGMENTS, segments_for, unit_disk, unit_sphere};
 
 use crate::error::Result;
-use crate::scene::Scene;
+use crate::scene::{LoadOptions, Scene};
 
 /// Loads the Mitsuba XML scene at `path`; `defines` (name, value) override its `<default>`s.
 /// Relative file names (meshes, bitmaps) resolve against the file's directory.
@@ -80,7 +80,18 @@ use crate::scene::Scene;
 /// `file:line:col` for anything wrong or unsupported in it; [`crate::Error::InvalidArgument`] for
 /// a define whose name is not an identifier.
 pub fn load(path: &Path, defines: &[(String, String)]) -> Result<Scene> {
-    loader::load_path(path, defines, loader::load_mesh_file)
+    let options = LoadOptions { defines: defines.to_vec(), ..LoadOptions::default() };
+    loader::load_path(path, &options, loader::load_mesh_file)
+}
+
+/// Loads the Mitsuba XML scene at `path` with `options`: its defines; the rendered size, for which
+/// the camera is set up and curved shapes are tessellated; whether files outside the scene's
+/// folder may be read (by default a `filename` must lie inside it).
+///
+/// # Errors
+/// As [`load`].
+pub fn load_with(path: &Path, options: &LoadOptions) -> Result<Scene> {
+    loader::load_path(path, options, loader::load_mesh_file)
 }
 
 /// Loads a Mitsuba XML scene from `text`, as if read from `file` (used in messages and to resolve
@@ -89,5 +100,6 @@ pub fn load(path: &Path, defines: &[(String, String)]) -> Result<Scene> {
 /// # Errors
 /// As [`load`].
 pub fn load_str(text: &str, file: &Path, defines: &[(String, String)]) -> Result<Scene> {
-    loader::load_text(text, file, defines, loader::load_mesh_file)
+    let options = LoadOptions { defines: defines.to_vec(), ..LoadOptions::default() };
+    loader::load_text_with(text, file, &options, loader::load_mesh_file)
 }

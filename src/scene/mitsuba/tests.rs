@@ -12,7 +12,7 @@ use super::*;
 use crate::bsdf::Distribution;
 use crate::error::{Error, Result};
 use crate::scene::shapes::{Geometry, cuboid, quad, sphere, triangle_area};
-use crate::scene::{Albedo, Camera, Material, builtin};
+use crate::scene::{Albedo, Camera, LoadOptions, Material, builtin};
 
 /// A sensor looking down −z from (0, 0, 5) on a 64 × 48 film.
 pub(super) const SENSOR: &str = r#"<sensor type="perspective"><float name="fov" value="40"/><transform name="to_world"><lookat origin="0, 0, 5" target="0, 0, 0" up="0, 1, 0"/></transform><film type="hdrfilm"><integer name="width" value="64"/><integer name="height" value="48"/></film></sensor>"#;
@@ -555,7 +555,8 @@ fn material_values(s: &Scene, m: &Material) -> String {
 
 #[test]
 fn cornell_box_xml_is_the_builtin_twin() {
-    let xml = load_path(&manifest("scenes/cornell-box/cornell-box.xml"), &[], obj_for_tests).unwrap();
+    let xml =
+        load_path(&manifest("scenes/cornell-box/cornell-box.xml"), &LoadOptions::default(), obj_for_tests).unwrap();
     let builtin = builtin::load("cornell-box").unwrap();
     assert!(xml.warnings.is_empty(), "{:?}", xml.warnings);
     assert_eq!(xml.camera, builtin.camera);
@@ -577,13 +578,13 @@ fn cornell_box_xml_is_the_builtin_twin() {
     }
     assert_eq!(param(&xml, "light.emitter.radiance.value"), [17.0, 12.0, 4.0]);
     assert_eq!(param(&xml, "sphere.bsdf.alpha.value"), [0.2]);
-    let spp = load_path(&manifest("scenes/cornell-box/cornell-box.xml"), &[("spp".into(), "64".into())], obj_for_tests);
+    let spp = load_path(&manifest("scenes/cornell-box/cornell-box.xml"), &defines(&[("spp", "64")]), obj_for_tests);
     assert_eq!(spp.unwrap().default_spp, Some(64));
 }
 
 #[test]
 fn blend_xml_loads() {
-    let s = load_path(&manifest("scenes/blend/blend.xml"), &[("weight".into(), "0.3".into())], obj_for_tests).unwrap();
+    let s = load_path(&manifest("scenes/blend/blend.xml"), &defines(&[("weight", "0.3")]), obj_for_tests).unwrap();
     assert!(s.warnings.is_empty(), "{:?}", s.warnings);
     assert_eq!(param(&s, "object.weight.value"), [0.3]);
     assert_eq!(param(&s, "object.bsdf_0.reflectance.value"), [0.1, 0.6, 0.35]);
@@ -602,7 +603,8 @@ fn blend_xml_loads() {
 
 #[test]
 fn cornell_box_xml_renders_bit_for_bit_like_the_builtin_on_the_cpu() {
-    let xml = load_path(&manifest("scenes/cornell-box/cornell-box.xml"), &[], obj_for_tests).unwrap();
+    let xml =
+        load_path(&manifest("scenes/cornell-box/cornell-box.xml"), &LoadOptions::default(), obj_for_tests).unwrap();
     let builtin = builtin::load("cornell-box").unwrap();
     let opts = crate::integrator::RenderOptions {
         width: 24,
@@ -615,4 +617,12 @@ fn cornell_box_xml_renders_bit_for_bit_like_the_builtin_on_the_cpu() {
     let bits = |i: &crate::image::Image| i.as_slice().iter().map(|v| v.to_bits()).collect::<Vec<_>>();
     assert!(a.mean()[0] > 0.0);
     assert_eq!(bits(&a), bits(&b));
+}
+
+/// Load options with these defines.
+fn defines(pairs: &[(&str, &str)]) -> LoadOptions {
+    LoadOptions {
+        defines: pairs.iter().map(|(n, v)| (n.to_string(), v.to_string())).collect(),
+        ..LoadOptions::default()
+    }
 }

@@ -5,6 +5,7 @@ use std::path::Path;
 
 use super::loader::{load_path, load_text};
 use super::tests::{SENSOR, load, obj_for_tests, wrap};
+use crate::scene::LoadOptions;
 
 /// The message of the error `body` (inside a scene with a sensor, file `test.xml`) gives.
 fn err(body: &str) -> String {
@@ -84,7 +85,7 @@ fn fixtures_give_their_pinned_messages() {
     ];
     for (file, tail) in cases {
         let path = dir.join(file);
-        let e = load_path(&path, &[], obj_for_tests).map(|_| ()).unwrap_err().to_string();
+        let e = load_path(&path, &LoadOptions::default(), obj_for_tests).map(|_| ()).unwrap_err().to_string();
         assert_eq!(e, format!("{}:{tail}", path.display()), "{file}");
     }
     // Every fixture is pinned (unknown_property.xml loads, with warnings: below).
@@ -94,7 +95,7 @@ fn fixtures_give_their_pinned_messages() {
     assert!(files.is_empty(), "fixtures without a pinned message: {files:?}");
 
     let path = dir.join("unknown_property.xml");
-    let s = load_path(&path, &[], obj_for_tests).unwrap();
+    let s = load_path(&path, &LoadOptions::default(), obj_for_tests).unwrap();
     let p = path.display();
     assert_eq!(
         s.warnings,

@@ -1,0 +1,186 @@
+//! Loading a scene by name: `LoadOptions` (defines, the rendered size, where files may be read) and the folder rule.
+
+use std::path::{Component, Path, PathBuf};
+
+use super::{Scene, builtin, gltf, mitsuba};
+use crate::error::{Error, Result};
+
+/// How [`load_with`] reads a scene.
+///
+/// # Example
+///
+/// ```
+/// use pathgrad::scene::{LoadOptions, load_with};
+///
+/// // The Cornell box XML, tessellated and sized for a 64-pixel-wide render.
+/// let path = concat!(env!("CARGO_MANIFEST_DIR"), "/scenes/cornell-box/cornell-box.xml");
+/// let scene = load_with(path, &LoadOptions { width: Some(64), ..LoadOptions::default() })?;
+/// assert_eq!((scene.camera.width, scene.camera.height), (64, 64));
+/// # Ok::<(), pathgrad::error::Error>(())
+/// ```
+#[derive(Clone, Debug, Default, PartialEq, Eq)]
+pub struct LoadOptions {
+    /// Overrides of a Mitsuba XML scene's `<default>` values (`-D name=value`).
+    pub defines: Vec<(String, String)>,
+    /// The image width to render, if not the scene's own. The scene's camera takes this size
+    /// (with only a width, the height follows the film's aspect ratio), and curved shapes are
+    /// tessellated for the size actually rendered.
+    pub width: Option<u32>,
+    /// The image height to render, if not the scene's own (see `width`).
+    pub height: Option<u32>,
+    /// Let the scene read files outside its own folder: absolute paths, `..`, or links that lead
+    /// out. Off by default, so that a scene from elsewhere can read nothing but its own files.
+    pub allow_outside_folder: bool,
+}
+
+impl LoadOptions {
+    /// The image size for a film of `film` pixels (width, height) under these options.
+    pub fn size_for(&self, film: (u32, u32)) -> (u32, u32) {
+        match (self.width, self.height) {
+            (Some(w), Some(h)) => (w, h),
+            (Some(w), None) => (w, ((u64::from(w) * u64::from(film.1)) / u64::from(film.0.max(1))).max(1) as u32),
+            (None, Some(h)) => (film.0, h),
+            (None, None) => film,
+        }
+    }
+}
+
+/// Loads the scene `spec` names: `builtin:NAME` (see [`builtin::BUILTIN_SCENES`]), a Mitsuba 3
+/// XML file (`.xml`, whose `<default>` values `defines` override: `-D name=value`), or a glTF 2.0
+/// file (`.gltf`, `.glb`); with the default [`LoadOptions`] otherwise.
+///
+/// # Errors
+/// As [`load_with`].
+pub fn load(spec: &str, defines: &[(String, String)]) -> Result<Scene> {
+    load_with(spec, &LoadOptions { defines: defines.to_vec(), ..LoadOptions::default() })
+}
+
+/// Loads the scene `spec` names (as [`load`]) with `options`.
+///
+/// # Errors
+/// [`Error::Scene`] for an unknown built-in or extension, `defines` for a scene that is not XML,
+/// a file the scene names outside its folder (unless allowed), and every loader error (with its
+/// file:line:col); [`Error::Io`] for unreadable files.
+pub fn load_with(spec: &str, options: &LoadOptions) -> Result<Scene> {
+    let path = Path::new(spec);
+    let ext = path.extension().and_then(|e| e.to_str()).map(str::to_ascii_lowercase);
+    if let Some((name, _)) = options.defines.first()
+        && ext.as_deref() != Some("xml")
+    {
+        return Err(Error::Scene {
+            location: spec.to_string(),
+            message: format!(
+                "-D {name}=…: only a Mitsuba XML scene has <default> values to override (see `pathgrad params` for the parameters of this one)"
+            ),
+        });
+    }
+    let mut scene = if let Some(name) = spec.strip_prefix("builtin:") {
+        builtin::load(name)?
+    } else {
+        check_scene_file(path)?;
+        match ext.as_deref() {
+            Some("xml") => mitsuba::load_with(path, options)?,
+            Some("gltf" | "glb") => gltf::load_with(path, options)?,
+            _ => {
+                return Err(Error::Scene {
+                    location: spec.to_string(),
+                    message: format!(
+                        "unsupported scene format (supported: .xml (Mitsuba 3), .gltf/.glb, builtin:NAME with NAME one of {})",
+                        builtin::BUILTIN_SCENES.iter().map(|(n, _)| *n).collect::<Vec<_>>().join(", ")
+                    ),
+                });
+            }
+        }
+    };
+    let (width, height) = options.size_for((scene.camera.width, scene.camera.height));
+    scene.camera.width = width;
+    scene.camera.height = height;
+    scene.validate()?;
+    Ok(scene)
+}
+
+/// Says plainly when a scene path is not a readable file (a directory, a device, nothing).
+fn check_scene_file(path: &Path) -> Result<()> {
+    let problem = match std::fs::metadata(path) {
+        Ok(meta) if meta.is_dir() => "is a directory, not a scene file",
+        Ok(meta) if !meta.is_file() => "is not a regular file (a device or pipe), not a scene file",
+        Ok(_) => return Ok(()),
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => "not found",
+        Err(source) => return Err(Error::Io { path: path.to_path_buf(), source }),
+    };
+    Err(Error::Scene { location: path.display().to_string(), message: problem.into() })
+}
+
+/// Resolves `name`, a file a scene in folder `dir` refers to, and applies the folder rule: unless
+/// `allow_outside` is set, the file must lie inside `dir` — no absolute path, no `..` that climbs
+/// out, and (for a file that exists) no symbolic link leading out. Returns the path to read, or
+/// the message of the refusal.
+pub(crate) fn scene_file(dir: &Path, name: &str, allow_outside: bool) -> std::result::Result<PathBuf, String> {
+    let dir = if dir.as_os_str().is_empty() { Path::new(".") } else { dir };
+    let relative = Path::new(name);
+    let path = dir.join(relative);
+    if allow_outside {
+        return Ok(path);
+    }
+    let refuse = |why: &str| {
+        Err(format!(
+            "'{name}' {why}: a scene reads only files inside its own folder ({}) unless reading outside is \
+             allowed (LoadOptions::allow_outside_folder; on the command line --allow-outside-folder)",
+            dir.display()
+        ))
+    };
+    let mut depth = 0i64;
+    for component in relative.components() {
+        match component {
+            Component::Prefix(_) | Component::RootDir => return refuse("is an absolute path"),
+            Component::ParentDir => depth -= 1,
+            Component::Normal(_) => depth += 1,
+            Component::CurDir => {}
+        }
+        if depth < 0 {
+            return refuse("climbs out of the scene's folder");
+        }
+    }
+    if let (Ok(real), Ok(real_dir)) = (path.canonicalize(), dir.canonicalize())
+        && !real.starts_with(&real_dir)
+    {
+        return refuse(&format!("leads out of the scene's folder (to {}) through a symbolic link", real.display()));
+    }
+    Ok(path)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_folder_rule() {
+        let dir = tempfile::tempdir().unwrap();
+        std::fs::create_dir(dir.path().join("sub")).unwrap();
+        std::fs::write(dir.path().join("sub/a.obj"), "").unwrap();
+        let ok = |name: &str| scene_file(dir.path(), name, false);
+        assert_eq!(ok("sub/a.obj").unwrap(), dir.path().join("sub/a.obj"));
+        assert!(ok("sub/../sub/a.obj").is_ok(), "a '..' that stays inside is fine");
+        assert!(ok("missing.obj").is_ok(), "a missing file is the reader's error to report");
+        for (name, why) in
+            [("/etc/passwd", "is an absolute path"), ("../x.obj", "climbs out"), ("sub/../../x.obj", "climbs out")]
+        {
+            let e = ok(name).unwrap_err();
+            assert!(e.contains(why) && e.contains("--allow-outside-folder"), "{name}: {e}");
+        }
+        std::os::unix::fs::symlink("/etc", dir.path().join("etc")).unwrap();
+        let e = ok("etc/hostname").unwrap_err();
+        assert!(e.contains("symbolic link"), "{e}");
+        assert_eq!(scene_file(dir.path(), "/etc/passwd", true).unwrap(), Path::new("/etc/passwd"));
+    }
+
+    #[test]
+    fn sizes_follow_the_film_aspect() {
+        let o = |width, height| LoadOptions { width, height, ..LoadOptions::default() };
+        assert_eq!(o(None, None).size_for((256, 192)), (256, 192));
+        assert_eq!(o(Some(64), None).size_for((256, 192)), (64, 48));
+        assert_eq!(o(None, Some(10)).size_for((256, 192)), (256, 10));
+        assert_eq!(o(Some(3), Some(4)).size_for((256, 192)), (3, 4));
+        assert_eq!(o(Some(1), None).size_for((256, 16)), (1, 1));
+    }
+}
