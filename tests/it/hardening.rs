@@ -328,3 +328,25 @@ fn resume_stores_absolute_paths_and_notices_a_changed_target() {
     assert_eq!(state["iteration"], 3);
     assert!(Path::new(state["config"]["target"].as_str().unwrap()).is_absolute(), "{state}");
 }
+
+/// Set-up (loading, the target, the first kernel builds) is reported apart and does not count as
+/// iteration time: with an empty shader cache the builds dwarf two tiny iterations.
+#[test]
+fn optimize_reports_set_up_apart_from_iterations() {
+    let dir = tempfile::tempdir().unwrap();
+    let o = pathgrad()
+        .env("XDG_CACHE_HOME", dir.path().join("cache"))
+        .args(["optimize", "builtin:blend", "--target-set", "object.weight.value=0.4"])
+        .args(["--param", "object.weight.value=0.8", "--width", "16", "--spp-primal", "1", "--spp-grad", "1"])
+        .args(["--spp", "2", "--iters", "2", "--json", "-o"])
+        .arg(dir.path().join("run"))
+        .output()
+        .unwrap();
+    ok(&o);
+    let summary: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    let (setup, time) = (summary["setup_s"].as_f64().unwrap(), summary["time_s"].as_f64().unwrap());
+    assert!(setup > 0.0 && time > 0.0, "{summary}");
+    let mut reader = csv::Reader::from_path(dir.path().join("run/history.csv")).unwrap();
+    let first: f64 = reader.records().next().unwrap().unwrap()[1].parse().unwrap();
+    assert!(first < setup, "iteration 0 ({first} s) holds no kernel build (set-up {setup} s)");
+}

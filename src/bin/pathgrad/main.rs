@@ -349,7 +349,7 @@ fn grad(args: &GradArgs) -> Result<()> {
     with_values(&scene.params, &args.target_set, "--target-set").context("--target-set")?;
     let ctx = context(&args.flags.device)?;
     let mut renderer = Renderer::new(&ctx, &scene).with_context(|| format!("loading {}", args.scene))?;
-    announce_compiles(&mut renderer, args.json);
+    let _ = announce_compiles(&mut renderer, args.json);
     let start = Instant::now();
     if let (Some(name), Some((output, outputs, exr_file, png_file))) = (&args.image_gradient, image_gradient_outputs) {
         let image = renderer.image_gradient(&opts, name).with_context(|| format!("differentiating {}", args.scene))?;
@@ -532,14 +532,15 @@ fn check_output(path: &Path) -> Result<bool> {
 /// Tells the user, on stderr, when building a kernel variant takes more than a moment: lavapipe
 /// compiles each variant on its first use on a machine (later runs load it from Mesa's shader
 /// cache), and a silent wait of seconds looks like a hang. Nothing is printed when `quiet` or when
-/// the build is quick.
-fn announce_compiles(renderer: &mut Renderer, quiet: bool) {
+/// the build is quick. Returns the total time spent building variants so far, in microseconds,
+/// which keeps growing as later calls build more (`optimize` counts it as set-up, not iterations).
+fn announce_compiles(renderer: &mut Renderer, quiet: bool) -> std::sync::Arc<std::sync::atomic::AtomicU64> {
     use pathgrad::gpu::renderer::{COMPILE_NOTICE_MS, CompileEvent};
-    if quiet {
-        return;
-    }
+    let total_us = std::sync::Arc::new(std::sync::atomic::AtomicU64::new(0));
+    let total = total_us.clone();
     let mut pending: Option<(std::sync::mpsc::Sender<()>, std::thread::JoinHandle<()>)> = None;
     renderer.set_compile_observer(Box::new(move |event| match event {
+        CompileEvent::Started { .. } if quiet => {}
         CompileEvent::Started { kernel, features } => {
             let (done, wait) = std::sync::mpsc::channel::<()>();
             let what = format!("{kernel} kernel ({features})");
@@ -556,15 +557,17 @@ fn announce_compiles(renderer: &mut Renderer, quiet: bool) {
             pending = Some((done, timer));
         }
         CompileEvent::Finished { kernel, seconds } => {
+            total.fetch_add((*seconds * 1e6) as u64, std::sync::atomic::Ordering::Relaxed);
             if let Some((done, timer)) = pending.take() {
                 let _ = done.send(());
                 let _ = timer.join();
             }
-            if *seconds * 1e3 > COMPILE_NOTICE_MS as f64 {
+            if !quiet && *seconds * 1e3 > COMPILE_NOTICE_MS as f64 {
                 eprintln!("compiled the {kernel} kernel in {seconds:.1} s");
             }
         }
     }));
+    total_us
 }
 
 /// A progress bar of `len` steps showing `what` (an indicatif template fragment) with elapsed time
@@ -603,7 +606,7 @@ fn render(args: &RenderArgs) -> Result<()> {
         let ctx = context(&args.flags.device)?;
         let device = ctx.info().name.clone();
         let mut renderer = Renderer::new(&ctx, &scene).with_context(|| format!("loading {}", args.scene))?;
-        announce_compiles(&mut renderer, args.json);
+        let _ = announce_compiles(&mut renderer, args.json);
         let image = renderer
             .render_with_progress(&opts, &mut |done, _| progress.set_position(u64::from(done)))
             .with_context(|| format!("rendering {}", args.scene))?;

@@ -12,7 +12,7 @@ use std::collections::{BTreeMap, BTreeSet};
 use std::fs;
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
-use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::time::Instant;
 
 use anyhow::{Context as _, Result, bail};
@@ -164,7 +164,7 @@ struct State {
     config: RunConfig,
     /// Iterations done; the next has this index (and seed `seed + iteration`).
     iteration: u64,
-    /// Wall time of the iterations so far, in seconds (setup and outputs excluded).
+    /// Wall time of the iterations so far, in seconds (set-up, kernel builds and outputs excluded).
     elapsed_s: f64,
     /// Values of the optimised parameters, as f64 copies of their f32 values.
     params: BTreeMap<String, Vec<f64>>,
@@ -184,6 +184,11 @@ struct Session {
     dir: PathBuf,
     scene: Scene,
     renderer: Renderer,
+    /// Microseconds spent building kernel variants so far.
+    compile_us: Arc<AtomicU64>,
+    /// Set-up time of this session in seconds: loading, the target, and every kernel build
+    /// (including those during the first iterations), none of which counts as iteration time.
+    setup_s: f64,
     target: Image,
     truth: Option<ParamTable>,
     ids: Vec<ParamId>,
@@ -195,6 +200,7 @@ struct Session {
 }
 
 pub(super) fn optimize(args: &OptimizeArgs) -> Result<()> {
+    let begun = Instant::now();
     let given = given_on_command_line();
     let mut session = match &args.resume {
         None => start(args)?,
@@ -211,6 +217,7 @@ pub(super) fn optimize(args: &OptimizeArgs) -> Result<()> {
         })
         .context("installing the Ctrl-C handler")?;
     }
+    session.setup_s = begun.elapsed().as_secs_f64();
     let outcome = iterate(&mut session, args.json, &interrupted);
     let stopped = match &outcome {
         Ok(reason) => reason.to_string(),
@@ -331,6 +338,8 @@ fn start(args: &OptimizeArgs) -> Result<Session> {
         dir,
         scene,
         renderer: prepared.renderer,
+        compile_us: prepared.compile_us,
+        setup_s: 0.0,
         target: prepared.target,
         truth: prepared.truth,
         ids,
@@ -474,6 +483,8 @@ fn resume(args: &OptimizeArgs, dir: &Path, given: &BTreeSet<String>) -> Result<S
         dir: dir.to_path_buf(),
         scene,
         renderer: prepared.renderer,
+        compile_us: prepared.compile_us,
+        setup_s: 0.0,
         target: prepared.target,
         truth: prepared.truth,
         ids,
@@ -581,6 +592,8 @@ fn iteration_options(scene: &Scene, config: &RunConfig) -> Result<IterationOptio
 /// `--target-set`) and the iteration options.
 struct Prepared {
     renderer: Renderer,
+    /// Microseconds spent building kernel variants so far (see `announce_compiles`).
+    compile_us: Arc<AtomicU64>,
     target: Image,
     truth: Option<ParamTable>,
     options: IterationOptions,
@@ -596,7 +609,7 @@ fn prepare(config: &RunConfig, scene: &Scene, device: &Option<String>, quiet: bo
     };
     let ctx = context(device)?;
     let mut renderer = Renderer::new(&ctx, scene).with_context(|| format!("loading {}", config.scene))?;
-    super::announce_compiles(&mut renderer, quiet);
+    let compile_us = super::announce_compiles(&mut renderer, quiet);
     let final_opts = RenderOptions { spp: config.spp_final, ..options.render };
     let target = target_image(&mut renderer, scene, &final_opts, config.target.as_deref(), &config.target_set)?;
     if (target.width(), target.height()) != (config.width, config.height) {
@@ -609,7 +622,7 @@ fn prepare(config: &RunConfig, scene: &Scene, device: &Option<String>, quiet: bo
             config.height
         );
     }
-    Ok(Prepared { renderer, target, truth, options })
+    Ok(Prepared { renderer, compile_us, target, truth, options })
 }
 
 fn values_of(table: &ParamTable, ids: &[ParamId]) -> BTreeMap<String, Vec<f64>> {
@@ -625,6 +638,11 @@ fn iterate(s: &mut Session, json: bool, interrupted: &AtomicBool) -> Result<&'st
     let ctx = s.renderer.context().clone();
     log_memory(&ctx, s.run.iteration());
     let (started, before) = (Instant::now(), s.elapsed);
+    let compiled_before = s.compile_us.load(Ordering::Relaxed);
+    // Kernel builds during iterations (the first gradient builds its variants) are set-up time.
+    let compile_s = |s: &Session| (s.compile_us.load(Ordering::Relaxed) - compiled_before) as f64 * 1e-6;
+    let iteration_s = |s: &Session| (started.elapsed().as_secs_f64() - compile_s(s)).max(0.0);
+    let mut compiled_seen = 0.0;
     let reason = loop {
         if interrupted.load(Ordering::SeqCst) {
             break "interrupted";
@@ -632,13 +650,19 @@ fn iterate(s: &mut Session, json: bool, interrupted: &AtomicBool) -> Result<&'st
         if s.run.iteration() >= s.config.iters {
             break "completed";
         }
-        if s.config.time_budget.is_some_and(|b| before + started.elapsed().as_secs_f64() >= b) {
+        if s.config.time_budget.is_some_and(|b| before + iteration_s(s) >= b) {
             break "time budget";
         }
         let (loss, gradients) =
             s.run.gradient(&mut s.renderer, &s.target).with_context(|| format!("iteration {}", s.run.iteration()))?;
         let report = s.run.apply(loss, &gradients)?;
-        s.elapsed = before + started.elapsed().as_secs_f64();
+        let compiling = compile_s(s);
+        if compiling > compiled_seen {
+            // A first build made this iteration slow: its pace says nothing about the rest.
+            bar.reset_eta();
+            compiled_seen = compiling;
+        }
+        s.elapsed = before + iteration_s(s);
         let row = row(s, report.iteration, s.elapsed, loss, report.gradient_norm);
         s.history.append(&s.dir.join("history.csv"), row)?;
         write_state(s, "running")?;
@@ -649,6 +673,7 @@ fn iterate(s: &mut Session, json: bool, interrupted: &AtomicBool) -> Result<&'st
         }
     };
     bar.finish_and_clear();
+    s.setup_s += compile_s(s);
     log_memory(&ctx, s.run.iteration());
     Ok(reason)
 }
@@ -774,6 +799,7 @@ fn summary(s: &Session, stopped: &str, json: bool) {
             "iterations": s.run.iteration(),
             "stopped": stopped,
             "time_s": s.elapsed,
+            "setup_s": s.setup_s,
             "loss": last.map(|r| r.loss),
             "param_error": last.and_then(|r| r.error),
             "params": params,
@@ -786,9 +812,10 @@ fn summary(s: &Session, stopped: &str, json: bool) {
         println!("{v}");
     } else {
         println!(
-            "{stopped} after {} iterations in {:.2} s{}{} → {}",
+            "{stopped} after {} iterations in {:.2} s (set-up {:.2} s: loading, the target, kernel builds){}{} → {}",
             s.run.iteration(),
             s.elapsed,
+            s.setup_s,
             last.map(|r| format!(", loss {:.4e}", r.loss)).unwrap_or_default(),
             last.and_then(|r| r.error).map(|e| format!(", parameter error {e:.4e}")).unwrap_or_default(),
             s.dir.display()

@@ -150,7 +150,7 @@ pub(crate) fn run(args: &VarianceArgs) -> Result<()> {
 
     let ctx = context(&args.flags.device)?;
     let mut renderer = Renderer::new(&ctx, &scene).with_context(|| format!("loading {}", args.scene))?;
-    super::announce_compiles(&mut renderer, args.json);
+    let _ = super::announce_compiles(&mut renderer, args.json);
     // Only the kind of the parameter measured is compiled into the gradient kernels.
     opts.differentiate = renderer.param_kinds(&[param]);
     let runs = u64::from(args.runs) * rows.len() as u64;
