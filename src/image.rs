@@ -312,6 +312,14 @@ impl Image {
     /// has), stores them as integers, or subsamples them.
     pub fn read_exr(path: impl AsRef<Path>) -> Result<Image> {
         let path = path.as_ref();
+        match std::fs::metadata(path) {
+            Ok(meta) if meta.is_dir() => return Err(image_error(path, "is a directory, not an OpenEXR file")),
+            Ok(meta) if !meta.is_file() => {
+                return Err(image_error(path, "is not a regular file (a device or pipe), not an OpenEXR file"));
+            }
+            Ok(meta) if meta.len() == 0 => return Err(image_error(path, "is empty (0 bytes), not an OpenEXR file")),
+            _ => {}
+        }
         let exr_image =
             exr::prelude::read_first_flat_layer_from_file(path).map_err(|e| exr_error(path, Direction::Read, e))?;
         let layer = exr_image.layer_data;

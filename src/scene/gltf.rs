@@ -141,6 +141,17 @@ pub fn load_with(path: &Path, options: &LoadOptions) -> Result<Scene> {
 fn parse(path: &Path, bytes: &[u8]) -> Result<::gltf::Gltf> {
     let at = |location: String, message: String| Error::Scene { location, message };
     let file = path.display();
+    if bytes.is_empty() {
+        return Err(at(file.to_string(), "the file is empty (0 bytes)".into()));
+    }
+    let is_glb_name = path.extension().is_some_and(|e| e.eq_ignore_ascii_case("glb"));
+    if is_glb_name && !bytes.starts_with(b"glTF") {
+        let head: String = bytes.iter().take(4).map(|&b| if b.is_ascii_graphic() { b as char } else { '.' }).collect();
+        return Err(at(
+            file.to_string(),
+            format!("not a GLB file: it does not begin with the magic 'glTF' (it begins with '{head}')"),
+        ));
+    }
     if bytes.starts_with(b"glTF") {
         // gltf 1.4 computes `length - 12` unchecked on the header's length field.
         let length = bytes.get(8..12).map(|b| u32::from_le_bytes([b[0], b[1], b[2], b[3]]));
@@ -798,7 +809,8 @@ impl Loader<'_> {
             (None, Some(uri)) => self.read_uri(&at, uri)?,
             (None, None) => return Err(self.error(at, "has neither a uri nor a bufferView")),
         };
-        let decoded = image::load_from_memory(&bytes).map_err(|e| self.error(&at, format!("cannot decode: {e}")))?;
+        let decoded =
+            crate::scene::load::decode_image(&bytes).map_err(|e| self.error(&at, format!("cannot decode: {e}")))?;
         let rgb = decoded.to_rgb32f();
         let texels = rgb
             .pixels()

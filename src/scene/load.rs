@@ -1,4 +1,4 @@
-//! Loading a scene by name: `LoadOptions` (defines, the rendered size, where files may be read) and the folder rule.
+//! Loading a scene by name: `LoadOptions` (defines, the rendered size, where files may be read), the folder rule, image decoding.
 
 use std::path::{Component, Path, PathBuf};
 
@@ -149,6 +149,23 @@ pub(crate) fn scene_file(dir: &Path, name: &str, allow_outside: bool) -> std::re
     Ok(path)
 }
 
+/// Decodes an image file's bytes (PNG, JPEG, … whatever the `image` crate reads), saying how large
+/// it is when it is too large to decode (the crate's own message names no size).
+pub(crate) fn decode_image(bytes: &[u8]) -> std::result::Result<image::DynamicImage, String> {
+    let reader = || image::ImageReader::new(std::io::Cursor::new(bytes)).with_guessed_format();
+    let decoded = reader().map_err(|e| e.to_string())?.decode();
+    decoded.map_err(|e| match e {
+        image::ImageError::Limits(limit) => match reader().ok().and_then(|r| r.into_dimensions().ok()) {
+            Some((w, h)) => format!(
+                "{w}×{h} pixels ({:.0} MiB as 8-bit RGBA) is too large to decode ({limit})",
+                f64::from(w) * f64::from(h) * 4.0 / (1024.0 * 1024.0)
+            ),
+            None => format!("too large to decode ({limit})"),
+        },
+        e => e.to_string(),
+    })
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -172,6 +189,38 @@ mod tests {
         let e = ok("etc/hostname").unwrap_err();
         assert!(e.contains("symbolic link"), "{e}");
         assert_eq!(scene_file(dir.path(), "/etc/passwd", true).unwrap(), Path::new("/etc/passwd"));
+    }
+
+    #[test]
+    fn an_image_too_large_to_decode_gives_its_size() {
+        // A PNG declaring 100 000 × 100 000 pixels (40 GB decoded), with no data.
+        let mut png = vec![0x89, b'P', b'N', b'G', 0x0D, 0x0A, 0x1A, 0x0A];
+        let mut ihdr = b"IHDR".to_vec();
+        ihdr.extend_from_slice(&100_000u32.to_be_bytes());
+        ihdr.extend_from_slice(&100_000u32.to_be_bytes());
+        ihdr.extend_from_slice(&[8, 6, 0, 0, 0]);
+        png.extend_from_slice(&13u32.to_be_bytes());
+        png.extend_from_slice(&ihdr);
+        png.extend_from_slice(&crc32(&ihdr).to_be_bytes());
+        for chunk in [&b"IDAT"[..], &b"IEND"[..]] {
+            png.extend_from_slice(&0u32.to_be_bytes());
+            png.extend_from_slice(chunk);
+            png.extend_from_slice(&crc32(chunk).to_be_bytes());
+        }
+        let e = decode_image(&png).unwrap_err();
+        assert!(e.contains("100000×100000 pixels") && e.contains("too large to decode"), "{e}");
+    }
+
+    /// The CRC-32 of PNG chunks (ISO 3309).
+    fn crc32(bytes: &[u8]) -> u32 {
+        let mut crc = !0u32;
+        for &b in bytes {
+            crc ^= u32::from(b);
+            for _ in 0..8 {
+                crc = if crc & 1 != 0 { (crc >> 1) ^ 0xEDB8_8320 } else { crc >> 1 };
+            }
+        }
+        !crc
     }
 
     #[test]

@@ -139,6 +139,9 @@ pub struct Scene {
     pub default_spp: Option<u32>,
     /// Warnings found while loading (unknown properties, dropped triangles, …), also logged.
     pub warnings: Vec<String>,
+    /// Triangles dropped on loading because their area overflows `f32` (coordinates too large),
+    /// so that an empty result says why.
+    pub overflowed_triangles: usize,
 }
 
 /// Bounds of the parameter kinds: reflectances and weights in [0, 1]; roughness between the value
@@ -170,6 +173,7 @@ impl Scene {
             max_depth: 6,
             default_spp: None,
             warnings: Vec::new(),
+            overflowed_triangles: 0,
         }
     }
 
@@ -235,14 +239,25 @@ impl Scene {
     ) -> Result<()> {
         let mut geometry = geometry;
         let before = geometry.indices.len();
+        let mut overflowed = 0;
         geometry.indices.retain(|t| {
             let p = t.map(|i| geometry.positions.get(i as usize).copied().unwrap_or(Vec3::NAN));
             let area = shapes::triangle_area(p[0], p[1], p[2]);
+            if area.is_infinite() && p.iter().all(|v| v.is_finite()) {
+                overflowed += 1;
+            }
             area.is_finite() && area > 0.0
         });
         let dropped = before - geometry.indices.len();
-        if dropped > 0 {
-            self.warn(format!("mesh '{name}': dropped {dropped} degenerate triangle(s) of {before}"));
+        if overflowed > 0 {
+            self.warn(format!(
+                "mesh '{name}': dropped {overflowed} triangle(s) of {before} whose area overflows 32-bit floats \
+                 (coordinates too large; scale the mesh down)"
+            ));
+            self.overflowed_triangles += overflowed;
+        }
+        if dropped > overflowed {
+            self.warn(format!("mesh '{name}': dropped {} degenerate triangle(s) of {before}", dropped - overflowed));
         }
         let emitter = match radiance {
             Some(r) => {
@@ -317,7 +332,13 @@ impl Scene {
         let err =
             |what: String, message: String| Error::Scene { location: format!("{}: {what}", self.source), message };
         if self.triangle_count() == 0 {
-            return Err(err("scene".into(), "has no triangles".into()));
+            let why = match self.overflowed_triangles {
+                0 => String::new(),
+                n => format!(
+                    " ({n} were dropped because their area overflows 32-bit floats: the coordinates are too large)"
+                ),
+            };
+            return Err(err("scene".into(), format!("has no triangles{why}")));
         }
         for (i, m) in self.materials.iter().enumerate() {
             if let Material::Blend { children, .. } = m {

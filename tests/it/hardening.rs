@@ -350,3 +350,63 @@ fn optimize_reports_set_up_apart_from_iterations() {
     let first: f64 = reader.records().next().unwrap().unwrap()[1].parse().unwrap();
     assert!(first < setup, "iteration 0 ({first} s) holds no kernel build (set-up {setup} s)");
 }
+
+/// Messages say what is wrong: a directory or a device is not "not found", an OS error is printed
+/// once, overflowing geometry is named as such, an empty or foreign `.glb` is not "invalid JSON",
+/// and warnings carry neither a doubled file name nor colour codes or timestamps off a terminal.
+#[test]
+fn messages_name_the_real_problem() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    std::fs::create_dir(d.join("dir.xml")).unwrap();
+    std::fs::write(d.join("empty.glb"), b"").unwrap();
+    std::fs::write(d.join("foreign.glb"), b"PK\x03\x04 not a glb").unwrap();
+    std::fs::write(
+        d.join("huge.xml"),
+        r#"<scene version="3.0.0">
+    <sensor type="perspective"/>
+    <shape type="rectangle"><transform name="to_world"><scale value="3e19"/></transform></shape>
+    <shape type="cube"><emitter type="area"><rgb name="radiance" value="1"/></emitter></shape>
+    <shape type="rectangle"><transform name="to_world"><scale value="3e19"/></transform><emitter type="area"><rgb name="radiance" value="1"/></emitter></shape>
+</scene>"#,
+    )
+    .unwrap();
+    std::fs::write(
+        d.join("warn.xml"),
+        std::fs::read_to_string(Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/xml/unknown_property.xml"))
+            .unwrap(),
+    )
+    .unwrap();
+    let run = |args: &[&str]| pathgrad().current_dir(d).args(args).output().unwrap();
+    let cases: [(&[&str], &str); 7] = [
+        (&["params", "dir.xml"], "error: dir.xml: is a directory, not a scene file\n"),
+        (&["params", "/dev/null"], "error: /dev/null: is not a regular file (a device or pipe), not a scene file\n"),
+        (&["params", "empty.glb"], "error: empty.glb: the file is empty (0 bytes)\n"),
+        (
+            &["params", "foreign.glb"],
+            "error: foreign.glb: not a GLB file: it does not begin with the magic 'glTF' (it begins with 'PK..')\n",
+        ),
+        (
+            &["grad", "builtin:cornell-box", "--target", "missing.exr", "--device", "cpu"],
+            "error: missing.exr: No such file or directory (os error 2)\n",
+        ),
+        (
+            &["grad", "builtin:cornell-box", "--target", ".", "--device", "cpu"],
+            "error: .: is a directory, not an OpenEXR file\n",
+        ),
+        (
+            &["params", "huge.xml"],
+            "area emitter on shape '_unnamed_2' whose area overflows 32-bit floats (coordinates too large)\n",
+        ),
+    ];
+    for (args, want) in cases {
+        let e = stderr(&run(args));
+        assert!(e.ends_with(want), "{args:?}: expected it to end with {want:?}: {e:?}");
+    }
+    let e = stderr(&run(&["params", "huge.xml"]));
+    assert!(e.contains("dropped 2 triangle(s) of 2 whose area overflows 32-bit floats"), "{e}");
+    let e = stderr(&run(&["params", "warn.xml"]));
+    assert!(e.contains(" WARN pathgrad::scene: warn.xml:6:9: unknown property 'radius'"), "{e:?}");
+    assert!(!e.contains("warn.xml: warn.xml") && !e.contains('\u{1b}'), "{e:?}");
+    assert!(e.lines().all(|l| l.starts_with(" WARN") || l.starts_with("error")), "no timestamps: {e:?}");
+}

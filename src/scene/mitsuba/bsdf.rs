@@ -276,13 +276,8 @@ fn read_bitmap(path: &Path, raw: bool) -> std::result::Result<(u32, u32, Vec<f32
         let (Ok(w), Ok(h)) = (w, h) else { return Err("image too large".into()) };
         return Ok((w, h, image.layer_data.channel_data.pixels.1));
     }
-    let image = image::ImageReader::open(path)
-        .map_err(|e| e.to_string())?
-        .with_guessed_format()
-        .map_err(|e| e.to_string())?
-        .decode()
-        .map_err(|e| e.to_string())?
-        .to_rgb32f();
+    let bytes = std::fs::read(path).map_err(|e| e.to_string())?;
+    let image = crate::scene::load::decode_image(&bytes)?.to_rgb32f();
     let (w, h) = image.dimensions();
     let mut texels = image.into_raw();
     if !raw {

@@ -240,11 +240,21 @@ impl<'a> Loader<'a> {
             [e] => Some(self.area_emitter(e, &name)?),
             [_, second, ..] => return Err(self.x.err(second, "a shape takes one emitter")),
         };
+        let overflowed_before = self.scene.overflowed_triangles;
         self.scene.add_mesh(&name, geometry, material, None).map_err(|e| self.located(node, e))?;
         if let Some((e, param, radiance)) = emitter {
             let mesh = self.scene.meshes.last().expect("add_mesh pushed a mesh");
             let g = Geometry { positions: mesh.positions.clone(), indices: mesh.indices.clone(), ..Default::default() };
-            if !(area(&g) > 0.0) {
+            let total = area(&g);
+            if total.is_infinite() || self.scene.overflowed_triangles > overflowed_before {
+                return Err(self.x.err(
+                    e,
+                    format!(
+                        "area emitter on shape '{name}' whose area overflows 32-bit floats (coordinates too large)"
+                    ),
+                ));
+            }
+            if !(total > 0.0) {
                 return Err(self.x.err(e, format!("area emitter on shape '{name}' of zero area")));
             }
             let id = self
