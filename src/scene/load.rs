@@ -77,11 +77,19 @@ pub fn load_with(spec: &str, options: &LoadOptions) -> Result<Scene> {
     let mut scene = if let Some(name) = spec.strip_prefix("builtin:") {
         builtin::load(name)?
     } else {
-        check_scene_file(path)?;
         match ext.as_deref() {
-            Some("xml") => mitsuba::load_with(path, options)?,
-            Some("gltf" | "glb") => gltf::load_with(path, options)?,
+            Some("xml") => {
+                check_scene_file(path)?;
+                mitsuba::load_with(path, options)?
+            }
+            Some("gltf" | "glb") => {
+                check_scene_file(path)?;
+                gltf::load_with(path, options)?
+            }
             _ => {
+                if path.exists() && !path.is_file() {
+                    check_scene_file(path)?;
+                }
                 return Err(Error::Scene {
                     location: spec.to_string(),
                     message: format!(
@@ -99,13 +107,12 @@ pub fn load_with(spec: &str, options: &LoadOptions) -> Result<Scene> {
     Ok(scene)
 }
 
-/// Says plainly when a scene path is not a readable file (a directory, a device, nothing).
+/// Says plainly when a scene path is not a readable file (a directory, a device) or is missing.
 fn check_scene_file(path: &Path) -> Result<()> {
     let problem = match std::fs::metadata(path) {
         Ok(meta) if meta.is_dir() => "is a directory, not a scene file",
         Ok(meta) if !meta.is_file() => "is not a regular file (a device or pipe), not a scene file",
         Ok(_) => return Ok(()),
-        Err(e) if e.kind() == std::io::ErrorKind::NotFound => "not found",
         Err(source) => return Err(Error::Io { path: path.to_path_buf(), source }),
     };
     Err(Error::Scene { location: path.display().to_string(), message: problem.into() })

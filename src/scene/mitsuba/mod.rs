@@ -73,7 +73,8 @@ use crate::error::Result;
 use crate::scene::{LoadOptions, Scene};
 
 /// Loads the Mitsuba XML scene at `path`; `defines` (name, value) override its `<default>`s.
-/// Relative file names (meshes, bitmaps) resolve against the file's directory.
+/// Relative file names (meshes, bitmaps) resolve against the file's directory and must stay inside it
+/// (see [`load_with`] to allow others).
 ///
 /// # Errors
 /// [`crate::Error::Io`] if the file cannot be read; [`crate::Error::Scene`] located at
