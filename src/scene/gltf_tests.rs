@@ -239,6 +239,11 @@ fn malformed_files_give_pinned_messages() {
         ),
         ("short_buffer.gltf", "short_buffer.gltf: buffers[0]: holds 44 bytes but its byteLength is 100"),
         ("bad_uri.gltf", "bad_uri.gltf: buffers[0]: URI '%FF.bin' is not valid percent-encoded UTF-8"),
+        ("empty.glb", "empty.glb: the file is empty (0 bytes)"),
+        (
+            "bad_magic.glb",
+            "bad_magic.glb: not a GLB file: it does not begin with the magic 'glTF' (it begins with 'PK..')",
+        ),
         (
             "climbing_uri.gltf",
             "climbing_uri.gltf: buffers[0]: URI '../../../../../../../../etc/passwd' climbs out of the scene's folder: \

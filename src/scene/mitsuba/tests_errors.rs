@@ -64,6 +64,20 @@ fn fixtures_give_their_pinned_messages() {
         ),
         ("ref_cycle.xml", "8:9: <ref id=\"loop\">: reference cycle: this BSDF contains itself".into()),
         (
+            "outside_filename.xml",
+            format!(
+                "6:9: <string name=\"filename\">: '../mesh/quad.obj' climbs out of the scene's folder: a scene reads \
+                 only files inside its own folder ({d}) unless reading outside is allowed \
+                 (LoadOptions::allow_outside_folder; on the command line --allow-outside-folder)"
+            ),
+        ),
+        (
+            "overflow_emitter.xml",
+            "9:9: <emitter>: area emitter on shape '_unnamed_0' whose area overflows 32-bit floats (coordinates too \
+             large)"
+                .into(),
+        ),
+        (
             "bad_spectrum.xml",
             "7:13: <spectrum name=\"reflectance\">: only constant spectra are supported (one number), got \
              wavelength:value pairs '400:0.1, 700:0.9'"
