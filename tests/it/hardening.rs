@@ -410,3 +410,23 @@ fn messages_name_the_real_problem() {
     assert!(!e.contains("warn.xml: warn.xml") && !e.contains('\u{1b}'), "{e:?}");
     assert!(e.lines().all(|l| l.starts_with(" WARN") || l.starts_with("error")), "no timestamps: {e:?}");
 }
+
+/// `variance` checks every file it will write before estimating anything.
+#[test]
+fn variance_checks_its_outputs_first() {
+    use std::os::unix::fs::PermissionsExt as _;
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("v");
+    std::fs::create_dir(&out).unwrap();
+    let summary = out.join("summary.json");
+    std::fs::write(&summary, "{}").unwrap();
+    std::fs::set_permissions(&summary, std::fs::Permissions::from_mode(0o444)).unwrap();
+    let o = pathgrad()
+        .args(["variance", "builtin:cornell-box", "--param", "sphere.bsdf.alpha.value", "--runs", "2"])
+        .args(["--width", "8", "--spp", "1", "--device", "99", "-o"])
+        .arg(&out)
+        .output()
+        .unwrap();
+    assert!(stderr(&o).contains("summary.json: is read-only"), "{}", stderr(&o));
+    assert_eq!(names(&out), ["summary.json"]);
+}

@@ -147,6 +147,13 @@ pub(crate) fn run(args: &VarianceArgs) -> Result<()> {
     if args.output.exists() && !args.output.is_dir() {
         bail!("invalid -o {}: exists and is not a directory", args.output.display());
     }
+    // Every file the run will write is checked before anything is estimated.
+    let planned = planned_outputs(&args.output, &rows, loss_mode);
+    if args.output.is_dir() {
+        for path in &planned {
+            pathgrad::output::check_destination(path)?;
+        }
+    }
 
     let ctx = context(&args.flags.device)?;
     let mut renderer = Renderer::new(&ctx, &scene).with_context(|| format!("loading {}", args.scene))?;
@@ -157,6 +164,7 @@ pub(crate) fn run(args: &VarianceArgs) -> Result<()> {
     let progress = progress_bar(runs, "{msg:>16} [{bar:40}] {pos}/{len} runs", args.json);
 
     let mut measured = Vec::with_capacity(rows.len());
+    let mut outputs: Option<Outputs> = None;
     let mode;
     if loss_mode {
         mode = "loss";
@@ -225,16 +233,17 @@ pub(crate) fn run(args: &VarianceArgs) -> Result<()> {
             });
             maps.push(r);
         }
-        create_output(&args.output)?;
+        outputs = Some(Outputs::create(&args.output)?);
         let top = maps.iter().map(|m| m.variance.max_channel_mean()).fold(0.0f32, f32::max);
         let scale = maps.iter().map(|m| m.mean.signed_scale()).fold(0.0f32, f32::max);
         for (row, (map, m)) in rows.iter().zip(maps.iter().zip(&mut measured)) {
             let variance_exr = args.output.join(format!("variance-{}.exr", row.stem));
             let mean_exr = args.output.join(format!("mean-{}.exr", row.stem));
-            map.variance.write_exr(&variance_exr)?;
-            map.variance.write_log_png(variance_exr.with_extension("png"), Some(top), PNG_DECADES)?;
-            map.mean.write_exr(&mean_exr)?;
-            map.mean.write_signed_png(mean_exr.with_extension("png"), Some(scale))?;
+            let set = outputs.as_mut().expect("created above");
+            map.variance.write_exr(set.stage(&variance_exr)?)?;
+            map.variance.write_log_png(set.stage(&variance_exr.with_extension("png"))?, Some(top), PNG_DECADES)?;
+            map.mean.write_exr(set.stage(&mean_exr)?)?;
+            map.mean.write_signed_png(set.stage(&mean_exr.with_extension("png"))?, Some(scale))?;
             m.extra = serde_json::json!({"outputs": [variance_exr, variance_exr.with_extension("png"), mean_exr, mean_exr.with_extension("png")]});
         }
     }
@@ -287,12 +296,17 @@ pub(crate) fn run(args: &VarianceArgs) -> Result<()> {
         "nee": opts.nee, "width": opts.width, "height": opts.height, "seed": opts.seed,
         "baseline": rows[baseline].label, "device": ctx.info().name, "techniques": items,
     });
-    create_output(&args.output)?;
+    let mut outputs = match outputs {
+        Some(o) => o,
+        None => Outputs::create(&args.output)?,
+    };
     let summary_path = args.output.join("summary.json");
     pathgrad::output::write_bytes_atomically(
-        &summary_path,
+        outputs.stage(&summary_path)?,
         (serde_json::to_string_pretty(&summary)? + "\n").as_bytes(),
     )?;
+    debug_assert_eq!(outputs.set.destinations(), planned, "the planned outputs are the ones written");
+    outputs.commit()?;
     if args.json {
         println!("{summary}");
         return Ok(());
@@ -337,7 +351,56 @@ pub(crate) fn run(args: &VarianceArgs) -> Result<()> {
     Ok(())
 }
 
-/// Creates the output directory (only once every estimate has succeeded: a failed run leaves none).
-fn create_output(dir: &std::path::Path) -> Result<()> {
-    std::fs::create_dir_all(dir).with_context(|| format!("creating -o {}", dir.display()))
+/// The files a run writes into `dir`, in the order it writes them.
+fn planned_outputs(dir: &std::path::Path, rows: &[Technique], loss_mode: bool) -> Vec<std::path::PathBuf> {
+    let mut files = Vec::new();
+    if !loss_mode {
+        for row in rows {
+            for name in ["variance", "mean"] {
+                let exr = dir.join(format!("{name}-{}.exr", row.stem));
+                files.push(exr.with_extension("png"));
+                files.insert(files.len() - 1, exr);
+            }
+        }
+    }
+    files.push(dir.join("summary.json"));
+    files
+}
+
+/// The output directory (created only once every estimate has succeeded) and the files staged in
+/// it: all are put in place together, and if anything fails before, nothing is left — the
+/// directory too, if this run created it.
+struct Outputs {
+    dir: std::path::PathBuf,
+    created: bool,
+    set: pathgrad::output::OutputSet,
+}
+
+impl Outputs {
+    fn create(dir: &std::path::Path) -> Result<Outputs> {
+        let created = !dir.exists();
+        std::fs::create_dir_all(dir).with_context(|| format!("creating -o {}", dir.display()))?;
+        Ok(Outputs { dir: dir.to_path_buf(), created, set: pathgrad::output::OutputSet::new() })
+    }
+
+    fn stage(&mut self, path: &std::path::Path) -> Result<std::path::PathBuf> {
+        Ok(self.set.stage(path)?)
+    }
+
+    fn commit(mut self) -> Result<()> {
+        let set = std::mem::take(&mut self.set);
+        set.commit()?;
+        self.created = false;
+        Ok(())
+    }
+}
+
+impl Drop for Outputs {
+    fn drop(&mut self) {
+        // Uncommitted: the set's own drop removes its files; an emptied new directory goes too.
+        self.set = pathgrad::output::OutputSet::new();
+        if self.created {
+            let _ = std::fs::remove_dir(&self.dir);
+        }
+    }
 }
