@@ -11,6 +11,42 @@
 #define PATHGRAD_BVH_GLSL
 
 #include "abi.glsl"
+#extension GL_EXT_shader_explicit_arithmetic_types_int64 : require
+
+// The node and triangle arrays are read as 64-bit words: on lavapipe a load is one gather per
+// 32-bit component, while a 64-bit gather fetches two for about the price of one (a node is 7
+// gathers instead of 14, a triangle 5 instead of 9; BENCHMARKS.md). The layouts
+// (src/gpu/abi_structs.rs) put the used words first and keep them 8-byte aligned; the values are
+// the same floats, so results are bit-identical.
+// One struct per node or triangle, so a word's address is the element's plus a constant.
+struct NodeWords { uint64_t w0; uint64_t w1; uint64_t w2; uint64_t w3; uint64_t w4; uint64_t w5; uint64_t w6; uint64_t pad; };
+struct TriWords { uint64_t w0; uint64_t w1; uint64_t w2; uint64_t w3; uint64_t w4; };
+layout(buffer_reference, scalar, buffer_reference_align = 8) readonly buffer NodeWordArray { NodeWords v[]; };
+layout(buffer_reference, scalar, buffer_reference_align = 8) readonly buffer TriWordArray { TriWords v[]; };
+
+vec2 word_floats(uint64_t w) { return uintBitsToFloat(unpackUint2x32(w)); }
+
+BvhNode load_node(uint i) {
+    NodeWordArray a = NodeWordArray(globals.addr_nodes);
+    vec2 w0 = word_floats(a.v[i].w0);
+    vec2 w1 = word_floats(a.v[i].w1);
+    vec2 w2 = word_floats(a.v[i].w2);
+    vec2 w3 = word_floats(a.v[i].w3);
+    vec2 w4 = word_floats(a.v[i].w4);
+    vec2 w5 = word_floats(a.v[i].w5);
+    uvec2 children = unpackUint2x32(a.v[i].w6);
+    return BvhNode(vec3(w0, w1.x), vec3(w1.y, w2), vec3(w3, w4.x), vec3(w4.y, w5), children.x, children.y, 0u, 0u);
+}
+
+TriPositions load_tri(uint i) {
+    TriWordArray a = TriWordArray(globals.addr_tris);
+    vec2 w0 = word_floats(a.v[i].w0);
+    vec2 w1 = word_floats(a.v[i].w1);
+    vec2 w2 = word_floats(a.v[i].w2);
+    vec2 w3 = word_floats(a.v[i].w3);
+    vec2 w4 = word_floats(a.v[i].w4);   // its second half is padding
+    return TriPositions(vec3(w0, w1.x), vec3(w1.y, w2), vec3(w3, w4.x), 0u);
+}
 
 #define MIN_DIR_COMPONENT 1e-20
 
@@ -86,7 +122,7 @@ Hit bvh_traverse(Ray ray, float tmin, float tmax, bool any_hit) {
             // Unrolled over the few slots a leaf can have: no inner loop to mask and join.
             [[unroll]] for (uint k = 0u; k < BVH_LEAF_MAX; k++) {
                 if (k < count && !(any_hit && best.valid)) {
-                    vec4 h = intersect_triangle(ray, tris[first + k], tmin, tmax);
+                    vec4 h = intersect_triangle(ray, load_tri(first + k), tmin, tmax);
                     if (h.w != 0.0) {
                         tmax = h.x;
                         best = Hit(h.x, first + k, h.y, h.z, true);
@@ -96,9 +132,14 @@ Hit bvh_traverse(Ray ray, float tmin, float tmax, bool any_hit) {
             // Any hit answers a shadow query, even one found just before a loop budget ran out.
             if (any_hit && best.valid) { finished = true; break; }
         } else {
-            BvhNode node = nodes[current];
-            float ta = node.child0 != BVH_NO_CHILD ? slab(ray, node.lo0, node.hi0, tmin, tmax) : -1.0;
-            float tb = node.child1 != BVH_NO_CHILD ? slab(ray, node.lo1, node.hi1, tmin, tmax) : -1.0;
+            // The whole node is loaded and both boxes tested before the references are looked at:
+            // a test behind `child != BVH_NO_CHILD` became a branch whose box loads waited for the
+            // reference's, so the node's words are now requested together (alone, no measurable gain).
+            BvhNode node = load_node(current);
+            float sa = slab(ray, node.lo0, node.hi0, tmin, tmax);
+            float sb = slab(ray, node.lo1, node.hi1, tmin, tmax);
+            float ta = node.child0 != BVH_NO_CHILD ? sa : -1.0;
+            float tb = node.child1 != BVH_NO_CHILD ? sb : -1.0;
             bool ha = ta >= 0.0;
             bool hb = tb >= 0.0;
             if (ha && hb) {

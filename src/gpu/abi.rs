@@ -27,7 +27,7 @@ mod tests {
     fn structs_have_no_padding() {
         assert_eq!(size_of::<Globals>(), 20 * 4 + 4 * 12 + 7 * 8);
         assert_eq!(size_of::<BvhNode>(), 64);
-        assert_eq!(size_of::<TriPositions>(), 48);
+        assert_eq!(size_of::<TriPositions>(), 40);
         assert_eq!(size_of::<TriShading>(), 3 * 12 + 3 * 8 + 8);
         assert_eq!(size_of::<Material>(), 10 * 4 + 2 * 12);
         assert_eq!(size_of::<EmitterTri>(), 16 + 36);

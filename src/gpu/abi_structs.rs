@@ -80,36 +80,34 @@ abi_structs! {
     struct BvhNode {
         /// Box minimum of child 0.
         lo0: Vec3,
-        /// Reference of child 0.
-        child0: u32,
         /// Box maximum of child 0.
         hi0: Vec3,
-        /// Reference of child 1.
-        child1: u32,
         /// Box minimum of child 1.
         lo1: Vec3,
-        /// Unused: keeps every box corner 16-byte aligned, so a node is four aligned 16-byte loads.
-        pad0: u32,
         /// Box maximum of child 1.
         hi1: Vec3,
+        /// Reference of child 0.
+        child0: u32,
+        /// Reference of child 1.
+        child1: u32,
+        /// Unused: rounds a node up to 64 bytes. The 56 used bytes are seven 8-byte words, which
+        /// is how the traversal reads a node (shaders/lib/bvh.glsl).
+        pad0: u32,
         /// Unused, as `pad0`.
         pad1: u32,
     }
 
-    /// Triangle vertex positions, in BVH leaf order, each vertex 16-byte aligned.
+    /// Triangle vertex positions, in BVH leaf order: nine floats and a pad, five 8-byte words
+    /// (how the traversal reads them).
     struct TriPositions {
         /// Vertex 0.
         v0: Vec3,
-        /// Unused: keeps the vertices 16-byte aligned.
-        pad0: u32,
         /// Vertex 1.
         v1: Vec3,
-        /// Unused.
-        pad1: u32,
         /// Vertex 2.
         v2: Vec3,
-        /// Unused.
-        pad2: u32,
+        /// Unused: keeps every triangle 8-byte aligned.
+        pad0: u32,
     }
 
     /// Per-triangle shading data, indexed by the original triangle id.

@@ -299,6 +299,10 @@ fn describe(instance: &ash::Instance, index: usize, pd: vk::PhysicalDevice) -> D
     if v12.buffer_device_address == vk::FALSE {
         missing.push("bufferDeviceAddress".to_string());
     }
+    // The BVH traversal reads its nodes and triangles as 64-bit words (shaders/lib/bvh.glsl).
+    if core.shader_int64 == vk::FALSE {
+        missing.push("shaderInt64".to_string());
+    }
     if !has_atomic_ext || atomic.shader_buffer_float32_atomic_add == vk::FALSE {
         missing.push("VK_EXT_shader_atomic_float (shaderBufferFloat32AtomicAdd)".to_string());
     }
@@ -476,7 +480,8 @@ impl Context {
         let queue_info =
             [vk::DeviceQueueCreateInfo::default().queue_family_index(queue_family).queue_priorities(&priorities)];
         let ext_ptrs = [ash::ext::shader_atomic_float::NAME.as_ptr()];
-        // Deterministic gradients need 64-bit integer atomics: enabled where the device has them.
+        // 64-bit integers are required (the BVH traversal's loads); deterministic gradients also
+        // need 64-bit integer atomics: enabled where the device has them.
         let int64 = info.int64_atomics;
         let mut v12 = vk::PhysicalDeviceVulkan12Features::default()
             .scalar_block_layout(true)
@@ -484,7 +489,7 @@ impl Context {
             .shader_buffer_int64_atomics(int64);
         let mut atomic =
             vk::PhysicalDeviceShaderAtomicFloatFeaturesEXT::default().shader_buffer_float32_atomic_add(true);
-        let core = vk::PhysicalDeviceFeatures::default().shader_int64(int64);
+        let core = vk::PhysicalDeviceFeatures::default().shader_int64(true);
         let mut features =
             vk::PhysicalDeviceFeatures2::default().features(core).push_next(&mut v12).push_next(&mut atomic);
         let device_info = vk::DeviceCreateInfo::default()
