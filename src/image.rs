@@ -75,6 +75,21 @@ const SEQUENTIAL_CHROMA: f64 = 0.13;
 /// to yellow.
 const SEQUENTIAL_HUE_DEG: (f64, f64) = (300.0, 450.0);
 
+/// What [`Image::non_finite`] found.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct NonFinite {
+    /// How many values are NaN or infinite.
+    pub count: usize,
+    /// Column of the first.
+    pub x: u32,
+    /// Row of the first.
+    pub y: u32,
+    /// Channel of the first: `R`, `G` or `B`.
+    pub channel: &'static str,
+    /// The first such value.
+    pub value: f32,
+}
+
 /// A linear RGB image of `f32` values: row-major, top row first, three floats per pixel.
 ///
 /// Pixel `(x, y)` is stored at `data[3 * (y * width + x)..][..3]`, `x` to the right and `y`
@@ -186,6 +201,32 @@ impl Image {
     /// All values, mutable, in the layout of [`as_slice`](Self::as_slice).
     pub fn as_mut_slice(&mut self) -> &mut [f32] {
         &mut self.data
+    }
+
+    /// The NaN and infinite values: how many there are, and the first in storage order as
+    /// `(x, y, channel name, value)`; `None` if every value is finite. Renders and loss targets
+    /// are refused with this.
+    ///
+    /// ```
+    /// use pathgrad::image::Image;
+    ///
+    /// let mut image = Image::new(3, 2);
+    /// image.set_pixel(2, 1, [0.0, f32::INFINITY, f32::NAN]);
+    /// let bad = image.non_finite().unwrap();
+    /// assert_eq!((bad.count, bad.x, bad.y, bad.channel), (2, 2, 1, "G"));
+    /// ```
+    pub fn non_finite(&self) -> Option<NonFinite> {
+        let mut bad = self.data.iter().enumerate().filter(|(_, v)| !v.is_finite());
+        let (i, &value) = bad.next()?;
+        let pixel = i / 3;
+        let width = self.width as usize;
+        Some(NonFinite {
+            count: 1 + bad.count(),
+            x: (pixel % width) as u32,
+            y: (pixel / width) as u32,
+            channel: RGB_NAMES[i % 3],
+            value,
+        })
     }
 
     /// The per-channel mean over all pixels, accumulated in `f64`.

@@ -88,6 +88,28 @@ fn directory_of(path: &Path) -> &Path {
 /// assert!(err.to_string().contains("is a directory"), "{err}");
 /// ```
 pub fn check_destination(path: &Path) -> Result<PathBuf> {
+    let target = check_existing(path)?;
+    // Whether the directory takes new files is only known by trying.
+    let probe = temp_path(&target)?;
+    match OpenOptions::new().write(true).create_new(true).open(&probe) {
+        Ok(file) => {
+            drop(file);
+            let _ = fs::remove_file(&probe);
+        }
+        Err(e) => {
+            return Err(output_error(
+                path,
+                format!("cannot create files in {} ({e})", directory_of(&target).display()),
+            ));
+        }
+    }
+    Ok(target)
+}
+
+/// [`check_destination`] without the probe: the resolved destination, once its directory exists
+/// and an existing destination is a writable regular file. A writer that creates its temporary
+/// file next learns the rest from that.
+fn check_existing(path: &Path) -> Result<PathBuf> {
     let target = resolve_destination(path)?;
     let dir = directory_of(&target);
     match fs::metadata(dir) {
@@ -107,17 +129,6 @@ pub fn check_destination(path: &Path) -> Result<PathBuf> {
             ));
         }
         _ => {}
-    }
-    // Whether the directory takes new files is only known by trying.
-    let probe = temp_path(&target)?;
-    match OpenOptions::new().write(true).create_new(true).open(&probe) {
-        Ok(file) => {
-            drop(file);
-            let _ = fs::remove_file(&probe);
-        }
-        Err(e) => {
-            return Err(output_error(path, format!("cannot create files in {} ({e})", dir.display())));
-        }
     }
     Ok(target)
 }
@@ -162,11 +173,12 @@ fn remove_stale_temporaries(target: &Path) {
 /// file is removed and the destination is left as it was.
 ///
 /// # Errors
-/// Those of [`check_destination`]; [`Error::Io`] naming `path` if the file cannot be created,
+/// [`Error::Output`] for a destination [`check_destination`] refuses (a directory that takes no new
+/// files shows as the next error instead); [`Error::Io`] naming `path` if the file cannot be created,
 /// written or renamed; whatever `write` returns.
 pub fn write_atomically(path: &Path, write: impl FnOnce(&mut BufWriter<File>) -> Result<()>) -> Result<()> {
     let io_error = |source| Error::Io { path: path.to_path_buf(), source };
-    let target = check_destination(path)?;
+    let target = check_existing(path)?;
     remove_stale_temporaries(&target);
     let temp = TempFile { path: temp_path(&target)?, kept: false };
     let file = OpenOptions::new().write(true).create_new(true).open(&temp.path).map_err(io_error)?;

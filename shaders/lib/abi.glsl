@@ -15,14 +15,12 @@ layout(set = 0, binding = BINDING_GLOBALS, scalar) uniform GlobalsBuf { Globals 
 // storage-buffer bindings: on lavapipe (Mesa 25.0) a storage-buffer load whose index differs per
 // lane is a branchy per-lane scalar sequence with a bounds check per component, while a
 // buffer-reference load is one masked gather per component. The addresses sit in `globals`.
-layout(buffer_reference, scalar, buffer_reference_align = 4) readonly buffer NodeArray { BvhNode v[]; };
 layout(buffer_reference, scalar, buffer_reference_align = 4) readonly buffer TriArray { TriPositions v[]; };
 layout(buffer_reference, scalar, buffer_reference_align = 4) readonly buffer UintArray { uint v[]; };
 layout(buffer_reference, scalar, buffer_reference_align = 4) readonly buffer ShadingArray { TriShading v[]; };
 layout(buffer_reference, scalar, buffer_reference_align = 4) readonly buffer MaterialArray { Material v[]; };
 layout(buffer_reference, scalar, buffer_reference_align = 4) readonly buffer EmitterArray { EmitterTri v[]; };
 layout(buffer_reference, scalar, buffer_reference_align = 4) readonly buffer FloatArray { float v[]; };
-#define nodes (NodeArray(globals.addr_nodes).v)
 #define tris (TriArray(globals.addr_tris).v)
 #define prim_ids (UintArray(globals.addr_prim_ids).v)
 #define shading (ShadingArray(globals.addr_shading).v)

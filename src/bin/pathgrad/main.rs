@@ -264,15 +264,14 @@ fn target_image(
     Ok(match (target, target_set.is_empty()) {
         (Some(path), true) => {
             let image = Image::read_exr(path)?;
-            let width = image.width() as usize;
-            if let Some(i) = image.as_slice().iter().position(|v| !v.is_finite()) {
-                let (pixel, channel) = (i / 3, ["R", "G", "B"][i % 3]);
+            if let Some(bad) = image.non_finite() {
                 bail!(
-                    "invalid --target {}: pixel ({}, {}) channel {channel} is {} (a loss needs finite values)",
+                    "invalid --target {}: pixel ({}, {}) channel {} is {} (a loss needs finite values)",
                     path.display(),
-                    pixel % width,
-                    pixel / width,
-                    image.as_slice()[i]
+                    bad.x,
+                    bad.y,
+                    bad.channel,
+                    bad.value
                 );
             }
             image
@@ -527,15 +526,10 @@ fn options(scene: &pathgrad::scene::Scene, flags: &RenderFlags) -> Result<Render
     let mut o = RenderOptions::for_scene(scene);
     o.spp = flags.spp.or(scene.default_spp).unwrap_or(DEFAULT_SPP);
     o.seed = flags.seed;
-    if let Some(w) = flags.width {
-        o.width = w;
-        if flags.height.is_none() {
-            o.height = ((u64::from(w) * u64::from(scene.camera.height)) / u64::from(scene.camera.width)).max(1) as u32;
-        }
-    }
-    if let Some(h) = flags.height {
-        o.height = h;
-    }
+    // The one rule for --width/--height (a scene from `RenderFlags::load` already has this size,
+    // and applying it again leaves it so).
+    let size = pathgrad::scene::LoadOptions { width: flags.width, height: flags.height, ..Default::default() };
+    (o.width, o.height) = size.size_for((scene.camera.width, scene.camera.height));
     o.max_depth = match flags.max_depth {
         None => Some(scene.max_depth),
         Some(-1) => None,
@@ -677,17 +671,15 @@ fn preview_path(output: &Path) -> PathBuf {
 /// Refuses an image with a NaN or an infinite value (`what` names it): such a result is never
 /// written. Radiance beyond the f32 range (a constant environment of 3e38, say) ends up here.
 fn refuse_non_finite(image: &Image, what: &str) -> Result<()> {
-    let values = image.as_slice();
-    let mut bad = values.iter().enumerate().filter(|(_, v)| !v.is_finite());
-    if let Some((i, v)) = bad.next() {
-        let width = image.width() as usize;
-        let (pixel, channel) = (i / 3, ["R", "G", "B"][i % 3]);
+    if let Some(bad) = image.non_finite() {
         bail!(
-            "{what} has {} non-finite values (the first: pixel ({}, {}) channel {channel} is {v}); the scene's \
+            "{what} has {} non-finite values (the first: pixel ({}, {}) channel {} is {}); the scene's \
              values overflow 32-bit floats or are invalid, so nothing was written",
-            1 + bad.count(),
-            pixel % width,
-            pixel / width
+            bad.count,
+            bad.x,
+            bad.y,
+            bad.channel,
+            bad.value
         );
     }
     Ok(())

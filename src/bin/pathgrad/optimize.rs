@@ -324,8 +324,7 @@ fn start(args: &OptimizeArgs) -> Result<Session> {
     refuse_existing_run(&dir)?;
     let adam = Adam::new(&initial_table, &ids, adam_options(&config)?)?;
     let initial = values_of(&initial_table, &ids);
-    let mut prepared = prepare(&config, &scene, &args.flags.device, args.json)?;
-    prepared.options.render.differentiate = prepared.renderer.param_kinds(&ids);
+    let prepared = prepare(&config, &scene, &ids, &args.flags.device, args.json)?;
     let history = History::new(&scene.params, &ids, prepared.truth.is_some());
     let run = Optimization::resume(initial_table, adam, 0, prepared.options)?;
     fs::create_dir_all(&dir).with_context(|| format!("creating -o {}", dir.display()))?;
@@ -470,8 +469,7 @@ fn resume(args: &OptimizeArgs, dir: &Path, given: &BTreeSet<String>) -> Result<S
     let adam_state = AdamState { m: state.adam_m.clone(), v: state.adam_v.clone(), steps: state.adam_steps.clone() };
     let adam = Adam::with_state(&table, &ids, adam_options(&config)?, adam_state)
         .with_context(|| format!("{}: Adam state", path.display()))?;
-    let mut prepared = prepare(&config, &scene, &args.flags.device, args.json)?;
-    prepared.options.render.differentiate = prepared.renderer.param_kinds(&ids);
+    let prepared = prepare(&config, &scene, &ids, &args.flags.device, args.json)?;
     let mut history = History::new(&scene.params, &ids, prepared.truth.is_some());
     let csv = dir.join("history.csv");
     history.read(&csv, state.iteration)?;
@@ -599,9 +597,16 @@ struct Prepared {
     options: IterationOptions,
 }
 
-/// Checks `config` on `scene`, creates the device and the renderer and renders or reads the target.
-fn prepare(config: &RunConfig, scene: &Scene, device: &Option<String>, quiet: bool) -> Result<Prepared> {
-    let options = iteration_options(scene, config)?;
+/// Checks `config` on `scene`, creates the device and the renderer and renders or reads the target;
+/// the gradient passes compile only the parameter kinds of `ids`, the parameters optimised.
+fn prepare(
+    config: &RunConfig,
+    scene: &Scene,
+    ids: &[ParamId],
+    device: &Option<String>,
+    quiet: bool,
+) -> Result<Prepared> {
+    let mut options = iteration_options(scene, config)?;
     let truth = if config.target_set.is_empty() {
         None
     } else {
@@ -622,6 +627,7 @@ fn prepare(config: &RunConfig, scene: &Scene, device: &Option<String>, quiet: bo
             config.height
         );
     }
+    options.render.differentiate = renderer.param_kinds(ids);
     Ok(Prepared { renderer, compile_us, target, truth, options })
 }
 
