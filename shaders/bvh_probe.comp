@@ -15,7 +15,7 @@ layout(set = 0, binding = BINDING_PROBE_OUT, scalar) writeonly buffer ProbeOut {
 // `queries`: bit 0 runs the closest-hit query, bit 1 the occlusion query (a query not run reports 0).
 // `burn`: loop iterations spent before tracing, so a test can make lavapipe's loop budget
 // (PLATFORM.md §6.1) run out at any chosen step of a traversal; 0 in ordinary use.
-layout(push_constant) uniform Push { uint ray_count; uint queries; uint burn; };
+PUSH_BvhProbePush;
 
 void main() {
     uint i = gl_GlobalInvocationID.y * gl_NumWorkGroups.x * WORKGROUP_SIZE + gl_GlobalInvocationID.x;

@@ -5,13 +5,13 @@
 // bsdf_pdf_diff at `wo_eval`.
 #version 460
 #extension GL_EXT_scalar_block_layout : require
-#include <generated/abi_structs.glsl>
+#include <generated/contract.glsl>
 #include "lib/differential.glsl"
 
 layout(local_size_x = WORKGROUP_SIZE) in;
 layout(set = 0, binding = BINDING_PROBE_IN, scalar) readonly buffer ProbeIn { BsdfProbeCase cases[]; };
 layout(set = 0, binding = BINDING_PROBE_OUT, scalar) writeonly buffer ProbeOut { BsdfProbeResult results[]; };
-layout(push_constant) uniform Push { uint case_count; };
+PUSH_CasePush;
 
 void main() {
     uint i = gl_GlobalInvocationID.x;

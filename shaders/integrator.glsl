@@ -38,7 +38,6 @@
 #include "lib/emitter.glsl"
 #include "lib/differential.glsl"
 
-#define FLOAT_MAX 3.402823466e38
 
 // Whether the differential strategy may place its differential vertex on material `m`: its
 // roughness (rough conductor) or weight (blend) is the target parameter.

@@ -40,16 +40,8 @@ layout(set = 0, binding = BINDING_ADJOINT, scalar) readonly buffer AdjointBuf { 
 layout(set = 0, binding = BINDING_ACCUM, scalar) buffer AccumBuf { float accum[]; };
 #endif
 layout(set = 0, binding = BINDING_WORK, scalar) coherent buffer WorkBuf { uint work_next; };
-layout(push_constant) uniform Push {
-    uint sample_begin;  // first sample index (PIXEL_SELECT: first global sample) of this dispatch
-    uint sample_count;  // samples per item
-    uint item_count;    // items in this dispatch
-    uint lane_items;    // most items one lane takes
-};
+PUSH_KernelPush;  // sample_begin, sample_count, item_count, lane_items (src/contract/structs.rs)
 
-// A replay may leave this much radiance (relative to the path's, plus a floor): the primal sums
-// its terms and the replay subtracts the same terms in the same order (ALGORITHMS.md §3.3).
-#define REPLAY_RESIDUAL_TOLERANCE 1e-5
 
 // The pixel (row-major) of item `item`, false for a tile position outside the image.
 bool item_pixel(uint item, out uint pixel) {

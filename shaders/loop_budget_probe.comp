@@ -9,7 +9,7 @@ layout(local_size_x = WORKGROUP_SIZE) in;
 #define LOOP_CAP 0xFFFFFFFFu
 // Output, 2 words per invocation: iterations run, final xorshift32 state.
 layout(set = 0, binding = BINDING_PROBE_OUT, scalar) writeonly buffer ProbeOut { uint probe_out[]; };
-layout(push_constant) uniform Push { uint invocation_count; uint iterations; };
+PUSH_LoopBudgetPush;
 
 void main() {
     uint i = gl_GlobalInvocationID.y * gl_NumWorkGroups.x * WORKGROUP_SIZE + gl_GlobalInvocationID.x;

@@ -5,13 +5,13 @@
 #extension GL_EXT_shader_atomic_float : require
 #extension GL_KHR_shader_subgroup_arithmetic : require
 #extension GL_KHR_shader_subgroup_basic : require
+#include <generated/contract.glsl>
 
 layout(local_size_x = WORKGROUP_SIZE) in;
 layout(set = 0, binding = BINDING_PROBE_IN, scalar) readonly buffer Images { float values[]; };  // image, then target
 layout(set = 0, binding = BINDING_PROBE_OUT, scalar) buffer Outputs { float outputs[]; };       // loss sum, then adjoint
-layout(push_constant) uniform Push { uint count; uint kind; };
+PUSH_LossPush;
 
-#define REL_MSE_EPSILON 1e-3
 
 void main() {
     uint i = gl_GlobalInvocationID.y * gl_NumWorkGroups.x * WORKGROUP_SIZE + gl_GlobalInvocationID.x;
@@ -19,15 +19,15 @@ void main() {
     if (i < count) {
         float d = values[i] - values[count + i];
         float grad;
-        if (kind == 0u) {
+        if (kind == LOSS_L1) {
             term = abs(d);
             grad = d > 0.0 ? 1.0 : (d < 0.0 ? -1.0 : 0.0);
-        } else if (kind == 1u) {
+        } else if (kind == LOSS_L2) {
             term = d * d;
             grad = 2.0 * d;
         } else {
             float target = values[count + i];
-            float denom = kind == 2u ? target + REL_MSE_EPSILON : max(abs(target), REL_MSE_EPSILON);
+            float denom = kind == LOSS_REL_MSE ? target + REL_MSE_EPSILON : max(abs(target), REL_MSE_EPSILON);
             term = d * d / (denom * denom);
             grad = 2.0 * d / (denom * denom);
         }

@@ -1,13 +1,14 @@
 // Test probe: Philox outputs for a list of (counter, key) inputs, read back and compared with src/rng.rs.
 #version 460
 #extension GL_EXT_scalar_block_layout : require
+#include <generated/contract.glsl>
 #include "lib/rng.glsl"
 
 layout(local_size_x = WORKGROUP_SIZE) in;
 // Input: 6 words per case (counter c0..c3, key k0, k1). Output: 4 raw words then 4 floats' bits.
 layout(set = 0, binding = BINDING_PROBE_IN, scalar) readonly buffer ProbeIn { uint probe_in[]; };
 layout(set = 0, binding = BINDING_PROBE_OUT, scalar) writeonly buffer ProbeOut { uint probe_out[]; };
-layout(push_constant) uniform Push { uint case_count; };
+PUSH_CasePush;
 
 void main() {
     uint i = gl_GlobalInvocationID.x;

@@ -8,15 +8,13 @@ use obvhs::BvhBuildParams;
 use obvhs::bvh2::builder::build_bvh2_from_tris;
 use obvhs::triangle::Triangle;
 
-use crate::error::{Error, Result};
-use crate::gpu::abi::{
+use crate::contract::{
     BVH_LEAF_BIT, BVH_LEAF_COUNT_SHIFT, BVH_LEAF_FIRST_MASK, BVH_LEAF_MAX, BVH_NO_CHILD, BVH_STACK_SIZE, BvhNode,
     TriPositions,
 };
+use crate::error::{Error, Result};
 
-/// Direction components smaller than this are replaced by it (keeping the sign), so the slab test's
-/// reciprocal is finite and `0 · ∞` never produces NaN — identically in Rust and GLSL.
-pub const MIN_DIR_COMPONENT: f32 = 1e-20;
+pub use crate::contract::MIN_DIR_COMPONENT;
 
 /// A built BVH: nodes plus the triangles in leaf order.
 #[derive(Clone, Debug, Default, PartialEq)]

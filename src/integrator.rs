@@ -1,7 +1,7 @@
 //! Options shared by the GPU renderer and the CPU reference: image size, samples, depth, seed.
 
+use crate::contract::{Globals, NO_PARAM, STRATEGY_BSDF, STRATEGY_DIFF};
 use crate::error::{Error, Result};
-use crate::gpu::abi::{Globals, NO_PARAM, STRATEGY_BSDF, STRATEGY_DIFF};
 use crate::params::ParamId;
 use crate::rng::{PassTag, RngKey};
 use crate::scene::Scene;
@@ -48,19 +48,19 @@ impl ParamKinds {
     /// No parameter.
     pub const NONE: ParamKinds = ParamKinds(0);
     /// Constant colours: diffuse albedo, conductor specular reflectance.
-    pub const COLOR: ParamKinds = ParamKinds(crate::gpu::abi::G_COLOR);
+    pub const COLOR: ParamKinds = ParamKinds(crate::contract::G_COLOR);
     /// Texels of textured colours.
-    pub const TEXTURE: ParamKinds = ParamKinds(crate::gpu::abi::G_TEXTURE);
+    pub const TEXTURE: ParamKinds = ParamKinds(crate::contract::G_TEXTURE);
     /// Roughness of rough conductors.
-    pub const ALPHA: ParamKinds = ParamKinds(crate::gpu::abi::G_ALPHA);
+    pub const ALPHA: ParamKinds = ParamKinds(crate::contract::G_ALPHA);
     /// Blend weights.
-    pub const WEIGHT: ParamKinds = ParamKinds(crate::gpu::abi::G_WEIGHT);
+    pub const WEIGHT: ParamKinds = ParamKinds(crate::contract::G_WEIGHT);
     /// Emitted radiance of area emitters.
-    pub const EMISSION: ParamKinds = ParamKinds(crate::gpu::abi::G_EMISSION);
+    pub const EMISSION: ParamKinds = ParamKinds(crate::contract::G_EMISSION);
     /// The constant environment's radiance.
-    pub const ENVIRONMENT: ParamKinds = ParamKinds(crate::gpu::abi::G_ENV);
+    pub const ENVIRONMENT: ParamKinds = ParamKinds(crate::contract::G_ENV);
     /// Every kind.
-    pub const ALL: ParamKinds = ParamKinds(crate::gpu::abi::G_ANY);
+    pub const ALL: ParamKinds = ParamKinds(crate::contract::G_ANY);
 
     /// Both sets.
     pub const fn union(self, other: ParamKinds) -> ParamKinds {
@@ -82,7 +82,7 @@ impl ParamKinds {
         self.0 == 0
     }
 
-    /// The set as `G_*` feature bits of [`crate::gpu::abi`].
+    /// The set as `G_*` feature bits of [`crate::contract`].
     pub const fn bits(self) -> u32 {
         self.0
     }

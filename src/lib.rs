@@ -38,6 +38,7 @@ pub mod adaptive;
 pub mod alias;
 pub mod bsdf;
 pub mod bvh;
+pub mod contract;
 pub mod cpu;
 pub mod error;
 pub mod gpu;

@@ -3,24 +3,9 @@
 use crate::error::{Error, Result};
 use crate::image::Image;
 
-/// ε of the relative MSE's denominator.
-pub const REL_MSE_EPSILON: f64 = 1e-3;
+pub use crate::contract::REL_MSE_EPSILON;
 
-/// A loss between a rendered image I and a target Ĩ, averaged over all W·H·3 values.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum Loss {
-    /// Mean absolute difference; its adjoint is sign(I − Ĩ)/(3WH) (0 where equal).
-    L1,
-    /// Mean squared difference.
-    L2,
-    /// Relative MSE with the target in the denominator: ((I − Ĩ)/(Ĩ + ε))², ε = 1e-3 (the
-    /// reference's inverse-rendering scripts).
-    RelMse,
-    /// Relative MSE with the denominator max(|Ĩ|, ε): ((I − Ĩ)/max(|Ĩ|, ε))², ε = 1e-3 (the
-    /// reference's variance scripts, `variance_loss.py`). Equal to [`Loss::RelMse`] up to
-    /// O(ε/Ĩ) where Ĩ ≫ ε; it differs where the target is dark.
-    RelMseMax,
-}
+pub use crate::contract::Loss;
 
 impl Loss {
     /// The option's spelling: `l1`, `l2`, `relmse` or `relmse_max`.
@@ -99,7 +84,8 @@ pub fn loss_and_adjoint(image: &Image, target: &Image, loss: Loss) -> Result<(f6
                 ),
                 Loss::L2 => (d * d, 2.0 * d),
                 Loss::RelMse | Loss::RelMseMax => {
-                    let denom = if loss == Loss::RelMse { t + REL_MSE_EPSILON } else { t.abs().max(REL_MSE_EPSILON) };
+                    let eps = f64::from(REL_MSE_EPSILON);
+                    let denom = if loss == Loss::RelMse { t + eps } else { t.abs().max(eps) };
                     (d * d / (denom * denom), 2.0 * d / (denom * denom))
                 }
             };
@@ -121,7 +107,7 @@ pub fn loss_and_adjoint_gpu(
     target: &Image,
     loss: Loss,
 ) -> Result<(f64, Image)> {
-    use crate::gpu::abi::{BINDING_PROBE_IN, BINDING_PROBE_OUT};
+    use crate::contract::{BINDING_PROBE_IN, BINDING_PROBE_OUT};
     use crate::gpu::{Buffer, Kernel, pipeline::groups_for};
     if (image.width(), image.height()) != (target.width(), target.height()) {
         return Err(Error::InvalidArgument {
@@ -137,14 +123,8 @@ pub fn loss_and_adjoint_gpu(
     output.clear()?;
     let kernel = Kernel::new(ctx, "loss", &[BINDING_PROBE_IN, BINDING_PROBE_OUT], 8)?;
     let group = kernel.bind(&[(BINDING_PROBE_IN, &input), (BINDING_PROBE_OUT, &output)])?;
-    let kind: u32 = match loss {
-        Loss::L1 => 0,
-        Loss::L2 => 1,
-        Loss::RelMse => 2,
-        Loss::RelMseMax => 3,
-    };
-    let push = [n as u32, kind];
-    ctx.submit_and_wait("loss", |cmd| kernel.record(cmd, &group, bytemuck::cast_slice(&push), groups_for(n as u32)))?;
+    let push = crate::contract::LossPush { count: n as u32, kind: loss.value() };
+    ctx.submit_and_wait("loss", |cmd| kernel.record(cmd, &group, bytemuck::bytes_of(&push), groups_for(n as u32)))?;
     let out: Vec<f32> = output.download(n + 1)?;
     Ok((f64::from(out[0]), Image::from_rgb(image.width(), image.height(), out[1..].to_vec())?))
 }

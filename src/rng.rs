@@ -51,7 +51,7 @@ pub enum PassTag {
     /// The gradient passes (fused primal + replay).
     Gradient = 2,
     /// Adaptive pixel selection.
-    PixelSelect = crate::gpu::abi::PASS_PIXEL_SELECT,
+    PixelSelect = crate::contract::PASS_PIXEL_SELECT,
     /// Reference (target) renders.
     Reference = 4,
     /// Tests and tools.
@@ -71,7 +71,7 @@ pub enum Stream {
     /// Attached-derivative regularisation noise.
     Jacobian = 3,
     /// Pixel selection (adaptive sampling, ALGORITHMS.md §6).
-    Pixel = crate::gpu::abi::STREAM_PIXEL,
+    Pixel = crate::contract::STREAM_PIXEL,
 }
 
 /// The Philox key of one pass: `key0 = seed`, `key1 = (iteration << 8) | pass_tag`.

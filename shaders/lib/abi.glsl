@@ -7,7 +7,7 @@
 #extension GL_EXT_control_flow_attributes : require
 #extension GL_EXT_buffer_reference : require
 #extension GL_EXT_buffer_reference_uvec2 : require
-#include <generated/abi_structs.glsl>
+#include <generated/contract.glsl>
 
 // Per-render constants: a uniform buffer (every lane reads the same values).
 layout(set = 0, binding = BINDING_GLOBALS, scalar) uniform GlobalsBuf { Globals globals; };

@@ -6,10 +6,6 @@
 #include "sampling.glsl"
 #include "features.glsl"
 
-#define D_UNDERFLOW 1e-20
-#define AZIMUTH_EPSILON 1e-7
-#define BECKMANN_U_CLAMP 1e-6
-#define BECKMANN_NORMAL_INCIDENCE 0.99999
 
 struct Leaf { uint kind; uint distribution; float alpha; vec3 color; vec3 eta; vec3 k; };
 struct Bsdf { Leaf leaf0; Leaf leaf1; float weight; bool blend; };

@@ -48,7 +48,6 @@ TriPositions load_tri(uint i) {
     return TriPositions(vec3(w0, w1.x), vec3(w1.y, w2), vec3(w3, w4.x), 0u);
 }
 
-#define MIN_DIR_COMPONENT 1e-20
 
 struct Ray { vec3 origin; vec3 dir; vec3 inv_dir; };
 struct Hit { float t; uint slot; float b1; float b2; bool valid; };

@@ -6,13 +6,6 @@
 
 #include "bsdf.glsl"
 
-#define EULER_E 2.71828182845904523536
-// e − f32(e): 1 + e·x without cancellation near the branch point x = −1/e.
-#define EULER_E_LO 8.254840366817007e-08
-#define LAMBERT_SERIES_ONLY 0.1
-#define LAMBERT_W0_SMALL -0.25
-#define LAMBERT_WM1_SMALL -0.15
-#define DIFF_COS_EPSILON 1e-9
 
 // ---- Lambert W on [−1/e, 0): branch-point series start, three Halley steps ----
 float lambert_branch_offset(float x) {

@@ -2,11 +2,6 @@
 #ifndef PATHGRAD_SAMPLING_GLSL
 #define PATHGRAD_SAMPLING_GLSL
 
-#define PI 3.14159265358979323846
-#define INV_PI 0.31830988618379067154
-#define PI_OVER_2 1.57079632679489661923
-#define PI_OVER_4 0.78539816339744830962
-
 // Orthonormal frame around a unit normal (Duff et al. 2017); the normal is +z in local coordinates.
 struct ShadingFrame { vec3 t; vec3 b; vec3 n; };
 

@@ -7,11 +7,7 @@
 #include "bsdf.glsl"
 #include "params.glsl"
 
-// Spawned rays start this far (relative to the largest coordinate, at least 1) off the surface on
-// the side they leave to, so they do not re-hit the triangle they start on.
-#define RAY_OFFSET 1e-4
-// Shadow rays stop this fraction short of the emitter point so the emitter itself never occludes.
-#define SHADOW_EPSILON 1e-4
+// RAY_OFFSET and SHADOW_EPSILON come from src/contract/floats.rs.
 
 struct Surface { vec3 p; vec3 ng; vec3 ns; vec2 uv; uint material; uint emitter; };
 

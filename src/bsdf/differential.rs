@@ -10,19 +10,10 @@ use glam::{Vec2, Vec3};
 use crate::bsdf::rough_conductor::Distribution;
 use crate::bsdf::{Bsdf, BsdfSample, Leaf, bsdf_eval, leaf_pdf, leaf_sample};
 
-/// The f32 rounding error of e, so that 1 + e·x is computed without cancellation near x = −1/e.
-const E_LO: f32 = (std::f64::consts::E - E as f64) as f32;
-/// Below this distance p = √(2(1 + e·x)) from the branch point the series alone is used (its
-/// truncation error is ~0.026 p⁶ < 3e-8, while Halley's residual loses precision as p → 0).
-const LAMBERT_SERIES_ONLY: f32 = 0.1;
-/// Above this x, W0 starts from x(1 − x) instead of the branch-point series.
-const LAMBERT_W0_SMALL: f32 = -0.25;
-/// Above this x, W−1 starts from the asymptotic ln(−x) − ln(−ln(−x)) + … instead of the series.
-const LAMBERT_WM1_SMALL: f32 = -0.15;
+use crate::contract::{EULER_E_LO as E_LO, LAMBERT_SERIES_ONLY, LAMBERT_W0_SMALL, LAMBERT_WM1_SMALL};
 /// Fixed number of Halley steps (written out in GLSL: no data-dependent loops).
 const LAMBERT_HALLEY_STEPS: usize = 3;
-/// Half vectors with cos θh below this have density 0 (ALGORITHMS.md §4.2).
-pub const DIFF_COS_EPSILON: f32 = 1e-9;
+pub use crate::contract::DIFF_COS_EPSILON;
 
 /// 1 + e·x, with e·x formed by a fused multiply-add plus the rounding error of e: no cancellation
 /// near the branch point x = −1/e (clamped at 0 below it).

@@ -7,25 +7,10 @@ use glam::{Vec2, Vec3};
 
 use crate::sampling::{erf_approx, erfinv_approx, sample_concentric_disk};
 
-/// Microfacet distribution.
-#[repr(u32)]
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum Distribution {
-    /// Beckmann.
-    Beckmann = 0,
-    /// GGX (Trowbridge–Reitz).
-    Ggx = 1,
-}
+pub use crate::contract::Distribution;
 
-/// D is set to 0 where D·cos θh falls below this: the value underflows and its derivative is noise.
-pub const D_UNDERFLOW: f32 = 1e-20;
-/// Below this |sin θ| the azimuth of the stretched incident direction is taken as 0.
-const AZIMUTH_EPSILON: f32 = 1e-7;
-/// The Beckmann slope sampler clamps its uniforms into [ε, 1 − ε] (logarithms and erfinv stay finite).
-const BECKMANN_U_CLAMP: f32 = 1e-6;
-/// Above this cos θi the Beckmann visible slopes are sampled as the plain (Gaussian) slopes: the
-/// Newton inversion degenerates as tan θi → 0 while the two distributions coincide.
-const BECKMANN_NORMAL_INCIDENCE: f32 = 0.99999;
+pub use crate::contract::D_UNDERFLOW;
+use crate::contract::{AZIMUTH_EPSILON, BECKMANN_NORMAL_INCIDENCE, BECKMANN_U_CLAMP};
 
 fn sqrt3(v: Vec3) -> Vec3 {
     Vec3::new(v.x.sqrt(), v.y.sqrt(), v.z.sqrt())

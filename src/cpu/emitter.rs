@@ -3,8 +3,8 @@
 
 use glam::{Vec2, Vec3};
 
+use crate::contract::Globals;
 use crate::cpu::surface::param_color;
-use crate::gpu::abi::Globals;
 use crate::sampling::{UNIFORM_SPHERE_PDF, sample_uniform_sphere, sample_uniform_triangle};
 use crate::scene::flat::FlatScene;
 

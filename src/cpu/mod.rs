@@ -14,8 +14,8 @@ use glam::Vec3;
 use rayon::prelude::*;
 
 use crate::adaptive::{PixelSampling, select_pixel};
+use crate::contract::Globals;
 use crate::cpu::path::GradSink;
-use crate::gpu::abi::Globals;
 use crate::rng::{PassTag, RngKey};
 
 use crate::error::Result;

@@ -6,13 +6,13 @@ use glam::{Vec2, Vec3};
 use crate::bsdf::differential::{bsdf_pdf_diff, bsdf_sample_diff};
 use crate::bsdf::{bsdf_eval, bsdf_pdf, bsdf_sample};
 use crate::bvh::{Ray, closest_hit, occluded};
+use crate::contract::{
+    DIM_DIFF_SIGN, DIM_DIRECTION, DIM_EMITTER_POS, DIM_EMITTER_SELECT, DIM_LOBE, DIM_PIXEL_JITTER, DIM_ROULETTE,
+    DIM_TECHNIQUE, Globals, MAT_BLEND, MAT_ROUGH_CONDUCTOR, NO_EMITTER, NO_PARAM, STRATEGY_DIFF,
+};
 use crate::cpu::emitter::{emitter_pdf_solid_angle, environment_pdf, sample_emitter};
 use crate::cpu::surface::{
     SHADOW_EPSILON, bsdf_backward, mis_power, offset_origin, param_color, resolve_bsdf, safe_div, surface_at,
-};
-use crate::gpu::abi::{
-    DIM_DIFF_SIGN, DIM_DIRECTION, DIM_EMITTER_POS, DIM_EMITTER_SELECT, DIM_LOBE, DIM_PIXEL_JITTER, DIM_ROULETTE,
-    DIM_TECHNIQUE, Globals, MAT_BLEND, MAT_ROUGH_CONDUCTOR, NO_EMITTER, NO_PARAM, STRATEGY_DIFF,
 };
 use crate::rng::{RngKey, Stream, uniform4};
 use crate::sampling::Frame;
@@ -50,9 +50,7 @@ fn hit_weight(diff: bool, prev_nee: bool, pdf_f: f32, pdf_e: f32, prev_sum: f32)
     1.0 / (1.0 + prev_sum * pdf_e / pdf_f)
 }
 
-/// A replay may leave this much radiance, relative to the path's (plus a floor): the primal sums its
-/// terms and the replay subtracts the same terms in the same order (ALGORITHMS.md §3.3).
-pub const REPLAY_RESIDUAL_TOLERANCE: f32 = 1e-5;
+pub use crate::contract::REPLAY_RESIDUAL_TOLERANCE;
 
 /// Whether what a replay left over (`left`) is rounding of the path's radiance `total`.
 pub fn replay_returned_to_zero(total: Vec3, left: Vec3) -> bool {

@@ -4,15 +4,11 @@ use glam::Vec3;
 
 use crate::bsdf::{Bsdf, Distribution, Leaf, LeafGrad, bsdf_eval_grad};
 use crate::bvh::Hit;
+use crate::contract::{MAT_BLEND, MAT_ROUGH_CONDUCTOR, Material};
 use crate::cpu::path::GradSink;
-use crate::gpu::abi::{MAT_BLEND, MAT_ROUGH_CONDUCTOR, Material};
 use crate::scene::flat::FlatScene;
 
-/// Offset of spawned rays, relative to the largest coordinate (at least 1): they must not re-hit
-/// the triangle they start on.
-pub const RAY_OFFSET: f32 = 1e-4;
-/// Shadow rays stop this fraction short of the emitter point so the emitter never occludes itself.
-pub const SHADOW_EPSILON: f32 = 1e-4;
+pub use crate::contract::{RAY_OFFSET, SHADOW_EPSILON};
 
 /// A hit resolved to position, normals, material and emitter.
 #[derive(Clone, Copy, Debug)]

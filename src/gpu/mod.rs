@@ -1,6 +1,5 @@
 //! The Vulkan back end: context, buffers, pipelines, scene upload and the renderer.
 
-pub mod abi;
 pub mod buffer;
 pub mod context;
 pub mod pipeline;

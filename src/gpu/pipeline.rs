@@ -103,7 +103,7 @@ impl Kernel {
                 .vk("vkCreateShaderModule")?;
             let feature_bytes = features.unwrap_or(0).to_ne_bytes();
             let entries =
-                [vk::SpecializationMapEntry::default().constant_id(crate::gpu::abi::SPEC_FEATURES).offset(0).size(4)];
+                [vk::SpecializationMapEntry::default().constant_id(crate::contract::SPEC_FEATURES).offset(0).size(4)];
             let spec = vk::SpecializationInfo::default().map_entries(&entries).data(&feature_bytes);
             let mut stage = vk::PipelineShaderStageCreateInfo::default()
                 .stage(vk::ShaderStageFlags::COMPUTE)
@@ -243,7 +243,7 @@ pub fn compute_barrier(ctx: &Context, cmd: vk::CommandBuffer) {
 /// grid when they exceed the 65 535 groups one dimension allows. Kernels compute their linear index
 /// as `gl_GlobalInvocationID.y * gl_NumWorkGroups.x * WORKGROUP_SIZE + gl_GlobalInvocationID.x`.
 pub fn groups_for(invocations: u32) -> [u32; 3] {
-    let groups = invocations.div_ceil(crate::gpu::abi::WORKGROUP_SIZE).max(1);
+    let groups = invocations.div_ceil(crate::contract::WORKGROUP_SIZE).max(1);
     let x = groups.min(65_535);
     [x, groups.div_ceil(x), 1]
 }

@@ -10,8 +10,8 @@ use std::time::Instant;
 use ash::vk;
 
 use crate::adaptive::{AdaptiveOptions, PixelSampling};
+use crate::contract::*;
 use crate::error::{Error, Result};
-use crate::gpu::abi::*;
 use crate::gpu::buffer::Buffer;
 use crate::gpu::context::Context;
 use crate::gpu::pipeline::{Kernel, compute_barrier, groups_for, memory_barrier};
@@ -134,16 +134,6 @@ impl std::fmt::Debug for Renderer {
 /// The bindings every render kernel has: the per-render constants (a uniform buffer that also
 /// holds the scene arrays' device addresses), the status word and the work counter.
 const SCENE_BINDINGS: [u32; 3] = [BINDING_GLOBALS, BINDING_STATUS, BINDING_WORK];
-
-/// Push constants of the render kernels (`shaders/kernel.glsl`).
-#[repr(C)]
-#[derive(Clone, Copy, bytemuck::Pod, bytemuck::Zeroable)]
-struct Push {
-    sample_begin: u32,
-    sample_count: u32,
-    item_count: u32,
-    lane_items: u32,
-}
 
 impl Renderer {
     /// Flattens `scene`, builds its BVH and uploads everything.
@@ -545,8 +535,13 @@ impl Renderer {
                 (b, ty)
             })
             .collect();
-        let kernel =
-            Kernel::specialised(&self.ctx, name, &bindings, std::mem::size_of::<Push>() as u32, Some(v.features))?;
+        let kernel = Kernel::specialised(
+            &self.ctx,
+            name,
+            &bindings,
+            std::mem::size_of::<KernelPush>() as u32,
+            Some(v.features),
+        )?;
         self.kernels.insert(v, kernel);
         self.warm_up(v)?;
         let seconds = started.elapsed().as_secs_f64();
@@ -573,7 +568,7 @@ impl Renderer {
             .collect();
         let kernel = &self.kernels[&v];
         let group = kernel.bind(&bindings)?;
-        let push = Push { sample_begin: 0, sample_count: 0, item_count: 0, lane_items: 0 };
+        let push = KernelPush { sample_begin: 0, sample_count: 0, item_count: 0, lane_items: 0 };
         self.ctx.submit_and_wait(v.kind.layout().0, |cmd| {
             kernel.record(cmd, &group, bytemuck::bytes_of(&push), [1, 1, 1]);
         })
@@ -629,11 +624,11 @@ impl Renderer {
         let name = v.kind.layout().0;
         let pixels = options.width * options.height;
         // One dispatch: (push constants, lanes).
-        let launch = |push: Push| {
+        let launch = |push: KernelPush| {
             let lanes = if self.one_path_per_lane { push.item_count } else { push.item_count.min(MAX_LANES) };
             (push, groups_for(lanes.max(1)))
         };
-        let record = |cmd: vk::CommandBuffer, dispatches: &[(Push, [u32; 3])]| {
+        let record = |cmd: vk::CommandBuffer, dispatches: &[(KernelPush, [u32; 3])]| {
             for (push, groups) in dispatches {
                 // SAFETY: `cmd` is recording; the counter is alive until the submission is waited on.
                 unsafe { ctx.device().cmd_fill_buffer(cmd, counter.raw(), 0, vk::WHOLE_SIZE, 0) };
@@ -671,11 +666,16 @@ impl Renderer {
                     let dispatches: Vec<_> = if self.one_path_per_lane {
                         (done..end)
                             .map(|s| {
-                                launch(Push { sample_begin: s, sample_count: 1, item_count: items, lane_items: 1 })
+                                launch(KernelPush {
+                                    sample_begin: s,
+                                    sample_count: 1,
+                                    item_count: items,
+                                    lane_items: 1,
+                                })
                             })
                             .collect()
                     } else {
-                        let push = Push {
+                        let push = KernelPush {
                             sample_begin: done,
                             sample_count: end - done,
                             item_count: items,
@@ -699,7 +699,7 @@ impl Renderer {
                 let mut done = 0u64;
                 while done < count {
                     let end = (done + chunk).min(count);
-                    let push = Push {
+                    let push = KernelPush {
                         sample_begin: done as u32,
                         sample_count: 1,
                         item_count: (end - done) as u32,

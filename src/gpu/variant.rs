@@ -3,9 +3,9 @@
 //! A kernel contains only what its request and scene use (issue "Fast kernels"): the material
 //! kinds and distributions present, textures, two-sided materials, emitters and the environment,
 //! next-event estimation, the strategy, and which parameter kinds are differentiated. Each bit is
-//! an `F_*`/`G_*` constant of [`crate::gpu::abi`], read by `shaders/lib/features.glsl`.
+//! an `F_*`/`G_*` constant of [`crate::contract`], read by `shaders/lib/features.glsl`.
 
-use crate::gpu::abi::*;
+use crate::contract::*;
 use crate::integrator::{ParamKinds, RenderOptions, Strategy};
 use crate::scene::flat::FlatScene;
 

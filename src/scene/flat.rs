@@ -4,10 +4,10 @@
 use glam::Vec3;
 
 use crate::bvh::{self, Bvh};
-use crate::error::Result;
-use crate::gpu::abi::{
+use crate::contract::{
     EmitterTri, MAT_BLEND, MAT_DIFFUSE, MAT_ROUGH_CONDUCTOR, Material as GpuMaterial, NO_EMITTER, TriShading,
 };
+use crate::error::Result;
 use crate::scene::shapes::triangle_area;
 use crate::scene::{Albedo, Material, Scene};
 

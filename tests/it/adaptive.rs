@@ -4,8 +4,8 @@
 
 use glam::Vec3;
 use pathgrad::adaptive::{AdaptiveEstimator, AdaptiveOptions, PixelSampling, select_pixel};
+use pathgrad::contract::{AliasEntry, BINDING_ALIAS, BINDING_PROBE_OUT};
 use pathgrad::cpu::path::{GradSink, trace_path};
-use pathgrad::gpu::abi::{AliasEntry, BINDING_ALIAS, BINDING_PROBE_OUT};
 use pathgrad::gpu::pipeline::groups_for;
 use pathgrad::gpu::renderer::GradMode;
 use pathgrad::gpu::{Buffer, Kernel, Renderer};
@@ -49,10 +49,14 @@ fn pixel_selection_gpu_equals_cpu_bitwise() {
     let output = Buffer::storage(&gpu.ctx, "alias probe output", u64::from(samples) * 4).unwrap();
     let kernel = Kernel::new(&gpu.ctx, "alias_probe", &[BINDING_ALIAS, BINDING_PROBE_OUT], 16).unwrap();
     let group = kernel.bind(&[(BINDING_ALIAS, &alias_buf), (BINDING_PROBE_OUT, &output)]).unwrap();
-    let push = [key.0[0], key.0[1], w * h, samples];
+    let push = pathgrad::contract::AliasProbePush {
+        key: glam::UVec2::new(key.0[0], key.0[1]),
+        table_size: w * h,
+        sample_count: samples,
+    };
     gpu.ctx
         .submit_and_wait("alias probe", |cmd| {
-            kernel.record(cmd, &group, bytemuck::cast_slice(&push), groups_for(samples))
+            kernel.record(cmd, &group, bytemuck::bytes_of(&push), groups_for(samples))
         })
         .unwrap();
     let got: Vec<u32> = output.download(samples as usize).unwrap();

@@ -82,7 +82,7 @@ fn deep_meshes_fit_the_traversal_stack() {
     let scene = crate::support::scenes::deep_meshes();
     let flat = pathgrad::scene::flat::FlatScene::new(&scene).unwrap();
     println!("deep meshes: {} nodes, depth {}", flat.bvh.nodes.len(), flat.bvh.depth);
-    assert!(flat.bvh.depth < pathgrad::gpu::abi::BVH_STACK_SIZE, "depth {}", flat.bvh.depth);
+    assert!(flat.bvh.depth < pathgrad::contract::BVH_STACK_SIZE, "depth {}", flat.bvh.depth);
     assert_eq!(flat.bvh.prim_ids.len(), scene.triangle_count());
     let mut ids = flat.bvh.prim_ids.clone();
     ids.sort_unstable();

@@ -11,7 +11,7 @@
 //! 70 000-iteration loop went unreported (measured with `shaders/loop_budget_probe.comp`).
 
 use pathgrad::bvh;
-use pathgrad::gpu::abi::{BINDING_PROBE_OUT, BINDING_STATUS, STATUS_LOOP_BUDGET, WORKGROUP_SIZE};
+use pathgrad::contract::{BINDING_PROBE_OUT, BINDING_STATUS, STATUS_LOOP_BUDGET, WORKGROUP_SIZE};
 use pathgrad::gpu::pipeline::groups_for;
 use pathgrad::gpu::{Buffer, Kernel};
 
@@ -43,7 +43,7 @@ fn run_probe(gpu: &TestGpu, iterations: u32) -> (u32, Vec<[u32; 2]>) {
     let output = Buffer::storage(&gpu.ctx, "loop probe output", u64::from(INVOCATIONS) * 8).unwrap();
     let kernel = Kernel::new(&gpu.ctx, "loop_budget_probe", &[BINDING_STATUS, BINDING_PROBE_OUT], 8).unwrap();
     let group = kernel.bind(&[(BINDING_STATUS, &status), (BINDING_PROBE_OUT, &output)]).unwrap();
-    let push = [INVOCATIONS, iterations];
+    let push = pathgrad::contract::LoopBudgetPush { invocation_count: INVOCATIONS, iterations };
     gpu.ctx
         .submit_and_wait("loop budget probe", |cmd| {
             kernel.record(cmd, &group, bytemuck::bytes_of(&push), groups_for(INVOCATIONS))

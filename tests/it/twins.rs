@@ -1,6 +1,6 @@
 //! GLSL twins pinned to their Rust originals by running both on the same inputs.
 
-use pathgrad::gpu::abi::{BINDING_PROBE_IN, BINDING_PROBE_OUT};
+use pathgrad::contract::{BINDING_PROBE_IN, BINDING_PROBE_OUT, CasePush};
 use pathgrad::gpu::pipeline::groups_for;
 use pathgrad::gpu::{Buffer, Kernel};
 use pathgrad::rng::{philox4x32_10, u32_to_unit_f32};
@@ -33,7 +33,9 @@ fn rng_gpu_equals_cpu_bitwise() {
     let group = kernel.bind(&[(BINDING_PROBE_IN, &input), (BINDING_PROBE_OUT, &output)]).unwrap();
     let n = cases.len() as u32;
     gpu.ctx
-        .submit_and_wait("rng probe", |cmd| kernel.record(cmd, &group, bytemuck::bytes_of(&n), groups_for(n)))
+        .submit_and_wait("rng probe", |cmd| {
+            kernel.record(cmd, &group, bytemuck::bytes_of(&CasePush { case_count: n }), groups_for(n))
+        })
         .unwrap();
     let got: Vec<u32> = output.download(cases.len() * 8).unwrap();
     for (i, case) in cases.iter().enumerate() {
@@ -54,10 +56,10 @@ fn probe_case(
     u_lobe: f32,
     u: glam::Vec2,
     wo_eval: glam::Vec3,
-) -> pathgrad::gpu::abi::BsdfProbeCase {
+) -> pathgrad::contract::BsdfProbeCase {
     use glam::Vec3;
     use pathgrad::bsdf::Leaf;
-    use pathgrad::gpu::abi::{LEAF_DIFFUSE, LEAF_ROUGH_CONDUCTOR};
+    use pathgrad::contract::{LEAF_DIFFUSE, LEAF_ROUGH_CONDUCTOR};
     let fields = |l: &Leaf| match *l {
         Leaf::Diffuse { albedo } => (LEAF_DIFFUSE, 0, 0.0, albedo, Vec3::ZERO, Vec3::ZERO),
         Leaf::RoughConductor { distribution, alpha, specular, eta, k } => {
@@ -65,7 +67,7 @@ fn probe_case(
         }
     };
     let (l0, l1) = (fields(&b.leaves[0]), fields(&b.leaves[1]));
-    pathgrad::gpu::abi::BsdfProbeCase {
+    pathgrad::contract::BsdfProbeCase {
         kind0: l0.0,
         dist0: l0.1,
         alpha0: l0.2,
@@ -91,15 +93,19 @@ fn probe_case(
 fn run_bsdf_probe(
     gpu: &TestGpu,
     kernel: &'static str,
-    cases: &[pathgrad::gpu::abi::BsdfProbeCase],
-) -> Vec<pathgrad::gpu::abi::BsdfProbeResult> {
+    cases: &[pathgrad::contract::BsdfProbeCase],
+) -> Vec<pathgrad::contract::BsdfProbeResult> {
     let input = Buffer::storage_with(&gpu.ctx, "probe input", cases).unwrap();
-    let size = (cases.len() * size_of::<pathgrad::gpu::abi::BsdfProbeResult>()) as u64;
+    let size = (cases.len() * size_of::<pathgrad::contract::BsdfProbeResult>()) as u64;
     let output = Buffer::storage(&gpu.ctx, "probe output", size).unwrap();
     let k = Kernel::new(&gpu.ctx, kernel, &[BINDING_PROBE_IN, BINDING_PROBE_OUT], 4).unwrap();
     let group = k.bind(&[(BINDING_PROBE_IN, &input), (BINDING_PROBE_OUT, &output)]).unwrap();
     let n = cases.len() as u32;
-    gpu.ctx.submit_and_wait(kernel, |cmd| k.record(cmd, &group, bytemuck::bytes_of(&n), groups_for(n))).unwrap();
+    gpu.ctx
+        .submit_and_wait(kernel, |cmd| {
+            k.record(cmd, &group, bytemuck::bytes_of(&CasePush { case_count: n }), groups_for(n))
+        })
+        .unwrap();
     output.download(cases.len()).unwrap()
 }
 
@@ -313,4 +319,84 @@ fn diff_gpu_equals_cpu() {
     }
     println!("{} cases: {validity_flips} validity flips, worst direction difference {worst_dir:.2e}", cases.len());
     assert!(validity_flips as f64 <= 1e-3 * cases.len() as f64, "{validity_flips} validity flips");
+}
+
+/// Every contract value reaches the kernels unchanged: the probe writes each integer and
+/// enumeration value and the bits of each float as the shaders see them (the macros build.rs
+/// defines), and each equals its Rust constant bit for bit. A float literal that rounds
+/// differently in glslang, or a value the build stopped passing, fails here.
+#[test]
+fn contract_values_reach_the_kernels_bit_for_bit() {
+    use pathgrad::contract::{ENUM_CONSTANTS, FLOAT_CONSTANTS, INT_CONSTANTS};
+    let gpu = TestGpu::new();
+    let uints: Vec<(&str, u32)> = INT_CONSTANTS.iter().chain(ENUM_CONSTANTS).copied().collect();
+    let n = uints.len() + FLOAT_CONSTANTS.len();
+    let output = Buffer::storage(&gpu.ctx, "contract probe output", (n * 4) as u64).unwrap();
+    let kernel = Kernel::new(&gpu.ctx, "contract_probe", &[BINDING_PROBE_OUT], 0).unwrap();
+    let group = kernel.bind(&[(BINDING_PROBE_OUT, &output)]).unwrap();
+    gpu.ctx.submit_and_wait("contract probe", |cmd| kernel.record(cmd, &group, &[], [1, 1, 1])).unwrap();
+    let got: Vec<u32> = output.download(n).unwrap();
+    for (&(name, want), &value) in uints.iter().zip(&got) {
+        assert_eq!(value, want, "{name}");
+    }
+    for (&(name, want), &bits) in FLOAT_CONSTANTS.iter().zip(&got[uints.len()..]) {
+        assert_eq!(bits, want.to_bits(), "{name}: the kernels see {} instead of {want:e}", f32::from_bits(bits));
+    }
+    assert_eq!(gpu.ctx.validation_errors(), 0);
+}
+
+/// Nothing restates the contract: no shader `#define`s a contract name or declares a push-constant
+/// block of its own (both come from build.rs), and no Rust file outside `src/contract/` declares a
+/// constant of a contract name.
+#[test]
+fn nothing_restates_the_contract() {
+    use pathgrad::contract::{ENUM_CONSTANTS, FLOAT_CONSTANTS, INT_CONSTANTS};
+    let names: std::collections::HashSet<&str> = INT_CONSTANTS
+        .iter()
+        .chain(ENUM_CONSTANTS)
+        .map(|(n, _)| *n)
+        .chain(FLOAT_CONSTANTS.iter().map(|(n, _)| *n))
+        .collect();
+    let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR"));
+    let mut files = Vec::new();
+    let mut stack = vec![root.join("shaders"), root.join("src")];
+    while let Some(dir) = stack.pop() {
+        for entry in std::fs::read_dir(&dir).unwrap() {
+            let path = entry.unwrap().path();
+            if path.is_dir() {
+                if !path.ends_with("src/contract") {
+                    stack.push(path);
+                }
+            } else {
+                files.push(path);
+            }
+        }
+    }
+    let mut offences = Vec::new();
+    for path in &files {
+        let ext = path.extension().and_then(|e| e.to_str()).unwrap_or("");
+        let text = std::fs::read_to_string(path).unwrap();
+        for (i, line) in text.lines().enumerate() {
+            let line = line.trim_start();
+            let declared = match ext {
+                "glsl" | "comp" => {
+                    if line.contains("push_constant") {
+                        offences.push(format!("{}:{}: a push-constant block", path.display(), i + 1));
+                    }
+                    line.strip_prefix("#define ").and_then(|rest| rest.split_whitespace().next())
+                }
+                "rs" => line
+                    .trim_start_matches("pub ")
+                    .trim_start_matches("pub(crate) ")
+                    .strip_prefix("const ")
+                    .and_then(|rest| rest.split(':').next()),
+                _ => None,
+            };
+            if let Some(name) = declared.filter(|n| names.contains(n.trim())) {
+                offences.push(format!("{}:{}: {}", path.display(), i + 1, name.trim()));
+            }
+        }
+    }
+    assert!(files.len() > 50, "the scan found only {} files", files.len());
+    assert!(offences.is_empty(), "contract items restated outside src/contract/:\n{}", offences.join("\n"));
 }

@@ -3,7 +3,7 @@
 use ash::vk;
 use bytemuck::{Pod, Zeroable};
 use pathgrad::bvh::Bvh;
-use pathgrad::gpu::abi::{BINDING_GLOBALS, BINDING_PROBE_IN, BINDING_PROBE_OUT, BINDING_STATUS, Globals};
+use pathgrad::contract::{BINDING_GLOBALS, BINDING_PROBE_IN, BINDING_PROBE_OUT, BINDING_STATUS, BvhProbePush, Globals};
 use pathgrad::gpu::pipeline::groups_for;
 use pathgrad::gpu::{Buffer, Kernel};
 
@@ -102,7 +102,7 @@ impl<'a> BvhProbe<'a> {
             ])
             .unwrap();
         let n = rays.len() as u32;
-        let push = [n, queries, burn];
+        let push = BvhProbePush { ray_count: n, queries, burn };
         ctx.submit_and_wait("bvh probe", |cmd| {
             self.kernel.record(cmd, &group, bytemuck::bytes_of(&push), groups_for(n))
         })
@@ -134,7 +134,7 @@ impl<'a> BvhProbe<'a> {
             .into_iter()
             .map(|burn| {
                 status.clear().unwrap();
-                let push = [1, queries, burn];
+                let push = BvhProbePush { ray_count: 1, queries, burn };
                 ctx.submit_and_wait("bvh probe", |cmd| {
                     self.kernel.record(cmd, &group, bytemuck::bytes_of(&push), [1, 1, 1])
                 })

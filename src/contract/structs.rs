@@ -1,11 +1,12 @@
-// Structs shared by Rust and GLSL, declared once.
+// Structs and push-constant blocks shared by Rust and GLSL, declared once.
 //
-// `src/gpu/abi.rs` expands this into `#[repr(C)]` bytemuck structs; `build.rs` expands the same
-// declarations into the GLSL twins (`generated/abi_structs.glsl`), used by every storage buffer with
-// `layout(scalar)`. Scalar layout inserts no padding and `Pod` refuses implicit padding, so the
+// `src/contract/mod.rs` expands this into `#[repr(C)]` bytemuck structs; `build.rs` expands the same
+// declarations into the GLSL twins (`generated/contract.glsl`), used by every storage buffer with
+// `layout(scalar)`. A push-constant block becomes a struct too, plus a macro `PUSH_<Name>` that
+// declares the kernel's `layout(push_constant, scalar)` block with the same members. Scalar layout inserts no padding and `Pod` refuses implicit padding, so the
 // offsets agree by construction (STYLE.md §3). Field types: u32, f32, Vec2, Vec3, UVec2 only.
 
-abi_structs! {
+contract_structs! {
     /// Per-dispatch constants: image size, random-number key, path options, camera.
     struct Globals {
         /// Image width in pixels.
@@ -240,5 +241,61 @@ abi_structs! {
         eval: Vec3,
         /// `bsdf_pdf` at `wo_eval`.
         eval_pdf: f32,
+    }
+}
+
+contract_push_blocks! {
+    /// Push constants of every render kernel (`shaders/kernel.glsl`).
+    struct KernelPush {
+        /// First sample index (adaptive pixel selection: first global sample) of this dispatch.
+        sample_begin: u32,
+        /// Samples per item.
+        sample_count: u32,
+        /// Items in this dispatch.
+        item_count: u32,
+        /// Most items one lane takes.
+        lane_items: u32,
+    }
+
+    /// Push constants of the loss kernel (`shaders/loss.comp`).
+    struct LossPush {
+        /// Values (3 per pixel) in the image and in the target.
+        count: u32,
+        /// `Loss` value.
+        kind: u32,
+    }
+
+    /// Push constants of the probe kernels that run a list of cases (bsdf, rng, diff, contract).
+    struct CasePush {
+        /// Cases in the input.
+        case_count: u32,
+    }
+
+    /// Push constants of the BVH probe (`shaders/bvh_probe.comp`).
+    struct BvhProbePush {
+        /// Rays in the input.
+        ray_count: u32,
+        /// Bit 0 runs the closest-hit query, bit 1 the occlusion query.
+        queries: u32,
+        /// Loop iterations spent before tracing (a loop-budget burner for tests).
+        burn: u32,
+    }
+
+    /// Push constants of the alias-table probe (`shaders/alias_probe.comp`).
+    struct AliasProbePush {
+        /// Philox key of the selection.
+        key: UVec2,
+        /// Entries of the table.
+        table_size: u32,
+        /// Samples to draw.
+        sample_count: u32,
+    }
+
+    /// Push constants of the loop-budget probe (`shaders/loop_budget_probe.comp`).
+    struct LoopBudgetPush {
+        /// Invocations that run the loop.
+        invocation_count: u32,
+        /// Iterations each invocation asks for.
+        iterations: u32,
     }
 }

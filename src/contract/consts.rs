@@ -1,18 +1,18 @@
-// Constants shared by Rust and GLSL: binding numbers, tags, random-number slots, limits.
+// Integer constants shared by Rust and GLSL: binding numbers, random-number slots, feature bits, limits.
 //
-// This file is `include!`d by both `src/gpu/abi.rs` and `build.rs`; build.rs hands the table to
+// This file is `include!`d by both `src/contract/mod.rs` and `build.rs`; build.rs hands the table to
 // shaderc as macro definitions, so no `.glsl` file spells any of these numbers. Keep it free of
 // `use` items and of anything but the macro call below.
 
-macro_rules! abi_constants {
+macro_rules! contract_constants {
     ($($(#[$doc:meta])* $name:ident = $value:expr;)*) => {
         $( $(#[$doc])* pub const $name: u32 = $value; )*
         /// Every constant as (name, value), in declaration order: the macro definitions of the shaders.
-        pub const ABI_CONSTANTS: &[(&str, u32)] = &[$((stringify!($name), $value)),*];
+        pub const INT_CONSTANTS: &[(&str, u32)] = &[$((stringify!($name), $value)),*];
     };
 }
 
-abi_constants! {
+contract_constants! {
     /// Invocations per workgroup of the 1-D kernels.
     WORKGROUP_SIZE = 64;
 
@@ -49,20 +49,6 @@ abi_constants! {
     /// Binding: test-probe output (probe kernels only).
     BINDING_PROBE_OUT = 11;
 
-    /// Material tag: Lambertian diffuse.
-    MAT_DIFFUSE = 0;
-    /// Material tag: rough conductor.
-    MAT_ROUGH_CONDUCTOR = 1;
-    /// Material tag: blend of two leaf materials.
-    MAT_BLEND = 2;
-    /// Leaf BSDF kind: Lambertian diffuse (same value as the material tag).
-    LEAF_DIFFUSE = 0;
-    /// Leaf BSDF kind: rough conductor (same value as the material tag).
-    LEAF_ROUGH_CONDUCTOR = 1;
-    /// Microfacet distribution: Beckmann.
-    DIST_BECKMANN = 0;
-    /// Microfacet distribution: GGX (Trowbridge–Reitz).
-    DIST_GGX = 1;
 
     /// `TriShading::emitter` of a triangle that does not emit.
     NO_EMITTER = 0xFFFF_FFFF;
@@ -125,10 +111,6 @@ abi_constants! {
     /// Surface vertex, block 2: Russian roulette (dim 9).
     DIM_ROULETTE = 9;
 
-    /// Strategy: BSDF sampling, power-heuristic MIS (plain PRB).
-    STRATEGY_BSDF = 0;
-    /// Strategy: differential path sampling with mixture MIS (ALGORITHMS.md §5).
-    STRATEGY_DIFF = 1;
 
     /// Specialisation constant id of `FEATURES` (`shaders/lib/features.glsl`).
     SPEC_FEATURES = 0;

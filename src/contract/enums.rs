@@ -1,0 +1,93 @@
+// Enumerations whose values cross the host/GPU boundary: material and leaf tags, microfacet
+// distributions, strategies, losses.
+//
+// `include!`d by `src/contract/mod.rs` and `build.rs`. Each variant names its GLSL macro and its
+// value once: Rust gets a `#[repr(u32)]` enum plus a `u32` constant of that name (for the `Pod`
+// struct fields that carry the tag), and build.rs hands the same (name, value) pairs to shaderc.
+// Keep this file free of `use` items.
+
+macro_rules! contract_enums {
+    ($($(#[$doc:meta])* enum $name:ident { $($(#[$vdoc:meta])* $variant:ident = $glsl:ident = $value:expr,)* })*) => {
+        $(
+            $(#[$doc])*
+            #[repr(u32)]
+            #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+            pub enum $name { $($(#[$vdoc])* $variant = $value,)* }
+
+            impl $name {
+                /// Every variant, in declaration order.
+                pub const ALL: &[$name] = &[$($name::$variant),*];
+
+                /// The value the kernels see.
+                pub const fn value(self) -> u32 {
+                    self as u32
+                }
+
+                /// The variant with this kernel value, if any.
+                pub fn from_value(value: u32) -> Option<$name> {
+                    $(if value == $value { return Some($name::$variant); })*
+                    None
+                }
+            }
+
+            $(
+                #[doc = concat!("[`", stringify!($name), "::", stringify!($variant), "`] as the kernels spell it.")]
+                pub const $glsl: u32 = $value;
+            )*
+        )*
+
+        /// Every enumeration value as (GLSL name, value), in declaration order.
+        pub const ENUM_CONSTANTS: &[(&str, u32)] = &[$($((stringify!($glsl), $value),)*)*];
+    };
+}
+
+contract_enums! {
+    /// What `Material::tag` holds.
+    enum MaterialTag {
+        /// Lambertian diffuse.
+        Diffuse = MAT_DIFFUSE = 0,
+        /// Rough conductor.
+        RoughConductor = MAT_ROUGH_CONDUCTOR = 1,
+        /// Blend of two leaf materials.
+        Blend = MAT_BLEND = 2,
+    }
+
+    /// The kind of a leaf BSDF in the kernels (the same values as the material tags).
+    enum LeafKind {
+        /// Lambertian diffuse.
+        Diffuse = LEAF_DIFFUSE = 0,
+        /// Rough conductor.
+        RoughConductor = LEAF_ROUGH_CONDUCTOR = 1,
+    }
+
+    /// Microfacet distribution.
+    enum Distribution {
+        /// Beckmann.
+        Beckmann = DIST_BECKMANN = 0,
+        /// GGX (Trowbridge–Reitz).
+        Ggx = DIST_GGX = 1,
+    }
+
+    /// What `Globals::strategy` holds (the sampling strategy without its parameters).
+    enum StrategyTag {
+        /// BSDF sampling, power-heuristic MIS (plain PRB).
+        Bsdf = STRATEGY_BSDF = 0,
+        /// Differential path sampling with mixture MIS (ALGORITHMS.md §5).
+        Diff = STRATEGY_DIFF = 1,
+    }
+
+    /// A loss between a rendered image I and a target Ĩ, averaged over all W·H·3 values.
+    enum Loss {
+        /// Mean absolute difference; its adjoint is sign(I − Ĩ)/(3WH) (0 where equal).
+        L1 = LOSS_L1 = 0,
+        /// Mean squared difference.
+        L2 = LOSS_L2 = 1,
+        /// Relative MSE with the target in the denominator: ((I − Ĩ)/(Ĩ + ε))², ε = 1e-3 (the
+        /// reference's inverse-rendering scripts).
+        RelMse = LOSS_REL_MSE = 2,
+        /// Relative MSE with the denominator max(|Ĩ|, ε): ((I − Ĩ)/max(|Ĩ|, ε))², ε = 1e-3 (the
+        /// reference's variance scripts, `variance_loss.py`). Equal to [`Loss::RelMse`] up to
+        /// O(ε/Ĩ) where Ĩ ≫ ε; it differs where the target is dark.
+        RelMseMax = LOSS_REL_MSE_MAX = 3,
+    }
+}
