@@ -23,8 +23,8 @@ REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 
 
 def consts():
-    """The F_*/G_* bits of src/gpu/abi_consts.rs."""
-    text = open(os.path.join(REPO, "src/gpu/abi_consts.rs")).read()
+    """The F_*/G_* bits of src/contract/consts.rs."""
+    text = open(os.path.join(REPO, "src/contract/consts.rs")).read()
     bits = {}
     for name, expr in re.findall(r"\b([FG]_[A-Z_]+) = ([^;]+);", text):
         bits[name] = eval(expr.replace("_", ""))  # plain integer arithmetic, e.g. 1 << 4

@@ -16,7 +16,7 @@
 // The node and triangle arrays are read as 64-bit words: on lavapipe a load is one gather per
 // 32-bit component, while a 64-bit gather fetches two for about the price of one (a node is 7
 // gathers instead of 14, a triangle 5 instead of 9; BENCHMARKS.md). The layouts
-// (src/gpu/abi_structs.rs) put the used words first and keep them 8-byte aligned; the values are
+// (src/contract/structs.rs) put the used words first and keep them 8-byte aligned; the values are
 // the same floats, so results are bit-identical.
 // One struct per node or triangle, so a word's address is the element's plus a constant.
 struct NodeWords { uint64_t w0; uint64_t w1; uint64_t w2; uint64_t w3; uint64_t w4; uint64_t w5; uint64_t w6; uint64_t pad; };

@@ -1,7 +1,7 @@
 // Kernel specialisation (issue "Fast kernels"): one specialisation constant, FEATURES, says which
 // parts of the one path loop a request and its scene use. Every optional part is guarded by
 // HAS(F_…); the driver folds the constant when it builds the pipeline and drops what is off, so a
-// kernel pays only for what it renders. The bits are the F_* constants of src/gpu/abi_consts.rs;
+// kernel pays only for what it renders. The bits are the F_* constants of src/contract/consts.rs;
 // the default (every bit set) is the general kernel that probes and tests without a plan use.
 #ifndef PATHGRAD_FEATURES_GLSL
 #define PATHGRAD_FEATURES_GLSL
