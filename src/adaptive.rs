@@ -49,7 +49,7 @@ impl std::str::FromStr for AdaptiveEstimator {
             "importance" => Ok(AdaptiveEstimator::Importance),
             "pixel_mean" => Ok(AdaptiveEstimator::PixelMean),
             _ => Err(Error::InvalidArgument {
-                parameter: "--adaptive-estimator".into(),
+                parameter: "AdaptiveEstimator".into(),
                 message: format!("'{s}' (expected importance or pixel_mean)"),
             }),
         }
@@ -204,7 +204,7 @@ impl PixelSampling {
         }
         let n = u64::from(self.width) * u64::from(self.height) * u64::from(options.spp);
         u32::try_from(n).map_err(|_| Error::InvalidArgument {
-            parameter: "--spp".into(),
+            parameter: "RenderOptions::spp".into(),
             message: format!(
                 "{}×{} pixels × {} spp = {n} adaptive samples exceed the 32-bit sample counter",
                 self.width, self.height, options.spp
@@ -364,11 +364,11 @@ mod tests {
         let big = PixelSampling::uniform(1024, 1024, AdaptiveEstimator::Importance).unwrap();
         assert_eq!(big.sample_count(&options(1024, 1024, 4095)).unwrap(), 1024 * 1024 * 4095);
         let e = big.sample_count(&options(1024, 1024, 4096)).unwrap_err().to_string();
-        assert!(e.contains("--spp") && e.contains("32-bit"), "{e}");
+        assert!(e.contains("RenderOptions::spp") && e.contains("32-bit"), "{e}");
         assert_eq!("pixel_mean".parse::<AdaptiveEstimator>().unwrap(), AdaptiveEstimator::PixelMean);
         assert!("mean".parse::<AdaptiveEstimator>().unwrap_err().to_string().contains("importance or pixel_mean"));
         let e = AdaptiveOptions { spp_primal: 0, estimator: AdaptiveEstimator::Importance }.validate().unwrap_err();
-        assert!(e.to_string().contains("--spp-primal"));
+        assert!(e.to_string().contains("LossGradientSetup::spp_primal"));
     }
 
     /// The selection key differs from the gradient key only in its pass tag, and keeps the

@@ -67,7 +67,7 @@ pub enum Error {
     #[error(
         "{kernel}: an invocation ran out of the driver's loop-iteration budget (llvmpipe truncates \
          loops silently at ~65 535 iterations); the result would be wrong, so it was discarded — \
-         lower --max-depth or simplify the scene"
+         lower RenderOptions::max_depth or simplify the scene"
     )]
     LoopBudget {
         /// The kernel that hit the limit.
@@ -148,5 +148,52 @@ pub(crate) trait VkResultExt<T> {
 impl<T> VkResultExt<T> for std::result::Result<T, vk::Result> {
     fn vk(self, call: &'static str) -> Result<T> {
         self.map_err(|result| Error::Vulkan { call, result })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    /// Library messages speak of library names (`RenderOptions::spp`), never of the CLI's flags
+    /// (`--spp`): no string literal in the library's sources outside `src/bin/` spells a flag.
+    /// Test modules and comments are skipped.
+    #[test]
+    fn library_messages_name_no_cli_flag() {
+        let src = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("src");
+        let mut stack = vec![src.clone()];
+        let mut offences = Vec::new();
+        let mut scanned = 0;
+        while let Some(dir) = stack.pop() {
+            for entry in std::fs::read_dir(&dir).unwrap() {
+                let path = entry.unwrap().path();
+                let name = path.file_name().and_then(|n| n.to_str()).unwrap_or("");
+                if path.is_dir() {
+                    if path != src.join("bin") {
+                        stack.push(path);
+                    }
+                    continue;
+                }
+                if !name.ends_with(".rs") || name.contains("tests") || name.ends_with("fixtures.rs") {
+                    continue;
+                }
+                scanned += 1;
+                let text = std::fs::read_to_string(&path).unwrap();
+                let code = text.split("#[cfg(test)]").next().unwrap_or("");
+                for (i, line) in code.lines().enumerate() {
+                    let line = line.trim_start();
+                    if line.starts_with("//") {
+                        continue;
+                    }
+                    // The odd pieces of a line split at quotes are inside string literals.
+                    let flag = line.split('"').skip(1).step_by(2).find_map(|s| {
+                        s.match_indices("--").find(|(at, _)| s[at + 2..].starts_with(|c: char| c.is_ascii_lowercase()))
+                    });
+                    if flag.is_some() {
+                        offences.push(format!("{}:{}: {line}", path.display(), i + 1));
+                    }
+                }
+            }
+        }
+        assert!(scanned > 40, "scanned only {scanned} files");
+        assert!(offences.is_empty(), "CLI flags in library messages:\n{}", offences.join("\n"));
     }
 }

@@ -119,7 +119,7 @@ impl Strategy {
     /// `target` with probability `q`.
     ///
     /// # Errors
-    /// [`Error::InvalidArgument`] naming `--strategy`, `--q` or the target for an unknown strategy,
+    /// [`Error::InvalidArgument`] naming `Strategy::from_name`, `Strategy::Diff::q` or the target for an unknown strategy,
     /// a q outside [0, 1] or an unknown parameter.
     pub fn from_name(scene: &Scene, name: &str, q: f32, target: &str) -> Result<Strategy> {
         match name {
@@ -127,7 +127,7 @@ impl Strategy {
             "diff" => {
                 if !(0.0..=1.0).contains(&q) {
                     return Err(Error::InvalidArgument {
-                        parameter: "--q".into(),
+                        parameter: "Strategy::Diff::q".into(),
                         message: format!("{q} is not in [0, 1]"),
                     });
                 }
@@ -138,7 +138,7 @@ impl Strategy {
                 Ok(Strategy::Diff { target, q })
             }
             other => Err(Error::InvalidArgument {
-                parameter: "--strategy".into(),
+                parameter: "Strategy::from_name".into(),
                 message: format!("unknown strategy '{other}' (expected bsdf or diff)"),
             }),
         }
@@ -168,10 +168,13 @@ impl Strategy {
 /// Checks the samples per pixel of pass 1 (the loss image of a gradient step).
 ///
 /// # Errors
-/// [`Error::InvalidArgument`] naming `--spp-primal` if it is 0.
+/// [`Error::InvalidArgument`] naming `LossGradientSetup::spp_primal` if it is 0.
 pub fn check_spp_primal(spp_primal: u32) -> Result<()> {
     if spp_primal == 0 {
-        return Err(Error::InvalidArgument { parameter: "--spp-primal".into(), message: "must be at least 1".into() });
+        return Err(Error::InvalidArgument {
+            parameter: "LossGradientSetup::spp_primal".into(),
+            message: "must be at least 1".into(),
+        });
     }
     Ok(())
 }
@@ -226,19 +229,22 @@ impl RenderOptions {
     pub fn validate(&self) -> Result<()> {
         let bad = |p: &str, m: &str| Err(Error::InvalidArgument { parameter: p.into(), message: m.into() });
         if self.width == 0 || self.height == 0 || self.width > 16_384 || self.height > 16_384 {
-            return bad("--width/--height", "must be between 1 and 16384");
+            return bad("RenderOptions::width/height", "must be between 1 and 16384");
         }
         if self.spp == 0 || self.spp > MAX_SPP {
-            return bad("--spp", &format!("must be between 1 and {MAX_SPP} (average independent seeds for more)"));
+            return bad(
+                "RenderOptions::spp",
+                &format!("must be between 1 and {MAX_SPP} (average independent seeds for more)"),
+            );
         }
         match self.max_depth {
-            Some(0) => return bad("--max-depth", "must be at least 1 (or -1 for unbounded)"),
+            Some(0) => return bad("RenderOptions::max_depth", "must be at least 1 (or None for unbounded)"),
             Some(d) if d > UNBOUNDED_DEPTH_CAP => {
                 return bad(
-                    "--max-depth",
+                    "RenderOptions::max_depth",
                     &format!(
-                        "{d} is more than {UNBOUNDED_DEPTH_CAP}, the most interactions a path can have (-1, unbounded, \
-                         also ends paths there)"
+                        "{d} is more than {UNBOUNDED_DEPTH_CAP}, the most interactions a path can have (None, \
+                         unbounded, also ends paths there)"
                     ),
                 );
             }
@@ -247,7 +253,7 @@ impl RenderOptions {
         if let Strategy::Diff { q, .. } = self.strategy
             && !(0.0..=1.0).contains(&q)
         {
-            return bad("--q", "must be in [0, 1]");
+            return bad("Strategy::Diff::q", "must be in [0, 1]");
         }
         Ok(())
     }

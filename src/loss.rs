@@ -28,7 +28,7 @@ impl std::str::FromStr for Loss {
             "relmse" => Ok(Loss::RelMse),
             "relmse_max" => Ok(Loss::RelMseMax),
             _ => Err(Error::InvalidArgument {
-                parameter: "--loss".into(),
+                parameter: "Loss".into(),
                 message: format!("'{s}' (expected relmse, relmse_max, l2 or l1)"),
             }),
         }

@@ -59,12 +59,12 @@ impl AdamOptions {
     /// Checks ranges.
     ///
     /// # Errors
-    /// [`Error::InvalidArgument`] naming `--lr` for a learning rate that is not positive and
+    /// [`Error::InvalidArgument`] naming `AdamOptions::learning_rate` for a learning rate that is not positive and
     /// finite, or the decay rates and ε outside their ranges.
     pub fn validate(&self) -> Result<()> {
         let bad = |p: &str, m: String| Err(Error::InvalidArgument { parameter: p.into(), message: m });
         if !(self.learning_rate > 0.0 && self.learning_rate.is_finite()) {
-            return bad("--lr", format!("{} must be positive and finite", self.learning_rate));
+            return bad("AdamOptions::learning_rate", format!("{} must be positive and finite", self.learning_rate));
         }
         for (name, beta) in [("Adam beta1", self.beta1), ("Adam beta2", self.beta2)] {
             if !(0.0..1.0).contains(&beta) {
@@ -556,7 +556,7 @@ mod tests {
         let (t, albedo, alpha, _) = table();
         for lr in [0.0, -0.1, f64::NAN, f64::INFINITY] {
             let e = Adam::new(&t, &[alpha], AdamOptions::with_learning_rate(lr)).unwrap_err().to_string();
-            assert!(e.contains("--lr"), "{e}");
+            assert!(e.contains("AdamOptions::learning_rate"), "{e}");
         }
         assert!(Adam::new(&t, &[], AdamOptions::default()).unwrap_err().to_string().contains("none given"));
         assert!(Adam::new(&t, &[alpha, alpha], AdamOptions::default()).unwrap_err().to_string().contains("twice"));

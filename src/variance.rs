@@ -146,7 +146,7 @@ pub struct ImageGradientVariance {
 fn check_runs(runs: u32) -> Result<()> {
     if runs < 2 {
         return Err(Error::InvalidArgument {
-            parameter: "--runs".into(),
+            parameter: "variance::runs".into(),
             message: format!("{runs}: a variance needs at least 2 runs"),
         });
     }
@@ -265,7 +265,10 @@ pub fn loss_gradient_variance(
     options.validate()?;
     let pass1 = options.loss_pass(setup.spp_primal)?;
     if setup.params.is_empty() {
-        return Err(Error::InvalidArgument { parameter: "--param".into(), message: "no parameter to record".into() });
+        return Err(Error::InvalidArgument {
+            parameter: "LossGradientSetup::params".into(),
+            message: "no parameter to record".into(),
+        });
     }
     let sampling = match setup.adaptive {
         None => None,

@@ -372,7 +372,7 @@ fn choose(devices: &[DeviceInfo], choice: &DeviceChoice) -> Result<usize> {
             Err(Error::MissingFeature {
                 device: d.name.clone(),
                 feature: d.missing.join(", "),
-                hint: "update the driver (Mesa ≥ 22 for lavapipe) or choose another --device".into(),
+                hint: "update the driver (Mesa ≥ 22 for lavapipe) or choose another device (DeviceChoice)".into(),
             })
         }
     };
@@ -473,7 +473,7 @@ impl Context {
                 Error::MissingFeature {
                     device: info.name.clone(),
                     feature: "a compute queue".into(),
-                    hint: "choose another --device".into(),
+                    hint: "choose another device (DeviceChoice)".into(),
                 }
             })? as u32;
         let priorities = [1.0f32];

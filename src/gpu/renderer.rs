@@ -371,7 +371,7 @@ impl Renderer {
             GradMode::Deterministic => {
                 if !self.ctx.info().int64_atomics {
                     return Err(Error::InvalidArgument {
-                        parameter: "--deterministic".into(),
+                        parameter: "GradMode::Deterministic".into(),
                         message: format!("device '{}' has no 64-bit integer atomics", self.ctx.info().name),
                     });
                 }
@@ -691,7 +691,7 @@ impl Renderer {
             Work::Samples { count } => {
                 if count > u64::from(u32::MAX) {
                     return Err(Error::InvalidArgument {
-                        parameter: "--spp".into(),
+                        parameter: "RenderOptions::spp".into(),
                         message: format!("{count} samples exceed the 32-bit sample counter"),
                     });
                 }

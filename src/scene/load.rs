@@ -132,7 +132,7 @@ pub(crate) fn scene_file(dir: &Path, name: &str, allow_outside: bool) -> std::re
     let refuse = |why: &str| {
         Err(format!(
             "'{name}' {why}: a scene reads only files inside its own folder ({}) unless reading outside is \
-             allowed (LoadOptions::allow_outside_folder; on the command line --allow-outside-folder)",
+             allowed (LoadOptions::allow_outside_folder)",
             dir.display()
         ))
     };
@@ -190,7 +190,7 @@ mod tests {
             [("/etc/passwd", "is an absolute path"), ("../x.obj", "climbs out"), ("sub/../../x.obj", "climbs out")]
         {
             let e = ok(name).unwrap_err();
-            assert!(e.contains(why) && e.contains("--allow-outside-folder"), "{name}: {e}");
+            assert!(e.contains(why) && e.contains("LoadOptions::allow_outside_folder"), "{name}: {e}");
         }
         std::os::unix::fs::symlink("/etc", dir.path().join("etc")).unwrap();
         let e = ok("etc/hostname").unwrap_err();

@@ -1,6 +1,7 @@
 //! The `pathgrad` command line: `render`, `grad`, `variance`, `optimize`, `params` and `devices`.
 
 mod curves;
+mod flags;
 mod optimize;
 mod variance;
 
@@ -436,7 +437,7 @@ fn main() -> ExitCode {
 fn error_message(e: &anyhow::Error) -> String {
     let mut line = String::new();
     for cause in e.chain() {
-        let text = cause.to_string();
+        let text = flags::with_flags(&cause.to_string());
         if line.ends_with(&text) {
             continue;
         }

@@ -212,7 +212,10 @@ impl<'a> Loader<'a> {
         };
         self.scene.default_spp = Some(count as u32);
         if let Some((_, n)) = p.integer(&self.x, "seed")? {
-            let w = self.x.warning(n, "property 'seed' of 'independent' ignored: pathgrad takes the seed from --seed");
+            let w = self.x.warning(
+                n,
+                "property 'seed' of 'independent' ignored: pathgrad takes the seed from the render options",
+            );
             self.scene.warn(w);
         }
         self.finish(&p)

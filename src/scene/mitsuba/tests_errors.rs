@@ -68,7 +68,7 @@ fn fixtures_give_their_pinned_messages() {
             format!(
                 "6:9: <string name=\"filename\">: '../mesh/quad.obj' climbs out of the scene's folder: a scene reads \
                  only files inside its own folder ({d}) unless reading outside is allowed \
-                 (LoadOptions::allow_outside_folder; on the command line --allow-outside-folder)"
+                 (LoadOptions::allow_outside_folder)"
             ),
         ),
         (
@@ -464,7 +464,7 @@ fn ignored_settings_are_warned_about() {
         w,
         [
             "4:22: rfilter 'gaussian' (Mitsuba's default) replaced by pathgrad's box filter",
-            "4:124: property 'seed' of 'independent' ignored: pathgrad takes the seed from --seed",
+            "4:124: property 'seed' of 'independent' ignored: pathgrad takes the seed from the render options",
             "3:28: property 'near_clip' of 'perspective' ignored: pathgrad's camera does not clip",
             "2:25: property 'rr_depth' of 'path' ignored: pathgrad starts Russian roulette at depth 5",
             "2:61: property 'hide_emitters' of 'path' ignored: pathgrad shows emitters",
