@@ -29,7 +29,19 @@ pub enum Error {
         /// What to do about it.
         hint: String,
     },
-    /// `--device` / `PATHGRAD_DEVICE` named a device that does not exist.
+    /// A borrowed device (`Context::from_raw`) was created without extensions or features pathgrad needs.
+    #[error(
+        "the Vulkan device '{device}' handed to pathgrad was created without {}; enable everything \
+         Context::requirements() lists when creating it",
+        missing.join(", ")
+    )]
+    NotEnabled {
+        /// Device name as reported by the driver.
+        device: String,
+        /// The Vulkan name of each missing extension or feature.
+        missing: Vec<String>,
+    },
+    /// A `DeviceChoice` (or `PATHGRAD_DEVICE`) named a device that does not exist.
     #[error("no Vulkan device matches '{selector}' (available: {available})")]
     DeviceNotFound {
         /// The index or UUID the user gave.

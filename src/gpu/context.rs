@@ -1,55 +1,33 @@
-//! `Context`: the Vulkan instance, device, queue and allocator, created here or borrowed from an engine.
+//! `Context`: the Vulkan device, queue and allocator, created here or borrowed from an engine.
 //!
-//! Device choice: `DeviceChoice::Auto` takes a discrete GPU over an integrated one over a CPU
-//! implementation (lavapipe); an index or UUID (from `pathgrad devices`) or the `PATHGRAD_DEVICE`
-//! variable picks one explicitly. Only what pathgrad needs is enabled: scalar block layout, float
-//! atomic add on storage buffers (gradients) and compute subgroup arithmetic (their reduction).
-//! With validation on, every message of type VALIDATION at WARNING or above is counted; tests fail on
-//! a non-zero count.
+//! [`Context::new`] creates an instance and device of its own, enabling only what pathgrad needs
+//! ([`Context::requirements`]), with the validation layer on request. [`Context::from_raw`] takes
+//! an engine's instance, device and queue instead: it checks what the engine enabled against the
+//! same list, installs no layer or messenger, and destroys only what it created itself (its
+//! allocator's memory, command pool and pipeline cache).
+//!
+//! Thread safety: `Context` is `Send + Sync` and shared as `Arc<Context>`. Its queue and command
+//! pool sit behind mutexes, so pathgrad's own calls from several threads serialise their
+//! submissions. Vulkan also requires the queue to be externally synchronised against the engine: on
+//! a borrowed queue, the engine must not submit to it from another thread while a pathgrad call
+//! runs (or should hand over a queue of its own for pathgrad).
 
-use std::ffi::{CStr, CString, c_void};
+use std::ffi::CString;
 use std::sync::atomic::{AtomicI64, AtomicU64, Ordering};
 use std::sync::{Arc, Mutex};
 
 use ash::vk;
 use gpu_allocator::vulkan::{Allocator, AllocatorCreateDesc};
 
+use super::DeviceChoice;
+use super::device::{DeviceInfo, choose, describe};
+use super::instance::{ValidationCounter, create_instance, load_entry, messenger_create_info};
+use super::requirements::{self, DeviceFeatures, Requirements};
 use crate::error::{Error, Result, VkResultExt};
-
-/// The validation layer's name.
-const VALIDATION_LAYER: &CStr = c"VK_LAYER_KHRONOS_validation";
 
 /// How long a fence wait may take before [`Error::Timeout`] (lavapipe has no watchdog, so a hung
 /// shader would otherwise hang the process). Work is submitted in chunks far shorter than this.
 pub const FENCE_TIMEOUT_SECONDS: u64 = 600;
-
-/// Which physical device to use.
-#[derive(Clone, Debug, Default, PartialEq, Eq)]
-pub enum DeviceChoice {
-    /// `PATHGRAD_DEVICE` if set, else discrete > integrated > virtual > CPU.
-    #[default]
-    Auto,
-    /// Prefer a CPU implementation (lavapipe): what tests use, so results do not depend on the box.
-    PreferCpu,
-    /// The device at this index of `pathgrad devices`.
-    Index(usize),
-    /// The device with this UUID (32 hex digits, dashes allowed).
-    Uuid(String),
-}
-
-impl DeviceChoice {
-    /// Parses `--device` / `PATHGRAD_DEVICE`: an index, a UUID, or `cpu`.
-    pub fn parse(text: &str) -> Self {
-        let t = text.trim();
-        if t.eq_ignore_ascii_case("cpu") || t.eq_ignore_ascii_case("lavapipe") {
-            DeviceChoice::PreferCpu
-        } else if let Ok(i) = t.parse::<usize>() {
-            DeviceChoice::Index(i)
-        } else {
-            DeviceChoice::Uuid(t.to_string())
-        }
-    }
-}
 
 /// Options for [`Context::new`].
 #[derive(Clone, Debug, Default)]
@@ -60,115 +38,13 @@ pub struct ContextDesc {
     pub validation: bool,
 }
 
-/// What pathgrad knows about a physical device.
-#[derive(Clone, Debug)]
-pub struct DeviceInfo {
-    /// Index in the instance's enumeration order.
-    pub index: usize,
-    /// Device name, e.g. `llvmpipe (LLVM 15.0.6, 256 bits)`.
-    pub name: String,
-    /// Discrete, integrated, CPU, …
-    pub device_type: vk::PhysicalDeviceType,
-    /// Driver name and version string.
-    pub driver: String,
-    /// Driver id (`MESA_LLVMPIPE` for lavapipe).
-    pub driver_id: vk::DriverId,
-    /// Device UUID as 32 hex digits.
-    pub uuid: String,
-    /// Vulkan API version the device supports.
-    pub api_version: u32,
-    /// Subgroup size.
-    pub subgroup_size: u32,
-    /// Everything pathgrad needs that the device lacks (empty when usable).
-    pub missing: Vec<String>,
-    /// Whether 64-bit integer atomics on buffers exist (deterministic gradients need them).
-    pub int64_atomics: bool,
-    /// Whether the driver silently cuts loops short after a per-invocation iteration budget
-    /// (lavapipe before Mesa 25, PLATFORM.md §6.1): kernels then trace one path per invocation.
-    pub loop_budget: bool,
-}
-
-impl DeviceInfo {
-    /// A one-line human-readable summary.
-    pub fn summary(&self) -> String {
-        format!(
-            "[{}] {} ({:?}, driver {}, Vulkan {}.{}.{}, subgroup {}) uuid {}{}",
-            self.index,
-            self.name,
-            self.device_type,
-            self.driver,
-            vk::api_version_major(self.api_version),
-            vk::api_version_minor(self.api_version),
-            vk::api_version_patch(self.api_version),
-            self.subgroup_size,
-            self.uuid,
-            if self.missing.is_empty() {
-                String::new()
-            } else {
-                format!(" — unusable: lacks {}", self.missing.join(", "))
-            }
-        )
-    }
-
-    fn rank(&self) -> u32 {
-        match self.device_type {
-            vk::PhysicalDeviceType::DISCRETE_GPU => 0,
-            vk::PhysicalDeviceType::INTEGRATED_GPU => 1,
-            vk::PhysicalDeviceType::VIRTUAL_GPU => 2,
-            vk::PhysicalDeviceType::CPU => 3,
-            _ => 4,
-        }
-    }
-}
-
-/// Counts validation messages; shared with the debug messenger callback.
-#[derive(Debug, Default)]
-pub struct ValidationCounter {
-    errors: AtomicU64,
-}
-
-impl ValidationCounter {
-    /// VALIDATION-type messages of severity WARNING or ERROR seen so far.
-    pub fn count(&self) -> u64 {
-        self.errors.load(Ordering::SeqCst)
-    }
-}
-
-unsafe extern "system" fn debug_callback(
-    severity: vk::DebugUtilsMessageSeverityFlagsEXT,
-    types: vk::DebugUtilsMessageTypeFlagsEXT,
-    data: *const vk::DebugUtilsMessengerCallbackDataEXT<'_>,
-    user: *mut c_void,
-) -> vk::Bool32 {
-    // SAFETY: the loader passes a valid callback-data pointer for the duration of the call.
-    let message = unsafe { data.as_ref() }
-        .and_then(|d| (!d.p_message.is_null()).then(|| unsafe { CStr::from_ptr(d.p_message) }))
-        .map(|m| m.to_string_lossy().into_owned())
-        .unwrap_or_default();
-    let counts = severity
-        .intersects(vk::DebugUtilsMessageSeverityFlagsEXT::WARNING | vk::DebugUtilsMessageSeverityFlagsEXT::ERROR)
-        && types.contains(vk::DebugUtilsMessageTypeFlagsEXT::VALIDATION);
-    if counts {
-        // SAFETY: `user` is the counter that the context keeps alive until the messenger is destroyed.
-        if let Some(counter) = unsafe { (user as *const ValidationCounter).as_ref() } {
-            counter.errors.fetch_add(1, Ordering::SeqCst);
-        }
-        tracing::error!(target: "vulkan", "{message}");
-    } else if severity.contains(vk::DebugUtilsMessageSeverityFlagsEXT::WARNING) {
-        tracing::warn!(target: "vulkan", "{message}");
-    } else {
-        tracing::debug!(target: "vulkan", "{message}");
-    }
-    vk::FALSE
-}
-
 /// The Vulkan instance, device, queue, allocator and command pool that everything else uses.
 ///
 /// Shared as `Arc<Context>`; every buffer and pipeline holds one and frees itself on drop.
 pub struct Context {
     _entry: ash::Entry,
     instance: ash::Instance,
-    debug: Option<(ash::ext::debug_utils::Instance, vk::DebugUtilsMessengerEXT)>,
+    owner: Owner,
     debug_names: Option<ash::ext::debug_utils::Device>,
     physical_device: vk::PhysicalDevice,
     device: ash::Device,
@@ -186,232 +62,56 @@ pub struct Context {
     peak_buffer_bytes: AtomicU64,
 }
 
+type Messenger = (ash::ext::debug_utils::Instance, vk::DebugUtilsMessengerEXT);
+
+/// Who created the instance and device, and so who destroys them.
+enum Owner {
+    /// [`Context::new`]: pathgrad, with its debug messenger if validation is on.
+    Pathgrad { debug: Option<Messenger> },
+    /// [`Context::from_raw`]: the engine.
+    Engine,
+}
+
+/// An engine's Vulkan objects for [`Context::from_raw`], and what it enabled on its device.
+pub struct BorrowedDevice {
+    /// The loader the engine's instance was created with.
+    pub entry: ash::Entry,
+    /// The engine's instance.
+    pub instance: ash::Instance,
+    /// The physical device of `device`.
+    pub physical_device: vk::PhysicalDevice,
+    /// The engine's logical device.
+    pub device: ash::Device,
+    /// The queue family of the queue pathgrad submits to (it must support compute).
+    pub queue_family: u32,
+    /// The queue's index within its family.
+    pub queue_index: u32,
+    /// The features the device was created with ([`DeviceFeatures::from_create_info`] reads them
+    /// from the engine's create-info).
+    pub enabled: DeviceFeatures,
+    /// The device extensions it was created with.
+    pub enabled_extensions: Vec<CString>,
+    /// The `apiVersion` the engine's instance was created with.
+    pub api_version: u32,
+}
+
+/// What [`Context::assemble`] builds a context from.
+struct Parts {
+    entry: ash::Entry,
+    instance: ash::Instance,
+    physical_device: vk::PhysicalDevice,
+    device: ash::Device,
+    queue_family: u32,
+    queue_index: u32,
+    info: DeviceInfo,
+    owner: Owner,
+    debug_names: Option<ash::ext::debug_utils::Device>,
+    validation: Arc<ValidationCounter>,
+}
+
 impl std::fmt::Debug for Context {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         f.debug_struct("Context").field("device", &self.info.name).finish_non_exhaustive()
-    }
-}
-
-fn load_entry() -> Result<ash::Entry> {
-    // SAFETY: loading the system Vulkan loader; ash keeps the library alive inside `Entry`.
-    unsafe { ash::Entry::load() }.map_err(|e| Error::NoDevice { reason: format!("cannot load libvulkan.so.1: {e}") })
-}
-
-fn create_instance(
-    entry: &ash::Entry,
-    validation: bool,
-    counter: &Arc<ValidationCounter>,
-) -> Result<(ash::Instance, bool, bool)> {
-    // SAFETY: plain queries of the loader.
-    let version = unsafe { entry.try_enumerate_instance_version() }
-        .vk("vkEnumerateInstanceVersion")?
-        .unwrap_or(vk::API_VERSION_1_0);
-    if version < vk::API_VERSION_1_2 {
-        return Err(Error::NoDevice { reason: "the Vulkan loader is older than 1.2".into() });
-    }
-    // SAFETY: plain query of the loader.
-    let layers = unsafe { entry.enumerate_instance_layer_properties() }.vk("vkEnumerateInstanceLayerProperties")?;
-    let has_layer = layers.iter().any(|l| l.layer_name_as_c_str().is_ok_and(|n| n == VALIDATION_LAYER));
-    // SAFETY: plain query of the loader.
-    let extensions =
-        unsafe { entry.enumerate_instance_extension_properties(None) }.vk("vkEnumerateInstanceExtensionProperties")?;
-    let has_debug_utils =
-        extensions.iter().any(|e| e.extension_name_as_c_str().is_ok_and(|n| n == ash::ext::debug_utils::NAME));
-    let use_validation = validation && has_layer && has_debug_utils;
-    if validation && !use_validation {
-        tracing::warn!(
-            "validation requested but VK_LAYER_KHRONOS_validation is not installed (apt-get install vulkan-validationlayers)"
-        );
-    }
-    let layer_ptrs: Vec<*const i8> = if use_validation { vec![VALIDATION_LAYER.as_ptr()] } else { vec![] };
-    let ext_ptrs: Vec<*const i8> = if has_debug_utils { vec![ash::ext::debug_utils::NAME.as_ptr()] } else { vec![] };
-    let app = vk::ApplicationInfo::default()
-        .application_name(c"pathgrad")
-        .engine_name(c"pathgrad")
-        .api_version(vk::API_VERSION_1_2);
-    let mut messenger_info = messenger_create_info(counter);
-    let mut info = vk::InstanceCreateInfo::default()
-        .application_info(&app)
-        .enabled_layer_names(&layer_ptrs)
-        .enabled_extension_names(&ext_ptrs);
-    if use_validation {
-        info = info.push_next(&mut messenger_info);
-    }
-    // SAFETY: the create-info and everything it points to live across the call.
-    let instance = unsafe { entry.create_instance(&info, None) }.map_err(|result| match result {
-        vk::Result::ERROR_INCOMPATIBLE_DRIVER => Error::NoDevice { reason: "the Vulkan loader found no driver".into() },
-        result => Error::Vulkan { call: "vkCreateInstance", result },
-    })?;
-    Ok((instance, use_validation, has_debug_utils))
-}
-
-fn messenger_create_info(counter: &Arc<ValidationCounter>) -> vk::DebugUtilsMessengerCreateInfoEXT<'static> {
-    vk::DebugUtilsMessengerCreateInfoEXT::default()
-        .message_severity(
-            vk::DebugUtilsMessageSeverityFlagsEXT::ERROR
-                | vk::DebugUtilsMessageSeverityFlagsEXT::WARNING
-                | vk::DebugUtilsMessageSeverityFlagsEXT::INFO,
-        )
-        .message_type(
-            vk::DebugUtilsMessageTypeFlagsEXT::GENERAL
-                | vk::DebugUtilsMessageTypeFlagsEXT::VALIDATION
-                | vk::DebugUtilsMessageTypeFlagsEXT::PERFORMANCE,
-        )
-        .pfn_user_callback(Some(debug_callback))
-        .user_data(Arc::as_ptr(counter) as *mut c_void)
-}
-
-fn hex(bytes: &[u8]) -> String {
-    bytes.iter().map(|b| format!("{b:02x}")).collect()
-}
-
-/// Queries one physical device: identity and whatever pathgrad needs that it lacks.
-fn describe(instance: &ash::Instance, index: usize, pd: vk::PhysicalDevice) -> DeviceInfo {
-    let mut driver = vk::PhysicalDeviceDriverProperties::default();
-    let mut id = vk::PhysicalDeviceIDProperties::default();
-    let mut subgroup = vk::PhysicalDeviceSubgroupProperties::default();
-    let props = {
-        let mut p2 =
-            vk::PhysicalDeviceProperties2::default().push_next(&mut driver).push_next(&mut id).push_next(&mut subgroup);
-        // SAFETY: `pd` came from this instance; the chain lives across the call.
-        unsafe { instance.get_physical_device_properties2(pd, &mut p2) };
-        p2.properties
-    };
-    let mut v12 = vk::PhysicalDeviceVulkan12Features::default();
-    let mut atomic = vk::PhysicalDeviceShaderAtomicFloatFeaturesEXT::default();
-    let core = {
-        let mut f2 = vk::PhysicalDeviceFeatures2::default().push_next(&mut v12).push_next(&mut atomic);
-        // SAFETY: as above.
-        unsafe { instance.get_physical_device_features2(pd, &mut f2) };
-        f2.features
-    };
-    // SAFETY: as above.
-    let extensions = unsafe { instance.enumerate_device_extension_properties(pd) }.unwrap_or_default();
-    let has_atomic_ext =
-        extensions.iter().any(|e| e.extension_name_as_c_str().is_ok_and(|n| n == ash::ext::shader_atomic_float::NAME));
-    let mut missing = Vec::new();
-    if props.api_version < vk::API_VERSION_1_2 {
-        missing.push("Vulkan 1.2".to_string());
-    }
-    if v12.scalar_block_layout == vk::FALSE {
-        missing.push("scalarBlockLayout".to_string());
-    }
-    if v12.buffer_device_address == vk::FALSE {
-        missing.push("bufferDeviceAddress".to_string());
-    }
-    // The BVH traversal reads its nodes and triangles as 64-bit words (shaders/lib/bvh.glsl).
-    if core.shader_int64 == vk::FALSE {
-        missing.push("shaderInt64".to_string());
-    }
-    if !has_atomic_ext || atomic.shader_buffer_float32_atomic_add == vk::FALSE {
-        missing.push("VK_EXT_shader_atomic_float (shaderBufferFloat32AtomicAdd)".to_string());
-    }
-    let needed_ops =
-        vk::SubgroupFeatureFlags::BASIC | vk::SubgroupFeatureFlags::ARITHMETIC | vk::SubgroupFeatureFlags::VOTE;
-    if !subgroup.supported_stages.contains(vk::ShaderStageFlags::COMPUTE)
-        || !subgroup.supported_operations.contains(needed_ops)
-    {
-        missing.push("compute subgroup basic/vote/arithmetic operations".to_string());
-    }
-    let name = props.device_name_as_c_str().map(|c| c.to_string_lossy().into_owned()).unwrap_or_default();
-    let driver_name = driver.driver_name_as_c_str().map(|c| c.to_string_lossy().into_owned()).unwrap_or_default();
-    let driver_info = driver.driver_info_as_c_str().map(|c| c.to_string_lossy().into_owned()).unwrap_or_default();
-    DeviceInfo {
-        index,
-        name,
-        device_type: props.device_type,
-        driver: format!("{driver_name} {driver_info}").trim().to_string(),
-        driver_id: driver.driver_id,
-        uuid: hex(&id.device_uuid),
-        api_version: props.api_version,
-        subgroup_size: subgroup.subgroup_size,
-        missing,
-        int64_atomics: core.shader_int64 == vk::TRUE && v12.shader_buffer_int64_atomics == vk::TRUE,
-        loop_budget: has_loop_budget(driver.driver_id, &driver_info),
-    }
-}
-
-/// Whether a driver has llvmpipe's loop limiter: Mesa 22.3 (Debian 12) has it, Mesa 25.0
-/// (bookworm-backports) does not (PLATFORM.md §14). Versions between were not measured and are
-/// treated as limited, and so is a lavapipe whose version cannot be read. lavapipe reports
-/// `driverVersion` 0.0.1; its Mesa version is in `driverInfo`, e.g. `Mesa 25.0.7-2~bpo12+1 (LLVM 15.0.6)`.
-pub fn has_loop_budget(driver_id: vk::DriverId, driver_info: &str) -> bool {
-    if driver_id != vk::DriverId::MESA_LLVMPIPE {
-        return false;
-    }
-    let major = driver_info
-        .split_once("Mesa ")
-        .and_then(|(_, v)| v.split(|c: char| !c.is_ascii_digit()).next())
-        .and_then(|m| m.parse::<u32>().ok());
-    major.is_none_or(|m| m < 25)
-}
-
-/// Lists every Vulkan device with what pathgrad needs that it lacks (the `devices` subcommand).
-///
-/// # Errors
-/// [`Error::NoDevice`] when there is no loader or no driver.
-pub fn list_devices() -> Result<Vec<DeviceInfo>> {
-    let entry = load_entry()?;
-    let counter = Arc::new(ValidationCounter::default());
-    let (instance, _, _) = create_instance(&entry, false, &counter)?;
-    // SAFETY: the instance is valid; it is destroyed right after the query.
-    let result = unsafe { instance.enumerate_physical_devices() }
-        .vk("vkEnumeratePhysicalDevices")
-        .map(|pds| pds.iter().enumerate().map(|(i, &pd)| describe(&instance, i, pd)).collect());
-    // SAFETY: nothing else refers to this instance.
-    unsafe { instance.destroy_instance(None) };
-    result
-}
-
-fn choose(devices: &[DeviceInfo], choice: &DeviceChoice) -> Result<usize> {
-    let available = || devices.iter().map(DeviceInfo::summary).collect::<Vec<_>>().join("; ");
-    let usable = |d: &DeviceInfo| -> Result<usize> {
-        if d.missing.is_empty() {
-            Ok(d.index)
-        } else {
-            Err(Error::MissingFeature {
-                device: d.name.clone(),
-                feature: d.missing.join(", "),
-                hint: "update the driver (Mesa ≥ 22 for lavapipe) or choose another device (DeviceChoice)".into(),
-            })
-        }
-    };
-    let choice = match choice {
-        DeviceChoice::Auto => match std::env::var("PATHGRAD_DEVICE") {
-            Ok(v) if !v.trim().is_empty() => DeviceChoice::parse(&v),
-            _ => DeviceChoice::Auto,
-        },
-        other => other.clone(),
-    };
-    match &choice {
-        DeviceChoice::Index(i) => devices
-            .get(*i)
-            .ok_or_else(|| Error::DeviceNotFound { selector: i.to_string(), available: available() })
-            .and_then(usable),
-        DeviceChoice::Uuid(u) => {
-            let want = u.replace('-', "").to_ascii_lowercase();
-            devices
-                .iter()
-                .find(|d| d.uuid == want)
-                .ok_or_else(|| Error::DeviceNotFound { selector: u.clone(), available: available() })
-                .and_then(usable)
-        }
-        DeviceChoice::Auto | DeviceChoice::PreferCpu => {
-            let prefer_cpu = choice == DeviceChoice::PreferCpu;
-            let best = devices.iter().filter(|d| d.missing.is_empty()).min_by_key(|d| {
-                let cpu_first = u32::from(
-                    !(d.device_type == vk::PhysicalDeviceType::CPU || d.driver_id == vk::DriverId::MESA_LLVMPIPE),
-                );
-                if prefer_cpu { (cpu_first, d.rank(), d.index) } else { (0, d.rank(), d.index) }
-            });
-            match best {
-                Some(d) => Ok(d.index),
-                None => match devices.first() {
-                    Some(d) => usable(d),
-                    None => Err(Error::NoDevice { reason: "the driver reports no physical device".into() }),
-                },
-            }
-        }
     }
 }
 
@@ -437,17 +137,22 @@ impl Context {
         validation: Arc<ValidationCounter>,
         desc: &ContextDesc,
     ) -> Result<Context> {
-        // Destroys the instance if anything below fails.
-        struct InstanceGuard(Option<ash::Instance>);
+        // Destroys the messenger and the instance if anything below fails.
+        struct InstanceGuard(Option<(ash::Instance, Option<Messenger>)>);
         impl Drop for InstanceGuard {
             fn drop(&mut self) {
-                if let Some(i) = self.0.take() {
+                if let Some((instance, debug)) = self.0.take() {
                     // SAFETY: no child object of the instance survives a failed construction.
-                    unsafe { i.destroy_instance(None) };
+                    unsafe {
+                        if let Some((loader, messenger)) = debug {
+                            loader.destroy_debug_utils_messenger(messenger, None);
+                        }
+                        instance.destroy_instance(None);
+                    }
                 }
             }
         }
-        let mut guard = InstanceGuard(Some(instance.clone()));
+        let mut guard = InstanceGuard(Some((instance.clone(), None)));
         let debug = if use_validation {
             let loader = ash::ext::debug_utils::Instance::new(&entry, &instance);
             // SAFETY: the counter outlives the messenger (both are owned by the context).
@@ -457,6 +162,7 @@ impl Context {
         } else {
             None
         };
+        guard.0 = Some((instance.clone(), debug.clone()));
         // SAFETY: valid instance.
         let pds = unsafe { instance.enumerate_physical_devices() }.vk("vkEnumeratePhysicalDevices")?;
         if pds.is_empty() {
@@ -479,39 +185,169 @@ impl Context {
         let priorities = [1.0f32];
         let queue_info =
             [vk::DeviceQueueCreateInfo::default().queue_family_index(queue_family).queue_priorities(&priorities)];
-        let ext_ptrs = [ash::ext::shader_atomic_float::NAME.as_ptr()];
-        // 64-bit integers are required (the BVH traversal's loads); deterministic gradients also
-        // need 64-bit integer atomics: enabled where the device has them.
-        let int64 = info.int64_atomics;
-        let mut v12 = vk::PhysicalDeviceVulkan12Features::default()
-            .scalar_block_layout(true)
-            .buffer_device_address(true)
-            .shader_buffer_int64_atomics(int64);
-        let mut atomic =
-            vk::PhysicalDeviceShaderAtomicFloatFeaturesEXT::default().shader_buffer_float32_atomic_add(true);
-        let core = vk::PhysicalDeviceFeatures::default().shader_int64(true);
+        let ext_ptrs: Vec<*const std::ffi::c_char> =
+            requirements::DEVICE_EXTENSIONS.iter().map(|e| e.as_ptr()).collect();
+        // Everything required; 64-bit integer atomics (deterministic gradients) where the device has them.
+        let mut enabled = DeviceFeatures::default();
+        enabled.enable_required(info.int64_atomics);
+        let mut v12 = enabled.vulkan12;
+        let mut atomic = enabled.atomic_float;
         let mut features =
-            vk::PhysicalDeviceFeatures2::default().features(core).push_next(&mut v12).push_next(&mut atomic);
+            vk::PhysicalDeviceFeatures2::default().features(enabled.core).push_next(&mut v12).push_next(&mut atomic);
         let device_info = vk::DeviceCreateInfo::default()
             .queue_create_infos(&queue_info)
             .enabled_extension_names(&ext_ptrs)
             .push_next(&mut features);
         // SAFETY: every feature and extension requested was checked by `describe`.
         let device = unsafe { instance.create_device(physical_device, &device_info, None) }.vk("vkCreateDevice")?;
-        // SAFETY: the queue family was created with one queue.
-        let queue = unsafe { device.get_device_queue(queue_family, 0) };
+        let debug_names = has_debug_utils.then(|| ash::ext::debug_utils::Device::new(&instance, &device));
+        let parts = Parts {
+            entry,
+            instance,
+            physical_device,
+            device: device.clone(),
+            queue_family,
+            queue_index: 0,
+            info,
+            owner: Owner::Pathgrad { debug },
+            debug_names,
+            validation,
+        };
+        match Context::assemble(parts) {
+            Ok(ctx) => {
+                guard.0 = None;
+                Ok(ctx)
+            }
+            Err(e) => {
+                // SAFETY: `assemble` destroyed what it created; nothing else was made from the device.
+                unsafe { device.destroy_device(None) };
+                Err(e)
+            }
+        }
+    }
+
+    /// What an engine must enable before it hands its device to [`Context::from_raw`]: API
+    /// version, device extensions, features (by Vulkan name; [`DeviceFeatures::enable_required`]
+    /// sets them), the subgroup operations the device must support and the queue's capabilities.
+    pub fn requirements() -> Requirements {
+        requirements::requirements()
+    }
+
+    /// Wraps an engine's Vulkan objects without taking them over: pathgrad allocates its buffers
+    /// through its own allocator on the engine's device, records and submits on the given queue,
+    /// and on drop destroys only what it created. No validation layer or debug messenger is
+    /// installed, and [`Context::validation_errors`] stays 0 (the engine's own messenger sees
+    /// pathgrad's calls).
+    ///
+    /// Every extension and feature of [`Context::requirements`] is checked against
+    /// `borrowed.enabled` and `borrowed.enabled_extensions`, and the device's properties
+    /// (API version, subgroup operations, the queue family's flags) against the physical device.
+    ///
+    /// ```no_run
+    /// # fn engine() -> pathgrad::gpu::BorrowedDevice { unimplemented!() }
+    /// // The engine created its instance and device with everything `Context::requirements()` lists.
+    /// let borrowed: pathgrad::gpu::BorrowedDevice = engine();
+    /// // SAFETY: the engine's handles are valid and outlive the context (see # Safety).
+    /// let ctx = unsafe { pathgrad::gpu::Context::from_raw(borrowed) }?;
+    /// # Ok::<(), pathgrad::Error>(())
+    /// ```
+    ///
+    /// # Errors
+    /// [`Error::NotEnabled`] naming every required extension or feature that `borrowed` does not
+    /// enable; [`Error::MissingFeature`] when the physical device lacks an API version, subgroup
+    /// operation or compute queue; allocation failures.
+    ///
+    /// # Safety
+    /// The instance, physical device, device and queue must be valid, belong together, and stay
+    /// alive until this context and everything made from it (renderers, buffers, kernels) are
+    /// dropped; the device must have been created with a queue at `queue_family`/`queue_index` and
+    /// with exactly the features and extensions `borrowed` reports; the engine must not submit to
+    /// that queue from another thread while a pathgrad call runs on it.
+    pub unsafe fn from_raw(borrowed: BorrowedDevice) -> Result<Arc<Context>> {
+        let BorrowedDevice {
+            entry,
+            instance,
+            physical_device,
+            device,
+            queue_family,
+            queue_index,
+            enabled,
+            enabled_extensions,
+            api_version,
+        } = borrowed;
+        let mut info = describe(&instance, 0, physical_device);
+        let mut missing: Vec<String> = Vec::new();
+        if api_version < requirements::API_VERSION {
+            missing.push(format!(
+                "Vulkan {}.{} (the engine created it for {}.{})",
+                vk::api_version_major(requirements::API_VERSION),
+                vk::api_version_minor(requirements::API_VERSION),
+                vk::api_version_major(api_version),
+                vk::api_version_minor(api_version)
+            ));
+        }
+        missing.extend(requirements::missing_extensions(&enabled_extensions));
+        missing.extend(enabled.missing().into_iter().map(String::from));
+        if !missing.is_empty() {
+            return Err(Error::NotEnabled { device: info.name, missing });
+        }
+        // What the physical device itself lacks (the subgroup operations are properties, not switches).
+        if !info.missing.is_empty() {
+            return Err(Error::MissingFeature {
+                device: info.name.clone(),
+                feature: info.missing.join(", "),
+                hint: "hand pathgrad another device".into(),
+            });
+        }
+        // SAFETY: the caller guarantees the physical device.
+        let families = unsafe { instance.get_physical_device_queue_family_properties(physical_device) };
+        let compute =
+            families.get(queue_family as usize).is_some_and(|f| f.queue_flags.contains(vk::QueueFlags::COMPUTE));
+        if !compute {
+            return Err(Error::MissingFeature {
+                device: info.name.clone(),
+                feature: format!("compute on queue family {queue_family}"),
+                hint: "hand pathgrad a queue of a family with VK_QUEUE_COMPUTE_BIT".into(),
+            });
+        }
+        info.int64_atomics = info.int64_atomics && enabled.int64_atomics();
+        let parts = Parts {
+            entry,
+            instance,
+            physical_device,
+            device,
+            queue_family,
+            queue_index,
+            info,
+            owner: Owner::Engine,
+            debug_names: None,
+            validation: Arc::new(ValidationCounter::default()),
+        };
+        Context::assemble(parts).map(Arc::new)
+    }
+
+    /// Creates pathgrad's own objects on a device (command pool, allocator, pipeline cache); on
+    /// failure destroys those and nothing else.
+    fn assemble(parts: Parts) -> Result<Context> {
+        let Parts {
+            entry,
+            instance,
+            physical_device,
+            device,
+            queue_family,
+            queue_index,
+            info,
+            owner,
+            debug_names,
+            validation,
+        } = parts;
+        // SAFETY: the device was created with this queue (by us, or as the engine guarantees).
+        let queue = unsafe { device.get_device_queue(queue_family, queue_index) };
         let pool_info = vk::CommandPoolCreateInfo::default()
             .queue_family_index(queue_family)
             .flags(vk::CommandPoolCreateFlags::RESET_COMMAND_BUFFER);
         // SAFETY: valid device.
-        let command_pool = match unsafe { device.create_command_pool(&pool_info, None) } {
-            Ok(p) => p,
-            Err(result) => {
-                // SAFETY: nothing was created from the device yet.
-                unsafe { device.destroy_device(None) };
-                return Err(Error::Vulkan { call: "vkCreateCommandPool", result });
-            }
-        };
+        let command_pool = unsafe { device.create_command_pool(&pool_info, None) }.vk("vkCreateCommandPool")?;
         let allocator = Allocator::new(&AllocatorCreateDesc {
             instance: instance.clone(),
             device: device.clone(),
@@ -524,24 +360,21 @@ impl Context {
         let allocator = match allocator {
             Ok(a) => a,
             Err(e) => {
-                // SAFETY: only the pool was created from the device.
-                unsafe {
-                    device.destroy_command_pool(command_pool, None);
-                    device.destroy_device(None);
-                }
+                // SAFETY: only the pool was created here.
+                unsafe { device.destroy_command_pool(command_pool, None) };
                 return Err(e);
             }
         };
-        let debug_names = has_debug_utils.then(|| ash::ext::debug_utils::Device::new(&instance, &device));
-        guard.0 = None;
         // SAFETY: valid device; an empty cache. A failure only costs compile time: go without.
         let pipeline_cache = unsafe { device.create_pipeline_cache(&vk::PipelineCacheCreateInfo::default(), None) }
             .unwrap_or(vk::PipelineCache::null());
-        tracing::info!(device = %info.name, driver = %info.driver, validation = use_validation, "Vulkan device ready");
+        let borrowed = matches!(owner, Owner::Engine);
+        let validation_on = matches!(&owner, Owner::Pathgrad { debug: Some(_) });
+        tracing::info!(device = %info.name, driver = %info.driver, validation = validation_on, borrowed, "Vulkan device ready");
         Ok(Context {
             _entry: entry,
             instance,
-            debug,
+            owner,
             debug_names,
             physical_device,
             device,
@@ -595,7 +428,7 @@ impl Context {
 
     /// Whether the validation layer is active on this context.
     pub fn validation_enabled(&self) -> bool {
-        self.debug.is_some()
+        matches!(&self.owner, Owner::Pathgrad { debug: Some(_) })
     }
 
     /// Buffers, pipelines and descriptor sets created from this context and not yet dropped.
@@ -707,33 +540,29 @@ impl Context {
 
 impl Drop for Context {
     fn drop(&mut self) {
-        // SAFETY: teardown in the order gpu-allocator requires: wait, allocator, pool, device,
-        // messenger, instance. Children hold an `Arc<Context>`, so none is alive any more.
+        // SAFETY: teardown in the order gpu-allocator requires: allocator, pool, cache, then (if
+        // pathgrad created them) device, messenger, instance. Children hold an `Arc<Context>`, so
+        // none is alive any more, and every pathgrad submission was waited for before it returned.
         unsafe {
-            let _ = self.device.device_wait_idle();
+            if matches!(self.owner, Owner::Pathgrad { .. }) {
+                let _ = self.device.device_wait_idle();
+            }
             drop(self.allocator.lock().unwrap_or_else(|p| p.into_inner()).take());
             self.device.destroy_command_pool(*self.command_pool.get_mut().unwrap_or_else(|p| p.into_inner()), None);
             self.device.destroy_pipeline_cache(self.pipeline_cache, None);
-            self.device.destroy_device(None);
-            if let Some((loader, messenger)) = self.debug.take() {
-                loader.destroy_debug_utils_messenger(messenger, None);
+            if let Owner::Pathgrad { debug } = &mut self.owner {
+                self.device.destroy_device(None);
+                if let Some((loader, messenger)) = debug.take() {
+                    loader.destroy_debug_utils_messenger(messenger, None);
+                }
+                self.instance.destroy_instance(None);
             }
-            self.instance.destroy_instance(None);
         }
     }
 }
 
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn loop_budget_follows_the_mesa_version_of_lavapipe_only() {
-        let lvp = vk::DriverId::MESA_LLVMPIPE;
-        assert!(has_loop_budget(lvp, "Mesa 22.3.6"));
-        assert!(!has_loop_budget(lvp, "Mesa 25.0.7-2~bpo12+1 (LLVM 15.0.6)"));
-        assert!(!has_loop_budget(lvp, "Mesa 26.1.0-devel (git-1234)"));
-        assert!(has_loop_budget(lvp, "something else"), "unknown versions are treated as limited");
-        assert!(!has_loop_budget(vk::DriverId::NVIDIA_PROPRIETARY, "580.95.05"));
-    }
-}
+/// `Context` is shared across threads as `Arc<Context>` (the module's thread-safety note).
+const _: fn() = || {
+    fn send_sync<T: Send + Sync>() {}
+    send_sync::<Context>();
+};

@@ -2,12 +2,17 @@
 
 pub mod buffer;
 pub mod context;
+pub mod device;
+mod instance;
 pub mod pipeline;
 pub mod renderer;
+pub mod requirements;
 pub mod shaders;
 pub mod variant;
 
 pub use buffer::Buffer;
-pub use context::{Context, ContextDesc, DeviceChoice, DeviceInfo};
+pub use context::{BorrowedDevice, Context, ContextDesc};
+pub use device::{DeviceChoice, DeviceInfo, list_devices};
 pub use pipeline::{BindGroup, Kernel};
 pub use renderer::Renderer;
+pub use requirements::{DeviceFeatures, Requirements};

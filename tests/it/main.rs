@@ -1,11 +1,14 @@
 //! The integration tests: one binary, every test runnable on lavapipe.
 
+#[path = "../../examples/embed/host.rs"]
+mod host;
 mod support;
 
 mod adaptive;
 mod bvh_embree;
 mod cli;
 mod cpu_vs_gpu;
+mod embed;
 mod embree_smoke;
 mod furnace;
 mod gradients;

@@ -502,7 +502,7 @@ fn params(spec: &str, defines: &[(String, String)], json: bool, allow_outside_fo
 }
 
 fn devices(json: bool) -> Result<()> {
-    let list = pathgrad::gpu::context::list_devices()?;
+    let list = pathgrad::gpu::list_devices()?;
     if json {
         let items: Vec<_> = list
             .iter()
