@@ -180,17 +180,42 @@ impl Host {
         self.messages.load(Ordering::SeqCst)
     }
 
-    /// Uses the device for the engine's own work: fills a host-visible buffer with `value` on the
-    /// GPU, waits, reads it back and frees everything. Returns the words read.
-    pub fn fill_and_read(&self, value: u32, words: usize) -> Result<Vec<u32>, vk::Result> {
+    /// Records commands with `record` into a command buffer of the host's own, submits them on its
+    /// queue and waits: how this engine runs a frame.
+    pub fn run(&self, record: impl FnOnce(vk::CommandBuffer)) -> Result<(), vk::Result> {
         let d = &self.device;
-        let size = (words * 4) as u64;
-        // SAFETY: plain Vulkan on the host's own device; every object is destroyed before returning.
+        // SAFETY: plain Vulkan on the host's own device; the pool is destroyed after the wait.
         unsafe {
-            let buffer = d.create_buffer(
-                &vk::BufferCreateInfo::default().size(size).usage(vk::BufferUsageFlags::TRANSFER_DST),
+            let pool = d.create_command_pool(
+                &vk::CommandPoolCreateInfo::default().queue_family_index(self.queue_family),
                 None,
             )?;
+            let result = (|| {
+                let cmd = d.allocate_command_buffers(
+                    &vk::CommandBufferAllocateInfo::default().command_pool(pool).command_buffer_count(1),
+                )?[0];
+                d.begin_command_buffer(cmd, &vk::CommandBufferBeginInfo::default())?;
+                record(cmd);
+                d.end_command_buffer(cmd)?;
+                let fence = d.create_fence(&vk::FenceCreateInfo::default(), None)?;
+                let cmds = [cmd];
+                let submitted = d.queue_submit(self.queue, &[vk::SubmitInfo::default().command_buffers(&cmds)], fence);
+                let waited = submitted.and_then(|()| d.wait_for_fences(&[fence], true, u64::MAX));
+                d.destroy_fence(fence, None);
+                waited
+            })();
+            d.destroy_command_pool(pool, None);
+            result
+        }
+    }
+
+    /// A host-visible buffer of the host's own (`TRANSFER_SRC | TRANSFER_DST`) and its memory.
+    fn staging(&self, size: u64) -> Result<(vk::Buffer, vk::DeviceMemory), vk::Result> {
+        let d = &self.device;
+        let usage = vk::BufferUsageFlags::TRANSFER_SRC | vk::BufferUsageFlags::TRANSFER_DST;
+        // SAFETY: plain Vulkan on the host's own device.
+        unsafe {
+            let buffer = d.create_buffer(&vk::BufferCreateInfo::default().size(size).usage(usage), None)?;
             let needs = d.get_buffer_memory_requirements(buffer);
             let kinds = self.instance.get_physical_device_memory_properties(self.physical_device);
             let wanted = vk::MemoryPropertyFlags::HOST_VISIBLE | vk::MemoryPropertyFlags::HOST_COHERENT;
@@ -205,42 +230,112 @@ impl Host {
                 None,
             )?;
             d.bind_buffer_memory(buffer, memory, 0)?;
-            let pool = d.create_command_pool(
-                &vk::CommandPoolCreateInfo::default().queue_family_index(self.queue_family),
-                None,
-            )?;
-            let cmd = d.allocate_command_buffers(
-                &vk::CommandBufferAllocateInfo::default().command_pool(pool).command_buffer_count(1),
-            )?[0];
-            d.begin_command_buffer(cmd, &vk::CommandBufferBeginInfo::default())?;
-            d.cmd_fill_buffer(cmd, buffer, 0, size, value);
-            let to_host = vk::MemoryBarrier::default()
-                .src_access_mask(vk::AccessFlags::TRANSFER_WRITE)
-                .dst_access_mask(vk::AccessFlags::HOST_READ);
-            d.cmd_pipeline_barrier(
-                cmd,
-                vk::PipelineStageFlags::TRANSFER,
-                vk::PipelineStageFlags::HOST,
-                vk::DependencyFlags::empty(),
-                &[to_host],
-                &[],
-                &[],
-            );
-            d.end_command_buffer(cmd)?;
-            let fence = d.create_fence(&vk::FenceCreateInfo::default(), None)?;
-            let cmds = [cmd];
-            d.queue_submit(self.queue, &[vk::SubmitInfo::default().command_buffers(&cmds)], fence)?;
-            d.wait_for_fences(&[fence], true, u64::MAX)?;
-            let ptr = d.map_memory(memory, 0, size, vk::MemoryMapFlags::empty())? as *const u32;
-            let read = std::slice::from_raw_parts(ptr, words).to_vec();
-            d.unmap_memory(memory);
-            d.destroy_fence(fence, None);
-            d.destroy_command_pool(pool, None);
-            d.destroy_buffer(buffer, None);
-            d.free_memory(memory, None);
-            Ok(read)
+            Ok((buffer, memory))
         }
     }
+
+    /// Copies `size` bytes at `offset` of any buffer on the device (one of pathgrad's, say) into
+    /// host memory through a staging buffer of the host's, after `record` has run in the same
+    /// command buffer.
+    pub fn read_after(
+        &self,
+        record: impl FnOnce(vk::CommandBuffer),
+        buffer: vk::Buffer,
+        offset: u64,
+        size: u64,
+    ) -> Result<Vec<u8>, vk::Result> {
+        let d = &self.device;
+        let (staging, memory) = self.staging(size)?;
+        let result = self.run(|cmd| {
+            record(cmd);
+            let region = [vk::BufferCopy::default().src_offset(offset).size(size)];
+            // SAFETY: both buffers live until the submission is waited on; pathgrad's recorded
+            // calls end with a barrier that makes their writes visible to later commands.
+            unsafe {
+                d.cmd_copy_buffer(cmd, buffer, staging, &region);
+                host_barrier(d, cmd);
+            }
+        });
+        // SAFETY: the work is done; the memory is host-visible and coherent.
+        let bytes = result.and_then(|()| unsafe {
+            let ptr = d.map_memory(memory, 0, size, vk::MemoryMapFlags::empty())? as *const u8;
+            let bytes = std::slice::from_raw_parts(ptr, size as usize).to_vec();
+            d.unmap_memory(memory);
+            Ok(bytes)
+        });
+        // SAFETY: not in use any more.
+        unsafe {
+            d.destroy_buffer(staging, None);
+            d.free_memory(memory, None);
+        }
+        bytes
+    }
+
+    /// Writes `bytes` at `offset` of any buffer on the device through a staging buffer of the
+    /// host's, and waits.
+    pub fn write(&self, buffer: vk::Buffer, offset: u64, bytes: &[u8]) -> Result<(), vk::Result> {
+        let d = &self.device;
+        let size = bytes.len() as u64;
+        let (staging, memory) = self.staging(size)?;
+        // SAFETY: host-visible, coherent memory of the staging buffer, not in use.
+        let result = unsafe {
+            d.map_memory(memory, 0, size, vk::MemoryMapFlags::empty()).map(|ptr| {
+                std::slice::from_raw_parts_mut(ptr as *mut u8, bytes.len()).copy_from_slice(bytes);
+                d.unmap_memory(memory);
+            })
+        }
+        .and_then(|()| {
+            self.run(|cmd| {
+                let region = [vk::BufferCopy::default().dst_offset(offset).size(size)];
+                // SAFETY: both buffers live until the submission is waited on.
+                unsafe { d.cmd_copy_buffer(cmd, staging, buffer, &region) };
+            })
+        });
+        // SAFETY: not in use any more.
+        unsafe {
+            d.destroy_buffer(staging, None);
+            d.free_memory(memory, None);
+        }
+        result
+    }
+
+    /// Uses the device for the engine's own work: fills a buffer of its own with `value` on the
+    /// GPU and reads it back. Returns the words read.
+    pub fn fill_and_read(&self, value: u32, words: usize) -> Result<Vec<u32>, vk::Result> {
+        let size = (words * 4) as u64;
+        let (buffer, memory) = self.staging(size)?;
+        // SAFETY: the host's own buffer, alive until the submission is waited on.
+        let bytes =
+            self.read_after(|cmd| unsafe { self.device.cmd_fill_buffer(cmd, buffer, 0, size, value) }, buffer, 0, size);
+        // SAFETY: not in use any more.
+        unsafe {
+            self.device.destroy_buffer(buffer, None);
+            self.device.free_memory(memory, None);
+        }
+        Ok(bytes?.chunks_exact(4).map(|w| u32::from_ne_bytes([w[0], w[1], w[2], w[3]])).collect())
+    }
+}
+
+/// Makes transfer writes visible to the host.
+///
+/// # Safety
+/// `cmd` is recording.
+unsafe fn host_barrier(d: &ash::Device, cmd: vk::CommandBuffer) {
+    let barrier = [vk::MemoryBarrier::default()
+        .src_access_mask(vk::AccessFlags::TRANSFER_WRITE)
+        .dst_access_mask(vk::AccessFlags::HOST_READ)];
+    // SAFETY: as the caller guarantees.
+    unsafe {
+        d.cmd_pipeline_barrier(
+            cmd,
+            vk::PipelineStageFlags::TRANSFER,
+            vk::PipelineStageFlags::HOST,
+            vk::DependencyFlags::empty(),
+            &barrier,
+            &[],
+            &[],
+        )
+    };
 }
 
 impl Host {

@@ -63,6 +63,9 @@ pub struct DeviceInfo {
     pub missing: Vec<String>,
     /// Whether 64-bit integer atomics on buffers exist (deterministic gradients need them).
     pub int64_atomics: bool,
+    /// Whether timeline semaphores exist (submissions that wait on and signal an engine's
+    /// semaphores, `Context::submit`).
+    pub timeline_semaphores: bool,
     /// Whether the driver silently cuts loops short after a per-invocation iteration budget
     /// (lavapipe before Mesa 25, PLATFORM.md §6.1): kernels then trace one path per invocation.
     pub loop_budget: bool,
@@ -133,6 +136,7 @@ pub(crate) fn describe(instance: &ash::Instance, index: usize, pd: vk::PhysicalD
         subgroup_size: subgroup.subgroup_size,
         missing,
         int64_atomics: supported.int64_atomics(),
+        timeline_semaphores: supported.vulkan12.timeline_semaphore == vk::TRUE,
         loop_budget: has_loop_budget(driver.driver_id, &driver_info),
     }
 }

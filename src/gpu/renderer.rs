@@ -1,20 +1,20 @@
-//! `Renderer`: uploads a scene once and dispatches the megakernels — the primal render, the fused
+//! `Renderer`: uploads a scene once and runs the megakernels — the primal render, the fused
 //! adjoint (reverse-mode gradients, with uniform or loss-aware adaptive pixel sampling) and
-//! forward-mode image gradients — one sample index per dispatch, in a fixed order, so the same seed
-//! gives the same image on the same device.
+//! forward-mode image gradients — through the kernel table (`kernels.rs`) and dispatch plans
+//! (`dispatch.rs`); each item in a fixed sample order, so the same seed gives the same image on the
+//! same device. `frame.rs` records the same plans into an engine's command buffers.
 
-use std::collections::HashMap;
 use std::sync::Arc;
-use std::time::Instant;
-
-use ash::vk;
 
 use crate::adaptive::{AdaptiveOptions, PixelSampling};
 use crate::contract::*;
 use crate::error::{Error, Result};
 use crate::gpu::buffer::Buffer;
 use crate::gpu::context::Context;
-use crate::gpu::pipeline::{Kernel, compute_barrier, groups_for, memory_barrier};
+use crate::gpu::dispatch::{self, Work, check_status};
+pub use crate::gpu::kernels::{COMPILE_NOTICE_MS, CompileEvent, CompileObserver};
+use crate::gpu::kernels::{KernelCache, KernelKind, Variant};
+use crate::gpu::upload::GpuScene;
 use crate::gpu::variant;
 use crate::image::Image;
 use crate::integrator::{ParamKinds, RenderOptions};
@@ -24,18 +24,6 @@ use crate::rng::PassTag;
 use crate::scene::Scene;
 use crate::scene::flat::FlatScene;
 
-/// Path samples per submission: enough work to hide submission overhead, little enough that a
-/// progress bar moves and a fence wait stays far below its timeout.
-const PATHS_PER_SUBMISSION: u64 = 1 << 20;
-
-/// Most invocations one dispatch launches when lanes take work from the counter: enough to keep a
-/// large GPU full (an H200 holds ~270 000 resident invocations); on lavapipe the lanes of the
-/// first subgroups take all the items and the rest find the counter exhausted at once.
-const MAX_LANES: u32 = 1 << 18;
-
-/// A first compile that takes longer than this is reported to the compile observer.
-pub const COMPILE_NOTICE_MS: u128 = 300;
-
 /// How reverse-mode gradients are accumulated.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub enum GradMode {
@@ -44,56 +32,6 @@ pub enum GradMode {
     Float,
     /// 64-bit fixed-point integer atomics (unit 2⁻³²): two runs give bitwise identical gradients.
     Deterministic,
-}
-
-/// The scene's arrays on the device.
-struct GpuScene {
-    nodes: Buffer,
-    tris: Buffer,
-    prim_ids: Buffer,
-    shading: Buffer,
-    materials: Buffer,
-    emitters: Buffer,
-    params: Buffer,
-}
-
-/// A kernel variant: which kernel, and the value of its `FEATURES` specialisation constant.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
-struct Variant {
-    kind: KernelKind,
-    features: u32,
-}
-
-/// What a compile observer is told (see [`Renderer::set_compile_observer`]).
-#[derive(Clone, Debug)]
-pub enum CompileEvent {
-    /// A kernel variant is about to be built (the driver compiles it now, or loads it from its
-    /// shader cache).
-    Started {
-        /// The kernel's name.
-        kernel: &'static str,
-        /// Its features, as [`variant::describe`] writes them.
-        features: String,
-    },
-    /// The variant is ready.
-    Finished {
-        /// The kernel's name.
-        kernel: &'static str,
-        /// Time spent building it, first dispatch included.
-        seconds: f64,
-    },
-}
-
-/// Receives [`CompileEvent`]s.
-pub type CompileObserver = Box<dyn FnMut(&CompileEvent) + Send>;
-
-/// How a dispatch hands out work.
-#[derive(Clone, Copy, Debug)]
-enum Work {
-    /// Every pixel, `spp` samples each.
-    Pixels { spp: u32 },
-    /// `count` global samples whose pixels the kernel draws (adaptive pixel sampling).
-    Samples { count: u64 },
 }
 
 /// Renders one scene on one device: images, gradients and image gradients.
@@ -110,19 +48,20 @@ enum Work {
 /// ```
 pub struct Renderer {
     ctx: Arc<Context>,
+    /// Tells this renderer's frames from another's.
+    id: usize,
     scene: Scene,
     flat: FlatScene,
-    gpu: GpuScene,
+    pub(crate) gpu: GpuScene,
     /// Parameter offset of the environment's radiance, or `NO_PARAM`.
     env_param: u32,
     /// Feature bits of what the scene contains.
-    scene_features: u32,
+    pub(crate) scene_features: u32,
     /// The parameter kinds the scene has (what refers to its parameters never changes).
     scene_kinds: ParamKinds,
-    kernels: HashMap<Variant, Kernel>,
+    pub(crate) kernels: KernelCache,
     /// One path per invocation (drivers with a loop budget, PLATFORM.md §6.1).
-    one_path_per_lane: bool,
-    observer: Option<CompileObserver>,
+    pub(crate) one_path_per_lane: bool,
 }
 
 impl std::fmt::Debug for Renderer {
@@ -130,10 +69,6 @@ impl std::fmt::Debug for Renderer {
         f.debug_struct("Renderer").field("scene", &self.scene.source).finish_non_exhaustive()
     }
 }
-
-/// The bindings every render kernel has: the per-render constants (a uniform buffer that also
-/// holds the scene arrays' device addresses), the status word and the work counter.
-const SCENE_BINDINGS: [u32; 3] = [BINDING_GLOBALS, BINDING_STATUS, BINDING_WORK];
 
 impl Renderer {
     /// Flattens `scene`, builds its BVH and uploads everything.
@@ -145,37 +80,29 @@ impl Renderer {
             let _span = tracing::info_span!("load", scene = %scene.source).entered();
             FlatScene::new(scene)?
         };
-        let _span = tracing::info_span!("upload").entered();
-        let gpu = GpuScene {
-            nodes: Buffer::storage_with(ctx, "BVH nodes", &flat.bvh.nodes)?,
-            tris: Buffer::storage_with(ctx, "triangles (leaf order)", &flat.bvh.tris)?,
-            prim_ids: Buffer::storage_with(ctx, "triangle ids", &flat.bvh.prim_ids)?,
-            shading: Buffer::storage_with(ctx, "triangle shading", &flat.shading)?,
-            materials: Buffer::storage_with(ctx, "materials", &flat.materials)?,
-            emitters: Buffer::storage_with(ctx, "emitters", &flat.emitters)?,
-            params: Buffer::storage_with(ctx, "param buffer", &flat.params)?,
-        };
+        let gpu = GpuScene::new(ctx, &flat)?;
         let env_param = scene.environment.map_or(NO_PARAM, |p| scene.params.entry(p).offset);
         let scene_features = variant::scene_features(&flat, env_param);
         let scene_kinds = variant::param_kinds(&flat, env_param, 0, flat.params.len() as u32);
+        static NEXT_ID: std::sync::atomic::AtomicUsize = std::sync::atomic::AtomicUsize::new(0);
         Ok(Renderer {
             ctx: ctx.clone(),
+            id: NEXT_ID.fetch_add(1, std::sync::atomic::Ordering::Relaxed),
             scene: scene.clone(),
             flat,
             gpu,
             env_param,
             scene_features,
             scene_kinds,
-            kernels: HashMap::new(),
+            kernels: KernelCache::new(ctx),
             one_path_per_lane: ctx.info().loop_budget,
-            observer: None,
         })
     }
 
     /// Calls `observer` when a kernel variant is built (on its first use in this process), so a
     /// front end can tell its user that a first compile is under way.
     pub fn set_compile_observer(&mut self, observer: CompileObserver) {
-        self.observer = Some(observer);
+        self.kernels.observer = Some(observer);
     }
 
     /// Traces one path per kernel invocation, one dispatch per sample index, instead of letting
@@ -194,8 +121,12 @@ impl Renderer {
     }
 
     /// The parameter kinds present in the scene and asked for by `options`.
-    fn grad_kinds(&self, options: &RenderOptions) -> ParamKinds {
+    pub(crate) fn grad_kinds(&self, options: &RenderOptions) -> ParamKinds {
         self.scene_kinds.intersection(options.differentiate)
+    }
+
+    pub(crate) fn id(&self) -> usize {
+        self.id
     }
 
     /// The scene being rendered.
@@ -276,7 +207,14 @@ impl Renderer {
         accum.clear()?;
         let features = variant::request_features(self.scene_features, options, ParamKinds::NONE);
         let v = Variant { kind: KernelKind::Primal, features };
-        self.dispatch(v, &globals, options, Work::Pixels { spp: options.spp }, &[(BINDING_ACCUM, &accum)], progress)?;
+        self.run(
+            v,
+            &globals,
+            options,
+            Work::Pixels { begin: 0, end: options.spp },
+            &[(BINDING_ACCUM, &accum)],
+            progress,
+        )?;
         let sums: Vec<f32> = accum.download(pixels as usize * 3)?;
         let spp = options.spp as f32;
         Image::from_rgb(options.width, options.height, sums.into_iter().map(|v| v / spp).collect())
@@ -296,7 +234,7 @@ impl Renderer {
         let _span = tracing::info_span!("adjoint", spp = options.spp, ?mode).entered();
         let globals = options.globals(&self.scene, &self.flat, PassTag::Gradient);
         let adjoint_buf = Buffer::storage_with(&self.ctx, "adjoint image", adjoint.as_slice())?;
-        let work = Work::Pixels { spp: options.spp };
+        let work = Work::Pixels { begin: 0, end: options.spp };
         self.reverse([KernelKind::Adjoint, KernelKind::AdjointFixed], &globals, options, work, &adjoint_buf, &[], mode)
     }
 
@@ -365,7 +303,7 @@ impl Renderer {
                 let mut bindings = vec![(BINDING_ADJOINT, adjoint_buf), (BINDING_GRADS, &grads)];
                 bindings.extend_from_slice(extra);
                 let v = Variant { kind: kinds[0], features };
-                self.dispatch(v, globals, options, work, &bindings, &mut |_, _| {})?;
+                self.run(v, globals, options, work, &bindings, &mut |_, _| {})?;
                 Ok(Gradients::new(&self.scene.params, grads.download(n)?))
             }
             GradMode::Deterministic => {
@@ -380,7 +318,7 @@ impl Renderer {
                 let mut bindings = vec![(BINDING_ADJOINT, adjoint_buf), (BINDING_GRADS_FIXED, &grads)];
                 bindings.extend_from_slice(extra);
                 let v = Variant { kind: kinds[1], features };
-                self.dispatch(v, globals, options, work, &bindings, &mut |_, _| {})?;
+                self.run(v, globals, options, work, &bindings, &mut |_, _| {})?;
                 let fixed: Vec<i64> = grads.download(n)?;
                 let unit = 1.0 / f64::from(globals.fixed_scale);
                 Ok(Gradients::new(&self.scene.params, fixed.iter().map(|&v| (v as f64 * unit) as f32).collect()))
@@ -498,11 +436,11 @@ impl Renderer {
         globals.adjoint_scale = 1.0;
         let kinds = variant::param_kinds(&self.flat, self.env_param, entry.offset, entry.offset + entry.len);
         let features = variant::request_features(self.scene_features, options, kinds);
-        self.dispatch(
+        self.run(
             Variant { kind: KernelKind::ImageGradient, features },
             &globals,
             options,
-            Work::Pixels { spp: options.spp },
+            Work::Pixels { begin: 0, end: options.spp },
             &[(BINDING_ADJOINT, &adjoint_buf), (BINDING_ACCUM, &accum)],
             &mut |_, _| {},
         )?;
@@ -511,71 +449,10 @@ impl Renderer {
         Image::from_rgb(options.width, options.height, sums.into_iter().map(|v| v / spp).collect())
     }
 
-    /// Builds the kernel variant `v` if this renderer has not yet, warming it up with an empty
-    /// dispatch so the driver's compile (or shader-cache load) happens here and is timed.
-    fn kernel(&mut self, v: Variant) -> Result<()> {
-        if self.kernels.contains_key(&v) {
-            return Ok(());
-        }
-        let (name, extra) = v.kind.layout();
-        let features = variant::describe(v.features);
-        let started = Instant::now();
-        if let Some(observer) = self.observer.as_mut() {
-            observer(&CompileEvent::Started { kernel: name, features: features.clone() });
-        }
-        let bindings: Vec<(u32, vk::DescriptorType)> = SCENE_BINDINGS
-            .iter()
-            .chain(extra)
-            .map(|&b| {
-                let ty = if b == BINDING_GLOBALS {
-                    vk::DescriptorType::UNIFORM_BUFFER
-                } else {
-                    vk::DescriptorType::STORAGE_BUFFER
-                };
-                (b, ty)
-            })
-            .collect();
-        let kernel = Kernel::specialised(
-            &self.ctx,
-            name,
-            &bindings,
-            std::mem::size_of::<KernelPush>() as u32,
-            Some(v.features),
-        )?;
-        self.kernels.insert(v, kernel);
-        self.warm_up(v)?;
-        let seconds = started.elapsed().as_secs_f64();
-        tracing::info!(kernel = name, features = %features, seconds, "kernel variant built");
-        if let Some(observer) = self.observer.as_mut() {
-            observer(&CompileEvent::Finished { kernel: name, seconds });
-        }
-        Ok(())
-    }
-
-    /// One dispatch of `v` with no work: lavapipe compiles a pipeline at its first dispatch.
-    fn warm_up(&self, v: Variant) -> Result<()> {
-        let (_, extra) = v.kind.layout();
-        let scratch = Buffer::storage(&self.ctx, "warm-up scratch", 16)?;
-        let globals = Buffer::uniform_with(
-            &self.ctx,
-            "globals",
-            std::slice::from_ref(&<Globals as bytemuck::Zeroable>::zeroed()),
-        )?;
-        let bindings: Vec<(u32, &Buffer)> = SCENE_BINDINGS
-            .iter()
-            .chain(extra)
-            .map(|&b| (b, if b == BINDING_GLOBALS { &globals } else { &scratch }))
-            .collect();
-        let kernel = &self.kernels[&v];
-        let group = kernel.bind(&bindings)?;
-        let push = KernelPush { sample_begin: 0, sample_count: 0, item_count: 0, lane_items: 0 };
-        self.ctx.submit_and_wait(v.kind.layout().0, |cmd| {
-            kernel.record(cmd, &group, bytemuck::bytes_of(&push), [1, 1, 1]);
-        })
-    }
-
-    /// Builds `v` if needed, then [`Renderer::run`]s it.
-    fn dispatch(
+    /// Builds `v` if needed, then dispatches it over `work` with the scene bindings plus `extra`,
+    /// one submission at a time (each waited for), and checks the kernels' status word.
+    /// `progress` hears (samples per pixel done, spp) after each submission.
+    fn run(
         &mut self,
         v: Variant,
         globals: &Globals,
@@ -584,163 +461,26 @@ impl Renderer {
         extra: &[(u32, &Buffer)],
         progress: &mut dyn FnMut(u32, u32),
     ) -> Result<()> {
-        self.kernel(v)?;
-        self.run(v, globals, options, work, extra, progress)
-    }
-
-    /// Dispatches `v` over `work` with the scene bindings plus `extra`, in submissions of about
-    /// [`PATHS_PER_SUBMISSION`] paths, then checks the kernels' status word. `progress` hears
-    /// (samples per pixel done, spp) after each submission.
-    fn run(
-        &self,
-        v: Variant,
-        globals: &Globals,
-        options: &RenderOptions,
-        work: Work,
-        extra: &[(u32, &Buffer)],
-        progress: &mut dyn FnMut(u32, u32),
-    ) -> Result<()> {
-        let g = &self.gpu;
-        let globals = Globals {
-            addr_nodes: g.nodes.device_address(),
-            addr_tris: g.tris.device_address(),
-            addr_prim_ids: g.prim_ids.device_address(),
-            addr_shading: g.shading.device_address(),
-            addr_materials: g.materials.device_address(),
-            addr_emitters: g.emitters.device_address(),
-            addr_params: g.params.device_address(),
-            ..*globals
-        };
-        let globals_buf = Buffer::uniform_with(&self.ctx, "globals", std::slice::from_ref(&globals))?;
+        let plan = dispatch::plan(work, options.width, options.height, options.spp, self.one_path_per_lane)?;
+        let globals_buf =
+            Buffer::uniform_with(&self.ctx, "globals", std::slice::from_ref(&self.gpu.with_addresses(globals)))?;
         let status = Buffer::storage(&self.ctx, "status flags", 4)?;
         status.clear()?;
         let counter = Buffer::storage(&self.ctx, "work counter", 4)?;
-        let ctx = &self.ctx;
         let mut bindings: Vec<(u32, &Buffer)> =
             vec![(BINDING_GLOBALS, &globals_buf), (BINDING_STATUS, &status), (BINDING_WORK, &counter)];
         bindings.extend_from_slice(extra);
-        let kernel = &self.kernels[&v];
+        let ctx = self.ctx.clone();
+        let kernel = self.kernels.get(v)?;
         let group = kernel.bind(&bindings)?;
-        let name = v.kind.layout().0;
-        let pixels = options.width * options.height;
-        // One dispatch: (push constants, lanes).
-        let launch = |push: KernelPush| {
-            let lanes = if self.one_path_per_lane { push.item_count } else { push.item_count.min(MAX_LANES) };
-            (push, groups_for(lanes.max(1)))
-        };
-        let record = |cmd: vk::CommandBuffer, dispatches: &[(KernelPush, [u32; 3])]| {
-            for (push, groups) in dispatches {
-                // SAFETY: `cmd` is recording; the counter is alive until the submission is waited on.
-                unsafe { ctx.device().cmd_fill_buffer(cmd, counter.raw(), 0, vk::WHOLE_SIZE, 0) };
-                memory_barrier(
-                    ctx,
-                    cmd,
-                    (vk::PipelineStageFlags::TRANSFER, vk::AccessFlags::TRANSFER_WRITE),
-                    (
-                        vk::PipelineStageFlags::COMPUTE_SHADER,
-                        vk::AccessFlags::SHADER_READ | vk::AccessFlags::SHADER_WRITE,
-                    ),
-                );
-                kernel.record(cmd, &group, bytemuck::bytes_of(push), *groups);
-                compute_barrier(ctx, cmd);
-                memory_barrier(
-                    ctx,
-                    cmd,
-                    (
-                        vk::PipelineStageFlags::COMPUTE_SHADER,
-                        vk::AccessFlags::SHADER_READ | vk::AccessFlags::SHADER_WRITE,
-                    ),
-                    (vk::PipelineStageFlags::TRANSFER, vk::AccessFlags::TRANSFER_WRITE),
-                );
-            }
-        };
-        match work {
-            Work::Pixels { spp } => {
-                let tiles_x = options.width.div_ceil(TILE_SIZE);
-                let tiles_y = options.height.div_ceil(TILE_SIZE);
-                let items = tiles_x * tiles_y * TILE_SIZE * TILE_SIZE;
-                let per_submit = (PATHS_PER_SUBMISSION / u64::from(pixels)).clamp(1, u64::from(spp)) as u32;
-                let mut done = 0;
-                while done < spp {
-                    let end = (done + per_submit).min(spp);
-                    let dispatches: Vec<_> = if self.one_path_per_lane {
-                        (done..end)
-                            .map(|s| {
-                                launch(KernelPush {
-                                    sample_begin: s,
-                                    sample_count: 1,
-                                    item_count: items,
-                                    lane_items: 1,
-                                })
-                            })
-                            .collect()
-                    } else {
-                        let push = KernelPush {
-                            sample_begin: done,
-                            sample_count: end - done,
-                            item_count: items,
-                            lane_items: u32::MAX,
-                        };
-                        vec![launch(push)]
-                    };
-                    ctx.submit_and_wait(name, |cmd| record(cmd, &dispatches))?;
-                    done = end;
-                    progress(done, spp);
-                }
-            }
-            Work::Samples { count } => {
-                if count > u64::from(u32::MAX) {
-                    return Err(Error::InvalidArgument {
-                        parameter: "RenderOptions::spp".into(),
-                        message: format!("{count} samples exceed the 32-bit sample counter"),
-                    });
-                }
-                let chunk = if self.one_path_per_lane { u64::from(pixels) } else { PATHS_PER_SUBMISSION };
-                let mut done = 0u64;
-                while done < count {
-                    let end = (done + chunk).min(count);
-                    let push = KernelPush {
-                        sample_begin: done as u32,
-                        sample_count: 1,
-                        item_count: (end - done) as u32,
-                        lane_items: if self.one_path_per_lane { 1 } else { u32::MAX },
-                    };
-                    let dispatches = [launch(push)];
-                    ctx.submit_and_wait(name, |cmd| record(cmd, &dispatches))?;
-                    done = end;
-                    progress((done * u64::from(options.spp) / count) as u32, options.spp);
-                }
-            }
+        for submission in &plan {
+            ctx.submit_and_wait(v.kind.name(), |cmd| {
+                dispatch::record(&ctx, cmd, kernel, &group, &counter, &submission.launches)
+            })?;
+            progress(submission.done, options.spp);
         }
         let flags: Vec<u32> = status.download(1)?;
-        check_status(flags[0], name)
-    }
-}
-
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
-enum KernelKind {
-    Primal,
-    Adjoint,
-    AdjointFixed,
-    AdjointAdaptive,
-    AdjointAdaptiveFixed,
-    ImageGradient,
-}
-
-impl KernelKind {
-    /// The kernel table: each kernel's `shaders/*.comp` name and the bindings it adds to
-    /// [`SCENE_BINDINGS`]. Adding a kernel is one entry here.
-    fn layout(self) -> (&'static str, &'static [u32]) {
-        match self {
-            KernelKind::Primal => ("primal", &[BINDING_ACCUM]),
-            KernelKind::Adjoint => ("adjoint", &[BINDING_ADJOINT, BINDING_GRADS]),
-            KernelKind::AdjointFixed => ("adjoint_fixed", &[BINDING_ADJOINT, BINDING_GRADS_FIXED]),
-            KernelKind::AdjointAdaptive => ("adjoint_adaptive", &[BINDING_ADJOINT, BINDING_GRADS, BINDING_ALIAS]),
-            KernelKind::AdjointAdaptiveFixed => {
-                ("adjoint_adaptive_fixed", &[BINDING_ADJOINT, BINDING_GRADS_FIXED, BINDING_ALIAS])
-            }
-            KernelKind::ImageGradient => ("image_gradient", &[BINDING_ADJOINT, BINDING_ACCUM]),
-        }
+        check_status(flags[0], v.kind.name())
     }
 }
 
@@ -755,29 +495,6 @@ fn check_size(image: &Image, options: &RenderOptions, what: &str) -> Result<()> 
                 options.width,
                 options.height
             ),
-        });
-    }
-    Ok(())
-}
-
-/// Turns the kernels' status word into an error.
-fn check_status(flags: u32, kernel: &'static str) -> Result<()> {
-    if flags & STATUS_LOOP_BUDGET != 0 {
-        return Err(Error::LoopBudget { kernel });
-    }
-    if flags & STATUS_STACK_OVERFLOW != 0 {
-        return Err(Error::Scene { location: "BVH".into(), message: format!("{kernel}: traversal stack overflow") });
-    }
-    if flags & STATUS_REPLAY_RESIDUAL != 0 {
-        return Err(Error::Numeric {
-            kernel,
-            message: "a replay ended with radiance left over: the replay drifted from its primal path".into(),
-        });
-    }
-    if flags & STATUS_FIXED_OVERFLOW != 0 {
-        return Err(Error::Numeric {
-            kernel,
-            message: "a fixed-point gradient sum overflowed ±2³¹; use float gradients or a smaller loss scale".into(),
         });
     }
     Ok(())

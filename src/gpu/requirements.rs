@@ -58,12 +58,16 @@ const REQUIRED: &[Flag] = &[
     ),
 ];
 
-/// Features pathgrad uses where enabled: 64-bit integer atomics give deterministic gradients.
-const OPTIONAL: &[Flag] = &[(
-    "shaderBufferInt64Atomics",
-    |f| f.vulkan12.shader_buffer_int64_atomics == vk::TRUE,
-    |f| f.vulkan12.shader_buffer_int64_atomics = vk::TRUE,
-)];
+/// Features pathgrad uses where enabled: 64-bit integer atomics give deterministic gradients,
+/// timeline semaphores let submissions wait on and signal an engine's semaphores.
+const OPTIONAL: &[Flag] = &[
+    (
+        "shaderBufferInt64Atomics",
+        |f| f.vulkan12.shader_buffer_int64_atomics == vk::TRUE,
+        |f| f.vulkan12.shader_buffer_int64_atomics = vk::TRUE,
+    ),
+    ("timelineSemaphore", |f| f.vulkan12.timeline_semaphore == vk::TRUE, |f| f.vulkan12.timeline_semaphore = vk::TRUE),
+];
 
 impl DeviceFeatures {
     /// What a physical device supports.
@@ -112,6 +116,10 @@ impl DeviceFeatures {
                         let s = &*(any as *const vk::PhysicalDeviceBufferDeviceAddressFeatures<'_>);
                         f.vulkan12.buffer_device_address |= s.buffer_device_address;
                     }
+                    vk::StructureType::PHYSICAL_DEVICE_TIMELINE_SEMAPHORE_FEATURES => {
+                        let s = &*(any as *const vk::PhysicalDeviceTimelineSemaphoreFeatures<'_>);
+                        f.vulkan12.timeline_semaphore |= s.timeline_semaphore;
+                    }
                     vk::StructureType::PHYSICAL_DEVICE_SHADER_ATOMIC_INT64_FEATURES => {
                         let s = &*(any as *const vk::PhysicalDeviceShaderAtomicInt64Features<'_>);
                         f.vulkan12.shader_buffer_int64_atomics |= s.shader_buffer_int64_atomics;
@@ -144,7 +152,7 @@ impl DeviceFeatures {
 
     /// Whether 64-bit integer atomics on buffers are set (deterministic gradients need them).
     pub fn int64_atomics(&self) -> bool {
-        OPTIONAL.iter().all(|(_, has, _)| has(self)) && self.core.shader_int64 == vk::TRUE
+        self.vulkan12.shader_buffer_int64_atomics == vk::TRUE && self.core.shader_int64 == vk::TRUE
     }
 }
 
@@ -167,7 +175,8 @@ pub struct Requirements {
     pub device_extensions: &'static [&'static CStr],
     /// Features to enable, by their Vulkan names ([`DeviceFeatures::enable_required`] sets them).
     pub feature_names: Vec<&'static str>,
-    /// Features pathgrad uses where enabled (`shaderBufferInt64Atomics`: deterministic gradients).
+    /// Features pathgrad uses where enabled (`shaderBufferInt64Atomics`: deterministic gradients;
+    /// `timelineSemaphore`: submissions synchronised with the engine's timeline semaphores).
     pub optional_feature_names: Vec<&'static str>,
     /// Subgroup operations the compute stage must support (a device property).
     pub subgroup_operations: vk::SubgroupFeatureFlags,

@@ -43,6 +43,22 @@ fn a_borrowed_device_gives_the_owned_results_and_is_left_intact() {
         assert_eq!(ctx.live_objects(), 0);
         results
     };
+    // The engine writes a parameter into pathgrad's parameter buffer itself; a render then sees it.
+    {
+        // SAFETY: as above.
+        let ctx = unsafe { Context::from_raw(host.borrowed()) }.unwrap();
+        let scene = pathgrad::scene::builtin::load("cornell-box").unwrap();
+        let options = RenderOptions { width: 16, height: 16, spp: 2, ..RenderOptions::for_scene(&scene) };
+        let mut rougher = scene.clone();
+        rougher.params.set("sphere.bsdf.alpha.value", &[0.3]).unwrap();
+        let want = Renderer::new(&ctx, &rougher).unwrap().render(&options).unwrap();
+        let mut renderer = Renderer::new(&ctx, &scene).unwrap();
+        let params = renderer.params_buffer();
+        let offset = scene.params.entry(scene.params.find("sphere.bsdf.alpha.value").unwrap()).offset;
+        host.write(params.buffer, params.offset + 4 * u64::from(offset), bytemuck::bytes_of(&0.3f32)).unwrap();
+        let got = renderer.render(&options).unwrap();
+        assert_eq!(bits(got.as_slice()), bits(want.as_slice()), "a parameter written by the host");
+    }
     assert_eq!(borrowed.0, owned.0, "image");
     assert_eq!(borrowed.1, owned.1, "gradient");
     assert!(borrowed.1.iter().any(|&b| f32::from_bits(b) != 0.0));
@@ -68,4 +84,71 @@ fn a_device_without_a_required_feature_is_refused_by_name() {
         assert!(e.contains("Context::requirements()"), "{e}");
         assert_eq!(host.close(), 0);
     }
+}
+
+/// The recorded path gives the blocking path's results bit for bit: a frame's render recorded in
+/// one range is the image `render` gives, its deterministic gradient recorded in two ranges is the
+/// one `backward` gives, and the same work submitted with timeline semaphores (the gradient pass
+/// waiting on the render's signal) gives them again and signals its values.
+#[test]
+fn the_recorded_path_equals_the_blocking_path() {
+    use ash::vk;
+    use pathgrad::gpu::{BufferLayout, SubmitSync};
+    let gpu = TestGpu::new();
+    let ctx = &gpu.ctx;
+    assert!(ctx.info().int64_atomics && ctx.info().timeline_semaphores, "lavapipe has both");
+    let scene = pathgrad::scene::builtin::load("cornell-box").unwrap();
+    let options = RenderOptions { width: 24, height: 16, spp: 4, ..RenderOptions::for_scene(&scene) };
+    let mut renderer = Renderer::new(ctx, &scene).unwrap();
+    let image = renderer.render(&options).unwrap();
+    let mut target_scene = scene.clone();
+    target_scene.params.set("sphere.bsdf.alpha.value", &[0.3]).unwrap();
+    let target = Renderer::new(ctx, &target_scene).unwrap().render(&options).unwrap();
+    let (_, adjoint) = pathgrad::loss::loss_and_adjoint(&image, &target, Loss::RelMse).unwrap();
+    let gradient = renderer.backward(&options, &adjoint, GradMode::Deterministic).unwrap();
+
+    let frame = renderer.frame(&options, GradMode::Deterministic).unwrap();
+    assert!(matches!(frame.gradient().layout, BufferLayout::GradientFixed { .. }));
+    assert_eq!(frame.image().size, 24 * 16 * 12);
+    frame.write_adjoint(&adjoint).unwrap();
+    ctx.submit_and_wait("recorded", |cmd| {
+        renderer.record_clear(&frame, cmd);
+        renderer.record_render(&frame, cmd, 0..4).unwrap();
+        renderer.record_backward(&frame, cmd, 0..2).unwrap();
+        renderer.record_backward(&frame, cmd, 2..4).unwrap();
+    })
+    .unwrap();
+    frame.check_status().unwrap();
+    assert_eq!(bits(frame.read_image(4).unwrap().as_slice()), bits(image.as_slice()), "recorded image");
+    let recorded = frame.read_gradients(&renderer).unwrap();
+    assert_eq!(bits(recorded.values()), bits(gradient.values()), "recorded gradient");
+    assert!(renderer.record_render(&frame, vk::CommandBuffer::null(), 3..5).is_err(), "a range past spp");
+
+    let d = ctx.device();
+    let mut kind = vk::SemaphoreTypeCreateInfo::default().semaphore_type(vk::SemaphoreType::TIMELINE);
+    // SAFETY: a semaphore of the test's, destroyed below after every wait.
+    let semaphore =
+        unsafe { d.create_semaphore(&vk::SemaphoreCreateInfo::default().push_next(&mut kind), None) }.unwrap();
+    ctx.submit_and_wait("clear", |cmd| renderer.record_clear(&frame, cmd)).unwrap();
+    let render =
+        renderer.submit_render(&frame, 0..4, &SubmitSync { wait: vec![], signal: vec![(semaphore, 1)] }).unwrap();
+    let wait = vec![(semaphore, 1, vk::PipelineStageFlags::COMPUTE_SHADER)];
+    let backward = renderer.submit_backward(&frame, 0..4, &SubmitSync { wait, signal: vec![(semaphore, 2)] }).unwrap();
+    let semaphores = [semaphore];
+    let values = [2u64];
+    // SAFETY: the semaphore is alive; a finite timeout.
+    unsafe {
+        d.wait_semaphores(&vk::SemaphoreWaitInfo::default().semaphores(&semaphores).values(&values), 60_000_000_000)
+    }
+    .unwrap();
+    render.wait().unwrap();
+    backward.wait().unwrap();
+    // SAFETY: no submission uses the semaphore any more.
+    unsafe { d.destroy_semaphore(semaphore, None) };
+    frame.check_status().unwrap();
+    assert_eq!(bits(frame.read_image(4).unwrap().as_slice()), bits(image.as_slice()), "submitted image");
+    assert_eq!(bits(frame.read_gradients(&renderer).unwrap().values()), bits(gradient.values()), "submitted gradient");
+    drop(frame);
+    drop(renderer);
+    assert_eq!(ctx.validation_errors(), 0);
 }

@@ -107,7 +107,7 @@ fn variance_protocols_reject_bad_settings() {
     let mut renderer = Renderer::new(&gpu.ctx, &scene).unwrap();
     let opts = RenderOptions { width: 8, height: 6, spp: 1, ..RenderOptions::for_scene(&scene) };
     let e = variance::image_gradient_variance(&mut renderer, &opts, "object.weight.value", 1, &mut |_| {});
-    assert!(e.unwrap_err().to_string().contains("--runs"));
+    assert!(e.unwrap_err().to_string().contains("variance::runs"));
     let e = variance::image_gradient_variance(&mut renderer, &opts, "nope", 2, &mut |_| {});
     assert!(e.unwrap_err().to_string().contains("nope"));
     let target = pathgrad::image::Image::new(8, 6);
@@ -115,9 +115,12 @@ fn variance_protocols_reject_bad_settings() {
     let bad = [
         (
             LossGradientSetup { target: &target, loss: Loss::L2, spp_primal: 0, adaptive: None, params: &weight },
-            "--spp-primal",
+            "LossGradientSetup::spp_primal",
         ),
-        (LossGradientSetup { target: &target, loss: Loss::L2, spp_primal: 1, adaptive: None, params: &[] }, "--param"),
+        (
+            LossGradientSetup { target: &target, loss: Loss::L2, spp_primal: 1, adaptive: None, params: &[] },
+            "LossGradientSetup::params",
+        ),
     ];
     for (setup, flag) in bad {
         let e = variance::loss_gradient_variance(&mut renderer, &opts, &setup, 2, &mut |_| {}).unwrap_err();

@@ -1,0 +1,51 @@
+//! The scene on the device: its flattened arrays uploaded once, and their device addresses.
+
+use std::sync::Arc;
+
+use crate::contract::Globals;
+use crate::error::Result;
+use crate::gpu::buffer::Buffer;
+use crate::gpu::context::Context;
+use crate::scene::flat::FlatScene;
+
+/// The scene's arrays on the device.
+pub(crate) struct GpuScene {
+    pub nodes: Buffer,
+    pub tris: Buffer,
+    pub prim_ids: Buffer,
+    pub shading: Buffer,
+    pub materials: Buffer,
+    pub emitters: Buffer,
+    /// One f32 per parameter value (`ParamTable` offsets): what `Renderer::set_params` rewrites.
+    pub params: Buffer,
+}
+
+impl GpuScene {
+    /// Uploads `flat`.
+    pub(crate) fn new(ctx: &Arc<Context>, flat: &FlatScene) -> Result<GpuScene> {
+        let _span = tracing::info_span!("upload").entered();
+        Ok(GpuScene {
+            nodes: Buffer::storage_with(ctx, "BVH nodes", &flat.bvh.nodes)?,
+            tris: Buffer::storage_with(ctx, "triangles (leaf order)", &flat.bvh.tris)?,
+            prim_ids: Buffer::storage_with(ctx, "triangle ids", &flat.bvh.prim_ids)?,
+            shading: Buffer::storage_with(ctx, "triangle shading", &flat.shading)?,
+            materials: Buffer::storage_with(ctx, "materials", &flat.materials)?,
+            emitters: Buffer::storage_with(ctx, "emitters", &flat.emitters)?,
+            params: Buffer::storage_with(ctx, "param buffer", &flat.params)?,
+        })
+    }
+
+    /// `globals` with the device addresses of the scene's arrays filled in.
+    pub(crate) fn with_addresses(&self, globals: &Globals) -> Globals {
+        Globals {
+            addr_nodes: self.nodes.device_address(),
+            addr_tris: self.tris.device_address(),
+            addr_prim_ids: self.prim_ids.device_address(),
+            addr_shading: self.shading.device_address(),
+            addr_materials: self.materials.device_address(),
+            addr_emitters: self.emitters.device_address(),
+            addr_params: self.params.device_address(),
+            ..*globals
+        }
+    }
+}
