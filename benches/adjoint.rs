@@ -4,6 +4,7 @@
 //! variant of the box without Russian roulette, so every path really has that many vertices).
 //! Prints figures; asserts nothing about time. Run: `cargo bench --bench adjoint`.
 
+use pathgrad::backend::Backend;
 use std::time::Instant;
 
 use glam::Vec3;

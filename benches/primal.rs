@@ -2,6 +2,7 @@
 //! device (`PATHGRAD_DEVICE`, default: the best one) and on the CPU reference. Prints figures; asserts
 //! nothing about time. Run: `cargo bench --bench primal`.
 
+use pathgrad::backend::Backend;
 use std::time::Instant;
 
 use pathgrad::gpu::{Context, ContextDesc, Renderer};

@@ -2,6 +2,7 @@
 //!
 //!     cargo run --release --example render [SCENE] [OUT.exr]
 
+use pathgrad::backend::Backend;
 use pathgrad::gpu::{Context, ContextDesc, Renderer, renderer::GradMode};
 use pathgrad::{integrator::RenderOptions, loss::Loss};
 

@@ -9,6 +9,7 @@
 //! pixel sampling ([`adaptive`]).
 //!
 //! ```no_run
+//! use pathgrad::backend::Backend;
 //! use pathgrad::gpu::{Context, ContextDesc, Renderer};
 //! use pathgrad::integrator::RenderOptions;
 //!
@@ -36,6 +37,7 @@
 
 pub mod adaptive;
 pub mod alias;
+pub mod backend;
 pub mod bsdf;
 pub mod bvh;
 pub mod contract;

@@ -10,8 +10,8 @@
 //! iteration and the parameter, and the parameters and Adam's moments stay as they were.
 
 use crate::adaptive::{AdaptiveEstimator, AdaptiveOptions};
+use crate::backend::Backend;
 use crate::error::{Error, Result};
-use crate::gpu::Renderer;
 use crate::gpu::renderer::GradMode;
 use crate::image::Image;
 use crate::integrator::RenderOptions;
@@ -301,6 +301,7 @@ pub struct StepReport {
 /// An inverse-rendering run: the parameters, Adam's state and the iteration count.
 ///
 /// ```no_run
+/// use pathgrad::backend::Backend;
 /// use pathgrad::gpu::{Context, ContextDesc, Renderer};
 /// use pathgrad::gpu::renderer::GradMode;
 /// use pathgrad::integrator::RenderOptions;
@@ -389,15 +390,15 @@ impl Optimization {
     /// # Errors
     /// Those of [`Renderer::set_params`], [`Renderer::loss_and_gradient_split`] and
     /// [`Renderer::loss_and_gradient_adaptive`] (a target of the wrong size, Vulkan failures).
-    pub fn gradient(&self, renderer: &mut Renderer, target: &Image) -> Result<(f64, Gradients)> {
-        renderer.set_params(&self.params)?;
+    pub fn gradient(&self, backend: &mut dyn Backend, target: &Image) -> Result<(f64, Gradients)> {
+        backend.set_params(&self.params)?;
         let o = &self.options;
         let render = o.at(self.iteration);
         match o.adaptive {
-            None => renderer.loss_and_gradient_split(&render, o.spp_primal, target, o.loss, o.mode),
+            None => backend.loss_and_gradient_split(&render, o.spp_primal, target, o.loss, o.mode),
             Some(estimator) => {
                 let adaptive = AdaptiveOptions { spp_primal: o.spp_primal, estimator };
-                renderer.loss_and_gradient_adaptive(&render, &adaptive, target, o.loss, o.mode)
+                backend.loss_and_gradient_adaptive(&render, &adaptive, target, o.loss, o.mode)
             }
         }
     }
@@ -427,8 +428,8 @@ impl Optimization {
     ///
     /// # Errors
     /// As those two.
-    pub fn step(&mut self, renderer: &mut Renderer, target: &Image) -> Result<StepReport> {
-        let (loss, gradients) = self.gradient(renderer, target)?;
+    pub fn step(&mut self, backend: &mut dyn Backend, target: &Image) -> Result<StepReport> {
+        let (loss, gradients) = self.gradient(backend, target)?;
         self.apply(loss, &gradients)
     }
 }

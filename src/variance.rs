@@ -16,8 +16,8 @@
 use std::time::Instant;
 
 use crate::adaptive::{AdaptiveEstimator, PixelSampling};
+use crate::backend::Backend;
 use crate::error::{Error, Result};
-use crate::gpu::Renderer;
 use crate::gpu::renderer::GradMode;
 use crate::image::Image;
 use crate::integrator::RenderOptions;
@@ -179,7 +179,7 @@ fn check_runs(runs: u32) -> Result<()> {
 /// [`Error::InvalidArgument`] for fewer than 2 runs or an unknown parameter; as
 /// [`Renderer::image_gradient`].
 pub fn image_gradient_variance(
-    renderer: &mut Renderer,
+    backend: &mut dyn Backend,
     options: &RenderOptions,
     param: &str,
     runs: u32,
@@ -191,7 +191,7 @@ pub fn image_gradient_variance(
     let mut clock = Stopwatch::new();
     for i in 0..runs {
         let run = RenderOptions { seed: options.seed.wrapping_add(i), ..*options };
-        let gradient = clock.time(|| renderer.image_gradient(&run, param))?;
+        let gradient = clock.time(|| backend.image_gradient(&run, param))?;
         moments.add(gradient.as_slice().iter().map(|&v| f64::from(v)));
         progress(i + 1);
     }
@@ -255,7 +255,7 @@ pub struct LossGradientVariance {
 /// [`Error::InvalidArgument`] for fewer than 2 runs, `spp_primal` = 0, no recorded parameter or a
 /// target of the wrong size; as [`Renderer::render`] and [`Renderer::backward`].
 pub fn loss_gradient_variance(
-    renderer: &mut Renderer,
+    backend: &mut dyn Backend,
     options: &RenderOptions,
     setup: &LossGradientSetup,
     runs: u32,
@@ -274,12 +274,12 @@ pub fn loss_gradient_variance(
         None => None,
         Some(estimator) => {
             let seed = options.seed.wrapping_add(WEIGHTS_SEED_OFFSET);
-            let image = renderer.render_reference(&RenderOptions { seed, ..pass1 })?;
+            let image = backend.render_reference(&RenderOptions { seed, ..pass1 })?;
             let (_, adjoint) = loss_and_adjoint(&image, setup.target, setup.loss)?;
             Some(PixelSampling::from_adjoint(&adjoint, estimator)?)
         }
     };
-    let entries: Vec<_> = setup.params.iter().map(|&id| renderer.scene().params.entry(id).clone()).collect();
+    let entries: Vec<_> = setup.params.iter().map(|&id| backend.scene().params.entry(id).clone()).collect();
     let len: usize = entries.iter().map(|e| e.len as usize).sum();
     let mut moments = Moments::new(len);
     let (mut clock, mut loss_sum) = (Stopwatch::new(), 0.0);
@@ -287,10 +287,10 @@ pub fn loss_gradient_variance(
         let seed = options.seed.wrapping_add(i);
         let (loss, gradients) = clock.time(|| {
             let run = RenderOptions { seed, ..*options };
-            let (loss, adjoint) = renderer.loss_image(&run, setup.spp_primal, setup.target, setup.loss)?;
+            let (loss, adjoint) = backend.loss_image(&run, setup.spp_primal, setup.target, setup.loss)?;
             let gradients = match &sampling {
-                None => renderer.backward(&run, &adjoint, GradMode::Float)?,
-                Some(sampling) => renderer.backward_adaptive(&run, &adjoint, sampling, GradMode::Float)?,
+                None => backend.backward(&run, &adjoint, GradMode::Float)?,
+                Some(sampling) => backend.backward_adaptive(&run, &adjoint, sampling, GradMode::Float)?,
             };
             Ok((loss, gradients))
         })?;

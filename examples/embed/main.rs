@@ -10,6 +10,7 @@
 
 mod host;
 
+use pathgrad::backend::Backend;
 use pathgrad::gpu::renderer::GradMode;
 use pathgrad::gpu::{BufferLayout, Context, Renderer};
 use pathgrad::image::Image;

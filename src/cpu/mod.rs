@@ -18,11 +18,122 @@ use crate::contract::Globals;
 use crate::cpu::path::GradSink;
 use crate::rng::{PassTag, RngKey};
 
+use crate::backend::{Backend, check_size};
 use crate::error::Result;
+use crate::gpu::renderer::GradMode;
 use crate::image::Image;
 use crate::integrator::RenderOptions;
+use crate::params::{Gradients, ParamTable};
 use crate::scene::Scene;
 use crate::scene::flat::FlatScene;
+
+/// Gradient sums are split into this many fixed parts of the pixels (or samples), each summed in
+/// order and the parts added in order: the result does not depend on the number of threads or on
+/// how rayon schedules them, so CPU gradients are deterministic.
+const GRADIENT_PARTS: usize = 64;
+
+/// The CPU reference as a [`Backend`]: the scene flattened (BVH included) once and kept between
+/// calls. Gradients are summed in f64 in a fixed order (deterministic in either [`GradMode`]).
+///
+/// ```
+/// use pathgrad::backend::Backend;
+/// use pathgrad::integrator::RenderOptions;
+/// let scene = pathgrad::scene::builtin::load("cornell-box")?;
+/// let mut cpu = pathgrad::cpu::Reference::new(&scene)?;
+/// let image = cpu.render(&RenderOptions { width: 8, height: 8, spp: 1, ..RenderOptions::for_scene(&scene) })?;
+/// assert_eq!(image.width(), 8);
+/// # Ok::<(), pathgrad::Error>(())
+/// ```
+pub struct Reference {
+    scene: Scene,
+    flat: FlatScene,
+}
+
+impl Reference {
+    /// Flattens `scene` and builds its BVH.
+    ///
+    /// # Errors
+    /// Scene validation errors.
+    pub fn new(scene: &Scene) -> Result<Reference> {
+        Ok(Reference { scene: scene.clone(), flat: FlatScene::new(scene)? })
+    }
+
+    fn gradients(&self, sums: Vec<f64>) -> Gradients {
+        Gradients::new(&self.scene.params, sums.into_iter().map(|g| g as f32).collect())
+    }
+}
+
+impl Backend for Reference {
+    fn scene(&self) -> &Scene {
+        &self.scene
+    }
+
+    fn describe(&self) -> String {
+        "CPU reference".into()
+    }
+
+    fn set_params(&mut self, params: &ParamTable) -> Result<()> {
+        if params.entries() != self.scene.params.entries() {
+            return Err(crate::Error::InvalidArgument {
+                parameter: "params".into(),
+                message: "the table's layout differs from the scene's".into(),
+            });
+        }
+        self.scene.params = params.clone();
+        self.flat.params = params.values().to_vec();
+        Ok(())
+    }
+
+    fn render_pass(
+        &mut self,
+        options: &RenderOptions,
+        pass: PassTag,
+        progress: &mut dyn FnMut(u32, u32),
+    ) -> Result<Image> {
+        let image = render_flat(&self.scene, &self.flat, options, pass)?;
+        progress(options.spp, options.spp);
+        Ok(image)
+    }
+
+    fn backward(&mut self, options: &RenderOptions, adjoint: &Image, _mode: GradMode) -> Result<Gradients> {
+        backward_flat(&self.scene, &self.flat, options, adjoint).map(|g| self.gradients(g))
+    }
+
+    fn backward_adaptive(
+        &mut self,
+        options: &RenderOptions,
+        adjoint: &Image,
+        sampling: &PixelSampling,
+        _mode: GradMode,
+    ) -> Result<Gradients> {
+        backward_adaptive_flat(&self.scene, &self.flat, options, adjoint, sampling).map(|g| self.gradients(g))
+    }
+
+    fn image_gradient(&mut self, options: &RenderOptions, name: &str) -> Result<Image> {
+        image_gradient_flat(&self.scene, &self.flat, options, name)
+    }
+
+    fn param_kinds(&self, ids: &[crate::params::ParamId]) -> crate::integrator::ParamKinds {
+        crate::gpu::variant::kinds_of(&self.scene, &self.flat, ids)
+    }
+}
+
+/// Sums `term(i, grads)` over `i` in `0..count` into one vector of `n` values, in the fixed
+/// order of [`GRADIENT_PARTS`].
+fn fixed_order_sum(count: u32, n: usize, term: impl Fn(u32, &mut [f64]) + Sync) -> Vec<f64> {
+    let per = count.div_ceil(GRADIENT_PARTS as u32).max(1);
+    let parts: Vec<Vec<f64>> = (0..GRADIENT_PARTS as u32)
+        .into_par_iter()
+        .map(|p| {
+            let mut grads = vec![0.0f64; n];
+            for i in (p * per).min(count)..((p + 1) * per).min(count) {
+                term(i, &mut grads);
+            }
+            grads
+        })
+        .collect();
+    parts.into_iter().fold(vec![0.0f64; n], add_vectors)
+}
 
 /// Renders `scene` on the CPU: per pixel, the sum of `spp` path radiances taken in sample order,
 /// divided by `spp` — the same accumulation order as the GPU's.
@@ -31,8 +142,12 @@ use crate::scene::flat::FlatScene;
 /// Scene validation and option errors.
 pub fn render(scene: &Scene, options: &RenderOptions) -> Result<Image> {
     options.validate()?;
-    let flat = FlatScene::new(scene)?;
-    let globals = options.globals(scene, &flat, PassTag::Primal);
+    render_flat(scene, &FlatScene::new(scene)?, options, PassTag::Primal)
+}
+
+fn render_flat(scene: &Scene, flat: &FlatScene, options: &RenderOptions, pass: PassTag) -> Result<Image> {
+    options.validate()?;
+    let globals = options.globals(scene, flat, pass);
     let pixels = (options.width * options.height) as usize;
     let data: Vec<f32> = (0..pixels)
         .into_par_iter()
@@ -40,7 +155,7 @@ pub fn render(scene: &Scene, options: &RenderOptions) -> Result<Image> {
             let mut sum = Vec3::ZERO;
             for s in 0..options.spp {
                 sum += path::trace_path::<false>(
-                    &flat,
+                    flat,
                     &globals,
                     pixel as u32,
                     s,
@@ -62,30 +177,20 @@ pub fn render(scene: &Scene, options: &RenderOptions) -> Result<Image> {
 /// Scene and option errors; an adjoint image of the wrong size.
 pub fn backward(scene: &Scene, options: &RenderOptions, adjoint: &Image) -> Result<Vec<f64>> {
     options.validate()?;
-    if (adjoint.width(), adjoint.height()) != (options.width, options.height) {
-        return Err(crate::Error::InvalidArgument {
-            parameter: "adjoint image".into(),
-            message: "size differs from the render".into(),
-        });
-    }
-    let flat = FlatScene::new(scene)?;
-    let globals = options.globals(scene, &flat, PassTag::Gradient);
-    let n = flat.params.len();
-    let pixels = (options.width * options.height) as usize;
+    backward_flat(scene, &FlatScene::new(scene)?, options, adjoint)
+}
+
+fn backward_flat(scene: &Scene, flat: &FlatScene, options: &RenderOptions, adjoint: &Image) -> Result<Vec<f64>> {
+    options.validate()?;
+    check_size(adjoint, options, "adjoint image")?;
+    let globals = options.globals(scene, flat, PassTag::Gradient);
     let drifted = std::sync::atomic::AtomicUsize::new(0);
-    let grads = (0..pixels)
-        .into_par_iter()
-        .fold(
-            || vec![0.0f64; n],
-            |mut grads, pixel| {
-                let adj = adjoint_at(adjoint, pixel as u32) * globals.adjoint_scale;
-                for s in 0..options.spp {
-                    replay_sample(&flat, &globals, pixel as u32, s, adj, &mut grads, &drifted);
-                }
-                grads
-            },
-        )
-        .reduce(|| vec![0.0f64; n], add_vectors);
+    let grads = fixed_order_sum(options.width * options.height, flat.params.len(), |pixel, grads| {
+        let adj = adjoint_at(adjoint, pixel) * globals.adjoint_scale;
+        for s in 0..options.spp {
+            replay_sample(flat, &globals, pixel, s, adj, grads, &drifted);
+        }
+    });
     check_replays(drifted.into_inner())?;
     Ok(grads)
 }
@@ -105,27 +210,29 @@ pub fn backward_adaptive(
     sampling: &PixelSampling,
 ) -> Result<Vec<f64>> {
     options.validate()?;
+    backward_adaptive_flat(scene, &FlatScene::new(scene)?, options, adjoint, sampling)
+}
+
+fn backward_adaptive_flat(
+    scene: &Scene,
+    flat: &FlatScene,
+    options: &RenderOptions,
+    adjoint: &Image,
+    sampling: &PixelSampling,
+) -> Result<Vec<f64>> {
+    options.validate()?;
     let delta = sampling.sample_adjoint(options, adjoint)?;
     let samples = sampling.sample_count(options)?;
-    let flat = FlatScene::new(scene)?;
-    let mut globals = options.globals(scene, &flat, PassTag::Gradient);
+    let mut globals = options.globals(scene, flat, PassTag::Gradient);
     // δL is in `delta` already (the kernel's adjoint_scale is 1 too).
     globals.adjoint_scale = 1.0;
     let key = RngKey([globals.key0, globals.key1]);
-    let n = flat.params.len();
     let drifted = std::sync::atomic::AtomicUsize::new(0);
-    let grads = (0..samples)
-        .into_par_iter()
-        .fold(
-            || vec![0.0f64; n],
-            |mut grads, k| {
-                let pixel = select_pixel(sampling.table(), key, k);
-                let adj = adjoint_at(&delta, pixel) * globals.adjoint_scale;
-                replay_sample(&flat, &globals, pixel, k, adj, &mut grads, &drifted);
-                grads
-            },
-        )
-        .reduce(|| vec![0.0f64; n], add_vectors);
+    let grads = fixed_order_sum(samples, flat.params.len(), |k, grads| {
+        let pixel = select_pixel(sampling.table(), key, k);
+        let adj = adjoint_at(&delta, pixel) * globals.adjoint_scale;
+        replay_sample(flat, &globals, pixel, k, adj, grads, &drifted);
+    });
     check_replays(drifted.into_inner())?;
     Ok(grads)
 }
@@ -165,13 +272,17 @@ fn replay_sample(
 /// Scene and option errors; an unknown parameter.
 pub fn image_gradient(scene: &Scene, options: &RenderOptions, name: &str) -> Result<Image> {
     options.validate()?;
+    image_gradient_flat(scene, &FlatScene::new(scene)?, options, name)
+}
+
+fn image_gradient_flat(scene: &Scene, flat: &FlatScene, options: &RenderOptions, name: &str) -> Result<Image> {
+    options.validate()?;
     let id = scene.params.find(name).ok_or_else(|| crate::Error::InvalidArgument {
         parameter: name.to_string(),
         message: "no such parameter".into(),
     })?;
     let entry = scene.params.entry(id).clone();
-    let flat = FlatScene::new(scene)?;
-    let globals = options.globals(scene, &flat, PassTag::Gradient);
+    let globals = options.globals(scene, flat, PassTag::Gradient);
     let pixels = (options.width * options.height) as usize;
     let drifted = std::sync::atomic::AtomicUsize::new(0);
     let data: Vec<f32> = (0..pixels)
@@ -181,10 +292,10 @@ pub fn image_gradient(scene: &Scene, options: &RenderOptions, name: &str) -> Res
             for s in 0..options.spp {
                 let p = pixel as u32;
                 let total =
-                    path::trace_path::<false>(&flat, &globals, p, s, Vec3::ZERO, Vec3::ZERO, &mut GradSink::None);
+                    path::trace_path::<false>(flat, &globals, p, s, Vec3::ZERO, Vec3::ZERO, &mut GradSink::None);
                 let mut sink =
                     GradSink::Forward { begin: entry.offset, end: entry.offset + entry.len, derivative: Vec3::ZERO };
-                let left = path::trace_path::<true>(&flat, &globals, p, s, Vec3::ONE, total, &mut sink);
+                let left = path::trace_path::<true>(flat, &globals, p, s, Vec3::ONE, total, &mut sink);
                 if !path::replay_returned_to_zero(total, left) {
                     drifted.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
                 }

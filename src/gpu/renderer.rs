@@ -6,7 +6,8 @@
 
 use std::sync::Arc;
 
-use crate::adaptive::{AdaptiveOptions, PixelSampling};
+use crate::adaptive::PixelSampling;
+use crate::backend::Backend;
 use crate::contract::*;
 use crate::error::{Error, Result};
 use crate::gpu::buffer::Buffer;
@@ -18,7 +19,6 @@ use crate::gpu::upload::GpuScene;
 use crate::gpu::variant;
 use crate::image::Image;
 use crate::integrator::{ParamKinds, RenderOptions};
-use crate::loss::{Loss, loss_and_adjoint};
 use crate::params::{Gradients, ParamTable};
 use crate::rng::PassTag;
 use crate::scene::Scene;
@@ -37,6 +37,7 @@ pub enum GradMode {
 /// Renders one scene on one device: images, gradients and image gradients.
 ///
 /// ```no_run
+/// use pathgrad::backend::Backend;
 /// use pathgrad::gpu::{Context, ContextDesc, Renderer};
 /// use pathgrad::integrator::RenderOptions;
 /// let scene = pathgrad::scene::builtin::load("cornell-box")?;
@@ -112,14 +113,6 @@ impl Renderer {
         self.one_path_per_lane = on;
     }
 
-    /// The kinds of the parameters `ids` (for [`RenderOptions::differentiate`]).
-    pub fn param_kinds(&self, ids: &[crate::params::ParamId]) -> ParamKinds {
-        ids.iter().fold(ParamKinds::NONE, |k, &id| {
-            let e = self.scene.params.entry(id);
-            k.union(variant::param_kinds(&self.flat, self.env_param, e.offset, e.offset + e.len))
-        })
-    }
-
     /// The parameter kinds present in the scene and asked for by `options`.
     pub(crate) fn grad_kinds(&self, options: &RenderOptions) -> ParamKinds {
         self.scene_kinds.intersection(options.differentiate)
@@ -148,7 +141,7 @@ impl Renderer {
     ///
     /// # Errors
     /// [`Error::InvalidArgument`] if the layout differs; Vulkan failures.
-    pub fn set_params(&mut self, params: &ParamTable) -> Result<()> {
+    fn replace_params(&mut self, params: &ParamTable) -> Result<()> {
         if params.entries() != self.scene.params.entries() {
             return Err(Error::InvalidArgument {
                 parameter: "params".into(),
@@ -160,39 +153,8 @@ impl Renderer {
         self.gpu.params.upload(&self.flat.params)
     }
 
-    /// Renders with `options`.
-    ///
-    /// # Errors
-    /// Option errors, Vulkan failures, [`Error::LoopBudget`] if the driver truncated a kernel loop.
-    pub fn render(&mut self, options: &RenderOptions) -> Result<Image> {
-        self.render_with_progress(options, &mut |_, _| {})
-    }
-
-    /// Renders with `options`, calling `progress(samples_done, spp)` after each submission.
-    ///
-    /// # Errors
-    /// As [`Renderer::render`].
-    pub fn render_with_progress(
-        &mut self,
-        options: &RenderOptions,
-        progress: &mut dyn FnMut(u32, u32),
-    ) -> Result<Image> {
-        self.render_pass(options, PassTag::Primal, progress)
-    }
-
-    /// Renders a reference (a target image) with `options`: the same estimator as
-    /// [`Renderer::render`] under the [`PassTag::Reference`] key, so its paths are independent of
-    /// every render, loss image and gradient pass of any seed (ALGORITHMS.md §2.3) — an
-    /// optimisation whose iteration t uses seed base + t never replays its target's paths.
-    ///
-    /// # Errors
-    /// As [`Renderer::render`].
-    pub fn render_reference(&mut self, options: &RenderOptions) -> Result<Image> {
-        self.render_pass(options, PassTag::Reference, &mut |_, _| {})
-    }
-
     /// Renders with `options` under the key of `pass`.
-    fn render_pass(
+    fn render_with_key(
         &mut self,
         options: &RenderOptions,
         pass: PassTag,
@@ -228,9 +190,9 @@ impl Renderer {
     /// Option errors; [`Error::InvalidArgument`] for an adjoint image of the wrong size or
     /// deterministic mode without 64-bit atomics; Vulkan failures; [`Error::LoopBudget`];
     /// [`Error::Numeric`] if a replay drifted from its primal path or a fixed-point sum overflowed.
-    pub fn backward(&mut self, options: &RenderOptions, adjoint: &Image, mode: GradMode) -> Result<Gradients> {
+    fn backward_uniform(&mut self, options: &RenderOptions, adjoint: &Image, mode: GradMode) -> Result<Gradients> {
         options.validate()?;
-        check_size(adjoint, options, "adjoint image")?;
+        crate::backend::check_size(adjoint, options, "adjoint image")?;
         let _span = tracing::info_span!("adjoint", spp = options.spp, ?mode).entered();
         let globals = options.globals(&self.scene, &self.flat, PassTag::Gradient);
         let adjoint_buf = Buffer::storage_with(&self.ctx, "adjoint image", adjoint.as_slice())?;
@@ -248,7 +210,7 @@ impl Renderer {
     /// # Errors
     /// As [`Renderer::backward`]; [`Error::InvalidArgument`] if `sampling` is for another image size
     /// or N exceeds the 32-bit sample counter.
-    pub fn backward_adaptive(
+    fn backward_with_sampling(
         &mut self,
         options: &RenderOptions,
         adjoint: &Image,
@@ -256,7 +218,7 @@ impl Renderer {
         mode: GradMode,
     ) -> Result<Gradients> {
         options.validate()?;
-        check_size(adjoint, options, "adjoint image")?;
+        crate::backend::check_size(adjoint, options, "adjoint image")?;
         let delta = sampling.sample_adjoint(options, adjoint)?;
         let _span =
             tracing::info_span!("adjoint_adaptive", spp = options.spp, ?mode, estimator = sampling.estimator().name())
@@ -326,97 +288,13 @@ impl Renderer {
         }
     }
 
-    /// The loss of a render against `target` and its gradient: pass 1 renders with the primal key
-    /// and gives the loss and its adjoint image; the fused pass then replays independent paths.
-    /// Pass 1 always uses plain BSDF sampling with next-event estimation (as \[SG24\]'s Algorithm 2);
-    /// `options.strategy` and `options.nee` apply to the gradient pass.
-    ///
-    /// # Errors
-    /// As [`Renderer::render`] and [`Renderer::backward`]; a target of the wrong size.
-    pub fn loss_and_gradient(
-        &mut self,
-        options: &RenderOptions,
-        target: &Image,
-        loss: Loss,
-        mode: GradMode,
-    ) -> Result<(f64, Gradients)> {
-        self.loss_and_gradient_split(options, options.spp, target, loss, mode)
-    }
-
-    /// As [`Renderer::loss_and_gradient`] with separate sample budgets (ALGORITHMS.md §3.4, §6
-    /// "Budget"): pass 1 renders `spp_primal` samples per pixel, the fused gradient pass
-    /// `options.spp`.
-    ///
-    /// # Errors
-    /// As [`Renderer::loss_and_gradient`]; [`Error::InvalidArgument`] naming `--spp-primal` if it
-    /// is 0.
-    pub fn loss_and_gradient_split(
-        &mut self,
-        options: &RenderOptions,
-        spp_primal: u32,
-        target: &Image,
-        loss: Loss,
-        mode: GradMode,
-    ) -> Result<(f64, Gradients)> {
-        let (value, adjoint) = self.loss_image(options, spp_primal, target, loss)?;
-        Ok((value, self.backward(options, &adjoint, mode)?))
-    }
-
-    /// Pass 1 of a gradient step: renders [`RenderOptions::loss_pass`] (`spp_primal` spp, plain
-    /// BSDF sampling with NEE, the primal key) and returns its loss against `target` and the
-    /// adjoint image ∂loss/∂I, computed on the host.
-    ///
-    /// # Errors
-    /// [`Error::InvalidArgument`] naming `--spp-primal` if it is 0, or for a target of the wrong
-    /// size; as [`Renderer::render`].
-    pub fn loss_image(
-        &mut self,
-        options: &RenderOptions,
-        spp_primal: u32,
-        target: &Image,
-        loss: Loss,
-    ) -> Result<(f64, Image)> {
-        let pass1 = options.loss_pass(spp_primal)?;
-        options.validate()?;
-        check_size(target, options, "target image")?;
-        let image = self.render(&pass1)?;
-        loss_and_adjoint(&image, target, loss)
-    }
-
-    /// The loss of a render against `target` and its gradient with loss-aware adaptive pixel
-    /// sampling (ALGORITHMS.md §6, Su & Gkioulekas' Algorithm 2): pass 1 renders `adaptive.spp_primal`
-    /// samples per pixel with the primal key (plain BSDF sampling with next-event estimation) and
-    /// gives the loss and its adjoint image A; the pixel weights are π_p ∝ Σ_c |A_pc|; the fused
-    /// pass then draws N = W·H·`options.spp` samples from them ([`Renderer::backward_adaptive`]).
-    /// `options.strategy` and `options.nee` apply to the gradient pass. If A is zero everywhere
-    /// the gradient is exactly zero and is returned without a gradient pass.
-    ///
-    /// # Errors
-    /// As [`Renderer::loss_and_gradient`] and [`Renderer::backward_adaptive`];
-    /// [`Error::InvalidArgument`] for `adaptive.spp_primal` = 0 or a non-finite adjoint value.
-    pub fn loss_and_gradient_adaptive(
-        &mut self,
-        options: &RenderOptions,
-        adaptive: &AdaptiveOptions,
-        target: &Image,
-        loss: Loss,
-        mode: GradMode,
-    ) -> Result<(f64, Gradients)> {
-        let (value, adjoint) = self.loss_image(options, adaptive.spp_primal, target, loss)?;
-        if adjoint.as_slice().iter().all(|&a| a == 0.0) {
-            return Ok((value, Gradients::new(&self.scene.params, vec![0.0; self.flat.params.len()])));
-        }
-        let sampling = PixelSampling::from_adjoint(&adjoint, adaptive.estimator)?;
-        Ok((value, self.backward_adaptive(options, &adjoint, &sampling, mode)?))
-    }
-
     /// Forward-mode image gradient ∂I/∂θ: per pixel and channel, the derivative of the image by
     /// the parameter `name` (tangent 1 on each of its values, so for an RGB parameter the
     /// derivative along scaling all three together), through the same replay with δL = 1.
     ///
     /// # Errors
     /// [`Error::InvalidArgument`] for an unknown parameter; as [`Renderer::backward`].
-    pub fn image_gradient(&mut self, options: &RenderOptions, name: &str) -> Result<Image> {
+    fn forward_image_gradient(&mut self, options: &RenderOptions, name: &str) -> Result<Image> {
         options.validate()?;
         let id = self.scene.params.find(name).ok_or_else(|| Error::InvalidArgument {
             parameter: name.to_string(),
@@ -484,18 +362,47 @@ impl Renderer {
     }
 }
 
-fn check_size(image: &Image, options: &RenderOptions, what: &str) -> Result<()> {
-    if (image.width(), image.height()) != (options.width, options.height) {
-        return Err(Error::InvalidArgument {
-            parameter: what.to_string(),
-            message: format!(
-                "is {}×{} but the render is {}×{}",
-                image.width(),
-                image.height(),
-                options.width,
-                options.height
-            ),
-        });
+impl Backend for Renderer {
+    fn scene(&self) -> &Scene {
+        &self.scene
     }
-    Ok(())
+
+    fn describe(&self) -> String {
+        self.ctx.info().name.clone()
+    }
+
+    fn set_params(&mut self, params: &ParamTable) -> Result<()> {
+        self.replace_params(params)
+    }
+
+    fn render_pass(
+        &mut self,
+        options: &RenderOptions,
+        pass: PassTag,
+        progress: &mut dyn FnMut(u32, u32),
+    ) -> Result<Image> {
+        self.render_with_key(options, pass, progress)
+    }
+
+    fn backward(&mut self, options: &RenderOptions, adjoint: &Image, mode: GradMode) -> Result<Gradients> {
+        self.backward_uniform(options, adjoint, mode)
+    }
+
+    fn backward_adaptive(
+        &mut self,
+        options: &RenderOptions,
+        adjoint: &Image,
+        sampling: &PixelSampling,
+        mode: GradMode,
+    ) -> Result<Gradients> {
+        self.backward_with_sampling(options, adjoint, sampling, mode)
+    }
+
+    fn image_gradient(&mut self, options: &RenderOptions, name: &str) -> Result<Image> {
+        self.forward_image_gradient(options, name)
+    }
+
+    fn param_kinds(&self, ids: &[crate::params::ParamId]) -> ParamKinds {
+        variant::kinds_of(&self.scene, &self.flat, ids)
+    }
 }

@@ -35,6 +35,15 @@ pub fn scene_features(flat: &FlatScene, env_param: u32) -> u32 {
     f
 }
 
+/// The kinds of the parameters `ids` of `scene` (flattened as `flat`).
+pub fn kinds_of(scene: &crate::scene::Scene, flat: &FlatScene, ids: &[crate::params::ParamId]) -> ParamKinds {
+    let env_param = scene.environment.map_or(NO_PARAM, |p| scene.params.entry(p).offset);
+    ids.iter().fold(ParamKinds::NONE, |k, &id| {
+        let e = scene.params.entry(id);
+        k.union(param_kinds(flat, env_param, e.offset, e.offset + e.len))
+    })
+}
+
 /// The kinds of the parameter values `begin .. end`, judged by what refers to them.
 pub fn param_kinds(flat: &FlatScene, env_param: u32, begin: u32, end: u32) -> ParamKinds {
     let overlaps = |offset: u32, len: u32| offset != NO_PARAM && offset < end && begin < offset.saturating_add(len);

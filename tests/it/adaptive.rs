@@ -4,6 +4,7 @@
 
 use glam::Vec3;
 use pathgrad::adaptive::{AdaptiveEstimator, AdaptiveOptions, PixelSampling, select_pixel};
+use pathgrad::backend::Backend;
 use pathgrad::contract::{AliasEntry, BINDING_ALIAS, BINDING_PROBE_OUT};
 use pathgrad::cpu::path::{GradSink, trace_path};
 use pathgrad::gpu::pipeline::groups_for;

@@ -1,5 +1,6 @@
 //! The GPU renderer against the CPU reference: same scene, same seed, per path and per pixel.
 
+use pathgrad::backend::Backend;
 use pathgrad::gpu::Renderer;
 use pathgrad::integrator::RenderOptions;
 use pathgrad::scene::builtin::{self, BUILTIN_SCENES};

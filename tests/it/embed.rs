@@ -1,6 +1,7 @@
 //! pathgrad on a device it did not create (`Context::from_raw`): the same results as on its own,
 //! refusal of a device without what it needs, and nothing of the host's destroyed or leaked.
 
+use pathgrad::backend::Backend;
 use pathgrad::gpu::renderer::GradMode;
 use pathgrad::gpu::{Context, Renderer};
 use pathgrad::integrator::RenderOptions;

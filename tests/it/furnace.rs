@@ -3,6 +3,7 @@
 //! walls' radiance in expectation, so every pixel's expected value is 1 — a check of NEE densities,
 //! MIS weights, BSDF sampling and Russian roulette.
 
+use pathgrad::backend::Backend;
 use pathgrad::gpu::Renderer;
 use pathgrad::image::Image;
 use pathgrad::integrator::RenderOptions;

@@ -1,6 +1,7 @@
 //! Gradients: the GPU adjoint against the CPU twin, forward against reverse mode, deterministic
 //! mode, and central finite differences with common random numbers.
 
+use pathgrad::backend::Backend;
 use pathgrad::gpu::Renderer;
 use pathgrad::gpu::renderer::GradMode;
 use pathgrad::image::Image;

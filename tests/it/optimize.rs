@@ -3,6 +3,7 @@
 //! roughness and a blend weight, and a negative control with the gradient's sign flipped fails
 //! the same criterion.
 
+use pathgrad::backend::Backend;
 use pathgrad::gpu::Renderer;
 use pathgrad::gpu::renderer::GradMode;
 use pathgrad::integrator::RenderOptions;

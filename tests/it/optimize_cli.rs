@@ -262,3 +262,41 @@ fn a_non_finite_target_is_refused_with_the_pixel_named() {
         assert!(!out.exists(), "nothing is written for a refused target");
     }
 }
+
+/// `optimize --cpu` runs the same protocol on the CPU reference: every iteration's loss, parameter
+/// and gradient norm match the GPU run's within the GPU-vs-CPU gradient tolerance (1e-3 relative,
+/// tests/it/gradients.rs), and `variance --cpu` gives the GPU's variances within it.
+#[test]
+fn optimize_and_variance_run_on_the_cpu_reference_like_on_the_gpu() {
+    let dir = tempfile::tempdir().unwrap();
+    let (gpu, cpu) = (dir.path().join("gpu"), dir.path().join("cpu"));
+    ok(&run(SMALL, &["--iters", "4", "-o", gpu.to_str().unwrap()]));
+    ok(&run(SMALL, &["--iters", "4", "--cpu", "-o", cpu.to_str().unwrap()]));
+    let ((header, on_gpu), (_, on_cpu)) = (rows(&gpu), rows(&cpu));
+    assert_eq!(on_gpu.len(), 4);
+    for (g, c) in on_gpu.iter().zip(&on_cpu) {
+        for column in ["loss", "object.weight.value", "grad_norm"] {
+            let i = header.iter().position(|h| h == column).unwrap();
+            let (a, b): (f64, f64) = (g[i].parse().unwrap(), c[i].parse().unwrap());
+            assert!((a - b).abs() <= 1e-3 * a.abs().max(b.abs()), "iteration {}: {column} GPU {a} vs CPU {b}", g[0]);
+        }
+    }
+    let summary = |extra: &[&str]| {
+        let out = dir.path().join(format!("v{}", extra.len()));
+        let o = crate::cli::pathgrad()
+            .args(["variance", "builtin:blend", "--param", "object.weight.value", "--strategy", "bsdf,diff"])
+            .args(["--runs", "3", "--spp", "1", "--width", "16", "--json", "-o"])
+            .arg(&out)
+            .args(extra)
+            .output()
+            .unwrap();
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        serde_json::from_slice::<serde_json::Value>(&o.stdout).unwrap()
+    };
+    let (g, c) = (summary(&[]), summary(&["--cpu"]));
+    assert_eq!(c["device"], "CPU reference");
+    for (rg, rc) in g["techniques"].as_array().unwrap().iter().zip(c["techniques"].as_array().unwrap()) {
+        let (a, b) = (rg["variance"].as_f64().unwrap(), rc["variance"].as_f64().unwrap());
+        assert!((a - b).abs() <= 1e-3 * a.abs().max(b.abs()), "{}: GPU {a} vs CPU {b}", rg["technique"]);
+    }
+}

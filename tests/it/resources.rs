@@ -1,5 +1,6 @@
 //! Vulkan objects own themselves: everything a render creates is gone when its owner is dropped.
 
+use pathgrad::backend::Backend;
 use pathgrad::gpu::Renderer;
 use pathgrad::integrator::RenderOptions;
 use pathgrad::scene::builtin;

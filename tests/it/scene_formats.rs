@@ -1,6 +1,7 @@
 //! Scene files against each other: the XML twin of the built-in Cornell box, and one scene written
 //! both as Mitsuba XML and as glTF.
 
+use pathgrad::backend::Backend;
 use pathgrad::gpu::Renderer;
 use pathgrad::integrator::RenderOptions;
 use pathgrad::scene;

@@ -1,6 +1,7 @@
 //! Sampling strategies (ALGORITHMS.md §5): the differential strategy's GPU kernels against the CPU
 //! twin per path, and every strategy unbiased against plain BSDF sampling over independent seeds.
 
+use pathgrad::backend::Backend;
 use pathgrad::gpu::Renderer;
 use pathgrad::gpu::renderer::GradMode;
 use pathgrad::image::Image;

@@ -2,6 +2,7 @@
 //! independent estimates they stand for, seed by seed, in both modes and with adaptive sampling.
 
 use pathgrad::adaptive::{AdaptiveEstimator, PixelSampling};
+use pathgrad::backend::Backend;
 use pathgrad::gpu::Renderer;
 use pathgrad::gpu::renderer::GradMode;
 use pathgrad::integrator::{RenderOptions, Strategy};

@@ -5,6 +5,7 @@ mod flags;
 mod optimize;
 mod variance;
 
+use pathgrad::backend::Backend;
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 use std::time::Instant;
@@ -63,6 +64,15 @@ enum Command {
     },
 }
 
+/// A backend opened by [`RenderFlags::backend`].
+struct Opened {
+    backend: Box<dyn Backend>,
+    /// The Vulkan context (none for the CPU reference): memory figures.
+    ctx: Option<std::sync::Arc<pathgrad::gpu::Context>>,
+    /// Microseconds spent building kernel variants so far (see `announce_compiles`).
+    compile_us: std::sync::Arc<std::sync::atomic::AtomicU64>,
+}
+
 /// Options every rendering command accepts.
 #[derive(Args, Debug)]
 struct RenderFlags {
@@ -85,6 +95,10 @@ struct RenderFlags {
     /// Vulkan device: an index or UUID from `pathgrad devices`, or `cpu` (env: PATHGRAD_DEVICE).
     #[arg(long)]
     device: Option<String>,
+    /// Run on the CPU reference implementation instead of Vulkan (the same estimators and random
+    /// numbers; slower).
+    #[arg(long, conflicts_with = "device")]
+    cpu: bool,
     /// Let the scene read files outside its own folder (absolute paths, `..`); by default a
     /// scene reads only the files beside and below it.
     #[arg(long)]
@@ -92,6 +106,19 @@ struct RenderFlags {
 }
 
 impl RenderFlags {
+    /// The backend these flags ask for, on `scene`: the CPU reference with `--cpu`, else a
+    /// renderer on the chosen device (first compiles announced on stderr unless `quiet`).
+    fn backend(&self, scene: &pathgrad::scene::Scene, spec: &str, quiet: bool) -> Result<Opened> {
+        if self.cpu {
+            let cpu = pathgrad::cpu::Reference::new(scene).with_context(|| format!("loading {spec}"))?;
+            return Ok(Opened { backend: Box::new(cpu), ctx: None, compile_us: Default::default() });
+        }
+        let ctx = context(&self.device)?;
+        let mut renderer = Renderer::new(&ctx, scene).with_context(|| format!("loading {spec}"))?;
+        let compile_us = announce_compiles(&mut renderer, quiet);
+        Ok(Opened { backend: Box::new(renderer), ctx: Some(ctx), compile_us })
+    }
+
     /// Loads `spec` for these flags: curved shapes are tessellated for the size rendered.
     fn load(&self, spec: &str, defines: &[(String, String)]) -> Result<pathgrad::scene::Scene> {
         let options = pathgrad::scene::LoadOptions {
@@ -191,9 +218,6 @@ struct RenderArgs {
     /// Exposure of PNG output in stops (negative darkens).
     #[arg(long, default_value_t = 0.0, allow_negative_numbers = true)]
     exposure: f32,
-    /// Render with the CPU reference implementation instead of Vulkan.
-    #[arg(long)]
-    cpu: bool,
     /// Print a JSON summary instead of text.
     #[arg(long)]
     json: bool,
@@ -256,7 +280,7 @@ fn parse_values(flag: &str, name: &str, text: &str) -> Result<Vec<f32>> {
 /// values with [`TARGET_SPP_FACTOR`]× the spp (at least [`TARGET_MIN_SPP`]), an independent seed
 /// and plain BSDF sampling with NEE. The renderer's parameters are restored to the scene's after.
 fn target_image(
-    renderer: &mut Renderer,
+    renderer: &mut dyn Backend,
     scene: &pathgrad::scene::Scene,
     opts: &RenderOptions,
     target: Option<&Path>,
@@ -347,9 +371,7 @@ fn grad(args: &GradArgs) -> Result<()> {
         scene.params.select(&[name.as_str()]).context("--image-gradient")?;
     }
     with_values(&scene.params, &args.target_set, "--target-set").context("--target-set")?;
-    let ctx = context(&args.flags.device)?;
-    let mut renderer = Renderer::new(&ctx, &scene).with_context(|| format!("loading {}", args.scene))?;
-    let _ = announce_compiles(&mut renderer, args.json);
+    let mut renderer = args.flags.backend(&scene, &args.scene, args.json)?.backend;
     let start = Instant::now();
     if let (Some(name), Some((output, outputs, exr_file, png_file))) = (&args.image_gradient, image_gradient_outputs) {
         let image = renderer.image_gradient(&opts, name).with_context(|| format!("differentiating {}", args.scene))?;
@@ -371,7 +393,7 @@ fn grad(args: &GradArgs) -> Result<()> {
     }
     // Only the kinds of the parameters reported are compiled into the gradient kernel.
     opts.differentiate = renderer.param_kinds(&chosen);
-    let target = target_image(&mut renderer, &scene, &opts, args.target.as_deref(), &args.target_set)?;
+    let target = target_image(renderer.as_mut(), &scene, &opts, args.target.as_deref(), &args.target_set)?;
     let mode = if args.deterministic { GradMode::Deterministic } else { GradMode::Float };
     // time_s is the gradient step (render, loss, fused adjoint), not the --target-set render.
     let start = Instant::now();
@@ -618,20 +640,11 @@ fn render(args: &RenderArgs) -> Result<()> {
     let opts = options(&scene, &args.flags)?;
     let progress = progress_bar(u64::from(opts.spp), "rendering [{bar:40}] {pos}/{len} spp", args.json);
     let start = Instant::now();
-    let (image, device) = if args.cpu {
-        let image =
-            pathgrad::cpu::render(&scene, &opts).with_context(|| format!("rendering {} on the CPU", args.scene))?;
-        (image, "CPU reference".to_string())
-    } else {
-        let ctx = context(&args.flags.device)?;
-        let device = ctx.info().name.clone();
-        let mut renderer = Renderer::new(&ctx, &scene).with_context(|| format!("loading {}", args.scene))?;
-        let _ = announce_compiles(&mut renderer, args.json);
-        let image = renderer
-            .render_with_progress(&opts, &mut |done, _| progress.set_position(u64::from(done)))
-            .with_context(|| format!("rendering {}", args.scene))?;
-        (image, device)
-    };
+    let mut backend = args.flags.backend(&scene, &args.scene, args.json)?.backend;
+    let device = backend.describe();
+    let image = backend
+        .render_pass(&opts, pathgrad::rng::PassTag::Primal, &mut |done, _| progress.set_position(u64::from(done)))
+        .with_context(|| format!("rendering {}", args.scene))?;
     let seconds = start.elapsed().as_secs_f64();
     progress.finish_and_clear();
     refuse_non_finite(&image, "the render")?;

@@ -8,6 +8,7 @@
 //! current iteration finishes, the outputs are written and the command exits with status 130 (a
 //! second Ctrl-C exits at once; every file is replaced atomically, so none is left half-written).
 
+use pathgrad::backend::Backend;
 use std::collections::{BTreeMap, BTreeSet};
 use std::fs;
 use std::path::{Path, PathBuf};
@@ -18,7 +19,6 @@ use std::time::Instant;
 use anyhow::{Context as _, Result, bail};
 use clap::Args;
 use pathgrad::adaptive::AdaptiveEstimator;
-use pathgrad::gpu::Renderer;
 use pathgrad::gpu::renderer::GradMode;
 use pathgrad::image::Image;
 use pathgrad::integrator::{RenderOptions, Strategy};
@@ -30,7 +30,7 @@ use pathgrad::scene::Scene;
 use serde::{Deserialize, Serialize};
 
 use super::curves::{History, Row};
-use super::{RenderFlags, StrategyArgs, context, options, parse_define, target_image, with_values};
+use super::{Opened, RenderFlags, StrategyArgs, options, parse_define, target_image, with_values};
 
 /// Iterations when `--iters` is not given.
 const DEFAULT_ITERS: u64 = 100;
@@ -183,7 +183,9 @@ struct Session {
     config: RunConfig,
     dir: PathBuf,
     scene: Scene,
-    renderer: Renderer,
+    renderer: Box<dyn Backend>,
+    /// The Vulkan context, for memory figures (none on the CPU reference).
+    ctx: Option<Arc<pathgrad::gpu::Context>>,
     /// Microseconds spent building kernel variants so far.
     compile_us: Arc<AtomicU64>,
     /// Set-up time of this session in seconds: loading, the target, and every kernel build
@@ -324,7 +326,7 @@ fn start(args: &OptimizeArgs) -> Result<Session> {
     refuse_existing_run(&dir)?;
     let adam = Adam::new(&initial_table, &ids, adam_options(&config)?)?;
     let initial = values_of(&initial_table, &ids);
-    let prepared = prepare(&config, &scene, &ids, &args.flags.device, args.json)?;
+    let prepared = prepare(&config, &scene, &ids, &args.flags, args.json)?;
     let history = History::new(&scene.params, &ids, prepared.truth.is_some());
     let run = Optimization::resume(initial_table, adam, 0, prepared.options)?;
     fs::create_dir_all(&dir).with_context(|| format!("creating -o {}", dir.display()))?;
@@ -337,6 +339,7 @@ fn start(args: &OptimizeArgs) -> Result<Session> {
         dir,
         scene,
         renderer: prepared.renderer,
+        ctx: prepared.ctx,
         compile_us: prepared.compile_us,
         setup_s: 0.0,
         target: prepared.target,
@@ -469,7 +472,7 @@ fn resume(args: &OptimizeArgs, dir: &Path, given: &BTreeSet<String>) -> Result<S
     let adam_state = AdamState { m: state.adam_m.clone(), v: state.adam_v.clone(), steps: state.adam_steps.clone() };
     let adam = Adam::with_state(&table, &ids, adam_options(&config)?, adam_state)
         .with_context(|| format!("{}: Adam state", path.display()))?;
-    let prepared = prepare(&config, &scene, &ids, &args.flags.device, args.json)?;
+    let prepared = prepare(&config, &scene, &ids, &args.flags, args.json)?;
     let mut history = History::new(&scene.params, &ids, prepared.truth.is_some());
     let csv = dir.join("history.csv");
     history.read(&csv, state.iteration)?;
@@ -481,6 +484,7 @@ fn resume(args: &OptimizeArgs, dir: &Path, given: &BTreeSet<String>) -> Result<S
         dir: dir.to_path_buf(),
         scene,
         renderer: prepared.renderer,
+        ctx: prepared.ctx,
         compile_us: prepared.compile_us,
         setup_s: 0.0,
         target: prepared.target,
@@ -589,7 +593,8 @@ fn iteration_options(scene: &Scene, config: &RunConfig) -> Result<IterationOptio
 /// What a run needs besides its parameters and Adam: the renderer, the target, the truth (with
 /// `--target-set`) and the iteration options.
 struct Prepared {
-    renderer: Renderer,
+    renderer: Box<dyn Backend>,
+    ctx: Option<Arc<pathgrad::gpu::Context>>,
     /// Microseconds spent building kernel variants so far (see `announce_compiles`).
     compile_us: Arc<AtomicU64>,
     target: Image,
@@ -599,24 +604,16 @@ struct Prepared {
 
 /// Checks `config` on `scene`, creates the device and the renderer and renders or reads the target;
 /// the gradient passes compile only the parameter kinds of `ids`, the parameters optimised.
-fn prepare(
-    config: &RunConfig,
-    scene: &Scene,
-    ids: &[ParamId],
-    device: &Option<String>,
-    quiet: bool,
-) -> Result<Prepared> {
+fn prepare(config: &RunConfig, scene: &Scene, ids: &[ParamId], flags: &RenderFlags, quiet: bool) -> Result<Prepared> {
     let mut options = iteration_options(scene, config)?;
     let truth = if config.target_set.is_empty() {
         None
     } else {
         Some(with_values(&scene.params, &config.target_set, "--target-set")?)
     };
-    let ctx = context(device)?;
-    let mut renderer = Renderer::new(&ctx, scene).with_context(|| format!("loading {}", config.scene))?;
-    let compile_us = super::announce_compiles(&mut renderer, quiet);
+    let Opened { backend: mut renderer, ctx, compile_us } = flags.backend(scene, &config.scene, quiet)?;
     let final_opts = RenderOptions { spp: config.spp_final, ..options.render };
-    let target = target_image(&mut renderer, scene, &final_opts, config.target.as_deref(), &config.target_set)?;
+    let target = target_image(renderer.as_mut(), scene, &final_opts, config.target.as_deref(), &config.target_set)?;
     if (target.width(), target.height()) != (config.width, config.height) {
         bail!(
             "invalid --target {}: it is {}×{} but the render is {}×{} (set --width/--height to match)",
@@ -628,7 +625,7 @@ fn prepare(
         );
     }
     options.render.differentiate = renderer.param_kinds(ids);
-    Ok(Prepared { renderer, compile_us, target, truth, options })
+    Ok(Prepared { renderer, ctx, compile_us, target, truth, options })
 }
 
 fn values_of(table: &ParamTable, ids: &[ParamId]) -> BTreeMap<String, Vec<f64>> {
@@ -641,8 +638,8 @@ fn values_of(table: &ParamTable, ids: &[ParamId]) -> BTreeMap<String, Vec<f64>> 
 fn iterate(s: &mut Session, json: bool, interrupted: &AtomicBool) -> Result<&'static str> {
     let bar = super::progress_bar(s.config.iters, "optimising [{bar:30}] {pos}/{len} it {msg}", json);
     bar.set_position(s.run.iteration());
-    let ctx = s.renderer.context().clone();
-    log_memory(&ctx, s.run.iteration());
+    let ctx = s.ctx.clone();
+    log_memory(ctx.as_deref(), s.run.iteration());
     let (started, before) = (Instant::now(), s.elapsed);
     let compiled_before = s.compile_us.load(Ordering::Relaxed);
     // Kernel builds during iterations (the first gradient builds its variants) are set-up time.
@@ -659,8 +656,10 @@ fn iterate(s: &mut Session, json: bool, interrupted: &AtomicBool) -> Result<&'st
         if s.config.time_budget.is_some_and(|b| before + iteration_s(s) >= b) {
             break "time budget";
         }
-        let (loss, gradients) =
-            s.run.gradient(&mut s.renderer, &s.target).with_context(|| format!("iteration {}", s.run.iteration()))?;
+        let (loss, gradients) = s
+            .run
+            .gradient(s.renderer.as_mut(), &s.target)
+            .with_context(|| format!("iteration {}", s.run.iteration()))?;
         let report = s.run.apply(loss, &gradients)?;
         let compiling = compile_s(s);
         if compiling > compiled_seen {
@@ -675,12 +674,12 @@ fn iterate(s: &mut Session, json: bool, interrupted: &AtomicBool) -> Result<&'st
         bar.set_position(s.run.iteration());
         bar.set_message(progress_message(s, loss));
         if s.run.iteration().is_multiple_of(MEMORY_LOG_EVERY) {
-            log_memory(&ctx, s.run.iteration());
+            log_memory(ctx.as_deref(), s.run.iteration());
         }
     };
     bar.finish_and_clear();
     s.setup_s += compile_s(s);
-    log_memory(&ctx, s.run.iteration());
+    log_memory(ctx.as_deref(), s.run.iteration());
     Ok(reason)
 }
 
@@ -735,7 +734,8 @@ fn rss_kib() -> Option<u64> {
     line.split_whitespace().nth(1)?.parse().ok()
 }
 
-fn log_memory(ctx: &pathgrad::gpu::Context, iteration: u64) {
+fn log_memory(ctx: Option<&pathgrad::gpu::Context>, iteration: u64) {
+    let Some(ctx) = ctx else { return };
     tracing::debug!(
         iteration,
         rss_kib = rss_kib().unwrap_or(0),
@@ -799,7 +799,7 @@ fn summary(s: &Session, stopped: &str, json: bool) {
         .iter()
         .map(|f| s.dir.join(f))
         .collect();
-    let ctx = s.renderer.context();
+    let ctx = s.ctx.as_deref();
     if json {
         let v = serde_json::json!({
             "iterations": s.run.iteration(),
@@ -812,8 +812,8 @@ fn summary(s: &Session, stopped: &str, json: bool) {
             "dir": s.dir,
             "outputs": outputs,
             "rss_kib": rss_kib(),
-            "buffer_bytes": ctx.buffer_bytes(),
-            "peak_buffer_bytes": ctx.peak_buffer_bytes(),
+            "buffer_bytes": ctx.map(|c| c.buffer_bytes()),
+            "peak_buffer_bytes": ctx.map(|c| c.peak_buffer_bytes()),
         });
         println!("{v}");
     } else {

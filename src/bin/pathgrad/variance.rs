@@ -7,11 +7,10 @@ use std::path::PathBuf;
 use anyhow::{Context as _, Result, bail};
 use clap::Args;
 use pathgrad::adaptive::AdaptiveEstimator;
-use pathgrad::gpu::Renderer;
 use pathgrad::integrator::{RenderOptions, Strategy};
 use pathgrad::variance::{self, LossGradientSetup};
 
-use super::{RenderFlags, context, options, parse_define, progress_bar, target_image, warn_without_sampler};
+use super::{RenderFlags, options, parse_define, progress_bar, target_image, warn_without_sampler};
 
 /// Dynamic range of the variance PNGs: this many decades below the largest variance of any
 /// technique (one scale for all, so the maps compare by eye).
@@ -155,9 +154,8 @@ pub(crate) fn run(args: &VarianceArgs) -> Result<()> {
         }
     }
 
-    let ctx = context(&args.flags.device)?;
-    let mut renderer = Renderer::new(&ctx, &scene).with_context(|| format!("loading {}", args.scene))?;
-    let _ = super::announce_compiles(&mut renderer, args.json);
+    let mut renderer = args.flags.backend(&scene, &args.scene, args.json)?.backend;
+    let device = renderer.describe();
     // Only the kind of the parameter measured is compiled into the gradient kernels.
     opts.differentiate = renderer.param_kinds(&[param]);
     let runs = u64::from(args.runs) * rows.len() as u64;
@@ -169,7 +167,7 @@ pub(crate) fn run(args: &VarianceArgs) -> Result<()> {
     if loss_mode {
         mode = "loss";
         let loss: pathgrad::loss::Loss = args.loss.as_deref().unwrap_or("relmse").parse()?;
-        let target = target_image(&mut renderer, &scene, &opts, args.target.as_deref(), &args.target_set)?;
+        let target = target_image(renderer.as_mut(), &scene, &opts, args.target.as_deref(), &args.target_set)?;
         let spp_primal = args.spp_primal.unwrap_or(3 * opts.spp);
         let params = [param];
         // Warm-up, untimed: lavapipe compiles each kernel at its first dispatch.
@@ -181,8 +179,14 @@ pub(crate) fn run(args: &VarianceArgs) -> Result<()> {
                 adaptive: adaptive.then_some(estimator),
                 params: &params,
             };
-            variance::loss_gradient_variance(&mut renderer, &RenderOptions { spp: 1, ..opts }, &setup, 2, &mut |_| {})
-                .context("warming up")?;
+            variance::loss_gradient_variance(
+                renderer.as_mut(),
+                &RenderOptions { spp: 1, ..opts },
+                &setup,
+                2,
+                &mut |_| {},
+            )
+            .context("warming up")?;
         }
         for (k, row) in rows.iter().enumerate() {
             progress.set_message(row.label.clone());
@@ -195,7 +199,7 @@ pub(crate) fn run(args: &VarianceArgs) -> Result<()> {
             };
             let base = u64::from(args.runs) * k as u64;
             let r = variance::loss_gradient_variance(
-                &mut renderer,
+                renderer.as_mut(),
                 &RenderOptions { strategy: row.strategy, ..opts },
                 &setup,
                 args.runs,
@@ -218,7 +222,7 @@ pub(crate) fn run(args: &VarianceArgs) -> Result<()> {
             progress.set_message(row.label.clone());
             let base = u64::from(args.runs) * k as u64;
             let r = variance::image_gradient_variance(
-                &mut renderer,
+                renderer.as_mut(),
                 &RenderOptions { strategy: row.strategy, ..opts },
                 &args.param,
                 args.runs,
@@ -294,7 +298,7 @@ pub(crate) fn run(args: &VarianceArgs) -> Result<()> {
         "scene": args.scene, "param": args.param, "mode": mode, "runs": args.runs, "spp": opts.spp,
         "spp_primal": loss_mode.then(|| args.spp_primal.unwrap_or(3 * opts.spp)),
         "nee": opts.nee, "width": opts.width, "height": opts.height, "seed": opts.seed,
-        "baseline": rows[baseline].label, "device": ctx.info().name, "techniques": items,
+        "baseline": rows[baseline].label, "device": device, "techniques": items,
     });
     let mut outputs = match outputs {
         Some(o) => o,
@@ -324,7 +328,7 @@ pub(crate) fn run(args: &VarianceArgs) -> Result<()> {
         if opts.nee { "on" } else { "off" },
         opts.width,
         opts.height,
-        ctx.info().name
+        device
     );
     println!(
         "{:<22} {:>12} {:>10} {:>10} {:>10} {:>10} {:>10}",
