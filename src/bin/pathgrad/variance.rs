@@ -10,7 +10,7 @@ use pathgrad::adaptive::AdaptiveEstimator;
 use pathgrad::integrator::{RenderOptions, Strategy};
 use pathgrad::variance::{self, LossGradientSetup};
 
-use super::{RenderFlags, options, parse_define, progress_bar, target_image, warn_without_sampler};
+use crate::common::{RenderFlags, options, parse_define, progress_bar, target_image, warn_without_sampler};
 
 /// Dynamic range of the variance PNGs: this many decades below the largest variance of any
 /// technique (one scale for all, so the maps compare by eye).

@@ -1,0 +1,355 @@
+//! What every command shares: the rendering flags and the backend they open, targets, parameter
+//! values, progress bars and output files.
+
+use std::path::{Path, PathBuf};
+
+use anyhow::{Context as _, Result, bail};
+use clap::Args;
+use pathgrad::backend::Backend;
+use pathgrad::gpu::{Context, ContextDesc, DeviceChoice, Renderer};
+use pathgrad::image::Image;
+use pathgrad::integrator::RenderOptions;
+
+/// Samples per pixel when neither `--spp` nor the scene names a number.
+pub(crate) const DEFAULT_SPP: u32 = 16;
+
+/// A backend opened by [`RenderFlags::backend`].
+pub(crate) struct Opened {
+    pub(crate) backend: Box<dyn Backend>,
+    /// The Vulkan context (none for the CPU reference): memory figures.
+    pub(crate) ctx: Option<std::sync::Arc<pathgrad::gpu::Context>>,
+    /// Microseconds spent building kernel variants so far (see `announce_compiles`).
+    pub(crate) compile_us: std::sync::Arc<std::sync::atomic::AtomicU64>,
+}
+
+/// Options every rendering command accepts.
+#[derive(Args, Debug)]
+pub(crate) struct RenderFlags {
+    /// Samples per pixel, at most 1048576 (default: the scene's, else 16).
+    #[arg(long)]
+    pub(crate) spp: Option<u32>,
+    /// Image width (default: the scene's).
+    #[arg(long)]
+    pub(crate) width: Option<u32>,
+    /// Image height (default: the scene's).
+    #[arg(long)]
+    pub(crate) height: Option<u32>,
+    /// Maximum surface interactions per path, at most 1024; -1 is unbounded: Russian roulette
+    /// ends paths, and none goes beyond 1024 (default: the scene's).
+    #[arg(long, allow_negative_numbers = true)]
+    pub(crate) max_depth: Option<i64>,
+    /// Random seed.
+    #[arg(long, default_value_t = 0)]
+    pub(crate) seed: u32,
+    /// Vulkan device: an index or UUID from `pathgrad devices`, or `cpu` (env: PATHGRAD_DEVICE).
+    #[arg(long)]
+    pub(crate) device: Option<String>,
+    /// Run on the CPU reference implementation instead of Vulkan (the same estimators and random
+    /// numbers; slower).
+    #[arg(long, conflicts_with = "device")]
+    pub(crate) cpu: bool,
+    /// Let the scene read files outside its own folder (absolute paths, `..`); by default a
+    /// scene reads only the files beside and below it.
+    #[arg(long)]
+    pub(crate) allow_outside_folder: bool,
+}
+
+impl RenderFlags {
+    /// The backend these flags ask for, on `scene`: the CPU reference with `--cpu`, else a
+    /// renderer on the chosen device (first compiles announced on stderr unless `quiet`).
+    pub(crate) fn backend(&self, scene: &pathgrad::scene::Scene, spec: &str, quiet: bool) -> Result<Opened> {
+        if self.cpu {
+            let cpu = pathgrad::cpu::Reference::new(scene).with_context(|| format!("loading {spec}"))?;
+            return Ok(Opened { backend: Box::new(cpu), ctx: None, compile_us: Default::default() });
+        }
+        let ctx = context(&self.device)?;
+        let mut renderer = Renderer::new(&ctx, scene).with_context(|| format!("loading {spec}"))?;
+        let compile_us = announce_compiles(&mut renderer, quiet);
+        Ok(Opened { backend: Box::new(renderer), ctx: Some(ctx), compile_us })
+    }
+
+    /// Loads `spec` for these flags: curved shapes are tessellated for the size rendered.
+    pub(crate) fn load(&self, spec: &str, defines: &[(String, String)]) -> Result<pathgrad::scene::Scene> {
+        let options = pathgrad::scene::LoadOptions {
+            defines: defines.to_vec(),
+            width: self.width,
+            height: self.height,
+            allow_outside_folder: self.allow_outside_folder,
+        };
+        Ok(pathgrad::scene::load_with(spec, &options)?)
+    }
+}
+
+/// How gradient passes sample paths: every command that estimates gradients takes these.
+#[derive(Args, Debug, Clone)]
+pub(crate) struct StrategyArgs {
+    /// Gradient sampling strategy: `bsdf` (plain PRB, the baseline) or `diff` (differential path
+    /// sampling of one vertex, Su & Gkioulekas).
+    #[arg(long, default_value = "bsdf")]
+    pub(crate) strategy: String,
+    /// Probability that `diff` makes a capable vertex the differential vertex [default: 0.5]
+    /// (only with `--strategy diff`).
+    #[arg(long)]
+    pub(crate) q: Option<f32>,
+    /// Turn next-event estimation off (for both strategies).
+    #[arg(long)]
+    pub(crate) no_nee: bool,
+    /// The parameter whose derivative drives `diff`'s sampler (default: the first parameter the
+    /// command differentiates).
+    #[arg(long, value_name = "NAME")]
+    pub(crate) diff_param: Option<String>,
+}
+
+impl StrategyArgs {
+    /// `--q`, or its default.
+    pub(crate) fn q(&self) -> f32 {
+        self.q.unwrap_or(pathgrad::integrator::DEFAULT_DIFF_Q)
+    }
+
+    /// Sets `opts.strategy` and `opts.nee`; `default_target` is the parameter the command
+    /// differentiates first. Warns when `diff` has no sampler for the target.
+    pub(crate) fn apply(
+        &self,
+        scene: &pathgrad::scene::Scene,
+        default_target: Option<&str>,
+        opts: &mut RenderOptions,
+    ) -> Result<()> {
+        use pathgrad::integrator::Strategy;
+        opts.nee = !self.no_nee;
+        if self.strategy != "diff" {
+            if let Some(q) = self.q {
+                bail!("--q {q} applies only to --strategy diff (this run uses {})", self.strategy);
+            }
+            if let Some(name) = &self.diff_param {
+                bail!("--diff-param {name} applies only to --strategy diff (this run uses {})", self.strategy);
+            }
+        }
+        let target = self.diff_param.as_deref().or(default_target);
+        opts.strategy = match (self.strategy.as_str(), target) {
+            ("diff", None) => bail!("--strategy diff needs --diff-param NAME (the parameter that drives the sampler)"),
+            (name, target) => Strategy::from_name(scene, name, self.q(), target.unwrap_or(""))?,
+        };
+        warn_without_sampler(scene, opts.strategy);
+        opts.validate()?;
+        Ok(())
+    }
+}
+
+/// Warns when `strategy` is `diff` driven by a parameter no material has a differential sampler for
+/// (it then samples like `bsdf`, with the balance heuristic).
+pub(crate) fn warn_without_sampler(scene: &pathgrad::scene::Scene, strategy: pathgrad::integrator::Strategy) {
+    use pathgrad::integrator::Strategy;
+    if let Strategy::Diff { target, .. } = strategy
+        && !Strategy::has_differential_sampler(scene, target)
+    {
+        tracing::warn!(
+            "{} is neither a roughness nor a blend weight: --strategy diff samples like bsdf (balance heuristic)",
+            scene.params.entry(target).name
+        );
+    }
+}
+
+/// The target of `--target-set` gets this many times the gradient render's spp (at least
+/// `TARGET_MIN_SPP`), so its noise is small next to the render's.
+pub(crate) const TARGET_SPP_FACTOR: u32 = 4;
+pub(crate) const TARGET_MIN_SPP: u32 = 64;
+/// The target of `--target-set` uses this seed offset and the reference key ([`Renderer::render_reference`]), so its paths are independent of every render of the run.
+pub(crate) const TARGET_SEED_OFFSET: u32 = 0x5EED;
+
+pub(crate) fn parse_values(flag: &str, name: &str, text: &str) -> Result<Vec<f32>> {
+    text.split(',')
+        .map(|v| {
+            v.trim().parse::<f32>().map_err(|_| anyhow::anyhow!("invalid {flag} {name}={text}: '{v}' is not a number"))
+        })
+        .collect()
+}
+
+/// The image a loss compares against: `--target REF.exr`, or the scene rendered at `--target-set`
+/// values with [`TARGET_SPP_FACTOR`]× the spp (at least [`TARGET_MIN_SPP`]), an independent seed
+/// and plain BSDF sampling with NEE. The renderer's parameters are restored to the scene's after.
+pub(crate) fn target_image(
+    renderer: &mut dyn Backend,
+    scene: &pathgrad::scene::Scene,
+    opts: &RenderOptions,
+    target: Option<&Path>,
+    target_set: &[(String, String)],
+) -> Result<Image> {
+    Ok(match (target, target_set.is_empty()) {
+        (Some(path), true) => {
+            let image = Image::read_exr(path)?;
+            if let Some(bad) = image.non_finite() {
+                bail!(
+                    "invalid --target {}: pixel ({}, {}) channel {} is {} (a loss needs finite values)",
+                    path.display(),
+                    bad.x,
+                    bad.y,
+                    bad.channel,
+                    bad.value
+                );
+            }
+            image
+        }
+        (None, false) => {
+            let table = with_values(&scene.params, target_set, "--target-set")?;
+            renderer.set_params(&table)?;
+            let target_opts = RenderOptions {
+                spp: (opts.spp * TARGET_SPP_FACTOR).max(TARGET_MIN_SPP),
+                seed: opts.seed.wrapping_add(TARGET_SEED_OFFSET),
+                strategy: pathgrad::integrator::Strategy::Bsdf,
+                nee: true,
+                ..*opts
+            };
+            let target = renderer.render_reference(&target_opts).context("rendering the target")?;
+            renderer.set_params(&scene.params)?;
+            target
+        }
+        _ => bail!("give --target REF.exr or --target-set NAME=VALUE"),
+    })
+}
+
+/// `table` with the values of `settings` (NAME=V sets every value of the parameter or glob,
+/// NAME=R,G,B each); `flag` names the option in errors.
+pub(crate) fn with_values(
+    table: &pathgrad::params::ParamTable,
+    settings: &[(String, String)],
+    flag: &str,
+) -> Result<pathgrad::params::ParamTable> {
+    let mut table = table.clone();
+    for (name, text) in settings {
+        let ids = table.select(&[name.as_str()])?;
+        for id in ids {
+            let entry = table.entry(id).clone();
+            let mut values = parse_values(flag, name, text)?;
+            if values.len() == 1 {
+                values = vec![values[0]; entry.len as usize];
+            }
+            table.set(&entry.name, &values)?;
+        }
+    }
+    Ok(table)
+}
+
+pub(crate) fn parse_define(text: &str) -> std::result::Result<(String, String), String> {
+    match text.split_once('=') {
+        Some((name, value)) if !name.trim().is_empty() => Ok((name.trim().to_string(), value.to_string())),
+        _ => Err(format!("expected NAME=VALUE, got '{text}'")),
+    }
+}
+
+pub(crate) fn context(device: &Option<String>) -> Result<std::sync::Arc<Context>> {
+    let validation = std::env::var("PATHGRAD_VALIDATION").is_ok_and(|v| v == "1");
+    let device = device.as_deref().map(DeviceChoice::parse).unwrap_or_default();
+    Ok(Context::new(&ContextDesc { device, validation })?)
+}
+
+pub(crate) fn options(scene: &pathgrad::scene::Scene, flags: &RenderFlags) -> Result<RenderOptions> {
+    let mut o = RenderOptions::for_scene(scene);
+    o.spp = flags.spp.or(scene.default_spp).unwrap_or(DEFAULT_SPP);
+    o.seed = flags.seed;
+    // The one rule for --width/--height (a scene from `RenderFlags::load` already has this size,
+    // and applying it again leaves it so).
+    let size = pathgrad::scene::LoadOptions { width: flags.width, height: flags.height, ..Default::default() };
+    (o.width, o.height) = size.size_for((scene.camera.width, scene.camera.height));
+    o.max_depth = match flags.max_depth {
+        None => Some(scene.max_depth),
+        Some(-1) => None,
+        Some(d) if d >= 1 && d <= i64::from(u32::MAX) => Some(d as u32),
+        Some(d) => bail!("invalid --max-depth {d}: must be at least 1, or -1 for unbounded"),
+    };
+    o.validate()?;
+    Ok(o)
+}
+
+pub(crate) fn check_output(path: &Path) -> Result<bool> {
+    match path.extension().and_then(|e| e.to_str()).map(str::to_ascii_lowercase).as_deref() {
+        Some("exr") => Ok(true),
+        Some("png") => Ok(false),
+        _ => bail!("invalid -o {}: the output must end in .exr or .png", path.display()),
+    }
+}
+
+/// Tells the user, on stderr, when building a kernel variant takes more than a moment: lavapipe
+/// compiles each variant on its first use on a machine (later runs load it from Mesa's shader
+/// cache), and a silent wait of seconds looks like a hang. Nothing is printed when `quiet` or when
+/// the build is quick. Returns the total time spent building variants so far, in microseconds,
+/// which keeps growing as later calls build more (`optimize` counts it as set-up, not iterations).
+pub(crate) fn announce_compiles(renderer: &mut Renderer, quiet: bool) -> std::sync::Arc<std::sync::atomic::AtomicU64> {
+    use pathgrad::gpu::renderer::{COMPILE_NOTICE_MS, CompileEvent};
+    let total_us = std::sync::Arc::new(std::sync::atomic::AtomicU64::new(0));
+    let total = total_us.clone();
+    let mut pending: Option<(std::sync::mpsc::Sender<()>, std::thread::JoinHandle<()>)> = None;
+    renderer.set_compile_observer(Box::new(move |event| match event {
+        CompileEvent::Started { .. } if quiet => {}
+        CompileEvent::Started { kernel, features } => {
+            let (done, wait) = std::sync::mpsc::channel::<()>();
+            let what = format!("{kernel} kernel ({features})");
+            let timer = std::thread::spawn(move || {
+                let delay = std::time::Duration::from_millis(COMPILE_NOTICE_MS as u64);
+                if wait.recv_timeout(delay).is_err() {
+                    eprintln!(
+                        "compiling the {what} for this scene: the driver builds it on first use \
+                         (seconds on lavapipe); later runs load it from the shader cache"
+                    );
+                    let _ = wait.recv();
+                }
+            });
+            pending = Some((done, timer));
+        }
+        CompileEvent::Finished { kernel, seconds } => {
+            total.fetch_add((*seconds * 1e6) as u64, std::sync::atomic::Ordering::Relaxed);
+            if let Some((done, timer)) = pending.take() {
+                let _ = done.send(());
+                let _ = timer.join();
+            }
+            if !quiet && *seconds * 1e3 > COMPILE_NOTICE_MS as f64 {
+                eprintln!("compiled the {kernel} kernel in {seconds:.1} s");
+            }
+        }
+    }));
+    total_us
+}
+
+/// A progress bar of `len` steps showing `what` (an indicatif template fragment) with elapsed time
+/// and ETA; hidden when `hidden` (a `--json` run prints nothing but its summary).
+pub(crate) fn progress_bar(len: u64, what: &str, hidden: bool) -> indicatif::ProgressBar {
+    let progress = indicatif::ProgressBar::new(len);
+    if hidden {
+        progress.set_draw_target(indicatif::ProgressDrawTarget::hidden());
+    }
+    let template = format!("{{spinner}} {what} ({{elapsed}}, eta {{eta}})");
+    progress.set_style(
+        indicatif::ProgressStyle::with_template(&template).expect("the template is valid").progress_chars("=> "),
+    );
+    progress
+}
+
+/// The PNG preview written beside an EXR output.
+pub(crate) fn preview_path(output: &Path) -> PathBuf {
+    output.with_extension("png")
+}
+
+/// Refuses an image with a NaN or an infinite value (`what` names it): such a result is never
+/// written. Radiance beyond the f32 range (a constant environment of 3e38, say) ends up here.
+pub(crate) fn refuse_non_finite(image: &Image, what: &str) -> Result<()> {
+    if let Some(bad) = image.non_finite() {
+        bail!(
+            "{what} has {} non-finite values (the first: pixel ({}, {}) channel {} is {}); the scene's \
+             values overflow 32-bit floats or are invalid, so nothing was written",
+            bad.count,
+            bad.x,
+            bad.y,
+            bad.channel,
+            bad.value
+        );
+    }
+    Ok(())
+}
+
+pub(crate) fn save(image: &Image, path: &Path, is_exr: bool, exposure: f32) -> Result<()> {
+    if is_exr {
+        image.write_exr(path)?
+    } else {
+        image.write_png(path, exposure)?
+    }
+    Ok(())
+}

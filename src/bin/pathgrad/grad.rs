@@ -1,0 +1,134 @@
+//! `pathgrad grad`: the gradient of a loss against a target, or a forward-mode image gradient.
+
+use std::path::PathBuf;
+use std::time::Instant;
+
+use anyhow::{Context as _, Result, bail};
+use clap::Args;
+use pathgrad::output::OutputSet;
+
+use crate::common::*;
+
+#[derive(Args, Debug)]
+pub(crate) struct GradArgs {
+    /// The scene: builtin:NAME or a scene file.
+    pub(crate) scene: String,
+    /// Override a scene file's default: NAME=VALUE (repeatable).
+    #[arg(short = 'D', long = "define", value_name = "NAME=VALUE", value_parser = parse_define)]
+    pub(crate) defines: Vec<(String, String)>,
+    /// Parameters to report, by name or glob (`*.alpha.value`); repeatable.
+    #[arg(long = "param", value_name = "NAME")]
+    pub(crate) params: Vec<String>,
+    /// The target image (EXR) the loss compares against.
+    #[arg(long, conflicts_with = "target_set")]
+    pub(crate) target: Option<PathBuf>,
+    /// Render the target at these parameter values instead (NAME=V or NAME=R,G,B; repeatable),
+    /// with 4× the spp (at least 64) and an independent seed.
+    #[arg(long = "target-set", value_name = "NAME=VALUE", value_parser = parse_define)]
+    pub(crate) target_set: Vec<(String, String)>,
+    /// The loss: relmse, relmse_max, l2 or l1.
+    #[arg(long, default_value = "relmse")]
+    pub(crate) loss: String,
+    /// Accumulate gradients in 64-bit fixed point: bitwise reproducible runs.
+    #[arg(long)]
+    pub(crate) deterministic: bool,
+    /// Instead of a loss gradient, write the forward-mode image gradient ∂I/∂NAME to -o.
+    #[arg(long, value_name = "NAME", conflicts_with_all = ["target", "target_set"])]
+    pub(crate) image_gradient: Option<String>,
+    /// Output of --image-gradient: an .exr (a signed false-colour .png is written beside it).
+    #[arg(short, long)]
+    pub(crate) output: Option<PathBuf>,
+    #[command(flatten)]
+    pub(crate) flags: RenderFlags,
+    #[command(flatten)]
+    pub(crate) sampling: StrategyArgs,
+    /// Print JSON: {"loss", "gradients": {name: [..]}, "time_s"}.
+    #[arg(long)]
+    pub(crate) json: bool,
+}
+
+pub(crate) fn grad(args: &GradArgs) -> Result<()> {
+    use pathgrad::gpu::renderer::GradMode;
+    // The outputs of --image-gradient are checked before anything is loaded or rendered.
+    let image_gradient_outputs = match (&args.image_gradient, &args.output) {
+        (None, Some(_)) => bail!("-o is the output of --image-gradient (a loss gradient is printed)"),
+        (None, None) => None,
+        (Some(_), None) => bail!("--image-gradient needs -o OUT.exr"),
+        (Some(_), Some(output)) => {
+            if !check_output(output)? {
+                bail!("invalid -o {}: an image gradient is written as .exr (plus a .png preview)", output.display());
+            }
+            let mut outputs = OutputSet::new();
+            let exr_file = outputs.stage(output)?;
+            let png_file = outputs.stage(&preview_path(output))?;
+            Some((output, outputs, exr_file, png_file))
+        }
+    };
+    let scene = args.flags.load(&args.scene, &args.defines)?;
+    let mut opts = options(&scene, &args.flags)?;
+    let first_param = args.image_gradient.as_deref().or_else(|| args.params.first().map(String::as_str));
+    args.sampling.apply(&scene, first_param, &mut opts)?;
+    // Names, the loss and the target's values are checked before the device is opened.
+    let loss: pathgrad::loss::Loss = args.loss.parse()?;
+    let patterns: Vec<&str> =
+        if args.params.is_empty() { vec!["*"] } else { args.params.iter().map(String::as_str).collect() };
+    let chosen = scene.params.select(&patterns).context("--param")?;
+    if let Some(name) = &args.image_gradient {
+        scene.params.select(&[name.as_str()]).context("--image-gradient")?;
+    }
+    with_values(&scene.params, &args.target_set, "--target-set").context("--target-set")?;
+    let mut renderer = args.flags.backend(&scene, &args.scene, args.json)?.backend;
+    let start = Instant::now();
+    if let (Some(name), Some((output, outputs, exr_file, png_file))) = (&args.image_gradient, image_gradient_outputs) {
+        let image = renderer.image_gradient(&opts, name).with_context(|| format!("differentiating {}", args.scene))?;
+        let seconds = start.elapsed().as_secs_f64();
+        refuse_non_finite(&image, &format!("the image gradient ∂I/∂{name}"))?;
+        image.write_exr(&exr_file)?;
+        image.write_signed_png(&png_file, None)?;
+        outputs.commit()?;
+        let preview = preview_path(output);
+        if args.json {
+            println!(
+                "{}",
+                serde_json::json!({"param": name, "time_s": seconds, "outputs": [output, preview], "mean": image.mean()})
+            );
+        } else {
+            println!("∂I/∂{name} in {seconds:.2} s → {}, {}", output.display(), preview.display());
+        }
+        return Ok(());
+    }
+    // Only the kinds of the parameters reported are compiled into the gradient kernel.
+    opts.differentiate = renderer.param_kinds(&chosen);
+    let target = target_image(renderer.as_mut(), &scene, &opts, args.target.as_deref(), &args.target_set)?;
+    let mode = if args.deterministic { GradMode::Deterministic } else { GradMode::Float };
+    // time_s is the gradient step (render, loss, fused adjoint), not the --target-set render.
+    let start = Instant::now();
+    let (value, gradients) = renderer
+        .loss_and_gradient(&opts, &target, loss, mode)
+        .with_context(|| format!("differentiating {}", args.scene))?;
+    let seconds = start.elapsed().as_secs_f64();
+    if args.json {
+        let map: serde_json::Map<String, serde_json::Value> = chosen
+            .iter()
+            .map(|&id| {
+                let name = scene.params.entry(id).name.clone();
+                let values = gradients.get(&name).expect("the gradient has the table's layout").to_vec();
+                (name, serde_json::json!(values))
+            })
+            .collect();
+        println!("{}", serde_json::json!({"loss": value, "gradients": map, "time_s": seconds}));
+    } else {
+        println!("loss ({}) = {value:.6e}   ({seconds:.2} s)", args.loss);
+        for id in chosen {
+            let name = &scene.params.entry(id).name;
+            let values = gradients.get(name).expect("the gradient has the table's layout");
+            if values.len() <= 4 {
+                println!("  ∂loss/∂{name} = {values:?}");
+            } else {
+                let norm = values.iter().map(|v| f64::from(*v).powi(2)).sum::<f64>().sqrt();
+                println!("  ∂loss/∂{name} = [{} values, norm {norm:.4e}]", values.len());
+            }
+        }
+    }
+    Ok(())
+}

@@ -1,0 +1,111 @@
+//! Before the first iteration: Adam's and the iterations' options, the backend, and the target.
+
+use pathgrad::backend::Backend;
+use std::collections::BTreeMap;
+use std::path::Path;
+use std::sync::Arc;
+use std::sync::atomic::AtomicU64;
+
+use anyhow::{Result, bail};
+use pathgrad::gpu::renderer::GradMode;
+use pathgrad::image::Image;
+use pathgrad::integrator::{RenderOptions, Strategy};
+use pathgrad::loss::Loss;
+use pathgrad::optim::{AdamOptions, IterationOptions};
+use pathgrad::params::{ParamId, ParamTable};
+use pathgrad::scene::Scene;
+
+use crate::common::{Opened, RenderFlags, target_image, with_values};
+
+use super::*;
+
+pub(super) fn adam_options(config: &RunConfig) -> Result<AdamOptions> {
+    let o = AdamOptions::with_learning_rate(config.lr);
+    o.validate()?;
+    Ok(o)
+}
+
+/// The render options of `config` on `scene`: the gradient pass's (spp = spp_grad).
+pub(super) fn iteration_options(scene: &Scene, config: &RunConfig) -> Result<IterationOptions> {
+    let strategy = Strategy::from_name(scene, &config.strategy, config.q, config.diff_param.as_deref().unwrap_or(""))?;
+    if config.spp_grad == 0 {
+        bail!("invalid --spp-grad: must be at least 1");
+    }
+    if config.spp_primal == 0 {
+        bail!("invalid --spp-primal: must be at least 1");
+    }
+    if let Some(t) = config.time_budget
+        && !(t > 0.0 && t.is_finite())
+    {
+        bail!("invalid --time-budget {t}: must be a positive number of seconds");
+    }
+    let render = RenderOptions {
+        width: config.width,
+        height: config.height,
+        spp: config.spp_grad,
+        max_depth: config.max_depth,
+        seed: config.seed,
+        nee: config.nee,
+        strategy,
+        ..RenderOptions::for_scene(scene)
+    };
+    let options = IterationOptions {
+        render,
+        spp_primal: config.spp_primal,
+        adaptive: if config.adaptive { Some(config.adaptive_estimator.parse()?) } else { None },
+        loss: config.loss.parse::<Loss>()?,
+        mode: if config.deterministic { GradMode::Deterministic } else { GradMode::Float },
+    };
+    options.validate()?;
+    Ok(options)
+}
+
+/// What a run needs besides its parameters and Adam: the renderer, the target, the truth (with
+/// `--target-set`) and the iteration options.
+pub(super) struct Prepared {
+    pub(super) renderer: Box<dyn Backend>,
+    pub(super) ctx: Option<Arc<pathgrad::gpu::Context>>,
+    /// Microseconds spent building kernel variants so far (see `announce_compiles`).
+    pub(super) compile_us: Arc<AtomicU64>,
+    pub(super) target: Image,
+    pub(super) truth: Option<ParamTable>,
+    pub(super) options: IterationOptions,
+}
+
+/// Checks `config` on `scene`, creates the device and the renderer and renders or reads the target;
+/// the gradient passes compile only the parameter kinds of `ids`, the parameters optimised.
+pub(super) fn prepare(
+    config: &RunConfig,
+    scene: &Scene,
+    ids: &[ParamId],
+    flags: &RenderFlags,
+    quiet: bool,
+) -> Result<Prepared> {
+    let mut options = iteration_options(scene, config)?;
+    let truth = if config.target_set.is_empty() {
+        None
+    } else {
+        Some(with_values(&scene.params, &config.target_set, "--target-set")?)
+    };
+    let Opened { backend: mut renderer, ctx, compile_us } = flags.backend(scene, &config.scene, quiet)?;
+    let final_opts = RenderOptions { spp: config.spp_final, ..options.render };
+    let target = target_image(renderer.as_mut(), scene, &final_opts, config.target.as_deref(), &config.target_set)?;
+    if (target.width(), target.height()) != (config.width, config.height) {
+        bail!(
+            "invalid --target {}: it is {}×{} but the render is {}×{} (set --width/--height to match)",
+            config.target.as_deref().unwrap_or(Path::new("")).display(),
+            target.width(),
+            target.height(),
+            config.width,
+            config.height
+        );
+    }
+    options.render.differentiate = renderer.param_kinds(ids);
+    Ok(Prepared { renderer, ctx, compile_us, target, truth, options })
+}
+
+pub(super) fn values_of(table: &ParamTable, ids: &[ParamId]) -> BTreeMap<String, Vec<f64>> {
+    ids.iter()
+        .map(|&id| (table.entry(id).name.clone(), table.get(id).iter().map(|&v| f64::from(v)).collect()))
+        .collect()
+}

@@ -1,0 +1,35 @@
+//! `pathgrad params`: a scene's differentiable parameters.
+
+use anyhow::Result;
+
+pub(crate) fn params(spec: &str, defines: &[(String, String)], json: bool, allow_outside_folder: bool) -> Result<()> {
+    let options =
+        pathgrad::scene::LoadOptions { defines: defines.to_vec(), allow_outside_folder, ..Default::default() };
+    let scene = pathgrad::scene::load_with(spec, &options)?;
+    let table = &scene.params;
+    if json {
+        let items: Vec<serde_json::Value> = table
+            .entries()
+            .iter()
+            .map(|e| {
+                let values = &table.values()[e.offset as usize..(e.offset + e.len) as usize];
+                // JSON has no infinity: an open upper bound is null.
+                let upper = e.bounds.1.is_finite().then_some(e.bounds.1);
+                serde_json::json!({"name": e.name, "size": e.len, "bounds": [e.bounds.0, upper], "values": values})
+            })
+            .collect();
+        println!("{}", serde_json::to_string_pretty(&items)?);
+    } else {
+        for e in table.entries() {
+            let values = &table.values()[e.offset as usize..(e.offset + e.len) as usize];
+            let shown = if values.len() <= 4 {
+                format!("{values:?}")
+            } else {
+                let mean = values.iter().map(|&v| f64::from(v)).sum::<f64>() / values.len() as f64;
+                format!("[{} values, mean {mean:.4}]", values.len())
+            };
+            println!("{:<48} {:>8}  [{}, {}]  {shown}", e.name, e.len, e.bounds.0, e.bounds.1);
+        }
+    }
+    Ok(())
+}

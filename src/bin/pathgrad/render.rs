@@ -1,0 +1,84 @@
+//! `pathgrad render`: a scene to an EXR (with a PNG preview) or a PNG.
+
+use std::path::PathBuf;
+use std::time::Instant;
+
+use anyhow::{Context as _, Result, bail};
+use clap::Args;
+use pathgrad::output::OutputSet;
+
+use crate::common::*;
+
+#[derive(Args, Debug)]
+pub(crate) struct RenderArgs {
+    /// The scene: builtin:cornell-box, builtin:furnace or builtin:blend.
+    pub(crate) scene: String,
+    /// Override a scene file's default: NAME=VALUE (repeatable).
+    #[arg(short = 'D', long = "define", value_name = "NAME=VALUE", value_parser = parse_define)]
+    pub(crate) defines: Vec<(String, String)>,
+    /// Output file, .exr or .png.
+    #[arg(short, long)]
+    pub(crate) output: PathBuf,
+    #[command(flatten)]
+    pub(crate) flags: RenderFlags,
+    /// With an .exr output, do not write the .png preview beside it.
+    #[arg(long)]
+    pub(crate) no_preview: bool,
+    /// Exposure of PNG output in stops (negative darkens).
+    #[arg(long, default_value_t = 0.0, allow_negative_numbers = true)]
+    pub(crate) exposure: f32,
+    /// Print a JSON summary instead of text.
+    #[arg(long)]
+    pub(crate) json: bool,
+}
+
+pub(crate) fn render(args: &RenderArgs) -> Result<()> {
+    // Every option and output path is checked before anything is rendered.
+    let is_exr = check_output(&args.output)?;
+    if !args.exposure.is_finite() {
+        bail!("invalid --exposure {}: must be a finite number of stops", args.exposure);
+    }
+    let mut outputs = OutputSet::new();
+    let main_file = outputs.stage(&args.output)?;
+    let preview_file =
+        if is_exr && !args.no_preview { Some(outputs.stage(&preview_path(&args.output))?) } else { None };
+    let scene = args.flags.load(&args.scene, &args.defines)?;
+    let opts = options(&scene, &args.flags)?;
+    let progress = progress_bar(u64::from(opts.spp), "rendering [{bar:40}] {pos}/{len} spp", args.json);
+    let start = Instant::now();
+    let mut backend = args.flags.backend(&scene, &args.scene, args.json)?.backend;
+    let device = backend.describe();
+    let image = backend
+        .render_pass(&opts, pathgrad::rng::PassTag::Primal, &mut |done, _| progress.set_position(u64::from(done)))
+        .with_context(|| format!("rendering {}", args.scene))?;
+    let seconds = start.elapsed().as_secs_f64();
+    progress.finish_and_clear();
+    refuse_non_finite(&image, "the render")?;
+    save(&image, &main_file, is_exr, args.exposure)?;
+    if let Some(preview) = &preview_file {
+        image.write_png(preview, args.exposure)?;
+    }
+    let written = outputs.destinations();
+    outputs.commit()?;
+    let samples = f64::from(opts.width) * f64::from(opts.height) * f64::from(opts.spp);
+    if args.json {
+        let summary = serde_json::json!({
+            "scene": args.scene, "device": device, "width": opts.width, "height": opts.height, "spp": opts.spp,
+            "max_depth": opts.max_depth, "seed": opts.seed, "time_s": seconds, "samples_per_second": samples / seconds,
+            "mean": image.mean(), "outputs": written,
+        });
+        println!("{summary}");
+    } else {
+        let names: Vec<_> = written.iter().map(|p| p.display().to_string()).collect();
+        println!(
+            "rendered {} at {}×{}, {} spp on {device} in {seconds:.2} s ({:.3} M samples/s) → {}",
+            args.scene,
+            opts.width,
+            opts.height,
+            opts.spp,
+            samples / seconds / 1e6,
+            names.join(", ")
+        );
+    }
+    Ok(())
+}
