@@ -57,7 +57,7 @@ impl std::str::FromStr for AdaptiveEstimator {
 }
 
 /// Settings of a loss gradient with adaptive pixel sampling
-/// ([`crate::gpu::Renderer::loss_and_gradient_adaptive`]); the gradient pass takes its samples
+/// ([`crate::backend::Backend::loss_and_gradient_adaptive`]); the gradient pass takes its samples
 /// per pixel, spp_grad, from [`RenderOptions::spp`].
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct AdaptiveOptions {

@@ -388,8 +388,8 @@ impl Optimization {
     /// or adaptive). Changes nothing in the run; [`Optimization::apply`] takes the step.
     ///
     /// # Errors
-    /// Those of [`Renderer::set_params`], [`Renderer::loss_and_gradient_split`] and
-    /// [`Renderer::loss_and_gradient_adaptive`] (a target of the wrong size, Vulkan failures).
+    /// Those of [`Backend::set_params`], [`Backend::loss_and_gradient_split`] and
+    /// [`Backend::loss_and_gradient_adaptive`] (a target of the wrong size, Vulkan failures).
     pub fn gradient(&self, backend: &mut dyn Backend, target: &Image) -> Result<(f64, Gradients)> {
         backend.set_params(&self.params)?;
         let o = &self.options;

@@ -26,7 +26,7 @@ use crate::params::ParamId;
 
 /// Seed offset of the render whose adjoint image fixes the pixel weights of adaptive loss-gradient
 /// runs (the reference's `variance_loss.py` uses seed 2000); it is rendered under the reference
-/// key ([`Renderer::render_reference`]), so no run's pass 1 shares its paths.
+/// key ([`Backend::render_reference`]), so no run's pass 1 shares its paths.
 pub const WEIGHTS_SEED_OFFSET: u32 = 2000;
 
 /// Running mean and sum of squared deviations of many values at once (Welford, in f64).
@@ -154,7 +154,7 @@ fn check_runs(runs: u32) -> Result<()> {
 }
 
 /// The per-pixel variance of the forward-mode image gradient ∂I/∂`param` (tangent 1 on every value
-/// of the parameter, as [`Renderer::image_gradient`]) over `runs` estimates with seeds
+/// of the parameter, as [`Backend::image_gradient`]) over `runs` estimates with seeds
 /// `options.seed + i`, all with `options` (its strategy, NEE and spp). `progress` is called after
 /// every run with the number done.
 ///
@@ -177,7 +177,7 @@ fn check_runs(runs: u32) -> Result<()> {
 ///
 /// # Errors
 /// [`Error::InvalidArgument`] for fewer than 2 runs or an unknown parameter; as
-/// [`Renderer::image_gradient`].
+/// [`Backend::image_gradient`].
 pub fn image_gradient_variance(
     backend: &mut dyn Backend,
     options: &RenderOptions,
@@ -220,7 +220,7 @@ pub struct LossGradientSetup<'a> {
     pub spp_primal: u32,
     /// `Some(estimator)`: the gradient pass draws its pixels adaptively from weights fixed once, from
     /// the adjoint image of a render at seed `seed + WEIGHTS_SEED_OFFSET` with `spp_primal` (the
-    /// Tables 1–2 protocol; [`Renderer::render_reference`]); `None`: every pixel gets spp_grad
+    /// Tables 1–2 protocol; [`Backend::render_reference`]); `None`: every pixel gets spp_grad
     /// samples.
     pub adaptive: Option<AdaptiveEstimator>,
     /// The parameters whose gradient is recorded.
@@ -253,7 +253,7 @@ pub struct LossGradientVariance {
 ///
 /// # Errors
 /// [`Error::InvalidArgument`] for fewer than 2 runs, `spp_primal` = 0, no recorded parameter or a
-/// target of the wrong size; as [`Renderer::render`] and [`Renderer::backward`].
+/// target of the wrong size; as [`Backend::render`] and [`Backend::backward`].
 pub fn loss_gradient_variance(
     backend: &mut dyn Backend,
     options: &RenderOptions,

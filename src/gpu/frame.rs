@@ -197,7 +197,7 @@ impl Frame {
     /// a truncated loop, a stack overflow, a replay that drifted or a fixed-point overflow is an error.
     ///
     /// # Errors
-    /// As [`Renderer::render`] and [`Renderer::backward`]; Vulkan failures.
+    /// As [`Backend::render`](crate::backend::Backend::render) and [`Backend::backward`](crate::backend::Backend::backward); Vulkan failures.
     pub fn check_status(&self) -> Result<()> {
         for pass in [&self.primal, &self.backward] {
             let flags: Vec<u32> = pass.status.download(1)?;
@@ -303,8 +303,8 @@ impl Renderer {
     }
 
     /// The parameter buffer the kernels read: the engine may write it in its own passes (or use
-    /// [`Renderer::set_params`]). A write there does not change the renderer's host copy
-    /// (`scene().params`), which only [`Renderer::set_params`] replaces.
+    /// [`Backend::set_params`](crate::backend::Backend::set_params)). A write there does not change the renderer's host copy
+    /// (`scene().params`), which only [`Backend::set_params`](crate::backend::Backend::set_params) replaces.
     pub fn params_buffer(&self) -> BufferView {
         view(&self.gpu.params, BufferLayout::ParamValues)
     }

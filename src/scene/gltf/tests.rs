@@ -1,7 +1,10 @@
 //! Tests of the glTF loader: the committed scenes, the documented default camera, and the
 //! malformed fixtures under `tests/data/gltf/` with their pinned messages.
 
+use glam::Vec2;
+
 use super::*;
+use crate::scene::{Albedo, Material};
 
 #[test]
 fn base64_and_percent_decoding() {

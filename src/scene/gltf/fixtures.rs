@@ -90,7 +90,7 @@ impl Builder {
         if let Some(uri) = bin_uri {
             buffer["uri"] = json!(uri);
         }
-        doc["asset"] = json!({ "version": "2.0", "generator": "pathgrad src/scene/gltf_fixtures.rs" });
+        doc["asset"] = json!({ "version": "2.0", "generator": "pathgrad src/scene/gltf/fixtures.rs" });
         doc["buffers"] = json!([buffer]);
         doc["bufferViews"] = json!(self.views);
         doc["accessors"] = json!(self.accessors);

@@ -1,0 +1,250 @@
+//! The walk over a glTF document: nodes and their transforms, cameras and meshes.
+
+use std::fmt::Display;
+
+use ::gltf::json;
+use glam::{Mat4, Quat, Vec2, Vec3};
+use json::validation::Checked;
+
+use crate::error::{Error, Result};
+use crate::scene::Camera;
+use crate::scene::shapes::Geometry;
+
+use super::*;
+
+impl Loader<'_> {
+    pub(super) fn error(&self, element: impl Display, message: impl Into<String>) -> Error {
+        located(self.path, element, message)
+    }
+
+    pub(super) fn run(&mut self) -> Result<()> {
+        let root = self.root;
+        for ext in &root.extensions_used {
+            if !SUPPORTED_EXTENSIONS.contains(&ext.as_str()) {
+                self.scene.warn(format!("extension '{ext}' is ignored"));
+            }
+        }
+        let roots: Vec<usize> = match (root.scene, root.scenes.first()) {
+            (Some(s), _) => root.scenes[s.value()].nodes.iter().map(|n| n.value()).collect(),
+            (None, Some(first)) => first.nodes.iter().map(|n| n.value()).collect(),
+            (None, None) => {
+                let mut is_child = vec![false; root.nodes.len()];
+                for n in &root.nodes {
+                    for c in n.children.iter().flatten() {
+                        is_child[c.value()] = true;
+                    }
+                }
+                (0..root.nodes.len()).filter(|&i| !is_child[i]).collect()
+            }
+        };
+        // Depth-first, children in order, with an explicit stack: a deep tree cannot overflow ours.
+        let mut visited = vec![false; root.nodes.len()];
+        let mut stack: Vec<(usize, Mat4)> = roots.into_iter().rev().map(|n| (n, Mat4::IDENTITY)).collect();
+        while let Some((index, parent)) = stack.pop() {
+            if std::mem::replace(&mut visited[index], true) {
+                return Err(self.error(
+                    format!("nodes[{index}]"),
+                    "is reached twice: a node may have only one parent and the hierarchy must not have cycles",
+                ));
+            }
+            let node = &root.nodes[index];
+            let world = parent * self.local_transform(index)?;
+            if let Some(camera) = node.camera {
+                self.camera(index, camera.value(), &world)?;
+            }
+            if let Some(mesh) = node.mesh {
+                self.mesh(index, mesh.value(), &world)?;
+            }
+            for child in node.children.iter().flatten().rev() {
+                stack.push((child.value(), world));
+            }
+        }
+        match self.camera {
+            Some(camera) => self.scene.camera = camera,
+            None => self.default_camera(),
+        }
+        Ok(())
+    }
+
+    pub(super) fn local_transform(&self, index: usize) -> Result<Mat4> {
+        let root = self.root;
+        let node = &root.nodes[index];
+        let m = match node.matrix {
+            Some(m) => Mat4::from_cols_array(&m),
+            None => {
+                let t = Vec3::from(node.translation.unwrap_or([0.0; 3]));
+                let s = Vec3::from(node.scale.unwrap_or([1.0; 3]));
+                let r = Quat::from_array(node.rotation.map(|q| q.0).unwrap_or([0.0, 0.0, 0.0, 1.0]));
+                if !(r.length() > 0.0) {
+                    return Err(self.error(format!("nodes[{index}]"), "rotation is not a unit quaternion"));
+                }
+                Mat4::from_scale_rotation_translation(s, r.normalize(), t)
+            }
+        };
+        if !m.is_finite() {
+            return Err(self.error(format!("nodes[{index}]"), "transform is not finite"));
+        }
+        Ok(m)
+    }
+
+    // ---- camera ----
+
+    pub(super) fn camera(&mut self, node: usize, index: usize, world: &Mat4) -> Result<()> {
+        let root = self.root;
+        let camera = &root.cameras[index];
+        let at = format!("cameras[{index}]");
+        let perspective = match (&camera.type_, &camera.perspective) {
+            (Checked::Valid(json::camera::Type::Perspective), Some(p)) => p,
+            (Checked::Valid(json::camera::Type::Orthographic), _) => {
+                self.scene.warn(format!("{at}: orthographic cameras are not supported; ignored"));
+                return Ok(());
+            }
+            _ => return Err(self.error(at, "needs type 'perspective' with a 'perspective' object")),
+        };
+        if self.camera.is_some() {
+            return Ok(());
+        }
+        let yfov = perspective.yfov;
+        if !(yfov > 0.0 && yfov < std::f32::consts::PI) {
+            return Err(self.error(at, format!("yfov {yfov} must lie in (0, π)")));
+        }
+        let height = match perspective.aspect_ratio {
+            None => DEFAULT_WIDTH,
+            Some(a) if a > 0.0 && a.is_finite() => ((DEFAULT_WIDTH as f32 / a).round() as u32).max(1),
+            Some(a) => return Err(self.error(at, format!("aspectRatio {a} must be positive"))),
+        };
+        let position = world.transform_point3(Vec3::ZERO);
+        let forward = world.transform_vector3(-Vec3::Z).normalize_or_zero();
+        let up = world.transform_vector3(Vec3::Y);
+        if forward == Vec3::ZERO || forward.cross(up).length_squared() == 0.0 {
+            return Err(self.error(format!("nodes[{node}]"), "the camera's transform is degenerate"));
+        }
+        self.camera = Some(Camera {
+            position,
+            target: position + forward,
+            up: up.normalize(),
+            fov_y_degrees: yfov.to_degrees(),
+            width: DEFAULT_WIDTH,
+            height,
+        });
+        Ok(())
+    }
+
+    pub(super) fn default_camera(&mut self) {
+        let mut lo = Vec3::splat(f32::INFINITY);
+        let mut hi = Vec3::splat(f32::NEG_INFINITY);
+        for p in self.scene.meshes.iter().flat_map(|m| &m.positions) {
+            lo = lo.min(*p);
+            hi = hi.max(*p);
+        }
+        if lo.cmpgt(hi).any() {
+            (lo, hi) = (Vec3::splat(-1.0), Vec3::splat(1.0));
+        }
+        let center = 0.5 * (lo + hi);
+        let radius = (0.5 * (hi - lo).length()).max(1e-3);
+        let distance = radius / (0.5 * DEFAULT_FOV_Y_DEGREES.to_radians()).sin();
+        let position = center + Vec3::Z * distance;
+        self.scene.camera = Camera { position, target: center, ..placeholder_camera() };
+        self.scene.warn(format!(
+            "no perspective camera in the scene; using a default one at {position} looking down -z at {center} \
+             (yfov {DEFAULT_FOV_Y_DEGREES}°, {DEFAULT_WIDTH}×{DEFAULT_WIDTH})"
+        ));
+    }
+
+    // ---- meshes ----
+
+    pub(super) fn mesh(&mut self, node: usize, index: usize, world: &Mat4) -> Result<()> {
+        let root = self.root;
+        let mesh = &root.meshes[index];
+        if root.nodes[node].skin.is_some() {
+            self.scene.warn(format!("nodes[{node}]: skin ignored (the bind pose is rendered)"));
+        }
+        for (j, primitive) in mesh.primitives.iter().enumerate() {
+            let at = format!("meshes[{index}].primitives[{j}]");
+            match primitive.mode {
+                Checked::Valid(json::mesh::Mode::Triangles) => {}
+                Checked::Valid(mode) => {
+                    return Err(self.error(
+                        at,
+                        format!("mode {} ({mode:?}) is not supported (only TRIANGLES, mode 4)", mode.as_gl_enum()),
+                    ));
+                }
+                Checked::Invalid => return Err(self.error(at, "invalid mode")),
+            }
+            if primitive.targets.as_ref().is_some_and(|t| !t.is_empty()) {
+                self.scene.warn(format!("{at}: morph targets ignored"));
+            }
+            let material = self.material(primitive.material.map(|m| m.value()))?;
+            let geometry = self.geometry(&at, primitive, material.tex_coord)?;
+            let name = if mesh.primitives.len() > 1 {
+                // One mesh per primitive: `node_j`, kept apart from every other node's name.
+                let name = fresh_name(&self.taken_names, format!("{}_{j}", self.node_names[node]));
+                self.taken_names.insert(name.clone());
+                name
+            } else {
+                self.node_names[node].clone()
+            };
+            self.scene.add_mesh(&name, geometry.transformed(world), material.id, material.radiance)?;
+        }
+        Ok(())
+    }
+
+    pub(super) fn geometry(
+        &mut self,
+        at: &str,
+        primitive: &json::mesh::Primitive,
+        tex_coord: Option<u32>,
+    ) -> Result<Geometry> {
+        use json::mesh::Semantic;
+        let attribute = |semantic: Semantic| primitive.attributes.get(&Checked::Valid(semantic)).map(|a| a.value());
+        let positions_accessor =
+            attribute(Semantic::Positions).ok_or_else(|| self.error(at, "has no POSITION attribute"))?;
+        let positions = self.read_floats(positions_accessor, 3, false, &format!("POSITION of {at}"))?;
+        let n = positions.len() / 3;
+        let mut g = Geometry {
+            positions: positions.chunks_exact(3).map(|p| Vec3::new(p[0], p[1], p[2])).collect(),
+            ..Default::default()
+        };
+        if let Some(normals) = attribute(Semantic::Normals) {
+            let normals = self.read_floats(normals, 3, false, &format!("NORMAL of {at}"))?;
+            if normals.len() != 3 * n {
+                return Err(self.error(at, format!("NORMAL has {} elements but POSITION has {n}", normals.len() / 3)));
+            }
+            g.normals =
+                Some(normals.chunks_exact(3).map(|v| Vec3::new(v[0], v[1], v[2]).normalize_or_zero()).collect());
+        }
+        let set = tex_coord.unwrap_or(0);
+        match attribute(Semantic::TexCoords(set)) {
+            Some(uvs) => {
+                let uvs = self.read_floats(uvs, 2, true, &format!("TEXCOORD_{set} of {at}"))?;
+                if uvs.len() != 2 * n {
+                    return Err(
+                        self.error(at, format!("TEXCOORD_{set} has {} elements but POSITION has {n}", uvs.len() / 2))
+                    );
+                }
+                g.uvs = Some(uvs.chunks_exact(2).map(|t| Vec2::new(t[0], t[1])).collect());
+            }
+            None if tex_coord.is_some() => {
+                return Err(self.error(
+                    at,
+                    format!("its material has a base-colour texture but the primitive has no TEXCOORD_{set}"),
+                ));
+            }
+            None => {}
+        }
+        let indices = match primitive.indices {
+            Some(a) => self.read_indices(a.value(), &format!("indices of {at}"))?,
+            None => (0..n as u32).collect(),
+        };
+        if indices.len() % 3 != 0 {
+            return Err(self.error(at, format!("{} indices is not a multiple of 3", indices.len())));
+        }
+        if let Some(bad) = indices.iter().find(|&&i| i as usize >= n) {
+            return Err(self.error(at, format!("index {bad} is out of range ({n} vertices)")));
+        }
+        g.indices = indices.chunks_exact(3).map(|t| [t[0], t[1], t[2]]).collect();
+        Ok(g)
+    }
+
+    // ---- buffers and accessors ----
+}

@@ -1,0 +1,133 @@
+//! glTF materials and their images as pathgrad materials and texture parameters.
+
+use ::gltf::json;
+use glam::Vec3;
+use json::validation::Checked;
+
+use crate::bsdf::Distribution;
+use crate::error::Result;
+use crate::scene::{Albedo, Material, bounds};
+
+use super::*;
+
+impl Loader<'_> {
+    /// The pathgrad material of glTF material `index` (`None`: the default material), mapped once.
+    pub(super) fn material(&mut self, index: Option<usize>) -> Result<MappedMaterial> {
+        let root = self.root;
+        let slot = index.unwrap_or(root.materials.len());
+        if let Some(mapped) = &self.materials[slot] {
+            return Ok(mapped.clone());
+        }
+        let default = json::Material::default();
+        let (m, name, at) = match index {
+            Some(i) => (&root.materials[i], self.material_names[i].clone(), format!("materials[{i}]")),
+            None => (&default, "default_material".to_string(), "default material".to_string()),
+        };
+        let pbr = &m.pbr_metallic_roughness;
+        let factor = pbr.base_color_factor.0;
+        let (metallic, roughness) = (pbr.metallic_factor.0, pbr.roughness_factor.0);
+        let in_unit = |v: f32| (0.0..=1.0).contains(&v);
+        if !factor.iter().all(|&v| in_unit(v)) {
+            return Err(self.error(&at, format!("baseColorFactor {factor:?} must lie in [0, 1]")));
+        }
+        if !in_unit(metallic) || !in_unit(roughness) {
+            return Err(self
+                .error(&at, format!("metallicFactor {metallic} and roughnessFactor {roughness} must lie in [0, 1]")));
+        }
+        let mut ignored = Vec::new();
+        if pbr.metallic_roughness_texture.is_some() {
+            ignored.push("metallicRoughnessTexture");
+        }
+        if m.normal_texture.is_some() {
+            ignored.push("normalTexture");
+        }
+        if m.occlusion_texture.is_some() {
+            ignored.push("occlusionTexture");
+        }
+        if m.emissive_texture.is_some() {
+            ignored.push("emissiveTexture");
+        }
+        if !matches!(m.alpha_mode, Checked::Valid(json::material::AlphaMode::Opaque)) {
+            ignored.push("alphaMode (rendered as OPAQUE)");
+        }
+        if !ignored.is_empty() {
+            self.scene.warn(format!("{at} ('{name}'): ignored {}", ignored.join(", ")));
+        }
+
+        let base = Vec3::new(factor[0], factor[1], factor[2]);
+        let alpha = (roughness * roughness).max(bounds::ALPHA.0);
+        // The base-colour texture, linear and multiplied by the factor.
+        let mut texture = None;
+        let mut mean = base;
+        let mut tex_coord = None;
+        if let Some(info) = &pbr.base_color_texture {
+            let image = root.textures[info.index.value()].source.value();
+            let (w, h, texels) = self.image_texels(image, base)?;
+            let sum = texels.chunks_exact(3).fold(Vec3::ZERO, |s, t| s + Vec3::new(t[0], t[1], t[2]));
+            mean = sum / (w as f32 * h as f32);
+            if metallic > 0.0 {
+                self.scene.warn(format!(
+                    "{at} ('{name}'): the base-colour texture tints only the diffuse part; the metallic part uses its \
+                     mean colour {mean}"
+                ));
+            }
+            if metallic < 1.0 {
+                texture = Some(self.scene.add_texture(&format!("{name}.base_color.data"), w, h, &texels)?);
+            }
+            tex_coord = Some(info.tex_coord);
+        }
+        let id = if metallic >= 1.0 {
+            self.scene.add_rough_conductor(&name, Distribution::Ggx, alpha, mean, Vec3::ZERO, Vec3::ONE)?
+        } else {
+            let weight = DIELECTRIC_F0 + (1.0 - DIELECTRIC_F0) * metallic;
+            let specular = ((metallic * mean + Vec3::splat(DIELECTRIC_F0 * (1.0 - metallic))) / weight).min(Vec3::ONE);
+            let diffuse = match texture {
+                Some(t) => self.scene.add_material(Material::Diffuse { albedo: Albedo::Bitmap(t) }),
+                None => self.scene.add_diffuse(&format!("{name}.bsdf_0"), base)?,
+            };
+            let lobe = self.scene.add_rough_conductor(
+                &format!("{name}.bsdf_1"),
+                Distribution::Ggx,
+                alpha,
+                specular,
+                Vec3::ZERO,
+                Vec3::ONE,
+            )?;
+            self.scene.add_blend(&name, weight, [diffuse, lobe])?
+        };
+        let id = if m.double_sided { self.scene.add_material(Material::TwoSided(id)) } else { id };
+
+        let strength =
+            m.extensions.as_ref().and_then(|e| e.emissive_strength.as_ref()).map_or(1.0, |s| s.emissive_strength.0);
+        let radiance = Vec3::from(m.emissive_factor.0) * strength;
+        if !(radiance.is_finite() && radiance.min_element() >= 0.0) {
+            return Err(self.error(
+                &at,
+                format!("emitted radiance {radiance} (emissiveFactor × emissiveStrength) must be finite and ≥ 0"),
+            ));
+        }
+        let mapped = MappedMaterial { id, radiance: (radiance.max_element() > 0.0).then_some(radiance), tex_coord };
+        self.materials[slot] = Some(mapped.clone());
+        Ok(mapped)
+    }
+
+    /// Image `index` decoded to linear RGB texels (sRGB decoded, times `factor`), row 0 at the top.
+    pub(super) fn image_texels(&mut self, index: usize, factor: Vec3) -> Result<(u32, u32, Vec<f32>)> {
+        let root = self.root;
+        let image = &root.images[index];
+        let at = format!("images[{index}]");
+        let bytes = match (&image.buffer_view, &image.uri) {
+            (Some(view), _) => self.view(view.value(), &at)?.0.to_vec(),
+            (None, Some(uri)) => self.read_uri(&at, uri)?,
+            (None, None) => return Err(self.error(at, "has neither a uri nor a bufferView")),
+        };
+        let decoded =
+            crate::scene::load::decode_image(&bytes).map_err(|e| self.error(&at, format!("cannot decode: {e}")))?;
+        let rgb = decoded.to_rgb32f();
+        let texels = rgb
+            .pixels()
+            .flat_map(|p| [0, 1, 2].map(|c| (srgb_to_linear(p.0[c]) * factor[c]).clamp(0.0, 1.0)))
+            .collect();
+        Ok((rgb.width(), rgb.height(), texels))
+    }
+}
