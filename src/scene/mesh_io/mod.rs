@@ -1,0 +1,227 @@
+//! Triangle meshes from Wavefront OBJ (`tobj`) and PLY (`ply-rs-bw`) files, as [`Geometry`].
+//!
+//! Both loaders merge everything the file holds into one [`Geometry`]: every OBJ object and group,
+//! every PLY face. Polygons are fan-triangulated. OBJ materials (`mtllib`, `usemtl`) are ignored —
+//! the scene file assigns the BSDF, as in Mitsuba — and so are OBJ points and lines (`p`, `l`,
+//! faces of fewer than three vertices).
+//!
+//! **Texture coordinates.** Mitsuba's `obj` plugin flips the vertical texture coordinate by default
+//! (`flip_tex_coords = true`, "most OBJ files use this convention"), and pathgrad does the same:
+//! an OBJ `vt u v` becomes `(u, 1 − v)`, so textures appear as they do in Mitsuba. PLY texture
+//! coordinates are taken as they are, as Mitsuba's `ply` plugin does.
+//!
+//! **Normals.** Vertex normals are used as the file gives them (not renormalised: the renderer normalises the interpolated normal, and keeping the floats exact lets an OBJ twin of a built-in scene render bit for bit the same); without them the
+//! geometry has `normals: None` and the renderer shades with face normals.
+//!
+//! **Errors** name the file and, where the format has lines, the line: an OBJ statement's line,
+//! a PLY header line or, for ASCII PLY, the payload line of the element at fault (binary PLY errors
+//! name the element and its 0-based index instead). Degenerate triangles are not errors here:
+//! [`crate::scene::Scene::add_mesh`] drops them with a counted warning.
+//!
+//! **No panics.** OBJ files are checked statement by statement (`check_obj`) before `tobj` sees
+//! them, because `tobj` 4 overflows — a panic in debug builds — on relative face indices that
+//! point before the first element (e.g. `f 1/-5 …` with one `vt`). The PLY header's element counts
+//! are checked against the file size before the payload is read, so a tiny file cannot ask for
+//! billions of empty elements. Each third-party parse still runs under
+//! [`std::panic::catch_unwind`] as a backstop: a panic we did not foresee becomes an error naming
+//! the file (the panic message itself still reaches the default panic hook's stderr output).
+
+use std::path::Path;
+
+use crate::error::{Error, Result};
+
+mod obj;
+mod ply;
+
+pub use obj::load_obj;
+pub use ply::load_ply;
+
+/// An [`Error::Scene`] located at `path` (and `line`, 1-based, if known).
+pub(crate) fn scene_error(path: &Path, line: Option<usize>, message: impl Into<String>) -> Error {
+    let location = match line {
+        Some(line) => format!("{}:{line}", path.display()),
+        None => path.display().to_string(),
+    };
+    Error::Scene { location, message: message.into() }
+}
+
+/// Reads `path` whole; a missing file is an [`Error::Io`] naming it.
+pub(crate) fn read_file(path: &Path) -> Result<Vec<u8>> {
+    std::fs::read(path).map_err(|source| Error::Io { path: path.to_path_buf(), source })
+}
+
+/// Runs `f`, returning `None` if it panics. Only for calls into third-party parsers whose
+/// freedom from panics on hostile input we cannot prove (see the module docs).
+pub(crate) fn catch_panic<T>(f: impl FnOnce() -> T) -> Option<T> {
+    std::panic::catch_unwind(std::panic::AssertUnwindSafe(f)).ok()
+}
+
+#[cfg(test)]
+mod tests {
+    use glam::{Vec2, Vec3};
+
+    use super::*;
+    use crate::scene::shapes::Geometry;
+
+    fn data(name: &str) -> std::path::PathBuf {
+        Path::new("tests/data/mesh").join(name)
+    }
+
+    fn error(result: Result<Geometry>) -> String {
+        result.expect_err("the file is malformed").to_string()
+    }
+
+    #[test]
+    fn obj_quad_with_normals_and_uvs() {
+        let g = load_obj(&data("quad.obj")).unwrap();
+        assert_eq!(g.positions.len(), 4);
+        assert_eq!(g.indices, vec![[0, 1, 2], [0, 2, 3]]);
+        assert_eq!(g.normals.as_ref().unwrap(), &vec![Vec3::Z; 4]);
+        // vt 0 0, 1 0, 1 1, 0 1 with v flipped.
+        let uvs = g.uvs.as_ref().unwrap();
+        assert_eq!(uvs, &vec![Vec2::new(0.0, 1.0), Vec2::new(1.0, 1.0), Vec2::new(1.0, 0.0), Vec2::new(0.0, 0.0)]);
+        assert_eq!(g.positions[2], Vec3::new(1.0, 1.0, 0.0));
+    }
+
+    #[test]
+    fn obj_objects_are_merged_and_missing_normals_are_none() {
+        let g = load_obj(&data("two_objects.obj")).unwrap();
+        assert_eq!(g.positions.len(), 6);
+        assert_eq!(g.indices, vec![[0, 1, 2], [3, 4, 5]]);
+        assert!(g.normals.is_none() && g.uvs.is_none());
+        // A pentagon with relative indices is fan-triangulated.
+        let g = load_obj(&data("pentagon.obj")).unwrap();
+        assert_eq!(g.indices, vec![[0, 1, 2], [0, 2, 3], [0, 3, 4]]);
+    }
+
+    #[test]
+    fn ply_ascii_and_binary_give_identical_geometry() {
+        let ascii = load_ply(&data("quad_ascii.ply")).unwrap();
+        let binary = load_ply(&data("quad_binary.ply")).unwrap();
+        assert_eq!(ascii, binary);
+        assert_eq!(ascii.indices, vec![[0, 1, 2], [0, 2, 3]]);
+        assert_eq!(ascii.normals.as_ref().unwrap(), &vec![Vec3::Z; 4]);
+        assert_eq!(ascii.uvs.as_ref().unwrap()[2], Vec2::new(1.0, 1.0));
+        // The same quad as OBJ, whose uvs are flipped: positions and triangles agree.
+        let obj = load_obj(&data("quad.obj")).unwrap();
+        assert_eq!(obj.positions, ascii.positions);
+        assert_eq!(obj.indices, ascii.indices);
+    }
+
+    #[test]
+    fn ply_with_double_coordinates_and_st_names() {
+        let g = load_ply(&data("quad_double_st.ply")).unwrap();
+        assert_eq!(g, Geometry { normals: None, ..load_ply(&data("quad_ascii.ply")).unwrap() });
+    }
+
+    /// Every malformed fixture gives exactly this message.
+    #[test]
+    fn malformed_meshes_give_pinned_messages() {
+        let cases: &[(&str, &str)] = &[
+            ("bad_index.obj", "tests/data/mesh/bad_index.obj:6: vertex index 9 is out of range (the file defines 4)"),
+            ("nan.obj", "tests/data/mesh/nan.obj:3: vertex coordinate is not finite (NaN or infinity)"),
+            (
+                "not_a_mesh.obj",
+                "tests/data/mesh/not_a_mesh.obj: not an OBJ mesh: it has no vertex ('v') or face ('f') statements",
+            ),
+            ("binary.obj", "tests/data/mesh/binary.obj:1: not UTF-8 text (is this an OBJ file?)"),
+            ("no_faces.obj", "tests/data/mesh/no_faces.obj: has no faces ('f' statements with 3 or more vertices)"),
+            ("bad_number.obj", "tests/data/mesh/bad_number.obj:3: vertex ('v'): '0,5' is not a number"),
+            (
+                "mixed_uvs.obj",
+                "tests/data/mesh/mixed_uvs.obj:9: face vertex '4' lacks a texture coordinate index but earlier ones do \
+                 (give every face vertex one, or none)",
+            ),
+            // tobj 4 would overflow (panic in debug builds) on this relative index.
+            (
+                "relative_underflow.obj",
+                "tests/data/mesh/relative_underflow.obj:5: texture coordinate index -5 is out of range \
+                 (1 defined before this line)",
+            ),
+            (
+                "zero_index.obj",
+                "tests/data/mesh/zero_index.obj:4: face vertex '0': index 0 is invalid (OBJ indices start at 1)",
+            ),
+        ];
+        for (file, expected) in cases {
+            assert_eq!(error(load_obj(&data(file))), *expected, "{file}");
+        }
+        let cases: &[(&str, &str)] = &[
+            (
+                "truncated.ply",
+                "tests/data/mesh/truncated.ply: element 'face' declares 2 items but the file ends after 1 of them (truncated?)",
+            ),
+            (
+                "truncated_binary.ply",
+                "tests/data/mesh/truncated_binary.ply: Unexpected end of file while reading binary element 'face' \
+                 (expected 2, got 1).",
+            ),
+            ("bad_face.ply", "tests/data/mesh/bad_face.ply:15: face 1: vertex index 7 is out of range (4 vertices)"),
+            (
+                "two_vertex_face.ply",
+                "tests/data/mesh/two_vertex_face.ply:13: face 0: has 2 vertices; a face needs at least 3",
+            ),
+            (
+                "not_a_mesh.ply",
+                "tests/data/mesh/not_a_mesh.ply: not a PLY file (it does not start with the line 'ply')",
+            ),
+            ("point_cloud.ply", "tests/data/mesh/point_cloud.ply: has no 'face' element (a point cloud is not a mesh)"),
+            (
+                "partial_normals.ply",
+                "tests/data/mesh/partial_normals.ply: element 'vertex' has some of the properties nx, ny, nz but not all",
+            ),
+            (
+                "nan_binary.ply",
+                "tests/data/mesh/nan_binary.ply: vertex 1: 'y' is not finite (NaN or infinity, or too large for f32)",
+            ),
+            ("bad_header.ply", "tests/data/mesh/bad_header.ply:3: PLY header: Couldn't parse line."),
+            (
+                "many_empty.ply",
+                "tests/data/mesh/many_empty.ply: element 'junk' declares 4000000000 items but no properties",
+            ),
+        ];
+        for (file, expected) in cases {
+            assert_eq!(error(load_ply(&data(file))), *expected, "{file}");
+        }
+        let missing = error(load_obj(&data("missing.obj")));
+        assert!(missing.starts_with("tests/data/mesh/missing.obj: No such file"), "{missing}");
+        let missing = error(load_ply(&data("missing.ply")));
+        assert!(missing.starts_with("tests/data/mesh/missing.ply: No such file"), "{missing}");
+    }
+
+    /// Random edits of the good fixtures never panic (a small in-tree stand-in for the fuzz targets).
+    #[test]
+    fn mutated_meshes_never_panic() {
+        let mut state = 0x9e37_79b9_7f4a_7c15_u64;
+        let mut next = move || {
+            state ^= state << 13;
+            state ^= state >> 7;
+            state ^= state << 17;
+            state
+        };
+        let dir = tempfile::tempdir().unwrap();
+        for (name, loader) in [
+            ("quad.obj", load_obj as fn(&Path) -> Result<Geometry>),
+            ("quad_ascii.ply", load_ply),
+            ("quad_binary.ply", load_ply),
+        ] {
+            let original = std::fs::read(data(name)).unwrap();
+            for round in 0..150 {
+                let mut bytes = original.clone();
+                for _ in 0..1 + round % 4 {
+                    let at = next() as usize % bytes.len();
+                    match next() % 3 {
+                        0 => bytes[at] = next() as u8,
+                        1 => bytes.truncate(at.max(1)),
+                        _ => bytes.insert(at, b"-0123456789 /\nfvt"[next() as usize % 17]),
+                    }
+                }
+                let path = dir.path().join(name);
+                std::fs::write(&path, &bytes).unwrap();
+                if let Err(e) = loader(&path) {
+                    assert!(!e.to_string().contains("panicked"), "{name} round {round}: {e}");
+                }
+            }
+        }
+    }
+}

@@ -1,0 +1,282 @@
+//! PLY through `ply-rs-bw`, ASCII or binary: header counts checked against the file size, then
+//! vertices (positions, normals, texture coordinates under their common names) and faces.
+
+use std::path::Path;
+
+use glam::{Vec2, Vec3};
+use ply_rs_bw::ply::{DefaultElement, ElementDef, Encoding, Property, PropertyType, ScalarType};
+
+use super::{catch_panic, read_file, scene_error};
+use crate::error::Result;
+use crate::scene::shapes::Geometry;
+
+/// The vertex properties that may hold texture coordinates, in order of preference.
+const PLY_UV_NAMES: [(&str, &str); 4] =
+    [("u", "v"), ("s", "t"), ("texture_u", "texture_v"), ("texture_s", "texture_t")];
+/// The face properties that may hold the vertex index lists.
+const PLY_FACE_LISTS: [&str; 2] = ["vertex_indices", "vertex_index"];
+
+/// Loads a PLY file (ASCII, binary little-endian or binary big-endian).
+///
+/// Reads the `vertex` element's `x y z` (any numeric type), optional `nx ny nz`, optional texture
+/// coordinates (`u v`, `s t`, `texture_u texture_v` or `texture_s texture_t`, as they are), and the
+/// `face` element's `vertex_indices` (or `vertex_index`) lists of 3 or more indices, fan-triangulated.
+/// Other elements and properties are ignored.
+///
+/// # Errors
+/// [`Error::Io`] if the file cannot be read; [`Error::Scene`] naming the file (and the line for the
+/// header and ASCII payloads) for a file that is not PLY, a malformed or truncated header or payload,
+/// a missing `vertex`/`face` element or `x`/`y`/`z`/index-list property, a partial normal or uv
+/// property set, a face of fewer than 3 vertices, an index out of range, a non-finite value, or a
+/// mesh without faces.
+pub fn load_ply(path: &Path) -> Result<Geometry> {
+    let bytes = read_file(path)?;
+    if !(bytes.starts_with(b"ply\n") || bytes.starts_with(b"ply\r")) {
+        return Err(scene_error(path, None, "not a PLY file (it does not start with the line 'ply')"));
+    }
+    catch_panic(|| parse_ply(path, &bytes))
+        .unwrap_or_else(|| Err(scene_error(path, None, "the PLY parser (ply-rs-bw) panicked on this file")))
+}
+
+fn parse_ply(path: &Path, bytes: &[u8]) -> Result<Geometry> {
+    let parser = ply_rs_bw::parser::Parser::<DefaultElement>::new();
+    let mut reader = ply_rs_bw::parser::Reader::new(bytes);
+    let header = parser.read_header(&mut reader).map_err(|e| {
+        let (line, message) = ply_message(&e);
+        scene_error(path, line, format!("PLY header: {message}"))
+    })?;
+    let payload = &bytes[bytes.len() - reader.get_ref().len()..];
+    let first_line = bytes[..bytes.len() - payload.len()].iter().filter(|&&b| b == b'\n').count() + 1;
+    let ascii = header.encoding == Encoding::Ascii;
+    check_ply_sizes(path, &header.elements, payload, ascii)?;
+    let data = parser.read_payload(&mut reader, &header).map_err(|e| {
+        let (line, message) = ply_message(&e);
+        scene_error(path, if ascii { line } else { None }, message)
+    })?;
+
+    // Where element `name` #index is reported: its payload line in ASCII files.
+    let locate = |name: &str, index: usize| -> Option<usize> {
+        if !ascii {
+            return None;
+        }
+        let before: usize = header.elements.iter().take_while(|(k, _)| k.as_str() != name).map(|(_, e)| e.count).sum();
+        Some(first_line + before + index)
+    };
+    let element_error = |name: &str, index: usize, message: String| {
+        scene_error(path, locate(name, index), format!("{name} {index}: {message}"))
+    };
+
+    let vertex_def = header.elements.get("vertex").ok_or_else(|| scene_error(path, None, "has no 'vertex' element"))?;
+    let face_def = header
+        .elements
+        .get("face")
+        .ok_or_else(|| scene_error(path, None, "has no 'face' element (a point cloud is not a mesh)"))?;
+    for name in ["x", "y", "z"] {
+        scalar_property(path, vertex_def, name)?
+            .ok_or_else(|| scene_error(path, None, format!("element 'vertex' has no property '{name}'")))?;
+    }
+    let has_normals = optional_group(path, vertex_def, &["nx", "ny", "nz"])?;
+    let mut uv_names = None;
+    for (u, v) in PLY_UV_NAMES {
+        if optional_group(path, vertex_def, &[u, v])? {
+            uv_names = Some((u, v));
+            break;
+        }
+    }
+    let list_name = PLY_FACE_LISTS
+        .into_iter()
+        .find(|n| face_def.properties.contains_key(*n))
+        .ok_or_else(|| scene_error(path, None, "element 'face' has no 'vertex_indices' (or 'vertex_index') list"))?;
+    match &face_def.properties[list_name].data_type {
+        PropertyType::List(_, ScalarType::Float | ScalarType::Double) | PropertyType::Scalar(_) => {
+            return Err(scene_error(path, None, format!("property 'face.{list_name}' must be a list of integers")));
+        }
+        PropertyType::List(..) => {}
+    }
+
+    let empty = Vec::new();
+    let vertices = data.get("vertex").unwrap_or(&empty);
+    let faces = data.get("face").unwrap_or(&empty);
+    let mut g = Geometry::default();
+    let mut normals = Vec::new();
+    let mut uvs = Vec::new();
+    let get = |e: &DefaultElement, i: usize, name: &str| -> Result<f32> {
+        let value = e.get(name).and_then(number).map(|v| v as f32);
+        match value {
+            Some(v) if v.is_finite() => Ok(v),
+            Some(_) => Err(element_error(
+                "vertex",
+                i,
+                format!("'{name}' is not finite (NaN or infinity, or too large for f32)"),
+            )),
+            None => Err(element_error("vertex", i, format!("'{name}' is missing"))),
+        }
+    };
+    for (i, e) in vertices.iter().enumerate() {
+        g.positions.push(Vec3::new(get(e, i, "x")?, get(e, i, "y")?, get(e, i, "z")?));
+        if has_normals {
+            normals.push(Vec3::new(get(e, i, "nx")?, get(e, i, "ny")?, get(e, i, "nz")?));
+        }
+        if let Some((u, v)) = uv_names {
+            uvs.push(Vec2::new(get(e, i, u)?, get(e, i, v)?));
+        }
+    }
+    let n = g.positions.len();
+    for (i, e) in faces.iter().enumerate() {
+        let list = e
+            .get(list_name)
+            .and_then(index_list)
+            .ok_or_else(|| element_error("face", i, format!("'{list_name}' is missing")))?;
+        if list.len() < 3 {
+            return Err(element_error("face", i, format!("has {} vertices; a face needs at least 3", list.len())));
+        }
+        if let Some(bad) = list.iter().find(|&&k| k < 0 || k as u64 >= n as u64) {
+            return Err(element_error("face", i, format!("vertex index {bad} is out of range ({n} vertices)")));
+        }
+        for k in 1..list.len() - 1 {
+            g.indices.push([list[0] as u32, list[k] as u32, list[k + 1] as u32]);
+        }
+    }
+    if g.indices.is_empty() {
+        return Err(scene_error(path, None, "has no faces"));
+    }
+    g.normals = has_normals.then_some(normals);
+    g.uvs = uv_names.map(|_| uvs);
+    Ok(g)
+}
+
+/// The line and the first line of the message of a `ply-rs-bw` error.
+fn ply_message(e: &ply_rs_bw::parser::ParseError) -> (Option<usize>, String) {
+    let text = e.to_string();
+    let text = match e.line() {
+        Some(line) => text.strip_prefix(&format!("Line {line}: ")).unwrap_or(&text).to_string(),
+        None => text,
+    };
+    (e.line(), text.lines().next().unwrap_or("").trim().to_string())
+}
+
+/// Rejects element counts the payload cannot hold, before the parser allocates for them: in ASCII
+/// each element takes a line; in binary at least the sizes of its scalars and list counts.
+fn check_ply_sizes(
+    path: &Path,
+    elements: &ply_rs_bw::ply::KeyMap<ElementDef>,
+    payload: &[u8],
+    ascii: bool,
+) -> Result<()> {
+    if ascii {
+        let mut lines = payload.iter().filter(|&&b| b == b'\n').count();
+        if payload.last().is_some_and(|&b| b != b'\n') {
+            lines += 1;
+        }
+        let mut needed = 0usize;
+        for (name, e) in elements {
+            let available = lines.saturating_sub(needed);
+            needed = needed.saturating_add(e.count);
+            if needed > lines {
+                return Err(scene_error(
+                    path,
+                    None,
+                    format!(
+                        "element '{name}' declares {} items but the file ends after {available} of them (truncated?)",
+                        e.count
+                    ),
+                ));
+            }
+        }
+        return Ok(());
+    }
+    let mut needed = 0u64;
+    for (name, e) in elements {
+        let min_size: u64 = e
+            .properties
+            .values()
+            .map(|p| match &p.data_type {
+                PropertyType::Scalar(t) | PropertyType::List(t, _) => scalar_size(t),
+            })
+            .sum();
+        if min_size == 0 && e.count > 0 {
+            return Err(scene_error(
+                path,
+                None,
+                format!("element '{name}' declares {} items but no properties", e.count),
+            ));
+        }
+        needed = needed.saturating_add(min_size.saturating_mul(e.count as u64));
+        if needed > payload.len() as u64 {
+            return Err(scene_error(
+                path,
+                None,
+                format!(
+                    "element '{name}' declares {} items, which need more than the {} bytes left in the file (truncated?)",
+                    e.count,
+                    payload.len()
+                ),
+            ));
+        }
+    }
+    Ok(())
+}
+
+fn scalar_size(t: &ScalarType) -> u64 {
+    match t {
+        ScalarType::Char | ScalarType::UChar => 1,
+        ScalarType::Short | ScalarType::UShort => 2,
+        ScalarType::Int | ScalarType::UInt | ScalarType::Float => 4,
+        ScalarType::Double => 8,
+    }
+}
+
+/// Whether `element` has the scalar property `name` (`None` if absent; an error if it is a list).
+fn scalar_property(path: &Path, element: &ElementDef, name: &str) -> Result<Option<()>> {
+    match element.properties.get(name).map(|p| &p.data_type) {
+        None => Ok(None),
+        Some(PropertyType::Scalar(_)) => Ok(Some(())),
+        Some(PropertyType::List(..)) => {
+            Err(scene_error(path, None, format!("property '{}.{name}' is a list; expected a number", element.name)))
+        }
+    }
+}
+
+/// Whether all of `names` are scalar properties of `element`; none is fine, some is an error.
+fn optional_group(path: &Path, element: &ElementDef, names: &[&str]) -> Result<bool> {
+    let mut present = 0;
+    for name in names {
+        if scalar_property(path, element, name)?.is_some() {
+            present += 1;
+        }
+    }
+    if present != 0 && present != names.len() {
+        return Err(scene_error(
+            path,
+            None,
+            format!("element '{}' has some of the properties {} but not all", element.name, names.join(", ")),
+        ));
+    }
+    Ok(present == names.len())
+}
+
+fn number(p: &Property) -> Option<f64> {
+    Some(match *p {
+        Property::Char(v) => v.into(),
+        Property::UChar(v) => v.into(),
+        Property::Short(v) => v.into(),
+        Property::UShort(v) => v.into(),
+        Property::Int(v) => v.into(),
+        Property::UInt(v) => v.into(),
+        Property::Float(v) => v.into(),
+        Property::Double(v) => v,
+        _ => return None,
+    })
+}
+
+fn index_list(p: &Property) -> Option<Vec<i64>> {
+    Some(match p {
+        Property::ListChar(v) => v.iter().map(|&x| x.into()).collect(),
+        Property::ListUChar(v) => v.iter().map(|&x| x.into()).collect(),
+        Property::ListShort(v) => v.iter().map(|&x| x.into()).collect(),
+        Property::ListUShort(v) => v.iter().map(|&x| x.into()).collect(),
+        Property::ListInt(v) => v.iter().map(|&x| x.into()).collect(),
+        Property::ListUInt(v) => v.iter().map(|&x| x.into()).collect(),
+        _ => return None,
+    })
+}
