@@ -57,3 +57,17 @@ pub mod stats;
 pub mod variance;
 
 pub use error::{Error, Result};
+
+// The front door: what a program that renders and differentiates needs, at the crate root.
+pub use backend::Backend;
+pub use cpu::Reference;
+pub use gpu::renderer::GradMode;
+pub use gpu::{
+    BorrowedDevice, BufferLayout, BufferView, Context, ContextDesc, DeviceChoice, DeviceFeatures, Frame, Pending,
+    Renderer, Requirements, SubmitSync,
+};
+pub use image::Image;
+pub use integrator::{RenderOptions, Strategy};
+pub use loss::Loss;
+pub use params::{Gradients, ParamTable};
+pub use scene::Scene;

@@ -6,9 +6,10 @@
 //! f32 in the same order, so paths agree with the GPU's except where transcendental functions
 //! round differently (ALGORITHMS.md §2.4).
 
-pub mod emitter;
+pub(crate) mod emitter;
+#[doc(hidden)]
 pub mod path;
-pub mod surface;
+pub(crate) mod surface;
 
 use glam::Vec3;
 use rayon::prelude::*;
@@ -34,6 +35,7 @@ const GRADIENT_PARTS: usize = 64;
 
 /// The CPU reference as a [`Backend`]: the scene flattened (BVH included) once and kept between
 /// calls. Gradients are summed in f64 in a fixed order (deterministic in either [`GradMode`]).
+/// Thread safety: `Send + Sync`; each call runs on rayon's thread pool.
 ///
 /// ```
 /// use pathgrad::backend::Backend;
@@ -117,6 +119,11 @@ impl Backend for Reference {
         crate::gpu::variant::kinds_of(&self.scene, &self.flat, ids)
     }
 }
+
+const _: fn() = || {
+    fn send_sync<T: Send + Sync>() {}
+    send_sync::<Reference>();
+};
 
 /// Sums `term(i, grads)` over `i` in `0..count` into one vector of `n` values, in the fixed
 /// order of [`GRADIENT_PARTS`].

@@ -36,6 +36,10 @@ pub enum GradMode {
 
 /// Renders one scene on one device: images, gradients and image gradients.
 ///
+/// Thread safety: `Renderer` is `Send` (move it to the thread that renders) but not `Sync`: every
+/// call takes `&mut self`, and its compile observer is an `FnMut`. Several renderers may share one
+/// `Arc<Context>` from different threads; their submissions serialise on the context's queue.
+///
 /// ```no_run
 /// use pathgrad::backend::Backend;
 /// use pathgrad::gpu::{Context, ContextDesc, Renderer};
@@ -361,6 +365,11 @@ impl Renderer {
         check_status(flags[0], v.kind.name())
     }
 }
+
+const _: fn() = || {
+    fn send<T: Send>() {}
+    send::<Renderer>();
+};
 
 impl Backend for Renderer {
     fn scene(&self) -> &Scene {

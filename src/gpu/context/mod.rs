@@ -77,6 +77,7 @@ enum Owner {
 }
 
 /// An engine's Vulkan objects for [`Context::from_raw`], and what it enabled on its device.
+/// Plain data (`Send + Sync`, as ash's handles and feature structs are).
 pub struct BorrowedDevice {
     /// The loader the engine's instance was created with.
     pub entry: ash::Entry,
@@ -519,4 +520,5 @@ impl Drop for Context {
 const _: fn() = || {
     fn send_sync<T: Send + Sync>() {}
     send_sync::<Context>();
+    send_sync::<BorrowedDevice>();
 };

@@ -18,7 +18,8 @@ pub struct SubmitSync {
 }
 
 /// Work submitted by [`Context::submit`] and not yet waited for. Dropping it waits (with the
-/// context's finite timeout) before its command buffer is freed.
+/// context's finite timeout) before its command buffer is freed. Thread safety: `Send + Sync`;
+/// it may be waited for on another thread.
 #[must_use = "dropping a Pending waits for it"]
 pub struct Pending {
     ctx: Arc<Context>,
@@ -26,6 +27,11 @@ pub struct Pending {
     fence: vk::Fence,
     what: String,
 }
+
+const _: fn() = || {
+    fn send_sync<T: Send + Sync>() {}
+    send_sync::<Pending>();
+};
 
 impl Pending {
     /// Whether the work has finished (without blocking).

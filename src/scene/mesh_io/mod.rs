@@ -1,6 +1,6 @@
-//! Triangle meshes from Wavefront OBJ (`tobj`) and PLY (`ply-rs-bw`) files, as [`Geometry`].
+//! Triangle meshes from Wavefront OBJ (`tobj`) and PLY (`ply-rs-bw`) files, as [`Geometry`](crate::scene::shapes::Geometry).
 //!
-//! Both loaders merge everything the file holds into one [`Geometry`]: every OBJ object and group,
+//! Both loaders merge everything the file holds into one [`Geometry`](crate::scene::shapes::Geometry): every OBJ object and group,
 //! every PLY face. Polygons are fan-triangulated. OBJ materials (`mtllib`, `usemtl`) are ignored —
 //! the scene file assigns the BSDF, as in Mitsuba — and so are OBJ points and lines (`p`, `l`,
 //! faces of fewer than three vertices).

@@ -16,9 +16,9 @@ use crate::scene::shapes::Geometry;
 /// the triangles.
 ///
 /// # Errors
-/// [`Error::Io`] if the file cannot be read; [`Error::Scene`] at `file:line` for a statement that
+/// [`Error::Io`](crate::Error::Io) if the file cannot be read; [`Error::Scene`](crate::Error::Scene) at `file:line` for a statement that
 /// does not parse, an index out of range, a non-finite number, or a face that gives a texture
-/// coordinate or normal where others do not; [`Error::Scene`] at `file` for a file with no
+/// coordinate or normal where others do not; [`Error::Scene`](crate::Error::Scene) at `file` for a file with no
 /// vertices and faces ("not an OBJ mesh") or without faces.
 pub fn load_obj(path: &Path) -> Result<Geometry> {
     let bytes = read_file(path)?;

@@ -24,7 +24,7 @@ const PLY_FACE_LISTS: [&str; 2] = ["vertex_indices", "vertex_index"];
 /// Other elements and properties are ignored.
 ///
 /// # Errors
-/// [`Error::Io`] if the file cannot be read; [`Error::Scene`] naming the file (and the line for the
+/// [`Error::Io`](crate::Error::Io) if the file cannot be read; [`Error::Scene`](crate::Error::Scene) naming the file (and the line for the
 /// header and ASCII payloads) for a file that is not PLY, a malformed or truncated header or payload,
 /// a missing `vertex`/`face` element or `x`/`y`/`z`/index-list property, a partial normal or uv
 /// property set, a face of fewer than 3 vertices, an index out of range, a non-finite value, or a
