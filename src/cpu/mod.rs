@@ -92,12 +92,14 @@ impl Backend for Reference {
         pass: PassTag,
         progress: &mut dyn FnMut(u32, u32),
     ) -> Result<Image> {
+        options.validate()?;
         let image = render_flat(&self.scene, &self.flat, options, pass)?;
         progress(options.spp, options.spp);
         Ok(image)
     }
 
     fn backward(&mut self, options: &RenderOptions, adjoint: &Image, _mode: GradMode) -> Result<Gradients> {
+        options.validate()?;
         backward_flat(&self.scene, &self.flat, options, adjoint).map(|g| self.gradients(g))
     }
 
@@ -108,10 +110,12 @@ impl Backend for Reference {
         sampling: &PixelSampling,
         _mode: GradMode,
     ) -> Result<Gradients> {
+        options.validate()?;
         backward_adaptive_flat(&self.scene, &self.flat, options, adjoint, sampling).map(|g| self.gradients(g))
     }
 
     fn image_gradient(&mut self, options: &RenderOptions, name: &str) -> Result<Image> {
+        options.validate()?;
         image_gradient_flat(&self.scene, &self.flat, options, name)
     }
 
@@ -153,7 +157,6 @@ pub fn render(scene: &Scene, options: &RenderOptions) -> Result<Image> {
 }
 
 fn render_flat(scene: &Scene, flat: &FlatScene, options: &RenderOptions, pass: PassTag) -> Result<Image> {
-    options.validate()?;
     let globals = options.globals(scene, flat, pass);
     let pixels = (options.width * options.height) as usize;
     let data: Vec<f32> = (0..pixels)
@@ -188,7 +191,6 @@ pub fn backward(scene: &Scene, options: &RenderOptions, adjoint: &Image) -> Resu
 }
 
 fn backward_flat(scene: &Scene, flat: &FlatScene, options: &RenderOptions, adjoint: &Image) -> Result<Vec<f64>> {
-    options.validate()?;
     check_size(adjoint, options, "adjoint image")?;
     let globals = options.globals(scene, flat, PassTag::Gradient);
     let drifted = std::sync::atomic::AtomicUsize::new(0);
@@ -227,7 +229,6 @@ fn backward_adaptive_flat(
     adjoint: &Image,
     sampling: &PixelSampling,
 ) -> Result<Vec<f64>> {
-    options.validate()?;
     let delta = sampling.sample_adjoint(options, adjoint)?;
     let samples = sampling.sample_count(options)?;
     let mut globals = options.globals(scene, flat, PassTag::Gradient);
@@ -283,7 +284,6 @@ pub fn image_gradient(scene: &Scene, options: &RenderOptions, name: &str) -> Res
 }
 
 fn image_gradient_flat(scene: &Scene, flat: &FlatScene, options: &RenderOptions, name: &str) -> Result<Image> {
-    options.validate()?;
     let id = scene.params.find(name).ok_or_else(|| crate::Error::InvalidArgument {
         parameter: name.to_string(),
         message: "no such parameter".into(),
