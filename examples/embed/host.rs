@@ -209,8 +209,9 @@ impl Host {
         }
     }
 
-    /// A host-visible buffer of the host's own (`TRANSFER_SRC | TRANSFER_DST`) and its memory.
-    fn staging(&self, size: u64) -> Result<(vk::Buffer, vk::DeviceMemory), vk::Result> {
+    /// A host-visible buffer of the host's own (`TRANSFER_SRC | TRANSFER_DST`) and its memory;
+    /// [`Host::free`] releases them.
+    pub fn staging(&self, size: u64) -> Result<(vk::Buffer, vk::DeviceMemory), vk::Result> {
         let d = &self.device;
         let usage = vk::BufferUsageFlags::TRANSFER_SRC | vk::BufferUsageFlags::TRANSFER_DST;
         // SAFETY: plain Vulkan on the host's own device.
@@ -263,11 +264,7 @@ impl Host {
             d.unmap_memory(memory);
             Ok(bytes)
         });
-        // SAFETY: not in use any more.
-        unsafe {
-            d.destroy_buffer(staging, None);
-            d.free_memory(memory, None);
-        }
+        self.free(staging, memory);
         bytes
     }
 
@@ -291,12 +288,17 @@ impl Host {
                 unsafe { d.cmd_copy_buffer(cmd, staging, buffer, &region) };
             })
         });
-        // SAFETY: not in use any more.
-        unsafe {
-            d.destroy_buffer(staging, None);
-            d.free_memory(memory, None);
-        }
+        self.free(staging, memory);
         result
+    }
+
+    /// Destroys a buffer made by [`Host::staging`] and frees its memory.
+    pub fn free(&self, buffer: vk::Buffer, memory: vk::DeviceMemory) {
+        // SAFETY: the host's own objects, no longer in use.
+        unsafe {
+            self.device.destroy_buffer(buffer, None);
+            self.device.free_memory(memory, None);
+        }
     }
 
     /// Uses the device for the engine's own work: fills a buffer of its own with `value` on the
@@ -307,11 +309,7 @@ impl Host {
         // SAFETY: the host's own buffer, alive until the submission is waited on.
         let bytes =
             self.read_after(|cmd| unsafe { self.device.cmd_fill_buffer(cmd, buffer, 0, size, value) }, buffer, 0, size);
-        // SAFETY: not in use any more.
-        unsafe {
-            self.device.destroy_buffer(buffer, None);
-            self.device.free_memory(memory, None);
-        }
+        self.free(buffer, memory);
         Ok(bytes?.chunks_exact(4).map(|w| u32::from_ne_bytes([w[0], w[1], w[2], w[3]])).collect())
     }
 }

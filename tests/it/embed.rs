@@ -36,6 +36,10 @@ fn image_and_gradient(ctx: &std::sync::Arc<Context>) -> (Vec<u32>, Vec<u32>) {
 fn a_borrowed_device_gives_the_owned_results_and_is_left_intact() {
     let owned = image_and_gradient(&TestGpu::new().ctx);
     let host = Host::new(&HostOptions { validation: true, ..Default::default() }).unwrap();
+    // A buffer of the host's that lives across pathgrad's whole life, filled before it comes.
+    let (kept, kept_memory) = host.staging(64).unwrap();
+    // SAFETY: the host's own buffer, alive until freed below.
+    host.run(|cmd| unsafe { host.device.cmd_fill_buffer(cmd, kept, 0, 64, 0xABCD) }).unwrap();
     let borrowed = {
         // SAFETY: the host's handles are valid and outlive this block.
         let ctx = unsafe { Context::from_raw(host.borrowed()) }.unwrap();
@@ -65,6 +69,9 @@ fn a_borrowed_device_gives_the_owned_results_and_is_left_intact() {
     assert!(borrowed.1.iter().any(|&b| f32::from_bits(b) != 0.0));
     let words = host.fill_and_read(0xC0FFEE, 1024).unwrap();
     assert!(words.iter().all(|&w| w == 0xC0FFEE));
+    let kept_words: Vec<u32> = bytemuck::pod_collect_to_vec(&host.read_after(|_| {}, kept, 0, 64).unwrap());
+    assert_eq!(kept_words, vec![0xABCD; 16], "the host's buffer from before pathgrad");
+    host.free(kept, kept_memory);
     assert_eq!(host.close(), 0, "the host's validation layer reported messages");
 }
 
