@@ -8,6 +8,10 @@ use crate::error::{Error, Result};
 use crate::gpu::buffer::Buffer;
 use crate::gpu::context::Context;
 use crate::gpu::pipeline::{BindGroup, Kernel, compute_barrier, groups_for, memory_barrier};
+use crate::integrator::RenderOptions;
+use crate::rng::PassTag;
+use crate::scene::Scene;
+use crate::scene::flat::FlatScene;
 
 /// Path samples per submission: enough work to hide submission overhead, little enough that a
 /// progress bar moves and a fence wait stays far below its timeout.
@@ -25,6 +29,35 @@ pub(crate) enum Work {
     Pixels { begin: u32, end: u32 },
     /// `count` global samples whose pixels the kernel draws (adaptive pixel sampling).
     Samples { count: u64 },
+}
+
+/// A request checked once: its options (validated), the constants its kernels read (`Globals`,
+/// before the scene's device addresses are filled in) and its dispatch plan. Every render,
+/// gradient and image-gradient call starts by building one and uses nothing else of its options.
+pub(crate) struct Request {
+    pub options: RenderOptions,
+    pub globals: Globals,
+    pub plan: Vec<Submission>,
+}
+
+impl Request {
+    /// Validates `options` and derives the constants of `pass` and the plan of `work`.
+    ///
+    /// # Errors
+    /// Option errors; those of [`plan`].
+    pub(crate) fn new(
+        scene: &Scene,
+        flat: &FlatScene,
+        options: &RenderOptions,
+        pass: PassTag,
+        work: Work,
+        one_path_per_lane: bool,
+    ) -> Result<Request> {
+        options.validate()?;
+        let globals = options.globals(scene, flat, pass);
+        let plan = plan(work, options.width, options.height, options.spp, one_path_per_lane)?;
+        Ok(Request { options: *options, globals, plan })
+    }
 }
 
 /// One kernel launch: its push constants and workgroup counts.

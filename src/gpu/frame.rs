@@ -238,7 +238,10 @@ impl Renderer {
     /// Option errors; [`Error::InvalidArgument`] for deterministic mode without 64-bit atomics;
     /// Vulkan and allocation failures.
     pub fn frame(&mut self, options: &RenderOptions, mode: GradMode) -> Result<Frame> {
-        options.validate()?;
+        // The plan is made per recorded range; these requests give the checked options and constants.
+        let whole = Work::Pixels { begin: 0, end: options.spp };
+        let primal_globals = self.request(options, PassTag::Primal, whole)?.globals;
+        let backward_globals = self.request(options, PassTag::Gradient, whole)?.globals;
         if mode == GradMode::Deterministic && !self.context().info().int64_atomics {
             return Err(Error::InvalidArgument {
                 parameter: "GradMode::Deterministic".into(),
@@ -259,8 +262,6 @@ impl Renderer {
                 KernelKind::AdjointFixed,
             ),
         };
-        let primal_globals = options.globals(self.scene(), self.flat(), PassTag::Primal);
-        let backward_globals = options.globals(self.scene(), self.flat(), PassTag::Gradient);
         let fixed_unit = 1.0 / f64::from(backward_globals.fixed_scale);
         let primal_variant = Variant {
             kind: KernelKind::Primal,

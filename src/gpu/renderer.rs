@@ -12,7 +12,7 @@ use crate::contract::*;
 use crate::error::{Error, Result};
 use crate::gpu::buffer::Buffer;
 use crate::gpu::context::Context;
-use crate::gpu::dispatch::{self, Work, check_status};
+use crate::gpu::dispatch::{self, Request, Work, check_status};
 pub use crate::gpu::kernels::{COMPILE_NOTICE_MS, CompileEvent, CompileObserver};
 use crate::gpu::kernels::{KernelCache, KernelKind, Variant};
 use crate::gpu::upload::GpuScene;
@@ -164,23 +164,15 @@ impl Renderer {
         pass: PassTag,
         progress: &mut dyn FnMut(u32, u32),
     ) -> Result<Image> {
-        options.validate()?;
+        let request = self.request(options, pass, Work::Pixels { begin: 0, end: options.spp })?;
         let _span =
             tracing::info_span!("primal", width = options.width, height = options.height, spp = options.spp).entered();
         let pixels = options.width * options.height;
-        let globals = options.globals(&self.scene, &self.flat, pass);
         let accum = Buffer::storage(&self.ctx, "accumulation image", u64::from(pixels) * 12)?;
         accum.clear()?;
         let features = variant::request_features(self.scene_features, options, ParamKinds::NONE);
         let v = Variant { kind: KernelKind::Primal, features };
-        self.run(
-            v,
-            &globals,
-            options,
-            Work::Pixels { begin: 0, end: options.spp },
-            &[(BINDING_ACCUM, &accum)],
-            progress,
-        )?;
+        self.run(v, &request, &[(BINDING_ACCUM, &accum)], progress)?;
         let sums: Vec<f32> = accum.download(pixels as usize * 3)?;
         let spp = options.spp as f32;
         Image::from_rgb(options.width, options.height, sums.into_iter().map(|v| v / spp).collect())
@@ -195,13 +187,11 @@ impl Renderer {
     /// deterministic mode without 64-bit atomics; Vulkan failures; [`Error::LoopBudget`];
     /// [`Error::Numeric`] if a replay drifted from its primal path or a fixed-point sum overflowed.
     fn backward_uniform(&mut self, options: &RenderOptions, adjoint: &Image, mode: GradMode) -> Result<Gradients> {
-        options.validate()?;
+        let request = self.request(options, PassTag::Gradient, Work::Pixels { begin: 0, end: options.spp })?;
         crate::backend::check_size(adjoint, options, "adjoint image")?;
         let _span = tracing::info_span!("adjoint", spp = options.spp, ?mode).entered();
-        let globals = options.globals(&self.scene, &self.flat, PassTag::Gradient);
         let adjoint_buf = Buffer::storage_with(&self.ctx, "adjoint image", adjoint.as_slice())?;
-        let work = Work::Pixels { begin: 0, end: options.spp };
-        self.reverse([KernelKind::Adjoint, KernelKind::AdjointFixed], &globals, options, work, &adjoint_buf, &[], mode)
+        self.reverse([KernelKind::Adjoint, KernelKind::AdjointFixed], &request, &adjoint_buf, &[], mode)
     }
 
     /// Reverse-mode gradient with loss-aware adaptive pixel sampling (ALGORITHMS.md §6): the
@@ -221,26 +211,23 @@ impl Renderer {
         sampling: &PixelSampling,
         mode: GradMode,
     ) -> Result<Gradients> {
-        options.validate()?;
+        let count = u64::from(options.width * options.height) * u64::from(options.spp);
+        let mut request = self.request(options, PassTag::Gradient, Work::Samples { count })?;
         crate::backend::check_size(adjoint, options, "adjoint image")?;
         let delta = sampling.sample_adjoint(options, adjoint)?;
         let _span =
             tracing::info_span!("adjoint_adaptive", spp = options.spp, ?mode, estimator = sampling.estimator().name())
                 .entered();
-        let mut globals = options.globals(&self.scene, &self.flat, PassTag::Gradient);
         // δL is in `delta` already.
-        globals.adjoint_scale = 1.0;
+        request.globals.adjoint_scale = 1.0;
         let table = sampling.table();
         let entries: Vec<AliasEntry> =
             table.prob().iter().zip(table.alias()).map(|(&prob, &alias)| AliasEntry { prob, alias }).collect();
         let alias_buf = Buffer::storage_with(&self.ctx, "pixel alias table", &entries)?;
         let adjoint_buf = Buffer::storage_with(&self.ctx, "adjoint image (per-sample δL)", delta.as_slice())?;
-        let count = u64::from(options.width * options.height) * u64::from(options.spp);
         self.reverse(
             [KernelKind::AdjointAdaptive, KernelKind::AdjointAdaptiveFixed],
-            &globals,
-            options,
-            Work::Samples { count },
+            &request,
             &adjoint_buf,
             &[(BINDING_ALIAS, &alias_buf)],
             mode,
@@ -249,18 +236,16 @@ impl Renderer {
 
     /// Runs the reverse-mode kernel of `mode` — `kinds[0]` with float atomics, `kinds[1]` in fixed
     /// point — over the scene bindings, the adjoint image, the gradient and `extra`.
-    #[allow(clippy::too_many_arguments)]
     fn reverse(
         &mut self,
         kinds: [KernelKind; 2],
-        globals: &Globals,
-        options: &RenderOptions,
-        work: Work,
+        request: &Request,
         adjoint_buf: &Buffer,
         extra: &[(u32, &Buffer)],
         mode: GradMode,
     ) -> Result<Gradients> {
         let n = self.flat.params.len();
+        let options = &request.options;
         let features = variant::request_features(self.scene_features, options, self.grad_kinds(options));
         match mode {
             GradMode::Float => {
@@ -269,7 +254,7 @@ impl Renderer {
                 let mut bindings = vec![(BINDING_ADJOINT, adjoint_buf), (BINDING_GRADS, &grads)];
                 bindings.extend_from_slice(extra);
                 let v = Variant { kind: kinds[0], features };
-                self.run(v, globals, options, work, &bindings, &mut |_, _| {})?;
+                self.run(v, request, &bindings, &mut |_, _| {})?;
                 Ok(Gradients::new(&self.scene.params, grads.download(n)?))
             }
             GradMode::Deterministic => {
@@ -284,9 +269,9 @@ impl Renderer {
                 let mut bindings = vec![(BINDING_ADJOINT, adjoint_buf), (BINDING_GRADS_FIXED, &grads)];
                 bindings.extend_from_slice(extra);
                 let v = Variant { kind: kinds[1], features };
-                self.run(v, globals, options, work, &bindings, &mut |_, _| {})?;
+                self.run(v, request, &bindings, &mut |_, _| {})?;
                 let fixed: Vec<i64> = grads.download(n)?;
-                let unit = 1.0 / f64::from(globals.fixed_scale);
+                let unit = 1.0 / f64::from(request.globals.fixed_scale);
                 Ok(Gradients::new(&self.scene.params, fixed.iter().map(|&v| (v as f64 * unit) as f32).collect()))
             }
         }
@@ -299,30 +284,27 @@ impl Renderer {
     /// # Errors
     /// [`Error::InvalidArgument`] for an unknown parameter; as [`Renderer::backward`].
     fn forward_image_gradient(&mut self, options: &RenderOptions, name: &str) -> Result<Image> {
-        options.validate()?;
+        let mut request = self.request(options, PassTag::Gradient, Work::Pixels { begin: 0, end: options.spp })?;
         let id = self.scene.params.find(name).ok_or_else(|| Error::InvalidArgument {
             parameter: name.to_string(),
             message: "no such parameter (see `pathgrad params SCENE`)".into(),
         })?;
         let entry = self.scene.params.entry(id).clone();
         let _span = tracing::info_span!("image_gradient", param = name).entered();
-        let mut globals = options.globals(&self.scene, &self.flat, PassTag::Gradient);
-        globals.forward_begin = entry.offset;
-        globals.forward_end = entry.offset + entry.len;
+        request.globals.forward_begin = entry.offset;
+        request.globals.forward_end = entry.offset + entry.len;
         let pixels = options.width * options.height;
         let ones = vec![1.0f32; pixels as usize * 3];
         let adjoint_buf = Buffer::storage_with(&self.ctx, "adjoint image (ones)", &ones)?;
         let accum = Buffer::storage(&self.ctx, "image gradient", u64::from(pixels) * 12)?;
         accum.clear()?;
         // δL = 1 per sample: the adjoint scale must not divide by spp here; the mean is taken below.
-        globals.adjoint_scale = 1.0;
+        request.globals.adjoint_scale = 1.0;
         let kinds = variant::param_kinds(&self.flat, self.env_param, entry.offset, entry.offset + entry.len);
         let features = variant::request_features(self.scene_features, options, kinds);
         self.run(
             Variant { kind: KernelKind::ImageGradient, features },
-            &globals,
-            options,
-            Work::Pixels { begin: 0, end: options.spp },
+            &request,
             &[(BINDING_ADJOINT, &adjoint_buf), (BINDING_ACCUM, &accum)],
             &mut |_, _| {},
         )?;
@@ -331,21 +313,23 @@ impl Renderer {
         Image::from_rgb(options.width, options.height, sums.into_iter().map(|v| v / spp).collect())
     }
 
-    /// Builds `v` if needed, then dispatches it over `work` with the scene bindings plus `extra`,
-    /// one submission at a time (each waited for), and checks the kernels' status word.
-    /// `progress` hears (samples per pixel done, spp) after each submission.
+    /// The request of `options` under the key of `pass`, planned for `work` on this device.
+    pub(crate) fn request(&self, options: &RenderOptions, pass: PassTag, work: Work) -> Result<Request> {
+        Request::new(&self.scene, &self.flat, options, pass, work, self.one_path_per_lane)
+    }
+
+    /// Builds `v` if needed, then dispatches it along `request`'s plan with the scene bindings
+    /// plus `extra`, one submission at a time (each waited for), and checks the kernels' status
+    /// word. `progress` hears (samples per pixel done, spp) after each submission.
     fn run(
         &mut self,
         v: Variant,
-        globals: &Globals,
-        options: &RenderOptions,
-        work: Work,
+        request: &Request,
         extra: &[(u32, &Buffer)],
         progress: &mut dyn FnMut(u32, u32),
     ) -> Result<()> {
-        let plan = dispatch::plan(work, options.width, options.height, options.spp, self.one_path_per_lane)?;
-        let globals_buf =
-            Buffer::uniform_with(&self.ctx, "globals", std::slice::from_ref(&self.gpu.with_addresses(globals)))?;
+        let globals = self.gpu.with_addresses(&request.globals);
+        let globals_buf = Buffer::uniform_with(&self.ctx, "globals", std::slice::from_ref(&globals))?;
         let status = Buffer::storage(&self.ctx, "status flags", 4)?;
         status.clear()?;
         let counter = Buffer::storage(&self.ctx, "work counter", 4)?;
@@ -355,11 +339,11 @@ impl Renderer {
         let ctx = self.ctx.clone();
         let kernel = self.kernels.get(v)?;
         let group = kernel.bind(&bindings)?;
-        for submission in &plan {
+        for submission in &request.plan {
             ctx.submit_and_wait(v.kind.name(), |cmd| {
                 dispatch::record(&ctx, cmd, kernel, &group, &counter, &submission.launches)
             })?;
-            progress(submission.done, options.spp);
+            progress(submission.done, request.options.spp);
         }
         let flags: Vec<u32> = status.download(1)?;
         check_status(flags[0], v.kind.name())
