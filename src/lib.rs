@@ -8,6 +8,13 @@
 //! parameters from a target image: Adam on loss gradients, optionally with loss-aware adaptive
 //! pixel sampling ([`adaptive`]).
 //!
+//! The front door is re-exported here: [`Backend`] (what the GPU [`Renderer`] and the CPU
+//! [`Reference`] both do), [`Context`] (a device of pathgrad's own, or an engine's through
+//! [`Context::from_raw`]), [`Frame`] (work recorded into an engine's command buffers),
+//! [`RenderOptions`], [`Image`], [`Loss`] and [`Gradients`]. [`contract`] is everything that
+//! crosses the host/GPU boundary. Thread safety: the plain data types (scenes, images, options,
+//! parameter tables, gradients) are `Send + Sync`; each handle type states its own.
+//!
 //! ```no_run
 //! use pathgrad::backend::Backend;
 //! use pathgrad::gpu::{Context, ContextDesc, Renderer};
@@ -71,3 +78,13 @@ pub use integrator::{RenderOptions, Strategy};
 pub use loss::Loss;
 pub use params::{Gradients, ParamTable};
 pub use scene::Scene;
+
+/// The plain data types are `Send + Sync` (the crate docs' thread-safety note).
+const _: fn() = || {
+    fn send_sync<T: Send + Sync>() {}
+    send_sync::<Scene>();
+    send_sync::<Image>();
+    send_sync::<RenderOptions>();
+    send_sync::<ParamTable>();
+    send_sync::<Gradients>();
+};
