@@ -31,6 +31,9 @@ pub struct LoadOptions {
     /// Let the scene read files outside its own folder: absolute paths, `..`, or links that lead
     /// out. Off by default, so that a scene from elsewhere can read nothing but its own files.
     pub allow_outside_folder: bool,
+    /// The sensor to render, by index or name ([`Scene::sensor_index`]); the first if `None`. Its
+    /// film gives the default size, and curved shapes are tessellated for it.
+    pub sensor: Option<String>,
 }
 
 impl LoadOptions {
@@ -100,6 +103,10 @@ pub fn load_with(spec: &str, options: &LoadOptions) -> Result<Scene> {
             }
         }
     };
+    if let Some(selector) = &options.sensor {
+        let chosen = scene.sensor_index(selector)?;
+        scene.camera = scene.sensors[chosen].camera;
+    }
     let (width, height) = options.size_for((scene.camera.width, scene.camera.height));
     scene.camera.width = width;
     scene.camera.height = height;

@@ -116,6 +116,16 @@ pub struct Camera {
     pub height: u32,
 }
 
+/// A named camera of a scene: a Mitsuba `<sensor>` (named by its `id`, else `sensor_INDEX`) or a
+/// glTF camera (named by its node).
+#[derive(Clone, Debug, PartialEq)]
+pub struct Sensor {
+    /// The sensor's name, unique in the scene.
+    pub name: String,
+    /// Its camera, with its film's size.
+    pub camera: Camera,
+}
+
 /// Everything a render needs.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Scene {
@@ -125,8 +135,10 @@ pub struct Scene {
     pub meshes: Vec<Mesh>,
     /// Materials.
     pub materials: Vec<Material>,
-    /// The camera.
+    /// The camera rendered: the chosen one of `sensors` (the first unless one is selected).
     pub camera: Camera,
+    /// Every camera the scene file holds, in file order (one for built-in scenes).
+    pub sensors: Vec<Sensor>,
     /// Bitmap textures.
     pub textures: Vec<Texture>,
     /// Constant environment radiance (RGB parameter) seen by rays that leave the scene, if any.
@@ -160,6 +172,22 @@ pub mod bounds {
 }
 
 impl Scene {
+    /// The sensor `selector` names: an index into [`Scene::sensors`] or a sensor's name.
+    ///
+    /// # Errors
+    /// [`Error::Scene`] naming the scene and listing its sensors when none matches.
+    pub fn sensor_index(&self, selector: &str) -> Result<usize> {
+        let by_name = self.sensors.iter().position(|s| s.name == selector);
+        let by_index = selector.trim().parse::<usize>().ok().filter(|&i| i < self.sensors.len());
+        by_name.or(by_index).ok_or_else(|| {
+            let list: Vec<String> = self.sensors.iter().enumerate().map(|(i, s)| format!("{i}: {}", s.name)).collect();
+            Error::Scene {
+                location: self.source.clone(),
+                message: format!("no sensor '{selector}' (the scene has {})", list.join(", ")),
+            }
+        })
+    }
+
     /// An empty scene with `camera`.
     pub fn new(source: &str, camera: Camera) -> Scene {
         Scene {
@@ -167,6 +195,7 @@ impl Scene {
             meshes: Vec::new(),
             materials: Vec::new(),
             camera,
+            sensors: vec![Sensor { name: "camera".into(), camera }],
             textures: Vec::new(),
             environment: None,
             params: ParamTable::default(),

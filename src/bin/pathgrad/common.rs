@@ -48,6 +48,10 @@ pub(crate) struct RenderFlags {
     /// numbers; slower).
     #[arg(long, conflicts_with = "device")]
     pub(crate) cpu: bool,
+    /// The sensor to render: its index or name in a scene with several (`pathgrad params`
+    /// lists them; default: the first).
+    #[arg(long)]
+    pub(crate) sensor: Option<String>,
     /// Let the scene read files outside its own folder (absolute paths, `..`); by default a
     /// scene reads only the files beside and below it.
     #[arg(long)]
@@ -75,6 +79,7 @@ impl RenderFlags {
             width: self.width,
             height: self.height,
             allow_outside_folder: self.allow_outside_folder,
+            sensor: self.sensor.clone(),
         };
         Ok(pathgrad::scene::load_with(spec, &options)?)
     }

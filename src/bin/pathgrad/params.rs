@@ -1,4 +1,4 @@
-//! `pathgrad params`: a scene's differentiable parameters.
+//! `pathgrad params`: a scene's differentiable parameters and its sensors.
 
 use anyhow::Result;
 
@@ -18,7 +18,18 @@ pub(crate) fn params(spec: &str, defines: &[(String, String)], json: bool, allow
                 serde_json::json!({"name": e.name, "size": e.len, "bounds": [e.bounds.0, upper], "values": values})
             })
             .collect();
-        println!("{}", serde_json::to_string_pretty(&items)?);
+        let sensors: Vec<serde_json::Value> = scene
+            .sensors
+            .iter()
+            .enumerate()
+            .map(|(i, s)| {
+                let c = &s.camera;
+                serde_json::json!({"index": i, "name": s.name, "position": c.position.to_array(),
+                    "target": c.target.to_array(), "up": c.up.to_array(), "fov_y_degrees": c.fov_y_degrees,
+                    "width": c.width, "height": c.height})
+            })
+            .collect();
+        println!("{}", serde_json::to_string_pretty(&serde_json::json!({"params": items, "sensors": sensors}))?);
     } else {
         for e in table.entries() {
             let values = &table.values()[e.offset as usize..(e.offset + e.len) as usize];
@@ -29,6 +40,19 @@ pub(crate) fn params(spec: &str, defines: &[(String, String)], json: bool, allow
                 format!("[{} values, mean {mean:.4}]", values.len())
             };
             println!("{:<48} {:>8}  [{}, {}]  {shown}", e.name, e.len, e.bounds.0, e.bounds.1);
+        }
+        println!("sensors (--sensor INDEX|NAME; the first is the default):");
+        for (i, s) in scene.sensors.iter().enumerate() {
+            let c = &s.camera;
+            println!(
+                "  {i}: {:<24} at {:?} towards {:?}, fov_y {:.2}°, {}×{}",
+                s.name,
+                c.position.to_array(),
+                c.target.to_array(),
+                c.fov_y_degrees,
+                c.width,
+                c.height
+            );
         }
     }
     Ok(())

@@ -59,8 +59,11 @@ impl Loader<'_> {
                 stack.push((child.value(), world));
             }
         }
-        match self.camera {
-            Some(camera) => self.scene.camera = camera,
+        match self.cameras.first() {
+            Some(first) => {
+                self.scene.camera = first.camera;
+                self.scene.sensors = std::mem::take(&mut self.cameras);
+            }
             None => self.default_camera(),
         }
         Ok(())
@@ -101,9 +104,6 @@ impl Loader<'_> {
             }
             _ => return Err(self.error(at, "needs type 'perspective' with a 'perspective' object")),
         };
-        if self.camera.is_some() {
-            return Ok(());
-        }
         let yfov = perspective.yfov;
         if !(yfov > 0.0 && yfov < std::f32::consts::PI) {
             return Err(self.error(at, format!("yfov {yfov} must lie in (0, π)")));
@@ -119,14 +119,16 @@ impl Loader<'_> {
         if forward == Vec3::ZERO || forward.cross(up).length_squared() == 0.0 {
             return Err(self.error(format!("nodes[{node}]"), "the camera's transform is degenerate"));
         }
-        self.camera = Some(Camera {
+        let camera = Camera {
             position,
             target: position + forward,
             up: up.normalize(),
             fov_y_degrees: yfov.to_degrees(),
             width: DEFAULT_WIDTH,
             height,
-        });
+        };
+        // Named by its node (node names are unique: `unique_names`).
+        self.cameras.push(crate::scene::Sensor { name: self.node_names[node].clone(), camera });
         Ok(())
     }
 
@@ -145,6 +147,7 @@ impl Loader<'_> {
         let distance = radius / (0.5 * DEFAULT_FOV_Y_DEGREES.to_radians()).sin();
         let position = center + Vec3::Z * distance;
         self.scene.camera = Camera { position, target: center, ..placeholder_camera() };
+        self.scene.sensors = vec![crate::scene::Sensor { name: "default".into(), camera: self.scene.camera }];
         self.scene.warn(format!(
             "no perspective camera in the scene; using a default one at {position} looking down -z at {center} \
              (yfov {DEFAULT_FOV_Y_DEGREES}°, {DEFAULT_WIDTH}×{DEFAULT_WIDTH})"

@@ -118,7 +118,7 @@ pub fn load_with(path: &Path, options: &LoadOptions) -> Result<Scene> {
         taken_names: HashSet::new(),
         allow_outside_folder: options.allow_outside_folder,
         scene: Scene::new(&path.display().to_string(), placeholder_camera()),
-        camera: None,
+        cameras: Vec::new(),
     };
     loader.taken_names = loader.node_names.iter().cloned().collect();
     // Errors raised below the loader (a parameter defined twice, say) get the file's name too.
@@ -287,8 +287,8 @@ struct Loader<'a> {
     /// Node names and the mesh names made so far (a primitive of a multi-primitive mesh is `node_j`).
     taken_names: HashSet<String>,
     scene: Scene,
-    /// The camera found so far.
-    camera: Option<Camera>,
+    /// The perspective cameras found so far, in node order.
+    cameras: Vec<crate::scene::Sensor>,
 }
 
 /// An [`Error::Scene`] at `file: element`.

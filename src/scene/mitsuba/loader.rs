@@ -141,24 +141,34 @@ impl<'a> Loader<'a> {
         }
 
         let sensors: Vec<El<'a>> = children.iter().copied().filter(|c| c.has_tag_name("sensor")).collect();
-        match sensors.first() {
-            Some(&s) => {
-                self.sensor(s)?;
-                // Curved shapes are tessellated for the size rendered, not the film's.
-                let camera = &mut self.scene.camera;
-                (camera.width, camera.height) = self.options.size_for((camera.width, camera.height));
-            }
-            None => {
-                return Err(self.x.err(
-                    root,
-                    "the scene has no <sensor>; pathgrad needs a perspective sensor (it has no default camera)",
-                ));
-            }
+        if sensors.is_empty() {
+            return Err(self.x.err(
+                root,
+                "the scene has no <sensor>; pathgrad needs a perspective sensor (it has no default camera)",
+            ));
         }
-        for &s in sensors.iter().skip(1) {
-            let w = self.x.warning(s, "only the first <sensor> is used; this one is ignored");
-            self.scene.warn(w);
+        // Every sensor, each with its own film and sampler; the chosen one is rendered.
+        self.scene.sensors.clear();
+        let mut spps = Vec::new();
+        for (i, &s) in sensors.iter().enumerate() {
+            self.scene.default_spp = None;
+            self.sensor(s)?;
+            spps.push(self.scene.default_spp);
+            let name = s.attribute("id").map_or_else(|| format!("sensor_{i}"), str::to_string);
+            if self.scene.sensors.iter().any(|other| other.name == name) {
+                return Err(self.x.err(s, format!("a second sensor named '{name}'")));
+            }
+            self.scene.sensors.push(crate::scene::Sensor { name, camera: self.scene.camera });
         }
+        let chosen = match &self.options.sensor {
+            Some(selector) => self.scene.sensor_index(selector)?,
+            None => 0,
+        };
+        self.scene.camera = self.scene.sensors[chosen].camera;
+        self.scene.default_spp = spps[chosen];
+        // Curved shapes are tessellated for the size rendered, not the film's.
+        let camera = &mut self.scene.camera;
+        (camera.width, camera.height) = self.options.size_for((camera.width, camera.height));
         let integrators: Vec<El<'a>> = children.iter().copied().filter(|c| c.has_tag_name("integrator")).collect();
         match integrators[..] {
             [] => self.scene.max_depth = crate::integrator::UNBOUNDED_DEPTH_CAP,

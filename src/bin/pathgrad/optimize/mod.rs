@@ -160,6 +160,9 @@ struct RunConfig {
     /// `--allow-outside-folder`.
     #[serde(default)]
     allow_outside_folder: bool,
+    /// `--sensor`, if given.
+    #[serde(default)]
+    sensor: Option<String>,
 }
 
 /// `state.json`: a run between two iterations.
@@ -326,6 +329,7 @@ fn start(args: &OptimizeArgs) -> Result<Session> {
         nee: opts.nee,
         diff_param,
         allow_outside_folder: args.flags.allow_outside_folder,
+        sensor: args.flags.sensor.clone(),
     };
     let dir = args.output.clone().unwrap_or_else(|| PathBuf::from(DEFAULT_OUTPUT));
     refuse_existing_run(&dir)?;

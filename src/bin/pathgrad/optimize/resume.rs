@@ -109,6 +109,7 @@ pub(super) fn resume(args: &OptimizeArgs, dir: &Path, given: &BTreeSet<String>) 
         width: Some(config.width),
         height: Some(config.height),
         allow_outside_folder: config.allow_outside_folder,
+        sensor: config.sensor.clone(),
     };
     let scene = pathgrad::scene::load_with(&config.scene, &load)
         .with_context(|| format!("loading {} (from {})", config.scene, path.display()))?;
@@ -183,6 +184,7 @@ pub(super) fn check_unchanged(
         Some(text(&args.flags.allow_outside_folder)),
         text(&c.allow_outside_folder),
     );
+    check("sensor", "--sensor", args.flags.sensor.clone(), c.sensor.clone().unwrap_or_else(|| "0".into()));
     check("target_set", "--target-set", Some(pairs(&args.target_set)), pairs(&c.target_set));
     check("lr", "--lr", args.lr.map(|v| text(&v)), text(&c.lr));
     check("spp_primal", "--spp-primal", args.spp_primal.map(|v| text(&v)), text(&c.spp_primal));
