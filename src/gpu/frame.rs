@@ -372,7 +372,11 @@ impl Renderer {
         let (o, spp) = (&frame.options, frame.options.spp);
         let work = Work::Pixels { begin: samples.start, end: samples.end };
         let plan = dispatch::plan(work, o.width, o.height, spp, self.one_path_per_lane)?;
-        let kernel = self.kernels.built(pass.variant).expect("a frame's kernels are built with it");
+        // A frame's kernels are built with it, in this renderer's cache (checked above).
+        let kernel = self.kernels.built(pass.variant).ok_or_else(|| Error::InvalidArgument {
+            parameter: "frame".into(),
+            message: "its kernels are not built in this renderer".into(),
+        })?;
         memory_barrier(
             &frame.ctx,
             cmd,
