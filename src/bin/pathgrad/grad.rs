@@ -7,7 +7,10 @@ use anyhow::{Context as _, Result, bail};
 use clap::Args;
 use pathgrad::output::OutputSet;
 
-use crate::common::*;
+use crate::common::{
+    RenderFlags, StrategyArgs, check_output, options, parse_define, preview_path, refuse_non_finite, target_image,
+    with_values,
+};
 
 #[derive(Args, Debug)]
 pub(crate) struct GradArgs {

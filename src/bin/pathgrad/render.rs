@@ -7,7 +7,9 @@ use anyhow::{Context as _, Result, bail};
 use clap::Args;
 use pathgrad::output::OutputSet;
 
-use crate::common::*;
+use crate::common::{
+    RenderFlags, check_output, options, parse_define, preview_path, progress_bar, refuse_non_finite, save,
+};
 
 #[derive(Args, Debug)]
 pub(crate) struct RenderArgs {
