@@ -8,6 +8,7 @@ pub(crate) mod load;
 pub mod mesh_io;
 pub mod mitsuba;
 pub mod shapes;
+pub mod volume;
 
 use glam::{Vec2, Vec3};
 
