@@ -91,16 +91,24 @@ float slab(Ray ray, vec3 lo, vec3 hi, float tmin, float tmax) {
     return near <= far ? near : -1.0;
 }
 
+// The first REG_STACK entries of the traversal stack live in eight registers, read and written
+// with selects; only deeper entries go to the private array. On lavapipe a private array indexed
+// per lane costs a scalar load or store per lane, while eight selects are a few vector
+// instructions, and a traversal rarely has more than eight entries pending (BENCHMARKS.md: about
+// 5 % on primal renders and gradient steps, images bit-identical). The order of visits is
+// src/bvh.rs's either way.
+#define REG_STACK 8u
 // One node or leaf per step, visited in the order of src/bvh.rs (`traverse`): a leaf's triangles
 // are tested; an inner node's two boxes are fetched together and tested, and the step goes on to
 // the nearer child hit (the first in node order for shadow rays: any hit will do, so no ordering
 // is paid for) with the other one pushed. Keeping the next entry in a register instead of pushing
 // and popping it saves two stack accesses a step — on lavapipe a private array indexed per lane
-// costs a scalar sequence per lane. The builder bounds the depth to fit the stack; the overflow
-// check stays as a guard.
+// costs a scalar sequence per lane (hence also the register part of the stack below). The builder
+// bounds the depth to fit the stack; the overflow check stays as a guard.
 Hit bvh_traverse(Ray ray, float tmin, float tmax, bool any_hit) {
     Hit best = Hit(0.0, 0u, 0.0, 0.0, false);
-    uint stack[BVH_STACK_SIZE];
+    uint stack[BVH_STACK_SIZE - REG_STACK];
+    uint r0 = 0u, r1 = 0u, r2 = 0u, r3 = 0u, r4 = 0u, r5 = 0u, r6 = 0u, r7 = 0u;
     uint sp = 0u;
     uint current = 0u;   // the root
     bool have_current = true;
@@ -112,7 +120,11 @@ Hit bvh_traverse(Ray ray, float tmin, float tmax, bool any_hit) {
         if (!have_current) {
             if (sp == 0u) { finished = true; break; }
             sp -= 1u;
-            current = stack[sp];
+            if (sp >= REG_STACK) {
+                current = stack[sp - REG_STACK];
+            } else {
+                current = sp == 0u ? r0 : sp == 1u ? r1 : sp == 2u ? r2 : sp == 3u ? r3 : sp == 4u ? r4 : sp == 5u ? r5 : sp == 6u ? r6 : r7;
+            }
         }
         have_current = false;
         if ((current & BVH_LEAF_BIT) != 0u) {
@@ -144,7 +156,13 @@ Hit bvh_traverse(Ray ray, float tmin, float tmax, bool any_hit) {
             if (ha && hb) {
                 if (sp + 1u > BVH_STACK_SIZE) { raise_status(STATUS_STACK_OVERFLOW); finished = true; break; }
                 bool b_nearer = !any_hit && tb < ta;
-                stack[sp] = b_nearer ? node.child0 : node.child1;
+                uint pushed = b_nearer ? node.child0 : node.child1;
+                if (sp >= REG_STACK) {
+                    stack[sp - REG_STACK] = pushed;
+                } else {
+                    r0 = sp == 0u ? pushed : r0; r1 = sp == 1u ? pushed : r1; r2 = sp == 2u ? pushed : r2; r3 = sp == 3u ? pushed : r3;
+                    r4 = sp == 4u ? pushed : r4; r5 = sp == 5u ? pushed : r5; r6 = sp == 6u ? pushed : r6; r7 = sp == 7u ? pushed : r7;
+                }
                 sp += 1u;
                 current = b_nearer ? node.child1 : node.child0;
                 have_current = true;
