@@ -75,15 +75,7 @@ impl Backend for Reference {
     }
 
     fn set_params(&mut self, params: &ParamTable) -> Result<()> {
-        if params.entries() != self.scene.params.entries() {
-            return Err(crate::Error::InvalidArgument {
-                parameter: "params".into(),
-                message: "the table's layout differs from the scene's".into(),
-            });
-        }
-        self.scene.params = params.clone();
-        self.flat.params = params.values().to_vec();
-        Ok(())
+        crate::scene::flat::replace_params(&mut self.scene, &mut self.flat, params)
     }
 
     fn render_pass(

@@ -141,99 +141,6 @@ impl Renderer {
         &self.ctx
     }
 
-    /// Replaces the parameter values (same table layout) and uploads them.
-    ///
-    /// # Errors
-    /// [`Error::InvalidArgument`] if the layout differs; Vulkan failures.
-    fn replace_params(&mut self, params: &ParamTable) -> Result<()> {
-        if params.entries() != self.scene.params.entries() {
-            return Err(Error::InvalidArgument {
-                parameter: "params".into(),
-                message: "the table's layout differs from the scene's".into(),
-            });
-        }
-        self.scene.params = params.clone();
-        self.flat.params = params.values().to_vec();
-        self.gpu.params.upload(&self.flat.params)
-    }
-
-    /// Renders with `options` under the key of `pass`.
-    fn render_with_key(
-        &mut self,
-        options: &RenderOptions,
-        pass: PassTag,
-        progress: &mut dyn FnMut(u32, u32),
-    ) -> Result<Image> {
-        let request = self.request(options, pass, Work::Pixels { begin: 0, end: options.spp })?;
-        let _span =
-            tracing::info_span!("primal", width = options.width, height = options.height, spp = options.spp).entered();
-        let pixels = options.width * options.height;
-        let accum = Buffer::storage(&self.ctx, "accumulation image", u64::from(pixels) * 12)?;
-        accum.clear()?;
-        let features = variant::request_features(self.scene_features, options, ParamKinds::NONE);
-        let v = Variant { kind: KernelKind::Primal, features };
-        self.run(v, &request, &[(BINDING_ACCUM, &accum)], progress)?;
-        let sums: Vec<f32> = accum.download(pixels as usize * 3)?;
-        let spp = options.spp as f32;
-        Image::from_rgb(options.width, options.height, sums.into_iter().map(|v| v / spp).collect())
-    }
-
-    /// Reverse-mode gradient of a loss whose adjoint image (∂loss/∂pixel) is `adjoint`: the fused
-    /// primal + replay kernel (PRB) with the gradient key, so its paths are independent of the
-    /// render that produced `adjoint` (ALGORITHMS.md §1, §3.4).
-    ///
-    /// # Errors
-    /// Option errors; [`Error::InvalidArgument`] for an adjoint image of the wrong size or
-    /// deterministic mode without 64-bit atomics; Vulkan failures; [`Error::LoopBudget`];
-    /// [`Error::Numeric`] if a replay drifted from its primal path or a fixed-point sum overflowed.
-    fn backward_uniform(&mut self, options: &RenderOptions, adjoint: &Image, mode: GradMode) -> Result<Gradients> {
-        let request = self.request(options, PassTag::Gradient, Work::Pixels { begin: 0, end: options.spp })?;
-        crate::backend::check_size(adjoint, options, "adjoint image")?;
-        let _span = tracing::info_span!("adjoint", spp = options.spp, ?mode).entered();
-        let adjoint_buf = Buffer::storage_with(&self.ctx, "adjoint image", adjoint.as_slice())?;
-        self.reverse([KernelKind::Adjoint, KernelKind::AdjointFixed], &request, &adjoint_buf, &[], mode)
-    }
-
-    /// Reverse-mode gradient with loss-aware adaptive pixel sampling (ALGORITHMS.md §6): the
-    /// N = W·H·`options.spp` samples of the fused primal + replay kernel draw their pixels from
-    /// `sampling` on the device (sample k: pixel p(k) from the alias table, path counters (p(k), k))
-    /// and carry the adjoint radiance of [`PixelSampling::sample_adjoint`] — A_p/(N·π_p) for the
-    /// unbiased importance estimator, A_p/n_p for the per-pixel mean, whose histogram n_p is drawn
-    /// on the host from the same uniforms before the launch.
-    ///
-    /// # Errors
-    /// As [`Renderer::backward`]; [`Error::InvalidArgument`] if `sampling` is for another image size
-    /// or N exceeds the 32-bit sample counter.
-    fn backward_with_sampling(
-        &mut self,
-        options: &RenderOptions,
-        adjoint: &Image,
-        sampling: &PixelSampling,
-        mode: GradMode,
-    ) -> Result<Gradients> {
-        let count = u64::from(options.width * options.height) * u64::from(options.spp);
-        let mut request = self.request(options, PassTag::Gradient, Work::Samples { count })?;
-        crate::backend::check_size(adjoint, options, "adjoint image")?;
-        let delta = sampling.sample_adjoint(options, adjoint)?;
-        let _span =
-            tracing::info_span!("adjoint_adaptive", spp = options.spp, ?mode, estimator = sampling.estimator().name())
-                .entered();
-        // δL is in `delta` already.
-        request.globals.adjoint_scale = 1.0;
-        let table = sampling.table();
-        let entries: Vec<AliasEntry> =
-            table.prob().iter().zip(table.alias()).map(|(&prob, &alias)| AliasEntry { prob, alias }).collect();
-        let alias_buf = Buffer::storage_with(&self.ctx, "pixel alias table", &entries)?;
-        let adjoint_buf = Buffer::storage_with(&self.ctx, "adjoint image (per-sample δL)", delta.as_slice())?;
-        self.reverse(
-            [KernelKind::AdjointAdaptive, KernelKind::AdjointAdaptiveFixed],
-            &request,
-            &adjoint_buf,
-            &[(BINDING_ALIAS, &alias_buf)],
-            mode,
-        )
-    }
-
     /// Runs the reverse-mode kernel of `mode` — `kinds[0]` with float atomics, `kinds[1]` in fixed
     /// point — over the scene bindings, the adjoint image, the gradient and `extra`.
     fn reverse(
@@ -275,42 +182,6 @@ impl Renderer {
                 Ok(Gradients::new(&self.scene.params, fixed.iter().map(|&v| (v as f64 * unit) as f32).collect()))
             }
         }
-    }
-
-    /// Forward-mode image gradient ∂I/∂θ: per pixel and channel, the derivative of the image by
-    /// the parameter `name` (tangent 1 on each of its values, so for an RGB parameter the
-    /// derivative along scaling all three together), through the same replay with δL = 1.
-    ///
-    /// # Errors
-    /// [`Error::InvalidArgument`] for an unknown parameter; as [`Renderer::backward`].
-    fn forward_image_gradient(&mut self, options: &RenderOptions, name: &str) -> Result<Image> {
-        let mut request = self.request(options, PassTag::Gradient, Work::Pixels { begin: 0, end: options.spp })?;
-        let id = self.scene.params.find(name).ok_or_else(|| Error::InvalidArgument {
-            parameter: name.to_string(),
-            message: "no such parameter (see `pathgrad params SCENE`)".into(),
-        })?;
-        let entry = self.scene.params.entry(id).clone();
-        let _span = tracing::info_span!("image_gradient", param = name).entered();
-        request.globals.forward_begin = entry.offset;
-        request.globals.forward_end = entry.offset + entry.len;
-        let pixels = options.width * options.height;
-        let ones = vec![1.0f32; pixels as usize * 3];
-        let adjoint_buf = Buffer::storage_with(&self.ctx, "adjoint image (ones)", &ones)?;
-        let accum = Buffer::storage(&self.ctx, "image gradient", u64::from(pixels) * 12)?;
-        accum.clear()?;
-        // δL = 1 per sample: the adjoint scale must not divide by spp here; the mean is taken below.
-        request.globals.adjoint_scale = 1.0;
-        let kinds = variant::param_kinds(&self.flat, self.env_param, entry.offset, entry.offset + entry.len);
-        let features = variant::request_features(self.scene_features, options, kinds);
-        self.run(
-            Variant { kind: KernelKind::ImageGradient, features },
-            &request,
-            &[(BINDING_ADJOINT, &adjoint_buf), (BINDING_ACCUM, &accum)],
-            &mut |_, _| {},
-        )?;
-        let sums: Vec<f32> = accum.download(pixels as usize * 3)?;
-        let spp = options.spp as f32;
-        Image::from_rgb(options.width, options.height, sums.into_iter().map(|v| v / spp).collect())
     }
 
     /// The request of `options` under the key of `pass`, planned for `work` on this device.
@@ -364,23 +235,62 @@ impl Backend for Renderer {
         self.ctx.info().name.clone()
     }
 
+    /// Replaces the parameter values (same table layout) and uploads them.
+    ///
+    /// # Errors
+    /// [`Error::InvalidArgument`] if the layout differs; Vulkan failures.
     fn set_params(&mut self, params: &ParamTable) -> Result<()> {
-        self.replace_params(params)
+        crate::scene::flat::replace_params(&mut self.scene, &mut self.flat, params)?;
+        self.gpu.params.upload(&self.flat.params)
     }
 
+    /// Renders with `options` under the key of `pass`.
     fn render_pass(
         &mut self,
         options: &RenderOptions,
         pass: PassTag,
         progress: &mut dyn FnMut(u32, u32),
     ) -> Result<Image> {
-        self.render_with_key(options, pass, progress)
+        let request = self.request(options, pass, Work::Pixels { begin: 0, end: options.spp })?;
+        let _span =
+            tracing::info_span!("primal", width = options.width, height = options.height, spp = options.spp).entered();
+        let pixels = options.width * options.height;
+        let accum = Buffer::storage(&self.ctx, "accumulation image", u64::from(pixels) * 12)?;
+        accum.clear()?;
+        let features = variant::request_features(self.scene_features, options, ParamKinds::NONE);
+        let v = Variant { kind: KernelKind::Primal, features };
+        self.run(v, &request, &[(BINDING_ACCUM, &accum)], progress)?;
+        let sums: Vec<f32> = accum.download(pixels as usize * 3)?;
+        let spp = options.spp as f32;
+        Image::from_rgb(options.width, options.height, sums.into_iter().map(|v| v / spp).collect())
     }
 
+    /// Reverse-mode gradient of a loss whose adjoint image (∂loss/∂pixel) is `adjoint`: the fused
+    /// primal + replay kernel (PRB) with the gradient key, so its paths are independent of the
+    /// render that produced `adjoint` (ALGORITHMS.md §1, §3.4).
+    ///
+    /// # Errors
+    /// Option errors; [`Error::InvalidArgument`] for an adjoint image of the wrong size or
+    /// deterministic mode without 64-bit atomics; Vulkan failures; [`Error::LoopBudget`];
+    /// [`Error::Numeric`] if a replay drifted from its primal path or a fixed-point sum overflowed.
     fn backward(&mut self, options: &RenderOptions, adjoint: &Image, mode: GradMode) -> Result<Gradients> {
-        self.backward_uniform(options, adjoint, mode)
+        let request = self.request(options, PassTag::Gradient, Work::Pixels { begin: 0, end: options.spp })?;
+        crate::backend::check_size(adjoint, options, "adjoint image")?;
+        let _span = tracing::info_span!("adjoint", spp = options.spp, ?mode).entered();
+        let adjoint_buf = Buffer::storage_with(&self.ctx, "adjoint image", adjoint.as_slice())?;
+        self.reverse([KernelKind::Adjoint, KernelKind::AdjointFixed], &request, &adjoint_buf, &[], mode)
     }
 
+    /// Reverse-mode gradient with loss-aware adaptive pixel sampling (ALGORITHMS.md §6): the
+    /// N = W·H·`options.spp` samples of the fused primal + replay kernel draw their pixels from
+    /// `sampling` on the device (sample k: pixel p(k) from the alias table, path counters (p(k), k))
+    /// and carry the adjoint radiance of [`PixelSampling::sample_adjoint`] — A_p/(N·π_p) for the
+    /// unbiased importance estimator, A_p/n_p for the per-pixel mean, whose histogram n_p is drawn
+    /// on the host from the same uniforms before the launch.
+    ///
+    /// # Errors
+    /// As [`Renderer::backward`]; [`Error::InvalidArgument`] if `sampling` is for another image size
+    /// or N exceeds the 32-bit sample counter.
     fn backward_adaptive(
         &mut self,
         options: &RenderOptions,
@@ -388,11 +298,63 @@ impl Backend for Renderer {
         sampling: &PixelSampling,
         mode: GradMode,
     ) -> Result<Gradients> {
-        self.backward_with_sampling(options, adjoint, sampling, mode)
+        let count = u64::from(options.width * options.height) * u64::from(options.spp);
+        let mut request = self.request(options, PassTag::Gradient, Work::Samples { count })?;
+        crate::backend::check_size(adjoint, options, "adjoint image")?;
+        let delta = sampling.sample_adjoint(options, adjoint)?;
+        let _span =
+            tracing::info_span!("adjoint_adaptive", spp = options.spp, ?mode, estimator = sampling.estimator().name())
+                .entered();
+        // δL is in `delta` already.
+        request.globals.adjoint_scale = 1.0;
+        let table = sampling.table();
+        let entries: Vec<AliasEntry> =
+            table.prob().iter().zip(table.alias()).map(|(&prob, &alias)| AliasEntry { prob, alias }).collect();
+        let alias_buf = Buffer::storage_with(&self.ctx, "pixel alias table", &entries)?;
+        let adjoint_buf = Buffer::storage_with(&self.ctx, "adjoint image (per-sample δL)", delta.as_slice())?;
+        self.reverse(
+            [KernelKind::AdjointAdaptive, KernelKind::AdjointAdaptiveFixed],
+            &request,
+            &adjoint_buf,
+            &[(BINDING_ALIAS, &alias_buf)],
+            mode,
+        )
     }
 
+    /// Forward-mode image gradient ∂I/∂θ: per pixel and channel, the derivative of the image by
+    /// the parameter `name` (tangent 1 on each of its values, so for an RGB parameter the
+    /// derivative along scaling all three together), through the same replay with δL = 1.
+    ///
+    /// # Errors
+    /// [`Error::InvalidArgument`] for an unknown parameter; as [`Renderer::backward`].
     fn image_gradient(&mut self, options: &RenderOptions, name: &str) -> Result<Image> {
-        self.forward_image_gradient(options, name)
+        let mut request = self.request(options, PassTag::Gradient, Work::Pixels { begin: 0, end: options.spp })?;
+        let id = self.scene.params.find(name).ok_or_else(|| Error::InvalidArgument {
+            parameter: name.to_string(),
+            message: "no such parameter (see `pathgrad params SCENE`)".into(),
+        })?;
+        let entry = self.scene.params.entry(id).clone();
+        let _span = tracing::info_span!("image_gradient", param = name).entered();
+        request.globals.forward_begin = entry.offset;
+        request.globals.forward_end = entry.offset + entry.len;
+        let pixels = options.width * options.height;
+        let ones = vec![1.0f32; pixels as usize * 3];
+        let adjoint_buf = Buffer::storage_with(&self.ctx, "adjoint image (ones)", &ones)?;
+        let accum = Buffer::storage(&self.ctx, "image gradient", u64::from(pixels) * 12)?;
+        accum.clear()?;
+        // δL = 1 per sample: the adjoint scale must not divide by spp here; the mean is taken below.
+        request.globals.adjoint_scale = 1.0;
+        let kinds = variant::param_kinds(&self.flat, self.env_param, entry.offset, entry.offset + entry.len);
+        let features = variant::request_features(self.scene_features, options, kinds);
+        self.run(
+            Variant { kind: KernelKind::ImageGradient, features },
+            &request,
+            &[(BINDING_ADJOINT, &adjoint_buf), (BINDING_ACCUM, &accum)],
+            &mut |_, _| {},
+        )?;
+        let sums: Vec<f32> = accum.download(pixels as usize * 3)?;
+        let spp = options.spp as f32;
+        Image::from_rgb(options.width, options.height, sums.into_iter().map(|v| v / spp).collect())
     }
 
     fn param_kinds(&self, ids: &[crate::params::ParamId]) -> ParamKinds {

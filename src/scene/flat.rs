@@ -28,6 +28,27 @@ pub struct FlatScene {
     pub params: Vec<f32>,
 }
 
+/// Gives `scene` and its flattened twin `flat` the values of `params`, which must have the scene
+/// table's layout (what both backends' `set_params` do before the GPU uploads).
+///
+/// # Errors
+/// [`crate::Error::InvalidArgument`] if the layout differs.
+pub(crate) fn replace_params(
+    scene: &mut Scene,
+    flat: &mut FlatScene,
+    params: &crate::params::ParamTable,
+) -> Result<()> {
+    if params.entries() != scene.params.entries() {
+        return Err(crate::Error::InvalidArgument {
+            parameter: "params".into(),
+            message: "the table's layout differs from the scene's".into(),
+        });
+    }
+    scene.params = params.clone();
+    flat.params = params.values().to_vec();
+    Ok(())
+}
+
 impl FlatScene {
     /// Flattens and validates `scene` and builds its BVH.
     ///
