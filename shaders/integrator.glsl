@@ -55,8 +55,9 @@ float hit_weight(bool diff, bool prev_nee, float pdf_f, float pdf_e, float prev_
     return 1.0 / (1.0 + prev_sum * pdf_e / pdf_f);
 }
 
-vec4 draw_block(uint pixel, uint sample_index, uint vertex, uint block) {
-    return uniform4(uvec2(globals.key0, globals.key1), pixel, sample_index, vertex, STREAM_MAIN, block, 0u);
+// Block `block` of the main stream of a path's vertex, under its view's key word `key1`.
+vec4 draw_block(uint key1, uint pixel, uint sample_index, uint vertex, uint block) {
+    return uniform4(uvec2(globals.key0, key1), pixel, sample_index, vertex, STREAM_MAIN, block, 0u);
 }
 
 // Whether this kernel replays paths at all.
@@ -68,7 +69,9 @@ struct PathState {
     vec3 throughput;   // β (ALGORITHMS.md §3.1)
     vec3 radiance;     // L gathered so far (adjoint: the suffix still to arrive)
     vec3 adj;          // δL, the adjoint radiance (adjoint mode)
-    uint pixel;        // row-major pixel index
+    uint view;         // index of the request's view
+    uint key1;         // the view's Philox key word 1
+    uint pixel;        // row-major pixel index within the view
     uint sample_index;
     uint vertex;       // index of the vertex the next step finds, from 1
     float prev_pdf_f;  // density with which the previous vertex sampled ray.dir
@@ -80,19 +83,22 @@ struct PathState {
     bool adjoint;      // this is the replay of the path (adjoint mode)
 };
 
-// The camera ray of `pixel` for sample `sample_index`: a primal path, or (adjoint) its replay from
-// the path's radiance `radiance_total` with adjoint radiance `adj_radiance`.
-PathState path_begin(uint pixel, uint sample_index, bool adjoint, vec3 adj_radiance, vec3 radiance_total) {
-    vec4 u_cam = draw_block(pixel, sample_index, 0u, DIM_PIXEL_JITTER / 4u);
+// The camera ray of `pixel` of view `view` for sample `sample_index`: a primal path, or (adjoint)
+// its replay from the path's radiance `radiance_total` with adjoint radiance `adj_radiance`.
+PathState path_begin(uint view, uint pixel, uint sample_index, bool adjoint, vec3 adj_radiance, vec3 radiance_total) {
+    ViewCamera cam = views[view];
+    vec4 u_cam = draw_block(cam.key1, pixel, sample_index, 0u, DIM_PIXEL_JITTER / 4u);
     uint px = pixel % globals.width;
     uint py = pixel / globals.width;
     float sx = 2.0 * (float(px) + u_cam.x) / float(globals.width) - 1.0;
     float sy = 1.0 - 2.0 * (float(py) + u_cam.y) / float(globals.height);
     PathState st;
-    st.ray = make_ray(globals.cam_origin, normalize(globals.cam_forward + sx * globals.cam_right + sy * globals.cam_up));
+    st.ray = make_ray(cam.origin, normalize(cam.forward + sx * cam.right + sy * cam.up));
     st.throughput = vec3(1.0);
     st.radiance = adjoint ? radiance_total : vec3(0.0);
     st.adj = adj_radiance;
+    st.view = view;
+    st.key1 = cam.key1;
     st.pixel = pixel;
     st.sample_index = sample_index;
     st.vertex = 1u;
@@ -160,7 +166,7 @@ bool path_step(inout PathState st) {
 
             // ---- emitter sampling ----
             if (nee) {
-                vec4 u_em = draw_block(st.pixel, st.sample_index, vertex, DIM_EMITTER_SELECT / 4u);
+                vec4 u_em = draw_block(st.key1, st.pixel, st.sample_index, vertex, DIM_EMITTER_SELECT / 4u);
                 EmitterSample es = sample_emitter(u_em[DIM_EMITTER_SELECT % 4u], vec2(u_em[DIM_EMITTER_POS % 4u], u_em[DIM_EMITTER_POS % 4u + 1u]));
                 if (es.valid) {
                     vec3 wl;
@@ -205,7 +211,7 @@ bool path_step(inout PathState st) {
             }
 
             // ---- BSDF or differential sampling ----
-            vec4 u_bs = draw_block(st.pixel, st.sample_index, vertex, DIM_LOBE / 4u);
+            vec4 u_bs = draw_block(st.key1, st.pixel, st.sample_index, vertex, DIM_LOBE / 4u);
             float u_lobe = u_bs[DIM_LOBE % 4u];
             vec2 u_dir = vec2(u_bs[DIM_DIRECTION % 4u], u_bs[DIM_DIRECTION % 4u + 1u]);
             bool use_dx = capable && !st.dx_taken && u_bs[DIM_TECHNIQUE % 4u] < globals.diff_q;
@@ -213,7 +219,7 @@ bool path_step(inout PathState st) {
             float pdf_f;
             float pdf_d = 0.0;
             if (use_dx) {
-                float u_sign = draw_block(st.pixel, st.sample_index, vertex, DIM_DIFF_SIGN / 4u)[DIM_DIFF_SIGN % 4u];
+                float u_sign = draw_block(st.key1, st.pixel, st.sample_index, vertex, DIM_DIFF_SIGN / 4u)[DIM_DIFF_SIGN % 4u];
                 bs = bsdf_sample_diff(bsdf, wi, u_sign, u_lobe, u_dir);
                 pdf_d = bs.pdf;
                 pdf_f = bs.valid ? bsdf_pdf(bsdf, wi, bs.wo) : 0.0;
@@ -248,7 +254,7 @@ bool path_step(inout PathState st) {
                 // ---- Russian roulette ----
                 // vertex - 1 >= rr_depth (ALGORITHMS.md §3.1), written without the subtraction.
                 if (!ended && vertex > globals.rr_depth) {
-                    float u_rr = draw_block(st.pixel, st.sample_index, vertex, DIM_ROULETTE / 4u)[DIM_ROULETTE % 4u];
+                    float u_rr = draw_block(st.key1, st.pixel, st.sample_index, vertex, DIM_ROULETTE / 4u)[DIM_ROULETTE % 4u];
                     float p_rr = min(max_component(st.throughput), 0.95);
                     if (!(u_rr < p_rr)) ended = true; else st.throughput /= p_rr;
                 }

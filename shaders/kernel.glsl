@@ -3,11 +3,12 @@
 //
 // Work comes in items taken from a counter (`work_next`), one lane at a time, so no lane or
 // thread idles while another has work left (lavapipe's thread pool splits a dispatch in fixed
-// halves; GPUs retire lanes unevenly). An item is one pixel and `sample_count` consecutive
-// samples from `sample_begin` — pixels walk the image in TILE_SIZE² tiles, so a SIMD batch traces
-// neighbouring pixels — or, with PIXEL_SELECT = 1 (adaptive pixel sampling, ALGORITHMS.md §6),
-// one global sample k = sample_begin + item whose pixel p(k) is drawn from the alias table and
-// whose path uses k as its sample index. A lane starts its next path in the same loop iteration
+// halves; GPUs retire lanes unevenly). An item is one pixel of one view and `sample_count`
+// consecutive samples from `sample_begin` — the views one after another, pixels walking each in
+// TILE_SIZE² tiles, so a SIMD batch traces neighbouring pixels — or, with PIXEL_SELECT = 1
+// (adaptive pixel sampling, ALGORITHMS.md §6), one global sample k = sample_begin + item whose
+// (view, pixel) is drawn from the alias table over every view's pixels and whose path uses k as
+// its sample index. The image and adjoint buffers hold the views' pixels one view after another. A lane starts its next path in the same loop iteration
 // in which its current one ends (path regeneration), so a batch no longer waits for its longest
 // path. Each item is traced by one lane in sample order and written only by it, so the result is
 // bitwise the same whichever lane takes it: the same seed gives the same image.
@@ -43,13 +44,20 @@ layout(set = 0, binding = BINDING_WORK, scalar) coherent buffer WorkBuf { uint w
 PUSH_KernelPush;  // sample_begin, sample_count, item_count, lane_items (src/contract/structs.rs)
 
 
-// The pixel (row-major) of item `item`, false for a tile position outside the image.
-bool item_pixel(uint item, out uint pixel) {
+// The view and pixel (row-major within the view) of item `item`, false for a tile position
+// outside the image.
+bool item_pixel(uint item, out uint view, out uint pixel) {
+    uint pixels = globals.width * globals.height;
 #if PIXEL_SELECT
-    pixel = select_pixel(uvec2(globals.key0, globals.key1), globals.width * globals.height, sample_begin + item);
+    uint drawn = select_pixel(uvec2(globals.key0, globals.key1), globals.view_count * pixels, sample_begin + item);
+    view = drawn / pixels;
+    pixel = drawn % pixels;
     return true;
 #else
     uint tiles_x = (globals.width + TILE_SIZE - 1u) / TILE_SIZE;
+    uint per_view = tiles_x * ((globals.height + TILE_SIZE - 1u) / TILE_SIZE) * TILE_SIZE * TILE_SIZE;
+    view = item / per_view;
+    item %= per_view;
     uint tile = item / (TILE_SIZE * TILE_SIZE);
     uint within = item % (TILE_SIZE * TILE_SIZE);
     uint x = (tile % tiles_x) * TILE_SIZE + within % TILE_SIZE;
@@ -78,8 +86,8 @@ void main() {
             uint item = atomicAdd(work_next, 1u);
             if (item >= item_count) { finished = true; break; }
             taken++;
-            uint pixel;
-            if (!item_pixel(item, pixel)) continue;
+            uint view, pixel;
+            if (!item_pixel(item, view, pixel)) continue;
 #if PIXEL_SELECT
             sample_index = sample_begin + item;
 #else
@@ -87,16 +95,18 @@ void main() {
 #endif
             samples_left = sample_count;
             sum = vec3(0.0);
-            st = path_begin(pixel, sample_index, false, vec3(0.0), vec3(0.0));
+            st = path_begin(view, pixel, sample_index, false, vec3(0.0), vec3(0.0));
             in_flight = true;
         }
         if (!path_step(st)) continue;
+        uint view = st.view;
         uint pixel = st.pixel;
+        uint at = 3u * (view * globals.width * globals.height + pixel);  // in the image buffers
 #if ADJOINT_KERNEL
         if (!st.adjoint) {
             total = st.radiance;
-            vec3 adj = vec3(adjoint_image[3u * pixel], adjoint_image[3u * pixel + 1u], adjoint_image[3u * pixel + 2u]) * globals.adjoint_scale;
-            st = path_begin(pixel, sample_index, true, adj, total);
+            vec3 adj = vec3(adjoint_image[at], adjoint_image[at + 1u], adjoint_image[at + 2u]) * globals.adjoint_scale;
+            st = path_begin(view, pixel, sample_index, true, adj, total);
             continue;
         }
         if (any(greaterThan(abs(st.radiance), REPLAY_RESIDUAL_TOLERANCE * (abs(total) + vec3(1e-6))))) raise_status(STATUS_REPLAY_RESIDUAL);
@@ -110,14 +120,14 @@ void main() {
         samples_left--;
         if (samples_left > 0u) {
             sample_index++;
-            st = path_begin(pixel, sample_index, false, vec3(0.0), vec3(0.0));
+            st = path_begin(view, pixel, sample_index, false, vec3(0.0), vec3(0.0));
             continue;
         }
         in_flight = false;
 #if GRAD_MODE == GRAD_MODE_NONE || GRAD_MODE == GRAD_MODE_FORWARD
-        accum[3u * pixel] += sum.x;
-        accum[3u * pixel + 1u] += sum.y;
-        accum[3u * pixel + 2u] += sum.z;
+        accum[at] += sum.x;
+        accum[at + 1u] += sum.y;
+        accum[at + 2u] += sum.z;
 #endif
     }
     if (!finished) raise_status(STATUS_LOOP_BUDGET);

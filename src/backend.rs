@@ -30,7 +30,7 @@ use crate::adaptive::{AdaptiveOptions, PixelSampling};
 use crate::error::{Error, Result};
 use crate::gpu::renderer::GradMode;
 use crate::image::Image;
-use crate::integrator::{ParamKinds, RenderOptions};
+use crate::integrator::{ParamKinds, RenderOptions, View};
 use crate::loss::{Loss, loss_and_adjoint};
 use crate::params::{Gradients, ParamId, ParamTable};
 use crate::rng::PassTag;
@@ -50,32 +50,45 @@ pub trait Backend {
     /// [`Error::InvalidArgument`] if the layout differs; backend failures.
     fn set_params(&mut self, params: &ParamTable) -> Result<()>;
 
-    /// Renders with `options` under the key of `pass` (primal for images and pass 1, reference
-    /// for targets), calling `progress(samples_done, spp)` as it goes.
+    /// Renders `views` (at least one) with `options` under the key of `pass` (primal for images
+    /// and pass 1, reference for targets), all in one pass over the device: one image per view.
+    /// `progress(samples_done, spp)` hears how far it is.
     ///
     /// # Errors
-    /// Option errors; backend failures.
-    fn render_pass(
+    /// Option errors, no views; backend failures.
+    fn render_views(
         &mut self,
         options: &RenderOptions,
+        views: &[View],
         pass: PassTag,
         progress: &mut dyn FnMut(u32, u32),
-    ) -> Result<Image>;
+    ) -> Result<Vec<Image>>;
 
-    /// Reverse-mode gradient of a loss whose adjoint image (∂loss/∂pixel) is `adjoint`.
+    /// Reverse-mode gradient of Σ_v ⟨A_v, I_v⟩ over `views`, where `adjoints[v]` is A_v
+    /// (∂loss/∂pixel of view v's image): every view's paths in one pass, into one gradient.
     ///
     /// # Errors
-    /// Option errors, an adjoint of the wrong size, a mode the backend cannot do; backend failures.
-    fn backward(&mut self, options: &RenderOptions, adjoint: &Image, mode: GradMode) -> Result<Gradients>;
-
-    /// Reverse-mode gradient with loss-aware adaptive pixel sampling drawn from `sampling`.
-    ///
-    /// # Errors
-    /// As [`Backend::backward`]; a sampling of another size.
-    fn backward_adaptive(
+    /// Option errors, an adjoint of the wrong size or count, a mode the backend cannot do;
+    /// backend failures.
+    fn backward_views(
         &mut self,
         options: &RenderOptions,
-        adjoint: &Image,
+        views: &[View],
+        adjoints: &[Image],
+        mode: GradMode,
+    ) -> Result<Gradients>;
+
+    /// [`Backend::backward_views`] with loss-aware adaptive pixel sampling over every view's
+    /// pixels: `sampling` is for the views' adjoint images stacked top to bottom
+    /// ([`Image::stack`]); W·H·spp samples per view are drawn in all.
+    ///
+    /// # Errors
+    /// As [`Backend::backward_views`]; a sampling of another size.
+    fn backward_adaptive_views(
+        &mut self,
+        options: &RenderOptions,
+        views: &[View],
+        adjoints: &[Image],
         sampling: &PixelSampling,
         mode: GradMode,
     ) -> Result<Gradients>;
@@ -89,6 +102,46 @@ pub trait Backend {
     /// # Errors
     /// An unknown parameter; as [`Backend::backward`].
     fn image_gradient(&mut self, options: &RenderOptions, name: &str) -> Result<Image>;
+
+    /// Renders the scene's camera ([`View::current`]) with `options` under the key of `pass`.
+    ///
+    /// # Errors
+    /// As [`Backend::render_views`].
+    fn render_pass(
+        &mut self,
+        options: &RenderOptions,
+        pass: PassTag,
+        progress: &mut dyn FnMut(u32, u32),
+    ) -> Result<Image> {
+        let view = View::current(self.scene());
+        Ok(self.render_views(options, &[view], pass, progress)?.remove(0))
+    }
+
+    /// Reverse-mode gradient of a loss whose adjoint image (∂loss/∂pixel) of the scene's camera
+    /// is `adjoint`.
+    ///
+    /// # Errors
+    /// As [`Backend::backward_views`].
+    fn backward(&mut self, options: &RenderOptions, adjoint: &Image, mode: GradMode) -> Result<Gradients> {
+        let view = View::current(self.scene());
+        self.backward_views(options, &[view], std::slice::from_ref(adjoint), mode)
+    }
+
+    /// Reverse-mode gradient of the scene's camera with adaptive pixel sampling drawn from
+    /// `sampling`.
+    ///
+    /// # Errors
+    /// As [`Backend::backward_adaptive_views`].
+    fn backward_adaptive(
+        &mut self,
+        options: &RenderOptions,
+        adjoint: &Image,
+        sampling: &PixelSampling,
+        mode: GradMode,
+    ) -> Result<Gradients> {
+        let view = View::current(self.scene());
+        self.backward_adaptive_views(options, &[view], std::slice::from_ref(adjoint), sampling, mode)
+    }
 
     /// Renders with `options` (the primal key).
     ///
@@ -121,11 +174,38 @@ pub trait Backend {
         target: &Image,
         loss: Loss,
     ) -> Result<(f64, Image)> {
+        let view = View::current(self.scene());
+        let (mut losses, mut adjoints) =
+            self.loss_images(options, spp_primal, &[view], std::slice::from_ref(target), loss)?;
+        Ok((losses.remove(0), adjoints.remove(0)))
+    }
+
+    /// Pass 1 of a multi-view step: renders every view of `views` with
+    /// [`RenderOptions::loss_pass`] in one pass and returns each view's loss against its target
+    /// and its adjoint image ∂loss_v/∂I_v.
+    ///
+    /// # Errors
+    /// As [`Backend::loss_image`]; a number of targets other than of views.
+    fn loss_images(
+        &mut self,
+        options: &RenderOptions,
+        spp_primal: u32,
+        views: &[View],
+        targets: &[Image],
+        loss: Loss,
+    ) -> Result<(Vec<f64>, Vec<Image>)> {
         let pass1 = options.loss_pass(spp_primal)?;
         options.validate()?;
-        check_size(target, options, "target image")?;
-        let image = self.render(&pass1)?;
-        loss_and_adjoint(&image, target, loss)
+        check_views(views, targets, options, "target image")?;
+        let images = self.render_views(&pass1, views, PassTag::Primal, &mut |_, _| {})?;
+        let mut losses = Vec::with_capacity(views.len());
+        let mut adjoints = Vec::with_capacity(views.len());
+        for (image, target) in images.iter().zip(targets) {
+            let (value, adjoint) = loss_and_adjoint(image, target, loss)?;
+            losses.push(value);
+            adjoints.push(adjoint);
+        }
+        Ok((losses, adjoints))
     }
 
     /// The loss of a render against `target` and its gradient: pass 1 ([`Backend::loss_image`])
@@ -142,8 +222,30 @@ pub trait Backend {
         loss: Loss,
         mode: GradMode,
     ) -> Result<(f64, Gradients)> {
-        let (value, adjoint) = self.loss_image(options, spp_primal, target, loss)?;
-        Ok((value, self.backward(options, &adjoint, mode)?))
+        let view = View::current(self.scene());
+        self.loss_and_gradient_views(options, spp_primal, &[view], std::slice::from_ref(target), loss, mode)
+    }
+
+    /// The mean of the views' losses, each view against its target, and its gradient: pass 1 of
+    /// every view in one pass, then one fused gradient pass over every view
+    /// ([`Backend::backward_views`]) divided by the number of views as [`Gradients::mean`]
+    /// divides, so that it equals the mean of the views' single-view gradients (bit for bit in
+    /// deterministic mode, where the views' paths are the same as alone: [`View`]).
+    ///
+    /// # Errors
+    /// As [`Backend::loss_images`] and [`Backend::backward_views`].
+    fn loss_and_gradient_views(
+        &mut self,
+        options: &RenderOptions,
+        spp_primal: u32,
+        views: &[View],
+        targets: &[Image],
+        loss: Loss,
+        mode: GradMode,
+    ) -> Result<(f64, Gradients)> {
+        let (losses, adjoints) = self.loss_images(options, spp_primal, views, targets, loss)?;
+        let sum = self.backward_views(options, views, &adjoints, mode)?;
+        Ok((mean(&losses), Gradients::sum_divided(&[sum], views.len())?))
     }
 
     /// [`Backend::loss_and_gradient_split`] with `options.spp` for both passes.
@@ -175,14 +277,69 @@ pub trait Backend {
         loss: Loss,
         mode: GradMode,
     ) -> Result<(f64, Gradients)> {
-        let (value, adjoint) = self.loss_image(options, adaptive.spp_primal, target, loss)?;
-        if adjoint.as_slice().iter().all(|&a| a == 0.0) {
-            let n = self.scene().params.values().len();
-            return Ok((value, Gradients::new(&self.scene().params, vec![0.0; n])));
-        }
-        let sampling = PixelSampling::from_adjoint(&adjoint, adaptive.estimator)?;
-        Ok((value, self.backward_adaptive(options, &adjoint, &sampling, mode)?))
+        let view = View::current(self.scene());
+        self.loss_and_gradient_views_adaptive(options, adaptive, &[view], std::slice::from_ref(target), loss, mode)
     }
+
+    /// [`Backend::loss_and_gradient_views`] with adaptive pixel sampling over every view's pixels:
+    /// the weights π come from all views' adjoint images together, so views where the loss is
+    /// larger get more of the V·W·H·`options.spp` samples.
+    ///
+    /// # Errors
+    /// As [`Backend::loss_and_gradient_views`] and [`Backend::backward_adaptive_views`].
+    fn loss_and_gradient_views_adaptive(
+        &mut self,
+        options: &RenderOptions,
+        adaptive: &AdaptiveOptions,
+        views: &[View],
+        targets: &[Image],
+        loss: Loss,
+        mode: GradMode,
+    ) -> Result<(f64, Gradients)> {
+        let (losses, adjoints) = self.loss_images(options, adaptive.spp_primal, views, targets, loss)?;
+        if adjoints.iter().all(|a| a.as_slice().iter().all(|&v| v == 0.0)) {
+            let n = self.scene().params.values().len();
+            return Ok((mean(&losses), Gradients::new(&self.scene().params, vec![0.0; n])));
+        }
+        let sampling = PixelSampling::from_adjoint(&Image::stack(&adjoints)?, adaptive.estimator)?;
+        let sum = self.backward_adaptive_views(options, views, &adjoints, &sampling, mode)?;
+        Ok((mean(&losses), Gradients::sum_divided(&[sum], views.len())?))
+    }
+}
+
+/// The mean of per-view losses, summed in view order.
+fn mean(losses: &[f64]) -> f64 {
+    losses.iter().sum::<f64>() / losses.len() as f64
+}
+
+/// Refuses a bad list of views ([`check_view_list`]), or `images` (targets or adjoints) that are
+/// not one per view at the render's size.
+pub(crate) fn check_views(views: &[View], images: &[Image], options: &RenderOptions, what: &str) -> Result<()> {
+    check_view_list(views)?;
+    if images.len() != views.len() {
+        return Err(Error::InvalidArgument {
+            parameter: what.to_string(),
+            message: format!("{} given for {} views", images.len(), views.len()),
+        });
+    }
+    images.iter().try_for_each(|image| check_size(image, options, what))
+}
+
+/// Refuses an empty list of views or a stream past 2²⁴.
+pub(crate) fn check_view_list(views: &[View]) -> Result<()> {
+    if views.is_empty() {
+        return Err(Error::InvalidArgument {
+            parameter: "views".into(),
+            message: "at least one view is needed".into(),
+        });
+    }
+    if let Some(v) = views.iter().find(|v| v.stream >= 1 << 24) {
+        return Err(Error::InvalidArgument {
+            parameter: "View::stream".into(),
+            message: format!("{} is not below 2^24", v.stream),
+        });
+    }
+    Ok(())
 }
 
 /// Refuses an image whose size is not the render's.

@@ -1,11 +1,11 @@
 //! Options shared by the GPU renderer and the CPU reference: image size, samples, depth, seed.
 
-use crate::contract::{Globals, NO_PARAM, STRATEGY_BSDF, STRATEGY_DIFF};
+use crate::contract::{Globals, NO_PARAM, STRATEGY_BSDF, STRATEGY_DIFF, ViewCamera};
 use crate::error::{Error, Result};
 use crate::params::ParamId;
 use crate::rng::{PassTag, RngKey};
-use crate::scene::Scene;
 use crate::scene::flat::FlatScene;
+use crate::scene::{Camera, Scene};
 
 /// Bounce cap used when `max_depth` is unbounded: a path that survives Russian roulette this long
 /// is ended (its expected contribution beyond is negligible at any sane albedo).
@@ -179,6 +179,51 @@ pub fn check_spp_primal(spp_primal: u32) -> Result<()> {
     Ok(())
 }
 
+/// One camera a request renders, and the random-number stream of its paths
+/// ([`crate::rng::RngKey`]). A request of several views renders them all at the request's
+/// [`RenderOptions::width`] × [`RenderOptions::height`], one image each, in one submission.
+///
+/// ```
+/// use pathgrad::integrator::View;
+/// let scene = pathgrad::scene::builtin::load("cornell-box")?;
+/// let view = View::sensor(&scene, 0)?;
+/// assert_eq!(view, View::current(&scene));
+/// # Ok::<(), pathgrad::Error>(())
+/// ```
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct View {
+    /// The pinhole camera (its film size is not used: the request's size is).
+    pub camera: Camera,
+    /// The stream of its paths' keys: below 2²⁴. Sensor i uses stream i.
+    pub stream: u32,
+}
+
+impl View {
+    /// Sensor `index` of `scene`, in stream `index`.
+    ///
+    /// # Errors
+    /// [`Error::InvalidArgument`] for an index past the scene's sensors.
+    pub fn sensor(scene: &Scene, index: usize) -> Result<View> {
+        let sensor = scene.sensors.get(index).ok_or_else(|| Error::InvalidArgument {
+            parameter: "View::sensor".into(),
+            message: format!("sensor {index} does not exist: '{}' has {}", scene.source, scene.sensors.len()),
+        })?;
+        if index >= 1 << 24 {
+            return Err(Error::InvalidArgument {
+                parameter: "View::sensor".into(),
+                message: format!("sensor {index}: streams end at 2^24"),
+            });
+        }
+        Ok(View { camera: sensor.camera, stream: index as u32 })
+    }
+
+    /// The scene's camera ([`Scene::camera`]) in the stream of the sensor it was chosen from
+    /// ([`Scene::sensor`]): what single-view renders see.
+    pub fn current(scene: &Scene) -> View {
+        View { camera: scene.camera, stream: scene.sensor as u32 }
+    }
+}
+
 /// What to render.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct RenderOptions {
@@ -269,13 +314,46 @@ impl RenderOptions {
         Ok(RenderOptions { spp: spp_primal, strategy: Strategy::Bsdf, nee: true, ..*self })
     }
 
+    /// The options of `views` views stacked into one tall image, one below another (how a
+    /// multi-view request holds its images, and what adaptive sampling over all views draws from).
+    ///
+    /// # Errors
+    /// [`Error::InvalidArgument`] if the stack is too tall.
+    pub fn stacked(&self, views: usize) -> Result<RenderOptions> {
+        let height = u32::try_from(views).ok().and_then(|v| v.checked_mul(self.height)).ok_or_else(|| {
+            Error::InvalidArgument {
+                parameter: "views".into(),
+                message: format!("{views} views of height {} are too many for one request", self.height),
+            }
+        })?;
+        Ok(RenderOptions { height, ..*self })
+    }
+
     /// The Philox key of `pass` (plain renders and loss images use [`PassTag::Primal`]; the fused
     /// gradient passes [`PassTag::Gradient`], so their paths are independent of the loss image's).
     pub fn key(&self, pass: PassTag) -> RngKey {
         RngKey::new(self.seed, 0, pass)
     }
 
-    /// The per-dispatch constants for `scene` (flattened as `flat`) in `pass`.
+    /// The camera constants of `view` in `pass` (its aspect ratio is the render's, `width/height`).
+    pub fn view_camera(&self, view: &View, pass: PassTag) -> ViewCamera {
+        let c = &view.camera;
+        let forward = (c.target - c.position).normalize();
+        let right = forward.cross(c.up).normalize();
+        let up = right.cross(forward);
+        let tan_y = (c.fov_y_degrees.to_radians() * 0.5).tan();
+        let tan_x = tan_y * self.width as f32 / self.height as f32;
+        ViewCamera {
+            origin: c.position,
+            right: right * tan_x,
+            up: up * tan_y,
+            forward,
+            key1: RngKey::new(self.seed, view.stream, pass).0[1],
+        }
+    }
+
+    /// The per-dispatch constants for `scene` (flattened as `flat`) in `pass`, for one view
+    /// (`view_count` is set by the renderers for a request of several).
     pub fn globals(&self, scene: &Scene, flat: &FlatScene, pass: PassTag) -> Globals {
         let (strategy, diff_q, diff_begin, diff_end) = match self.strategy {
             Strategy::Bsdf => (STRATEGY_BSDF, 0.0, 0, 0),
@@ -284,12 +362,6 @@ impl RenderOptions {
                 (STRATEGY_DIFF, q, e.offset, e.offset + e.len)
             }
         };
-        let c = &scene.camera;
-        let forward = (c.target - c.position).normalize();
-        let right = forward.cross(c.up).normalize();
-        let up = right.cross(forward);
-        let tan_y = (c.fov_y_degrees.to_radians() * 0.5).tan();
-        let tan_x = tan_y * self.width as f32 / self.height as f32;
         let key = self.key(pass);
         Globals {
             width: self.width,
@@ -300,10 +372,7 @@ impl RenderOptions {
             rr_depth: self.rr_depth.unwrap_or(u32::MAX),
             emitter_count: flat.emitters.len() as u32,
             emitter_total_area: flat.emitter_total_area,
-            cam_origin: c.position,
-            cam_right: right * tan_x,
-            cam_up: up * tan_y,
-            cam_forward: forward,
+            view_count: 1,
             env_param: scene.environment.map_or(NO_PARAM, |p| scene.params.entry(p).offset),
             adjoint_scale: 1.0 / self.spp as f32,
             fixed_scale: FIXED_POINT_SCALE,
@@ -322,6 +391,7 @@ impl RenderOptions {
             addr_materials: glam::UVec2::ZERO,
             addr_emitters: glam::UVec2::ZERO,
             addr_params: glam::UVec2::ZERO,
+            addr_views: glam::UVec2::ZERO,
             env_select_prob: match (scene.environment.is_some(), flat.emitters.is_empty()) {
                 (false, _) => 0.0,
                 (true, true) => 1.0,

@@ -14,7 +14,7 @@ use crate::backend::Backend;
 use crate::error::{Error, Result};
 use crate::gpu::renderer::GradMode;
 use crate::image::Image;
-use crate::integrator::RenderOptions;
+use crate::integrator::{RenderOptions, View};
 use crate::loss::Loss;
 use crate::params::{Gradients, ParamId, ParamTable};
 
@@ -391,14 +391,29 @@ impl Optimization {
     /// Those of [`Backend::set_params`], [`Backend::loss_and_gradient_split`] and
     /// [`Backend::loss_and_gradient_adaptive`] (a target of the wrong size, Vulkan failures).
     pub fn gradient(&self, backend: &mut dyn Backend, target: &Image) -> Result<(f64, Gradients)> {
+        let view = View::current(backend.scene());
+        self.gradient_views(backend, &[view], std::slice::from_ref(target))
+    }
+
+    /// [`Optimization::gradient`] of the mean loss over `views`, view v against `targets[v]`:
+    /// every view in each pass of one step ([`Backend::loss_and_gradient_views`]).
+    ///
+    /// # Errors
+    /// As [`Optimization::gradient`]; targets not one per view.
+    pub fn gradient_views(
+        &self,
+        backend: &mut dyn Backend,
+        views: &[View],
+        targets: &[Image],
+    ) -> Result<(f64, Gradients)> {
         backend.set_params(&self.params)?;
         let o = &self.options;
         let render = o.at(self.iteration);
         match o.adaptive {
-            None => backend.loss_and_gradient_split(&render, o.spp_primal, target, o.loss, o.mode),
+            None => backend.loss_and_gradient_views(&render, o.spp_primal, views, targets, o.loss, o.mode),
             Some(estimator) => {
                 let adaptive = AdaptiveOptions { spp_primal: o.spp_primal, estimator };
-                backend.loss_and_gradient_adaptive(&render, &adaptive, target, o.loss, o.mode)
+                backend.loss_and_gradient_views_adaptive(&render, &adaptive, views, targets, o.loss, o.mode)
             }
         }
     }
@@ -430,6 +445,16 @@ impl Optimization {
     /// As those two.
     pub fn step(&mut self, backend: &mut dyn Backend, target: &Image) -> Result<StepReport> {
         let (loss, gradients) = self.gradient(backend, target)?;
+        self.apply(loss, &gradients)
+    }
+
+    /// One iteration over several views: [`Optimization::gradient_views`], then
+    /// [`Optimization::apply`].
+    ///
+    /// # Errors
+    /// As those two.
+    pub fn step_views(&mut self, backend: &mut dyn Backend, views: &[View], targets: &[Image]) -> Result<StepReport> {
+        let (loss, gradients) = self.gradient_views(backend, views, targets)?;
         self.apply(loss, &gradients)
     }
 }

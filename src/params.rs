@@ -173,10 +173,24 @@ pub fn glob_match(pattern: &str, name: &str) -> bool {
 }
 
 /// A gradient with the layout of a [`ParamTable`]: one value per parameter value.
+///
+/// Deterministic gradients also keep the exact sums they were rounded from (64-bit fixed point
+/// on a GPU, f64 on the CPU reference), so that [`Gradients::mean`] of several — the views of a
+/// step, the items of a batch — is exact, and equal bit for bit to the same sum taken in one pass.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Gradients {
     entries: Vec<ParamEntry>,
     values: Vec<f32>,
+    exact: Option<Exact>,
+}
+
+/// The exact sums behind a gradient's values.
+#[derive(Clone, Debug, PartialEq)]
+enum Exact {
+    /// Integer sums; a value is `sum · unit`.
+    Fixed { sums: Vec<i64>, unit: f64 },
+    /// f64 sums (the CPU reference's fixed-order sums).
+    Wide(Vec<f64>),
 }
 
 impl Gradients {
@@ -186,7 +200,19 @@ impl Gradients {
     /// If the lengths differ (an internal invariant: gradients are made by the renderers).
     pub fn new(table: &ParamTable, values: Vec<f32>) -> Gradients {
         assert_eq!(values.len(), table.values().len(), "a gradient has one value per parameter value");
-        Gradients { entries: table.entries().to_vec(), values }
+        Gradients { entries: table.entries().to_vec(), values, exact: None }
+    }
+
+    /// A gradient of fixed-point sums: value i is `sums[i] · unit`.
+    pub(crate) fn from_fixed(table: &ParamTable, sums: Vec<i64>, unit: f64) -> Gradients {
+        let values = sums.iter().map(|&v| (v as f64 * unit) as f32).collect();
+        Gradients { exact: Some(Exact::Fixed { sums, unit }), ..Gradients::new(table, values) }
+    }
+
+    /// A gradient of f64 sums.
+    pub(crate) fn from_wide(table: &ParamTable, sums: Vec<f64>) -> Gradients {
+        let values = sums.iter().map(|&v| v as f32).collect();
+        Gradients { exact: Some(Exact::Wide(sums)), ..Gradients::new(table, values) }
     }
 
     /// The gradient of the parameter called `name`.
@@ -205,6 +231,91 @@ impl Gradients {
     /// The parameter entries.
     pub fn entries(&self) -> &[ParamEntry] {
         &self.entries
+    }
+
+    /// The fixed-point sums and their unit, for a deterministic GPU gradient.
+    pub fn fixed_point(&self) -> Option<(&[i64], f64)> {
+        match &self.exact {
+            Some(Exact::Fixed { sums, unit }) => Some((sums, *unit)),
+            _ => None,
+        }
+    }
+
+    /// The mean of `parts` (one layout), summed in their order: exactly (integer or f64 sums)
+    /// when every part keeps exact sums of one kind, else in f64 from the f32 values.
+    ///
+    /// ```
+    /// use pathgrad::params::{Gradients, ParamTable};
+    /// let mut table = ParamTable::default();
+    /// table.add("w", &[0.5], (0.0, 1.0))?;
+    /// let mean = Gradients::mean(&[Gradients::new(&table, vec![1.0]), Gradients::new(&table, vec![2.0])])?;
+    /// assert_eq!(mean.values(), &[1.5]);
+    /// # Ok::<(), pathgrad::Error>(())
+    /// ```
+    ///
+    /// # Errors
+    /// [`Error::InvalidArgument`] for no parts or parts of different layouts; [`Error::Numeric`]
+    /// if a fixed-point sum overflows.
+    pub fn mean(parts: &[Gradients]) -> Result<Gradients> {
+        Gradients::sum_divided(parts, parts.len())
+    }
+
+    /// The sum of `parts` divided by `count`, as [`Gradients::mean`] takes it (the mean of the
+    /// `count` views a multi-view pass summed).
+    pub(crate) fn sum_divided(parts: &[Gradients], count: usize) -> Result<Gradients> {
+        let bad = |m: String| Err(Error::InvalidArgument { parameter: "gradients".into(), message: m });
+        let Some(first) = parts.first() else { return bad("a mean of no gradients".into()) };
+        if let Some(other) = parts.iter().find(|g| g.entries != first.entries) {
+            return bad(format!(
+                "gradients of different parameter tables ({} and {} entries)",
+                first.entries.len(),
+                other.entries.len()
+            ));
+        }
+        let n = first.values.len();
+        let divisor = count as f64;
+        let fixed: Option<Vec<(&[i64], f64)>> = parts.iter().map(Gradients::fixed_point).collect();
+        if let Some(fixed) = fixed
+            && fixed.iter().all(|&(_, unit)| unit == fixed[0].1)
+        {
+            let mut sums = vec![0i64; n];
+            for (part, _) in &fixed {
+                for (s, &v) in sums.iter_mut().zip(part.iter()) {
+                    *s = s.checked_add(v).ok_or_else(|| Error::Numeric {
+                        kernel: "gradient mean",
+                        message: "a fixed-point gradient sum overflowed 64 bits".into(),
+                    })?;
+                }
+            }
+            let unit = fixed[0].1 / divisor;
+            let values = sums.iter().map(|&v| (v as f64 * unit) as f32).collect();
+            return Ok(Gradients { entries: first.entries.clone(), values, exact: Some(Exact::Fixed { sums, unit }) });
+        }
+        let wide: Option<Vec<&Vec<f64>>> = parts
+            .iter()
+            .map(|g| match &g.exact {
+                Some(Exact::Wide(v)) => Some(v),
+                _ => None,
+            })
+            .collect();
+        let mut sums = vec![0f64; n];
+        match wide {
+            Some(wide) => {
+                for part in wide {
+                    sums.iter_mut().zip(part).for_each(|(s, v)| *s += v);
+                }
+                let means: Vec<f64> = sums.iter().map(|s| s / divisor).collect();
+                let values = means.iter().map(|&v| v as f32).collect();
+                Ok(Gradients { entries: first.entries.clone(), values, exact: Some(Exact::Wide(means)) })
+            }
+            None => {
+                for part in parts {
+                    sums.iter_mut().zip(&part.values).for_each(|(s, &v)| *s += f64::from(v));
+                }
+                let values = sums.iter().map(|s| (s / divisor) as f32).collect();
+                Ok(Gradients { entries: first.entries.clone(), values, exact: None })
+            }
+        }
     }
 }
 

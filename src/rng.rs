@@ -74,14 +74,17 @@ pub enum Stream {
     Pixel = crate::contract::STREAM_PIXEL,
 }
 
-/// The Philox key of one pass: `key0 = seed`, `key1 = (iteration << 8) | pass_tag`.
+/// The Philox key of one pass: `key0 = seed`, `key1 = (stream << 8) | pass_tag`. The 24-bit
+/// stream separates the paths of a request's views: a view of sensor i uses stream i
+/// ([`crate::integrator::View`]), so each sensor's paths are the same whichever views are
+/// rendered with it, and independent of every other sensor's.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct RngKey(pub [u32; 2]);
 
 impl RngKey {
-    /// The key for `seed`, optimisation `iteration` and `pass`.
-    pub fn new(seed: u32, iteration: u32, pass: PassTag) -> Self {
-        RngKey([seed, (iteration << 8) | pass as u32])
+    /// The key for `seed`, `stream` (below 2²⁴) and `pass`.
+    pub fn new(seed: u32, stream: u32, pass: PassTag) -> Self {
+        RngKey([seed, (stream << 8) | pass as u32])
     }
 }
 

@@ -21,12 +21,14 @@ layout(buffer_reference, scalar, buffer_reference_align = 4) readonly buffer Sha
 layout(buffer_reference, scalar, buffer_reference_align = 4) readonly buffer MaterialArray { Material v[]; };
 layout(buffer_reference, scalar, buffer_reference_align = 4) readonly buffer EmitterArray { EmitterTri v[]; };
 layout(buffer_reference, scalar, buffer_reference_align = 4) readonly buffer FloatArray { float v[]; };
+layout(buffer_reference, scalar, buffer_reference_align = 4) readonly buffer ViewArray { ViewCamera v[]; };
 #define tris (TriArray(globals.addr_tris).v)
 #define prim_ids (UintArray(globals.addr_prim_ids).v)
 #define shading (ShadingArray(globals.addr_shading).v)
 #define materials (MaterialArray(globals.addr_materials).v)
 #define emitters (EmitterArray(globals.addr_emitters).v)
 #define params (FloatArray(globals.addr_params).v)
+#define views (ViewArray(globals.addr_views).v)
 layout(set = 0, binding = BINDING_STATUS, scalar) coherent buffer StatusBuf { uint status_flags; };
 
 // Raises a status bit that the host checks after the dispatch.

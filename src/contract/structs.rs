@@ -7,7 +7,7 @@
 // offsets agree by construction (STYLE.md §3). Field types: u32, f32, Vec2, Vec3, UVec2 only.
 
 contract_structs! {
-    /// Per-dispatch constants: image size, random-number key, path options, camera.
+    /// Per-dispatch constants: image size, random-number key, path options, scene addresses.
     struct Globals {
         /// Image width in pixels.
         width: u32,
@@ -15,7 +15,8 @@ contract_structs! {
         height: u32,
         /// Philox key word 0: the user seed.
         key0: u32,
-        /// Philox key word 1: `(iteration << 8) | pass_tag`.
+        /// Philox key word 1 of the pass in stream 0 (`pass_tag`): the key of adaptive pixel
+        /// selection; paths use their view's `ViewCamera::key1`.
         key1: u32,
         /// Maximum number of surface interactions; `u32::MAX` is unbounded.
         max_depth: u32,
@@ -25,14 +26,8 @@ contract_structs! {
         emitter_count: u32,
         /// Total area of the emissive triangles (area-proportional emitter sampling).
         emitter_total_area: f32,
-        /// Pinhole position.
-        cam_origin: Vec3,
-        /// Camera right axis scaled by tan(horizontal half field of view).
-        cam_right: Vec3,
-        /// Camera up axis scaled by tan(vertical half field of view).
-        cam_up: Vec3,
-        /// Camera viewing direction (unit).
-        cam_forward: Vec3,
+        /// Number of views (cameras) the request renders; each has a `ViewCamera` at `addr_views`.
+        view_count: u32,
         /// Parameter offset of the constant environment radiance, or `NO_PARAM`.
         env_param: u32,
         /// Probability that next-event estimation samples the environment rather than area emitters.
@@ -72,6 +67,23 @@ contract_structs! {
         addr_emitters: UVec2,
         /// Device address of the parameter values.
         addr_params: UVec2,
+        /// Device address of the request's `ViewCamera`s.
+        addr_views: UVec2,
+    }
+
+    /// One view of a request: its pinhole camera and the key word of its paths. The image (and
+    /// adjoint image) buffers hold the views' pixels one view after another.
+    struct ViewCamera {
+        /// Pinhole position.
+        origin: Vec3,
+        /// Right axis scaled by tan(horizontal half field of view).
+        right: Vec3,
+        /// Up axis scaled by tan(vertical half field of view).
+        up: Vec3,
+        /// Viewing direction (unit).
+        forward: Vec3,
+        /// Philox key word 1 of the view's paths: `(stream << 8) | pass_tag`.
+        key1: u32,
     }
 
     /// One BVH2 node holding both children's boxes, so a traversal step fetches them at once.

@@ -15,15 +15,15 @@ use glam::Vec3;
 use rayon::prelude::*;
 
 use crate::adaptive::{PixelSampling, select_pixel};
-use crate::contract::Globals;
+use crate::contract::{Globals, ViewCamera};
 use crate::cpu::path::GradSink;
 use crate::rng::{PassTag, RngKey};
 
-use crate::backend::{Backend, check_size};
+use crate::backend::{Backend, check_size, check_view_list, check_views};
 use crate::error::Result;
 use crate::gpu::renderer::GradMode;
 use crate::image::Image;
-use crate::integrator::RenderOptions;
+use crate::integrator::{RenderOptions, View};
 use crate::params::{Gradients, ParamTable};
 use crate::scene::Scene;
 use crate::scene::flat::FlatScene;
@@ -61,7 +61,7 @@ impl Reference {
     }
 
     fn gradients(&self, sums: Vec<f64>) -> Gradients {
-        Gradients::new(&self.scene.params, sums.into_iter().map(|g| g as f32).collect())
+        Gradients::from_wide(&self.scene.params, sums)
     }
 }
 
@@ -78,32 +78,48 @@ impl Backend for Reference {
         crate::scene::flat::replace_params(&mut self.scene, &mut self.flat, params)
     }
 
-    fn render_pass(
+    fn render_views(
         &mut self,
         options: &RenderOptions,
+        views: &[View],
         pass: PassTag,
         progress: &mut dyn FnMut(u32, u32),
-    ) -> Result<Image> {
+    ) -> Result<Vec<Image>> {
         options.validate()?;
-        let image = render_flat(&self.scene, &self.flat, options, pass)?;
+        check_view_list(views)?;
+        let images = views.iter().map(|v| render_flat(&self.scene, &self.flat, options, v, pass)).collect();
         progress(options.spp, options.spp);
-        Ok(image)
+        images
     }
 
-    fn backward(&mut self, options: &RenderOptions, adjoint: &Image, _mode: GradMode) -> Result<Gradients> {
-        options.validate()?;
-        backward_flat(&self.scene, &self.flat, options, adjoint).map(|g| self.gradients(g))
-    }
-
-    fn backward_adaptive(
+    fn backward_views(
         &mut self,
         options: &RenderOptions,
-        adjoint: &Image,
+        views: &[View],
+        adjoints: &[Image],
+        _mode: GradMode,
+    ) -> Result<Gradients> {
+        options.validate()?;
+        check_views(views, adjoints, options, "adjoint image")?;
+        let mut sums = vec![0.0f64; self.flat.params.len()];
+        for (view, adjoint) in views.iter().zip(adjoints) {
+            sums = add_vectors(sums, backward_flat(&self.scene, &self.flat, options, view, adjoint)?);
+        }
+        Ok(self.gradients(sums))
+    }
+
+    fn backward_adaptive_views(
+        &mut self,
+        options: &RenderOptions,
+        views: &[View],
+        adjoints: &[Image],
         sampling: &PixelSampling,
         _mode: GradMode,
     ) -> Result<Gradients> {
         options.validate()?;
-        backward_adaptive_flat(&self.scene, &self.flat, options, adjoint, sampling).map(|g| self.gradients(g))
+        check_views(views, adjoints, options, "adjoint image")?;
+        backward_adaptive_flat(&self.scene, &self.flat, options, views, &Image::stack(adjoints)?, sampling)
+            .map(|g| self.gradients(g))
     }
 
     fn image_gradient(&mut self, options: &RenderOptions, name: &str) -> Result<Image> {
@@ -145,11 +161,12 @@ fn fixed_order_sum(count: u32, n: usize, term: impl Fn(u32, &mut [f64]) + Sync) 
 /// Scene validation and option errors.
 pub fn render(scene: &Scene, options: &RenderOptions) -> Result<Image> {
     options.validate()?;
-    render_flat(scene, &FlatScene::new(scene)?, options, PassTag::Primal)
+    render_flat(scene, &FlatScene::new(scene)?, options, &View::current(scene), PassTag::Primal)
 }
 
-fn render_flat(scene: &Scene, flat: &FlatScene, options: &RenderOptions, pass: PassTag) -> Result<Image> {
+fn render_flat(scene: &Scene, flat: &FlatScene, options: &RenderOptions, view: &View, pass: PassTag) -> Result<Image> {
     let globals = options.globals(scene, flat, pass);
+    let camera = options.view_camera(view, pass);
     let pixels = (options.width * options.height) as usize;
     let data: Vec<f32> = (0..pixels)
         .into_par_iter()
@@ -159,6 +176,7 @@ fn render_flat(scene: &Scene, flat: &FlatScene, options: &RenderOptions, pass: P
                 sum += path::trace_path::<false>(
                     flat,
                     &globals,
+                    &camera,
                     pixel as u32,
                     s,
                     Vec3::ZERO,
@@ -179,17 +197,24 @@ fn render_flat(scene: &Scene, flat: &FlatScene, options: &RenderOptions, pass: P
 /// Scene and option errors; an adjoint image of the wrong size.
 pub fn backward(scene: &Scene, options: &RenderOptions, adjoint: &Image) -> Result<Vec<f64>> {
     options.validate()?;
-    backward_flat(scene, &FlatScene::new(scene)?, options, adjoint)
+    backward_flat(scene, &FlatScene::new(scene)?, options, &View::current(scene), adjoint)
 }
 
-fn backward_flat(scene: &Scene, flat: &FlatScene, options: &RenderOptions, adjoint: &Image) -> Result<Vec<f64>> {
+fn backward_flat(
+    scene: &Scene,
+    flat: &FlatScene,
+    options: &RenderOptions,
+    view: &View,
+    adjoint: &Image,
+) -> Result<Vec<f64>> {
     check_size(adjoint, options, "adjoint image")?;
     let globals = options.globals(scene, flat, PassTag::Gradient);
+    let camera = options.view_camera(view, PassTag::Gradient);
     let drifted = std::sync::atomic::AtomicUsize::new(0);
     let grads = fixed_order_sum(options.width * options.height, flat.params.len(), |pixel, grads| {
         let adj = adjoint_at(adjoint, pixel) * globals.adjoint_scale;
         for s in 0..options.spp {
-            replay_sample(flat, &globals, pixel, s, adj, grads, &drifted);
+            replay_sample(flat, &globals, &camera, pixel, s, adj, grads, &drifted);
         }
     });
     check_replays(drifted.into_inner())?;
@@ -211,27 +236,35 @@ pub fn backward_adaptive(
     sampling: &PixelSampling,
 ) -> Result<Vec<f64>> {
     options.validate()?;
-    backward_adaptive_flat(scene, &FlatScene::new(scene)?, options, adjoint, sampling)
+    check_size(adjoint, options, "adjoint image")?;
+    backward_adaptive_flat(scene, &FlatScene::new(scene)?, options, &[View::current(scene)], adjoint, sampling)
 }
 
+/// Adaptive samples over `views`, whose adjoint images are stacked in `adjoint`: a drawn pixel g
+/// of the stack is pixel g mod W·H of view ⌊g / W·H⌋.
 fn backward_adaptive_flat(
     scene: &Scene,
     flat: &FlatScene,
     options: &RenderOptions,
+    views: &[View],
     adjoint: &Image,
     sampling: &PixelSampling,
 ) -> Result<Vec<f64>> {
-    let delta = sampling.sample_adjoint(options, adjoint)?;
-    let samples = sampling.sample_count(options)?;
+    let stacked = options.stacked(views.len())?;
+    let delta = sampling.sample_adjoint(&stacked, adjoint)?;
+    let samples = sampling.sample_count(&stacked)?;
+    let cameras: Vec<ViewCamera> = views.iter().map(|v| options.view_camera(v, PassTag::Gradient)).collect();
+    let pixels = options.width * options.height;
     let mut globals = options.globals(scene, flat, PassTag::Gradient);
     // δL is in `delta` already (the kernel's adjoint_scale is 1 too).
     globals.adjoint_scale = 1.0;
     let key = RngKey([globals.key0, globals.key1]);
     let drifted = std::sync::atomic::AtomicUsize::new(0);
     let grads = fixed_order_sum(samples, flat.params.len(), |k, grads| {
-        let pixel = select_pixel(sampling.table(), key, k);
-        let adj = adjoint_at(&delta, pixel) * globals.adjoint_scale;
-        replay_sample(flat, &globals, pixel, k, adj, grads, &drifted);
+        let drawn = select_pixel(sampling.table(), key, k);
+        let adj = adjoint_at(&delta, drawn) * globals.adjoint_scale;
+        let camera = &cameras[(drawn / pixels) as usize];
+        replay_sample(flat, &globals, camera, drawn % pixels, k, adj, grads, &drifted);
     });
     check_replays(drifted.into_inner())?;
     Ok(grads)
@@ -249,18 +282,21 @@ fn add_vectors(a: Vec<f64>, b: Vec<f64>) -> Vec<f64> {
 /// One fused sample of the adjoint kernels: the path (`pixel`, `sample`) in primal mode for its
 /// radiance, then its replay with adjoint radiance `adj`, scattering into `grads`; a replay that
 /// does not return to zero is counted in `drifted`.
+#[allow(clippy::too_many_arguments)]
 fn replay_sample(
     flat: &FlatScene,
     globals: &Globals,
+    camera: &ViewCamera,
     pixel: u32,
     sample: u32,
     adj: Vec3,
     grads: &mut [f64],
     drifted: &std::sync::atomic::AtomicUsize,
 ) {
-    let total = path::trace_path::<false>(flat, globals, pixel, sample, Vec3::ZERO, Vec3::ZERO, &mut GradSink::None);
+    let total =
+        path::trace_path::<false>(flat, globals, camera, pixel, sample, Vec3::ZERO, Vec3::ZERO, &mut GradSink::None);
     let mut sink = GradSink::Backward(grads);
-    let left = path::trace_path::<true>(flat, globals, pixel, sample, adj, total, &mut sink);
+    let left = path::trace_path::<true>(flat, globals, camera, pixel, sample, adj, total, &mut sink);
     if !path::replay_returned_to_zero(total, left) {
         drifted.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
     }
@@ -282,6 +318,7 @@ fn image_gradient_flat(scene: &Scene, flat: &FlatScene, options: &RenderOptions,
     })?;
     let entry = scene.params.entry(id).clone();
     let globals = options.globals(scene, flat, PassTag::Gradient);
+    let camera = options.view_camera(&View::current(scene), PassTag::Gradient);
     let pixels = (options.width * options.height) as usize;
     let drifted = std::sync::atomic::AtomicUsize::new(0);
     let data: Vec<f32> = (0..pixels)
@@ -290,11 +327,19 @@ fn image_gradient_flat(scene: &Scene, flat: &FlatScene, options: &RenderOptions,
             let mut sum = Vec3::ZERO;
             for s in 0..options.spp {
                 let p = pixel as u32;
-                let total =
-                    path::trace_path::<false>(flat, &globals, p, s, Vec3::ZERO, Vec3::ZERO, &mut GradSink::None);
+                let total = path::trace_path::<false>(
+                    flat,
+                    &globals,
+                    &camera,
+                    p,
+                    s,
+                    Vec3::ZERO,
+                    Vec3::ZERO,
+                    &mut GradSink::None,
+                );
                 let mut sink =
                     GradSink::Forward { begin: entry.offset, end: entry.offset + entry.len, derivative: Vec3::ZERO };
-                let left = path::trace_path::<true>(flat, &globals, p, s, Vec3::ONE, total, &mut sink);
+                let left = path::trace_path::<true>(flat, &globals, &camera, p, s, Vec3::ONE, total, &mut sink);
                 if !path::replay_returned_to_zero(total, left) {
                     drifted.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
                 }

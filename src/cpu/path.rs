@@ -8,7 +8,7 @@ use crate::bsdf::{bsdf_eval, bsdf_pdf, bsdf_sample};
 use crate::bvh::{Ray, closest_hit, occluded};
 use crate::contract::{
     DIM_DIFF_SIGN, DIM_DIRECTION, DIM_EMITTER_POS, DIM_EMITTER_SELECT, DIM_LOBE, DIM_PIXEL_JITTER, DIM_ROULETTE,
-    DIM_TECHNIQUE, Globals, MAT_BLEND, MAT_ROUGH_CONDUCTOR, NO_EMITTER, NO_PARAM, STRATEGY_DIFF,
+    DIM_TECHNIQUE, Globals, MAT_BLEND, MAT_ROUGH_CONDUCTOR, NO_EMITTER, NO_PARAM, STRATEGY_DIFF, ViewCamera,
 };
 use crate::cpu::emitter::{emitter_pdf_solid_angle, environment_pdf, sample_emitter};
 use crate::cpu::surface::{
@@ -18,8 +18,8 @@ use crate::rng::{RngKey, Stream, uniform4};
 use crate::sampling::Frame;
 use crate::scene::flat::FlatScene;
 
-fn draw_block(globals: &Globals, pixel: u32, sample: u32, vertex: u32, block: u32) -> [f32; 4] {
-    uniform4(RngKey([globals.key0, globals.key1]), pixel, sample, vertex, Stream::Main, block, 0)
+fn draw_block(key: RngKey, pixel: u32, sample: u32, vertex: u32, block: u32) -> [f32; 4] {
+    uniform4(key, pixel, sample, vertex, Stream::Main, block, 0)
 }
 
 fn max_component(v: Vec3) -> f32 {
@@ -100,13 +100,16 @@ impl GradSink<'_> {
     }
 }
 
-/// One camera path through `pixel` (row-major index) for sample `sample`: its radiance (primal,
+/// One camera path of `view` through `pixel` (row-major index) for sample `sample`: its radiance (primal,
 /// `ADJOINT = false`), or — replaying from `radiance_total` with adjoint radiance `adj_radiance`
 /// (δL) and scattering the GRAD terms into `sink` — what is left of it at the end, 0 up to
 /// rounding (adjoint, ALGORITHMS.md §3.3).
+// The arguments are those of `path_begin` in the kernels, one for one.
+#[allow(clippy::too_many_arguments)]
 pub fn trace_path<const ADJOINT: bool>(
     flat: &FlatScene,
     globals: &Globals,
+    view: &ViewCamera,
     pixel: u32,
     sample: u32,
     adj_radiance: Vec3,
@@ -114,12 +117,12 @@ pub fn trace_path<const ADJOINT: bool>(
     sink: &mut GradSink<'_>,
 ) -> Vec3 {
     // ---- camera ray ----
-    let u_cam = draw_block(globals, pixel, sample, 0, DIM_PIXEL_JITTER / 4);
+    let key = RngKey([globals.key0, view.key1]);
+    let u_cam = draw_block(key, pixel, sample, 0, DIM_PIXEL_JITTER / 4);
     let (px, py) = (pixel % globals.width, pixel / globals.width);
     let sx = 2.0 * (px as f32 + u_cam[0]) / globals.width as f32 - 1.0;
     let sy = 1.0 - 2.0 * (py as f32 + u_cam[1]) / globals.height as f32;
-    let mut ray =
-        Ray::new(globals.cam_origin, (globals.cam_forward + sx * globals.cam_right + sy * globals.cam_up).normalize());
+    let mut ray = Ray::new(view.origin, (view.forward + sx * view.right + sy * view.up).normalize());
 
     let mut throughput = Vec3::ONE; // β (ALGORITHMS.md §3.1)
     let mut radiance = if ADJOINT { radiance_total } else { Vec3::ZERO }; // L (adjoint: the suffix)
@@ -172,7 +175,7 @@ pub fn trace_path<const ADJOINT: bool>(
         let capable = diff && material_capable(flat, globals, s.material);
 
         // ---- emitter sampling ----
-        let u_em = draw_block(globals, pixel, sample, vertex, DIM_EMITTER_SELECT / 4);
+        let u_em = draw_block(key, pixel, sample, vertex, DIM_EMITTER_SELECT / 4);
         let pos = (DIM_EMITTER_POS % 4) as usize;
         let u_select = u_em[(DIM_EMITTER_SELECT % 4) as usize];
         let es = if nee { sample_emitter(flat, globals, u_select, Vec2::new(u_em[pos], u_em[pos + 1])) } else { None };
@@ -208,13 +211,13 @@ pub fn trace_path<const ADJOINT: bool>(
         }
 
         // ---- BSDF or differential sampling ----
-        let u_bs = draw_block(globals, pixel, sample, vertex, DIM_LOBE / 4);
+        let u_bs = draw_block(key, pixel, sample, vertex, DIM_LOBE / 4);
         let dir = (DIM_DIRECTION % 4) as usize;
         let u_lobe = u_bs[(DIM_LOBE % 4) as usize];
         let u_dir = Vec2::new(u_bs[dir], u_bs[dir + 1]);
         let use_dx = capable && !dx_taken && u_bs[(DIM_TECHNIQUE % 4) as usize] < globals.diff_q;
         let (bs, pdf_f, pdf_d) = if use_dx {
-            let u_sign = draw_block(globals, pixel, sample, vertex, DIM_DIFF_SIGN / 4)[(DIM_DIFF_SIGN % 4) as usize];
+            let u_sign = draw_block(key, pixel, sample, vertex, DIM_DIFF_SIGN / 4)[(DIM_DIFF_SIGN % 4) as usize];
             let bs = bsdf_sample_diff(&bsdf, wi, u_sign, u_lobe, u_dir);
             let pdf_f = bs.as_ref().map_or(0.0, |b| bsdf_pdf(&bsdf, wi, b.wo));
             let pdf_d = bs.as_ref().map_or(0.0, |b| b.pdf);
@@ -256,7 +259,7 @@ pub fn trace_path<const ADJOINT: bool>(
         // ---- Russian roulette ----
         // vertex − 1 ≥ rr_depth (ALGORITHMS.md §3.1), written without the subtraction.
         if vertex > globals.rr_depth {
-            let u_rr = draw_block(globals, pixel, sample, vertex, DIM_ROULETTE / 4)[(DIM_ROULETTE % 4) as usize];
+            let u_rr = draw_block(key, pixel, sample, vertex, DIM_ROULETTE / 4)[(DIM_ROULETTE % 4) as usize];
             let p_rr = max_component(throughput).min(0.95);
             if !(u_rr < p_rr) {
                 break;

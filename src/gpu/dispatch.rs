@@ -3,12 +3,13 @@
 
 use ash::vk;
 
+use crate::backend::check_view_list;
 use crate::contract::*;
 use crate::error::{Error, Result};
 use crate::gpu::buffer::Buffer;
 use crate::gpu::context::Context;
 use crate::gpu::pipeline::{BindGroup, Kernel, compute_barrier, groups_for, memory_barrier};
-use crate::integrator::RenderOptions;
+use crate::integrator::{RenderOptions, View};
 use crate::rng::PassTag;
 use crate::scene::Scene;
 use crate::scene::flat::FlatScene;
@@ -25,38 +26,45 @@ const MAX_LANES: u32 = 1 << 18;
 /// How a dispatch hands out work.
 #[derive(Clone, Copy, Debug)]
 pub(crate) enum Work {
-    /// Every pixel, samples `begin..end` each.
+    /// Every pixel of every view, samples `begin..end` each.
     Pixels { begin: u32, end: u32 },
-    /// `count` global samples whose pixels the kernel draws (adaptive pixel sampling).
+    /// `count` global samples whose views and pixels the kernel draws (adaptive pixel sampling).
     Samples { count: u64 },
 }
 
 /// A request checked once: its options (validated), the constants its kernels read (`Globals`,
-/// before the scene's device addresses are filled in) and its dispatch plan. Every render,
-/// gradient and image-gradient call starts by building one and uses nothing else of its options.
+/// before the scene's device addresses are filled in; its views' cameras) and its dispatch plan.
+/// Every render, gradient and image-gradient call starts by building one and uses nothing else of
+/// its options.
 pub(crate) struct Request {
     pub options: RenderOptions,
     pub globals: Globals,
+    pub views: Vec<ViewCamera>,
     pub plan: Vec<Submission>,
 }
 
 impl Request {
-    /// Validates `options` and derives the constants of `pass` and the plan of `work`.
+    /// Validates `options` and `views` and derives the constants of `pass` and the plan of `work`.
     ///
     /// # Errors
-    /// Option errors; those of [`plan`].
+    /// Option and view errors; those of [`plan`].
     pub(crate) fn new(
         scene: &Scene,
         flat: &FlatScene,
         options: &RenderOptions,
+        views: &[View],
         pass: PassTag,
         work: Work,
         one_path_per_lane: bool,
     ) -> Result<Request> {
         options.validate()?;
-        let globals = options.globals(scene, flat, pass);
-        let plan = plan(work, options.width, options.height, options.spp, one_path_per_lane)?;
-        Ok(Request { options: *options, globals, plan })
+        check_view_list(views)?;
+        let mut globals = options.globals(scene, flat, pass);
+        globals.view_count = views.len() as u32;
+        let cameras = views.iter().map(|v| options.view_camera(v, pass)).collect();
+        let (w, h) = (options.width, options.height);
+        let plan = plan(work, w, h, views.len() as u32, options.spp, one_path_per_lane)?;
+        Ok(Request { options: *options, globals, views: cameras, plan })
     }
 }
 
@@ -69,14 +77,25 @@ pub(crate) struct Submission {
     pub done: u32,
 }
 
-/// Splits `work` on a `width`×`height` image into submissions of about [`PATHS_PER_SUBMISSION`]
-/// paths. With `one_path_per_lane` (drivers with a loop budget) each launch traces one sample
-/// index with one path per invocation. `spp` scales the progress of adaptive work.
+/// Splits `work` on `views` images of `width`×`height` into submissions of about
+/// [`PATHS_PER_SUBMISSION`] paths. With `one_path_per_lane` (drivers with a loop budget) each
+/// launch traces one sample index with one path per invocation. `spp` scales the progress of
+/// adaptive work.
 ///
 /// # Errors
-/// [`Error::InvalidArgument`] if adaptive work exceeds the 32-bit sample counter.
-pub(crate) fn plan(work: Work, width: u32, height: u32, spp: u32, one_path_per_lane: bool) -> Result<Vec<Submission>> {
-    let pixels = width * height;
+/// [`Error::InvalidArgument`] if the work exceeds the 32-bit item or sample counters.
+pub(crate) fn plan(
+    work: Work,
+    width: u32,
+    height: u32,
+    views: u32,
+    spp: u32,
+    one_path_per_lane: bool,
+) -> Result<Vec<Submission>> {
+    let too_many = |what: String| Error::InvalidArgument { parameter: "views".into(), message: what };
+    let pixels = (width * height)
+        .checked_mul(views)
+        .ok_or_else(|| too_many(format!("{views} views of {width}×{height} exceed the 32-bit pixel counter")))?;
     let launch = |push: KernelPush| {
         let lanes = if one_path_per_lane { push.item_count } else { push.item_count.min(MAX_LANES) };
         (push, groups_for(lanes.max(1)))
@@ -85,7 +104,9 @@ pub(crate) fn plan(work: Work, width: u32, height: u32, spp: u32, one_path_per_l
     match work {
         Work::Pixels { begin, end } => {
             let tiles = width.div_ceil(TILE_SIZE) * height.div_ceil(TILE_SIZE);
-            let items = tiles * TILE_SIZE * TILE_SIZE;
+            let items = (tiles * TILE_SIZE * TILE_SIZE)
+                .checked_mul(views)
+                .ok_or_else(|| too_many(format!("{views} views of {width}×{height} exceed the 32-bit item counter")))?;
             let per_submit = (PATHS_PER_SUBMISSION / u64::from(pixels)).clamp(1, u64::from(end - begin).max(1)) as u32;
             let mut done = begin;
             while done < end {

@@ -34,13 +34,13 @@ use crate::contract::*;
 use crate::error::{Error, Result};
 use crate::gpu::buffer::Buffer;
 use crate::gpu::context::{Context, Pending, SubmitSync};
-use crate::gpu::dispatch::{self, PATHS_PER_SUBMISSION, Work};
+use crate::gpu::dispatch::{self, PATHS_PER_SUBMISSION, Request, Work};
 use crate::gpu::kernels::{KernelKind, Variant};
 use crate::gpu::pipeline::{BindGroup, memory_barrier};
 use crate::gpu::renderer::{GradMode, Renderer};
 use crate::gpu::variant;
 use crate::image::Image;
-use crate::integrator::{ParamKinds, RenderOptions};
+use crate::integrator::{ParamKinds, RenderOptions, View};
 use crate::params::Gradients;
 use crate::rng::PassTag;
 
@@ -82,6 +82,8 @@ struct Pass {
     variant: Variant,
     /// Kept alive for the descriptor set, which refers to it.
     _globals: Buffer,
+    /// Kept alive for the kernels, which read it through its address.
+    _views: Buffer,
     status: Buffer,
     counter: Buffer,
     group: BindGroup,
@@ -240,8 +242,9 @@ impl Renderer {
     pub fn frame(&mut self, options: &RenderOptions, mode: GradMode) -> Result<Frame> {
         // The plan is made per recorded range; these requests give the checked options and constants.
         let whole = Work::Pixels { begin: 0, end: options.spp };
-        let primal_globals = self.request(options, PassTag::Primal, whole)?.globals;
-        let backward_globals = self.request(options, PassTag::Gradient, whole)?.globals;
+        let view = [View::current(self.scene())];
+        let primal_request = self.request(options, &view, PassTag::Primal, whole)?;
+        let backward_request = self.request(options, &view, PassTag::Gradient, whole)?;
         if mode == GradMode::Deterministic && !self.context().info().int64_atomics {
             return Err(Error::InvalidArgument {
                 parameter: "GradMode::Deterministic".into(),
@@ -262,7 +265,7 @@ impl Renderer {
                 KernelKind::AdjointFixed,
             ),
         };
-        let fixed_unit = 1.0 / f64::from(backward_globals.fixed_scale);
+        let fixed_unit = 1.0 / f64::from(backward_request.globals.fixed_scale);
         let primal_variant = Variant {
             kind: KernelKind::Primal,
             features: variant::request_features(self.scene_features, options, ParamKinds::NONE),
@@ -271,9 +274,9 @@ impl Renderer {
             kind,
             features: variant::request_features(self.scene_features, options, self.grad_kinds(options)),
         };
-        let primal = self.pass(primal_variant, &primal_globals, &[(BINDING_ACCUM, &image)])?;
+        let primal = self.pass(primal_variant, &primal_request, &[(BINDING_ACCUM, &image)])?;
         let backward =
-            self.pass(backward_variant, &backward_globals, &[(BINDING_ADJOINT, &adjoint), (grad_binding, &gradient)])?;
+            self.pass(backward_variant, &backward_request, &[(BINDING_ADJOINT, &adjoint), (grad_binding, &gradient)])?;
         let frame = Frame {
             ctx,
             renderer_id: self.id(),
@@ -290,17 +293,18 @@ impl Renderer {
         Ok(frame)
     }
 
-    fn pass(&mut self, variant: Variant, globals: &Globals, extra: &[(u32, &Buffer)]) -> Result<Pass> {
+    fn pass(&mut self, variant: Variant, request: &Request, extra: &[(u32, &Buffer)]) -> Result<Pass> {
         let ctx = self.context().clone();
+        let views = self.views_buffer(request)?;
         let globals =
-            Buffer::uniform_with(&ctx, "frame globals", std::slice::from_ref(&self.gpu.with_addresses(globals)))?;
+            Buffer::uniform_with(&ctx, "frame globals", std::slice::from_ref(&self.globals_for(request, &views)))?;
         let status = Buffer::storage(&ctx, "frame status", 4)?;
         let counter = Buffer::storage(&ctx, "frame work counter", 4)?;
         let mut bindings: Vec<(u32, &Buffer)> =
             vec![(BINDING_GLOBALS, &globals), (BINDING_STATUS, &status), (BINDING_WORK, &counter)];
         bindings.extend_from_slice(extra);
         let group = self.kernels.get(variant)?.bind(&bindings)?;
-        Ok(Pass { variant, _globals: globals, status, counter, group })
+        Ok(Pass { variant, _globals: globals, _views: views, status, counter, group })
     }
 
     /// The parameter buffer the kernels read: the engine may write it in its own passes (or use
@@ -371,7 +375,7 @@ impl Renderer {
         self.check_request(frame, &samples)?;
         let (o, spp) = (&frame.options, frame.options.spp);
         let work = Work::Pixels { begin: samples.start, end: samples.end };
-        let plan = dispatch::plan(work, o.width, o.height, spp, self.one_path_per_lane)?;
+        let plan = dispatch::plan(work, o.width, o.height, 1, spp, self.one_path_per_lane)?;
         // A frame's kernels are built with it, in this renderer's cache (checked above).
         let kernel = self.kernels.built(pass.variant).ok_or_else(|| Error::InvalidArgument {
             parameter: "frame".into(),

@@ -8,6 +8,7 @@ use std::sync::Arc;
 
 use crate::adaptive::PixelSampling;
 use crate::backend::Backend;
+use crate::backend::check_views;
 use crate::contract::*;
 use crate::error::{Error, Result};
 use crate::gpu::buffer::Buffer;
@@ -18,7 +19,7 @@ use crate::gpu::kernels::{KernelCache, KernelKind, Variant};
 use crate::gpu::upload::GpuScene;
 use crate::gpu::variant;
 use crate::image::Image;
-use crate::integrator::{ParamKinds, RenderOptions};
+use crate::integrator::{ParamKinds, RenderOptions, View};
 use crate::params::{Gradients, ParamTable};
 use crate::rng::PassTag;
 use crate::scene::Scene;
@@ -179,14 +180,37 @@ impl Renderer {
                 self.run(v, request, &bindings, &mut |_, _| {})?;
                 let fixed: Vec<i64> = grads.download(n)?;
                 let unit = 1.0 / f64::from(request.globals.fixed_scale);
-                Ok(Gradients::new(&self.scene.params, fixed.iter().map(|&v| (v as f64 * unit) as f32).collect()))
+                Ok(Gradients::from_fixed(&self.scene.params, fixed, unit))
             }
         }
     }
 
-    /// The request of `options` under the key of `pass`, planned for `work` on this device.
-    pub(crate) fn request(&self, options: &RenderOptions, pass: PassTag, work: Work) -> Result<Request> {
-        Request::new(&self.scene, &self.flat, options, pass, work, self.one_path_per_lane)
+    /// The request of `options` and `views` under the key of `pass`, planned for `work` on this
+    /// device.
+    pub(crate) fn request(
+        &self,
+        options: &RenderOptions,
+        views: &[View],
+        pass: PassTag,
+        work: Work,
+    ) -> Result<Request> {
+        Request::new(&self.scene, &self.flat, options, views, pass, work, self.one_path_per_lane)
+    }
+
+    /// The request of `options` for the scene's camera alone.
+    fn request_current(&self, options: &RenderOptions, pass: PassTag, work: Work) -> Result<Request> {
+        self.request(options, &[View::current(&self.scene)], pass, work)
+    }
+
+    /// `request`'s constants with the scene's device addresses and that of `views`, a buffer of
+    /// its views' cameras (made by [`Renderer::views_buffer`]).
+    pub(crate) fn globals_for(&self, request: &Request, views: &Buffer) -> Globals {
+        Globals { addr_views: views.device_address(), ..self.gpu.with_addresses(&request.globals) }
+    }
+
+    /// A buffer of `request`'s views' cameras.
+    pub(crate) fn views_buffer(&self, request: &Request) -> Result<Buffer> {
+        Buffer::storage_with(&self.ctx, "views", &request.views)
     }
 
     /// Builds `v` if needed, then dispatches it along `request`'s plan with the scene bindings
@@ -199,7 +223,8 @@ impl Renderer {
         extra: &[(u32, &Buffer)],
         progress: &mut dyn FnMut(u32, u32),
     ) -> Result<()> {
-        let globals = self.gpu.with_addresses(&request.globals);
+        let views = self.views_buffer(request)?;
+        let globals = self.globals_for(request, &views);
         let globals_buf = Buffer::uniform_with(&self.ctx, "globals", std::slice::from_ref(&globals))?;
         let status = Buffer::storage(&self.ctx, "status flags", 4)?;
         status.clear()?;
@@ -244,67 +269,91 @@ impl Backend for Renderer {
         self.gpu.params.upload(&self.flat.params)
     }
 
-    /// Renders with `options` under the key of `pass`.
-    fn render_pass(
+    /// Renders `views` with `options` under the key of `pass`: one kernel pass over every view's
+    /// pixels into one image buffer, the views one after another.
+    fn render_views(
         &mut self,
         options: &RenderOptions,
+        views: &[View],
         pass: PassTag,
         progress: &mut dyn FnMut(u32, u32),
-    ) -> Result<Image> {
-        let request = self.request(options, pass, Work::Pixels { begin: 0, end: options.spp })?;
-        let _span =
-            tracing::info_span!("primal", width = options.width, height = options.height, spp = options.spp).entered();
-        let pixels = options.width * options.height;
-        let accum = Buffer::storage(&self.ctx, "accumulation image", u64::from(pixels) * 12)?;
+    ) -> Result<Vec<Image>> {
+        let request = self.request(options, views, pass, Work::Pixels { begin: 0, end: options.spp })?;
+        let _span = tracing::info_span!(
+            "primal",
+            width = options.width,
+            height = options.height,
+            spp = options.spp,
+            views = views.len()
+        )
+        .entered();
+        let values = u64::from(options.width * options.height) * 3 * views.len() as u64;
+        let accum = Buffer::storage(&self.ctx, "accumulation image", values * 4)?;
         accum.clear()?;
         let features = variant::request_features(self.scene_features, options, ParamKinds::NONE);
         let v = Variant { kind: KernelKind::Primal, features };
         self.run(v, &request, &[(BINDING_ACCUM, &accum)], progress)?;
-        let sums: Vec<f32> = accum.download(pixels as usize * 3)?;
+        let sums: Vec<f32> = accum.download(values as usize)?;
         let spp = options.spp as f32;
-        Image::from_rgb(options.width, options.height, sums.into_iter().map(|v| v / spp).collect())
+        let stacked = options.stacked(views.len())?;
+        Image::from_rgb(stacked.width, stacked.height, sums.into_iter().map(|v| v / spp).collect())?
+            .split(views.len() as u32)
     }
 
-    /// Reverse-mode gradient of a loss whose adjoint image (∂loss/∂pixel) is `adjoint`: the fused
-    /// primal + replay kernel (PRB) with the gradient key, so its paths are independent of the
-    /// render that produced `adjoint` (ALGORITHMS.md §1, §3.4).
+    /// Reverse-mode gradient of Σ_v ⟨A_v, I_v⟩: the fused primal + replay kernel (PRB) over every
+    /// view, with the gradient key, so its paths are independent of the render that produced the
+    /// adjoints (ALGORITHMS.md §1, §3.4).
     ///
     /// # Errors
-    /// Option errors; [`Error::InvalidArgument`] for an adjoint image of the wrong size or
-    /// deterministic mode without 64-bit atomics; Vulkan failures; [`Error::LoopBudget`];
+    /// Option errors; [`Error::InvalidArgument`] for adjoint images of the wrong size or number,
+    /// or deterministic mode without 64-bit atomics; Vulkan failures; [`Error::LoopBudget`];
     /// [`Error::Numeric`] if a replay drifted from its primal path or a fixed-point sum overflowed.
-    fn backward(&mut self, options: &RenderOptions, adjoint: &Image, mode: GradMode) -> Result<Gradients> {
-        let request = self.request(options, PassTag::Gradient, Work::Pixels { begin: 0, end: options.spp })?;
-        crate::backend::check_size(adjoint, options, "adjoint image")?;
-        let _span = tracing::info_span!("adjoint", spp = options.spp, ?mode).entered();
-        let adjoint_buf = Buffer::storage_with(&self.ctx, "adjoint image", adjoint.as_slice())?;
+    fn backward_views(
+        &mut self,
+        options: &RenderOptions,
+        views: &[View],
+        adjoints: &[Image],
+        mode: GradMode,
+    ) -> Result<Gradients> {
+        let request = self.request(options, views, PassTag::Gradient, Work::Pixels { begin: 0, end: options.spp })?;
+        check_views(views, adjoints, options, "adjoint image")?;
+        let _span = tracing::info_span!("adjoint", spp = options.spp, ?mode, views = views.len()).entered();
+        let adjoint_buf = Buffer::storage_with(&self.ctx, "adjoint image", Image::stack(adjoints)?.as_slice())?;
         self.reverse([KernelKind::Adjoint, KernelKind::AdjointFixed], &request, &adjoint_buf, &[], mode)
     }
 
-    /// Reverse-mode gradient with loss-aware adaptive pixel sampling (ALGORITHMS.md §6): the
-    /// N = W·H·`options.spp` samples of the fused primal + replay kernel draw their pixels from
-    /// `sampling` on the device (sample k: pixel p(k) from the alias table, path counters (p(k), k))
-    /// and carry the adjoint radiance of [`PixelSampling::sample_adjoint`] — A_p/(N·π_p) for the
-    /// unbiased importance estimator, A_p/n_p for the per-pixel mean, whose histogram n_p is drawn
+    /// Reverse-mode gradient with loss-aware adaptive pixel sampling (ALGORITHMS.md §6) over
+    /// every view's pixels: the N = V·W·H·`options.spp` samples of the fused primal + replay
+    /// kernel draw their (view, pixel) from `sampling` on the device (sample k: pixel g(k) of the
+    /// stacked adjoint images from the alias table, path counters (g(k) mod W·H, k) in its view)
+    /// and carry the adjoint radiance of [`PixelSampling::sample_adjoint`] — A_g/(N·π_g) for the
+    /// unbiased importance estimator, A_g/n_g for the per-pixel mean, whose histogram n_g is drawn
     /// on the host from the same uniforms before the launch.
     ///
     /// # Errors
-    /// As [`Renderer::backward`]; [`Error::InvalidArgument`] if `sampling` is for another image size
-    /// or N exceeds the 32-bit sample counter.
-    fn backward_adaptive(
+    /// As [`Renderer::backward_views`]; [`Error::InvalidArgument`] if `sampling` is for another
+    /// size or N exceeds the 32-bit sample counter.
+    fn backward_adaptive_views(
         &mut self,
         options: &RenderOptions,
-        adjoint: &Image,
+        views: &[View],
+        adjoints: &[Image],
         sampling: &PixelSampling,
         mode: GradMode,
     ) -> Result<Gradients> {
-        let count = u64::from(options.width * options.height) * u64::from(options.spp);
-        let mut request = self.request(options, PassTag::Gradient, Work::Samples { count })?;
-        crate::backend::check_size(adjoint, options, "adjoint image")?;
-        let delta = sampling.sample_adjoint(options, adjoint)?;
-        let _span =
-            tracing::info_span!("adjoint_adaptive", spp = options.spp, ?mode, estimator = sampling.estimator().name())
-                .entered();
+        check_views(views, adjoints, options, "adjoint image")?;
+        let stacked = options.stacked(views.len())?;
+        let count = u64::from(sampling.sample_count(&stacked)?);
+        let mut request = self.request(options, views, PassTag::Gradient, Work::Samples { count })?;
+        let delta = sampling.sample_adjoint(&stacked, &Image::stack(adjoints)?)?;
+        let _span = tracing::info_span!(
+            "adjoint_adaptive",
+            spp = options.spp,
+            ?mode,
+            estimator = sampling.estimator().name(),
+            views = views.len()
+        )
+        .entered();
         // δL is in `delta` already.
         request.globals.adjoint_scale = 1.0;
         let table = sampling.table();
@@ -328,7 +377,8 @@ impl Backend for Renderer {
     /// # Errors
     /// [`Error::InvalidArgument`] for an unknown parameter; as [`Renderer::backward`].
     fn image_gradient(&mut self, options: &RenderOptions, name: &str) -> Result<Image> {
-        let mut request = self.request(options, PassTag::Gradient, Work::Pixels { begin: 0, end: options.spp })?;
+        let mut request =
+            self.request_current(options, PassTag::Gradient, Work::Pixels { begin: 0, end: options.spp })?;
         let id = self.scene.params.find(name).ok_or_else(|| Error::InvalidArgument {
             parameter: name.to_string(),
             message: "no such parameter (see `pathgrad params SCENE`)".into(),

@@ -122,6 +122,58 @@ impl Image {
         self.width
     }
 
+    /// `images` (one width) one below another, the first at the top: the layout in which a
+    /// multi-view request holds its views' pixels.
+    ///
+    /// ```
+    /// use pathgrad::image::Image;
+    /// let a = Image::from_rgb(1, 1, vec![1.0, 2.0, 3.0])?;
+    /// let b = Image::from_rgb(1, 1, vec![4.0, 5.0, 6.0])?;
+    /// let both = Image::stack(&[a.clone(), b])?;
+    /// assert_eq!((both.width(), both.height()), (1, 2));
+    /// assert_eq!(both.split(2)?[0], a);
+    /// # Ok::<(), pathgrad::Error>(())
+    /// ```
+    ///
+    /// # Errors
+    /// [`Error::InvalidArgument`] for no images, different widths or a stack too tall.
+    pub fn stack(images: &[Image]) -> Result<Image> {
+        let Some(first) = images.first() else {
+            return Err(Error::InvalidArgument { parameter: "images".into(), message: "nothing to stack".into() });
+        };
+        if let Some(other) = images.iter().find(|i| i.width != first.width) {
+            return Err(Error::InvalidArgument {
+                parameter: "images".into(),
+                message: format!("widths differ ({} and {})", first.width, other.width),
+            });
+        }
+        let height = images.iter().try_fold(0u32, |h, i| h.checked_add(i.height)).ok_or_else(|| {
+            Error::InvalidArgument { parameter: "images".into(), message: "the stack is too tall".into() }
+        })?;
+        Image::from_rgb(first.width, height, images.iter().flat_map(|i| i.data.iter().copied()).collect())
+    }
+
+    /// The image cut into `count` images of equal height, top first (the inverse of
+    /// [`Image::stack`]).
+    ///
+    /// # Errors
+    /// [`Error::InvalidArgument`] if the height is not a multiple of `count`.
+    pub fn split(&self, count: u32) -> Result<Vec<Image>> {
+        if count == 0 || !self.height.is_multiple_of(count) {
+            return Err(Error::InvalidArgument {
+                parameter: "count".into(),
+                message: format!("{count} does not divide the height {}", self.height),
+            });
+        }
+        let height = self.height / count;
+        let chunk = (self.width * height * 3) as usize;
+        self.data
+            .chunks(chunk.max(1))
+            .take(count as usize)
+            .map(|c| Image::from_rgb(self.width, height, c.to_vec()))
+            .collect()
+    }
+
     /// Height in pixels.
     pub fn height(&self) -> u32 {
         self.height

@@ -106,6 +106,7 @@ pub fn load_with(spec: &str, options: &LoadOptions) -> Result<Scene> {
     if let Some(selector) = &options.sensor {
         let chosen = scene.sensor_index(selector)?;
         scene.camera = scene.sensors[chosen].camera;
+        scene.sensor = chosen;
     }
     let (width, height) = options.size_for((scene.camera.width, scene.camera.height));
     scene.camera.width = width;

@@ -140,6 +140,9 @@ pub struct Scene {
     pub camera: Camera,
     /// Every camera the scene file holds, in file order (one for built-in scenes).
     pub sensors: Vec<Sensor>,
+    /// The index in `sensors` that `camera` was chosen from: its paths' random-number stream
+    /// ([`crate::integrator::View::current`]).
+    pub sensor: usize,
     /// Bitmap textures.
     pub textures: Vec<Texture>,
     /// Constant environment radiance (RGB parameter) seen by rays that leave the scene, if any.
@@ -197,6 +200,7 @@ impl Scene {
             materials: Vec::new(),
             camera,
             sensors: vec![Sensor { name: "camera".into(), camera }],
+            sensor: 0,
             textures: Vec::new(),
             environment: None,
             params: ParamTable::default(),

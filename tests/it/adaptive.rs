@@ -92,14 +92,15 @@ fn per_sample_sums(
     globals.adjoint_scale = 1.0;
     let delta = sampling.sample_adjoint(opts, adjoint).unwrap();
     let key = RngKey([globals.key0, globals.key1]);
+    let camera = opts.view_camera(&pathgrad::integrator::View::current(scene), PassTag::Gradient);
     let n = flat.params.len();
     let (mut sum, mut abs) = (vec![0.0f64; n], vec![0.0f64; n]);
     for k in 0..sampling.sample_count(opts).unwrap() {
         let p = select_pixel(sampling.table(), key, k);
         let adj = Vec3::from_slice(&delta.as_slice()[3 * p as usize..3 * p as usize + 3]);
-        let total = trace_path::<false>(&flat, &globals, p, k, Vec3::ZERO, Vec3::ZERO, &mut GradSink::None);
+        let total = trace_path::<false>(&flat, &globals, &camera, p, k, Vec3::ZERO, Vec3::ZERO, &mut GradSink::None);
         let mut term = vec![0.0f64; n];
-        trace_path::<true>(&flat, &globals, p, k, adj, total, &mut GradSink::Backward(&mut term));
+        trace_path::<true>(&flat, &globals, &camera, p, k, adj, total, &mut GradSink::Backward(&mut term));
         for i in 0..n {
             sum[i] += term[i];
             abs[i] += term[i].abs();

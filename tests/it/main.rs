@@ -21,3 +21,4 @@ mod scene_formats;
 mod strategies;
 mod twins;
 mod variance;
+mod views;

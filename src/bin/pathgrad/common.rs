@@ -8,7 +8,7 @@ use clap::Args;
 use pathgrad::backend::Backend;
 use pathgrad::gpu::{Context, ContextDesc, DeviceChoice, Renderer};
 use pathgrad::image::Image;
-use pathgrad::integrator::RenderOptions;
+use pathgrad::integrator::{RenderOptions, View};
 
 /// Samples per pixel when neither `--spp` nor the scene names a number.
 pub(crate) const DEFAULT_SPP: u32 = 16;
@@ -195,21 +195,121 @@ pub(crate) fn target_image(
             image
         }
         (None, false) => {
-            let table = with_values(&scene.params, target_set, "--target-set")?;
-            renderer.set_params(&table)?;
-            let target_opts = RenderOptions {
-                spp: (opts.spp * TARGET_SPP_FACTOR).max(TARGET_MIN_SPP),
-                seed: opts.seed.wrapping_add(TARGET_SEED_OFFSET),
-                strategy: pathgrad::integrator::Strategy::Bsdf,
-                nee: true,
-                ..*opts
-            };
-            let target = renderer.render_reference(&target_opts).context("rendering the target")?;
-            renderer.set_params(&scene.params)?;
-            target
+            let view = pathgrad::integrator::View::current(scene);
+            rendered_targets(renderer, scene, opts, &[view], target_set)?.remove(0)
         }
         _ => bail!("give --target REF.exr or --target-set NAME=VALUE"),
     })
+}
+
+/// `views` rendered at `--target-set` values in one pass, as [`target_image`] renders one; the
+/// renderer's parameters are restored to the scene's after.
+fn rendered_targets(
+    renderer: &mut dyn Backend,
+    scene: &pathgrad::scene::Scene,
+    opts: &RenderOptions,
+    views: &[View],
+    target_set: &[(String, String)],
+) -> Result<Vec<Image>> {
+    let table = with_values(&scene.params, target_set, "--target-set")?;
+    renderer.set_params(&table)?;
+    let target_opts = RenderOptions {
+        spp: (opts.spp * TARGET_SPP_FACTOR).max(TARGET_MIN_SPP),
+        seed: opts.seed.wrapping_add(TARGET_SEED_OFFSET),
+        strategy: pathgrad::integrator::Strategy::Bsdf,
+        nee: true,
+        ..*opts
+    };
+    let targets = renderer
+        .render_views(&target_opts, views, pathgrad::rng::PassTag::Reference, &mut |_, _| {})
+        .context("rendering the target")?;
+    renderer.set_params(&scene.params)?;
+    Ok(targets)
+}
+
+/// The views of `--view SENSOR[=TARGET.exr]` flags, each with its target file if it names one.
+/// Every view names a sensor once; either every view names a target or none does (they are then
+/// rendered with `--target-set`). The views share one film size, which `opts` takes unless
+/// `--width`/`--height` are given. Checked before any device is opened.
+pub(crate) fn parse_views(
+    scene: &pathgrad::scene::Scene,
+    flags: &RenderFlags,
+    specs: &[String],
+    has_target_set: bool,
+    opts: &mut RenderOptions,
+) -> Result<Vec<(View, Option<PathBuf>)>> {
+    if let Some(sensor) = &flags.sensor {
+        bail!("--sensor {sensor} and --view both choose cameras: give the sensors as --view SENSOR only");
+    }
+    let mut out: Vec<(View, Option<PathBuf>, usize)> = Vec::new();
+    for spec in specs {
+        let (sensor, target) = match spec.split_once('=') {
+            Some((s, t)) => (s, Some(PathBuf::from(t))),
+            None => (spec.as_str(), None),
+        };
+        let index = scene.sensor_index(sensor).with_context(|| format!("invalid --view {spec}"))?;
+        if out.iter().any(|(_, _, i)| *i == index) {
+            bail!("invalid --view {spec}: sensor {index} ('{}') is given twice", scene.sensors[index].name);
+        }
+        match (&target, has_target_set) {
+            (Some(_), true) => {
+                bail!("invalid --view {spec}: with --target-set the targets are rendered (give --view SENSOR)")
+            }
+            (None, false) => bail!(
+                "invalid --view {spec}: give its target as --view {sensor}=TARGET.exr, or render the targets with --target-set"
+            ),
+            _ => {}
+        }
+        out.push((View::sensor(scene, index)?, target, index));
+    }
+    let film = |i: usize| (scene.sensors[i].camera.width, scene.sensors[i].camera.height);
+    let first = film(out[0].2);
+    if let Some((_, _, other)) = out.iter().find(|(_, _, i)| film(*i) != first) {
+        let (w, h) = film(*other);
+        bail!(
+            "--view: the views of one step share a film size, but sensor '{}' is {}×{} and '{}' is {w}×{h}",
+            scene.sensors[out[0].2].name,
+            first.0,
+            first.1,
+            scene.sensors[*other].name
+        );
+    }
+    opts.width = flags.width.unwrap_or(first.0);
+    opts.height = flags.height.unwrap_or(first.1);
+    Ok(out.into_iter().map(|(v, t, _)| (v, t)).collect())
+}
+
+/// The targets of views from [`parse_views`]: the EXR files they name, or all of them rendered at
+/// `--target-set` values in one pass.
+pub(crate) fn view_targets(
+    renderer: &mut dyn Backend,
+    scene: &pathgrad::scene::Scene,
+    opts: &RenderOptions,
+    views: &[(View, Option<PathBuf>)],
+    target_set: &[(String, String)],
+) -> Result<Vec<Image>> {
+    if !target_set.is_empty() {
+        let list: Vec<View> = views.iter().map(|(v, _)| *v).collect();
+        return rendered_targets(renderer, scene, opts, &list, target_set);
+    }
+    views
+        .iter()
+        .map(|(_, path)| {
+            let path = path.as_deref().expect("parse_views checked that every view names a target");
+            let image = target_image(renderer, scene, opts, Some(path), &[])?;
+            if (image.width(), image.height()) != (opts.width, opts.height) {
+                bail!(
+                    "invalid --view target {}: it is {}×{} but the views render at {}×{}",
+                    path.display(),
+                    image.width(),
+                    image.height(),
+                    opts.width,
+                    opts.height
+                );
+            }
+            Ok(image)
+        })
+        .collect()
 }
 
 /// `table` with the values of `settings` (NAME=V sets every value of the parameter or glob,

@@ -8,9 +8,10 @@ use clap::Args;
 use pathgrad::output::OutputSet;
 
 use crate::common::{
-    RenderFlags, StrategyArgs, check_output, options, parse_define, preview_path, refuse_non_finite, target_image,
-    with_values,
+    RenderFlags, StrategyArgs, check_output, options, parse_define, parse_views, preview_path, refuse_non_finite,
+    target_image, view_targets, with_values,
 };
+use pathgrad::integrator::View;
 
 #[derive(Args, Debug)]
 pub(crate) struct GradArgs {
@@ -25,6 +26,11 @@ pub(crate) struct GradArgs {
     /// The target image (EXR) the loss compares against.
     #[arg(long, conflicts_with = "target_set")]
     pub(crate) target: Option<PathBuf>,
+    /// Differentiate several views in one step: SENSOR=TARGET.exr, or SENSOR with --target-set
+    /// (repeatable; by index or name, `pathgrad params` lists them). The loss is the mean of the
+    /// views' losses; every view is rendered and differentiated in one pass.
+    #[arg(long = "view", value_name = "SENSOR[=TARGET.exr]", conflicts_with_all = ["target", "image_gradient"])]
+    pub(crate) views: Vec<String>,
     /// Render the target at these parameter values instead (NAME=V or NAME=R,G,B; repeatable),
     /// with 4× the spp (at least 64) and an independent seed.
     #[arg(long = "target-set", value_name = "NAME=VALUE", value_parser = parse_define)]
@@ -69,6 +75,10 @@ pub(crate) fn grad(args: &GradArgs) -> Result<()> {
     };
     let scene = args.flags.load(&args.scene, &args.defines)?;
     let mut opts = options(&scene, &args.flags)?;
+    let views = match args.views.is_empty() {
+        true => Vec::new(),
+        false => parse_views(&scene, &args.flags, &args.views, !args.target_set.is_empty(), &mut opts)?,
+    };
     let first_param = args.image_gradient.as_deref().or_else(|| args.params.first().map(String::as_str));
     args.sampling.apply(&scene, first_param, &mut opts)?;
     // Names, the loss and the target's values are checked before the device is opened.
@@ -102,14 +112,24 @@ pub(crate) fn grad(args: &GradArgs) -> Result<()> {
     }
     // Only the kinds of the parameters reported are compiled into the gradient kernel.
     opts.differentiate = renderer.param_kinds(&chosen);
-    let target = target_image(renderer.as_mut(), &scene, &opts, args.target.as_deref(), &args.target_set)?;
     let mode = if args.deterministic { GradMode::Deterministic } else { GradMode::Float };
     // time_s is the gradient step (render, loss, fused adjoint), not the --target-set render.
-    let start = Instant::now();
-    let (value, gradients) = renderer
-        .loss_and_gradient(&opts, &target, loss, mode)
-        .with_context(|| format!("differentiating {}", args.scene))?;
-    let seconds = start.elapsed().as_secs_f64();
+    let (value, gradients, seconds) = if views.is_empty() {
+        let target = target_image(renderer.as_mut(), &scene, &opts, args.target.as_deref(), &args.target_set)?;
+        let start = Instant::now();
+        let (value, gradients) = renderer
+            .loss_and_gradient(&opts, &target, loss, mode)
+            .with_context(|| format!("differentiating {}", args.scene))?;
+        (value, gradients, start.elapsed().as_secs_f64())
+    } else {
+        let targets = view_targets(renderer.as_mut(), &scene, &opts, &views, &args.target_set)?;
+        let list: Vec<View> = views.iter().map(|(v, _)| *v).collect();
+        let start = Instant::now();
+        let (value, gradients) = renderer
+            .loss_and_gradient_views(&opts, opts.spp, &list, &targets, loss, mode)
+            .with_context(|| format!("differentiating {} over {} views", args.scene, list.len()))?;
+        (value, gradients, start.elapsed().as_secs_f64())
+    };
     if args.json {
         let map: serde_json::Map<String, serde_json::Value> = chosen
             .iter()

@@ -165,6 +165,7 @@ impl<'a> Loader<'a> {
             None => 0,
         };
         self.scene.camera = self.scene.sensors[chosen].camera;
+        self.scene.sensor = chosen;
         self.scene.default_spp = spps[chosen];
         // Curved shapes are tessellated for the size rendered, not the film's.
         let camera = &mut self.scene.camera;

@@ -20,13 +20,13 @@ use anyhow::{Context as _, Result, bail};
 use clap::Args;
 use pathgrad::adaptive::AdaptiveEstimator;
 use pathgrad::image::Image;
-use pathgrad::integrator::Strategy;
+use pathgrad::integrator::{Strategy, View};
 use pathgrad::optim::{Adam, Optimization};
 use pathgrad::params::{ParamId, ParamTable};
 use pathgrad::scene::Scene;
 use serde::{Deserialize, Serialize};
 
-use crate::common::{RenderFlags, StrategyArgs, options, parse_define, with_values};
+use crate::common::{RenderFlags, StrategyArgs, options, parse_define, parse_views, with_values};
 use crate::curves::History;
 
 mod prepare;
@@ -67,6 +67,11 @@ pub(super) struct OptimizeArgs {
     /// The target image (EXR) the loss compares against.
     #[arg(long, conflicts_with = "target_set")]
     target: Option<PathBuf>,
+    /// Optimise over several views: SENSOR=TARGET.exr, or SENSOR with --target-set (repeatable;
+    /// by index or name). The loss is the mean of the views' losses; each iteration renders and
+    /// differentiates every view in one pass. The final image is the first view's.
+    #[arg(long = "view", value_name = "SENSOR[=TARGET.exr]", conflicts_with = "target")]
+    views: Vec<String>,
     /// Render the target at these values instead (NAME=V or NAME=R,G,B; repeatable), with 4× the
     /// final render's spp (at least 64) and an independent seed; the parameter error is reported.
     #[arg(long = "target-set", value_name = "NAME=VALUE", value_parser = parse_define)]
@@ -163,6 +168,20 @@ struct RunConfig {
     /// `--sensor`, if given.
     #[serde(default)]
     sensor: Option<String>,
+    /// `--view`s: the sensors (by name) and their target files.
+    #[serde(default)]
+    views: Vec<ViewConfig>,
+}
+
+/// One `--view` of a run.
+#[derive(Serialize, Deserialize, Clone, Debug, PartialEq)]
+struct ViewConfig {
+    /// The sensor's name.
+    sensor: String,
+    /// Its target, as an absolute path (none with `--target-set`).
+    target: Option<PathBuf>,
+    /// A hash of the target file's bytes, as [`RunConfig::target_hash`].
+    target_hash: Option<String>,
 }
 
 /// `state.json`: a run between two iterations.
@@ -199,7 +218,9 @@ struct Session {
     /// Set-up time of this session in seconds: loading, the target, and every kernel build
     /// (including those during the first iterations), none of which counts as iteration time.
     setup_s: f64,
-    target: Image,
+    /// The views optimised over (the scene's camera alone without `--view`) and their targets.
+    views: Vec<View>,
+    targets: Vec<Image>,
     truth: Option<ParamTable>,
     ids: Vec<ParamId>,
     run: Optimization,
@@ -291,6 +312,15 @@ fn start(args: &OptimizeArgs) -> Result<Session> {
     let ids = scene.params.select(&pattern_refs).context("--param")?;
     let initial_table = with_values(&scene.params, &inits, "--param").context("--param")?;
     let mut opts = options(&scene, &args.flags)?;
+    let mut views = Vec::new();
+    if !args.views.is_empty() {
+        for (view, target) in parse_views(&scene, &args.flags, &args.views, !args.target_set.is_empty(), &mut opts)? {
+            let target = target.as_deref().map(absolute).transpose()?;
+            let target_hash = target.as_deref().map(content_hash).transpose()?;
+            let sensor = scene.sensors[view.stream as usize].name.clone();
+            views.push(ViewConfig { sensor, target, target_hash });
+        }
+    }
     let first = scene.params.entry(ids[0]).name.clone();
     args.sampling.apply(&scene, Some(&first), &mut opts)?;
     let diff_param = match opts.strategy {
@@ -330,6 +360,7 @@ fn start(args: &OptimizeArgs) -> Result<Session> {
         diff_param,
         allow_outside_folder: args.flags.allow_outside_folder,
         sensor: args.flags.sensor.clone(),
+        views,
     };
     let dir = args.output.clone().unwrap_or_else(|| PathBuf::from(DEFAULT_OUTPUT));
     refuse_existing_run(&dir)?;
@@ -351,7 +382,8 @@ fn start(args: &OptimizeArgs) -> Result<Session> {
         ctx: prepared.ctx,
         compile_us: prepared.compile_us,
         setup_s: 0.0,
-        target: prepared.target,
+        views: prepared.views,
+        targets: prepared.targets,
         truth: prepared.truth,
         ids,
         run,
@@ -388,7 +420,7 @@ fn iterate(s: &mut Session, json: bool, interrupted: &AtomicBool) -> Result<&'st
         }
         let (loss, gradients) = s
             .run
-            .gradient(s.renderer.as_mut(), &s.target)
+            .gradient_views(s.renderer.as_mut(), &s.views, &s.targets)
             .with_context(|| format!("iteration {}", s.run.iteration()))?;
         let report = s.run.apply(loss, &gradients)?;
         let compiling = compile_s(s);

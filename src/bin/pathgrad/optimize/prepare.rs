@@ -15,7 +15,8 @@ use pathgrad::optim::{AdamOptions, IterationOptions};
 use pathgrad::params::{ParamId, ParamTable};
 use pathgrad::scene::Scene;
 
-use crate::common::{Opened, RenderFlags, target_image, with_values};
+use crate::common::{Opened, RenderFlags, target_image, view_targets, with_values};
+use pathgrad::integrator::View;
 
 use super::*;
 
@@ -67,7 +68,9 @@ pub(super) struct Prepared {
     pub(super) ctx: Option<Arc<pathgrad::gpu::Context>>,
     /// Microseconds spent building kernel variants so far (see `announce_compiles`).
     pub(super) compile_us: Arc<AtomicU64>,
-    pub(super) target: Image,
+    /// The views optimised over and their targets.
+    pub(super) views: Vec<View>,
+    pub(super) targets: Vec<Image>,
     pub(super) truth: Option<ParamTable>,
     pub(super) options: IterationOptions,
 }
@@ -89,6 +92,17 @@ pub(super) fn prepare(
     };
     let Opened { backend: mut renderer, ctx, compile_us } = flags.backend(scene, &config.scene, quiet)?;
     let final_opts = RenderOptions { spp: config.spp_final, ..options.render };
+    if !config.views.is_empty() {
+        let mut views = Vec::new();
+        for v in &config.views {
+            let index = scene.sensor_index(&v.sensor).context("--view")?;
+            views.push((View::sensor(scene, index)?, v.target.clone()));
+        }
+        let targets = view_targets(renderer.as_mut(), scene, &final_opts, &views, &config.target_set)?;
+        options.render.differentiate = renderer.param_kinds(ids);
+        let views = views.into_iter().map(|(v, _)| v).collect();
+        return Ok(Prepared { renderer, ctx, compile_us, views, targets, truth, options });
+    }
     let target = target_image(renderer.as_mut(), scene, &final_opts, config.target.as_deref(), &config.target_set)?;
     if (target.width(), target.height()) != (config.width, config.height) {
         bail!(
@@ -101,7 +115,8 @@ pub(super) fn prepare(
         );
     }
     options.render.differentiate = renderer.param_kinds(ids);
-    Ok(Prepared { renderer, ctx, compile_us, target, truth, options })
+    let views = vec![View::current(scene)];
+    Ok(Prepared { renderer, ctx, compile_us, views, targets: vec![target], truth, options })
 }
 
 pub(super) fn values_of(table: &ParamTable, ids: &[ParamId]) -> BTreeMap<String, Vec<f64>> {

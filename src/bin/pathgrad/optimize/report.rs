@@ -102,7 +102,11 @@ pub(super) fn finish(s: &mut Session, stopped: &str) -> Result<()> {
     s.history.write_svg(&s.dir.join("curves.svg"), &s.initial_point())?;
     s.renderer.set_params(s.run.params())?;
     let opts = RenderOptions { spp: s.config.spp_final, strategy: Strategy::Bsdf, nee: true, ..s.run.options().render };
-    let image = s.renderer.render(&opts).context("rendering the final image")?;
+    let image = s
+        .renderer
+        .render_views(&opts, &s.views[..1], pathgrad::rng::PassTag::Primal, &mut |_, _| {})
+        .context("rendering the final image")?
+        .remove(0);
     image.write_exr(s.dir.join("final.exr"))?;
     image.write_png(s.dir.join("final.png"), 0.0)?;
     Ok(())

@@ -98,6 +98,20 @@ pub(super) fn resume(args: &OptimizeArgs, dir: &Path, given: &BTreeSet<String>) 
         }
         config.target_hash = Some(now);
     }
+    for view in &mut config.views {
+        let (Some(target), Some(stored)) = (&view.target, &view.target_hash) else { continue };
+        let now = content_hash(target)?;
+        if now != *stored && !args.allow_changed_target {
+            bail!(
+                "--resume {}: the target {} of view {} changed since the run started (its content hash was {stored}, \
+                 now {now}); restore it, or pass --allow-changed-target to continue towards the new image",
+                dir.display(),
+                target.display(),
+                view.sensor
+            );
+        }
+        view.target_hash = Some(now);
+    }
     if let Some(iters) = args.iters {
         config.iters = iters;
     }
@@ -144,7 +158,8 @@ pub(super) fn resume(args: &OptimizeArgs, dir: &Path, given: &BTreeSet<String>) 
         ctx: prepared.ctx,
         compile_us: prepared.compile_us,
         setup_s: 0.0,
-        target: prepared.target,
+        views: prepared.views,
+        targets: prepared.targets,
         truth: prepared.truth,
         ids,
         run,
@@ -186,6 +201,20 @@ pub(super) fn check_unchanged(
     );
     check("sensor", "--sensor", args.flags.sensor.clone(), c.sensor.clone().unwrap_or_else(|| "0".into()));
     check("target_set", "--target-set", Some(pairs(&args.target_set)), pairs(&c.target_set));
+    let views: Vec<String> = c
+        .views
+        .iter()
+        .map(|v| v.target.as_deref().map_or(v.sensor.clone(), |t| format!("{}={}", v.sensor, t.display())))
+        .collect();
+    let given_views: Vec<String> = args
+        .views
+        .iter()
+        .map(|spec| match spec.split_once('=') {
+            Some((s, t)) => absolute(Path::new(t)).map(|t| format!("{s}={}", t.display())),
+            None => Ok(spec.clone()),
+        })
+        .collect::<Result<_>>()?;
+    check("views", "--view", Some(given_views.join(" ")), views.join(" "));
     check("lr", "--lr", args.lr.map(|v| text(&v)), text(&c.lr));
     check("spp_primal", "--spp-primal", args.spp_primal.map(|v| text(&v)), text(&c.spp_primal));
     check("spp_grad", "--spp-grad", args.spp_grad.map(|v| text(&v)), text(&c.spp_grad));
