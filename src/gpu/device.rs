@@ -15,7 +15,8 @@ use crate::error::{Error, Result, VkResultExt};
 /// Which physical device to use.
 #[derive(Clone, Debug, Default, PartialEq, Eq)]
 pub enum DeviceChoice {
-    /// `PATHGRAD_DEVICE` if set, else discrete > integrated > virtual > CPU.
+    /// `PATHGRAD_DEVICE` if set, else the GPU whose UUID a scheduler put first in
+    /// `CUDA_VISIBLE_DEVICES`/`NVIDIA_VISIBLE_DEVICES`, else discrete > integrated > virtual > CPU.
     #[default]
     Auto,
     /// Prefer a CPU implementation (lavapipe): what tests use, so results do not depend on the box.
@@ -189,7 +190,7 @@ pub(crate) fn choose(devices: &[DeviceInfo], choice: &DeviceChoice) -> Result<us
     let choice = match choice {
         DeviceChoice::Auto => match std::env::var("PATHGRAD_DEVICE") {
             Ok(v) if !v.trim().is_empty() => DeviceChoice::parse(&v),
-            _ => DeviceChoice::Auto,
+            _ => scheduled_device(|name| std::env::var(name).ok()).unwrap_or(DeviceChoice::Auto),
         },
         other => other.clone(),
     };
@@ -225,9 +226,42 @@ pub(crate) fn choose(devices: &[DeviceInfo], choice: &DeviceChoice) -> Result<us
     }
 }
 
+/// The GPU a scheduler gave this process, by UUID: the first entry of `CUDA_VISIBLE_DEVICES`,
+/// else of `NVIDIA_VISIBLE_DEVICES` (Slurm's GRES and Kubernetes' NVIDIA device plugin set them),
+/// when it is a `GPU-<uuid>`. NVIDIA's Vulkan driver reports the same UUID as `deviceUUID`. An
+/// index there counts CUDA devices, not Vulkan ones, so it is not used.
+pub(crate) fn scheduled_device(var: impl Fn(&str) -> Option<String>) -> Option<DeviceChoice> {
+    ["CUDA_VISIBLE_DEVICES", "NVIDIA_VISIBLE_DEVICES"].iter().find_map(|name| {
+        let value = var(name)?;
+        let first = value.split(',').next()?.trim();
+        let uuid = first.get(..4).filter(|p| p.eq_ignore_ascii_case("GPU-")).map(|_| &first[4..])?;
+        (uuid.chars().filter(char::is_ascii_hexdigit).count() == 32).then(|| DeviceChoice::Uuid(uuid.to_string()))
+    })
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn scheduler_gpu_uuids_choose_the_device() {
+        let env = |pairs: &'static [(&'static str, &'static str)]| {
+            move |name: &str| pairs.iter().find(|(n, _)| *n == name).map(|(_, v)| v.to_string())
+        };
+        let uuid = "GPU-5b2c1f3a-9e7d-4c11-8a0b-2f6e4d3c1b0a";
+        assert_eq!(
+            scheduled_device(env(&[("CUDA_VISIBLE_DEVICES", "GPU-5b2c1f3a-9e7d-4c11-8a0b-2f6e4d3c1b0a,GPU-x")])),
+            Some(DeviceChoice::Uuid(uuid[4..].to_string()))
+        );
+        assert_eq!(
+            scheduled_device(env(&[("NVIDIA_VISIBLE_DEVICES", "GPU-5b2c1f3a-9e7d-4c11-8a0b-2f6e4d3c1b0a")])),
+            Some(DeviceChoice::Uuid(uuid[4..].to_string()))
+        );
+        // Indices, `all` and `none` say nothing about Vulkan's order.
+        assert_eq!(scheduled_device(env(&[("CUDA_VISIBLE_DEVICES", "0,1")])), None);
+        assert_eq!(scheduled_device(env(&[("NVIDIA_VISIBLE_DEVICES", "all")])), None);
+        assert_eq!(scheduled_device(env(&[])), None);
+    }
 
     #[test]
     fn loop_budget_follows_the_mesa_version_of_lavapipe_only() {

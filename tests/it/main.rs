@@ -5,6 +5,7 @@ mod host;
 mod support;
 
 mod adaptive;
+mod batch;
 mod bvh_embree;
 mod cli;
 mod cpu_vs_gpu;

@@ -3,7 +3,7 @@
 use clap::{Parser, Subcommand};
 
 use crate::common::parse_define;
-use crate::{grad, optimize, render, variance};
+use crate::{batch, grad, optimize, render, variance};
 
 /// A differentiable path tracer on Vulkan compute shaders.
 #[derive(Parser, Debug)]
@@ -27,6 +27,11 @@ pub(crate) enum Command {
     Variance(variance::VarianceArgs),
     /// Recover parameters from a target image: Adam on loss gradients, with CSV, curves and resume.
     Optimize(optimize::OptimizeArgs),
+    /// Run the items of a JSONL manifest (renders, losses, gradients, image gradients), or this
+    /// process's shard of them (--shard I/N, Slurm job arrays, Kubernetes Indexed Jobs).
+    Batch(batch::BatchArgs),
+    /// Merge the summaries of `batch` shards and sum their gradients in item order.
+    Reduce(batch::ReduceArgs),
     /// List a scene's differentiable parameters: names, sizes, bounds and current values.
     Params {
         /// The scene: builtin:NAME or a scene file.

@@ -1,6 +1,7 @@
-//! The `pathgrad` command line: `render`, `grad`, `variance`, `optimize`, `params` and `devices`,
+//! The `pathgrad` command line: `render`, `grad`, `variance`, `optimize`, `batch`, `reduce`, `params` and `devices`,
 //! one module each; `common` holds what they share and `cli` the grammar.
 
+mod batch;
 mod cli;
 mod common;
 mod curves;
@@ -73,5 +74,7 @@ fn run(cli: Cli) -> Result<()> {
         Command::Grad(args) => grad::grad(&args),
         Command::Variance(args) => variance::run(&args),
         Command::Optimize(args) => optimize::optimize(&args),
+        Command::Batch(args) => batch::batch(&args),
+        Command::Reduce(args) => batch::reduce(&args),
     }
 }

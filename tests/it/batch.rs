@@ -1,0 +1,175 @@
+//! `pathgrad batch` and `reduce`: manifests, shards from the flag and the schedulers' variables,
+//! reruns, and bad lines.
+
+use std::path::{Path, PathBuf};
+use std::process::Output;
+
+use crate::cli::pathgrad;
+
+/// A manifest of `count` items on the blend scene: images, deterministic loss gradients against
+/// `target.exr` beside it, and an image gradient; every item with its own seed or values.
+fn manifest(dir: &Path, count: usize) -> PathBuf {
+    let target = dir.join("target.exr");
+    let o = pathgrad()
+        .args(["render", "builtin:blend", "--width", "16", "--height", "12", "--spp", "16", "--no-preview", "-o"])
+        .arg(&target)
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let mut lines = Vec::new();
+    for i in 0..count {
+        let common = format!(r#""scene": "builtin:blend", "width": 16, "height": 12, "spp": 2, "seed": {i}"#);
+        lines.push(match i % 3 {
+            0 => format!(r#"{{{common}, "produce": ["image"]}}"#),
+            1 => format!(
+                r#"{{{common}, "params": {{"object.weight.value": {}}}, "produce": ["image", "loss", "gradients"], "target": "target.exr", "deterministic": true}}"#,
+                0.2 + 0.1 * i as f64
+            ),
+            _ => format!(r#"{{"id": "grad-{i}", {common}, "produce": ["image_gradient"], "image_gradient": "object.weight.value"}}"#),
+        });
+    }
+    let path = dir.join("manifest.jsonl");
+    std::fs::write(&path, lines.join("\n") + "\n").unwrap();
+    path
+}
+
+fn batch(manifest: &Path, out: &Path, args: &[&str], env: &[(&str, &str)]) -> Output {
+    let mut command = pathgrad();
+    command.arg("batch").arg(manifest).arg("-o").arg(out).args(args);
+    for var in ["SLURM_ARRAY_TASK_ID", "SLURM_ARRAY_TASK_COUNT", "SLURM_ARRAY_TASK_MIN", "JOB_COMPLETION_INDEX"] {
+        command.env_remove(var);
+    }
+    command.envs(env.iter().copied()).output().unwrap()
+}
+
+fn ok(o: &Output) {
+    assert!(o.status.success(), "status {:?}: {}", o.status, String::from_utf8_lossy(&o.stderr));
+}
+
+fn reduce(dirs: &[&Path], out: &Path) {
+    let o = pathgrad().arg("reduce").args(dirs).arg("-o").arg(out).output().unwrap();
+    ok(&o);
+}
+
+fn summary(path: &Path) -> Vec<serde_json::Value> {
+    std::fs::read_to_string(path).unwrap().lines().map(|l| serde_json::from_str(l).unwrap()).collect()
+}
+
+/// The item files of a run (everything but summaries), by name.
+fn item_files(dir: &Path) -> Vec<(String, Vec<u8>)> {
+    let mut files: Vec<(String, Vec<u8>)> = std::fs::read_dir(dir)
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .filter(|p| !p.file_name().unwrap().to_str().unwrap().starts_with("summary"))
+        .filter(|p| p.file_name().unwrap() != "totals.json")
+        .map(|p| (p.file_name().unwrap().to_str().unwrap().to_string(), std::fs::read(&p).unwrap()))
+        .collect();
+    files.sort();
+    files
+}
+
+/// Three shards from Slurm's array variables into one directory, and three from a Kubernetes
+/// Indexed Job's completion index into three, reduce to the unsharded run bit for bit: the same
+/// item files and the same gradient totals.
+#[test]
+fn sharded_runs_reduce_to_the_unsharded_run_bitwise() {
+    let dir = tempfile::tempdir().unwrap();
+    let manifest = manifest(dir.path(), 7);
+    let whole = dir.path().join("whole");
+    ok(&batch(&manifest, &whole, &[], &[]));
+    reduce(&[&whole], &whole);
+    let slurm = dir.path().join("slurm");
+    for i in ["10", "11", "12"] {
+        let env = [("SLURM_ARRAY_TASK_ID", i), ("SLURM_ARRAY_TASK_COUNT", "3"), ("SLURM_ARRAY_TASK_MIN", "10")];
+        ok(&batch(&manifest, &slurm, &[], &env));
+    }
+    reduce(&[&slurm], &slurm);
+    let k8s: Vec<PathBuf> = (0..3).map(|i| dir.path().join(format!("k8s-{i}"))).collect();
+    for (i, out) in k8s.iter().enumerate() {
+        ok(&batch(&manifest, out, &["--shards", "3"], &[("JOB_COMPLETION_INDEX", &i.to_string())]));
+        assert_eq!(summary(&out.join(format!("summary.shard-{i}-of-3.jsonl"))).len(), if i == 0 { 3 } else { 2 });
+    }
+    let merged = dir.path().join("k8s");
+    reduce(&k8s.iter().map(PathBuf::as_path).collect::<Vec<_>>(), &merged);
+    let totals = std::fs::read(whole.join("totals.json")).unwrap();
+    let parsed: serde_json::Value = serde_json::from_slice(&totals).unwrap();
+    assert_eq!(parsed["items"], 7);
+    assert_eq!(parsed["with_gradients"], 2);
+    assert!(parsed["gradients"]["object.weight.value"][0].as_f64().unwrap() != 0.0, "{parsed}");
+    assert_eq!(std::fs::read(slurm.join("totals.json")).unwrap(), totals);
+    assert_eq!(std::fs::read(merged.join("totals.json")).unwrap(), totals);
+    assert_eq!(item_files(&slurm), item_files(&whole));
+    let k8s_files: Vec<(String, Vec<u8>)> = {
+        let mut all: Vec<_> = k8s.iter().flat_map(|d| item_files(d)).collect();
+        all.sort();
+        all
+    };
+    assert_eq!(k8s_files, item_files(&whole));
+    let rows = summary(&merged.join("summary.jsonl"));
+    assert_eq!(rows.iter().map(|r| r["index"].as_u64().unwrap()).collect::<Vec<_>>(), (0..7).collect::<Vec<_>>());
+}
+
+/// A shard killed mid-way leaves finished items (their record written last) and one item whose
+/// images were written but not its record; a rerun does only what is missing, and the files
+/// end up as an uninterrupted run writes them.
+#[test]
+fn a_rerun_completes_only_the_missing_items() {
+    let dir = tempfile::tempdir().unwrap();
+    let manifest = manifest(dir.path(), 5);
+    let out = dir.path().join("out");
+    ok(&batch(&manifest, &out, &[], &[]));
+    let complete = item_files(&out);
+    let rows = summary(&out.join("summary.jsonl"));
+    // The state a kill leaves: item 4 never started, item 3 stopped before its record.
+    let name = |i: usize| rows[i]["name"].as_str().unwrap().to_string();
+    for output in rows[4]["outputs"].as_array().unwrap() {
+        std::fs::remove_file(out.join(output.as_str().unwrap())).unwrap();
+    }
+    std::fs::remove_file(out.join(format!("{}.json", name(3)))).unwrap();
+    std::fs::write(out.join(format!(".{}.exr.99999-0.tmp", name(3))), b"torn").unwrap();
+    let o = batch(&manifest, &out, &["--json"], &[]);
+    ok(&o);
+    let report: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    assert_eq!((report["ok"].as_u64(), report["skipped"].as_u64()), (Some(2), Some(3)), "{report}");
+    let statuses: Vec<String> =
+        summary(&out.join("summary.jsonl")).iter().map(|r| r["status"].as_str().unwrap().to_string()).collect();
+    assert_eq!(statuses, ["skipped", "skipped", "skipped", "ok", "ok"]);
+    let after: Vec<(String, Vec<u8>)> = item_files(&out).into_iter().filter(|(n, _)| !n.ends_with(".tmp")).collect();
+    assert_eq!(after, complete);
+}
+
+/// Bad lines — an unknown key, a missing scene, a bad value, a missing target — are reported with
+/// their line numbers in the summary and on stderr; the other items run; the exit status fails.
+#[test]
+fn bad_manifest_lines_are_reported_and_the_rest_go_on() {
+    let dir = tempfile::tempdir().unwrap();
+    let good = r#"{"scene": "builtin:blend", "width": 8, "height": 6, "spp": 1, "produce": ["image"]}"#;
+    let lines = [
+        good,
+        r#"{"scene": "builtin:blend", "colour": "red", "produce": ["image"]}"#,
+        "",
+        r#"{"scene": "nowhere.xml", "produce": ["image"]}"#,
+        r#"{"scene": "builtin:blend", "spp": "many", "produce": ["image"]}"#,
+        r#"{"scene": "builtin:blend", "width": 8, "height": 6, "produce": ["loss"]}"#,
+        r#"{"id": "second", "scene": "builtin:blend", "width": 8, "height": 6, "spp": 1, "seed": 1, "produce": ["image"]}"#,
+    ];
+    let manifest = dir.path().join("m.jsonl");
+    std::fs::write(&manifest, lines.join("\n")).unwrap();
+    let out = dir.path().join("out");
+    let o = batch(&manifest, &out, &[], &[]);
+    assert!(!o.status.success());
+    let stderr = String::from_utf8_lossy(&o.stderr);
+    let rows = summary(&out.join("summary.jsonl"));
+    let status: Vec<(&str, u64)> =
+        rows.iter().map(|r| (r["status"].as_str().unwrap(), r["line"].as_u64().unwrap())).collect();
+    assert_eq!(status, [("ok", 1), ("failed", 2), ("failed", 4), ("failed", 5), ("failed", 6), ("ok", 7)]);
+    for (line, expected) in
+        [(2, "unknown field `colour`"), (4, "nowhere.xml"), (5, "invalid type"), (6, "'target' is needed")]
+    {
+        let row = rows.iter().find(|r| r["line"] == line).unwrap();
+        let error = row["error"].as_str().unwrap();
+        assert!(error.contains(&format!("m.jsonl:{line}:")) && error.contains(expected), "{error}");
+        assert!(stderr.contains(error), "{stderr}");
+    }
+    assert!(out.join("second.exr").is_file());
+}
