@@ -173,3 +173,35 @@ fn bad_manifest_lines_are_reported_and_the_rest_go_on() {
     }
     assert!(out.join("second.exr").is_file());
 }
+
+/// A shard really killed (SIGKILL) after its first items: the rerun skips what was finished,
+/// runs the rest, and the files are those of an uninterrupted run.
+#[test]
+fn a_killed_shard_resumes_where_it_stopped() {
+    let dir = tempfile::tempdir().unwrap();
+    let manifest = manifest(dir.path(), 9);
+    let whole = dir.path().join("whole");
+    ok(&batch(&manifest, &whole, &[], &[]));
+    let out = dir.path().join("killed");
+    let mut child = pathgrad().arg("batch").arg(&manifest).arg("-o").arg(&out).spawn().unwrap();
+    let summary_path = out.join("summary.jsonl");
+    let deadline = std::time::Instant::now() + std::time::Duration::from_secs(120);
+    while std::fs::read_to_string(&summary_path).map_or(0, |t| t.lines().count()) < 2 {
+        assert!(std::time::Instant::now() < deadline, "the shard never finished two items");
+        std::thread::sleep(std::time::Duration::from_millis(5));
+    }
+    child.kill().unwrap();
+    child.wait().unwrap();
+    let done_before = std::fs::read_to_string(&summary_path).unwrap().lines().count();
+    let o = batch(&manifest, &out, &["--json"], &[]);
+    ok(&o);
+    let report: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    let (ran, skipped) = (report["ok"].as_u64().unwrap(), report["skipped"].as_u64().unwrap());
+    assert_eq!(ran + skipped, 9, "{report}");
+    assert!(skipped as usize >= done_before, "{report}: {done_before} were finished before the kill");
+    if ran == 0 {
+        println!("the shard finished every item before the kill landed: only the skip was exercised");
+    }
+    let after: Vec<(String, Vec<u8>)> = item_files(&out).into_iter().filter(|(n, _)| !n.ends_with(".tmp")).collect();
+    assert_eq!(after, item_files(&whole));
+}
