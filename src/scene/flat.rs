@@ -56,6 +56,7 @@ impl FlatScene {
     /// [`crate::Error::Scene`] from validation or the BVH build.
     pub fn new(scene: &Scene) -> Result<FlatScene> {
         scene.validate()?;
+        refuse_media(scene)?;
         let mut triangles = Vec::with_capacity(scene.triangle_count());
         let mut shading = Vec::with_capacity(scene.triangle_count());
         let mut emitters = Vec::new();
@@ -164,5 +165,24 @@ fn flatten_material(scene: &Scene, m: &Material) -> GpuMaterial {
             p_weight: offset(weight),
             ..Default::default()
         },
+        // Refused by `refuse_media` before anything is flattened.
+        Material::Null => GpuMaterial::default(),
     }
+}
+
+/// The renderers do not trace participating media yet: a scene with a medium or a `null`
+/// boundary loads (its parameters are listed) but is refused here, naming what it holds.
+fn refuse_media(scene: &Scene) -> Result<()> {
+    let what = match (
+        scene.media.first(),
+        scene.meshes.iter().find(|m| matches!(scene.materials[m.material.0 as usize], Material::Null)),
+    ) {
+        (Some(medium), _) => format!("the medium '{}'", medium.name),
+        (None, Some(mesh)) => format!("the null-BSDF shape '{}'", mesh.name),
+        (None, None) => return Ok(()),
+    };
+    Err(crate::Error::Scene {
+        location: scene.source.clone(),
+        message: format!("{what}: participating media are loaded (`pathgrad params` lists them) but not rendered yet"),
+    })
 }

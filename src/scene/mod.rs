@@ -5,6 +5,7 @@ pub mod builtin;
 pub mod flat;
 pub mod gltf;
 pub(crate) mod load;
+pub mod medium;
 pub mod mesh_io;
 pub mod mitsuba;
 pub mod shapes;
@@ -78,6 +79,8 @@ pub enum Material {
     /// The child seen from both sides (Mitsuba's `twosided`): from the back, the shading frame is
     /// flipped so the child sees its front.
     TwoSided(MaterialId),
+    /// No surface: an index-matched boundary of a medium (Mitsuba's `null`); rays pass through.
+    Null,
 }
 
 /// A triangle mesh with one material, optionally emitting.
@@ -98,6 +101,8 @@ pub struct Mesh {
     pub material: MaterialId,
     /// RGB radiance parameter if the mesh is an area emitter.
     pub emitter: Option<ParamId>,
+    /// The medium inside the mesh (a closed surface), if any.
+    pub interior: Option<medium::MediumId>,
 }
 
 /// A perspective pinhole camera.
@@ -145,6 +150,8 @@ pub struct Scene {
     pub sensor: usize,
     /// Bitmap textures.
     pub textures: Vec<Texture>,
+    /// Participating media, each inside the meshes whose `interior` it is.
+    pub media: Vec<medium::Medium>,
     /// Constant environment radiance (RGB parameter) seen by rays that leave the scene, if any.
     pub environment: Option<ParamId>,
     /// Every differentiable value.
@@ -202,6 +209,7 @@ impl Scene {
             sensors: vec![Sensor { name: "camera".into(), camera }],
             sensor: 0,
             textures: Vec::new(),
+            media: Vec::new(),
             environment: None,
             params: ParamTable::default(),
             max_depth: 6,
@@ -307,6 +315,7 @@ impl Scene {
             indices: geometry.indices,
             material,
             emitter,
+            interior: None,
         });
         Ok(())
     }
@@ -384,14 +393,27 @@ impl Scene {
                         Some(Material::Blend { .. }) => {
                             return Err(err(format!("material {i}"), "a blend's children must not be blends".into()));
                         }
+                        Some(Material::Null) => {
+                            return Err(err(format!("material {i}"), "a blend's children must not be null".into()));
+                        }
                         Some(_) => {}
                     }
                 }
             }
         }
+        for (i, m) in self.materials.iter().enumerate() {
+            if let Material::TwoSided(c) = m
+                && matches!(self.materials.get(c.0 as usize), Some(Material::Null))
+            {
+                return Err(err(format!("material {i}"), "a two-sided wrapper of a null BSDF".into()));
+            }
+        }
         for m in &self.meshes {
             let n = m.positions.len();
             let at = || format!("mesh '{}'", m.name);
+            if m.interior.is_some_and(|id| id.0 as usize >= self.media.len()) {
+                return Err(err(at(), "its interior medium does not exist".into()));
+            }
             if m.material.0 as usize >= self.materials.len() {
                 return Err(err(at(), format!("material {} does not exist", m.material.0)));
             }

@@ -155,34 +155,33 @@ impl Grid {
         out
     }
 
-    /// Channel `c` of voxel (x, y, z).
-    fn voxel(&self, x: u32, y: u32, z: u32, c: u32) -> f32 {
-        let r = self.resolution;
-        self.values[(((z * r.y + y) * r.x + x) * self.channels + c) as usize]
-    }
-
     /// Channel `c` at `p` in the unit cube, as Mitsuba's trilinear `gridvolume`: the continuous
     /// voxel coordinate p·res − 0.5 is clamped to [0, res − 1] on each axis and interpolated
     /// between its eight neighbours (so outside the cube the nearest face's values hold).
     pub fn lookup(&self, p: Vec3, c: u32) -> f32 {
-        let r = self.resolution.as_vec3();
-        let u = (p * r - 0.5).clamp(Vec3::ZERO, r - 1.0);
-        let lo = u.floor().as_uvec3();
-        let hi = (lo + 1).min(self.resolution - 1);
-        let t = u - lo.as_vec3();
-        let at = |x: u32, y: u32, z: u32| self.voxel(x, y, z, c);
-        let lerp = |a: f32, b: f32, w: f32| a + (b - a) * w;
-        let x00 = lerp(at(lo.x, lo.y, lo.z), at(hi.x, lo.y, lo.z), t.x);
-        let x10 = lerp(at(lo.x, hi.y, lo.z), at(hi.x, hi.y, lo.z), t.x);
-        let x01 = lerp(at(lo.x, lo.y, hi.z), at(hi.x, lo.y, hi.z), t.x);
-        let x11 = lerp(at(lo.x, hi.y, hi.z), at(hi.x, hi.y, hi.z), t.x);
-        lerp(lerp(x00, x10, t.y), lerp(x01, x11, t.y), t.z)
+        lookup(&self.values, self.resolution, self.channels, p, c)
     }
 
     /// The largest value of channel `c` (a majorant for delta tracking).
     pub fn max(&self, c: u32) -> f32 {
         self.values.iter().skip(c as usize).step_by(self.channels as usize).copied().fold(f32::NEG_INFINITY, f32::max)
     }
+}
+
+/// [`Grid::lookup`] on the voxel values `values` of a grid of `resolution` with `channels`.
+pub fn lookup(values: &[f32], resolution: UVec3, channels: u32, p: Vec3, c: u32) -> f32 {
+    let r = resolution.as_vec3();
+    let u = (p * r - 0.5).clamp(Vec3::ZERO, r - 1.0);
+    let lo = u.floor().as_uvec3();
+    let hi = (lo + 1).min(resolution - 1);
+    let t = u - lo.as_vec3();
+    let at = |x: u32, y: u32, z: u32| values[(((z * resolution.y + y) * resolution.x + x) * channels + c) as usize];
+    let lerp = |a: f32, b: f32, w: f32| a + (b - a) * w;
+    let x00 = lerp(at(lo.x, lo.y, lo.z), at(hi.x, lo.y, lo.z), t.x);
+    let x10 = lerp(at(lo.x, hi.y, lo.z), at(hi.x, hi.y, lo.z), t.x);
+    let x01 = lerp(at(lo.x, lo.y, hi.z), at(hi.x, lo.y, hi.z), t.x);
+    let x11 = lerp(at(lo.x, hi.y, hi.z), at(hi.x, hi.y, hi.z), t.x);
+    lerp(lerp(x00, x10, t.y), lerp(x01, x11, t.y), t.z)
 }
 
 #[cfg(test)]

@@ -11,7 +11,7 @@ use crate::error::Result;
 use crate::scene::{Albedo, Material, MaterialId, TextureId, bounds};
 
 /// The BSDF plugins pathgrad reads.
-const SUPPORTED_BSDFS: &str = "blendbsdf, diffuse, roughconductor, twosided";
+const SUPPORTED_BSDFS: &str = "blendbsdf, diffuse, null, roughconductor, twosided";
 
 /// Conductor presets for `roughconductor`'s `material`: RGB (eta, k) for Au, Ag, Cu, Al and Cr,
 /// the widely used RGB reductions of the measured spectra that Mitsuba tabulates (as in Mitsuba
@@ -76,6 +76,10 @@ impl<'a> Loader<'a> {
                 }
             }
             "roughconductor" => self.rough_conductor(&p, name)?,
+            "null" => {
+                self.finish(&p)?;
+                self.scene.add_material(Material::Null)
+            }
             "blendbsdf" => {
                 let weight = self.float_in(&p, "weight", None, bounds::WEIGHT)?;
                 let children = p.take_nested(&["bsdf", "ref"]);

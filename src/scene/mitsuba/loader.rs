@@ -21,7 +21,20 @@ pub(super) const MAX_NESTING: usize = 16;
 const MAX_NODES: u32 = 1 << 22;
 
 /// Object tags that may carry an `id`.
-const ID_TAGS: &[&str] = &["bsdf", "emitter", "film", "integrator", "rfilter", "sampler", "sensor", "shape", "texture"];
+const ID_TAGS: &[&str] = &[
+    "bsdf",
+    "emitter",
+    "film",
+    "integrator",
+    "medium",
+    "phase",
+    "rfilter",
+    "sampler",
+    "sensor",
+    "shape",
+    "texture",
+    "volume",
+];
 
 /// Mesh file formats of `<shape type="obj|ply">`.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -82,6 +95,7 @@ pub(super) fn load_text_with(text: &str, file: &Path, options: &LoadOptions, mes
         names: HashMap::new(),
         materials: HashMap::new(),
         textures: HashMap::new(),
+        media: HashMap::new(),
         in_progress: Vec::new(),
         meshes,
         options,
@@ -107,6 +121,8 @@ pub(super) struct Loader<'a> {
     pub materials: HashMap<NodeId, MaterialId>,
     /// Textures already built, by element.
     pub textures: HashMap<NodeId, TextureId>,
+    /// Media already built, by element.
+    pub media: HashMap<NodeId, crate::scene::medium::MediumId>,
     /// BSDFs and textures being built (cycle detection).
     pub in_progress: Vec<NodeId>,
     /// The mesh file reader.
@@ -134,7 +150,9 @@ impl<'a> Loader<'a> {
 
         let mut unnamed = 0;
         for c in &children {
-            if matches!(c.tag_name().name(), "shape" | "bsdf" | "texture" | "emitter") && !c.has_attribute("id") {
+            if matches!(c.tag_name().name(), "shape" | "bsdf" | "texture" | "emitter" | "medium")
+                && !c.has_attribute("id")
+            {
                 self.names.insert(c.id(), format!("_unnamed_{unnamed}"));
                 unnamed += 1;
             }
@@ -190,6 +208,8 @@ impl<'a> Loader<'a> {
                 }
                 "shape" => self.shape(c)?,
                 "emitter" => self.environment(c)?,
+                // Built when a shape refers to it (its `interior`); one nothing refers to is reported below.
+                "medium" | "volume" | "phase" => {}
                 tag @ ("film" | "sampler" | "rfilter") => {
                     return Err(self.x.err(c, format!("a <{tag}> must be inside a <sensor>")));
                 }
@@ -199,7 +219,7 @@ impl<'a> Loader<'a> {
                         c,
                         format!(
                             "unsupported element <{tag}> (supported in <scene>: default, bsdf, texture, shape, \
-                             emitter, sensor, integrator)"
+                             emitter, medium, volume, phase, sensor, integrator)"
                         ),
                     ));
                 }
@@ -213,6 +233,13 @@ impl<'a> Loader<'a> {
         if self.scene.meshes.is_empty() {
             return Err(self.x.err(root, "the scene has no shapes"));
         }
+        for &c in children.iter().filter(|c| c.has_tag_name("medium")) {
+            if !self.media.contains_key(&c.id()) {
+                let w = self.x.warning(c, "no shape has this medium as its interior: it is ignored");
+                self.scene.warn(w);
+            }
+        }
+        self.refuse_sensors_in_media(&sensors)?;
         if self.scene.meshes.iter().all(|m| m.emitter.is_none()) && self.scene.environment.is_none() {
             let w = self.x.warning(root, "the scene has no emitters: it renders black");
             self.scene.warn(w);

@@ -56,6 +56,7 @@
 
 mod bsdf;
 mod loader;
+mod media;
 mod sensor;
 mod shapes;
 mod xml;
@@ -64,6 +65,8 @@ mod xml;
 mod tests;
 #[cfg(test)]
 mod tests_errors;
+#[cfg(test)]
+mod tests_media;
 
 use std::path::Path;
 

@@ -225,8 +225,11 @@ impl<'a> Loader<'a> {
     /// [`UNBOUNDED_DEPTH_CAP`], which the renderer treats as unbounded).
     pub(super) fn integrator(&mut self, node: El<'a>) -> Result<()> {
         let p = Props::parse(&self.x, node)?;
-        if !matches!(p.kind.as_str(), "path" | "prb" | "prb_basic") {
-            return Err(self.x.err(node, format!("unsupported plugin '{}' (supported: path, prb, prb_basic)", p.kind)));
+        if !matches!(p.kind.as_str(), "path" | "prb" | "prb_basic" | "volpath" | "prbvolpath") {
+            return Err(self.x.err(
+                node,
+                format!("unsupported plugin '{}' (supported: path, prb, prb_basic, volpath, prbvolpath)", p.kind),
+            ));
         }
         self.scene.max_depth = match p.integer(&self.x, "max_depth")? {
             None | Some((-1, _)) => UNBOUNDED_DEPTH_CAP,

@@ -227,6 +227,11 @@ impl<'a> Loader<'a> {
         if let Some(bad) = geometry.positions.iter().find(|v| !v.is_finite()) {
             return Err(self.x.err(node, format!("a vertex position is not finite ({bad})")));
         }
+        // Named first: a `<ref name="interior" id="…"/>` is not a BSDF reference.
+        let interior = p.object("interior");
+        if let Some(exterior) = p.object("exterior") {
+            return Err(self.x.err(exterior, "exterior media are not supported (paths start in vacuum)"));
+        }
         let bsdfs = p.take_nested(&["bsdf", "ref"]);
         let emitters = p.take_nested(&["emitter"]);
         self.finish(&p)?;
@@ -240,8 +245,15 @@ impl<'a> Loader<'a> {
             [e] => Some(self.area_emitter(e, &name)?),
             [_, second, ..] => return Err(self.x.err(second, "a shape takes one emitter")),
         };
+        let interior = match interior {
+            Some(m) => Some(self.medium(m, format!("{name}.interior_medium"))?),
+            None => None,
+        };
         let overflowed_before = self.scene.overflowed_triangles;
         self.scene.add_mesh(&name, geometry, material, None).map_err(|e| self.located(node, e))?;
+        if let Some(mesh) = self.scene.meshes.last_mut() {
+            mesh.interior = interior;
+        }
         if let Some((e, param, radiance)) = emitter {
             let mesh = self.scene.meshes.last().expect("add_mesh pushed a mesh");
             let g = Geometry { positions: mesh.positions.clone(), indices: mesh.indices.clone(), ..Default::default() };

@@ -30,7 +30,7 @@ fn fixtures_give_their_pinned_messages() {
     let cases: &[(&str, String)] = &[
         (
             "unsupported_plugin.xml",
-            "5:5: <bsdf id=\"shiny\">: unsupported plugin 'plastic' (supported: blendbsdf, diffuse, roughconductor, twosided)"
+            "5:5: <bsdf id=\"shiny\">: unsupported plugin 'plastic' (supported: blendbsdf, diffuse, null, roughconductor, twosided)"
                 .into(),
         ),
         ("bad_rgb.xml", "7:13: <rgb name=\"reflectance\">: value: expected a number, got 'x'".into()),
@@ -92,8 +92,8 @@ fn fixtures_give_their_pinned_messages() {
         ("duplicate_id.xml", format!("6:5: <shape id=\"a\">: duplicate id 'a' (first used at {d}/duplicate_id.xml:5:5)")),
         (
             "unsupported_element.xml",
-            "5:5: <medium id=\"fog\">: unsupported element <medium> (supported in <scene>: default, bsdf, texture, \
-             shape, emitter, sensor, integrator)"
+            "5:5: <mesh id=\"fog\">: unsupported element <mesh> (supported in <scene>: default, bsdf, texture, \
+             shape, emitter, medium, volume, phase, sensor, integrator)"
                 .into(),
         ),
     ];
@@ -183,7 +183,7 @@ fn element_and_property_errors() {
         (r#"<shape type="cube">oops</shape>"#, "<shape>: unexpected text inside the element"),
         (
             r#"<shape type="cube"><color name="c" value="1"/></shape>"#,
-            "<color name=\"c\">: unsupported element <color> (supported inside an object: boolean, float, integer, point, rgb, spectrum, string, transform, vector, bsdf, emitter, film, integrator, ref, rfilter, sampler, sensor, shape, texture)",
+            "<color name=\"c\">: unsupported element <color> (supported inside an object: boolean, float, integer, point, rgb, spectrum, string, transform, vector, bsdf, emitter, film, integrator, medium, phase, ref, rfilter, sampler, sensor, shape, texture, volume)",
         ),
         (
             r#"<shape type="cube"><float name="a" value="1" unit="m"/></shape>"#,
@@ -380,8 +380,8 @@ fn element_and_property_errors() {
             "<emitter>: a scene has at most one constant emitter",
         ),
         (
-            r#"<integrator type="volpath"/>"#,
-            "<integrator>: unsupported plugin 'volpath' (supported: path, prb, prb_basic)",
+            r#"<integrator type="aov"/>"#,
+            "<integrator>: unsupported plugin 'aov' (supported: path, prb, prb_basic, volpath, prbvolpath)",
         ),
         (
             r#"<integrator type="path"><integer name="max_depth" value="0"/></integrator>"#,

@@ -15,8 +15,21 @@ pub(super) type El<'a> = Node<'a, 'a>;
 /// The property tags and the object tags an object element may contain.
 const PROPERTY_TAGS: &[&str] =
     &["boolean", "float", "integer", "point", "rgb", "spectrum", "string", "transform", "vector"];
-const OBJECT_TAGS: &[&str] =
-    &["bsdf", "emitter", "film", "integrator", "ref", "rfilter", "sampler", "sensor", "shape", "texture"];
+const OBJECT_TAGS: &[&str] = &[
+    "bsdf",
+    "emitter",
+    "film",
+    "integrator",
+    "medium",
+    "phase",
+    "ref",
+    "rfilter",
+    "sampler",
+    "sensor",
+    "shape",
+    "texture",
+    "volume",
+];
 
 /// A `<default>` or `-D` value and whether any attribute used it.
 struct Define {
@@ -417,6 +430,21 @@ impl<'a> Props<'a> {
             Some(Prop { value: Value::Color(v), node, .. }) => Ok(Some((*v, *node))),
             Some(Prop { value: Value::Float(v), node, .. }) => Ok(Some((Vec3::splat(*v), *node))),
             Some(p) => Err(self.wrong_type(x, p, "an <rgb>, a constant <spectrum> or a <float>")),
+        }
+    }
+
+    /// Property `name` as given: one value for a `<float>`, three for an `<rgb>` or constant
+    /// `<spectrum>` (media keep grey and RGB values apart).
+    ///
+    /// # Errors
+    /// A property of another type.
+    pub fn values(&self, x: &Xml<'_>, name: &str) -> Result<Option<(Vec<f32>, El<'a>)>> {
+        self.no_object(x, name, "an <rgb>, a constant <spectrum>, a <float> or a <volume>")?;
+        match self.get(name) {
+            None => Ok(None),
+            Some(Prop { value: Value::Color(v), node, .. }) => Ok(Some((v.to_array().to_vec(), *node))),
+            Some(Prop { value: Value::Float(v), node, .. }) => Ok(Some((vec![*v], *node))),
+            Some(p) => Err(self.wrong_type(x, p, "an <rgb>, a constant <spectrum>, a <float> or a <volume>")),
         }
     }
 

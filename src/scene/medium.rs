@@ -1,0 +1,129 @@
+//! Participating media as Mitsuba 3 describes them: homogeneous and heterogeneous media inside
+//! shapes, their extinction and albedo fields (constants or `.vol` grids), scale and phase function.
+//!
+//! Every differentiable value is a parameter named as Mitsuba's `traverse` names it
+//! (`smoke.interior_medium.sigma_t.data`, `.albedo.value.value`, `.scale`, `.phase_function.g`).
+//! The extinction at a point is `scale · sigma_t(p)`; a grid fills the unit cube under its
+//! volume's `to_world` and is looked up trilinearly at `p·res − 0.5` with clamping
+//! ([`crate::scene::volume::Grid::lookup`]).
+
+use glam::{Mat4, UVec3, Vec3};
+
+use crate::params::{ParamId, ParamTable};
+
+/// Index of a medium in [`crate::scene::Scene::media`].
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct MediumId(pub u32);
+
+/// A value over space.
+#[derive(Clone, Debug, PartialEq)]
+pub enum Field {
+    /// The same value everywhere: a parameter of `channels` (1 or 3) values.
+    Constant {
+        /// The value.
+        value: ParamId,
+        /// 1 (grey) or 3 (RGB).
+        channels: u32,
+    },
+    /// A grid of `resolution` voxels with `channels` values each, x fastest then y then z (the
+    /// `.vol` order), filling the unit cube under the volume's `to_world`.
+    Grid {
+        /// Voxels along x, y and z.
+        resolution: UVec3,
+        /// 1 or 3.
+        channels: u32,
+        /// The voxel values.
+        values: ParamId,
+        /// World to the grid's unit cube (the inverse of the volume's `to_world`).
+        to_local: Mat4,
+    },
+}
+
+impl Field {
+    /// Channel `c` of the field at world point `p` with the values in `params` (a grey field
+    /// gives its one value for every channel).
+    pub fn eval(&self, params: &ParamTable, p: Vec3, c: u32) -> f32 {
+        match self {
+            Field::Constant { value, channels } => params.get(*value)[(c.min(channels - 1)) as usize],
+            Field::Grid { resolution, channels, values, to_local } => crate::scene::volume::lookup(
+                params.get(*values),
+                *resolution,
+                *channels,
+                to_local.transform_point3(p),
+                c.min(channels - 1),
+            ),
+        }
+    }
+
+    /// The largest value of channel `c` anywhere (a majorant of [`Field::eval`]: trilinear
+    /// interpolation never exceeds its corners).
+    pub fn max(&self, params: &ParamTable, c: u32) -> f32 {
+        match self {
+            Field::Constant { .. } => self.eval(params, Vec3::ZERO, c),
+            Field::Grid { channels, values, .. } => {
+                let ch = c.min(channels - 1) as usize;
+                params.get(*values).iter().skip(ch).step_by(*channels as usize).fold(0.0f32, |m, &v| m.max(v))
+            }
+        }
+    }
+
+    /// The number of channels.
+    pub fn channels(&self) -> u32 {
+        match self {
+            Field::Constant { channels, .. } | Field::Grid { channels, .. } => *channels,
+        }
+    }
+}
+
+/// A phase function.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Phase {
+    /// Uniform over the sphere: 1/(4π).
+    Isotropic,
+    /// Henyey–Greenstein with mean cosine `g` (one value in (−1, 1)).
+    HenyeyGreenstein {
+        /// The asymmetry parameter.
+        g: ParamId,
+    },
+}
+
+/// A participating medium inside one or more shapes (their `interior`).
+#[derive(Clone, Debug, PartialEq)]
+pub struct Medium {
+    /// The parameter prefix: the medium's `id`, or `SHAPE.interior_medium` when nested in a shape.
+    pub name: String,
+    /// `heterogeneous` in the file (else `homogeneous`); both may hold grids or constants.
+    pub heterogeneous: bool,
+    /// Extinction before `scale`: per unit length, ≥ 0.
+    pub sigma_t: Field,
+    /// Single-scattering albedo σ_s/σ_t in [0, 1].
+    pub albedo: Field,
+    /// Multiplies `sigma_t` (one value ≥ 0).
+    pub scale: ParamId,
+    /// The phase function.
+    pub phase: Phase,
+}
+
+impl Medium {
+    /// The extinction of channel `c` at `p`: `scale · sigma_t(p)`.
+    pub fn extinction(&self, params: &ParamTable, p: Vec3, c: u32) -> f32 {
+        params.get(self.scale)[0] * self.sigma_t.eval(params, p, c)
+    }
+
+    /// A majorant of [`Medium::extinction`] over every channel: `scale · max(sigma_t)` (ALGORITHMS.md §8).
+    pub fn majorant(&self, params: &ParamTable) -> f32 {
+        let channels = self.sigma_t.channels();
+        params.get(self.scale)[0] * (0..channels).map(|c| self.sigma_t.max(params, c)).fold(0.0f32, f32::max)
+    }
+}
+
+/// Bounds of medium parameters: extinction and scale ≥ 0, albedo in [0, 1], |g| < 1 (the
+/// optimiser keeps g within ±0.999, where Henyey–Greenstein is still finite).
+pub mod bounds {
+    /// Extinction values and `scale`.
+    pub const EXTINCTION: (f32, f32) = (0.0, f32::INFINITY);
+    /// Albedo values.
+    pub const ALBEDO: (f32, f32) = (0.0, 1.0);
+    /// Henyey–Greenstein g.
+    pub const HG_G: (f32, f32) = (-0.999, 0.999);
+}

@@ -1,0 +1,195 @@
+//! Mitsuba `<medium>`s: `homogeneous` and `heterogeneous`, their `sigma_t` and `albedo` as
+//! constants, `constvolume` or `gridvolume` (`.vol` files), `scale`, and `isotropic` or `hg` phase
+//! functions; and the check that no sensor sits inside a medium.
+
+use glam::{DVec3, Mat4, Vec3};
+
+use super::loader::Loader;
+use super::xml::{El, Props};
+use crate::error::Result;
+use crate::scene::medium::{Field, Medium, MediumId, Phase, bounds};
+use crate::scene::volume::Grid;
+
+impl<'a> Loader<'a> {
+    /// The medium `node` is or refers to, built on first use; `name` (the parameter prefix) is
+    /// used unless the medium has an `id`.
+    pub(super) fn medium(&mut self, node: El<'a>, name: String) -> Result<MediumId> {
+        let target = self.deref(node)?;
+        if !target.has_tag_name("medium") {
+            return Err(self.x.err(node, format!("refers to a <{}>, expected a <medium>", target.tag_name().name())));
+        }
+        if let Some(&m) = self.media.get(&target.id()) {
+            return Ok(m);
+        }
+        let name = self.name_of(target, name)?;
+        let p = Props::parse(&self.x, target)?;
+        let heterogeneous = match p.kind.as_str() {
+            "homogeneous" => false,
+            "heterogeneous" => true,
+            other => {
+                return Err(self.x.err(
+                    target,
+                    format!("unsupported plugin '{other}' (supported media: homogeneous, heterogeneous)"),
+                ));
+            }
+        };
+        let sigma_t = self.field(&p, "sigma_t", &name, 1.0, bounds::EXTINCTION)?;
+        let albedo = self.field(&p, "albedo", &name, 0.75, bounds::ALBEDO)?;
+        let scale = self.float_in(&p, "scale", Some(1.0), bounds::EXTINCTION)?;
+        let phases = p.take_nested(&["phase", "ref"]);
+        self.finish(&p)?;
+        let scale = self
+            .scene
+            .params
+            .add(&format!("{name}.scale"), &[scale], bounds::EXTINCTION)
+            .map_err(|e| self.located(target, e))?;
+        let phase = match phases[..] {
+            [] => Phase::Isotropic,
+            [ph] => self.phase(ph, &name)?,
+            [_, second, ..] => return Err(self.x.err(second, "a medium takes one phase function")),
+        };
+        let id = MediumId(self.scene.media.len() as u32);
+        self.scene.media.push(Medium { name, heterogeneous, sigma_t, albedo, scale, phase });
+        self.media.insert(target.id(), id);
+        Ok(id)
+    }
+
+    /// Property `prop` of medium `p`: a `<float>` or `<rgb>`, a `constvolume` or a `gridvolume`
+    /// (`default` when absent), its values in `range`.
+    fn field(&mut self, p: &Props<'a>, prop: &str, medium: &str, default: f32, range: (f32, f32)) -> Result<Field> {
+        let constant = |loader: &mut Self, values: Vec<f32>, node: El<'a>| -> Result<Field> {
+            let channels = values.len() as u32;
+            let name = format!("{medium}.{prop}.value.value");
+            let value = loader.scene.params.add(&name, &values, range).map_err(|e| loader.located(node, e))?;
+            Ok(Field::Constant { value, channels })
+        };
+        let Some(volume) = p.object(prop) else {
+            return match p.values(&self.x, prop)? {
+                Some((values, node)) => constant(self, values, node),
+                None => constant(self, vec![default], p.node),
+            };
+        };
+        let volume = self.deref(volume)?;
+        if !volume.has_tag_name("volume") {
+            return Err(self.x.err(volume, format!("'{prop}' must be a <float>, an <rgb> or a <volume>")));
+        }
+        let v = Props::parse(&self.x, volume)?;
+        match v.kind.as_str() {
+            "constvolume" => {
+                let (values, node) = v.values(&self.x, "value")?.unwrap_or((vec![1.0], volume));
+                self.finish(&v)?;
+                constant(self, values, node)
+            }
+            "gridvolume" => {
+                let (file, file_node) = v
+                    .string(&self.x, "filename")?
+                    .ok_or_else(|| self.x.err(volume, "'gridvolume' needs the property 'filename'"))?;
+                let to_world = v.transform(&self.x, "to_world")?.map_or(Mat4::IDENTITY, |(t, _)| t.matrix);
+                if let Some((filter, node)) = v.string(&self.x, "filter_type")?
+                    && filter != "trilinear"
+                {
+                    return Err(self.x.err(node, format!("filter_type '{filter}' is not supported (only trilinear)")));
+                }
+                if v.boolean(&self.x, "use_grid_bbox", false)? {
+                    return Err(self
+                        .x
+                        .err(volume, "use_grid_bbox is not supported: the grid fills the unit cube under to_world"));
+                }
+                self.finish(&v)?;
+                if !(Mat4::from_mat3(glam::Mat3::from_mat4(to_world)).determinant().abs() > 0.0) {
+                    return Err(self.x.err(volume, "to_world is singular (it flattens the grid)"));
+                }
+                let path = crate::scene::load::scene_file(&self.dir, &file, self.options.allow_outside_folder)
+                    .map_err(|m| self.x.err(file_node, m))?;
+                let grid = Grid::read(&path).map_err(|e| self.located(file_node, e))?;
+                let name = format!("{medium}.{prop}.data");
+                let values =
+                    self.scene.params.add(&name, &grid.values, range).map_err(|e| self.located(file_node, e))?;
+                Ok(Field::Grid {
+                    resolution: grid.resolution,
+                    channels: grid.channels,
+                    values,
+                    to_local: to_world.inverse(),
+                })
+            }
+            other => Err(self
+                .x
+                .err(volume, format!("unsupported plugin '{other}' (supported volumes: constvolume, gridvolume)"))),
+        }
+    }
+
+    /// A `<phase>`: `isotropic`, or `hg` with `g` (parameter `MEDIUM.phase_function.g`).
+    fn phase(&mut self, node: El<'a>, medium: &str) -> Result<Phase> {
+        let node = self.deref(node)?;
+        if !node.has_tag_name("phase") {
+            return Err(self.x.err(node, "a medium's nested object must be a <phase>"));
+        }
+        let p = Props::parse(&self.x, node)?;
+        let phase = match p.kind.as_str() {
+            "isotropic" => Phase::Isotropic,
+            "hg" => {
+                let g = self.float_in(&p, "g", Some(0.8), (-1.0, 1.0))?;
+                if g.abs() >= 1.0 {
+                    return Err(self
+                        .x
+                        .err(p.node_of("g").unwrap_or(node), format!("'g' must lie in (-1, 1), got {g}")));
+                }
+                let name = format!("{medium}.phase_function.g");
+                let g = self.scene.params.add(&name, &[g], bounds::HG_G).map_err(|e| self.located(node, e))?;
+                Phase::HenyeyGreenstein { g }
+            }
+            other => {
+                return Err(self
+                    .x
+                    .err(node, format!("unsupported plugin '{other}' (supported phases: isotropic, hg)")));
+            }
+        };
+        self.finish(&p)?;
+        Ok(phase)
+    }
+
+    /// Refuses a sensor inside a closed shape with an interior medium (pathgrad's paths start in
+    /// vacuum).
+    pub(super) fn refuse_sensors_in_media(&self, sensors: &[El<'a>]) -> Result<()> {
+        for (node, sensor) in sensors.iter().zip(&self.scene.sensors) {
+            let origin = sensor.camera.position.as_dvec3();
+            for mesh in self.scene.meshes.iter().filter(|m| m.interior.is_some()) {
+                if inside(origin, &mesh.positions, &mesh.indices) {
+                    return Err(self.x.err(
+                        *node,
+                        format!(
+                            "sensor '{}' is inside the medium of shape '{}': a camera inside a medium is not supported",
+                            sensor.name, mesh.name
+                        ),
+                    ));
+                }
+            }
+        }
+        Ok(())
+    }
+}
+
+/// Whether `p` is inside the closed triangle mesh: a ray in a fixed direction that no axis or
+/// diagonal is parallel to crosses it an odd number of times (in f64).
+fn inside(p: DVec3, positions: &[Vec3], indices: &[[u32; 3]]) -> bool {
+    let d = DVec3::new(0.5773, 0.6123, 0.5403).normalize();
+    let mut crossings = 0u32;
+    for t in indices {
+        let [a, b, c] = t.map(|i| positions[i as usize].as_dvec3());
+        let (e1, e2) = (b - a, c - a);
+        let h = d.cross(e2);
+        let det = e1.dot(h);
+        if det.abs() < 1e-300 {
+            continue;
+        }
+        let s = p - a;
+        let u = s.dot(h) / det;
+        let q = s.cross(e1);
+        let v = d.dot(q) / det;
+        let t = e2.dot(q) / det;
+        if (0.0..=1.0).contains(&u) && v >= 0.0 && u + v <= 1.0 && t > 0.0 {
+            crossings += 1;
+        }
+    }
+    crossings % 2 == 1
+}
