@@ -37,6 +37,7 @@
 #include "lib/surface.glsl"
 #include "lib/emitter.glsl"
 #include "lib/differential.glsl"
+#include "lib/medium.glsl"
 
 
 // Whether the differential strategy may place its differential vertex on material `m`: its
@@ -60,6 +61,12 @@ vec4 draw_block(uint key1, uint pixel, uint sample_index, uint vertex, uint bloc
     return uniform4(uvec2(globals.key0, key1), pixel, sample_index, vertex, STREAM_MAIN, block, 0u);
 }
 
+// What a path segment reaches (path_step).
+#define EVENT_ESCAPE 0u
+#define EVENT_SURFACE 1u
+#define EVENT_MEDIUM 2u
+#define EVENT_LOST 3u
+
 // Whether this kernel replays paths at all.
 #define ADJOINT_KERNEL (GRAD_MODE != GRAD_MODE_NONE)
 
@@ -72,6 +79,7 @@ struct PathState {
     uint view;         // index of the request's view
     uint key1;         // the view's Philox key word 1
     uint pixel;        // row-major pixel index within the view
+    uint medium;       // the medium the path is in, or NO_MEDIUM (cameras are in vacuum)
     uint sample_index;
     uint vertex;       // index of the vertex the next step finds, from 1
     float prev_pdf_f;  // density with which the previous vertex sampled ray.dir
@@ -100,6 +108,7 @@ PathState path_begin(uint view, uint pixel, uint sample_index, bool adjoint, vec
     st.view = view;
     st.key1 = cam.key1;
     st.pixel = pixel;
+    st.medium = NO_MEDIUM;
     st.sample_index = sample_index;
     st.vertex = 1u;
     st.prev_pdf_f = 0.0;
@@ -129,9 +138,87 @@ bool path_step(inout PathState st) {
     Bsdf bsdf;
     vec3 wi = vec3(0.0, 0.0, 1.0);
 
-    // ---- intersection ----
-    Hit hit = bvh_closest_hit(st.ray, 0.0, FLOAT_MAX);
-    if (!hit.valid) {
+    // ---- intersection: through null boundaries and null collisions to the next event ----
+    Hit hit;
+    uint event;
+    float travelled = 0.0;    // from the last vertex to the ray's origin, across null boundaries
+    vec3 x_medium = vec3(0.0);
+    if (HAS(F_MEDIA)) {
+        uvec2 key = uvec2(globals.key0, st.key1);
+        uint step = 0u;      // delta-tracking steps of this vertex
+        event = EVENT_LOST;
+        [[dont_unroll]] for (uint crossings = 0u; crossings <= MAX_NULL_CROSSINGS; crossings++) {
+            hit = bvh_closest_hit(st.ray, 0.0, FLOAT_MAX);
+            if (st.medium != NO_MEDIUM) {
+                float t = delta_track(st.medium, st.ray, hit.valid ? hit.t : FLOAT_MAX, key, st.pixel, st.sample_index, vertex, step, st.throughput);
+                if (t >= 0.0) { event = EVENT_MEDIUM; x_medium = st.ray.origin + t * st.ray.dir; break; }
+            }
+            if (!hit.valid) { event = EVENT_ESCAPE; break; }
+            Surface sn = surface_at(hit);
+            if (materials[sn.material].tag != MAT_NULL) { event = EVENT_SURFACE; break; }
+            st.medium = medium_crossed(sn.interior, sn.ng, st.ray.dir, st.medium);
+            travelled += hit.t;
+            st.ray = make_ray(offset_origin(sn.p, sn.ng, st.ray.dir), st.ray.dir);
+        }
+    } else {
+        hit = bvh_closest_hit(st.ray, 0.0, FLOAT_MAX);
+        event = hit.valid ? EVENT_SURFACE : EVENT_ESCAPE;
+    }
+    if (event == EVENT_LOST) {
+        ended = true;
+    } else if (HAS(F_MEDIA) && event == EVENT_MEDIUM) {
+        // ---- a real collision in the medium: NEE through media, phase sampling, roulette ----
+        if (vertex >= globals.max_depth || !(max_component(st.throughput) > 0.0)) {
+            ended = true;
+        } else {
+            uint m = st.medium;
+            vec3 d = st.ray.dir;
+            vec3 x = x_medium;
+            if (nee) {
+                vec4 u_em = draw_block(st.key1, st.pixel, st.sample_index, vertex, DIM_EMITTER_SELECT / 4u);
+                EmitterSample es = sample_emitter(u_em[DIM_EMITTER_SELECT % 4u], vec2(u_em[DIM_EMITTER_POS % 4u], u_em[DIM_EMITTER_POS % 4u + 1u]));
+                if (es.valid) {
+                    vec3 wl;
+                    float p_e;
+                    float shadow_tmax;
+                    if (HAS(F_ENV) && es.environment) {
+                        wl = es.point;
+                        p_e = environment_pdf();
+                        shadow_tmax = FLOAT_MAX;
+                    } else {
+                        vec3 to_light = es.point - x;
+                        float dist = length(to_light);
+                        wl = to_light / dist;
+                        p_e = emitter_pdf_solid_angle(dist, dot(es.normal, -wl));
+                        shadow_tmax = dist * (1.0 - SHADOW_EPSILON);
+                    }
+                    float f = phase_eval(m, d, wl);
+                    if (p_e > 0.0 && f > 0.0) {
+                        vec3 tr = shadow_transmittance(m, x, wl, shadow_tmax, uvec2(globals.key0, st.key1), st.pixel, st.sample_index, vertex);
+                        st.radiance += sign * (st.throughput * tr * mis_power(p_e, f) * f * es.radiance / p_e);
+                    }
+                }
+            }
+            vec4 u_ph = draw_block(st.key1, st.pixel, st.sample_index, vertex, DIM_LOBE / 4u);
+            vec3 wo = phase_sample(m, d, vec2(u_ph[DIM_DIRECTION % 4u], u_ph[DIM_DIRECTION % 4u + 1u]));
+            float pdf = phase_eval(m, d, wo);
+            if (!(pdf > 0.0)) {
+                ended = true;
+            } else {
+                // The sample's density is the phase function itself: the weight f/pdf is 1.
+                st.prev_pdf_f = pdf;
+                st.prev_nee = nee;
+                st.prev_sum = 1.0;
+                if (vertex > globals.rr_depth) {
+                    float u_rr = draw_block(st.key1, st.pixel, st.sample_index, vertex, DIM_ROULETTE / 4u)[DIM_ROULETTE % 4u];
+                    float p_rr = min(max_component(st.throughput), 0.95);
+                    if (!(u_rr < p_rr)) ended = true; else st.throughput /= p_rr;
+                }
+                if (!ended && !(max_component(st.throughput) > 0.0)) ended = true;
+                if (!ended) st.ray = make_ray(x, wo);
+            }
+        }
+    } else if (event == EVENT_ESCAPE) {
         // ---- environment hit ----
         if (HAS(F_ENV) && globals.env_param != NO_PARAM) {
             float w_b = hit_weight(diff, st.prev_nee, st.prev_pdf_f, environment_pdf(), st.prev_sum);
@@ -146,7 +233,7 @@ bool path_step(inout PathState st) {
         // ---- emitter hit ----
         float cos_emit = dot(s.ng, wi_world);
         if (HAS(F_EMITTERS) && s.emitter != NO_EMITTER && cos_emit > 0.0) {
-            float w_b = hit_weight(diff, st.prev_nee, st.prev_pdf_f, emitter_pdf_solid_angle(hit.t, cos_emit), st.prev_sum);
+            float w_b = hit_weight(diff, st.prev_nee, st.prev_pdf_f, emitter_pdf_solid_angle(travelled + hit.t, cos_emit), st.prev_sum);
             uint p_radiance = emitters[s.emitter].p_radiance;
             st.radiance += sign * (st.throughput * w_b * param_rgb(p_radiance));
             if (HAS(G_EMISSION)) { gt.hit_param = p_radiance; gt.hit = st.adj * st.throughput * w_b; }
@@ -188,7 +275,15 @@ bool path_step(inout PathState st) {
                     }
                     vec3 wo = to_local(frame, wl);
                     vec3 f = bsdf_eval(bsdf, wi, wo);
-                    if (p_e > 0.0 && max_component(f) > 0.0 && !bvh_occluded(make_ray(origin, wl), 0.0, shadow_tmax)) {
+                    vec3 tr = vec3(0.0);
+                    if (p_e > 0.0 && max_component(f) > 0.0) {
+                        if (HAS(F_MEDIA)) {
+                            tr = shadow_transmittance(st.medium, origin, wl, shadow_tmax, uvec2(globals.key0, st.key1), st.pixel, st.sample_index, vertex);
+                        } else if (!bvh_occluded(make_ray(origin, wl), 0.0, shadow_tmax)) {
+                            tr = vec3(1.0);
+                        }
+                    }
+                    if (max_component(tr) > 0.0) {
                         float pdf_f = bsdf_pdf(bsdf, wi, wo);
                         float w_n;
                         if (!diff) {
@@ -199,12 +294,12 @@ bool path_step(inout PathState st) {
                             float pdf_d = capable ? bsdf_pdf_diff(bsdf, wi, wo) : pdf_f;
                             w_n = 1.0 / (st.w1 + st.w2 + (st.w1 * pdf_f + q_here * st.w2 * pdf_d + (1.0 - q_here) * st.w2 * pdf_f) / p_e);
                         }
-                        st.radiance += sign * (st.throughput * w_n * f * es.radiance / p_e);
+                        st.radiance += sign * (st.throughput * tr * w_n * f * es.radiance / p_e);
                         grad_wo[0] = wo;
-                        grad_adj[0] = st.adj * st.throughput * w_n * es.radiance / p_e;
+                        grad_adj[0] = st.adj * st.throughput * tr * w_n * es.radiance / p_e;
                         if (es.environment ? HAS(G_ENV) : HAS(G_EMISSION)) {
                             gt.nee_param = es.param;
-                            gt.nee = st.adj * st.throughput * w_n * f / p_e;
+                            gt.nee = st.adj * st.throughput * tr * w_n * f / p_e;
                         }
                     }
                 }

@@ -392,6 +392,8 @@ impl RenderOptions {
             addr_emitters: glam::UVec2::ZERO,
             addr_params: glam::UVec2::ZERO,
             addr_views: glam::UVec2::ZERO,
+            addr_media: glam::UVec2::ZERO,
+            addr_fields: glam::UVec2::ZERO,
             env_select_prob: match (scene.environment.is_some(), flat.emitters.is_empty()) {
                 (false, _) => 0.0,
                 (true, true) => 1.0,

@@ -65,9 +65,9 @@ pub enum Stream {
     /// Per-vertex decisions of surface vertices.
     Main = 0,
     /// Delta-tracking steps.
-    DeltaTracking = 1,
+    DeltaTracking = crate::contract::STREAM_DELTA_TRACKING,
     /// Ratio-tracking steps of NEE.
-    RatioTracking = 2,
+    RatioTracking = crate::contract::STREAM_RATIO_TRACKING,
     /// Attached-derivative regularisation noise.
     Jacobian = 3,
     /// Pixel selection (adaptive sampling, ALGORITHMS.md §6).

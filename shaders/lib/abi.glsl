@@ -22,6 +22,8 @@ layout(buffer_reference, scalar, buffer_reference_align = 4) readonly buffer Mat
 layout(buffer_reference, scalar, buffer_reference_align = 4) readonly buffer EmitterArray { EmitterTri v[]; };
 layout(buffer_reference, scalar, buffer_reference_align = 4) readonly buffer FloatArray { float v[]; };
 layout(buffer_reference, scalar, buffer_reference_align = 4) readonly buffer ViewArray { ViewCamera v[]; };
+layout(buffer_reference, scalar, buffer_reference_align = 4) readonly buffer MediumArray { MediumDesc v[]; };
+layout(buffer_reference, scalar, buffer_reference_align = 4) readonly buffer FieldArray { FieldDesc v[]; };
 #define tris (TriArray(globals.addr_tris).v)
 #define prim_ids (UintArray(globals.addr_prim_ids).v)
 #define shading (ShadingArray(globals.addr_shading).v)
@@ -29,6 +31,8 @@ layout(buffer_reference, scalar, buffer_reference_align = 4) readonly buffer Vie
 #define emitters (EmitterArray(globals.addr_emitters).v)
 #define params (FloatArray(globals.addr_params).v)
 #define views (ViewArray(globals.addr_views).v)
+#define media (MediumArray(globals.addr_media).v)
+#define fields (FieldArray(globals.addr_fields).v)
 layout(set = 0, binding = BINDING_STATUS, scalar) coherent buffer StatusBuf { uint status_flags; };
 
 // Raises a status bit that the host checks after the dispatch.

@@ -9,7 +9,7 @@
 
 // RAY_OFFSET and SHADOW_EPSILON come from src/contract/floats.rs.
 
-struct Surface { vec3 p; vec3 ng; vec3 ns; vec2 uv; uint material; uint emitter; };
+struct Surface { vec3 p; vec3 ng; vec3 ns; vec2 uv; uint material; uint emitter; uint interior; };
 
 Surface surface_at(Hit hit) {
     TriPositions tri = tris[hit.slot];
@@ -23,6 +23,7 @@ Surface surface_at(Hit hit) {
     s.uv = b0 * sh.uv0 + hit.b1 * sh.uv1 + hit.b2 * sh.uv2;
     s.material = sh.material;
     s.emitter = sh.emitter;
+    s.interior = sh.interior;
     return s;
 }
 

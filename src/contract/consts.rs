@@ -54,6 +54,14 @@ contract_constants! {
     NO_EMITTER = 0xFFFF_FFFF;
     /// A parameter offset that refers to nothing (e.g. no environment).
     NO_PARAM = 0xFFFF_FFFF;
+    /// `TriShading::interior` of a triangle whose mesh holds no medium, and the medium of a path
+    /// in vacuum.
+    NO_MEDIUM = 0xFFFF_FFFF;
+    /// Most null-BSDF boundaries one path segment (or shadow ray) passes before it is cut off.
+    MAX_NULL_CROSSINGS = 64;
+    /// Most tentative collisions one free flight or shadow segment takes before it is cut off
+    /// (it then carries nothing): far beyond any majorant × length a scene has.
+    MAX_TRACKING_STEPS = 32768;
 
     /// Status bit: an invocation exhausted lavapipe's loop budget (a loop exited early).
     STATUS_LOOP_BUDGET = 1;
@@ -90,6 +98,10 @@ contract_constants! {
 
     /// Stream of per-vertex decisions.
     STREAM_MAIN = 0;
+    /// Stream of delta-tracking steps (free flights and the null/real choice), per vertex.
+    STREAM_DELTA_TRACKING = 1;
+    /// Stream of ratio-tracking steps of shadow rays, per vertex.
+    STREAM_RATIO_TRACKING = 2;
     /// Stream of adaptive pixel selection (ALGORITHMS.md §2.3, §6): counter (0, k), vertex 0, block 0.
     STREAM_PIXEL = 4;
     /// Pass tag of the adaptive pixel-selection key: `key1 = (iteration << 8) | PASS_PIXEL_SELECT`.
@@ -136,6 +148,8 @@ contract_constants! {
     F_GGX = 1 << 9;
     /// Feature bit: two-sided materials.
     F_TWO_SIDED = 1 << 10;
+    /// Feature bit: participating media and null boundaries.
+    F_MEDIA = 1 << 11;
     /// Feature bit: gradients of constant colours (albedo, specular reflectance).
     G_COLOR = 1 << 16;
     /// Feature bit: gradients of texels.

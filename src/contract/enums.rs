@@ -50,6 +50,24 @@ contract_enums! {
         RoughConductor = MAT_ROUGH_CONDUCTOR = 1,
         /// Blend of two leaf materials.
         Blend = MAT_BLEND = 2,
+        /// No surface: a medium's index-matched boundary, which paths pass through.
+        Null = MAT_NULL = 3,
+    }
+
+    /// What a `FieldDesc` holds.
+    enum FieldKind {
+        /// One value (per channel) everywhere.
+        Constant = FIELD_CONSTANT = 0,
+        /// A trilinearly interpolated voxel grid over the unit cube under its transform.
+        Grid = FIELD_GRID = 1,
+    }
+
+    /// A medium's phase function.
+    enum PhaseKind {
+        /// Uniform over the sphere.
+        Isotropic = PHASE_ISOTROPIC = 0,
+        /// Henyey–Greenstein.
+        HenyeyGreenstein = PHASE_HG = 1,
     }
 
     /// The kind of a leaf BSDF in the kernels (the same values as the material tags).

@@ -48,11 +48,13 @@ mod tests {
     /// Scalar layout packs 4-byte scalars and vectors of them with no padding: sizes are field sums.
     #[test]
     fn structs_have_no_padding() {
-        assert_eq!(size_of::<Globals>(), 21 * 4 + 8 * 8);
+        assert_eq!(size_of::<Globals>(), 21 * 4 + 10 * 8);
         assert_eq!(size_of::<ViewCamera>(), 4 * 12 + 4);
         assert_eq!(size_of::<BvhNode>(), 64);
         assert_eq!(size_of::<TriPositions>(), 40);
-        assert_eq!(size_of::<TriShading>(), 3 * 12 + 3 * 8 + 8);
+        assert_eq!(size_of::<TriShading>(), 3 * 12 + 3 * 8 + 12);
+        assert_eq!(size_of::<FieldDesc>(), 6 * 4 + 4 * 12);
+        assert_eq!(size_of::<MediumDesc>(), 6 * 4);
         assert_eq!(size_of::<Material>(), 10 * 4 + 2 * 12);
         assert_eq!(size_of::<EmitterTri>(), 16 + 36);
         assert_eq!(size_of::<AliasEntry>(), 8);

@@ -69,6 +69,10 @@ contract_structs! {
         addr_params: UVec2,
         /// Device address of the request's `ViewCamera`s.
         addr_views: UVec2,
+        /// Device address of the media (`MediumDesc`).
+        addr_media: UVec2,
+        /// Device address of the media's fields (`FieldDesc`).
+        addr_fields: UVec2,
     }
 
     /// One view of a request: its pinhole camera and the key word of its paths. The image (and
@@ -141,6 +145,51 @@ contract_structs! {
         material: u32,
         /// Index into the emitter array, or `NO_EMITTER`.
         emitter: u32,
+        /// Index into the media of the medium inside the triangle's mesh (behind its winding
+        /// normal), or `NO_MEDIUM`.
+        interior: u32,
+    }
+
+    /// A field of a medium (extinction or albedo): a constant or a grid. A grid's local point is
+    /// (dot(row0, p), dot(row1, p), dot(row2, p)) + shift, in the unit cube.
+    struct FieldDesc {
+        /// `FIELD_CONSTANT` or `FIELD_GRID`.
+        kind: u32,
+        /// 1 or 3 values per point.
+        channels: u32,
+        /// Parameter offset of the value (constant) or of voxel 0 (grid, x fastest).
+        offset: u32,
+        /// Voxels along x.
+        res_x: u32,
+        /// Voxels along y.
+        res_y: u32,
+        /// Voxels along z.
+        res_z: u32,
+        /// Row 0 of the world-to-unit-cube matrix.
+        row0: Vec3,
+        /// Row 1.
+        row1: Vec3,
+        /// Row 2.
+        row2: Vec3,
+        /// The translation.
+        shift: Vec3,
+    }
+
+    /// A participating medium: extinction `scale · sigma_t(p)`, albedo, phase function and the
+    /// majorant of delta and ratio tracking.
+    struct MediumDesc {
+        /// Index of its extinction field.
+        sigma_t: u32,
+        /// Index of its albedo field.
+        albedo: u32,
+        /// Parameter offset of `scale`.
+        p_scale: u32,
+        /// `PHASE_ISOTROPIC` or `PHASE_HG`.
+        phase: u32,
+        /// Parameter offset of Henyey–Greenstein's g, or `NO_PARAM`.
+        p_g: u32,
+        /// `scale · max(sigma_t)` over every point and channel, from the current parameters.
+        majorant: f32,
     }
 
     /// A material; its differentiable values are offsets into the parameter array.

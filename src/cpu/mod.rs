@@ -7,6 +7,7 @@
 //! round differently (ALGORITHMS.md §2.4).
 
 pub(crate) mod emitter;
+pub mod medium;
 #[doc(hidden)]
 pub mod path;
 pub(crate) mod surface;
@@ -100,6 +101,7 @@ impl Backend for Reference {
         _mode: GradMode,
     ) -> Result<Gradients> {
         options.validate()?;
+        refuse_media_gradients(&self.flat)?;
         check_views(views, adjoints, options, "adjoint image")?;
         let mut sums = vec![0.0f64; self.flat.params.len()];
         for (view, adjoint) in views.iter().zip(adjoints) {
@@ -117,6 +119,7 @@ impl Backend for Reference {
         _mode: GradMode,
     ) -> Result<Gradients> {
         options.validate()?;
+        refuse_media_gradients(&self.flat)?;
         check_views(views, adjoints, options, "adjoint image")?;
         backward_adaptive_flat(&self.scene, &self.flat, options, views, &Image::stack(adjoints)?, sampling)
             .map(|g| self.gradients(g))
@@ -124,6 +127,7 @@ impl Backend for Reference {
 
     fn image_gradient(&mut self, options: &RenderOptions, name: &str) -> Result<Image> {
         options.validate()?;
+        refuse_media_gradients(&self.flat)?;
         image_gradient_flat(&self.scene, &self.flat, options, name)
     }
 
@@ -197,7 +201,9 @@ fn render_flat(scene: &Scene, flat: &FlatScene, options: &RenderOptions, view: &
 /// Scene and option errors; an adjoint image of the wrong size.
 pub fn backward(scene: &Scene, options: &RenderOptions, adjoint: &Image) -> Result<Vec<f64>> {
     options.validate()?;
-    backward_flat(scene, &FlatScene::new(scene)?, options, &View::current(scene), adjoint)
+    let flat = FlatScene::new(scene)?;
+    refuse_media_gradients(&flat)?;
+    backward_flat(scene, &flat, options, &View::current(scene), adjoint)
 }
 
 fn backward_flat(
@@ -237,7 +243,9 @@ pub fn backward_adaptive(
 ) -> Result<Vec<f64>> {
     options.validate()?;
     check_size(adjoint, options, "adjoint image")?;
-    backward_adaptive_flat(scene, &FlatScene::new(scene)?, options, &[View::current(scene)], adjoint, sampling)
+    let flat = FlatScene::new(scene)?;
+    refuse_media_gradients(&flat)?;
+    backward_adaptive_flat(scene, &flat, options, &[View::current(scene)], adjoint, sampling)
 }
 
 /// Adaptive samples over `views`, whose adjoint images are stacked in `adjoint`: a drawn pixel g
@@ -308,7 +316,9 @@ fn replay_sample(
 /// Scene and option errors; an unknown parameter.
 pub fn image_gradient(scene: &Scene, options: &RenderOptions, name: &str) -> Result<Image> {
     options.validate()?;
-    image_gradient_flat(scene, &FlatScene::new(scene)?, options, name)
+    let flat = FlatScene::new(scene)?;
+    refuse_media_gradients(&flat)?;
+    image_gradient_flat(scene, &flat, options, name)
 }
 
 fn image_gradient_flat(scene: &Scene, flat: &FlatScene, options: &RenderOptions, name: &str) -> Result<Image> {
@@ -352,6 +362,19 @@ fn image_gradient_flat(scene: &Scene, flat: &FlatScene, options: &RenderOptions,
         .collect();
     check_replays(drifted.into_inner())?;
     Image::from_rgb(options.width, options.height, data)
+}
+
+/// Gradients through media are not built yet: a scene with a medium or a null boundary renders
+/// but is refused here.
+pub(crate) fn refuse_media_gradients(flat: &FlatScene) -> Result<()> {
+    if medium::has_media(flat) {
+        return Err(crate::Error::InvalidArgument {
+            parameter: "scene".into(),
+            message: "gradients of scenes with participating media or null boundaries are not built yet (renders are)"
+                .into(),
+        });
+    }
+    Ok(())
 }
 
 fn check_replays(drifted: usize) -> Result<()> {

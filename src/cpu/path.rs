@@ -8,9 +8,11 @@ use crate::bsdf::{bsdf_eval, bsdf_pdf, bsdf_sample};
 use crate::bvh::{Ray, closest_hit, occluded};
 use crate::contract::{
     DIM_DIFF_SIGN, DIM_DIRECTION, DIM_EMITTER_POS, DIM_EMITTER_SELECT, DIM_LOBE, DIM_PIXEL_JITTER, DIM_ROULETTE,
-    DIM_TECHNIQUE, Globals, MAT_BLEND, MAT_ROUGH_CONDUCTOR, NO_EMITTER, NO_PARAM, STRATEGY_DIFF, ViewCamera,
+    DIM_TECHNIQUE, Globals, MAT_BLEND, MAT_NULL, MAT_ROUGH_CONDUCTOR, MAX_NULL_CROSSINGS, NO_EMITTER, NO_MEDIUM,
+    NO_PARAM, STRATEGY_DIFF, ViewCamera,
 };
 use crate::cpu::emitter::{emitter_pdf_solid_angle, environment_pdf, sample_emitter};
+use crate::cpu::medium;
 use crate::cpu::surface::{
     SHADOW_EPSILON, bsdf_backward, mis_power, offset_origin, param_color, resolve_bsdf, safe_div, surface_at,
 };
@@ -20,6 +22,18 @@ use crate::scene::flat::FlatScene;
 
 fn draw_block(key: RngKey, pixel: u32, sample: u32, vertex: u32, block: u32) -> [f32; 4] {
     uniform4(key, pixel, sample, vertex, Stream::Main, block, 0)
+}
+
+/// What a path segment reaches.
+enum Event {
+    /// Nothing: the environment.
+    Escape,
+    /// A surface that is not a null boundary.
+    Surface(crate::bvh::Hit, crate::cpu::surface::Surface),
+    /// A real collision in the current medium, at this point.
+    Medium(Vec3),
+    /// More null boundaries than `MAX_NULL_CROSSINGS` in a row: the path is cut off.
+    Lost,
 }
 
 fn max_component(v: Vec3) -> f32 {
@@ -134,27 +148,124 @@ pub fn trace_path<const ADJOINT: bool>(
     let mut prev_sum = 1.0f32; // w1 + w2 at the previous vertex before its update, rescaled
     let (mut w1, mut w2) = (0.0f32, 1.0f32); // mixture sums of the differential strategy (§5.2)
     let mut dx_taken = false; // the differential vertex has been chosen
+    let media = medium::has_media(flat);
+    let mut current = NO_MEDIUM; // the medium the path is in (cameras are in vacuum)
     for vertex in 1..=globals.max_depth {
-        // ---- intersection ----
-        let Some(hit) = closest_hit(&flat.bvh, &ray, 0.0, f32::MAX) else {
-            // ---- environment hit ----
-            if globals.env_param != NO_PARAM {
-                let w_b = hit_weight(diff, prev_nee, prev_pdf_f, environment_pdf(globals), prev_sum);
-                radiance += sign * (throughput * w_b * param_color(flat, globals.env_param));
-                if ADJOINT {
-                    sink.add_rgb(globals.env_param, adj_radiance * throughput * w_b);
+        // ---- intersection: through null boundaries and null collisions to the next event ----
+        let mut travelled = 0.0f32; // from the last vertex to `ray.origin`, across null boundaries
+        let mut step = 0u32; // delta-tracking steps of this vertex
+        let mut crossings = 0u32;
+        let event = loop {
+            let hit = closest_hit(&flat.bvh, &ray, 0.0, f32::MAX);
+            if media && current != NO_MEDIUM {
+                let t_max = hit.as_ref().map_or(f32::MAX, |h| h.t);
+                let m = &flat.media[current as usize];
+                let counters = (pixel, sample, vertex);
+                if let Some(t) = medium::delta_track(flat, key, m, &ray, t_max, counters, &mut step, &mut throughput) {
+                    break Event::Medium(ray.origin + t * ray.dir);
                 }
             }
-            break;
+            let Some(hit) = hit else { break Event::Escape };
+            let s = surface_at(flat, &hit);
+            if !(media && flat.materials[s.material as usize].tag == MAT_NULL) {
+                break Event::Surface(hit, s);
+            }
+            crossings += 1;
+            if crossings > MAX_NULL_CROSSINGS {
+                break Event::Lost;
+            }
+            let interior = flat.shading[flat.bvh.prim_ids[hit.slot as usize] as usize].interior;
+            current = medium::crossed(interior, s.ng, ray.dir, current);
+            travelled += hit.t;
+            ray = Ray::new(offset_origin(s.p, s.ng, ray.dir), ray.dir);
         };
-        let s = surface_at(flat, &hit);
+        let (hit, s) = match event {
+            Event::Lost => break,
+            Event::Escape => {
+                // ---- environment hit ----
+                if globals.env_param != NO_PARAM {
+                    let w_b = hit_weight(diff, prev_nee, prev_pdf_f, environment_pdf(globals), prev_sum);
+                    radiance += sign * (throughput * w_b * param_color(flat, globals.env_param));
+                    if ADJOINT {
+                        sink.add_rgb(globals.env_param, adj_radiance * throughput * w_b);
+                    }
+                }
+                break;
+            }
+            Event::Medium(x) => {
+                if vertex >= globals.max_depth || !(max_component(throughput) > 0.0) {
+                    break;
+                }
+                let m = &flat.media[current as usize];
+                let d = ray.dir;
+                // ---- emitter sampling from the medium ----
+                let u_em = draw_block(key, pixel, sample, vertex, DIM_EMITTER_SELECT / 4);
+                let pos = (DIM_EMITTER_POS % 4) as usize;
+                let u_select = u_em[(DIM_EMITTER_SELECT % 4) as usize];
+                let es = if nee {
+                    sample_emitter(flat, globals, u_select, Vec2::new(u_em[pos], u_em[pos + 1]))
+                } else {
+                    None
+                };
+                if let Some(es) = es {
+                    let (wl, p_e, shadow_tmax) = if es.environment {
+                        (es.point, environment_pdf(globals), f32::MAX)
+                    } else {
+                        let to_light = es.point - x;
+                        let dist = to_light.length();
+                        let wl = to_light / dist;
+                        (wl, emitter_pdf_solid_angle(globals, dist, es.normal.dot(-wl)), dist * (1.0 - SHADOW_EPSILON))
+                    };
+                    let f = medium::phase_eval(flat, m, d, wl);
+                    if p_e > 0.0 && f > 0.0 {
+                        let tr = medium::shadow_transmittance(
+                            flat,
+                            key,
+                            current,
+                            (x, wl, shadow_tmax),
+                            (pixel, sample, vertex),
+                        );
+                        let w_n = mis_power(p_e, f);
+                        radiance += sign * (throughput * tr * w_n * f * es.radiance / p_e);
+                    }
+                }
+                // ---- phase sampling ----
+                let u_bs = draw_block(key, pixel, sample, vertex, DIM_LOBE / 4);
+                let dir = (DIM_DIRECTION % 4) as usize;
+                let wo = medium::phase_sample(flat, m, d, [u_bs[dir], u_bs[dir + 1]]);
+                let pdf = medium::phase_eval(flat, m, d, wo);
+                if !(pdf > 0.0) {
+                    break;
+                }
+                // The sample's density is the phase function itself: the weight f/pdf is 1.
+                prev_pdf_f = pdf;
+                prev_nee = nee;
+                prev_sum = 1.0;
+                // ---- Russian roulette ----
+                if vertex > globals.rr_depth {
+                    let u_rr = draw_block(key, pixel, sample, vertex, DIM_ROULETTE / 4)[(DIM_ROULETTE % 4) as usize];
+                    let p_rr = max_component(throughput).min(0.95);
+                    if !(u_rr < p_rr) {
+                        break;
+                    }
+                    throughput /= p_rr;
+                }
+                if !(max_component(throughput) > 0.0) {
+                    break;
+                }
+                ray = Ray::new(x, wo);
+                continue;
+            }
+            Event::Surface(hit, s) => (hit, s),
+        };
         let wi_world = -ray.dir;
 
         // ---- emitter hit ----
         let cos_emit = s.ng.dot(wi_world);
         if s.emitter != NO_EMITTER && cos_emit > 0.0 {
+            let distance = travelled + hit.t;
             let w_b =
-                hit_weight(diff, prev_nee, prev_pdf_f, emitter_pdf_solid_angle(globals, hit.t, cos_emit), prev_sum);
+                hit_weight(diff, prev_nee, prev_pdf_f, emitter_pdf_solid_angle(globals, distance, cos_emit), prev_sum);
             let p_radiance = flat.emitters[s.emitter as usize].p_radiance;
             radiance += sign * (throughput * w_b * param_color(flat, p_radiance));
             if ADJOINT {
@@ -191,7 +302,16 @@ pub fn trace_path<const ADJOINT: bool>(
             };
             let wo = frame.to_local(wl);
             let f = bsdf_eval(&bsdf, wi, wo);
-            if p_e > 0.0 && max_component(f) > 0.0 && !occluded(&flat.bvh, &Ray::new(origin, wl), 0.0, shadow_tmax) {
+            let tr = if !(p_e > 0.0 && max_component(f) > 0.0) {
+                Vec3::ZERO
+            } else if media {
+                medium::shadow_transmittance(flat, key, current, (origin, wl, shadow_tmax), (pixel, sample, vertex))
+            } else if occluded(&flat.bvh, &Ray::new(origin, wl), 0.0, shadow_tmax) {
+                Vec3::ZERO
+            } else {
+                Vec3::ONE
+            };
+            if max_component(tr) > 0.0 {
                 let pdf_f = bsdf_pdf(&bsdf, wi, wo);
                 let w_n = if !diff {
                     mis_power(p_e, pdf_f)
@@ -201,11 +321,11 @@ pub fn trace_path<const ADJOINT: bool>(
                     let pdf_d = if capable { bsdf_pdf_diff(&bsdf, wi, wo) } else { pdf_f };
                     1.0 / (w1 + w2 + (w1 * pdf_f + q_here * w2 * pdf_d + (1.0 - q_here) * w2 * pdf_f) / p_e)
                 };
-                radiance += sign * (throughput * w_n * f * es.radiance / p_e);
+                radiance += sign * (throughput * tr * w_n * f * es.radiance / p_e);
                 if ADJOINT {
-                    let adj = adj_radiance * throughput * w_n * es.radiance / p_e;
+                    let adj = adj_radiance * throughput * tr * w_n * es.radiance / p_e;
                     bsdf_backward(flat, s.material, s.uv, &bsdf, wi, wo, adj, sink);
-                    sink.add_rgb(es.param, adj_radiance * throughput * w_n * f / p_e);
+                    sink.add_rgb(es.param, adj_radiance * throughput * tr * w_n * f / p_e);
                 }
             }
         }

@@ -152,6 +152,7 @@ impl Renderer {
         extra: &[(u32, &Buffer)],
         mode: GradMode,
     ) -> Result<Gradients> {
+        crate::cpu::refuse_media_gradients(&self.flat)?;
         let n = self.flat.params.len();
         let options = &request.options;
         let features = variant::request_features(self.scene_features, options, self.grad_kinds(options));
@@ -266,7 +267,11 @@ impl Backend for Renderer {
     /// [`Error::InvalidArgument`] if the layout differs; Vulkan failures.
     fn set_params(&mut self, params: &ParamTable) -> Result<()> {
         crate::scene::flat::replace_params(&mut self.scene, &mut self.flat, params)?;
-        self.gpu.params.upload(&self.flat.params)
+        self.gpu.params.upload(&self.flat.params)?;
+        if !self.flat.media.is_empty() {
+            self.gpu.media.upload(&self.flat.media)?;
+        }
+        Ok(())
     }
 
     /// Renders `views` with `options` under the key of `pass`: one kernel pass over every view's
@@ -377,6 +382,7 @@ impl Backend for Renderer {
     /// # Errors
     /// [`Error::InvalidArgument`] for an unknown parameter; as [`Renderer::backward`].
     fn image_gradient(&mut self, options: &RenderOptions, name: &str) -> Result<Image> {
+        crate::cpu::refuse_media_gradients(&self.flat)?;
         let mut request =
             self.request_current(options, PassTag::Gradient, Work::Pixels { begin: 0, end: options.spp })?;
         let id = self.scene.params.find(name).ok_or_else(|| Error::InvalidArgument {

@@ -18,6 +18,10 @@ pub(crate) struct GpuScene {
     pub emitters: Buffer,
     /// One f32 per parameter value (`ParamTable` offsets): what `Renderer::set_params` rewrites.
     pub params: Buffer,
+    /// The media (their majorants follow the parameters: rewritten with them).
+    pub media: Buffer,
+    /// The media's fields.
+    pub fields: Buffer,
 }
 
 impl GpuScene {
@@ -32,6 +36,8 @@ impl GpuScene {
             materials: Buffer::storage_with(ctx, "materials", &flat.materials)?,
             emitters: Buffer::storage_with(ctx, "emitters", &flat.emitters)?,
             params: Buffer::storage_with(ctx, "param buffer", &flat.params)?,
+            media: Buffer::storage_with(ctx, "media", &flat.media)?,
+            fields: Buffer::storage_with(ctx, "media fields", &flat.fields)?,
         })
     }
 
@@ -45,6 +51,8 @@ impl GpuScene {
             addr_materials: self.materials.device_address(),
             addr_emitters: self.emitters.device_address(),
             addr_params: self.params.device_address(),
+            addr_media: self.media.device_address(),
+            addr_fields: self.fields.device_address(),
             ..*globals
         }
     }

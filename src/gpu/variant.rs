@@ -17,6 +17,7 @@ pub fn scene_features(flat: &FlatScene, env_param: u32) -> u32 {
         f |= match m.tag {
             MAT_DIFFUSE => F_DIFFUSE,
             MAT_ROUGH_CONDUCTOR => F_CONDUCTOR | if m.distribution == DIST_BECKMANN { F_BECKMANN } else { F_GGX },
+            MAT_NULL => F_MEDIA,
             _ => F_BLEND,
         };
         if m.tex_width > 0 {
@@ -31,6 +32,9 @@ pub fn scene_features(flat: &FlatScene, env_param: u32) -> u32 {
     }
     if env_param != NO_PARAM {
         f |= F_ENV;
+    }
+    if !flat.media.is_empty() {
+        f |= F_MEDIA;
     }
     f
 }
@@ -90,7 +94,7 @@ pub fn request_features(scene: u32, options: &RenderOptions, kinds: ParamKinds) 
 
 /// A short human-readable name of a variant, for logs: `nee env diffuse conductor[beckmann] ∂alpha`.
 pub fn describe(features: u32) -> String {
-    const NAMES: [(u32, &str); 17] = [
+    const NAMES: [(u32, &str); 18] = [
         (F_NEE, "nee"),
         (F_ENV, "env"),
         (F_EMITTERS, "emitters"),
@@ -102,6 +106,7 @@ pub fn describe(features: u32) -> String {
         (F_BLEND, "blend"),
         (F_TEXTURE, "texture"),
         (F_TWO_SIDED, "two-sided"),
+        (F_MEDIA, "media"),
         (G_COLOR, "∂color"),
         (G_TEXTURE, "∂texture"),
         (G_ALPHA, "∂alpha"),

@@ -5,9 +5,11 @@ use glam::Vec3;
 
 use crate::bvh::{self, Bvh};
 use crate::contract::{
-    EmitterTri, MAT_BLEND, MAT_DIFFUSE, MAT_ROUGH_CONDUCTOR, Material as GpuMaterial, NO_EMITTER, TriShading,
+    EmitterTri, FIELD_CONSTANT, FIELD_GRID, FieldDesc, MAT_BLEND, MAT_DIFFUSE, MAT_NULL, MAT_ROUGH_CONDUCTOR,
+    Material as GpuMaterial, MediumDesc, NO_EMITTER, NO_MEDIUM, NO_PARAM, PHASE_HG, PHASE_ISOTROPIC, TriShading,
 };
 use crate::error::Result;
+use crate::scene::medium::{Field, Phase};
 use crate::scene::shapes::triangle_area;
 use crate::scene::{Albedo, Material, Scene};
 
@@ -26,6 +28,10 @@ pub struct FlatScene {
     pub emitter_total_area: f32,
     /// Parameter values.
     pub params: Vec<f32>,
+    /// Participating media, in the scene's order.
+    pub media: Vec<MediumDesc>,
+    /// Their extinction and albedo fields.
+    pub fields: Vec<FieldDesc>,
 }
 
 /// Gives `scene` and its flattened twin `flat` the values of `params`, which must have the scene
@@ -46,6 +52,10 @@ pub(crate) fn replace_params(
     }
     scene.params = params.clone();
     flat.params = params.values().to_vec();
+    // The majorants follow the densities (ALGORITHMS.md §8: recomputed when parameters change).
+    for (desc, medium) in flat.media.iter_mut().zip(&scene.media) {
+        desc.majorant = medium.majorant(&scene.params);
+    }
     Ok(())
 }
 
@@ -56,7 +66,6 @@ impl FlatScene {
     /// [`crate::Error::Scene`] from validation or the BVH build.
     pub fn new(scene: &Scene) -> Result<FlatScene> {
         scene.validate()?;
-        refuse_media(scene)?;
         let mut triangles = Vec::with_capacity(scene.triangle_count());
         let mut shading = Vec::with_capacity(scene.triangle_count());
         let mut emitters = Vec::new();
@@ -99,6 +108,7 @@ impl FlatScene {
                     uv2: uv[2],
                     material: mesh.material.0,
                     emitter,
+                    interior: mesh.interior.map_or(NO_MEDIUM, |m| m.0),
                 });
             }
         }
@@ -112,6 +122,7 @@ impl FlatScene {
             last.cdf = 1.0;
         }
         let materials = scene.materials.iter().map(|m| flatten_material(scene, m)).collect();
+        let (media, fields) = flatten_media(scene);
         let bvh = bvh::build(&triangles)?;
         Ok(FlatScene {
             bvh,
@@ -120,6 +131,8 @@ impl FlatScene {
             emitters,
             emitter_total_area: total as f32,
             params: scene.params.values().to_vec(),
+            media,
+            fields,
         })
     }
 
@@ -165,24 +178,54 @@ fn flatten_material(scene: &Scene, m: &Material) -> GpuMaterial {
             p_weight: offset(weight),
             ..Default::default()
         },
-        // Refused by `refuse_media` before anything is flattened.
-        Material::Null => GpuMaterial::default(),
+        Material::Null => GpuMaterial { tag: MAT_NULL, ..Default::default() },
     }
 }
 
-/// The renderers do not trace participating media yet: a scene with a medium or a `null`
-/// boundary loads (its parameters are listed) but is refused here, naming what it holds.
-fn refuse_media(scene: &Scene) -> Result<()> {
-    let what = match (
-        scene.media.first(),
-        scene.meshes.iter().find(|m| matches!(scene.materials[m.material.0 as usize], Material::Null)),
-    ) {
-        (Some(medium), _) => format!("the medium '{}'", medium.name),
-        (None, Some(mesh)) => format!("the null-BSDF shape '{}'", mesh.name),
-        (None, None) => return Ok(()),
+/// The media and their fields (two per medium, extinction then albedo).
+fn flatten_media(scene: &Scene) -> (Vec<MediumDesc>, Vec<FieldDesc>) {
+    let offset = |id| scene.params.entry(id).offset;
+    let field = |f: &Field| match f {
+        Field::Constant { value, channels } => {
+            FieldDesc { kind: FIELD_CONSTANT, channels: *channels, offset: offset(*value), ..Default::default() }
+        }
+        Field::Grid { resolution, channels, values, to_local } => {
+            let rows = to_local.transpose();
+            FieldDesc {
+                kind: FIELD_GRID,
+                channels: *channels,
+                offset: offset(*values),
+                res_x: resolution.x,
+                res_y: resolution.y,
+                res_z: resolution.z,
+                row0: rows.x_axis.truncate(),
+                row1: rows.y_axis.truncate(),
+                row2: rows.z_axis.truncate(),
+                shift: to_local.w_axis.truncate(),
+            }
+        }
     };
-    Err(crate::Error::Scene {
-        location: scene.source.clone(),
-        message: format!("{what}: participating media are loaded (`pathgrad params` lists them) but not rendered yet"),
-    })
+    let mut fields = Vec::new();
+    let media = scene
+        .media
+        .iter()
+        .map(|m| {
+            let first = fields.len() as u32;
+            fields.push(field(&m.sigma_t));
+            fields.push(field(&m.albedo));
+            let (phase, p_g) = match m.phase {
+                Phase::Isotropic => (PHASE_ISOTROPIC, NO_PARAM),
+                Phase::HenyeyGreenstein { g } => (PHASE_HG, offset(g)),
+            };
+            MediumDesc {
+                sigma_t: first,
+                albedo: first + 1,
+                p_scale: offset(m.scale),
+                phase,
+                p_g,
+                majorant: m.majorant(&scene.params),
+            }
+        })
+        .collect();
+    (media, fields)
 }

@@ -15,6 +15,7 @@ mod furnace;
 mod gradients;
 mod hardening;
 mod loop_budget;
+mod media;
 mod optimize;
 mod optimize_cli;
 mod resources;

@@ -99,16 +99,17 @@ fn media_load_with_mitsubas_names() {
     assert_eq!(c.albedo.eval(&scene.params, Vec3::ZERO, 1), 0.3);
 }
 
-/// Such a scene loads, and the renderers say plainly that they do not trace media yet.
+/// Such a scene flattens: its media and fields, and a null boundary alone needs the media code.
 #[test]
-fn media_are_refused_by_the_renderers_by_name() {
+fn media_flatten() {
     let dir = grids();
     let scene = load_in(dir.path(), MEDIA).unwrap();
-    let e = crate::scene::flat::FlatScene::new(&scene).unwrap_err().to_string();
-    assert!(e.contains("the medium 'fog'") && e.contains("not rendered yet"), "{e}");
+    let flat = crate::scene::flat::FlatScene::new(&scene).unwrap();
+    assert_eq!((flat.media.len(), flat.fields.len()), (3, 6));
+    assert_eq!(flat.media[1].majorant, 3.0 * 63.0);
     let null_only = load_in(dir.path(), r#"<shape type="cube" id="glass"><bsdf type="null"/></shape>"#).unwrap();
-    let e = crate::scene::flat::FlatScene::new(&null_only).unwrap_err().to_string();
-    assert!(e.contains("the null-BSDF shape 'glass'"), "{e}");
+    let flat = crate::scene::flat::FlatScene::new(&null_only).unwrap();
+    assert!(flat.media.is_empty() && crate::cpu::medium::has_media(&flat));
 }
 
 /// Every refusal names the file, line and what is wrong.

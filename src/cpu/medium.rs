@@ -1,0 +1,198 @@
+//! Participating media on the CPU: field lookups, phase functions, delta tracking of free flights
+//! and ratio tracking of shadow rays through media and null boundaries (ALGORITHMS.md §8; twin of
+//! `shaders/lib/medium.glsl`).
+//!
+//! RGB extinction is tracked spectrally against one grey majorant σ̄ ≥ max_c σ_t,c: a tentative
+//! collision at x is real with probability P = mean_c σ_t,c(x)/σ̄ and weights each channel by
+//! σ_s,c/(σ̄ P) (real) or (σ̄ − σ_t,c)/(σ̄ (1 − P)) (null), so every channel is unbiased; for a grey
+//! medium the weights are the albedo and 1, plain delta tracking.
+
+use glam::Vec3;
+
+use crate::bvh::{Ray, closest_hit};
+use crate::contract::{
+    FIELD_CONSTANT, FieldDesc, MAT_NULL, MAX_NULL_CROSSINGS, MAX_TRACKING_STEPS, MediumDesc, NO_MEDIUM, PHASE_HG,
+};
+use crate::cpu::surface::{offset_origin, surface_at};
+use crate::rng::{RngKey, Stream, uniform4};
+use crate::sampling::Frame;
+use crate::scene::flat::FlatScene;
+
+/// Whether the scene needs the media code of the path loop (a medium or a null boundary).
+pub fn has_media(flat: &FlatScene) -> bool {
+    !flat.media.is_empty() || flat.materials.iter().any(|m| m.tag == MAT_NULL)
+}
+
+/// Channel `c` of field `f` at world point `p`.
+fn field_at(flat: &FlatScene, f: &FieldDesc, p: Vec3, c: u32) -> f32 {
+    let c = c.min(f.channels - 1);
+    if f.kind == FIELD_CONSTANT {
+        return flat.params[(f.offset + c) as usize];
+    }
+    let local = Vec3::new(f.row0.dot(p), f.row1.dot(p), f.row2.dot(p)) + f.shift;
+    let res = glam::UVec3::new(f.res_x, f.res_y, f.res_z);
+    let count = (f.res_x * f.res_y * f.res_z * f.channels) as usize;
+    let values = &flat.params[f.offset as usize..f.offset as usize + count];
+    crate::scene::volume::lookup(values, res, f.channels, local, c)
+}
+
+fn rgb(flat: &FlatScene, f: &FieldDesc, p: Vec3) -> Vec3 {
+    Vec3::new(field_at(flat, f, p, 0), field_at(flat, f, p, 1), field_at(flat, f, p, 2))
+}
+
+/// The extinction `scale · sigma_t(p)` per channel.
+pub fn extinction(flat: &FlatScene, m: &MediumDesc, p: Vec3) -> Vec3 {
+    flat.params[m.p_scale as usize] * rgb(flat, &flat.fields[m.sigma_t as usize], p)
+}
+
+/// The albedo per channel.
+pub fn albedo(flat: &FlatScene, m: &MediumDesc, p: Vec3) -> Vec3 {
+    rgb(flat, &flat.fields[m.albedo as usize], p)
+}
+
+/// Henyey–Greenstein's g of `m` (0 for an isotropic medium).
+fn hg_g(flat: &FlatScene, m: &MediumDesc) -> f32 {
+    if m.phase == PHASE_HG { flat.params[m.p_g as usize] } else { 0.0 }
+}
+
+/// The phase function's value for light travelling along `d` scattered into `wo` (both unit):
+/// (1 − g²) / (4π (1 + g² − 2g cos θ)^{3/2}) with cos θ = d·wo; g > 0 scatters forward.
+pub fn phase_eval(flat: &FlatScene, m: &MediumDesc, d: Vec3, wo: Vec3) -> f32 {
+    let g = hg_g(flat, m);
+    let denom = 1.0 + g * g - 2.0 * g * d.dot(wo);
+    (1.0 - g * g) / (4.0 * std::f32::consts::PI * denom * denom.max(0.0).sqrt())
+}
+
+/// A direction drawn from the phase function around `d` with two uniforms; its density equals
+/// [`phase_eval`].
+pub fn phase_sample(flat: &FlatScene, m: &MediumDesc, d: Vec3, u: [f32; 2]) -> Vec3 {
+    let g = hg_g(flat, m);
+    let cos = if g.abs() < 1e-3 {
+        1.0 - 2.0 * u[0]
+    } else {
+        let s = (1.0 - g * g) / (1.0 - g + 2.0 * g * u[0]);
+        ((1.0 + g * g - s * s) / (2.0 * g)).clamp(-1.0, 1.0)
+    };
+    let sin = (1.0 - cos * cos).max(0.0).sqrt();
+    let phi = 2.0 * std::f32::consts::PI * u[1];
+    Frame::from_normal(d).to_world(Vec3::new(sin * phi.cos(), sin * phi.sin(), cos))
+}
+
+/// Where a free flight along `ray` in medium `m` ends before `t_max`: `Some(t)` at a real
+/// collision, `None` if it reaches `t_max`; the spectral-tracking weight of the flight is
+/// multiplied into `weight`. Draws stream DT of `vertex` from step `*step` on.
+#[allow(clippy::too_many_arguments)]
+pub fn delta_track(
+    flat: &FlatScene,
+    key: RngKey,
+    m: &MediumDesc,
+    ray: &Ray,
+    t_max: f32,
+    (pixel, sample, vertex): (u32, u32, u32),
+    step: &mut u32,
+    weight: &mut Vec3,
+) -> Option<f32> {
+    let majorant = m.majorant;
+    if !(majorant > 0.0) {
+        return None;
+    }
+    let mut t = 0.0f32;
+    while *step < MAX_TRACKING_STEPS {
+        let u = uniform4(key, pixel, sample, vertex, Stream::DeltaTracking, 0, *step);
+        *step += 1;
+        t += -(1.0 - u[0]).ln() / majorant;
+        if !(t < t_max) {
+            return None;
+        }
+        let x = ray.origin + t * ray.dir;
+        let sigma = extinction(flat, m, x);
+        let p_real = ((sigma.x + sigma.y + sigma.z) / (3.0 * majorant)).clamp(0.0, 1.0);
+        if u[1] < p_real {
+            *weight *= albedo(flat, m, x) * sigma / (majorant * p_real);
+            return Some(t);
+        }
+        *weight *= (Vec3::splat(majorant) - sigma) / (majorant * (1.0 - p_real));
+    }
+    // A flight that outlasts the step budget is cut off: it carries nothing.
+    *weight = Vec3::ZERO;
+    None
+}
+
+/// The ratio-tracking transmittance of `m` along `origin + t·dir` for t in [0, t_max), drawing
+/// stream RT of `vertex` from step `*step` on.
+fn ratio_track(
+    flat: &FlatScene,
+    key: RngKey,
+    m: &MediumDesc,
+    (origin, dir, t_max): (Vec3, Vec3, f32),
+    (pixel, sample, vertex): (u32, u32, u32),
+    step: &mut u32,
+) -> Vec3 {
+    let majorant = m.majorant;
+    if !(majorant > 0.0) {
+        return Vec3::ONE;
+    }
+    let mut tr = Vec3::ONE;
+    let mut t = 0.0f32;
+    while *step < MAX_TRACKING_STEPS {
+        let u = uniform4(key, pixel, sample, vertex, Stream::RatioTracking, 0, *step)[0];
+        *step += 1;
+        t += -(1.0 - u).ln() / majorant;
+        if !(t < t_max) {
+            return tr;
+        }
+        tr *= (Vec3::splat(majorant) - extinction(flat, m, origin + t * dir)) / majorant;
+    }
+    Vec3::ZERO
+}
+
+/// The medium a ray along `dir` is in after crossing the triangle in leaf slot `slot` (whose
+/// mesh holds medium `interior` behind its winding normal `ng`) from medium `current`.
+pub fn crossed(interior: u32, ng: Vec3, dir: Vec3, current: u32) -> u32 {
+    if interior == NO_MEDIUM {
+        current
+    } else if ng.dot(dir) < 0.0 {
+        interior
+    } else {
+        NO_MEDIUM
+    }
+}
+
+/// The transmittance from `origin` along `dir` over [0, t_max) starting in medium `medium`:
+/// ratio tracking through each medium, passing null boundaries; 0 if an opaque surface is in the
+/// way or more than `MAX_NULL_CROSSINGS` boundaries are.
+pub fn shadow_transmittance(
+    flat: &FlatScene,
+    key: RngKey,
+    medium: u32,
+    (origin, dir, t_max): (Vec3, Vec3, f32),
+    counters: (u32, u32, u32),
+) -> Vec3 {
+    let (mut m, mut o, mut remaining) = (medium, origin, t_max);
+    // Measured from the end each time, so the origins' offsets past each boundary do not add up
+    // to a segment that reaches the emitter itself.
+    let end = origin + t_max * dir;
+    let mut tr = Vec3::ONE;
+    let mut step = 0u32;
+    for _ in 0..=MAX_NULL_CROSSINGS {
+        let hit = closest_hit(&flat.bvh, &Ray::new(o, dir), 0.0, remaining);
+        let segment = hit.as_ref().map_or(remaining, |h| h.t);
+        if m != NO_MEDIUM {
+            tr *= ratio_track(flat, key, &flat.media[m as usize], (o, dir, segment), counters, &mut step);
+        }
+        let Some(hit) = hit else { return tr };
+        let s = surface_at(flat, &hit);
+        if flat.materials[s.material as usize].tag != MAT_NULL {
+            return Vec3::ZERO;
+        }
+        m = crossed(flat.shading[flat.bvh.prim_ids[hit.slot as usize] as usize].interior, s.ng, dir, m);
+        o = offset_origin(s.p, s.ng, dir);
+        if t_max < f32::MAX {
+            remaining = (end - o).dot(dir);
+            if !(remaining > 0.0) {
+                return tr;
+            }
+        }
+    }
+    Vec3::ZERO
+}

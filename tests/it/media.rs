@@ -1,0 +1,277 @@
+//! Participating media: closed forms (a slab's transmittance, a white furnace), a constant grid
+//! against the homogeneous medium, ratio-tracked NEE against delta-tracked emitter hits on the
+//! CPU reference; the kernels against it path by path; and the refusal of what is not built yet
+//! (gradients through media).
+
+use std::path::Path;
+
+use glam::UVec3;
+use pathgrad::backend::Backend;
+use pathgrad::cpu::Reference;
+use pathgrad::image::Image;
+use pathgrad::integrator::RenderOptions;
+use pathgrad::scene::Scene;
+use pathgrad::scene::volume::Grid;
+
+use crate::support::TestGpu;
+
+fn scene(dir: &Path, body: &str) -> Scene {
+    let path = dir.join("scene.xml");
+    std::fs::write(&path, format!(r#"<scene version="3.0.0">{body}</scene>"#)).unwrap();
+    pathgrad::scene::load(path.to_str().unwrap(), &[]).unwrap()
+}
+
+fn sensor(origin: &str, fov: f32, size: u32) -> String {
+    format!(
+        r#"<sensor type="perspective"><float name="fov" value="{fov}"/><transform name="to_world"><lookat origin="{origin}" target="0, 0, 0" up="0, 1, 0"/></transform><film type="hdrfilm"><integer name="width" value="{size}"/><integer name="height" value="{size}"/></film></sensor>"#
+    )
+}
+
+/// Mean and standard error of the pixel values of channel 0.
+fn mean_and_error(image: &Image) -> (f64, f64) {
+    let v: Vec<f64> = image.as_slice().iter().step_by(3).map(|&x| f64::from(x)).collect();
+    let n = v.len() as f64;
+    let mean = v.iter().sum::<f64>() / n;
+    let var = v.iter().map(|x| (x - mean).powi(2)).sum::<f64>() / (n - 1.0);
+    (mean, (var / n).sqrt())
+}
+
+/// A camera looking through a purely absorbing cube (σ_t = 0.7, thickness 2 along the view) at
+/// a large emitter of radiance 2: each pixel is 2·exp(−1.4) in expectation (delta tracking keeps
+/// a path with probability exp(−σ_t d)). A z-test over the pixels, |z| < 4.
+#[test]
+fn a_slab_transmits_exp_minus_sigma_d() {
+    let dir = tempfile::tempdir().unwrap();
+    let s = scene(
+        dir.path(),
+        &format!(
+            r#"{}<integrator type="volpath"/>
+            <shape type="cube" id="slab"><bsdf type="null"/><medium type="homogeneous" name="interior"><float name="sigma_t" value="0.7"/><float name="albedo" value="0"/></medium></shape>
+            <shape type="rectangle" id="light"><emitter type="area"><rgb name="radiance" value="2, 2, 2"/></emitter><transform name="to_world"><scale value="20"/><translate z="-4"/></transform></shape>"#,
+            sensor("0, 0, 6", 2.0, 16)
+        ),
+    );
+    let mut cpu = Reference::new(&s).unwrap();
+    let image = cpu.render(&RenderOptions { spp: 64, seed: 1, ..RenderOptions::for_scene(&s) }).unwrap();
+    let (mean, error) = mean_and_error(&image);
+    let expected = 2.0 * (-0.7f64 * 2.0).exp();
+    // Every ray crosses within 0.02 % of 2 units (fov 2°): the closed form holds to 1e-4.
+    println!("slab: {mean} ± {error}, expected {expected}");
+    assert!((mean - expected).abs() < 4.0 * error, "{mean} ± {error} vs {expected}");
+    assert!(error < 0.02 * expected, "the test has the power to see a 2 % error");
+}
+
+/// A grid of constant density renders bit for bit like the homogeneous medium of that density:
+/// the same majorant, the same extinction at every point, so the same decisions on every path.
+#[test]
+fn a_constant_grid_renders_like_the_homogeneous_medium() {
+    let dir = tempfile::tempdir().unwrap();
+    std::fs::write(dir.path().join("flat.vol"), Grid::new(UVec3::new(2, 3, 2), 1, vec![0.9; 12]).unwrap().to_bytes())
+        .unwrap();
+    let body = |sigma: &str| {
+        format!(
+            r#"{}<integrator type="volpath"><integer name="max_depth" value="8"/></integrator><emitter type="constant"><rgb name="radiance" value="0.5, 0.6, 0.7"/></emitter>
+            <shape type="rectangle" id="floor"><bsdf type="diffuse"/><transform name="to_world"><scale value="5"/><rotate x="1" angle="-90"/><translate y="-1"/></transform></shape>
+            <shape type="sphere" id="ball"><bsdf type="null"/><medium type="heterogeneous" name="interior">{sigma}<rgb name="albedo" value="0.8, 0.7, 0.6"/><phase type="hg"><float name="g" value="0.4"/></phase></medium></shape>"#,
+            sensor("0, 1, 5", 40.0, 24)
+        )
+    };
+    let grid = scene(
+        dir.path(),
+        &body(
+            r#"<volume type="gridvolume" name="sigma_t"><string name="filename" value="flat.vol"/><transform name="to_world"><scale value="2"/><translate x="-1" y="-1" z="-1"/></transform></volume>"#,
+        ),
+    );
+    let constant = scene(dir.path(), &body(r#"<float name="sigma_t" value="0.9"/>"#));
+    let opts = RenderOptions { spp: 4, seed: 3, ..RenderOptions::for_scene(&grid) };
+    let a = Reference::new(&grid).unwrap().render(&opts).unwrap();
+    let b = Reference::new(&constant).unwrap().render(&opts).unwrap();
+    let bits = |i: &Image| i.as_slice().iter().map(|v| v.to_bits()).collect::<Vec<_>>();
+    assert_eq!(bits(&a), bits(&b));
+    assert!(a.mean()[0] > 0.0);
+}
+
+/// An albedo-1 medium in a white furnace (environment 1, nothing else): light is neither lost
+/// nor gained, so every pixel is 1 in expectation, whatever the scattering. z-test, |z| < 4.
+#[test]
+fn an_albedo_one_medium_in_a_white_furnace_is_white() {
+    let dir = tempfile::tempdir().unwrap();
+    let s = scene(
+        dir.path(),
+        &format!(
+            r#"{}<integrator type="volpath"><integer name="max_depth" value="-1"/></integrator><emitter type="constant"><rgb name="radiance" value="1, 1, 1"/></emitter>
+            <shape type="sphere" id="cloud"><bsdf type="null"/><medium type="homogeneous" name="interior"><rgb name="sigma_t" value="2, 3, 4"/><float name="albedo" value="1"/><phase type="hg"><float name="g" value="0.5"/></phase></medium></shape>"#,
+            sensor("0, 0, 4", 30.0, 16)
+        ),
+    );
+    let image = Reference::new(&s).unwrap().render(&RenderOptions { spp: 64, seed: 5, ..RenderOptions::for_scene(&s) });
+    for c in 0..3 {
+        let channel: Vec<f32> = image.as_ref().unwrap().as_slice().iter().skip(c).step_by(3).copied().collect();
+        let n = channel.len() as f64;
+        let mean = channel.iter().map(|&v| f64::from(v)).sum::<f64>() / n;
+        let var = channel.iter().map(|&v| (f64::from(v) - mean).powi(2)).sum::<f64>() / (n - 1.0);
+        let error = (var / n).sqrt();
+        println!("furnace channel {c}: {mean} ± {error}");
+        assert!((mean - 1.0).abs() < 4.0 * error.max(1e-6), "channel {c}: {mean} ± {error}");
+    }
+}
+
+/// Light reaching a floor through an absorbing slab, estimated with next-event estimation
+/// (ratio-tracked transmittance along shadow rays) and without it (emitter hits that survive
+/// delta tracking), agrees: two unbiased estimators of one image, Welch z-test on the mean.
+#[test]
+fn ratio_tracked_nee_agrees_with_delta_tracked_hits() {
+    let dir = tempfile::tempdir().unwrap();
+    let s = scene(
+        dir.path(),
+        &format!(
+            r#"{}<integrator type="volpath"><integer name="max_depth" value="2"/></integrator>
+            <shape type="rectangle" id="floor"><bsdf type="diffuse"><rgb name="reflectance" value="0.8, 0.8, 0.8"/></bsdf><transform name="to_world"><scale value="3"/></transform></shape>
+            <shape type="cube" id="slab"><bsdf type="null"/><medium type="homogeneous" name="interior"><float name="sigma_t" value="0.8"/><float name="albedo" value="0"/></medium><transform name="to_world"><scale x="4" y="4" z="0.5"/><translate z="2"/></transform></shape>
+            <shape type="rectangle" id="light"><emitter type="area"><rgb name="radiance" value="4, 4, 4"/></emitter><transform name="to_world"><rotate x="1" angle="180"/><translate z="4"/></transform></shape>"#,
+            sensor("0.3, 0.2, 1.2", 60.0, 16)
+        ),
+    );
+    let mut cpu = Reference::new(&s).unwrap();
+    let base = RenderOptions { spp: 64, seed: 7, ..RenderOptions::for_scene(&s) };
+    let with = cpu.render(&base).unwrap();
+    let without = cpu.render(&RenderOptions { nee: false, seed: 8, ..base }).unwrap();
+    let (a, ea) = mean_and_error(&with);
+    let (b, eb) = mean_and_error(&without);
+    let z = (a - b) / (ea * ea + eb * eb).sqrt();
+    println!("NEE {a} ± {ea}, hits {b} ± {eb}, z = {z}");
+    assert!(a > 0.01, "the floor is lit through the slab");
+    assert!(z.abs() < 4.0, "NEE {a} ± {ea} vs hits {b} ± {eb}");
+    // Without the slab the floor is brighter: the transmittance is not 1.
+    let clear = RenderOptions { seed: 9, ..base };
+    let mut table = s.params.clone();
+    table.set("slab.interior_medium.scale", &[0.0]).unwrap();
+    cpu.set_params(&table).unwrap();
+    let (c, ec) = mean_and_error(&cpu.render(&clear).unwrap());
+    assert!(c > a + 4.0 * (ea + ec), "clear {c} vs through the slab {a}");
+}
+
+/// Gradients through media are not built yet, and both backends say so.
+#[test]
+fn media_gradients_are_refused_by_name() {
+    let gpu = TestGpu::new();
+    let dir = tempfile::tempdir().unwrap();
+    let s = scene(
+        dir.path(),
+        &format!(
+            r#"{}<emitter type="constant"/><shape type="sphere" id="fog"><bsdf type="null"/><medium type="homogeneous" name="interior"/></shape>"#,
+            sensor("0, 0, 4", 30.0, 8)
+        ),
+    );
+    let backends: Vec<Box<dyn Backend>> =
+        vec![Box::new(pathgrad::gpu::Renderer::new(&gpu.ctx, &s).unwrap()), Box::new(Reference::new(&s).unwrap())];
+    for mut backend in backends {
+        let opts = RenderOptions::for_scene(&s);
+        let e = backend.image_gradient(&opts, "fog.interior_medium.scale").unwrap_err().to_string();
+        assert!(e.contains("not built yet"), "{e}");
+        let adjoint = Image::new(opts.width, opts.height);
+        let e = backend.backward(&opts, &adjoint, pathgrad::gpu::renderer::GradMode::Float).unwrap_err().to_string();
+        assert!(e.contains("not built yet"), "{e}");
+    }
+}
+
+/// The kernels' media code is the CPU twin's: one path per pixel of a scene with a heterogeneous
+/// RGB medium (grid extinction, constant albedo, HG phase), a homogeneous one, null boundaries,
+/// surfaces and both emitter kinds agree value by value like surface-only renders do
+/// (cpu_vs_gpu.rs: 1e-4 relative; a path may take another branch where logarithms round
+/// differently, so a budget of 1 % of the values may differ), and so do the means of 16 spp.
+#[test]
+fn gpu_media_equal_the_cpu_per_path() {
+    let gpu = TestGpu::new();
+    let dir = tempfile::tempdir().unwrap();
+    let density: Vec<f32> = (0..4 * 4 * 4 * 3).map(|i| 0.2 + 0.8 * ((i * 37 % 11) as f32 / 10.0)).collect();
+    std::fs::write(dir.path().join("density.vol"), Grid::new(UVec3::splat(4), 3, density).unwrap().to_bytes()).unwrap();
+    let s = scene(
+        dir.path(),
+        &format!(
+            r#"{}<integrator type="volpath"><integer name="max_depth" value="12"/></integrator><emitter type="constant"><rgb name="radiance" value="0.3, 0.4, 0.5"/></emitter>
+            <shape type="rectangle" id="light"><emitter type="area"><rgb name="radiance" value="6, 6, 5"/></emitter><transform name="to_world"><rotate x="1" angle="90"/><translate y="3"/></transform></shape>
+            <shape type="rectangle" id="floor"><bsdf type="diffuse"/><transform name="to_world"><scale value="4"/><rotate x="1" angle="-90"/><translate y="-1.05"/></transform></shape>
+            <shape type="cube" id="smoke"><bsdf type="null"/><medium type="heterogeneous" name="interior">
+                <volume type="gridvolume" name="sigma_t"><string name="filename" value="density.vol"/><transform name="to_world"><scale value="2"/><translate x="-1" y="-1" z="-1"/></transform></volume>
+                <rgb name="albedo" value="0.9, 0.8, 0.7"/><float name="scale" value="2"/><phase type="hg"><float name="g" value="0.5"/></phase></medium>
+                <transform name="to_world"><translate x="-0.6"/><scale value="0.8"/></transform></shape>
+            <shape type="sphere" id="fog"><bsdf type="null"/><medium type="homogeneous" name="interior"><float name="sigma_t" value="1.5"/><float name="albedo" value="0.95"/></medium>
+                <transform name="to_world"><scale value="0.6"/><translate x="1"/></transform></shape>"#,
+            sensor("0, 0.5, 4", 45.0, 32)
+        ),
+    );
+    let mut renderer = pathgrad::gpu::Renderer::new(&gpu.ctx, &s).unwrap();
+    let mut cpu = Reference::new(&s).unwrap();
+    for spp in [1, 16] {
+        let opts = RenderOptions { spp, seed: 4, ..RenderOptions::for_scene(&s) };
+        let g = renderer.render(&opts).unwrap();
+        let c = cpu.render(&opts).unwrap();
+        let scale = c.as_slice().iter().fold(0.0f32, |m, v| m.max(v.abs()));
+        let mismatched = g
+            .as_slice()
+            .iter()
+            .zip(c.as_slice())
+            .filter(|(a, b)| (*a - *b).abs() > 1e-4 * a.abs().max(b.abs()) + 1e-6 * scale)
+            .count();
+        println!(
+            "media, {spp} spp: {mismatched} of {} values differ; means {:?} vs {:?}",
+            g.as_slice().len(),
+            g.mean(),
+            c.mean()
+        );
+        assert!(c.mean()[0] > 0.01);
+        assert!(mismatched as f64 <= 0.01 * g.as_slice().len() as f64, "{spp} spp: {mismatched} mismatches");
+        for ch in 0..3 {
+            assert!((g.mean()[ch] - c.mean()[ch]).abs() <= 1e-3 * c.mean()[ch], "{spp} spp channel {ch}");
+        }
+    }
+    // The media are in view: without them the image is another.
+    let mut clear = s.params.clone();
+    clear.set("smoke.interior_medium.scale", &[0.0]).unwrap();
+    clear.set("fog.interior_medium.scale", &[0.0]).unwrap();
+    renderer.set_params(&clear).unwrap();
+    let opts = RenderOptions { spp: 16, seed: 4, ..RenderOptions::for_scene(&s) };
+    let without = renderer.render(&opts).unwrap();
+    let with = cpu.render(&opts).unwrap();
+    let changed = without.as_slice().iter().zip(with.as_slice()).filter(|(a, b)| (*a - *b).abs() > 0.05).count();
+    println!("{changed} of {} values change without the media", with.as_slice().len());
+    assert!(changed > with.as_slice().len() / 10, "{changed}");
+}
+
+/// The closed forms hold on the GPU too (the slab and the furnace of the CPU tests above).
+#[test]
+fn gpu_media_pass_the_closed_forms() {
+    let gpu = TestGpu::new();
+    let dir = tempfile::tempdir().unwrap();
+    let slab = scene(
+        dir.path(),
+        &format!(
+            r#"{}<integrator type="volpath"/>
+            <shape type="cube" id="slab"><bsdf type="null"/><medium type="homogeneous" name="interior"><float name="sigma_t" value="0.7"/><float name="albedo" value="0"/></medium></shape>
+            <shape type="rectangle" id="light"><emitter type="area"><rgb name="radiance" value="2, 2, 2"/></emitter><transform name="to_world"><scale value="20"/><translate z="-4"/></transform></shape>"#,
+            sensor("0, 0, 6", 2.0, 16)
+        ),
+    );
+    let image = pathgrad::gpu::Renderer::new(&gpu.ctx, &slab)
+        .unwrap()
+        .render(&RenderOptions { spp: 64, seed: 1, ..RenderOptions::for_scene(&slab) })
+        .unwrap();
+    let (mean, error) = mean_and_error(&image);
+    let expected = 2.0 * (-0.7f64 * 2.0).exp();
+    assert!((mean - expected).abs() < 4.0 * error, "slab {mean} ± {error} vs {expected}");
+    let furnace = scene(
+        dir.path(),
+        &format!(
+            r#"{}<integrator type="volpath"><integer name="max_depth" value="-1"/></integrator><emitter type="constant"><rgb name="radiance" value="1, 1, 1"/></emitter>
+            <shape type="sphere" id="cloud"><bsdf type="null"/><medium type="homogeneous" name="interior"><rgb name="sigma_t" value="2, 3, 4"/><float name="albedo" value="1"/><phase type="hg"><float name="g" value="0.5"/></phase></medium></shape>"#,
+            sensor("0, 0, 4", 30.0, 16)
+        ),
+    );
+    let image = pathgrad::gpu::Renderer::new(&gpu.ctx, &furnace)
+        .unwrap()
+        .render(&RenderOptions { spp: 64, seed: 5, ..RenderOptions::for_scene(&furnace) })
+        .unwrap();
+    let (mean, error) = mean_and_error(&image);
+    assert!((mean - 1.0).abs() < 4.0 * error.max(1e-6), "furnace {mean} ± {error}");
+}
