@@ -236,7 +236,7 @@ impl<'a> Loader<'a> {
         let emitters = p.take_nested(&["emitter"]);
         self.finish(&p)?;
         let material = match bsdfs[..] {
-            [] => self.default_bsdf(node, &name)?,
+            [] => self.default_bsdf(node, &name, !emitters.is_empty())?,
             [b] => self.bsdf(b, format!("{name}.bsdf"), 1)?,
             [_, second, ..] => return Err(self.x.err(second, "a shape takes one BSDF")),
         };
@@ -281,9 +281,11 @@ impl<'a> Loader<'a> {
         Ok(())
     }
 
-    /// Mitsuba's BSDF for shapes without one: diffuse, reflectance 0.5, named `SHAPE.bsdf`.
-    fn default_bsdf(&mut self, node: El<'a>, name: &str) -> Result<MaterialId> {
-        self.scene.add_diffuse(&format!("{name}.bsdf"), Vec3::splat(0.5)).map_err(|e| self.located(node, e))
+    /// Mitsuba's BSDF for shapes without one: diffuse, named `SHAPE.bsdf`, of reflectance 0.5 —
+    /// or 0 on an area emitter, which Mitsuba 3 makes black so that lights do not reflect.
+    fn default_bsdf(&mut self, node: El<'a>, name: &str, emitter: bool) -> Result<MaterialId> {
+        let reflectance = if emitter { 0.0 } else { 0.5 };
+        self.scene.add_diffuse(&format!("{name}.bsdf"), Vec3::splat(reflectance)).map_err(|e| self.located(node, e))
     }
 
     /// Reads a shape's `<emitter type="area">`: its element, parameter name and radiance.
