@@ -275,4 +275,3 @@ fn gpu_media_pass_the_closed_forms() {
     let (mean, error) = mean_and_error(&image);
     assert!((mean - 1.0).abs() < 4.0 * error.max(1e-6), "furnace {mean} ± {error}");
 }
-

@@ -626,3 +626,14 @@ fn defines(pairs: &[(&str, &str)]) -> LoadOptions {
         ..LoadOptions::default()
     }
 }
+
+/// Shapes without a BSDF get Mitsuba 3's default: diffuse of reflectance 0.5, or 0 on an area
+/// emitter (Mitsuba's traverse lists `light.bsdf.reflectance.value = 0`), so lights do not reflect.
+#[test]
+fn default_bsdfs_are_mitsubas() {
+    let s = load_ok(
+        r#"<shape type="rectangle" id="plain"/><shape type="rectangle" id="light"><emitter type="area"/></shape>"#,
+    );
+    assert_eq!(param(&s, "plain.bsdf.reflectance.value"), [0.5, 0.5, 0.5]);
+    assert_eq!(param(&s, "light.bsdf.reflectance.value"), [0.0, 0.0, 0.0]);
+}
