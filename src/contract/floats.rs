@@ -35,6 +35,10 @@ contract_floats! {
     RAY_OFFSET = 1e-4;
     /// Shadow rays stop this fraction short of the emitter point so the emitter never occludes itself.
     SHADOW_EPSILON = 1e-4;
+    /// A medium's majorant is `scale · max σ_t` times 1 + this: no density reaches it, so no
+    /// delta- or ratio-tracking weight (σ̄ − σ_t)/… is exactly 0 and no derivative through one is
+    /// lost (issue 13, "exactness where a zero appears"); it costs 0.4 % more tentative collisions.
+    MAJORANT_MARGIN = 0.00390625;
     /// Direction components smaller than this are replaced by it (keeping the sign), so the slab
     /// test's reciprocal is finite and `0 · ∞` never produces NaN.
     MIN_DIR_COMPONENT = 1e-20;

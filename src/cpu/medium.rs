@@ -13,6 +13,7 @@ use crate::bvh::{Ray, closest_hit};
 use crate::contract::{
     FIELD_CONSTANT, FieldDesc, MAT_NULL, MAX_NULL_CROSSINGS, MAX_TRACKING_STEPS, MediumDesc, NO_MEDIUM, PHASE_HG,
 };
+use crate::cpu::path::GradSink;
 use crate::cpu::surface::{offset_origin, surface_at};
 use crate::rng::{RngKey, Stream, uniform4};
 use crate::sampling::Frame;
@@ -81,6 +82,11 @@ pub fn phase_sample(flat: &FlatScene, m: &MediumDesc, d: Vec3, u: [f32; 2]) -> V
 /// Where a free flight along `ray` in medium `m` ends before `t_max`: `Some(t)` at a real
 /// collision, `None` if it reaches `t_max`; the spectral-tracking weight of the flight is
 /// multiplied into `weight`. Draws stream DT of `vertex` from step `*step` on.
+///
+/// In a replay, `grad` is (sink, δL·L) with L the radiance the flight's weights multiply: each
+/// weight w scatters δL·L·∂w/w (ALGORITHMS.md §8; a null weight (σ̄ − σ_t,c)/(σ̄(1 − P)) through
+/// σ_t, a real one a_c σ_t,c/(σ̄ P) through a and σ_t, with P detached). A channel whose weight is
+/// exactly 0 carries nothing after it, and its derivative is not recovered here.
 #[allow(clippy::too_many_arguments)]
 pub fn delta_track(
     flat: &FlatScene,
@@ -91,6 +97,7 @@ pub fn delta_track(
     (pixel, sample, vertex): (u32, u32, u32),
     step: &mut u32,
     weight: &mut Vec3,
+    mut grad: Option<(&mut GradSink<'_>, Vec3)>,
 ) -> Option<f32> {
     let majorant = m.majorant;
     if !(majorant > 0.0) {
@@ -108,10 +115,19 @@ pub fn delta_track(
         let sigma = extinction(flat, m, x);
         let p_real = ((sigma.x + sigma.y + sigma.z) / (3.0 * majorant)).clamp(0.0, 1.0);
         if u[1] < p_real {
-            *weight *= albedo(flat, m, x) * sigma / (majorant * p_real);
+            let a = albedo(flat, m, x);
+            *weight *= a * sigma / (majorant * p_real);
+            if let Some((sink, w)) = grad.as_mut() {
+                albedo_grad(flat, m, x, safe_ratio(*w, a), sink);
+                extinction_grad(flat, m, x, safe_ratio(*w, sigma), sink);
+            }
             return Some(t);
         }
-        *weight *= (Vec3::splat(majorant) - sigma) / (majorant * (1.0 - p_real));
+        let null = Vec3::splat(majorant) - sigma;
+        *weight *= null / (majorant * (1.0 - p_real));
+        if let Some((sink, w)) = grad.as_mut() {
+            extinction_grad(flat, m, x, -safe_ratio(*w, null), sink);
+        }
     }
     // A flight that outlasts the step budget is cut off: it carries nothing.
     *weight = Vec3::ZERO;
@@ -120,6 +136,9 @@ pub fn delta_track(
 
 /// The ratio-tracking transmittance of `m` along `origin + t·dir` for t in [0, t_max), drawing
 /// stream RT of `vertex` from step `*step` on.
+///
+/// In a replay, `grad` is (sink, δL·C) with C the contribution the transmittance multiplies: each
+/// factor r = (σ̄ − σ_t)/σ̄ scatters δL·C·∂r/r through σ_t (the nested replay of ALGORITHMS.md §8).
 fn ratio_track(
     flat: &FlatScene,
     key: RngKey,
@@ -127,6 +146,7 @@ fn ratio_track(
     (origin, dir, t_max): (Vec3, Vec3, f32),
     (pixel, sample, vertex): (u32, u32, u32),
     step: &mut u32,
+    grad: &mut Option<(&mut GradSink<'_>, Vec3)>,
 ) -> Vec3 {
     let majorant = m.majorant;
     if !(majorant > 0.0) {
@@ -141,9 +161,19 @@ fn ratio_track(
         if !(t < t_max) {
             return tr;
         }
-        tr *= (Vec3::splat(majorant) - extinction(flat, m, origin + t * dir)) / majorant;
+        let x = origin + t * dir;
+        let null = Vec3::splat(majorant) - extinction(flat, m, x);
+        tr *= null / majorant;
+        if let Some((sink, w)) = grad.as_mut() {
+            extinction_grad(flat, m, x, -safe_ratio(*w, null), sink);
+        }
     }
     Vec3::ZERO
+}
+
+/// a / b per channel, 0 where b is 0.
+fn safe_ratio(a: Vec3, b: Vec3) -> Vec3 {
+    Vec3::select(b.cmpeq(Vec3::ZERO), Vec3::ZERO, a / b)
 }
 
 /// The medium a ray along `dir` is in after crossing the triangle in leaf slot `slot` (whose
@@ -160,13 +190,15 @@ pub fn crossed(interior: u32, ng: Vec3, dir: Vec3, current: u32) -> u32 {
 
 /// The transmittance from `origin` along `dir` over [0, t_max) starting in medium `medium`:
 /// ratio tracking through each medium, passing null boundaries; 0 if an opaque surface is in the
-/// way or more than `MAX_NULL_CROSSINGS` boundaries are.
+/// way or more than `MAX_NULL_CROSSINGS` boundaries are. In a replay (`grad`: sink and δL·C),
+/// the same steps scatter their derivatives (see `ratio_track`).
 pub fn shadow_transmittance(
     flat: &FlatScene,
     key: RngKey,
     medium: u32,
     (origin, dir, t_max): (Vec3, Vec3, f32),
     counters: (u32, u32, u32),
+    mut grad: Option<(&mut GradSink<'_>, Vec3)>,
 ) -> Vec3 {
     let (mut m, mut o, mut remaining) = (medium, origin, t_max);
     // Measured from the end each time, so the origins' offsets past each boundary do not add up
@@ -178,7 +210,7 @@ pub fn shadow_transmittance(
         let hit = closest_hit(&flat.bvh, &Ray::new(o, dir), 0.0, remaining);
         let segment = hit.as_ref().map_or(remaining, |h| h.t);
         if m != NO_MEDIUM {
-            tr *= ratio_track(flat, key, &flat.media[m as usize], (o, dir, segment), counters, &mut step);
+            tr *= ratio_track(flat, key, &flat.media[m as usize], (o, dir, segment), counters, &mut step, &mut grad);
         }
         let Some(hit) = hit else { return tr };
         let s = surface_at(flat, &hit);
@@ -195,4 +227,74 @@ pub fn shadow_transmittance(
         }
     }
     Vec3::ZERO
+}
+
+/// The voxels and trilinear weights of a grid lookup at local point `local` (as
+/// [`crate::scene::volume::lookup`] interpolates them).
+fn trilinear(f: &FieldDesc, local: Vec3) -> [(u32, f32); 8] {
+    let res = glam::UVec3::new(f.res_x, f.res_y, f.res_z);
+    let r = res.as_vec3();
+    let u = (local * r - 0.5).clamp(Vec3::ZERO, r - 1.0);
+    let lo = u.floor().as_uvec3();
+    let hi = (lo + 1).min(res - 1);
+    let t = u - lo.as_vec3();
+    let mut out = [(0u32, 0.0f32); 8];
+    for (k, o) in out.iter_mut().enumerate() {
+        let pick = |bit: usize, a: u32, b: u32| if k & bit == 0 { a } else { b };
+        let (x, y, z) = (pick(1, lo.x, hi.x), pick(2, lo.y, hi.y), pick(4, lo.z, hi.z));
+        let w = (if k & 1 == 0 { 1.0 - t.x } else { t.x })
+            * (if k & 2 == 0 { 1.0 - t.y } else { t.y })
+            * (if k & 4 == 0 { 1.0 - t.z } else { t.z });
+        *o = ((z * res.y + y) * res.x + x, w);
+    }
+    out
+}
+
+/// GRAD of field `f` at `p` with weight `w` per image channel: each value's derivative
+/// (channel c of an RGB field reaches image channel c only; a grey field reaches all three).
+fn field_grad(f: &FieldDesc, p: Vec3, w: Vec3, sink: &mut GradSink<'_>) {
+    let add = |sink: &mut GradSink<'_>, base: u32, scale: f32| {
+        if f.channels == 1 {
+            sink.add(base, w * scale);
+        } else {
+            sink.add_rgb(base, w * scale);
+        }
+    };
+    if f.kind == FIELD_CONSTANT {
+        add(sink, f.offset, 1.0);
+        return;
+    }
+    let local = Vec3::new(f.row0.dot(p), f.row1.dot(p), f.row2.dot(p)) + f.shift;
+    for (voxel, weight) in trilinear(f, local) {
+        if weight != 0.0 {
+            add(sink, f.offset + voxel * f.channels, weight);
+        }
+    }
+}
+
+/// GRAD of the extinction `scale · sigma_t(p)` with weight `w` per channel (through the scale and
+/// the field's values).
+pub fn extinction_grad(flat: &FlatScene, m: &MediumDesc, p: Vec3, w: Vec3, sink: &mut GradSink<'_>) {
+    let field = &flat.fields[m.sigma_t as usize];
+    sink.add(m.p_scale, w * rgb(flat, field, p));
+    field_grad(field, p, w * flat.params[m.p_scale as usize], sink);
+}
+
+/// GRAD of the albedo at `p` with weight `w` per channel.
+pub fn albedo_grad(flat: &FlatScene, m: &MediumDesc, p: Vec3, w: Vec3, sink: &mut GradSink<'_>) {
+    field_grad(&flat.fields[m.albedo as usize], p, w, sink);
+}
+
+/// GRAD of the phase function's value for (d, wo) with weight `w` (per channel): through g.
+pub fn phase_grad(flat: &FlatScene, m: &MediumDesc, d: Vec3, wo: Vec3, w: Vec3, sink: &mut GradSink<'_>) {
+    if m.phase != PHASE_HG {
+        return;
+    }
+    let g = flat.params[m.p_g as usize];
+    let c = d.dot(wo);
+    let denom = 1.0 + g * g - 2.0 * g * c;
+    // d/dg of (1 − g²)/(4π D^{3/2}), D = 1 + g² − 2gc.
+    let dfdg = (-2.0 * g * denom - 3.0 * (1.0 - g * g) * (g - c))
+        / (4.0 * std::f32::consts::PI * denom * denom * denom.max(0.0).sqrt());
+    sink.add(m.p_g, w * dfdg);
 }

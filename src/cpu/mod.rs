@@ -101,7 +101,6 @@ impl Backend for Reference {
         _mode: GradMode,
     ) -> Result<Gradients> {
         options.validate()?;
-        refuse_media_gradients(&self.flat)?;
         check_views(views, adjoints, options, "adjoint image")?;
         let mut sums = vec![0.0f64; self.flat.params.len()];
         for (view, adjoint) in views.iter().zip(adjoints) {
@@ -119,7 +118,6 @@ impl Backend for Reference {
         _mode: GradMode,
     ) -> Result<Gradients> {
         options.validate()?;
-        refuse_media_gradients(&self.flat)?;
         check_views(views, adjoints, options, "adjoint image")?;
         backward_adaptive_flat(&self.scene, &self.flat, options, views, &Image::stack(adjoints)?, sampling)
             .map(|g| self.gradients(g))
@@ -127,7 +125,6 @@ impl Backend for Reference {
 
     fn image_gradient(&mut self, options: &RenderOptions, name: &str) -> Result<Image> {
         options.validate()?;
-        refuse_media_gradients(&self.flat)?;
         image_gradient_flat(&self.scene, &self.flat, options, name)
     }
 
@@ -202,7 +199,6 @@ fn render_flat(scene: &Scene, flat: &FlatScene, options: &RenderOptions, view: &
 pub fn backward(scene: &Scene, options: &RenderOptions, adjoint: &Image) -> Result<Vec<f64>> {
     options.validate()?;
     let flat = FlatScene::new(scene)?;
-    refuse_media_gradients(&flat)?;
     backward_flat(scene, &flat, options, &View::current(scene), adjoint)
 }
 
@@ -244,7 +240,6 @@ pub fn backward_adaptive(
     options.validate()?;
     check_size(adjoint, options, "adjoint image")?;
     let flat = FlatScene::new(scene)?;
-    refuse_media_gradients(&flat)?;
     backward_adaptive_flat(scene, &flat, options, &[View::current(scene)], adjoint, sampling)
 }
 
@@ -317,7 +312,6 @@ fn replay_sample(
 pub fn image_gradient(scene: &Scene, options: &RenderOptions, name: &str) -> Result<Image> {
     options.validate()?;
     let flat = FlatScene::new(scene)?;
-    refuse_media_gradients(&flat)?;
     image_gradient_flat(scene, &flat, options, name)
 }
 
@@ -362,19 +356,6 @@ fn image_gradient_flat(scene: &Scene, flat: &FlatScene, options: &RenderOptions,
         .collect();
     check_replays(drifted.into_inner())?;
     Image::from_rgb(options.width, options.height, data)
-}
-
-/// Gradients through media are not built yet: a scene with a medium or a null boundary renders
-/// but is refused here.
-pub(crate) fn refuse_media_gradients(flat: &FlatScene) -> Result<()> {
-    if medium::has_media(flat) {
-        return Err(crate::Error::InvalidArgument {
-            parameter: "scene".into(),
-            message: "gradients of scenes with participating media or null boundaries are not built yet (renders are)"
-                .into(),
-        });
-    }
-    Ok(())
 }
 
 fn check_replays(drifted: usize) -> Result<()> {

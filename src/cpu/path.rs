@@ -161,7 +161,10 @@ pub fn trace_path<const ADJOINT: bool>(
                 let t_max = hit.as_ref().map_or(f32::MAX, |h| h.t);
                 let m = &flat.media[current as usize];
                 let counters = (pixel, sample, vertex);
-                if let Some(t) = medium::delta_track(flat, key, m, &ray, t_max, counters, &mut step, &mut throughput) {
+                let grad = if ADJOINT { Some((&mut *sink, adj_radiance * radiance)) } else { None };
+                if let Some(t) =
+                    medium::delta_track(flat, key, m, &ray, t_max, counters, &mut step, &mut throughput, grad)
+                {
                     break Event::Medium(ray.origin + t * ray.dir);
                 }
             }
@@ -218,15 +221,25 @@ pub fn trace_path<const ADJOINT: bool>(
                     };
                     let f = medium::phase_eval(flat, m, d, wl);
                     if p_e > 0.0 && f > 0.0 {
-                        let tr = medium::shadow_transmittance(
-                            flat,
-                            key,
-                            current,
-                            (x, wl, shadow_tmax),
-                            (pixel, sample, vertex),
-                        );
+                        let segment = (x, wl, shadow_tmax);
+                        let counters = (pixel, sample, vertex);
+                        let tr = medium::shadow_transmittance(flat, key, current, segment, counters, None);
                         let w_n = mis_power(p_e, f);
-                        radiance += sign * (throughput * tr * w_n * f * es.radiance / p_e);
+                        let contribution = throughput * tr * w_n * f * es.radiance / p_e;
+                        radiance += sign * contribution;
+                        if ADJOINT && max_component(tr) > 0.0 {
+                            let adj = adj_radiance * contribution;
+                            medium::phase_grad(flat, m, d, wl, adj / f, sink);
+                            medium::shadow_transmittance(
+                                flat,
+                                key,
+                                current,
+                                segment,
+                                counters,
+                                Some((&mut *sink, adj)),
+                            );
+                            sink.add_rgb(es.param, adj_radiance * throughput * tr * w_n * f / p_e);
+                        }
                     }
                 }
                 // ---- phase sampling ----
@@ -237,7 +250,11 @@ pub fn trace_path<const ADJOINT: bool>(
                 if !(pdf > 0.0) {
                     break;
                 }
-                // The sample's density is the phase function itself: the weight f/pdf is 1.
+                // The sample's density is the phase function itself: the weight f/pdf is 1; its
+                // attached numerator f still has a derivative (through g).
+                if ADJOINT {
+                    medium::phase_grad(flat, m, d, wo, adj_radiance * radiance / pdf, sink);
+                }
                 prev_pdf_f = pdf;
                 prev_nee = nee;
                 prev_sum = 1.0;
@@ -305,7 +322,14 @@ pub fn trace_path<const ADJOINT: bool>(
             let tr = if !(p_e > 0.0 && max_component(f) > 0.0) {
                 Vec3::ZERO
             } else if media {
-                medium::shadow_transmittance(flat, key, current, (origin, wl, shadow_tmax), (pixel, sample, vertex))
+                medium::shadow_transmittance(
+                    flat,
+                    key,
+                    current,
+                    (origin, wl, shadow_tmax),
+                    (pixel, sample, vertex),
+                    None,
+                )
             } else if occluded(&flat.bvh, &Ray::new(origin, wl), 0.0, shadow_tmax) {
                 Vec3::ZERO
             } else {
@@ -322,6 +346,12 @@ pub fn trace_path<const ADJOINT: bool>(
                     1.0 / (w1 + w2 + (w1 * pdf_f + q_here * w2 * pdf_d + (1.0 - q_here) * w2 * pdf_f) / p_e)
                 };
                 radiance += sign * (throughput * tr * w_n * f * es.radiance / p_e);
+                if ADJOINT && media {
+                    let segment = (origin, wl, shadow_tmax);
+                    let weight = adj_radiance * throughput * tr * w_n * f * es.radiance / p_e;
+                    let counters = (pixel, sample, vertex);
+                    medium::shadow_transmittance(flat, key, current, segment, counters, Some((&mut *sink, weight)));
+                }
                 if ADJOINT {
                     let adj = adj_radiance * throughput * tr * w_n * es.radiance / p_e;
                     bsdf_backward(flat, s.material, s.uv, &bsdf, wi, wo, adj, sink);

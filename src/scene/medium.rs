@@ -110,10 +110,13 @@ impl Medium {
         params.get(self.scale)[0] * self.sigma_t.eval(params, p, c)
     }
 
-    /// A majorant of [`Medium::extinction`] over every channel: `scale · max(sigma_t)` (ALGORITHMS.md §8).
+    /// The majorant of delta and ratio tracking: `scale · max(sigma_t)` over every point and
+    /// channel (ALGORITHMS.md §8), times 1 + [`crate::contract::MAJORANT_MARGIN`] so that it
+    /// strictly exceeds every density.
     pub fn majorant(&self, params: &ParamTable) -> f32 {
         let channels = self.sigma_t.channels();
-        params.get(self.scale)[0] * (0..channels).map(|c| self.sigma_t.max(params, c)).fold(0.0f32, f32::max)
+        let max = params.get(self.scale)[0] * (0..channels).map(|c| self.sigma_t.max(params, c)).fold(0.0f32, f32::max);
+        max * (1.0 + crate::contract::MAJORANT_MARGIN)
     }
 }
 
