@@ -19,6 +19,26 @@ use crate::rng::{RngKey, Stream, uniform4};
 use crate::sampling::Frame;
 use crate::scene::flat::FlatScene;
 
+/// Differential path sampling places its vertex among surface vertices only: in a scene with
+/// media its mixture weights would be wrong, so it is refused there.
+///
+/// # Errors
+/// [`crate::Error::InvalidArgument`] naming `Strategy::Diff`.
+pub(crate) fn refuse_diff_with_media(
+    flat: &FlatScene,
+    options: &crate::integrator::RenderOptions,
+) -> crate::Result<()> {
+    if has_media(flat) && matches!(options.strategy, crate::integrator::Strategy::Diff { .. }) {
+        return Err(crate::Error::InvalidArgument {
+            parameter: "Strategy::Diff".into(),
+            message: "differential path sampling is not built for scenes with participating media or null \
+                      boundaries (use the BSDF strategy)"
+                .into(),
+        });
+    }
+    Ok(())
+}
+
 /// Whether the scene needs the media code of the path loop (a medium or a null boundary).
 pub fn has_media(flat: &FlatScene) -> bool {
     !flat.media.is_empty() || flat.materials.iter().any(|m| m.tag == MAT_NULL)

@@ -166,6 +166,7 @@ pub fn render(scene: &Scene, options: &RenderOptions) -> Result<Image> {
 }
 
 fn render_flat(scene: &Scene, flat: &FlatScene, options: &RenderOptions, view: &View, pass: PassTag) -> Result<Image> {
+    medium::refuse_diff_with_media(flat, options)?;
     let globals = options.globals(scene, flat, pass);
     let camera = options.view_camera(view, pass);
     let pixels = (options.width * options.height) as usize;
@@ -209,6 +210,7 @@ fn backward_flat(
     view: &View,
     adjoint: &Image,
 ) -> Result<Vec<f64>> {
+    medium::refuse_diff_with_media(flat, options)?;
     check_size(adjoint, options, "adjoint image")?;
     let globals = options.globals(scene, flat, PassTag::Gradient);
     let camera = options.view_camera(view, PassTag::Gradient);
@@ -253,6 +255,7 @@ fn backward_adaptive_flat(
     adjoint: &Image,
     sampling: &PixelSampling,
 ) -> Result<Vec<f64>> {
+    medium::refuse_diff_with_media(flat, options)?;
     let stacked = options.stacked(views.len())?;
     let delta = sampling.sample_adjoint(&stacked, adjoint)?;
     let samples = sampling.sample_count(&stacked)?;
@@ -316,6 +319,7 @@ pub fn image_gradient(scene: &Scene, options: &RenderOptions, name: &str) -> Res
 }
 
 fn image_gradient_flat(scene: &Scene, flat: &FlatScene, options: &RenderOptions, name: &str) -> Result<Image> {
+    medium::refuse_diff_with_media(flat, options)?;
     let id = scene.params.find(name).ok_or_else(|| crate::Error::InvalidArgument {
         parameter: name.to_string(),
         message: "no such parameter".into(),

@@ -151,7 +151,8 @@ fn ratio_tracked_nee_agrees_with_delta_tracked_hits() {
     assert!(c > a + 4.0 * (ea + ec), "clear {c} vs through the slab {a}");
 }
 
-/// The kernels do not differentiate media yet, and say so (the CPU reference does: below).
+/// The kernels do not differentiate media yet, and say so (the CPU reference does: below); the
+/// differential strategy is refused in media scenes on both backends.
 #[test]
 fn gpu_media_gradients_are_refused_by_name() {
     let gpu = TestGpu::new();
@@ -170,6 +171,13 @@ fn gpu_media_gradients_are_refused_by_name() {
     let adjoint = Image::new(opts.width, opts.height);
     let e = renderer.backward(&opts, &adjoint, pathgrad::gpu::renderer::GradMode::Float).unwrap_err().to_string();
     assert!(e.contains("do not differentiate participating media"), "{e}");
+    // Differential path sampling is not built for media, on either backend.
+    let target = s.params.find("fog.interior_medium.scale").unwrap();
+    let diff = RenderOptions { strategy: pathgrad::integrator::Strategy::Diff { target, q: 0.5 }, ..opts };
+    let mut cpu = Reference::new(&s).unwrap();
+    for e in [renderer.render(&diff).unwrap_err().to_string(), cpu.render(&diff).unwrap_err().to_string()] {
+        assert!(e.contains("differential path sampling is not built"), "{e}");
+    }
 }
 
 /// The kernels' media code is the CPU twin's: one path per pixel of a scene with a heterogeneous
