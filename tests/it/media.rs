@@ -363,3 +363,82 @@ fn media_gradients_match_finite_differences_on_the_cpu() {
         assert!(mp.abs() > 2.0 * (vp / f64::from(SEEDS)).sqrt(), "{name}: the gradient is not distinguishable from 0");
     }
 }
+
+/// `optimize --cpu` recovers a 2×2×2 density grid from renders of three views (front, side,
+/// top; a white sky lights a scattering medium): from a uniform 0.4 (RMSE 0.29 against the
+/// truth) to an RMSE below 0.1 in 600 iterations (0.054 when this test was written). The targets
+/// are rendered at 1024 spp; the CPU reference is deterministic, so the run is too.
+#[test]
+fn optimize_recovers_a_small_density_grid_over_three_views() {
+    let dir = tempfile::tempdir().unwrap();
+    let truth = [0.2f32, 0.9, 0.5, 0.1, 0.7, 0.3, 0.05, 0.6];
+    std::fs::write(dir.path().join("truth.vol"), Grid::new(UVec3::splat(2), 1, truth.to_vec()).unwrap().to_bytes())
+        .unwrap();
+    let camera = |id: &str, origin: &str, up: &str| {
+        format!(
+            r#"<sensor type="perspective" id="{id}"><float name="fov" value="35"/><transform name="to_world"><lookat origin="{origin}" target="0, 0.5, 0" up="{up}"/></transform><film type="hdrfilm"><integer name="width" value="24"/><integer name="height" value="24"/></film></sensor>"#
+        )
+    };
+    let body = format!(
+        r#"{}{}{}<integrator type="volpath"><integer name="max_depth" value="6"/></integrator><emitter type="constant"><rgb name="radiance" value="1, 1, 1"/></emitter>
+        <shape type="cube" id="smoke"><bsdf type="null"/><medium type="heterogeneous" name="interior">
+            <volume type="gridvolume" name="sigma_t"><string name="filename" value="truth.vol"/><transform name="to_world"><translate x="-0.5" z="-0.5"/></transform></volume>
+            <float name="albedo" value="0.5"/><float name="scale" value="4"/></medium>
+            <transform name="to_world"><scale value="0.5"/><translate y="0.5"/></transform></shape>"#,
+        camera("front", "0, 0.5, 3.5", "0, 1, 0"),
+        camera("side", "3.5, 0.5, 0", "0, 1, 0"),
+        camera("top", "0.3, 4, 0.2", "0, 0, -1")
+    );
+    let path = dir.path().join("scene.xml");
+    std::fs::write(&path, format!(r#"<scene version="3.0.0">{body}</scene>"#)).unwrap();
+    let scene_arg = path.to_str().unwrap();
+    let mut views = Vec::new();
+    for view in ["front", "side", "top"] {
+        let target = dir.path().join(format!("{view}.exr"));
+        let o = crate::cli::pathgrad()
+            .args(["render", scene_arg, "--cpu", "--sensor", view, "--spp", "1024", "--no-preview", "-o"])
+            .arg(&target)
+            .output()
+            .unwrap();
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        views.push(format!("{view}={}", target.display()));
+    }
+    let out = dir.path().join("run");
+    let mut args = vec![
+        "optimize",
+        scene_arg,
+        "--cpu",
+        "--param",
+        "smoke.interior_medium.sigma_t.data=0.4",
+        "--iters",
+        "600",
+        "--lr",
+        "0.05",
+        "--spp",
+        "4",
+        "--spp-primal",
+        "8",
+        "--spp-grad",
+        "8",
+        "--json",
+        "-o",
+        out.to_str().unwrap(),
+    ];
+    for v in &views {
+        args.extend(["--view", v.as_str()]);
+    }
+    let o = crate::cli::pathgrad().args(&args).output().unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let summary: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    let values: Vec<f64> = summary["params"]["smoke.interior_medium.sigma_t.data"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|v| v.as_f64().unwrap())
+        .collect();
+    let rmse = |a: &[f64]| (a.iter().zip(truth).map(|(x, t)| (x - f64::from(t)).powi(2)).sum::<f64>() / 8.0).sqrt();
+    let start = rmse(&[0.4; 8]);
+    let end = rmse(&values);
+    println!("density grid RMSE {start:.3} -> {end:.3}: {values:?}");
+    assert!(end < 0.1 && end < start / 2.5, "RMSE {start} -> {end}");
+}
