@@ -121,6 +121,19 @@ PathState path_begin(uint view, uint pixel, uint sample_index, bool adjoint, vec
     return st;
 }
 
+// Russian roulette at vertex `vertex` — from vertex − 1 ≥ rr_depth (ALGORITHMS.md §3.1, written
+// without the subtraction), surviving with p = min(max β, 0.95) and β divided by it — then the end
+// of a path whose throughput is zero. True if the path goes on. Surface and medium vertices share it.
+bool path_survives(inout PathState st, uint vertex) {
+    if (vertex > globals.rr_depth) {
+        float u_rr = draw_block(st.key1, st.pixel, st.sample_index, vertex, DIM_ROULETTE / 4u)[DIM_ROULETTE % 4u];
+        float p_rr = min(max_component(st.throughput), 0.95);
+        if (!(u_rr < p_rr)) return false;
+        st.throughput /= p_rr;
+    }
+    return max_component(st.throughput) > 0.0;
+}
+
 // One vertex of the path: intersection, emitter or environment hit, NEE, BSDF or differential
 // sampling, Russian roulette. Returns true when the path has ended.
 bool path_step(inout PathState st) {
@@ -209,13 +222,7 @@ bool path_step(inout PathState st) {
                 st.prev_pdf_f = pdf;
                 st.prev_nee = nee;
                 st.prev_sum = 1.0;
-                if (vertex > globals.rr_depth) {
-                    float u_rr = draw_block(st.key1, st.pixel, st.sample_index, vertex, DIM_ROULETTE / 4u)[DIM_ROULETTE % 4u];
-                    float p_rr = min(max_component(st.throughput), 0.95);
-                    if (!(u_rr < p_rr)) ended = true; else st.throughput /= p_rr;
-                }
-                if (!ended && !(max_component(st.throughput) > 0.0)) ended = true;
-                if (!ended) st.ray = make_ray(x, wo);
+                if (!path_survives(st, vertex)) ended = true; else st.ray = make_ray(x, wo);
             }
         }
     } else if (event == EVENT_ESCAPE) {
@@ -347,13 +354,7 @@ bool path_step(inout PathState st) {
                 st.dx_taken = st.dx_taken || use_dx;
 
                 // ---- Russian roulette ----
-                // vertex - 1 >= rr_depth (ALGORITHMS.md §3.1), written without the subtraction.
-                if (!ended && vertex > globals.rr_depth) {
-                    float u_rr = draw_block(st.key1, st.pixel, st.sample_index, vertex, DIM_ROULETTE / 4u)[DIM_ROULETTE % 4u];
-                    float p_rr = min(max_component(st.throughput), 0.95);
-                    if (!(u_rr < p_rr)) ended = true; else st.throughput /= p_rr;
-                }
-                if (!ended && !(max_component(st.throughput) > 0.0)) ended = true;
+                if (!ended && !path_survives(st, vertex)) ended = true;
                 if (!ended) {
                     // The path continues: everything later in `radiance` carries the factor f̂(wi, wo).
                     grad_wo[1] = bs.wo;

@@ -24,6 +24,26 @@ fn draw_block(key: RngKey, pixel: u32, sample: u32, vertex: u32, block: u32) -> 
     uniform4(key, pixel, sample, vertex, Stream::Main, block, 0)
 }
 
+/// Russian roulette at `vertex` — from vertex − 1 ≥ rr_depth (ALGORITHMS.md §3.1, written without
+/// the subtraction), surviving with p = min(max β, 0.95) and β divided by it — then the end of a
+/// path whose throughput is zero. True if the path goes on (twin of `path_survives` in the kernels).
+fn path_survives(
+    globals: &Globals,
+    key: RngKey,
+    (pixel, sample, vertex): (u32, u32, u32),
+    throughput: &mut Vec3,
+) -> bool {
+    if vertex > globals.rr_depth {
+        let u_rr = draw_block(key, pixel, sample, vertex, DIM_ROULETTE / 4)[(DIM_ROULETTE % 4) as usize];
+        let p_rr = max_component(*throughput).min(0.95);
+        if !(u_rr < p_rr) {
+            return false;
+        }
+        *throughput /= p_rr;
+    }
+    max_component(*throughput) > 0.0
+}
+
 /// What a path segment reaches.
 enum Event {
     /// Nothing: the environment.
@@ -258,16 +278,7 @@ pub fn trace_path<const ADJOINT: bool>(
                 prev_pdf_f = pdf;
                 prev_nee = nee;
                 prev_sum = 1.0;
-                // ---- Russian roulette ----
-                if vertex > globals.rr_depth {
-                    let u_rr = draw_block(key, pixel, sample, vertex, DIM_ROULETTE / 4)[(DIM_ROULETTE % 4) as usize];
-                    let p_rr = max_component(throughput).min(0.95);
-                    if !(u_rr < p_rr) {
-                        break;
-                    }
-                    throughput /= p_rr;
-                }
-                if !(max_component(throughput) > 0.0) {
+                if !path_survives(globals, key, (pixel, sample, vertex), &mut throughput) {
                     break;
                 }
                 ray = Ray::new(x, wo);
@@ -407,16 +418,7 @@ pub fn trace_path<const ADJOINT: bool>(
         dx_taken = dx_taken || use_dx;
 
         // ---- Russian roulette ----
-        // vertex − 1 ≥ rr_depth (ALGORITHMS.md §3.1), written without the subtraction.
-        if vertex > globals.rr_depth {
-            let u_rr = draw_block(key, pixel, sample, vertex, DIM_ROULETTE / 4)[(DIM_ROULETTE % 4) as usize];
-            let p_rr = max_component(throughput).min(0.95);
-            if !(u_rr < p_rr) {
-                break;
-            }
-            throughput /= p_rr;
-        }
-        if !(max_component(throughput) > 0.0) {
+        if !path_survives(globals, key, (pixel, sample, vertex), &mut throughput) {
             break;
         }
         // The path continues: everything later in `radiance` carries the factor f̂(wi, wo).
