@@ -177,25 +177,7 @@ fn gradients_match_finite_differences() {
             let g = renderer.backward(&opts, &adjoint, GradMode::Float).unwrap();
             prb.push(g.get(name).unwrap().iter().map(|&v| f64::from(v)).sum::<f64>());
         }
-        let stats = |v: &[f64]| {
-            let m = v.iter().sum::<f64>() / v.len() as f64;
-            (m, v.iter().map(|x| (x - m).powi(2)).sum::<f64>() / (v.len() as f64 - 1.0))
-        };
-        let ((mf, vf), (mp, vp)) = (stats(&fd), stats(&prb));
-        let se = ((vf + vp) / f64::from(SEEDS)).sqrt();
-        let welch = (mf - mp).abs() / se;
-        println!(
-            "{} {name}: finite differences {mf:.5} ± {:.5}, PRB {mp:.5} ± {:.5}, Welch {welch:.2}",
-            scene.source,
-            (vf / f64::from(SEEDS)).sqrt(),
-            (vp / f64::from(SEEDS)).sqrt()
-        );
-        assert!(welch < 4.0, "{} {name}: FD {mf} vs PRB {mp} ({welch:.1} standard errors)", scene.source);
-        assert!(
-            mp.abs() > 2.0 * (vp / f64::from(SEEDS)).sqrt(),
-            "{} {name}: the gradient is not distinguishable from 0, the test has no power",
-            scene.source
-        );
+        crate::support::assert_fd_matches(&format!("{} {name}", scene.source), &fd, &prb);
     }
 }
 

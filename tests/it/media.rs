@@ -347,20 +347,7 @@ fn media_gradients_match_finite_differences_on_the_cpu() {
             let g = cpu.backward(&opts, &adjoint, pathgrad::gpu::renderer::GradMode::Float).unwrap();
             prb.push(g.get(name).unwrap().iter().map(|&v| f64::from(v)).sum::<f64>());
         }
-        let stats = |v: &[f64]| {
-            let m = v.iter().sum::<f64>() / v.len() as f64;
-            (m, v.iter().map(|x| (x - m).powi(2)).sum::<f64>() / (v.len() as f64 - 1.0))
-        };
-        let ((mf, vf), (mp, vp)) = (stats(&fd), stats(&prb));
-        let se = ((vf + vp) / f64::from(SEEDS)).sqrt();
-        let welch = (mf - mp).abs() / se;
-        println!(
-            "{name}: finite differences {mf:.5} ± {:.5}, PRB {mp:.5} ± {:.5}, Welch {welch:.2}",
-            (vf / f64::from(SEEDS)).sqrt(),
-            (vp / f64::from(SEEDS)).sqrt()
-        );
-        assert!(welch < 4.0, "{name}: FD {mf} vs PRB {mp} ({welch:.1} standard errors)");
-        assert!(mp.abs() > 2.0 * (vp / f64::from(SEEDS)).sqrt(), "{name}: the gradient is not distinguishable from 0");
+        crate::support::assert_fd_matches(name, &fd, &prb);
     }
 }
 

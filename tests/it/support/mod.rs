@@ -36,3 +36,27 @@ impl Drop for TestGpu {
         }
     }
 }
+
+/// The finite-difference test's verdict (gradients.rs, media.rs): over the seeds, the Welch
+/// statistic |mean_fd − mean_prb| / √(s²_fd/M + s²_prb/M) is below 4, and the PRB mean is more
+/// than two standard errors from 0 (the test has the power to see a wrong gradient). Prints both
+/// estimates under `what`.
+pub fn assert_fd_matches(what: &str, fd: &[f64], prb: &[f64]) {
+    let seeds = fd.len() as f64;
+    let stats = |v: &[f64]| {
+        let m = v.iter().sum::<f64>() / v.len() as f64;
+        (m, v.iter().map(|x| (x - m).powi(2)).sum::<f64>() / (v.len() as f64 - 1.0))
+    };
+    let ((mf, vf), (mp, vp)) = (stats(fd), stats(prb));
+    let welch = (mf - mp).abs() / ((vf + vp) / seeds).sqrt();
+    println!(
+        "{what}: finite differences {mf:.5} ± {:.5}, PRB {mp:.5} ± {:.5}, Welch {welch:.2}",
+        (vf / seeds).sqrt(),
+        (vp / seeds).sqrt()
+    );
+    assert!(welch < 4.0, "{what}: FD {mf} vs PRB {mp} ({welch:.1} standard errors)");
+    assert!(
+        mp.abs() > 2.0 * (vp / seeds).sqrt(),
+        "{what}: the gradient is not distinguishable from 0, the test has no power"
+    );
+}
