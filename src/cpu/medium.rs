@@ -62,7 +62,7 @@ fn rgb(flat: &FlatScene, f: &FieldDesc, p: Vec3) -> Vec3 {
 }
 
 /// The extinction `scale · sigma_t(p)` per channel.
-pub fn extinction(flat: &FlatScene, m: &MediumDesc, p: Vec3) -> Vec3 {
+pub fn medium_extinction(flat: &FlatScene, m: &MediumDesc, p: Vec3) -> Vec3 {
     flat.params[m.p_scale as usize] * rgb(flat, &flat.fields[m.sigma_t as usize], p)
 }
 
@@ -132,7 +132,7 @@ pub fn delta_track(
             return None;
         }
         let x = ray.origin + t * ray.dir;
-        let sigma = extinction(flat, m, x);
+        let sigma = medium_extinction(flat, m, x);
         let p_real = ((sigma.x + sigma.y + sigma.z) / (3.0 * majorant)).clamp(0.0, 1.0);
         if u[1] < p_real {
             let a = albedo(flat, m, x);
@@ -182,7 +182,7 @@ fn ratio_track(
             return tr;
         }
         let x = origin + t * dir;
-        let null = Vec3::splat(majorant) - extinction(flat, m, x);
+        let null = Vec3::splat(majorant) - medium_extinction(flat, m, x);
         tr *= null / majorant;
         if let Some((sink, w)) = grad.as_mut() {
             extinction_grad(flat, m, x, -safe_ratio(*w, null), sink);
@@ -196,9 +196,9 @@ fn safe_ratio(a: Vec3, b: Vec3) -> Vec3 {
     Vec3::select(b.cmpeq(Vec3::ZERO), Vec3::ZERO, a / b)
 }
 
-/// The medium a ray along `dir` is in after crossing the triangle in leaf slot `slot` (whose
-/// mesh holds medium `interior` behind its winding normal `ng`) from medium `current`.
-pub fn crossed(interior: u32, ng: Vec3, dir: Vec3, current: u32) -> u32 {
+/// The medium a ray along `dir` is in after crossing, from medium `current`, a triangle whose
+/// mesh holds medium `interior` behind its winding normal `ng`.
+pub fn medium_crossed(interior: u32, ng: Vec3, dir: Vec3, current: u32) -> u32 {
     if interior == NO_MEDIUM {
         current
     } else if ng.dot(dir) < 0.0 {
@@ -237,7 +237,7 @@ pub fn shadow_transmittance(
         if flat.materials[s.material as usize].tag != MAT_NULL {
             return Vec3::ZERO;
         }
-        m = crossed(flat.shading[flat.bvh.prim_ids[hit.slot as usize] as usize].interior, s.ng, dir, m);
+        m = medium_crossed(flat.shading[flat.bvh.prim_ids[hit.slot as usize] as usize].interior, s.ng, dir, m);
         o = offset_origin(s.p, s.ng, dir);
         if t_max < f32::MAX {
             remaining = (end - o).dot(dir);

@@ -198,7 +198,7 @@ pub fn trace_path<const ADJOINT: bool>(
                 break Event::Lost;
             }
             let interior = flat.shading[flat.bvh.prim_ids[hit.slot as usize] as usize].interior;
-            current = medium::crossed(interior, s.ng, ray.dir, current);
+            current = medium::medium_crossed(interior, s.ng, ray.dir, current);
             travelled += hit.t;
             ray = Ray::new(offset_origin(s.p, s.ng, ray.dir), ray.dir);
         };
