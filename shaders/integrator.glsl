@@ -163,7 +163,7 @@ bool path_step(inout PathState st) {
         [[dont_unroll]] for (uint crossings = 0u; crossings <= MAX_NULL_CROSSINGS; crossings++) {
             hit = bvh_closest_hit(st.ray, 0.0, FLOAT_MAX);
             if (st.medium != NO_MEDIUM) {
-                float t = delta_track(st.medium, st.ray, hit.valid ? hit.t : FLOAT_MAX, key, st.pixel, st.sample_index, vertex, step, st.throughput);
+                float t = delta_track(st.medium, st.ray, hit.valid ? hit.t : FLOAT_MAX, key, st.pixel, st.sample_index, vertex, step, st.throughput, adjoint, st.adj * st.radiance);
                 if (t >= 0.0) { event = EVENT_MEDIUM; x_medium = st.ray.origin + t * st.ray.dir; break; }
             }
             if (!hit.valid) { event = EVENT_ESCAPE; break; }
@@ -207,8 +207,17 @@ bool path_step(inout PathState st) {
                     }
                     float f = phase_eval(m, d, wl);
                     if (p_e > 0.0 && f > 0.0) {
-                        vec3 tr = shadow_transmittance(m, x, wl, shadow_tmax, uvec2(globals.key0, st.key1), st.pixel, st.sample_index, vertex);
-                        st.radiance += sign * (st.throughput * tr * mis_power(p_e, f) * f * es.radiance / p_e);
+                        float w_n = mis_power(p_e, f);
+                        vec3 w_tr = st.adj * st.throughput * w_n * f * es.radiance / p_e;
+                        vec3 tr = nee_transmittance(m, x, wl, shadow_tmax, uvec2(globals.key0, st.key1), st.pixel, st.sample_index, vertex, adjoint, w_tr);
+                        st.radiance += sign * (st.throughput * tr * w_n * f * es.radiance / p_e);
+                        if (adjoint && max_component(tr) > 0.0) {
+                            phase_grad(m, d, wl, w_tr * tr / f);
+                            if (es.environment ? HAS(G_ENV) : HAS(G_EMISSION)) {
+                                gt.nee_param = es.param;
+                                gt.nee = st.adj * st.throughput * tr * w_n * f / p_e;
+                            }
+                        }
                     }
                 }
             }
@@ -218,7 +227,9 @@ bool path_step(inout PathState st) {
             if (!(pdf > 0.0)) {
                 ended = true;
             } else {
-                // The sample's density is the phase function itself: the weight f/pdf is 1.
+                // The sample's density is the phase function itself: the weight f/pdf is 1; its
+                // attached numerator f still has a derivative (through g).
+                if (adjoint) phase_grad(m, d, wo, st.adj * st.radiance / pdf);
                 st.prev_pdf_f = pdf;
                 st.prev_nee = nee;
                 st.prev_sum = 1.0;
@@ -283,16 +294,9 @@ bool path_step(inout PathState st) {
                     vec3 wo = to_local(frame, wl);
                     vec3 f = bsdf_eval(bsdf, wi, wo);
                     vec3 tr = vec3(0.0);
+                    float w_n = 0.0;
                     if (p_e > 0.0 && max_component(f) > 0.0) {
-                        if (HAS(F_MEDIA)) {
-                            tr = shadow_transmittance(st.medium, origin, wl, shadow_tmax, uvec2(globals.key0, st.key1), st.pixel, st.sample_index, vertex);
-                        } else if (!bvh_occluded(make_ray(origin, wl), 0.0, shadow_tmax)) {
-                            tr = vec3(1.0);
-                        }
-                    }
-                    if (max_component(tr) > 0.0) {
                         float pdf_f = bsdf_pdf(bsdf, wi, wo);
-                        float w_n;
                         if (!diff) {
                             w_n = mis_power(p_e, pdf_f);
                         } else {
@@ -301,6 +305,14 @@ bool path_step(inout PathState st) {
                             float pdf_d = capable ? bsdf_pdf_diff(bsdf, wi, wo) : pdf_f;
                             w_n = 1.0 / (st.w1 + st.w2 + (st.w1 * pdf_f + q_here * st.w2 * pdf_d + (1.0 - q_here) * st.w2 * pdf_f) / p_e);
                         }
+                        if (HAS(F_MEDIA)) {
+                            vec3 w_tr = st.adj * st.throughput * w_n * f * es.radiance / p_e;
+                            tr = nee_transmittance(st.medium, origin, wl, shadow_tmax, uvec2(globals.key0, st.key1), st.pixel, st.sample_index, vertex, adjoint, w_tr);
+                        } else if (!bvh_occluded(make_ray(origin, wl), 0.0, shadow_tmax)) {
+                            tr = vec3(1.0);
+                        }
+                    }
+                    if (max_component(tr) > 0.0) {
                         st.radiance += sign * (st.throughput * tr * w_n * f * es.radiance / p_e);
                         grad_wo[0] = wo;
                         grad_adj[0] = st.adj * st.throughput * tr * w_n * es.radiance / p_e;

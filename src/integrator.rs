@@ -59,6 +59,8 @@ impl ParamKinds {
     pub const EMISSION: ParamKinds = ParamKinds(crate::contract::G_EMISSION);
     /// The constant environment's radiance.
     pub const ENVIRONMENT: ParamKinds = ParamKinds(crate::contract::G_ENV);
+    /// Participating media: extinction and albedo (grid voxels or constants), scale, g.
+    pub const MEDIUM: ParamKinds = ParamKinds(crate::contract::G_MEDIUM);
     /// Every kind.
     pub const ALL: ParamKinds = ParamKinds(crate::contract::G_ANY);
 

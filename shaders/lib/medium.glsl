@@ -66,10 +66,62 @@ vec3 phase_sample(uint m, vec3 d, vec2 u) {
     return to_world(shading_frame(d), vec3(sn * cos(phi), sn * sin(phi), c));
 }
 
+// GRAD of the medium's fields at x (ALGORITHMS.md §8): weight `w_sigma` per channel through the
+// extinction scale · sigma_t(x) (its scale and its voxels), `w_albedo` through the albedo's voxels.
+// Channel c of an RGB field reaches image channel c only; a grey field reaches all three. Twin of
+// extinction_grad and albedo_grad in src/cpu/medium.rs; one param_grad site for every voxel.
+void medium_grad(uint m, vec3 x, vec3 w_sigma, vec3 w_albedo) {
+    if (!HAS(G_MEDIUM)) return;
+    MediumDesc md = media[m];
+    float scale = params[md.p_scale];
+    param_grad(md.p_scale, w_sigma * field_rgb(md.sigma_t, x));
+    [[dont_unroll]] for (uint k = 0u; k < 2u; k++) {
+        uint f = k == 0u ? md.sigma_t : md.albedo;
+        vec3 w = k == 0u ? w_sigma * scale : w_albedo;
+        if (w == vec3(0.0)) continue;
+        FieldDesc d = fields[f];
+        uvec3 res = uvec3(d.res_x, d.res_y, d.res_z);
+        vec3 r = vec3(res);
+        vec3 u = clamp((vec3(dot(d.row0, x), dot(d.row1, x), dot(d.row2, x)) + d.shift) * r - 0.5, vec3(0.0), r - 1.0);
+        uvec3 lo = uvec3(floor(u));
+        uvec3 hi = min(lo + 1u, res - 1u);
+        vec3 t = u - vec3(lo);
+        uint corners = d.kind == FIELD_CONSTANT ? 1u : 8u;
+        [[dont_unroll]] for (uint corner = 0u; corner < corners; corner++) {
+            uint base = d.offset;
+            float weight = 1.0;
+            if (d.kind != FIELD_CONSTANT) {
+                bvec3 up = bvec3((corner & 1u) != 0u, (corner & 2u) != 0u, (corner & 4u) != 0u);
+                uvec3 v = uvec3(up.x ? hi.x : lo.x, up.y ? hi.y : lo.y, up.z ? hi.z : lo.z);
+                weight = (up.x ? t.x : 1.0 - t.x) * (up.y ? t.y : 1.0 - t.y) * (up.z ? t.z : 1.0 - t.z);
+                base += ((v.z * res.y + v.y) * res.x + v.x) * d.channels;
+            }
+            if (weight == 0.0) continue;
+            [[dont_unroll]] for (uint c = 0u; c < d.channels; c++) {
+                vec3 by = d.channels == 1u ? w * weight : vec3(c == 0u ? w.x : 0.0, c == 1u ? w.y : 0.0, c == 2u ? w.z : 0.0) * weight;
+                param_grad(base + c, by);
+            }
+        }
+    }
+}
+
+// GRAD of the phase function's value for (d, wo) with weight w per channel: through g.
+void phase_grad(uint m, vec3 d, vec3 wo, vec3 w) {
+    if (!HAS(G_MEDIUM) || media[m].phase != PHASE_HG) return;
+    float g = params[media[m].p_g];
+    float c = dot(d, wo);
+    float denom = 1.0 + g * g - 2.0 * g * c;
+    // d/dg of (1 − g²)/(4π D^{3/2}), D = 1 + g² − 2gc.
+    float dfdg = (-2.0 * g * denom - 3.0 * (1.0 - g * g) * (g - c)) / (4.0 * PI * denom * denom * sqrt(max(denom, 0.0)));
+    param_grad(media[m].p_g, w * dfdg);
+}
+
 // Delta tracking of the flight along `ray` in medium m up to t_max: the distance of a real
 // collision, or -1 if the flight reaches t_max; its spectral-tracking weight multiplies `weight`.
-// Draws stream DT of `vertex` from step `step` on.
-float delta_track(uint m, Ray ray, float t_max, uvec2 key, uint pixel, uint sample_index, uint vertex, inout uint step, inout vec3 weight) {
+// Draws stream DT of `vertex` from step `step` on. In a replay (`replay`, with gw = δL·L for the
+// radiance L the flight's weights multiply) each weight w scatters gw·∂w/w: a null weight
+// (σ̄ − σ_t,c)/(σ̄(1 − P)) through σ_t, a real one a_c σ_t,c/(σ̄ P) through a and σ_t, P detached.
+float delta_track(uint m, Ray ray, float t_max, uvec2 key, uint pixel, uint sample_index, uint vertex, inout uint step, inout vec3 weight, bool replay, vec3 gw) {
     float majorant = media[m].majorant;
     if (!(majorant > 0.0)) return -1.0;
     float t = 0.0;
@@ -81,18 +133,30 @@ float delta_track(uint m, Ray ray, float t_max, uvec2 key, uint pixel, uint samp
         vec3 x = ray.origin + t * ray.dir;
         vec3 sigma = medium_extinction(m, x);
         float p_real = clamp((sigma.x + sigma.y + sigma.z) / (3.0 * majorant), 0.0, 1.0);
-        if (u.y < p_real) {
-            weight *= field_rgb(media[m].albedo, x) * sigma / (majorant * p_real);
-            return t;
+        bool real = u.y < p_real;
+        vec3 w_sigma;
+        vec3 w_albedo = vec3(0.0);
+        if (real) {
+            vec3 a = field_rgb(media[m].albedo, x);
+            weight *= a * sigma / (majorant * p_real);
+            w_sigma = safe_div(gw, sigma);
+            w_albedo = safe_div(gw, a);
+        } else {
+            vec3 null_density = vec3(majorant) - sigma;
+            weight *= null_density / (majorant * (1.0 - p_real));
+            w_sigma = -safe_div(gw, null_density);
         }
-        weight *= (vec3(majorant) - sigma) / (majorant * (1.0 - p_real));
+        if (replay) medium_grad(m, x, w_sigma, w_albedo);
+        if (real) return t;
     }
     weight = vec3(0.0);
     return -1.0;
 }
 
-// Ratio-tracking transmittance of medium m along origin + t·dir over [0, t_max), stream RT.
-vec3 ratio_track(uint m, vec3 origin, vec3 dir, float t_max, uvec2 key, uint pixel, uint sample_index, uint vertex, inout uint step) {
+// Ratio-tracking transmittance of medium m along origin + t·dir over [0, t_max), stream RT. In a
+// replay (gw = δL·C for the contribution C the transmittance multiplies) each factor
+// r = (σ̄ − σ_t)/σ̄ scatters gw·∂r/r through σ_t: the nested replay of ALGORITHMS.md §8.
+vec3 ratio_track(uint m, vec3 origin, vec3 dir, float t_max, uvec2 key, uint pixel, uint sample_index, uint vertex, inout uint step, bool replay, vec3 gw) {
     float majorant = media[m].majorant;
     if (!(majorant > 0.0)) return vec3(1.0);
     vec3 tr = vec3(1.0);
@@ -102,7 +166,10 @@ vec3 ratio_track(uint m, vec3 origin, vec3 dir, float t_max, uvec2 key, uint pix
         step++;
         t += -log(1.0 - u) / majorant;
         if (!(t < t_max)) return tr;
-        tr *= (vec3(majorant) - medium_extinction(m, origin + t * dir)) / majorant;
+        vec3 x = origin + t * dir;
+        vec3 null_density = vec3(majorant) - medium_extinction(m, x);
+        tr *= null_density / majorant;
+        if (replay) medium_grad(m, x, -safe_div(gw, null_density), vec3(0.0));
     }
     return vec3(0.0);
 }
@@ -114,8 +181,9 @@ uint medium_crossed(uint interior, vec3 ng, vec3 dir, uint current) {
 }
 
 // Transmittance from origin along dir over [0, t_max) starting in medium m, through null
-// boundaries; 0 past an opaque surface or MAX_NULL_CROSSINGS boundaries.
-vec3 shadow_transmittance(uint m, vec3 origin, vec3 dir, float t_max, uvec2 key, uint pixel, uint sample_index, uint vertex) {
+// boundaries; 0 past an opaque surface or MAX_NULL_CROSSINGS boundaries. A replay (`replay`, gw)
+// scatters the derivatives of the same steps (see ratio_track).
+vec3 shadow_transmittance(uint m, vec3 origin, vec3 dir, float t_max, uvec2 key, uint pixel, uint sample_index, uint vertex, bool replay, vec3 gw) {
     vec3 o = origin;
     float remaining = t_max;
     vec3 end_point = origin + t_max * dir;
@@ -124,7 +192,7 @@ vec3 shadow_transmittance(uint m, vec3 origin, vec3 dir, float t_max, uvec2 key,
     [[dont_unroll]] for (uint k = 0u; k <= MAX_NULL_CROSSINGS; k++) {
         Hit hit = bvh_closest_hit(make_ray(o, dir), 0.0, remaining);
         float segment = hit.valid ? hit.t : remaining;
-        if (m != NO_MEDIUM) tr *= ratio_track(m, o, dir, segment, key, pixel, sample_index, vertex, step);
+        if (m != NO_MEDIUM) tr *= ratio_track(m, o, dir, segment, key, pixel, sample_index, vertex, step, replay, gw);
         if (!hit.valid) return tr;
         Surface s = surface_at(hit);
         if (materials[s.material].tag != MAT_NULL) return vec3(0.0);
@@ -136,6 +204,22 @@ vec3 shadow_transmittance(uint m, vec3 origin, vec3 dir, float t_max, uvec2 key,
         }
     }
     return vec3(0.0);
+}
+
+// The transmittance of a shadow ray (shadow_transmittance) and, in a replay, its nested replay:
+// the same ratio-tracking steps once more with gw = w·T, since each factor's term needs the whole
+// product T first (ALGORITHMS.md §8). One call site of the traversal for both passes.
+vec3 nee_transmittance(uint m, vec3 origin, vec3 dir, float t_max, uvec2 key, uint pixel, uint sample_index, uint vertex, bool replay, vec3 w) {
+    vec3 tr = vec3(0.0);
+    uint passes = replay && HAS(G_MEDIUM) ? 2u : 1u;
+    [[dont_unroll]] for (uint pass = 0u; pass < passes; pass++) {
+        vec3 t = shadow_transmittance(m, origin, dir, t_max, key, pixel, sample_index, vertex, pass == 1u, w * tr);
+        if (pass == 0u) {
+            tr = t;
+            if (!(max_component(tr) > 0.0)) break;
+        }
+    }
+    return tr;
 }
 
 #endif

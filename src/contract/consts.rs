@@ -162,8 +162,11 @@ contract_constants! {
     G_EMISSION = 1 << 20;
     /// Feature bit: gradients of the environment's radiance.
     G_ENV = 1 << 21;
+    /// Feature bit: gradients of participating media (grid or constant extinction and albedo,
+    /// scale, Henyey–Greenstein g).
+    G_MEDIUM = 1 << 22;
     /// Feature bits that differentiate something.
-    G_ANY = (1 << 16) | (1 << 17) | (1 << 18) | (1 << 19) | (1 << 20) | (1 << 21);
+    G_ANY = (1 << 16) | (1 << 17) | (1 << 18) | (1 << 19) | (1 << 20) | (1 << 21) | (1 << 22);
 
     /// Work items one dispatch hands out are taken from this counter (`BINDING_WORK`).
     BINDING_WORK = 16;

@@ -152,7 +152,6 @@ impl Renderer {
         extra: &[(u32, &Buffer)],
         mode: GradMode,
     ) -> Result<Gradients> {
-        refuse_media_gradients(&self.flat)?;
         let n = self.flat.params.len();
         let options = &request.options;
         let features = variant::request_features(self.scene_features, options, self.grad_kinds(options));
@@ -383,7 +382,6 @@ impl Backend for Renderer {
     /// # Errors
     /// [`Error::InvalidArgument`] for an unknown parameter; as [`Renderer::backward`].
     fn image_gradient(&mut self, options: &RenderOptions, name: &str) -> Result<Image> {
-        refuse_media_gradients(&self.flat)?;
         let mut request =
             self.request_current(options, PassTag::Gradient, Work::Pixels { begin: 0, end: options.spp })?;
         let id = self.scene.params.find(name).ok_or_else(|| Error::InvalidArgument {
@@ -417,18 +415,4 @@ impl Backend for Renderer {
     fn param_kinds(&self, ids: &[crate::params::ParamId]) -> ParamKinds {
         variant::kinds_of(&self.scene, &self.flat, ids)
     }
-}
-
-/// The kernels do not differentiate participating media yet (their adjoint terms exist on the CPU
-/// reference): a scene with a medium or a null boundary renders here, but its gradients are refused.
-fn refuse_media_gradients(flat: &FlatScene) -> Result<()> {
-    if crate::cpu::medium::has_media(flat) {
-        return Err(Error::InvalidArgument {
-            parameter: "scene".into(),
-            message: "the GPU kernels do not differentiate participating media or null boundaries yet; the CPU \
-                      reference does"
-                .into(),
-        });
-    }
-    Ok(())
 }

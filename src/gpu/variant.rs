@@ -76,6 +76,13 @@ pub fn param_kinds(flat: &FlatScene, env_param: u32, begin: u32, end: u32) -> Pa
     if overlaps(env_param, 3) {
         k = k.union(ParamKinds::ENVIRONMENT);
     }
+    let field = |f: u32| {
+        let d = &flat.fields[f as usize];
+        overlaps(d.offset, d.channels * if d.kind == FIELD_CONSTANT { 1 } else { d.res_x * d.res_y * d.res_z })
+    };
+    if flat.media.iter().any(|m| overlaps(m.p_scale, 1) || overlaps(m.p_g, 1) || field(m.sigma_t) || field(m.albedo)) {
+        k = k.union(ParamKinds::MEDIUM);
+    }
     k
 }
 
@@ -94,7 +101,7 @@ pub fn request_features(scene: u32, options: &RenderOptions, kinds: ParamKinds) 
 
 /// A short human-readable name of a variant, for logs: `nee env diffuse conductor[beckmann] ∂alpha`.
 pub fn describe(features: u32) -> String {
-    const NAMES: [(u32, &str); 18] = [
+    const NAMES: [(u32, &str); 19] = [
         (F_NEE, "nee"),
         (F_ENV, "env"),
         (F_EMITTERS, "emitters"),
@@ -113,6 +120,7 @@ pub fn describe(features: u32) -> String {
         (G_WEIGHT, "∂weight"),
         (G_EMISSION, "∂emission"),
         (G_ENV, "∂env"),
+        (G_MEDIUM, "∂medium"),
     ];
     let parts: Vec<&str> = NAMES.iter().filter(|(bit, _)| features & bit != 0).map(|(_, n)| *n).collect();
     parts.join(" ")

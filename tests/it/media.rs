@@ -1,7 +1,7 @@
 //! Participating media: closed forms (a slab's transmittance, a white furnace), a constant grid
 //! against the homogeneous medium, ratio-tracked NEE against delta-tracked emitter hits on the
-//! CPU reference; the kernels against it path by path; and the refusal of what is not built yet
-//! (gradients through media).
+//! CPU reference; the kernels against it path by path, in the primal and in both gradient modes;
+//! and the refusal of what is not built (differential sampling in media).
 
 use std::path::Path;
 
@@ -151,10 +151,9 @@ fn ratio_tracked_nee_agrees_with_delta_tracked_hits() {
     assert!(c > a + 4.0 * (ea + ec), "clear {c} vs through the slab {a}");
 }
 
-/// The kernels do not differentiate media yet, and say so (the CPU reference does: below); the
-/// differential strategy is refused in media scenes on both backends.
+/// Differential path sampling is not built for media, and both backends say so.
 #[test]
-fn gpu_media_gradients_are_refused_by_name() {
+fn differential_sampling_is_refused_in_media_scenes() {
     let gpu = TestGpu::new();
     let dir = tempfile::tempdir().unwrap();
     let s = scene(
@@ -166,12 +165,6 @@ fn gpu_media_gradients_are_refused_by_name() {
     );
     let mut renderer = pathgrad::gpu::Renderer::new(&gpu.ctx, &s).unwrap();
     let opts = RenderOptions::for_scene(&s);
-    let e = renderer.image_gradient(&opts, "fog.interior_medium.scale").unwrap_err().to_string();
-    assert!(e.contains("do not differentiate participating media"), "{e}");
-    let adjoint = Image::new(opts.width, opts.height);
-    let e = renderer.backward(&opts, &adjoint, pathgrad::gpu::renderer::GradMode::Float).unwrap_err().to_string();
-    assert!(e.contains("do not differentiate participating media"), "{e}");
-    // Differential path sampling is not built for media, on either backend.
     let target = s.params.find("fog.interior_medium.scale").unwrap();
     let diff = RenderOptions { strategy: pathgrad::integrator::Strategy::Diff { target, q: 0.5 }, ..opts };
     let mut cpu = Reference::new(&s).unwrap();
@@ -180,19 +173,13 @@ fn gpu_media_gradients_are_refused_by_name() {
     }
 }
 
-/// The kernels' media code is the CPU twin's: one path per pixel of a scene with a heterogeneous
-/// RGB medium (grid extinction, constant albedo, HG phase), a homogeneous one, null boundaries,
-/// surfaces and both emitter kinds agree value by value like surface-only renders do
-/// (cpu_vs_gpu.rs: 1e-4 relative; a path may take another branch where logarithms round
-/// differently, so a budget of 1 % of the values may differ), and so do the means of 16 spp.
-#[test]
-fn gpu_media_equal_the_cpu_per_path() {
-    let gpu = TestGpu::new();
-    let dir = tempfile::tempdir().unwrap();
+/// A scene with a heterogeneous RGB medium (grid extinction, constant albedo, HG phase), a
+/// homogeneous one, null boundaries, surfaces and both emitter kinds, in `dir`.
+fn mixed_media(dir: &Path) -> Scene {
     let density: Vec<f32> = (0..4 * 4 * 4 * 3).map(|i| 0.2 + 0.8 * ((i * 37 % 11) as f32 / 10.0)).collect();
-    std::fs::write(dir.path().join("density.vol"), Grid::new(UVec3::splat(4), 3, density).unwrap().to_bytes()).unwrap();
-    let s = scene(
-        dir.path(),
+    std::fs::write(dir.join("density.vol"), Grid::new(UVec3::splat(4), 3, density).unwrap().to_bytes()).unwrap();
+    scene(
+        dir,
         &format!(
             r#"{}<integrator type="volpath"><integer name="max_depth" value="12"/></integrator><emitter type="constant"><rgb name="radiance" value="0.3, 0.4, 0.5"/></emitter>
             <shape type="rectangle" id="light"><emitter type="area"><rgb name="radiance" value="6, 6, 5"/></emitter><transform name="to_world"><rotate x="1" angle="90"/><translate y="3"/></transform></shape>
@@ -205,7 +192,18 @@ fn gpu_media_equal_the_cpu_per_path() {
                 <transform name="to_world"><scale value="0.6"/><translate x="1"/></transform></shape>"#,
             sensor("0, 0.5, 4", 45.0, 32)
         ),
-    );
+    )
+}
+
+/// The kernels' media code is the CPU twin's: one path per pixel of `mixed_media` agrees value by
+/// value like surface-only renders do
+/// (cpu_vs_gpu.rs: 1e-4 relative; a path may take another branch where logarithms round
+/// differently, so a budget of 1 % of the values may differ), and so do the means of 16 spp.
+#[test]
+fn gpu_media_equal_the_cpu_per_path() {
+    let gpu = TestGpu::new();
+    let dir = tempfile::tempdir().unwrap();
+    let s = mixed_media(dir.path());
     let mut renderer = pathgrad::gpu::Renderer::new(&gpu.ctx, &s).unwrap();
     let mut cpu = Reference::new(&s).unwrap();
     for spp in [1, 16] {
@@ -242,6 +240,79 @@ fn gpu_media_equal_the_cpu_per_path() {
     let changed = without.as_slice().iter().zip(with.as_slice()).filter(|(a, b)| (*a - *b).abs() > 0.05).count();
     println!("{changed} of {} values change without the media", with.as_slice().len());
     assert!(changed > with.as_slice().len() / 10, "{changed}");
+}
+
+/// The kernels' media gradients are the CPU twin's (whose gradients the finite-difference test
+/// below checks): forward mode per pixel with the per-path tolerances of the primal above (a path
+/// may branch elsewhere where logarithms round differently: 1 % of the values), reverse mode per
+/// parameter value within 1e-3 of Σ_p |A_p ∂I_p/∂θ| as the surface tests (gradients.rs), in float
+/// and fixed-point accumulation, for every medium parameter kind and the surfaces' parameters in
+/// the same scene. The replay of every path returns to zero (both backends check it).
+#[test]
+fn gpu_media_gradients_equal_the_cpu() {
+    use pathgrad::gpu::renderer::GradMode;
+    let gpu = TestGpu::new();
+    let dir = tempfile::tempdir().unwrap();
+    let s = mixed_media(dir.path());
+    let mut renderer = pathgrad::gpu::Renderer::new(&gpu.ctx, &s).unwrap();
+    let names = [
+        "smoke.interior_medium.sigma_t.data",
+        "smoke.interior_medium.scale",
+        "smoke.interior_medium.phase_function.g",
+        "smoke.interior_medium.albedo.value.value",
+        "fog.interior_medium.sigma_t.value.value",
+        "fog.interior_medium.albedo.value.value",
+        "floor.bsdf.reflectance.value",
+        "light.emitter.radiance.value",
+    ];
+    let opts = RenderOptions { width: 24, height: 24, spp: 1, seed: 6, ..RenderOptions::for_scene(&s) };
+    for name in [
+        "smoke.interior_medium.sigma_t.data",
+        "smoke.interior_medium.phase_function.g",
+        "fog.interior_medium.albedo.value.value",
+    ] {
+        let g = renderer.image_gradient(&opts, name).unwrap();
+        let c = pathgrad::cpu::image_gradient(&s, &opts, name).unwrap();
+        let scale = c.as_slice().iter().fold(0.0f32, |m, v| m.max(v.abs()));
+        assert!(scale > 0.0, "{name}: the image gradient is zero everywhere");
+        let mismatched = g
+            .as_slice()
+            .iter()
+            .zip(c.as_slice())
+            .filter(|(a, b)| (*a - *b).abs() > 1e-4 * a.abs().max(b.abs()) + 1e-4 * scale)
+            .count();
+        println!("{name}: {mismatched} of {} forward-mode values differ", g.as_slice().len());
+        assert!(mismatched as f64 <= 0.01 * g.as_slice().len() as f64, "{name}: {mismatched} mismatches");
+    }
+    let opts = RenderOptions { spp: 2, ..opts };
+    let adjoint = Image::from_rgb(
+        opts.width,
+        opts.height,
+        (0..opts.width * opts.height * 3).map(|i| ((i as f32 * 0.37).sin() + 0.3) * 0.5).collect(),
+    )
+    .unwrap();
+    let c = pathgrad::cpu::backward(&s, &opts, &adjoint).unwrap();
+    for mode in [GradMode::Float, GradMode::Deterministic] {
+        let g = renderer.backward(&opts, &adjoint, mode).unwrap();
+        for name in names {
+            let e = s.params.entry(s.params.find(name).unwrap_or_else(|| panic!("{name}"))).clone();
+            let forward = pathgrad::cpu::image_gradient(&s, &opts, name).unwrap();
+            let magnitude: f64 = forward
+                .as_slice()
+                .iter()
+                .zip(adjoint.as_slice())
+                .map(|(f, a)| (f64::from(*f) * f64::from(*a)).abs())
+                .sum();
+            assert!(magnitude > 0.0, "{name}: no derivative in view");
+            let cv = &c[e.offset as usize..(e.offset + e.len) as usize];
+            for (a, b) in g.get(name).unwrap().iter().zip(cv) {
+                assert!(
+                    (f64::from(*a) - b).abs() <= 1e-3 * magnitude,
+                    "{mode:?} {name}: GPU {a} vs CPU {b} (scale {magnitude})"
+                );
+            }
+        }
+    }
 }
 
 /// The closed forms hold on the GPU too (the slab and the furnace of the CPU tests above).
