@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""Mitsuba 3 `prb` next to pathgrad on the same XML scene: timings, losses, gradients, mean radiance.
+"""Mitsuba 3 `prb` (`prbvolpath` with media) next to pathgrad on the same XML scene: timings, losses, gradients, mean radiance.
 
 This is a benchmarking tool for people, not part of CI and not a test: nothing here is asserted on.
 For each seed it
@@ -78,6 +78,7 @@ def parse_args():
     p.add_argument("--variant", default="llvm_ad_rgb", help="Mitsuba variant; scalar_rgb: no gradients")
     p.add_argument("--pathgrad", default=str(REPO / "target" / "release" / "pathgrad"), help="pathgrad binary")
     p.add_argument("--device", help="pathgrad --device (default: its own choice)")
+    p.add_argument("--integrator", help="Mitsuba integrator (default: prb, or prbvolpath in a scene with media)")
     p.add_argument("--list-params", action="store_true", help="print Mitsuba's parameter keys and exit")
     return p.parse_args()
 
@@ -114,8 +115,11 @@ class MitsubaSide:
                 print(key)
             sys.exit(0)
         resize_film(self.mi, self.params, args.width, args.height)
-        # prb exists in the AD variants only; `path` is the same primal estimator.
-        self.integrator_type = "prb" if self.ad else "path"
+        # prb exists in the AD variants only; `path` is the same primal estimator. A scene with a
+        # participating medium takes their volumetric twins, prbvolpath and volpath.
+        media = any(".interior_medium." in key for key in self.params.keys())
+        default = {(False, True): "prb", (False, False): "path", (True, True): "prbvolpath", (True, False): "volpath"}
+        self.integrator_type = args.integrator or default[(media, self.ad)]
         self.integrator = mi.load_dict(
             {"type": self.integrator_type, "max_depth": args.max_depth, "rr_depth": RR_DEPTH}
         )

@@ -247,7 +247,8 @@ fn gpu_media_equal_the_cpu_per_path() {
 /// may branch elsewhere where logarithms round differently: 1 % of the values), reverse mode per
 /// parameter value within 1e-3 of Σ_p |A_p ∂I_p/∂θ| as the surface tests (gradients.rs), in float
 /// and fixed-point accumulation, for every medium parameter kind and the surfaces' parameters in
-/// the same scene. The replay of every path returns to zero (both backends check it).
+/// the same scene. The replay of every path returns to zero (both backends check it), and the
+/// backward pass's memory does not grow with spp or depth.
 #[test]
 fn gpu_media_gradients_equal_the_cpu() {
     use pathgrad::gpu::renderer::GradMode;
@@ -312,6 +313,17 @@ fn gpu_media_gradients_equal_the_cpu() {
                 );
             }
         }
+    } // PRB's memory is flat through media too: the buffers a backward pass allocates do not grow
+    // with the samples per pixel or the depth (paths are replayed, never stored).
+    let mut peak = |o: RenderOptions| {
+        renderer.context().reset_peak_buffer_bytes();
+        renderer.backward(&o, &adjoint, GradMode::Float).unwrap();
+        renderer.context().peak_buffer_bytes()
+    };
+    let base = peak(RenderOptions { spp: 1, max_depth: Some(2), ..opts });
+    for (spp, depth) in [(16, 2), (1, 48), (16, 48)] {
+        let bytes = peak(RenderOptions { spp, max_depth: Some(depth), ..opts });
+        assert_eq!(bytes, base, "{spp} spp, depth {depth}: {bytes} bytes against {base} at 1 spp, depth 2");
     }
 }
 
