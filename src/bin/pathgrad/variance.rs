@@ -8,6 +8,7 @@ use anyhow::{Context as _, Result, bail};
 use clap::Args;
 use pathgrad::adaptive::AdaptiveEstimator;
 use pathgrad::integrator::{RenderOptions, Strategy};
+use pathgrad::scene::Material;
 use pathgrad::variance::{self, LossGradientSetup};
 
 use crate::common::{RenderFlags, options, parse_define, progress_bar, target_image, warn_without_sampler};
@@ -27,9 +28,10 @@ pub(crate) struct VarianceArgs {
     /// --diff-param says otherwise.
     #[arg(long, value_name = "NAME")]
     param: String,
-    /// Strategies to compare, comma-separated: bsdf, diff.
-    #[arg(long, value_delimiter = ',', default_value = "bsdf,diff")]
-    strategy: Vec<String>,
+    /// Strategies to compare, comma-separated: bsdf, diff (default: both; bsdf alone in a scene
+    /// with participating media or null boundaries, where diff is not built).
+    #[arg(long, value_delimiter = ',')]
+    strategy: Option<Vec<String>>,
     /// Probabilities of `diff`'s differential vertex, comma-separated (one row each: a q sweep).
     #[arg(long, value_delimiter = ',', default_value = "0.5")]
     q: Vec<f32>,
@@ -84,7 +86,16 @@ struct Technique {
 fn techniques(args: &VarianceArgs, scene: &pathgrad::scene::Scene) -> Result<Vec<Technique>> {
     let target = args.diff_param.as_deref().unwrap_or(&args.param);
     let mut rows = Vec::new();
-    for name in &args.strategy {
+    let media = !scene.media.is_empty() || scene.materials.iter().any(|m| matches!(m, Material::Null));
+    let default = if media {
+        tracing::info!(
+            "the scene has participating media or null boundaries: comparing bsdf alone (diff is not built for media)"
+        );
+        vec!["bsdf".to_string()]
+    } else {
+        vec!["bsdf".to_string(), "diff".to_string()]
+    };
+    for name in args.strategy.as_ref().unwrap_or(&default) {
         let qs: &[f32] = if name == "diff" { &args.q } else { &[0.0] };
         for &q in qs {
             let strategy = Strategy::from_name(scene, name, q, target)?;
