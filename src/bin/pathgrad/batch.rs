@@ -37,7 +37,8 @@ pub(crate) struct BatchArgs {
     /// The number of shards of a Kubernetes Indexed Job (its JOB_COMPLETION_INDEX is the shard).
     #[arg(long, value_name = "N", conflicts_with = "shard")]
     shards: Option<u32>,
-    /// Vulkan device: an index or UUID from `pathgrad devices`, or `cpu` (env: PATHGRAD_DEVICE).
+    /// Vulkan device: an index or UUID from `pathgrad devices`, or `cpu` for a CPU Vulkan device
+    /// such as lavapipe (the CPU reference implementation is `--cpu`) (env: PATHGRAD_DEVICE).
     #[arg(long)]
     device: Option<String>,
     /// Run on the CPU reference implementation instead of Vulkan.

@@ -41,7 +41,8 @@ pub(crate) struct RenderFlags {
     /// Random seed.
     #[arg(long, default_value_t = 0)]
     pub(crate) seed: u32,
-    /// Vulkan device: an index or UUID from `pathgrad devices`, or `cpu` (env: PATHGRAD_DEVICE).
+    /// Vulkan device: an index or UUID from `pathgrad devices`, or `cpu` for a CPU Vulkan device
+    /// such as lavapipe (the CPU reference implementation is `--cpu`) (env: PATHGRAD_DEVICE).
     #[arg(long)]
     pub(crate) device: Option<String>,
     /// Run on the CPU reference implementation instead of Vulkan (the same estimators and random
