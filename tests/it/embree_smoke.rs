@@ -20,7 +20,19 @@ fn embree_hits_at_t_one_and_misses_beside() {
         ([0.75, 0.75, -1.0], [0.0, 0.0, 1.0]),  // above the diagonal: beside triangle 0
         ([0.25, 0.25, -1.0], [0.0, 0.0, -1.0]), // pointing away
     ];
-    assert_eq!(scene.closest_hits(&rays, 0.0), [Some((1.0, 0)), Some((1.0, 1)), Some((2.0, 0)), None, None]);
+    let hits = scene.closest_hits(&rays, 0.0);
+    let want = [Some((1.0, 0)), Some((1.0, 1)), Some((2.0, 0)), None, None];
+    // Embree's t comes from its own reciprocal-based arithmetic, which differs between its ISA
+    // paths (an AVX2 host gives 0.99999994 for 1): the primitive must match and t be within 4 ulps.
+    for (i, (hit, want)) in hits.iter().zip(want).enumerate() {
+        match (hit, want) {
+            (Some((t, prim)), Some((t_want, prim_want))) => {
+                assert_eq!(*prim, prim_want, "ray {i}");
+                assert!((t - t_want).abs() <= 4.0 * f32::EPSILON * t_want, "ray {i}: t {t}, expected {t_want}");
+            }
+            _ => assert_eq!(*hit, want, "ray {i}"),
+        }
+    }
     // tmin past the triangle turns the hit into a miss.
     assert_eq!(scene.closest_hits(&rays[..1], 1.5), [None]);
 
