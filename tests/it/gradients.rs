@@ -58,12 +58,7 @@ fn image_gradients_gpu_equal_cpu_per_path() {
             let c = pathgrad::cpu::image_gradient(&scene, &opts, name).unwrap();
             let scale = c.as_slice().iter().fold(0.0f32, |m, v| m.max(v.abs()));
             assert!(scale > 0.0, "{} {name}: the image gradient is zero everywhere", scene.source);
-            let mismatched = g
-                .as_slice()
-                .iter()
-                .zip(c.as_slice())
-                .filter(|(a, b)| (*a - *b).abs() > 1e-4 * a.abs().max(b.abs()) + 1e-4 * scale)
-                .count();
+            let mismatched = crate::support::count_mismatches(&g, &c, 1e-4);
             println!("{} {name}: {mismatched} of {} values differ", scene.source, g.as_slice().len());
             assert!(
                 mismatched as f64 <= 1e-3 * g.as_slice().len() as f64,

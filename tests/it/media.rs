@@ -211,13 +211,7 @@ fn gpu_media_equal_the_cpu_per_path() {
         let opts = RenderOptions { spp, seed: 4, ..RenderOptions::for_scene(&s) };
         let g = renderer.render(&opts).unwrap();
         let c = cpu.render(&opts).unwrap();
-        let scale = c.as_slice().iter().fold(0.0f32, |m, v| m.max(v.abs()));
-        let mismatched = g
-            .as_slice()
-            .iter()
-            .zip(c.as_slice())
-            .filter(|(a, b)| (*a - *b).abs() > 1e-4 * a.abs().max(b.abs()) + 1e-6 * scale)
-            .count();
+        let mismatched = crate::support::count_mismatches(&g, &c, 1e-6);
         println!(
             "media, {spp} spp: {mismatched} of {} values differ; means {:?} vs {:?}",
             g.as_slice().len(),
@@ -276,12 +270,7 @@ fn gpu_media_gradients_equal_the_cpu() {
         let c = pathgrad::cpu::image_gradient(&s, &opts, name).unwrap();
         let scale = c.as_slice().iter().fold(0.0f32, |m, v| m.max(v.abs()));
         assert!(scale > 0.0, "{name}: the image gradient is zero everywhere");
-        let mismatched = g
-            .as_slice()
-            .iter()
-            .zip(c.as_slice())
-            .filter(|(a, b)| (*a - *b).abs() > 1e-4 * a.abs().max(b.abs()) + 1e-4 * scale)
-            .count();
+        let mismatched = crate::support::count_mismatches(&g, &c, 1e-4);
         println!("{name}: {mismatched} of {} forward-mode values differ", g.as_slice().len());
         assert!(mismatched as f64 <= 0.01 * g.as_slice().len() as f64, "{name}: {mismatched} mismatches");
     }

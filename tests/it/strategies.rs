@@ -24,18 +24,6 @@ fn diff(scene: &Scene, target: &str, q: f32) -> Strategy {
     Strategy::Diff { target: scene.params.find(target).unwrap(), q }
 }
 
-/// Paths that took the same decisions agree to 1e-4 relative per value (as the BSDF strategy's,
-/// `cpu_vs_gpu.rs`); a gradient pixel sums terms of both signs, so its floor is 1e-4 of the image's
-/// largest value. Budget: 1e-3 of the values may differ (a few-ulp difference crossing a threshold).
-fn count_mismatches(gpu: &Image, cpu: &Image) -> usize {
-    let scale = cpu.as_slice().iter().fold(0.0f32, |m, v| m.max(v.abs()));
-    gpu.as_slice()
-        .iter()
-        .zip(cpu.as_slice())
-        .filter(|(a, b)| (*a - *b).abs() > 1e-4 * a.abs().max(b.abs()) + 1e-4 * scale)
-        .count()
-}
-
 #[test]
 fn differential_strategy_gpu_equals_cpu_per_path() {
     let gpu = TestGpu::new();
@@ -66,7 +54,9 @@ fn differential_strategy_gpu_equals_cpu_per_path() {
             ];
             for (what, g, c) in &images {
                 assert!(c.as_slice().iter().any(|v| *v != 0.0), "{} {what}: all zero", scene.source);
-                let mismatched = count_mismatches(g, c);
+                // A gradient pixel sums terms of both signs: floor 1e-4 of the largest value; budget 1e-3 of
+                // the values (a few-ulp difference crossing a threshold).
+                let mismatched = crate::support::count_mismatches(g, c, 1e-4);
                 println!("{} (NEE {nee}) {what}: {mismatched} of {} values differ", scene.source, g.as_slice().len());
                 assert!(
                     mismatched as f64 <= 1e-3 * g.as_slice().len() as f64,

@@ -37,6 +37,19 @@ impl Drop for TestGpu {
     }
 }
 
+/// Values of a GPU image that differ from the CPU twin's beyond rounding: paths that took the same
+/// decisions agree to 1e-4 relative per value (`cpu_vs_gpu.rs`); `floor` is a fraction of the CPU
+/// image's largest |value| below which a difference is ignored (terms of both signs cancel in a
+/// gradient pixel; near-black pixels of a render). Callers budget how many may differ.
+pub fn count_mismatches(gpu: &pathgrad::image::Image, cpu: &pathgrad::image::Image, floor: f32) -> usize {
+    let scale = cpu.as_slice().iter().fold(0.0f32, |m, v| m.max(v.abs()));
+    gpu.as_slice()
+        .iter()
+        .zip(cpu.as_slice())
+        .filter(|(a, b)| (*a - *b).abs() > 1e-4 * a.abs().max(b.abs()) + floor * scale)
+        .count()
+}
+
 /// The finite-difference test's verdict (gradients.rs, media.rs): over the seeds, the Welch
 /// statistic |mean_fd − mean_prb| / √(s²_fd/M + s²_prb/M) is below 4, and the PRB mean is more
 /// than two standard errors from 0 (the test has the power to see a wrong gradient). Prints both
