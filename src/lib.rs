@@ -57,6 +57,7 @@ pub mod loss;
 pub mod optim;
 pub mod output;
 pub mod params;
+pub mod prior;
 pub mod rng;
 pub mod sampling;
 pub mod scene;

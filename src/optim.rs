@@ -17,6 +17,7 @@ use crate::image::Image;
 use crate::integrator::{RenderOptions, View};
 use crate::loss::Loss;
 use crate::params::{Gradients, ParamId, ParamTable};
+use crate::prior::Smoothness;
 
 /// Adam's first-moment decay β₁ (ALGORITHMS.md §7.2, the paper's default).
 pub const BETA1: f64 = 0.9;
@@ -336,6 +337,7 @@ pub struct Optimization {
     params: ParamTable,
     adam: Adam,
     iteration: u64,
+    prior: Option<Smoothness>,
 }
 
 impl Optimization {
@@ -360,7 +362,18 @@ impl Optimization {
     /// As [`IterationOptions::validate`].
     pub fn resume(params: ParamTable, adam: Adam, iteration: u64, options: IterationOptions) -> Result<Optimization> {
         options.validate()?;
-        Ok(Optimization { options, params, adam, iteration })
+        Ok(Optimization { options, params, adam, iteration, prior: None })
+    }
+
+    /// The same run with `prior` added to the objective: every gradient from now on includes its
+    /// gradient ([`Smoothness::add_gradient`]); the losses reported stay the images' losses.
+    pub fn with_prior(self, prior: Smoothness) -> Optimization {
+        Optimization { prior: Some(prior), ..self }
+    }
+
+    /// The prior added to the objective, if any.
+    pub fn prior(&self) -> Option<&Smoothness> {
+        self.prior.as_ref()
     }
 
     /// The current parameter values.
@@ -396,7 +409,8 @@ impl Optimization {
     }
 
     /// [`Optimization::gradient`] of the mean loss over `views`, view v against `targets[v]`:
-    /// every view in each pass of one step ([`Backend::loss_and_gradient_views`]).
+    /// every view in each pass of one step ([`Backend::loss_and_gradient_views`]). With a prior
+    /// ([`Optimization::with_prior`]) the gradient includes the prior's; the loss does not.
     ///
     /// # Errors
     /// As [`Optimization::gradient`]; targets not one per view.
@@ -409,12 +423,16 @@ impl Optimization {
         backend.set_params(&self.params)?;
         let o = &self.options;
         let render = o.at(self.iteration);
-        match o.adaptive {
-            None => backend.loss_and_gradient_views(&render, o.spp_primal, views, targets, o.loss, o.mode),
+        let (loss, gradients) = match o.adaptive {
+            None => backend.loss_and_gradient_views(&render, o.spp_primal, views, targets, o.loss, o.mode)?,
             Some(estimator) => {
                 let adaptive = AdaptiveOptions { spp_primal: o.spp_primal, estimator };
-                backend.loss_and_gradient_views_adaptive(&render, &adaptive, views, targets, o.loss, o.mode)
+                backend.loss_and_gradient_views_adaptive(&render, &adaptive, views, targets, o.loss, o.mode)?
             }
+        };
+        match &self.prior {
+            None => Ok((loss, gradients)),
+            Some(prior) => Ok((loss, prior.add_gradient(&self.params, &gradients)?)),
         }
     }
 

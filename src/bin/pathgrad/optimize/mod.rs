@@ -86,6 +86,12 @@ pub(super) struct OptimizeArgs {
     /// Adam's learning rate [default: 0.01].
     #[arg(long)]
     lr: Option<f64>,
+    /// Add a smoothness prior of this weight λ to the objective: λ times the mean squared
+    /// difference between neighbouring voxels (texels) of every optimised volume grid (bitmap
+    /// texture). It steadies grids that the views determine poorly; the loss shown stays the
+    /// images' loss.
+    #[arg(long, value_name = "LAMBDA")]
+    smooth: Option<f64>,
     /// Samples per pixel of pass 1, the loss image [default: 6].
     #[arg(long, value_name = "N")]
     spp_primal: Option<u32>,
@@ -145,6 +151,9 @@ struct RunConfig {
     iters: u64,
     time_budget: Option<f64>,
     lr: f64,
+    /// `--smooth`: the smoothness prior's weight, if any.
+    #[serde(default)]
+    smooth: Option<f64>,
     spp_primal: u32,
     spp_grad: u32,
     /// Samples per pixel of the final render (`--spp`); a `--target-set` target gets 4×.
@@ -340,6 +349,7 @@ fn start(args: &OptimizeArgs) -> Result<Session> {
         iters: args.iters.unwrap_or(DEFAULT_ITERS),
         time_budget: args.time_budget,
         lr: args.lr.unwrap_or(pathgrad::optim::DEFAULT_LEARNING_RATE),
+        smooth: args.smooth,
         spp_primal: args.spp_primal.unwrap_or(DEFAULT_SPP_PRIMAL),
         spp_grad: args.spp_grad.unwrap_or(DEFAULT_SPP_GRAD),
         spp_final: opts.spp,
@@ -368,7 +378,7 @@ fn start(args: &OptimizeArgs) -> Result<Session> {
     let initial = values_of(&initial_table, &ids);
     let prepared = prepare(&config, &scene, &ids, &args.flags, args.json)?;
     let history = History::new(&scene.params, &ids, prepared.truth.is_some());
-    let run = Optimization::resume(initial_table, adam, 0, prepared.options)?;
+    let run = with_smoothness(Optimization::resume(initial_table, adam, 0, prepared.options)?, &scene, &ids, &config)?;
     fs::create_dir_all(&dir).with_context(|| format!("creating -o {}", dir.display()))?;
     // Checked again under the lock: another run may have started in DIR since the first check.
     let lock = lock_dir(&dir, "-o")?;

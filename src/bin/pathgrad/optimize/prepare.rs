@@ -11,8 +11,9 @@ use pathgrad::gpu::renderer::GradMode;
 use pathgrad::image::Image;
 use pathgrad::integrator::{RenderOptions, Strategy};
 use pathgrad::loss::Loss;
-use pathgrad::optim::{AdamOptions, IterationOptions};
+use pathgrad::optim::{AdamOptions, IterationOptions, Optimization};
 use pathgrad::params::{ParamId, ParamTable};
+use pathgrad::prior::Smoothness;
 use pathgrad::scene::Scene;
 
 use crate::common::{Opened, RenderFlags, target_image, view_targets, with_values};
@@ -24,6 +25,18 @@ pub(super) fn adam_options(config: &RunConfig) -> Result<AdamOptions> {
     let o = AdamOptions::with_learning_rate(config.lr);
     o.validate()?;
     Ok(o)
+}
+
+/// `run` with `--smooth`'s prior over the gridded parameters among `ids`, if it was given.
+pub(super) fn with_smoothness(
+    run: Optimization,
+    scene: &Scene,
+    ids: &[ParamId],
+    config: &RunConfig,
+) -> Result<Optimization> {
+    let Some(weight) = config.smooth else { return Ok(run) };
+    let prior = Smoothness::new(scene, ids, weight).map_err(|e| anyhow::anyhow!("--smooth {weight}: {e}"))?;
+    Ok(run.with_prior(prior))
 }
 
 /// The render options of `config` on `scene`: the gradient pass's (spp = spp_grad).

@@ -134,6 +134,8 @@ pub(super) fn summary(s: &Session, stopped: &str, json: bool) {
         .map(|f| s.dir.join(f))
         .collect();
     let ctx = s.ctx.as_deref();
+    // The smoothness prior's value at the final parameters (--smooth).
+    let prior = s.run.prior().map(|p| p.value(s.run.params()));
     if json {
         let v = serde_json::json!({
             "iterations": s.run.iteration(),
@@ -141,6 +143,7 @@ pub(super) fn summary(s: &Session, stopped: &str, json: bool) {
             "time_s": s.elapsed,
             "setup_s": s.setup_s,
             "loss": last.map(|r| r.loss),
+            "prior": prior,
             "param_error": last.and_then(|r| r.error),
             "params": params,
             "dir": s.dir,
@@ -152,11 +155,12 @@ pub(super) fn summary(s: &Session, stopped: &str, json: bool) {
         println!("{v}");
     } else {
         println!(
-            "{stopped} after {} iterations in {:.2} s (set-up {:.2} s: loading, the target, kernel builds){}{} → {}",
+            "{stopped} after {} iterations in {:.2} s (set-up {:.2} s: loading, the target, kernel builds){}{}{} → {}",
             s.run.iteration(),
             s.elapsed,
             s.setup_s,
             last.map(|r| format!(", loss {:.4e}", r.loss)).unwrap_or_default(),
+            prior.map(|p| format!(", prior {p:.4e}")).unwrap_or_default(),
             last.and_then(|r| r.error).map(|e| format!(", parameter error {e:.4e}")).unwrap_or_default(),
             s.dir.display()
         );

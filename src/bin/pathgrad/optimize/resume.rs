@@ -147,7 +147,8 @@ pub(super) fn resume(args: &OptimizeArgs, dir: &Path, given: &BTreeSet<String>) 
     let mut history = History::new(&scene.params, &ids, prepared.truth.is_some());
     let csv = dir.join("history.csv");
     history.read(&csv, state.iteration)?;
-    let run = Optimization::resume(table, adam, state.iteration, prepared.options)?;
+    let run =
+        with_smoothness(Optimization::resume(table, adam, state.iteration, prepared.options)?, &scene, &ids, &config)?;
     history.rewrite(&csv)?;
     Ok(Session {
         _lock: lock,
@@ -216,6 +217,7 @@ pub(super) fn check_unchanged(
         .collect::<Result<_>>()?;
     check("views", "--view", Some(given_views.join(" ")), views.join(" "));
     check("lr", "--lr", args.lr.map(|v| text(&v)), text(&c.lr));
+    check("smooth", "--smooth", args.smooth.map(|v| text(&v)), c.smooth.map_or("none".into(), |v| text(&v)));
     check("spp_primal", "--spp-primal", args.spp_primal.map(|v| text(&v)), text(&c.spp_primal));
     check("spp_grad", "--spp-grad", args.spp_grad.map(|v| text(&v)), text(&c.spp_grad));
     check("loss", "--loss", args.loss.clone(), c.loss.clone());
