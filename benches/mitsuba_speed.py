@@ -30,6 +30,11 @@ pathgrad, Mitsuba, ...) so that drift of the machine hits both alike, it times
     (so ~/.drjit has no kernels). Then "warm": a second such process with the same, now filled,
     cache directory. Its own ``time_s`` (pathgrad) or in-process step time (Mitsuba) is shown too.
 
+Each timed pathgrad process also renders (steps) ``--repeat`` more times with ``--repeat``; the
+median of those is the "steady" figure: throughput in a process whose kernels are built, which is
+what Mitsuba's warm in-process timings measure (and what an engine or a batch job sees after its
+first frame). The whole-process and ``time_s`` figures are kept beside it.
+
 Whole-process CPU time (user + system, all threads) is recorded beside every wall time: on a
 machine with few cores it shows how much of the wall time is parallel work. Every figure is the
 median over ``--runs`` repetitions (``--cold-runs`` for the cold part); ``--json`` prints every
@@ -100,6 +105,9 @@ def parse_args():
     p.add_argument("--spp", type=int, default=16)
     p.add_argument("--max-depth", type=int, default=6, help="surface interactions per path; -1: unbounded")
     p.add_argument("--runs", type=int, default=3, help="repetitions of each timing (interleaved)")
+    p.add_argument("--repeat", type=int, default=2,
+                   help="pathgrad's --repeat: renders (steps) after the first in each timed process; their "
+                        "median is the steady figure, without the process's kernel builds (0: none)")  # fmt: skip
     p.add_argument("--cold-runs", type=int, help="repetitions of the cold/warm processes (default: --runs)")
     p.add_argument("--cold-width", type=int, default=64)
     p.add_argument("--cold-height", type=int, default=64)
@@ -271,16 +279,17 @@ class Pathgrad:
     def size(self, width, height, spp):
         return ["--width", str(width), "--height", str(height), "--spp", str(spp)]
 
-    def render(self, width, height, spp, seed, out, defines=(), env=None):
+    def render(self, width, height, spp, seed, out, defines=(), env=None, repeat=0):
         cmd = [self.args.pathgrad, "render", self.args.scene, "-o", str(out), "--no-preview", "--json",
-               *self.size(width, height, spp), "--seed", str(seed), *self.common]  # fmt: skip
+               *self.size(width, height, spp), "--seed", str(seed), "--repeat", str(repeat), *self.common]  # fmt: skip
         for d in defines:
             cmd += ["-D", d]
         return run_process(cmd, env)
 
-    def grad(self, width, height, spp, seed, target, env=None):
+    def grad(self, width, height, spp, seed, target, env=None, repeat=0):
         cmd = [self.args.pathgrad, "grad", self.args.scene, "--target", str(target), "--param", self.name,
-               "--loss", "relmse", "--json", *self.size(width, height, spp), "--seed", str(seed), *self.common]  # fmt: skip
+               "--loss", "relmse", "--json", *self.size(width, height, spp), "--seed", str(seed),
+               "--repeat", str(repeat), *self.common]  # fmt: skip
         return run_process(cmd, env)
 
 
@@ -363,10 +372,12 @@ def main():
         log(f"warm-up: Mitsuba {result['mitsuba_warmup_s']:.2f} s, pathgrad {result['pathgrad_warmup_s']:.2f} s")
 
         if "primal" in args.parts:
-            rows = {"pathgrad_wall_s": [], "pathgrad_cpu_s": [], "pathgrad_time_s": [], "mitsuba_s": [],
-                    "mitsuba_cpu_s": [], "pathgrad_mean": [], "mitsuba_mean": []}  # fmt: skip
+            rows = {"pathgrad_wall_s": [], "pathgrad_cpu_s": [], "pathgrad_time_s": [], "pathgrad_steady_s": [],
+                    "mitsuba_s": [], "mitsuba_cpu_s": [], "pathgrad_mean": [], "mitsuba_mean": []}  # fmt: skip
             for i in range(args.runs):
-                wall, cpu, j = pg.render(args.width, args.height, args.spp, i, tmp / "primal.exr")
+                wall, cpu, j = pg.render(args.width, args.height, args.spp, i, tmp / "primal.exr", repeat=args.repeat)
+                if j.get("repeat_s"):
+                    rows["pathgrad_steady_s"].append(median(j["repeat_s"]))
                 rows["pathgrad_wall_s"].append(wall)
                 rows["pathgrad_cpu_s"].append(cpu)
                 rows["pathgrad_time_s"].append(j.get("time_s"))
@@ -384,9 +395,11 @@ def main():
         if need_grad:
             rows = {"pathgrad_wall_s": [], "pathgrad_cpu_s": [], "pathgrad_time_s": [], "pathgrad_loss": [],
                     "pathgrad_grad": [], "mitsuba_s": [], "mitsuba_cpu_s": [], "mitsuba_loss": [],
-                    "mitsuba_grad": []}  # fmt: skip
+                    "mitsuba_grad": [], "pathgrad_steady_s": []}  # fmt: skip
             for i in range(args.runs):
-                wall, cpu, j = pg.grad(args.width, args.height, args.spp, i, pg_target)
+                wall, cpu, j = pg.grad(args.width, args.height, args.spp, i, pg_target, repeat=args.repeat)
+                if j.get("repeat_s"):
+                    rows["pathgrad_steady_s"].append(median(j["repeat_s"]))
                 rows["pathgrad_wall_s"].append(wall)
                 rows["pathgrad_cpu_s"].append(cpu)
                 rows["pathgrad_time_s"].append(j.get("time_s"))
@@ -448,7 +461,7 @@ def summarize(result, samples, args):
     med = {}
     for part in ("primal", "grad"):
         if part in result:
-            med[part] = {k: median(v) for k, v in result[part].items() if k.endswith("_s")}
+            med[part] = {k: median(v) for k, v in result[part].items() if k.endswith("_s") and v}
     if "cold" in args.parts:
         med["cold"] = {k: median(v) for k, v in result["cold"].items() if k.endswith("_s") or k.endswith("_bytes")}
     result["median"] = med
@@ -459,6 +472,8 @@ def summarize(result, samples, args):
             m = med[part]
             ratios[part] = {"whole_process": m["mitsuba_s"] / m["pathgrad_wall_s"],
                             "own_time": m["mitsuba_s"] / m["pathgrad_time_s"]}  # fmt: skip
+            if "pathgrad_steady_s" in m:
+                ratios[part]["steady"] = m["mitsuba_s"] / m["pathgrad_steady_s"]
     if "cold" in med:
         m = med["cold"]
         ratios["cold"] = {"cold_process": m["mitsuba_cold_wall_s"] / m["pathgrad_cold_wall_s"],
@@ -486,15 +501,23 @@ def summarize(result, samples, args):
         print(f"\nprimal render\n{head}")
         row("pathgrad render, whole process", m["pathgrad_wall_s"], m["pathgrad_cpu_s"])
         row("pathgrad render, its time_s", m["pathgrad_time_s"])
+        if "steady" in r:
+            row("pathgrad render, steady (--repeat, in process)", m["pathgrad_steady_s"])
         row(f"Mitsuba mi.render ({args.mitsuba_primal}) + sync, warm", m["mitsuba_s"], m["mitsuba_cpu_s"])
-        print(f"  throughput pathgrad / Mitsuba: {r['own_time']:.3f}× (time_s), {r['whole_process']:.3f}× (whole process)")
+        steady = f"{r['steady']:.3f}× (steady), " if "steady" in r else ""
+        print(f"  throughput pathgrad / Mitsuba: {steady}{r['own_time']:.3f}× (time_s), "
+              f"{r['whole_process']:.3f}× (whole process)")  # fmt: skip
     if "grad" in med:
         m, r = med["grad"], ratios["grad"]
         print(f"\ngradient step (render + relMSE + backward) of {args.param}, target at {args.target_value}\n{head}")
         row("pathgrad grad --target, whole process", m["pathgrad_wall_s"], m["pathgrad_cpu_s"])
         row("pathgrad grad --target, its time_s", m["pathgrad_time_s"])
+        if "steady" in r:
+            row("pathgrad grad --target, steady (--repeat, in process)", m["pathgrad_steady_s"])
         row("Mitsuba prb: render + loss + dr.backward + sync", m["mitsuba_s"], m["mitsuba_cpu_s"])
-        print(f"  time Mitsuba / pathgrad: {r['own_time']:.3f}× (time_s), {r['whole_process']:.3f}× (whole process)")
+        steady = f"{r['steady']:.3f}× (steady), " if "steady" in r else ""
+        print(f"  time Mitsuba / pathgrad: {steady}{r['own_time']:.3f}× (time_s), "
+              f"{r['whole_process']:.3f}× (whole process)")  # fmt: skip
         g = result["grad"]
         print(f"  loss: pathgrad {median(g['pathgrad_loss']):.5g}, Mitsuba {median(g['mitsuba_loss']):.5g}; "
               f"gradient: pathgrad {median([v[0] for v in g['pathgrad_grad'] if v]):.5g}, "
@@ -517,7 +540,9 @@ def summarize(result, samples, args):
               f"{m['pathgrad_cache_bytes'] / 1e6:.2f} MB, Mitsuba {m['mitsuba_cache_bytes'] / 1e6:.2f} MB")  # fmt: skip
     print("\nRatios > 1: pathgrad is faster. pathgrad's time_s excludes its start-up (Vulkan, scene load, BVH) but "
           "includes creating its pipelines, which it does on first use (a lavapipe compile, or a load from Mesa's "
-          "shader cache); Mitsuba's warm timings exclude kernel compilation and Python start-up.")  # fmt: skip
+          "shader cache, where lavapipe still runs its NIR passes); 'steady' is the median of the --repeat renders "
+          "(steps) after the first in the same process, as Mitsuba's warm timings, which exclude kernel "
+          "compilation and Python start-up.")  # fmt: skip
 
 
 if __name__ == "__main__":

@@ -16,7 +16,20 @@ fn render_writes_exr_and_png_preview_and_a_json_summary() {
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("cb.exr");
     let o = pathgrad()
-        .args(["render", "builtin:cornell-box", "--spp", "2", "--width", "32", "--seed", "5", "--json", "-o"])
+        .args([
+            "render",
+            "builtin:cornell-box",
+            "--spp",
+            "2",
+            "--width",
+            "32",
+            "--seed",
+            "5",
+            "--json",
+            "--repeat",
+            "2",
+        ])
+        .arg("-o")
         .arg(&out)
         .output()
         .unwrap();
@@ -25,6 +38,8 @@ fn render_writes_exr_and_png_preview_and_a_json_summary() {
     assert_eq!(summary["width"], 32);
     assert_eq!(summary["height"], 32, "the height follows the scene's aspect ratio");
     assert!(summary["samples_per_second"].as_f64().unwrap() > 0.0);
+    let repeats = summary["repeat_s"].as_array().unwrap();
+    assert!(repeats.len() == 2 && repeats.iter().all(|t| t.as_f64().unwrap() > 0.0), "--repeat 2: {summary}");
     let image = pathgrad::image::Image::read_exr(&out).unwrap();
     assert_eq!((image.width(), image.height()), (32, 32));
     assert!(image.mean().iter().all(|&m| m > 0.0 && m.is_finite()));
@@ -103,13 +118,14 @@ fn devices_lists_lavapipe() {
 fn grad_prints_loss_and_gradients_as_json() {
     let o = pathgrad()
         .args(["grad", "builtin:cornell-box", "--target-set", "sphere.bsdf.alpha.value=0.4", "--param", "sphere.*"])
-        .args(["--spp", "2", "--width", "16", "--json", "--deterministic"])
+        .args(["--spp", "2", "--width", "16", "--json", "--deterministic", "--repeat", "1"])
         .output()
         .unwrap();
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     let v: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
     assert!(v["loss"].as_f64().unwrap() > 0.0);
     assert!(v["time_s"].as_f64().unwrap() > 0.0);
+    assert_eq!(v["repeat_s"].as_array().unwrap().len(), 1, "--repeat 1: {v}");
     let g = v["gradients"].as_object().unwrap();
     assert_eq!(g.keys().collect::<Vec<_>>(), ["sphere.bsdf.alpha.value", "sphere.bsdf.specular_reflectance.value"]);
     assert_eq!(g["sphere.bsdf.specular_reflectance.value"].as_array().unwrap().len(), 3);

@@ -54,6 +54,11 @@ pub(crate) struct GradArgs {
     /// Print JSON: {"loss", "gradients": {name: [..]}, "time_s"}.
     #[arg(long)]
     pub(crate) json: bool,
+    /// After the gradient step, take the same step N more times in this process and report each
+    /// one's time (`repeat_s` in the JSON): the steady cost, without the one-off costs of opening
+    /// the device, the target and building the kernels. Not with --image-gradient.
+    #[arg(long, value_name = "N", default_value_t = 0, conflicts_with = "image_gradient")]
+    pub(crate) repeat: u32,
 }
 
 pub(crate) fn grad(args: &GradArgs) -> Result<()> {
@@ -114,13 +119,20 @@ pub(crate) fn grad(args: &GradArgs) -> Result<()> {
     opts.differentiate = renderer.param_kinds(&chosen);
     let mode = if args.deterministic { GradMode::Deterministic } else { GradMode::Float };
     // time_s is the gradient step (render, loss, fused adjoint), not the --target-set render.
+    let mut repeat_s = Vec::new();
     let (value, gradients, seconds) = if views.is_empty() {
         let target = target_image(renderer.as_mut(), &scene, &opts, args.target.as_deref(), &args.target_set)?;
         let start = Instant::now();
         let (value, gradients) = renderer
             .loss_and_gradient(&opts, &target, loss, mode)
             .with_context(|| format!("differentiating {}", args.scene))?;
-        (value, gradients, start.elapsed().as_secs_f64())
+        let seconds = start.elapsed().as_secs_f64();
+        for _ in 0..args.repeat {
+            let start = Instant::now();
+            renderer.loss_and_gradient(&opts, &target, loss, mode).context("differentiating again (--repeat)")?;
+            repeat_s.push(start.elapsed().as_secs_f64());
+        }
+        (value, gradients, seconds)
     } else {
         let targets = view_targets(renderer.as_mut(), &scene, &opts, &views, &args.target_set)?;
         let list: Vec<View> = views.iter().map(|(v, _)| *v).collect();
@@ -128,7 +140,15 @@ pub(crate) fn grad(args: &GradArgs) -> Result<()> {
         let (value, gradients) = renderer
             .loss_and_gradient_views(&opts, opts.spp, &list, &targets, loss, mode)
             .with_context(|| format!("differentiating {} over {} views", args.scene, list.len()))?;
-        (value, gradients, start.elapsed().as_secs_f64())
+        let seconds = start.elapsed().as_secs_f64();
+        for _ in 0..args.repeat {
+            let start = Instant::now();
+            renderer
+                .loss_and_gradient_views(&opts, opts.spp, &list, &targets, loss, mode)
+                .context("differentiating again (--repeat)")?;
+            repeat_s.push(start.elapsed().as_secs_f64());
+        }
+        (value, gradients, seconds)
     };
     if args.json {
         let map: serde_json::Map<String, serde_json::Value> = chosen
@@ -139,9 +159,12 @@ pub(crate) fn grad(args: &GradArgs) -> Result<()> {
                 (name, serde_json::json!(values))
             })
             .collect();
-        println!("{}", serde_json::json!({"loss": value, "gradients": map, "time_s": seconds}));
+        println!("{}", serde_json::json!({"loss": value, "gradients": map, "time_s": seconds, "repeat_s": repeat_s}));
     } else {
         println!("loss ({}) = {value:.6e}   ({seconds:.2} s)", args.loss);
+        if let Some(best) = repeat_s.iter().copied().reduce(f64::min) {
+            println!("  {} repeats: fastest {best:.3} s", repeat_s.len());
+        }
         for id in chosen {
             let name = &scene.params.entry(id).name;
             let values = gradients.get(name).expect("the gradient has the table's layout");

@@ -32,6 +32,11 @@ pub(crate) struct RenderArgs {
     /// Print a JSON summary instead of text.
     #[arg(long)]
     pub(crate) json: bool,
+    /// After the render, render the same image N more times in this process and report each
+    /// one's time (`repeat_s` in the JSON): the steady throughput, without the one-off costs of
+    /// opening the device and building the kernels.
+    #[arg(long, value_name = "N", default_value_t = 0)]
+    pub(crate) repeat: u32,
 }
 
 pub(crate) fn render(args: &RenderArgs) -> Result<()> {
@@ -56,6 +61,14 @@ pub(crate) fn render(args: &RenderArgs) -> Result<()> {
     let seconds = start.elapsed().as_secs_f64();
     progress.finish_and_clear();
     refuse_non_finite(&image, "the render")?;
+    let mut repeat_s = Vec::new();
+    for _ in 0..args.repeat {
+        let start = Instant::now();
+        backend
+            .render_pass(&opts, pathgrad::rng::PassTag::Primal, &mut |_, _| {})
+            .with_context(|| format!("rendering {} again (--repeat)", args.scene))?;
+        repeat_s.push(start.elapsed().as_secs_f64());
+    }
     save(&image, &main_file, is_exr, args.exposure)?;
     if let Some(preview) = &preview_file {
         image.write_png(preview, args.exposure)?;
@@ -67,7 +80,7 @@ pub(crate) fn render(args: &RenderArgs) -> Result<()> {
         let summary = serde_json::json!({
             "scene": args.scene, "device": device, "width": opts.width, "height": opts.height, "spp": opts.spp,
             "max_depth": opts.max_depth, "seed": opts.seed, "time_s": seconds, "samples_per_second": samples / seconds,
-            "mean": image.mean(), "outputs": written,
+            "mean": image.mean(), "outputs": written, "repeat_s": repeat_s,
         });
         println!("{summary}");
     } else {
@@ -81,6 +94,9 @@ pub(crate) fn render(args: &RenderArgs) -> Result<()> {
             samples / seconds / 1e6,
             names.join(", ")
         );
+        if let Some(best) = repeat_s.iter().copied().reduce(f64::min) {
+            println!("  {} repeats: fastest {best:.3} s ({:.3} M samples/s)", repeat_s.len(), samples / best / 1e6);
+        }
     }
     Ok(())
 }
