@@ -189,12 +189,7 @@ impl Adam {
     /// table and the state are untouched; [`Error::InvalidArgument`] if `gradients` has another
     /// layout than `table`.
     pub fn step(&mut self, table: &mut ParamTable, gradients: &Gradients, iteration: u64) -> Result<()> {
-        if gradients.entries() != table.entries() {
-            return Err(Error::InvalidArgument {
-                parameter: "gradients".into(),
-                message: "the gradient's layout differs from the parameter table's".into(),
-            });
-        }
+        gradients.check_layout(table)?;
         for &p in &self.params {
             let e = table.entry(p);
             let g = &gradients.values()[e.offset as usize..(e.offset + e.len) as usize];

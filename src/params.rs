@@ -233,6 +233,20 @@ impl Gradients {
         &self.entries
     }
 
+    /// Checks that the gradient is laid out as `table`.
+    ///
+    /// # Errors
+    /// [`Error::InvalidArgument`] naming `gradients` if the layouts differ.
+    pub fn check_layout(&self, table: &ParamTable) -> Result<()> {
+        if self.entries != table.entries() {
+            return Err(Error::InvalidArgument {
+                parameter: "gradients".into(),
+                message: "the gradient's layout differs from the parameter table's".into(),
+            });
+        }
+        Ok(())
+    }
+
     /// The fixed-point sums and their unit, for a deterministic GPU gradient.
     pub fn fixed_point(&self) -> Option<(&[i64], f64)> {
         match &self.exact {

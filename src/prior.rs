@@ -122,12 +122,7 @@ impl Smoothness {
     /// # Errors
     /// [`Error::InvalidArgument`] if `gradients` has another layout than `table`.
     pub fn add_gradient(&self, table: &ParamTable, gradients: &Gradients) -> Result<Gradients> {
-        if gradients.entries() != table.entries() {
-            return Err(Error::InvalidArgument {
-                parameter: "gradients".into(),
-                message: "the gradient's layout differs from the parameter table's".into(),
-            });
-        }
+        gradients.check_layout(table)?;
         let mut prior = vec![0.0f64; table.values().len()];
         let scale = 2.0 * self.weight / self.pairs as f64;
         self.visit(table, |d, a, b| {

@@ -119,20 +119,15 @@ pub(crate) fn grad(args: &GradArgs) -> Result<()> {
     opts.differentiate = renderer.param_kinds(&chosen);
     let mode = if args.deterministic { GradMode::Deterministic } else { GradMode::Float };
     // time_s is the gradient step (render, loss, fused adjoint), not the --target-set render.
-    let mut repeat_s = Vec::new();
-    let (value, gradients, seconds) = if views.is_empty() {
+    let (value, gradients, seconds, repeat_s) = if views.is_empty() {
         let target = target_image(renderer.as_mut(), &scene, &opts, args.target.as_deref(), &args.target_set)?;
         let start = Instant::now();
         let (value, gradients) = renderer
             .loss_and_gradient(&opts, &target, loss, mode)
             .with_context(|| format!("differentiating {}", args.scene))?;
         let seconds = start.elapsed().as_secs_f64();
-        for _ in 0..args.repeat {
-            let start = Instant::now();
-            renderer.loss_and_gradient(&opts, &target, loss, mode).context("differentiating again (--repeat)")?;
-            repeat_s.push(start.elapsed().as_secs_f64());
-        }
-        (value, gradients, seconds)
+        let repeat_s = repeated(args.repeat, || renderer.loss_and_gradient(&opts, &target, loss, mode).map(drop))?;
+        (value, gradients, seconds, repeat_s)
     } else {
         let targets = view_targets(renderer.as_mut(), &scene, &opts, &views, &args.target_set)?;
         let list: Vec<View> = views.iter().map(|(v, _)| *v).collect();
@@ -141,14 +136,10 @@ pub(crate) fn grad(args: &GradArgs) -> Result<()> {
             .loss_and_gradient_views(&opts, opts.spp, &list, &targets, loss, mode)
             .with_context(|| format!("differentiating {} over {} views", args.scene, list.len()))?;
         let seconds = start.elapsed().as_secs_f64();
-        for _ in 0..args.repeat {
-            let start = Instant::now();
-            renderer
-                .loss_and_gradient_views(&opts, opts.spp, &list, &targets, loss, mode)
-                .context("differentiating again (--repeat)")?;
-            repeat_s.push(start.elapsed().as_secs_f64());
-        }
-        (value, gradients, seconds)
+        let repeat_s = repeated(args.repeat, || {
+            renderer.loss_and_gradient_views(&opts, opts.spp, &list, &targets, loss, mode).map(drop)
+        })?;
+        (value, gradients, seconds, repeat_s)
     };
     if args.json {
         let map: serde_json::Map<String, serde_json::Value> = chosen
@@ -177,4 +168,15 @@ pub(crate) fn grad(args: &GradArgs) -> Result<()> {
         }
     }
     Ok(())
+}
+
+/// `--repeat`: runs `step` `n` times and returns each run's seconds.
+fn repeated(n: u32, mut step: impl FnMut() -> pathgrad::Result<()>) -> Result<Vec<f64>> {
+    (0..n)
+        .map(|_| {
+            let start = Instant::now();
+            step().context("differentiating again (--repeat)")?;
+            Ok(start.elapsed().as_secs_f64())
+        })
+        .collect()
 }
