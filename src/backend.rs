@@ -160,6 +160,25 @@ pub trait Backend {
         self.render_pass(options, PassTag::Reference, &mut |_, _| {})
     }
 
+    /// Gets ready for gradient steps of `options` with a pass 1 of `spp_primal` spp, in `mode`,
+    /// with adaptive pixel sampling or not: a backend that compiles kernels builds the pass-1
+    /// and the gradient kernel now, side by side, rather than one after the other on first use.
+    /// The loss-and-gradient calls below call it; calling it again costs nothing. The default
+    /// does nothing.
+    ///
+    /// # Errors
+    /// Option errors; kernel builds that fail.
+    fn prepare_gradient(
+        &mut self,
+        options: &RenderOptions,
+        spp_primal: u32,
+        mode: GradMode,
+        adaptive: bool,
+    ) -> Result<()> {
+        let _ = (options, spp_primal, mode, adaptive);
+        Ok(())
+    }
+
     /// Pass 1 of a gradient step: renders [`RenderOptions::loss_pass`] (`spp_primal` spp, plain
     /// BSDF sampling with NEE, the primal key) and returns its loss against `target` and the
     /// adjoint image ∂loss/∂I, computed on the host.
@@ -243,6 +262,7 @@ pub trait Backend {
         loss: Loss,
         mode: GradMode,
     ) -> Result<(f64, Gradients)> {
+        self.prepare_gradient(options, spp_primal, mode, false)?;
         let (losses, adjoints) = self.loss_images(options, spp_primal, views, targets, loss)?;
         let sum = self.backward_views(options, views, &adjoints, mode)?;
         Ok((mean(&losses), Gradients::sum_divided(&[sum], views.len())?))
@@ -296,6 +316,7 @@ pub trait Backend {
         loss: Loss,
         mode: GradMode,
     ) -> Result<(f64, Gradients)> {
+        self.prepare_gradient(options, adaptive.spp_primal, mode, true)?;
         let (losses, adjoints) = self.loss_images(options, adaptive.spp_primal, views, targets, loss)?;
         if adjoints.iter().all(|a| a.as_slice().iter().all(|&v| v == 0.0)) {
             let n = self.scene().params.values().len();

@@ -274,6 +274,7 @@ impl Renderer {
             kind,
             features: variant::request_features(self.scene_features, options, self.grad_kinds(options)),
         };
+        self.kernels.prepare(&[primal_variant, backward_variant])?;
         let primal = self.pass(primal_variant, &primal_request, &[(BINDING_ACCUM, &image)])?;
         let backward =
             self.pass(backward_variant, &backward_request, &[(BINDING_ADJOINT, &adjoint), (grad_binding, &gradient)])?;

@@ -110,41 +110,89 @@ impl KernelCache {
         self.kernels.get(&v)
     }
 
-    fn build(&mut self, v: Variant) -> Result<()> {
-        let (name, extra) = v.kind.layout();
-        let features = variant::describe(v.features);
-        let started = Instant::now();
-        if let Some(observer) = self.observer.as_mut() {
-            observer(&CompileEvent::Started { kernel: name, features: features.clone() });
+    /// Builds every variant of `variants` that this cache has not built yet, all at once: the
+    /// pipelines are created on threads of their own (a driver compiles each pipeline on one
+    /// thread, so a pass-1 kernel and a gradient kernel compile side by side instead of one after
+    /// the other), then warmed up in order. Events are reported as for single builds, each
+    /// variant's `Finished` when it is ready.
+    pub(crate) fn prepare(&mut self, variants: &[Variant]) -> Result<()> {
+        let mut missing: Vec<Variant> = Vec::with_capacity(variants.len());
+        for &v in variants {
+            if !self.kernels.contains_key(&v) && !missing.contains(&v) {
+                missing.push(v);
+            }
         }
-        let bindings: Vec<(u32, vk::DescriptorType)> = SCENE_BINDINGS
-            .iter()
-            .chain(extra)
-            .map(|&b| {
-                let ty = if b == BINDING_GLOBALS {
-                    vk::DescriptorType::UNIFORM_BUFFER
-                } else {
-                    vk::DescriptorType::STORAGE_BUFFER
-                };
-                (b, ty)
-            })
-            .collect();
-        let kernel = Kernel::specialised(
-            &self.ctx,
-            name,
-            &bindings,
-            std::mem::size_of::<KernelPush>() as u32,
-            Some(v.features),
-        )?;
+        if missing.len() < 2 {
+            return missing.first().map_or(Ok(()), |&v| self.build(v));
+        }
+        let started = Instant::now();
+        for &v in &missing {
+            self.report_start(v);
+        }
+        let ctx = &self.ctx;
+        let created: Vec<Result<Kernel>> = std::thread::scope(|scope| {
+            let handles: Vec<_> = missing.iter().map(|&v| scope.spawn(move || create(ctx, v))).collect();
+            handles.into_iter().map(|h| h.join().unwrap_or_else(|panic| std::panic::resume_unwind(panic))).collect()
+        });
+        let create_seconds = started.elapsed().as_secs_f64();
+        for (v, kernel) in missing.into_iter().zip(created) {
+            self.finish(v, kernel?, started, create_seconds)?;
+        }
+        Ok(())
+    }
+
+    fn build(&mut self, v: Variant) -> Result<()> {
+        let started = Instant::now();
+        self.report_start(v);
+        let kernel = create(&self.ctx, v)?;
+        let create_seconds = started.elapsed().as_secs_f64();
+        self.finish(v, kernel, started, create_seconds)
+    }
+
+    fn report_start(&mut self, v: Variant) {
+        if let Some(observer) = self.observer.as_mut() {
+            observer(&CompileEvent::Started { kernel: v.kind.name(), features: variant::describe(v.features) });
+        }
+    }
+
+    /// Warms up `kernel` (variant `v`, whose build began at `started` and whose pipeline took
+    /// `create_seconds` to create), keeps it and reports it built.
+    fn finish(&mut self, v: Variant, kernel: Kernel, started: Instant, create_seconds: f64) -> Result<()> {
         warm_up(&self.ctx, v, &kernel)?;
         self.kernels.insert(v, kernel);
         let seconds = started.elapsed().as_secs_f64();
-        tracing::info!(kernel = name, features = %features, seconds, "kernel variant built");
+        let name = v.kind.name();
+        tracing::info!(
+            kernel = name,
+            features = %variant::describe(v.features),
+            seconds,
+            create_seconds,
+            "kernel variant built"
+        );
         if let Some(observer) = self.observer.as_mut() {
             observer(&CompileEvent::Finished { kernel: name, seconds });
         }
         Ok(())
     }
+}
+
+/// Creates the pipeline of variant `v` (where Mesa 25's lavapipe compiles it, or loads it from
+/// its shader cache).
+fn create(ctx: &Arc<Context>, v: Variant) -> Result<Kernel> {
+    let (name, extra) = v.kind.layout();
+    let bindings: Vec<(u32, vk::DescriptorType)> = SCENE_BINDINGS
+        .iter()
+        .chain(extra)
+        .map(|&b| {
+            let ty = if b == BINDING_GLOBALS {
+                vk::DescriptorType::UNIFORM_BUFFER
+            } else {
+                vk::DescriptorType::STORAGE_BUFFER
+            };
+            (b, ty)
+        })
+        .collect();
+    Kernel::specialised(ctx, name, &bindings, std::mem::size_of::<KernelPush>() as u32, Some(v.features))
 }
 
 /// One dispatch of `kernel` with no work: lavapipe compiles a pipeline at its first dispatch.

@@ -412,6 +412,35 @@ impl Backend for Renderer {
         Image::from_rgb(options.width, options.height, sums.into_iter().map(|v| v / spp).collect())
     }
 
+    /// Builds the pass-1 primal variant and the gradient pass's variant together
+    /// ([`KernelCache::prepare`]: each pipeline on its own thread).
+    fn prepare_gradient(
+        &mut self,
+        options: &RenderOptions,
+        spp_primal: u32,
+        mode: GradMode,
+        adaptive: bool,
+    ) -> Result<()> {
+        let pass1 = options.loss_pass(spp_primal)?;
+        let mut variants = vec![Variant {
+            kind: KernelKind::Primal,
+            features: variant::request_features(self.scene_features, &pass1, ParamKinds::NONE),
+        }];
+        let kind = match (adaptive, mode) {
+            (false, GradMode::Float) => Some(KernelKind::Adjoint),
+            (true, GradMode::Float) => Some(KernelKind::AdjointAdaptive),
+            // Without 64-bit atomics the gradient pass refuses the mode, by name, when it runs.
+            (_, GradMode::Deterministic) if !self.ctx.info().int64_atomics => None,
+            (false, GradMode::Deterministic) => Some(KernelKind::AdjointFixed),
+            (true, GradMode::Deterministic) => Some(KernelKind::AdjointAdaptiveFixed),
+        };
+        if let Some(kind) = kind {
+            let features = variant::request_features(self.scene_features, options, self.grad_kinds(options));
+            variants.push(Variant { kind, features });
+        }
+        self.kernels.prepare(&variants)
+    }
+
     fn param_kinds(&self, ids: &[crate::params::ParamId]) -> ParamKinds {
         variant::kinds_of(&self.scene, &self.flat, ids)
     }

@@ -377,16 +377,26 @@ pub(crate) fn check_output(path: &Path) -> Result<bool> {
 /// Tells the user, on stderr, when building a kernel variant takes more than a moment: lavapipe
 /// compiles each variant on its first use on a machine (later runs load it from Mesa's shader
 /// cache), and a silent wait of seconds looks like a hang. Nothing is printed when `quiet` or when
-/// the build is quick. Returns the total time spent building variants so far, in microseconds,
-/// which keeps growing as later calls build more (`optimize` counts it as set-up, not iterations).
+/// the build is quick. Returns the wall time spent building variants so far, in microseconds
+/// (variants built side by side count once), which keeps growing as later calls build more
+/// (`optimize` counts it as set-up, not iterations).
 pub(crate) fn announce_compiles(renderer: &mut Renderer, quiet: bool) -> std::sync::Arc<std::sync::atomic::AtomicU64> {
     use pathgrad::gpu::renderer::{COMPILE_NOTICE_MS, CompileEvent};
     let total_us = std::sync::Arc::new(std::sync::atomic::AtomicU64::new(0));
     let total = total_us.clone();
-    let mut pending: Option<(std::sync::mpsc::Sender<()>, std::thread::JoinHandle<()>)> = None;
+    // The builds under way: each one's kernel and the timer thread that announces it if it is slow.
+    let mut pending: Vec<(&'static str, std::sync::mpsc::Sender<()>, std::thread::JoinHandle<()>)> = Vec::new();
+    let mut outstanding = 0usize;
+    let mut busy_since = std::time::Instant::now();
     renderer.set_compile_observer(Box::new(move |event| match event {
-        CompileEvent::Started { .. } if quiet => {}
         CompileEvent::Started { kernel, features } => {
+            if outstanding == 0 {
+                busy_since = std::time::Instant::now();
+            }
+            outstanding += 1;
+            if quiet {
+                return;
+            }
             let (done, wait) = std::sync::mpsc::channel::<()>();
             let what = format!("{kernel} kernel ({features})");
             let timer = std::thread::spawn(move || {
@@ -399,11 +409,15 @@ pub(crate) fn announce_compiles(renderer: &mut Renderer, quiet: bool) -> std::sy
                     let _ = wait.recv();
                 }
             });
-            pending = Some((done, timer));
+            pending.push((kernel, done, timer));
         }
         CompileEvent::Finished { kernel, seconds } => {
-            total.fetch_add((*seconds * 1e6) as u64, std::sync::atomic::Ordering::Relaxed);
-            if let Some((done, timer)) = pending.take() {
+            outstanding = outstanding.saturating_sub(1);
+            if outstanding == 0 {
+                total.fetch_add(busy_since.elapsed().as_micros() as u64, std::sync::atomic::Ordering::Relaxed);
+            }
+            if let Some(i) = pending.iter().position(|(k, _, _)| k == kernel) {
+                let (_, done, timer) = pending.remove(i);
                 let _ = done.send(());
                 let _ = timer.join();
             }
