@@ -33,11 +33,21 @@
 #include "lib/alias.glsl"
 #endif
 
+// Reverse-mode kernels over pixels can also render a gradient step's pass 1: with
+// `globals.primal_only` set, each primal path's radiance goes to the accumulation image and no
+// path is replayed — the same loop and the same sums as the primal kernel, so a first gradient
+// compiles one kernel instead of two.
+#if (GRAD_MODE == GRAD_MODE_FLOAT || GRAD_MODE == GRAD_MODE_FIXED) && !PIXEL_SELECT
+#define PRIMAL_ON_REVERSE 1
+#else
+#define PRIMAL_ON_REVERSE 0
+#endif
+
 layout(local_size_x = WORKGROUP_SIZE) in;
 #if ADJOINT_KERNEL
 layout(set = 0, binding = BINDING_ADJOINT, scalar) readonly buffer AdjointBuf { float adjoint_image[]; };
 #endif
-#if GRAD_MODE == GRAD_MODE_NONE || GRAD_MODE == GRAD_MODE_FORWARD
+#if GRAD_MODE == GRAD_MODE_NONE || GRAD_MODE == GRAD_MODE_FORWARD || PRIMAL_ON_REVERSE
 layout(set = 0, binding = BINDING_ACCUM, scalar) buffer AccumBuf { float accum[]; };
 #endif
 layout(set = 0, binding = BINDING_WORK, scalar) coherent buffer WorkBuf { uint work_next; };
@@ -103,19 +113,21 @@ void main() {
         uint pixel = st.pixel;
         uint at = 3u * (view * globals.width * globals.height + pixel);  // in the image buffers
 #if ADJOINT_KERNEL
-        if (!st.adjoint) {
+        if (!st.adjoint && !(PRIMAL_ON_REVERSE != 0 && globals.primal_only != 0u)) {
             total = st.radiance;
             vec3 adj = vec3(adjoint_image[at], adjoint_image[at + 1u], adjoint_image[at + 2u]) * globals.adjoint_scale;
             st = path_begin(view, pixel, sample_index, true, adj, total);
             continue;
         }
-        if (any(greaterThan(abs(st.radiance), REPLAY_RESIDUAL_TOLERANCE * (abs(total) + vec3(1e-6))))) raise_status(STATUS_REPLAY_RESIDUAL);
+        if (st.adjoint && any(greaterThan(abs(st.radiance), REPLAY_RESIDUAL_TOLERANCE * (abs(total) + vec3(1e-6))))) raise_status(STATUS_REPLAY_RESIDUAL);
 #endif
 #if GRAD_MODE == GRAD_MODE_NONE
         sum += st.radiance;
 #elif GRAD_MODE == GRAD_MODE_FORWARD
         sum += forward_derivative;
         forward_derivative = vec3(0.0);
+#elif PRIMAL_ON_REVERSE
+        if (!st.adjoint) sum += st.radiance;
 #endif
         samples_left--;
         if (samples_left > 0u) {
@@ -128,6 +140,12 @@ void main() {
         accum[at] += sum.x;
         accum[at + 1u] += sum.y;
         accum[at + 2u] += sum.z;
+#elif PRIMAL_ON_REVERSE
+        if (globals.primal_only != 0u) {
+            accum[at] += sum.x;
+            accum[at + 1u] += sum.y;
+            accum[at + 2u] += sum.z;
+        }
 #endif
     }
     if (!finished) raise_status(STATUS_LOOP_BUDGET);

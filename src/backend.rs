@@ -179,6 +179,26 @@ pub trait Backend {
         Ok(())
     }
 
+    /// Renders `pass1` (a [`RenderOptions::loss_pass`]) of `views` under the primal key: the
+    /// image of [`Backend::loss_images`]. With `gradient`, it is pass 1 of a gradient step of
+    /// `options` in that mode, and a backend may render it with that step's gradient kernel (the
+    /// GPU does where the kernel's features are pass 1's, so that a first step builds one kernel,
+    /// not two): the same estimator, paths and random numbers. The default renders
+    /// [`Backend::render_views`].
+    ///
+    /// # Errors
+    /// As [`Backend::render_views`].
+    fn render_loss_pass(
+        &mut self,
+        options: &RenderOptions,
+        pass1: &RenderOptions,
+        views: &[View],
+        gradient: Option<GradMode>,
+    ) -> Result<Vec<Image>> {
+        let _ = (options, gradient);
+        self.render_views(pass1, views, PassTag::Primal, &mut |_, _| {})
+    }
+
     /// Pass 1 of a gradient step: renders [`RenderOptions::loss_pass`] (`spp_primal` spp, plain
     /// BSDF sampling with NEE, the primal key) and returns its loss against `target` and the
     /// adjoint image ∂loss/∂I, computed on the host.
@@ -213,18 +233,7 @@ pub trait Backend {
         targets: &[Image],
         loss: Loss,
     ) -> Result<(Vec<f64>, Vec<Image>)> {
-        let pass1 = options.loss_pass(spp_primal)?;
-        options.validate()?;
-        check_views(views, targets, options, "target image")?;
-        let images = self.render_views(&pass1, views, PassTag::Primal, &mut |_, _| {})?;
-        let mut losses = Vec::with_capacity(views.len());
-        let mut adjoints = Vec::with_capacity(views.len());
-        for (image, target) in images.iter().zip(targets) {
-            let (value, adjoint) = loss_and_adjoint(image, target, loss)?;
-            losses.push(value);
-            adjoints.push(adjoint);
-        }
-        Ok((losses, adjoints))
+        pass1_losses(self, options, spp_primal, views, targets, loss, None)
     }
 
     /// The loss of a render against `target` and its gradient: pass 1 ([`Backend::loss_image`])
@@ -263,7 +272,7 @@ pub trait Backend {
         mode: GradMode,
     ) -> Result<(f64, Gradients)> {
         self.prepare_gradient(options, spp_primal, mode, false)?;
-        let (losses, adjoints) = self.loss_images(options, spp_primal, views, targets, loss)?;
+        let (losses, adjoints) = pass1_losses(self, options, spp_primal, views, targets, loss, Some(mode))?;
         let sum = self.backward_views(options, views, &adjoints, mode)?;
         Ok((mean(&losses), Gradients::sum_divided(&[sum], views.len())?))
     }
@@ -326,6 +335,31 @@ pub trait Backend {
         let sum = self.backward_adaptive_views(options, views, &adjoints, &sampling, mode)?;
         Ok((mean(&losses), Gradients::sum_divided(&[sum], views.len())?))
     }
+}
+
+/// [`Backend::loss_images`], rendered as pass 1 of a gradient step in `gradient`'s mode if given
+/// ([`Backend::render_loss_pass`]).
+fn pass1_losses<B: Backend + ?Sized>(
+    backend: &mut B,
+    options: &RenderOptions,
+    spp_primal: u32,
+    views: &[View],
+    targets: &[Image],
+    loss: Loss,
+    gradient: Option<GradMode>,
+) -> Result<(Vec<f64>, Vec<Image>)> {
+    let pass1 = options.loss_pass(spp_primal)?;
+    options.validate()?;
+    check_views(views, targets, options, "target image")?;
+    let images = backend.render_loss_pass(options, &pass1, views, gradient)?;
+    let mut losses = Vec::with_capacity(views.len());
+    let mut adjoints = Vec::with_capacity(views.len());
+    for (image, target) in images.iter().zip(targets) {
+        let (value, adjoint) = loss_and_adjoint(image, target, loss)?;
+        losses.push(value);
+        adjoints.push(adjoint);
+    }
+    Ok((losses, adjoints))
 }
 
 /// The mean of per-view losses, summed in view order.

@@ -386,6 +386,7 @@ impl RenderOptions {
             diff_begin,
             diff_end,
             node_count: flat.bvh.nodes.len() as u32,
+            primal_only: 0,
             addr_nodes: glam::UVec2::ZERO,
             addr_tris: glam::UVec2::ZERO,
             addr_prim_ids: glam::UVec2::ZERO,

@@ -53,6 +53,10 @@ contract_structs! {
         diff_end: u32,
         /// Number of BVH nodes.
         node_count: u32,
+        /// Reverse-mode kernels over pixels: 1 adds each path's radiance to the accumulation
+        /// image instead of replaying it (a gradient step's pass 1 on its gradient kernel, so
+        /// one compiled kernel serves both passes); 0 replays every path.
+        primal_only: u32,
         /// Device address of the BVH nodes (`shaders/lib/abi.glsl`); 0 on the CPU.
         addr_nodes: UVec2,
         /// Device address of the leaf-ordered triangles.

@@ -277,7 +277,9 @@ impl Renderer {
         self.kernels.prepare(&[primal_variant, backward_variant])?;
         let primal = self.pass(primal_variant, &primal_request, &[(BINDING_ACCUM, &image)])?;
         let backward =
-            self.pass(backward_variant, &backward_request, &[(BINDING_ADJOINT, &adjoint), (grad_binding, &gradient)])?;
+            // The image is bound where the gradient kernel declares its pass-1 output; the replay
+            // (`primal_only` = 0) never writes it.
+            self.pass(backward_variant, &backward_request, &[(BINDING_ADJOINT, &adjoint), (grad_binding, &gradient), (BINDING_ACCUM, &image)])?;
         let frame = Frame {
             ctx,
             renderer_id: self.id(),

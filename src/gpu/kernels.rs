@@ -34,8 +34,9 @@ impl KernelKind {
     pub(crate) fn layout(self) -> (&'static str, &'static [u32]) {
         match self {
             KernelKind::Primal => ("primal", &[BINDING_ACCUM]),
-            KernelKind::Adjoint => ("adjoint", &[BINDING_ADJOINT, BINDING_GRADS]),
-            KernelKind::AdjointFixed => ("adjoint_fixed", &[BINDING_ADJOINT, BINDING_GRADS_FIXED]),
+            // The accumulation image is written only in `primal_only` mode (a gradient step's pass 1).
+            KernelKind::Adjoint => ("adjoint", &[BINDING_ADJOINT, BINDING_GRADS, BINDING_ACCUM]),
+            KernelKind::AdjointFixed => ("adjoint_fixed", &[BINDING_ADJOINT, BINDING_GRADS_FIXED, BINDING_ACCUM]),
             KernelKind::AdjointAdaptive => ("adjoint_adaptive", &[BINDING_ADJOINT, BINDING_GRADS, BINDING_ALIAS]),
             KernelKind::AdjointAdaptiveFixed => {
                 ("adjoint_adaptive_fixed", &[BINDING_ADJOINT, BINDING_GRADS_FIXED, BINDING_ALIAS])

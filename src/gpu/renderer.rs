@@ -142,6 +142,73 @@ impl Renderer {
         &self.ctx
     }
 
+    /// Renders `views` with `options` under the key of `pass` on kernel variant `v`: the primal
+    /// kernel, or a reverse-mode kernel over pixels in `primal_only` mode (a gradient step's pass 1,
+    /// [`Renderer::loss_pass_kernel`]), which adds the same paths' radiance in the same order.
+    fn render_views_on(
+        &mut self,
+        v: Variant,
+        options: &RenderOptions,
+        views: &[View],
+        pass: PassTag,
+        progress: &mut dyn FnMut(u32, u32),
+    ) -> Result<Vec<Image>> {
+        let mut request = self.request(options, views, pass, Work::Pixels { begin: 0, end: options.spp })?;
+        let on_reverse = v.kind != KernelKind::Primal;
+        request.globals.primal_only = u32::from(on_reverse);
+        let _span = tracing::info_span!(
+            "primal",
+            kernel = v.kind.name(),
+            width = options.width,
+            height = options.height,
+            spp = options.spp,
+            views = views.len()
+        )
+        .entered();
+        let values = u64::from(options.width * options.height) * 3 * views.len() as u64;
+        let accum = Buffer::storage(&self.ctx, "accumulation image", values * 4)?;
+        accum.clear()?;
+        if on_reverse {
+            // Bound because the kernel declares them; primal_only mode reads and writes neither.
+            let grad_binding = if v.kind == KernelKind::AdjointFixed { BINDING_GRADS_FIXED } else { BINDING_GRADS };
+            let adjoint = Buffer::storage(&self.ctx, "adjoint image (unused by pass 1)", 16)?;
+            let grads = Buffer::storage(&self.ctx, "gradient (unused by pass 1)", 16)?;
+            self.run(
+                v,
+                &request,
+                &[(BINDING_ACCUM, &accum), (BINDING_ADJOINT, &adjoint), (grad_binding, &grads)],
+                progress,
+            )?;
+        } else {
+            self.run(v, &request, &[(BINDING_ACCUM, &accum)], progress)?;
+        }
+        let sums: Vec<f32> = accum.download(values as usize)?;
+        let spp = options.spp as f32;
+        let stacked = options.stacked(views.len())?;
+        Image::from_rgb(stacked.width, stacked.height, sums.into_iter().map(|v| v / spp).collect())?
+            .split(views.len() as u32)
+    }
+
+    /// The gradient kernel of a (non-adaptive) gradient step of `options` in `mode` if it can
+    /// render the step's pass 1, `pass1`: its features are pass 1's plus parameter kinds (which
+    /// compile adjoint-only code), so one kernel build serves both passes. `None` where the step
+    /// uses another strategy or NEE setting than pass 1, or the mode has no kernel here.
+    pub(crate) fn loss_pass_kernel(
+        &self,
+        options: &RenderOptions,
+        pass1: &RenderOptions,
+        mode: GradMode,
+    ) -> Option<Variant> {
+        let kind = match mode {
+            GradMode::Float => KernelKind::Adjoint,
+            GradMode::Deterministic if self.ctx.info().int64_atomics => KernelKind::AdjointFixed,
+            GradMode::Deterministic => return None,
+        };
+        let features = variant::request_features(self.scene_features, options, self.grad_kinds(options));
+        let primal = variant::request_features(self.scene_features, pass1, ParamKinds::NONE);
+        (features & !G_ANY == primal).then_some(Variant { kind, features })
+    }
+
     /// Runs the reverse-mode kernel of `mode` — `kinds[0]` with float atomics, `kinds[1]` in fixed
     /// point — over the scene bindings, the adjoint image, the gradient and `extra`.
     fn reverse(
@@ -283,26 +350,21 @@ impl Backend for Renderer {
         pass: PassTag,
         progress: &mut dyn FnMut(u32, u32),
     ) -> Result<Vec<Image>> {
-        let request = self.request(options, views, pass, Work::Pixels { begin: 0, end: options.spp })?;
-        let _span = tracing::info_span!(
-            "primal",
-            width = options.width,
-            height = options.height,
-            spp = options.spp,
-            views = views.len()
-        )
-        .entered();
-        let values = u64::from(options.width * options.height) * 3 * views.len() as u64;
-        let accum = Buffer::storage(&self.ctx, "accumulation image", values * 4)?;
-        accum.clear()?;
         let features = variant::request_features(self.scene_features, options, ParamKinds::NONE);
-        let v = Variant { kind: KernelKind::Primal, features };
-        self.run(v, &request, &[(BINDING_ACCUM, &accum)], progress)?;
-        let sums: Vec<f32> = accum.download(values as usize)?;
-        let spp = options.spp as f32;
-        let stacked = options.stacked(views.len())?;
-        Image::from_rgb(stacked.width, stacked.height, sums.into_iter().map(|v| v / spp).collect())?
-            .split(views.len() as u32)
+        self.render_views_on(Variant { kind: KernelKind::Primal, features }, options, views, pass, progress)
+    }
+
+    fn render_loss_pass(
+        &mut self,
+        options: &RenderOptions,
+        pass1: &RenderOptions,
+        views: &[View],
+        gradient: Option<GradMode>,
+    ) -> Result<Vec<Image>> {
+        match gradient.and_then(|mode| self.loss_pass_kernel(options, pass1, mode)) {
+            Some(v) => self.render_views_on(v, pass1, views, PassTag::Primal, &mut |_, _| {}),
+            None => self.render_views(pass1, views, PassTag::Primal, &mut |_, _| {}),
+        }
     }
 
     /// Reverse-mode gradient of Σ_v ⟨A_v, I_v⟩: the fused primal + replay kernel (PRB) over every
@@ -324,7 +386,15 @@ impl Backend for Renderer {
         check_views(views, adjoints, options, "adjoint image")?;
         let _span = tracing::info_span!("adjoint", spp = options.spp, ?mode, views = views.len()).entered();
         let adjoint_buf = Buffer::storage_with(&self.ctx, "adjoint image", Image::stack(adjoints)?.as_slice())?;
-        self.reverse([KernelKind::Adjoint, KernelKind::AdjointFixed], &request, &adjoint_buf, &[], mode)
+        // Declared by the kernel for pass 1 (`primal_only`); a replay never touches it.
+        let unused_accum = Buffer::storage(&self.ctx, "accumulation image (unused by the replay)", 16)?;
+        self.reverse(
+            [KernelKind::Adjoint, KernelKind::AdjointFixed],
+            &request,
+            &adjoint_buf,
+            &[(BINDING_ACCUM, &unused_accum)],
+            mode,
+        )
     }
 
     /// Reverse-mode gradient with loss-aware adaptive pixel sampling (ALGORITHMS.md §6) over
@@ -422,6 +492,10 @@ impl Backend for Renderer {
         adaptive: bool,
     ) -> Result<()> {
         let pass1 = options.loss_pass(spp_primal)?;
+        if !adaptive && let Some(v) = self.loss_pass_kernel(options, &pass1, mode) {
+            // One kernel for both passes (render_loss_pass).
+            return self.kernels.prepare(&[v]);
+        }
         let mut variants = vec![Variant {
             kind: KernelKind::Primal,
             features: variant::request_features(self.scene_features, &pass1, ParamKinds::NONE),

@@ -222,3 +222,57 @@ fn differentiating_fewer_kinds_gives_the_same_gradients_for_them() {
         }
     }
 }
+
+/// A gradient step's pass 1 runs on the step's gradient kernel (`primal_only`), so a first step
+/// builds one kernel, not two; and that kernel renders the primal kernel's image: the same paths'
+/// radiance, summed in the same order (bit for bit on lavapipe; within a few ulp allowed for a
+/// driver that contracts the two kernels' arithmetic differently).
+#[test]
+fn a_gradient_steps_pass_1_runs_on_its_gradient_kernel_and_renders_the_primal_image() {
+    use pathgrad::gpu::renderer::CompileEvent;
+    use pathgrad::integrator::View;
+    use pathgrad::rng::PassTag;
+    use std::sync::{Arc, Mutex};
+
+    let gpu = TestGpu::new();
+    let scene = builtin::load("cornell-box").unwrap();
+    let opts = RenderOptions { width: 32, height: 32, spp: 4, seed: 5, ..RenderOptions::for_scene(&scene) };
+    let built = Arc::new(Mutex::new(Vec::new()));
+    let observer = {
+        let built = built.clone();
+        move |e: &CompileEvent| {
+            if let CompileEvent::Started { kernel, .. } = e {
+                built.lock().unwrap().push(*kernel);
+            }
+        }
+    };
+    let view = [View::current(&scene)];
+    let pass1 = opts.loss_pass(3).unwrap();
+
+    // A whole step on a fresh renderer builds the gradient kernel alone.
+    let target = Renderer::new(&gpu.ctx, &scene).unwrap().render_reference(&opts).unwrap();
+    let mut renderer = Renderer::new(&gpu.ctx, &scene).unwrap();
+    renderer.set_compile_observer(Box::new(observer.clone()));
+    let (loss, _) =
+        renderer.loss_and_gradient_split(&opts, 3, &target, pathgrad::loss::Loss::RelMse, GradMode::Float).unwrap();
+    assert!(loss > 0.0);
+    assert_eq!(*built.lock().unwrap(), ["adjoint"], "the step builds only its gradient kernel");
+
+    for (mode, kernel) in [(GradMode::Float, "adjoint"), (GradMode::Deterministic, "adjoint_fixed")] {
+        let mut renderer = Renderer::new(&gpu.ctx, &scene).unwrap();
+        built.lock().unwrap().clear();
+        renderer.set_compile_observer(Box::new(observer.clone()));
+        let on_gradient = renderer.render_loss_pass(&opts, &pass1, &view, Some(mode)).unwrap().remove(0);
+        assert_eq!(*built.lock().unwrap(), [kernel], "{mode:?}: pass 1 on the gradient kernel");
+        let plain = renderer.render_views(&pass1, &view, PassTag::Primal, &mut |_, _| {}).unwrap().remove(0);
+        assert_eq!(*built.lock().unwrap(), [kernel, "primal"]);
+        let lit = plain.as_slice().iter().filter(|v| **v > 0.0).count();
+        assert!(lit > plain.as_slice().len() / 2, "{mode:?}: the image is lit ({lit} values)");
+        for (i, (a, b)) in on_gradient.as_slice().iter().zip(plain.as_slice()).enumerate() {
+            assert!(
+                (a - b).abs() <= 1e-5 * a.abs().max(b.abs()) + 1e-7,
+                "{mode:?}: value {i}: {a} on the gradient kernel, {b} on the primal"
+            );
+        }
+    }
+}
