@@ -139,7 +139,9 @@ bool path_survives(inout PathState st, uint vertex) {
 bool path_step(inout PathState st) {
     bool adjoint = ADJOINT_KERNEL && st.adjoint;
     float sign = adjoint ? -1.0 : 1.0;
-    bool diff = HAS(F_DIFF);
+    // The strategy is also read at run time, so a kernel with the differential strategy can render a
+    // gradient step's pass 1, which uses plain BSDF sampling (kernel.glsl, PRIMAL_ON_REVERSE).
+    bool diff = HAS(F_DIFF) && globals.strategy == STRATEGY_DIFF;
     bool nee = HAS(F_NEE);
     uint vertex = st.vertex;
     st.vertex = vertex + 1u;

@@ -191,8 +191,9 @@ impl Renderer {
 
     /// The gradient kernel of a (non-adaptive) gradient step of `options` in `mode` if it can
     /// render the step's pass 1, `pass1`: its features are pass 1's plus parameter kinds (which
-    /// compile adjoint-only code), so one kernel build serves both passes. `None` where the step
-    /// uses another strategy or NEE setting than pass 1, or the mode has no kernel here.
+    /// compile adjoint-only code) and perhaps the differential strategy (chosen at run time as
+    /// well), so one kernel build serves both passes. `None` where the step renders without NEE,
+    /// or the mode has no kernel here.
     pub(crate) fn loss_pass_kernel(
         &self,
         options: &RenderOptions,
@@ -206,7 +207,7 @@ impl Renderer {
         };
         let features = variant::request_features(self.scene_features, options, self.grad_kinds(options));
         let primal = variant::request_features(self.scene_features, pass1, ParamKinds::NONE);
-        (features & !G_ANY == primal).then_some(Variant { kind, features })
+        (features & !(G_ANY | F_DIFF) == primal).then_some(Variant { kind, features })
     }
 
     /// Runs the reverse-mode kernel of `mode` — `kinds[0]` with float atomics, `kinds[1]` in fixed

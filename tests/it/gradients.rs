@@ -257,6 +257,16 @@ fn a_gradient_steps_pass_1_runs_on_its_gradient_kernel_and_renders_the_primal_im
         renderer.loss_and_gradient_split(&opts, 3, &target, pathgrad::loss::Loss::RelMse, GradMode::Float).unwrap();
     assert!(loss > 0.0);
     assert_eq!(*built.lock().unwrap(), ["adjoint"], "the step builds only its gradient kernel");
+    // So does a step with the differential strategy, whose kernel renders pass 1 with BSDF sampling.
+    let target_id = scene.params.find("sphere.bsdf.alpha.value").unwrap();
+    let diff = RenderOptions { strategy: pathgrad::integrator::Strategy::Diff { target: target_id, q: 0.5 }, ..opts };
+    let mut renderer = Renderer::new(&gpu.ctx, &scene).unwrap();
+    built.lock().unwrap().clear();
+    renderer.set_compile_observer(Box::new(observer.clone()));
+    let (diff_loss, _) =
+        renderer.loss_and_gradient_split(&diff, 3, &target, pathgrad::loss::Loss::RelMse, GradMode::Float).unwrap();
+    assert_eq!(*built.lock().unwrap(), ["adjoint"], "a differential step builds only its gradient kernel");
+    assert!((diff_loss - loss).abs() <= 1e-6 * loss, "pass 1 is the same BSDF-sampled render: {diff_loss} vs {loss}");
 
     for (mode, kernel) in [(GradMode::Float, "adjoint"), (GradMode::Deterministic, "adjoint_fixed")] {
         let mut renderer = Renderer::new(&gpu.ctx, &scene).unwrap();
