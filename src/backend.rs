@@ -161,8 +161,9 @@ pub trait Backend {
     }
 
     /// Gets ready for gradient steps of `options` with a pass 1 of `spp_primal` spp, in `mode`,
-    /// with adaptive pixel sampling or not: a backend that compiles kernels builds the pass-1
-    /// and the gradient kernel now, side by side, rather than one after the other on first use.
+    /// with adaptive pixel sampling or not: a backend that compiles kernels builds the kernels of
+    /// both passes now (side by side, or one serving both), rather than one after the other on
+    /// first use.
     /// The loss-and-gradient calls below call it; calling it again costs nothing. The default
     /// does nothing.
     ///
