@@ -483,9 +483,9 @@ impl Backend for Renderer {
         Image::from_rgb(options.width, options.height, sums.into_iter().map(|v| v / spp).collect())
     }
 
-    /// Builds the gradient pass's variant, which renders pass 1 too where it can
-    /// ([`Renderer::loss_pass_kernel`]); otherwise the pass-1 primal variant beside it
-    /// ([`KernelCache::prepare`]: each pipeline on its own thread).
+    /// Builds the gradient pass's variant, which renders pass 1 too where it can (its features
+    /// are pass 1's plus parameter kinds and the strategy); otherwise the pass-1 primal variant
+    /// beside it, each pipeline created on its own thread.
     fn prepare_gradient(
         &mut self,
         options: &RenderOptions,
