@@ -168,20 +168,13 @@ impl Renderer {
         let values = u64::from(options.width * options.height) * 3 * views.len() as u64;
         let accum = Buffer::storage(&self.ctx, "accumulation image", values * 4)?;
         accum.clear()?;
-        if on_reverse {
-            // Bound because the kernel declares them; primal_only mode reads and writes neither.
-            let grad_binding = if v.kind == KernelKind::AdjointFixed { BINDING_GRADS_FIXED } else { BINDING_GRADS };
-            let adjoint = Buffer::storage(&self.ctx, "adjoint image (unused by pass 1)", 16)?;
-            let grads = Buffer::storage(&self.ctx, "gradient (unused by pass 1)", 16)?;
-            self.run(
-                v,
-                &request,
-                &[(BINDING_ACCUM, &accum), (BINDING_ADJOINT, &adjoint), (grad_binding, &grads)],
-                progress,
-            )?;
-        } else {
-            self.run(v, &request, &[(BINDING_ACCUM, &accum)], progress)?;
-        }
+        // A gradient kernel's other buffers (the kernel table's) are bound because it declares
+        // them; primal_only mode reads and writes none of them. The primal kernel has no others.
+        let others: Vec<u32> = v.kind.layout().1.iter().copied().filter(|&b| b != BINDING_ACCUM).collect();
+        let unused = if others.is_empty() { None } else { Some(Buffer::storage(&self.ctx, "unused binding", 16)?) };
+        let mut bindings = vec![(BINDING_ACCUM, &accum)];
+        bindings.extend(unused.iter().flat_map(|u| others.iter().map(move |&b| (b, u))));
+        self.run(v, &request, &bindings, progress)?;
         let sums: Vec<f32> = accum.download(values as usize)?;
         let spp = options.spp as f32;
         let stacked = options.stacked(views.len())?;
