@@ -96,6 +96,7 @@ pub(super) fn load_text_with(text: &str, file: &Path, options: &LoadOptions, mes
         materials: HashMap::new(),
         textures: HashMap::new(),
         media: HashMap::new(),
+        medium_shapes: Vec::new(),
         in_progress: Vec::new(),
         meshes,
         options,
@@ -123,6 +124,8 @@ pub(super) struct Loader<'a> {
     pub textures: HashMap<NodeId, TextureId>,
     /// Media already built, by element.
     pub media: HashMap<NodeId, crate::scene::medium::MediumId>,
+    /// The shapes with an interior medium: their mesh index and element (for the overlap check).
+    pub medium_shapes: Vec<(usize, El<'a>)>,
     /// BSDFs and textures being built (cycle detection).
     pub in_progress: Vec<NodeId>,
     /// The mesh file reader.
@@ -240,6 +243,7 @@ impl<'a> Loader<'a> {
             }
         }
         self.refuse_sensors_in_media(&sensors)?;
+        self.refuse_overlapping_media()?;
         if self.scene.meshes.iter().all(|m| m.emitter.is_none()) && self.scene.environment.is_none() {
             let w = self.x.warning(root, "the scene has no emitters: it renders black");
             self.scene.warn(w);

@@ -167,6 +167,56 @@ impl<'a> Loader<'a> {
         }
         Ok(())
     }
+
+    /// Refuses two shapes with interior media that overlap or nest: a path leaving the inner
+    /// one would be in vacuum, not in the outer medium (exterior media are not supported), so
+    /// such a scene would render wrongly without a word.
+    pub(super) fn refuse_overlapping_media(&self) -> Result<()> {
+        let shapes = &self.medium_shapes;
+        for (i, &(a, node_a)) in shapes.iter().enumerate() {
+            for &(b, node_b) in &shapes[i + 1..] {
+                let (ma, mb) = (&self.scene.meshes[a], &self.scene.meshes[b]);
+                if reaches_into(ma, mb) || reaches_into(mb, ma) {
+                    let at = self.x.loc(node_a);
+                    return Err(self.x.err(
+                        node_b,
+                        format!(
+                            "shape '{}' and shape '{}' ({at}) both have an interior medium and overlap: nested or \
+                             intersecting media are not supported",
+                            mb.name, ma.name
+                        ),
+                    ));
+                }
+            }
+        }
+        Ok(())
+    }
+}
+
+/// At most this many vertices of a shape are tested against another shape in the overlap check
+/// (evenly spaced): enough to find a nested shape (all its vertices are inside) or two shapes that
+/// cut deeply into each other, without a quadratic cost on large meshes.
+const OVERLAP_SAMPLE_VERTICES: usize = 4096;
+
+/// Whether some vertex of mesh `a` lies inside closed mesh `b`. Each vertex is first moved by 10⁻⁴
+/// of its distance towards `a`'s vertex centroid, so shapes that only touch (a shared face, a
+/// vertex on the other's surface) do not count as overlapping.
+fn reaches_into(a: &crate::scene::Mesh, b: &crate::scene::Mesh) -> bool {
+    let centroid = a.positions.iter().map(|p| p.as_dvec3()).sum::<DVec3>() / a.positions.len().max(1) as f64;
+    let (lo, hi) = bounds(&b.positions);
+    let step = a.positions.len().div_ceil(OVERLAP_SAMPLE_VERTICES).max(1);
+    a.positions.iter().step_by(step).any(|p| {
+        let p = p.as_dvec3();
+        let q = p + 1e-4 * (centroid - p);
+        q.cmpgt(lo).all() && q.cmplt(hi).all() && inside(q, &b.positions, &b.indices)
+    })
+}
+
+/// The bounding box of `positions`, in f64.
+fn bounds(positions: &[Vec3]) -> (DVec3, DVec3) {
+    positions.iter().fold((DVec3::splat(f64::INFINITY), DVec3::splat(f64::NEG_INFINITY)), |(lo, hi), p| {
+        (lo.min(p.as_dvec3()), hi.max(p.as_dvec3()))
+    })
 }
 
 /// Whether `p` is inside the closed triangle mesh: a ray in a fixed direction that no axis or

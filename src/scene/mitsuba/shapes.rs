@@ -254,6 +254,9 @@ impl<'a> Loader<'a> {
         if let Some(mesh) = self.scene.meshes.last_mut() {
             mesh.interior = interior;
         }
+        if interior.is_some() {
+            self.medium_shapes.push((self.scene.meshes.len() - 1, node));
+        }
         if let Some((e, param, radiance)) = emitter {
             let mesh = self.scene.meshes.last().expect("add_mesh pushed a mesh");
             let g = Geometry { positions: mesh.positions.clone(), indices: mesh.indices.clone(), ..Default::default() };

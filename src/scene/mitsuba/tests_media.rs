@@ -185,3 +185,34 @@ fn bad_media_are_refused_with_their_location() {
     let e = load_in(dir.path(), around).map(|_| ()).unwrap_err().to_string();
     assert!(e.contains("inside the medium of shape 'room'") && e.contains("test.xml:"), "{e}");
 }
+
+/// Shapes with interior media that nest or cut into each other are refused, naming both and
+/// where they are; shapes that only touch (a shared face) or lie apart load.
+#[test]
+fn overlapping_media_are_refused() {
+    let dir = grids();
+    let cube = |id: &str, transform: &str| {
+        format!(
+            r#"<shape type="cube" id="{id}"><bsdf type="null"/><medium type="homogeneous" name="interior"/>
+            <transform name="to_world">{transform}</transform></shape>"#
+        )
+    };
+    let refused = |body: String, inner: &str, outer: &str| {
+        let e = load_in(dir.path(), &body).map(|_| ()).unwrap_err().to_string();
+        assert!(
+            e.contains(&format!("shape '{inner}' and shape '{outer}'"))
+                && e.contains("nested or intersecting media are not supported")
+                && e.matches("test.xml:").count() == 2,
+            "{e}"
+        );
+    };
+    // A small box inside a large one (the sensor is outside both).
+    refused(cube("outer", r#"<scale value="2"/>"#) + &cube("inner", r#"<scale value="0.5"/>"#), "inner", "outer");
+    // Two boxes cutting into each other.
+    refused(cube("a", "") + &cube("b", r#"<translate x="1"/>"#), "b", "a");
+    // Side by side, sharing the face x = 1, and far apart: both load.
+    for shift in ["2", "5"] {
+        let body = cube("a", "") + &cube("b", &format!(r#"<translate x="{shift}"/>"#));
+        load_in(dir.path(), &body).unwrap();
+    }
+}
