@@ -174,11 +174,14 @@ fn differential_sampling_is_refused_in_media_scenes() {
     }
 }
 
-/// A scene with a heterogeneous RGB medium (grid extinction, constant albedo, HG phase), a
-/// homogeneous one, null boundaries, surfaces and both emitter kinds, in `dir`.
+/// A scene with a heterogeneous RGB medium (grid extinction and albedo, HG phase), a homogeneous
+/// one (constant extinction, constant RGB albedo), null boundaries, surfaces and both emitter
+/// kinds, in `dir`.
 fn mixed_media(dir: &Path) -> Scene {
     let density: Vec<f32> = (0..4 * 4 * 4 * 3).map(|i| 0.2 + 0.8 * ((i * 37 % 11) as f32 / 10.0)).collect();
     std::fs::write(dir.join("density.vol"), Grid::new(UVec3::splat(4), 3, density).unwrap().to_bytes()).unwrap();
+    let albedo: Vec<f32> = (0..4 * 4 * 4 * 3).map(|i| 0.6 + 0.35 * ((i * 23 % 7) as f32 / 6.0)).collect();
+    std::fs::write(dir.join("albedo.vol"), Grid::new(UVec3::splat(4), 3, albedo).unwrap().to_bytes()).unwrap();
     scene(
         dir,
         &format!(
@@ -187,9 +190,10 @@ fn mixed_media(dir: &Path) -> Scene {
             <shape type="rectangle" id="floor"><bsdf type="diffuse"/><transform name="to_world"><scale value="4"/><rotate x="1" angle="-90"/><translate y="-1.05"/></transform></shape>
             <shape type="cube" id="smoke"><bsdf type="null"/><medium type="heterogeneous" name="interior">
                 <volume type="gridvolume" name="sigma_t"><string name="filename" value="density.vol"/><transform name="to_world"><scale value="2"/><translate x="-1" y="-1" z="-1"/></transform></volume>
-                <rgb name="albedo" value="0.9, 0.8, 0.7"/><float name="scale" value="2"/><phase type="hg"><float name="g" value="0.5"/></phase></medium>
+                <volume type="gridvolume" name="albedo"><string name="filename" value="albedo.vol"/><transform name="to_world"><scale value="2"/><translate x="-1" y="-1" z="-1"/></transform></volume>
+                <float name="scale" value="2"/><phase type="hg"><float name="g" value="0.5"/></phase></medium>
                 <transform name="to_world"><translate x="-0.6"/><scale value="0.8"/></transform></shape>
-            <shape type="sphere" id="fog"><bsdf type="null"/><medium type="homogeneous" name="interior"><float name="sigma_t" value="1.5"/><float name="albedo" value="0.95"/></medium>
+            <shape type="sphere" id="fog"><bsdf type="null"/><medium type="homogeneous" name="interior"><float name="sigma_t" value="1.5"/><rgb name="albedo" value="0.95, 0.9, 0.85"/></medium>
                 <transform name="to_world"><scale value="0.6"/><translate x="1"/></transform></shape>"#,
             sensor("0, 0.5, 4", 45.0, 32)
         ),
@@ -256,7 +260,7 @@ fn gpu_media_gradients_equal_the_cpu() {
         "smoke.interior_medium.sigma_t.data",
         "smoke.interior_medium.scale",
         "smoke.interior_medium.phase_function.g",
-        "smoke.interior_medium.albedo.value.value",
+        "smoke.interior_medium.albedo.data",
         "fog.interior_medium.sigma_t.value.value",
         "fog.interior_medium.albedo.value.value",
         "floor.bsdf.reflectance.value",
@@ -265,6 +269,7 @@ fn gpu_media_gradients_equal_the_cpu() {
     let opts = RenderOptions { width: 24, height: 24, spp: 1, seed: 6, ..RenderOptions::for_scene(&s) };
     for name in [
         "smoke.interior_medium.sigma_t.data",
+        "smoke.interior_medium.albedo.data",
         "smoke.interior_medium.phase_function.g",
         "fog.interior_medium.albedo.value.value",
     ] {
@@ -354,17 +359,20 @@ fn gpu_media_pass_the_closed_forms() {
 
 /// Gradients through media on the CPU reference against central finite differences with common
 /// random numbers, by the surface test's protocol (gradients.rs): J(θ) = Σ_p A_p·I_p(θ) with A an
-/// independent render, 64 seeds, Welch statistic < 4 and a power check. Extinction grid texels
-/// (tangent 1 on every texel), a homogeneous RGB extinction (its largest channel is the density
-/// the majorant is made of: without `MAJORANT_MARGIN` its null weights are exactly 0 and its
-/// derivative is lost), RGB albedo, scale, g, and a flat block of grid density at the maximum;
-/// the majorants follow the shifted parameters in the finite differences and are detached in PRB.
+/// independent render, 64 seeds, Welch statistic < 4 and a power check. Extinction and RGB albedo
+/// grid texels (tangent 1 on every texel), a homogeneous RGB extinction (its largest channel is
+/// the density the majorant is made of: without `MAJORANT_MARGIN` its null weights are exactly 0
+/// and its derivative is lost), a constant grey albedo, scale, g, and a flat block of grid density
+/// at the maximum; the majorants follow the shifted parameters in the finite differences and are
+/// detached in PRB.
 #[test]
 fn media_gradients_match_finite_differences_on_the_cpu() {
     const SEEDS: u32 = 64;
     let dir = tempfile::tempdir().unwrap();
     let density: Vec<f32> = (0..64).map(|i| 0.5 + ((i * 29 % 13) as f32) / 12.0).collect();
     std::fs::write(dir.path().join("density.vol"), Grid::new(UVec3::splat(4), 1, density).unwrap().to_bytes()).unwrap();
+    let albedo: Vec<f32> = (0..64 * 3).map(|i| 0.5 + 0.4 * ((i * 23 % 7) as f32 / 6.0)).collect();
+    std::fs::write(dir.path().join("albedo.vol"), Grid::new(UVec3::splat(4), 3, albedo).unwrap().to_bytes()).unwrap();
     // A flat block: every voxel at the grid's maximum, the density the majorant is made of.
     std::fs::write(dir.path().join("block.vol"), Grid::new(UVec3::splat(2), 1, vec![3.0; 8]).unwrap().to_bytes())
         .unwrap();
@@ -380,7 +388,8 @@ fn media_gradients_match_finite_differences_on_the_cpu() {
             <shape type="rectangle" id="floor"><bsdf type="diffuse"/><transform name="to_world"><scale value="4"/><rotate x="1" angle="-90"/><translate y="-1.05"/></transform></shape>
             <shape type="cube" id="smoke"><bsdf type="null"/><medium type="heterogeneous" name="interior">
                 <volume type="gridvolume" name="sigma_t"><string name="filename" value="density.vol"/><transform name="to_world"><scale value="2"/><translate x="-1" y="-1" z="-1"/></transform></volume>
-                <rgb name="albedo" value="0.8, 0.7, 0.6"/><float name="scale" value="1.5"/><phase type="hg"><float name="g" value="0.3"/></phase></medium>
+                <volume type="gridvolume" name="albedo"><string name="filename" value="albedo.vol"/><transform name="to_world"><scale value="2"/><translate x="-1" y="-1" z="-1"/></transform></volume>
+                <float name="scale" value="1.5"/><phase type="hg"><float name="g" value="0.3"/></phase></medium>
                 <transform name="to_world"><translate x="-0.6"/><scale value="0.8"/></transform></shape>
             <shape type="sphere" id="fog"><bsdf type="null"/><medium type="homogeneous" name="interior"><rgb name="sigma_t" value="0.8, 1.0, 1.2"/><float name="albedo" value="0.3"/></medium>
                 <transform name="to_world"><scale value="0.6"/><translate x="1"/></transform></shape>"#,
@@ -395,7 +404,7 @@ fn media_gradients_match_finite_differences_on_the_cpu() {
     };
     for name in [
         "smoke.interior_medium.sigma_t.data",
-        "smoke.interior_medium.albedo.value.value",
+        "smoke.interior_medium.albedo.data",
         "smoke.interior_medium.scale",
         "smoke.interior_medium.phase_function.g",
         "fog.interior_medium.sigma_t.value.value",
