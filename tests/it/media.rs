@@ -362,9 +362,10 @@ fn gpu_media_pass_the_closed_forms() {
 /// independent render, 64 seeds, Welch statistic < 4 and a power check. Extinction and RGB albedo
 /// grid texels (tangent 1 on every texel), a homogeneous RGB extinction (its largest channel is
 /// the density the majorant is made of: without `MAJORANT_MARGIN` its null weights are exactly 0
-/// and its derivative is lost), a constant grey albedo, scale, g, and a flat block of grid density
-/// at the maximum; the majorants follow the shifted parameters in the finite differences and are
-/// detached in PRB.
+/// and its derivative is lost), a constant grey albedo, scale, g, a surface's parameter in the
+/// media scene (the floor's reflectance, seen and lit through the media), and a flat block of grid
+/// density at the maximum; the majorants follow the shifted parameters in the finite differences
+/// and are detached in PRB.
 #[test]
 fn media_gradients_match_finite_differences_on_the_cpu() {
     const SEEDS: u32 = 64;
@@ -409,6 +410,7 @@ fn media_gradients_match_finite_differences_on_the_cpu() {
         "smoke.interior_medium.phase_function.g",
         "fog.interior_medium.sigma_t.value.value",
         "fog.interior_medium.albedo.value.value",
+        "floor.bsdf.reflectance.value",
         "block.interior_medium.sigma_t.data",
     ] {
         let values = s.params.get(s.params.find(name).unwrap()).to_vec();
