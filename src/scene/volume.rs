@@ -10,7 +10,9 @@
 //! Every check happens before anything large is allocated: the header's sizes must agree with the
 //! file's length, so a short file cannot ask for gigabytes. Errors name the file.
 //!
-//! This is the grid reader of issue "Heterogeneous media"; no scene loader or kernel uses it yet.
+//! The Mitsuba loader reads `gridvolume` files with [`Grid::read`] (`scene/mitsuba/media.rs`); the
+//! scene's media (`scene/medium.rs`) and the CPU reference (`cpu/medium.rs`) look values up with
+//! [`lookup`], whose GLSL twin is the kernels' `field_at` (`shaders/lib/medium.glsl`).
 
 use std::path::Path;
 

@@ -174,11 +174,14 @@ fn differential_sampling_is_refused_in_media_scenes() {
     }
 }
 
-/// A scene with a heterogeneous RGB medium (grid extinction, constant albedo, HG phase), a
-/// homogeneous one, null boundaries, surfaces and both emitter kinds, in `dir`.
+/// A scene with a heterogeneous RGB medium (grid extinction and albedo, HG phase), a homogeneous
+/// one (constant extinction, constant RGB albedo), null boundaries, surfaces and both emitter
+/// kinds, in `dir`.
 fn mixed_media(dir: &Path) -> Scene {
     let density: Vec<f32> = (0..4 * 4 * 4 * 3).map(|i| 0.2 + 0.8 * ((i * 37 % 11) as f32 / 10.0)).collect();
     std::fs::write(dir.join("density.vol"), Grid::new(UVec3::splat(4), 3, density).unwrap().to_bytes()).unwrap();
+    let albedo: Vec<f32> = (0..4 * 4 * 4 * 3).map(|i| 0.6 + 0.35 * ((i * 23 % 7) as f32 / 6.0)).collect();
+    std::fs::write(dir.join("albedo.vol"), Grid::new(UVec3::splat(4), 3, albedo).unwrap().to_bytes()).unwrap();
     scene(
         dir,
         &format!(
@@ -187,9 +190,10 @@ fn mixed_media(dir: &Path) -> Scene {
             <shape type="rectangle" id="floor"><bsdf type="diffuse"/><transform name="to_world"><scale value="4"/><rotate x="1" angle="-90"/><translate y="-1.05"/></transform></shape>
             <shape type="cube" id="smoke"><bsdf type="null"/><medium type="heterogeneous" name="interior">
                 <volume type="gridvolume" name="sigma_t"><string name="filename" value="density.vol"/><transform name="to_world"><scale value="2"/><translate x="-1" y="-1" z="-1"/></transform></volume>
-                <rgb name="albedo" value="0.9, 0.8, 0.7"/><float name="scale" value="2"/><phase type="hg"><float name="g" value="0.5"/></phase></medium>
+                <volume type="gridvolume" name="albedo"><string name="filename" value="albedo.vol"/><transform name="to_world"><scale value="2"/><translate x="-1" y="-1" z="-1"/></transform></volume>
+                <float name="scale" value="2"/><phase type="hg"><float name="g" value="0.5"/></phase></medium>
                 <transform name="to_world"><translate x="-0.6"/><scale value="0.8"/></transform></shape>
-            <shape type="sphere" id="fog"><bsdf type="null"/><medium type="homogeneous" name="interior"><float name="sigma_t" value="1.5"/><float name="albedo" value="0.95"/></medium>
+            <shape type="sphere" id="fog"><bsdf type="null"/><medium type="homogeneous" name="interior"><float name="sigma_t" value="1.5"/><rgb name="albedo" value="0.95, 0.9, 0.85"/></medium>
                 <transform name="to_world"><scale value="0.6"/><translate x="1"/></transform></shape>"#,
             sensor("0, 0.5, 4", 45.0, 32)
         ),
@@ -241,8 +245,10 @@ fn gpu_media_equal_the_cpu_per_path() {
 /// below checks): forward mode per pixel with the per-path tolerances of the primal above (a path
 /// may branch elsewhere where logarithms round differently: 1 % of the values), reverse mode per
 /// parameter value within 1e-3 of Σ_p |A_p ∂I_p/∂θ| as the surface tests (gradients.rs), for every medium parameter kind and the surfaces' parameters in
-/// the same scene. The replay of every path returns to zero (both backends check it), and the
-/// backward pass's memory does not grow with spp or depth.
+/// the same scene; and on the CPU twin, forward mode equals reverse mode for a tangent of 1 on
+/// every value of each parameter, to 1e-5 of that scale, as for surfaces
+/// (`support::assert_forward_equals_reverse`). The replay of every path returns to zero (both
+/// backends check it), and the backward pass's memory does not grow with spp or depth.
 #[test]
 fn gpu_media_gradients_equal_the_cpu() {
     use pathgrad::gpu::renderer::GradMode;
@@ -254,7 +260,7 @@ fn gpu_media_gradients_equal_the_cpu() {
         "smoke.interior_medium.sigma_t.data",
         "smoke.interior_medium.scale",
         "smoke.interior_medium.phase_function.g",
-        "smoke.interior_medium.albedo.value.value",
+        "smoke.interior_medium.albedo.data",
         "fog.interior_medium.sigma_t.value.value",
         "fog.interior_medium.albedo.value.value",
         "floor.bsdf.reflectance.value",
@@ -263,6 +269,7 @@ fn gpu_media_gradients_equal_the_cpu() {
     let opts = RenderOptions { width: 24, height: 24, spp: 1, seed: 6, ..RenderOptions::for_scene(&s) };
     for name in [
         "smoke.interior_medium.sigma_t.data",
+        "smoke.interior_medium.albedo.data",
         "smoke.interior_medium.phase_function.g",
         "fog.interior_medium.albedo.value.value",
     ] {
@@ -288,15 +295,10 @@ fn gpu_media_gradients_equal_the_cpu() {
         let g = renderer.backward(&opts, &adjoint, mode).unwrap();
         for name in names {
             let e = s.params.entry(s.params.find(name).unwrap_or_else(|| panic!("{name}"))).clone();
-            let forward = pathgrad::cpu::image_gradient(&s, &opts, name).unwrap();
-            let magnitude: f64 = forward
-                .as_slice()
-                .iter()
-                .zip(adjoint.as_slice())
-                .map(|(f, a)| (f64::from(*f) * f64::from(*a)).abs())
-                .sum();
-            assert!(magnitude > 0.0, "{name}: no derivative in view");
             let cv = &c[e.offset as usize..(e.offset + e.len) as usize];
+            let forward = pathgrad::cpu::image_gradient(&s, &opts, name).unwrap();
+            let magnitude = crate::support::assert_forward_equals_reverse(name, &forward, &adjoint, cv.iter().sum());
+            assert!(magnitude > 0.0, "{name}: no derivative in view");
             for (a, b) in g.get(name).unwrap().iter().zip(cv) {
                 assert!(
                     (f64::from(*a) - b).abs() <= 1e-3 * magnitude,
@@ -357,17 +359,21 @@ fn gpu_media_pass_the_closed_forms() {
 
 /// Gradients through media on the CPU reference against central finite differences with common
 /// random numbers, by the surface test's protocol (gradients.rs): J(θ) = Σ_p A_p·I_p(θ) with A an
-/// independent render, 64 seeds, Welch statistic < 4 and a power check. Extinction grid texels
-/// (tangent 1 on every texel), a homogeneous RGB extinction (its largest channel is the density
-/// the majorant is made of: without `MAJORANT_MARGIN` its null weights are exactly 0 and its
-/// derivative is lost), RGB albedo, scale, g, and a flat block of grid density at the maximum;
-/// the majorants follow the shifted parameters in the finite differences and are detached in PRB.
+/// independent render, 64 seeds, Welch statistic < 4 and a power check. Extinction and RGB albedo
+/// grid texels (tangent 1 on every texel), a homogeneous RGB extinction (its largest channel is
+/// the density the majorant is made of: without `MAJORANT_MARGIN` its null weights are exactly 0
+/// and its derivative is lost), a constant grey albedo, scale, g, a surface's parameter in the
+/// media scene (the floor's reflectance, seen and lit through the media), and a flat block of grid
+/// density at the maximum; the majorants follow the shifted parameters in the finite differences
+/// and are detached in PRB.
 #[test]
 fn media_gradients_match_finite_differences_on_the_cpu() {
     const SEEDS: u32 = 64;
     let dir = tempfile::tempdir().unwrap();
     let density: Vec<f32> = (0..64).map(|i| 0.5 + ((i * 29 % 13) as f32) / 12.0).collect();
     std::fs::write(dir.path().join("density.vol"), Grid::new(UVec3::splat(4), 1, density).unwrap().to_bytes()).unwrap();
+    let albedo: Vec<f32> = (0..64 * 3).map(|i| 0.5 + 0.4 * ((i * 23 % 7) as f32 / 6.0)).collect();
+    std::fs::write(dir.path().join("albedo.vol"), Grid::new(UVec3::splat(4), 3, albedo).unwrap().to_bytes()).unwrap();
     // A flat block: every voxel at the grid's maximum, the density the majorant is made of.
     std::fs::write(dir.path().join("block.vol"), Grid::new(UVec3::splat(2), 1, vec![3.0; 8]).unwrap().to_bytes())
         .unwrap();
@@ -383,7 +389,8 @@ fn media_gradients_match_finite_differences_on_the_cpu() {
             <shape type="rectangle" id="floor"><bsdf type="diffuse"/><transform name="to_world"><scale value="4"/><rotate x="1" angle="-90"/><translate y="-1.05"/></transform></shape>
             <shape type="cube" id="smoke"><bsdf type="null"/><medium type="heterogeneous" name="interior">
                 <volume type="gridvolume" name="sigma_t"><string name="filename" value="density.vol"/><transform name="to_world"><scale value="2"/><translate x="-1" y="-1" z="-1"/></transform></volume>
-                <rgb name="albedo" value="0.8, 0.7, 0.6"/><float name="scale" value="1.5"/><phase type="hg"><float name="g" value="0.3"/></phase></medium>
+                <volume type="gridvolume" name="albedo"><string name="filename" value="albedo.vol"/><transform name="to_world"><scale value="2"/><translate x="-1" y="-1" z="-1"/></transform></volume>
+                <float name="scale" value="1.5"/><phase type="hg"><float name="g" value="0.3"/></phase></medium>
                 <transform name="to_world"><translate x="-0.6"/><scale value="0.8"/></transform></shape>
             <shape type="sphere" id="fog"><bsdf type="null"/><medium type="homogeneous" name="interior"><rgb name="sigma_t" value="0.8, 1.0, 1.2"/><float name="albedo" value="0.3"/></medium>
                 <transform name="to_world"><scale value="0.6"/><translate x="1"/></transform></shape>"#,
@@ -398,11 +405,12 @@ fn media_gradients_match_finite_differences_on_the_cpu() {
     };
     for name in [
         "smoke.interior_medium.sigma_t.data",
-        "smoke.interior_medium.albedo.value.value",
+        "smoke.interior_medium.albedo.data",
         "smoke.interior_medium.scale",
         "smoke.interior_medium.phase_function.g",
         "fog.interior_medium.sigma_t.value.value",
         "fog.interior_medium.albedo.value.value",
+        "floor.bsdf.reflectance.value",
         "block.interior_medium.sigma_t.data",
     ] {
         let values = s.params.get(s.params.find(name).unwrap()).to_vec();

@@ -50,6 +50,28 @@ pub fn count_mismatches(gpu: &pathgrad::image::Image, cpu: &pathgrad::image::Ima
         .count()
 }
 
+/// Forward against reverse mode (ALGORITHMS.md §10, forward/reverse consistency): for a tangent
+/// of 1 on every value of a parameter, `reverse` (its reverse-mode gradient for `adjoint`, summed
+/// over those values) equals Σ_p A_p · ∂I_p/∂θ from its forward-mode image `forward`. The two
+/// differ only by f32 rounding of per-pixel means (≤ 1e-6 relative each), so they must agree to
+/// 1e-5 of Σ_p |A_p · ∂I_p/∂θ|, which is returned as the scale of other comparisons.
+pub fn assert_forward_equals_reverse(
+    what: &str,
+    forward: &pathgrad::image::Image,
+    adjoint: &pathgrad::image::Image,
+    reverse: f64,
+) -> f64 {
+    let terms: Vec<f64> =
+        forward.as_slice().iter().zip(adjoint.as_slice()).map(|(f, a)| f64::from(*f) * f64::from(*a)).collect();
+    let magnitude: f64 = terms.iter().map(|t| t.abs()).sum();
+    let forward_total: f64 = terms.iter().sum();
+    assert!(
+        (reverse - forward_total).abs() <= 1e-5 * magnitude,
+        "{what}: reverse {reverse} vs forward {forward_total}"
+    );
+    magnitude
+}
+
 /// The finite-difference test's verdict (gradients.rs, media.rs): over the seeds, the Welch
 /// statistic |mean_fd − mean_prb| / √(s²_fd/M + s²_prb/M) is below 4, and the PRB mean is more
 /// than two standard errors from 0 (the test has the power to see a wrong gradient). Prints both
