@@ -1,17 +1,18 @@
-//! The BVH: built by obvhs on the host, flattened into `BvhNode`s, and traversed here on the CPU in
-//! exactly the order `shaders/lib/bvh.glsl` traverses it on the GPU (its twin).
+//! The BVH: obvhs's compressed 8-wide BVH (CWBVH, Ylitie et al. 2017) over the scene's triangles,
+//! traversed here on the CPU in exactly the order `shaders/lib/bvh.glsl` traverses it on the GPU
+//! (its twin).
 
 use std::time::Duration;
 
-use glam::Vec3;
+use glam::{UVec2, Vec3, Vec3A};
 use obvhs::BvhBuildParams;
+use obvhs::aabb::Aabb;
 use obvhs::bvh2::builder::build_bvh2_from_tris;
+use obvhs::bvh2::{Bvh2, node::Bvh2Node};
+use obvhs::cwbvh::bvh2_to_cwbvh::bvh2_to_cwbvh;
 use obvhs::triangle::Triangle;
 
-use crate::contract::{
-    BVH_LEAF_BIT, BVH_LEAF_COUNT_SHIFT, BVH_LEAF_FIRST_MASK, BVH_LEAF_MAX, BVH_NO_CHILD, BVH_STACK_SIZE, BvhNode,
-    TriPositions,
-};
+use crate::contract::{BVH_FAR_SCALE, BVH_LEAF_MAX, BVH_STACK_SIZE, BvhNode, TriPositions};
 use crate::error::{Error, Result};
 
 pub use crate::contract::MIN_DIR_COMPONENT;
@@ -19,39 +20,50 @@ pub use crate::contract::MIN_DIR_COMPONENT;
 /// A built BVH: nodes plus the triangles in leaf order.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct Bvh {
-    /// Nodes, each with both children's boxes; the root is node 0.
+    /// Compressed 8-wide nodes; the root is node 0.
     pub nodes: Vec<BvhNode>,
     /// Triangle positions in leaf order.
     pub tris: Vec<TriPositions>,
     /// The original triangle id of each leaf slot.
     pub prim_ids: Vec<u32>,
-    /// Inner nodes on the longest path from the root to a leaf (the root counts).
+    /// Nodes on the longest path from the root down (the root counts).
     pub depth: u32,
 }
 
+/// Byte `k` (0–7) of a per-child word pair.
+fn child_byte(w: UVec2, k: u32) -> u32 {
+    let word = if k < 4 { w.x } else { w.y };
+    (word >> (8 * (k % 4))) & 0xff
+}
+
 impl Bvh {
-    /// The leaf-slot range of every leaf, in node order.
+    /// The leaf-slot range of every leaf child, in node and slot order.
     pub fn leaves(&self) -> impl Iterator<Item = std::ops::Range<u32>> + '_ {
-        self.nodes
-            .iter()
-            .flat_map(|n| [n.child0, n.child1])
-            .filter(|&r| r != BVH_NO_CHILD && r & BVH_LEAF_BIT != 0)
-            .map(|r| {
-                let first = r & BVH_LEAF_FIRST_MASK;
-                first..first + ((r & !BVH_LEAF_BIT) >> BVH_LEAF_COUNT_SHIFT) + 1
+        self.nodes.iter().flat_map(|n| {
+            (0..8).filter_map(move |k| {
+                let meta = child_byte(n.meta, k);
+                let inner = (n.exp_imask >> 24) & (1 << k) != 0;
+                (meta != 0 && !inner).then(|| {
+                    let first = n.tri_base + (meta & 0x1f);
+                    first..first + (meta >> 5).count_ones()
+                })
             })
+        })
     }
 }
 
-/// Deepest tree the traversal stack holds: a step pops one entry and pushes at most two, so a
-/// path through `d` inner nodes keeps at most `d + 1` entries.
+/// Deepest binary tree the conversion is given: a compressed node consumes at least one of its
+/// levels, and a traversal step pops one entry and pushes at most one, so the stack holds fewer
+/// entries than this.
 const MAX_DEPTH: u32 = BVH_STACK_SIZE - 2;
 /// A subtree still too deep at this depth is rebuilt by median splits, whose height is at most
-/// ⌈log₂(n / BVH_LEAF_MAX)⌉ + 1 ≤ 28 for any n < 2²⁸: so every tree fits the stack.
+/// ⌈log₂ n⌉ + 1 ≤ 29 for any n < 2²⁸: so every tree fits the stack.
 const REBUILD_DEPTH: u32 = MAX_DEPTH - 30;
+/// Triangles a BVH can address (leaf slots are 32-bit; the median rebuild's bound assumes this).
+const MAX_TRIANGLES: usize = 1 << 28;
 
-/// A node of the tree while it is being shaped: an inner node with two children, or a leaf of
-/// original triangle ids.
+/// A node of the binary tree while it is being shaped: an inner node with two children, or a
+/// leaf of original triangle ids.
 #[derive(Clone, Debug)]
 enum Shape {
     Inner([usize; 2]),
@@ -65,56 +77,85 @@ struct TmpNode {
     shape: Shape,
 }
 
-/// Builds a BVH over `triangles`: obvhs's PLOC build (`medium_build`, leaves of at most
-/// [`BVH_LEAF_MAX`] triangles), flattened into nodes that hold both children's boxes. Any valid
+/// Builds a BVH over `triangles`: obvhs's PLOC build (`medium_build`) into a binary tree of
+/// one-triangle leaves, its depth bounded, converted by obvhs into compressed 8-wide nodes with
+/// leaves of up to [`BVH_LEAF_MAX`] triangles and children ordered for the ray octant. Any valid
 /// mesh builds: subtrees deeper than the traversal stack allows (a fan-triangulated 1000-gon
 /// gives PLOC depth ~270) are rebuilt below depth `REBUILD_DEPTH` by median splits.
 ///
 /// # Errors
-/// [`Error::Scene`] for more triangles than a leaf reference can address (2²⁸).
+/// [`Error::Scene`] for more triangles than a BVH can address (2²⁸).
 pub fn build(triangles: &[[Vec3; 3]]) -> Result<Bvh> {
-    if triangles.len() >= BVH_LEAF_FIRST_MASK as usize {
+    if triangles.len() >= MAX_TRIANGLES {
         return Err(Error::Scene {
             location: "BVH".into(),
-            message: format!("{} triangles exceed the {} a BVH can address", triangles.len(), BVH_LEAF_FIRST_MASK),
+            message: format!("{} triangles exceed the {} a BVH can address", triangles.len(), MAX_TRIANGLES),
         });
     }
     if triangles.is_empty() {
-        let empty = BvhNode { child0: BVH_NO_CHILD, child1: BVH_NO_CHILD, ..BvhNode::default() };
+        // A root with eight empty slots: nothing is ever hit.
+        let empty = BvhNode { exp_imask: 127 | 127 << 8 | 127 << 16, ..BvhNode::default() };
         return Ok(Bvh { nodes: vec![empty], tris: Vec::new(), prim_ids: Vec::new(), depth: 1 });
     }
     let tris: Vec<Triangle> =
         triangles.iter().map(|t| Triangle { v0: t[0].into(), v1: t[1].into(), v2: t[2].into() }).collect();
     let mut build_time = Duration::ZERO;
-    let params = BvhBuildParams { max_prims_per_leaf: BVH_LEAF_MAX, ..BvhBuildParams::medium_build() };
-    let bvh2 = build_bvh2_from_tris(&tris, params, &mut build_time);
-    let arena: Vec<TmpNode> = bvh2
+    let params = BvhBuildParams { max_prims_per_leaf: 1, ..BvhBuildParams::medium_build() };
+    let ploc = build_bvh2_from_tris(&tris, params, &mut build_time);
+    let arena: Vec<TmpNode> = ploc
         .nodes
         .iter()
         .map(|n| {
             let shape = if n.prim_count > 0 {
                 let first = n.first_index as usize;
-                Shape::Leaf(bvh2.primitive_indices[first..first + n.prim_count as usize].to_vec())
+                Shape::Leaf(ploc.primitive_indices[first..first + n.prim_count as usize].to_vec())
             } else {
                 Shape::Inner([n.first_index as usize, n.first_index as usize + 1])
             };
             TmpNode { lo: n.aabb.min.into(), hi: n.aabb.max.into(), shape }
         })
         .collect();
-    let mut out = Flattener { triangles, arena, heights: Vec::new(), bvh: Bvh::default() };
-    out.heights = heights(&out.arena);
-    let root_depth = out.heights[0];
-    out.flatten_root();
-    let bvh = out.bvh;
+    let mut shaper = Shaper { triangles, arena, heights: Vec::new(), bvh2: Bvh2::default() };
+    shaper.heights = heights(&shaper.arena);
+    let ploc_depth = shaper.heights[0];
+    shaper.bvh2.nodes.push(Bvh2Node::default());
+    shaper.place(0, 0, 1);
+    let cw = bvh2_to_cwbvh(&shaper.bvh2, BVH_LEAF_MAX, true, false);
+    let nodes: Vec<BvhNode> = cw.nodes.iter().map(|n| bytemuck::cast(*n)).collect();
+    let tris = cw
+        .primitive_indices
+        .iter()
+        .map(|&id| {
+            let t = &triangles[id as usize];
+            TriPositions { v0: t[0], v1: t[1], v2: t[2], ..TriPositions::default() }
+        })
+        .collect();
+    let depth = cw_depth(&nodes);
+    let bvh = Bvh { nodes, tris, prim_ids: cw.primitive_indices, depth };
     tracing::debug!(
         triangles = triangles.len(),
         nodes = bvh.nodes.len(),
         depth = bvh.depth,
-        ploc_depth = root_depth,
+        ploc_depth,
         ?build_time,
         "BVH built"
     );
     Ok(bvh)
+}
+
+/// Nodes on the longest path from the root down, without recursion.
+fn cw_depth(nodes: &[BvhNode]) -> u32 {
+    let mut deepest = 0;
+    let mut stack = vec![(0u32, 1u32)];
+    while let Some((i, d)) = stack.pop() {
+        deepest = deepest.max(d);
+        let n = &nodes[i as usize];
+        let inner = n.exp_imask >> 24;
+        for k in 0..inner.count_ones() {
+            stack.push((n.child_base + k, d + 1));
+        }
+    }
+    deepest
 }
 
 /// Inner nodes on the longest path down from each node (0 for a leaf), without recursion.
@@ -139,84 +180,51 @@ fn heights(arena: &[TmpNode]) -> Vec<u32> {
     h
 }
 
-struct Flattener<'a> {
+/// Writes the arena's tree as an obvhs binary tree of one-triangle leaves (siblings adjacent, as
+/// obvhs expects), rebuilding subtrees that would be too deep.
+struct Shaper<'a> {
     triangles: &'a [[Vec3; 3]],
     arena: Vec<TmpNode>,
     heights: Vec<u32>,
-    bvh: Bvh,
+    bvh2: Bvh2,
 }
 
-impl Flattener<'_> {
-    fn flatten_root(&mut self) {
-        self.bvh.nodes.push(BvhNode::default());
-        match self.arena[0].shape.clone() {
-            Shape::Leaf(ids) => {
-                let child0 = self.leaf(&ids);
-                let (lo0, hi0) = (self.arena[0].lo, self.arena[0].hi);
-                self.bvh.nodes[0] = BvhNode { lo0, child0, hi0, child1: BVH_NO_CHILD, ..BvhNode::default() };
-                self.bvh.depth = 1;
-            }
-            Shape::Inner(_) => {
-                self.bvh.depth = 0;
-                self.inner(0, 0, 1);
-            }
-        }
-    }
-
-    /// Writes arena node `i` (inner) as flat node `slot` at depth `depth` (the root is 1).
-    fn inner(&mut self, i: usize, slot: usize, depth: u32) {
-        self.bvh.depth = self.bvh.depth.max(depth);
-        let Shape::Inner([a, b]) = self.arena[i].shape else { unreachable!("inner() is given inner nodes") };
-        let child0 = self.child(a, depth + 1);
-        let child1 = self.child(b, depth + 1);
-        let (na, nb) = (&self.arena[a], &self.arena[b]);
-        self.bvh.nodes[slot] =
-            BvhNode { lo0: na.lo, child0, hi0: na.hi, child1, lo1: nb.lo, hi1: nb.hi, ..BvhNode::default() };
-    }
-
-    /// The reference of arena node `i` placed at `depth`, rebuilding it first if its subtree
-    /// would not fit the stack.
-    fn child(&mut self, i: usize, depth: u32) -> u32 {
-        if matches!(self.arena[i].shape, Shape::Inner(_))
+impl Shaper<'_> {
+    /// Writes arena node `i` as binary node `slot` at depth `depth` (the root is 1), rebuilding
+    /// it first if its subtree would not fit the stack or it is a leaf of several triangles.
+    fn place(&mut self, mut i: usize, slot: usize, depth: u32) {
+        let too_deep = matches!(self.arena[i].shape, Shape::Inner(_))
             && depth + self.heights[i] > MAX_DEPTH + 1
-            && depth >= REBUILD_DEPTH
-        {
+            && depth >= REBUILD_DEPTH;
+        let wide_leaf = matches!(&self.arena[i].shape, Shape::Leaf(ids) if ids.len() > 1);
+        if too_deep || wide_leaf {
             let mut ids = Vec::new();
             collect_leaves(&self.arena, i, &mut ids);
-            let rebuilt = self.median(&mut ids);
-            return self.child(rebuilt, depth);
+            i = self.median(&mut ids);
         }
-        if let Shape::Leaf(ids) = &self.arena[i].shape {
-            if ids.len() > BVH_LEAF_MAX as usize {
-                let mut ids = ids.clone();
-                let rebuilt = self.median(&mut ids);
-                return self.child(rebuilt, depth);
+        let aabb = Aabb::new(Vec3A::from(self.arena[i].lo), Vec3A::from(self.arena[i].hi));
+        match self.arena[i].shape.clone() {
+            Shape::Leaf(ids) => {
+                let first = self.bvh2.primitive_indices.len() as u32;
+                self.bvh2.primitive_indices.push(ids[0]);
+                self.bvh2.nodes[slot] = Bvh2Node::new(aabb, 1, first);
             }
-            let ids = ids.clone();
-            return self.leaf(&ids);
+            Shape::Inner([a, b]) => {
+                let first = self.bvh2.nodes.len();
+                self.bvh2.nodes.push(Bvh2Node::default());
+                self.bvh2.nodes.push(Bvh2Node::default());
+                self.bvh2.nodes[slot] = Bvh2Node::new(aabb, 0, first as u32);
+                self.place(a, first, depth + 1);
+                self.place(b, first + 1, depth + 1);
+            }
         }
-        let slot = self.bvh.nodes.len();
-        self.bvh.nodes.push(BvhNode::default());
-        self.inner(i, slot, depth);
-        slot as u32
-    }
-
-    /// Appends a leaf's triangles to the leaf-ordered arrays; its reference.
-    fn leaf(&mut self, ids: &[u32]) -> u32 {
-        let first = self.bvh.tris.len() as u32;
-        for &id in ids {
-            let t = &self.triangles[id as usize];
-            self.bvh.tris.push(TriPositions { v0: t[0], v1: t[1], v2: t[2], ..TriPositions::default() });
-            self.bvh.prim_ids.push(id);
-        }
-        BVH_LEAF_BIT | ((ids.len() as u32 - 1) << BVH_LEAF_COUNT_SHIFT) | first
     }
 
     /// Builds a subtree over `ids` by splitting at the median centroid along the widest axis
-    /// (halving every time, whatever the geometry); returns its arena index.
+    /// (halving every time, whatever the geometry) down to single triangles; its arena index.
     fn median(&mut self, ids: &mut [u32]) -> usize {
         let (lo, hi) = bounds(self.triangles, ids);
-        if ids.len() <= BVH_LEAF_MAX as usize {
+        if ids.len() == 1 {
             self.arena.push(TmpNode { lo, hi, shape: Shape::Leaf(ids.to_vec()) });
             self.heights.push(0);
             return self.arena.len() - 1;
@@ -328,13 +336,49 @@ pub fn intersect_triangle(ray: &Ray, tri: &TriPositions, tmin: f32, tmax: f32) -
     (t > tmin && t < tmax).then_some((t, b1, b2))
 }
 
-/// Entry distance of the ray into the box `lo..hi` if it enters before `tmax` (and ends after `tmin`).
-fn slab(ray: &Ray, lo: Vec3, hi: Vec3, tmin: f32, tmax: f32) -> Option<f32> {
-    let t0 = (lo - ray.origin) * ray.inv_dir;
-    let t1 = (hi - ray.origin) * ray.inv_dir;
-    let near = t0.min(t1).max_element().max(tmin);
-    let far = t0.max(t1).min_element().min(tmax);
-    (near <= far).then_some(near)
+/// The ray's octant as the children's traversal order wants it: byte-replicated bits 2, 1, 0 set
+/// for non-negative x, y, z.
+fn octant_inv4(dir: Vec3) -> u32 {
+    (if dir.x < 0.0 { 0 } else { 0x0404_0404 })
+        | (if dir.y < 0.0 { 0 } else { 0x0202_0202 })
+        | (if dir.z < 0.0 { 0 } else { 0x0101_0101 })
+}
+
+/// Tests the ray against a node's eight child boxes; the hit mask: for an inner child hit, bit
+/// 24 + (slot ^ octant), so that the highest bit is the child to visit first; for a leaf child
+/// hit, its triangles' bits (offsets from `tri_base`) in the low 24 bits.
+fn intersect_node(node: &BvhNode, ray: &Ray, octant: u32, tmin: f32, tmax: f32) -> u32 {
+    let e = node.exp_imask;
+    let cell = Vec3::new(
+        f32::from_bits((e & 0xff) << 23),
+        f32::from_bits(((e >> 8) & 0xff) << 23),
+        f32::from_bits(((e >> 16) & 0xff) << 23),
+    );
+    // The ray in the node's grid: a plane at cell q is crossed at q·scale + offset.
+    let scale = cell * ray.inv_dir;
+    let offset = (node.origin - ray.origin) * ray.inv_dir;
+    let mut mask = 0;
+    for half in 0..2 {
+        let m = if half == 0 { node.meta.x } else { node.meta.y };
+        // Inner children's metas are 24 + slot with bits 3 and 4 both set, which no leaf has.
+        let inner4 = (m & (m << 1)) & 0x1010_1010;
+        let bit_index4 = (m ^ (octant & ((inner4 >> 4) * 0xff))) & 0x1f1f_1f1f;
+        let child_bits4 = (m >> 5) & 0x0707_0707;
+        for k in 0..4 {
+            let slot = 4 * half + k;
+            let q = |w: UVec2| child_byte(w, slot) as f32;
+            let lo = Vec3::new(q(node.lo_x), q(node.lo_y), q(node.lo_z));
+            let hi = Vec3::new(q(node.hi_x), q(node.hi_y), q(node.hi_z));
+            let t0 = lo * scale + offset;
+            let t1 = hi * scale + offset;
+            let near = t0.min(t1).max_element().max(tmin);
+            let far = (t0.max(t1).min_element() * BVH_FAR_SCALE).min(tmax);
+            if near <= far {
+                mask |= ((child_bits4 >> (8 * k)) & 0xff) << ((bit_index4 >> (8 * k)) & 0xff);
+            }
+        }
+    }
+    mask
 }
 
 /// The closest hit with `tmin < t < tmax`, or `None`. Same visiting order as `bvh_closest_hit`.
@@ -347,47 +391,52 @@ pub fn occluded(bvh: &Bvh, ray: &Ray, tmin: f32, tmax: f32) -> bool {
     traverse(bvh, ray, tmin, tmax, true).is_some()
 }
 
-/// One stack entry per step: a leaf's triangles are tested, an inner node's two boxes are
-/// tested and the children hit are pushed — the farther first for closest hits, in node order
-/// for shadow rays (any hit will do, so no ordering is paid for). The GLSL twin keeps the entry
-/// it would pop next in a register instead of pushing it; the visiting order is the same.
+/// Ylitie et al.'s traversal, one step at a time: a step tests one pending triangle if there is
+/// one, else visits the next inner child hit (highest bit first: the nearest for the ray's
+/// octant) of the current node group, pushing the rest of the group. A group is a node's
+/// `(child_base, inner hits << 24 | inner mask)`; the triangles pending are `(tri_base, bits)`.
+/// When both are empty the next group is popped. Shadow rays use the same order and stop at the
+/// first hit.
 fn traverse(bvh: &Bvh, ray: &Ray, tmin: f32, mut tmax: f32, any_hit: bool) -> Option<Hit> {
+    let octant = octant_inv4(ray.dir);
     let mut best: Option<Hit> = None;
-    let mut stack = [0u32; BVH_STACK_SIZE as usize];
-    let mut sp = 1usize;
-    while sp > 0 {
-        sp -= 1;
-        let r = stack[sp];
-        if r & BVH_LEAF_BIT != 0 {
-            let first = r & BVH_LEAF_FIRST_MASK;
-            let count = ((r & !BVH_LEAF_BIT) >> BVH_LEAF_COUNT_SHIFT) + 1;
-            for slot in first..first + count {
-                if let Some((t, b1, b2)) = intersect_triangle(ray, &bvh.tris[slot as usize], tmin, tmax) {
-                    tmax = t;
-                    best = Some(Hit { t, slot, b1, b2 });
-                    if any_hit {
-                        return best;
-                    }
+    let mut stack = [UVec2::ZERO; BVH_STACK_SIZE as usize];
+    let mut sp = 0usize;
+    // The root, as the only inner child of a virtual group.
+    let mut group = UVec2::new(0, 0x8000_0000);
+    let mut tris = UVec2::ZERO;
+    loop {
+        if tris.y != 0 {
+            let k = 31 - tris.y.leading_zeros();
+            tris.y &= !(1 << k);
+            let slot = tris.x + k;
+            if let Some((t, b1, b2)) = intersect_triangle(ray, &bvh.tris[slot as usize], tmin, tmax) {
+                tmax = t;
+                best = Some(Hit { t, slot, b1, b2 });
+                if any_hit {
+                    return best;
                 }
             }
-        } else {
-            let n = &bvh.nodes[r as usize];
-            let ta = if n.child0 != BVH_NO_CHILD { slab(ray, n.lo0, n.hi0, tmin, tmax) } else { None };
-            let tb = if n.child1 != BVH_NO_CHILD { slab(ray, n.lo1, n.hi1, tmin, tmax) } else { None };
-            let (a, b) = (n.child0, n.child1);
-            // Pushed first, visited last.
-            let (first, second) = match (ta, tb) {
-                (Some(_), Some(_)) if any_hit => (Some(b), Some(a)),
-                (Some(x), Some(y)) if y < x => (Some(a), Some(b)),
-                (Some(_), Some(_)) => (Some(b), Some(a)),
-                (Some(_), None) => (None, Some(a)),
-                (None, Some(_)) => (None, Some(b)),
-                (None, None) => (None, None),
-            };
-            for child in [first, second].into_iter().flatten() {
-                stack[sp] = child;
+        } else if group.y & 0xff00_0000 != 0 {
+            let bit = 31 - group.y.leading_zeros();
+            let slot = (bit - 24) ^ (octant & 0xff);
+            let index = group.x + (group.y & !(u32::MAX << slot)).count_ones();
+            group.y &= !(1 << bit);
+            if group.y & 0xff00_0000 != 0 {
+                stack[sp] = group;
                 sp += 1;
             }
+            let node = &bvh.nodes[index as usize];
+            let hits = intersect_node(node, ray, octant, tmin, tmax);
+            group = UVec2::new(node.child_base, (hits & 0xff00_0000) | (node.exp_imask >> 24));
+            tris = UVec2::new(node.tri_base, hits & 0x00ff_ffff);
+        }
+        if tris.y == 0 && group.y & 0xff00_0000 == 0 {
+            if sp == 0 {
+                break;
+            }
+            sp -= 1;
+            group = stack[sp];
         }
     }
     best

@@ -84,17 +84,8 @@ contract_constants! {
 
     /// Entries of the traversal stack; the builder bounds the tree's depth to fit (src/bvh.rs).
     BVH_STACK_SIZE = 64;
-    /// BVH child reference: set for a leaf.
-    BVH_LEAF_BIT = 0x8000_0000;
-    /// BVH child reference: the leaf's triangle count minus one sits at this bit.
-    BVH_LEAF_COUNT_SHIFT = 28;
-    /// BVH child reference: mask of a leaf's first triangle.
-    BVH_LEAF_FIRST_MASK = 0x0FFF_FFFF;
-    /// Most triangles in one BVH leaf (small leaves keep SIMD lanes in step; 2 measured best of
-    /// 1, 2, 4, 8 on lavapipe, BENCHMARKS.md).
-    BVH_LEAF_MAX = 2;
-    /// BVH child reference of an absent child (a root that is a single leaf).
-    BVH_NO_CHILD = 0xFFFF_FFFF;
+    /// Most triangles in one BVH leaf (the compressed BVH's child encoding holds up to 3).
+    BVH_LEAF_MAX = 3;
 
     /// Stream of per-vertex decisions.
     STREAM_MAIN = 0;

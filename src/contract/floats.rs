@@ -42,6 +42,10 @@ contract_floats! {
     /// Direction components smaller than this are replaced by it (keeping the sign), so the slab
     /// test's reciprocal is finite and `0 · ∞` never produces NaN.
     MIN_DIR_COMPONENT = 1e-20;
+    /// The far end of a ray's span through a quantised BVH box is scaled by this before the box
+    /// test: the box's planes are reached through a grid transform whose few ulps of rounding must
+    /// not miss a triangle lying on a face (flat boxes are common: axis-aligned walls).
+    BVH_FAR_SCALE = 1.0 + 1.0 / 1_048_576.0;
     /// A replay may leave this much radiance, relative to the path's (plus a floor): the primal sums
     /// its terms and the replay subtracts the same terms in the same order (ALGORITHMS.md §3.3).
     REPLAY_RESIDUAL_TOLERANCE = 1e-5;

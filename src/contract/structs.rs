@@ -94,28 +94,36 @@ contract_structs! {
         key1: u32,
     }
 
-    /// One BVH2 node holding both children's boxes, so a traversal step fetches them at once.
-    /// A child reference is an inner node's index, a leaf (`BVH_LEAF_BIT | (count − 1) <<
-    /// BVH_LEAF_COUNT_SHIFT | first`: triangles `first .. first + count` of the leaf-ordered
-    /// arrays), or `BVH_NO_CHILD`.
+    /// One node of the compressed 8-wide BVH (Ylitie et al. 2017, as obvhs builds it): up to eight
+    /// children whose boxes are quantised to 8 bits on a grid that starts at `origin` with cell
+    /// sizes that are powers of two, so one node is ten 8-byte words for eight boxes (how the
+    /// traversal reads it, shaders/lib/bvh.glsl). Byte k of a per-child word is child slot k.
     struct BvhNode {
-        /// Box minimum of child 0.
-        lo0: Vec3,
-        /// Box maximum of child 0.
-        hi0: Vec3,
-        /// Box minimum of child 1.
-        lo1: Vec3,
-        /// Box maximum of child 1.
-        hi1: Vec3,
-        /// Reference of child 0.
-        child0: u32,
-        /// Reference of child 1.
-        child1: u32,
-        /// Unused: rounds a node up to 64 bytes. The 56 used bytes are seven 8-byte words, which
-        /// is how the traversal reads a node (shaders/lib/bvh.glsl).
-        pad0: u32,
-        /// Unused, as `pad0`.
-        pad1: u32,
+        /// The grid's origin (the node's box minimum).
+        origin: Vec3,
+        /// Bytes 0–2: the biased exponents of the grid's cell size along x, y and z (a cell is
+        /// `f32::from_bits(e << 23)`); byte 3: bit k set when child slot k is an inner node.
+        exp_imask: u32,
+        /// Index of the first inner child; inner children are consecutive, in slot order.
+        child_base: u32,
+        /// Leaf slot of the first triangle of the leaf children.
+        tri_base: u32,
+        /// Per child: 0 for an empty slot; an inner child `0b001` in the top three bits and 24 +
+        /// its slot below; a leaf its triangle count in unary in the top three bits (1 to 3
+        /// triangles) and its first triangle's offset from `tri_base` below.
+        meta: UVec2,
+        /// Per child: the box's low x, in cells.
+        lo_x: UVec2,
+        /// Per child: the box's high x, in cells.
+        hi_x: UVec2,
+        /// Per child: the box's low y, in cells.
+        lo_y: UVec2,
+        /// Per child: the box's high y, in cells.
+        hi_y: UVec2,
+        /// Per child: the box's low z, in cells.
+        lo_z: UVec2,
+        /// Per child: the box's high z, in cells.
+        hi_z: UVec2,
     }
 
     /// Triangle vertex positions, in BVH leaf order: nine floats and a pad, five 8-byte words
