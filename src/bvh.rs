@@ -2,14 +2,16 @@
 //! traversed here on the CPU in exactly the order `shaders/lib/bvh.glsl` traverses it on the GPU
 //! (its twin).
 
-use std::time::Duration;
+use std::time::Instant;
 
 use glam::{UVec2, Vec3, Vec3A};
 use obvhs::BvhBuildParams;
 use obvhs::aabb::Aabb;
-use obvhs::bvh2::builder::build_bvh2_from_tris;
+use obvhs::bvh2::leaf_collapser::collapse;
+use obvhs::bvh2::reinsertion::ReinsertionOptimizer;
 use obvhs::bvh2::{Bvh2, node::Bvh2Node};
 use obvhs::cwbvh::bvh2_to_cwbvh::bvh2_to_cwbvh;
+use obvhs::ploc::PlocBuilder;
 use obvhs::triangle::Triangle;
 
 use crate::contract::{BVH_FAR_SCALE, BVH_LEAF_MAX, BVH_STACK_SIZE, BvhNode, TriPositions};
@@ -77,7 +79,7 @@ struct TmpNode {
     shape: Shape,
 }
 
-/// Builds a BVH over `triangles`: obvhs's PLOC build (`medium_build`) into a binary tree of
+/// Builds a BVH over `triangles`: obvhs's PLOC build and reinsertion (`medium_build`) into a binary tree of
 /// one-triangle leaves, its depth bounded, converted by obvhs into compressed 8-wide nodes with
 /// leaves of up to [`BVH_LEAF_MAX`] triangles and children ordered for the ray octant. Any valid
 /// mesh builds: subtrees deeper than the traversal stack allows (a fan-triangulated 1000-gon
@@ -99,9 +101,25 @@ pub fn build(triangles: &[[Vec3; 3]]) -> Result<Bvh> {
     }
     let tris: Vec<Triangle> =
         triangles.iter().map(|t| Triangle { v0: t[0].into(), v1: t[1].into(), v2: t[2].into() }).collect();
-    let mut build_time = Duration::ZERO;
-    let params = BvhBuildParams { max_prims_per_leaf: 1, ..BvhBuildParams::medium_build() };
-    let ploc = build_bvh2_from_tris(&tris, params, &mut build_time);
+    // The steps of obvhs's `build_bvh2_from_tris` for one-triangle leaves (the tree is the same),
+    // without its debug-build validation, which panics on trees the reinsertion made deeper than
+    // its own stack estimate (a fan-triangulated 1000-gon: depth 273 against 252).
+    let start = Instant::now();
+    let params = BvhBuildParams::medium_build();
+    let ids = (0..tris.len() as u32).collect();
+    let mut ploc = PlocBuilder::with_capacity(tris.len()).build(
+        params.ploc_search_distance,
+        &tris,
+        ids,
+        params.sort_precision,
+        params.search_depth_threshold,
+    );
+    let mut reinsertion = ReinsertionOptimizer::default();
+    reinsertion.run(&mut ploc, params.reinsertion_batch_ratio, None);
+    collapse(&mut ploc, 1, params.collapse_traversal_cost);
+    let ratio = params.reinsertion_batch_ratio * params.post_collapse_reinsertion_batch_ratio_multiplier;
+    reinsertion.run(&mut ploc, ratio, None);
+    let build_time = start.elapsed();
     let arena: Vec<TmpNode> = ploc
         .nodes
         .iter()
@@ -440,4 +458,74 @@ fn traverse(bvh: &Bvh, ray: &Ray, tmin: f32, mut tmax: f32, any_hit: bool) -> Op
         }
     }
     best
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn tri(x: f32) -> [Vec3; 3] {
+        [Vec3::new(x, -1.0, -1.0), Vec3::new(x, 1.0, -1.0), Vec3::new(x, -1.0, 1.0)]
+    }
+
+    /// Every leaf slot is in exactly one leaf, and the slots map back to every triangle once.
+    fn assert_leaves_cover(bvh: &Bvh, n: usize) {
+        let mut seen = vec![0u32; bvh.tris.len()];
+        for leaf in bvh.leaves() {
+            assert!(!leaf.is_empty() && leaf.len() <= BVH_LEAF_MAX as usize, "leaf {leaf:?}");
+            for slot in leaf {
+                seen[slot as usize] += 1;
+            }
+        }
+        assert!(seen.iter().all(|&c| c == 1), "slots covered {seen:?}");
+        let mut ids = bvh.prim_ids.clone();
+        ids.sort_unstable();
+        assert_eq!(ids, (0..n as u32).collect::<Vec<_>>());
+    }
+
+    #[test]
+    fn an_empty_bvh_is_never_hit() {
+        let bvh = build(&[]).unwrap();
+        let ray = Ray::new(Vec3::ZERO, Vec3::X);
+        assert_eq!(closest_hit(&bvh, &ray, 0.0, f32::MAX), None);
+        assert!(!occluded(&bvh, &ray, 0.0, f32::MAX));
+    }
+
+    #[test]
+    fn a_single_triangle_is_hit_and_missed() {
+        let bvh = build(&[tri(2.0)]).unwrap();
+        assert_leaves_cover(&bvh, 1);
+        let hit = closest_hit(&bvh, &Ray::new(Vec3::new(0.0, -0.5, -0.5), Vec3::X), 0.0, f32::MAX).unwrap();
+        assert_eq!((hit.t, hit.slot), (2.0, 0));
+        assert!(closest_hit(&bvh, &Ray::new(Vec3::new(0.0, 0.5, 0.5), Vec3::X), 0.0, f32::MAX).is_none());
+        assert!(!occluded(&bvh, &Ray::new(Vec3::new(0.0, -0.5, -0.5), Vec3::X), 0.0, 1.5));
+        assert!(occluded(&bvh, &Ray::new(Vec3::new(0.0, -0.5, -0.5), Vec3::X), 0.0, 2.5));
+    }
+
+    /// Stacked triangles along a ray: the closest is found from either side, whatever the octant.
+    #[test]
+    fn the_closest_of_many_is_found_from_both_sides() {
+        let tris: Vec<[Vec3; 3]> = (0..100).map(|i| tri(i as f32 * 0.1)).collect();
+        let bvh = build(&tris).unwrap();
+        assert_leaves_cover(&bvh, tris.len());
+        let forward = closest_hit(&bvh, &Ray::new(Vec3::new(-1.0, -0.5, -0.5), Vec3::X), 0.0, f32::MAX).unwrap();
+        assert_eq!(bvh.prim_ids[forward.slot as usize], 0);
+        let back = closest_hit(&bvh, &Ray::new(Vec3::new(20.0, -0.5, -0.5), -Vec3::X), 0.0, f32::MAX).unwrap();
+        assert_eq!(bvh.prim_ids[back.slot as usize], 99);
+    }
+
+    /// A fan-triangulated 1000-gon, whose PLOC tree is ~270 deep, is bounded to fit the stack.
+    #[test]
+    fn a_deep_fan_fits_the_stack() {
+        let ring = |k: u32| {
+            let a = k as f32 / 1000.0 * std::f32::consts::TAU;
+            Vec3::new(a.cos(), a.sin(), 0.0)
+        };
+        let tris: Vec<[Vec3; 3]> = (1..999).map(|k| [ring(0), ring(k), ring(k + 1)]).collect();
+        let bvh = build(&tris).unwrap();
+        assert!(bvh.depth < BVH_STACK_SIZE, "depth {}", bvh.depth);
+        assert_leaves_cover(&bvh, tris.len());
+        let hit = closest_hit(&bvh, &Ray::new(Vec3::new(0.3, 0.2, 1.0), -Vec3::Z), 0.0, f32::MAX).unwrap();
+        assert!((hit.t - 1.0).abs() < 1e-6);
+    }
 }
