@@ -99,12 +99,36 @@ fn contract_glsl() -> String {
 /// The include name under which the generated declarations are served.
 const GENERATED_CONTRACT: &str = "generated/contract.glsl";
 
+/// Builds `native/specialise.cpp` and links it with Debian's SPIRV-Tools optimizer (static
+/// libraries of the spirv-tools package, found through pkg-config's libdir).
+fn specialiser() {
+    println!("cargo:rerun-if-changed=native/specialise.cpp");
+    cc::Build::new()
+        .cpp(true)
+        .std("c++17")
+        .file("native/specialise.cpp")
+        .warnings(false)
+        .compile("pathgrad_specialise");
+    let libdir = std::process::Command::new("pkg-config")
+        .args(["--variable=libdir", "SPIRV-Tools"])
+        .output()
+        .ok()
+        .filter(|o| o.status.success())
+        .map(|o| String::from_utf8_lossy(&o.stdout).trim().to_string())
+        .unwrap_or_else(|| "/usr/lib/x86_64-linux-gnu".into());
+    println!("cargo:rustc-link-search=native={libdir}");
+    println!("cargo:rustc-link-lib=static=SPIRV-Tools-opt");
+    println!("cargo:rustc-link-lib=static=SPIRV-Tools");
+    println!("cargo:rustc-link-lib=dylib=stdc++");
+}
+
 fn main() {
     let root = PathBuf::from(std::env::var("CARGO_MANIFEST_DIR").expect("cargo sets CARGO_MANIFEST_DIR"));
     let out = PathBuf::from(std::env::var("OUT_DIR").expect("cargo sets OUT_DIR"));
     let shader_dir = root.join("shaders");
     println!("cargo:rerun-if-changed=shaders");
     println!("cargo:rerun-if-changed=src/contract");
+    specialiser();
 
     let generated = contract_glsl();
     let macros = contract_macros();

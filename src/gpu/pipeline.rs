@@ -9,7 +9,7 @@ use ash::vk;
 use crate::error::{Error, Result, VkResultExt};
 use crate::gpu::buffer::Buffer;
 use crate::gpu::context::Context;
-use crate::gpu::shaders;
+use crate::gpu::{shaders, specialise};
 
 /// A compute pipeline over storage (and uniform) buffers, optionally specialised.
 pub struct Kernel {
@@ -41,7 +41,9 @@ impl Kernel {
 
     /// Builds the kernel compiled from `shaders/{name}.comp` with descriptors of the given types
     /// at `bindings` of set 0, `push_size` bytes of push constants and, if given, `features` as
-    /// the value of its `FEATURES` specialisation constant (`shaders/lib/features.glsl`).
+    /// the value of its `FEATURES` specialisation constant (`shaders/lib/features.glsl`), applied on
+    /// the host where it can be (`crate::gpu::specialise`: the module shrinks to what the value
+    /// keeps before the driver sees it) and by the driver otherwise.
     ///
     /// # Errors
     /// As [`Kernel::new`].
@@ -56,10 +58,15 @@ impl Kernel {
             parameter: "kernel".into(),
             message: format!("no kernel named {name}"),
         })?;
-        let words = ash::util::read_spv(&mut Cursor::new(bytes)).map_err(|e| Error::InvalidArgument {
+        let mut words = ash::util::read_spv(&mut Cursor::new(bytes)).map_err(|e| Error::InvalidArgument {
             parameter: "kernel".into(),
             message: format!("{name}: bad SPIR-V: {e}"),
         })?;
+        // A specialised module carries its value frozen in: the driver is given no constant then.
+        let host_specialised = features
+            .and_then(|f| specialise::specialised_module(name, &words, crate::contract::SPEC_FEATURES, f))
+            .map(|w| words = w)
+            .is_some();
         let device = ctx.device();
         let layout_bindings: Vec<_> = bindings
             .iter()
@@ -109,7 +116,7 @@ impl Kernel {
                 .stage(vk::ShaderStageFlags::COMPUTE)
                 .module(module)
                 .name(c"main");
-            if features.is_some() {
+            if features.is_some() && !host_specialised {
                 stage = stage.specialization_info(&spec);
             }
             let info = [vk::ComputePipelineCreateInfo::default().stage(stage).layout(kernel.layout)];

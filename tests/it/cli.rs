@@ -165,3 +165,41 @@ fn grad_errors_name_what_is_wrong() {
         assert!(stderr.contains(message), "{args:?}: expected '{message}' in: {stderr}");
     }
 }
+
+/// Kernels specialised on the host (src/gpu/specialise.rs), fresh or from its disk cache, render
+/// and differentiate bit for bit like kernels the driver specialises (`PATHGRAD_SPECIALISE=0`),
+/// and the host's are cached where the cache directory says.
+#[test]
+fn host_specialised_kernels_match_the_drivers_bit_for_bit() {
+    let dir = tempfile::tempdir().unwrap();
+    let cache = dir.path().join("cache");
+    let run = |tag: &str, host: bool| {
+        let out = dir.path().join(format!("{tag}.exr"));
+        let mut c = pathgrad();
+        c.env("XDG_CACHE_HOME", &cache).env("PATHGRAD_SPECIALISE", if host { "1" } else { "0" });
+        let o = c
+            .args(["render", "builtin:cornell-box", "--spp", "2", "--width", "24", "--no-preview", "-o"])
+            .arg(&out)
+            .output()
+            .unwrap();
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        let mut c = pathgrad();
+        c.env("XDG_CACHE_HOME", &cache).env("PATHGRAD_SPECIALISE", if host { "1" } else { "0" });
+        let g = c
+            .args(["grad", "builtin:cornell-box", "--target-set", "sphere.bsdf.alpha.value=0.4", "--param", "sphere.*"])
+            .args(["--spp", "2", "--width", "16", "--json", "--deterministic"])
+            .output()
+            .unwrap();
+        assert!(g.status.success(), "{}", String::from_utf8_lossy(&g.stderr));
+        let v: serde_json::Value = serde_json::from_slice(&g.stdout).unwrap();
+        (std::fs::read(&out).unwrap(), v["loss"].clone(), v["gradients"].clone())
+    };
+    let fresh = run("fresh", true);
+    let cached_files = std::fs::read_dir(cache.join("pathgrad/kernels")).map(|d| d.count()).unwrap_or(0);
+    assert!(cached_files >= 2, "the primal and adjoint kernels are cached: {cached_files} files");
+    let cached = run("cached", true);
+    let driver = run("driver", false);
+    assert!(fresh.0 == cached.0 && fresh.0 == driver.0, "the images differ");
+    assert_eq!((&fresh.1, &fresh.2), (&cached.1, &cached.2));
+    assert_eq!((&fresh.1, &fresh.2), (&driver.1, &driver.2));
+}

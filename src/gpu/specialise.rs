@@ -1,0 +1,188 @@
+//! Kernels specialised on the host: a kernel's `FEATURES` value is applied to its SPIR-V and what
+//! the value switches off is optimised away (Debian's SPIRV-Tools, `native/specialise.cpp`) before
+//! the driver sees the module, and the result is kept in a disk cache.
+//!
+//! The driver could apply the specialisation constant itself, but lavapipe first parses and
+//! optimises the whole module — every feature's code, ~23 000 instructions for the adjoint kernel
+//! — which took ~0.6 s per pipeline even with a warm shader cache. A specialised module (~5 700
+//! instructions) is created in ~0.1 s, and compiles faster cold (BENCHMARKS.md). The optimizer
+//! reorders no floating-point arithmetic, so images are bitwise the same either way (a test renders
+//! both). `PATHGRAD_SPECIALISE=0` leaves the specialisation to the driver.
+
+use std::path::PathBuf;
+use std::time::Instant;
+
+unsafe extern "C" {
+    fn pathgrad_specialise_spirv(
+        words: *const u32,
+        count: usize,
+        spec_id: u32,
+        value: u32,
+        out: *mut *mut u32,
+        out_count: *mut usize,
+    ) -> std::ffi::c_int;
+    fn pathgrad_free_spirv(words: *mut u32);
+}
+
+/// SPIR-V's magic number, the first word of every module.
+const SPIRV_MAGIC: u32 = 0x0723_0203;
+
+/// Whether kernels are specialised on the host (`PATHGRAD_SPECIALISE=0` turns it off).
+pub fn enabled() -> bool {
+    std::env::var("PATHGRAD_SPECIALISE").map_or(true, |v| v != "0")
+}
+
+/// `words` with specialisation constant `spec_id` set to `value`, frozen, and the module optimised
+/// and stripped of debug information; `None` if the optimizer refuses the module.
+pub fn specialise(words: &[u32], spec_id: u32, value: u32) -> Option<Vec<u32>> {
+    let mut out: *mut u32 = std::ptr::null_mut();
+    let mut count = 0usize;
+    // SAFETY: `words` is valid for `words.len()` reads; on success the shim hands over a malloc'd
+    // array of `count` words, copied here and freed by its own `free`.
+    unsafe {
+        let status = pathgrad_specialise_spirv(words.as_ptr(), words.len(), spec_id, value, &mut out, &mut count);
+        if status != 0 || out.is_null() {
+            return None;
+        }
+        let result = std::slice::from_raw_parts(out, count).to_vec();
+        pathgrad_free_spirv(out);
+        (result.first() == Some(&SPIRV_MAGIC)).then_some(result)
+    }
+}
+
+/// The directory of specialised modules: `$XDG_CACHE_HOME/pathgrad/kernels`, else
+/// `$HOME/.cache/pathgrad/kernels`.
+fn cache_dir() -> Option<PathBuf> {
+    let base = std::env::var_os("XDG_CACHE_HOME")
+        .filter(|v| !v.is_empty())
+        .map(PathBuf::from)
+        .or_else(|| std::env::var_os("HOME").filter(|v| !v.is_empty()).map(|h| PathBuf::from(h).join(".cache")))?;
+    Some(base.join("pathgrad").join("kernels"))
+}
+
+/// 64-bit FNV-1a.
+fn fnv(parts: &[&[u8]]) -> u64 {
+    let mut h = 0xcbf2_9ce4_8422_2325u64;
+    for part in parts {
+        for &b in *part {
+            h = (h ^ u64::from(b)).wrapping_mul(0x0000_0100_0000_01b3);
+        }
+    }
+    h
+}
+
+/// The cache key: a hash of the module and the value (content-addressed, so a new build's modules
+/// never meet an old build's entries).
+fn key(words: &[u32], spec_id: u32, value: u32) -> u64 {
+    fnv(&[bytemuck::cast_slice(words), &spec_id.to_le_bytes(), &value.to_le_bytes()])
+}
+
+/// A cache file's bytes: the module, then the hash of its bytes (a damaged file is not used).
+fn cache_bytes(words: &[u32]) -> Vec<u8> {
+    let mut bytes = bytemuck::cast_slice::<u32, u8>(words).to_vec();
+    let sum = fnv(&[&bytes]);
+    bytes.extend_from_slice(&sum.to_le_bytes());
+    bytes
+}
+
+/// The module in a cache file's bytes, if they are whole.
+fn from_cache_bytes(bytes: &[u8]) -> Option<Vec<u32>> {
+    let (module, sum) = bytes.split_at_checked(bytes.len().checked_sub(8)?)?;
+    if module.len() < 20 || module.len() % 4 != 0 || fnv(&[module]).to_le_bytes() != *sum {
+        return None;
+    }
+    let words: Vec<u32> = module.chunks_exact(4).map(|c| u32::from_le_bytes([c[0], c[1], c[2], c[3]])).collect();
+    (words[0] == SPIRV_MAGIC).then_some(words)
+}
+
+/// `words` specialised to `value` (see [`specialise`]), from the disk cache when it has them;
+/// `None` when host specialisation is off or fails (the driver then specialises).
+pub fn specialised_module(name: &str, words: &[u32], spec_id: u32, value: u32) -> Option<Vec<u32>> {
+    if !enabled() {
+        return None;
+    }
+    let file = cache_dir().map(|d| d.join(format!("{name}-{value:08x}-{:016x}.spv", key(words, spec_id, value))));
+    if let Some(words) = file.as_ref().and_then(|f| std::fs::read(f).ok()).and_then(|b| from_cache_bytes(&b)) {
+        tracing::debug!(kernel = name, "specialised kernel loaded from the cache");
+        return Some(words);
+    }
+    let start = Instant::now();
+    let Some(result) = specialise(words, spec_id, value) else {
+        tracing::warn!(kernel = name, "the SPIR-V optimizer refused the kernel; the driver specialises it");
+        return None;
+    };
+    tracing::debug!(
+        kernel = name,
+        words = words.len(),
+        specialised_words = result.len(),
+        seconds = start.elapsed().as_secs_f64(),
+        "kernel specialised on the host"
+    );
+    if let Some(file) = file {
+        // Written under a unique name and renamed, so a concurrent reader never sees half a module;
+        // a cache that cannot be written only costs the next process this work again.
+        let tmp = file.with_extension(format!("tmp{}-{:?}", std::process::id(), std::thread::current().id()));
+        let written = file.parent().map(std::fs::create_dir_all).transpose().and_then(|_| {
+            std::fs::write(&tmp, cache_bytes(&result))?;
+            std::fs::rename(&tmp, &file)
+        });
+        if let Err(e) = written {
+            let _ = std::fs::remove_file(&tmp);
+            tracing::debug!(kernel = name, error = %e, "specialised kernel not cached");
+        }
+    }
+    Some(result)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn adjoint_words() -> Vec<u32> {
+        let bytes = crate::gpu::shaders::spirv("adjoint").expect("the adjoint kernel is embedded");
+        ash::util::read_spv(&mut std::io::Cursor::new(bytes)).unwrap()
+    }
+
+    /// Specialising drops what a value switches off: the module shrinks, more for fewer features,
+    /// and the same value gives the same words.
+    #[test]
+    fn specialising_shrinks_the_module_and_is_deterministic() {
+        use crate::contract::*;
+        let words = adjoint_words();
+        let few = F_NEE | F_EMITTERS | F_DIFFUSE | G_COLOR;
+        let a = specialise(&words, SPEC_FEATURES, few).expect("specialised");
+        let b = specialise(&words, SPEC_FEATURES, few).expect("specialised");
+        let all = specialise(&words, SPEC_FEATURES, u32::MAX).expect("specialised");
+        assert_eq!(a, b);
+        assert_eq!(a[0], SPIRV_MAGIC);
+        assert!(a.len() * 3 < words.len(), "{} of {} words", a.len(), words.len());
+        assert!(a.len() < all.len(), "{} vs {} words", a.len(), all.len());
+    }
+
+    #[test]
+    fn a_broken_module_is_refused() {
+        assert_eq!(specialise(&[SPIRV_MAGIC, 0x0001_0500, 0, 7], 0, 1), None);
+        assert_eq!(specialise(&[1, 2, 3], 0, 1), None);
+    }
+
+    /// A cache file reads back as its module; a cut or altered one is refused.
+    #[test]
+    fn damaged_cache_files_are_refused() {
+        let words: Vec<u32> = vec![SPIRV_MAGIC, 0x0001_0500, 0, 9, 0, 42];
+        let bytes = cache_bytes(&words);
+        assert_eq!(from_cache_bytes(&bytes), Some(words));
+        assert_eq!(from_cache_bytes(&bytes[..bytes.len() - 4]), None);
+        let mut altered = bytes.clone();
+        altered[10] ^= 1;
+        assert_eq!(from_cache_bytes(&altered), None);
+        assert_eq!(from_cache_bytes(&[]), None);
+    }
+
+    #[test]
+    fn the_key_depends_on_the_module_and_the_value() {
+        let words = [SPIRV_MAGIC, 1, 2, 3];
+        assert_ne!(key(&words, 0, 1), key(&words, 0, 2));
+        assert_ne!(key(&words, 0, 1), key(&[SPIRV_MAGIC, 1, 2, 4], 0, 1));
+        assert_eq!(key(&words, 0, 1), key(&words, 0, 1));
+    }
+}
