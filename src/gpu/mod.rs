@@ -19,7 +19,7 @@ pub mod renderer;
 pub mod requirements;
 #[doc(hidden)]
 pub mod shaders;
-pub mod specialise;
+mod specialise;
 mod upload;
 #[doc(hidden)]
 pub mod variant;
