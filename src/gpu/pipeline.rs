@@ -63,10 +63,12 @@ impl Kernel {
             message: format!("{name}: bad SPIR-V: {e}"),
         })?;
         // A specialised module carries its value frozen in: the driver is given no constant then.
-        let host_specialised = features
-            .and_then(|f| specialise::specialised_module(name, &words, crate::contract::SPEC_FEATURES, f))
-            .map(|w| words = w)
-            .is_some();
+        let host =
+            features.and_then(|f| specialise::specialised_module(name, &words, crate::contract::SPEC_FEATURES, f));
+        let host_specialised = host.is_some();
+        if let Some(specialised) = host {
+            words = specialised;
+        }
         let device = ctx.device();
         let layout_bindings: Vec<_> = bindings
             .iter()
