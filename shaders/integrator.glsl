@@ -153,229 +153,260 @@ bool path_step(inout PathState st) {
     Bsdf bsdf;
     vec3 wi = vec3(0.0, 0.0, 1.0);
 
-    // ---- intersection: through null boundaries and null collisions to the next event ----
+    // What a surface vertex carries from its NEE query, across the shadow ray's traversal, to the
+    // rest of its shading: the vertex, the NEE sample and its unoccluded terms.
+    Surface s;
+    ShadingFrame frame;
+    bool shade = false;       // a surface vertex below the maximum depth
+    bool capable = false;
+    EmitterSample es;
+    vec3 nee_wo = vec3(0.0, 0.0, 1.0);
+    vec3 nee_f = vec3(0.0);
+    float nee_w = 0.0;
+    float nee_pdf = 0.0;
+    vec3 tr = vec3(0.0);      // NEE's transmittance: 0 (occluded or no sample) or 1 (surfaces), ratio tracking (media)
+    Ray shadow_ray;
+    float shadow_tmax = 0.0;
+    bool shadow_query = false;
+
     Hit hit;
     uint event;
     float travelled = 0.0;    // from the last vertex to the ray's origin, across null boundaries
     vec3 x_medium = vec3(0.0);
-    if (HAS(F_MEDIA)) {
-        uvec2 key = uvec2(globals.key0, st.key1);
-        uint step = 0u;      // delta-tracking steps of this vertex
-        event = EVENT_LOST;
-        [[dont_unroll]] for (uint crossings = 0u; crossings <= MAX_NULL_CROSSINGS; crossings++) {
-            hit = bvh_closest_hit(st.ray, 0.0, FLOAT_MAX);
-            if (st.medium != NO_MEDIUM) {
-                float t = delta_track(st.medium, st.ray, hit.valid ? hit.t : FLOAT_MAX, key, st.pixel, st.sample_index, vertex, step, st.throughput, adjoint, st.adj * st.radiance);
-                if (t >= 0.0) { event = EVENT_MEDIUM; x_medium = st.ray.origin + t * st.ray.dir; break; }
+    // Both rays of a vertex go through one traversal site, so the kernel holds one inlined copy of
+    // the traversal: pass 0 traces the path's ray and shades up to NEE's shadow query, pass 1 (if
+    // the vertex made a query) answers it. Kernels with media trace their shadow rays by ratio
+    // tracking inside pass 0.
+    [[dont_unroll]] for (uint pass = 0u; pass < 2u; pass++) {
+        // ---- intersection: through null boundaries and null collisions to the next event ----
+        if (HAS(F_MEDIA)) {
+            uvec2 key = uvec2(globals.key0, st.key1);
+            uint step = 0u;      // delta-tracking steps of this vertex
+            event = EVENT_LOST;
+            [[dont_unroll]] for (uint crossings = 0u; crossings <= MAX_NULL_CROSSINGS; crossings++) {
+                hit = bvh_closest_hit(st.ray, 0.0, FLOAT_MAX);
+                if (st.medium != NO_MEDIUM) {
+                    float t = delta_track(st.medium, st.ray, hit.valid ? hit.t : FLOAT_MAX, key, st.pixel, st.sample_index, vertex, step, st.throughput, adjoint, st.adj * st.radiance);
+                    if (t >= 0.0) { event = EVENT_MEDIUM; x_medium = st.ray.origin + t * st.ray.dir; break; }
+                }
+                if (!hit.valid) { event = EVENT_ESCAPE; break; }
+                Surface sn = surface_at(hit);
+                if (materials[sn.material].tag != MAT_NULL) { event = EVENT_SURFACE; break; }
+                st.medium = medium_crossed(sn.interior, sn.ng, st.ray.dir, st.medium);
+                travelled += hit.t;
+                st.ray = make_ray(offset_origin(sn.p, sn.ng, st.ray.dir), st.ray.dir);
             }
-            if (!hit.valid) { event = EVENT_ESCAPE; break; }
-            Surface sn = surface_at(hit);
-            if (materials[sn.material].tag != MAT_NULL) { event = EVENT_SURFACE; break; }
-            st.medium = medium_crossed(sn.interior, sn.ng, st.ray.dir, st.medium);
-            travelled += hit.t;
-            st.ray = make_ray(offset_origin(sn.p, sn.ng, st.ray.dir), st.ray.dir);
+        } else {
+            bool shadow = pass != 0u;
+            Hit h = bvh_traverse(shadow ? shadow_ray : st.ray, 0.0, shadow ? shadow_tmax : FLOAT_MAX, shadow);
+            if (shadow) {
+                if (!h.valid) tr = vec3(1.0);
+                break;
+            }
+            hit = h;
+            event = hit.valid ? EVENT_SURFACE : EVENT_ESCAPE;
         }
-    } else {
-        hit = bvh_closest_hit(st.ray, 0.0, FLOAT_MAX);
-        event = hit.valid ? EVENT_SURFACE : EVENT_ESCAPE;
-    }
-    if (event == EVENT_LOST) {
-        ended = true;
-    } else if (HAS(F_MEDIA) && event == EVENT_MEDIUM) {
-        // ---- a real collision in the medium: NEE through media, phase sampling, roulette ----
-        if (vertex >= globals.max_depth || !(max_component(st.throughput) > 0.0)) {
+        if (event == EVENT_LOST) {
+            ended = true;
+        } else if (HAS(F_MEDIA) && event == EVENT_MEDIUM) {
+            // ---- a real collision in the medium: NEE through media, phase sampling, roulette ----
+            if (vertex >= globals.max_depth || !(max_component(st.throughput) > 0.0)) {
+                ended = true;
+            } else {
+                uint m = st.medium;
+                vec3 d = st.ray.dir;
+                vec3 x = x_medium;
+                if (nee) {
+                    vec4 u_em = draw_block(st.key1, st.pixel, st.sample_index, vertex, DIM_EMITTER_SELECT / 4u);
+                    EmitterSample es = sample_emitter(u_em[DIM_EMITTER_SELECT % 4u], vec2(u_em[DIM_EMITTER_POS % 4u], u_em[DIM_EMITTER_POS % 4u + 1u]));
+                    if (es.valid) {
+                        vec3 wl;
+                        float p_e;
+                        float shadow_tmax;
+                        if (HAS(F_ENV) && es.environment) {
+                            wl = es.point;
+                            p_e = environment_pdf();
+                            shadow_tmax = FLOAT_MAX;
+                        } else {
+                            vec3 to_light = es.point - x;
+                            float dist = length(to_light);
+                            wl = to_light / dist;
+                            p_e = emitter_pdf_solid_angle(dist, dot(es.normal, -wl));
+                            shadow_tmax = dist * (1.0 - SHADOW_EPSILON);
+                        }
+                        float f = phase_eval(m, d, wl);
+                        if (p_e > 0.0 && f > 0.0) {
+                            float w_n = mis_power(p_e, f);
+                            vec3 w_tr = st.adj * st.throughput * w_n * f * es.radiance / p_e;
+                            vec3 tr = nee_transmittance(m, x, wl, shadow_tmax, uvec2(globals.key0, st.key1), st.pixel, st.sample_index, vertex, adjoint, w_tr);
+                            st.radiance += sign * (st.throughput * tr * w_n * f * es.radiance / p_e);
+                            if (adjoint && max_component(tr) > 0.0) {
+                                phase_grad(m, d, wl, w_tr * tr / f);
+                                if (es.environment ? HAS(G_ENV) : HAS(G_EMISSION)) {
+                                    gt.nee_param = es.param;
+                                    gt.nee = st.adj * st.throughput * tr * w_n * f / p_e;
+                                }
+                            }
+                        }
+                    }
+                }
+                vec4 u_ph = draw_block(st.key1, st.pixel, st.sample_index, vertex, DIM_LOBE / 4u);
+                vec3 wo = phase_sample(m, d, vec2(u_ph[DIM_DIRECTION % 4u], u_ph[DIM_DIRECTION % 4u + 1u]));
+                float pdf = phase_eval(m, d, wo);
+                if (!(pdf > 0.0)) {
+                    ended = true;
+                } else {
+                    // The sample's density is the phase function itself: the weight f/pdf is 1; its
+                    // attached numerator f still has a derivative (through g).
+                    if (adjoint) phase_grad(m, d, wo, st.adj * st.radiance / pdf);
+                    st.prev_pdf_f = pdf;
+                    st.prev_nee = nee;
+                    st.prev_sum = 1.0;
+                    if (!path_survives(st, vertex)) ended = true; else st.ray = make_ray(x, wo);
+                }
+            }
+        } else if (event == EVENT_ESCAPE) {
+            // ---- environment hit ----
+            if (HAS(F_ENV) && globals.env_param != NO_PARAM) {
+                float w_b = hit_weight(diff, st.prev_nee, st.prev_pdf_f, environment_pdf(), st.prev_sum);
+                st.radiance += sign * (st.throughput * w_b * param_rgb(globals.env_param));
+                if (HAS(G_ENV)) { gt.hit_param = globals.env_param; gt.hit = st.adj * st.throughput * w_b; }
+            }
             ended = true;
         } else {
-            uint m = st.medium;
-            vec3 d = st.ray.dir;
-            vec3 x = x_medium;
-            if (nee) {
-                vec4 u_em = draw_block(st.key1, st.pixel, st.sample_index, vertex, DIM_EMITTER_SELECT / 4u);
-                EmitterSample es = sample_emitter(u_em[DIM_EMITTER_SELECT % 4u], vec2(u_em[DIM_EMITTER_POS % 4u], u_em[DIM_EMITTER_POS % 4u + 1u]));
-                if (es.valid) {
-                    vec3 wl;
-                    float p_e;
-                    float shadow_tmax;
-                    if (HAS(F_ENV) && es.environment) {
-                        wl = es.point;
-                        p_e = environment_pdf();
-                        shadow_tmax = FLOAT_MAX;
-                    } else {
-                        vec3 to_light = es.point - x;
-                        float dist = length(to_light);
-                        wl = to_light / dist;
-                        p_e = emitter_pdf_solid_angle(dist, dot(es.normal, -wl));
-                        shadow_tmax = dist * (1.0 - SHADOW_EPSILON);
-                    }
-                    float f = phase_eval(m, d, wl);
-                    if (p_e > 0.0 && f > 0.0) {
-                        float w_n = mis_power(p_e, f);
-                        vec3 w_tr = st.adj * st.throughput * w_n * f * es.radiance / p_e;
-                        vec3 tr = nee_transmittance(m, x, wl, shadow_tmax, uvec2(globals.key0, st.key1), st.pixel, st.sample_index, vertex, adjoint, w_tr);
-                        st.radiance += sign * (st.throughput * tr * w_n * f * es.radiance / p_e);
-                        if (adjoint && max_component(tr) > 0.0) {
-                            phase_grad(m, d, wl, w_tr * tr / f);
-                            if (es.environment ? HAS(G_ENV) : HAS(G_EMISSION)) {
-                                gt.nee_param = es.param;
-                                gt.nee = st.adj * st.throughput * tr * w_n * f / p_e;
+            s = surface_at(hit);
+            vec3 wi_world = -st.ray.dir;
+
+            // ---- emitter hit ----
+            float cos_emit = dot(s.ng, wi_world);
+            if (HAS(F_EMITTERS) && s.emitter != NO_EMITTER && cos_emit > 0.0) {
+                float w_b = hit_weight(diff, st.prev_nee, st.prev_pdf_f, emitter_pdf_solid_angle(travelled + hit.t, cos_emit), st.prev_sum);
+                uint p_radiance = emitters[s.emitter].p_radiance;
+                st.radiance += sign * (st.throughput * w_b * param_rgb(p_radiance));
+                if (HAS(G_EMISSION)) { gt.hit_param = p_radiance; gt.hit = st.adj * st.throughput * w_b; }
+            }
+            if (vertex >= globals.max_depth) {
+                ended = true;
+            } else {
+                shade = true;
+                bsdf = resolve_bsdf(s.material, s.uv);
+                // A two-sided material seen from the back shades with the flipped normal.
+                if (HAS(F_TWO_SIDED) && materials[s.material].two_sided != 0u && dot(s.ns, wi_world) < 0.0) s.ns = -s.ns;
+                frame = shading_frame(s.ns);
+                wi = to_local(frame, wi_world);
+                gt.material = s.material;
+                gt.uv = s.uv;
+
+                capable = diff && material_capable(s.material);
+
+                // ---- emitter sampling: the sample and its unoccluded terms; the shadow ray is pass 1's ----
+                if (nee) {
+                    vec4 u_em = draw_block(st.key1, st.pixel, st.sample_index, vertex, DIM_EMITTER_SELECT / 4u);
+                    es = sample_emitter(u_em[DIM_EMITTER_SELECT % 4u], vec2(u_em[DIM_EMITTER_POS % 4u], u_em[DIM_EMITTER_POS % 4u + 1u]));
+                    if (es.valid) {
+                        vec3 wl;
+                        vec3 origin;
+                        if (HAS(F_ENV) && es.environment) {
+                            wl = es.point;
+                            origin = offset_origin(s.p, s.ng, wl);
+                            nee_pdf = environment_pdf();
+                            shadow_tmax = FLOAT_MAX;
+                        } else {
+                            origin = offset_origin(s.p, s.ng, es.point - s.p);
+                            vec3 to_light = es.point - origin;
+                            float dist = length(to_light);
+                            wl = to_light / dist;
+                            nee_pdf = emitter_pdf_solid_angle(dist, dot(es.normal, -wl));
+                            shadow_tmax = dist * (1.0 - SHADOW_EPSILON);
+                        }
+                        nee_wo = to_local(frame, wl);
+                        nee_f = bsdf_eval(bsdf, wi, nee_wo);
+                        if (nee_pdf > 0.0 && max_component(nee_f) > 0.0) {
+                            float pdf_f = bsdf_pdf(bsdf, wi, nee_wo);
+                            if (!diff) {
+                                nee_w = mis_power(nee_pdf, pdf_f);
+                            } else {
+                                // Appendix B: the NEE direction as produced by BSDF or differential sampling here.
+                                float q_here = capable ? globals.diff_q : 0.0;
+                                float pdf_d = capable ? bsdf_pdf_diff(bsdf, wi, nee_wo) : pdf_f;
+                                nee_w = 1.0 / (st.w1 + st.w2 + (st.w1 * pdf_f + q_here * st.w2 * pdf_d + (1.0 - q_here) * st.w2 * pdf_f) / nee_pdf);
+                            }
+                            if (HAS(F_MEDIA)) {
+                                vec3 w_tr = st.adj * st.throughput * nee_w * nee_f * es.radiance / nee_pdf;
+                                tr = nee_transmittance(st.medium, origin, wl, shadow_tmax, uvec2(globals.key0, st.key1), st.pixel, st.sample_index, vertex, adjoint, w_tr);
+                            } else {
+                                shadow_ray = make_ray(origin, wl);
+                                shadow_query = true;
                             }
                         }
                     }
                 }
             }
-            vec4 u_ph = draw_block(st.key1, st.pixel, st.sample_index, vertex, DIM_LOBE / 4u);
-            vec3 wo = phase_sample(m, d, vec2(u_ph[DIM_DIRECTION % 4u], u_ph[DIM_DIRECTION % 4u + 1u]));
-            float pdf = phase_eval(m, d, wo);
-            if (!(pdf > 0.0)) {
-                ended = true;
-            } else {
-                // The sample's density is the phase function itself: the weight f/pdf is 1; its
-                // attached numerator f still has a derivative (through g).
-                if (adjoint) phase_grad(m, d, wo, st.adj * st.radiance / pdf);
-                st.prev_pdf_f = pdf;
-                st.prev_nee = nee;
-                st.prev_sum = 1.0;
-                if (!path_survives(st, vertex)) ended = true; else st.ray = make_ray(x, wo);
+        }
+        if (!shadow_query) break;
+    }
+
+    if (shade) {
+        // ---- NEE's contribution, now that its transmittance is known ----
+        if (max_component(tr) > 0.0) {
+            st.radiance += sign * (st.throughput * tr * nee_w * nee_f * es.radiance / nee_pdf);
+            grad_wo[0] = nee_wo;
+            grad_adj[0] = st.adj * st.throughput * tr * nee_w * es.radiance / nee_pdf;
+            if (es.environment ? HAS(G_ENV) : HAS(G_EMISSION)) {
+                gt.nee_param = es.param;
+                gt.nee = st.adj * st.throughput * tr * nee_w * nee_f / nee_pdf;
             }
         }
-    } else if (event == EVENT_ESCAPE) {
-        // ---- environment hit ----
-        if (HAS(F_ENV) && globals.env_param != NO_PARAM) {
-            float w_b = hit_weight(diff, st.prev_nee, st.prev_pdf_f, environment_pdf(), st.prev_sum);
-            st.radiance += sign * (st.throughput * w_b * param_rgb(globals.env_param));
-            if (HAS(G_ENV)) { gt.hit_param = globals.env_param; gt.hit = st.adj * st.throughput * w_b; }
-        }
-        ended = true;
-    } else {
-        Surface s = surface_at(hit);
-        vec3 wi_world = -st.ray.dir;
 
-        // ---- emitter hit ----
-        float cos_emit = dot(s.ng, wi_world);
-        if (HAS(F_EMITTERS) && s.emitter != NO_EMITTER && cos_emit > 0.0) {
-            float w_b = hit_weight(diff, st.prev_nee, st.prev_pdf_f, emitter_pdf_solid_angle(travelled + hit.t, cos_emit), st.prev_sum);
-            uint p_radiance = emitters[s.emitter].p_radiance;
-            st.radiance += sign * (st.throughput * w_b * param_rgb(p_radiance));
-            if (HAS(G_EMISSION)) { gt.hit_param = p_radiance; gt.hit = st.adj * st.throughput * w_b; }
+        // ---- BSDF or differential sampling ----
+        vec4 u_bs = draw_block(st.key1, st.pixel, st.sample_index, vertex, DIM_LOBE / 4u);
+        float u_lobe = u_bs[DIM_LOBE % 4u];
+        vec2 u_dir = vec2(u_bs[DIM_DIRECTION % 4u], u_bs[DIM_DIRECTION % 4u + 1u]);
+        bool use_dx = capable && !st.dx_taken && u_bs[DIM_TECHNIQUE % 4u] < globals.diff_q;
+        BsdfSample bs;
+        float pdf_f;
+        float pdf_d = 0.0;
+        if (use_dx) {
+            float u_sign = draw_block(st.key1, st.pixel, st.sample_index, vertex, DIM_DIFF_SIGN / 4u)[DIM_DIFF_SIGN % 4u];
+            bs = bsdf_sample_diff(bsdf, wi, u_sign, u_lobe, u_dir);
+            pdf_d = bs.pdf;
+            pdf_f = bs.valid ? bsdf_pdf(bsdf, wi, bs.wo) : 0.0;
+        } else {
+            bs = bsdf_sample(bsdf, wi, u_lobe, u_dir);
+            pdf_f = bs.pdf;
+            if (capable && bs.valid) pdf_d = bsdf_pdf_diff(bsdf, wi, bs.wo);
         }
-        if (vertex >= globals.max_depth) {
+        // An invalid differential sample ends the path unmarked (ALGORITHMS.md §5.5 ruling 3).
+        if (!bs.valid || !(pdf_f > 0.0)) {
             ended = true;
         } else {
-            bsdf = resolve_bsdf(s.material, s.uv);
-            // A two-sided material seen from the back shades with the flipped normal.
-            if (HAS(F_TWO_SIDED) && materials[s.material].two_sided != 0u && dot(s.ns, wi_world) < 0.0) s.ns = -s.ns;
-            ShadingFrame frame = shading_frame(s.ns);
-            wi = to_local(frame, wi_world);
-            gt.material = s.material;
-            gt.uv = s.uv;
-
-            bool capable = diff && material_capable(s.material);
-
-            // ---- emitter sampling ----
-            if (nee) {
-                vec4 u_em = draw_block(st.key1, st.pixel, st.sample_index, vertex, DIM_EMITTER_SELECT / 4u);
-                EmitterSample es = sample_emitter(u_em[DIM_EMITTER_SELECT % 4u], vec2(u_em[DIM_EMITTER_POS % 4u], u_em[DIM_EMITTER_POS % 4u + 1u]));
-                if (es.valid) {
-                    vec3 wl;
-                    float p_e;
-                    float shadow_tmax;
-                    vec3 origin;
-                    if (HAS(F_ENV) && es.environment) {
-                        wl = es.point;
-                        origin = offset_origin(s.p, s.ng, wl);
-                        p_e = environment_pdf();
-                        shadow_tmax = FLOAT_MAX;
-                    } else {
-                        origin = offset_origin(s.p, s.ng, es.point - s.p);
-                        vec3 to_light = es.point - origin;
-                        float dist = length(to_light);
-                        wl = to_light / dist;
-                        p_e = emitter_pdf_solid_angle(dist, dot(es.normal, -wl));
-                        shadow_tmax = dist * (1.0 - SHADOW_EPSILON);
-                    }
-                    vec3 wo = to_local(frame, wl);
-                    vec3 f = bsdf_eval(bsdf, wi, wo);
-                    vec3 tr = vec3(0.0);
-                    float w_n = 0.0;
-                    if (p_e > 0.0 && max_component(f) > 0.0) {
-                        float pdf_f = bsdf_pdf(bsdf, wi, wo);
-                        if (!diff) {
-                            w_n = mis_power(p_e, pdf_f);
-                        } else {
-                            // Appendix B: the NEE direction as produced by BSDF or differential sampling here.
-                            float q_here = capable ? globals.diff_q : 0.0;
-                            float pdf_d = capable ? bsdf_pdf_diff(bsdf, wi, wo) : pdf_f;
-                            w_n = 1.0 / (st.w1 + st.w2 + (st.w1 * pdf_f + q_here * st.w2 * pdf_d + (1.0 - q_here) * st.w2 * pdf_f) / p_e);
-                        }
-                        if (HAS(F_MEDIA)) {
-                            vec3 w_tr = st.adj * st.throughput * w_n * f * es.radiance / p_e;
-                            tr = nee_transmittance(st.medium, origin, wl, shadow_tmax, uvec2(globals.key0, st.key1), st.pixel, st.sample_index, vertex, adjoint, w_tr);
-                        } else if (!bvh_occluded(make_ray(origin, wl), 0.0, shadow_tmax)) {
-                            tr = vec3(1.0);
-                        }
-                    }
-                    if (max_component(tr) > 0.0) {
-                        st.radiance += sign * (st.throughput * tr * w_n * f * es.radiance / p_e);
-                        grad_wo[0] = wo;
-                        grad_adj[0] = st.adj * st.throughput * tr * w_n * es.radiance / p_e;
-                        if (es.environment ? HAS(G_ENV) : HAS(G_EMISSION)) {
-                            gt.nee_param = es.param;
-                            gt.nee = st.adj * st.throughput * tr * w_n * f / p_e;
-                        }
-                    }
+            st.throughput *= bs.value / pdf_f;
+            st.prev_pdf_f = pdf_f;
+            st.prev_nee = nee;
+            st.prev_sum = st.w1 + st.w2;
+            if (capable) {
+                st.w1 += globals.diff_q * st.w2 * pdf_d / pdf_f;
+                st.w2 *= 1.0 - globals.diff_q;
+                float sum = st.w1 + st.w2;
+                if (!(sum > 0.0)) {
+                    ended = true;
+                } else {
+                    st.w1 /= sum;
+                    st.w2 /= sum;
+                    st.throughput /= sum;
+                    st.prev_sum /= sum;
                 }
             }
+            st.dx_taken = st.dx_taken || use_dx;
 
-            // ---- BSDF or differential sampling ----
-            vec4 u_bs = draw_block(st.key1, st.pixel, st.sample_index, vertex, DIM_LOBE / 4u);
-            float u_lobe = u_bs[DIM_LOBE % 4u];
-            vec2 u_dir = vec2(u_bs[DIM_DIRECTION % 4u], u_bs[DIM_DIRECTION % 4u + 1u]);
-            bool use_dx = capable && !st.dx_taken && u_bs[DIM_TECHNIQUE % 4u] < globals.diff_q;
-            BsdfSample bs;
-            float pdf_f;
-            float pdf_d = 0.0;
-            if (use_dx) {
-                float u_sign = draw_block(st.key1, st.pixel, st.sample_index, vertex, DIM_DIFF_SIGN / 4u)[DIM_DIFF_SIGN % 4u];
-                bs = bsdf_sample_diff(bsdf, wi, u_sign, u_lobe, u_dir);
-                pdf_d = bs.pdf;
-                pdf_f = bs.valid ? bsdf_pdf(bsdf, wi, bs.wo) : 0.0;
-            } else {
-                bs = bsdf_sample(bsdf, wi, u_lobe, u_dir);
-                pdf_f = bs.pdf;
-                if (capable && bs.valid) pdf_d = bsdf_pdf_diff(bsdf, wi, bs.wo);
-            }
-            // An invalid differential sample ends the path unmarked (ALGORITHMS.md §5.5 ruling 3).
-            if (!bs.valid || !(pdf_f > 0.0)) {
-                ended = true;
-            } else {
-                st.throughput *= bs.value / pdf_f;
-                st.prev_pdf_f = pdf_f;
-                st.prev_nee = nee;
-                st.prev_sum = st.w1 + st.w2;
-                if (capable) {
-                    st.w1 += globals.diff_q * st.w2 * pdf_d / pdf_f;
-                    st.w2 *= 1.0 - globals.diff_q;
-                    float sum = st.w1 + st.w2;
-                    if (!(sum > 0.0)) {
-                        ended = true;
-                    } else {
-                        st.w1 /= sum;
-                        st.w2 /= sum;
-                        st.throughput /= sum;
-                        st.prev_sum /= sum;
-                    }
-                }
-                st.dx_taken = st.dx_taken || use_dx;
-
-                // ---- Russian roulette ----
-                if (!ended && !path_survives(st, vertex)) ended = true;
-                if (!ended) {
-                    // The path continues: everything later in `radiance` carries the factor f̂(wi, wo).
-                    grad_wo[1] = bs.wo;
-                    grad_adj[1] = st.adj * safe_div(st.radiance, bs.value);
-                    vec3 wo_world = to_world(frame, bs.wo);
-                    st.ray = make_ray(offset_origin(s.p, s.ng, wo_world), wo_world);
-                }
+            // ---- Russian roulette ----
+            if (!ended && !path_survives(st, vertex)) ended = true;
+            if (!ended) {
+                // The path continues: everything later in `radiance` carries the factor f̂(wi, wo).
+                grad_wo[1] = bs.wo;
+                grad_adj[1] = st.adj * safe_div(st.radiance, bs.value);
+                vec3 wo_world = to_world(frame, bs.wo);
+                st.ray = make_ray(offset_origin(s.p, s.ng, wo_world), wo_world);
             }
         }
     }

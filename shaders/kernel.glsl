@@ -84,9 +84,14 @@ void main() {
     uint taken = 0u;
     bool in_flight = false;
     vec3 sum = vec3(0.0);     // the item's radiance (primal) or derivative (forward), in sample order
-#if ADJOINT_KERNEL
-    vec3 total = vec3(0.0);   // the primal radiance of the path being replayed
-#endif
+    vec3 total = vec3(0.0);   // the primal radiance of the path being replayed (adjoint kernels)
+    // Every path starts at the top of an iteration, from these: one inlined path_begin (its camera
+    // loads and random numbers) serves a new item, its next sample and a replay alike.
+    bool begin = false;
+    bool begin_adjoint = false;
+    uint begin_view = 0u;
+    uint begin_pixel = 0u;
+    vec3 begin_adj = vec3(0.0);
     // The flag is set only where the loop ends for its own reason, so a driver's silent loop
     // truncation (PLATFORM.md §6.1) is reported; the bound is never reached otherwise.
     bool finished = false;
@@ -96,8 +101,7 @@ void main() {
             uint item = atomicAdd(work_next, 1u);
             if (item >= item_count) { finished = true; break; }
             taken++;
-            uint view, pixel;
-            if (!item_pixel(item, view, pixel)) continue;
+            if (!item_pixel(item, begin_view, begin_pixel)) continue;
 #if PIXEL_SELECT
             sample_index = sample_begin + item;
 #else
@@ -105,8 +109,13 @@ void main() {
 #endif
             samples_left = sample_count;
             sum = vec3(0.0);
-            st = path_begin(view, pixel, sample_index, false, vec3(0.0), vec3(0.0));
+            begin = true;
+            begin_adjoint = false;
             in_flight = true;
+        }
+        if (begin) {
+            st = path_begin(begin_view, begin_pixel, sample_index, begin_adjoint, begin_adjoint ? begin_adj : vec3(0.0), total);
+            begin = false;
         }
         if (!path_step(st)) continue;
         uint view = st.view;
@@ -115,8 +124,11 @@ void main() {
 #if ADJOINT_KERNEL
         if (!st.adjoint && !(PRIMAL_ON_REVERSE != 0 && globals.primal_only != 0u)) {
             total = st.radiance;
-            vec3 adj = vec3(adjoint_image[at], adjoint_image[at + 1u], adjoint_image[at + 2u]) * globals.adjoint_scale;
-            st = path_begin(view, pixel, sample_index, true, adj, total);
+            begin_adj = vec3(adjoint_image[at], adjoint_image[at + 1u], adjoint_image[at + 2u]) * globals.adjoint_scale;
+            begin_adjoint = true;
+            begin_view = view;
+            begin_pixel = pixel;
+            begin = true;
             continue;
         }
         if (st.adjoint && any(greaterThan(abs(st.radiance), REPLAY_RESIDUAL_TOLERANCE * (abs(total) + vec3(1e-6))))) raise_status(STATUS_REPLAY_RESIDUAL);
@@ -132,7 +144,10 @@ void main() {
         samples_left--;
         if (samples_left > 0u) {
             sample_index++;
-            st = path_begin(view, pixel, sample_index, false, vec3(0.0), vec3(0.0));
+            begin_adjoint = false;
+            begin_view = view;
+            begin_pixel = pixel;
+            begin = true;
             continue;
         }
         in_flight = false;
