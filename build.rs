@@ -103,6 +103,14 @@ const GENERATED_CONTRACT: &str = "generated/contract.glsl";
 /// libraries of the spirv-tools package, found through pkg-config's libdir).
 fn specialiser() {
     println!("cargo:rerun-if-changed=native/specialise.cpp");
+    // The specialiser's own source is part of its cache key (src/gpu/specialise.rs): a changed pass
+    // list must not read modules that an older one wrote.
+    let source = std::fs::read("native/specialise.cpp").expect("native/specialise.cpp is readable");
+    let mut hash = 0xcbf2_9ce4_8422_2325u64;
+    for b in source {
+        hash = (hash ^ u64::from(b)).wrapping_mul(0x0000_0100_0000_01b3);
+    }
+    println!("cargo:rustc-env=PATHGRAD_SPECIALISER_HASH={hash:016x}");
     cc::Build::new()
         .cpp(true)
         .std("c++17")
@@ -145,8 +153,10 @@ fn main() {
         let mut opts = shaderc::CompileOptions::new().expect("shaderc options could not be created");
         opts.set_target_env(shaderc::TargetEnv::Vulkan, shaderc::EnvVersion::Vulkan1_2 as u32);
         opts.set_target_spirv(shaderc::SpirvVersion::V1_5);
+        // No debug information: the host specialiser (src/gpu/specialise.rs) parses every kernel
+        // at first use, and names and line records made the module 40 % larger and its work
+        // ~0.15 s longer.
         opts.set_optimization_level(shaderc::OptimizationLevel::Performance);
-        opts.set_generate_debug_info();
         for (macro_name, value) in &macros {
             // Integers stay plain, so `#if` can compare them; GLSL converts them to uint where needed.
             opts.add_macro_definition(macro_name, Some(value));

@@ -5,7 +5,7 @@
 //! The driver could apply the specialisation constant itself, but lavapipe first parses and
 //! optimises the whole module — every feature's code, ~23 000 instructions for the adjoint kernel
 //! — which took ~0.6 s per pipeline even with a warm shader cache. A specialised module (~5 700
-//! instructions) is created in ~0.1 s (BENCHMARKS.md). Specialising takes ~0.8 s, once per
+//! instructions) is created in ~0.1 s (BENCHMARKS.md). Specialising takes ~0.4 s, once per
 //! variant and build on a machine; the cache keeps it from the processes after. The optimizer
 //! reorders no floating-point arithmetic, so images are bitwise the same either way (a test renders
 //! both). `PATHGRAD_SPECIALISE=0` leaves the specialisation to the driver.
@@ -23,6 +23,7 @@ unsafe extern "C" {
         out_count: *mut usize,
     ) -> std::ffi::c_int;
     fn pathgrad_free_spirv(words: *mut u32);
+    fn pathgrad_spirv_tools_version() -> *const std::ffi::c_char;
 }
 
 /// SPIR-V's magic number, the first word of every module.
@@ -72,10 +73,18 @@ fn fnv(parts: &[&[u8]]) -> u64 {
     h
 }
 
-/// The cache key: a hash of the module and the value (content-addressed, so a new build's modules
-/// never meet an old build's entries).
+/// What made a cached module besides its input: the specialiser's source (a hash that build.rs
+/// takes of `native/specialise.cpp`) and the SPIRV-Tools it was linked with.
+fn specialiser_identity() -> Vec<u8> {
+    // SAFETY: the shim returns SPIRV-Tools' static, NUL-terminated version string.
+    let tools = unsafe { std::ffi::CStr::from_ptr(pathgrad_spirv_tools_version()) };
+    [env!("PATHGRAD_SPECIALISER_HASH").as_bytes(), tools.to_bytes()].concat()
+}
+
+/// The cache key: a hash of the module, the value and the specialiser (content-addressed, so a
+/// new build's modules or pass list never meet an old build's entries).
 fn key(words: &[u32], spec_id: u32, value: u32) -> u64 {
-    fnv(&[bytemuck::cast_slice(words), &spec_id.to_le_bytes(), &value.to_le_bytes()])
+    fnv(&[bytemuck::cast_slice(words), &spec_id.to_le_bytes(), &value.to_le_bytes(), &specialiser_identity()])
 }
 
 /// A cache file's bytes: the module, then the hash of its bytes (a damaged file is not used).
