@@ -203,3 +203,44 @@ fn host_specialised_kernels_match_the_drivers_bit_for_bit() {
     assert_eq!((&fresh.1, &fresh.2), (&cached.1, &cached.2));
     assert_eq!((&fresh.1, &fresh.2), (&driver.1, &driver.2));
 }
+
+/// The CLI has lavapipe build 128-bit kernels unless `LP_NATIVE_VECTOR_WIDTH` is set (its `main`);
+/// a render and a deterministic gradient come out bit for bit the same at the driver's own default,
+/// 256 bits (8 lanes; subgroups of 8 instead of 4 in the gradient's reductions).
+#[test]
+fn the_clis_vector_width_changes_no_result() {
+    let dir = tempfile::tempdir().unwrap();
+    let run = |tag: &str, width: Option<&str>| {
+        let out = dir.path().join(format!("{tag}.exr"));
+        let cache = dir.path().join(format!("cache-{tag}"));
+        let command = |c: &mut Command| {
+            c.env("XDG_CACHE_HOME", &cache);
+            match width {
+                Some(w) => c.env("LP_NATIVE_VECTOR_WIDTH", w),
+                None => c.env_remove("LP_NATIVE_VECTOR_WIDTH"),
+            };
+        };
+        let mut c = pathgrad();
+        command(&mut c);
+        let o = c
+            .args(["render", "builtin:cornell-box", "--spp", "2", "--width", "24", "--no-preview", "-o"])
+            .arg(&out)
+            .output()
+            .unwrap();
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        let mut c = pathgrad();
+        command(&mut c);
+        let g = c
+            .args(["grad", "builtin:cornell-box", "--target-set", "sphere.bsdf.alpha.value=0.4", "--param", "sphere.*"])
+            .args(["--spp", "2", "--width", "16", "--json", "--deterministic"])
+            .output()
+            .unwrap();
+        assert!(g.status.success(), "{}", String::from_utf8_lossy(&g.stderr));
+        let v: serde_json::Value = serde_json::from_slice(&g.stdout).unwrap();
+        (std::fs::read(&out).unwrap(), v["loss"].clone(), v["gradients"].clone())
+    };
+    let cli_default = run("default", None);
+    let driver_default = run("w256", Some("256"));
+    assert!(cli_default.0 == driver_default.0, "the images differ");
+    assert_eq!((&cli_default.1, &cli_default.2), (&driver_default.1, &driver_default.2));
+}

@@ -21,6 +21,7 @@ use clap::Parser;
 use cli::{Cli, Command};
 
 fn main() -> ExitCode {
+    lavapipe_vector_width();
     let cli = Cli::parse();
     let default_level = match cli.verbose {
         0 => "warn",
@@ -44,6 +45,17 @@ fn main() -> ExitCode {
             eprintln!("error: {}", error_message(&e));
             ExitCode::FAILURE
         }
+    }
+}
+
+/// lavapipe builds its kernels for 128-bit vectors (4 lanes) unless `LP_NATIVE_VECTOR_WIDTH` says
+/// otherwise: on an AVX2 host that compiles a first kernel in about 60 % of the time of its default
+/// 256 bits, with renders as fast (BENCHMARKS.md). Other drivers ignore the variable.
+fn lavapipe_vector_width() {
+    if std::env::var_os("LP_NATIVE_VECTOR_WIDTH").is_none() {
+        // SAFETY: the first thing `main` does, before any thread exists that could read the
+        // environment at the same time.
+        unsafe { std::env::set_var("LP_NATIVE_VECTOR_WIDTH", "128") };
     }
 }
 
