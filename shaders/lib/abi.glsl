@@ -14,19 +14,16 @@ layout(set = 0, binding = BINDING_GLOBALS, scalar) uniform GlobalsBuf { Globals 
 // The scene's arrays are read through buffer device addresses (GL_EXT_buffer_reference), not
 // storage-buffer bindings: on lavapipe (Mesa 25.0) a storage-buffer load whose index differs per
 // lane is a branchy per-lane scalar sequence with a bounds check per component, while a
-// buffer-reference load is one masked gather per component. The addresses sit in `globals`.
-layout(buffer_reference, scalar, buffer_reference_align = 4) readonly buffer TriArray { TriPositions v[]; };
+// buffer-reference load is one masked gather per component. The addresses sit in `globals`. The
+// triangles and their shading data are read as 64-bit words (lib/bvh.glsl, lib/surface.glsl).
 layout(buffer_reference, scalar, buffer_reference_align = 4) readonly buffer UintArray { uint v[]; };
-layout(buffer_reference, scalar, buffer_reference_align = 4) readonly buffer ShadingArray { TriShading v[]; };
 layout(buffer_reference, scalar, buffer_reference_align = 4) readonly buffer MaterialArray { Material v[]; };
 layout(buffer_reference, scalar, buffer_reference_align = 4) readonly buffer EmitterArray { EmitterTri v[]; };
 layout(buffer_reference, scalar, buffer_reference_align = 4) readonly buffer FloatArray { float v[]; };
 layout(buffer_reference, scalar, buffer_reference_align = 4) readonly buffer ViewArray { ViewCamera v[]; };
 layout(buffer_reference, scalar, buffer_reference_align = 4) readonly buffer MediumArray { MediumDesc v[]; };
 layout(buffer_reference, scalar, buffer_reference_align = 4) readonly buffer FieldArray { FieldDesc v[]; };
-#define tris (TriArray(globals.addr_tris).v)
 #define prim_ids (UintArray(globals.addr_prim_ids).v)
-#define shading (ShadingArray(globals.addr_shading).v)
 #define materials (MaterialArray(globals.addr_materials).v)
 #define emitters (EmitterArray(globals.addr_emitters).v)
 #define params (FloatArray(globals.addr_params).v)

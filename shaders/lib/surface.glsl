@@ -11,19 +11,35 @@
 
 struct Surface { vec3 p; vec3 ng; vec3 ns; vec2 uv; uint material; uint emitter; uint interior; };
 
+// A triangle's shading data (TriShading, 18 words at a stride of 72 bytes) read as nine 64-bit
+// words, like the traversal's nodes and triangles (bvh.glsl): on lavapipe each word read is one
+// gather whatever its width.
+struct ShadingWords { uint64_t w0; uint64_t w1; uint64_t w2; uint64_t w3; uint64_t w4; uint64_t w5; uint64_t w6; uint64_t w7; uint64_t w8; };
+layout(buffer_reference, scalar, buffer_reference_align = 8) readonly buffer ShadingWordArray { ShadingWords v[]; };
+
 Surface surface_at(Hit hit) {
-    TriPositions tri = tris[hit.slot];
-    TriShading sh = shading[prim_ids[hit.slot]];
+    TriPositions tri = load_tri(hit.slot);
+    ShadingWordArray a = ShadingWordArray(globals.addr_shading);
+    uint i = prim_ids[hit.slot];
+    vec2 w0 = word_floats(a.v[i].w0);             // n0.xy
+    vec2 w1 = word_floats(a.v[i].w1);             // n0.z, n1.x
+    vec2 w2 = word_floats(a.v[i].w2);             // n1.yz
+    vec2 w3 = word_floats(a.v[i].w3);             // n2.xy
+    vec2 w4 = word_floats(a.v[i].w4);             // n2.z, uv0.x
+    vec2 w5 = word_floats(a.v[i].w5);             // uv0.y, uv1.x
+    vec2 w6 = word_floats(a.v[i].w6);             // uv1.y, uv2.x
+    uvec2 w7 = unpackUint2x32(a.v[i].w7);         // uv2.y, material
+    uvec2 w8 = unpackUint2x32(a.v[i].w8);         // emitter, interior
     float b0 = 1.0 - hit.b1 - hit.b2;
     Surface s;
     s.p = b0 * tri.v0 + hit.b1 * tri.v1 + hit.b2 * tri.v2;
     s.ng = normalize(cross(tri.v1 - tri.v0, tri.v2 - tri.v0));
-    vec3 n = b0 * sh.n0 + hit.b1 * sh.n1 + hit.b2 * sh.n2;
+    vec3 n = b0 * vec3(w0, w1.x) + hit.b1 * vec3(w1.y, w2) + hit.b2 * vec3(w3, w4.x);
     s.ns = dot(n, n) > 0.0 ? normalize(n) : s.ng;
-    s.uv = b0 * sh.uv0 + hit.b1 * sh.uv1 + hit.b2 * sh.uv2;
-    s.material = sh.material;
-    s.emitter = sh.emitter;
-    s.interior = sh.interior;
+    s.uv = b0 * vec2(w4.y, w5.x) + hit.b1 * vec2(w5.y, w6.x) + hit.b2 * vec2(w6.y, uintBitsToFloat(w7.x));
+    s.material = w7.y;
+    s.emitter = w8.x;
+    s.interior = w8.y;
     return s;
 }
 
