@@ -320,9 +320,9 @@ bool path_step(inout PathState st) {
                             shadow_tmax = dist * (1.0 - SHADOW_EPSILON);
                         }
                         nee_wo = to_local(frame, wl);
-                        nee_f = bsdf_eval(bsdf, wi, nee_wo);
+                        float pdf_f;
+                        nee_f = bsdf_eval_pdf(bsdf, wi, nee_wo, pdf_f);
                         if (nee_pdf > 0.0 && max_component(nee_f) > 0.0) {
-                            float pdf_f = bsdf_pdf(bsdf, wi, nee_wo);
                             if (!diff) {
                                 nee_w = mis_power(nee_pdf, pdf_f);
                             } else {

@@ -48,18 +48,37 @@ float microfacet_d(uint distribution, float alpha, vec3 h) {
     return d * c > D_UNDERFLOW ? d : 0.0;
 }
 
-float microfacet_g1(uint distribution, float alpha, vec3 v, vec3 h) {
-    if (dot(v, h) * v.z <= 0.0) return 0.0;
+// Smith's G1 and its ∂/∂α (ALGORITHMS.md §4.2) from one evaluation: ∂G1/∂α is 0 where G1 is
+// constant (masked, or at normal incidence).
+void microfacet_g1_and_dalpha(uint distribution, float alpha, vec3 v, vec3 h, out float g1, out float dg1) {
+    g1 = 0.0;
+    dg1 = 0.0;
+    if (dot(v, h) * v.z <= 0.0) return;
     float tan2 = tan2_theta(v);
-    if (tan2 == 0.0) return 1.0;
+    if (tan2 == 0.0) {
+        g1 = 1.0;
+        return;
+    }
     float s2 = alpha * alpha * tan2;
     if (is_beckmann(distribution)) {
-        // Exact Smith Λ (not the rational fit): see src/bsdf/rough_conductor.rs.
+        // Exact Smith Λ (not the rational fit): see src/bsdf/rough_conductor.rs. a > 0, so erf
+        // takes the exponential that Λ and the derivative use.
         float a = 1.0 / sqrt(s2);
-        float lambda = 0.5 * (erf_approx(a) - 1.0) + exp(-a * a) / (2.0 * a * sqrt(PI));
-        return 1.0 / (1.0 + lambda);
+        float e = exp(-a * a);
+        float lambda = 0.5 * (erf_nonnegative(a, e) - 1.0) + e / (2.0 * a * sqrt(PI));
+        g1 = 1.0 / (1.0 + lambda);
+        dg1 = -g1 * g1 * e / (2.0 * a * alpha * sqrt(PI));
+        return;
     }
-    return 2.0 / (1.0 + sqrt(1.0 + s2));
+    float root = sqrt(1.0 + s2);
+    g1 = 2.0 / (1.0 + root);
+    dg1 = -2.0 * (alpha * tan2 / root) / ((1.0 + root) * (1.0 + root));
+}
+
+float microfacet_g1(uint distribution, float alpha, vec3 v, vec3 h) {
+    float g1, dg1;
+    microfacet_g1_and_dalpha(distribution, alpha, v, h, g1, dg1);
+    return g1;
 }
 
 vec3 fresnel_conductor(float c, vec3 eta, vec3 k) {
@@ -74,18 +93,22 @@ vec3 fresnel_conductor(float c, vec3 eta, vec3 k) {
     return (rs + rp) * 0.5;
 }
 
-vec3 microfacet_eval(Leaf l, vec3 wi, vec3 wo) {
+// f̂ and the solid-angle density of wo, sharing D and G1(wi): one evaluation where the path needs
+// both (NEE's direction, a sampled direction).
+vec3 microfacet_eval_pdf(Leaf l, vec3 wi, vec3 wo, out float pdf) {
+    pdf = 0.0;
     if (wi.z <= 0.0 || wo.z <= 0.0) return vec3(0.0);
     vec3 h = normalize(wi + wo);
     float d = microfacet_d(l.distribution, l.alpha, h);
+    float gi = microfacet_g1(l.distribution, l.alpha, wi, h);
+    if (dot(wi, h) > 0.0 && dot(wo, h) > 0.0) pdf = d * gi / (4.0 * wi.z);
     if (d == 0.0) return vec3(0.0);
-    float g = microfacet_g1(l.distribution, l.alpha, wi, h) * microfacet_g1(l.distribution, l.alpha, wo, h);
+    float g = gi * microfacet_g1(l.distribution, l.alpha, wo, h);
     return fresnel_conductor(dot(wi, h), l.eta, l.k) * l.color * (d * g / (4.0 * wi.z));
 }
 
-// ∂D/∂α (ALGORITHMS.md §4.2); 0 where the underflow guard zeroes D.
-float microfacet_d_dalpha(uint distribution, float alpha, vec3 h) {
-    float d = microfacet_d(distribution, alpha, h);
+// ∂D/∂α (ALGORITHMS.md §4.2) given d = D(h); 0 where the underflow guard zeroes D.
+float microfacet_d_dalpha_of(uint distribution, float alpha, vec3 h, float d) {
     if (d == 0.0) return 0.0;
     float t = (h.x * h.x + h.y * h.y) / (h.z * h.z);
     float a2 = alpha * alpha;
@@ -93,19 +116,8 @@ float microfacet_d_dalpha(uint distribution, float alpha, vec3 h) {
     return d * 2.0 * (t - a2) / (alpha * (a2 + t));
 }
 
-// ∂G1/∂α of microfacet_g1; 0 where G1 is constant (masked, or at normal incidence).
-float microfacet_g1_dalpha(uint distribution, float alpha, vec3 v, vec3 h) {
-    if (dot(v, h) * v.z <= 0.0) return 0.0;
-    float tan2 = tan2_theta(v);
-    if (tan2 == 0.0) return 0.0;
-    float s2 = alpha * alpha * tan2;
-    if (is_beckmann(distribution)) {
-        float a = 1.0 / sqrt(s2);
-        float g1 = microfacet_g1(distribution, alpha, v, h);
-        return -g1 * g1 * exp(-a * a) / (2.0 * a * alpha * sqrt(PI));
-    }
-    float root = sqrt(1.0 + s2);
-    return -2.0 * (alpha * tan2 / root) / ((1.0 + root) * (1.0 + root));
+float microfacet_d_dalpha(uint distribution, float alpha, vec3 h) {
+    return microfacet_d_dalpha_of(distribution, alpha, h, microfacet_d(distribution, alpha, h));
 }
 
 // f̂ = F · specular · scalar with scalar = D G1 G1 / (4 cos θi); also ∂scalar/∂α.
@@ -117,22 +129,14 @@ void microfacet_eval_parts(Leaf l, vec3 wi, vec3 wo, out vec3 f, out float scala
     vec3 h = normalize(wi + wo);
     float d = microfacet_d(l.distribution, l.alpha, h);
     if (d == 0.0) return;
-    float gi = microfacet_g1(l.distribution, l.alpha, wi, h);
-    float go = microfacet_g1(l.distribution, l.alpha, wo, h);
-    float dd = microfacet_d_dalpha(l.distribution, l.alpha, h);
-    float dgi = microfacet_g1_dalpha(l.distribution, l.alpha, wi, h);
-    float dgo = microfacet_g1_dalpha(l.distribution, l.alpha, wo, h);
+    float gi, dgi, go, dgo;
+    microfacet_g1_and_dalpha(l.distribution, l.alpha, wi, h, gi, dgi);
+    microfacet_g1_and_dalpha(l.distribution, l.alpha, wo, h, go, dgo);
+    float dd = microfacet_d_dalpha_of(l.distribution, l.alpha, h, d);
     float inv = 1.0 / (4.0 * wi.z);
     scalar = d * gi * go * inv;
     dscalar = (dd * gi * go + d * (dgi * go + gi * dgo)) * inv;
     f = fresnel_conductor(dot(wi, h), l.eta, l.k);
-}
-
-float microfacet_pdf(uint distribution, float alpha, vec3 wi, vec3 wo) {
-    if (wi.z <= 0.0 || wo.z <= 0.0) return 0.0;
-    vec3 h = normalize(wi + wo);
-    if (dot(wi, h) <= 0.0 || dot(wo, h) <= 0.0) return 0.0;
-    return microfacet_d(distribution, alpha, h) * microfacet_g1(distribution, alpha, wi, h) / (4.0 * wi.z);
 }
 
 vec2 sample_ggx_slopes(float cos_theta, vec2 u) {
@@ -155,9 +159,10 @@ vec2 sample_beckmann_slopes(float cos_theta, vec2 u) {
     float inv_sqrt_pi = sqrt(INV_PI);
     float tan_theta = sqrt(max(1.0 - cos_theta * cos_theta, 0.0)) / cos_theta;
     float cot_theta = 1.0 / tan_theta;
-    float m = erf_approx(cot_theta);
+    float e = exp(-cot_theta * cot_theta);   // cot θ > 0: erf takes this exponential
+    float m = erf_nonnegative(cot_theta, e);
     float x = m - (m + 1.0) * erf_approx(sqrt(-log(u.x)));
-    float target = u.x * (1.0 + m + inv_sqrt_pi * tan_theta * exp(-cot_theta * cot_theta));
+    float target = u.x * (1.0 + m + inv_sqrt_pi * tan_theta * e);
     // Three Newton steps, written out (no loop spends lavapipe's loop budget).
     float slope = erfinv_approx(x);
     x -= (1.0 + x + inv_sqrt_pi * tan_theta * exp(-slope * slope) - target) / (1.0 - slope * tan_theta);
@@ -191,11 +196,21 @@ bool microfacet_sample(uint distribution, float alpha, vec3 wi, vec2 u, out vec3
 }
 
 // ---- leaves ----
+vec3 leaf_eval_pdf(Leaf l, vec3 wi, vec3 wo, out float pdf) {
+    if (is_diffuse(l.kind)) {
+        pdf = diffuse_pdf(wi, wo);
+        return diffuse_eval(l.color, wi, wo);
+    }
+    return microfacet_eval_pdf(l, wi, wo, pdf);
+}
 vec3 leaf_eval(Leaf l, vec3 wi, vec3 wo) {
-    return is_diffuse(l.kind) ? diffuse_eval(l.color, wi, wo) : microfacet_eval(l, wi, wo);
+    float pdf;
+    return leaf_eval_pdf(l, wi, wo, pdf);
 }
 float leaf_pdf(Leaf l, vec3 wi, vec3 wo) {
-    return is_diffuse(l.kind) ? diffuse_pdf(wi, wo) : microfacet_pdf(l.distribution, l.alpha, wi, wo);
+    float pdf;
+    leaf_eval_pdf(l, wi, wo, pdf);
+    return pdf;
 }
 bool leaf_sample(Leaf l, vec3 wi, vec2 u, out vec3 wo) {
     if (is_diffuse(l.kind)) {
@@ -222,16 +237,31 @@ LeafGrad leaf_eval_grad(Leaf l, vec3 wi, vec3 wo, vec3 adj) {
 // ---- blend (ALGORITHMS.md §4.3) and the whole BSDF ----
 float blend_weight(Bsdf b) { return clamp(b.weight, 0.0, 1.0); }
 
-vec3 bsdf_eval(Bsdf b, vec3 wi, vec3 wo) {
-    if (!HAS(F_BLEND) || !b.blend) return leaf_eval(b.leaf0, wi, wo);
+// f̂ at (wi, wo) and, in `pdf`, the density with which bsdf_sample draws wo: one evaluation of
+// each leaf for both.
+vec3 bsdf_eval_pdf(Bsdf b, vec3 wi, vec3 wo, out float pdf) {
+    float pdf0;
+    vec3 f0 = leaf_eval_pdf(b.leaf0, wi, wo, pdf0);
+    if (!HAS(F_BLEND) || !b.blend) {
+        pdf = pdf0;
+        return f0;
+    }
     float w = blend_weight(b);
-    return leaf_eval(b.leaf0, wi, wo) * (1.0 - w) + leaf_eval(b.leaf1, wi, wo) * w;
+    float pdf1;
+    vec3 f1 = leaf_eval_pdf(b.leaf1, wi, wo, pdf1);
+    pdf = pdf0 * (1.0 - w) + pdf1 * w;
+    return f0 * (1.0 - w) + f1 * w;
+}
+
+vec3 bsdf_eval(Bsdf b, vec3 wi, vec3 wo) {
+    float pdf;
+    return bsdf_eval_pdf(b, wi, wo, pdf);
 }
 
 float bsdf_pdf(Bsdf b, vec3 wi, vec3 wo) {
-    if (!HAS(F_BLEND) || !b.blend) return leaf_pdf(b.leaf0, wi, wo);
-    float w = blend_weight(b);
-    return leaf_pdf(b.leaf0, wi, wo) * (1.0 - w) + leaf_pdf(b.leaf1, wi, wo) * w;
+    float pdf;
+    bsdf_eval_pdf(b, wi, wo, pdf);
+    return pdf;
 }
 
 // ∂(adj · f̂)/∂(every value of b) at (wi, wo); the weight's derivative is f̂1 − f̂0 inside (0, 1).
@@ -250,8 +280,7 @@ BsdfSample bsdf_sample(Bsdf b, vec3 wi, float u_lobe, vec2 u) {
     vec3 wo;
     if (!leaf_sample(leaf, wi, u, wo)) return s;
     s.wo = wo;
-    s.pdf = bsdf_pdf(b, wi, wo);
-    s.value = bsdf_eval(b, wi, wo);
+    s.value = bsdf_eval_pdf(b, wi, wo, s.pdf);
     s.valid = s.pdf > 0.0;
     return s;
 }

@@ -46,12 +46,18 @@ vec2 sample_uniform_triangle(vec2 u) {
     return vec2(u.y * su, su * (1.0 - u.y));
 }
 
+// erf_approx of x ≥ 0 given e = exp(−x·x), for callers that need that exponential themselves (the
+// Beckmann terms): one exp instead of two, and the same value.
+float erf_nonnegative(float x, float e) {
+    float t = 1.0 / (1.0 + 0.3275911 * x);
+    float poly = t * (0.2548296 + t * (-0.28449674 + t * (1.4214138 + t * (-1.453152 + t * 1.0614054))));
+    return 1.0 - poly * e;
+}
+
 // Abramowitz & Stegun 7.1.26 (absolute error below 1.5e-7).
 float erf_approx(float x) {
     float ax = abs(x);
-    float t = 1.0 / (1.0 + 0.3275911 * ax);
-    float poly = t * (0.2548296 + t * (-0.28449674 + t * (1.4214138 + t * (-1.453152 + t * 1.0614054))));
-    float y = 1.0 - poly * exp(-ax * ax);
+    float y = erf_nonnegative(ax, exp(-ax * ax));
     return x < 0.0 ? -y : y;
 }
 
