@@ -131,6 +131,10 @@ void visit_node(uint i, Ray ray, uint octant, float tmin, float tmax, out uvec2 
 // stop at the first hit. The builder bounds the depth to fit the stack; the overflow check stays
 // as a guard.
 Hit bvh_traverse(Ray ray, float tmin, float tmax, bool any_hit) {
+    // The reciprocal direction is taken here, from `dir`, the same values make_ray gives: the
+    // kernel's one traversal site is then its one place that computes it, and the callers' copies
+    // are dead code.
+    ray = make_ray(ray.origin, ray.dir);
     Hit best = Hit(0.0, 0u, 0.0, 0.0, false);
     uint octant = octant_inv4(ray.dir);
     uvec2 stack[BVH_STACK_SIZE - REG_STACK];
