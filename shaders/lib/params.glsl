@@ -45,12 +45,15 @@ void param_grad(uint offset, vec3 by_channel) {
     float value = by_channel.x + by_channel.y + by_channel.z;
     if (value == 0.0) return;
 #if GRAD_MODE == GRAD_MODE_FLOAT
+    // When the whole subgroup adds to one value, one lane adds the subgroup's sum; either way the
+    // adds go through one compare-and-swap loop (one inlined copy for the driver to compile).
+    float amount = value;
+    bool adds = true;
     if (subgroupAllEqual(offset)) {
-        float total = subgroupAdd(value);
-        if (subgroupElect()) atomic_add_float(offset, total);
-    } else {
-        atomic_add_float(offset, value);
+        amount = subgroupAdd(value);
+        adds = subgroupElect();
     }
+    if (adds) atomic_add_float(offset, amount);
 #else
     int64_t add = int64_t(round(value * globals.fixed_scale));
     int64_t before = atomicAdd(grads_fixed[offset], add);
