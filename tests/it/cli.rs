@@ -166,6 +166,35 @@ fn grad_errors_name_what_is_wrong() {
     }
 }
 
+/// A Cornell-box render (24 px wide, 2 spp) to `dir/tag.exr` and a `--deterministic` gradient of
+/// the sphere's parameters, each a CLI process that `configure` sets up: the image's bytes, the
+/// loss and the gradients.
+fn render_and_grad(
+    dir: &std::path::Path,
+    tag: &str,
+    configure: impl Fn(&mut Command),
+) -> (Vec<u8>, serde_json::Value, serde_json::Value) {
+    let out = dir.join(format!("{tag}.exr"));
+    let mut c = pathgrad();
+    configure(&mut c);
+    let o = c
+        .args(["render", "builtin:cornell-box", "--spp", "2", "--width", "24", "--no-preview", "-o"])
+        .arg(&out)
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let mut c = pathgrad();
+    configure(&mut c);
+    let g = c
+        .args(["grad", "builtin:cornell-box", "--target-set", "sphere.bsdf.alpha.value=0.4", "--param", "sphere.*"])
+        .args(["--spp", "2", "--width", "16", "--json", "--deterministic"])
+        .output()
+        .unwrap();
+    assert!(g.status.success(), "{}", String::from_utf8_lossy(&g.stderr));
+    let v: serde_json::Value = serde_json::from_slice(&g.stdout).unwrap();
+    (std::fs::read(&out).unwrap(), v["loss"].clone(), v["gradients"].clone())
+}
+
 /// Kernels specialised on the host (src/gpu/specialise.rs), fresh or from its disk cache, render
 /// and differentiate bit for bit like kernels the driver specialises (`PATHGRAD_SPECIALISE=0`),
 /// and the host's are cached where the cache directory says.
@@ -174,25 +203,9 @@ fn host_specialised_kernels_match_the_drivers_bit_for_bit() {
     let dir = tempfile::tempdir().unwrap();
     let cache = dir.path().join("cache");
     let run = |tag: &str, host: bool| {
-        let out = dir.path().join(format!("{tag}.exr"));
-        let mut c = pathgrad();
-        c.env("XDG_CACHE_HOME", &cache).env("PATHGRAD_SPECIALISE", if host { "1" } else { "0" });
-        let o = c
-            .args(["render", "builtin:cornell-box", "--spp", "2", "--width", "24", "--no-preview", "-o"])
-            .arg(&out)
-            .output()
-            .unwrap();
-        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
-        let mut c = pathgrad();
-        c.env("XDG_CACHE_HOME", &cache).env("PATHGRAD_SPECIALISE", if host { "1" } else { "0" });
-        let g = c
-            .args(["grad", "builtin:cornell-box", "--target-set", "sphere.bsdf.alpha.value=0.4", "--param", "sphere.*"])
-            .args(["--spp", "2", "--width", "16", "--json", "--deterministic"])
-            .output()
-            .unwrap();
-        assert!(g.status.success(), "{}", String::from_utf8_lossy(&g.stderr));
-        let v: serde_json::Value = serde_json::from_slice(&g.stdout).unwrap();
-        (std::fs::read(&out).unwrap(), v["loss"].clone(), v["gradients"].clone())
+        render_and_grad(dir.path(), tag, |c| {
+            c.env("XDG_CACHE_HOME", &cache).env("PATHGRAD_SPECIALISE", if host { "1" } else { "0" });
+        })
     };
     let fresh = run("fresh", true);
     let cached_files = std::fs::read_dir(cache.join("pathgrad/kernels")).map(|d| d.count()).unwrap_or(0);
@@ -211,33 +224,14 @@ fn host_specialised_kernels_match_the_drivers_bit_for_bit() {
 fn the_clis_vector_width_changes_no_result() {
     let dir = tempfile::tempdir().unwrap();
     let run = |tag: &str, width: Option<&str>| {
-        let out = dir.path().join(format!("{tag}.exr"));
         let cache = dir.path().join(format!("cache-{tag}"));
-        let command = |c: &mut Command| {
+        render_and_grad(dir.path(), tag, |c| {
             c.env("XDG_CACHE_HOME", &cache);
             match width {
                 Some(w) => c.env("LP_NATIVE_VECTOR_WIDTH", w),
                 None => c.env_remove("LP_NATIVE_VECTOR_WIDTH"),
             };
-        };
-        let mut c = pathgrad();
-        command(&mut c);
-        let o = c
-            .args(["render", "builtin:cornell-box", "--spp", "2", "--width", "24", "--no-preview", "-o"])
-            .arg(&out)
-            .output()
-            .unwrap();
-        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
-        let mut c = pathgrad();
-        command(&mut c);
-        let g = c
-            .args(["grad", "builtin:cornell-box", "--target-set", "sphere.bsdf.alpha.value=0.4", "--param", "sphere.*"])
-            .args(["--spp", "2", "--width", "16", "--json", "--deterministic"])
-            .output()
-            .unwrap();
-        assert!(g.status.success(), "{}", String::from_utf8_lossy(&g.stderr));
-        let v: serde_json::Value = serde_json::from_slice(&g.stdout).unwrap();
-        (std::fs::read(&out).unwrap(), v["loss"].clone(), v["gradients"].clone())
+        })
     };
     let cli_default = run("default", None);
     let driver_default = run("w256", Some("256"));
