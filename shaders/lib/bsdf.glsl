@@ -3,6 +3,7 @@
 #ifndef PATHGRAD_BSDF_GLSL
 #define PATHGRAD_BSDF_GLSL
 
+#extension GL_EXT_control_flow_attributes : require
 #include "sampling.glsl"
 #include "features.glsl"
 
@@ -163,14 +164,16 @@ vec2 sample_beckmann_slopes(float cos_theta, vec2 u) {
     float m = erf_nonnegative(cot_theta, e);
     float x = m - (m + 1.0) * erf_approx(sqrt(-log(u.x)));
     float target = u.x * (1.0 + m + inv_sqrt_pi * tan_theta * e);
-    // Three Newton steps, written out (no loop spends lavapipe's loop budget).
-    float slope = erfinv_approx(x);
-    x -= (1.0 + x + inv_sqrt_pi * tan_theta * exp(-slope * slope) - target) / (1.0 - slope * tan_theta);
-    slope = erfinv_approx(x);
-    x -= (1.0 + x + inv_sqrt_pi * tan_theta * exp(-slope * slope) - target) / (1.0 - slope * tan_theta);
-    slope = erfinv_approx(x);
-    x -= (1.0 + x + inv_sqrt_pi * tan_theta * exp(-slope * slope) - target) / (1.0 - slope * tan_theta);
-    return vec2(erfinv_approx(x), erfinv_approx(2.0 * u.y - 1.0));
+    // Three Newton steps, then the slope at the result: a loop, so lavapipe compiles one copy of
+    // the inverse erf and the exponential instead of four and three (four iterations a sample are
+    // nothing to the loop budget of a driver that has one, PLATFORM.md §6.1).
+    float slope;
+    [[dont_unroll]] for (uint step = 0u; step < 4u; step++) {
+        slope = erfinv_approx(x);
+        if (step == 3u) break;
+        x -= (1.0 + x + inv_sqrt_pi * tan_theta * exp(-slope * slope) - target) / (1.0 - slope * tan_theta);
+    }
+    return vec2(slope, erfinv_approx(2.0 * u.y - 1.0));
 }
 
 // A reflected direction about a visible normal; valid = false when it falls below the surface.
