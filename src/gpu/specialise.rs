@@ -8,10 +8,11 @@
 //! instructions) is created in ~0.1 s (BENCHMARKS.md). Specialising takes ~0.4 s, once per
 //! variant and build on a machine; the cache keeps it from the processes after. The optimizer
 //! reorders no floating-point arithmetic, so images are bitwise the same either way (a test renders
-//! both). `PATHGRAD_SPECIALISE=0` leaves the specialisation to the driver.
+//! both). `PATHGRAD_SPECIALISE=0` leaves the specialisation to the driver. The cache holds at
+//! most 64 MB; past that the entries used longest ago are removed.
 
-use std::path::PathBuf;
-use std::time::Instant;
+use std::path::{Path, PathBuf};
+use std::time::{Instant, SystemTime};
 
 unsafe extern "C" {
     fn pathgrad_specialise_spirv(
@@ -60,6 +61,37 @@ fn cache_dir() -> Option<PathBuf> {
         .map(PathBuf::from)
         .or_else(|| std::env::var_os("HOME").filter(|v| !v.is_empty()).map(|h| PathBuf::from(h).join(".cache")))?;
     Some(base.join("pathgrad").join("kernels"))
+}
+
+/// The most the kernel cache keeps, in bytes (a specialised module is ~100 KB): entries of older
+/// builds are never read again, so past this the entries used longest ago are removed.
+const CACHE_LIMIT_BYTES: u64 = 64 << 20;
+
+/// Removes the files of `dir` that were used (read or written) longest ago until the rest fit in
+/// `limit` bytes. Best effort: a file that cannot be read or removed is left.
+fn prune(dir: &Path, limit: u64) {
+    let Ok(entries) = std::fs::read_dir(dir) else { return };
+    let mut files: Vec<(SystemTime, u64, PathBuf)> = entries
+        .flatten()
+        .filter_map(|e| {
+            let meta = e.metadata().ok().filter(|m| m.is_file())?;
+            Some((meta.modified().ok()?, meta.len(), e.path()))
+        })
+        .collect();
+    let mut total: u64 = files.iter().map(|f| f.1).sum();
+    if total <= limit {
+        return;
+    }
+    files.sort();
+    for (_, len, path) in files {
+        if total <= limit {
+            break;
+        }
+        if std::fs::remove_file(&path).is_ok() {
+            total -= len;
+            tracing::debug!(file = %path.display(), "old specialised kernel removed from the cache");
+        }
+    }
 }
 
 /// 64-bit FNV-1a.
@@ -112,7 +144,9 @@ pub fn specialised_module(name: &str, words: &[u32], spec_id: u32, value: u32) -
         return None;
     }
     let file = cache_dir().map(|d| d.join(format!("{name}-{value:08x}-{:016x}.spv", key(words, spec_id, value))));
-    if let Some(words) = file.as_ref().and_then(|f| std::fs::read(f).ok()).and_then(|b| from_cache_bytes(&b)) {
+    if let Some((file, words)) = file.as_ref().and_then(|f| Some((f, from_cache_bytes(&std::fs::read(f).ok()?)?))) {
+        // A use keeps an entry young: pruning removes the entries used longest ago.
+        let _ = std::fs::File::options().write(true).open(file).and_then(|f| f.set_modified(SystemTime::now()));
         tracing::debug!(kernel = name, "specialised kernel loaded from the cache");
         return Some(words);
     }
@@ -139,6 +173,9 @@ pub fn specialised_module(name: &str, words: &[u32], spec_id: u32, value: u32) -
         if let Err(e) = written {
             let _ = std::fs::remove_file(&tmp);
             tracing::debug!(kernel = name, error = %e, "specialised kernel not cached");
+        }
+        if let Some(dir) = file.parent() {
+            prune(dir, CACHE_LIMIT_BYTES);
         }
     }
     Some(result)
@@ -186,6 +223,26 @@ mod tests {
         altered[10] ^= 1;
         assert_eq!(from_cache_bytes(&altered), None);
         assert_eq!(from_cache_bytes(&[]), None);
+    }
+
+    /// Past the limit, the entries used longest ago go first, and only as many as needed.
+    #[test]
+    fn pruning_removes_the_least_recently_used_entries() {
+        let dir = tempfile::tempdir().unwrap();
+        let now = SystemTime::now();
+        for (i, age) in [30u64, 10, 20, 0].into_iter().enumerate() {
+            let path = dir.path().join(format!("k{i}.spv"));
+            std::fs::write(&path, vec![0u8; 1000]).unwrap();
+            let f = std::fs::File::options().write(true).open(&path).unwrap();
+            f.set_modified(now - std::time::Duration::from_secs(age * 60)).unwrap();
+        }
+        prune(dir.path(), 4000);
+        assert_eq!(std::fs::read_dir(dir.path()).unwrap().count(), 4, "within the limit nothing goes");
+        prune(dir.path(), 2500);
+        let mut left: Vec<String> =
+            std::fs::read_dir(dir.path()).unwrap().map(|e| e.unwrap().file_name().into_string().unwrap()).collect();
+        left.sort();
+        assert_eq!(left, ["k1.spv", "k3.spv"], "the two used longest ago (30 and 20 minutes) are removed");
     }
 
     #[test]
