@@ -3,8 +3,8 @@
 //! the driver sees the module, and the result is kept in a disk cache.
 //!
 //! The driver could apply the specialisation constant itself, but lavapipe first parses and
-//! optimises the whole module — every feature's code, ~23 000 instructions for the adjoint kernel
-//! — which took ~0.6 s per pipeline even with a warm shader cache. A specialised module (~5 700
+//! optimises the whole module — every feature's code, ~20 000 instructions for the adjoint kernel
+//! — which took ~0.6 s per pipeline even with a warm shader cache. A specialised module (~4 300
 //! instructions) is created in ~0.1 s (BENCHMARKS.md). Specialising takes ~0.4 s, once per
 //! variant and build on a machine; the cache keeps it from the processes after. The optimizer
 //! reorders no floating-point arithmetic, so images are bitwise the same either way (a test renders
