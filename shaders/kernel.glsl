@@ -8,10 +8,11 @@
 // TILE_SIZE² tiles, so a SIMD batch traces neighbouring pixels — or, with PIXEL_SELECT = 1
 // (adaptive pixel sampling, ALGORITHMS.md §6), one global sample k = sample_begin + item whose
 // (view, pixel) is drawn from the alias table over every view's pixels and whose path uses k as
-// its sample index. The image and adjoint buffers hold the views' pixels one view after another. A lane starts its next path in the same loop iteration
-// in which its current one ends (path regeneration), so a batch no longer waits for its longest
-// path. Each item is traced by one lane in sample order and written only by it, so the result is
-// bitwise the same whichever lane takes it: the same seed gives the same image.
+// its sample index. The image and adjoint buffers hold the views' pixels one view after another.
+// A lane's next path takes its first step in the iteration right after its current one ends (path
+// regeneration), so a batch no longer waits for its longest path. Each item is traced by one lane
+// in sample order and written only by it, so the result is bitwise the same whichever lane takes
+// it: the same seed gives the same image.
 //
 // Fused adjoint kernels (ARCHITECTURE decision 6) run each sample's primal path for its radiance
 // L, then replay it in adjoint mode from L; nothing per path is stored, so memory is independent
