@@ -103,14 +103,6 @@ const GENERATED_CONTRACT: &str = "generated/contract.glsl";
 /// libraries of the spirv-tools package, found through pkg-config's libdir).
 fn specialiser() {
     println!("cargo:rerun-if-changed=native/specialise.cpp");
-    // The specialiser's own source is part of its cache key (src/gpu/specialise.rs): a changed pass
-    // list must not read modules that an older one wrote.
-    let source = std::fs::read("native/specialise.cpp").expect("native/specialise.cpp is readable");
-    let mut hash = 0xcbf2_9ce4_8422_2325u64;
-    for b in source {
-        hash = (hash ^ u64::from(b)).wrapping_mul(0x0000_0100_0000_01b3);
-    }
-    println!("cargo:rustc-env=PATHGRAD_SPECIALISER_HASH={hash:016x}");
     cc::Build::new()
         .cpp(true)
         .std("c++17")

@@ -105,12 +105,12 @@ fn fnv(parts: &[&[u8]]) -> u64 {
     h
 }
 
-/// What made a cached module besides its input: the specialiser's source (a hash that build.rs
-/// takes of `native/specialise.cpp`) and the SPIRV-Tools it was linked with.
+/// What made a cached module besides its input: the specialiser's source (its pass list) and the
+/// SPIRV-Tools it was linked with.
 fn specialiser_identity() -> Vec<u8> {
     // SAFETY: the shim returns SPIRV-Tools' static, NUL-terminated version string.
     let tools = unsafe { std::ffi::CStr::from_ptr(pathgrad_spirv_tools_version()) };
-    [env!("PATHGRAD_SPECIALISER_HASH").as_bytes(), tools.to_bytes()].concat()
+    [include_bytes!("../../native/specialise.cpp").as_slice(), tools.to_bytes()].concat()
 }
 
 /// The cache key: a hash of the module, the value and the specialiser (content-addressed, so a
