@@ -50,7 +50,8 @@ float microfacet_d(uint distribution, float alpha, vec3 h) {
 }
 
 // Smith's G1 and its ∂/∂α (ALGORITHMS.md §4.2) from one evaluation: ∂G1/∂α is 0 where G1 is
-// constant (masked, or at normal incidence).
+// constant (masked, or at normal incidence). Twin: microfacet_g1 and microfacet_g1_dalpha of
+// src/bsdf/rough_conductor.rs, the same values.
 void microfacet_g1_and_dalpha(uint distribution, float alpha, vec3 v, vec3 h, out float g1, out float dg1) {
     g1 = 0.0;
     dg1 = 0.0;
@@ -95,7 +96,8 @@ vec3 fresnel_conductor(float c, vec3 eta, vec3 k) {
 }
 
 // f̂ and the solid-angle density of wo, sharing D and G1(wi): one evaluation where the path needs
-// both (NEE's direction, a sampled direction).
+// both (NEE's direction, a sampled direction). Twin: microfacet_eval and microfacet_pdf of
+// src/bsdf/rough_conductor.rs, the same values.
 vec3 microfacet_eval_pdf(Leaf l, vec3 wi, vec3 wo, out float pdf) {
     pdf = 0.0;
     if (wi.z <= 0.0 || wo.z <= 0.0) return vec3(0.0);
@@ -108,17 +110,14 @@ vec3 microfacet_eval_pdf(Leaf l, vec3 wi, vec3 wo, out float pdf) {
     return fresnel_conductor(dot(wi, h), l.eta, l.k) * l.color * (d * g / (4.0 * wi.z));
 }
 
-// ∂D/∂α (ALGORITHMS.md §4.2) given d = D(h); 0 where the underflow guard zeroes D.
+// ∂D/∂α (ALGORITHMS.md §4.2) given d = D(h); 0 where the underflow guard zeroes D (twin:
+// microfacet_d_dalpha, which computes D itself).
 float microfacet_d_dalpha_of(uint distribution, float alpha, vec3 h, float d) {
     if (d == 0.0) return 0.0;
     float t = (h.x * h.x + h.y * h.y) / (h.z * h.z);
     float a2 = alpha * alpha;
     if (is_beckmann(distribution)) return d * 2.0 * (t - a2) / (a2 * alpha);
     return d * 2.0 * (t - a2) / (alpha * (a2 + t));
-}
-
-float microfacet_d_dalpha(uint distribution, float alpha, vec3 h) {
-    return microfacet_d_dalpha_of(distribution, alpha, h, microfacet_d(distribution, alpha, h));
 }
 
 // f̂ = F · specular · scalar with scalar = D G1 G1 / (4 cos θi); also ∂scalar/∂α.
