@@ -128,60 +128,40 @@ fn main() {
     let shader_dir = root.join("shaders");
     println!("cargo:rerun-if-changed=shaders");
     println!("cargo:rerun-if-changed=src/contract");
-    specialiser();
 
     let generated = contract_glsl();
     let macros = contract_macros();
     let compiler = shaderc::Compiler::new().expect("shaderc compiler could not be created");
-    let mut entries = Vec::new();
     let mut sources: Vec<PathBuf> = walk(&shader_dir);
     sources.sort();
     for path in &sources {
         println!("cargo:rerun-if-changed={}", path.display());
     }
-    for path in sources.iter().filter(|p| p.extension().is_some_and(|e| e == "comp")) {
-        let name = path.file_stem().expect("a .comp file has a stem").to_string_lossy().into_owned();
-        let text = std::fs::read_to_string(path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
-        let mut opts = shaderc::CompileOptions::new().expect("shaderc options could not be created");
-        opts.set_target_env(shaderc::TargetEnv::Vulkan, shaderc::EnvVersion::Vulkan1_2 as u32);
-        opts.set_target_spirv(shaderc::SpirvVersion::V1_5);
-        // No debug information: the host specialiser (src/gpu/specialise.rs) parses every kernel
-        // at first use, and names and line records made the module 40 % larger and its work
-        // ~0.15 s longer.
-        opts.set_optimization_level(shaderc::OptimizationLevel::Performance);
-        for (macro_name, value) in &macros {
-            // Integers stay plain, so `#if` can compare them; GLSL converts them to uint where needed.
-            opts.add_macro_definition(macro_name, Some(value));
-        }
-        let dir = shader_dir.clone();
-        let generated = generated.clone();
-        opts.set_include_callback(move |requested, kind, requester, _depth| {
-            if requested == GENERATED_CONTRACT {
-                return Ok(shaderc::ResolvedInclude {
-                    resolved_name: GENERATED_CONTRACT.to_string(),
-                    content: generated.clone(),
-                });
-            }
-            let base = match kind {
-                shaderc::IncludeType::Relative => {
-                    Path::new(requester).parent().map(Path::to_path_buf).unwrap_or_else(|| dir.clone())
-                }
-                shaderc::IncludeType::Standard => dir.clone(),
-            };
-            let full = base.join(requested);
-            let content = std::fs::read_to_string(&full).map_err(|e| format!("{}: {e}", full.display()))?;
-            Ok(shaderc::ResolvedInclude { resolved_name: full.display().to_string(), content })
-        });
-        let artifact = compiler
-            .compile_into_spirv(&text, shaderc::ShaderKind::Compute, &path.display().to_string(), "main", Some(&opts))
-            .unwrap_or_else(|e| panic!("shader compilation failed:\n{e}"));
-        if artifact.get_num_warnings() > 0 {
-            println!("cargo:warning={}", artifact.get_warning_messages().replace('\n', " | "));
-        }
-        let spv = out.join(format!("{name}.spv"));
-        std::fs::write(&spv, artifact.as_binary_u8()).unwrap_or_else(|e| panic!("{}: {e}", spv.display()));
-        entries.push((name, spv));
-    }
+    let kernels: Vec<&PathBuf> = sources.iter().filter(|p| p.extension().is_some_and(|e| e == "comp")).collect();
+    // Every core takes the next kernel until none is left (the adjoint variants take seconds each
+    // in shaderc's optimiser); the specialiser's C++ compiles beside them. The build script runs
+    // twice in `scripts/test` (clippy's check and the test build), so this is CI time twice over.
+    let next = std::sync::atomic::AtomicUsize::new(0);
+    let workers = std::thread::available_parallelism().map_or(1, |n| n.get()).min(kernels.len().max(1));
+    let entries: Vec<(String, PathBuf)> = std::thread::scope(|scope| {
+        scope.spawn(specialiser);
+        let handles: Vec<_> = (0..workers)
+            .map(|_| {
+                scope.spawn(|| {
+                    let mut done = Vec::new();
+                    loop {
+                        let i = next.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+                        let Some(path) = kernels.get(i) else { return done };
+                        done.push((i, compile_kernel(&compiler, path, &shader_dir, &generated, &macros, &out)));
+                    }
+                })
+            })
+            .collect();
+        let mut done: Vec<(usize, (String, PathBuf))> =
+            handles.into_iter().flat_map(|h| h.join().expect("a kernel compiler thread panicked")).collect();
+        done.sort_by_key(|(i, _)| *i);
+        done.into_iter().map(|(_, entry)| entry).collect()
+    });
     let mut table =
         String::from("/// Every compiled kernel: (name, SPIR-V bytes).\npub const SHADERS: &[(&str, &[u8])] = &[\n");
     for (name, spv) in &entries {
@@ -189,6 +169,58 @@ fn main() {
     }
     table.push_str("];\n");
     std::fs::write(out.join("shaders.rs"), table).expect("OUT_DIR is writable");
+}
+
+/// Compiles one `.comp` file to `out/<stem>.spv`; returns (stem, path of the SPIR-V).
+fn compile_kernel(
+    compiler: &shaderc::Compiler,
+    path: &Path,
+    shader_dir: &Path,
+    generated: &str,
+    macros: &[(&'static str, String)],
+    out: &Path,
+) -> (String, PathBuf) {
+    let name = path.file_stem().expect("a .comp file has a stem").to_string_lossy().into_owned();
+    let text = std::fs::read_to_string(path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+    let mut opts = shaderc::CompileOptions::new().expect("shaderc options could not be created");
+    opts.set_target_env(shaderc::TargetEnv::Vulkan, shaderc::EnvVersion::Vulkan1_2 as u32);
+    opts.set_target_spirv(shaderc::SpirvVersion::V1_5);
+    // No debug information: the host specialiser (src/gpu/specialise.rs) parses every kernel
+    // at first use, and names and line records made the module 40 % larger and its work
+    // ~0.15 s longer.
+    opts.set_optimization_level(shaderc::OptimizationLevel::Performance);
+    for (macro_name, value) in macros {
+        // Integers stay plain, so `#if` can compare them; GLSL converts them to uint where needed.
+        opts.add_macro_definition(macro_name, Some(value));
+    }
+    let dir = shader_dir.to_path_buf();
+    let generated = generated.to_string();
+    opts.set_include_callback(move |requested, kind, requester, _depth| {
+        if requested == GENERATED_CONTRACT {
+            return Ok(shaderc::ResolvedInclude {
+                resolved_name: GENERATED_CONTRACT.to_string(),
+                content: generated.clone(),
+            });
+        }
+        let base = match kind {
+            shaderc::IncludeType::Relative => {
+                Path::new(requester).parent().map(Path::to_path_buf).unwrap_or_else(|| dir.clone())
+            }
+            shaderc::IncludeType::Standard => dir.clone(),
+        };
+        let full = base.join(requested);
+        let content = std::fs::read_to_string(&full).map_err(|e| format!("{}: {e}", full.display()))?;
+        Ok(shaderc::ResolvedInclude { resolved_name: full.display().to_string(), content })
+    });
+    let artifact = compiler
+        .compile_into_spirv(&text, shaderc::ShaderKind::Compute, &path.display().to_string(), "main", Some(&opts))
+        .unwrap_or_else(|e| panic!("shader compilation failed:\n{e}"));
+    if artifact.get_num_warnings() > 0 {
+        println!("cargo:warning={}", artifact.get_warning_messages().replace('\n', " | "));
+    }
+    let spv = out.join(format!("{name}.spv"));
+    std::fs::write(&spv, artifact.as_binary_u8()).unwrap_or_else(|e| panic!("{}: {e}", spv.display()));
+    (name, spv)
 }
 
 /// Every file under `dir`, recursively.
