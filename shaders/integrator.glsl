@@ -168,6 +168,12 @@ bool path_step(inout PathState st) {
     Ray shadow_ray;
     float shadow_tmax = 0.0;
     bool shadow_query = false;
+    // A medium vertex below the maximum depth carries its NEE sample the same way: the phase
+    // function's value, and (both kinds of vertex, kernels with media) the replay's weight of the
+    // transmittance, so that one ratio-tracking site serves both.
+    bool scatter = false;
+    float nee_phase = 0.0;
+    vec3 nee_w_tr = vec3(0.0);
 
     Hit hit;
     uint event;
@@ -213,56 +219,31 @@ bool path_step(inout PathState st) {
             if (vertex >= globals.max_depth || !(max_component(st.throughput) > 0.0)) {
                 ended = true;
             } else {
-                uint m = st.medium;
-                vec3 d = st.ray.dir;
-                vec3 x = x_medium;
+                scatter = true;
                 if (nee) {
                     vec4 u_em = draw_block(st.key1, st.pixel, st.sample_index, vertex, DIM_EMITTER_SELECT / 4u);
-                    EmitterSample es = sample_emitter(u_em[DIM_EMITTER_SELECT % 4u], vec2(u_em[DIM_EMITTER_POS % 4u], u_em[DIM_EMITTER_POS % 4u + 1u]));
+                    es = sample_emitter(u_em[DIM_EMITTER_SELECT % 4u], vec2(u_em[DIM_EMITTER_POS % 4u], u_em[DIM_EMITTER_POS % 4u + 1u]));
                     if (es.valid) {
                         vec3 wl;
-                        float p_e;
-                        float shadow_tmax;
                         if (HAS(F_ENV) && es.environment) {
                             wl = es.point;
-                            p_e = environment_pdf();
+                            nee_pdf = environment_pdf();
                             shadow_tmax = FLOAT_MAX;
                         } else {
-                            vec3 to_light = es.point - x;
+                            vec3 to_light = es.point - x_medium;
                             float dist = length(to_light);
                             wl = to_light / dist;
-                            p_e = emitter_pdf_solid_angle(dist, dot(es.normal, -wl));
+                            nee_pdf = emitter_pdf_solid_angle(dist, dot(es.normal, -wl));
                             shadow_tmax = dist * (1.0 - SHADOW_EPSILON);
                         }
-                        float f = phase_eval(m, d, wl);
-                        if (p_e > 0.0 && f > 0.0) {
-                            float w_n = mis_power(p_e, f);
-                            vec3 w_tr = st.adj * st.throughput * w_n * f * es.radiance / p_e;
-                            vec3 tr = nee_transmittance(m, x, wl, shadow_tmax, uvec2(globals.key0, st.key1), st.pixel, st.sample_index, vertex, adjoint, w_tr);
-                            st.radiance += sign * (st.throughput * tr * w_n * f * es.radiance / p_e);
-                            if (adjoint && max_component(tr) > 0.0) {
-                                phase_grad(m, d, wl, w_tr * tr / f);
-                                if (es.environment ? HAS(G_ENV) : HAS(G_EMISSION)) {
-                                    gt.nee_param = es.param;
-                                    gt.nee = st.adj * st.throughput * tr * w_n * f / p_e;
-                                }
-                            }
+                        nee_phase = phase_eval(st.medium, st.ray.dir, wl);
+                        if (nee_pdf > 0.0 && nee_phase > 0.0) {
+                            nee_w = mis_power(nee_pdf, nee_phase);
+                            nee_w_tr = st.adj * st.throughput * nee_w * nee_phase * es.radiance / nee_pdf;
+                            shadow_ray = make_ray(x_medium, wl);
+                            shadow_query = true;
                         }
                     }
-                }
-                vec4 u_ph = draw_block(st.key1, st.pixel, st.sample_index, vertex, DIM_LOBE / 4u);
-                vec3 wo = phase_sample(m, d, vec2(u_ph[DIM_DIRECTION % 4u], u_ph[DIM_DIRECTION % 4u + 1u]));
-                float pdf = phase_eval(m, d, wo);
-                if (!(pdf > 0.0)) {
-                    ended = true;
-                } else {
-                    // The sample's density is the phase function itself: the weight f/pdf is 1; its
-                    // attached numerator f still has a derivative (through g).
-                    if (adjoint) phase_grad(m, d, wo, st.adj * st.radiance / pdf);
-                    st.prev_pdf_f = pdf;
-                    st.prev_nee = nee;
-                    st.prev_sum = 1.0;
-                    if (!path_survives(st, vertex)) ended = true; else st.ray = make_ray(x, wo);
                 }
             }
         } else if (event == EVENT_ESCAPE) {
@@ -331,19 +312,52 @@ bool path_step(inout PathState st) {
                                 float pdf_d = capable ? bsdf_pdf_diff(bsdf, wi, nee_wo) : pdf_f;
                                 nee_w = 1.0 / (st.w1 + st.w2 + (st.w1 * pdf_f + q_here * st.w2 * pdf_d + (1.0 - q_here) * st.w2 * pdf_f) / nee_pdf);
                             }
-                            if (HAS(F_MEDIA)) {
-                                vec3 w_tr = st.adj * st.throughput * nee_w * nee_f * es.radiance / nee_pdf;
-                                tr = nee_transmittance(st.medium, origin, wl, shadow_tmax, uvec2(globals.key0, st.key1), st.pixel, st.sample_index, vertex, adjoint, w_tr);
-                            } else {
-                                shadow_ray = make_ray(origin, wl);
-                                shadow_query = true;
-                            }
+                            if (HAS(F_MEDIA)) nee_w_tr = st.adj * st.throughput * nee_w * nee_f * es.radiance / nee_pdf;
+                            shadow_ray = make_ray(origin, wl);
+                            shadow_query = true;
                         }
                     }
                 }
             }
         }
+        if (HAS(F_MEDIA)) {
+            // ---- NEE's transmittance through media and null boundaries (ratio tracking) ----
+            if (shadow_query) {
+                tr = nee_transmittance(st.medium, shadow_ray.origin, shadow_ray.dir, shadow_tmax, uvec2(globals.key0, st.key1), st.pixel, st.sample_index, vertex, adjoint, nee_w_tr);
+            }
+            break;
+        }
         if (!shadow_query) break;
+    }
+
+    if (HAS(F_MEDIA) && scatter) {
+        // ---- a medium vertex: NEE's contribution, phase sampling, roulette ----
+        uint m = st.medium;
+        vec3 d = st.ray.dir;
+        if (shadow_query) {
+            st.radiance += sign * (st.throughput * tr * nee_w * nee_phase * es.radiance / nee_pdf);
+            if (adjoint && max_component(tr) > 0.0) {
+                phase_grad(m, d, shadow_ray.dir, nee_w_tr * tr / nee_phase);
+                if (es.environment ? HAS(G_ENV) : HAS(G_EMISSION)) {
+                    gt.nee_param = es.param;
+                    gt.nee = st.adj * st.throughput * tr * nee_w * nee_phase / nee_pdf;
+                }
+            }
+        }
+        vec4 u_ph = draw_block(st.key1, st.pixel, st.sample_index, vertex, DIM_LOBE / 4u);
+        vec3 wo = phase_sample(m, d, vec2(u_ph[DIM_DIRECTION % 4u], u_ph[DIM_DIRECTION % 4u + 1u]));
+        float pdf = phase_eval(m, d, wo);
+        if (!(pdf > 0.0)) {
+            ended = true;
+        } else {
+            // The sample's density is the phase function itself: the weight f/pdf is 1; its
+            // attached numerator f still has a derivative (through g).
+            if (adjoint) phase_grad(m, d, wo, st.adj * st.radiance / pdf);
+            st.prev_pdf_f = pdf;
+            st.prev_nee = nee;
+            st.prev_sum = 1.0;
+            if (!path_survives(st, vertex)) ended = true; else st.ray = make_ray(x_medium, wo);
+        }
     }
 
     if (shade) {

@@ -10,11 +10,14 @@ float lerp_exact(float a, float b, float w) {
     return a + (b - a) * w;
 }
 
-// Channel c of field `f` at world point p (trilinear at p·res − 0.5 with clamping, as Mitsuba).
-float field_at(uint f, vec3 p, uint c) {
+// Field `f` at world point p per channel (trilinear at p·res − 0.5 with clamping, as Mitsuba); a
+// grey field's one channel in all three. One lookup body, looped over the channels, so each call
+// site inlines eight voxel loads rather than twenty-four; the twin is rgb in src/cpu/medium.rs.
+vec3 field_rgb(uint f, vec3 p) {
     FieldDesc d = fields[f];
-    c = min(c, d.channels - 1u);
-    if (d.kind == FIELD_CONSTANT) return params[d.offset + c];
+    if (d.kind == FIELD_CONSTANT) {
+        return vec3(params[d.offset], params[d.offset + min(1u, d.channels - 1u)], params[d.offset + min(2u, d.channels - 1u)]);
+    }
     vec3 local = vec3(dot(d.row0, p), dot(d.row1, p), dot(d.row2, p)) + d.shift;
     uvec3 res = uvec3(d.res_x, d.res_y, d.res_z);
     vec3 r = vec3(res);
@@ -22,17 +25,17 @@ float field_at(uint f, vec3 p, uint c) {
     uvec3 lo = uvec3(floor(u));
     uvec3 hi = min(lo + 1u, res - 1u);
     vec3 t = u - vec3(lo);
+    float v[3];
+    [[dont_unroll]] for (uint c = 0u; c < d.channels; c++) {
 #define VOXEL(VX, VY, VZ) params[d.offset + (((VZ) * res.y + (VY)) * res.x + (VX)) * d.channels + c]
-    float x00 = lerp_exact(VOXEL(lo.x, lo.y, lo.z), VOXEL(hi.x, lo.y, lo.z), t.x);
-    float x10 = lerp_exact(VOXEL(lo.x, hi.y, lo.z), VOXEL(hi.x, hi.y, lo.z), t.x);
-    float x01 = lerp_exact(VOXEL(lo.x, lo.y, hi.z), VOXEL(hi.x, lo.y, hi.z), t.x);
-    float x11 = lerp_exact(VOXEL(lo.x, hi.y, hi.z), VOXEL(hi.x, hi.y, hi.z), t.x);
+        float x00 = lerp_exact(VOXEL(lo.x, lo.y, lo.z), VOXEL(hi.x, lo.y, lo.z), t.x);
+        float x10 = lerp_exact(VOXEL(lo.x, hi.y, lo.z), VOXEL(hi.x, hi.y, lo.z), t.x);
+        float x01 = lerp_exact(VOXEL(lo.x, lo.y, hi.z), VOXEL(hi.x, lo.y, hi.z), t.x);
+        float x11 = lerp_exact(VOXEL(lo.x, hi.y, hi.z), VOXEL(hi.x, hi.y, hi.z), t.x);
 #undef VOXEL
-    return lerp_exact(lerp_exact(x00, x10, t.y), lerp_exact(x01, x11, t.y), t.z);
-}
-
-vec3 field_rgb(uint f, vec3 p) {
-    return vec3(field_at(f, p, 0u), field_at(f, p, 1u), field_at(f, p, 2u));
+        v[c] = lerp_exact(lerp_exact(x00, x10, t.y), lerp_exact(x01, x11, t.y), t.z);
+    }
+    return d.channels == 1u ? vec3(v[0]) : vec3(v[0], v[1], v[2]);
 }
 
 // The extinction scale · sigma_t(p) per channel.
