@@ -181,27 +181,54 @@ bool path_step(inout PathState st) {
     vec3 x_medium = vec3(0.0);
     // Both rays of a vertex go through one traversal site, so the kernel holds one inlined copy of
     // the traversal: pass 0 traces the path's ray and shades up to NEE's shadow query, pass 1 (if
-    // the vertex made a query) answers it. Kernels with media trace their shadow rays by ratio
-    // tracking inside pass 0.
-    [[dont_unroll]] for (uint pass = 0u; pass < 2u; pass++) {
+    // the vertex made a query) answers it. In kernels with media both passes cross null boundaries
+    // and track through media at the same site (delta tracking for the path, ratio tracking for
+    // the shadow ray), and a replay that differentiates media runs pass 2: the shadow ray's nested
+    // replay, which needs pass 1's whole transmittance first (ALGORITHMS.md §8).
+    [[dont_unroll]] for (uint pass = 0u; pass < 3u; pass++) {
         // ---- intersection: through null boundaries and null collisions to the next event ----
         if (HAS(F_MEDIA)) {
-            uvec2 key = uvec2(globals.key0, st.key1);
-            uint step = 0u;      // delta-tracking steps of this vertex
+            bool shadow = pass != 0u;
+            Ray ray = shadow ? shadow_ray : st.ray;
+            uint m = st.medium;
+            float remaining = shadow ? shadow_tmax : FLOAT_MAX;
+            vec3 end_point = ray.origin + shadow_tmax * ray.dir;
+            uint stream = shadow ? STREAM_RATIO_TRACKING : STREAM_DELTA_TRACKING;
+            bool replay = shadow ? pass == 2u : adjoint;
+            vec3 gw = shadow ? nee_w_tr * tr : st.adj * st.radiance;
+            vec3 transmitted = vec3(1.0);
+            uint step = 0u;      // tracking steps of this ray
             event = EVENT_LOST;
             [[dont_unroll]] for (uint crossings = 0u; crossings <= MAX_NULL_CROSSINGS; crossings++) {
-                hit = bvh_closest_hit(st.ray, 0.0, FLOAT_MAX);
-                if (st.medium != NO_MEDIUM) {
-                    float t = delta_track(st.medium, st.ray, hit.valid ? hit.t : FLOAT_MAX, key, st.pixel, st.sample_index, vertex, step, st.throughput, adjoint, st.adj * st.radiance);
-                    if (t >= 0.0) { event = EVENT_MEDIUM; x_medium = st.ray.origin + t * st.ray.dir; break; }
+                hit = bvh_closest_hit(ray, 0.0, remaining);
+                if (m != NO_MEDIUM) {
+                    // A shadow ray's segments each start at 1 and multiply its transmittance.
+                    vec3 w = shadow ? vec3(1.0) : st.throughput;
+                    float t = track(m, ray, hit.valid ? hit.t : remaining, uvec2(globals.key0, st.key1), st.pixel, st.sample_index, vertex, stream, shadow, step, w, replay, gw);
+                    if (shadow) transmitted *= w; else st.throughput = w;
+                    if (t >= 0.0) { event = EVENT_MEDIUM; x_medium = ray.origin + t * ray.dir; break; }
                 }
                 if (!hit.valid) { event = EVENT_ESCAPE; break; }
                 Surface sn = surface_at(hit);
                 if (materials[sn.material].tag != MAT_NULL) { event = EVENT_SURFACE; break; }
-                st.medium = medium_crossed(sn.interior, sn.ng, st.ray.dir, st.medium);
-                travelled += hit.t;
-                st.ray = make_ray(offset_origin(sn.p, sn.ng, st.ray.dir), st.ray.dir);
+                m = medium_crossed(sn.interior, sn.ng, ray.dir, m);
+                vec3 o = offset_origin(sn.p, sn.ng, ray.dir);
+                if (!shadow) travelled += hit.t;
+                ray = make_ray(o, ray.dir);
+                if (shadow && shadow_tmax < FLOAT_MAX) {
+                    remaining = dot(end_point - o, ray.dir);
+                    if (!(remaining > 0.0)) { event = EVENT_ESCAPE; break; }
+                }
             }
+            if (shadow) {
+                // Unoccluded: what the media let through; an opaque surface or too many null
+                // boundaries: nothing.
+                if (pass == 1u) tr = event == EVENT_ESCAPE ? transmitted : vec3(0.0);
+                if (pass == 2u || !(adjoint && HAS(G_MEDIUM)) || !(max_component(tr) > 0.0)) break;
+                continue;
+            }
+            st.medium = m;
+            st.ray = ray;
         } else {
             bool shadow = pass != 0u;
             Hit h = bvh_traverse(shadow ? shadow_ray : st.ray, 0.0, shadow ? shadow_tmax : FLOAT_MAX, shadow);
@@ -319,13 +346,6 @@ bool path_step(inout PathState st) {
                     }
                 }
             }
-        }
-        if (HAS(F_MEDIA)) {
-            // ---- NEE's transmittance through media and null boundaries (ratio tracking) ----
-            if (shadow_query) {
-                tr = nee_transmittance(st.medium, shadow_ray.origin, shadow_ray.dir, shadow_tmax, uvec2(globals.key0, st.key1), st.pixel, st.sample_index, vertex, adjoint, nee_w_tr);
-            }
-            break;
         }
         if (!shadow_query) break;
     }

@@ -119,24 +119,29 @@ void phase_grad(uint m, vec3 d, vec3 wo, vec3 w) {
     param_grad(media[m].p_g, w * dfdg);
 }
 
-// Delta tracking of the flight along `ray` in medium m up to t_max: the distance of a real
-// collision, or -1 if the flight reaches t_max; its spectral-tracking weight multiplies `weight`.
-// Draws stream DT of `vertex` from step `step` on. In a replay (`replay`, with gw = δL·L for the
-// radiance L the flight's weights multiply) each weight w scatters gw·∂w/w: a null weight
-// (σ̄ − σ_t,c)/(σ̄(1 − P)) through σ_t, a real one a_c σ_t,c/(σ̄ P) through a and σ_t, P detached.
-float delta_track(uint m, Ray ray, float t_max, uvec2 key, uint pixel, uint sample_index, uint vertex, inout uint step, inout vec3 weight, bool replay, vec3 gw) {
+// Tracking along `ray` in medium m up to t_max, one sample per step from stream `stream` of
+// `vertex`, from step `step` on; the steps' weights multiply `weight`. Delta tracking (`ratio`
+// false) stops at a real collision and returns its distance; ratio tracking (true: shadow rays)
+// takes every collision as null, so `weight` becomes the transmittance. Returns -1 when the
+// flight reaches t_max; past MAX_TRACKING_STEPS the weight is 0. In a replay (`replay`, with
+// gw = δL·L for the radiance L the weights multiply) each weight w scatters gw·∂w/w: a null weight
+// (σ̄ − σ_t,c)/(σ̄(1 − P)) through σ_t, a real one a_c σ_t,c/(σ̄ P) through a and σ_t, P detached
+// (P = 0 in ratio tracking: the nested replay of ALGORITHMS.md §8). One body for both, so a
+// kernel inlines one copy of the field lookups and of medium_grad; twin of delta_track and
+// ratio_track in src/cpu/medium.rs.
+float track(uint m, Ray ray, float t_max, uvec2 key, uint pixel, uint sample_index, uint vertex, uint stream, bool ratio, inout uint step, inout vec3 weight, bool replay, vec3 gw) {
     float majorant = media[m].majorant;
     if (!(majorant > 0.0)) return -1.0;
     float t = 0.0;
     [[dont_unroll]] while (step < MAX_TRACKING_STEPS) {
-        vec4 u = uniform4(key, pixel, sample_index, vertex, STREAM_DELTA_TRACKING, 0u, step);
+        vec4 u = uniform4(key, pixel, sample_index, vertex, stream, 0u, step);
         step++;
         t += -log(1.0 - u.x) / majorant;
         if (!(t < t_max)) return -1.0;
         vec3 x = ray.origin + t * ray.dir;
         vec3 sigma = medium_extinction(m, x);
-        float p_real = clamp((sigma.x + sigma.y + sigma.z) / (3.0 * majorant), 0.0, 1.0);
-        bool real = u.y < p_real;
+        float p_real = ratio ? 0.0 : clamp((sigma.x + sigma.y + sigma.z) / (3.0 * majorant), 0.0, 1.0);
+        bool real = !ratio && u.y < p_real;
         vec3 w_sigma;
         vec3 w_albedo = vec3(0.0);
         if (real) {
@@ -156,73 +161,10 @@ float delta_track(uint m, Ray ray, float t_max, uvec2 key, uint pixel, uint samp
     return -1.0;
 }
 
-// Ratio-tracking transmittance of medium m along origin + t·dir over [0, t_max), stream RT. In a
-// replay (gw = δL·C for the contribution C the transmittance multiplies) each factor
-// r = (σ̄ − σ_t)/σ̄ scatters gw·∂r/r through σ_t: the nested replay of ALGORITHMS.md §8.
-vec3 ratio_track(uint m, vec3 origin, vec3 dir, float t_max, uvec2 key, uint pixel, uint sample_index, uint vertex, inout uint step, bool replay, vec3 gw) {
-    float majorant = media[m].majorant;
-    if (!(majorant > 0.0)) return vec3(1.0);
-    vec3 tr = vec3(1.0);
-    float t = 0.0;
-    [[dont_unroll]] while (step < MAX_TRACKING_STEPS) {
-        float u = uniform4(key, pixel, sample_index, vertex, STREAM_RATIO_TRACKING, 0u, step).x;
-        step++;
-        t += -log(1.0 - u) / majorant;
-        if (!(t < t_max)) return tr;
-        vec3 x = origin + t * dir;
-        vec3 null_density = vec3(majorant) - medium_extinction(m, x);
-        tr *= null_density / majorant;
-        if (replay) medium_grad(m, x, -safe_div(gw, null_density), vec3(0.0));
-    }
-    return vec3(0.0);
-}
-
 // The medium after crossing a boundary of `interior` (winding normal ng) along dir from `current`.
 uint medium_crossed(uint interior, vec3 ng, vec3 dir, uint current) {
     if (interior == NO_MEDIUM) return current;
     return dot(ng, dir) < 0.0 ? interior : NO_MEDIUM;
-}
-
-// Transmittance from origin along dir over [0, t_max) starting in medium m, through null
-// boundaries; 0 past an opaque surface or MAX_NULL_CROSSINGS boundaries. A replay (`replay`, gw)
-// scatters the derivatives of the same steps (see ratio_track).
-vec3 shadow_transmittance(uint m, vec3 origin, vec3 dir, float t_max, uvec2 key, uint pixel, uint sample_index, uint vertex, bool replay, vec3 gw) {
-    vec3 o = origin;
-    float remaining = t_max;
-    vec3 end_point = origin + t_max * dir;
-    vec3 tr = vec3(1.0);
-    uint step = 0u;
-    [[dont_unroll]] for (uint k = 0u; k <= MAX_NULL_CROSSINGS; k++) {
-        Hit hit = bvh_closest_hit(make_ray(o, dir), 0.0, remaining);
-        float segment = hit.valid ? hit.t : remaining;
-        if (m != NO_MEDIUM) tr *= ratio_track(m, o, dir, segment, key, pixel, sample_index, vertex, step, replay, gw);
-        if (!hit.valid) return tr;
-        Surface s = surface_at(hit);
-        if (materials[s.material].tag != MAT_NULL) return vec3(0.0);
-        m = medium_crossed(s.interior, s.ng, dir, m);
-        o = offset_origin(s.p, s.ng, dir);
-        if (t_max < FLOAT_MAX) {
-            remaining = dot(end_point - o, dir);
-            if (!(remaining > 0.0)) return tr;
-        }
-    }
-    return vec3(0.0);
-}
-
-// The transmittance of a shadow ray (shadow_transmittance) and, in a replay, its nested replay:
-// the same ratio-tracking steps once more with gw = w·T, since each factor's term needs the whole
-// product T first (ALGORITHMS.md §8). One call site of the traversal for both passes.
-vec3 nee_transmittance(uint m, vec3 origin, vec3 dir, float t_max, uvec2 key, uint pixel, uint sample_index, uint vertex, bool replay, vec3 w) {
-    vec3 tr = vec3(0.0);
-    uint passes = replay && HAS(G_MEDIUM) ? 2u : 1u;
-    [[dont_unroll]] for (uint pass = 0u; pass < passes; pass++) {
-        vec3 t = shadow_transmittance(m, origin, dir, t_max, key, pixel, sample_index, vertex, pass == 1u, w * tr);
-        if (pass == 0u) {
-            tr = t;
-            if (!(max_component(tr) > 0.0)) break;
-        }
-    }
-    return tr;
 }
 
 #endif

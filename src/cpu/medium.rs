@@ -211,7 +211,9 @@ pub fn medium_crossed(interior: u32, ng: Vec3, dir: Vec3, current: u32) -> u32 {
 /// The transmittance from `origin` along `dir` over [0, t_max) starting in medium `medium`:
 /// ratio tracking through each medium, passing null boundaries; 0 if an opaque surface is in the
 /// way or more than `MAX_NULL_CROSSINGS` boundaries are. In a replay (`grad`: sink and δL·C),
-/// the same steps scatter their derivatives (see `ratio_track`).
+/// the same steps scatter their derivatives (see `ratio_track`). The kernels trace the same
+/// segments in `path_step`'s pass loop (`shaders/integrator.glsl`: pass 1, and pass 2 for the
+/// replay), through the traversal and tracking sites of the path's own ray.
 pub fn shadow_transmittance(
     flat: &FlatScene,
     key: RngKey,
