@@ -38,11 +38,6 @@ vec3 field_rgb(uint f, vec3 p) {
     return d.channels == 1u ? vec3(v[0]) : vec3(v[0], v[1], v[2]);
 }
 
-// The extinction scale · sigma_t(p) per channel.
-vec3 medium_extinction(uint m, vec3 p) {
-    return params[media[m].p_scale] * field_rgb(media[m].sigma_t, p);
-}
-
 float medium_g(uint m) {
     return media[m].phase == PHASE_HG ? params[media[m].p_g] : 0.0;
 }
@@ -70,14 +65,15 @@ vec3 phase_sample(uint m, vec3 d, vec2 u) {
 }
 
 // GRAD of the medium's fields at x (ALGORITHMS.md §8): weight `w_sigma` per channel through the
-// extinction scale · sigma_t(x) (its scale and its voxels), `w_albedo` through the albedo's voxels.
+// extinction scale · sigma_t(x) (its scale and its voxels; `field_sigma` is sigma_t(x), which the
+// caller has looked up), `w_albedo` through the albedo's voxels.
 // Channel c of an RGB field reaches image channel c only; a grey field reaches all three. Twin of
 // extinction_grad and albedo_grad in src/cpu/medium.rs; one param_grad site for every voxel.
-void medium_grad(uint m, vec3 x, vec3 w_sigma, vec3 w_albedo) {
+void medium_grad(uint m, vec3 x, vec3 field_sigma, vec3 w_sigma, vec3 w_albedo) {
     if (!HAS(G_MEDIUM)) return;
     MediumDesc md = media[m];
     float scale = params[md.p_scale];
-    param_grad(md.p_scale, w_sigma * field_rgb(md.sigma_t, x));
+    param_grad(md.p_scale, w_sigma * field_sigma);
     [[dont_unroll]] for (uint k = 0u; k < 2u; k++) {
         uint f = k == 0u ? md.sigma_t : md.albedo;
         vec3 w = k == 0u ? w_sigma * scale : w_albedo;
@@ -139,7 +135,8 @@ float track(uint m, Ray ray, float t_max, uvec2 key, uint pixel, uint sample_ind
         t += -log(1.0 - u.x) / majorant;
         if (!(t < t_max)) return -1.0;
         vec3 x = ray.origin + t * ray.dir;
-        vec3 sigma = medium_extinction(m, x);
+        vec3 field_sigma = field_rgb(media[m].sigma_t, x);
+        vec3 sigma = params[media[m].p_scale] * field_sigma;   // the extinction: medium_extinction of the twin
         float p_real = ratio ? 0.0 : clamp((sigma.x + sigma.y + sigma.z) / (3.0 * majorant), 0.0, 1.0);
         bool real = !ratio && u.y < p_real;
         vec3 w_sigma;
@@ -154,7 +151,7 @@ float track(uint m, Ray ray, float t_max, uvec2 key, uint pixel, uint sample_ind
             weight *= null_density / (majorant * (1.0 - p_real));
             w_sigma = -safe_div(gw, null_density);
         }
-        if (replay) medium_grad(m, x, w_sigma, w_albedo);
+        if (replay) medium_grad(m, x, field_sigma, w_sigma, w_albedo);
         if (real) return t;
     }
     weight = vec3(0.0);
