@@ -1,7 +1,8 @@
 // Participating media in the path loop (ALGORITHMS.md §8): field lookups, the phase function,
-// delta tracking of free flights and ratio tracking of shadow rays through media and null
-// boundaries; twin of src/cpu/medium.rs, which says how RGB extinction is tracked (spectral
-// tracking against one grey majorant). Compiled only into kernels with F_MEDIA.
+// and one tracking body for delta tracking of free flights and ratio tracking of shadow rays
+// (`path_step`'s pass loop in integrator.glsl crosses the null boundaries between media); twin of
+// src/cpu/medium.rs, which says how RGB extinction is tracked (spectral tracking against one grey
+// majorant). Compiled only into kernels with F_MEDIA.
 #ifndef PATHGRAD_MEDIUM_GLSL
 #define PATHGRAD_MEDIUM_GLSL
 
