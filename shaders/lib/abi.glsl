@@ -15,21 +15,20 @@ layout(set = 0, binding = BINDING_GLOBALS, scalar) uniform GlobalsBuf { Globals 
 // storage-buffer bindings: on lavapipe (Mesa 25.0) a storage-buffer load whose index differs per
 // lane is a branchy per-lane scalar sequence with a bounds check per component, while a
 // buffer-reference load is one masked gather per component. The addresses sit in `globals`. The
-// triangles and their shading data are read as 64-bit words (lib/bvh.glsl, lib/surface.glsl).
+// triangles, their shading data and the media's fields are read as 64-bit words (lib/bvh.glsl,
+// lib/surface.glsl, lib/medium.glsl).
 layout(buffer_reference, scalar, buffer_reference_align = 4) readonly buffer UintArray { uint v[]; };
 layout(buffer_reference, scalar, buffer_reference_align = 4) readonly buffer MaterialArray { Material v[]; };
 layout(buffer_reference, scalar, buffer_reference_align = 4) readonly buffer EmitterArray { EmitterTri v[]; };
 layout(buffer_reference, scalar, buffer_reference_align = 4) readonly buffer FloatArray { float v[]; };
 layout(buffer_reference, scalar, buffer_reference_align = 4) readonly buffer ViewArray { ViewCamera v[]; };
 layout(buffer_reference, scalar, buffer_reference_align = 4) readonly buffer MediumArray { MediumDesc v[]; };
-layout(buffer_reference, scalar, buffer_reference_align = 4) readonly buffer FieldArray { FieldDesc v[]; };
 #define prim_ids (UintArray(globals.addr_prim_ids).v)
 #define materials (MaterialArray(globals.addr_materials).v)
 #define emitters (EmitterArray(globals.addr_emitters).v)
 #define params (FloatArray(globals.addr_params).v)
 #define views (ViewArray(globals.addr_views).v)
 #define media (MediumArray(globals.addr_media).v)
-#define fields (FieldArray(globals.addr_fields).v)
 layout(set = 0, binding = BINDING_STATUS, scalar) coherent buffer StatusBuf { uint status_flags; };
 
 // Raises a status bit that the host checks after the dispatch.

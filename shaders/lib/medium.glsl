@@ -11,11 +11,31 @@ float lerp_exact(float a, float b, float w) {
     return a + (b - a) * w;
 }
 
+// A field's description (FieldDesc, 18 words at a stride of 72 bytes) read as nine 64-bit words,
+// as surface_at reads a triangle's shading data: on lavapipe each word read is one gather whatever
+// its width, and the field index differs from lane to lane.
+struct FieldWords { uint64_t w0; uint64_t w1; uint64_t w2; uint64_t w3; uint64_t w4; uint64_t w5; uint64_t w6; uint64_t w7; uint64_t w8; };
+layout(buffer_reference, scalar, buffer_reference_align = 8) readonly buffer FieldWordArray { FieldWords v[]; };
+
+FieldDesc load_field(uint f) {
+    FieldWordArray a = FieldWordArray(globals.addr_fields);
+    uvec2 w0 = unpackUint2x32(a.v[f].w0);          // kind, channels
+    uvec2 w1 = unpackUint2x32(a.v[f].w1);          // offset, res_x
+    uvec2 w2 = unpackUint2x32(a.v[f].w2);          // res_y, res_z
+    vec2 w3 = word_floats(a.v[f].w3);              // row0.xy
+    vec2 w4 = word_floats(a.v[f].w4);              // row0.z, row1.x
+    vec2 w5 = word_floats(a.v[f].w5);              // row1.yz
+    vec2 w6 = word_floats(a.v[f].w6);              // row2.xy
+    vec2 w7 = word_floats(a.v[f].w7);              // row2.z, shift.x
+    vec2 w8 = word_floats(a.v[f].w8);              // shift.yz
+    return FieldDesc(w0.x, w0.y, w1.x, w1.y, w2.x, w2.y, vec3(w3, w4.x), vec3(w4.y, w5), vec3(w6, w7.x), vec3(w7.y, w8));
+}
+
 // Field `f` at world point p per channel (trilinear at p·res − 0.5 with clamping, as Mitsuba); a
 // grey field's one channel in all three. One lookup body, looped over the channels, so each call
 // site inlines eight voxel loads rather than twenty-four; the twin is rgb in src/cpu/medium.rs.
 vec3 field_rgb(uint f, vec3 p) {
-    FieldDesc d = fields[f];
+    FieldDesc d = load_field(f);
     if (d.kind == FIELD_CONSTANT) {
         return vec3(params[d.offset], params[d.offset + min(1u, d.channels - 1u)], params[d.offset + min(2u, d.channels - 1u)]);
     }
@@ -79,7 +99,7 @@ void medium_grad(uint m, vec3 x, vec3 field_sigma, vec3 w_sigma, vec3 w_albedo) 
         uint f = k == 0u ? md.sigma_t : md.albedo;
         vec3 w = k == 0u ? w_sigma * scale : w_albedo;
         if (w == vec3(0.0)) continue;
-        FieldDesc d = fields[f];
+        FieldDesc d = load_field(f);
         uvec3 res = uvec3(d.res_x, d.res_y, d.res_z);
         vec3 r = vec3(res);
         vec3 u = clamp((vec3(dot(d.row0, x), dot(d.row1, x), dot(d.row2, x)) + d.shift) * r - 0.5, vec3(0.0), r - 1.0);
