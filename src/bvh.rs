@@ -342,7 +342,10 @@ pub fn intersect_triangle(ray: &Ray, tri: &TriPositions, tmin: f32, tmax: f32) -
     let inv_det = 1.0 / det;
     let s = ray.origin - tri.v0;
     let b1 = s.dot(p) * inv_det;
-    if !(0.0..=1.0).contains(&b1) {
+    // Not `(0.0..=1.0).contains`, which debug builds call out of line (see `rng::philox4x32_10`);
+    // NaN fails both forms.
+    #[allow(clippy::manual_range_contains)]
+    if !(b1 >= 0.0 && b1 <= 1.0) {
         return None;
     }
     let q = s.cross(e1);
@@ -376,13 +379,16 @@ fn intersect_node(node: &BvhNode, ray: &Ray, octant: u32, tmin: f32, tmax: f32) 
     let scale = cell * ray.inv_dir;
     let offset = (node.origin - ray.origin) * ray.inv_dir;
     let mut mask = 0;
-    for half in 0..2 {
+    // `while` loops: debug builds call `Range::next` out of line (see `rng::philox4x32_10`).
+    let mut half = 0;
+    while half < 2 {
         let m = if half == 0 { node.meta.x } else { node.meta.y };
         // Inner children's metas are 24 + slot with bits 3 and 4 both set, which no leaf has.
         let inner4 = (m & (m << 1)) & 0x1010_1010;
         let bit_index4 = (m ^ (octant & ((inner4 >> 4) * 0xff))) & 0x1f1f_1f1f;
         let child_bits4 = (m >> 5) & 0x0707_0707;
-        for k in 0..4 {
+        let mut k = 0;
+        while k < 4 {
             let slot = 4 * half + k;
             let q = |w: UVec2| child_byte(w, slot) as f32;
             let lo = Vec3::new(q(node.lo_x), q(node.lo_y), q(node.lo_z));
@@ -394,7 +400,9 @@ fn intersect_node(node: &BvhNode, ray: &Ray, octant: u32, tmin: f32, tmax: f32) 
             if near <= far {
                 mask |= ((child_bits4 >> (8 * k)) & 0xff) << ((bit_index4 >> (8 * k)) & 0xff);
             }
+            k += 1;
         }
+        half += 1;
     }
     mask
 }
