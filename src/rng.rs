@@ -21,8 +21,9 @@ const PHILOX_W1: u32 = 0xBB67_AE85;
 pub fn philox4x32_10(counter: [u32; 4], key: [u32; 2]) -> [u32; 4] {
     let mut c = counter;
     let mut k = key;
-    // A `while`, not `for round in 0..10`: debug builds (opt-level 1) call `Range::next` out of
-    // line, and this loop runs for every uniform the CPU reference draws (BENCHMARKS.md, "CI").
+    // A `while`, not `for round in 0..10`: at opt-level 1 (debug builds) rustc links core's
+    // generic `Range::next` from a dependency built at opt-level 0 rather than inlining it, and
+    // this loop runs for every uniform the CPU reference draws (BENCHMARKS.md, "Eleventh session").
     let mut round = 0;
     while round < 10 {
         if round > 0 {
