@@ -136,7 +136,32 @@ void phase_grad(uint m, vec3 d, vec3 wo, vec3 w) {
     param_grad(media[m].p_g, w * dfdg);
 }
 
-// Tracking along `ray` in medium m up to t_max, one sample per step from stream `stream` of
+// The part (t0, t1) of the segment ray(t), t in [0, t_max), where medium m exists: all of it for
+// an unbounded medium, else its intersection with the medium's box (Mitsuba's heterogeneous
+// medium lives only inside its sigma_t volume's bounding box); t0 >= t1 when the segment misses
+// it. Twin of medium_span in src/cpu/medium.rs, axis by axis in the same order.
+vec2 medium_span(uint m, Ray ray, float t_max) {
+    float t0 = 0.0;
+    float t1 = t_max;
+    if (media[m].bounded == 0u) return vec2(t0, t1);
+    vec3 lo = media[m].lo;
+    vec3 hi = media[m].hi;
+    [[dont_unroll]] for (uint axis = 0u; axis < 3u; axis++) {
+        float o = ray.origin[axis];
+        float d = ray.dir[axis];
+        if (d == 0.0) {
+            if (o < lo[axis] || o > hi[axis]) return vec2(1.0, 0.0);
+            continue;
+        }
+        float a = (lo[axis] - o) / d;
+        float b = (hi[axis] - o) / d;
+        t0 = max(t0, min(a, b));
+        t1 = min(t1, max(a, b));
+    }
+    return vec2(t0, t1);
+}
+
+// Tracking along `ray` in medium m up to t_max, only where the medium exists (medium_span), one sample per step from stream `stream` of
 // `vertex`, from step `step` on; the steps' weights multiply `weight`. Delta tracking (`ratio`
 // false) stops at a real collision and returns its distance; ratio tracking (true: shadow rays)
 // takes every collision as null, so `weight` becomes the transmittance. Returns -1 when the
@@ -149,12 +174,14 @@ void phase_grad(uint m, vec3 d, vec3 wo, vec3 w) {
 float track(uint m, Ray ray, float t_max, uvec2 key, uint pixel, uint sample_index, uint vertex, uint stream, bool ratio, inout uint step, inout vec3 weight, bool replay, vec3 gw) {
     float majorant = media[m].majorant;
     if (!(majorant > 0.0)) return -1.0;
-    float t = 0.0;
+    vec2 span = medium_span(m, ray, t_max);
+    if (!(span.x < span.y)) return -1.0;
+    float t = span.x;
     [[dont_unroll]] while (step < MAX_TRACKING_STEPS) {
         vec4 u = uniform4(key, pixel, sample_index, vertex, stream, 0u, step);
         step++;
         t += -log(1.0 - u.x) / majorant;
-        if (!(t < t_max)) return -1.0;
+        if (!(t < span.y)) return -1.0;
         vec3 x = ray.origin + t * ray.dir;
         vec3 field_sigma = field_rgb(media[m].sigma_t, x);
         vec3 sigma = params[media[m].p_scale] * field_sigma;   // the extinction: medium_extinction of the twin

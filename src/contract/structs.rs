@@ -202,6 +202,13 @@ contract_structs! {
         p_g: u32,
         /// `scale · max(sigma_t)` over every point and channel, from the current parameters.
         majorant: f32,
+        /// 1: the medium exists only inside the world box `lo`–`hi` (Mitsuba's heterogeneous
+        /// medium: its sigma_t volume's bounding box); 0: wherever its shape is.
+        bounded: u32,
+        /// The box's minimum corner (when `bounded`).
+        lo: Vec3,
+        /// The box's maximum corner (when `bounded`).
+        hi: Vec3,
     }
 
     /// A material; its differentiable values are offsets into the parameter array.

@@ -99,9 +99,36 @@ pub fn phase_sample(flat: &FlatScene, m: &MediumDesc, d: Vec3, u: [f32; 2]) -> V
     Frame::from_normal(d).to_world(Vec3::new(sin * phi.cos(), sin * phi.sin(), cos))
 }
 
+/// The part [t0, t1) of the segment `origin + t·dir`, t in [0, `t_max`), where medium `m`
+/// exists: all of it for an unbounded medium, else its intersection with the medium's box (a
+/// slab test, Mitsuba's `intersect_aabb` clipped to the segment as its `sample_interaction`
+/// does); `None` when the segment misses the box. Twin of `medium_span` in
+/// `shaders/lib/medium.glsl`.
+pub fn medium_span(m: &MediumDesc, origin: Vec3, dir: Vec3, t_max: f32) -> Option<(f32, f32)> {
+    let (mut t0, mut t1) = (0.0f32, t_max);
+    if m.bounded == 0 {
+        return Some((t0, t1));
+    }
+    let axes =
+        [(origin.x, dir.x, m.lo.x, m.hi.x), (origin.y, dir.y, m.lo.y, m.hi.y), (origin.z, dir.z, m.lo.z, m.hi.z)];
+    for (o, d, lo, hi) in axes {
+        if d == 0.0 {
+            if o < lo || o > hi {
+                return None;
+            }
+            continue;
+        }
+        let (a, b) = ((lo - o) / d, (hi - o) / d);
+        t0 = t0.max(a.min(b));
+        t1 = t1.min(a.max(b));
+    }
+    (t0 < t1).then_some((t0, t1))
+}
+
 /// Where a free flight along `ray` in medium `m` ends before `t_max`: `Some(t)` at a real
 /// collision, `None` if it reaches `t_max`; the spectral-tracking weight of the flight is
-/// multiplied into `weight`. Draws stream DT of `vertex` from step `*step` on.
+/// multiplied into `weight`. Draws stream DT of `vertex` from step `*step` on, only over the part
+/// of the ray where the medium exists ([`medium_span`]).
 ///
 /// In a replay, `grad` is (sink, δL·L) with L the radiance the flight's weights multiply: each
 /// weight w scatters δL·L·∂w/w (ALGORITHMS.md §8; a null weight (σ̄ − σ_t,c)/(σ̄(1 − P)) through
@@ -123,12 +150,12 @@ pub fn delta_track(
     if !(majorant > 0.0) {
         return None;
     }
-    let mut t = 0.0f32;
+    let (mut t, t_end) = medium_span(m, ray.origin, ray.dir, t_max)?;
     while *step < MAX_TRACKING_STEPS {
         let u = uniform4(key, pixel, sample, vertex, Stream::DeltaTracking, 0, *step);
         *step += 1;
         t += -(1.0 - u[0]).ln() / majorant;
-        if !(t < t_max) {
+        if !(t < t_end) {
             return None;
         }
         let x = ray.origin + t * ray.dir;
@@ -172,13 +199,13 @@ fn ratio_track(
     if !(majorant > 0.0) {
         return Vec3::ONE;
     }
+    let Some((mut t, t_end)) = medium_span(m, origin, dir, t_max) else { return Vec3::ONE };
     let mut tr = Vec3::ONE;
-    let mut t = 0.0f32;
     while *step < MAX_TRACKING_STEPS {
         let u = uniform4(key, pixel, sample, vertex, Stream::RatioTracking, 0, *step)[0];
         *step += 1;
         t += -(1.0 - u).ln() / majorant;
-        if !(t < t_max) {
+        if !(t < t_end) {
             return tr;
         }
         let x = origin + t * dir;

@@ -224,6 +224,9 @@ fn flatten_media(scene: &Scene) -> (Vec<MediumDesc>, Vec<FieldDesc>) {
                 phase,
                 p_g,
                 majorant: m.majorant(&scene.params),
+                bounded: u32::from(m.extent.is_some()),
+                lo: m.extent.map_or(Vec3::ZERO, |e| e.0),
+                hi: m.extent.map_or(Vec3::ZERO, |e| e.1),
             }
         })
         .collect();

@@ -6,6 +6,12 @@
 //! The extinction at a point is `scale · sigma_t(p)`; a grid fills the unit cube under its
 //! volume's `to_world` and is looked up trilinearly at `p·res − 0.5` with clamping
 //! ([`crate::scene::volume::Grid::lookup`]).
+//!
+//! **Extent, as Mitsuba 3.** A `homogeneous` medium fills its shape. A `heterogeneous` one exists
+//! only inside the world-space bounding box of the unit cube under its `sigma_t` volume's
+//! `to_world` (a `constvolume`'s too, and a plain `<float>`/`<rgb>` σ_t is a `constvolume` over
+//! [0, 1]³), intersected with the shape: between the shape's boundary and that box a ray travels
+//! in vacuum ([`Medium::extent`], ALGORITHMS.md §8).
 
 use glam::{Mat4, UVec3, Vec3};
 
@@ -94,6 +100,11 @@ pub struct Medium {
     pub name: String,
     /// `heterogeneous` in the file (else `homogeneous`); both may hold grids or constants.
     pub heterogeneous: bool,
+    /// Where the medium exists, as a world-space box (min, max), or `None` wherever its shape
+    /// is: a heterogeneous medium's is the axis-aligned bound of the eight corners of the unit
+    /// cube under its `sigma_t` volume's `to_world`, as Mitsuba's `Volume::bbox`; a homogeneous
+    /// medium has none.
+    pub extent: Option<(Vec3, Vec3)>,
     /// Extinction before `scale`: per unit length, ≥ 0.
     pub sigma_t: Field,
     /// Single-scattering albedo σ_s/σ_t in [0, 1].
@@ -118,6 +129,20 @@ impl Medium {
         let max = params.get(self.scale)[0] * (0..channels).map(|c| self.sigma_t.max(params, c)).fold(0.0f32, f32::max);
         max * (1.0 + crate::contract::MAJORANT_MARGIN)
     }
+}
+
+/// The world-space axis-aligned bound of the unit cube under `to_world` (its eight corners), as
+/// Mitsuba's `Volume::bbox`.
+pub fn unit_cube_bounds(to_world: Mat4) -> (Vec3, Vec3) {
+    let mut lo = Vec3::splat(f32::INFINITY);
+    let mut hi = Vec3::splat(f32::NEG_INFINITY);
+    for corner in 0..8u32 {
+        let c = Vec3::new((corner & 1) as f32, ((corner >> 1) & 1) as f32, ((corner >> 2) & 1) as f32);
+        let p = to_world.transform_point3(c);
+        lo = lo.min(p);
+        hi = hi.max(p);
+    }
+    (lo, hi)
 }
 
 /// Bounds of medium parameters: extinction and scale ≥ 0, albedo in [0, 1], |g| < 1 (the

@@ -62,8 +62,9 @@ fn a_slab_transmits_exp_minus_sigma_d() {
     assert!(error < 0.02 * expected, "the test has the power to see a 2 % error");
 }
 
-/// A grid of constant density renders bit for bit like the homogeneous medium of that density:
-/// the same majorant, the same extinction at every point, so the same decisions on every path.
+/// A heterogeneous grid of constant density whose box holds its shape renders bit for bit like
+/// the homogeneous medium of that density: the same majorant, the same extinction at every point
+/// of the shape, so the same decisions on every path.
 #[test]
 fn a_constant_grid_renders_like_the_homogeneous_medium() {
     let dir = tempfile::tempdir().unwrap();
@@ -73,23 +74,77 @@ fn a_constant_grid_renders_like_the_homogeneous_medium() {
         format!(
             r#"{}<integrator type="volpath"><integer name="max_depth" value="8"/></integrator><emitter type="constant"><rgb name="radiance" value="0.5, 0.6, 0.7"/></emitter>
             <shape type="rectangle" id="floor"><bsdf type="diffuse"/><transform name="to_world"><scale value="5"/><rotate x="1" angle="-90"/><translate y="-1"/></transform></shape>
-            <shape type="sphere" id="ball"><bsdf type="null"/><medium type="heterogeneous" name="interior">{sigma}<rgb name="albedo" value="0.8, 0.7, 0.6"/><phase type="hg"><float name="g" value="0.4"/></phase></medium></shape>"#,
+            <shape type="sphere" id="ball"><bsdf type="null"/>{sigma}<rgb name="albedo" value="0.8, 0.7, 0.6"/><phase type="hg"><float name="g" value="0.4"/></phase></medium></shape>"#,
             sensor("0, 1, 5", 40.0, 24)
         )
     };
     let grid = scene(
         dir.path(),
         &body(
-            r#"<volume type="gridvolume" name="sigma_t"><string name="filename" value="flat.vol"/><transform name="to_world"><scale value="2"/><translate x="-1" y="-1" z="-1"/></transform></volume>"#,
+            r#"<medium type="heterogeneous" name="interior"><volume type="gridvolume" name="sigma_t"><string name="filename" value="flat.vol"/><transform name="to_world"><scale value="2"/><translate x="-1" y="-1" z="-1"/></transform></volume>"#,
         ),
     );
-    let constant = scene(dir.path(), &body(r#"<float name="sigma_t" value="0.9"/>"#));
+    let constant =
+        scene(dir.path(), &body(r#"<medium type="homogeneous" name="interior"><float name="sigma_t" value="0.9"/>"#));
     let opts = RenderOptions { spp: 4, seed: 3, ..RenderOptions::for_scene(&grid) };
     let a = Reference::new(&grid).unwrap().render(&opts).unwrap();
     let b = Reference::new(&constant).unwrap().render(&opts).unwrap();
     let bits = |i: &Image| i.as_slice().iter().map(|v| v.to_bits()).collect::<Vec<_>>();
     assert_eq!(bits(&a), bits(&b));
     assert!(a.mean()[0] > 0.0);
+}
+
+/// A heterogeneous medium exists only inside its σ_t volume's box, as in Mitsuba 3: in a cube
+/// [−1, 1]³ holding an absorbing medium of constant σ_t = 0.7, a plain `<float>` σ_t fills only
+/// [0, 1]³ (Mitsuba's `constvolume` over the unit cube), and a `constvolume` moved by its
+/// `to_world` fills only its own box. Looking along −z at an emitter of radiance 2 through a
+/// narrow field of view: rays through x, y ∈ (0, 1) cross one unit of medium (2·e^{−0.7}), rays
+/// through x, y ∈ (−1, 0) none (2), and a box pushed half out of the cube along z is crossed over
+/// half a unit (2·e^{−0.35}). The same medium declared `homogeneous` fills the cube (2·e^{−1.4}).
+/// CPU reference and kernels, z-tests over the pixels, |z| < 4.
+#[test]
+fn a_heterogeneous_medium_exists_only_in_its_volume_box() {
+    let gpu = TestGpu::new();
+    let dir = tempfile::tempdir().unwrap();
+    let narrow = |x: f32, y: f32| {
+        format!(
+            r#"<sensor type="perspective"><float name="fov" value="2"/><transform name="to_world"><lookat origin="{x}, {y}, 6" target="{x}, {y}, 0" up="0, 1, 0"/></transform><film type="hdrfilm"><integer name="width" value="16"/><integer name="height" value="16"/></film></sensor>"#
+        )
+    };
+    let cases = [
+        ("heterogeneous", r#"<float name="sigma_t" value="0.7"/>"#, (0.5, 0.5), 2.0 * (-0.7f64).exp()),
+        ("heterogeneous", r#"<float name="sigma_t" value="0.7"/>"#, (-0.5, -0.5), 2.0),
+        (
+            "heterogeneous",
+            r#"<volume type="constvolume" name="sigma_t"><float name="value" value="0.7"/><transform name="to_world"><translate x="-0.8" y="-0.8" z="0.5"/></transform></volume>"#,
+            (-0.3, -0.3),
+            2.0 * (-0.35f64).exp(),
+        ),
+        ("homogeneous", r#"<float name="sigma_t" value="0.7"/>"#, (0.5, 0.5), 2.0 * (-1.4f64).exp()),
+    ];
+    for (kind, sigma, (x, y), expected) in cases {
+        let s = scene(
+            dir.path(),
+            &format!(
+                r#"{}<integrator type="volpath"/>
+                <shape type="cube" id="slab"><bsdf type="null"/><medium type="{kind}" name="interior">{sigma}<float name="albedo" value="0"/></medium></shape>
+                <shape type="rectangle" id="light"><emitter type="area"><rgb name="radiance" value="2, 2, 2"/></emitter><transform name="to_world"><scale value="20"/><translate z="-4"/></transform></shape>"#,
+                narrow(x, y)
+            ),
+        );
+        let opts = RenderOptions { spp: 64, seed: 1, ..RenderOptions::for_scene(&s) };
+        let cpu = Reference::new(&s).unwrap().render(&opts).unwrap();
+        let kernels = pathgrad::gpu::Renderer::new(&gpu.ctx, &s).unwrap().render(&opts).unwrap();
+        for (what, image) in [("cpu", &cpu), ("gpu", &kernels)] {
+            let (mean, error) = mean_and_error(image);
+            println!("{kind} {sigma} at ({x}, {y}), {what}: {mean} ± {error}, expected {expected}");
+            assert!(
+                (mean - expected).abs() < 4.0 * error.max(1e-6 * expected),
+                "{what}: {mean} ± {error} vs {expected}"
+            );
+            assert!(error < 0.02 * expected, "the test has the power to see a 2 % error");
+        }
+    }
 }
 
 /// An albedo-1 medium in a white furnace (environment 1, nothing else): light is neither lost
@@ -174,9 +229,9 @@ fn differential_sampling_is_refused_in_media_scenes() {
     }
 }
 
-/// A scene with a heterogeneous RGB medium (grid extinction and albedo, HG phase), a homogeneous
-/// one (constant extinction, constant RGB albedo), null boundaries, surfaces and both emitter
-/// kinds, in `dir`.
+/// A scene with a heterogeneous RGB medium (grid extinction and albedo, HG phase) whose σ_t box
+/// covers only part of its cube (the rest of the cube is vacuum), a homogeneous one (constant
+/// extinction, constant RGB albedo), null boundaries, surfaces and both emitter kinds, in `dir`.
 fn mixed_media(dir: &Path) -> Scene {
     let density: Vec<f32> = (0..4 * 4 * 4 * 3).map(|i| 0.2 + 0.8 * ((i * 37 % 11) as f32 / 10.0)).collect();
     std::fs::write(dir.join("density.vol"), Grid::new(UVec3::splat(4), 3, density).unwrap().to_bytes()).unwrap();
@@ -189,7 +244,7 @@ fn mixed_media(dir: &Path) -> Scene {
             <shape type="rectangle" id="light"><emitter type="area"><rgb name="radiance" value="6, 6, 5"/></emitter><transform name="to_world"><rotate x="1" angle="90"/><translate y="3"/></transform></shape>
             <shape type="rectangle" id="floor"><bsdf type="diffuse"/><transform name="to_world"><scale value="4"/><rotate x="1" angle="-90"/><translate y="-1.05"/></transform></shape>
             <shape type="cube" id="smoke"><bsdf type="null"/><medium type="heterogeneous" name="interior">
-                <volume type="gridvolume" name="sigma_t"><string name="filename" value="density.vol"/><transform name="to_world"><scale value="2"/><translate x="-1" y="-1" z="-1"/></transform></volume>
+                <volume type="gridvolume" name="sigma_t"><string name="filename" value="density.vol"/><transform name="to_world"><scale value="1.5"/><translate x="-0.9" y="-0.6" z="-0.7"/></transform></volume>
                 <volume type="gridvolume" name="albedo"><string name="filename" value="albedo.vol"/><transform name="to_world"><scale value="2"/><translate x="-1" y="-1" z="-1"/></transform></volume>
                 <float name="scale" value="2"/><phase type="hg"><float name="g" value="0.5"/></phase></medium>
                 <transform name="to_world"><translate x="-0.6"/><scale value="0.8"/></transform></shape>

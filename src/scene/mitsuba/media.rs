@@ -7,7 +7,7 @@ use glam::{DVec3, Mat4, Vec3};
 use super::loader::Loader;
 use super::xml::{El, Props};
 use crate::error::Result;
-use crate::scene::medium::{Field, Medium, MediumId, Phase, bounds};
+use crate::scene::medium::{Field, Medium, MediumId, Phase, bounds, unit_cube_bounds};
 use crate::scene::volume::Grid;
 
 impl<'a> Loader<'a> {
@@ -33,8 +33,10 @@ impl<'a> Loader<'a> {
                 ));
             }
         };
-        let sigma_t = self.field(&p, "sigma_t", &name, 1.0, bounds::EXTINCTION)?;
-        let albedo = self.field(&p, "albedo", &name, 0.75, bounds::ALBEDO)?;
+        let (sigma_t, sigma_t_to_world) = self.field(&p, "sigma_t", &name, 1.0, bounds::EXTINCTION)?;
+        let (albedo, _) = self.field(&p, "albedo", &name, 0.75, bounds::ALBEDO)?;
+        // Mitsuba's heterogeneous medium exists only inside its sigma_t volume's bounding box.
+        let extent = heterogeneous.then(|| unit_cube_bounds(sigma_t_to_world));
         let scale = self.float_in(&p, "scale", Some(1.0), bounds::EXTINCTION)?;
         let phases = p.take_nested(&["phase", "ref"]);
         self.finish(&p)?;
@@ -49,14 +51,22 @@ impl<'a> Loader<'a> {
             [_, second, ..] => return Err(self.x.err(second, "a medium takes one phase function")),
         };
         let id = MediumId(self.scene.media.len() as u32);
-        self.scene.media.push(Medium { name, heterogeneous, sigma_t, albedo, scale, phase });
+        self.scene.media.push(Medium { name, heterogeneous, extent, sigma_t, albedo, scale, phase });
         self.media.insert(target.id(), id);
         Ok(id)
     }
 
     /// Property `prop` of medium `p`: a `<float>` or `<rgb>`, a `constvolume` or a `gridvolume`
-    /// (`default` when absent), its values in `range`.
-    fn field(&mut self, p: &Props<'a>, prop: &str, medium: &str, default: f32, range: (f32, f32)) -> Result<Field> {
+    /// (`default` when absent), its values in `range`; with the volume's `to_world` (the identity
+    /// for a plain value, which Mitsuba makes a `constvolume` over the unit cube).
+    fn field(
+        &mut self,
+        p: &Props<'a>,
+        prop: &str,
+        medium: &str,
+        default: f32,
+        range: (f32, f32),
+    ) -> Result<(Field, Mat4)> {
         let constant = |loader: &mut Self, values: Vec<f32>, node: El<'a>| -> Result<Field> {
             let channels = values.len() as u32;
             let name = format!("{medium}.{prop}.value.value");
@@ -64,10 +74,11 @@ impl<'a> Loader<'a> {
             Ok(Field::Constant { value, channels })
         };
         let Some(volume) = p.object(prop) else {
-            return match p.values(&self.x, prop)? {
+            let field = match p.values(&self.x, prop)? {
                 Some((values, node)) => constant(self, values, node),
                 None => constant(self, vec![default], p.node),
             };
+            return Ok((field?, Mat4::IDENTITY));
         };
         let volume = self.deref(volume)?;
         if !volume.has_tag_name("volume") {
@@ -77,8 +88,9 @@ impl<'a> Loader<'a> {
         match v.kind.as_str() {
             "constvolume" => {
                 let (values, node) = v.values(&self.x, "value")?.unwrap_or((vec![1.0], volume));
+                let to_world = v.transform(&self.x, "to_world")?.map_or(Mat4::IDENTITY, |(t, _)| t.matrix);
                 self.finish(&v)?;
-                constant(self, values, node)
+                Ok((constant(self, values, node)?, to_world))
             }
             "gridvolume" => {
                 let (file, file_node) = v
@@ -105,12 +117,13 @@ impl<'a> Loader<'a> {
                 let name = format!("{medium}.{prop}.data");
                 let values =
                     self.scene.params.add(&name, &grid.values, range).map_err(|e| self.located(file_node, e))?;
-                Ok(Field::Grid {
+                let field = Field::Grid {
                     resolution: grid.resolution,
                     channels: grid.channels,
                     values,
                     to_local: to_world.inverse(),
-                })
+                };
+                Ok((field, to_world))
             }
             other => Err(self
                 .x
