@@ -98,8 +98,10 @@ PathState path_begin(uint view, uint pixel, uint sample_index, bool adjoint, vec
     vec4 u_cam = draw_block(cam.key1, pixel, sample_index, 0u, DIM_PIXEL_JITTER / 4u);
     uint px = pixel % globals.width;
     uint py = pixel / globals.width;
-    float sx = 2.0 * (float(px) + u_cam.x) / float(globals.width) - 1.0;
-    float sy = 1.0 - 2.0 * (float(py) + u_cam.y) / float(globals.height);
+    float fx = filter_sample(cam.filter_kind, cam.filter_radius, cam.filter_alpha, px, globals.width, u_cam.x);
+    float fy = filter_sample(cam.filter_kind, cam.filter_radius, cam.filter_alpha, py, globals.height, u_cam.y);
+    float sx = 2.0 * fx / float(globals.width) - 1.0;
+    float sy = 1.0 - 2.0 * fy / float(globals.height);
     PathState st;
     st.ray = make_ray(cam.origin, normalize(cam.forward + sx * cam.right + sy * cam.up));
     st.throughput = vec3(1.0);

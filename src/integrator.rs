@@ -345,12 +345,16 @@ impl RenderOptions {
         let up = right.cross(forward);
         let tan_y = (c.fov_y_degrees.to_radians() * 0.5).tan();
         let tan_x = tan_y * self.width as f32 / self.height as f32;
+        let (filter_kind, filter_radius, filter_alpha) = c.filter.constants();
         ViewCamera {
             origin: c.position,
             right: right * tan_x,
             up: up * tan_y,
             forward,
             key1: RngKey::new(self.seed, view.stream, pass).0[1],
+            filter_kind,
+            filter_radius,
+            filter_alpha,
         }
     }
 

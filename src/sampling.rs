@@ -83,6 +83,51 @@ pub fn sample_uniform_triangle(u: Vec2) -> Vec2 {
     Vec2::new(u.y * su, su * (1.0 - u.y))
 }
 
+/// ∫ from −radius to `x` of the 1D reconstruction filter `kind` (`FILTER_TENT` or
+/// `FILTER_GAUSSIAN`, whose exponent factor is `alpha` = −1/(2σ²)): the tent's
+/// (x + r)²/(2r) for x ≤ 0 and r − (r − x)²/(2r) beyond; Mitsuba's Gaussian
+/// exp(αt²) − exp(αr²) integrates to (√π/2)·s·(erf(x/s) − erf(−r/s)) − exp(αr²)(x + r), s = σ√2.
+pub fn filter_cdf(kind: u32, radius: f32, alpha: f32, x: f32) -> f32 {
+    if kind == crate::contract::FILTER_TENT {
+        let r = radius;
+        if x <= 0.0 { (x + r) * (x + r) / (2.0 * r) } else { r - (r - x) * (r - x) / (2.0 * r) }
+    } else {
+        let s = (-1.0 / alpha).sqrt();
+        let bias = (alpha * radius * radius).exp();
+        0.5 * PI.sqrt() * s * (erf_approx(x / s) - erf_approx(-radius / s)) - bias * (x + radius)
+    }
+}
+
+/// The film coordinate (in pixels, along one axis) of a sample of pixel `pixel` on a film
+/// `extent` pixels long, drawn with `u` from the reconstruction filter around the pixel's centre
+/// and truncated to the film, so that the mean of the samples' radiance is Mitsuba's
+/// filter-weighted pixel value (`scene::PixelFilter`). The box filter is `pixel + u`; the others
+/// invert [`filter_cdf`] by [`crate::contract::FILTER_BISECTIONS`] bisection steps. Twin of `filter_sample` in
+/// `shaders/lib/sampling.glsl`.
+pub fn filter_sample(kind: u32, radius: f32, alpha: f32, pixel: u32, extent: u32, u: f32) -> f32 {
+    if kind == crate::contract::FILTER_BOX {
+        return pixel as f32 + u;
+    }
+    let c = pixel as f32 + 0.5;
+    let a = (-radius).max(-c);
+    let b = radius.min(extent as f32 - c);
+    let (ca, cb) = (filter_cdf(kind, radius, alpha, a), filter_cdf(kind, radius, alpha, b));
+    let target = ca + u * (cb - ca);
+    let (mut lo, mut hi) = (a, b);
+    let mut step = 0;
+    // A `while`: debug builds call core's range iterators out of line (Cargo.toml).
+    while step < crate::contract::FILTER_BISECTIONS {
+        let mid = 0.5 * (lo + hi);
+        if filter_cdf(kind, radius, alpha, mid) < target {
+            lo = mid;
+        } else {
+            hi = mid;
+        }
+        step += 1;
+    }
+    c + 0.5 * (lo + hi)
+}
+
 /// The error function, Abramowitz & Stegun 7.1.26 (absolute error below 1.5e-7).
 pub fn erf_approx(x: f32) -> f32 {
     let ax = x.abs();
@@ -154,6 +199,62 @@ mod tests {
             assert!((v.length() - 1.0).abs() < 1e-5 && v.z >= 0.0);
             let b = sample_uniform_triangle(u);
             assert!(b.x >= 0.0 && b.y >= 0.0 && b.x + b.y <= 1.0 + 1e-6);
+        }
+    }
+
+    /// Mitsuba's filters in f64: the tent, and the Gaussian windowed to zero at 4σ.
+    fn filter_f64(kind: u32, radius: f64, x: f64) -> f64 {
+        if kind == crate::contract::FILTER_TENT {
+            (1.0 - x.abs() / radius).max(0.0)
+        } else {
+            let s = radius / 4.0;
+            ((-x * x / (2.0 * s * s)).exp() - (-radius * radius / (2.0 * s * s)).exp()).max(0.0)
+        }
+    }
+
+    /// `filter_sample` draws film coordinates with the filter's density around the pixel's centre,
+    /// truncated to the film: a chi-square test over 64 bins of the support (the expected mass of
+    /// each bin by Simpson's rule on the f64 filter), for a pixel inside the film and for pixels
+    /// whose support the film's edges cut (the first pixel, and the last of a 3-pixel film); tent
+    /// and Gaussian at Mitsuba's default and another size. The box filter is the pixel's square.
+    #[test]
+    fn filter_samples_follow_the_filter_truncated_to_the_film() {
+        use crate::contract::{FILTER_BOX, FILTER_GAUSSIAN, FILTER_TENT};
+        use crate::scene::PixelFilter;
+        assert_eq!(filter_sample(FILTER_BOX, 0.5, 0.0, 7, 16, 0.25), 7.25);
+        let filters = [
+            PixelFilter::Gaussian { stddev: 0.5 },
+            PixelFilter::Gaussian { stddev: 1.3 },
+            PixelFilter::Tent { radius: 1.0 },
+            PixelFilter::Tent { radius: 2.5 },
+        ];
+        let (n, bins) = (200_000u32, 64usize);
+        for filter in filters {
+            let (kind, radius, alpha) = filter.constants();
+            assert!(kind == FILTER_GAUSSIAN || kind == FILTER_TENT);
+            for (pixel, extent) in [(20u32, 40u32), (0, 40), (2, 3)] {
+                let c = f64::from(pixel) + 0.5;
+                let (a, b) = ((-f64::from(radius)).max(-c), f64::from(radius).min(f64::from(extent) - c));
+                let width = (b - a) / bins as f64;
+                let mass = |lo: f64| {
+                    let f = |x: f64| filter_f64(kind, f64::from(radius), x);
+                    width / 6.0 * (f(lo) + 4.0 * f(lo + 0.5 * width) + f(lo + width))
+                };
+                let masses: Vec<f64> = (0..bins).map(|i| mass(a + i as f64 * width)).collect();
+                let total: f64 = masses.iter().sum();
+                let expected: Vec<f64> = masses.iter().map(|m| m / total).collect();
+                let mut observed = vec![0u64; bins];
+                for i in 0..n {
+                    let u = (f64::from(i) + 0.5) / f64::from(n);
+                    // A scrambled sequence: the test is of the warp, not of a generator.
+                    let u = (u + 0.618_033_988_75 * f64::from(i % 7919)).fract() as f32;
+                    let x = f64::from(filter_sample(kind, radius, alpha, pixel, extent, u)) - c;
+                    assert!(x >= a - 1e-4 && x <= b + 1e-4, "{filter:?} pixel {pixel}: offset {x} outside [{a}, {b}]");
+                    observed[(((x - a) / width) as usize).min(bins - 1)] += 1;
+                }
+                let r = crate::stats::chi2_discrete(&observed, &expected);
+                assert!(r.passed(1e-3), "{filter:?} pixel {pixel} of {extent}: p = {}{}", r.p_value, r.table);
+            }
         }
     }
 

@@ -61,6 +61,38 @@ float erf_approx(float x) {
     return x < 0.0 ? -y : y;
 }
 
+// ∫ from −radius to x of the 1D reconstruction filter `kind` (FILTER_TENT or FILTER_GAUSSIAN,
+// alpha = −1/(2σ²)); twin of filter_cdf in src/sampling.rs, which derives it.
+float filter_cdf(uint kind, float radius, float alpha, float x) {
+    if (kind == FILTER_TENT) {
+        float r = radius;
+        return x <= 0.0 ? (x + r) * (x + r) / (2.0 * r) : r - (r - x) * (r - x) / (2.0 * r);
+    }
+    float s = sqrt(-1.0 / alpha);
+    float bias = exp(alpha * radius * radius);
+    return 0.5 * sqrt(PI) * s * (erf_approx(x / s) - erf_approx(-radius / s)) - bias * (x + radius);
+}
+
+// The film coordinate along one axis of a sample of pixel `pixel` on a film `extent` pixels long,
+// drawn with u from the reconstruction filter around the pixel's centre, truncated to the film
+// (bisection on filter_cdf); the box filter is pixel + u. Twin of filter_sample in src/sampling.rs.
+float filter_sample(uint kind, float radius, float alpha, uint pixel, uint extent, float u) {
+    if (kind == FILTER_BOX) return float(pixel) + u;
+    float c = float(pixel) + 0.5;
+    float a = max(-radius, -c);
+    float b = min(radius, float(extent) - c);
+    float ca = filter_cdf(kind, radius, alpha, a);
+    float cb = filter_cdf(kind, radius, alpha, b);
+    float target = ca + u * (cb - ca);
+    float lo = a;
+    float hi = b;
+    [[dont_unroll]] for (uint step = 0u; step < FILTER_BISECTIONS; step++) {
+        float mid = 0.5 * (lo + hi);
+        if (filter_cdf(kind, radius, alpha, mid) < target) lo = mid; else hi = mid;
+    }
+    return c + 0.5 * (lo + hi);
+}
+
 // Giles' single-precision inverse error function (2010), x in (-1, 1).
 float erfinv_approx(float x) {
     float w = -log((1.0 - x) * (1.0 + x));

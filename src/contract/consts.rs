@@ -57,6 +57,9 @@ contract_constants! {
     /// `TriShading::interior` of a triangle whose mesh holds no medium, and the medium of a path
     /// in vacuum.
     NO_MEDIUM = 0xFFFF_FFFF;
+    /// Bisection steps of a pixel filter's sample (`sampling::filter_sample`): 2⁻²⁴ of the
+    /// filter's support, below f32's resolution of a film coordinate.
+    FILTER_BISECTIONS = 24;
     /// Most null-BSDF boundaries one path segment (or shadow ray) passes before it is cut off.
     MAX_NULL_CROSSINGS = 64;
     /// Most tentative collisions one free flight or shadow segment takes before it is cut off

@@ -86,6 +86,16 @@ contract_enums! {
         Ggx = DIST_GGX = 1,
     }
 
+    /// A film's reconstruction filter (`ViewCamera::filter_kind`, `scene::PixelFilter`).
+    enum FilterKind {
+        /// The pixel's square, uniformly.
+        Box = FILTER_BOX = 0,
+        /// Mitsuba's `tent`.
+        Tent = FILTER_TENT = 1,
+        /// Mitsuba's `gaussian`.
+        Gaussian = FILTER_GAUSSIAN = 2,
+    }
+
     /// What `Globals::strategy` holds (the sampling strategy without its parameters).
     enum StrategyTag {
         /// BSDF sampling, power-heuristic MIS (plain PRB).

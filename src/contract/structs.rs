@@ -92,6 +92,12 @@ contract_structs! {
         forward: Vec3,
         /// Philox key word 1 of the view's paths: `(stream << 8) | pass_tag`.
         key1: u32,
+        /// The film's reconstruction filter: `FILTER_BOX`, `FILTER_TENT` or `FILTER_GAUSSIAN`.
+        filter_kind: u32,
+        /// Its radius in pixels.
+        filter_radius: f32,
+        /// Gaussian: −1/(2σ²), the exponent's factor.
+        filter_alpha: f32,
     }
 
     /// One node of the compressed 8-wide BVH (Ylitie et al. 2017, as obvhs builds it): up to eight

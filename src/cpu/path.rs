@@ -154,8 +154,11 @@ pub fn trace_path<const ADJOINT: bool>(
     let key = RngKey([globals.key0, view.key1]);
     let u_cam = draw_block(key, pixel, sample, 0, DIM_PIXEL_JITTER / 4);
     let (px, py) = (pixel % globals.width, pixel / globals.width);
-    let sx = 2.0 * (px as f32 + u_cam[0]) / globals.width as f32 - 1.0;
-    let sy = 1.0 - 2.0 * (py as f32 + u_cam[1]) / globals.height as f32;
+    let (kind, radius, alpha) = (view.filter_kind, view.filter_radius, view.filter_alpha);
+    let fx = crate::sampling::filter_sample(kind, radius, alpha, px, globals.width, u_cam[0]);
+    let fy = crate::sampling::filter_sample(kind, radius, alpha, py, globals.height, u_cam[1]);
+    let sx = 2.0 * fx / globals.width as f32 - 1.0;
+    let sy = 1.0 - 2.0 * fy / globals.height as f32;
     let mut ray = Ray::new(view.origin, (view.forward + sx * view.right + sy * view.up).normalize());
 
     let mut throughput = Vec3::ONE; // β (ALGORITHMS.md §3.1)

@@ -51,6 +51,7 @@ fn cornell_box() -> Result<Scene> {
         fov_y_degrees: 38.0,
         width: 256,
         height: 256,
+        filter: crate::scene::PixelFilter::Box,
     };
     let mut s = Scene::new("builtin:cornell-box", camera);
     let white = s.add_diffuse("white", Vec3::new(0.725, 0.71, 0.68))?;
@@ -88,6 +89,7 @@ fn furnace() -> Result<Scene> {
         fov_y_degrees: 40.0,
         width: 64,
         height: 64,
+        filter: crate::scene::PixelFilter::Box,
     };
     let mut s = Scene::new("builtin:furnace", camera);
     let white = s.add_diffuse("object", Vec3::ONE)?;
@@ -120,6 +122,7 @@ fn blend() -> Result<Scene> {
         fov_y_degrees: 35.0,
         width: 256,
         height: 192,
+        filter: crate::scene::PixelFilter::Box,
     };
     let mut s = Scene::new("builtin:blend", camera);
     let floor = s.add_diffuse("floor", Vec3::new(0.5, 0.5, 0.5))?;

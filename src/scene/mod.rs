@@ -120,6 +120,43 @@ pub struct Camera {
     pub width: u32,
     /// Default image height.
     pub height: u32,
+    /// The film's reconstruction filter.
+    pub filter: PixelFilter,
+}
+
+/// A film's reconstruction filter, as Mitsuba 3's `rfilter`s: a pixel's value is the filter-
+/// weighted mean of the radiance over the film around the pixel's centre, ∫ f(x − c) L(x) dx /
+/// ∫ f(x − c) dx over the film (Mitsuba splats samples with these weights and normalises by their
+/// sum; pathgrad draws each sample's position from the filter itself, truncated to the film,
+/// which has the same expectation). Separable: f(x, y) = f(x) f(y).
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub enum PixelFilter {
+    /// The pixel's own square, uniformly (`box`, radius 0.5).
+    #[default]
+    Box,
+    /// `tent`: f(x) = max(0, 1 − |x| / radius).
+    Tent {
+        /// Its radius in pixels (Mitsuba's default 1).
+        radius: f32,
+    },
+    /// `gaussian`: f(x) = max(0, exp(−x² / (2σ²)) − exp(−r² / (2σ²))) for |x| < r = 4σ.
+    Gaussian {
+        /// Its standard deviation σ in pixels (Mitsuba's default 0.5).
+        stddev: f32,
+    },
+}
+
+impl PixelFilter {
+    /// The filter's constants as the kernels read them: kind, radius and (Gaussian) −1/(2σ²).
+    pub fn constants(&self) -> (u32, f32, f32) {
+        match *self {
+            PixelFilter::Box => (crate::contract::FILTER_BOX, 0.5, 0.0),
+            PixelFilter::Tent { radius } => (crate::contract::FILTER_TENT, radius, 0.0),
+            PixelFilter::Gaussian { stddev } => {
+                (crate::contract::FILTER_GAUSSIAN, 4.0 * stddev, -1.0 / (2.0 * stddev * stddev))
+            }
+        }
+    }
 }
 
 /// A named camera of a scene: a Mitsuba `<sensor>` (named by its `id`, else `sensor_INDEX`) or a

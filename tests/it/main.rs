@@ -8,6 +8,7 @@ mod adaptive;
 mod batch;
 mod bvh_embree;
 mod cli;
+mod conformance;
 mod cpu_vs_gpu;
 mod embed;
 mod embree_smoke;

@@ -126,6 +126,7 @@ impl Loader<'_> {
             fov_y_degrees: yfov.to_degrees(),
             width: DEFAULT_WIDTH,
             height,
+            filter: crate::scene::PixelFilter::Box,
         };
         // Named by its node (node names are unique: `unique_names`).
         self.cameras.push(crate::scene::Sensor { name: self.node_names[node].clone(), camera });

@@ -214,6 +214,7 @@ fn placeholder_camera() -> Camera {
         fov_y_degrees: DEFAULT_FOV_Y_DEGREES,
         width: DEFAULT_WIDTH,
         height: DEFAULT_WIDTH,
+        filter: crate::scene::PixelFilter::Box,
     }
 }
 

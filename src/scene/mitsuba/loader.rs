@@ -85,8 +85,15 @@ pub(super) fn load_text_with(text: &str, file: &Path, options: &LoadOptions, mes
             message: format!("malformed XML: {message}"),
         }
     })?;
-    let placeholder =
-        Camera { position: Vec3::ZERO, target: Vec3::Z, up: Vec3::Y, fov_y_degrees: 45.0, width: 1, height: 1 };
+    let placeholder = Camera {
+        position: Vec3::ZERO,
+        target: Vec3::Z,
+        up: Vec3::Y,
+        fov_y_degrees: 45.0,
+        width: 1,
+        height: 1,
+        filter: crate::scene::PixelFilter::Box,
+    };
     let mut loader = Loader {
         x: Xml::new(name.clone(), &doc),
         dir: file.parent().map(Path::to_path_buf).unwrap_or_default(),

@@ -14,7 +14,7 @@
 //! - BSDFs `diffuse` (`reflectance`: colour or `<texture type="bitmap">`), `roughconductor`,
 //!   `blendbsdf`, `twosided`; `<emitter type="constant">` at scene level (the environment).
 //! - `<sensor type="perspective">` with `fov`/`focal_length`, `fov_axis`, `to_world`, a
-//!   `<film type="hdrfilm">` and a `<sampler type="independent">` (`sample_count` →
+//!   `<film type="hdrfilm">` (`width`, `height`, an `rfilter`) and a `<sampler type="independent">` (`sample_count` →
 //!   [`Scene::default_spp`]); `<integrator type="path|prb|prb_basic">` `max_depth` →
 //!   [`Scene::max_depth`].
 //!
@@ -47,8 +47,12 @@
 //! - **Depth**: `max_depth = -1` (and a scene without `<integrator>`, Mitsuba's default) becomes
 //!   [`crate::integrator::UNBOUNDED_DEPTH_CAP`], which the renderer treats as unbounded. `rr_depth`
 //!   other than 5 and `hide_emitters` are warned about and ignored.
-//! - **Filters and samplers**: `box` is pathgrad's pixel filter; `gaussian` (Mitsuba's default)
-//!   is accepted with a warning; other filters and samplers are unsupported.
+//! - **Filters and samplers**: the film's `rfilter` is `box`, `tent` (`radius`) or `gaussian`
+//!   (`stddev`; Mitsuba's default, also when the film names none), rendered exactly
+//!   ([`crate::scene::PixelFilter`]: each sample's position is drawn from the filter around the
+//!   pixel's centre, truncated to the film, which has the expectation of Mitsuba's weighted
+//!   splatting); filters with negative lobes (`mitchell`, `catmullrom`, `lanczos`) and
+//!   `sample_border` are refused; samplers other than `independent` are unsupported.
 //! - **Bitmaps**: texel row 0 is the image's top row (Mitsuba's v = 0); PNG is sRGB-decoded
 //!   unless `raw`, EXR is linear; texels must lie in [0, 1].
 //! - **Blends** of two `twosided` leaves become `twosided(blend(..))` (the same BSDF), since

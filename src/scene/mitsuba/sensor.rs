@@ -14,10 +14,14 @@ use super::loader::Loader;
 use super::xml::{El, Props, Transform};
 use crate::error::Result;
 use crate::integrator::{DEFAULT_RR_DEPTH, UNBOUNDED_DEPTH_CAP};
-use crate::scene::Camera;
+use crate::scene::{Camera, PixelFilter};
 
 /// Mitsuba's default film size.
 const DEFAULT_FILM: (u32, u32) = (768, 576);
+/// Mitsuba's `gaussian` rfilter's default standard deviation, in pixels.
+const DEFAULT_GAUSSIAN_STDDEV: f32 = 0.5;
+/// The largest filter radius read, in pixels.
+const MAX_FILTER_RADIUS: f32 = 64.0;
 /// Largest film side pathgrad renders (as `RenderOptions::validate`).
 const MAX_FILM: i64 = 16_384;
 /// Mitsuba's default `sample_count` of the `independent` sampler.
@@ -76,8 +80,9 @@ impl<'a> Loader<'a> {
             return Err(self.x.err(node, format!("unsupported plugin '{}' (supported: perspective)", p.kind)));
         }
         let films = p.take_nested(&["film"]);
-        let (width, height) = match films[..] {
-            [] => DEFAULT_FILM,
+        // Mitsuba's hdrfilm reconstructs with a Gaussian (σ = 0.5) unless told otherwise.
+        let (width, height, filter) = match films[..] {
+            [] => (DEFAULT_FILM.0, DEFAULT_FILM.1, PixelFilter::Gaussian { stddev: DEFAULT_GAUSSIAN_STDDEV }),
             [f] => self.film(f)?,
             [_, second, ..] => return Err(self.x.err(second, "a sensor has at most one <film>")),
         };
@@ -147,11 +152,12 @@ impl<'a> Loader<'a> {
             None => (Vec3::ZERO, Vec3::Z, Vec3::Y),
             Some((t, n)) => camera_frame(&t).map_err(|m| self.x.err(n, m))?,
         };
-        self.scene.camera = Camera { position, target, up, fov_y_degrees: fov_y, width, height };
+        self.scene.camera = Camera { position, target, up, fov_y_degrees: fov_y, width, height, filter };
         Ok(())
     }
 
-    fn film(&mut self, node: El<'a>) -> Result<(u32, u32)> {
+    /// A `<film>`: its size and reconstruction filter (Mitsuba's default: a Gaussian of σ 0.5).
+    fn film(&mut self, node: El<'a>) -> Result<(u32, u32, PixelFilter)> {
         let p = Props::parse(&self.x, node)?;
         if p.kind != "hdrfilm" {
             return Err(self.x.err(node, format!("unsupported plugin '{}' (supported: hdrfilm)", p.kind)));
@@ -169,33 +175,48 @@ impl<'a> Loader<'a> {
         for name in ["pixel_format", "component_format", "file_format"] {
             p.string(&self.x, name)?;
         }
-        match p.take_nested(&["rfilter"])[..] {
-            [] => {}
+        if p.boolean(&self.x, "sample_border", false)? {
+            let n = p.node_of("sample_border").unwrap_or(node);
+            return Err(self.x.err(n, "sample_border is not supported (pathgrad samples inside the film only)"));
+        }
+        let filter = match p.take_nested(&["rfilter"])[..] {
+            [] => PixelFilter::Gaussian { stddev: DEFAULT_GAUSSIAN_STDDEV },
             [f] => {
                 let f = Props::parse(&self.x, f)?;
-                match f.kind.as_str() {
-                    "box" => {}
-                    // Mitsuba's default filter: naming it changes nothing relative to omitting it.
+                // A positive, finite size in pixels (Mitsuba's defaults when absent).
+                let size = |loader: &Self, name: &str, default: f32| -> Result<f32> {
+                    match f.float(&loader.x, name)? {
+                        None => Ok(default),
+                        Some((v, _)) if v.is_finite() && v > 0.0 && v <= MAX_FILTER_RADIUS => Ok(v),
+                        Some((v, n)) => Err(loader
+                            .x
+                            .err(n, format!("'{name}' must lie in (0, {MAX_FILTER_RADIUS}] pixels, got {v}"))),
+                    }
+                };
+                let filter = match f.kind.as_str() {
+                    "box" => PixelFilter::Box,
+                    "tent" => PixelFilter::Tent { radius: size(self, "radius", 1.0)? },
                     "gaussian" => {
-                        let w = self.x.warning(
-                            f.node,
-                            "rfilter 'gaussian' (Mitsuba's default) replaced by pathgrad's box filter",
-                        );
-                        self.scene.warn(w);
-                        f.float(&self.x, "stddev")?;
+                        let stddev = size(self, "stddev", DEFAULT_GAUSSIAN_STDDEV)?;
+                        PixelFilter::Gaussian { stddev: stddev.min(MAX_FILTER_RADIUS / 4.0) }
                     }
                     other => {
-                        return Err(self
-                            .x
-                            .err(f.node, format!("unsupported plugin '{other}' (supported: box, gaussian as box)")));
+                        return Err(self.x.err(
+                            f.node,
+                            format!(
+                                "unsupported plugin '{other}' (supported: box, tent, gaussian; filters with negative \
+                                 lobes are not)"
+                            ),
+                        ));
                     }
-                }
+                };
                 self.finish(&f)?;
+                filter
             }
             [_, second, ..] => return Err(self.x.err(second, "a film has at most one <rfilter>")),
-        }
+        };
         self.finish(&p)?;
-        Ok((size[0], size[1]))
+        Ok((size[0], size[1], filter))
     }
 
     fn sampler(&mut self, node: El<'a>) -> Result<()> {

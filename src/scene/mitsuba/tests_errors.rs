@@ -422,8 +422,16 @@ fn sensor_errors() {
             "<integer name=\"width\">: 'width' must lie in [1, 16384], got 0",
         ),
         (
-            r#"<film type="hdrfilm"><rfilter type="tent"/></film>"#,
-            "<rfilter>: unsupported plugin 'tent' (supported: box, gaussian as box)",
+            r#"<film type="hdrfilm"><rfilter type="mitchell"/></film>"#,
+            "<rfilter>: unsupported plugin 'mitchell' (supported: box, tent, gaussian; filters with negative lobes are not)",
+        ),
+        (
+            r#"<film type="hdrfilm"><rfilter type="gaussian"><float name="stddev" value="-1"/></rfilter></film>"#,
+            "<float name=\"stddev\">: 'stddev' must lie in (0, 64] pixels, got -1",
+        ),
+        (
+            r#"<film type="hdrfilm"><boolean name="sample_border" value="true"/></film>"#,
+            "<boolean name=\"sample_border\">: sample_border is not supported (pathgrad samples inside the film only)",
         ),
         (r#"<sampler type="stratified"/>"#, "<sampler>: unsupported plugin 'stratified' (supported: independent)"),
         (
@@ -463,7 +471,6 @@ fn ignored_settings_are_warned_about() {
     assert_eq!(
         w,
         [
-            "4:22: rfilter 'gaussian' (Mitsuba's default) replaced by pathgrad's box filter",
             "4:124: property 'seed' of 'independent' ignored: pathgrad takes the seed from the render options",
             "3:28: property 'near_clip' of 'perspective' ignored: pathgrad's camera does not clip",
             "2:25: property 'rr_depth' of 'path' ignored: pathgrad starts Russian roulette at depth 5",

@@ -4,7 +4,7 @@ use glam::Vec3;
 use pathgrad::bsdf::Distribution;
 use pathgrad::scene::builtin::FURNACE_RADIANCE;
 use pathgrad::scene::shapes::{Geometry, cuboid, quad, sphere};
-use pathgrad::scene::{Albedo, Camera, Material, Scene};
+use pathgrad::scene::{Albedo, Camera, Material, PixelFilter, Scene};
 
 /// The furnace with its ceiling removed and a constant environment of the same radiance: paths
 /// reach emitted radiance 1 through both next-event techniques (area and environment). Inside: an
@@ -17,6 +17,7 @@ pub fn open_furnace() -> Scene {
         fov_y_degrees: 45.0,
         width: 48,
         height: 48,
+        filter: PixelFilter::Box,
     };
     let mut s = Scene::new("test:open-furnace", camera);
     let white = s.add_diffuse("object", Vec3::ONE).unwrap();
@@ -50,6 +51,7 @@ pub fn textured_environment() -> Scene {
         fov_y_degrees: 40.0,
         width: 64,
         height: 48,
+        filter: PixelFilter::Box,
     };
     let mut s = Scene::new("test:textured-environment", camera);
     let mut texels = Vec::new();
@@ -92,6 +94,7 @@ pub fn deep_meshes() -> Scene {
         fov_y_degrees: 40.0,
         width: 64,
         height: 48,
+        filter: PixelFilter::Box,
     };
     let mut s = Scene::new("test:deep-meshes", camera);
     let grey = s.add_diffuse("grey", Vec3::splat(0.6)).unwrap();

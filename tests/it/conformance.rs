@@ -1,0 +1,326 @@
+//! The conformance matrix: every scene of `tests/conformance/scenes/` rendered by the kernels and
+//! compared with the Mitsuba 3 statistics stored beside it (`tests/conformance/reference/`,
+//! written by `tests/conformance/mitsuba_reference.py`), primal and image gradients, block by block.
+//!
+//! For each scene and each compared quantity (the primal image; the forward-mode image gradient of
+//! each parameter the reference lists, tangent 1 on every value), pathgrad renders `S` seeds and
+//! takes, per seed, each B×B block's mean per channel and the image's mean per channel; over the
+//! seeds, their means and standard errors. Each block, channel and image mean gives
+//! z = (mean_p − mean_m) / √(se_p² + se_m² + (10⁻⁴ mean_m)²), the floor standing for f32 rounding
+//! in blocks without variance (constant sky). Every |z| must stay below the Bonferroni threshold
+//! for a family-wise false-alarm rate of 1 % over all the matrix's tests.
+//!
+//! The power check: with that threshold, each image mean must have the power (95 %) to see a
+//! relative bias of 1 % (primal) or 5 % (gradients, relative to the mean |block value|) — the
+//! test fails when it cannot. pathgrad's sample count per scene is sized for it from the
+//! reference's own variance (the same estimator's per-sample variance), within a budget.
+//!
+//! Every scene must also load without a warning (a warning means pathgrad approximates something,
+//! which the matrix must not pass silently), and every parameter pathgrad exposes must carry one
+//! of the names Mitsuba's `mi.traverse` prints for the scene.
+//!
+//! `PATHGRAD_CONFORMANCE=name,name` restricts the run to those scenes (by file stem).
+
+use std::path::{Path, PathBuf};
+
+use pathgrad::backend::Backend;
+use pathgrad::gpu::Renderer;
+use pathgrad::image::Image;
+use pathgrad::integrator::RenderOptions;
+use serde_json::Value;
+
+use crate::support::TestGpu;
+
+/// Family-wise false-alarm rate of the whole matrix.
+const FAMILY_ALPHA: f64 = 0.01;
+/// Power demanded of each image-mean test against the bias below.
+const POWER_Z: f64 = 1.645;
+/// The relative bias of the primal image mean the test must be able to see.
+const PRIMAL_BIAS: f64 = 0.01;
+/// The relative bias of an image gradient (against its mean |block value|) it must be able to see.
+const GRADIENT_BIAS: f64 = 0.05;
+/// Seeds per quantity on pathgrad's side.
+const SEEDS: u32 = 8;
+/// The sample counts pathgrad may choose from (per seed).
+const SPP_RANGE: (u32, u32) = (16, 2048);
+
+fn root() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/conformance")
+}
+
+/// Per-block and image statistics of one quantity over seeds: means and standard errors.
+#[derive(Clone, Debug)]
+struct Stats {
+    mean: Vec<[f64; 3]>,
+    se: Vec<[f64; 3]>,
+    image_mean: [f64; 3],
+    image_se: [f64; 3],
+}
+
+fn triples(v: &Value) -> Vec<[f64; 3]> {
+    v.as_array()
+        .expect("an array of [r, g, b]")
+        .iter()
+        .map(|t| {
+            let t = t.as_array().expect("[r, g, b]");
+            [t[0].as_f64().unwrap(), t[1].as_f64().unwrap(), t[2].as_f64().unwrap()]
+        })
+        .collect()
+}
+
+fn triple(v: &Value) -> [f64; 3] {
+    triples(&Value::Array(vec![v.clone()]))[0]
+}
+
+impl Stats {
+    fn from_json(v: &Value) -> Stats {
+        Stats {
+            mean: triples(&v["mean"]),
+            se: triples(&v["se"]),
+            image_mean: triple(&v["image_mean"]),
+            image_se: triple(&v["image_se"]),
+        }
+    }
+
+    /// Statistics over the per-seed images `images`, in blocks of `block` pixels.
+    fn of_images(images: &[Image], block: u32) -> Stats {
+        let (w, h) = (images[0].width(), images[0].height());
+        let (bx, by) = (w.div_ceil(block), h.div_ceil(block));
+        let per_seed: Vec<(Vec<[f64; 3]>, [f64; 3])> = images
+            .iter()
+            .map(|img| {
+                let mut sums = vec![[0.0f64; 3]; (bx * by) as usize];
+                let mut counts = vec![0u32; (bx * by) as usize];
+                let mut total = [0.0f64; 3];
+                for (i, px) in img.as_slice().chunks_exact(3).enumerate() {
+                    let (x, y) = (i as u32 % w, i as u32 / w);
+                    let b = ((y / block) * bx + x / block) as usize;
+                    counts[b] += 1;
+                    for c in 0..3 {
+                        sums[b][c] += f64::from(px[c]);
+                        total[c] += f64::from(px[c]);
+                    }
+                }
+                let blocks = sums.iter().zip(&counts).map(|(s, &n)| s.map(|v| v / f64::from(n))).collect();
+                (blocks, total.map(|v| v / f64::from(w * h)))
+            })
+            .collect();
+        let n = per_seed.len() as f64;
+        let mean_se = |values: &dyn Fn(usize) -> f64| {
+            let m = (0..per_seed.len()).map(values).sum::<f64>() / n;
+            let var = (0..per_seed.len()).map(|s| (values(s) - m).powi(2)).sum::<f64>() / (n - 1.0);
+            (m, (var / n).sqrt())
+        };
+        let mut stats = Stats { mean: Vec::new(), se: Vec::new(), image_mean: [0.0; 3], image_se: [0.0; 3] };
+        for b in 0..(bx * by) as usize {
+            let (mut m, mut e) = ([0.0; 3], [0.0; 3]);
+            for c in 0..3 {
+                (m[c], e[c]) = mean_se(&|s| per_seed[s].0[b][c]);
+            }
+            stats.mean.push(m);
+            stats.se.push(e);
+        }
+        for c in 0..3 {
+            (stats.image_mean[c], stats.image_se[c]) = mean_se(&|s| per_seed[s].1[c]);
+        }
+        stats
+    }
+
+    /// The scale a relative bias is measured against, per channel: |image mean| for the primal,
+    /// the mean |block value| for a gradient (whose image mean may cancel).
+    fn scale(&self, gradient: bool) -> [f64; 3] {
+        if !gradient {
+            return self.image_mean.map(f64::abs);
+        }
+        let n = self.mean.len() as f64;
+        [0, 1, 2].map(|c| self.mean.iter().map(|b| b[c].abs()).sum::<f64>() / n)
+    }
+}
+
+/// z of pathgrad's value against Mitsuba's, with the rounding floor.
+fn z(p: f64, sp: f64, m: f64, sm: f64) -> f64 {
+    let denom = (sp * sp + sm * sm + (1e-4 * m).powi(2)).sqrt();
+    if denom == 0.0 { if p == m { 0.0 } else { f64::INFINITY } } else { (p - m) / denom }
+}
+
+/// The standard normal's upper tail P(Z > z) = erfc(z/√2)/2 = Q(1/2, z²/2)/2, z ≥ 0.
+fn normal_tail(z: f64) -> f64 {
+    0.5 * pathgrad::stats::gamma_q(0.5, 0.5 * z * z)
+}
+
+/// The z whose two-sided tail is `p`, by bisection.
+fn two_sided_threshold(p: f64) -> f64 {
+    let (mut lo, mut hi) = (0.0f64, 40.0f64);
+    for _ in 0..200 {
+        let mid = 0.5 * (lo + hi);
+        if 2.0 * normal_tail(mid) > p { lo = mid } else { hi = mid }
+    }
+    0.5 * (lo + hi)
+}
+
+/// One reference: the scene, its statistics, what to compare.
+struct Reference {
+    name: String,
+    json: Value,
+}
+
+impl Reference {
+    fn block(&self) -> u32 {
+        self.json["block"].as_u64().unwrap() as u32
+    }
+    fn blocks(&self) -> usize {
+        (self.json["blocks_x"].as_u64().unwrap() * self.json["blocks_y"].as_u64().unwrap()) as usize
+    }
+    fn quantities(&self) -> Vec<(Option<String>, Stats)> {
+        let mut out = vec![(None, Stats::from_json(&self.json["primal"]))];
+        if let Some(grads) = self.json["gradients"].as_object() {
+            for (key, g) in grads {
+                out.push((Some(key.clone()), Stats::from_json(g)));
+            }
+        }
+        out
+    }
+}
+
+fn references() -> Vec<Reference> {
+    let only: Option<Vec<String>> = std::env::var("PATHGRAD_CONFORMANCE")
+        .ok()
+        .filter(|v| !v.trim().is_empty())
+        .map(|v| v.split(',').map(|s| s.trim().to_string()).collect());
+    let mut files: Vec<PathBuf> = std::fs::read_dir(root().join("reference"))
+        .expect("tests/conformance/reference")
+        .map(|e| e.unwrap().path())
+        .filter(|p| p.extension().is_some_and(|e| e == "json"))
+        .collect();
+    files.sort();
+    files
+        .into_iter()
+        .map(|p| {
+            let name = p.file_stem().unwrap().to_string_lossy().into_owned();
+            let json: Value = serde_json::from_str(&std::fs::read_to_string(&p).unwrap())
+                .unwrap_or_else(|e| panic!("{}: {e}", p.display()));
+            Reference { name, json }
+        })
+        .filter(|r| only.as_ref().is_none_or(|o| o.contains(&r.name)))
+        .collect()
+}
+
+/// The sample count per seed at which pathgrad's image mean has the power to see `bias` of
+/// `scale`, assuming its per-sample variance is the reference's (seeds × spp × se² per channel).
+fn spp_for_power(reference: &Reference, m: &Stats, gradient: bool, threshold: f64) -> u32 {
+    let (seeds_m, spp_m) = (reference.json["seeds"].as_f64().unwrap(), reference.json["spp"].as_f64().unwrap());
+    let bias = if gradient { GRADIENT_BIAS } else { PRIMAL_BIAS };
+    let scale = m.scale(gradient);
+    let mut need = f64::from(SPP_RANGE.0);
+    for c in 0..3 {
+        let allowed = bias * scale[c] / (threshold + POWER_Z);
+        let budget = allowed * allowed - m.image_se[c] * m.image_se[c];
+        let per_sample = m.image_se[c].powi(2) * seeds_m * spp_m;
+        if per_sample == 0.0 || scale[c] == 0.0 {
+            continue;
+        }
+        let spp = if budget > 0.0 { per_sample / (f64::from(SEEDS) * budget) } else { f64::INFINITY };
+        need = need.max(spp * 1.3);
+    }
+    (need.ceil() as u32).clamp(SPP_RANGE.0, SPP_RANGE.1).next_power_of_two().min(SPP_RANGE.1)
+}
+
+#[test]
+fn conformance_matrix_agrees_with_mitsuba() {
+    let refs = references();
+    assert!(!refs.is_empty(), "no references in tests/conformance/reference (or none matches PATHGRAD_CONFORMANCE)");
+    // Bonferroni over every block, channel and image mean of every quantity of every scene.
+    let tests: usize = refs.iter().map(|r| r.quantities().len() * (r.blocks() + 1) * 3).sum();
+    let threshold = two_sided_threshold(FAMILY_ALPHA / tests as f64);
+    println!("conformance: {} scenes, {tests} z-tests, |z| threshold {threshold:.2}", refs.len());
+    let gpu = TestGpu::new();
+    let mut failures = Vec::new();
+    for r in &refs {
+        let started = std::time::Instant::now();
+        let file = root().join("scenes").join(r.json["scene"].as_str().unwrap());
+        let scene = match pathgrad::scene::load(file.to_str().unwrap(), &[]) {
+            Ok(s) => s,
+            Err(e) => {
+                failures.push(format!("{}: does not load: {e}", r.name));
+                continue;
+            }
+        };
+        if !scene.warnings.is_empty() {
+            failures.push(format!("{}: loads with warnings: {:?}", r.name, scene.warnings));
+        }
+        let keys: Vec<&str> = r.json["keys"].as_array().unwrap().iter().map(|k| k.as_str().unwrap()).collect();
+        for entry in scene.params.entries() {
+            if !keys.contains(&entry.name.as_str()) {
+                failures.push(format!("{}: parameter '{}' is not one of Mitsuba's keys", r.name, entry.name));
+            }
+        }
+        let mut renderer = Renderer::new(&gpu.ctx, &scene).unwrap();
+        let mut line = format!("{:<40}", r.name);
+        for (key, theirs) in r.quantities() {
+            let gradient = key.is_some();
+            let spp = spp_for_power(r, &theirs, gradient, threshold);
+            let images: Vec<Image> = (0..SEEDS)
+                .map(|s| {
+                    let opts = RenderOptions { spp, seed: 1000 + s, ..RenderOptions::for_scene(&scene) };
+                    match &key {
+                        None => renderer.render(&opts),
+                        Some(k) => renderer.image_gradient(&opts, k),
+                    }
+                    .unwrap_or_else(|e| panic!("{}: {e}", r.name))
+                })
+                .collect();
+            let mine = Stats::of_images(&images, r.block());
+            let what = key.clone().unwrap_or_else(|| "primal".into());
+            assert_eq!(mine.mean.len(), theirs.mean.len(), "{}: block count", r.name);
+            let mut worst = 0.0f64;
+            for (b, (mp, mm)) in mine.mean.iter().zip(&theirs.mean).enumerate() {
+                for c in 0..3 {
+                    let zb = z(mp[c], mine.se[b][c], mm[c], theirs.se[b][c]);
+                    worst = worst.max(zb.abs());
+                    if zb.abs() > threshold {
+                        failures.push(format!(
+                            "{} {what}: block {b} channel {c}: {:.5} ± {:.2e} vs Mitsuba {:.5} ± {:.2e} (z {zb:.1})",
+                            r.name, mp[c], mine.se[b][c], mm[c], theirs.se[b][c]
+                        ));
+                    }
+                }
+            }
+            let scale = theirs.scale(gradient);
+            let bias = if gradient { GRADIENT_BIAS } else { PRIMAL_BIAS };
+            let mut ratio = [0.0; 3];
+            for c in 0..3 {
+                let (mp, sp, mm, sm) = (mine.image_mean[c], mine.image_se[c], theirs.image_mean[c], theirs.image_se[c]);
+                let zi = z(mp, sp, mm, sm);
+                worst = worst.max(zi.abs());
+                ratio[c] = if mm != 0.0 { mp / mm } else { f64::NAN };
+                if zi.abs() > threshold {
+                    failures.push(format!(
+                        "{} {what}: image mean channel {c}: {mp:.6} ± {sp:.2e} vs Mitsuba {mm:.6} ± {sm:.2e} (z {zi:.1})",
+                        r.name
+                    ));
+                }
+                // The power check: the bias this test would see 95 % of the time.
+                let detectable = (threshold + POWER_Z) * (sp * sp + sm * sm).sqrt();
+                if scale[c] > 0.0 && detectable > bias * scale[c] {
+                    failures.push(format!(
+                        "{} {what}: channel {c} cannot see a {:.0} % bias (it sees {:.2} %) at {spp} spp × {SEEDS} seeds",
+                        r.name,
+                        100.0 * bias,
+                        100.0 * detectable / scale[c]
+                    ));
+                }
+            }
+            line +=
+                &format!("  {what} [{:.4} {:.4} {:.4}] max|z| {worst:.1} ({spp} spp)", ratio[0], ratio[1], ratio[2]);
+        }
+        println!("{line}  {:.1} s", started.elapsed().as_secs_f64());
+    }
+    assert!(failures.is_empty(), "{} disagreement(s) with Mitsuba:\n{}", failures.len(), failures.join("\n"));
+}
+
+#[test]
+fn the_normal_threshold_is_right() {
+    // Two-sided 5 % and 1e-6 of the standard normal.
+    assert!((two_sided_threshold(0.05) - 1.959_964).abs() < 1e-5);
+    assert!((two_sided_threshold(1e-6) - 4.891_638).abs() < 1e-5);
+}
