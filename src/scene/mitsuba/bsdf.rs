@@ -33,8 +33,8 @@ pub(super) fn conductor(name: &str) -> Option<(Vec3, Vec3)> {
 }
 
 impl<'a> Loader<'a> {
-    /// Builds (once) the BSDF `node` — a `<bsdf>` or a `<ref>` to one — named by its id or else
-    /// `name`.
+    /// Builds (once) the BSDF `node` — a `<bsdf>` or a `<ref>` to one — named `name`, the path
+    /// that reached it, unless the scene level named it first ([`Loader::name_of`]).
     ///
     /// # Errors
     /// Anything wrong with the BSDF or its children, reference cycles, nesting past
@@ -194,8 +194,9 @@ impl<'a> Loader<'a> {
         self.scene.add_rough_conductor(name, distribution, alpha, specular, eta, k).map_err(|e| self.located(p.node, e))
     }
 
-    /// Builds (once) the texture `node` — a `<texture>` or a `<ref>` to one — named by its id or
-    /// else `name`; its texels become the parameter `NAME.data`.
+    /// Builds (once) the texture `node` — a `<texture>` or a `<ref>` to one — named `name` unless
+    /// the scene level named it first ([`Loader::name_of`]); its texels become the parameter
+    /// `NAME.data`.
     ///
     /// # Errors
     /// Unsupported plugins, missing or undecodable files, texels outside [0, 1].
