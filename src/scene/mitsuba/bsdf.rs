@@ -158,7 +158,10 @@ impl<'a> Loader<'a> {
                 _ => return Err(x.err(n, format!("unsupported distribution '{s}' (supported: beckmann, ggx)"))),
             },
         };
-        let alpha = if p.has("alpha_u") || p.has("alpha_v") {
+        // Mitsuba's key is the property given: `alpha`, or `alpha_u` and `alpha_v`, of which
+        // pathgrad (isotropic) exposes `alpha_u`, which `alpha_v` must equal and follows.
+        let anisotropic = p.has("alpha_u") || p.has("alpha_v");
+        let alpha = if anisotropic {
             if p.has("alpha") {
                 return Err(x.err(p.node, "give either 'alpha' or 'alpha_u'/'alpha_v', not both"));
             }
@@ -191,7 +194,17 @@ impl<'a> Loader<'a> {
         };
         // VNDF sampling is what pathgrad does; `false` would only change the noise.
         p.boolean(x, "sample_visible", true)?;
-        self.scene.add_rough_conductor(name, distribution, alpha, specular, eta, k).map_err(|e| self.located(p.node, e))
+        let key = if anisotropic { "alpha_u" } else { "alpha" };
+        let params = &mut self.scene.params;
+        let alpha = params.add(&format!("{name}.{key}.value"), &[alpha], bounds::ALPHA);
+        let alpha = alpha.map_err(|e| self.located(p.node, e))?;
+        let specular = self.scene.params.add(
+            &format!("{name}.specular_reflectance.value"),
+            &specular.to_array(),
+            bounds::REFLECTANCE,
+        );
+        let specular = specular.map_err(|e| self.located(p.node, e))?;
+        Ok(self.scene.add_material(Material::RoughConductor { distribution, alpha, specular, eta, k }))
     }
 
     /// Builds (once) the texture `node` — a `<texture>` or a `<ref>` to one — named `name` unless

@@ -366,6 +366,9 @@ fn rough_conductor_properties_and_presets() {
     assert_eq!((eta, k), bsdf::conductor("Au").unwrap());
     assert_eq!(s.params.get(alpha)[0], 0.2);
     assert_eq!(param(&s, "g.bsdf.specular_reflectance.value"), [0.9, 0.8, 0.7]);
+    // Mitsuba's key is the property the file gives; alpha_v follows alpha_u.
+    assert_eq!(param(&s, "au.bsdf.alpha_u.value"), [0.2]);
+    assert!(s.params.find("au.bsdf.alpha.value").is_none() && s.params.find("au.bsdf.alpha_v.value").is_none());
     for m in ["none", "Au", "Ag", "Cu", "Al", "Cr"] {
         let (eta, k) = bsdf::conductor(m).unwrap();
         assert!(eta.min_element() >= 0.0 && k.min_element() > 0.0, "{m}");
