@@ -67,6 +67,8 @@ mod tests;
 mod tests_errors;
 #[cfg(test)]
 mod tests_media;
+#[cfg(test)]
+mod tests_names;
 
 use std::path::Path;
 
