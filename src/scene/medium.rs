@@ -1,8 +1,12 @@
 //! Participating media as Mitsuba 3 describes them: homogeneous and heterogeneous media inside
 //! shapes, their extinction and albedo fields (constants or `.vol` grids), scale and phase function.
 //!
-//! Every differentiable value is a parameter named as Mitsuba's `traverse` names it
-//! (`smoke.interior_medium.sigma_t.data`, `.albedo.value.value`, `.scale`, `.phase_function.g`).
+//! Every differentiable value is a parameter named as Mitsuba's `traverse` names it: the medium's
+//! prefix, `SHAPE.interior_medium` for the first shape that reaches it (a nested medium's own id
+//! plays no part) or the id of one declared at scene level and reached there first (see
+//! [`crate::scene::mitsuba`]), then `.sigma_t.data` for a grid, `.sigma_t.value.value` for a
+//! constant or `constvolume`, the same for `albedo`, `.scale` and `.phase_function.g`
+//! (`smoke.interior_medium.sigma_t.data`).
 //! The extinction at a point is `scale · sigma_t(p)`; a grid fills the unit cube under its
 //! volume's `to_world` and is looked up trilinearly at `p·res − 0.5` with clamping
 //! ([`crate::scene::volume::Grid::lookup`]).
@@ -96,7 +100,8 @@ pub enum Phase {
 /// A participating medium inside one or more shapes (their `interior`).
 #[derive(Clone, Debug, PartialEq)]
 pub struct Medium {
-    /// The parameter prefix: the medium's `id`, or `SHAPE.interior_medium` when nested in a shape.
+    /// The parameter prefix: `SHAPE.interior_medium`, or the `id` of a medium Mitsuba's traverse
+    /// reaches at scene level first.
     pub name: String,
     /// `heterogeneous` in the file (else `homogeneous`); both may hold grids or constants.
     pub heterogeneous: bool,

@@ -33,8 +33,8 @@ pub(super) fn conductor(name: &str) -> Option<(Vec3, Vec3)> {
 }
 
 impl<'a> Loader<'a> {
-    /// Builds (once) the BSDF `node` — a `<bsdf>` or a `<ref>` to one — named by its id or else
-    /// `name`.
+    /// Builds (once) the BSDF `node` — a `<bsdf>` or a `<ref>` to one — named `name`, the path
+    /// that reached it, unless the scene level named it first ([`Loader::name_of`]).
     ///
     /// # Errors
     /// Anything wrong with the BSDF or its children, reference cycles, nesting past
@@ -158,7 +158,10 @@ impl<'a> Loader<'a> {
                 _ => return Err(x.err(n, format!("unsupported distribution '{s}' (supported: beckmann, ggx)"))),
             },
         };
-        let alpha = if p.has("alpha_u") || p.has("alpha_v") {
+        // Mitsuba's key is the property given: `alpha`, or `alpha_u` and `alpha_v`, of which
+        // pathgrad (isotropic) exposes `alpha_u`, which `alpha_v` must equal and follows.
+        let anisotropic = p.has("alpha_u") || p.has("alpha_v");
+        let alpha = if anisotropic {
             if p.has("alpha") {
                 return Err(x.err(p.node, "give either 'alpha' or 'alpha_u'/'alpha_v', not both"));
             }
@@ -191,11 +194,22 @@ impl<'a> Loader<'a> {
         };
         // VNDF sampling is what pathgrad does; `false` would only change the noise.
         p.boolean(x, "sample_visible", true)?;
-        self.scene.add_rough_conductor(name, distribution, alpha, specular, eta, k).map_err(|e| self.located(p.node, e))
+        let key = if anisotropic { "alpha_u" } else { "alpha" };
+        let params = &mut self.scene.params;
+        let alpha = params.add(&format!("{name}.{key}.value"), &[alpha], bounds::ALPHA);
+        let alpha = alpha.map_err(|e| self.located(p.node, e))?;
+        let specular = self.scene.params.add(
+            &format!("{name}.specular_reflectance.value"),
+            &specular.to_array(),
+            bounds::REFLECTANCE,
+        );
+        let specular = specular.map_err(|e| self.located(p.node, e))?;
+        Ok(self.scene.add_material(Material::RoughConductor { distribution, alpha, specular, eta, k }))
     }
 
-    /// Builds (once) the texture `node` — a `<texture>` or a `<ref>` to one — named by its id or
-    /// else `name`; its texels become the parameter `NAME.data`.
+    /// Builds (once) the texture `node` — a `<texture>` or a `<ref>` to one — named `name` unless
+    /// the scene level named it first ([`Loader::name_of`]); its texels become the parameter
+    /// `NAME.data`.
     ///
     /// # Errors
     /// Unsupported plugins, missing or undecodable files, texels outside [0, 1].

@@ -100,6 +100,7 @@ pub(super) fn load_text_with(text: &str, file: &Path, options: &LoadOptions, mes
         scene: Scene::new(&name, placeholder),
         ids: HashMap::new(),
         names: HashMap::new(),
+        top_names: HashMap::new(),
         materials: HashMap::new(),
         textures: HashMap::new(),
         media: HashMap::new(),
@@ -123,8 +124,12 @@ pub(super) struct Loader<'a> {
     pub scene: Scene,
     /// Every object with an `id`.
     ids: HashMap<String, El<'a>>,
-    /// `_unnamed_N` names of top-level objects without an id.
+    /// `_unnamed_N` names of the top-level objects Mitsuba names `object_<address>`: those without
+    /// an id, and textures (whose ids Mitsuba's traverse does not use).
     names: HashMap<NodeId, String>,
+    /// The scene-level name of each top-level object the walk of `<scene>`'s children has reached;
+    /// an object first reached through a parent is named after that parent instead.
+    top_names: HashMap<NodeId, String>,
     /// BSDFs already built, by element.
     pub materials: HashMap<NodeId, MaterialId>,
     /// Textures already built, by element.
@@ -160,8 +165,9 @@ impl<'a> Loader<'a> {
 
         let mut unnamed = 0;
         for c in &children {
-            if matches!(c.tag_name().name(), "shape" | "bsdf" | "texture" | "emitter" | "medium")
-                && !c.has_attribute("id")
+            let tag = c.tag_name().name();
+            if matches!(tag, "shape" | "bsdf" | "texture" | "emitter" | "medium")
+                && (!c.has_attribute("id") || tag == "texture")
             {
                 self.names.insert(c.id(), format!("_unnamed_{unnamed}"));
                 unnamed += 1;
@@ -205,7 +211,14 @@ impl<'a> Loader<'a> {
             [_, second, ..] => return Err(self.x.err(second, "a scene has at most one <integrator>")),
         }
 
-        for &c in &children {
+        // Built in the order Mitsuba 3.9.1's `load_file` traverses the scene, since an object is
+        // named after the first path that reaches it: meshes last (see `traversal_order`).
+        let mut mesh_children = Vec::new();
+        for (i, c) in self.traversal_order(&children)? {
+            if matches!(c.tag_name().name(), "shape" | "bsdf" | "texture" | "emitter" | "medium") {
+                let name = self.top_name(c)?;
+                self.top_names.insert(c.id(), name);
+            }
             match c.tag_name().name() {
                 "default" | "sensor" | "integrator" => {}
                 "bsdf" => {
@@ -216,9 +229,13 @@ impl<'a> Loader<'a> {
                     let name = self.top_name(c)?;
                     self.texture(c, name, 0)?;
                 }
-                "shape" => self.shape(c)?,
+                "shape" => {
+                    self.shape(c)?;
+                    mesh_children.push(i);
+                }
                 "emitter" => self.environment(c)?,
-                // Built when a shape refers to it (its `interior`); one nothing refers to is reported below.
+                // Built when a shape refers to it (its `interior`), under the name given above unless
+                // an earlier shape reached it first; one nothing refers to is reported below.
                 "medium" | "volume" | "phase" => {}
                 tag @ ("film" | "sampler" | "rfilter") => {
                     return Err(self.x.err(c, format!("a <{tag}> must be inside a <sensor>")));
@@ -235,6 +252,7 @@ impl<'a> Loader<'a> {
                 }
             }
         }
+        self.meshes_in_document_order(&mesh_children);
         for t in root.children().filter(|c| c.is_text()) {
             if t.text().is_some_and(|s| !s.trim().is_empty()) {
                 return Err(self.x.err(root, "unexpected text inside the element"));
@@ -262,6 +280,44 @@ impl<'a> Loader<'a> {
             }
         }
         Ok(())
+    }
+
+    /// `children` (with their indices) in the order Mitsuba 3.9.1's default `load_file`
+    /// (`optimize=True`) traverses them: every object but the mesh shapes in document order, then
+    /// the meshes (`obj`, `ply`, `rectangle`, `cube`: Mitsuba turns rectangles into meshes and
+    /// moves meshes after everything else; their order among themselves is Mitsuba's own, here
+    /// the document's).
+    fn traversal_order(&self, children: &[El<'a>]) -> Result<Vec<(usize, El<'a>)>> {
+        let mut first = Vec::new();
+        let mut meshes = Vec::new();
+        for (i, &c) in children.iter().enumerate() {
+            let mesh = c.has_tag_name("shape")
+                && matches!(self.x.attr(c, "type")?.as_deref(), Some("obj" | "ply" | "rectangle" | "cube"));
+            if mesh { meshes.push((i, c)) } else { first.push((i, c)) }
+        }
+        first.extend(meshes);
+        Ok(first)
+    }
+
+    /// Puts [`Scene::meshes`], built in traversal order from the children with indices
+    /// `built_from`, back in document order (and the indices in `medium_shapes` with them).
+    fn meshes_in_document_order(&mut self, built_from: &[usize]) {
+        let mut order: Vec<usize> = (0..built_from.len()).collect();
+        order.sort_by_key(|&m| built_from[m]);
+        if order.iter().enumerate().all(|(new, &old)| new == old) {
+            return;
+        }
+        let mut new_index = vec![0; order.len()];
+        for (new, &old) in order.iter().enumerate() {
+            new_index[old] = new;
+        }
+        let mut meshes: Vec<Option<crate::scene::Mesh>> =
+            std::mem::take(&mut self.scene.meshes).into_iter().map(Some).collect();
+        self.scene.meshes = order.iter().map(|&old| meshes[old].take().expect("each mesh is moved once")).collect();
+        for (m, _) in &mut self.medium_shapes {
+            *m = new_index[*m];
+        }
+        self.medium_shapes.sort_by_key(|(m, _)| *m);
     }
 
     fn collect_defines(&mut self, children: &[El<'a>], cli: &[(String, String)]) -> Result<()> {
@@ -305,14 +361,20 @@ impl<'a> Loader<'a> {
         Ok(())
     }
 
-    /// The name of a top-level object: its id or its `_unnamed_N`.
+    /// The name of a top-level object at scene level: its `_unnamed_N`, else its id.
     pub(super) fn top_name(&self, node: El<'a>) -> Result<String> {
-        self.name_of(node, self.names.get(&node.id()).cloned().unwrap_or_default())
+        match self.names.get(&node.id()) {
+            Some(name) => Ok(name.clone()),
+            None => Ok(self.x.attr(node, "id")?.unwrap_or_default()),
+        }
     }
 
-    /// The name of `node`: its id, else `fallback`.
+    /// The name of `node`, being built on its first use through the path `fallback`
+    /// (`SHAPE.bsdf`, `BLEND.bsdf_0`, …), as Mitsuba's `traverse` names an object after the first
+    /// path that reaches it: its scene-level name if the walk of `<scene>`'s children has already
+    /// passed it, else `fallback`. A nested object's own `id` plays no part.
     pub fn name_of(&self, node: El<'a>, fallback: String) -> Result<String> {
-        Ok(self.x.attr(node, "id")?.unwrap_or(fallback))
+        Ok(self.top_names.get(&node.id()).cloned().unwrap_or(fallback))
     }
 
     /// The element a `<ref>` points to (any other element is returned as is).

@@ -11,8 +11,9 @@ use crate::scene::medium::{Field, Medium, MediumId, Phase, bounds, unit_cube_bou
 use crate::scene::volume::Grid;
 
 impl<'a> Loader<'a> {
-    /// The medium `node` is or refers to, built on first use; `name` (the parameter prefix) is
-    /// used unless the medium has an `id`.
+    /// The medium `node` is or refers to, built on first use; `name` (the parameter prefix,
+    /// `SHAPE.interior_medium`) is used unless the scene level named it first
+    /// ([`Loader::name_of`]).
     pub(super) fn medium(&mut self, node: El<'a>, name: String) -> Result<MediumId> {
         let target = self.deref(node)?;
         if !target.has_tag_name("medium") {

@@ -25,14 +25,42 @@
 //! capped at 16, reference cycles are detected, and the XML parser's node count is capped.
 //!
 //! # Decisions
-//! - **Parameter names** are Mitsuba 3's keys: an object with an `id` is named by it
-//!   (`ID.reflectance.value`, `ID.alpha.value`, `ID.specular_reflectance.value`,
-//!   `ID.weight.value`, `ID.reflectance.data` for a bitmap, `ID.radiance.value` for the
-//!   environment). A nested object without an id is named after its parent and slot: a shape's
-//!   BSDF `SHAPE.bsdf`, its emitter `SHAPE.emitter` (so `SHAPE.emitter.radiance.value`), a blend's
-//!   children `BLEND.bsdf_0`/`BLEND.bsdf_1`, a twosided's child `TWOSIDED.brdf_0`, a diffuse
-//!   BSDF's texture `BSDF.reflectance`. A top-level shape, BSDF, texture or emitter without an id
-//!   is `_unnamed_N`, N counting such elements from 0 in document order (stable for a given file).
+//! - **Parameter names** are the keys of Mitsuba 3.9.1's `mi.traverse(mi.load_file(path))`
+//!   (default options), which `tests_names` compares with Mitsuba's lists for the scenes in
+//!   `tests/data/mitsuba_names/` (`regenerate.py` there rewrites them). Mitsuba names a
+//!   scene-level object (a child of `<scene>`) by its `id`, and every other object after the
+//!   first path that reaches it, `PARENT.SLOT`: a shape's `bsdf`, `emitter` and
+//!   `interior_medium`, a blend's `bsdf_0`/`bsdf_1`, a twosided's `brdf_0`, a diffuse BSDF's
+//!   `reflectance` texture, a medium's `sigma_t`, `albedo` and `phase_function`; an object
+//!   reached again keeps its first name. So a nested object's own `id` plays no part (a blend
+//!   nested in shape `ball` is `ball.bsdf` whatever its id), and a scene-level object is named by
+//!   its id only if the walk of the scene reaches it before any shape or other object that refers
+//!   to it. That walk takes the scene's children in document order, except that meshes (`obj`,
+//!   `ply`, `rectangle`, `cube`) come after everything else: a BSDF declared after the rectangles
+//!   that use it is still named by its id, one declared after a `sphere` or `disk` that uses it
+//!   is `SHAPE.bsdf`. pathgrad builds the scene in that order (and keeps its meshes in document
+//!   order). The keys end in `.reflectance.value`, `.reflectance.data` (a bitmap's texels),
+//!   `.alpha.value` (`.alpha_u.value` when the file gives `alpha_u`/`alpha_v`),
+//!   `.specular_reflectance.value`, `.weight.value`, `.radiance.value` (`SHAPE.emitter.…` or the
+//!   environment's), and for media `.sigma_t.value.value`/`.sigma_t.data`, the same for
+//!   `albedo`, `.scale` and `.phase_function.g` (see [`crate::scene::medium`]).
+//! - **Where Mitsuba's names cannot be matched**, pathgrad keeps its own, and says so here:
+//!   - A scene-level object without an id, and every scene-level texture (whose id Mitsuba's
+//!     traverse ignores), is `object_<address>` in Mitsuba, a different key on every run;
+//!     pathgrad calls it `_unnamed_N`, N counting such elements from 0 in document order.
+//!   - Mitsuba's default load merges objects whose properties are equal (ids aside) into one,
+//!     and meshes that then share a BSDF into one `object_<address>` mesh, listing the survivor
+//!     once; pathgrad keeps every object, so two equal nested BSDFs are two parameters. Give
+//!     objects that must stay apart different values (or load with `optimize=False`).
+//!   - A rough conductor without `specular_reflectance` in the file has pathgrad's
+//!     `….specular_reflectance.value` (1), which Mitsuba does not list; with `alpha_u` and
+//!     `alpha_v` (equal: pathgrad is isotropic) only `alpha_u` is a parameter.
+//!   - A `<volume>` or `<phase>` declared at scene level and `<ref>`'d by media is, in Mitsuba,
+//!     one object named by its id; pathgrad copies it into each medium, named
+//!     `MEDIUM.sigma_t.…`/`MEDIUM.phase_function.g`. A medium nothing refers to is ignored, and
+//!     has no parameters. Which of two meshes first reaches an object nested in one and
+//!     `<ref>`'d by the other is Mitsuba's choice (it varies between runs); pathgrad takes the
+//!     document's order.
 //! - **No camera, no default**: a scene without `<sensor>` is an error (Mitsuba would invent one
 //!   from the scene's bounds; pathgrad asks for it explicitly). Only the first sensor is used.
 //! - **Camera orientation** matches Mitsuba: local +z forward, +y up, and Mitsuba's film puts local
@@ -71,6 +99,8 @@ mod tests;
 mod tests_errors;
 #[cfg(test)]
 mod tests_media;
+#[cfg(test)]
+mod tests_names;
 
 use std::path::Path;
 

@@ -298,10 +298,8 @@ impl<'a> Loader<'a> {
             return Err(self.x.err(node, format!("unsupported plugin '{}' (supported on shapes: area)", p.kind)));
         }
         let radiance = self.color_in(&p, "radiance", Vec3::ONE, bounds::RADIANCE)?;
-        let param = match self.x.attr(node, "id")? {
-            Some(id) => format!("{id}.radiance.value"),
-            None => format!("{shape}.emitter.radiance.value"),
-        };
+        // Mitsuba names a shape's emitter after the shape, whatever its own id.
+        let param = format!("{shape}.emitter.radiance.value");
         self.finish(&p)?;
         Ok((node, param, radiance))
     }

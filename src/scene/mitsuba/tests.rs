@@ -134,7 +134,7 @@ fn later_transform_elements_apply_after_earlier_ones() {
 #[test]
 fn defines_substitute_and_cli_overrides_win() {
     let xml = format!(
-        r#"<scene version="2.1.0"><default name="spp" value="8"/><default name="r" value="0.25"/>{}<shape type="cube"><bsdf type="diffuse" id="d"><rgb name="reflectance" value="$r, 0.5,$r"/></bsdf></shape></scene>"#,
+        r#"<scene version="2.1.0"><default name="spp" value="8"/><default name="r" value="0.25"/>{}<shape type="cube" id="d"><bsdf type="diffuse"><rgb name="reflectance" value="$r, 0.5,$r"/></bsdf></shape></scene>"#,
         SENSOR.replace(
             "</sensor>",
             r#"<sampler type="independent"><integer name="sample_count" value="$spp"/></sampler></sensor>"#
@@ -142,7 +142,7 @@ fn defines_substitute_and_cli_overrides_win() {
     );
     let s = load_text(&xml, Path::new("d.xml"), &[], obj_for_tests).unwrap();
     assert_eq!(s.default_spp, Some(8));
-    assert_eq!(param(&s, "d.reflectance.value"), [0.25, 0.5, 0.25]);
+    assert_eq!(param(&s, "d.bsdf.reflectance.value"), [0.25, 0.5, 0.25]);
     let cli = [("spp".to_string(), "64".to_string()), ("unused".to_string(), "1".to_string())];
     let s = load_text(&xml, Path::new("d.xml"), &cli, obj_for_tests).unwrap();
     assert_eq!(s.default_spp, Some(64));
@@ -159,17 +159,17 @@ fn defines_substitute_and_cli_overrides_win() {
 #[test]
 fn property_values() {
     let s = load_ok(
-        r#"<shape type="cube"><bsdf type="diffuse" id="a"><rgb name="reflectance" value="0.1 0.2 0.3"/></bsdf></shape>
-           <shape type="cube"><bsdf type="diffuse" id="b"><rgb name="reflectance" value="0.4"/></bsdf></shape>
-           <shape type="cube"><bsdf type="diffuse" id="c"><spectrum name="reflectance" value="0.6"/></bsdf></shape>
-           <shape type="cube"><bsdf type="diffuse" id="d"><float name="reflectance" value="0.7"/></bsdf></shape>
-           <shape type="cube"><bsdf type="diffuse" id="e"/><boolean name="flip_normals" value="TRUE"/></shape>"#,
+        r#"<shape type="cube" id="a"><bsdf type="diffuse"><rgb name="reflectance" value="0.1 0.2 0.3"/></bsdf></shape>
+           <shape type="cube" id="b"><bsdf type="diffuse"><rgb name="reflectance" value="0.4"/></bsdf></shape>
+           <shape type="cube" id="c"><bsdf type="diffuse"><spectrum name="reflectance" value="0.6"/></bsdf></shape>
+           <shape type="cube" id="d"><bsdf type="diffuse"><float name="reflectance" value="0.7"/></bsdf></shape>
+           <shape type="cube" id="e"><bsdf type="diffuse"/><boolean name="flip_normals" value="TRUE"/></shape>"#,
     );
-    assert_eq!(param(&s, "a.reflectance.value"), [0.1, 0.2, 0.3]);
-    assert_eq!(param(&s, "b.reflectance.value"), [0.4; 3]);
-    assert_eq!(param(&s, "c.reflectance.value"), [0.6; 3]);
-    assert_eq!(param(&s, "d.reflectance.value"), [0.7; 3]);
-    assert_eq!(param(&s, "e.reflectance.value"), [0.5; 3], "Mitsuba's default reflectance");
+    assert_eq!(param(&s, "a.bsdf.reflectance.value"), [0.1, 0.2, 0.3]);
+    assert_eq!(param(&s, "b.bsdf.reflectance.value"), [0.4; 3]);
+    assert_eq!(param(&s, "c.bsdf.reflectance.value"), [0.6; 3]);
+    assert_eq!(param(&s, "d.bsdf.reflectance.value"), [0.7; 3]);
+    assert_eq!(param(&s, "e.bsdf.reflectance.value"), [0.5; 3], "Mitsuba's default reflectance");
     assert_eq!(s.warnings, ["test.xml:1:1: the scene has no emitters: it renders black"]);
 }
 
@@ -329,14 +329,16 @@ fn bsdf_names_follow_mitsuba() {
             "metal.specular_reflectance.value",
             "mix.bsdf_0.reflectance.value",
             "mix.weight.value",
+            // Meshes come after every other object, as in Mitsuba's default load.
+            "sky.radiance.value",
             "box.bsdf.brdf_0.reflectance.value",
             "_unnamed_0.emitter.radiance.value",
+            // A nested emitter's own id plays no part.
             "_unnamed_1.bsdf.reflectance.value",
-            "lamp.radiance.value",
-            "sky.radiance.value",
+            "_unnamed_1.emitter.radiance.value",
         ]
     );
-    assert_eq!(param(&s, "lamp.radiance.value"), [1.0; 3], "default radiance");
+    assert_eq!(param(&s, "_unnamed_1.emitter.radiance.value"), [1.0; 3], "default radiance");
     assert_eq!(param(&s, "sky.radiance.value"), [0.1, 0.2, 0.3]);
     let Material::RoughConductor { distribution, alpha, specular, eta, k } = s.materials[0] else { panic!() };
     assert_eq!(
@@ -353,9 +355,9 @@ fn bsdf_names_follow_mitsuba() {
 #[test]
 fn rough_conductor_properties_and_presets() {
     let s = load_ok(
-        r#"<shape type="cube"><bsdf type="roughconductor" id="g"><string name="distribution" value="ggx"/><float name="alpha" value="0.3"/>
+        r#"<shape type="cube" id="g"><bsdf type="roughconductor"><string name="distribution" value="ggx"/><float name="alpha" value="0.3"/>
              <rgb name="specular_reflectance" value="0.9, 0.8, 0.7"/><rgb name="eta" value="0.2, 0.9, 1.1"/><rgb name="k" value="3.9, 2.4, 2.1"/></bsdf></shape>
-           <shape type="cube"><bsdf type="roughconductor" id="au"><string name="material" value="Au"/><float name="alpha_u" value="0.2"/><float name="alpha_v" value="0.2"/></bsdf></shape>"#,
+           <shape type="cube" id="au"><bsdf type="roughconductor"><string name="material" value="Au"/><float name="alpha_u" value="0.2"/><float name="alpha_v" value="0.2"/></bsdf></shape>"#,
     );
     let Material::RoughConductor { distribution, alpha, eta, k, .. } = s.materials[0] else { panic!() };
     assert_eq!((distribution, s.params.get(alpha)[0]), (Distribution::Ggx, 0.3));
@@ -363,7 +365,10 @@ fn rough_conductor_properties_and_presets() {
     let Material::RoughConductor { eta, k, alpha, .. } = s.materials[1] else { panic!() };
     assert_eq!((eta, k), bsdf::conductor("Au").unwrap());
     assert_eq!(s.params.get(alpha)[0], 0.2);
-    assert_eq!(param(&s, "g.specular_reflectance.value"), [0.9, 0.8, 0.7]);
+    assert_eq!(param(&s, "g.bsdf.specular_reflectance.value"), [0.9, 0.8, 0.7]);
+    // Mitsuba's key is the property the file gives; alpha_v follows alpha_u.
+    assert_eq!(param(&s, "au.bsdf.alpha_u.value"), [0.2]);
+    assert!(s.params.find("au.bsdf.alpha.value").is_none() && s.params.find("au.bsdf.alpha_v.value").is_none());
     for m in ["none", "Au", "Ag", "Cu", "Al", "Cr"] {
         let (eta, k) = bsdf::conductor(m).unwrap();
         assert!(eta.min_element() >= 0.0 && k.min_element() > 0.0, "{m}");
@@ -373,14 +378,14 @@ fn rough_conductor_properties_and_presets() {
 #[test]
 fn blend_of_two_twosided_becomes_twosided_blend() {
     let s = load_ok(
-        r#"<shape type="cube"><bsdf type="blendbsdf" id="b"><float name="weight" value="0.5"/>
+        r#"<shape type="cube" id="b"><bsdf type="blendbsdf"><float name="weight" value="0.5"/>
              <bsdf type="twosided"><bsdf type="diffuse"/></bsdf><bsdf type="twosided"><bsdf type="roughconductor"/></bsdf>
            </bsdf></shape>"#,
     );
     let Material::TwoSided(inner) = s.materials[s.meshes[0].material.0 as usize] else { panic!() };
     let Material::Blend { children, .. } = &s.materials[inner.0 as usize] else { panic!() };
     assert!(matches!(s.materials[children[0].0 as usize], Material::Diffuse { .. }));
-    assert!(s.params.find("b.bsdf_1.brdf_0.alpha.value").is_some());
+    assert!(s.params.find("b.bsdf.bsdf_1.brdf_0.alpha.value").is_some());
     s.validate().unwrap();
 }
 
@@ -392,20 +397,21 @@ fn bitmap_textures_are_linear_rgb() {
     exr::prelude::write_rgba_file(dir.path().join("t.exr"), 1, 2, |_, y| (0.25f32, 0.5f32, y as f32 * 0.75, 1.0f32))
         .unwrap();
     let xml = wrap(
-        r#"<shape type="cube"><bsdf type="diffuse" id="p"><texture type="bitmap" name="reflectance"><string name="filename" value="t.png"/></texture></bsdf></shape>
+        r#"<shape type="cube" id="p"><bsdf type="diffuse"><texture type="bitmap" name="reflectance"><string name="filename" value="t.png"/></texture></bsdf></shape>
            <texture type="bitmap" id="lin"><string name="filename" value="t.exr"/></texture>
            <shape type="cube"><bsdf type="diffuse"><ref name="reflectance" id="lin"/></bsdf></shape>
-           <shape type="cube"><bsdf type="diffuse" id="raw"><texture type="bitmap" name="reflectance"><string name="filename" value="t.png"/><boolean name="raw" value="true"/></texture></bsdf></shape>"#,
+           <shape type="cube" id="raw"><bsdf type="diffuse"><texture type="bitmap" name="reflectance"><string name="filename" value="t.png"/><boolean name="raw" value="true"/></texture></bsdf></shape>"#,
     );
     let s = load_text(&xml, &dir.path().join("s.xml"), &[], obj_for_tests).unwrap();
-    let texels = param(&s, "p.reflectance.data");
+    let texels = param(&s, "p.bsdf.reflectance.data");
     let expect: Vec<f32> =
         [255u8, 0, 128, 10, 20, 30].iter().map(|&b| bsdf::srgb_to_linear(f32::from(b) / 255.0)).collect();
     assert_eq!(texels, expect);
     assert!((texels[2] - 0.2158605).abs() < 1e-6, "sRGB 128 is linear 0.2159");
-    assert_eq!(param(&s, "lin.data"), [0.25, 0.5, 0.0, 0.25, 0.5, 0.75]);
-    assert_eq!(param(&s, "raw.reflectance.data")[2], 128.0 / 255.0);
-    assert_eq!((s.textures[0].width, s.textures[0].height, s.textures[1].height), (2, 1, 2));
+    // A texture at scene level is Mitsuba's object_<address> whatever its id: pathgrad's _unnamed_N.
+    assert_eq!(param(&s, "_unnamed_0.data"), [0.25, 0.5, 0.0, 0.25, 0.5, 0.75]);
+    assert_eq!(param(&s, "raw.bsdf.reflectance.data")[2], 128.0 / 255.0);
+    assert_eq!((s.textures[1].width, s.textures[1].height, s.textures[0].height), (2, 1, 2));
     assert!(matches!(s.materials[0], Material::Diffuse { albedo: Albedo::Bitmap(_) }));
 }
 

@@ -53,15 +53,20 @@ const MEDIA: &str = r#"
         <volume type="constvolume" name="albedo"><rgb name="value" value="0.2, 0.3, 0.4"/></volume></medium></shape>
 "#;
 
-/// The parameter names are those Mitsuba 3.9.1's `mi.traverse` lists for the same file (checked
-/// by hand: `fog.sigma_t.value.value`, `smoke.interior_medium.sigma_t.data`, …); a medium two
-/// shapes refer to is one medium; values, channels and the grid's placement are the file's.
+/// The parameter names are those Mitsuba 3.9.1's `mi.traverse` lists for the same file
+/// (`fog.sigma_t.value.value`, `smoke.interior_medium.sigma_t.data`, …; `tests_names` compares
+/// such scenes with Mitsuba's lists), in its default load's order: the sphere `c` before the
+/// meshes; a medium two shapes refer to is one medium; values, channels and the grid's placement
+/// are the file's.
 #[test]
 fn media_load_with_mitsubas_names() {
     let dir = grids();
     let scene = load_in(dir.path(), MEDIA).unwrap();
     let expected = [
         "_unnamed_0.radiance.value",
+        "c.interior_medium.sigma_t.value.value",
+        "c.interior_medium.albedo.value.value",
+        "c.interior_medium.scale",
         "fog.sigma_t.value.value",
         "fog.albedo.value.value",
         "fog.scale",
@@ -70,21 +75,18 @@ fn media_load_with_mitsubas_names() {
         "smoke.interior_medium.sigma_t.data",
         "smoke.interior_medium.albedo.data",
         "smoke.interior_medium.scale",
-        "c.interior_medium.sigma_t.value.value",
-        "c.interior_medium.albedo.value.value",
-        "c.interior_medium.scale",
     ];
     assert_eq!(names(&scene), expected);
     assert_eq!(scene.media.len(), 3);
     let interior: Vec<Option<u32>> = scene.meshes.iter().map(|m| m.interior.map(|i| i.0)).collect();
-    assert_eq!(interior, [Some(0), Some(0), Some(1), Some(2)]);
-    let fog = &scene.media[0];
+    assert_eq!(interior, [Some(1), Some(1), Some(2), Some(0)]);
+    let fog = &scene.media[1];
     assert!(!fog.heterogeneous);
     assert!(matches!(fog.phase, Phase::HenyeyGreenstein { .. }));
     assert_eq!(fog.sigma_t.channels(), 3);
     assert_eq!(fog.extinction(&scene.params, Vec3::ZERO, 2), 0.6);
     assert_eq!(fog.majorant(&scene.params), 0.6 * (1.0 + crate::contract::MAJORANT_MARGIN));
-    let smoke = &scene.media[1];
+    let smoke = &scene.media[2];
     assert!(smoke.heterogeneous && smoke.phase == Phase::Isotropic);
     let Field::Grid { resolution, channels, .. } = smoke.sigma_t else { panic!("{:?}", smoke.sigma_t) };
     assert_eq!((resolution, channels), (UVec3::splat(4), 1));
@@ -94,7 +96,7 @@ fn media_load_with_mitsubas_names() {
     assert_eq!(smoke.extinction(&scene.params, centre(1.0, 2.0, 3.0), 0), 3.0 * (1.0 + 8.0 + 48.0));
     assert_eq!(smoke.majorant(&scene.params), 3.0 * 63.0 * (1.0 + crate::contract::MAJORANT_MARGIN));
     assert_eq!(smoke.albedo.channels(), 3);
-    let c = &scene.media[2];
+    let c = &scene.media[0];
     assert_eq!(c.sigma_t.channels(), 1);
     assert_eq!(c.albedo.eval(&scene.params, Vec3::ZERO, 1), 0.3);
 }
@@ -106,7 +108,7 @@ fn media_flatten() {
     let scene = load_in(dir.path(), MEDIA).unwrap();
     let flat = crate::scene::flat::FlatScene::new(&scene).unwrap();
     assert_eq!((flat.media.len(), flat.fields.len()), (3, 6));
-    assert_eq!(flat.media[1].majorant, 3.0 * 63.0 * (1.0 + crate::contract::MAJORANT_MARGIN));
+    assert_eq!(flat.media[2].majorant, 3.0 * 63.0 * (1.0 + crate::contract::MAJORANT_MARGIN));
     let null_only = load_in(dir.path(), r#"<shape type="cube" id="glass"><bsdf type="null"/></shape>"#).unwrap();
     let flat = crate::scene::flat::FlatScene::new(&null_only).unwrap();
     assert!(flat.media.is_empty() && crate::cpu::medium::has_media(&flat));
