@@ -212,11 +212,11 @@ fn spp_for_power(reference: &Reference, m: &Stats, gradient: bool, threshold: f6
     let bias = if gradient { GRADIENT_BIAS } else { PRIMAL_BIAS };
     let scale = m.scale(gradient);
     let mut need = f64::from(SPP_RANGE.0);
-    for c in 0..3 {
-        let allowed = bias * scale[c] / (threshold + POWER_Z);
-        let budget = allowed * allowed - m.image_se[c] * m.image_se[c];
-        let per_sample = m.image_se[c].powi(2) * seeds_m * spp_m;
-        if per_sample == 0.0 || scale[c] == 0.0 {
+    for (scale, se) in scale.into_iter().zip(m.image_se) {
+        let allowed = bias * scale / (threshold + POWER_Z);
+        let budget = allowed * allowed - se * se;
+        let per_sample = se * se * seeds_m * spp_m;
+        if per_sample == 0.0 || scale == 0.0 {
             continue;
         }
         let spp = if budget > 0.0 { per_sample / (f64::from(SEEDS) * budget) } else { f64::INFINITY };
