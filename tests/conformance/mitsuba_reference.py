@@ -1,0 +1,457 @@
+#!/usr/bin/env python3
+"""Renders the conformance matrix's Mitsuba 3 reference statistics: reference/NAME.json per scene.
+
+For each scene in MATRIX below (scenes/NAME.xml): load it with Mitsuba (variant llvm_ad_rgb), pick
+the integrator (`prbvolpath` for scenes with a medium or a null BSDF, `prb` otherwise) with the
+scene's own max_depth, rr_depth 5 and its hide_emitters, render `seeds` images (seeds 0..S-1) at
+`spp` samples per pixel, and record per B x B block (partial blocks at the right and bottom
+edges) and for the whole image the mean per channel over seeds and its standard error
+(stdev / sqrt(S)). The same for the forward-mode image derivative of each listed parameter,
+tangent 1 on every element of it (`dr.forward`), or, where Mitsuba has no derivative, for the
+central finite difference (render(θ+h) − render(θ−h)) / 2h with common seeds.
+
+    DRJIT_LIBLLVM_PATH=/usr/lib/x86_64-linux-gnu/libLLVM-19.so \\
+        /tmp/mi/bin/python tests/conformance/mitsuba_reference.py            # all scenes
+    ... mitsuba_reference.py --only bsdf_blend medium_hg_03                 # some
+    ... mitsuba_reference.py --check --only medium_hg_03                    # gradients vs FD, prints z
+    python3 tests/conformance/mitsuba_reference.py --table                  # README table (no Mitsuba)
+
+Render one scene at a time: the LLVM back end uses every core.
+"""
+
+import argparse
+import json
+import math
+import sys
+import time
+import xml.etree.ElementTree as ET
+from pathlib import Path
+
+HERE = Path(__file__).resolve().parent
+SCENES = HERE / "scenes"
+REFERENCE = HERE / "reference"
+VARIANT = "llvm_ad_rgb"
+MITSUBA_VERSION = "3.9.1"
+
+# The matrix: scene -> features (tags for the README), grads (Mitsuba keys that pathgrad also
+# exposes, differentiated with tangent 1 on every element), and optional overrides: spp, seeds,
+# fd (key -> finite-difference step, forcing method "fd"), group ("pending": pathgrad reads the
+# feature but does not implement it yet).
+MATRIX = {
+    # ---- bsdf
+    "bsdf_diffuse_rgb": dict(features=["diffuse", "rgb reflectance", "sphere"], grads=["ball.bsdf.reflectance.value"]),
+    "bsdf_diffuse_default": dict(features=["default bsdf (diffuse 0.5)"], grads=["ball.bsdf.reflectance.value"]),
+    "bsdf_diffuse_spectrum": dict(features=["diffuse", "<spectrum value>"], grads=["ball.bsdf.reflectance.value"]),
+    "bsdf_diffuse_bitmap": dict(features=["diffuse", "bitmap sRGB PNG", "rectangle uv"], grads=["panel.bsdf.reflectance.data"]),
+    # Mitsuba names a top-level texture reached through <ref> by its address (object_...), so its
+    # data has no stable key: the gradient is the floor's.
+    "bsdf_diffuse_bitmap_ref": dict(features=["diffuse", "bitmap raw", "top-level texture + ref", "sphere uv"],
+                                    grads=["floor.bsdf.reflectance.value"]),
+    "bsdf_roughconductor_beckmann": dict(features=["roughconductor", "beckmann", "alpha"], grads=["ball.bsdf.alpha.value"]),
+    "bsdf_roughconductor_ggx": dict(features=["roughconductor", "ggx", "alpha", "specular_reflectance"],
+                                    grads=["ball.bsdf.alpha.value", "ball.bsdf.specular_reflectance.value"]),
+    "bsdf_roughconductor_defaults": dict(features=["roughconductor", "defaults (beckmann, alpha 0.1, eta 0, k 1)"],
+                                         grads=["ball.bsdf.alpha.value"]),
+    "bsdf_roughconductor_eta_k": dict(features=["roughconductor", "ggx", "eta/k rgb"], grads=["ball.bsdf.alpha.value"]),
+    "bsdf_roughconductor_material": dict(features=["roughconductor", "material Au"], grads=["ball.bsdf.alpha.value"]),
+    "bsdf_roughconductor_alpha_uv": dict(features=["roughconductor", "alpha_u = alpha_v", "sample_visible false"],
+                                         grads=["floor.bsdf.reflectance.value"]),
+    "bsdf_blend": dict(features=["blendbsdf", "weight", "diffuse + roughconductor"],
+                       grads=["ball.bsdf.weight.value", "ball.bsdf.bsdf_0.reflectance.value"]),
+    "bsdf_twosided_diffuse": dict(features=["twosided", "diffuse", "back faces"], grads=["sided.bsdf.brdf_0.reflectance.value"]),
+    "bsdf_twosided_roughconductor": dict(features=["twosided", "roughconductor", "shared bsdf ref"], grads=["metal.brdf_0.alpha.value"]),
+    "bsdf_blend_twosided_leaves": dict(features=["blendbsdf of twosided leaves"], grads=["panel.bsdf.weight.value"]),
+    "bsdf_twosided_blend": dict(features=["twosided(blendbsdf)", "shared bsdf ref"], grads=["coat.brdf_0.weight.value"]),
+    "bsdf_null": dict(features=["null bsdf (no medium)"], grads=["ball.bsdf.reflectance.value"]),
+    # ---- emitter
+    "emitter_area_rgb": dict(features=["area", "rgb radiance", "emitter seen directly"], grads=["light.emitter.radiance.value"]),
+    "emitter_area_spectrum": dict(features=["area", "<spectrum value> radiance"], grads=["light.emitter.radiance.value"]),
+    "emitter_area_default_bsdf": dict(features=["area", "emitter's default black bsdf"], grads=["light.bsdf.reflectance.value"]),
+    "emitter_area_sphere": dict(features=["area", "sphere emitter"], grads=["bulb.emitter.radiance.value"]),
+    "emitter_constant": dict(features=["constant", "environment only"], grads=["sky.radiance.value"]),
+    # ---- shape
+    "shape_obj_smooth": dict(features=["obj", "vertex normals"], grads=["mesh.bsdf.reflectance.value"]),
+    "shape_obj_face_normals": dict(features=["obj", "face_normals"], grads=["mesh.bsdf.reflectance.value"]),
+    "shape_obj_uv": dict(features=["obj", "texture coordinates", "bitmap", "polygon face"], grads=["mesh.bsdf.reflectance.data"]),
+    "shape_ply_ascii": dict(features=["ply ascii", "vertex normals", "roughconductor"], grads=["mesh.bsdf.alpha.value"]),
+    "shape_ply_binary_uv": dict(features=["ply binary", "u/v", "bitmap"], grads=["mesh.bsdf.reflectance.data"]),
+    "shape_rectangle": dict(features=["rectangle", "non-uniform scale", "rotations"], grads=["board.bsdf.reflectance.value"]),
+    "shape_cube": dict(features=["cube", "non-uniform scale"], grads=["box.bsdf.reflectance.value"]),
+    "shape_disk": dict(features=["disk", "disk area light"], grads=["plate.bsdf.reflectance.value", "lamp.emitter.radiance.value"]),
+    "shape_sphere": dict(features=["sphere", "center/radius", "to_world"], grads=["ball.bsdf.alpha.value"]),
+    "shape_flip_normals": dict(features=["flip_normals", "rectangle", "area light"], grads=["light.emitter.radiance.value"]),
+    "shape_flip_normals_obj": dict(features=["flip_normals", "obj"], grads=["mesh.bsdf.reflectance.value"]),
+    # ---- sensor
+    "sensor_fov_x": dict(features=["fov", "fov_axis x"], grads=["ball.bsdf.reflectance.value"]),
+    "sensor_fov_y": dict(features=["fov", "fov_axis y"], grads=[]),
+    "sensor_fov_diagonal": dict(features=["fov", "fov_axis diagonal"], grads=[]),
+    "sensor_fov_smaller": dict(features=["fov", "fov_axis smaller", "film 17x31"], grads=[]),
+    "sensor_fov_larger": dict(features=["fov", "fov_axis larger", "film 31x17"], grads=[]),
+    "sensor_focal_length": dict(features=["focal_length 35mm"], grads=[]),
+    "sensor_default_fov": dict(features=["default focal length (50mm)", "film 25x13"], grads=[]),
+    "sensor_to_world": dict(features=["sensor to_world rotate/translate", "roll", "film 29x23"], grads=[]),
+    "sensor_rfilter_gaussian": dict(features=["rfilter gaussian"], grads=[], group="pending"),
+    "sensor_rfilter_default": dict(features=["no rfilter (Mitsuba default gaussian)"], grads=[], group="pending"),
+    # ---- depth
+    "depth_1": dict(features=["max_depth 1"], grads=["light.emitter.radiance.value"]),
+    "depth_2": dict(features=["max_depth 2"], grads=["back.bsdf.reflectance.value"]),
+    "depth_3": dict(features=["max_depth 3"], grads=["back.bsdf.reflectance.value"]),
+    "depth_unbounded": dict(features=["max_depth -1", "russian roulette"], grads=["back.bsdf.reflectance.value"]),
+    # ---- surface
+    "surface_cornell_depth1": dict(features=["cornell box", "max_depth 1"], grads=["light.emitter.radiance.value"], spp=4096),
+    "surface_cornell_depth6": dict(features=["cornell box", "max_depth 6"], grads=["white.reflectance.value", "sphere.bsdf.alpha.value"],
+                                   spp=4096),
+    # ---- medium
+    "medium_homogeneous_grey": dict(features=["homogeneous", "float sigma_t", "float albedo", "isotropic"],
+                                    grads=["cloud.interior_medium.sigma_t.value.value", "cloud.interior_medium.albedo.value.value"]),
+    "medium_homogeneous_rgb": dict(features=["homogeneous", "rgb sigma_t", "rgb albedo", "scale"],
+                                   grads=["cloud.interior_medium.albedo.value.value"]),
+    "medium_homogeneous_constvolume": dict(features=["homogeneous", "constvolume sigma_t/albedo"],
+                                           grads=["cloud.interior_medium.sigma_t.value.value"]),
+    "medium_scale": dict(features=["homogeneous", "scale"], grads=["cloud.interior_medium.scale"],
+                         fd={"cloud.interior_medium.scale": 0.15}),
+    "medium_hg_m07": dict(features=["homogeneous", "hg g=-0.7"], grads=["cloud.interior_medium.phase_function.g"]),
+    "medium_hg_0": dict(features=["homogeneous", "hg g=0"], grads=["cloud.interior_medium.phase_function.g"]),
+    "medium_hg_03": dict(features=["homogeneous", "hg g=0.3"], grads=["cloud.interior_medium.phase_function.g"]),
+    "medium_hg_09": dict(features=["homogeneous", "hg g=0.9"], grads=["cloud.interior_medium.phase_function.g"]),
+    "medium_sphere": dict(features=["homogeneous", "null sphere"], grads=["cloud.interior_medium.albedo.value.value"]),
+    "medium_grid_sigma_t": dict(features=["heterogeneous", "grid sigma_t", "scale"],
+                                grads=["cloud.interior_medium.sigma_t.data", "cloud.interior_medium.scale"],
+                                fd={"cloud.interior_medium.scale": 0.2}),
+    "medium_grid_albedo": dict(features=["heterogeneous", "grid sigma_t", "grid rgb albedo", "hg g=0.3"],
+                               grads=["cloud.interior_medium.albedo.data"]),
+    "medium_grid_sigma_t_rgb": dict(features=["heterogeneous", "grid rgb sigma_t"], grads=["cloud.interior_medium.sigma_t.data"]),
+    "medium_grid_partial": dict(features=["heterogeneous", "grid smaller than its shape"], grads=["cloud.interior_medium.sigma_t.data"]),
+    "medium_hetero_const_float": dict(features=["heterogeneous", "float sigma_t (extent [0,1]^3)"],
+                                      grads=["cloud.interior_medium.sigma_t.value.value"]),
+    "medium_hetero_const_rgb": dict(features=["heterogeneous", "rgb sigma_t (extent [0,1]^3)", "rgb albedo", "scale"],
+                                    grads=["cloud.interior_medium.albedo.value.value"]),
+    "medium_hetero_constvolume_to_world": dict(features=["heterogeneous", "constvolume to_world"],
+                                               grads=["cloud.interior_medium.sigma_t.value.value"]),
+    "medium_issue_null_cube": dict(features=["issue row 1", "null cube", "max_depth 64"], grads=["floor.bsdf.reflectance.value"]),
+    "medium_issue_homogeneous": dict(features=["issue row 2", "homogeneous", "rgb albedo", "max_depth 64"],
+                                     grads=["cube.interior_medium.sigma_t.value.value"]),
+    "medium_issue_heterogeneous": dict(features=["issue row 3", "heterogeneous const (extent [0,1]^3)", "max_depth 64"],
+                                       grads=["cube.interior_medium.sigma_t.value.value"]),
+    "medium_issue_heterogeneous_hg": dict(features=["issue row 4", "heterogeneous const", "hg g=0.3", "max_depth 64"],
+                                          grads=["cube.interior_medium.albedo.value.value"]),
+    "medium_mitsuba_hetero_sigmat": dict(features=["mitsuba-data port", "grid sigma_t 16^3 (partial cover)", "scale 5"],
+                                         grads=["medium1.sigma_t.data"]),
+    "medium_mitsuba_hetero_sigmat_albedo": dict(features=["mitsuba-data port", "grid sigma_t", "grid albedo"],
+                                                grads=["medium1.albedo.data"]),
+    "medium_mitsuba_hetero_spectral_sigmat": dict(features=["mitsuba-data port", "grid rgb sigma_t"], grads=["medium1.sigma_t.data"]),
+    "medium_mitsuba_no_scattering": dict(features=["mitsuba-data port", "constvolume rgb sigma_t + to_world", "albedo 0"],
+                                         grads=["medium1.sigma_t.value.value"]),
+}
+
+DEFAULT_SPP = 1024
+# prbvolpath has no forward mode: its gradients take 3 reverse passes per block and seed, so
+# volumetric scenes render at a quarter of the samples (their primal noise stays under 0.1 %).
+DEFAULT_SPP_VOLUME = 256
+DEFAULT_SEEDS = 16
+DEFAULT_BLOCK = 8
+
+
+def integrator_of(path):
+    """(type, max_depth, hide_emitters) for a scene: prbvolpath where a medium or null BSDF is present."""
+    root = ET.parse(path).getroot()
+    defaults = {d.get("name"): d.get("value") for d in root.findall("default")}
+
+    def value(v):
+        return defaults.get(v[1:], v) if v.startswith("$") else v
+
+    volumetric = any(e.tag == "medium" for e in root.iter()) or any(
+        e.tag == "bsdf" and e.get("type") == "null" for e in root.iter())
+    max_depth, hide = -1, False
+    node = root.find("integrator")
+    if node is not None:
+        for child in node:
+            if child.get("name") == "max_depth":
+                max_depth = int(value(child.get("value")))
+            if child.get("name") == "hide_emitters":
+                hide = value(child.get("value")) == "true"
+    return ("prbvolpath" if volumetric else "prb"), max_depth, hide
+
+
+class Stats:
+    """Per-seed block means and image means, reduced to means and standard errors over seeds."""
+
+    def __init__(self, block):
+        self.block, self.blocks, self.images = block, [], []
+
+    def add(self, img):
+        import numpy as np
+        h, w, _ = img.shape
+        b = self.block
+        rows = []
+        for by in range(0, h, b):
+            for bx in range(0, w, b):
+                rows.append(img[by:by + b, bx:bx + b].reshape(-1, 3).mean(axis=0))
+        self.blocks.append(np.array(rows, dtype=np.float64))
+        self.images.append(img.reshape(-1, 3).astype(np.float64).mean(axis=0))
+
+    def summary(self):
+        import numpy as np
+        blocks, images = np.array(self.blocks), np.array(self.images)
+        s = len(images)
+
+        def se(a):
+            return a.std(axis=0, ddof=1) / math.sqrt(s)
+
+        return {"mean": rounded(blocks.mean(axis=0)), "se": rounded(se(blocks)),
+                "image_mean": rounded(images.mean(axis=0)), "image_se": rounded(se(images))}
+
+
+def rounded(a):
+    """Plain JSON numbers with 7 significant digits (more than float32 renders carry)."""
+    if hasattr(a, "tolist"):
+        a = a.tolist()
+    if isinstance(a, list):
+        return [rounded(x) for x in a]
+    return float(f"{a:.7g}")
+
+
+def to_numpy(img):
+    import numpy as np
+    a = np.array(img, dtype=np.float32)
+    return a[..., :3]
+
+
+def render_primal(mi, scene, integrator, spp, seed):
+    return to_numpy(mi.render(scene, integrator=integrator, spp=spp, seed=seed))
+
+
+def forward_gradient(mi, dr, scene, params, key, integrator, spp, seeds, stats):
+    """Forward-mode derivative images, tangent 1 on every element of params[key]."""
+    dr.enable_grad(params[key])
+    params.update()
+    for seed in seeds:
+        img = mi.render(scene, params, integrator=integrator, spp=spp, seed=seed)
+        dr.forward(params[key])
+        stats.add(to_numpy(dr.grad(img)))
+        del img
+    dr.disable_grad(params[key])
+    params.update()
+
+
+def reverse_gradient(mi, dr, scene, params, key, integrator, spp, seeds, block, stats):
+    """Block means of the image derivative by reverse mode, for integrators without forward mode
+    (prbvolpath): per seed, block and channel, the film is cropped to the block and one
+    render_backward pass with the adjoint 1/(block pixels) on that channel gives the block mean's
+    derivative, summed over the elements of params[key] (= tangent 1 on every element). Each pass
+    has its own seed. The block's pixels are filled with that value, so image means come out
+    pixel-weighted."""
+    import numpy as np
+    sensor = scene.sensors()[0]
+    film = sensor.film()
+    width, height = (int(v) for v in film.size())
+    size_key, offset_key = f"{sensor.id()}.film.crop_size", f"{sensor.id()}.film.crop_offset"
+    dr.enable_grad(params[key])
+    params.update()
+    n_blocks = -(-width // block) * -(-height // block)
+    for seed in seeds:
+        img = np.zeros((height, width, 3), np.float32)
+        for by in range(0, height, block):
+            for bx in range(0, width, block):
+                bw, bh = min(block, width - bx), min(block, height - by)
+                params[size_key] = mi.ScalarVector2u(bw, bh)
+                params[offset_key] = mi.ScalarPoint2u(bx, by)
+                params.update()
+                index = (by // block) * -(-width // block) + bx // block
+                for c in range(3):
+                    adjoint = np.zeros((bh, bw, 3), np.float32)
+                    adjoint[..., c] = 1.0 / (bw * bh)
+                    dr.clear_grad(params[key])
+                    pass_seed = (seed * n_blocks + index) * 3 + c
+                    integrator.render_backward(scene, params, mi.TensorXf(adjoint), sensor, seed=pass_seed, spp=spp)
+                    img[by:by + bh, bx:bx + bw, c] = float(np.array(dr.grad(params[key]), dtype=np.float64).sum())
+        stats.add(img)
+    params[size_key] = mi.ScalarVector2u(width, height)
+    params[offset_key] = mi.ScalarPoint2u(0, 0)
+    dr.disable_grad(params[key])
+    params.update()
+
+
+def shifted(value, delta):
+    """value + delta, elementwise, keeping the drjit type (a scalar float stays a float)."""
+    if isinstance(value, (int, float)):
+        return value + delta
+    return type(value)(value + delta)
+
+
+def fd_gradient(mi, scene, params, key, integrator, spp, seeds, step, stats):
+    """Central differences with common seeds: (render(θ+h) − render(θ−h)) / 2h, h on every element."""
+    base = params[key]
+    base = base if isinstance(base, (int, float)) else type(base)(base)
+    for seed in seeds:
+        params[key] = shifted(base, step)
+        params.update()
+        plus = render_primal(mi, scene, integrator, spp, seed)
+        params[key] = shifted(base, -step)
+        params.update()
+        minus = render_primal(mi, scene, integrator, spp, seed)
+        stats.add((plus - minus) / (2.0 * step))
+    params[key] = base
+    params.update()
+
+
+def differentiable(mi, params, key):
+    flags = params.properties[key][3]
+    value = params[key]
+    return not (flags & mi.ParamFlags.NonDifferentiable) and not isinstance(value, (int, float))
+
+
+def default_fd_step(params, key):
+    import numpy as np
+    v = np.abs(np.array(params[key], dtype=np.float64)).mean()
+    return float(f"{max(0.05 * v, 1e-3):.3g}")
+
+
+def run_scene(mi, dr, name, spec, args):
+    import numpy as np
+    path = SCENES / f"{name}.xml"
+    kind, max_depth, hide = integrator_of(path)
+    # optimize=False: Mitsuba 3.9 otherwise merges meshes that share a BSDF and identical objects,
+    # which renames their keys after memory addresses (object_1401...).
+    scene = mi.load_file(str(path), optimize=False)
+    params = mi.traverse(scene)
+    integrator = mi.load_dict({"type": kind, "max_depth": max_depth, "rr_depth": 5, "hide_emitters": hide})
+    spp = args.spp or spec.get("spp", DEFAULT_SPP if kind == "prb" else DEFAULT_SPP_VOLUME)
+    n_seeds = args.seeds or spec.get("seeds", DEFAULT_SEEDS)
+    seeds = list(range(n_seeds))
+    block = args.block
+    film = scene.sensors()[0].film().size()
+    width, height = int(film[0]), int(film[1])
+    start = time.time()
+
+    primal = Stats(block)
+    for seed in seeds:
+        primal.add(render_primal(mi, scene, integrator, spp, seed))
+    result_primal = primal.summary()
+    t_primal = time.time() - start
+
+    gradients = {}
+    for key in spec["grads"]:
+        if key not in params.properties:
+            raise SystemExit(f"{name}: no Mitsuba parameter '{key}' (keys: {list(params.keys())})")
+        stats = Stats(block)
+        t0 = time.time()
+        forced = spec.get("fd", {})
+        if key in forced or not differentiable(mi, params, key):
+            step = forced.get(key) or default_fd_step(params, key)
+            fd_gradient(mi, scene, params, key, integrator, spp, seeds, step, stats)
+            gradients[key] = {"method": "fd", "fd_step": step, **stats.summary()}
+        else:
+            if kind == "prb":
+                forward_gradient(mi, dr, scene, params, key, integrator, spp, seeds, stats)
+                method = "forward"
+            else:
+                reverse_gradient(mi, dr, scene, params, key, integrator, spp, seeds, block, stats)
+                method = "reverse"
+            gradients[key] = {"method": method, "fd_step": None, **stats.summary()}
+            if args.check:
+                check = Stats(block)
+                step = spec.get("check_step", {}).get(key) or default_fd_step(params, key)
+                fd_gradient(mi, scene, params, key, integrator, spp, seeds, step, check)
+                compare(name, key, gradients[key], check.summary(), step)
+        g = gradients[key]
+        print(f"    {key}: {g['method']}, image mean {fmt(g['image_mean'])} ± {fmt(g['image_se'])} "
+              f"({time.time() - t0:.1f} s)", flush=True)
+    seconds = time.time() - start
+
+    blocks_x, blocks_y = -(-width // block), -(-height // block)
+    assert len(result_primal["mean"]) == blocks_x * blocks_y
+    out = {
+        "scene": f"{name}.xml",
+        "features": spec["features"],
+        "mitsuba": mi.__version__,
+        "variant": VARIANT,
+        "integrator": kind,
+        "max_depth": max_depth,
+        "width": width,
+        "height": height,
+        "block": block,
+        "blocks_x": blocks_x,
+        "blocks_y": blocks_y,
+        "seeds": n_seeds,
+        "spp": spp,
+        "keys": list(params.keys()),
+        "primal": result_primal,
+        "gradients": gradients,
+        "seconds": round(seconds, 2),
+    }
+    rel = np.array(result_primal["image_se"]) / np.maximum(np.abs(result_primal["image_mean"]), 1e-12)
+    print(f"    primal image mean {fmt(result_primal['image_mean'])} ± {fmt(result_primal['image_se'])}, "
+          f"se/mean max {100 * rel.max():.3f} % (primal {t_primal:.1f} s, total {seconds:.1f} s)", flush=True)
+    return out
+
+
+def compare(name, key, forward, fd, step):
+    """Prints z-scores of forward-mode against finite-difference block means."""
+    import numpy as np
+    fm, fs = np.array(forward["mean"]), np.array(forward["se"])
+    dm, ds = np.array(fd["mean"]), np.array(fd["se"])
+    z = (fm - dm) / np.sqrt(fs ** 2 + ds ** 2 + 1e-30)
+    zi = (np.array(forward["image_mean"]) - np.array(fd["image_mean"])) / np.sqrt(
+        np.array(forward["image_se"]) ** 2 + np.array(fd["image_se"]) ** 2 + 1e-30)
+    print(f"    check {key} (h = {step}): forward {fmt(forward['image_mean'])}, fd {fmt(fd['image_mean'])} "
+          f"± {fmt(fd['image_se'])}; image z {fmt(zi)}, block |z| max {np.abs(z).max():.2f}, "
+          f"rms {np.sqrt((z ** 2).mean()):.2f}", flush=True)
+
+
+def fmt(v):
+    return "[" + ", ".join(f"{x:.4g}" for x in v) + "]"
+
+
+def table():
+    """The README's scene -> features table from the stored JSON."""
+    print("| scene | integrator, depth | spp × seeds | features | gradients |")
+    print("| --- | --- | --- | --- | --- |")
+    for name, spec in MATRIX.items():
+        f = REFERENCE / f"{name}.json"
+        if not f.exists():
+            print(f"| `{name}` | (not rendered) | | {', '.join(spec['features'])} | |")
+            continue
+        r = json.loads(f.read_text())
+        grads = ", ".join(f"`{k}`" + (" (fd)" if g["method"] == "fd" else "") for k, g in r["gradients"].items())
+        group = f" **{spec['group']}**" if spec.get("group") else ""
+        print(f"| `{name}`{group} | {r['integrator']}, {r['max_depth']} | {r['spp']} × {r['seeds']} | "
+              f"{', '.join(r['features'])} | {grads} |")
+
+
+def main():
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--only", nargs="+", metavar="NAME", help="render only these scenes")
+    parser.add_argument("--spp", type=int, help=f"samples per pixel for every scene (default: {DEFAULT_SPP} or the scene's)")
+    parser.add_argument("--seeds", type=int, help=f"seeds per scene (default {DEFAULT_SEEDS})")
+    parser.add_argument("--block", type=int, default=DEFAULT_BLOCK, help="block size in pixels (default 8)")
+    parser.add_argument("--check", action="store_true",
+                        help="also compare each forward/reverse-mode gradient with central differences (printed, not stored)")
+    parser.add_argument("--dry-run", action="store_true", help="do not write the JSON files")
+    parser.add_argument("--table", action="store_true", help="print the README table from reference/*.json and exit")
+    args = parser.parse_args()
+    if args.table:
+        table()
+        return
+    names = args.only or list(MATRIX)
+    unknown = [n for n in names if n not in MATRIX]
+    if unknown:
+        raise SystemExit(f"unknown scenes: {unknown} (known: {list(MATRIX)})")
+
+    import drjit as dr
+    import mitsuba as mi
+    mi.set_variant(VARIANT)
+    if mi.__version__ != MITSUBA_VERSION:
+        print(f"warning: Mitsuba {mi.__version__}, the references were made with {MITSUBA_VERSION}", file=sys.stderr)
+    REFERENCE.mkdir(exist_ok=True)
+    total = time.time()
+    for i, name in enumerate(names):
+        print(f"[{i + 1}/{len(names)}] {name}", flush=True)
+        out = run_scene(mi, dr, name, MATRIX[name], args)
+        if not args.dry_run:
+            (REFERENCE / f"{name}.json").write_text(json.dumps(out, indent=1) + "\n")
+    print(f"done: {len(names)} scenes in {time.time() - total:.0f} s")
+
+
+if __name__ == "__main__":
+    main()
