@@ -332,7 +332,10 @@ bool path_step(inout PathState st) {
                         nee_wo = to_local(frame, wl);
                         float pdf_f;
                         nee_f = bsdf_eval_pdf(bsdf, wi, nee_wo, pdf_f);
-                        if (nee_pdf > 0.0 && max_component(nee_f) > 0.0) {
+                        // The adjoint also traces it where f is zero on the upper hemisphere (a black
+                        // BSDF): f's derivative there is not zero (Mitsuba's prb differentiates it too).
+                        bool upper = wi.z > 0.0 && nee_wo.z > 0.0;
+                        if (nee_pdf > 0.0 && (max_component(nee_f) > 0.0 || (adjoint && upper))) {
                             if (!diff) {
                                 nee_w = mis_power(nee_pdf, pdf_f);
                             } else {

@@ -131,6 +131,47 @@ pub fn gamma_q(a: f64, x: f64) -> f64 {
     }
 }
 
+/// The regularised incomplete beta function I_x(a, b) (continued fraction, modified Lentz, on
+/// the side of x where it converges fast).
+pub fn beta_i(a: f64, b: f64, x: f64) -> f64 {
+    if x <= 0.0 {
+        return 0.0;
+    }
+    if x >= 1.0 {
+        return 1.0;
+    }
+    let ln_front = ln_gamma(a + b) - ln_gamma(a) - ln_gamma(b) + a * x.ln() + b * (1.0 - x).ln();
+    if x > (a + 1.0) / (a + b + 2.0) {
+        return 1.0 - beta_i(b, a, 1.0 - x);
+    }
+    let tiny = 1e-300;
+    let clamp = |v: f64| if v.abs() < tiny { tiny } else { v };
+    let mut c = 1.0;
+    let mut d = 1.0 / clamp(1.0 - (a + b) * x / (a + 1.0));
+    let mut h = d;
+    for m in 1..10_000 {
+        let m = f64::from(m);
+        let even = m * (b - m) * x / ((a + 2.0 * m - 1.0) * (a + 2.0 * m));
+        d = 1.0 / clamp(1.0 + even * d);
+        c = clamp(1.0 + even / c);
+        h *= d * c;
+        let odd = -(a + m) * (a + b + m) * x / ((a + 2.0 * m) * (a + 2.0 * m + 1.0));
+        d = 1.0 / clamp(1.0 + odd * d);
+        c = clamp(1.0 + odd / c);
+        let delta = d * c;
+        h *= delta;
+        if (delta - 1.0).abs() < 1e-15 {
+            break;
+        }
+    }
+    ln_front.exp() * h / a
+}
+
+/// P(|T| ≥ t) for Student's t with `dof` degrees of freedom (real, > 0): I_{ν/(ν+t²)}(ν/2, 1/2).
+pub fn student_t_two_sided(t: f64, dof: f64) -> f64 {
+    beta_i(0.5 * dof, 0.5, dof / (dof + t * t))
+}
+
 fn direction(cos_theta: f64, phi: f64) -> Vec3 {
     let sin = (1.0 - cos_theta * cos_theta).max(0.0).sqrt();
     Vec3::new((sin * phi.cos()) as f32, (sin * phi.sin()) as f32, cos_theta as f32)
@@ -330,6 +371,21 @@ mod tests {
         assert!((gamma_q(5.0, 18.307 / 2.0) - 0.05).abs() < 1e-4);
         assert!((gamma_q(50.0, 124.342 / 2.0) - 0.05).abs() < 1e-4);
         assert!((ln_gamma(5.0) - 24f64.ln()).abs() < 1e-12);
+    }
+
+    #[test]
+    fn student_t_matches_closed_forms() {
+        // ν = 1 (Cauchy): 1 − 2/π atan t; ν = 2: 1 − t/√(2 + t²); large ν: the normal, 2 Q(1/2, t²/2)/2.
+        for t in [0.0, 0.3, 1.0, 2.5, 10.0, 300.0] {
+            let cauchy = 1.0 - 2.0 / PI * f64::atan(t);
+            assert!((student_t_two_sided(t, 1.0) - cauchy).abs() < 1e-12 * cauchy.max(1e-3), "t {t}");
+            let two = 1.0 - t / (2.0 + t * t).sqrt();
+            assert!((student_t_two_sided(t, 2.0) - two).abs() < 1e-10 * two.max(1e-3), "t {t}");
+        }
+        let normal = gamma_q(0.5, 0.5 * 4.0 * 4.0);
+        assert!((student_t_two_sided(4.0, 1e7) / normal - 1.0).abs() < 1e-4);
+        // The 0.975 quantile of t with 7 dof is 2.364624.
+        assert!((student_t_two_sided(2.364_624, 7.0) - 0.05).abs() < 1e-6);
     }
 
     /// The harness has power: a cosine-weighted sampler tested against the uniform-hemisphere

@@ -333,7 +333,10 @@ pub fn trace_path<const ADJOINT: bool>(
             };
             let wo = frame.to_local(wl);
             let f = bsdf_eval(&bsdf, wi, wo);
-            let tr = if !(p_e > 0.0 && max_component(f) > 0.0) {
+            // The adjoint also traces the shadow ray where f is zero on the upper hemisphere (a
+            // black BSDF): f's derivative there is not zero (Mitsuba's prb differentiates it too).
+            let upper = wi.z > 0.0 && wo.z > 0.0;
+            let tr = if !(p_e > 0.0 && (max_component(f) > 0.0 || (ADJOINT && upper))) {
                 Vec3::ZERO
             } else if media {
                 medium::shadow_transmittance(

@@ -233,7 +233,8 @@ impl<'a> Loader<'a> {
             .string(&self.x, "filename")?
             .ok_or_else(|| self.x.err(target, "'bitmap' needs the property 'filename'"))?;
         let raw = p.boolean(&self.x, "raw", false)?;
-        for (prop, default) in [("filter_type", "bilinear"), ("wrap_mode", "repeat")] {
+        // `format` is the texels' storage: "variant" (the default) is float32, as pathgrad stores them.
+        for (prop, default) in [("filter_type", "bilinear"), ("wrap_mode", "repeat"), ("format", "variant")] {
             if let Some((v, n)) = p.string(&self.x, prop)?
                 && v != default
             {

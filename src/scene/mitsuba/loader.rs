@@ -416,7 +416,12 @@ impl<'a> Loader<'a> {
     /// # Errors
     /// A value outside the range, or of the wrong type.
     pub fn color_in(&self, p: &Props<'a>, name: &str, default: Vec3, range: (f32, f32)) -> Result<Vec3> {
-        match p.color(&self.x, name)? {
+        self.in_range(name, p.color(&self.x, name)?, default, range)
+    }
+
+    /// `value` if every channel lies in `range`, `default` when absent.
+    fn in_range(&self, name: &str, value: Option<(Vec3, El<'a>)>, default: Vec3, range: (f32, f32)) -> Result<Vec3> {
+        match value {
             None => Ok(default),
             Some((v, node)) => {
                 if v.to_array().iter().any(|c| !(*c >= range.0 && *c <= range.1)) {
@@ -425,6 +430,15 @@ impl<'a> Loader<'a> {
                 Ok(v)
             }
         }
+    }
+
+    /// Emitted radiance `name` of `p` ([`Props::radiance`]: a constant `<spectrum>` is a multiple
+    /// of D65) in `range`, `default` when absent.
+    ///
+    /// # Errors
+    /// A value outside the range, or of the wrong type.
+    pub fn radiance_in(&self, p: &Props<'a>, name: &str, default: Vec3, range: (f32, f32)) -> Result<Vec3> {
+        self.in_range(name, p.radiance(&self.x, name)?, default, range)
     }
 
     /// A float property `name` of `p` in `[lo, hi]`, `default` when absent (`None`: required).
@@ -459,7 +473,7 @@ impl<'a> Loader<'a> {
         if self.scene.environment.is_some() {
             return Err(self.x.err(node, "a scene has at most one constant emitter"));
         }
-        let radiance = self.color_in(&p, "radiance", Vec3::ONE, bounds::RADIANCE)?;
+        let radiance = self.radiance_in(&p, "radiance", Vec3::ONE, bounds::RADIANCE)?;
         let name = self.top_name(node)?;
         self.scene.set_environment(&format!("{name}.radiance.value"), radiance).map_err(|e| self.located(node, e))?;
         self.finish(&p)

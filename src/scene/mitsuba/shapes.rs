@@ -297,7 +297,7 @@ impl<'a> Loader<'a> {
         if p.kind != "area" {
             return Err(self.x.err(node, format!("unsupported plugin '{}' (supported on shapes: area)", p.kind)));
         }
-        let radiance = self.color_in(&p, "radiance", Vec3::ONE, bounds::RADIANCE)?;
+        let radiance = self.radiance_in(&p, "radiance", Vec3::ONE, bounds::RADIANCE)?;
         // Mitsuba names a shape's emitter after the shape, whatever its own id.
         let param = format!("{shape}.emitter.radiance.value");
         self.finish(&p)?;

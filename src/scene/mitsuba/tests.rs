@@ -174,6 +174,20 @@ fn property_values() {
 }
 
 #[test]
+fn an_emitters_constant_spectrum_is_a_multiple_of_d65() {
+    // The values Mitsuba 3.9.1 (llvm_ad_rgb) lists for `<spectrum name="radiance" value="2"/>`,
+    // in float32: 2 × (1.2047939, 0.948291, 0.90891606). A <float> or <rgb> is taken as given.
+    let s = load_ok(
+        r#"<emitter type="constant" id="sky"><spectrum name="radiance" value="2"/></emitter>
+           <shape type="cube" id="a"><emitter type="area"><spectrum name="radiance" value="3.7"/></emitter></shape>
+           <shape type="cube" id="b"><emitter type="area"><float name="radiance" value="3.7"/></emitter></shape>"#,
+    );
+    assert_eq!(param(&s, "sky.radiance.value"), [2.409_587_9, 1.896_582, 1.817_832_1]);
+    assert_eq!(param(&s, "a.emitter.radiance.value"), [4.457_737_4, 3.508_676_8, 3.362_989_4]);
+    assert_eq!(param(&s, "b.emitter.radiance.value"), [3.7; 3]);
+}
+
+#[test]
 fn unknown_properties_are_warned_about_by_name() {
     let s = load_ok(
         "<shape type=\"cube\">\n<float name=\"radius\" value=\"2\"/>\n<bsdf type=\"diffuse\"><texture type=\"bitmap\" name=\"bump\"/></bsdf></shape>",

@@ -15,6 +15,9 @@ pub(super) type El<'a> = Node<'a, 'a>;
 /// The property tags and the object tags an object element may contain.
 const PROPERTY_TAGS: &[&str] =
     &["boolean", "float", "integer", "point", "rgb", "spectrum", "string", "transform", "vector"];
+/// The D65 illuminant in linear sRGB as Mitsuba 3.9.1's RGB variants integrate it (an emitter's
+/// `<spectrum value="1"/>` reads back as these values from `mi.traverse`, in float32).
+pub(super) const D65_RGB: [f32; 3] = [1.204_793_9, 0.948_291, 0.908_916_06];
 const OBJECT_TAGS: &[&str] = &[
     "bsdf",
     "emitter",
@@ -237,8 +240,11 @@ pub(super) enum Value {
     Boolean(bool),
     /// `<string>`.
     Str(String),
-    /// `<rgb>` or a constant `<spectrum>`.
+    /// `<rgb>`.
     Color(Vec3),
+    /// A constant `<spectrum>`: grey, except in an emitter's radiance, where Mitsuba's RGB modes
+    /// read it as that multiple of the D65 illuminant ([`D65_RGB`]).
+    Spectrum(f32),
     /// `<point>` or `<vector>`.
     Point(Vec3),
     /// `<transform>`.
@@ -428,8 +434,21 @@ impl<'a> Props<'a> {
         match self.get(name) {
             None => Ok(None),
             Some(Prop { value: Value::Color(v), node, .. }) => Ok(Some((*v, *node))),
-            Some(Prop { value: Value::Float(v), node, .. }) => Ok(Some((Vec3::splat(*v), *node))),
+            Some(Prop { value: Value::Float(v) | Value::Spectrum(v), node, .. }) => Ok(Some((Vec3::splat(*v), *node))),
             Some(p) => Err(self.wrong_type(x, p, "an <rgb>, a constant <spectrum> or a <float>")),
+        }
+    }
+
+    /// Emitted radiance `name` with its element: as [`Props::color`], except that a constant
+    /// `<spectrum value="v"/>` is v times the D65 illuminant, as Mitsuba 3's RGB variants read
+    /// an emitter's uniform spectrum (a `<float>` or `<rgb>` is taken as given).
+    ///
+    /// # Errors
+    /// A property of another type.
+    pub fn radiance(&self, x: &Xml<'_>, name: &str) -> Result<Option<(Vec3, El<'a>)>> {
+        match self.get(name) {
+            Some(Prop { value: Value::Spectrum(v), node, .. }) => Ok(Some((Vec3::from(D65_RGB) * *v, *node))),
+            _ => self.color(x, name),
         }
     }
 
@@ -443,6 +462,7 @@ impl<'a> Props<'a> {
         match self.get(name) {
             None => Ok(None),
             Some(Prop { value: Value::Color(v), node, .. }) => Ok(Some((v.to_array().to_vec(), *node))),
+            Some(Prop { value: Value::Spectrum(v), node, .. }) => Ok(Some((vec![*v; 3], *node))),
             Some(Prop { value: Value::Float(v), node, .. }) => Ok(Some((vec![*v], *node))),
             Some(p) => Err(self.wrong_type(x, p, "an <rgb>, a constant <spectrum>, a <float> or a <volume>")),
         }
@@ -552,7 +572,7 @@ fn property(x: &Xml<'_>, node: El<'_>) -> Result<Value> {
                 ));
             }
             match x.numbers(node, "value", &value)?[..] {
-                [v] => Value::Color(Vec3::splat(v)),
+                [v] => Value::Spectrum(v),
                 _ => {
                     return Err(x.err(node, format!("only constant spectra are supported (one number), got '{value}'")));
                 }
