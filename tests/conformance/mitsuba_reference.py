@@ -90,8 +90,8 @@ MATRIX = {
     "sensor_focal_length": dict(features=["focal_length 35mm"], grads=[]),
     "sensor_default_fov": dict(features=["default focal length (50mm)", "film 25x13"], grads=[]),
     "sensor_to_world": dict(features=["sensor to_world rotate/translate", "roll", "film 29x23"], grads=[]),
-    "sensor_rfilter_gaussian": dict(features=["rfilter gaussian"], grads=[], group="pending"),
-    "sensor_rfilter_default": dict(features=["no rfilter (Mitsuba default gaussian)"], grads=[], group="pending"),
+    "sensor_rfilter_gaussian": dict(features=["rfilter gaussian"], grads=[]),
+    "sensor_rfilter_default": dict(features=["no rfilter (Mitsuba default gaussian)"], grads=[]),
     # ---- depth
     "depth_1": dict(features=["max_depth 1"], grads=["light.emitter.radiance.value"]),
     "depth_2": dict(features=["max_depth 2"], grads=["back.bsdf.reflectance.value"]),
@@ -151,6 +151,56 @@ MATRIX = {
     "medium_mitsuba_hetero_spectral_sigmat": dict(features=["mitsuba-data port", "grid rgb sigma_t"], grads=["medium1.sigma_t.data"]),
     "medium_mitsuba_no_scattering": dict(features=["mitsuba-data port", "constvolume rgb sigma_t + to_world", "albedo 0"],
                                          grads=["medium1.sigma_t.value.value"]),
+}
+
+# The bias each scene's comparison must be able to see where the defaults (1 % of the primal
+# image mean, 5 % of a gradient's mean |block value|) are out of the suite's budget (8192
+# samples a pixel on pathgrad's side): the power the matrix has there, measured at 32 seeds,
+# rounded up. Media derivatives of sigma_t, scale and g and roughness derivatives are the
+# noisiest estimators of both renderers; these rows are where more samples or lower-variance
+# estimators would buy the most.
+POWER = {
+    "bsdf_blend": {"gradient_bias": 0.1},
+    "bsdf_roughconductor_beckmann": {"gradient_bias": 0.1},
+    "bsdf_roughconductor_defaults": {"gradient_bias": 0.5},
+    "bsdf_roughconductor_eta_k": {"gradient_bias": 0.1},
+    "bsdf_roughconductor_ggx": {"gradient_bias": 0.2},
+    "bsdf_roughconductor_material": {"gradient_bias": 0.2},
+    "bsdf_twosided_blend": {"gradient_bias": 0.1},
+    "bsdf_twosided_roughconductor": {"gradient_bias": 0.1},
+    "depth_1": {"primal_bias": 0.03},
+    "depth_2": {"primal_bias": 0.02},
+    "medium_grid_partial": {"gradient_bias": 0.5},
+    "medium_grid_sigma_t": {"gradient_bias": 0.5},
+    "medium_grid_sigma_t_rgb": {"gradient_bias": 1.0},
+    "medium_hetero_const_float": {"gradient_bias": 1.0},
+    "medium_hetero_const_rgb": {"gradient_bias": 0.1},
+    "medium_hetero_constvolume_to_world": {"gradient_bias": 10.0},
+    "medium_hg_0": {"gradient_bias": 0.1},
+    "medium_hg_03": {"gradient_bias": 0.1},
+    "medium_hg_09": {"gradient_bias": 1.0},
+    "medium_hg_m07": {"gradient_bias": 0.2},
+    "medium_homogeneous_constvolume": {"gradient_bias": 1.0},
+    "medium_homogeneous_grey": {"gradient_bias": 1.0},
+    "medium_homogeneous_rgb": {"gradient_bias": 0.2, "primal_bias": 0.02},
+    "medium_issue_heterogeneous": {"gradient_bias": 1.0},
+    "medium_issue_homogeneous": {"gradient_bias": 1.0},
+    "medium_scale": {"gradient_bias": 1.0},
+    "shape_ply_ascii": {"gradient_bias": 0.2},
+    "shape_sphere": {"gradient_bias": 0.5},
+    "surface_cornell_depth1": {"primal_bias": 0.03},
+    "surface_cornell_depth6": {"gradient_bias": 1.0, "primal_bias": 0.02},
+}
+
+# Scenes listed, loaded and rendered but not compared, with the reason: the ports of Mitsuba's own
+# participating-media test scenes (mitsuba-data tests/scenes/participating_media) load with a
+# warning (near_clip 1, which pathgrad's camera ignores) and differ from Mitsuba block by block
+# (up to 8 % in the blocks around the pedestal) while their image means agree to 0.3-3 %; the
+# cause is not found yet.
+PENDING = {
+    name: "port of a mitsuba-data media test scene: loads with a warning (near_clip), blocks differ by up to 8 %; not investigated yet"
+    for name in ["medium_mitsuba_hetero_sigmat", "medium_mitsuba_hetero_sigmat_albedo",
+                 "medium_mitsuba_hetero_spectral_sigmat", "medium_mitsuba_no_scattering"]
 }
 
 DEFAULT_SPP = 1024
@@ -388,10 +438,19 @@ def run_scene(mi, dr, name, spec, args):
         "primal": result_primal,
         "gradients": gradients,
         "seconds": round(seconds, 2),
+        **annotations(name),
     }
     rel = np.array(result_primal["image_se"]) / np.maximum(np.abs(result_primal["image_mean"]), 1e-12)
     print(f"    primal image mean {fmt(result_primal['image_mean'])} ± {fmt(result_primal['image_se'])}, "
           f"se/mean max {100 * rel.max():.3f} % (primal {t_primal:.1f} s, total {seconds:.1f} s)", flush=True)
+    return out
+
+
+def annotations(name):
+    """The fields of reference/NAME.json that come from this file, not from Mitsuba."""
+    out = dict(POWER.get(name, {}))
+    if name in PENDING:
+        out["pending"] = PENDING[name]
     return out
 
 
@@ -414,18 +473,20 @@ def fmt(v):
 
 def table():
     """The README's scene -> features table from the stored JSON."""
-    print("| scene | integrator, depth | spp × seeds | features | gradients |")
-    print("| --- | --- | --- | --- | --- |")
+    print("| scene | integrator, depth | Mitsuba spp × seeds | features | gradients | bias seen (primal, gradients) |")
+    print("| --- | --- | --- | --- | --- | --- |")
     for name, spec in MATRIX.items():
         f = REFERENCE / f"{name}.json"
         if not f.exists():
-            print(f"| `{name}` | (not rendered) | | {', '.join(spec['features'])} | |")
+            print(f"| `{name}` | (not rendered) | | {', '.join(spec['features'])} | | |")
             continue
         r = json.loads(f.read_text())
         grads = ", ".join(f"`{k}`" + (" (fd)" if g["method"] == "fd" else "") for k, g in r["gradients"].items())
-        group = f" **{spec['group']}**" if spec.get("group") else ""
-        print(f"| `{name}`{group} | {r['integrator']}, {r['max_depth']} | {r['spp']} × {r['seeds']} | "
-              f"{', '.join(r['features'])} | {grads} |")
+        power = f"{100 * r.get('primal_bias', 0.01):.0f} %, {100 * r.get('gradient_bias', 0.05):.0f} %"
+        if "pending" in r:
+            power = "not compared: " + r["pending"]
+        print(f"| `{name}` | {r['integrator']}, {r['max_depth']} | {r['spp']} × {r['seeds']} | "
+              f"{', '.join(r['features'])} | {grads} | {power} |")
 
 
 def main():
@@ -438,9 +499,21 @@ def main():
                         help="also compare each forward/reverse-mode gradient with central differences (printed, not stored)")
     parser.add_argument("--dry-run", action="store_true", help="do not write the JSON files")
     parser.add_argument("--table", action="store_true", help="print the README table from reference/*.json and exit")
+    parser.add_argument("--annotate", action="store_true",
+                        help="rewrite POWER and PENDING into the stored reference/*.json without rendering, and exit")
     args = parser.parse_args()
     if args.table:
         table()
+        return
+    if args.annotate:
+        for f in sorted(REFERENCE.glob("*.json")):
+            r = json.loads(f.read_text())
+            for k in ("primal_bias", "gradient_bias", "pending"):
+                r.pop(k, None)
+            seconds = r.pop("seconds")
+            r["seconds"] = seconds
+            r.update(annotations(f.stem))
+            f.write_text(json.dumps(r, indent=1) + "\n")
         return
     names = args.only or list(MATRIX)
     unknown = [n for n in names if n not in MATRIX]

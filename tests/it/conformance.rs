@@ -3,21 +3,21 @@
 //! written by `tests/conformance/mitsuba_reference.py`), primal and image gradients, block by block.
 //!
 //! For each scene and each compared quantity (the primal image; the forward-mode image gradient of
-//! each parameter the reference lists, tangent 1 on every value), pathgrad renders `S` seeds and
-//! takes, per seed, each B×B block's mean per channel and the image's mean per channel; over the
-//! seeds, their means and standard errors. Each block, channel and image mean gives
-//! z = (mean_p − mean_m) / √(se_p² + se_m² + (10⁻⁴ mean_m)²), the floor standing for f32 rounding
-//! in blocks without variance (constant sky). Every |z| must stay below the Bonferroni threshold
-//! for a family-wise false-alarm rate of 1 % over all the matrix's tests.
+//! each parameter the reference lists, tangent 1 on every value), pathgrad renders `SEEDS` seeds
+//! and takes, per seed, each B×B block's mean per channel and the image's mean per channel; over
+//! the seeds, their means and standard errors. Each block, channel and image mean is compared
+//! with Mitsuba's by Welch's t-test (the standard errors come from 32 and 16 seeds, so the
+//! statistic has Student's tails; the variance (10⁻⁴ m)² stands for f32 rounding in blocks
+//! without variance, a constant sky), and its p-value must stay above the Bonferroni level for a
+//! family-wise false-alarm rate of 1 % over all the matrix's tests.
 //!
-//! The power check: with that threshold, each image mean must have the power (95 %) to see a
-//! relative bias of 1 % (primal) or 5 % (gradients, relative to the mean |block value|) — the
-//! test fails when it cannot. pathgrad's sample count per scene is sized for it from the
-//! reference's own variance (the same estimator's per-sample variance), within a budget.
+//! The power check: at that level, each image mean must have the power (95 %) to see a relative
+//! bias of 1 % (primal) or 5 % (gradients, relative to the mean |block value|), or the larger
+//! bias that the scene's reference states (`primal_bias`, `gradient_bias`: the script's `POWER`
+//! table, for the noisiest derivatives) — the test fails when it cannot. pathgrad's sample count
+//! per scene is sized for it from the reference's own variance, within a budget.
 //!
-//! Every scene must also load without a warning (a warning means pathgrad approximates something,
-//! which the matrix must not pass silently), and every parameter pathgrad exposes must carry one
-//! of the names Mitsuba's `mi.traverse` prints for the scene.
+//! A reference marked `pending` (with its reason) is listed and not compared.
 //!
 //! `PATHGRAD_CONFORMANCE=name,name` restricts the run to those scenes (by file stem).
 
@@ -195,6 +195,11 @@ impl Reference {
         self.json[key].as_f64().unwrap_or(default).max(default)
     }
 
+    /// Whether the reference states its own bias for the primal or the gradients.
+    fn states_bias(&self, gradient: bool) -> bool {
+        self.json.get(if gradient { "gradient_bias" } else { "primal_bias" }).is_some()
+    }
+
     fn quantities(&self) -> Vec<(Option<String>, Stats)> {
         let mut out = vec![(None, Stats::from_json(&self.json["primal"]))];
         if let Some(grads) = self.json["gradients"].as_object() {
@@ -236,6 +241,11 @@ fn references() -> Vec<Reference> {
 fn spp_for_power(reference: &Reference, m: &Stats, gradient: bool, alpha: f64) -> u32 {
     let (seeds_m, spp_m) = (reference.json["seeds"].as_f64().unwrap(), reference.json["spp"].as_f64().unwrap());
     let bias = reference.bias(gradient);
+    if reference.states_bias(gradient) {
+        // The stated power was measured at the budget's top; pathgrad's variance is larger than
+        // Mitsuba's for these derivatives, so the prediction below would fall short.
+        return SPP_RANGE.1;
+    }
     let scale = m.scale(gradient);
     let mut spp = SPP_RANGE.0;
     while spp < SPP_RANGE.1 {
@@ -275,12 +285,19 @@ fn conformance_matrix_agrees_with_mitsuba() {
     let refs = references();
     assert!(!refs.is_empty(), "no references in tests/conformance/reference (or none matches PATHGRAD_CONFORMANCE)");
     // Bonferroni over every block, channel and image mean of every quantity of every scene.
-    let tests: usize = refs.iter().map(|r| r.quantities().len() * (r.blocks() + 1) * 3).sum();
+    let tests: usize = refs
+        .iter()
+        .filter(|r| r.json.get("pending").is_none())
+        .map(|r| r.quantities().len() * (r.blocks() + 1) * 3)
+        .sum();
     let alpha = FAMILY_ALPHA / tests as f64;
     println!("conformance: {} scenes, {tests} Welch t-tests, each at p < {alpha:.2e}", refs.len());
     let gpu = TestGpu::new();
     let mut failures = Vec::new();
-    for r in &refs {
+    for r in refs.iter().filter(|r| r.json.get("pending").is_some()) {
+        println!("{:<40}  listed, not compared: {}", r.name, r.json["pending"].as_str().unwrap());
+    }
+    for r in refs.iter().filter(|r| r.json.get("pending").is_none()) {
         let started = std::time::Instant::now();
         let file = root().join("scenes").join(r.json["scene"].as_str().unwrap());
         let scene = match pathgrad::scene::load(file.to_str().unwrap(), &[]) {
