@@ -192,7 +192,7 @@ POWER = {
     "surface_cornell_depth6": {"gradient_bias": 1.0, "primal_bias": 0.02},
 }
 
-# Scenes listed, loaded and rendered but not compared, with the reason: the ports of Mitsuba's own
+# Scenes the test lists by name with the reason and does not load or compare: the ports of Mitsuba's own
 # participating-media test scenes (mitsuba-data tests/scenes/participating_media) load with a
 # warning (near_clip 1, which pathgrad's camera ignores) and differ from Mitsuba block by block
 # (up to 8 % in the blocks around the pedestal) while their image means agree to 0.3-3 %; the

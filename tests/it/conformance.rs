@@ -17,6 +17,10 @@
 //! table, for the noisiest derivatives) — the test fails when it cannot. pathgrad's sample count
 //! per scene is sized for it from the reference's own variance, within a budget.
 //!
+//! Every scene must also load without a warning (a warning means pathgrad approximates something,
+//! which the matrix must not pass silently), and every parameter pathgrad exposes must carry one
+//! of the names Mitsuba's `mi.traverse` prints for the scene.
+//!
 //! A reference marked `pending` (with its reason) is listed and not compared.
 //!
 //! `PATHGRAD_CONFORMANCE=name,name` restricts the run to those scenes (by file stem).
@@ -140,9 +144,9 @@ impl Stats {
 
 /// Welch's t of pathgrad's value `p` (standard error `sp` over `np` seeds) against Mitsuba's `m`
 /// (`sm` over `nm`), with the rounding floor (10⁻⁴ m)² as a variance known exactly: (t, degrees
-/// of freedom by Welch–Satterthwaite, two-sided p-value). The standard errors come from 8 and 16
+/// of freedom by Welch–Satterthwaite, two-sided p-value). The standard errors come from 32 and 16
 /// seeds, so the statistic's tail is Student's, far heavier than the normal's at Bonferroni
-/// levels (|t| 4.9 is p = 10⁻⁶ for the normal, 0.002 for 7 dof).
+/// levels (|t| 4.9 is p = 10⁻⁶ for the normal, 0.0018 for 7 dof, 0.0002 for 15).
 fn welch(p: f64, sp: f64, np: f64, m: f64, sm: f64, nm: f64) -> (f64, f64, f64) {
     let floor = (1e-4 * m).powi(2);
     let var = sp * sp + sm * sm + floor;
@@ -150,9 +154,15 @@ fn welch(p: f64, sp: f64, np: f64, m: f64, sm: f64, nm: f64) -> (f64, f64, f64) 
         return if p == m { (0.0, f64::INFINITY, 1.0) } else { (f64::INFINITY, f64::INFINITY, 0.0) };
     }
     let t = (p - m) / var.sqrt();
-    let spread = sp.powi(4) / (np - 1.0) + sm.powi(4) / (nm - 1.0);
-    let dof = if spread > 0.0 { (var * var / spread).min(1e7) } else { 1e7 };
+    let dof = welch_dof(var, sp, np, sm, nm);
     (t, dof, pathgrad::stats::student_t_two_sided(t, dof))
+}
+
+/// Welch–Satterthwaite degrees of freedom of a difference with variance `var`, of which `sp²`
+/// and `sm²` were estimated from `np` and `nm` seeds (the rest known exactly); at most 10⁷.
+fn welch_dof(var: f64, sp: f64, np: f64, sm: f64, nm: f64) -> f64 {
+    let spread = sp.powi(4) / (np - 1.0) + sm.powi(4) / (nm - 1.0);
+    if spread > 0.0 { (var * var / spread).min(1e7) } else { 1e7 }
 }
 
 /// The |t| whose two-sided tail is `p` with `dof` degrees of freedom, by bisection.
@@ -169,8 +179,7 @@ fn t_threshold(p: f64, dof: f64) -> f64 {
 /// the time, for Welch's statistic with these standard errors and seed counts.
 fn detectable(sp: f64, np: f64, sm: f64, nm: f64, alpha: f64) -> f64 {
     let var = sp * sp + sm * sm;
-    let spread = sp.powi(4) / (np - 1.0) + sm.powi(4) / (nm - 1.0);
-    let dof = if spread > 0.0 { (var * var / spread).min(1e7) } else { 1e7 };
+    let dof = welch_dof(var, sp, np, sm, nm);
     (t_threshold(alpha, dof) + t_threshold(2.0 * (1.0 - POWER), dof)) * var.sqrt()
 }
 
