@@ -38,6 +38,34 @@ impl Geometry {
     }
 }
 
+impl Geometry {
+    /// Smooth vertex normals as Mitsuba 3 computes them for a mesh file without normals
+    /// (`Mesh::recompute_vertex_normals`): each triangle's unit normal weighted by its angle at the
+    /// vertex (Thürmer and Wüthrich 1998), summed and normalised; degenerate triangles add
+    /// nothing, and a vertex left without a normal gets (1, 0, 0), as Mitsuba's does.
+    pub fn with_angle_weighted_normals(mut self) -> Geometry {
+        let mut normals = vec![Vec3::ZERO; self.positions.len()];
+        for t in &self.indices {
+            let v = t.map(|i| self.positions[i as usize]);
+            let n = (v[1] - v[0]).cross(v[2] - v[0]);
+            if !(n.length_squared() > 0.0) {
+                continue;
+            }
+            let n = n.normalize();
+            for j in 0..3 {
+                let d0 = (v[(j + 1) % 3] - v[j]).normalize_or_zero();
+                let d1 = (v[(j + 2) % 3] - v[j]).normalize_or_zero();
+                normals[t[j] as usize] += n * d0.dot(d1).clamp(-1.0, 1.0).acos();
+            }
+        }
+        for n in &mut normals {
+            *n = if n.length() != 0.0 { n.normalize() } else { Vec3::X };
+        }
+        self.normals = Some(normals);
+        self
+    }
+}
+
 /// Area of the triangle (a, b, c).
 pub fn triangle_area(a: Vec3, b: Vec3, c: Vec3) -> f32 {
     0.5 * (b - a).cross(c - a).length()

@@ -71,6 +71,8 @@ MATRIX = {
     "emitter_constant": dict(features=["constant", "environment only"], grads=["sky.radiance.value"]),
     # ---- shape
     "shape_obj_smooth": dict(features=["obj", "vertex normals"], grads=["mesh.bsdf.reflectance.value"]),
+    "shape_obj_no_normals": dict(features=["obj without normals (smooth, angle-weighted)", "quads", "non-uniform scale"],
+                                 grads=["mesh.bsdf.reflectance.value"]),
     "shape_obj_face_normals": dict(features=["obj", "face_normals"], grads=["mesh.bsdf.reflectance.value"]),
     "shape_obj_uv": dict(features=["obj", "texture coordinates", "bitmap", "polygon face"], grads=["mesh.bsdf.reflectance.data"]),
     "shape_ply_ascii": dict(features=["ply ascii", "vertex normals", "roughconductor"], grads=["mesh.bsdf.alpha.value"]),

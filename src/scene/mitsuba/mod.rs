@@ -9,7 +9,8 @@
 //!   `translate`, `rotate` (axis, degrees), `scale`, `matrix` (16 row-major or 9 values) and
 //!   `lookat`, each left-multiplying what came before (later elements apply after earlier ones).
 //! - Shapes `obj`, `ply`, `rectangle`, `cube`, `disk`, `sphere` with `to_world`, `flip_normals`
-//!   and (meshes) `face_normals`; one `<bsdf>`/`<ref>` each (default: diffuse 0.5, as Mitsuba) and
+//!   and (meshes) `face_normals` (a mesh file without normals is shaded with Mitsuba's
+//!   angle-weighted vertex normals, computed in world space, unless `face_normals` is set); one `<bsdf>`/`<ref>` each (default: diffuse 0.5, as Mitsuba) and
 //!   optionally `<emitter type="area">` with `radiance`.
 //! - BSDFs `diffuse` (`reflectance`: colour or `<texture type="bitmap">`), `roughconductor`,
 //!   `blendbsdf`, `twosided`; `<emitter type="constant">` at scene level (the environment).

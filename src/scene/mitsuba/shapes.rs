@@ -169,13 +169,16 @@ impl<'a> Loader<'a> {
                         .err(file_node, format!("mesh file '{file}' not found (looked for {})", path.display())));
                 }
                 let mut g = (self.meshes)(format, &path).map_err(|e| self.located(node, e))?;
-                if p.boolean(&self.x, "face_normals", false)? {
+                let face_normals = p.boolean(&self.x, "face_normals", false)?;
+                if face_normals {
                     g.normals = None;
                 }
                 if to_world != Mat4::IDENTITY {
                     g = g.transformed(&to_world);
                 }
-                g
+                // A file without normals is shaded smoothly unless the scene asks for face
+                // normals: Mitsuba computes vertex normals for it, in world space.
+                if g.normals.is_none() && !face_normals { g.with_angle_weighted_normals() } else { g }
             }
             "rectangle" => rectangle(&to_world),
             "cube" => cube(&to_world),

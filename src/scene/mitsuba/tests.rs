@@ -188,6 +188,31 @@ fn an_emitters_constant_spectrum_is_a_multiple_of_d65() {
 }
 
 #[test]
+fn a_mesh_file_without_normals_gets_mitsubas_smooth_normals() {
+    // Mitsuba 3.9.1 lists these `vertex_normals` for the conformance matrix's pedestal.obj (no
+    // `vn`): the cap's centre (0, 1, 0), the rim's first vertex (0.76621884, 0.64257962, ~0);
+    // with face_normals the mesh keeps none.
+    let path = manifest("tests/conformance/scenes/data/pedestal.obj");
+    let text = |extra: &str| {
+        wrap(&format!(
+            r#"<shape type="obj" id="p"><string name="filename" value="{}"/>{extra}</shape>"#,
+            path.display()
+        ))
+    };
+    let options = LoadOptions { allow_outside_folder: true, ..LoadOptions::default() };
+    let load = |xml: String| {
+        super::loader::load_text_with(&xml, Path::new("t.xml"), &options, super::loader::load_mesh_file)
+            .unwrap_or_else(|e| panic!("{e}"))
+    };
+    let smooth = load(text(""));
+    let n = smooth.meshes[0].normals.as_ref().expect("smooth normals");
+    assert!((n[0] - Vec3::Y).length() < 1e-6, "{}", n[0]);
+    assert!((n[1] - Vec3::new(0.766_218_84, 0.642_579_6, 0.0)).length() < 1e-6, "{}", n[1]);
+    let flat = load(text(r#"<boolean name="face_normals" value="true"/>"#));
+    assert!(flat.meshes[0].normals.is_none());
+}
+
+#[test]
 fn unknown_properties_are_warned_about_by_name() {
     let s = load_ok(
         "<shape type=\"cube\">\n<float name=\"radius\" value=\"2\"/>\n<bsdf type=\"diffuse\"><texture type=\"bitmap\" name=\"bump\"/></bsdf></shape>",
