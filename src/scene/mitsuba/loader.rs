@@ -106,6 +106,7 @@ pub(super) fn load_text_with(text: &str, file: &Path, options: &LoadOptions, mes
         media: HashMap::new(),
         medium_shapes: Vec::new(),
         in_progress: Vec::new(),
+        clips: Vec::new(),
         meshes,
         options,
     };
@@ -115,6 +116,20 @@ pub(super) fn load_text_with(text: &str, file: &Path, options: &LoadOptions, mes
 }
 
 /// State of one load.
+/// A sensor's clip distance waiting for the shapes ([`Loader::clip_warnings`]).
+pub(super) struct PendingClip {
+    /// The sensor's camera.
+    pub camera: crate::scene::Camera,
+    /// `near_clip` (else `far_clip`).
+    pub near: bool,
+    /// Its value.
+    pub depth: f32,
+    /// The warning, if it clips something.
+    pub warning: String,
+    /// Where in the scene's warnings it goes.
+    pub at: usize,
+}
+
 pub(super) struct Loader<'a> {
     /// The document.
     pub x: Xml<'a>,
@@ -140,6 +155,9 @@ pub(super) struct Loader<'a> {
     pub medium_shapes: Vec<(usize, El<'a>)>,
     /// BSDFs and textures being built (cycle detection).
     pub in_progress: Vec<NodeId>,
+    /// A sensor's `near_clip`/`far_clip`, which pathgrad's camera does not apply: decided once
+    /// every shape is built, where the warning would have gone ([`Loader::clip_warnings`]).
+    pub clips: Vec<PendingClip>,
     /// The mesh file reader.
     pub meshes: MeshLoader,
     /// The rendered size and the folder rule.
@@ -267,6 +285,7 @@ impl<'a> Loader<'a> {
                 self.scene.warn(w);
             }
         }
+        self.clip_warnings();
         self.refuse_sensors_in_media(&sensors)?;
         self.refuse_overlapping_media()?;
         if self.scene.meshes.iter().all(|m| m.emitter.is_none()) && self.scene.environment.is_none() {
@@ -280,6 +299,29 @@ impl<'a> Loader<'a> {
             }
         }
         Ok(())
+    }
+
+    /// Warns about each sensor's `near_clip`/`far_clip` that would remove something from this
+    /// scene: Mitsuba clips at camera-space depths below `near_clip` and above `far_clip`, which
+    /// pathgrad's camera does not. One that removes nothing (no triangle reaches a depth in
+    /// (0, near_clip), none beyond far_clip) renders the same, and is accepted silently. The
+    /// warning goes where the sensor's other warnings are.
+    fn clip_warnings(&mut self) {
+        for clip in std::mem::take(&mut self.clips).into_iter().rev() {
+            let forward = (clip.camera.target - clip.camera.position).normalize();
+            let clips_something = self.scene.meshes.iter().any(|m| {
+                m.indices.iter().any(|t| {
+                    let d = t.map(|i| (m.positions[i as usize] - clip.camera.position).dot(forward));
+                    let (lo, hi) = (d[0].min(d[1]).min(d[2]), d[0].max(d[1]).max(d[2]));
+                    if clip.near { lo < clip.depth && hi > 0.0 } else { hi > clip.depth }
+                })
+            });
+            if clips_something {
+                self.scene.warn(clip.warning);
+                let w = self.scene.warnings.pop().expect("just pushed");
+                self.scene.warnings.insert(clip.at, w);
+            }
+        }
     }
 
     /// `children` (with their indices) in the order Mitsuba 3.9.1's default `load_file`

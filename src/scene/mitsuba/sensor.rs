@@ -138,12 +138,13 @@ impl<'a> Loader<'a> {
                 vertical_fov(diagonal_fov, FovAxis::Diagonal, width, height)
             }
         };
+        let mut clips = Vec::new();
         for clip in ["near_clip", "far_clip"] {
-            if let Some((_, n)) = p.float(&self.x, clip)? {
-                let w = self
+            if let Some((depth, n)) = p.float(&self.x, clip)? {
+                let warning = self
                     .x
                     .warning(n, format!("property '{clip}' of 'perspective' ignored: pathgrad's camera does not clip"));
-                self.scene.warn(w);
+                clips.push((clip == "near_clip", depth, warning));
             }
         }
         let transform = p.transform(&self.x, "to_world")?;
@@ -153,6 +154,11 @@ impl<'a> Loader<'a> {
             Some((t, n)) => camera_frame(&t).map_err(|m| self.x.err(n, m))?,
         };
         self.scene.camera = Camera { position, target, up, fov_y_degrees: fov_y, width, height, filter };
+        // Whether they clip anything is known once the shapes are built.
+        let at = self.scene.warnings.len();
+        for (near, depth, warning) in clips {
+            self.clips.push(super::loader::PendingClip { camera: self.scene.camera, near, depth, warning, at });
+        }
         Ok(())
     }
 

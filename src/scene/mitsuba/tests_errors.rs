@@ -457,6 +457,31 @@ fn sensor_errors() {
 }
 
 #[test]
+fn clip_distances_are_warned_about_only_where_they_clip() {
+    // The camera at z = 5 looks down −z at a unit cube around the origin: depths 4 to 6.
+    let scene = |clips: &str| {
+        let xml = format!(
+            r#"<scene version="3.0.0"><sensor type="perspective">{clips}<transform name="to_world"><lookat origin="0, 0, 5" target="0, 0, 0" up="0, 1, 0"/></transform><film type="hdrfilm"/></sensor>
+<shape type="cube"><emitter type="area"/></shape></scene>"#
+        );
+        load_text(&xml, Path::new("c.xml"), &[], obj_for_tests).unwrap().warnings
+    };
+    let none: [&str; 0] = [];
+    assert_eq!(scene(r#"<float name="near_clip" value="3.9"/><float name="far_clip" value="6.1"/>"#), none);
+    assert_eq!(
+        scene(r#"<float name="near_clip" value="4.5"/><float name="far_clip" value="5.5"/>"#),
+        [
+            "c.xml:1:51: property 'near_clip' of 'perspective' ignored: pathgrad's camera does not clip",
+            "c.xml:1:88: property 'far_clip' of 'perspective' ignored: pathgrad's camera does not clip",
+        ]
+    );
+    assert_eq!(
+        scene(r#"<float name="far_clip" value="5.5"/>"#),
+        ["c.xml:1:51: property 'far_clip' of 'perspective' ignored: pathgrad's camera does not clip"]
+    );
+}
+
+#[test]
 fn ignored_settings_are_warned_about() {
     let xml = r#"<scene version="3.0.0">
 <integrator type="path"><integer name="rr_depth" value="3"/><boolean name="hide_emitters" value="true"/></integrator>
