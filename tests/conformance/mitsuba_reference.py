@@ -171,7 +171,7 @@ MATRIX = {
 # estimators would buy the most.
 POWER = {
     "medium_mitsuba_hetero_sigmat": {"gradient_bias": 0.1},
-    "medium_mitsuba_no_scattering": {"gradient_bias": 0.1},
+    "medium_mitsuba_no_scattering": {"gradient_bias": 0.2},
     "bsdf_blend": {"gradient_bias": 0.1},
     "bsdf_roughconductor_beckmann": {"gradient_bias": 0.1},
     "bsdf_roughconductor_defaults": {"gradient_bias": 0.5},
