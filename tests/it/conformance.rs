@@ -204,11 +204,6 @@ impl Reference {
         self.json[key].as_f64().unwrap_or(default).max(default)
     }
 
-    /// Whether the reference states its own bias for the primal or the gradients.
-    fn states_bias(&self, gradient: bool) -> bool {
-        self.json.get(if gradient { "gradient_bias" } else { "primal_bias" }).is_some()
-    }
-
     fn quantities(&self) -> Vec<(Option<String>, Stats)> {
         let mut out = vec![(None, Stats::from_json(&self.json["primal"]))];
         if let Some(grads) = self.json["gradients"].as_object() {
@@ -250,11 +245,6 @@ fn references() -> Vec<Reference> {
 fn spp_for_power(reference: &Reference, m: &Stats, gradient: bool, alpha: f64) -> u32 {
     let (seeds_m, spp_m) = (reference.json["seeds"].as_f64().unwrap(), reference.json["spp"].as_f64().unwrap());
     let bias = reference.bias(gradient);
-    if reference.states_bias(gradient) {
-        // The stated power was measured at the budget's top; pathgrad's variance is larger than
-        // Mitsuba's for these derivatives, so the prediction below would fall short.
-        return SPP_RANGE.1;
-    }
     let scale = m.scale(gradient);
     let mut spp = SPP_RANGE.0;
     while spp < SPP_RANGE.1 {
@@ -354,16 +344,20 @@ fn conformance_matrix_agrees_with_mitsuba() {
             let bias = r.bias(gradient);
             let scale = theirs.scale(gradient);
             let (np, nm) = (f64::from(SEEDS), r.json["seeds"].as_f64().unwrap());
-            // Sized from Mitsuba's variance; where pathgrad's is larger, doubled until the power
-            // is there (or the budget's top).
+            // Sized from Mitsuba's variance; where pathgrad's is larger, sized again from its own
+            // (se ∝ 1/√spp, with a margin), up to the budget's top.
             let mut spp = spp_for_power(r, &theirs, gradient, alpha);
             let mut mine = render_stats(&mut renderer, &scene, key.as_deref(), spp, r);
-            while spp < SPP_RANGE.1
-                && (0..3).any(|c| {
-                    scale[c] > 0.0 && detectable(mine.image_se[c], np, theirs.image_se[c], nm, alpha) > bias * scale[c]
-                })
-            {
-                spp *= 2;
+            loop {
+                let short = (0..3)
+                    .filter(|&c| scale[c] > 0.0)
+                    .map(|c| detectable(mine.image_se[c], np, theirs.image_se[c], nm, alpha) / (bias * scale[c]))
+                    .fold(0.0f64, f64::max);
+                if short <= 1.0 || spp >= SPP_RANGE.1 {
+                    break;
+                }
+                let wanted = (f64::from(spp) * short * short * 1.3).ceil() as u32;
+                spp = wanted.next_power_of_two().clamp(2 * spp, SPP_RANGE.1);
                 mine = render_stats(&mut renderer, &scene, key.as_deref(), spp, r);
             }
             let what = key.clone().unwrap_or_else(|| "primal".into());
