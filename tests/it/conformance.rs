@@ -15,7 +15,8 @@
 //! bias of 1 % (primal) or 5 % (gradients, relative to the mean |block value|), or the larger
 //! bias that the scene's reference states (`primal_bias`, `gradient_bias`: the script's `POWER`
 //! table, for the noisiest derivatives) — the test fails when it cannot. pathgrad's sample count
-//! per scene is sized for it from the reference's own variance, within a budget.
+//! per scene is sized for it from the reference's own variance, then, where that falls short, from
+//! its own measured variance, within a budget (`SPP_RANGE`).
 //!
 //! Every scene must also load without a warning (a warning means pathgrad approximates something,
 //! which the matrix must not pass silently), and every parameter pathgrad exposes must carry one
