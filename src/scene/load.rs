@@ -37,11 +37,15 @@ pub struct LoadOptions {
 }
 
 impl LoadOptions {
-    /// The image size for a film of `film` pixels (width, height) under these options.
+    /// The image size for a film of `film` pixels (width, height) under these options: with only
+    /// a width, the height keeps the film's aspect ratio, rounded to the nearest pixel (at least 1).
     pub fn size_for(&self, film: (u32, u32)) -> (u32, u32) {
         match (self.width, self.height) {
             (Some(w), Some(h)) => (w, h),
-            (Some(w), None) => (w, ((u64::from(w) * u64::from(film.1)) / u64::from(film.0.max(1))).max(1) as u32),
+            (Some(w), None) => {
+                let fw = u64::from(film.0.max(1));
+                (w, ((u64::from(w) * u64::from(film.1) + fw / 2) / fw).max(1) as u32)
+            }
             (None, Some(h)) => (film.0, h),
             (None, None) => film,
         }
@@ -246,5 +250,7 @@ mod tests {
         assert_eq!(o(None, Some(10)).size_for((256, 192)), (256, 10));
         assert_eq!(o(Some(3), Some(4)).size_for((256, 192)), (3, 4));
         assert_eq!(o(Some(1), None).size_for((256, 16)), (1, 1));
+        // Rounded, not truncated: glTF's aspect 1.5 at 512 wide is 512×341; at 96 wide, 96×64.
+        assert_eq!(o(Some(96), None).size_for((512, 341)), (96, 64));
     }
 }

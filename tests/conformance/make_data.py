@@ -164,7 +164,7 @@ def write_obj_background(path):
 
 # ---- bitmaps ----
 
-def write_png(path, rgb):
+def png_bytes(rgb):
     """8-bit RGB PNG from an (h, w, 3) uint8 array, no ancillary chunks."""
     h, w, _ = rgb.shape
     raw = b"".join(b"\x00" + rgb[y].tobytes() for y in range(h))
@@ -174,14 +174,16 @@ def write_png(path, rgb):
         return struct.pack(">I", len(data)) + c + struct.pack(">I", zlib.crc32(c) & 0xFFFFFFFF)
 
     png = b"\x89PNG\r\n\x1a\n" + chunk(b"IHDR", struct.pack(">IIBBBBB", w, h, 8, 2, 0, 0, 0))
-    png += chunk(b"IDAT", zlib.compress(raw, 9)) + chunk(b"IEND", b"")
-    path.write_bytes(png)
+    return png + chunk(b"IDAT", zlib.compress(raw, 9)) + chunk(b"IEND", b"")
 
 
-def checker_texture():
-    """8 x 8: a 2-texel checker of orange and blue, its top-left quadrant yellow (so a flip in u or
-    v, or a transposition, changes the image)."""
-    a, b, c = (200, 60, 40), (40, 160, 220), (230, 210, 50)
+def write_png(path, rgb):
+    path.write_bytes(png_bytes(rgb))
+
+
+def checker_texture(a=(200, 60, 40), b=(40, 160, 220), c=(230, 210, 50)):
+    """8 x 8: a 2-texel checker of a (orange) and b (blue), its top-left quadrant c (yellow), so a
+    flip in u or v, or a transposition, changes the image."""
     img = np.zeros((8, 8, 3), np.uint8)
     for y in range(8):
         for x in range(8):

@@ -16,6 +16,10 @@ central finite difference (render(θ+h) − render(θ−h)) / 2h with common see
     ... mitsuba_reference.py --check --only medium_hg_03                    # gradients vs FD, prints z
     python3 tests/conformance/mitsuba_reference.py --table                  # README table (no Mitsuba)
 
+A glTF row (`gltf=...` in MATRIX) is first written as Mitsuba XML by gltf_to_mitsuba.py
+(scenes/gltf/NAME.xml and NAME/, at the row's width); its gradients are listed by pathgrad's
+parameter names and differentiated through the Mitsuba keys the converter maps them to.
+
 Render one scene at a time: the LLVM back end uses every core.
 """
 
@@ -161,6 +165,23 @@ MATRIX = {
                                          grads=["medium1.sigma_t.value.value"],
                                          # A constvolume: its largest channel is the majorant (see above).
                                          fd={"medium1.sigma_t.value.value": None}),
+    # ---- glTF: pathgrad renders the glTF file; Mitsuba renders gltf_to_mitsuba.py's XML of it (the
+    # same meshes in world space, pathgrad's documented material mapping, the same camera). Keys
+    # are pathgrad's names; `pathgrad_keys` in the JSON maps each to Mitsuba's.
+    "gltf_showcase": dict(features=["glTF", "node tree (TRS, matrix)", "metallic 1 / 0.5 / 0 materials", "doubleSided",
+                                    "base-colour texture (PNG file)", "emissive + emissive_strength", "camera aspectRatio"],
+                          gltf="../../scenes/gltf/showcase.gltf", width=96,
+                          grads=["satin.weight.value", "floor.base_color.data", "light.emitter.radiance.value",
+                                 "metal.specular_reflectance.value"]),
+    "gltf_showcase_glb": dict(features=["GLB container", "image in a bufferView"],
+                              gltf="../../scenes/gltf/showcase.glb", width=96, grads=[]),
+    "gltf_features": dict(features=["glTF", "scene index", "camera under a rotated parent, no aspectRatio",
+                                    "u8/u16/u32 indices, no indices", "no NORMAL (flat)", "TEXCOORD_1 (normalized u16)",
+                                    "data-URI buffer and image", "default material", "two primitives", "mirroring node",
+                                    "duplicate node names"],
+                          gltf="scenes/gltf_src/features.gltf", width=64,
+                          grads=["tiles.base_color.data", "plastic.bsdf_0.reflectance.value", "lamp_0.emitter.radiance.value",
+                                 "default_material.specular_reflectance.value"]),
 }
 
 # The bias each scene's comparison must be able to see where the defaults (1 % of the primal
@@ -374,7 +395,13 @@ def default_fd_step(params, key):
 
 def run_scene(mi, dr, name, spec, args):
     import numpy as np
-    path = SCENES / f"{name}.xml"
+    keymap = None
+    if "gltf" in spec:
+        import gltf_to_mitsuba
+        keymap = gltf_to_mitsuba.convert(HERE / spec["gltf"], SCENES / "gltf", name, spec["width"])
+        path = SCENES / "gltf" / f"{name}.xml"
+    else:
+        path = SCENES / f"{name}.xml"
     kind, max_depth, hide = integrator_of(path)
     # optimize=False: Mitsuba 3.9 otherwise merges meshes that share a BSDF and identical objects,
     # which renames their keys after memory addresses (object_1401...).
@@ -396,7 +423,8 @@ def run_scene(mi, dr, name, spec, args):
     t_primal = time.time() - start
 
     gradients = {}
-    for key in spec["grads"]:
+    for ours in spec["grads"]:
+        key = keymap[ours] if keymap else ours
         if key not in params.properties:
             raise SystemExit(f"{name}: no Mitsuba parameter '{key}' (keys: {list(params.keys())})")
         stats = Stats(block)
@@ -405,7 +433,7 @@ def run_scene(mi, dr, name, spec, args):
         if key in forced or not differentiable(mi, params, key):
             step = forced.get(key) or default_fd_step(params, key)
             fd_gradient(mi, scene, params, key, integrator, spp, seeds, step, stats)
-            gradients[key] = {"method": "fd", "fd_step": step, **stats.summary()}
+            gradients[ours] = {"method": "fd", "fd_step": step, **stats.summary()}
         else:
             if kind == "prb":
                 forward_gradient(mi, dr, scene, params, key, integrator, spp, seeds, stats)
@@ -413,13 +441,15 @@ def run_scene(mi, dr, name, spec, args):
             else:
                 reverse_gradient(mi, dr, scene, params, key, integrator, spp, seeds, block, stats)
                 method = "reverse"
-            gradients[key] = {"method": method, "fd_step": None, **stats.summary()}
+            gradients[ours] = {"method": method, "fd_step": None, **stats.summary()}
             if args.check:
                 check = Stats(block)
                 step = spec.get("check_step", {}).get(key) or default_fd_step(params, key)
                 fd_gradient(mi, scene, params, key, integrator, spp, seeds, step, check)
-                compare(name, key, gradients[key], check.summary(), step)
-        g = gradients[key]
+                compare(name, key, gradients[ours], check.summary(), step)
+        g = gradients[ours]
+        if keymap:
+            g["mitsuba_key"] = key
         print(f"    {key}: {g['method']}, image mean {fmt(g['image_mean'])} ± {fmt(g['image_se'])} "
               f"({time.time() - t0:.1f} s)", flush=True)
     seconds = time.time() - start
@@ -427,7 +457,7 @@ def run_scene(mi, dr, name, spec, args):
     blocks_x, blocks_y = -(-width // block), -(-height // block)
     assert len(result_primal["mean"]) == blocks_x * blocks_y
     out = {
-        "scene": f"{name}.xml",
+        "scene": str(path.relative_to(SCENES)),
         "features": spec["features"],
         "mitsuba": mi.__version__,
         "variant": VARIANT,
@@ -443,6 +473,7 @@ def run_scene(mi, dr, name, spec, args):
         "keys": list(params.keys()),
         "primal": result_primal,
         "gradients": gradients,
+        **({"pathgrad_scene": spec["gltf"], "pathgrad_width": spec["width"], "pathgrad_keys": keymap} if keymap else {}),
         "seconds": round(seconds, 2),
         **annotations(name),
     }

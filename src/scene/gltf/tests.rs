@@ -110,7 +110,7 @@ fn showcase_scene() {
     let names: Vec<&str> = s.meshes.iter().map(|m| m.name.as_str()).collect();
     assert_eq!(names, ["floor", "metal_box", "satin_box", "light"]);
     assert_eq!(s.triangle_count(), 2 + 12 + 12 + 2);
-    assert!(s.warnings.is_empty(), "{:?}", s.warnings);
+    assert_eq!(s.warnings, [FRESNEL_WARNING]);
 
     // Camera: translation (0, 1.5, 5), rotated −15° about x; yfov 0.6 rad; aspect 1.5.
     let c = s.camera;
@@ -198,7 +198,7 @@ fn glb_equals_gltf() {
 #[test]
 fn twin_scene() {
     let s = load(Path::new("scenes/twin/twin.gltf")).unwrap();
-    assert!(s.warnings.is_empty(), "{:?}", s.warnings);
+    assert_eq!(s.warnings, [FRESNEL_WARNING]);
     assert_eq!(s.camera.position, Vec3::new(0.0, 2.0, 6.0));
     assert!((s.camera.target - s.camera.position).normalize().abs_diff_eq(-s.camera.position.normalize(), 1e-6));
     assert!((s.camera.fov_y_degrees - 40.0).abs() < 1e-4);
@@ -222,9 +222,10 @@ fn no_camera_gives_the_documented_default() {
     assert!(s.camera.position.abs_diff_eq(Vec3::new(0.5, 0.5, distance), 1e-6));
     assert_eq!(s.camera.target, Vec3::new(0.5, 0.5, 0.0));
     assert_eq!((s.camera.fov_y_degrees, s.camera.width, s.camera.height), (45.0, 512, 512));
-    assert_eq!(s.warnings.len(), 2);
+    assert_eq!(s.warnings.len(), 3);
     assert!(s.warnings[0].starts_with("no perspective camera"), "{:?}", s.warnings);
     assert!(s.warnings[1].starts_with("the scene has no emitters"), "{:?}", s.warnings);
+    assert_eq!(s.warnings[2], FRESNEL_WARNING);
     // glTF's default material: white, metallic 1, roughness 1.
     assert_close(&param(&s, "default_material.alpha.value"), &[1.0]);
     assert_close(&param(&s, "default_material.specular_reflectance.value"), &[1.0; 3]);

@@ -1,0 +1,173 @@
+#!/usr/bin/env python3
+"""Writes scenes/gltf_src/features.gltf: one small glTF 2.0 scene exercising the parts of the glTF
+loader that the showcase (scenes/gltf/showcase.gltf) does not, for the conformance matrix.
+
+Deterministic, numpy and the standard library only:  python3 tests/conformance/make_gltf.py
+
+What it holds (each line a loader rule of src/scene/gltf/mod.rs):
+- two scenes, `scene: 1`: the first scene's node is not rendered;
+- the camera on a child of a rotated parent, without `aspectRatio` (square image);
+- `floor`: UNSIGNED_BYTE indices, a base-colour texture embedded as a data URI, read through
+  TEXCOORD_1 (normalized UNSIGNED_SHORT) while TEXCOORD_0 holds other coordinates;
+- `box`: no NORMAL (flat shading), no indices, a `matrix` with rotation and non-uniform scale,
+  no material (glTF's default material: white, metallic 1, roughness 1);
+- `ball`: an icosphere with normals and UNSIGNED_INT indices under a TRS with non-uniform scale
+  (normals by the inverse transpose);
+- `lamp`: one mesh of two primitives (meshes `lamp_0`, `lamp_1`), emissive without
+  KHR_materials_emissive_strength, under a mirroring scale (determinant < 0: winding reversed,
+  so the emitting side stays the front);
+- two nodes named `post` (`post_5`, `post_6`) sharing the `plastic` material with `ball`.
+"""
+
+import base64
+import json
+import struct
+from pathlib import Path
+
+import numpy as np
+
+from make_data import checker_texture, icosphere, png_bytes
+
+OUT = Path(__file__).resolve().parent / "scenes" / "gltf_src"
+
+
+class Builder:
+    def __init__(self):
+        self.data = bytearray()
+        self.views, self.accessors = [], []
+
+    def add(self, array, component, kind, target=None, normalized=False, minmax=False):
+        while len(self.data) % 4:
+            self.data.append(0)
+        raw = array.tobytes()
+        view = {"buffer": 0, "byteOffset": len(self.data), "byteLength": len(raw)}
+        if target:
+            view["target"] = target
+        self.data += raw
+        self.views.append(view)
+        acc = {"bufferView": len(self.views) - 1, "componentType": component, "count": len(array), "type": kind}
+        if normalized:
+            acc["normalized"] = True
+        if minmax:
+            acc["min"] = [float(v) for v in array.min(axis=0)]
+            acc["max"] = [float(v) for v in array.max(axis=0)]
+        self.accessors.append(acc)
+        return len(self.accessors) - 1
+
+    def positions(self, p):
+        return self.add(np.asarray(p, "<f4"), 5126, "VEC3", 34962, minmax=True)
+
+    def vec3(self, v):
+        return self.add(np.asarray(v, "<f4"), 5126, "VEC3", 34962)
+
+    def vec2(self, v):
+        return self.add(np.asarray(v, "<f4"), 5126, "VEC2", 34962)
+
+
+def quad():
+    """A unit quad in the xz plane facing +y (counter-clockwise seen from above)."""
+    p = np.array([[-0.5, 0, -0.5], [-0.5, 0, 0.5], [0.5, 0, 0.5], [0.5, 0, -0.5]])
+    return p, np.tile([0.0, 1.0, 0.0], (4, 1)), np.array([[0, 1, 2], [0, 2, 3]])
+
+
+def cube_soup():
+    """A unit cube centred at the origin as 12 separate triangles (36 vertices), outward winding."""
+    tris = []
+    for axis in range(3):
+        for sign in (-1.0, 1.0):
+            n = np.zeros(3)
+            n[axis] = sign
+            u = np.zeros(3)
+            u[(axis + 1) % 3] = 1.0
+            v = np.cross(n, u)
+            c = 0.5 * n
+            corners = [c + 0.5 * (a * u + b * v) for a, b in ((-1, -1), (1, -1), (1, 1), (-1, 1))]
+            tris += [corners[0], corners[1], corners[2], corners[0], corners[2], corners[3]]
+    return np.array(tris)
+
+
+def main():
+    b = Builder()
+    # floor: a 4 x 4 quad; TEXCOORD_0 a decoy, TEXCOORD_1 the texture's (two repeats, normalized u16).
+    p, n, t = quad()
+    floor = {
+        "POSITION": b.positions(p * [4, 1, 4]),
+        "NORMAL": b.vec3(n),
+        "TEXCOORD_0": b.vec2(np.zeros((4, 2))),
+        "TEXCOORD_1": b.add(np.array([[0, 0], [0, 65535], [65535, 65535], [65535, 0]], "<u2"), 5123, "VEC2", 34962,
+                            normalized=True),
+    }
+    floor_indices = b.add(np.asarray(t.reshape(-1), "<u1"), 5121, "SCALAR", 34963)
+    box = {"POSITION": b.positions(cube_soup())}
+    verts, faces = icosphere(1)
+    verts = np.array(verts)
+    ball = {"POSITION": b.positions(verts), "NORMAL": b.vec3(verts)}
+    ball_indices = b.add(np.asarray(np.array(faces).reshape(-1), "<u4"), 5125, "SCALAR", 34963)
+    # lamp: primitive 0 a quad facing -y after the mirroring node (its winding faces +x before),
+    # primitive 1 a larger backing plate behind it.
+    lp = np.array([[0, -0.6, -0.6], [0, 0.6, -0.6], [0, 0.6, 0.6], [0, -0.6, 0.6]])
+    lamp_light = {"POSITION": b.positions(lp), "NORMAL": b.vec3(np.tile([1.0, 0, 0], (4, 1)))}
+    lamp_light_indices = b.add(np.array([0, 1, 2, 0, 2, 3], "<u2"), 5123, "SCALAR", 34963)
+    fp = lp * [1, 1.3, 1.3] + [-0.05, 0, 0]
+    lamp_frame = {"POSITION": b.positions(fp), "NORMAL": b.vec3(np.tile([1.0, 0, 0], (4, 1)))}
+    lamp_frame_indices = b.add(np.array([0, 1, 2, 0, 2, 3], "<u2"), 5123, "SCALAR", 34963)
+    post = {"POSITION": b.positions(cube_soup() * [0.15, 0.8, 0.15])}
+
+    # A cream and teal checker, its top-left quadrant red.
+    png = png_bytes(checker_texture((235, 225, 200), (30, 130, 140), (210, 40, 30)))
+    doc = {
+        "asset": {"version": "2.0", "generator": "pathgrad tests/conformance/make_gltf.py"},
+        "scene": 1,
+        "scenes": [{"nodes": [0]}, {"nodes": [1, 3, 4, 5, 6, 7, 8]}],
+        "nodes": [
+            {"name": "not_rendered", "mesh": 1, "translation": [0, 1, 0]},
+            {"name": "rig", "rotation": [-0.1736482, 0.0, 0.0, 0.9848078], "translation": [0.3, 2.2, 5.5],
+             "children": [2]},
+            {"name": "camera", "camera": 0, "rotation": [0.0, 0.0436194, 0.0, 0.9990482]},
+            {"name": "floor", "mesh": 0},
+            {"name": "box", "mesh": 1,
+             # rotate 30 degrees about y, scale (0.8, 0.6, 0.5), translate (-1.1, 0.3, 0.2), column-major
+             "matrix": [0.6928203, 0.0, -0.4, 0.0, 0.0, 0.6, 0.0, 0.0, 0.25, 0.0, 0.4330127, 0.0,
+                        -1.1, 0.3, 0.2, 1.0]},
+            {"name": "ball", "mesh": 2, "translation": [0.7, 0.45, 0.3], "scale": [0.55, 0.45, 0.4],
+             "rotation": [0.0, 0.0, 0.258819, 0.9659258]},
+            {"name": "lamp", "mesh": 3, "translation": [0.2, 2.6, 0.8],
+             # rotate 90 degrees about z (+x -> +y), then mirror in y: the quad's +x side faces -y
+             "rotation": [0.0, 0.0, 0.7071068, 0.7071068], "scale": [-1.0, 1.0, 1.0]},
+            {"name": "post", "mesh": 4, "translation": [1.6, 0.4, -1.0]},
+            {"name": "post", "mesh": 4, "translation": [-1.7, 0.4, -1.2]},
+        ],
+        "cameras": [{"type": "perspective", "perspective": {"yfov": 0.75, "znear": 0.05}}],
+        "meshes": [
+            {"name": "floor", "primitives": [{"attributes": floor, "indices": floor_indices, "material": 0}]},
+            {"name": "box", "primitives": [{"attributes": box}]},
+            {"name": "ball", "primitives": [{"attributes": ball, "indices": ball_indices, "material": 1}]},
+            {"name": "lamp", "primitives": [
+                {"attributes": lamp_light, "indices": lamp_light_indices, "material": 2},
+                {"attributes": lamp_frame, "indices": lamp_frame_indices, "material": 1}]},
+            {"name": "post", "primitives": [{"attributes": post, "material": 1}]},
+        ],
+        "materials": [
+            {"name": "tiles", "pbrMetallicRoughness": {
+                "baseColorFactor": [0.9, 0.85, 0.8, 1.0], "baseColorTexture": {"index": 0, "texCoord": 1},
+                "metallicFactor": 0.0, "roughnessFactor": 0.6}},
+            {"name": "plastic", "pbrMetallicRoughness": {
+                "baseColorFactor": [0.8, 0.25, 0.1, 1.0], "metallicFactor": 0.25, "roughnessFactor": 0.45}},
+            {"name": "lamp", "emissiveFactor": [1.0, 0.85, 0.7], "pbrMetallicRoughness": {
+                "baseColorFactor": [0.1, 0.1, 0.1, 1.0], "metallicFactor": 0.0, "roughnessFactor": 1.0}},
+        ],
+        "textures": [{"source": 0, "sampler": 0}],
+        "samplers": [{"magFilter": 9729, "minFilter": 9729, "wrapS": 10497, "wrapT": 10497}],
+        "images": [{"uri": "data:image/png;base64," + base64.b64encode(png).decode()}],
+        "accessors": b.accessors,
+        "bufferViews": b.views,
+        "buffers": [{"byteLength": len(b.data),
+                     "uri": "data:application/octet-stream;base64," + base64.b64encode(bytes(b.data)).decode()}],
+    }
+    OUT.mkdir(parents=True, exist_ok=True)
+    (OUT / "features.gltf").write_text(json.dumps(doc, indent=1) + "\n")
+    print(f"wrote {OUT / 'features.gltf'}")
+
+
+if __name__ == "__main__":
+    main()
