@@ -308,12 +308,29 @@ impl<'a> Loader<'a> {
     /// warning goes where the sensor's other warnings are.
     fn clip_warnings(&mut self) {
         for clip in std::mem::take(&mut self.clips).into_iter().rev() {
-            let forward = (clip.camera.target - clip.camera.position).normalize();
+            let c = clip.camera;
+            let forward = (c.target - c.position).normalize();
+            let right = forward.cross(c.up).normalize();
+            let up = right.cross(forward);
+            // The view pyramid's half-widths per unit depth, with a margin for the pixel filter.
+            let tan_y = 1.5 * (0.5 * c.fov_y_degrees.to_radians()).tan();
+            let tan_x = tan_y * c.width as f32 / c.height as f32;
             let clips_something = self.scene.meshes.iter().any(|m| {
                 m.indices.iter().any(|t| {
-                    let d = t.map(|i| (m.positions[i as usize] - clip.camera.position).dot(forward));
-                    let (lo, hi) = (d[0].min(d[1]).min(d[2]), d[0].max(d[1]).max(d[2]));
-                    if clip.near { lo < clip.depth && hi > 0.0 } else { hi > clip.depth }
+                    let v = t.map(|i| m.positions[i as usize] - c.position);
+                    let range = |axis: Vec3| {
+                        let d = v.map(|p| p.dot(axis));
+                        (d[0].min(d[1]).min(d[2]), d[0].max(d[1]).max(d[2]))
+                    };
+                    let (lo, hi) = range(forward);
+                    if !clip.near {
+                        return hi > clip.depth;
+                    }
+                    // Near: the triangle's box (in camera axes) must reach into the pyramid's
+                    // part in front of the near plane, not only pass beside the camera.
+                    let ((xl, xh), (yl, yh)) = (range(right), range(up));
+                    let (wx, wy) = (clip.depth * tan_x, clip.depth * tan_y);
+                    lo < clip.depth && hi > 0.0 && xl < wx && xh > -wx && yl < wy && yh > -wy
                 })
             });
             if clips_something {

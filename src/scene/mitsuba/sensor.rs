@@ -72,6 +72,10 @@ pub(super) fn vertical_fov(fov: f32, axis: FovAxis, width: u32, height: u32) -> 
     (2.0 * tan_y.atan().to_degrees()) as f32
 }
 
+/// Mitsuba 3's `perspective` clip distances when the scene names none.
+const MITSUBA_NEAR_CLIP: f32 = 0.01;
+const MITSUBA_FAR_CLIP: f32 = 10_000.0;
+
 impl<'a> Loader<'a> {
     /// Reads the sensor into `scene.camera` (and `default_spp`).
     pub(super) fn sensor(&mut self, node: El<'a>) -> Result<()> {
@@ -139,13 +143,28 @@ impl<'a> Loader<'a> {
             }
         };
         let mut clips = Vec::new();
-        for clip in ["near_clip", "far_clip"] {
-            if let Some((depth, n)) = p.float(&self.x, clip)? {
-                let warning = self
-                    .x
-                    .warning(n, format!("property '{clip}' of 'perspective' ignored: pathgrad's camera does not clip"));
-                clips.push((clip == "near_clip", depth, warning));
-            }
+        for (clip, default) in [("near_clip", MITSUBA_NEAR_CLIP), ("far_clip", MITSUBA_FAR_CLIP)] {
+            let (depth, warning) = match p.float(&self.x, clip)? {
+                Some((depth, n)) => (
+                    depth,
+                    self.x.warning(
+                        n,
+                        format!("property '{clip}' of 'perspective' ignored: pathgrad's camera does not clip"),
+                    ),
+                ),
+                // Mitsuba clips at its defaults too; geometry that close (or that far) is rare.
+                None => (
+                    default,
+                    self.x.warning(
+                        node,
+                        format!(
+                            "Mitsuba's default {clip} ({default}) clips geometry that pathgrad's camera, which does \
+                             not clip, renders"
+                        ),
+                    ),
+                ),
+            };
+            clips.push((clip == "near_clip", depth, warning));
         }
         let transform = p.transform(&self.x, "to_world")?;
         self.finish(&p)?;

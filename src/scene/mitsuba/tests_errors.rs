@@ -479,13 +479,25 @@ fn clip_distances_are_warned_about_only_where_they_clip() {
         scene(r#"<float name="far_clip" value="5.5"/>"#),
         ["c.xml:1:51: property 'far_clip' of 'perspective' ignored: pathgrad's camera does not clip"]
     );
+    // Mitsuba's defaults (0.01 and 10⁴) clip too: a camera inside the cube sees a face at 0.005.
+    assert_eq!(scene(""), none);
+    let inside = r#"<scene version="3.0.0"><sensor type="perspective"><transform name="to_world"><lookat origin="0, 0, -0.995" target="0, 0, -2" up="0, 1, 0"/></transform><film type="hdrfilm"/></sensor>
+<shape type="cube"><emitter type="area"/></shape></scene>"#;
+    // Faces that pass beside the camera, outside its view, are not clipped where it looks.
+    let beside = inside.replace("0, 0, -0.995", "0, 0, 0").replace("0, 0, -2", "0, 0, 1");
+    assert_eq!(load_text(&beside, Path::new("c.xml"), &[], obj_for_tests).unwrap().warnings, none);
+    assert_eq!(
+        load_text(inside, Path::new("c.xml"), &[], obj_for_tests).unwrap().warnings,
+        ["c.xml:1:24: Mitsuba's default near_clip (0.01) clips geometry that pathgrad's camera, which does not clip, \
+             renders"]
+    );
 }
 
 #[test]
 fn ignored_settings_are_warned_about() {
     let xml = r#"<scene version="3.0.0">
 <integrator type="path"><integer name="rr_depth" value="3"/><boolean name="hide_emitters" value="true"/></integrator>
-<sensor type="perspective"><float name="near_clip" value="0.1"/>
+<sensor type="perspective"><float name="near_clip" value="1.5"/>
 <film type="hdrfilm"><rfilter type="gaussian"/><string name="pixel_format" value="rgb"/></film><sampler type="independent"><integer name="seed" value="3"/></sampler></sensor>
 <shape type="cube"><bsdf type="diffuse"><texture type="bitmap" name="reflectance"><string name="filename" value="t.png"/><string name="filter_type" value="nearest"/></texture></bsdf></shape>
 </scene>"#;
