@@ -244,8 +244,7 @@ impl<'a> Loader<'a> {
                 self.scene.warn(w);
             }
         }
-        let path = crate::scene::load::scene_file(&self.dir, &file, self.options.allow_outside_folder)
-            .map_err(|m| self.x.err(file_node, m))?;
+        let path = self.scene_file(&file).map_err(|m| self.x.err(file_node, m))?;
         if !path.is_file() {
             return Err(self
                 .x

@@ -18,7 +18,7 @@ pub(super) const MAX_NESTING: usize = 16;
 /// Most XML nodes (elements, attributes' owners, text) a scene file may have: a memory bound for
 /// hostile input (a few hundred MB at most). Real scenes keep triangles in mesh files and stay far
 /// below, even with tens of thousands of shapes.
-const MAX_NODES: u32 = 1 << 22;
+pub(super) const MAX_NODES: u32 = 1 << 22;
 
 /// Object tags that may carry an `id`.
 const ID_TAGS: &[&str] = &[
@@ -76,14 +76,13 @@ pub(super) fn load_text(text: &str, file: &Path, defines: &[(String, String)], m
 /// Parses `text` (read from `file`) into a scene.
 pub(super) fn load_text_with(text: &str, file: &Path, options: &LoadOptions, meshes: MeshLoader) -> Result<Scene> {
     let name = file.display().to_string();
+    let dir = file.parent().map(Path::to_path_buf).unwrap_or_default();
+    // Malformed XML is reported here, in the file it is in; the spliced text parses.
+    let sources = super::include::splice(&name, text, &dir, options.allow_outside_folder)?;
     let parsing = roxmltree::ParsingOptions { allow_dtd: false, nodes_limit: MAX_NODES, ..Default::default() };
-    let doc = roxmltree::Document::parse_with_options(text, parsing).map_err(|e| {
-        let pos = e.pos();
-        let message = e.to_string().replace(&format!(" at {pos}"), "");
-        Error::Scene {
-            location: format!("{name}:{}:{}", pos.row, pos.col),
-            message: format!("malformed XML: {message}"),
-        }
+    let doc = roxmltree::Document::parse_with_options(&sources.text, parsing).map_err(|e| Error::Scene {
+        location: sources.location(0),
+        message: format!("the scene with its includes spliced in is not well-formed XML: {e}"),
     })?;
     let placeholder = Camera {
         position: Vec3::ZERO,
@@ -95,8 +94,9 @@ pub(super) fn load_text_with(text: &str, file: &Path, options: &LoadOptions, mes
         filter: crate::scene::PixelFilter::Box,
     };
     let mut loader = Loader {
-        x: Xml::new(name.clone(), &doc),
-        dir: file.parent().map(Path::to_path_buf).unwrap_or_default(),
+        x: Xml::new(name.clone(), &doc).with_sources(&sources),
+        dir,
+        search: sources.search.clone(),
         scene: Scene::new(&name, placeholder),
         ids: HashMap::new(),
         names: HashMap::new(),
@@ -135,6 +135,8 @@ pub(super) struct Loader<'a> {
     pub x: Xml<'a>,
     /// Directory that relative file names resolve against.
     pub dir: PathBuf,
+    /// The `<path>` folders, searched before `dir` (the latest first).
+    pub search: Vec<PathBuf>,
     /// The scene being built.
     pub scene: Scene,
     /// Every object with an `id`.
@@ -192,6 +194,9 @@ impl<'a> Loader<'a> {
             }
         }
 
+        for &c in &children {
+            self.check_scene_child(c)?;
+        }
         let sensors: Vec<El<'a>> = children.iter().copied().filter(|c| c.has_tag_name("sensor")).collect();
         if sensors.is_empty() {
             return Err(self.x.err(
@@ -254,20 +259,8 @@ impl<'a> Loader<'a> {
                 "emitter" => self.environment(c)?,
                 // Built when a shape refers to it (its `interior`), under the name given above unless
                 // an earlier shape reached it first; one nothing refers to is reported below.
-                "medium" | "volume" | "phase" => {}
-                tag @ ("film" | "sampler" | "rfilter") => {
-                    return Err(self.x.err(c, format!("a <{tag}> must be inside a <sensor>")));
-                }
-                "ref" => return Err(self.x.err(c, "a <ref> at scene level is not supported")),
-                tag => {
-                    return Err(self.x.err(
-                        c,
-                        format!(
-                            "unsupported element <{tag}> (supported in <scene>: default, bsdf, texture, shape, \
-                             emitter, medium, volume, phase, sensor, integrator)"
-                        ),
-                    ));
-                }
+                // `<path>`s took effect when the includes were spliced in.
+                _ => {}
             }
         }
         self.meshes_in_document_order(&mesh_children);
@@ -379,6 +372,32 @@ impl<'a> Loader<'a> {
         self.medium_shapes.sort_by_key(|(m, _)| *m);
     }
 
+    /// The file a property names: along the `<path>` folders, then beside the scene, under the
+    /// folder rule (the message when it breaks it).
+    pub(super) fn scene_file(&self, name: &str) -> std::result::Result<PathBuf, String> {
+        super::include::find(&self.search, &self.dir, name, self.options.allow_outside_folder)
+    }
+
+    /// Refuses a child of `<scene>` that pathgrad does not read, before anything else is
+    /// reported about the scene.
+    fn check_scene_child(&self, c: El<'a>) -> Result<()> {
+        match c.tag_name().name() {
+            "default" | "sensor" | "integrator" | "bsdf" | "texture" | "shape" | "emitter" | "medium" | "volume"
+            | "phase" | "path" => Ok(()),
+            tag @ ("film" | "sampler" | "rfilter") => {
+                Err(self.x.err(c, format!("a <{tag}> must be inside a <sensor>")))
+            }
+            "ref" => Err(self.x.err(c, "a <ref> at scene level is not supported")),
+            tag => Err(self.x.err(
+                c,
+                format!(
+                    "unsupported element <{tag}> (supported in <scene>: default, path, include, bsdf, texture, shape, \
+                     emitter, medium, volume, phase, sensor, integrator)"
+                ),
+            )),
+        }
+    }
+
     fn collect_defines(&mut self, children: &[El<'a>], cli: &[(String, String)]) -> Result<()> {
         let mut seen: Vec<String> = Vec::new();
         for &d in children.iter().filter(|c| c.has_tag_name("default")) {
@@ -388,8 +407,9 @@ impl<'a> Loader<'a> {
             if !is_identifier(name) {
                 return Err(self.x.err(d, format!("'{name}' is not a valid parameter name ([A-Za-z_][A-Za-z0-9_]*)")));
             }
+            // As Mitsuba: the first default of a name holds (an included file's may repeat it).
             if seen.iter().any(|s| s == name) {
-                return Err(self.x.err(d, format!("parameter '{name}' has two defaults")));
+                continue;
             }
             seen.push(name.to_string());
             self.x.define(name, value);

@@ -112,8 +112,7 @@ impl<'a> Loader<'a> {
                 if !(Mat4::from_mat3(glam::Mat3::from_mat4(to_world)).determinant().abs() > 0.0) {
                     return Err(self.x.err(volume, "to_world is singular (it flattens the grid)"));
                 }
-                let path = crate::scene::load::scene_file(&self.dir, &file, self.options.allow_outside_folder)
-                    .map_err(|m| self.x.err(file_node, m))?;
+                let path = self.scene_file(&file).map_err(|m| self.x.err(file_node, m))?;
                 let grid = Grid::read(&path).map_err(|e| self.located(file_node, e))?;
                 let name = format!("{medium}.{prop}.data");
                 let values =

@@ -88,6 +88,7 @@
 //!   pathgrad blends two leaf BSDFs.
 
 mod bsdf;
+mod include;
 mod loader;
 mod media;
 mod sensor;
@@ -98,6 +99,8 @@ mod xml;
 mod tests;
 #[cfg(test)]
 mod tests_errors;
+#[cfg(test)]
+mod tests_include;
 #[cfg(test)]
 mod tests_media;
 #[cfg(test)]

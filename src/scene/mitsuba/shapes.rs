@@ -161,8 +161,7 @@ impl<'a> Loader<'a> {
                 let (file, file_node) = p
                     .string(&self.x, "filename")?
                     .ok_or_else(|| self.x.err(node, format!("'{}' needs the property 'filename'", p.kind)))?;
-                let path = crate::scene::load::scene_file(&self.dir, &file, self.options.allow_outside_folder)
-                    .map_err(|m| self.x.err(file_node, m))?;
+                let path = self.scene_file(&file).map_err(|m| self.x.err(file_node, m))?;
                 if !path.is_file() {
                     return Err(self
                         .x

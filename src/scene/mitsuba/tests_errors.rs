@@ -92,8 +92,8 @@ fn fixtures_give_their_pinned_messages() {
         ("duplicate_id.xml", format!("6:5: <shape id=\"a\">: duplicate id 'a' (first used at {d}/duplicate_id.xml:5:5)")),
         (
             "unsupported_element.xml",
-            "5:5: <mesh id=\"fog\">: unsupported element <mesh> (supported in <scene>: default, bsdf, texture, \
-             shape, emitter, medium, volume, phase, sensor, integrator)"
+            "5:5: <mesh id=\"fog\">: unsupported element <mesh> (supported in <scene>: default, path, include, bsdf, \
+             texture, shape, emitter, medium, volume, phase, sensor, integrator)"
                 .into(),
         ),
     ];
@@ -154,9 +154,11 @@ fn document_errors() {
         )),
         format!("doc.xml:1:{}: <integrator>: a scene has at most one <integrator>", SENSOR.len() + 49)
     );
+    // An unsupported element is named before the missing sensor is.
     assert_eq!(
-        doc_err(r#"<scene version="3.0.0"><default name="a" value="1"/><default name="a" value="2"/></scene>"#),
-        "doc.xml:1:53: <default name=\"a\">: parameter 'a' has two defaults"
+        doc_err(r#"<scene version="3.0.0"><mesh/></scene>"#),
+        "doc.xml:1:24: <mesh>: unsupported element <mesh> (supported in <scene>: default, path, include, bsdf, \
+         texture, shape, emitter, medium, volume, phase, sensor, integrator)"
     );
     assert_eq!(
         doc_err(r#"<scene version="3.0.0"><default name="2x" value="1"/></scene>"#),

@@ -47,6 +47,8 @@ pub(super) struct Xml<'a> {
     pub file: String,
     doc: &'a roxmltree::Document<'a>,
     defines: HashMap<String, Define>,
+    /// Where the document's bytes came from, when it has files spliced in (`<include>`).
+    sources: Option<&'a super::include::Sources>,
 }
 
 /// Whether `name` is a valid `$name` identifier: `[A-Za-z_][A-Za-z0-9_]*`.
@@ -70,7 +72,12 @@ pub(super) fn describe(node: El<'_>) -> String {
 impl<'a> Xml<'a> {
     /// Wraps a parsed document.
     pub fn new(file: String, doc: &'a roxmltree::Document<'a>) -> Xml<'a> {
-        Xml { file, doc, defines: HashMap::new() }
+        Xml { file, doc, defines: HashMap::new(), sources: None }
+    }
+
+    /// Locates nodes in the files `sources` spliced together (the document is its text).
+    pub fn with_sources(self, sources: &'a super::include::Sources) -> Xml<'a> {
+        Xml { sources: Some(sources), ..self }
     }
 
     /// Adds or replaces a define.
@@ -88,6 +95,9 @@ impl<'a> Xml<'a> {
 
     /// `file:line:col` of `node`'s start.
     pub fn loc(&self, node: El<'_>) -> String {
+        if let Some(sources) = self.sources {
+            return sources.location(node.range().start);
+        }
         let p = self.doc.text_pos_at(node.range().start);
         format!("{}:{}:{}", self.file, p.row, p.col)
     }
