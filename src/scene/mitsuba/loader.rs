@@ -97,6 +97,7 @@ pub(super) fn load_text_with(text: &str, file: &Path, options: &LoadOptions, mes
         x: Xml::new(name.clone(), &doc).with_sources(&sources),
         dir,
         search: sources.search.clone(),
+        attached: Vec::new(),
         scene: Scene::new(&name, placeholder),
         ids: HashMap::new(),
         names: HashMap::new(),
@@ -137,6 +138,8 @@ pub(super) struct Loader<'a> {
     pub dir: PathBuf,
     /// The `<path>` folders, searched before `dir` (the latest first).
     pub search: Vec<PathBuf>,
+    /// The scene-level area emitters that a shape has referred to.
+    pub attached: Vec<NodeId>,
     /// The scene being built.
     pub scene: Scene,
     /// Every object with an `id`.
@@ -256,6 +259,8 @@ impl<'a> Loader<'a> {
                     self.shape(c)?;
                     mesh_children.push(i);
                 }
+                // Built by the shape that refers to it (checked below).
+                "emitter" if self.x.attr(c, "type")?.as_deref() == Some("area") && c.has_attribute("id") => {}
                 "emitter" => self.environment(c)?,
                 // Built when a shape refers to it (its `interior`), under the name given above unless
                 // an earlier shape reached it first; one nothing refers to is reported below.
@@ -271,6 +276,11 @@ impl<'a> Loader<'a> {
         }
         if self.scene.meshes.is_empty() {
             return Err(self.x.err(root, "the scene has no shapes"));
+        }
+        for &c in children.iter().filter(|c| c.has_tag_name("emitter") && c.has_attribute("id")) {
+            if self.x.attr(c, "type")?.as_deref() == Some("area") && !self.attached.contains(&c.id()) {
+                return Err(self.x.err(c, "an 'area' emitter must be nested in a <shape> or referred to by one"));
+            }
         }
         for &c in children.iter().filter(|c| c.has_tag_name("medium")) {
             if !self.media.contains_key(&c.id()) {
@@ -384,6 +394,8 @@ impl<'a> Loader<'a> {
         match c.tag_name().name() {
             "default" | "sensor" | "integrator" | "bsdf" | "texture" | "shape" | "emitter" | "medium" | "volume"
             | "phase" | "path" => Ok(()),
+            // Declared here for a sensor to refer to.
+            "sampler" if c.has_attribute("id") => Ok(()),
             tag @ ("film" | "sampler" | "rfilter") => {
                 Err(self.x.err(c, format!("a <{tag}> must be inside a <sensor>")))
             }

@@ -90,7 +90,13 @@ impl<'a> Loader<'a> {
             [f] => self.film(f)?,
             [_, second, ..] => return Err(self.x.err(second, "a sensor has at most one <film>")),
         };
-        match p.take_nested(&["sampler"])[..] {
+        // A sampler nested here or declared at scene level and referred to (`<ref id="…"/>`).
+        let samplers = p.take_nested(&["sampler", "ref"]);
+        let samplers = samplers.into_iter().map(|s| self.deref(s)).collect::<Result<Vec<_>>>()?;
+        if let Some(other) = samplers.iter().find(|s| !s.has_tag_name("sampler")) {
+            return Err(self.x.err(*other, "a sensor refers only to a <sampler> (a <film> must be nested in it)"));
+        }
+        match samplers[..] {
             [] => {}
             [s] => self.sampler(s)?,
             [_, second, ..] => return Err(self.x.err(second, "a sensor has at most one <sampler>")),
@@ -244,10 +250,31 @@ impl<'a> Loader<'a> {
         Ok((size[0], size[1], filter))
     }
 
+    /// Reads a `<sampler>`'s sample count. Mitsuba's other samplers (`stratified`, `multijitter`,
+    /// `orthogonal`, `ldsampler`) place samples differently for the same expectation: pathgrad
+    /// draws independent samples instead, ignores their placement settings and says so once.
     fn sampler(&mut self, node: El<'a>) -> Result<()> {
         let p = Props::parse(&self.x, node)?;
-        if p.kind != "independent" {
-            return Err(self.x.err(node, format!("unsupported plugin '{}' (supported: independent)", p.kind)));
+        match p.kind.as_str() {
+            "independent" => {}
+            kind @ ("stratified" | "multijitter" | "orthogonal" | "ldsampler") => {
+                p.boolean(&self.x, "jitter", true)?;
+                p.float(&self.x, "strength")?;
+                let w = self.x.warning(
+                    node,
+                    format!("sampler '{kind}' is drawn as 'independent' (the same expectation, other noise)"),
+                );
+                self.scene.warn(w);
+            }
+            other => {
+                return Err(self.x.err(
+                    node,
+                    format!(
+                        "unsupported plugin '{other}' (supported: independent; stratified, multijitter, orthogonal \
+                         and ldsampler as independent)"
+                    ),
+                ));
+            }
         }
         let count = match p.integer(&self.x, "sample_count")? {
             None => DEFAULT_SAMPLE_COUNT,
@@ -260,7 +287,7 @@ impl<'a> Loader<'a> {
         if let Some((_, n)) = p.integer(&self.x, "seed")? {
             let w = self.x.warning(
                 n,
-                "property 'seed' of 'independent' ignored: pathgrad takes the seed from the render options",
+                format!("property 'seed' of '{}' ignored: pathgrad takes the seed from the render options", p.kind),
             );
             self.scene.warn(w);
         }
@@ -269,12 +296,65 @@ impl<'a> Loader<'a> {
 
     /// Reads `<integrator>` into `scene.max_depth` (−1, Mitsuba's default, becomes
     /// [`UNBOUNDED_DEPTH_CAP`], which the renderer treats as unbounded).
+    ///
+    /// The wrappers `moment` and `aov` render the integrator nested in them (their image is that
+    /// integrator's; pathgrad writes no second moments or AOV channels) and say so once. `direct`
+    /// is a path tracer of depth 2 (Mitsuba's `direct` estimates the same image, with other
+    /// noise: its sample counts per emitter and BSDF are ignored), also said once.
     pub(super) fn integrator(&mut self, node: El<'a>) -> Result<()> {
         let p = Props::parse(&self.x, node)?;
+        if matches!(p.kind.as_str(), "moment" | "aov") {
+            let nested = p.take_nested(&["integrator"]);
+            if p.kind == "aov" {
+                p.string(&self.x, "aovs")?;
+            }
+            self.finish(&p)?;
+            let inner = match nested[..] {
+                [i] => i,
+                [] => return Err(self.x.err(node, format!("'{}' needs a nested <integrator>", p.kind))),
+                [_, second, ..] => {
+                    return Err(self
+                        .x
+                        .err(second, format!("pathgrad renders one integrator; this '{}' nests several", p.kind)));
+                }
+            };
+            let w = self.x.warning(
+                node,
+                format!(
+                    "'{}' integrator: pathgrad renders the integrator nested in it (the same image; no {} channels)",
+                    p.kind,
+                    if p.kind == "moment" { "second-moment" } else { "AOV" }
+                ),
+            );
+            self.scene.warn(w);
+            return self.integrator(inner);
+        }
+        if p.kind == "direct" {
+            for count in ["emitter_samples", "bsdf_samples", "shading_samples"] {
+                p.integer(&self.x, count)?;
+            }
+            let hide = p.boolean(&self.x, "hide_emitters", false)?.then(|| p.node_of("hide_emitters")).flatten();
+            self.finish(&p)?;
+            self.scene.max_depth = 2;
+            let w = self.x.warning(
+                node,
+                "'direct' integrator: rendered as a path tracer of max_depth 2 (the same image, other noise)",
+            );
+            self.scene.warn(w);
+            if let Some(n) = hide {
+                let w = self.x.warning(n, "property 'hide_emitters' of 'direct' ignored: pathgrad shows emitters");
+                self.scene.warn(w);
+            }
+            return Ok(());
+        }
         if !matches!(p.kind.as_str(), "path" | "prb" | "prb_basic" | "volpath" | "prbvolpath") {
             return Err(self.x.err(
                 node,
-                format!("unsupported plugin '{}' (supported: path, prb, prb_basic, volpath, prbvolpath)", p.kind),
+                format!(
+                    "unsupported plugin '{}' (supported: path, prb, prb_basic, volpath, prbvolpath, direct; moment and \
+                     aov around one of them)",
+                    p.kind
+                ),
             ));
         }
         self.scene.max_depth = match p.integer(&self.x, "max_depth")? {

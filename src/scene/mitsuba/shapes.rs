@@ -234,8 +234,21 @@ impl<'a> Loader<'a> {
         if let Some(exterior) = p.object("exterior") {
             return Err(self.x.err(exterior, "exterior media are not supported (paths start in vacuum)"));
         }
-        let bsdfs = p.take_nested(&["bsdf", "ref"]);
-        let emitters = p.take_nested(&["emitter"]);
+        // A `<ref>` to an area emitter declared at scene level attaches it here, as Mitsuba does.
+        let mut emitters = p.take_nested(&["emitter"]);
+        let mut bsdfs = Vec::new();
+        for b in p.take_nested(&["bsdf", "ref"]) {
+            let target = self.deref(b)?;
+            if target.has_tag_name("emitter") {
+                if self.attached.contains(&target.id()) {
+                    return Err(self.x.err(b, "this area emitter is attached to another shape already"));
+                }
+                self.attached.push(target.id());
+                emitters.push(target);
+            } else {
+                bsdfs.push(b);
+            }
+        }
         self.finish(&p)?;
         let material = match bsdfs[..] {
             [] => self.default_bsdf(node, &name, !emitters.is_empty())?,
@@ -300,8 +313,13 @@ impl<'a> Loader<'a> {
             return Err(self.x.err(node, format!("unsupported plugin '{}' (supported on shapes: area)", p.kind)));
         }
         let radiance = self.radiance_in(&p, "radiance", Vec3::ONE, bounds::RADIANCE)?;
-        // Mitsuba names a shape's emitter after the shape, whatever its own id.
-        let param = format!("{shape}.emitter.radiance.value");
+        // Mitsuba names an emitter nested in a shape after the shape, whatever its own id; one
+        // declared at scene level (and referred to) by its id.
+        let top_level = node.parent().is_some_and(|n| n.parent().is_some_and(|d| d.is_root()));
+        let param = match self.x.attr(node, "id")? {
+            Some(id) if top_level => format!("{id}.radiance.value"),
+            _ => format!("{shape}.emitter.radiance.value"),
+        };
         self.finish(&p)?;
         Ok((node, param, radiance))
     }

@@ -382,8 +382,9 @@ fn element_and_property_errors() {
             "<emitter>: a scene has at most one constant emitter",
         ),
         (
-            r#"<integrator type="aov"/>"#,
-            "<integrator>: unsupported plugin 'aov' (supported: path, prb, prb_basic, volpath, prbvolpath)",
+            r#"<integrator type="ptracer"/>"#,
+            "<integrator>: unsupported plugin 'ptracer' (supported: path, prb, prb_basic, volpath, prbvolpath, \
+             direct; moment and aov around one of them)",
         ),
         (
             r#"<integrator type="path"><integer name="max_depth" value="0"/></integrator>"#,
@@ -435,7 +436,11 @@ fn sensor_errors() {
             r#"<film type="hdrfilm"><boolean name="sample_border" value="true"/></film>"#,
             "<boolean name=\"sample_border\">: sample_border is not supported (pathgrad samples inside the film only)",
         ),
-        (r#"<sampler type="stratified"/>"#, "<sampler>: unsupported plugin 'stratified' (supported: independent)"),
+        (
+            r#"<sampler type="sobol"/>"#,
+            "<sampler>: unsupported plugin 'sobol' (supported: independent; stratified, multijitter, orthogonal and \
+             ldsampler as independent)",
+        ),
         (
             r#"<sampler type="independent"><integer name="sample_count" value="0"/></sampler>"#,
             "<integer name=\"sample_count\">: 'sample_count' must be at least 1, got 0",

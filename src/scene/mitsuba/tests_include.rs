@@ -1,9 +1,11 @@
-//! `<include>`, `<path>` and repeated `<default>`s as Mitsuba 3.9.1 reads them, and their errors
-//! located in the file where they are.
+//! The scene file as Mitsuba 3.9.1 reads it: `<include>`, `<path>`, repeated `<default>`s,
+//! references to objects declared at scene level (samplers, area emitters), and the integrators
+//! and samplers pathgrad renders in another's place; errors located in the file where they are.
 
 use std::path::Path;
 
-use super::tests::SENSOR;
+use super::loader::load_text;
+use super::tests::{SENSOR, obj_for_tests};
 use crate::scene::{LoadOptions, Scene};
 
 fn write(dir: &Path, name: &str, text: &str) {
@@ -138,4 +140,83 @@ fn bad_includes_and_paths_are_refused_by_name() {
     assert!(lib.is_dir());
     let scene = load(outside.path(), &[], true).unwrap();
     assert_eq!(scene.meshes.len(), 2);
+}
+
+fn text(body: &str) -> crate::Result<Scene> {
+    load_text(&format!(r#"<scene version="3.0.0">{body}</scene>"#), Path::new("s.xml"), &[], obj_for_tests)
+}
+
+const LIGHT: &str = r#"<shape type="rectangle" id="light"><emitter type="area"/></shape>"#;
+
+#[test]
+fn wrapped_and_direct_integrators_render_their_path_tracer() {
+    let moment = text(&format!(
+        r#"{SENSOR}{LIGHT}<integrator type="moment"><integrator type="path"><integer name="max_depth" value="3"/></integrator></integrator>"#
+    ))
+    .unwrap();
+    assert_eq!(moment.max_depth, 3);
+    assert_eq!(
+        moment.warnings,
+        [format!(
+            "s.xml:1:{}: 'moment' integrator: pathgrad renders the integrator nested in it (the same image; no \
+             second-moment channels)",
+            23 + SENSOR.len() + LIGHT.len() + 1
+        )]
+    );
+    let aov = text(&format!(
+        r#"{SENSOR}{LIGHT}<integrator type="aov"><string name="aovs" value="dd.y:depth"/><integrator type="direct"/></integrator>"#
+    ))
+    .unwrap();
+    assert_eq!(aov.max_depth, 2);
+    assert_eq!(aov.warnings.len(), 2, "{:?}", aov.warnings);
+    assert!(
+        aov.warnings[0].ends_with(
+            "'aov' integrator: pathgrad renders the integrator nested in it (the same image; no AOV channels)"
+        )
+    );
+    assert!(
+        aov.warnings[1]
+            .ends_with("'direct' integrator: rendered as a path tracer of max_depth 2 (the same image, other noise)")
+    );
+    let empty = text(&format!(r#"{SENSOR}{LIGHT}<integrator type="moment"/>"#)).unwrap_err().to_string();
+    assert!(empty.ends_with("'moment' needs a nested <integrator>"), "{empty}");
+    let unknown = text(&format!(r#"{SENSOR}{LIGHT}<integrator type="ptracer"/>"#)).unwrap_err().to_string();
+    assert!(unknown.contains("unsupported plugin 'ptracer'"), "{unknown}");
+}
+
+#[test]
+fn a_sensor_refers_to_a_scene_level_sampler_and_other_samplers_draw_independently() {
+    let sensor = SENSOR.replace("</sensor>", r#"<ref id="s"/></sensor>"#);
+    let scene = text(&format!(
+        r#"<sampler type="stratified" id="s"><integer name="sample_count" value="36"/><boolean name="jitter" value="false"/></sampler>{sensor}{LIGHT}"#
+    ))
+    .unwrap();
+    assert_eq!(scene.default_spp, Some(36));
+    assert_eq!(
+        scene.warnings,
+        ["s.xml:1:24: sampler 'stratified' is drawn as 'independent' (the same expectation, other noise)"]
+    );
+    let other = text(&format!(r#"<sampler type="sobol" id="s"/>{sensor}{LIGHT}"#)).unwrap_err().to_string();
+    assert!(other.contains("unsupported plugin 'sobol'"), "{other}");
+    // Without an id there is nothing to refer to it by.
+    let loose = text(&format!(r#"<sampler type="independent"/>{SENSOR}{LIGHT}"#)).unwrap_err().to_string();
+    assert!(loose.ends_with("a <sampler> must be inside a <sensor>"), "{loose}");
+}
+
+#[test]
+fn a_shape_refers_to_a_scene_level_area_emitter_named_by_its_id() {
+    let emitter = r#"<emitter type="area" id="lamp"><rgb name="radiance" value="2, 3, 4"/></emitter>"#;
+    let scene =
+        text(&format!(r#"{SENSOR}{emitter}<shape type="rectangle" id="panel"><ref id="lamp"/></shape>"#)).unwrap();
+    let names: Vec<&str> = scene.params.entries().iter().map(|e| e.name.as_str()).collect();
+    assert_eq!(names, ["panel.bsdf.reflectance.value", "lamp.radiance.value"]);
+    assert!(scene.meshes[0].emitter.is_some());
+    let twice = text(&format!(
+        r#"{SENSOR}{emitter}<shape type="rectangle"><ref id="lamp"/></shape><shape type="sphere"><ref id="lamp"/></shape>"#
+    ))
+    .unwrap_err()
+    .to_string();
+    assert!(twice.ends_with("this area emitter is attached to another shape already"), "{twice}");
+    let alone = text(&format!(r#"{SENSOR}{emitter}{LIGHT}"#)).unwrap_err().to_string();
+    assert!(alone.ends_with("an 'area' emitter must be nested in a <shape> or referred to by one"), "{alone}");
 }
