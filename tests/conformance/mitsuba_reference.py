@@ -165,6 +165,18 @@ MATRIX = {
                                          grads=["medium1.sigma_t.value.value"],
                                          # A constvolume: its largest channel is the majorant (see above).
                                          fd={"medium1.sigma_t.value.value": None}),
+    # ---- the scene file and stand-ins: `warnings` lists the warnings pathgrad must give (and
+    # the only ones it may), by a part of their text; `own_integrator` renders Mitsuba's primal
+    # with the scene's own integrator.
+    "scene_file_include": dict(features=["<path>", "<include> along a path", "mesh found along a path",
+                                         "repeated <default> (first holds)", "scene-level sampler + <ref>",
+                                         "scene-level area emitter + <ref>"],
+                               grads=["floor.bsdf.reflectance.value", "lamp.radiance.value"]),
+    "integrator_direct": dict(features=["direct integrator (as path, max_depth 2)"], own_integrator=True,
+                              warnings=["'direct' integrator"], grads=["back.bsdf.reflectance.value"]),
+    "integrator_moment_stratified": dict(features=["moment(path, max_depth 3)", "stratified sampler (as independent)"],
+                                         own_integrator=True, warnings=["'moment' integrator", "sampler 'stratified'"],
+                                         grads=[]),
     # ---- glTF: pathgrad renders the glTF file; Mitsuba renders gltf_to_mitsuba.py's XML of it (the
     # same meshes in world space, pathgrad's documented material mapping, the same camera). Keys
     # are pathgrad's names; `pathgrad_keys` in the JSON maps each to Mitsuba's.
@@ -239,9 +251,14 @@ DEFAULT_BLOCK = 8
 
 
 def integrator_of(path):
-    """(type, max_depth, hide_emitters) for a scene: prbvolpath where a medium or null BSDF is present."""
+    """(type, max_depth, hide_emitters) for a scene: prbvolpath where a medium or null BSDF is present.
+    A `moment` or `aov` wrapper is looked through; `direct` is depth 2. Reads the scene file
+    itself, not the files it includes (no included file of the matrix holds an integrator or a
+    medium)."""
     root = ET.parse(path).getroot()
-    defaults = {d.get("name"): d.get("value") for d in root.findall("default")}
+    defaults = {}
+    for d in root.findall("default"):
+        defaults.setdefault(d.get("name"), d.get("value"))  # the first holds, as in Mitsuba
 
     def value(v):
         return defaults.get(v[1:], v) if v.startswith("$") else v
@@ -250,6 +267,10 @@ def integrator_of(path):
         e.tag == "bsdf" and e.get("type") == "null" for e in root.iter())
     max_depth, hide = -1, False
     node = root.find("integrator")
+    while node is not None and node.get("type") in ("moment", "aov"):
+        node = node.find("integrator")
+    if node is not None and node.get("type") == "direct":
+        max_depth = 2
     if node is not None:
         for child in node:
             if child.get("name") == "max_depth":
@@ -417,8 +438,11 @@ def run_scene(mi, dr, name, spec, args):
     start = time.time()
 
     primal = Stats(block)
+    # `own_integrator`: the primal image by the scene's own integrator (direct, moment, ...), the
+    # one pathgrad renders in another's place; gradients by prb as everywhere.
+    primal_integrator = scene.integrator() if spec.get("own_integrator") else integrator
     for seed in seeds:
-        primal.add(render_primal(mi, scene, integrator, spp, seed))
+        primal.add(render_primal(mi, scene, primal_integrator, spp, seed))
     result_primal = primal.summary()
     t_primal = time.time() - start
 
@@ -486,6 +510,8 @@ def run_scene(mi, dr, name, spec, args):
 def annotations(name):
     """The fields of reference/NAME.json that come from this file, not from Mitsuba."""
     out = dict(POWER.get(name, {}))
+    if "warnings" in MATRIX.get(name, {}):
+        out["warnings"] = MATRIX[name]["warnings"]
     if name in PENDING:
         out["pending"] = PENDING[name]
     return out
@@ -545,7 +571,7 @@ def main():
     if args.annotate:
         for f in sorted(REFERENCE.glob("*.json")):
             r = json.loads(f.read_text())
-            for k in ("primal_bias", "gradient_bias", "pending"):
+            for k in ("primal_bias", "gradient_bias", "pending", "warnings"):
                 r.pop(k, None)
             seconds = r.pop("seconds")
             r["seconds"] = seconds

@@ -19,7 +19,8 @@
 //! its own measured variance, within a budget (`SPP_RANGE`).
 //!
 //! Every scene must also load without a warning (a warning means pathgrad approximates something,
-//! which the matrix must not pass silently), and every parameter pathgrad exposes must carry one
+//! which the matrix must not pass silently) but those its reference lists (`warnings`: a stand-in
+//! such as the `direct` integrator, whose image must then still agree), and every parameter pathgrad exposes must carry one
 //! of the names Mitsuba's `mi.traverse` prints for the scene.
 //!
 //! A reference marked `pending` (with its reason) is listed and not compared.
@@ -372,12 +373,22 @@ fn conformance_matrix_agrees_with_mitsuba() {
             }
         };
         // glTF scenes all carry the one warning that their materials approximate glTF's BRDF
-        // (which the comparison with the mapped materials in Mitsuba does not cover).
+        // (which the comparison with the mapped materials in Mitsuba does not cover); a scene
+        // whose reference lists `warnings` must give each of those, and no other.
         let gltf = r.json.get("pathgrad_scene").is_some();
-        let unexpected: Vec<&String> =
-            scene.warnings.iter().filter(|w| !(gltf && *w == pathgrad::scene::gltf::FRESNEL_WARNING)).collect();
+        let expected: Vec<&str> =
+            r.json["warnings"].as_array().map(|w| w.iter().map(|v| v.as_str().unwrap()).collect()).unwrap_or_default();
+        let unexpected: Vec<&String> = scene
+            .warnings
+            .iter()
+            .filter(|w| !(gltf && *w == pathgrad::scene::gltf::FRESNEL_WARNING))
+            .filter(|w| !expected.iter().any(|e| w.contains(e)))
+            .collect();
         if !unexpected.is_empty() {
             failures.push(format!("{}: loads with warnings: {unexpected:?}", r.name));
+        }
+        for e in expected.iter().filter(|e| !scene.warnings.iter().any(|w| w.contains(*e))) {
+            failures.push(format!("{}: the warning '{e}…' is missing", r.name));
         }
         let keys: Vec<&str> = r.json["keys"].as_array().unwrap().iter().map(|k| k.as_str().unwrap()).collect();
         match r.json["pathgrad_keys"].as_object() {
