@@ -46,6 +46,9 @@ MATRIX = {
     "bsdf_diffuse_rgb": dict(features=["diffuse", "rgb reflectance", "sphere"], grads=["ball.bsdf.reflectance.value"]),
     "bsdf_diffuse_default": dict(features=["default bsdf (diffuse 0.5)"], grads=["ball.bsdf.reflectance.value"]),
     "bsdf_diffuse_spectrum": dict(features=["diffuse", "<spectrum value>"], grads=["ball.bsdf.reflectance.value"]),
+    "bsdf_spectrum_pairs": dict(features=["<spectrum> wavelength:value pairs", "reflectance (D65, clamped)",
+                                          "area radiance (no D65)"],
+                                grads=["ball.bsdf.reflectance.value", "light.emitter.radiance.value"]),
     "bsdf_diffuse_bitmap": dict(features=["diffuse", "bitmap sRGB PNG", "rectangle uv"], grads=["panel.bsdf.reflectance.data"]),
     # Mitsuba names a top-level texture reached through <ref> by its address (object_...), so its
     # data has no stable key: the gradient is the floor's.

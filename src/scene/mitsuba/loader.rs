@@ -507,7 +507,9 @@ impl<'a> Loader<'a> {
     /// # Errors
     /// A value outside the range, or of the wrong type.
     pub fn color_in(&self, p: &Props<'a>, name: &str, default: Vec3, range: (f32, f32)) -> Result<Vec3> {
-        self.in_range(name, p.color(&self.x, name)?, default, range)
+        // A colour that may exceed 1 (η, k) takes a spectrum unclamped, as Mitsuba does.
+        let value = if range.1 > 1.0 { p.color_unbounded(&self.x, name)? } else { p.color(&self.x, name)? };
+        self.in_range(name, value, default, range)
     }
 
     /// `value` if every channel lies in `range`, `default` when absent.

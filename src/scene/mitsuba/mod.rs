@@ -93,6 +93,7 @@ mod loader;
 mod media;
 mod sensor;
 mod shapes;
+mod spectrum;
 mod xml;
 
 #[cfg(test)]

@@ -79,8 +79,7 @@ fn fixtures_give_their_pinned_messages() {
         ),
         (
             "bad_spectrum.xml",
-            "7:13: <spectrum name=\"reflectance\">: only constant spectra are supported (one number), got \
-             wavelength:value pairs '400:0.1, 700:0.9'"
+            "7:13: <spectrum name=\"reflectance\">: wavelengths must increase (400 nm after 700 nm)"
                 .into(),
         ),
         (

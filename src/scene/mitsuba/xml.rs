@@ -255,6 +255,10 @@ pub(super) enum Value {
     /// A constant `<spectrum>`: grey, except in an emitter's radiance, where Mitsuba's RGB modes
     /// read it as that multiple of the D65 illuminant ([`D65_RGB`]).
     Spectrum(f32),
+    /// A `<spectrum>` of wavelength:value pairs in linear sRGB as Mitsuba's RGB variants read it
+    /// ([`super::spectrum`]): for a bounded colour (a reflectance), an unbounded one (η, k, σ_t),
+    /// and an emitter's radiance.
+    Pairs { bounded: Vec3, unbounded: Vec3, emitted: Vec3 },
     /// `<point>` or `<vector>`.
     Point(Vec3),
     /// `<transform>`.
@@ -445,7 +449,20 @@ impl<'a> Props<'a> {
             None => Ok(None),
             Some(Prop { value: Value::Color(v), node, .. }) => Ok(Some((*v, *node))),
             Some(Prop { value: Value::Float(v) | Value::Spectrum(v), node, .. }) => Ok(Some((Vec3::splat(*v), *node))),
+            Some(Prop { value: Value::Pairs { bounded, .. }, node, .. }) => Ok(Some((*bounded, *node))),
             Some(p) => Err(self.wrong_type(x, p, "an <rgb>, a constant <spectrum> or a <float>")),
+        }
+    }
+
+    /// As [`Props::color`], for a colour without an upper bound (η, k): a spectrum of pairs is
+    /// not clamped at 1.
+    ///
+    /// # Errors
+    /// As [`Props::color`].
+    pub fn color_unbounded(&self, x: &Xml<'_>, name: &str) -> Result<Option<(Vec3, El<'a>)>> {
+        match self.get(name) {
+            Some(Prop { value: Value::Pairs { unbounded, .. }, node, .. }) => Ok(Some((*unbounded, *node))),
+            _ => self.color(x, name),
         }
     }
 
@@ -458,6 +475,7 @@ impl<'a> Props<'a> {
     pub fn radiance(&self, x: &Xml<'_>, name: &str) -> Result<Option<(Vec3, El<'a>)>> {
         match self.get(name) {
             Some(Prop { value: Value::Spectrum(v), node, .. }) => Ok(Some((Vec3::from(D65_RGB) * *v, *node))),
+            Some(Prop { value: Value::Pairs { emitted, .. }, node, .. }) => Ok(Some((*emitted, *node))),
             _ => self.color(x, name),
         }
     }
@@ -473,6 +491,9 @@ impl<'a> Props<'a> {
             None => Ok(None),
             Some(Prop { value: Value::Color(v), node, .. }) => Ok(Some((v.to_array().to_vec(), *node))),
             Some(Prop { value: Value::Spectrum(v), node, .. }) => Ok(Some((vec![*v; 3], *node))),
+            Some(Prop { value: Value::Pairs { unbounded, .. }, node, .. }) => {
+                Ok(Some((unbounded.to_array().to_vec(), *node)))
+            }
             Some(Prop { value: Value::Float(v), node, .. }) => Ok(Some((vec![*v], *node))),
             Some(p) => Err(self.wrong_type(x, p, "an <rgb>, a constant <spectrum>, a <float> or a <volume>")),
         }
@@ -576,15 +597,24 @@ fn property(x: &Xml<'_>, node: El<'_>) -> Result<Value> {
         "rgb" => Value::Color(x.triple(node, "value", &value, true)?),
         "spectrum" => {
             if value.contains(':') {
-                return Err(x.err(
-                    node,
-                    format!("only constant spectra are supported (one number), got wavelength:value pairs '{value}'"),
-                ));
-            }
-            match x.numbers(node, "value", &value)?[..] {
-                [v] => Value::Spectrum(v),
-                _ => {
-                    return Err(x.err(node, format!("only constant spectra are supported (one number), got '{value}'")));
+                let (w, v) = super::spectrum::parse_pairs(&value).map_err(|m| x.err(node, m))?;
+                Value::Pairs {
+                    bounded: super::spectrum::to_srgb(&w, &v, true, true),
+                    unbounded: super::spectrum::to_srgb(&w, &v, false, true),
+                    emitted: super::spectrum::to_srgb(&w, &v, false, false),
+                }
+            } else {
+                match x.numbers(node, "value", &value)?[..] {
+                    [v] => Value::Spectrum(v),
+                    _ => {
+                        return Err(x.err(
+                            node,
+                            format!(
+                                "a <spectrum> is one number or wavelength:value pairs ('400:0.1, 500:0.3'), got \
+                                 '{value}'"
+                            ),
+                        ));
+                    }
                 }
             }
         }
