@@ -18,7 +18,7 @@ use crate::error::{Error, Result};
 /// assert_eq!((scene.camera.width, scene.camera.height), (64, 64));
 /// # Ok::<(), pathgrad::error::Error>(())
 /// ```
-#[derive(Clone, Debug, Default, PartialEq, Eq)]
+#[derive(Clone, Debug, Default, PartialEq)]
 pub struct LoadOptions {
     /// Overrides of a Mitsuba XML scene's `<default>` values (`-D name=value`).
     pub defines: Vec<(String, String)>,
@@ -34,6 +34,37 @@ pub struct LoadOptions {
     /// The sensor to render, by index or name ([`Scene::sensor_index`]); the first if `None`. Its
     /// film gives the default size, and curved shapes are tessellated for it.
     pub sensor: Option<String>,
+    /// A constant environment of this linear RGB radiance: it lights a scene that brings no light
+    /// of its own (most glTF assets), as a differentiable parameter `env.radiance.value`; a scene
+    /// with its own constant environment has that one's radiance replaced instead (with a
+    /// warning; the parameter keeps its name).
+    pub environment: Option<[f32; 3]>,
+}
+
+/// Applies [`LoadOptions::environment`] to a scene being loaded, before its loader decides
+/// whether it has any light.
+///
+/// # Errors
+/// A radiance that is negative or not finite.
+pub(crate) fn apply_environment(scene: &mut Scene, environment: Option<[f32; 3]>) -> Result<()> {
+    let Some(rgb) = environment else { return Ok(()) };
+    if !rgb.iter().all(|v| v.is_finite() && *v >= 0.0) {
+        return Err(Error::InvalidArgument {
+            parameter: "LoadOptions::environment".into(),
+            message: format!("the radiance {rgb:?} must be finite and ≥ 0 in every channel"),
+        });
+    }
+    match scene.environment {
+        Some(id) => {
+            let name = scene.params.entry(id).name.clone();
+            scene.params.set(&name, &rgb)?;
+            scene.warn(format!(
+                "the scene's own environment '{name}' takes the radiance {rgb:?} of LoadOptions::environment"
+            ));
+            Ok(())
+        }
+        None => scene.set_environment("env.radiance.value", glam::Vec3::from(rgb)),
+    }
 }
 
 impl LoadOptions {
@@ -82,7 +113,9 @@ pub fn load_with(spec: &str, options: &LoadOptions) -> Result<Scene> {
         });
     }
     let mut scene = if let Some(name) = spec.strip_prefix("builtin:") {
-        builtin::load(name)?
+        let mut scene = builtin::load(name)?;
+        apply_environment(&mut scene, options.environment)?;
+        scene
     } else {
         match ext.as_deref() {
             Some("xml") => {

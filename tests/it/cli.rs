@@ -238,3 +238,39 @@ fn the_clis_vector_width_changes_no_result() {
     assert!(cli_default.0 == driver_default.0, "the images differ");
     assert_eq!((&cli_default.1, &cli_default.2), (&driver_default.1, &driver_default.2));
 }
+
+#[test]
+fn env_lights_a_gltf_asset_without_lights() {
+    let dir = tempfile::tempdir().unwrap();
+    let scene = concat!(env!("CARGO_MANIFEST_DIR"), "/tests/data/gltf/no_camera.gltf");
+    let render = |extra: &[&str], name: &str| {
+        let out = dir.path().join(name);
+        let o = pathgrad()
+            .args(["render", scene, "--spp", "2", "--width", "16"])
+            .args(extra)
+            .arg("-o")
+            .arg(&out)
+            .output()
+            .unwrap();
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        (pathgrad::image::Image::read_exr(&out).unwrap().mean(), String::from_utf8_lossy(&o.stderr).into_owned())
+    };
+    // Without: black, and the warning names the flag that lights it (the library's name for it
+    // spelled as the CLI's).
+    let (dark, stderr) = render(&[], "dark.exr");
+    assert_eq!(dark, [0.0; 3]);
+    assert!(stderr.contains("unless lit by an environment (--env)"), "{stderr}");
+    let (lit, stderr) = render(&["--env", "0.5,1,2"], "lit.exr");
+    assert!(lit[0] > 0.0 && lit[0] < lit[1] && lit[1] < lit[2], "{lit:?}");
+    assert!(!stderr.contains("no emitters"), "{stderr}");
+    for (bad, message) in [
+        ("1,2", "2 values: give R,G,B or one number"),
+        ("sky.exr", "'sky.exr' is not a number"),
+        ("0,-1,0", "must be finite and ≥ 0"),
+    ] {
+        let o =
+            pathgrad().args(["render", scene, "--env", bad, "-o", "x.exr"]).current_dir(dir.path()).output().unwrap();
+        let stderr = String::from_utf8_lossy(&o.stderr);
+        assert!(!o.status.success() && stderr.contains(message), "--env {bad}: {stderr}");
+    }
+}

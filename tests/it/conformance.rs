@@ -459,6 +459,7 @@ fn conformance_matrix_agrees_with_mitsuba() {
                 }
             }
             let mut ratio = [0.0; 3];
+            let mut sees = 0.0f64;
             for c in 0..3 {
                 let (mp, sp, mm, sm) = (mine.image_mean[c], mine.image_se[c], theirs.image_mean[c], theirs.image_se[c]);
                 let (t, dof, pv) = welch(mp, sp, np, mm, sm, nm);
@@ -472,6 +473,9 @@ fn conformance_matrix_agrees_with_mitsuba() {
                 }
                 // The power check: the bias this test would see 95 % of the time.
                 let detectable = detectable(sp, np, sm, nm, alpha);
+                if scale[c] > 0.0 {
+                    sees = sees.max(detectable / scale[c]);
+                }
                 if scale[c] > 0.0 && detectable > bias * scale[c] {
                     failures.push(format!(
                         "{} {what}: channel {c} cannot see a {:.0} % bias (it sees {:.2} %) at {spp} spp × {SEEDS} seeds",
@@ -481,8 +485,13 @@ fn conformance_matrix_agrees_with_mitsuba() {
                     ));
                 }
             }
-            line +=
-                &format!("  {what} [{:.4} {:.4} {:.4}] min p {least:.0e} ({spp} spp)", ratio[0], ratio[1], ratio[2]);
+            line += &format!(
+                "  {what} [{:.4} {:.4} {:.4}] min p {least:.0e} ({spp} spp, sees {:.2} %)",
+                ratio[0],
+                ratio[1],
+                ratio[2],
+                100.0 * sees
+            );
         }
         println!("{line}  {:.1} s", started.elapsed().as_secs_f64());
     }

@@ -89,6 +89,9 @@ struct Item {
     width: Option<u32>,
     #[serde(default, skip_serializing_if = "Option::is_none")]
     height: Option<u32>,
+    /// A constant environment of this linear RGB radiance (`--env`): `[r, g, b]`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    env: Option<[f32; 3]>,
     /// Surface interactions per path; -1 unbounded.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     max_depth: Option<i64>,
@@ -211,8 +214,8 @@ fn shard(args: &BatchArgs, var: impl Fn(&str) -> Option<String>) -> Result<(u64,
     Ok((i, n))
 }
 
-/// The loaded scenes and their backends, by what loading depends on.
-type SceneKey = (String, Vec<(String, String)>, Option<String>, Option<u32>, Option<u32>);
+/// What a loaded scene depends on: file, defines, sensor, size, environment (as bits).
+type SceneKey = (String, Vec<(String, String)>, Option<String>, Option<u32>, Option<u32>, Option<[u32; 3]>);
 
 struct Runner {
     manifest_dir: PathBuf,
@@ -242,7 +245,9 @@ impl Runner {
     /// The loaded scene and backend of `item`, loading them on first use.
     fn backend(&mut self, item: &Item) -> Result<&mut (pathgrad::scene::Scene, Box<dyn Backend>)> {
         let defines: Vec<(String, String)> = item.defines.iter().map(|(k, v)| (k.clone(), value_text(v))).collect();
-        let key = (self.resolve(&item.scene), defines, item.sensor.as_ref().map(value_text), item.width, item.height);
+        let env = item.env.map(|e| e.map(f32::to_bits));
+        let key =
+            (self.resolve(&item.scene), defines, item.sensor.as_ref().map(value_text), item.width, item.height, env);
         if !self.scenes.contains_key(&key) {
             let options = pathgrad::scene::LoadOptions {
                 defines: key.1.clone(),
@@ -250,6 +255,7 @@ impl Runner {
                 height: item.height,
                 allow_outside_folder: false,
                 sensor: key.2.clone(),
+                environment: item.env,
             };
             let scene = pathgrad::scene::load_with(&key.0, &options).with_context(|| format!("loading {}", key.0))?;
             let backend: Box<dyn Backend> = if self.cpu {

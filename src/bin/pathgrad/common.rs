@@ -57,6 +57,29 @@ pub(crate) struct RenderFlags {
     /// scene reads only the files beside and below it.
     #[arg(long)]
     pub(crate) allow_outside_folder: bool,
+    /// Light the scene with a constant environment of this linear RGB radiance (`R,G,B`, or one
+    /// number for grey): for scenes without lights of their own, as most glTF assets are. A
+    /// scene's own constant environment takes this radiance instead.
+    #[arg(long, value_name = "R,G,B", value_parser = parse_environment)]
+    pub(crate) env: Option<[f32; 3]>,
+}
+
+/// `--env`: `R,G,B` or one number, each finite and ≥ 0.
+pub(crate) fn parse_environment(text: &str) -> std::result::Result<[f32; 3], String> {
+    let values: Vec<f32> = text
+        .split(',')
+        .map(|v| v.trim().parse::<f32>().map_err(|_| format!("'{}' is not a number", v.trim())))
+        .collect::<std::result::Result<_, _>>()
+        .map_err(|e| format!("{e}: give R,G,B or one number (an environment map file is not supported yet)"))?;
+    let rgb = match values[..] {
+        [v] => [v; 3],
+        [r, g, b] => [r, g, b],
+        _ => return Err(format!("{} values: give R,G,B or one number", values.len())),
+    };
+    if !rgb.iter().all(|v| v.is_finite() && *v >= 0.0) {
+        return Err(format!("{rgb:?}: every channel must be finite and ≥ 0"));
+    }
+    Ok(rgb)
 }
 
 impl RenderFlags {
@@ -81,6 +104,7 @@ impl RenderFlags {
             height: self.height,
             allow_outside_folder: self.allow_outside_folder,
             sensor: self.sensor.clone(),
+            environment: self.env,
         };
         Ok(pathgrad::scene::load_with(spec, &options)?)
     }

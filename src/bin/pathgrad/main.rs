@@ -33,7 +33,7 @@ fn main() -> ExitCode {
     // Colours and timestamps help a person at a terminal; in a log file or a CI transcript they
     // are noise (escape codes, a clock nobody asked for).
     let terminal = std::io::IsTerminal::is_terminal(&std::io::stderr());
-    let subscriber = tracing_subscriber::fmt().with_env_filter(filter).with_writer(std::io::stderr).with_ansi(terminal);
+    let subscriber = tracing_subscriber::fmt().with_env_filter(filter).with_writer(|| FlagWriter).with_ansi(terminal);
     if terminal {
         subscriber.init()
     } else {
@@ -45,6 +45,23 @@ fn main() -> ExitCode {
             eprintln!("error: {}", error_message(&e));
             ExitCode::FAILURE
         }
+    }
+}
+
+/// stderr for log lines, with the library's option names in them (a warning that names
+/// `LoadOptions::environment`) spelled as this CLI's flags.
+struct FlagWriter;
+
+impl std::io::Write for FlagWriter {
+    fn write(&mut self, buf: &[u8]) -> std::io::Result<usize> {
+        // The formatter writes each event whole; a name split across writes stays as it is.
+        let text = flags::with_flags(&String::from_utf8_lossy(buf));
+        std::io::stderr().write_all(text.as_bytes())?;
+        Ok(buf.len())
+    }
+
+    fn flush(&mut self) -> std::io::Result<()> {
+        std::io::stderr().flush()
     }
 }
 

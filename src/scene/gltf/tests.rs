@@ -346,3 +346,14 @@ fn srgb_decoding_endpoints() {
     assert!((srgb_to_linear(1.0) - 1.0).abs() < 1e-6);
     assert!((srgb_to_linear(0.5) - 0.214_041).abs() < 1e-5);
 }
+
+#[test]
+fn an_environment_lights_a_scene_without_emitters() {
+    let options = LoadOptions { environment: Some([0.5, 1.0, 2.0]), ..LoadOptions::default() };
+    let s = load_with(&data("no_camera.gltf"), &options).unwrap();
+    assert_close(&param(&s, "env.radiance.value"), &[0.5, 1.0, 2.0]);
+    assert!(!s.warnings.iter().any(|w| w.contains("no emitters")), "{:?}", s.warnings);
+    let bad = LoadOptions { environment: Some([f32::NAN, 1.0, 1.0]), ..LoadOptions::default() };
+    let e = load_with(&data("no_camera.gltf"), &bad).unwrap_err().to_string();
+    assert!(e.contains("LoadOptions::environment") && e.contains("must be finite and ≥ 0"), "{e}");
+}

@@ -291,8 +291,12 @@ impl<'a> Loader<'a> {
         self.clip_warnings();
         self.refuse_sensors_in_media(&sensors)?;
         self.refuse_overlapping_media()?;
+        super::super::load::apply_environment(&mut self.scene, self.options.environment)?;
         if self.scene.meshes.iter().all(|m| m.emitter.is_none()) && self.scene.environment.is_none() {
-            let w = self.x.warning(root, "the scene has no emitters: it renders black");
+            let w = self.x.warning(
+                root,
+                "the scene has no emitters: it renders black unless lit by an environment (LoadOptions::environment)",
+            );
             self.scene.warn(w);
         }
         for name in self.x.unused_defines() {

@@ -148,7 +148,10 @@ fn defines_substitute_and_cli_overrides_win() {
     assert_eq!(s.default_spp, Some(64));
     assert_eq!(
         s.warnings,
-        ["d.xml:1:1: the scene has no emitters: it renders black", "d.xml: -D unused is not used by the scene"]
+        [
+            "d.xml:1:1: the scene has no emitters: it renders black unless lit by an environment (LoadOptions::environment)",
+            "d.xml: -D unused is not used by the scene"
+        ]
     );
     // `$` without a name stays literal; names are maximal identifiers.
     let bad = [("1x".to_string(), "1".to_string())];
@@ -170,7 +173,12 @@ fn property_values() {
     assert_eq!(param(&s, "c.bsdf.reflectance.value"), [0.6; 3]);
     assert_eq!(param(&s, "d.bsdf.reflectance.value"), [0.7; 3]);
     assert_eq!(param(&s, "e.bsdf.reflectance.value"), [0.5; 3], "Mitsuba's default reflectance");
-    assert_eq!(s.warnings, ["test.xml:1:1: the scene has no emitters: it renders black"]);
+    assert_eq!(
+        s.warnings,
+        [
+            "test.xml:1:1: the scene has no emitters: it renders black unless lit by an environment (LoadOptions::environment)"
+        ]
+    );
 }
 
 #[test]
@@ -222,7 +230,7 @@ fn unknown_properties_are_warned_about_by_name() {
         [
             "test.xml:2:1: unknown property 'radius' of 'cube' ignored",
             "test.xml:3:22: unknown property 'bump' of 'diffuse' ignored",
-            "test.xml:1:1: the scene has no emitters: it renders black",
+            "test.xml:1:1: the scene has no emitters: it renders black unless lit by an environment (LoadOptions::environment)",
         ]
     );
 }

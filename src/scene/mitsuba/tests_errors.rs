@@ -519,7 +519,7 @@ fn ignored_settings_are_warned_about() {
             "2:25: property 'rr_depth' of 'path' ignored: pathgrad starts Russian roulette at depth 5",
             "2:61: property 'hide_emitters' of 'path' ignored: pathgrad shows emitters",
             "5:122: property 'filter_type' = 'nearest' of 'bitmap' ignored: pathgrad uses 'bilinear'",
-            "1:1: the scene has no emitters: it renders black",
+            "1:1: the scene has no emitters: it renders black unless lit by an environment (LoadOptions::environment)",
         ]
     );
 }

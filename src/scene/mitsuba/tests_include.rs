@@ -220,3 +220,20 @@ fn a_shape_refers_to_a_scene_level_area_emitter_named_by_its_id() {
     let alone = text(&format!(r#"{SENSOR}{emitter}{LIGHT}"#)).unwrap_err().to_string();
     assert!(alone.ends_with("an 'area' emitter must be nested in a <shape> or referred to by one"), "{alone}");
 }
+
+#[test]
+fn an_environment_option_replaces_the_scenes_own_constant_environment() {
+    let options = LoadOptions { environment: Some([3.0, 2.0, 1.0]), ..LoadOptions::default() };
+    let text =
+        format!(r#"<scene version="3.0.0">{SENSOR}<emitter type="constant" id="sky"/><shape type="cube"/></scene>"#);
+    let scene = super::loader::load_text_with(&text, Path::new("e.xml"), &options, obj_for_tests).unwrap();
+    let sky = scene.params.find("sky.radiance.value").unwrap();
+    assert_eq!(scene.params.get(sky), [3.0, 2.0, 1.0]);
+    assert_eq!(scene.environment, Some(sky));
+    assert_eq!(
+        scene.warnings,
+        [
+            "the scene's own environment 'sky.radiance.value' takes the radiance [3.0, 2.0, 1.0] of LoadOptions::environment"
+        ]
+    );
+}

@@ -177,6 +177,9 @@ struct RunConfig {
     /// `--sensor`, if given.
     #[serde(default)]
     sensor: Option<String>,
+    /// `--env`, if given.
+    #[serde(default)]
+    env: Option<[f32; 3]>,
     /// `--view`s: the sensors (by name) and their target files.
     #[serde(default)]
     views: Vec<ViewConfig>,
@@ -370,6 +373,7 @@ fn start(args: &OptimizeArgs) -> Result<Session> {
         diff_param,
         allow_outside_folder: args.flags.allow_outside_folder,
         sensor: args.flags.sensor.clone(),
+        env: args.flags.env,
         views,
     };
     let dir = args.output.clone().unwrap_or_else(|| PathBuf::from(DEFAULT_OUTPUT));
