@@ -177,6 +177,7 @@ MATRIX = {
                                grads=["floor.bsdf.reflectance.value", "lamp.radiance.value"]),
     "integrator_direct": dict(features=["direct integrator (as path, max_depth 2)"], own_integrator=True,
                               warnings=["'direct' integrator"], grads=["back.bsdf.reflectance.value"]),
+    "integrator_volpathmis": dict(features=["volpathmis integrator"], own_integrator=True, grads=[]),
     "integrator_moment_stratified": dict(features=["moment(path, max_depth 3)", "stratified sampler (as independent)"],
                                          own_integrator=True, warnings=["'moment' integrator", "sampler 'stratified'"],
                                          grads=[]),

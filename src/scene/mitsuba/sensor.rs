@@ -347,12 +347,12 @@ impl<'a> Loader<'a> {
             }
             return Ok(());
         }
-        if !matches!(p.kind.as_str(), "path" | "prb" | "prb_basic" | "volpath" | "prbvolpath") {
+        if !matches!(p.kind.as_str(), "path" | "prb" | "prb_basic" | "volpath" | "volpathmis" | "prbvolpath") {
             return Err(self.x.err(
                 node,
                 format!(
-                    "unsupported plugin '{}' (supported: path, prb, prb_basic, volpath, prbvolpath, direct; moment and \
-                     aov around one of them)",
+                    "unsupported plugin '{}' (supported: path, prb, prb_basic, volpath, volpathmis, prbvolpath, \
+                     direct; moment and aov around one of them)",
                     p.kind
                 ),
             ));

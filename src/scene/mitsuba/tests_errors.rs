@@ -382,7 +382,7 @@ fn element_and_property_errors() {
         ),
         (
             r#"<integrator type="ptracer"/>"#,
-            "<integrator>: unsupported plugin 'ptracer' (supported: path, prb, prb_basic, volpath, prbvolpath, \
+            "<integrator>: unsupported plugin 'ptracer' (supported: path, prb, prb_basic, volpath, volpathmis, prbvolpath, \
              direct; moment and aov around one of them)",
         ),
         (
