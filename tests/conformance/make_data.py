@@ -107,9 +107,10 @@ def write_ply_quad_uv_binary(path):
     path.write_bytes(head.encode() + body)
 
 
-def write_obj_pedestal(path):
+def pedestal():
     """A low-poly stand-in for mitsuba-data's 575 KB `sphere_base.obj` (a pedestal, not a sphere):
-    a closed solid of revolution about y through the original's profile, 24 segments."""
+    a closed solid of revolution about y through the original's profile, 24 segments; vertices and
+    outward faces (triangles and quads)."""
     profile = [(0.0, -0.524), (0.767, -0.524), (0.735, -0.851), (0.898, -0.969), (0.905, -1.015), (0.0, -1.015)]
     seg = 24
     verts, faces = [], []
@@ -134,6 +135,11 @@ def write_obj_pedestal(path):
                 faces.append((a0 + k, b0, a0 + k1))
             else:
                 faces.append((a0 + k, b0 + k, b0 + k1, a0 + k1))
+    return verts, faces
+
+
+def write_obj_pedestal(path):
+    verts, faces = pedestal()
     lines = ["# pedestal: solid of revolution about y, 24 segments, outward faces (face normals)"]
     lines += [f"v {f6(x)} {f6(y)} {f6(z)}" for x, y, z in verts]
     lines += ["f " + " ".join(str(i + 1) for i in f) for f in faces]
@@ -160,6 +166,36 @@ def write_obj_background(path):
         "vt 0.532096 0.000073\nvt 0.000073 0.000073\n"
         "vn 0.0000 1.0000 0.0000\nvn 0.0000 0.0000 1.0000\n"
         "f 2/1/1 3/2/1 1/3/1\nf 4/4/2 5/5/2 3/2/2\nf 2/1/1 4/4/1 3/2/1\nf 4/4/2 6/6/2 5/5/2\n")
+
+
+def write_serialized(path):
+    """Mitsuba's serialized format (version 4, zlib streams, a table of offsets at the end), three
+    meshes: 0 the icosphere with vertex normals (single precision); 1 the pedestal without
+    normals, in double precision (Mitsuba computes smooth normals); 2 a unit quad in z = 0 with
+    normals, texture coordinates and the face-normals flag (its normals unused)."""
+    out, offsets = b"", []
+
+    def mesh(flags, name, positions, normals, uvs, triangles):
+        f = "<d" if flags & 0x2000 else "<f"
+        body = struct.pack("<I", flags) + name.encode() + b"\0" + struct.pack("<QQ", len(positions), len(triangles))
+        for arr in (positions, normals or [], uvs or []):
+            body += b"".join(struct.pack(f, c) for v in arr for c in v)
+        body += b"".join(struct.pack("<3I", *t) for t in triangles)
+        return struct.pack("<HH", 0x041C, 4) + zlib.compress(body, 9)
+
+    verts, faces = icosphere(2)
+    ball = [tuple(float(c) for c in v) for v in verts]
+    ped_v, ped_f = pedestal()
+    ped_t = [t for f in ped_f for t in ([f] if len(f) == 3 else [(f[0], f[1], f[2]), (f[0], f[2], f[3])])]
+    quad = [(0.0, 0.0, 0.0), (1.0, 0.0, 0.0), (1.0, 1.0, 0.0), (0.0, 1.0, 0.0)]
+    for data in (mesh(0x1000 | 0x0001, "ball", ball, ball, None, faces),
+                 mesh(0x2000, "pedestal", ped_v, None, None, ped_t),
+                 mesh(0x1000 | 0x0001 | 0x0002 | 0x0010, "card", quad, [(0.0, 0.0, 1.0)] * 4,
+                      [(0.0, 0.0), (1.0, 0.0), (1.0, 1.0), (0.0, 1.0)], [(0, 1, 2), (0, 2, 3)])):
+        offsets.append(len(out))
+        out += data
+    out += b"".join(struct.pack("<Q", o) for o in offsets) + struct.pack("<I", len(offsets))
+    path.write_bytes(out)
 
 
 # ---- bitmaps ----
@@ -285,6 +321,7 @@ def main():
     write_obj_pedestal(DATA / "pedestal.obj")
     write_obj_cube_centered(DATA / "unit_cube_centered.obj")
     write_obj_background(DATA / "background.obj")
+    write_serialized(DATA / "meshes.serialized")
     write_png(DATA / "checker.png", checker_texture())
     write_png(DATA / "ramp_raw.png", ramp_texture())
     write_png(DATA / "background_checker.png", background_checker())

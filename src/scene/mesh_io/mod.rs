@@ -1,4 +1,4 @@
-//! Triangle meshes from Wavefront OBJ (`tobj`) and PLY (`ply-rs-bw`) files, as [`Geometry`](crate::scene::shapes::Geometry).
+//! Triangle meshes from Wavefront OBJ (`tobj`), PLY (`ply-rs-bw`) and Mitsuba `.serialized` files, as [`Geometry`](crate::scene::shapes::Geometry).
 //!
 //! Both loaders merge everything the file holds into one [`Geometry`](crate::scene::shapes::Geometry): every OBJ object and group,
 //! every PLY face. Polygons are fan-triangulated. OBJ materials (`mtllib`, `usemtl`) are ignored —
@@ -32,9 +32,11 @@ use crate::error::{Error, Result};
 
 mod obj;
 mod ply;
+mod serialized;
 
 pub use obj::load_obj;
 pub use ply::load_ply;
+pub use serialized::{SerializedMesh, load_serialized};
 
 /// An [`Error::Scene`] located at `path` (and `line`, 1-based, if known).
 pub(crate) fn scene_error(path: &Path, line: Option<usize>, message: impl Into<String>) -> Error {

@@ -358,7 +358,10 @@ impl<'a> Loader<'a> {
         let mut meshes = Vec::new();
         for (i, &c) in children.iter().enumerate() {
             let mesh = c.has_tag_name("shape")
-                && matches!(self.x.attr(c, "type")?.as_deref(), Some("obj" | "ply" | "rectangle" | "cube"));
+                && matches!(
+                    self.x.attr(c, "type")?.as_deref(),
+                    Some("obj" | "ply" | "serialized" | "rectangle" | "cube")
+                );
             if mesh { meshes.push((i, c)) } else { first.push((i, c)) }
         }
         first.extend(meshes);

@@ -5,10 +5,12 @@
 //!   overridden by the caller's defines (the CLI's `-D name=value`); `<ref id>` anywhere an object
 //!   is expected, in either document order; `id` attributes (unique across the file).
 //! - Properties `<float>`, `<integer>`, `<boolean>`, `<string>`, `<rgb>` (`"r, g, b"`, `"r g b"` or
-//!   one value), constant `<spectrum value="c">`, `<point>`/`<vector>`, and `<transform>` with
+//!   one value), `<spectrum value="c">` or of wavelength:value pairs (converted as Mitsuba's RGB
+//!   variants do, module `spectrum`), `<point>`/`<vector>`, and `<transform>` with
 //!   `translate`, `rotate` (axis, degrees), `scale`, `matrix` (16 row-major or 9 values) and
 //!   `lookat`, each left-multiplying what came before (later elements apply after earlier ones).
-//! - Shapes `obj`, `ply`, `rectangle`, `cube`, `disk`, `sphere` with `to_world`, `flip_normals`
+//! - Shapes `obj`, `ply`, `serialized` (`shape_index`; its stored face-normals flag holds unless
+//!   the scene sets `face_normals`), `rectangle`, `cube`, `disk`, `sphere` with `to_world`, `flip_normals`
 //!   and (meshes) `face_normals` (a mesh file without normals is shaded with Mitsuba's
 //!   angle-weighted vertex normals, computed in world space, unless `face_normals` is set); one `<bsdf>`/`<ref>` each (default: diffuse 0.5, as Mitsuba) and
 //!   optionally `<emitter type="area">` with `radiance`.
@@ -16,8 +18,11 @@
 //!   `blendbsdf`, `twosided`; `<emitter type="constant">` at scene level (the environment).
 //! - `<sensor type="perspective">` with `fov`/`focal_length`, `fov_axis`, `to_world`, a
 //!   `<film type="hdrfilm">` (`width`, `height`, an `rfilter`) and a `<sampler type="independent">` (`sample_count` →
-//!   [`Scene::default_spp`]); `<integrator type="path|prb|prb_basic">` `max_depth` →
-//!   [`Scene::max_depth`].
+//!   [`Scene::default_spp`]), also declared at scene level and referred to by `<ref>`;
+//!   `<integrator type="path|prb|prb_basic|volpath|volpathmis|prbvolpath">` `max_depth` →
+//!   [`Scene::max_depth`], `direct` (depth 2), `moment`/`aov` around one of them.
+//! - The scene file: `<include>` and `<path>` (module `include`), repeated `<default>`s (the first
+//!   holds), a shape's `<ref>` to a scene-level area emitter.
 //!
 //! Any other plugin or element is an error, `file:line:col: <tag>: unsupported plugin 'X'
 //! (supported: …)`; a property a supported plugin does not know is a warning in
@@ -37,7 +42,7 @@
 //!   nested in shape `ball` is `ball.bsdf` whatever its id), and a scene-level object is named by
 //!   its id only if the walk of the scene reaches it before any shape or other object that refers
 //!   to it. That walk takes the scene's children in document order, except that meshes (`obj`,
-//!   `ply`, `rectangle`, `cube`) come after everything else: a BSDF declared after the rectangles
+//!   `ply`, `serialized`, `rectangle`, `cube`) come after everything else: a BSDF declared after the rectangles
 //!   that use it is still named by its id, one declared after a `sphere` or `disk` that uses it
 //!   is `SHAPE.bsdf`. pathgrad builds the scene in that order (and keeps its meshes in document
 //!   order). The keys end in `.reflectance.value`, `.reflectance.data` (a bitmap's texels),

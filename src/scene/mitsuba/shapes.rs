@@ -156,8 +156,16 @@ impl<'a> Loader<'a> {
             return Err(self.x.err(t_node, "to_world is singular (it flattens the shape)"));
         }
         let mut geometry = match p.kind.as_str() {
-            "obj" | "ply" => {
-                let format = if p.kind == "obj" { MeshFormat::Obj } else { MeshFormat::Ply };
+            "obj" | "ply" | "serialized" => {
+                let index = if p.kind == "serialized" {
+                    match p.integer(&self.x, "shape_index")? {
+                        None => 0,
+                        Some((i, _)) if (0..=i64::from(u32::MAX)).contains(&i) => i as u32,
+                        Some((i, n)) => return Err(self.x.err(n, format!("'shape_index' must be ≥ 0, got {i}"))),
+                    }
+                } else {
+                    0
+                };
                 let (file, file_node) = p
                     .string(&self.x, "filename")?
                     .ok_or_else(|| self.x.err(node, format!("'{}' needs the property 'filename'", p.kind)))?;
@@ -167,8 +175,18 @@ impl<'a> Loader<'a> {
                         .x
                         .err(file_node, format!("mesh file '{file}' not found (looked for {})", path.display())));
                 }
-                let mut g = (self.meshes)(format, &path).map_err(|e| self.located(node, e))?;
-                let face_normals = p.boolean(&self.x, "face_normals", false)?;
+                // A serialized mesh's stored face-normals flag holds unless the scene says otherwise
+                // (Mitsuba's rule).
+                let (mut g, stored_face_normals) = match p.kind.as_str() {
+                    "obj" => ((self.meshes)(MeshFormat::Obj, &path).map_err(|e| self.located(node, e))?, false),
+                    "ply" => ((self.meshes)(MeshFormat::Ply, &path).map_err(|e| self.located(node, e))?, false),
+                    _ => {
+                        let m =
+                            crate::scene::mesh_io::load_serialized(&path, index).map_err(|e| self.located(node, e))?;
+                        (m.geometry, m.face_normals)
+                    }
+                };
+                let face_normals = p.boolean(&self.x, "face_normals", stored_face_normals)?;
                 if face_normals {
                     g.normals = None;
                 }
