@@ -82,14 +82,26 @@ vec3 texture_bilinear(uint offset, uint width, uint height, vec2 uv) {
         + param_rgb(texel[3]) * weight[3];
 }
 
+// A checkerboard (Mitsuba's): its first colour (at p_color) where the transformed coordinates'
+// fractional parts lie on the same side of 1/2, else its second (at p_color + 3).
+uint checker_texel(Material m, vec2 uv) {
+    vec3 p = vec3(uv, 1.0);
+    vec2 t = vec2(dot(m.uv_row0, p), dot(m.uv_row1, p));
+    bvec2 upper = greaterThan(t - floor(t), vec2(0.5));
+    return m.p_color + (upper.x == upper.y ? 0u : 3u);
+}
+
+vec3 texture_color(Material m, vec2 uv) {
+    return m.tex_height == 0u ? param_rgb(checker_texel(m, uv)) : texture_bilinear(m.p_color, m.tex_width, m.tex_height, uv);
+}
+
 Leaf leaf_from_material(Material m, vec2 uv) {
     Leaf l;
     bool conductor = !is_diffuse(m.tag);
     l.kind = conductor ? LEAF_ROUGH_CONDUCTOR : LEAF_DIFFUSE;
     l.distribution = m.distribution;
     l.alpha = conductor ? params[m.p_alpha] : 0.0;
-    l.color = (HAS(F_TEXTURE) && m.tex_width > 0u) ? texture_bilinear(m.p_color, m.tex_width, m.tex_height, uv)
-                                                   : param_rgb(m.p_color);
+    l.color = (HAS(F_TEXTURE) && m.tex_width > 0u) ? texture_color(m, uv) : param_rgb(m.p_color);
     l.eta = m.eta;
     l.k = m.k;
     return l;
@@ -158,7 +170,9 @@ void push_rgb(uint offset, vec3 g) {
 
 void push_leaf(Material m, vec2 uv, LeafGrad g) {
     if (HAS(F_TEXTURE) && m.tex_width > 0u) {
-        if (HAS(G_TEXTURE)) {
+        if (HAS(G_TEXTURE) && m.tex_height == 0u) {
+            push_rgb(checker_texel(m, uv), g.color);
+        } else if (HAS(G_TEXTURE)) {
             uint texel[4];
             float weight[4];
             texture_footprint(m.p_color, m.tex_width, m.tex_height, uv, texel, weight);

@@ -232,7 +232,8 @@ contract_structs! {
         p_color: u32,
         /// Texture width in texels; 0 when the color is constant.
         tex_width: u32,
-        /// Texture height in texels.
+        /// Texture height in texels; 0 (with width 2) for a checkerboard, whose two colours are
+        /// the texels at `p_color` and `p_color + 3`.
         tex_height: u32,
         /// 1 if the material is seen from both sides.
         two_sided: u32,
@@ -244,6 +245,10 @@ contract_structs! {
         eta: Vec3,
         /// Imaginary part of the conductor's complex index of refraction (RGB).
         k: Vec3,
+        /// Checkerboard: row 0 of its texture-coordinate transform, u' = dot(uv_row0, (u, v, 1)).
+        uv_row0: Vec3,
+        /// Checkerboard: row 1, v' = dot(uv_row1, (u, v, 1)).
+        uv_row1: Vec3,
     }
 
     /// One emissive triangle, in the order of its area CDF.

@@ -79,8 +79,19 @@ pub fn texture_bilinear(params: &[f32], offset: u32, width: u32, height: u32, uv
         + param_rgb(params, texel[3]) * weight[3]
 }
 
+/// A checkerboard (Mitsuba's): the offset of its first colour (at `p_color`) where the transformed
+/// coordinates' fractional parts lie on the same side of 1/2, else of its second.
+pub fn checker_texel(m: &Material, uv: glam::Vec2) -> u32 {
+    let p = Vec3::new(uv.x, uv.y, 1.0);
+    let t = glam::Vec2::new(m.uv_row0.dot(p), m.uv_row1.dot(p));
+    let upper = (t - t.floor()).cmpgt(glam::Vec2::splat(0.5));
+    m.p_color + if upper.x == upper.y { 0 } else { 3 }
+}
+
 fn leaf_from_material(params: &[f32], m: &Material, uv: glam::Vec2) -> Leaf {
-    let color = if m.tex_width > 0 {
+    let color = if m.tex_width > 0 && m.tex_height == 0 {
+        param_rgb(params, checker_texel(m, uv))
+    } else if m.tex_width > 0 {
         texture_bilinear(params, m.p_color, m.tex_width, m.tex_height, uv)
     } else {
         param_rgb(params, m.p_color)
@@ -116,7 +127,9 @@ pub fn texture_backward(offset: u32, width: u32, height: u32, uv: glam::Vec2, g:
 }
 
 fn leaf_backward(m: &Material, uv: glam::Vec2, g: &LeafGrad, sink: &mut GradSink<'_>) {
-    if m.tex_width > 0 {
+    if m.tex_width > 0 && m.tex_height == 0 {
+        sink.add_rgb(checker_texel(m, uv), g.color);
+    } else if m.tex_width > 0 {
         texture_backward(m.p_color, m.tex_width, m.tex_height, uv, g.color, sink);
     } else {
         sink.add_rgb(m.p_color, g.color);

@@ -149,6 +149,15 @@ fn flatten_material(scene: &Scene, m: &Material) -> GpuMaterial {
         Material::Diffuse { albedo: Albedo::Rgb(albedo) } => {
             GpuMaterial { tag: MAT_DIFFUSE, p_color: offset(albedo), ..Default::default() }
         }
+        Material::Diffuse { albedo: Albedo::Checker { colors, to_uv } } => GpuMaterial {
+            tag: MAT_DIFFUSE,
+            p_color: offset(colors),
+            tex_width: 2,
+            tex_height: 0,
+            uv_row0: to_uv[0],
+            uv_row1: to_uv[1],
+            ..Default::default()
+        },
         Material::Diffuse { albedo: Albedo::Bitmap(t) } => {
             let t = &scene.textures[t.0 as usize];
             GpuMaterial {

@@ -40,12 +40,21 @@ pub struct Texture {
 }
 
 /// Where a diffuse albedo comes from.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, PartialEq)]
 pub enum Albedo {
     /// One RGB parameter.
     Rgb(ParamId),
     /// A bitmap texture.
     Bitmap(TextureId),
+    /// Mitsuba's `checkerboard`: `colors` holds six values, the first colour then the second;
+    /// texture coordinates go through `to_uv` (rows of a 2D affine map) first.
+    Checker {
+        /// The two RGB colours (one parameter of six values, or two contiguous parameters: the
+        /// first's id).
+        colors: ParamId,
+        /// u' = dot(to_uv[0], (u, v, 1)), v' = dot(to_uv[1], (u, v, 1)).
+        to_uv: [Vec3; 2],
+    },
 }
 
 /// A surface material. Differentiable values are parameters; the rest are constants.

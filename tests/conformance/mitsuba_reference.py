@@ -49,6 +49,11 @@ MATRIX = {
     "bsdf_spectrum_pairs": dict(features=["<spectrum> wavelength:value pairs", "reflectance (D65, clamped)",
                                           "area radiance (no D65)"],
                                 grads=["ball.bsdf.reflectance.value", "light.emitter.radiance.value"]),
+    # The floor's scene-level checkerboard is named by its address in Mitsuba (object_...): the
+    # panel's colours are compared.
+    "texture_checkerboard": dict(features=["checkerboard", "to_uv (scale, rotate, translate)", "scene-level texture + ref",
+                                           "default color0"],
+                                 grads=["panel.bsdf.reflectance.color0.value", "panel.bsdf.reflectance.color1.value"]),
     "bsdf_diffuse_bitmap": dict(features=["diffuse", "bitmap sRGB PNG", "rectangle uv"], grads=["panel.bsdf.reflectance.data"]),
     # Mitsuba names a top-level texture reached through <ref> by its address (object_...), so its
     # data has no stable key: the gradient is the floor's.

@@ -28,6 +28,10 @@ fn cases() -> Vec<(Scene, Vec<&'static str>)> {
             scenes::textured_environment(),
             vec!["floor.reflectance.data", "environment.radiance.value", "ball.alpha.value"],
         ),
+        (
+            scenes::conformance("texture_checkerboard"),
+            vec!["panel.bsdf.reflectance.color0.value", "panel.bsdf.reflectance.color1.value", "tiles.color1.value"],
+        ),
     ]
 }
 

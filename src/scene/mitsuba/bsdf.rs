@@ -8,7 +8,7 @@ use super::loader::{Loader, MAX_NESTING};
 use super::xml::{El, Props};
 use crate::bsdf::Distribution;
 use crate::error::Result;
-use crate::scene::{Albedo, Material, MaterialId, TextureId, bounds};
+use crate::scene::{Albedo, Material, MaterialId, bounds};
 
 /// The BSDF plugins pathgrad reads.
 const SUPPORTED_BSDFS: &str = "blendbsdf, diffuse, null, roughconductor, twosided";
@@ -68,8 +68,8 @@ impl<'a> Loader<'a> {
             "diffuse" => {
                 if let Some(t) = p.object("reflectance") {
                     self.finish(&p)?;
-                    let texture = self.texture(t, format!("{name}.reflectance"), depth + 1)?;
-                    self.scene.add_material(Material::Diffuse { albedo: Albedo::Bitmap(texture) })
+                    let albedo = self.texture(t, format!("{name}.reflectance"), depth + 1)?;
+                    self.scene.add_material(Material::Diffuse { albedo })
                 } else {
                     let albedo = self.color_in(&p, "reflectance", Vec3::splat(0.5), bounds::REFLECTANCE)?;
                     self.scene.add_diffuse(name, albedo).map_err(|e| self.located(node, e))?
@@ -213,7 +213,7 @@ impl<'a> Loader<'a> {
     ///
     /// # Errors
     /// Unsupported plugins, missing or undecodable files, texels outside [0, 1].
-    pub(super) fn texture(&mut self, node: El<'a>, name: String, depth: usize) -> Result<TextureId> {
+    pub(super) fn texture(&mut self, node: El<'a>, name: String, depth: usize) -> Result<Albedo> {
         let target = self.deref(node)?;
         if !target.has_tag_name("texture") {
             return Err(self.x.err(node, format!("refers to a <{}>, expected a <texture>", target.tag_name().name())));
@@ -226,8 +226,15 @@ impl<'a> Loader<'a> {
         }
         let name = self.name_of(target, name)?;
         let p = Props::parse(&self.x, target)?;
+        if p.kind == "checkerboard" {
+            let albedo = self.checkerboard(&p, &name)?;
+            self.textures.insert(target.id(), albedo);
+            return Ok(albedo);
+        }
         if p.kind != "bitmap" {
-            return Err(self.x.err(target, format!("unsupported plugin '{}' (supported: bitmap)", p.kind)));
+            return Err(self
+                .x
+                .err(target, format!("unsupported plugin '{}' (supported: bitmap, checkerboard)", p.kind)));
         }
         let (file, file_node) = p
             .string(&self.x, "filename")?
@@ -268,8 +275,38 @@ impl<'a> Loader<'a> {
             .add_texture(&format!("{name}.data"), width, height, &texels)
             .map_err(|e| self.located(target, e))?;
         self.finish(&p)?;
-        self.textures.insert(target.id(), t);
-        Ok(t)
+        self.textures.insert(target.id(), Albedo::Bitmap(t));
+        Ok(Albedo::Bitmap(t))
+    }
+
+    /// Mitsuba's `checkerboard` (`color0` 0.4 and `color1` 0.2 by default, each a colour — a
+    /// texture there is refused by name — and `to_uv`): parameters `NAME.color0.value` and
+    /// `NAME.color1.value`, added one after the other (the kernels read them as two texels).
+    fn checkerboard(&mut self, p: &Props<'a>, name: &str) -> Result<Albedo> {
+        for slot in ["color0", "color1"] {
+            if let Some(t) = p.object(slot) {
+                return Err(self
+                    .x
+                    .err(t, format!("a textured '{slot}' of a checkerboard is not supported (a colour is)")));
+            }
+        }
+        let color0 = self.color_in(p, "color0", Vec3::splat(0.4), bounds::REFLECTANCE)?;
+        let color1 = self.color_in(p, "color1", Vec3::splat(0.2), bounds::REFLECTANCE)?;
+        // Rows 0 and 1 of the 4×4 `to_uv`, columns x, y and the translation: Mitsuba's 2D map.
+        let to_uv = match p.transform(&self.x, "to_uv")? {
+            None => [Vec3::X, Vec3::Y],
+            Some((t, _)) => {
+                let m = t.matrix;
+                [0, 1].map(|r| Vec3::new(m.col(0)[r], m.col(1)[r], m.col(3)[r]))
+            }
+        };
+        self.finish(p)?;
+        let first = self.scene.params.add(&format!("{name}.color0.value"), &color0.to_array(), bounds::REFLECTANCE);
+        let first = first.map_err(|e| self.located(p.node, e))?;
+        let second = self.scene.params.add(&format!("{name}.color1.value"), &color1.to_array(), bounds::REFLECTANCE);
+        let second = second.map_err(|e| self.located(p.node, e))?;
+        debug_assert_eq!(self.scene.params.entry(second).offset, self.scene.params.entry(first).offset + 3);
+        Ok(Albedo::Checker { colors: first, to_uv })
     }
 }
 

@@ -10,7 +10,7 @@ use roxmltree::NodeId;
 use super::xml::{El, Props, Xml, is_identifier};
 use crate::error::{Error, Result};
 use crate::scene::shapes::Geometry;
-use crate::scene::{Camera, LoadOptions, MaterialId, Scene, TextureId, bounds};
+use crate::scene::{Albedo, Camera, LoadOptions, MaterialId, Scene, bounds};
 
 /// Deepest nesting of BSDFs and textures (through nested elements and `<ref>`s together).
 pub(super) const MAX_NESTING: usize = 16;
@@ -153,7 +153,7 @@ pub(super) struct Loader<'a> {
     /// BSDFs already built, by element.
     pub materials: HashMap<NodeId, MaterialId>,
     /// Textures already built, by element.
-    pub textures: HashMap<NodeId, TextureId>,
+    pub textures: HashMap<NodeId, Albedo>,
     /// Media already built, by element.
     pub media: HashMap<NodeId, crate::scene::medium::MediumId>,
     /// The shapes with an interior medium: their mesh index and element (for the overlap check).
@@ -189,8 +189,10 @@ impl<'a> Loader<'a> {
         let mut unnamed = 0;
         for c in &children {
             let tag = c.tag_name().name();
-            if matches!(tag, "shape" | "bsdf" | "texture" | "emitter" | "medium")
-                && (!c.has_attribute("id") || tag == "texture")
+            // Mitsuba 3.9.1 names a scene-level bitmap by its address whatever its id (a
+            // checkerboard by its id).
+            let bitmap = tag == "texture" && c.attribute("type") != Some("checkerboard");
+            if matches!(tag, "shape" | "bsdf" | "texture" | "emitter" | "medium") && (!c.has_attribute("id") || bitmap)
             {
                 self.names.insert(c.id(), format!("_unnamed_{unnamed}"));
                 unnamed += 1;

@@ -369,7 +369,7 @@ fn element_and_property_errors() {
             r#"<bsdf type="twosided"><bsdf type="twosided"><bsdf type="diffuse"/></bsdf></bsdf>"#,
             "<bsdf>: a 'twosided' BSDF cannot wrap another twosided one",
         ),
-        (r#"<texture type="checkerboard"/>"#, "<texture>: unsupported plugin 'checkerboard' (supported: bitmap)"),
+        (r#"<texture type="wood"/>"#, "<texture>: unsupported plugin 'wood' (supported: bitmap, checkerboard)"),
         (r#"<texture type="bitmap"/>"#, "<texture>: 'bitmap' needs the property 'filename'"),
         (r#"<emitter type="area"/>"#, "<emitter>: an 'area' emitter must be nested in a <shape>"),
         (

@@ -127,3 +127,9 @@ pub fn deep_meshes() -> Scene {
         .unwrap();
     s
 }
+
+/// The conformance matrix's scene `name` (`tests/conformance/scenes/NAME.xml`).
+pub fn conformance(name: &str) -> Scene {
+    let path = format!("{}/tests/conformance/scenes/{name}.xml", env!("CARGO_MANIFEST_DIR"));
+    pathgrad::scene::load(&path, &[]).unwrap_or_else(|e| panic!("{path}: {e}"))
+}
