@@ -397,8 +397,12 @@ impl Scene {
 
     /// Records a loading warning and logs it.
     pub fn warn(&mut self, message: String) {
-        // Warnings of a file's loader already begin with its name (and a line).
-        if message.starts_with(&self.source) {
+        // Warnings of a file's loader already begin with its name (and a line), or with the
+        // name and line of a file it includes (`inc.xml:6:3: …`).
+        let located = message.split_once(':').is_some_and(|(file, rest)| {
+            file.ends_with(".xml") && rest.split(':').next().is_some_and(|l| l.parse::<u32>().is_ok())
+        });
+        if message.starts_with(&self.source) || located {
             tracing::warn!("{message}");
         } else {
             tracing::warn!("{}: {message}", self.source);

@@ -101,6 +101,9 @@ impl<'a> Loader<'a> {
             [s] => self.sampler(s)?,
             [_, second, ..] => return Err(self.x.err(second, "a sensor has at most one <sampler>")),
         }
+        // A pinhole has no focus: Mitsuba's `perspective` reads no `focus_distance` either (scenes
+        // written for `thinlens` keep it), so it changes nothing and is accepted silently.
+        p.float(&self.x, "focus_distance")?;
         let axis = match p.string(&self.x, "fov_axis")? {
             None => FovAxis::X,
             Some((s, n)) => match s.to_ascii_lowercase().as_str() {

@@ -237,3 +237,11 @@ fn an_environment_option_replaces_the_scenes_own_constant_environment() {
         ]
     );
 }
+
+#[test]
+fn a_pinholes_focus_distance_is_accepted_silently() {
+    let sensor =
+        SENSOR.replace("<float name=\"fov\"", "<float name=\"focus_distance\" value=\"6\"/><float name=\"fov\"");
+    let scene = text(&format!("{sensor}{LIGHT}")).unwrap();
+    assert!(scene.warnings.is_empty(), "{:?}", scene.warnings);
+}
