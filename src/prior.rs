@@ -181,7 +181,13 @@ mod tests {
         let mut scene = crate::scene::builtin::load("cornell-box").unwrap();
         let texels: Vec<f32> = (0..18).map(|i| 0.1 + 0.8 * (i as f32 * 0.37).fract()).collect();
         let id = scene.params.add("tex.data", &texels, (0.0, 1.0)).unwrap();
-        scene.textures.push(Texture { width: 3, height: 2, texels: id });
+        scene.textures.push(Texture {
+            width: 3,
+            height: 2,
+            texels: id,
+            nearest: false,
+            wrap: crate::scene::Wrap::Repeat,
+        });
         let scalar = scene.params.find("red.reflectance.value").unwrap();
         (scene, id, scalar)
     }

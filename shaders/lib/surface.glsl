@@ -49,21 +49,35 @@ vec3 offset_origin(vec3 p, vec3 ng, vec3 dir) {
     return p + ng * (dot(ng, dir) > 0.0 ? scale : -scale);
 }
 
-// The four texels a bilinear lookup at uv reads (with repeat wrapping; row 0 is v = 0): their
-// parameter offsets (RGB at offset..offset+2) and weights. Shared by the lookup and its gradient.
-void texture_footprint(uint offset, uint width, uint height, vec2 uv, out uint texel[4], out float weight[4]) {
+// Texel index i of a row or column of n texels under wrap mode `mode` (Mitsuba's `repeat`,
+// `mirror`, `clamp`).
+int wrap_texel(int i, int n, uint mode) {
+    if ((mode & TEX_WRAP_CLAMP) != 0u) return clamp(i, 0, n - 1);
+    if ((mode & TEX_WRAP_MIRROR) != 0u) {
+        int m = ((i % (2 * n)) + 2 * n) % (2 * n);
+        return m < n ? m : 2 * n - 1 - m;
+    }
+    return ((i % n) + n) % n;
+}
+
+// The four texels a lookup at uv reads (row 0 is v = 0): their parameter offsets (RGB at
+// offset..offset+2) and weights — bilinear, or the nearest texel with weight 1 (`TEX_NEAREST`),
+// indices wrapped by `mode`. Shared by the lookup and its gradient.
+void texture_footprint(uint offset, uint width, uint height, uint mode, vec2 uv, out uint texel[4],
+                       out float weight[4]) {
     float x = uv.x * float(width) - 0.5;
     float y = uv.y * float(height) - 0.5;
-    float x0 = floor(x);
-    float y0 = floor(y);
-    float fx = x - x0;
-    float fy = y - y0;
+    bool nearest = (mode & TEX_NEAREST) != 0u;
+    float x0 = nearest ? floor(x + 0.5) : floor(x);
+    float y0 = nearest ? floor(y + 0.5) : floor(y);
+    float fx = nearest ? 0.0 : x - x0;
+    float fy = nearest ? 0.0 : y - y0;
     int w = int(width);
     int h = int(height);
-    int ix0 = ((int(x0) % w) + w) % w;
-    int iy0 = ((int(y0) % h) + h) % h;
-    int ix1 = (ix0 + 1) % w;
-    int iy1 = (iy0 + 1) % h;
+    int ix0 = wrap_texel(int(x0), w, mode);
+    int iy0 = wrap_texel(int(y0), h, mode);
+    int ix1 = wrap_texel(int(x0) + 1, w, mode);
+    int iy1 = wrap_texel(int(y0) + 1, h, mode);
     texel[0] = offset + 3u * uint(iy0 * w + ix0);
     texel[1] = offset + 3u * uint(iy0 * w + ix1);
     texel[2] = offset + 3u * uint(iy1 * w + ix0);
@@ -74,10 +88,10 @@ void texture_footprint(uint offset, uint width, uint height, vec2 uv, out uint t
     weight[3] = fx * fy;
 }
 
-vec3 texture_bilinear(uint offset, uint width, uint height, vec2 uv) {
+vec3 texture_bilinear(uint offset, uint width, uint height, uint mode, vec2 uv) {
     uint texel[4];
     float weight[4];
-    texture_footprint(offset, width, height, uv, texel, weight);
+    texture_footprint(offset, width, height, mode, uv, texel, weight);
     return param_rgb(texel[0]) * weight[0] + param_rgb(texel[1]) * weight[1] + param_rgb(texel[2]) * weight[2]
         + param_rgb(texel[3]) * weight[3];
 }
@@ -92,7 +106,8 @@ uint checker_texel(Material m, vec2 uv) {
 }
 
 vec3 texture_color(Material m, vec2 uv) {
-    return m.tex_height == 0u ? param_rgb(checker_texel(m, uv)) : texture_bilinear(m.p_color, m.tex_width, m.tex_height, uv);
+    return m.tex_height == 0u ? param_rgb(checker_texel(m, uv))
+                              : texture_bilinear(m.p_color, m.tex_width, m.tex_height, m.tex_mode, uv);
 }
 
 Leaf leaf_from_material(Material m, vec2 uv) {
@@ -175,7 +190,7 @@ void push_leaf(Material m, vec2 uv, LeafGrad g) {
         } else if (HAS(G_TEXTURE)) {
             uint texel[4];
             float weight[4];
-            texture_footprint(m.p_color, m.tex_width, m.tex_height, uv, texel, weight);
+            texture_footprint(m.p_color, m.tex_width, m.tex_height, m.tex_mode, uv, texel, weight);
             for (uint k = 0u; k < 4u; k++) push_rgb(texel[k], g.color * weight[k]);
         }
     } else if (HAS(G_COLOR)) {

@@ -50,6 +50,13 @@ contract_constants! {
     BINDING_PROBE_OUT = 11;
 
 
+    /// `Material::tex_mode`: nearest-texel lookup (else bilinear).
+    TEX_NEAREST = 1;
+    /// `Material::tex_mode`: mirrored wrapping of texel indices (Mitsuba's `mirror`).
+    TEX_WRAP_MIRROR = 2;
+    /// `Material::tex_mode`: clamped texel indices (Mitsuba's `clamp`); neither bit: `repeat`.
+    TEX_WRAP_CLAMP = 4;
+
     /// `TriShading::emitter` of a triangle that does not emit.
     NO_EMITTER = 0xFFFF_FFFF;
     /// A parameter offset that refers to nothing (e.g. no environment).

@@ -235,6 +235,9 @@ contract_structs! {
         /// Texture height in texels; 0 (with width 2) for a checkerboard, whose two colours are
         /// the texels at `p_color` and `p_color + 3`.
         tex_height: u32,
+        /// Bitmap lookup: `TEX_NEAREST` or bilinear, or-ed with `TEX_WRAP_MIRROR` or
+        /// `TEX_WRAP_CLAMP` (repeat when neither).
+        tex_mode: u32,
         /// 1 if the material is seen from both sides.
         two_sided: u32,
         /// Parameter offset of the roughness alpha (conductor).

@@ -4,7 +4,7 @@ use glam::Vec3;
 
 use crate::bsdf::{Bsdf, Distribution, Leaf, LeafGrad, bsdf_eval_grad};
 use crate::bvh::Hit;
-use crate::contract::{MAT_BLEND, MAT_ROUGH_CONDUCTOR, Material};
+use crate::contract::{MAT_BLEND, MAT_ROUGH_CONDUCTOR, Material, TEX_NEAREST, TEX_WRAP_CLAMP, TEX_WRAP_MIRROR};
 use crate::cpu::path::GradSink;
 use crate::scene::flat::FlatScene;
 
@@ -52,17 +52,32 @@ fn param_rgb(params: &[f32], offset: u32) -> Vec3 {
     Vec3::new(params[o], params[o + 1], params[o + 2])
 }
 
-/// The four texels a bilinear lookup at `uv` reads (with repeat wrapping; row 0 is v = 0): their
-/// parameter offsets (RGB at `offset..offset + 2`) and weights. Shared by the lookup and its gradient.
-pub fn texture_footprint(offset: u32, width: u32, height: u32, uv: glam::Vec2) -> ([u32; 4], [f32; 4]) {
+/// Texel index `i` of a row or column of `n` texels under wrap mode `mode` (Mitsuba's `repeat`,
+/// `mirror`, `clamp`).
+fn wrap_texel(i: i32, n: i32, mode: u32) -> i32 {
+    if mode & TEX_WRAP_CLAMP != 0 {
+        return i.clamp(0, n - 1);
+    }
+    if mode & TEX_WRAP_MIRROR != 0 {
+        let m = i.rem_euclid(2 * n);
+        return if m < n { m } else { 2 * n - 1 - m };
+    }
+    i.rem_euclid(n)
+}
+
+/// The four texels a lookup at `uv` reads (row 0 is v = 0): their parameter offsets (RGB at
+/// `offset..offset + 2`) and weights — bilinear, or the nearest texel with weight 1
+/// (`TEX_NEAREST`), indices wrapped by `mode`. Shared by the lookup and its gradient.
+pub fn texture_footprint(offset: u32, width: u32, height: u32, mode: u32, uv: glam::Vec2) -> ([u32; 4], [f32; 4]) {
     let x = uv.x * width as f32 - 0.5;
     let y = uv.y * height as f32 - 0.5;
-    let (x0, y0) = (x.floor(), y.floor());
-    let (fx, fy) = (x - x0, y - y0);
+    let nearest = mode & TEX_NEAREST != 0;
+    let (x0, y0) = if nearest { ((x + 0.5).floor(), (y + 0.5).floor()) } else { (x.floor(), y.floor()) };
+    let (fx, fy) = if nearest { (0.0, 0.0) } else { (x - x0, y - y0) };
     let (w, h) = (width as i32, height as i32);
-    let ix0 = (x0 as i32).rem_euclid(w);
-    let iy0 = (y0 as i32).rem_euclid(h);
-    let (ix1, iy1) = ((ix0 + 1) % w, (iy0 + 1) % h);
+    let ix0 = wrap_texel(x0 as i32, w, mode);
+    let iy0 = wrap_texel(y0 as i32, h, mode);
+    let (ix1, iy1) = (wrap_texel(x0 as i32 + 1, w, mode), wrap_texel(y0 as i32 + 1, h, mode));
     let texel = |ix: i32, iy: i32| offset + 3 * (iy * w + ix) as u32;
     (
         [texel(ix0, iy0), texel(ix1, iy0), texel(ix0, iy1), texel(ix1, iy1)],
@@ -71,8 +86,8 @@ pub fn texture_footprint(offset: u32, width: u32, height: u32, uv: glam::Vec2) -
 }
 
 /// Bilinear lookup of the RGB texels at `params[offset..]`.
-pub fn texture_bilinear(params: &[f32], offset: u32, width: u32, height: u32, uv: glam::Vec2) -> Vec3 {
-    let (texel, weight) = texture_footprint(offset, width, height, uv);
+pub fn texture_bilinear(params: &[f32], offset: u32, width: u32, height: u32, mode: u32, uv: glam::Vec2) -> Vec3 {
+    let (texel, weight) = texture_footprint(offset, width, height, mode, uv);
     param_rgb(params, texel[0]) * weight[0]
         + param_rgb(params, texel[1]) * weight[1]
         + param_rgb(params, texel[2]) * weight[2]
@@ -92,7 +107,7 @@ fn leaf_from_material(params: &[f32], m: &Material, uv: glam::Vec2) -> Leaf {
     let color = if m.tex_width > 0 && m.tex_height == 0 {
         param_rgb(params, checker_texel(m, uv))
     } else if m.tex_width > 0 {
-        texture_bilinear(params, m.p_color, m.tex_width, m.tex_height, uv)
+        texture_bilinear(params, m.p_color, m.tex_width, m.tex_height, m.tex_mode, uv)
     } else {
         param_rgb(params, m.p_color)
     };
@@ -119,8 +134,16 @@ pub fn resolve_bsdf(flat: &FlatScene, id: u32, uv: glam::Vec2) -> Bsdf {
 }
 
 /// Scatters ∂/∂(texels) of a bilinear lookup: per-channel gradient `g` split by the four weights.
-pub fn texture_backward(offset: u32, width: u32, height: u32, uv: glam::Vec2, g: Vec3, sink: &mut GradSink<'_>) {
-    let (texel, weight) = texture_footprint(offset, width, height, uv);
+pub fn texture_backward(
+    offset: u32,
+    width: u32,
+    height: u32,
+    mode: u32,
+    uv: glam::Vec2,
+    g: Vec3,
+    sink: &mut GradSink<'_>,
+) {
+    let (texel, weight) = texture_footprint(offset, width, height, mode, uv);
     for (t, w) in texel.into_iter().zip(weight) {
         sink.add_rgb(t, g * w);
     }
@@ -130,7 +153,7 @@ fn leaf_backward(m: &Material, uv: glam::Vec2, g: &LeafGrad, sink: &mut GradSink
     if m.tex_width > 0 && m.tex_height == 0 {
         sink.add_rgb(checker_texel(m, uv), g.color);
     } else if m.tex_width > 0 {
-        texture_backward(m.p_color, m.tex_width, m.tex_height, uv, g.color, sink);
+        texture_backward(m.p_color, m.tex_width, m.tex_height, m.tex_mode, uv, g.color, sink);
     } else {
         sink.add_rgb(m.p_color, g.color);
     }

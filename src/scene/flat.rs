@@ -6,12 +6,13 @@ use glam::Vec3;
 use crate::bvh::{self, Bvh};
 use crate::contract::{
     EmitterTri, FIELD_CONSTANT, FIELD_GRID, FieldDesc, MAT_BLEND, MAT_DIFFUSE, MAT_NULL, MAT_ROUGH_CONDUCTOR,
-    Material as GpuMaterial, MediumDesc, NO_EMITTER, NO_MEDIUM, NO_PARAM, PHASE_HG, PHASE_ISOTROPIC, TriShading,
+    Material as GpuMaterial, MediumDesc, NO_EMITTER, NO_MEDIUM, NO_PARAM, PHASE_HG, PHASE_ISOTROPIC, TEX_NEAREST,
+    TEX_WRAP_CLAMP, TEX_WRAP_MIRROR, TriShading,
 };
 use crate::error::Result;
 use crate::scene::medium::{Field, Phase};
 use crate::scene::shapes::triangle_area;
-use crate::scene::{Albedo, Material, Scene};
+use crate::scene::{Albedo, Material, Scene, Wrap};
 
 /// The GPU-layout arrays of one scene.
 #[derive(Clone, Debug, Default, PartialEq)]
@@ -165,6 +166,12 @@ fn flatten_material(scene: &Scene, m: &Material) -> GpuMaterial {
                 p_color: offset(t.texels),
                 tex_width: t.width,
                 tex_height: t.height,
+                tex_mode: if t.nearest { TEX_NEAREST } else { 0 }
+                    | match t.wrap {
+                        Wrap::Repeat => 0,
+                        Wrap::Mirror => TEX_WRAP_MIRROR,
+                        Wrap::Clamp => TEX_WRAP_CLAMP,
+                    },
                 ..Default::default()
             }
         }

@@ -28,7 +28,8 @@ pub struct MaterialId(pub u32);
 pub struct TextureId(pub u32);
 
 /// An RGB bitmap whose linear texels are one parameter (`width × height × 3` values, row 0 at
-/// v = 0), looked up bilinearly with repeat wrapping at the hit's texture coordinates.
+/// v = 0), looked up at the hit's texture coordinates as `filter` and `wrap` say (Mitsuba's
+/// `filter_type` and `wrap_mode`; bilinear and repeat by default).
 #[derive(Clone, Debug, PartialEq)]
 pub struct Texture {
     /// Width in texels.
@@ -37,6 +38,22 @@ pub struct Texture {
     pub height: u32,
     /// The texels, RGB, row-major.
     pub texels: ParamId,
+    /// Nearest texel instead of bilinear interpolation.
+    pub nearest: bool,
+    /// How texel indices outside the image wrap.
+    pub wrap: Wrap,
+}
+
+/// How a bitmap's texel indices outside the image wrap (Mitsuba's `wrap_mode`).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum Wrap {
+    /// Tiled.
+    #[default]
+    Repeat,
+    /// Tiled with every other tile mirrored.
+    Mirror,
+    /// The edge texels extend.
+    Clamp,
 }
 
 /// Where a diffuse albedo comes from.
@@ -382,7 +399,7 @@ impl Scene {
             });
         }
         let texels = self.params.add(name, texels, bounds::REFLECTANCE)?;
-        self.textures.push(Texture { width, height, texels });
+        self.textures.push(Texture { width, height, texels, nearest: false, wrap: Wrap::Repeat });
         Ok(TextureId(self.textures.len() as u32 - 1))
     }
 

@@ -73,6 +73,16 @@ def write_obj_quad_uv(path):
         "f 1/1 2/2 3/3 4/4\n")
 
 
+def write_obj_quad_uv_wide(path):
+    """The quad of write_obj_quad_uv with texture coordinates from -0.75 to 1.75 (2.5 repeats of an
+    8-texel image: every wrap mode shows), as two triangles."""
+    path.write_text(
+        "# quad [-1,1]^2 at z = 0 facing +z, texture coordinates -0.75 .. 1.75\n"
+        "v -1 -1 0\nv 1 -1 0\nv 1 1 0\nv -1 1 0\n"
+        "vt -0.75 -0.75\nvt 1.75 -0.75\nvt 1.75 1.75\nvt -0.75 1.75\n"
+        "f 1/1 2/2 3/3\nf 1/1 3/3 4/4\n")
+
+
 def write_ply_icosahedron_ascii(path):
     """Icosahedron (no subdivision) as ASCII PLY with vertex normals."""
     v, faces = icosphere(0)
@@ -316,6 +326,7 @@ def main():
     DATA.mkdir(parents=True, exist_ok=True)
     write_obj_icosphere(DATA / "icosphere.obj")
     write_obj_quad_uv(DATA / "quad_uv.obj")
+    write_obj_quad_uv_wide(DATA / "quad_uv_wide.obj")
     write_ply_icosahedron_ascii(DATA / "icosahedron_ascii.ply")
     write_ply_quad_uv_binary(DATA / "quad_uv_binary.ply")
     write_obj_pedestal(DATA / "pedestal.obj")

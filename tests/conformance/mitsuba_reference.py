@@ -54,6 +54,9 @@ MATRIX = {
     "texture_checkerboard": dict(features=["checkerboard", "to_uv (scale, rotate, translate)", "scene-level texture + ref",
                                            "default color0"],
                                  grads=["panel.bsdf.reflectance.color0.value", "panel.bsdf.reflectance.color1.value"]),
+    "texture_filter_wrap": dict(features=["bitmap filter_type nearest", "wrap_mode mirror", "wrap_mode clamp",
+                                          "uv outside [0, 1]"],
+                                grads=["mirrored.bsdf.reflectance.data", "clamped.bsdf.reflectance.data"]),
     "bsdf_diffuse_bitmap": dict(features=["diffuse", "bitmap sRGB PNG", "rectangle uv"], grads=["panel.bsdf.reflectance.data"]),
     # Mitsuba names a top-level texture reached through <ref> by its address (object_...), so its
     # data has no stable key: the gradient is the floor's.

@@ -8,7 +8,7 @@ use super::loader::{Loader, MAX_NESTING};
 use super::xml::{El, Props};
 use crate::bsdf::Distribution;
 use crate::error::Result;
-use crate::scene::{Albedo, Material, MaterialId, bounds};
+use crate::scene::{Albedo, Material, MaterialId, Wrap, bounds};
 
 /// The BSDF plugins pathgrad reads.
 const SUPPORTED_BSDFS: &str = "blendbsdf, diffuse, null, roughconductor, twosided";
@@ -240,16 +240,32 @@ impl<'a> Loader<'a> {
             .string(&self.x, "filename")?
             .ok_or_else(|| self.x.err(target, "'bitmap' needs the property 'filename'"))?;
         let raw = p.boolean(&self.x, "raw", false)?;
-        // `format` is the texels' storage: "variant" (the default) is float32, as pathgrad stores them.
-        for (prop, default) in [("filter_type", "bilinear"), ("wrap_mode", "repeat"), ("format", "variant")] {
-            if let Some((v, n)) = p.string(&self.x, prop)?
-                && v != default
-            {
-                let w = self
-                    .x
-                    .warning(n, format!("property '{prop}' = '{v}' of 'bitmap' ignored: pathgrad uses '{default}'"));
-                self.scene.warn(w);
+        let nearest = match p.string(&self.x, "filter_type")? {
+            None => false,
+            Some((v, _)) if v == "bilinear" => false,
+            Some((v, _)) if v == "nearest" => true,
+            Some((v, n)) => {
+                return Err(self.x.err(n, format!("'filter_type' must be 'bilinear' or 'nearest', got '{v}'")));
             }
+        };
+        let wrap = match p.string(&self.x, "wrap_mode")? {
+            None => Wrap::Repeat,
+            Some((v, n)) => match v.as_str() {
+                "repeat" => Wrap::Repeat,
+                "mirror" => Wrap::Mirror,
+                "clamp" => Wrap::Clamp,
+                _ => {
+                    return Err(self.x.err(n, format!("'wrap_mode' must be 'repeat', 'mirror' or 'clamp', got '{v}'")));
+                }
+            },
+        };
+        // `format` is the texels' storage: "variant" (the default) is float32, as pathgrad stores them.
+        if let Some((v, n)) = p.string(&self.x, "format")?
+            && v != "variant"
+        {
+            let w =
+                self.x.warning(n, format!("property 'format' = '{v}' of 'bitmap' ignored: pathgrad uses 'variant'"));
+            self.scene.warn(w);
         }
         let path = self.scene_file(&file).map_err(|m| self.x.err(file_node, m))?;
         if !path.is_file() {
@@ -274,6 +290,8 @@ impl<'a> Loader<'a> {
             .scene
             .add_texture(&format!("{name}.data"), width, height, &texels)
             .map_err(|e| self.located(target, e))?;
+        let texture = &mut self.scene.textures[t.0 as usize];
+        (texture.nearest, texture.wrap) = (nearest, wrap);
         self.finish(&p)?;
         self.textures.insert(target.id(), Albedo::Bitmap(t));
         Ok(Albedo::Bitmap(t))

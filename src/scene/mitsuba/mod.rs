@@ -14,7 +14,8 @@
 //!   and (meshes) `face_normals` (a mesh file without normals is shaded with Mitsuba's
 //!   angle-weighted vertex normals, computed in world space, unless `face_normals` is set); one `<bsdf>`/`<ref>` each (default: diffuse 0.5, as Mitsuba) and
 //!   optionally `<emitter type="area">` with `radiance`.
-//! - BSDFs `diffuse` (`reflectance`: colour, `<texture type="bitmap">` or
+//! - BSDFs `diffuse` (`reflectance`: colour, `<texture type="bitmap">` (`raw`, `filter_type`
+//!   bilinear/nearest, `wrap_mode` repeat/mirror/clamp) or
 //!   `<texture type="checkerboard">` with colour `color0`/`color1` and `to_uv`), `roughconductor`,
 //!   `blendbsdf`, `twosided`; `<emitter type="constant">` at scene level (the environment).
 //! - `<sensor type="perspective">` with `fov`/`focal_length`, `fov_axis`, `to_world`, a

@@ -505,7 +505,7 @@ fn ignored_settings_are_warned_about() {
 <integrator type="path"><integer name="rr_depth" value="3"/><boolean name="hide_emitters" value="true"/></integrator>
 <sensor type="perspective"><float name="near_clip" value="1.5"/>
 <film type="hdrfilm"><rfilter type="gaussian"/><string name="pixel_format" value="rgb"/></film><sampler type="independent"><integer name="seed" value="3"/></sampler></sensor>
-<shape type="cube"><bsdf type="diffuse"><texture type="bitmap" name="reflectance"><string name="filename" value="t.png"/><string name="filter_type" value="nearest"/></texture></bsdf></shape>
+<shape type="cube"><bsdf type="diffuse"><texture type="bitmap" name="reflectance"><string name="filename" value="t.png"/><string name="format" value="uint8"/></texture></bsdf></shape>
 </scene>"#;
     let dir = tempfile::tempdir().unwrap();
     image::RgbImage::from_raw(1, 1, vec![1, 2, 3]).unwrap().save(dir.path().join("t.png")).unwrap();
@@ -518,7 +518,7 @@ fn ignored_settings_are_warned_about() {
             "3:28: property 'near_clip' of 'perspective' ignored: pathgrad's camera does not clip",
             "2:25: property 'rr_depth' of 'path' ignored: pathgrad starts Russian roulette at depth 5",
             "2:61: property 'hide_emitters' of 'path' ignored: pathgrad shows emitters",
-            "5:122: property 'filter_type' = 'nearest' of 'bitmap' ignored: pathgrad uses 'bilinear'",
+            "5:122: property 'format' = 'uint8' of 'bitmap' ignored: pathgrad uses 'variant'",
             "1:1: the scene has no emitters: it renders black unless lit by an environment (LoadOptions::environment)",
         ]
     );
