@@ -98,6 +98,8 @@ MATRIX = {
     "shape_rectangle": dict(features=["rectangle", "non-uniform scale", "rotations"], grads=["board.bsdf.reflectance.value"]),
     "shape_cube": dict(features=["cube", "non-uniform scale"], grads=["box.bsdf.reflectance.value"]),
     "shape_disk": dict(features=["disk", "disk area light"], grads=["plate.bsdf.reflectance.value", "lamp.emitter.radiance.value"]),
+    "shape_cylinder": dict(features=["cylinder", "p0/p1/radius", "to_world", "uv (bitmap)"],
+                           grads=["pipe.bsdf.reflectance.data", "post.bsdf.reflectance.value"]),
     "shape_sphere": dict(features=["sphere", "center/radius", "to_world"], grads=["ball.bsdf.alpha.value"]),
     "shape_flip_normals": dict(features=["flip_normals", "rectangle", "area light"], grads=["light.emitter.radiance.value"]),
     "shape_flip_normals_obj": dict(features=["flip_normals", "obj"], grads=["mesh.bsdf.reflectance.value"]),

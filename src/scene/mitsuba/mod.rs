@@ -10,7 +10,8 @@
 //!   `translate`, `rotate` (axis, degrees), `scale`, `matrix` (16 row-major or 9 values) and
 //!   `lookat`, each left-multiplying what came before (later elements apply after earlier ones).
 //! - Shapes `obj`, `ply`, `serialized` (`shape_index`; its stored face-normals flag holds unless
-//!   the scene sets `face_normals`), `rectangle`, `cube`, `disk`, `sphere` with `to_world`, `flip_normals`
+//!   the scene sets `face_normals`), `rectangle`, `cube`, `disk`, `sphere`, `cylinder` (`p0`, `p1`,
+//!   `radius`; tessellated like the sphere) with `to_world`, `flip_normals`
 //!   and (meshes) `face_normals` (a mesh file without normals is shaded with Mitsuba's
 //!   angle-weighted vertex normals, computed in world space, unless `face_normals` is set); one `<bsdf>`/`<ref>` each (default: diffuse 0.5, as Mitsuba) and
 //!   optionally `<emitter type="area">` with `radiance`.

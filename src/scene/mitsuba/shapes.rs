@@ -7,7 +7,7 @@
 
 use std::f32::consts::{PI, TAU};
 
-use glam::{Mat4, Vec2, Vec3};
+use glam::{Mat4, Vec2, Vec3, Vec4};
 
 use super::loader::{Loader, MeshFormat};
 use super::xml::{El, Props};
@@ -16,7 +16,7 @@ use crate::scene::shapes::{Geometry, cuboid, merge, quad, triangle_area};
 use crate::scene::{Camera, MaterialId, bounds};
 
 /// The shape plugins pathgrad reads.
-const SUPPORTED_SHAPES: &str = "cube, disk, obj, ply, rectangle, sphere";
+const SUPPORTED_SHAPES: &str = "cube, cylinder, disk, obj, ply, rectangle, serialized, sphere";
 
 /// Largest distance, in pixels of the scene's film, between a tessellated curved shape and the
 /// true surface. A pixel straddling a silhouette of contrast C and coverage p has a 64-spp standard
@@ -78,6 +78,35 @@ pub fn unit_sphere(rings: u32, segments: u32) -> Geometry {
         }
     }
     Geometry { normals: Some(positions.clone()), positions, uvs: Some(uvs), indices }
+}
+
+/// Mitsuba's unit cylinder: the open tube of radius 1 about z from z = 0 to z = 1, outward normals
+/// (radial, for smooth shading of the analytic surface), `u = φ/2π` from +x towards +y and
+/// `v = z`, as `segments` quads split in two.
+pub fn unit_cylinder(segments: u32) -> Geometry {
+    let mut positions = Vec::new();
+    let mut normals = Vec::new();
+    let mut uvs = Vec::new();
+    for j in 0..=segments {
+        let phi = TAU * j as f32 / segments as f32;
+        let n = Vec3::new(phi.cos(), phi.sin(), 0.0);
+        for z in [0.0, 1.0] {
+            positions.push(n + Vec3::Z * z);
+            normals.push(n);
+            uvs.push(Vec2::new(j as f32 / segments as f32, z));
+        }
+    }
+    let indices = (0..segments).flat_map(|j| [[2 * j, 2 * j + 2, 2 * j + 3], [2 * j, 2 * j + 3, 2 * j + 1]]).collect();
+    Geometry { positions, normals: Some(normals), uvs: Some(uvs), indices }
+}
+
+/// Mitsuba's orthonormal frame around unit `n` (`coordinate_system`, Duff et al. 2017): the
+/// tangents a cylinder's φ = 0 and φ = π/2 point along.
+fn coordinate_system(n: Vec3) -> (Vec3, Vec3) {
+    let sign = 1.0f32.copysign(n.z);
+    let a = -1.0 / (sign + n.z);
+    let b = n.x * n.y * a;
+    (Vec3::new(1.0 + sign * n.x * n.x * a, sign * b, -sign * n.x), Vec3::new(b, sign + n.y * n.y * a, -n.y))
 }
 
 /// Mitsuba's unit disk in z = 0 facing +z, as a fan of `segments` triangles; `u` is the radius
@@ -203,6 +232,29 @@ impl<'a> Loader<'a> {
                 let (c, x, y, _) = columns(&to_world);
                 let n = segments_for(&self.scene.camera, c, x.length().max(y.length()), 1.0);
                 unit_disk(n).transformed(&to_world)
+            }
+            "cylinder" => {
+                let p0 = p.point(&self.x, "p0")?.map_or(Vec3::ZERO, |c| c.0);
+                let p1 = p.point(&self.x, "p1")?.map_or(Vec3::Z, |c| c.0);
+                let radius = match p.float(&self.x, "radius")? {
+                    None => 1.0,
+                    Some((r, _)) if r > 0.0 => r,
+                    Some((r, n)) => return Err(self.x.err(n, format!("'radius' must be positive, got {r}"))),
+                };
+                let axis = p1 - p0;
+                if !(axis.length() > 0.0) {
+                    return Err(self.x.err(node, "a cylinder's p0 and p1 must differ"));
+                }
+                // Mitsuba's placement: to_world · translate(p0) · frame(axis) · scale(r, r, |axis|).
+                let (s, t) = coordinate_system(axis.normalize());
+                let frame = Mat4::from_cols(s.extend(0.0), t.extend(0.0), axis.normalize().extend(0.0), Vec4::W);
+                let m = to_world
+                    * Mat4::from_translation(p0)
+                    * frame
+                    * Mat4::from_scale(Vec3::new(radius, radius, axis.length()));
+                let (c, x, y, _) = columns(&m);
+                let n = segments_for(&self.scene.camera, c, x.length().max(y.length()), 1.0);
+                unit_cylinder(n).transformed(&m)
             }
             "sphere" => {
                 let center = p.point(&self.x, "center")?.map_or(Vec3::ZERO, |c| c.0);

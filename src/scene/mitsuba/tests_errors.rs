@@ -227,8 +227,8 @@ fn element_and_property_errors() {
         (r#"<shape type="cube"><film type="hdrfilm"/></shape>"#, "<film>: a <film> is not expected inside 'cube'"),
         (r#"<shape/>"#, "<shape>: missing attribute 'type'"),
         (
-            r#"<shape type="cylinder"/>"#,
-            "<shape>: unsupported plugin 'cylinder' (supported: cube, disk, obj, ply, rectangle, sphere)",
+            r#"<shape type="shapegroup"/>"#,
+            "<shape>: unsupported plugin 'shapegroup' (supported: cube, cylinder, disk, obj, ply, rectangle, serialized, sphere)",
         ),
         (r#"<shape type="obj"/>"#, "<shape>: 'obj' needs the property 'filename'"),
         (

@@ -4,6 +4,8 @@
 
 use std::path::Path;
 
+use glam::Vec3;
+
 use super::loader::load_text;
 use super::tests::{SENSOR, obj_for_tests};
 use crate::scene::{LoadOptions, Scene};
@@ -244,4 +246,24 @@ fn a_pinholes_focus_distance_is_accepted_silently() {
         SENSOR.replace("<float name=\"fov\"", "<float name=\"focus_distance\" value=\"6\"/><float name=\"fov\"");
     let scene = text(&format!("{sensor}{LIGHT}")).unwrap();
     assert!(scene.warnings.is_empty(), "{:?}", scene.warnings);
+}
+
+#[test]
+fn a_cylinder_spans_p0_to_p1_with_outward_normals() {
+    let shape = r#"<shape type="cylinder" id="c"><point name="p0" value="0, -1, 0"/><point name="p1" value="0, 1, 0"/><float name="radius" value="0.5"/></shape>"#;
+    let scene = text(&format!("{SENSOR}{LIGHT}{shape}")).unwrap();
+    let mesh = scene.meshes.iter().find(|m| m.name == "c").unwrap();
+    let normals = mesh.normals.as_ref().unwrap();
+    for (p, n) in mesh.positions.iter().zip(normals) {
+        assert!((p.y.abs() - 1.0).abs() < 1e-6 && (Vec3::new(p.x, 0.0, p.z).length() - 0.5).abs() < 1e-6, "{p}");
+        assert!((*n - Vec3::new(p.x, 0.0, p.z) * 2.0).length() < 1e-5, "{p} {n}");
+    }
+    for t in &mesh.indices {
+        let [a, b, c] = t.map(|i| mesh.positions[i as usize]);
+        let centre = (a + b + c) / 3.0;
+        assert!((b - a).cross(c - a).dot(Vec3::new(centre.x, 0.0, centre.z)) > 0.0, "counter-clockwise from outside");
+    }
+    let same = r#"<shape type="cylinder"><point name="p0" value="1, 1, 1"/><point name="p1" value="1, 1, 1"/></shape>"#;
+    let err = text(&format!("{SENSOR}{LIGHT}{same}")).unwrap_err().to_string();
+    assert!(err.ends_with("a cylinder's p0 and p1 must differ"), "{err}");
 }
