@@ -69,7 +69,7 @@ pub enum Albedo {
         /// The two RGB colours (one parameter of six values, or two contiguous parameters: the
         /// first's id).
         colors: ParamId,
-        /// u' = dot(to_uv[0], (u, v, 1)), v' = dot(to_uv[1], (u, v, 1)).
+        /// `u' = dot(to_uv[0], (u, v, 1))`, `v' = dot(to_uv[1], (u, v, 1))`.
         to_uv: [Vec3; 2],
     },
 }
