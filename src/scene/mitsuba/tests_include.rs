@@ -89,8 +89,21 @@ fn errors_in_an_included_file_name_that_file_and_line() {
         "lib/more/ball.xml",
         "<scene version=\"3.0.0\">\n  <shape type=\"sphere\" id=\"ball\">\n    <float name=\"radiuss\" value=\"1\"/>\n  </shape>\n</scene>",
     );
+    // The scene file's own lines keep their numbers after the spliced text.
+    let main = dir.path().join("main.xml");
+    let text = std::fs::read_to_string(&main).unwrap();
+    std::fs::write(
+        &main,
+        text.replace(
+            r#"<emitter type="constant"/>"#,
+            r#"<emitter type="constant"><float name="scal" value="1"/></emitter>"#,
+        ),
+    )
+    .unwrap();
     let scene = load(dir.path(), &[], false).unwrap();
     let ball = dir.path().join("lib/more/ball.xml");
+    assert_eq!(scene.warnings[1], format!("{}:5:30: unknown property 'scal' of 'constant' ignored", main.display()));
+    let scene = Scene { warnings: scene.warnings[..1].to_vec(), ..scene };
     assert_eq!(scene.warnings, [format!("{}:3:5: unknown property 'radiuss' of 'sphere' ignored", ball.display())]);
 
     write(dir.path(), "lib/more/ball.xml", "<scene version=\"3.0.0\">\n  <shape type=\"sphere\">\n</scene>");
