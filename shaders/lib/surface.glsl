@@ -62,9 +62,17 @@ int wrap_texel(int i, int n, uint mode) {
 
 // The four texels a lookup at uv reads (row 0 is v = 0): their parameter offsets (RGB at
 // offset..offset+2) and weights — bilinear, or the nearest texel with weight 1 (`TEX_NEAREST`),
-// indices wrapped by `mode`. Shared by the lookup and its gradient.
+// indices wrapped by `mode`; or the checkerboard's texel with weight 1 (`TEX_CHECKER`). Shared by
+// the lookup and its gradient.
 void texture_footprint(uint offset, uint width, uint height, uint mode, vec2 uv, out uint texel[4],
                        out float weight[4]) {
+    if ((mode & TEX_CHECKER) != 0u) {
+        bvec2 upper = greaterThan(uv - floor(uv), vec2(0.5));
+        uint t = offset + (upper.x == upper.y ? 0u : 3u);
+        texel = uint[4](t, t, t, t);
+        weight = float[4](1.0, 0.0, 0.0, 0.0);
+        return;
+    }
     float x = uv.x * float(width) - 0.5;
     float y = uv.y * float(height) - 0.5;
     bool nearest = (mode & TEX_NEAREST) != 0u;
@@ -88,26 +96,19 @@ void texture_footprint(uint offset, uint width, uint height, uint mode, vec2 uv,
     weight[3] = fx * fy;
 }
 
-vec3 texture_bilinear(uint offset, uint width, uint height, uint mode, vec2 uv) {
+// A textured material's texture coordinates: the hit's through its `to_uv` rows.
+vec2 texture_uv(Material m, vec2 uv) {
+    vec3 p = vec3(uv, 1.0);
+    return vec2(dot(m.uv_row0, p), dot(m.uv_row1, p));
+}
+
+// A textured material's colour at the hit's texture coordinates uv.
+vec3 texture_lookup(Material m, vec2 uv) {
     uint texel[4];
     float weight[4];
-    texture_footprint(offset, width, height, mode, uv, texel, weight);
+    texture_footprint(m.p_color, m.tex_width, m.tex_height, m.tex_mode, texture_uv(m, uv), texel, weight);
     return param_rgb(texel[0]) * weight[0] + param_rgb(texel[1]) * weight[1] + param_rgb(texel[2]) * weight[2]
         + param_rgb(texel[3]) * weight[3];
-}
-
-// A checkerboard (Mitsuba's): its first colour (at p_color) where the transformed coordinates'
-// fractional parts lie on the same side of 1/2, else its second (at p_color + 3).
-uint checker_texel(Material m, vec2 uv) {
-    vec3 p = vec3(uv, 1.0);
-    vec2 t = vec2(dot(m.uv_row0, p), dot(m.uv_row1, p));
-    bvec2 upper = greaterThan(t - floor(t), vec2(0.5));
-    return m.p_color + (upper.x == upper.y ? 0u : 3u);
-}
-
-vec3 texture_color(Material m, vec2 uv) {
-    return m.tex_height == 0u ? param_rgb(checker_texel(m, uv))
-                              : texture_bilinear(m.p_color, m.tex_width, m.tex_height, m.tex_mode, uv);
 }
 
 Leaf leaf_from_material(Material m, vec2 uv) {
@@ -116,7 +117,7 @@ Leaf leaf_from_material(Material m, vec2 uv) {
     l.kind = conductor ? LEAF_ROUGH_CONDUCTOR : LEAF_DIFFUSE;
     l.distribution = m.distribution;
     l.alpha = conductor ? params[m.p_alpha] : 0.0;
-    l.color = (HAS(F_TEXTURE) && m.tex_width > 0u) ? texture_color(m, uv) : param_rgb(m.p_color);
+    l.color = (HAS(F_TEXTURE) && m.tex_width > 0u) ? texture_lookup(m, uv) : param_rgb(m.p_color);
     l.eta = m.eta;
     l.k = m.k;
     return l;
@@ -185,13 +186,14 @@ void push_rgb(uint offset, vec3 g) {
 
 void push_leaf(Material m, vec2 uv, LeafGrad g) {
     if (HAS(F_TEXTURE) && m.tex_width > 0u) {
-        if (HAS(G_TEXTURE) && m.tex_height == 0u) {
-            push_rgb(checker_texel(m, uv), g.color);
-        } else if (HAS(G_TEXTURE)) {
+        if (HAS(G_TEXTURE)) {
             uint texel[4];
             float weight[4];
-            texture_footprint(m.p_color, m.tex_width, m.tex_height, m.tex_mode, uv, texel, weight);
-            for (uint k = 0u; k < 4u; k++) push_rgb(texel[k], g.color * weight[k]);
+            texture_footprint(m.p_color, m.tex_width, m.tex_height, m.tex_mode, texture_uv(m, uv), texel, weight);
+            // A nearest or checkerboard lookup reads one texel: no pushes of zero for the rest.
+            for (uint k = 0u; k < 4u; k++) {
+                if (weight[k] != 0.0) push_rgb(texel[k], g.color * weight[k]);
+            }
         }
     } else if (HAS(G_COLOR)) {
         push_rgb(m.p_color, g.color);

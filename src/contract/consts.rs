@@ -56,6 +56,9 @@ contract_constants! {
     TEX_WRAP_MIRROR = 2;
     /// `Material::tex_mode`: clamped texel indices (Mitsuba's `clamp`); neither bit: `repeat`.
     TEX_WRAP_CLAMP = 4;
+    /// `Material::tex_mode`: Mitsuba's checkerboard, a 2×1 texture whose first texel is read
+    /// where the coordinates' fractional parts lie on the same side of 1/2, else its second.
+    TEX_CHECKER = 8;
 
     /// `TriShading::emitter` of a triangle that does not emit.
     NO_EMITTER = 0xFFFF_FFFF;

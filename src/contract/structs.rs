@@ -232,11 +232,11 @@ contract_structs! {
         p_color: u32,
         /// Texture width in texels; 0 when the color is constant.
         tex_width: u32,
-        /// Texture height in texels; 0 (with width 2) for a checkerboard, whose two colours are
-        /// the texels at `p_color` and `p_color + 3`.
+        /// Texture height in texels.
         tex_height: u32,
-        /// Bitmap lookup: `TEX_NEAREST` or bilinear, or-ed with `TEX_WRAP_MIRROR` or
-        /// `TEX_WRAP_CLAMP` (repeat when neither).
+        /// Texture lookup: `TEX_CHECKER` (a 2×1 texture of the checkerboard's two colours), else
+        /// `TEX_NEAREST` or bilinear, or-ed with `TEX_WRAP_MIRROR` or `TEX_WRAP_CLAMP` (repeat
+        /// when neither).
         tex_mode: u32,
         /// 1 if the material is seen from both sides.
         two_sided: u32,
@@ -248,9 +248,10 @@ contract_structs! {
         eta: Vec3,
         /// Imaginary part of the conductor's complex index of refraction (RGB).
         k: Vec3,
-        /// Checkerboard: row 0 of its texture-coordinate transform, u' = dot(uv_row0, (u, v, 1)).
+        /// Textured: row 0 of the texture-coordinate transform, u' = dot(uv_row0, (u, v, 1))
+        /// (Mitsuba's `to_uv`; (1, 0, 0) for none).
         uv_row0: Vec3,
-        /// Checkerboard: row 1, v' = dot(uv_row1, (u, v, 1)).
+        /// Textured: row 1, v' = dot(uv_row1, (u, v, 1)) ((0, 1, 0) for none).
         uv_row1: Vec3,
     }
 

@@ -4,7 +4,9 @@ use glam::Vec3;
 
 use crate::bsdf::{Bsdf, Distribution, Leaf, LeafGrad, bsdf_eval_grad};
 use crate::bvh::Hit;
-use crate::contract::{MAT_BLEND, MAT_ROUGH_CONDUCTOR, Material, TEX_NEAREST, TEX_WRAP_CLAMP, TEX_WRAP_MIRROR};
+use crate::contract::{
+    MAT_BLEND, MAT_ROUGH_CONDUCTOR, Material, TEX_CHECKER, TEX_NEAREST, TEX_WRAP_CLAMP, TEX_WRAP_MIRROR,
+};
 use crate::cpu::path::GradSink;
 use crate::scene::flat::FlatScene;
 
@@ -67,8 +69,14 @@ fn wrap_texel(i: i32, n: i32, mode: u32) -> i32 {
 
 /// The four texels a lookup at `uv` reads (row 0 is v = 0): their parameter offsets (RGB at
 /// `offset..offset + 2`) and weights — bilinear, or the nearest texel with weight 1
-/// (`TEX_NEAREST`), indices wrapped by `mode`. Shared by the lookup and its gradient.
+/// (`TEX_NEAREST`), indices wrapped by `mode`; or the checkerboard's texel with weight 1
+/// (`TEX_CHECKER`). Shared by the lookup and its gradient.
 pub fn texture_footprint(offset: u32, width: u32, height: u32, mode: u32, uv: glam::Vec2) -> ([u32; 4], [f32; 4]) {
+    if mode & TEX_CHECKER != 0 {
+        let upper = (uv - uv.floor()).cmpgt(glam::Vec2::splat(0.5));
+        let t = offset + if upper.x == upper.y { 0 } else { 3 };
+        return ([t; 4], [1.0, 0.0, 0.0, 0.0]);
+    }
     let x = uv.x * width as f32 - 0.5;
     let y = uv.y * height as f32 - 0.5;
     let nearest = mode & TEX_NEAREST != 0;
@@ -85,32 +93,23 @@ pub fn texture_footprint(offset: u32, width: u32, height: u32, mode: u32, uv: gl
     )
 }
 
-/// Bilinear lookup of the RGB texels at `params[offset..]`.
-pub fn texture_bilinear(params: &[f32], offset: u32, width: u32, height: u32, mode: u32, uv: glam::Vec2) -> Vec3 {
-    let (texel, weight) = texture_footprint(offset, width, height, mode, uv);
+/// A textured material's texture coordinates: the hit's `uv` through its `to_uv` rows.
+pub fn texture_uv(m: &Material, uv: glam::Vec2) -> glam::Vec2 {
+    let p = Vec3::new(uv.x, uv.y, 1.0);
+    glam::Vec2::new(m.uv_row0.dot(p), m.uv_row1.dot(p))
+}
+
+/// A textured material's colour at the hit's texture coordinates `uv`.
+pub fn texture_lookup(params: &[f32], m: &Material, uv: glam::Vec2) -> Vec3 {
+    let (texel, weight) = texture_footprint(m.p_color, m.tex_width, m.tex_height, m.tex_mode, texture_uv(m, uv));
     param_rgb(params, texel[0]) * weight[0]
         + param_rgb(params, texel[1]) * weight[1]
         + param_rgb(params, texel[2]) * weight[2]
         + param_rgb(params, texel[3]) * weight[3]
 }
 
-/// A checkerboard (Mitsuba's): the offset of its first colour (at `p_color`) where the transformed
-/// coordinates' fractional parts lie on the same side of 1/2, else of its second.
-pub fn checker_texel(m: &Material, uv: glam::Vec2) -> u32 {
-    let p = Vec3::new(uv.x, uv.y, 1.0);
-    let t = glam::Vec2::new(m.uv_row0.dot(p), m.uv_row1.dot(p));
-    let upper = (t - t.floor()).cmpgt(glam::Vec2::splat(0.5));
-    m.p_color + if upper.x == upper.y { 0 } else { 3 }
-}
-
 fn leaf_from_material(params: &[f32], m: &Material, uv: glam::Vec2) -> Leaf {
-    let color = if m.tex_width > 0 && m.tex_height == 0 {
-        param_rgb(params, checker_texel(m, uv))
-    } else if m.tex_width > 0 {
-        texture_bilinear(params, m.p_color, m.tex_width, m.tex_height, m.tex_mode, uv)
-    } else {
-        param_rgb(params, m.p_color)
-    };
+    let color = if m.tex_width > 0 { texture_lookup(params, m, uv) } else { param_rgb(params, m.p_color) };
     if m.tag == MAT_ROUGH_CONDUCTOR {
         let distribution =
             if m.distribution == Distribution::Ggx as u32 { Distribution::Ggx } else { Distribution::Beckmann };
@@ -133,27 +132,20 @@ pub fn resolve_bsdf(flat: &FlatScene, id: u32, uv: glam::Vec2) -> Bsdf {
     }
 }
 
-/// Scatters ∂/∂(texels) of a bilinear lookup: per-channel gradient `g` split by the four weights.
-pub fn texture_backward(
-    offset: u32,
-    width: u32,
-    height: u32,
-    mode: u32,
-    uv: glam::Vec2,
-    g: Vec3,
-    sink: &mut GradSink<'_>,
-) {
-    let (texel, weight) = texture_footprint(offset, width, height, mode, uv);
+/// Scatters ∂/∂(texels) of a lookup: per-channel gradient `g` split by the footprint's weights
+/// (a nearest or checkerboard lookup reads one texel: nothing is added for the rest).
+pub fn texture_backward(m: &Material, uv: glam::Vec2, g: Vec3, sink: &mut GradSink<'_>) {
+    let (texel, weight) = texture_footprint(m.p_color, m.tex_width, m.tex_height, m.tex_mode, texture_uv(m, uv));
     for (t, w) in texel.into_iter().zip(weight) {
-        sink.add_rgb(t, g * w);
+        if w != 0.0 {
+            sink.add_rgb(t, g * w);
+        }
     }
 }
 
 fn leaf_backward(m: &Material, uv: glam::Vec2, g: &LeafGrad, sink: &mut GradSink<'_>) {
-    if m.tex_width > 0 && m.tex_height == 0 {
-        sink.add_rgb(checker_texel(m, uv), g.color);
-    } else if m.tex_width > 0 {
-        texture_backward(m.p_color, m.tex_width, m.tex_height, m.tex_mode, uv, g.color, sink);
+    if m.tex_width > 0 {
+        texture_backward(m, uv, g.color, sink);
     } else {
         sink.add_rgb(m.p_color, g.color);
     }

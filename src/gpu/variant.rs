@@ -55,11 +55,7 @@ pub fn param_kinds(flat: &FlatScene, env_param: u32, begin: u32, end: u32) -> Pa
     for m in &flat.materials {
         match m.tag {
             MAT_DIFFUSE | MAT_ROUGH_CONDUCTOR => {
-                let texels = match (m.tex_width, m.tex_height) {
-                    (0, _) => 1,
-                    (_, 0) => 2, // a checkerboard's two colours
-                    (w, h) => w * h,
-                };
+                let texels = if m.tex_width > 0 { m.tex_width * m.tex_height } else { 1 };
                 if overlaps(m.p_color, 3 * texels) {
                     k = k.union(if m.tex_width > 0 { ParamKinds::TEXTURE } else { ParamKinds::COLOR });
                 }

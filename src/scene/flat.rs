@@ -6,8 +6,8 @@ use glam::Vec3;
 use crate::bvh::{self, Bvh};
 use crate::contract::{
     EmitterTri, FIELD_CONSTANT, FIELD_GRID, FieldDesc, MAT_BLEND, MAT_DIFFUSE, MAT_NULL, MAT_ROUGH_CONDUCTOR,
-    Material as GpuMaterial, MediumDesc, NO_EMITTER, NO_MEDIUM, NO_PARAM, PHASE_HG, PHASE_ISOTROPIC, TEX_NEAREST,
-    TEX_WRAP_CLAMP, TEX_WRAP_MIRROR, TriShading,
+    Material as GpuMaterial, MediumDesc, NO_EMITTER, NO_MEDIUM, NO_PARAM, PHASE_HG, PHASE_ISOTROPIC, TEX_CHECKER,
+    TEX_NEAREST, TEX_WRAP_CLAMP, TEX_WRAP_MIRROR, TriShading,
 };
 use crate::error::Result;
 use crate::scene::medium::{Field, Phase};
@@ -154,7 +154,8 @@ fn flatten_material(scene: &Scene, m: &Material) -> GpuMaterial {
             tag: MAT_DIFFUSE,
             p_color: offset(colors),
             tex_width: 2,
-            tex_height: 0,
+            tex_height: 1,
+            tex_mode: TEX_CHECKER,
             uv_row0: to_uv[0],
             uv_row1: to_uv[1],
             ..Default::default()
@@ -172,6 +173,8 @@ fn flatten_material(scene: &Scene, m: &Material) -> GpuMaterial {
                         Wrap::Mirror => TEX_WRAP_MIRROR,
                         Wrap::Clamp => TEX_WRAP_CLAMP,
                     },
+                uv_row0: Vec3::X,
+                uv_row1: Vec3::Y,
                 ..Default::default()
             }
         }

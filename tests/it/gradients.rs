@@ -32,6 +32,10 @@ fn cases() -> Vec<(Scene, Vec<&'static str>)> {
             scenes::conformance("texture_checkerboard"),
             vec!["panel.bsdf.reflectance.color0.value", "panel.bsdf.reflectance.color1.value", "tiles.color1.value"],
         ),
+        (
+            scenes::conformance("texture_filter_wrap"),
+            vec!["mirrored.bsdf.reflectance.data", "clamped.bsdf.reflectance.data"],
+        ),
     ]
 }
 

@@ -100,15 +100,6 @@ pub fn unit_cylinder(segments: u32) -> Geometry {
     Geometry { positions, normals: Some(normals), uvs: Some(uvs), indices }
 }
 
-/// Mitsuba's orthonormal frame around unit `n` (`coordinate_system`, Duff et al. 2017): the
-/// tangents a cylinder's φ = 0 and φ = π/2 point along.
-fn coordinate_system(n: Vec3) -> (Vec3, Vec3) {
-    let sign = 1.0f32.copysign(n.z);
-    let a = -1.0 / (sign + n.z);
-    let b = n.x * n.y * a;
-    (Vec3::new(1.0 + sign * n.x * n.x * a, sign * b, -sign * n.x), Vec3::new(b, sign + n.y * n.y * a, -n.y))
-}
-
 /// Mitsuba's unit disk in z = 0 facing +z, as a fan of `segments` triangles; `u` is the radius
 /// and `v = φ/2π`.
 pub fn unit_disk(segments: u32) -> Geometry {
@@ -245,9 +236,10 @@ impl<'a> Loader<'a> {
                 if !(axis.length() > 0.0) {
                     return Err(self.x.err(node, "a cylinder's p0 and p1 must differ"));
                 }
-                // Mitsuba's placement: to_world · translate(p0) · frame(axis) · scale(r, r, |axis|).
-                let (s, t) = coordinate_system(axis.normalize());
-                let frame = Mat4::from_cols(s.extend(0.0), t.extend(0.0), axis.normalize().extend(0.0), Vec4::W);
+                // Mitsuba's placement: to_world · translate(p0) · frame(axis) · scale(r, r, |axis|),
+                // the frame Mitsuba's `coordinate_system` builds (Duff et al.), as `Frame` does.
+                let f = crate::sampling::Frame::from_normal(axis.normalize());
+                let frame = Mat4::from_cols(f.t.extend(0.0), f.b.extend(0.0), f.n.extend(0.0), Vec4::W);
                 let m = to_world
                     * Mat4::from_translation(p0)
                     * frame
