@@ -18,7 +18,7 @@
 //! per scene is sized for it from the reference's own variance, then, where that falls short, from
 //! its own measured variance, within a budget (`SPP_RANGE`); a quantity that fails at fewer than
 //! the budget's top is rendered again at 4× the samples and judged by its last render
-//! (`failing_tests`).
+//! (`disagreements`).
 //!
 //! Every scene must also load without a warning (a warning means pathgrad approximates something,
 //! which the matrix must not pass silently) but those its reference lists (`warnings`: a stand-in
@@ -192,35 +192,41 @@ fn detectable(sp: f64, np: f64, sm: f64, nm: f64, alpha: f64) -> f64 {
     (t_threshold(alpha, dof) + t_threshold(2.0 * (1.0 - POWER), dof)) * var.sqrt()
 }
 
-/// The block channels and image means that fail the test at pathgrad's present sample count.
+/// Every block channel and image mean of `mine` that fails Welch's test against `theirs` at
+/// per-test level `alpha`, as messages (`block B channel C: …`, `image mean channel C: …`), and
+/// the least p-value seen.
 ///
-/// At a few samples a pixel, a block that light reaches through unlikely paths (a corner seeing a
-/// reflection of a textured panel) has a heavy-tailed per-seed mean: most seeds see little or
-/// nothing, a few see much, and the standard error estimated from 32 such seeds is far too small,
-/// so Welch's t "fails" on a mean that more samples bring to Mitsuba's. A quantity with any
-/// failure below the budget's top is therefore rendered again at 4× the samples, and only the
-/// last render is judged. This keeps the test's level (a failure still needs the last, largest
-/// render to fail at the Bonferroni level) and only adds power: a real difference stays while
-/// the standard errors shrink.
-fn failing_tests(mine: &Stats, theirs: &Stats, alpha: f64, nm: f64) -> usize {
+/// Also what decides whether a quantity is rendered again. At a few samples a pixel, a block that
+/// light reaches through unlikely paths (a corner seeing a reflection of a textured panel) has a
+/// heavy-tailed per-seed mean: most seeds see little or nothing, a few see much, and the standard
+/// error estimated from 32 such seeds is far too small, so Welch's t "fails" on a mean that more
+/// samples bring to Mitsuba's. A quantity with any failure below the budget's top is therefore
+/// rendered again at 4× the samples, and only the last render is judged. This keeps the test's
+/// level (a failure still needs the last, largest render to fail at the Bonferroni level) and only
+/// adds power: a real difference stays while the standard errors shrink.
+fn disagreements(mine: &Stats, theirs: &Stats, alpha: f64, nm: f64) -> (Vec<String>, f64) {
     let np = f64::from(SEEDS);
-    let blocks = (0..mine.mean.len())
-        .map(|b| {
-            (0..3)
-                .filter(|&c| {
-                    let (mp, sp, mm, sm) = (mine.mean[b][c], mine.se[b][c], theirs.mean[b][c], theirs.se[b][c]);
-                    welch(mp, sp, np, mm, sm, nm).2 < alpha
-                })
-                .count()
-        })
-        .sum::<usize>();
-    let images = (0..3)
-        .filter(|&c| {
-            let (mp, sp, mm, sm) = (mine.image_mean[c], mine.image_se[c], theirs.image_mean[c], theirs.image_se[c]);
-            welch(mp, sp, np, mm, sm, nm).2 < alpha
-        })
-        .count();
-    blocks + images
+    let mut out = Vec::new();
+    let mut least = 1.0f64;
+    let mut test = |what: String, mp: f64, sp: f64, mm: f64, sm: f64, digits: usize| {
+        let (t, dof, pv) = welch(mp, sp, np, mm, sm, nm);
+        least = least.min(pv);
+        if pv < alpha {
+            out.push(format!(
+                "{what}: {mp:.digits$} ± {sp:.2e} vs Mitsuba {mm:.digits$} ± {sm:.2e} (t {t:.1}, {dof:.0} dof, p {pv:.1e})"
+            ));
+        }
+    };
+    for (b, (mp, mm)) in mine.mean.iter().zip(&theirs.mean).enumerate() {
+        for c in 0..3 {
+            test(format!("block {b} channel {c}"), mp[c], mine.se[b][c], mm[c], theirs.se[b][c], 5);
+        }
+    }
+    for c in 0..3 {
+        let (mp, sp, mm, sm) = (mine.image_mean[c], mine.image_se[c], theirs.image_mean[c], theirs.image_se[c]);
+        test(format!("image mean channel {c}"), mp, sp, mm, sm, 6);
+    }
+    (out, least)
 }
 
 /// One reference: the scene, its statistics, what to compare.
@@ -438,7 +444,7 @@ fn conformance_matrix_agrees_with_mitsuba() {
                     .filter(|&c| scale[c] > 0.0)
                     .map(|c| detectable(mine.image_se[c], np, theirs.image_se[c], nm, alpha) / (bias * scale[c]))
                     .fold(0.0f64, f64::max);
-                let failing = failing_tests(&mine, &theirs, alpha, nm);
+                let failing = disagreements(&mine, &theirs, alpha, nm).0.len();
                 if (short <= 1.0 && failing == 0) || spp >= SPP_RANGE.1 {
                     break;
                 }
@@ -449,32 +455,13 @@ fn conformance_matrix_agrees_with_mitsuba() {
             }
             let what = key.clone().unwrap_or_else(|| "primal".into());
             assert_eq!(mine.mean.len(), theirs.mean.len(), "{}: block count", r.name);
-            let mut least = 1.0f64;
-            for (b, (mp, mm)) in mine.mean.iter().zip(&theirs.mean).enumerate() {
-                for c in 0..3 {
-                    let (t, dof, pv) = welch(mp[c], mine.se[b][c], np, mm[c], theirs.se[b][c], nm);
-                    least = least.min(pv);
-                    if pv < alpha {
-                        failures.push(format!(
-                            "{} {what}: block {b} channel {c}: {:.5} ± {:.2e} vs Mitsuba {:.5} ± {:.2e} (t {t:.1}, {dof:.0} dof, p {pv:.1e})",
-                            r.name, mp[c], mine.se[b][c], mm[c], theirs.se[b][c]
-                        ));
-                    }
-                }
-            }
+            let (failed, least) = disagreements(&mine, &theirs, alpha, nm);
+            failures.extend(failed.into_iter().map(|f| format!("{} {what}: {f}", r.name)));
             let mut ratio = [0.0; 3];
             let mut sees = 0.0f64;
             for c in 0..3 {
-                let (mp, sp, mm, sm) = (mine.image_mean[c], mine.image_se[c], theirs.image_mean[c], theirs.image_se[c]);
-                let (t, dof, pv) = welch(mp, sp, np, mm, sm, nm);
-                least = least.min(pv);
-                ratio[c] = if mm != 0.0 { mp / mm } else { f64::NAN };
-                if pv < alpha {
-                    failures.push(format!(
-                        "{} {what}: image mean channel {c}: {mp:.6} ± {sp:.2e} vs Mitsuba {mm:.6} ± {sm:.2e} (t {t:.1}, {dof:.0} dof, p {pv:.1e})",
-                        r.name
-                    ));
-                }
+                let (sp, mm, sm) = (mine.image_se[c], theirs.image_mean[c], theirs.image_se[c]);
+                ratio[c] = if mm != 0.0 { mine.image_mean[c] / mm } else { f64::NAN };
                 // The power check: the bias this test would see 95 % of the time.
                 let detectable = detectable(sp, np, sm, nm, alpha);
                 if scale[c] > 0.0 {
