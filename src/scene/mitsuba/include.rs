@@ -16,6 +16,7 @@
 
 use std::path::{Path, PathBuf};
 
+use super::xml::Xml;
 use crate::error::{Error, Result};
 use crate::scene::load::scene_file;
 
@@ -110,18 +111,14 @@ impl Splicer {
             Error::Scene { location, message }
         })?;
         let root = doc.root_element();
-        let located = |node: roxmltree::Node<'_, '_>| {
-            let p = doc.text_pos_at(node.range().start);
-            format!("{name}:{}:{}", p.row, p.col)
-        };
+        let x = Xml::new(name.clone(), &doc);
         let range = match included {
             None => 0..text.len(),
             Some(at) => {
                 if root.tag_name().name() != "scene" {
-                    return Err(Error::Scene {
-                        location: located(root),
-                        message: format!("an included file's root element must be <scene> (included at {at})"),
-                    });
+                    return Err(
+                        x.err(root, format!("an included file's root element must be <scene> (included at {at})"))
+                    );
                 }
                 match (root.first_child(), root.last_child()) {
                     (Some(first), Some(last)) => first.range().start..last.range().end,
@@ -131,41 +128,38 @@ impl Splicer {
         };
         let mut cursor = range.start;
         for c in root.children().filter(|c| c.is_element()) {
-            let err = |message: String| Error::Scene { location: located(c), message };
+            let err = |message: String| x.err(c, message);
+            let attribute = |name: &str| -> Result<&str> {
+                x.check_attrs(c, &[name])?;
+                c.attribute(name).ok_or_else(|| err(format!("missing attribute '{name}'")))
+            };
             match c.tag_name().name() {
                 "path" => {
-                    let value = attribute(c, "value").map_err(err)?;
+                    let value = attribute("value")?;
                     // Beside the file that names it, else along the search list (Mitsuba's order).
                     let folder = match scene_file(file_dir, value, self.allow_outside) {
                         Ok(beside) if beside.is_dir() => beside,
-                        beside => find(&self.out.search, &self.dir, value, self.allow_outside)
-                            .or(beside)
-                            .map_err(|m| err(format!("<path>: {m}")))?,
+                        beside => {
+                            find(&self.out.search, &self.dir, value, self.allow_outside).or(beside).map_err(err)?
+                        }
                     };
                     if !folder.is_dir() {
-                        return Err(err(format!(
-                            "<path>: folder '{value}' not found (looked for {})",
-                            folder.display()
-                        )));
+                        return Err(err(format!("folder '{value}' not found (looked for {})", folder.display())));
                     }
                     self.out.search.insert(0, folder);
                 }
                 "include" => {
-                    let value = attribute(c, "filename").map_err(err)?;
-                    let path = find(&self.out.search, &self.dir, value, self.allow_outside)
-                        .map_err(|m| err(format!("<include>: {m}")))?;
+                    let value = attribute("filename")?;
+                    let path = find(&self.out.search, &self.dir, value, self.allow_outside).map_err(err)?;
                     if !path.is_file() {
-                        return Err(err(format!(
-                            "<include>: included file '{value}' not found (looked for {})",
-                            path.display()
-                        )));
+                        return Err(err(format!("included file '{value}' not found (looked for {})", path.display())));
                     }
                     let real = path.canonicalize().unwrap_or_else(|_| path.clone());
                     if self.stack.contains(&real) {
-                        return Err(err(format!("<include>: '{value}' includes itself")));
+                        return Err(err(format!("'{value}' includes itself")));
                     }
                     if self.stack.len() >= MAX_DEPTH {
-                        return Err(err(format!("<include>: more than {MAX_DEPTH} nested includes")));
+                        return Err(err(format!("more than {MAX_DEPTH} nested includes")));
                     }
                     let bytes = std::fs::read(&path).map_err(|source| Error::Io { path: path.clone(), source })?;
                     let included_text = String::from_utf8(bytes).map_err(|e| Error::Scene {
@@ -177,7 +171,7 @@ impl Splicer {
                     self.out.files.push((path.display().to_string(), included_text));
                     self.stack.push(real);
                     let parent = path.parent().map(Path::to_path_buf).unwrap_or_default();
-                    self.expand(self.out.files.len() - 1, Some(&located(c)), &parent)?;
+                    self.expand(self.out.files.len() - 1, Some(&x.loc(c)), &parent)?;
                     self.stack.pop();
                 }
                 _ => {}
@@ -193,12 +187,4 @@ impl Splicer {
             self.out.text.push_str(&text[range]);
         }
     }
-}
-
-fn attribute<'a>(node: roxmltree::Node<'a, '_>, name: &str) -> std::result::Result<&'a str, String> {
-    let tag = node.tag_name().name();
-    if let Some(other) = node.attributes().find(|a| a.name() != name) {
-        return Err(format!("<{tag}>: unexpected attribute '{}' (it takes only '{name}')", other.name()));
-    }
-    node.attribute(name).ok_or_else(|| format!("<{tag}>: missing attribute '{name}'"))
 }
