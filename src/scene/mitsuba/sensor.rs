@@ -336,19 +336,14 @@ impl<'a> Loader<'a> {
             for count in ["emitter_samples", "bsdf_samples", "shading_samples"] {
                 p.integer(&self.x, count)?;
             }
-            let hide = p.boolean(&self.x, "hide_emitters", false)?.then(|| p.node_of("hide_emitters")).flatten();
-            self.finish(&p)?;
             self.scene.max_depth = 2;
             let w = self.x.warning(
                 node,
                 "'direct' integrator: rendered as a path tracer of max_depth 2 (the same image, other noise)",
             );
             self.scene.warn(w);
-            if let Some(n) = hide {
-                let w = self.x.warning(n, "property 'hide_emitters' of 'direct' ignored: pathgrad shows emitters");
-                self.scene.warn(w);
-            }
-            return Ok(());
+            self.warn_hide_emitters(&p, node)?;
+            return self.finish(&p);
         }
         if !matches!(p.kind.as_str(), "path" | "prb" | "prb_basic" | "volpath" | "volpathmis" | "prbvolpath") {
             return Err(self.x.err(
@@ -390,13 +385,19 @@ impl<'a> Loader<'a> {
             );
             self.scene.warn(w);
         }
+        self.warn_hide_emitters(&p, node)?;
+        self.finish(&p)
+    }
+
+    /// An integrator's `hide_emitters` set to true: pathgrad shows emitters, and says so.
+    fn warn_hide_emitters(&mut self, p: &Props<'a>, node: El<'a>) -> Result<()> {
         if p.boolean(&self.x, "hide_emitters", false)? {
             let n = p.node_of("hide_emitters").unwrap_or(node);
             let w =
                 self.x.warning(n, format!("property 'hide_emitters' of '{}' ignored: pathgrad shows emitters", p.kind));
             self.scene.warn(w);
         }
-        self.finish(&p)
+        Ok(())
     }
 }
 
