@@ -61,6 +61,14 @@ vec4 draw_block(uint key1, uint pixel, uint sample_index, uint vertex, uint bloc
     return uniform4(uvec2(globals.key0, key1), pixel, sample_index, vertex, STREAM_MAIN, block, 0u);
 }
 
+// Next-event estimation's two uniforms for an environment map's cell at vertex `vertex` (block 2);
+// unused, and not drawn, without a map.
+vec2 env_cell_uniforms(uint key1, uint pixel, uint sample_index, uint vertex) {
+    if (!HAS(F_ENV_MAP)) return vec2(0.0);
+    vec4 u = draw_block(key1, pixel, sample_index, vertex, DIM_ENV_CELL / 4u);
+    return vec2(u[DIM_ENV_CELL % 4u], u[DIM_ENV_CELL % 4u + 1u]);
+}
+
 // What a path segment reaches (path_step).
 #define EVENT_ESCAPE 0u
 #define EVENT_SURFACE 1u
@@ -251,12 +259,12 @@ bool path_step(inout PathState st) {
                 scatter = true;
                 if (nee) {
                     vec4 u_em = draw_block(st.key1, st.pixel, st.sample_index, vertex, DIM_EMITTER_SELECT / 4u);
-                    es = sample_emitter(u_em[DIM_EMITTER_SELECT % 4u], vec2(u_em[DIM_EMITTER_POS % 4u], u_em[DIM_EMITTER_POS % 4u + 1u]));
+                    es = sample_emitter(u_em[DIM_EMITTER_SELECT % 4u], vec2(u_em[DIM_EMITTER_POS % 4u], u_em[DIM_EMITTER_POS % 4u + 1u]), env_cell_uniforms(st.key1, st.pixel, st.sample_index, vertex));
                     if (es.valid) {
                         vec3 wl;
                         if (HAS(F_ENV) && es.environment) {
                             wl = es.point;
-                            nee_pdf = environment_pdf();
+                            nee_pdf = environment_pdf(wl);
                             shadow_tmax = FLOAT_MAX;
                         } else {
                             vec3 to_light = es.point - x_medium;
@@ -278,9 +286,13 @@ bool path_step(inout PathState st) {
         } else if (event == EVENT_ESCAPE) {
             // ---- environment hit ----
             if (HAS(F_ENV) && globals.env_param != NO_PARAM) {
-                float w_b = hit_weight(diff, st.prev_nee, st.prev_pdf_f, environment_pdf(), st.prev_sum);
-                st.radiance += sign * (st.throughput * w_b * param_rgb(globals.env_param));
-                if (HAS(G_ENV)) { gt.hit_param = globals.env_param; gt.hit = st.adj * st.throughput * w_b; }
+                float w_b = hit_weight(diff, st.prev_nee, st.prev_pdf_f, environment_pdf(st.ray.dir), st.prev_sum);
+                st.radiance += sign * (st.throughput * w_b * env_radiance(st.ray.dir));
+                if (HAS(G_ENV)) {
+                    gt.hit_param = globals.env_param;
+                    gt.hit = st.adj * st.throughput * w_b;
+                    gt.env_dir = st.ray.dir;
+                }
             }
             ended = true;
         } else {
@@ -312,14 +324,14 @@ bool path_step(inout PathState st) {
                 // ---- emitter sampling: the sample and its unoccluded terms; the shadow ray is pass 1's ----
                 if (nee) {
                     vec4 u_em = draw_block(st.key1, st.pixel, st.sample_index, vertex, DIM_EMITTER_SELECT / 4u);
-                    es = sample_emitter(u_em[DIM_EMITTER_SELECT % 4u], vec2(u_em[DIM_EMITTER_POS % 4u], u_em[DIM_EMITTER_POS % 4u + 1u]));
+                    es = sample_emitter(u_em[DIM_EMITTER_SELECT % 4u], vec2(u_em[DIM_EMITTER_POS % 4u], u_em[DIM_EMITTER_POS % 4u + 1u]), env_cell_uniforms(st.key1, st.pixel, st.sample_index, vertex));
                     if (es.valid) {
                         vec3 wl;
                         vec3 origin;
                         if (HAS(F_ENV) && es.environment) {
                             wl = es.point;
                             origin = offset_origin(s.p, s.ng, wl);
-                            nee_pdf = environment_pdf();
+                            nee_pdf = environment_pdf(wl);
                             shadow_tmax = FLOAT_MAX;
                         } else {
                             origin = offset_origin(s.p, s.ng, es.point - s.p);
@@ -366,6 +378,7 @@ bool path_step(inout PathState st) {
                 if (es.environment ? HAS(G_ENV) : HAS(G_EMISSION)) {
                     gt.nee_param = es.param;
                     gt.nee = st.adj * st.throughput * tr * nee_w * nee_phase / nee_pdf;
+                    gt.env_dir = es.point;
                 }
             }
         }
@@ -394,6 +407,7 @@ bool path_step(inout PathState st) {
             if (es.environment ? HAS(G_ENV) : HAS(G_EMISSION)) {
                 gt.nee_param = es.param;
                 gt.nee = st.adj * st.throughput * tr * nee_w * nee_f / nee_pdf;
+                gt.env_dir = es.point;
             }
         }
 

@@ -1,4 +1,5 @@
-// Area emitters on triangles: area-proportional sampling and densities (twin of src/cpu/emitter.rs).
+// Area emitters on triangles and the environment (constant or a map): sampling, radiance and
+// densities (twin of src/cpu/emitter.rs; the map's functions twin src/scene/envmap.rs).
 #ifndef PATHGRAD_EMITTER_GLSL
 #define PATHGRAD_EMITTER_GLSL
 
@@ -6,17 +7,107 @@
 #include "sampling.glsl"
 #include "features.glsl"
 
+layout(buffer_reference, scalar, buffer_reference_align = 4) readonly buffer EnvCellArray { EnvCell v[]; };
+#define env_cells (EnvCellArray(globals.addr_env_cells).v)
+
+// ---- the environment map (src/scene/envmap.rs states the conventions) ----
+
+// atan2(y, x) by the polynomial of envmap::atan2_poly (lavapipe's atan and acos differ from the
+// CPU twin's by about 1e-5).
+float atan2_poly(float y, float x) {
+    float ax = abs(x);
+    float ay = abs(y);
+    float hi = max(ax, ay);
+    float a = hi > 0.0 ? min(ax, ay) / hi : 0.0;
+    float s = a * a;
+    float p = -0.0040733092;
+    p = p * s + 0.02194661;
+    p = p * s - 0.056063175;
+    p = p * s + 0.096562564;
+    p = p * s - 0.13915803;
+    p = p * s + 0.1994851;
+    p = p * s - 0.33330107;
+    p = p * s + 0.99999946;
+    float r = p * a;
+    if (ay > ax) r = 0.5 * PI - r;
+    if (x < 0.0) r = PI - r;
+    return y < 0.0 ? -r : r;
+}
+
+// The map's (u, v) of world direction `dir` (unit).
+vec2 env_uv(vec3 dir) {
+    vec3 d = vec3(dot(globals.env_rot0, dir), dot(globals.env_rot1, dir), dot(globals.env_rot2, dir));
+    float u = atan2_poly(d.x, -d.z) * (0.5 * INV_PI);
+    return vec2(u - floor(u), atan2_poly(sqrt(d.x * d.x + d.z * d.z), d.y) * INV_PI);
+}
+
+// The cell (i, j) that `dir` lies in and the bilinear weights (fx, fy) of its corners there.
+uvec2 env_cell_at(vec3 dir, out vec2 f) {
+    vec2 uv = env_uv(dir);
+    float x = uv.x * float(globals.env_width) - 0.5;
+    float x0 = floor(x);
+    int w = int(globals.env_width);
+    float y = clamp(uv.y, 0.0, 1.0) * float(globals.env_height - 1u);
+    float y0 = min(floor(y), float(globals.env_height - 2u));
+    f = vec2(x - x0, y - y0);
+    return uvec2(uint(((int(x0) % w) + w) % w), uint(y0));
+}
+
+// The parameter offsets of the four texels around `dir` and their bilinear weights.
+void env_footprint(vec3 dir, out uint texel[4], out float weight[4]) {
+    vec2 f;
+    uvec2 c = env_cell_at(dir, f);
+    uint w = globals.env_width;
+    uint i1 = (c.x + 1u) % w;
+    uint base = globals.env_param;
+    texel = uint[4](base + 3u * (c.y * w + c.x), base + 3u * (c.y * w + i1), base + 3u * ((c.y + 1u) * w + c.x),
+                    base + 3u * ((c.y + 1u) * w + i1));
+    weight = float[4]((1.0 - f.x) * (1.0 - f.y), f.x * (1.0 - f.y), (1.0 - f.x) * f.y, f.x * f.y);
+}
+
+// The environment's radiance toward `dir`.
+vec3 env_radiance(vec3 dir) {
+    if (!HAS(F_ENV_MAP)) return param_rgb(globals.env_param);
+    uint texel[4];
+    float weight[4];
+    env_footprint(dir, texel, weight);
+    return globals.env_scale * (param_rgb(texel[0]) * weight[0] + param_rgb(texel[1]) * weight[1]
+        + param_rgb(texel[2]) * weight[2] + param_rgb(texel[3]) * weight[3]);
+}
+
+// A direction toward the environment: a cell by its alias table (u_cell: column and coin), then
+// uniform in longitude and cos θ within the cell (u_pos); the constant environment is uniform.
+vec3 env_sample(vec2 u_cell, vec2 u_pos) {
+    if (!HAS(F_ENV_MAP)) return sample_uniform_sphere(u_pos);
+    uint w = globals.env_width;
+    uint count = w * (globals.env_height - 1u);
+    precise float scaled = u_cell.x * float(count);
+    uint column = min(uint(floor(scaled)), count - 1u);
+    EnvCell e = env_cells[column];
+    uint cell = u_cell.y < e.prob ? column : e.alias;
+    uint i = cell % w;
+    uint j = cell / w;
+    float phi = 2.0 * PI * (float(i) + 0.5 + u_pos.x) / float(w);
+    float step = PI / float(globals.env_height - 1u);
+    float cos0 = cos(float(j) * step);
+    float cos1 = cos(float(j + 1u) * step);
+    float cos_theta = cos0 + u_pos.y * (cos1 - cos0);
+    float sin_theta = sqrt(max(1.0 - cos_theta * cos_theta, 0.0));
+    vec3 l = vec3(sin(phi) * sin_theta, cos_theta, -cos(phi) * sin_theta);
+    return l.x * globals.env_rot0 + l.y * globals.env_rot1 + l.z * globals.env_rot2;
+}
+
 // A next-event sample: a point on an area emitter, or (environment) a direction in `point`.
 struct EmitterSample { vec3 point; vec3 normal; vec3 radiance; uint param; bool environment; bool valid; };
 
-// With probability env_select_prob (u_select below it) a uniform direction toward the constant
-// environment; otherwise an emissive triangle with probability proportional to its area, then a
+// With probability env_select_prob (u_select below it) a direction toward the environment
+// (env_sample); otherwise an emissive triangle with probability proportional to its area, then a
 // uniform point on it (u_pos). The area density is (1 - env_select_prob) / total emissive area.
-EmitterSample sample_emitter(float u_select, vec2 u_pos) {
+EmitterSample sample_emitter(float u_select, vec2 u_pos, vec2 u_cell) {
     EmitterSample s = EmitterSample(vec3(0.0), vec3(0.0), vec3(0.0), NO_PARAM, false, false);
     if (HAS(F_ENV) && u_select < globals.env_select_prob) {
-        s.point = sample_uniform_sphere(u_pos);
-        s.radiance = param_rgb(globals.env_param);
+        s.point = env_sample(u_cell, u_pos);
+        s.radiance = env_radiance(s.point);
         s.param = globals.env_param;
         s.environment = true;
         s.valid = true;
@@ -53,9 +144,13 @@ float emitter_pdf_solid_angle(float dist, float cos_emitter) {
     return cos_emitter > 0.0 ? (1.0 - globals.env_select_prob) * dist * dist / (cos_emitter * globals.emitter_total_area) : 0.0;
 }
 
-// Solid-angle density with which next-event estimation samples a direction toward the environment.
-float environment_pdf() {
-    return globals.env_select_prob * (0.25 * INV_PI);
+// Solid-angle density with which next-event estimation samples direction `dir` toward the
+// environment: its map cell's density, or uniform.
+float environment_pdf(vec3 dir) {
+    if (!HAS(F_ENV_MAP)) return globals.env_select_prob * (0.25 * INV_PI);
+    vec2 f;
+    uvec2 c = env_cell_at(dir, f);
+    return globals.env_select_prob * env_cells[c.y * globals.env_width + c.x].pdf;
 }
 
 #endif

@@ -6,6 +6,7 @@
 #include "bvh.glsl"
 #include "bsdf.glsl"
 #include "params.glsl"
+#include "emitter.glsl"
 
 // RAY_OFFSET and SHADOW_EPSILON come from src/contract/floats.rs.
 
@@ -154,16 +155,19 @@ struct GradTerms {
     vec3 hit;
     uint nee_param;   // RGB parameter of the emitter NEE reached, or NO_PARAM
     vec3 nee;
+    vec3 env_dir;     // the direction of the environment's term (hit or NEE: a step has at most one)
 };
 
 GradTerms no_grad_terms() {
     LeafGrad none = LeafGrad(vec3(0.0), vec3(0.0));
-    return GradTerms(NO_PARAM, vec2(0.0), BsdfGrad(none, none, vec3(0.0)), NO_PARAM, vec3(0.0), NO_PARAM, vec3(0.0));
+    return GradTerms(NO_PARAM, vec2(0.0), BsdfGrad(none, none, vec3(0.0)), NO_PARAM, vec3(0.0), NO_PARAM, vec3(0.0),
+                     vec3(0.0, 0.0, 1.0));
 }
 
-// Most (offset, per-channel value) entries one vertex can produce: two RGB emitters, two leaves
-// of four RGB texels and a roughness each, a blend weight.
-#define GRAD_ENTRIES 33
+// Most (offset, per-channel value) entries one vertex can produce: an RGB emitter, four RGB texels
+// of an environment map (NEE), two leaves of four RGB texels and a roughness each, a blend weight
+// (a step that hits the environment ends there: it has no other term).
+#define GRAD_ENTRIES 42
 
 // The entries of the vertex being scattered. Globals, not parameters: GLSL passes arrays by
 // copy, and copying 33 entries in and out of every helper made the kernel several times larger.
@@ -201,11 +205,26 @@ void push_leaf(Material m, vec2 uv, LeafGrad g) {
     if (HAS(G_ALPHA) && !is_diffuse(m.tag)) push_entry(m.p_alpha, g.alpha);
 }
 
+// An emitter's radiance term: one RGB value, or the four texels of the environment map around
+// `env_dir` weighted as its lookup weighs them.
+void push_emitter(uint offset, vec3 g, vec3 env_dir) {
+    if (HAS(F_ENV_MAP) && offset == globals.env_param) {
+        uint texel[4];
+        float weight[4];
+        env_footprint(env_dir, texel, weight);
+        for (uint k = 0u; k < 4u; k++) {
+            if (weight[k] != 0.0) push_rgb(texel[k], g * (globals.env_scale * weight[k]));
+        }
+    } else {
+        push_rgb(offset, g);
+    }
+}
+
 // Scatters every term of `t` through one param_grad site.
 void scatter_terms(GradTerms t) {
     grad_count = 0u;
-    if ((HAS(G_EMISSION) || HAS(G_ENV)) && t.hit_param != NO_PARAM) push_rgb(t.hit_param, t.hit);
-    if ((HAS(G_EMISSION) || HAS(G_ENV)) && t.nee_param != NO_PARAM) push_rgb(t.nee_param, t.nee);
+    if ((HAS(G_EMISSION) || HAS(G_ENV)) && t.hit_param != NO_PARAM) push_emitter(t.hit_param, t.hit, t.env_dir);
+    if ((HAS(G_EMISSION) || HAS(G_ENV)) && t.nee_param != NO_PARAM) push_emitter(t.nee_param, t.nee, t.env_dir);
     if ((HAS(G_COLOR) || HAS(G_TEXTURE) || HAS(G_ALPHA) || HAS(G_WEIGHT)) && t.material != NO_PARAM) {
         Material m = materials[t.material];
         if (HAS(F_BLEND) && m.tag == MAT_BLEND) {

@@ -126,6 +126,9 @@ contract_constants! {
     DIM_DIFF_SIGN = 8;
     /// Surface vertex, block 2: Russian roulette (dim 9).
     DIM_ROULETTE = 9;
+    /// Surface or medium vertex, block 2: the environment map's cell for next-event estimation,
+    /// alias-table column and coin (dims 10 and 11).
+    DIM_ENV_CELL = 10;
 
 
     /// Specialisation constant id of `FEATURES` (`shaders/lib/features.glsl`).
@@ -154,6 +157,8 @@ contract_constants! {
     F_TWO_SIDED = 1 << 10;
     /// Feature bit: participating media and null boundaries.
     F_MEDIA = 1 << 11;
+    /// Feature bit: the environment is a map (`envmap`), not a constant.
+    F_ENV_MAP = 1 << 12;
     /// Feature bit: gradients of constant colours (albedo, specular reflectance).
     G_COLOR = 1 << 16;
     /// Feature bit: gradients of texels.

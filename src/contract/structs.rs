@@ -28,8 +28,21 @@ contract_structs! {
         emitter_total_area: f32,
         /// Number of views (cameras) the request renders; each has a `ViewCamera` at `addr_views`.
         view_count: u32,
-        /// Parameter offset of the constant environment radiance, or `NO_PARAM`.
+        /// Parameter offset of the environment's radiance (constant: one RGB value; map: its
+        /// texels, `env_width × env_height` RGB values row by row), or `NO_PARAM`.
         env_param: u32,
+        /// Environment map: width in texels (longitude); 0 for a constant environment.
+        env_width: u32,
+        /// Environment map: height in texels (latitude, row 0 toward the map's +y).
+        env_height: u32,
+        /// Environment map: Mitsuba's `scale`, multiplying every texel.
+        env_scale: f32,
+        /// Environment map: row 0 of the rotation from world to the map's frame (`to_world`⁻¹).
+        env_rot0: Vec3,
+        /// Row 1 of that rotation.
+        env_rot1: Vec3,
+        /// Row 2 of that rotation.
+        env_rot2: Vec3,
         /// Probability that next-event estimation samples the environment rather than area emitters.
         env_select_prob: f32,
         /// Adjoint kernels: δL of a sample is the adjoint image's pixel times this (1 / spp).
@@ -77,6 +90,8 @@ contract_structs! {
         addr_media: UVec2,
         /// Device address of the media's fields (`FieldDesc`).
         addr_fields: UVec2,
+        /// Device address of the environment map's sampling cells (`EnvCell`).
+        addr_env_cells: UVec2,
     }
 
     /// One view of a request: its pinhole camera and the key word of its paths. The image (and
@@ -271,6 +286,20 @@ contract_structs! {
         v1: Vec3,
         /// Vertex 2.
         v2: Vec3,
+    }
+
+    /// One cell of an environment map's sampling grid (`crate::scene::envmap`): the region between
+    /// four neighbouring texel centres, where the radiance is their bilinear blend. Cells are drawn
+    /// through an alias table (`prob`, `alias` as in `AliasEntry`) in proportion to their mean
+    /// luminance times solid angle, and then sampled uniformly in solid angle within.
+    struct EnvCell {
+        /// Probability of keeping the column's own cell.
+        prob: f32,
+        /// The cell drawn otherwise.
+        alias: u32,
+        /// Solid-angle density of a direction in this cell, given that the map is sampled: the
+        /// cell's realised probability over its solid angle.
+        pdf: f32,
     }
 
     /// One column of an alias table (`crate::alias::AliasTable`): keep the column's own entry

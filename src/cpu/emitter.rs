@@ -1,11 +1,13 @@
-//! Area emitters on triangles: area-proportional sampling and densities (twin of
-//! `shaders/lib/emitter.glsl`).
+//! Area emitters on triangles and the environment (constant or a map): sampling, radiance and
+//! densities (twin of `shaders/lib/emitter.glsl`).
 
-use glam::{Vec2, Vec3};
+use glam::{Mat3, Vec2, Vec3};
 
 use crate::contract::Globals;
+use crate::cpu::path::GradSink;
 use crate::cpu::surface::param_color;
 use crate::sampling::{UNIFORM_SPHERE_PDF, sample_uniform_sphere, sample_uniform_triangle};
+use crate::scene::envmap::EnvMap;
 use crate::scene::flat::FlatScene;
 
 /// A next-event sample: a point on an area emitter, or a direction toward the environment.
@@ -23,16 +25,70 @@ pub struct EmitterSample {
     pub environment: bool,
 }
 
-/// With probability `env_select_prob` a uniform direction toward the environment; otherwise an
-/// emissive triangle with probability proportional to its area, then a uniform point on it (area
-/// density (1 − env_select_prob) / total emissive area).
-pub fn sample_emitter(flat: &FlatScene, globals: &Globals, u_select: f32, u_pos: Vec2) -> Option<EmitterSample> {
+/// The environment map that `globals` describe, if the environment is one.
+pub fn env_map(globals: &Globals) -> Option<EnvMap> {
+    (globals.env_width > 0).then(|| EnvMap {
+        width: globals.env_width,
+        height: globals.env_height,
+        scale: globals.env_scale,
+        to_local: Mat3::from_cols(globals.env_rot0, globals.env_rot1, globals.env_rot2).transpose(),
+    })
+}
+
+/// The environment's radiance toward `dir`.
+pub fn env_radiance(flat: &FlatScene, globals: &Globals, dir: Vec3) -> Vec3 {
+    match env_map(globals) {
+        None => param_color(flat, globals.env_param),
+        Some(map) => {
+            let (texels, weights) = map.footprint(dir);
+            let sum = (0..4)
+                .fold(Vec3::ZERO, |acc, k| acc + param_color(flat, globals.env_param + 3 * texels[k]) * weights[k]);
+            map.scale * sum
+        }
+    }
+}
+
+/// Adds `g` times the derivative of the environment's radiance toward `dir` by its parameter
+/// values (one RGB value, or the four texels of the map's lookup) to `sink`.
+pub fn env_backward(globals: &Globals, dir: Vec3, g: Vec3, sink: &mut GradSink<'_>) {
+    match env_map(globals) {
+        None => sink.add_rgb(globals.env_param, g),
+        Some(map) => {
+            let (texels, weights) = map.footprint(dir);
+            for k in 0..4 {
+                if weights[k] != 0.0 {
+                    sink.add_rgb(globals.env_param + 3 * texels[k], g * (map.scale * weights[k]));
+                }
+            }
+        }
+    }
+}
+
+/// A direction toward the environment: a map's cell drawn by its alias table (`u_cell`: column
+/// and coin), then uniform in longitude and cos θ within it (`u_pos`); uniform for a constant.
+pub fn env_sample(flat: &FlatScene, globals: &Globals, u_cell: Vec2, u_pos: Vec2) -> Vec3 {
+    match env_map(globals) {
+        None => sample_uniform_sphere(u_pos),
+        Some(map) => map.sample(&flat.env_cells, u_cell, u_pos),
+    }
+}
+
+/// With probability `env_select_prob` a direction toward the environment ([`env_sample`]);
+/// otherwise an emissive triangle with probability proportional to its area, then a uniform point
+/// on it (area density (1 − env_select_prob) / total emissive area).
+pub fn sample_emitter(
+    flat: &FlatScene,
+    globals: &Globals,
+    u_select: f32,
+    u_pos: Vec2,
+    u_cell: Vec2,
+) -> Option<EmitterSample> {
     if u_select < globals.env_select_prob {
-        let radiance = param_color(flat, globals.env_param);
+        let dir = env_sample(flat, globals, u_cell, u_pos);
         return Some(EmitterSample {
-            point: sample_uniform_sphere(u_pos),
+            point: dir,
             normal: Vec3::ZERO,
-            radiance,
+            radiance: env_radiance(flat, globals, dir),
             param: globals.env_param,
             environment: true,
         });
@@ -69,7 +125,11 @@ pub fn emitter_pdf_solid_angle(globals: &Globals, dist: f32, cos_emitter: f32) -
     }
 }
 
-/// Solid-angle density with which next-event estimation samples a direction toward the environment.
-pub fn environment_pdf(globals: &Globals) -> f32 {
-    globals.env_select_prob * UNIFORM_SPHERE_PDF
+/// Solid-angle density with which next-event estimation samples direction `dir` toward the
+/// environment: its map cell's density, or uniform.
+pub fn environment_pdf(flat: &FlatScene, globals: &Globals, dir: Vec3) -> f32 {
+    match env_map(globals) {
+        None => globals.env_select_prob * UNIFORM_SPHERE_PDF,
+        Some(map) => globals.env_select_prob * map.pdf(&flat.env_cells, dir),
+    }
 }

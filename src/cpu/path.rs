@@ -7,11 +7,13 @@ use crate::bsdf::differential::{bsdf_pdf_diff, bsdf_sample_diff};
 use crate::bsdf::{bsdf_eval, bsdf_pdf, bsdf_sample};
 use crate::bvh::{Ray, closest_hit, occluded};
 use crate::contract::{
-    DIM_DIFF_SIGN, DIM_DIRECTION, DIM_EMITTER_POS, DIM_EMITTER_SELECT, DIM_LOBE, DIM_PIXEL_JITTER, DIM_ROULETTE,
-    DIM_TECHNIQUE, Globals, MAT_BLEND, MAT_NULL, MAT_ROUGH_CONDUCTOR, MAX_NULL_CROSSINGS, NO_EMITTER, NO_MEDIUM,
-    NO_PARAM, STRATEGY_DIFF, ViewCamera,
+    DIM_DIFF_SIGN, DIM_DIRECTION, DIM_EMITTER_POS, DIM_EMITTER_SELECT, DIM_ENV_CELL, DIM_LOBE, DIM_PIXEL_JITTER,
+    DIM_ROULETTE, DIM_TECHNIQUE, Globals, MAT_BLEND, MAT_NULL, MAT_ROUGH_CONDUCTOR, MAX_NULL_CROSSINGS, NO_EMITTER,
+    NO_MEDIUM, NO_PARAM, STRATEGY_DIFF, ViewCamera,
 };
-use crate::cpu::emitter::{emitter_pdf_solid_angle, environment_pdf, sample_emitter};
+use crate::cpu::emitter::{
+    EmitterSample, emitter_pdf_solid_angle, env_backward, env_radiance, environment_pdf, sample_emitter,
+};
 use crate::cpu::medium;
 use crate::cpu::surface::{
     SHADOW_EPSILON, bsdf_backward, mis_power, offset_origin, param_color, resolve_bsdf, safe_div, surface_at,
@@ -134,6 +136,22 @@ impl GradSink<'_> {
     }
 }
 
+/// Next-event estimation's two uniforms for an environment map's cell at `vertex` (block 2); zero,
+/// and not drawn, without a map.
+fn env_cell_uniforms(globals: &Globals, key: RngKey, pixel: u32, sample: u32, vertex: u32) -> Vec2 {
+    if globals.env_width == 0 {
+        return Vec2::ZERO;
+    }
+    let u = draw_block(key, pixel, sample, vertex, DIM_ENV_CELL / 4);
+    let d = (DIM_ENV_CELL % 4) as usize;
+    Vec2::new(u[d], u[d + 1])
+}
+
+/// Adds `g` times the derivative of NEE's emitter sample's radiance to `sink`.
+fn emitter_backward(globals: &Globals, es: &EmitterSample, g: Vec3, sink: &mut GradSink<'_>) {
+    if es.environment { env_backward(globals, es.point, g, sink) } else { sink.add_rgb(es.param, g) }
+}
+
 /// One camera path of `view` through `pixel` (row-major index) for sample `sample`: its radiance (primal,
 /// `ADJOINT = false`), or — replaying from `radiance_total` with adjoint radiance `adj_radiance`
 /// (δL) and scattering the GRAD terms into `sink` — what is left of it at the end, 0 up to
@@ -210,10 +228,10 @@ pub fn trace_path<const ADJOINT: bool>(
             Event::Escape => {
                 // ---- environment hit ----
                 if globals.env_param != NO_PARAM {
-                    let w_b = hit_weight(diff, prev_nee, prev_pdf_f, environment_pdf(globals), prev_sum);
-                    radiance += sign * (throughput * w_b * param_color(flat, globals.env_param));
+                    let w_b = hit_weight(diff, prev_nee, prev_pdf_f, environment_pdf(flat, globals, ray.dir), prev_sum);
+                    radiance += sign * (throughput * w_b * env_radiance(flat, globals, ray.dir));
                     if ADJOINT {
-                        sink.add_rgb(globals.env_param, adj_radiance * throughput * w_b);
+                        env_backward(globals, ray.dir, adj_radiance * throughput * w_b, sink);
                     }
                 }
                 break;
@@ -229,13 +247,14 @@ pub fn trace_path<const ADJOINT: bool>(
                 let pos = (DIM_EMITTER_POS % 4) as usize;
                 let u_select = u_em[(DIM_EMITTER_SELECT % 4) as usize];
                 let es = if nee {
-                    sample_emitter(flat, globals, u_select, Vec2::new(u_em[pos], u_em[pos + 1]))
+                    let u_cell = env_cell_uniforms(globals, key, pixel, sample, vertex);
+                    sample_emitter(flat, globals, u_select, Vec2::new(u_em[pos], u_em[pos + 1]), u_cell)
                 } else {
                     None
                 };
                 if let Some(es) = es {
                     let (wl, p_e, shadow_tmax) = if es.environment {
-                        (es.point, environment_pdf(globals), f32::MAX)
+                        (es.point, environment_pdf(flat, globals, es.point), f32::MAX)
                     } else {
                         let to_light = es.point - x;
                         let dist = to_light.length();
@@ -261,7 +280,7 @@ pub fn trace_path<const ADJOINT: bool>(
                                 counters,
                                 Some((&mut *sink, adj)),
                             );
-                            sink.add_rgb(es.param, adj_radiance * throughput * tr * w_n * f / p_e);
+                            emitter_backward(globals, &es, adj_radiance * throughput * tr * w_n * f / p_e, sink);
                         }
                     }
                 }
@@ -320,10 +339,15 @@ pub fn trace_path<const ADJOINT: bool>(
         let u_em = draw_block(key, pixel, sample, vertex, DIM_EMITTER_SELECT / 4);
         let pos = (DIM_EMITTER_POS % 4) as usize;
         let u_select = u_em[(DIM_EMITTER_SELECT % 4) as usize];
-        let es = if nee { sample_emitter(flat, globals, u_select, Vec2::new(u_em[pos], u_em[pos + 1])) } else { None };
+        let es = if nee {
+            let u_cell = env_cell_uniforms(globals, key, pixel, sample, vertex);
+            sample_emitter(flat, globals, u_select, Vec2::new(u_em[pos], u_em[pos + 1]), u_cell)
+        } else {
+            None
+        };
         if let Some(es) = es {
             let (wl, p_e, shadow_tmax, origin) = if es.environment {
-                (es.point, environment_pdf(globals), f32::MAX, offset_origin(s.p, s.ng, es.point))
+                (es.point, environment_pdf(flat, globals, es.point), f32::MAX, offset_origin(s.p, s.ng, es.point))
             } else {
                 let origin = offset_origin(s.p, s.ng, es.point - s.p);
                 let to_light = es.point - origin;
@@ -372,7 +396,7 @@ pub fn trace_path<const ADJOINT: bool>(
                 if ADJOINT {
                     let adj = adj_radiance * throughput * tr * w_n * es.radiance / p_e;
                     bsdf_backward(flat, s.material, s.uv, &bsdf, wi, wo, adj, sink);
-                    sink.add_rgb(es.param, adj_radiance * throughput * tr * w_n * f / p_e);
+                    emitter_backward(globals, &es, adj_radiance * throughput * tr * w_n * f / p_e, sink);
                 }
             }
         }

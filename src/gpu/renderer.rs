@@ -60,7 +60,8 @@ pub struct Renderer {
     flat: FlatScene,
     pub(crate) gpu: GpuScene,
     /// Parameter offset of the environment's radiance, or `NO_PARAM`.
-    env_param: u32,
+    /// The environment's parameter values (offset, count), or `(NO_PARAM, 0)`.
+    env: (u32, u32),
     /// Feature bits of what the scene contains.
     pub(crate) scene_features: u32,
     /// The parameter kinds the scene has (what refers to its parameters never changes).
@@ -87,9 +88,9 @@ impl Renderer {
             FlatScene::new(scene)?
         };
         let gpu = GpuScene::new(ctx, &flat)?;
-        let env_param = scene.environment.map_or(NO_PARAM, |p| scene.params.entry(p).offset);
-        let scene_features = variant::scene_features(&flat, env_param);
-        let scene_kinds = variant::param_kinds(&flat, env_param, 0, flat.params.len() as u32);
+        let env = variant::env_range(scene);
+        let scene_features = variant::scene_features(&flat, env.0);
+        let scene_kinds = variant::param_kinds(&flat, env, 0, flat.params.len() as u32);
         static NEXT_ID: std::sync::atomic::AtomicUsize = std::sync::atomic::AtomicUsize::new(0);
         Ok(Renderer {
             ctx: ctx.clone(),
@@ -97,7 +98,7 @@ impl Renderer {
             scene: scene.clone(),
             flat,
             gpu,
-            env_param,
+            env,
             scene_features,
             scene_kinds,
             kernels: KernelCache::new(ctx),
@@ -332,6 +333,9 @@ impl Backend for Renderer {
         if !self.flat.media.is_empty() {
             self.gpu.media.upload(&self.flat.media)?;
         }
+        if !self.flat.env_cells.is_empty() {
+            self.gpu.env_cells.upload(&self.flat.env_cells)?;
+        }
         Ok(())
     }
 
@@ -463,7 +467,7 @@ impl Backend for Renderer {
         accum.clear()?;
         // δL = 1 per sample: the adjoint scale must not divide by spp here; the mean is taken below.
         request.globals.adjoint_scale = 1.0;
-        let kinds = variant::param_kinds(&self.flat, self.env_param, entry.offset, entry.offset + entry.len);
+        let kinds = variant::param_kinds(&self.flat, self.env, entry.offset, entry.offset + entry.len);
         let features = variant::request_features(self.scene_features, options, kinds);
         self.run(
             Variant { kind: KernelKind::ImageGradient, features },

@@ -22,6 +22,8 @@ pub(crate) struct GpuScene {
     pub media: Buffer,
     /// The media's fields.
     pub fields: Buffer,
+    /// The environment map's sampling cells (they follow its texels: rewritten with the parameters).
+    pub env_cells: Buffer,
 }
 
 impl GpuScene {
@@ -38,6 +40,7 @@ impl GpuScene {
             params: Buffer::storage_with(ctx, "param buffer", &flat.params)?,
             media: Buffer::storage_with(ctx, "media", &flat.media)?,
             fields: Buffer::storage_with(ctx, "media fields", &flat.fields)?,
+            env_cells: Buffer::storage_with(ctx, "environment map cells", &flat.env_cells)?,
         })
     }
 
@@ -53,6 +56,7 @@ impl GpuScene {
             addr_params: self.params.device_address(),
             addr_media: self.media.device_address(),
             addr_fields: self.fields.device_address(),
+            addr_env_cells: self.env_cells.device_address(),
             ..*globals
         }
     }

@@ -33,23 +33,36 @@ pub fn scene_features(flat: &FlatScene, env_param: u32) -> u32 {
     if env_param != NO_PARAM {
         f |= F_ENV;
     }
+    if !flat.env_cells.is_empty() {
+        f |= F_ENV_MAP;
+    }
     if !flat.media.is_empty() {
         f |= F_MEDIA;
     }
     f
 }
 
-/// The kinds of the parameters `ids` of `scene` (flattened as `flat`).
-pub fn kinds_of(scene: &crate::scene::Scene, flat: &FlatScene, ids: &[crate::params::ParamId]) -> ParamKinds {
-    let env_param = scene.environment.map_or(NO_PARAM, |p| scene.params.entry(p).offset);
-    ids.iter().fold(ParamKinds::NONE, |k, &id| {
-        let e = scene.params.entry(id);
-        k.union(param_kinds(flat, env_param, e.offset, e.offset + e.len))
+/// The environment's parameter values of `scene` as (offset, count): one RGB value, or every
+/// texel of a map; `(NO_PARAM, 0)` without an environment.
+pub fn env_range(scene: &crate::scene::Scene) -> (u32, u32) {
+    scene.environment.map_or((NO_PARAM, 0), |p| {
+        let e = scene.params.entry(p);
+        (e.offset, e.len)
     })
 }
 
-/// The kinds of the parameter values `begin .. end`, judged by what refers to them.
-pub fn param_kinds(flat: &FlatScene, env_param: u32, begin: u32, end: u32) -> ParamKinds {
+/// The kinds of the parameters `ids` of `scene` (flattened as `flat`).
+pub fn kinds_of(scene: &crate::scene::Scene, flat: &FlatScene, ids: &[crate::params::ParamId]) -> ParamKinds {
+    let env = env_range(scene);
+    ids.iter().fold(ParamKinds::NONE, |k, &id| {
+        let e = scene.params.entry(id);
+        k.union(param_kinds(flat, env, e.offset, e.offset + e.len))
+    })
+}
+
+/// The kinds of the parameter values `begin .. end`, judged by what refers to them; `env` is
+/// [`env_range`].
+pub fn param_kinds(flat: &FlatScene, env: (u32, u32), begin: u32, end: u32) -> ParamKinds {
     let overlaps = |offset: u32, len: u32| offset != NO_PARAM && offset < end && begin < offset.saturating_add(len);
     let mut k = ParamKinds::NONE;
     for m in &flat.materials {
@@ -73,7 +86,7 @@ pub fn param_kinds(flat: &FlatScene, env_param: u32, begin: u32, end: u32) -> Pa
     if flat.emitters.iter().any(|e| overlaps(e.p_radiance, 3)) {
         k = k.union(ParamKinds::EMISSION);
     }
-    if overlaps(env_param, 3) {
+    if overlaps(env.0, env.1) {
         k = k.union(ParamKinds::ENVIRONMENT);
     }
     let field = |f: u32| {
@@ -101,7 +114,7 @@ pub fn request_features(scene: u32, options: &RenderOptions, kinds: ParamKinds) 
 
 /// A short human-readable name of a variant, for logs: `nee env diffuse conductor[beckmann] ∂alpha`.
 pub fn describe(features: u32) -> String {
-    const NAMES: [(u32, &str); 19] = [
+    const NAMES: [(u32, &str); 20] = [
         (F_NEE, "nee"),
         (F_ENV, "env"),
         (F_EMITTERS, "emitters"),
@@ -114,6 +127,7 @@ pub fn describe(features: u32) -> String {
         (F_TEXTURE, "texture"),
         (F_TWO_SIDED, "two-sided"),
         (F_MEDIA, "media"),
+        (F_ENV_MAP, "env-map"),
         (G_COLOR, "∂color"),
         (G_TEXTURE, "∂texture"),
         (G_ALPHA, "∂alpha"),

@@ -5,7 +5,7 @@ use glam::Vec3;
 
 use crate::bvh::{self, Bvh};
 use crate::contract::{
-    EmitterTri, FIELD_CONSTANT, FIELD_GRID, FieldDesc, MAT_BLEND, MAT_DIFFUSE, MAT_NULL, MAT_ROUGH_CONDUCTOR,
+    EmitterTri, EnvCell, FIELD_CONSTANT, FIELD_GRID, FieldDesc, MAT_BLEND, MAT_DIFFUSE, MAT_NULL, MAT_ROUGH_CONDUCTOR,
     Material as GpuMaterial, MediumDesc, NO_EMITTER, NO_MEDIUM, NO_PARAM, PHASE_HG, PHASE_ISOTROPIC, TEX_CHECKER,
     TEX_NEAREST, TEX_WRAP_CLAMP, TEX_WRAP_MIRROR, TriShading,
 };
@@ -33,6 +33,8 @@ pub struct FlatScene {
     pub media: Vec<MediumDesc>,
     /// Their extinction and albedo fields.
     pub fields: Vec<FieldDesc>,
+    /// The environment map's sampling cells (`crate::scene::envmap`); empty without a map.
+    pub env_cells: Vec<EnvCell>,
 }
 
 /// Gives `scene` and its flattened twin `flat` the values of `params`, which must have the scene
@@ -53,10 +55,12 @@ pub(crate) fn replace_params(
     }
     scene.params = params.clone();
     flat.params = params.values().to_vec();
-    // The majorants follow the densities (ALGORITHMS.md §8: recomputed when parameters change).
+    // The majorants follow the densities (ALGORITHMS.md §8: recomputed when parameters change),
+    // and an environment map's sampling cells follow its texels.
     for (desc, medium) in flat.media.iter_mut().zip(&scene.media) {
         desc.majorant = medium.majorant(&scene.params);
     }
+    flat.env_cells = env_cells(scene)?;
     Ok(())
 }
 
@@ -125,6 +129,7 @@ impl FlatScene {
         let materials = scene.materials.iter().map(|m| flatten_material(scene, m)).collect();
         let (media, fields) = flatten_media(scene);
         let bvh = bvh::build(&triangles)?;
+        let env_cells = env_cells(scene)?;
         Ok(FlatScene {
             bvh,
             shading,
@@ -134,6 +139,7 @@ impl FlatScene {
             params: scene.params.values().to_vec(),
             media,
             fields,
+            env_cells,
         })
     }
 
@@ -141,6 +147,14 @@ impl FlatScene {
     pub fn face_normal(&self, slot: u32) -> Vec3 {
         let t = &self.bvh.tris[slot as usize];
         (t.v1 - t.v0).cross(t.v2 - t.v0).normalize()
+    }
+}
+
+/// The sampling cells of `scene`'s environment map, if it has one.
+fn env_cells(scene: &Scene) -> Result<Vec<EnvCell>> {
+    match (scene.env_map, scene.environment) {
+        (Some(map), Some(texels)) => map.cells(scene.params.get(texels)),
+        _ => Ok(Vec::new()),
     }
 }
 

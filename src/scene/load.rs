@@ -55,6 +55,14 @@ pub(crate) fn apply_environment(scene: &mut Scene, environment: Option<[f32; 3]>
         });
     }
     match scene.environment {
+        Some(id) if scene.env_map.is_some() => Err(Error::InvalidArgument {
+            parameter: "LoadOptions::environment".into(),
+            message: format!(
+                "the scene's own environment '{}' is a map (envmap); a constant radiance replaces only a \
+                 constant environment",
+                scene.params.entry(id).name
+            ),
+        }),
         Some(id) => {
             let name = scene.params.entry(id).name.clone();
             scene.params.set(&name, &rgb)?;

@@ -2,6 +2,7 @@
 //! parameter table that holds every differentiable value.
 
 pub mod builtin;
+pub mod envmap;
 pub mod flat;
 pub mod gltf;
 pub(crate) mod load;
@@ -215,8 +216,11 @@ pub struct Scene {
     pub textures: Vec<Texture>,
     /// Participating media, each inside the meshes whose `interior` it is.
     pub media: Vec<medium::Medium>,
-    /// Constant environment radiance (RGB parameter) seen by rays that leave the scene, if any.
+    /// The environment's radiance seen by rays that leave the scene, if any: one RGB value
+    /// (constant), or the texels of `env_map`.
     pub environment: Option<ParamId>,
+    /// The environment map's layout when `environment` holds a map's texels.
+    pub env_map: Option<envmap::EnvMap>,
     /// Every differentiable value.
     pub params: ParamTable,
     /// Default maximum path depth (surface interactions) for this scene.
@@ -274,6 +278,7 @@ impl Scene {
             textures: Vec::new(),
             media: Vec::new(),
             environment: None,
+            env_map: None,
             params: ParamTable::default(),
             max_depth: 6,
             default_spp: None,
@@ -412,6 +417,23 @@ impl Scene {
         Ok(())
     }
 
+    /// Sets an environment map: `map`'s layout with `texels` (linear RGB, row-major, `map.width ×
+    /// map.height` of them), parameter `name`.
+    ///
+    /// # Errors
+    /// As [`ParamTable::add`]; a texel count that does not match.
+    pub fn set_environment_map(&mut self, name: &str, map: envmap::EnvMap, texels: &[f32]) -> Result<()> {
+        if texels.len() != 3 * map.width as usize * map.height as usize || map.height < 2 || map.width == 0 {
+            return Err(Error::InvalidArgument {
+                parameter: name.into(),
+                message: format!("{} texel values for a {}×{} map", texels.len() / 3, map.width, map.height),
+            });
+        }
+        self.environment = Some(self.params.add(name, texels, bounds::RADIANCE)?);
+        self.env_map = Some(map);
+        Ok(())
+    }
+
     /// Records a loading warning and logs it.
     pub fn warn(&mut self, message: String) {
         // Warnings of a file's loader already begin with its name (and a line), or with the
@@ -466,6 +488,15 @@ impl Scene {
                         Some(_) => {}
                     }
                 }
+            }
+        }
+        if let Some(map) = self.env_map {
+            let len = self.environment.map(|p| self.params.entry(p).len as usize);
+            if map.height < 2 || len != Some(3 * map.width as usize * map.height as usize) {
+                return Err(err(
+                    "environment map".into(),
+                    format!("its {}×{} texels do not match its parameter ({len:?} values)", map.width, map.height),
+                ));
             }
         }
         for (i, m) in self.materials.iter().enumerate() {

@@ -257,6 +257,51 @@ def background_checker():
 
 # ---- grids ----
 
+def write_exr(path, rgb):
+    """An uncompressed scanline OpenEXR file of float32 R, G, B channels (rows top to bottom)."""
+    rgb = np.asarray(rgb, np.float32)
+    height, width = rgb.shape[:2]
+
+    def attribute(name, kind, value):
+        return name.encode() + b"\0" + kind.encode() + b"\0" + struct.pack("<i", len(value)) + value
+
+    channels = b"".join(c.encode() + b"\0" + struct.pack("<iB3xii", 2, 0, 1, 1) for c in "BGR") + b"\0"
+    window = struct.pack("<iiii", 0, 0, width - 1, height - 1)
+    header = (struct.pack("<ii", 20000630, 2)
+              + attribute("channels", "chlist", channels)
+              + attribute("compression", "compression", b"\0")
+              + attribute("dataWindow", "box2i", window)
+              + attribute("displayWindow", "box2i", window)
+              + attribute("lineOrder", "lineOrder", b"\0")
+              + attribute("pixelAspectRatio", "float", struct.pack("<f", 1.0))
+              + attribute("screenWindowCenter", "v2f", struct.pack("<ff", 0.0, 0.0))
+              + attribute("screenWindowWidth", "float", struct.pack("<f", 1.0))
+              + b"\0")
+    lines = []
+    for y in range(height):
+        data = b"".join(rgb[y, :, c].astype("<f4").tobytes() for c in (2, 1, 0))
+        lines.append(struct.pack("<ii", y, len(data)) + data)
+    offset = len(header) + 8 * height
+    table = b""
+    for line in lines:
+        table += struct.pack("<Q", offset)
+        offset += len(line)
+    path.write_bytes(header + table + b"".join(lines))
+
+
+def sky_texels():
+    """A 32 x 16 latitude-longitude sky: a blue gradient, a warm sun and a green band low on one side."""
+    h, w = 16, 32
+    v = (np.arange(h) + 0.5)[:, None] / h * np.ones((1, w))
+    u = np.ones((h, 1)) * (np.arange(w) + 0.5)[None, :] / w
+    rgb = np.stack([0.3 + 0.4 * v, 0.45 + 0.3 * v, 0.9 - 0.2 * v], axis=-1)
+    sun = np.exp(-(((u - 0.3) / 0.05) ** 2 + ((v - 0.25) / 0.08) ** 2))
+    rgb += 12.0 * sun[..., None] * np.array([1.0, 0.85, 0.6])
+    band = (np.abs(v - 0.6) < 0.08) & (u > 0.55) & (u < 0.8)
+    rgb[band] = [0.2, 1.5, 0.3]
+    return rgb
+
+
 def write_vol(path, values):
     """Mitsuba .vol v3, float32; `values` indexed [z, y, x] or [z, y, x, c] (x fastest on disk)."""
     values = np.asarray(values, np.float32)
@@ -336,6 +381,7 @@ def main():
     write_png(DATA / "checker.png", checker_texture())
     write_png(DATA / "ramp_raw.png", ramp_texture())
     write_png(DATA / "background_checker.png", background_checker())
+    write_exr(DATA / "sky.exr", sky_texels())
     write_vol(DATA / "blob.vol", blob_grid())
     write_vol(DATA / "albedo_rgb.vol", albedo_grid())
     write_vol(DATA / "sigma_t_rgb.vol", sigma_rgb_grid())

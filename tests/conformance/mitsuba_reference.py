@@ -84,6 +84,9 @@ MATRIX = {
     "emitter_area_default_bsdf": dict(features=["area", "emitter's default black bsdf"], grads=["light.bsdf.reflectance.value"]),
     "emitter_area_sphere": dict(features=["area", "sphere emitter"], grads=["bulb.emitter.radiance.value"]),
     "emitter_constant": dict(features=["constant", "environment only"], grads=["sky.radiance.value"]),
+    "emitter_envmap": dict(features=["envmap", "EXR", "scale", "to_world rotation", "seen directly",
+                                     "roughconductor under it"],
+                           grads=["sky.data", "floor.bsdf.reflectance.value"]),
     # ---- shape
     "shape_obj_smooth": dict(features=["obj", "vertex normals"], grads=["mesh.bsdf.reflectance.value"]),
     "shape_obj_no_normals": dict(features=["obj without normals (smooth, angle-weighted)", "quads", "non-uniform scale"],

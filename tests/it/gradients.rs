@@ -36,6 +36,10 @@ fn cases() -> Vec<(Scene, Vec<&'static str>)> {
             scenes::conformance("texture_filter_wrap"),
             vec!["mirrored.bsdf.reflectance.data", "clamped.bsdf.reflectance.data"],
         ),
+        (
+            scenes::conformance("emitter_envmap"),
+            vec!["sky.data", "ball.bsdf.alpha.value", "floor.bsdf.reflectance.value"],
+        ),
     ]
 }
 

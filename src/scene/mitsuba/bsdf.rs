@@ -329,8 +329,9 @@ impl<'a> Loader<'a> {
 }
 
 /// Decodes an image into linear RGB texels, row 0 = the file's top row (Mitsuba's v = 0). PNG
-/// (and any other format the `image` crate reads) is sRGB-encoded unless `raw`; EXR is linear.
-fn read_bitmap(path: &Path, raw: bool) -> std::result::Result<(u32, u32, Vec<f32>), String> {
+/// (and any other 8- or 16-bit format the `image` crate reads) is sRGB-encoded unless `raw`; EXR
+/// and Radiance HDR are linear.
+pub(super) fn read_bitmap(path: &Path, raw: bool) -> std::result::Result<(u32, u32, Vec<f32>), String> {
     let is_exr = path.extension().and_then(|e| e.to_str()).is_some_and(|e| e.eq_ignore_ascii_case("exr"));
     if is_exr {
         let image = exr::prelude::read_first_rgba_layer_from_file(
@@ -350,10 +351,12 @@ fn read_bitmap(path: &Path, raw: bool) -> std::result::Result<(u32, u32, Vec<f32
         return Ok((w, h, image.layer_data.channel_data.pixels.1));
     }
     let bytes = std::fs::read(path).map_err(|e| e.to_string())?;
-    let image = crate::scene::load::decode_image(&bytes)?.to_rgb32f();
+    let decoded = crate::scene::load::decode_image(&bytes)?;
+    let linear = matches!(decoded.color(), image::ColorType::Rgb32F | image::ColorType::Rgba32F);
+    let image = decoded.to_rgb32f();
     let (w, h) = image.dimensions();
     let mut texels = image.into_raw();
-    if !raw {
+    if !raw && !linear {
         for t in &mut texels {
             *t = srgb_to_linear(*t);
         }

@@ -560,25 +560,83 @@ impl<'a> Loader<'a> {
         }
     }
 
-    /// A top-level `<emitter>`: the constant environment.
+    /// A top-level `<emitter>`: the environment, constant or a map.
     fn environment(&mut self, node: El<'a>) -> Result<()> {
         let p = Props::parse(&self.x, node)?;
         match p.kind.as_str() {
-            "constant" => {}
+            "constant" | "envmap" => {}
             "area" => return Err(self.x.err(node, "an 'area' emitter must be nested in a <shape>")),
             other => {
-                return Err(self
-                    .x
-                    .err(node, format!("unsupported plugin '{other}' (supported: constant; area inside a <shape>)")));
+                return Err(self.x.err(
+                    node,
+                    format!("unsupported plugin '{other}' (supported: constant, envmap; area inside a <shape>)"),
+                ));
             }
         }
         if self.scene.environment.is_some() {
-            return Err(self.x.err(node, "a scene has at most one constant emitter"));
+            return Err(self.x.err(node, "a scene has at most one environment emitter (constant or envmap)"));
         }
-        let radiance = self.radiance_in(&p, "radiance", Vec3::ONE, bounds::RADIANCE)?;
         let name = self.top_name(node)?;
-        self.scene.set_environment(&format!("{name}.radiance.value"), radiance).map_err(|e| self.located(node, e))?;
+        if p.kind == "envmap" {
+            self.envmap(&p, &name)?;
+        } else {
+            let radiance = self.radiance_in(&p, "radiance", Vec3::ONE, bounds::RADIANCE)?;
+            let set = self.scene.set_environment(&format!("{name}.radiance.value"), radiance);
+            set.map_err(|e| self.located(node, e))?;
+        }
         self.finish(&p)
+    }
+
+    /// Mitsuba's `envmap`: a latitude-longitude image (EXR, HDR, or PNG and other 8-bit formats,
+    /// sRGB-decoded), `scale`, and `to_world` (a rotation). Its texels are parameter `NAME.data`,
+    /// `height × width × 3` values: Mitsuba's `data` without the two columns it repeats at the
+    /// edges for its lookup.
+    fn envmap(&mut self, p: &Props<'a>, name: &str) -> Result<()> {
+        let (file, file_node) = p
+            .string(&self.x, "filename")?
+            .ok_or_else(|| self.x.err(p.node, "'envmap' needs the property 'filename'"))?;
+        let scale = self.float_in(p, "scale", Some(1.0), (0.0, f32::MAX))?;
+        let to_local = match p.transform(&self.x, "to_world")? {
+            None => glam::Mat3::IDENTITY,
+            Some((t, n)) => {
+                crate::scene::envmap::to_local(glam::Mat3::from_mat4(t.matrix)).map_err(|m| self.x.err(n, m))?
+            }
+        };
+        if p.boolean(&self.x, "mis_compensation", false)? {
+            let w = self.x.warning(
+                p.node,
+                "'mis_compensation' of 'envmap' ignored: pathgrad samples the map by luminance (the same \
+                 expectation, other noise)",
+            );
+            self.scene.warn(w);
+        }
+        let path = self.scene_file(&file).map_err(|m| self.x.err(file_node, m))?;
+        if !path.is_file() {
+            return Err(self
+                .x
+                .err(file_node, format!("image file '{file}' not found (looked for {})", path.display())));
+        }
+        let (width, height, texels) = super::bsdf::read_bitmap(&path, false)
+            .map_err(|m| self.x.err(file_node, format!("reading '{file}': {m}")))?;
+        if height < 2 {
+            return Err(self
+                .x
+                .err(file_node, format!("'{file}': an environment map needs at least 2 rows, it has {height}")));
+        }
+        if let Some((i, v)) = texels.iter().enumerate().find(|(_, v)| !(v.is_finite() && **v >= 0.0)) {
+            let texel = i / 3;
+            return Err(self.x.err(
+                file_node,
+                format!(
+                    "'{file}': texel ({}, {}) has value {v} (radiance must be finite and ≥ 0)",
+                    texel % width as usize,
+                    texel / width as usize
+                ),
+            ));
+        }
+        let map = crate::scene::envmap::EnvMap { width, height, scale, to_local };
+        let set = self.scene.set_environment_map(&format!("{name}.data"), map, &texels);
+        set.map_err(|e| self.located(p.node, e))
     }
 }
 

@@ -107,6 +107,8 @@ mod xml;
 #[cfg(test)]
 mod tests;
 #[cfg(test)]
+mod tests_emitters;
+#[cfg(test)]
 mod tests_errors;
 #[cfg(test)]
 mod tests_include;

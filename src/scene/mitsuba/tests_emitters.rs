@@ -1,0 +1,97 @@
+//! Emitters outside shapes as Mitsuba 3.9.1 reads them: `envmap` (its image formats, `scale`,
+//! `to_world`, its parameter) and what it refuses.
+
+use std::path::Path;
+
+use glam::{Mat3, Vec3};
+
+use super::tests::SENSOR;
+use crate::scene::{LoadOptions, Scene};
+
+const SHAPE: &str = r#"<shape type="cube"/>"#;
+
+/// Loads `main.xml` in `dir` holding `body` after a sensor, with `options`.
+fn load(dir: &Path, body: &str, options: &LoadOptions) -> crate::Result<Scene> {
+    let path = dir.join("main.xml");
+    std::fs::write(&path, format!(r#"<scene version="3.0.0">{SENSOR}{body}{SHAPE}</scene>"#)).unwrap();
+    super::load_with(&path, options)
+}
+
+fn err(dir: &Path, body: &str) -> String {
+    match load(dir, body, &LoadOptions::default()) {
+        Ok(_) => panic!("{body} loaded"),
+        Err(e) => e.to_string(),
+    }
+}
+
+/// A 4 × 3 Radiance HDR image whose texel (i, j) is (i, j, 0.5) + 1.
+fn write_hdr(path: &Path) -> Vec<f32> {
+    let texels: Vec<f32> = (0..3).flat_map(|j| (0..4).flat_map(move |i| [1.0 + i as f32, 1.0 + j as f32, 1.5])).collect();
+    let pixels: Vec<image::Rgb<f32>> = texels.chunks(3).map(|c| image::Rgb([c[0], c[1], c[2]])).collect();
+    let file = std::fs::File::create(path).unwrap();
+    image::codecs::hdr::HdrEncoder::new(file).encode(&pixels, 4, 3).unwrap();
+    texels
+}
+
+#[test]
+fn an_envmap_is_its_texels_under_scale_and_a_rotation() {
+    let dir = tempfile::tempdir().unwrap();
+    let texels = write_hdr(&dir.path().join("sky.hdr"));
+    let body = r#"<emitter type="envmap" id="sky"><string name="filename" value="sky.hdr"/>
+        <float name="scale" value="2"/><transform name="to_world"><rotate y="1" angle="90"/></transform></emitter>"#;
+    let scene = load(dir.path(), body, &LoadOptions::default()).unwrap();
+    let id = scene.params.find("sky.data").unwrap();
+    assert_eq!(scene.environment, Some(id));
+    // HDR is linear: the values come back as written (RGBE keeps these small integers exactly).
+    assert_eq!(scene.params.get(id), texels);
+    let map = scene.env_map.unwrap();
+    assert_eq!((map.width, map.height, map.scale), (4, 3, 2.0));
+    let expected = Mat3::from_rotation_y(90f32.to_radians()).transpose();
+    assert!(map.to_local.abs_diff_eq(expected, 1e-6), "{:?}", map.to_local);
+    assert!(scene.warnings.is_empty(), "{:?}", scene.warnings);
+}
+
+#[test]
+fn an_envmap_png_is_srgb_decoded() {
+    let dir = tempfile::tempdir().unwrap();
+    image::RgbImage::from_pixel(2, 2, image::Rgb([255, 128, 0])).save(dir.path().join("sky.png")).unwrap();
+    let body = r#"<emitter type="envmap"><string name="filename" value="sky.png"/></emitter>"#;
+    let scene = load(dir.path(), body, &LoadOptions::default()).unwrap();
+    let values = scene.params.get(scene.environment.unwrap());
+    let srgb = |c: f32| super::bsdf::srgb_to_linear(c / 255.0);
+    assert_eq!(&values[..3], &[1.0, srgb(128.0), 0.0]);
+    assert!(Vec3::from_slice(&values[..3]).x > 0.99);
+}
+
+#[test]
+fn bad_envmaps_are_refused_by_name() {
+    let dir = tempfile::tempdir().unwrap();
+    write_hdr(&dir.path().join("sky.hdr"));
+    image::RgbImage::from_pixel(4, 1, image::Rgb([9, 9, 9])).save(dir.path().join("row.png")).unwrap();
+    let file = r#"<string name="filename" value="sky.hdr"/>"#;
+    let cases = [
+        (r#"<emitter type="envmap"/>"#.to_string(), "'envmap' needs the property 'filename'"),
+        (
+            format!(r#"<emitter type="envmap">{file}<transform name="to_world"><scale value="2"/></transform></emitter>"#),
+            "an envmap's 'to_world' must be a rotation (no scale, shear or mirroring)",
+        ),
+        (r#"<emitter type="envmap"><string name="filename" value="row.png"/></emitter>"#.into(), "an environment map needs at least 2 rows, it has 1"),
+        (
+            r#"<emitter type="envmap"><string name="filename" value="none.exr"/></emitter>"#.into(),
+            "image file 'none.exr' not found",
+        ),
+        (
+            format!(r#"<emitter type="envmap">{file}</emitter><emitter type="constant"/>"#),
+            "a scene has at most one environment emitter (constant or envmap)",
+        ),
+        (format!(r#"<emitter type="envmap">{file}<float name="scale" value="-1"/></emitter>"#), "'scale' must lie in [0, ∞), got -1"),
+    ];
+    for (body, expected) in cases {
+        let e = err(dir.path(), &body);
+        assert!(e.contains(expected), "{body}: {e}");
+    }
+    // A constant radiance from the load options does not replace a map.
+    let options = LoadOptions { environment: Some([1.0, 1.0, 1.0]), ..LoadOptions::default() };
+    let e = load(dir.path(), &format!(r#"<emitter type="envmap" id="sky">{file}</emitter>"#), &options).unwrap_err();
+    assert!(e.to_string().contains("the scene's own environment 'sky.data' is a map (envmap)"), "{e}");
+}
