@@ -1,6 +1,7 @@
 // The one path loop (ALGORITHMS.md §3.1, §5.4): BSDF sampling, next-event estimation on area
-// emitters and a constant environment, MIS and Russian roulette, in two strategies that share every
-// line but the technique choice and the MIS denominators. Twin: src/cpu/path.rs, phase by phase.
+// emitters, the environment (constant or a map) and lights without area, MIS and Russian
+// roulette, in two strategies that share every line but the technique choice and the MIS
+// denominators. Twin: src/cpu/path.rs, phase by phase.
 //
 // Strategy BSDF (plain PRB) samples directions from the BSDF and weights emitter hits and NEE with
 // the power heuristic. Strategy DIFF (Su & Gkioulekas) makes one capable vertex — a material whose
@@ -259,10 +260,14 @@ bool path_step(inout PathState st) {
                 scatter = true;
                 if (nee) {
                     vec4 u_em = draw_block(st.key1, st.pixel, st.sample_index, vertex, DIM_EMITTER_SELECT / 4u);
-                    es = sample_emitter(u_em[DIM_EMITTER_SELECT % 4u], vec2(u_em[DIM_EMITTER_POS % 4u], u_em[DIM_EMITTER_POS % 4u + 1u]), env_cell_uniforms(st.key1, st.pixel, st.sample_index, vertex));
+                    es = sample_emitter(u_em[DIM_EMITTER_SELECT % 4u], vec2(u_em[DIM_EMITTER_POS % 4u], u_em[DIM_EMITTER_POS % 4u + 1u]), env_cell_uniforms(st.key1, st.pixel, st.sample_index, vertex), x_medium);
                     if (es.valid) {
                         vec3 wl;
-                        if (HAS(F_ENV) && es.environment) {
+                        if (HAS(F_LIGHTS) && es.delta) {
+                            wl = es.distant ? es.point : normalize(es.point - x_medium);
+                            shadow_tmax = es.distant ? FLOAT_MAX : length(es.point - x_medium) * (1.0 - SHADOW_EPSILON);
+                            nee_pdf = es.pdf;
+                        } else if (HAS(F_ENV) && es.environment) {
                             wl = es.point;
                             nee_pdf = environment_pdf(wl);
                             shadow_tmax = FLOAT_MAX;
@@ -275,7 +280,8 @@ bool path_step(inout PathState st) {
                         }
                         nee_phase = phase_eval(st.medium, st.ray.dir, wl);
                         if (nee_pdf > 0.0 && nee_phase > 0.0) {
-                            nee_w = mis_power(nee_pdf, nee_phase);
+                            // No phase sample reaches a light without area: NEE alone finds it.
+                            nee_w = (HAS(F_LIGHTS) && es.delta) ? 1.0 : mis_power(nee_pdf, nee_phase);
                             nee_w_tr = st.adj * st.throughput * nee_w * nee_phase * es.radiance / nee_pdf;
                             shadow_ray = make_ray(x_medium, wl);
                             shadow_query = true;
@@ -324,11 +330,23 @@ bool path_step(inout PathState st) {
                 // ---- emitter sampling: the sample and its unoccluded terms; the shadow ray is pass 1's ----
                 if (nee) {
                     vec4 u_em = draw_block(st.key1, st.pixel, st.sample_index, vertex, DIM_EMITTER_SELECT / 4u);
-                    es = sample_emitter(u_em[DIM_EMITTER_SELECT % 4u], vec2(u_em[DIM_EMITTER_POS % 4u], u_em[DIM_EMITTER_POS % 4u + 1u]), env_cell_uniforms(st.key1, st.pixel, st.sample_index, vertex));
+                    es = sample_emitter(u_em[DIM_EMITTER_SELECT % 4u], vec2(u_em[DIM_EMITTER_POS % 4u], u_em[DIM_EMITTER_POS % 4u + 1u]), env_cell_uniforms(st.key1, st.pixel, st.sample_index, vertex), s.p);
                     if (es.valid) {
                         vec3 wl;
                         vec3 origin;
-                        if (HAS(F_ENV) && es.environment) {
+                        if (HAS(F_LIGHTS) && es.delta && es.distant) {
+                            wl = es.point;
+                            origin = offset_origin(s.p, s.ng, wl);
+                            nee_pdf = es.pdf;
+                            shadow_tmax = FLOAT_MAX;
+                        } else if (HAS(F_LIGHTS) && es.delta) {
+                            origin = offset_origin(s.p, s.ng, es.point - s.p);
+                            vec3 to_light = es.point - origin;
+                            float dist = length(to_light);
+                            wl = to_light / dist;
+                            nee_pdf = es.pdf;
+                            shadow_tmax = dist * (1.0 - SHADOW_EPSILON);
+                        } else if (HAS(F_ENV) && es.environment) {
                             wl = es.point;
                             origin = offset_origin(s.p, s.ng, wl);
                             nee_pdf = environment_pdf(wl);
@@ -348,7 +366,10 @@ bool path_step(inout PathState st) {
                         // BSDF): f's derivative there is not zero (Mitsuba's prb differentiates it too).
                         bool upper = wi.z > 0.0 && nee_wo.z > 0.0;
                         if (nee_pdf > 0.0 && (max_component(nee_f) > 0.0 || (adjoint && upper))) {
-                            if (!diff) {
+                            if (HAS(F_LIGHTS) && es.delta) {
+                                // No BSDF sample reaches a light without area: NEE alone finds it.
+                                nee_w = diff ? 1.0 / (st.w1 + st.w2) : 1.0;
+                            } else if (!diff) {
                                 nee_w = mis_power(nee_pdf, pdf_f);
                             } else {
                                 // Appendix B: the NEE direction as produced by BSDF or differential sampling here.
@@ -377,7 +398,7 @@ bool path_step(inout PathState st) {
                 phase_grad(m, d, shadow_ray.dir, nee_w_tr * tr / nee_phase);
                 if (es.environment ? HAS(G_ENV) : HAS(G_EMISSION)) {
                     gt.nee_param = es.param;
-                    gt.nee = st.adj * st.throughput * tr * nee_w * nee_phase / nee_pdf;
+                    gt.nee = st.adj * st.throughput * tr * nee_w * nee_phase * es.factor / nee_pdf;
                     gt.env_dir = es.point;
                 }
             }
@@ -406,7 +427,7 @@ bool path_step(inout PathState st) {
             grad_adj[0] = st.adj * st.throughput * tr * nee_w * es.radiance / nee_pdf;
             if (es.environment ? HAS(G_ENV) : HAS(G_EMISSION)) {
                 gt.nee_param = es.param;
-                gt.nee = st.adj * st.throughput * tr * nee_w * nee_f / nee_pdf;
+                gt.nee = st.adj * st.throughput * tr * nee_w * nee_f * es.factor / nee_pdf;
                 gt.env_dir = es.point;
             }
         }

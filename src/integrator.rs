@@ -369,6 +369,7 @@ impl RenderOptions {
             }
         };
         let key = self.key(pass);
+        let (env_select_prob, light_select_prob) = emitter_selection(scene, flat);
         Globals {
             width: self.width,
             height: self.height,
@@ -408,11 +409,29 @@ impl RenderOptions {
             addr_media: glam::UVec2::ZERO,
             addr_fields: glam::UVec2::ZERO,
             addr_env_cells: glam::UVec2::ZERO,
-            env_select_prob: match (scene.environment.is_some(), flat.emitters.is_empty()) {
-                (false, _) => 0.0,
-                (true, true) => 1.0,
-                (true, false) => ENV_SELECT_PROB,
-            },
+            addr_lights: glam::UVec2::ZERO,
+            light_count: flat.lights.len() as u32,
+            light_select_prob,
+            env_select_prob,
         }
     }
+}
+
+/// Next-event estimation's probabilities of sampling the environment and the lights without area
+/// (the rest goes to emissive triangles). Without such lights: the environment alone, or
+/// [`ENV_SELECT_PROB`] beside triangles. With them: each light, the environment and the
+/// triangles as a whole are equally likely.
+fn emitter_selection(scene: &Scene, flat: &FlatScene) -> (f32, f32) {
+    let env = scene.environment.is_some();
+    let tris = !flat.emitters.is_empty();
+    let lights = flat.lights.len();
+    if lights == 0 {
+        return match (env, tris) {
+            (false, _) => (0.0, 0.0),
+            (true, false) => (1.0, 0.0),
+            (true, true) => (ENV_SELECT_PROB, 0.0),
+        };
+    }
+    let units = (lights + usize::from(env) + usize::from(tris)) as f32;
+    (if env { 1.0 / units } else { 0.0 }, lights as f32 / units)
 }

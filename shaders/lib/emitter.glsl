@@ -9,6 +9,8 @@
 
 layout(buffer_reference, scalar, buffer_reference_align = 4) readonly buffer EnvCellArray { EnvCell v[]; };
 #define env_cells (EnvCellArray(globals.addr_env_cells).v)
+layout(buffer_reference, scalar, buffer_reference_align = 4) readonly buffer LightArray { DeltaLight v[]; };
+#define lights (LightArray(globals.addr_lights).v)
 
 // ---- the environment map (src/scene/envmap.rs states the conventions) ----
 
@@ -97,14 +99,29 @@ vec3 env_sample(vec2 u_cell, vec2 u_pos) {
     return l.x * globals.env_rot0 + l.y * globals.env_rot1 + l.z * globals.env_rot2;
 }
 
-// A next-event sample: a point on an area emitter, or (environment) a direction in `point`.
-struct EmitterSample { vec3 point; vec3 normal; vec3 radiance; uint param; bool environment; bool valid; };
+// A next-event sample: a point on an area emitter, a direction toward the environment (`point`),
+// or a light without area (`delta`): its position, or (`distant`, a directional light) the
+// direction toward it in `point`; its radiance is already divided by the distance² and weighted
+// by a spot's falloff, `factor` being that weight, and `pdf` is the light's selection probability.
+struct EmitterSample {
+    vec3 point; vec3 normal; vec3 radiance; uint param; bool environment; bool valid;
+    bool delta; bool distant; float factor; float pdf;
+};
+
+// A spot's falloff toward unit direction `d` from its position (Mitsuba's falloff_curve).
+float spot_falloff(DeltaLight l, vec3 d) {
+    float c = dot(l.axis, d);
+    float beam = c >= l.cos_beam ? 1.0 : (l.cutoff - atan2_poly(sqrt(max(1.0 - c * c, 0.0)), c)) * l.inv_transition;
+    return c > l.cos_cutoff ? beam : 0.0;
+}
 
 // With probability env_select_prob (u_select below it) a direction toward the environment
-// (env_sample); otherwise an emissive triangle with probability proportional to its area, then a
-// uniform point on it (u_pos). The area density is (1 - env_select_prob) / total emissive area.
-EmitterSample sample_emitter(float u_select, vec2 u_pos, vec2 u_cell) {
-    EmitterSample s = EmitterSample(vec3(0.0), vec3(0.0), vec3(0.0), NO_PARAM, false, false);
+// (env_sample); with light_select_prob one of the lights without area, each equally likely, as
+// seen from shading point x; otherwise an emissive triangle with probability proportional to its
+// area, then a uniform point on it (u_pos). The area density is the rest of the probability over
+// the total emissive area.
+EmitterSample sample_emitter(float u_select, vec2 u_pos, vec2 u_cell, vec3 x) {
+    EmitterSample s = EmitterSample(vec3(0.0), vec3(0.0), vec3(0.0), NO_PARAM, false, false, false, false, 1.0, 0.0);
     if (HAS(F_ENV) && u_select < globals.env_select_prob) {
         s.point = env_sample(u_cell, u_pos);
         s.radiance = env_radiance(s.point);
@@ -113,9 +130,31 @@ EmitterSample sample_emitter(float u_select, vec2 u_pos, vec2 u_cell) {
         s.valid = true;
         return s;
     }
+    if (HAS(F_LIGHTS) && u_select < globals.env_select_prob + globals.light_select_prob) {
+        uint n = globals.light_count;
+        float t = (u_select - globals.env_select_prob) / globals.light_select_prob;
+        DeltaLight l = lights[min(uint(t * float(n)), n - 1u)];
+        s.delta = true;
+        s.param = l.p_intensity;
+        s.pdf = globals.light_select_prob / float(n);
+        if (l.kind == LIGHT_DIRECTIONAL) {
+            s.distant = true;
+            s.point = -l.axis;
+        } else {
+            s.point = l.position;
+            vec3 d = x - l.position;
+            float d2 = dot(d, d);
+            s.factor = 1.0 / d2;
+            if (l.kind == LIGHT_SPOT) s.factor *= spot_falloff(l, d * inversesqrt(d2));
+        }
+        s.radiance = param_rgb(l.p_intensity) * s.factor;
+        s.valid = s.factor > 0.0 && s.factor < FLOAT_MAX;
+        return s;
+    }
     uint count = globals.emitter_count;
     if (!HAS(F_EMITTERS) || count == 0u) return s;
-    u_select = (u_select - globals.env_select_prob) / (1.0 - globals.env_select_prob);
+    float taken = globals.env_select_prob + globals.light_select_prob;
+    u_select = (u_select - taken) / (1.0 - taken);
     uint lo = 0u;
     uint hi = count - 1u;
     // Binary search for the first cdf > u_select. The flag, set only where the search ends for its
@@ -141,7 +180,8 @@ EmitterSample sample_emitter(float u_select, vec2 u_pos, vec2 u_cell) {
 // Solid-angle density of reaching an emitter point at distance `dist` whose normal makes cosine
 // `cos_emitter` with the direction back to the shading point.
 float emitter_pdf_solid_angle(float dist, float cos_emitter) {
-    return cos_emitter > 0.0 ? (1.0 - globals.env_select_prob) * dist * dist / (cos_emitter * globals.emitter_total_area) : 0.0;
+    float p = 1.0 - globals.env_select_prob - globals.light_select_prob;
+    return cos_emitter > 0.0 ? p * dist * dist / (cos_emitter * globals.emitter_total_area) : 0.0;
 }
 
 // Solid-angle density with which next-event estimation samples direction `dir` toward the

@@ -159,6 +159,8 @@ contract_constants! {
     F_MEDIA = 1 << 11;
     /// Feature bit: the environment is a map (`envmap`), not a constant.
     F_ENV_MAP = 1 << 12;
+    /// Feature bit: lights without area (point, spot, directional).
+    F_LIGHTS = 1 << 13;
     /// Feature bit: gradients of constant colours (albedo, specular reflectance).
     G_COLOR = 1 << 16;
     /// Feature bit: gradients of texels.

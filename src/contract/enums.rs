@@ -54,6 +54,16 @@ contract_enums! {
         Null = MAT_NULL = 3,
     }
 
+    /// What `DeltaLight::kind` holds.
+    enum LightKind {
+        /// Mitsuba's `point`: intensity / distance².
+        Point = LIGHT_POINT = 0,
+        /// Mitsuba's `spot`: a point light with a cone and a linear falloff in angle.
+        Spot = LIGHT_SPOT = 1,
+        /// Mitsuba's `directional`: irradiance from one direction, at any distance.
+        Directional = LIGHT_DIRECTIONAL = 2,
+    }
+
     /// What a `FieldDesc` holds.
     enum FieldKind {
         /// One value (per channel) everywhere.

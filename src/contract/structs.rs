@@ -43,6 +43,11 @@ contract_structs! {
         env_rot1: Vec3,
         /// Row 2 of that rotation.
         env_rot2: Vec3,
+        /// Number of lights without area (`DeltaLight`: point, spot, directional).
+        light_count: u32,
+        /// Probability that next-event estimation samples one of them (each equally likely);
+        /// emissive triangles get what neither lights nor the environment take.
+        light_select_prob: f32,
         /// Probability that next-event estimation samples the environment rather than area emitters.
         env_select_prob: f32,
         /// Adjoint kernels: δL of a sample is the adjoint image's pixel times this (1 / spp).
@@ -92,6 +97,8 @@ contract_structs! {
         addr_fields: UVec2,
         /// Device address of the environment map's sampling cells (`EnvCell`).
         addr_env_cells: UVec2,
+        /// Device address of the lights without area (`DeltaLight`).
+        addr_lights: UVec2,
     }
 
     /// One view of a request: its pinhole camera and the key word of its paths. The image (and
@@ -286,6 +293,27 @@ contract_structs! {
         v1: Vec3,
         /// Vertex 2.
         v2: Vec3,
+    }
+
+    /// A light without area (Mitsuba's `point`, `spot`, `directional`): reached only by next-event
+    /// estimation, with weight 1 (no BSDF sample can hit it).
+    struct DeltaLight {
+        /// `LIGHT_POINT`, `LIGHT_SPOT` or `LIGHT_DIRECTIONAL`.
+        kind: u32,
+        /// Parameter offset of the RGB intensity (point, spot: W/sr) or irradiance (directional).
+        p_intensity: u32,
+        /// Position (point, spot).
+        position: Vec3,
+        /// Unit direction the light shines along: a spot's axis, a directional light's travel.
+        axis: Vec3,
+        /// Spot: cosine of the cutoff angle (no light beyond it).
+        cos_cutoff: f32,
+        /// Spot: cosine of the beam width (full intensity within it).
+        cos_beam: f32,
+        /// Spot: the cutoff angle in radians.
+        cutoff: f32,
+        /// Spot: 1 / (cutoff − beam width) in radians: the linear falloff's slope.
+        inv_transition: f32,
     }
 
     /// One cell of an environment map's sampling grid (`crate::scene::envmap`): the region between

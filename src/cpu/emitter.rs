@@ -3,11 +3,11 @@
 
 use glam::{Mat3, Vec2, Vec3};
 
-use crate::contract::Globals;
+use crate::contract::{DeltaLight, Globals, LIGHT_DIRECTIONAL, LIGHT_SPOT};
 use crate::cpu::path::GradSink;
 use crate::cpu::surface::param_color;
 use crate::sampling::{UNIFORM_SPHERE_PDF, sample_uniform_sphere, sample_uniform_triangle};
-use crate::scene::envmap::EnvMap;
+use crate::scene::envmap::{EnvMap, atan2_poly};
 use crate::scene::flat::FlatScene;
 
 /// A next-event sample: a point on an area emitter, or a direction toward the environment.
@@ -21,8 +21,28 @@ pub struct EmitterSample {
     pub radiance: Vec3,
     /// Parameter offset of the radiance.
     pub param: u32,
-    /// Whether this samples the constant environment.
+    /// Whether this samples the environment.
     pub environment: bool,
+    /// Whether this is a light without area: `point` is its position, or (`distant`) the direction
+    /// toward it; `radiance` is already divided by the distance² and weighted by a spot's falloff.
+    pub delta: bool,
+    /// A directional light.
+    pub distant: bool,
+    /// A light without area: the factor of its intensity in `radiance` (1 otherwise).
+    pub factor: f32,
+    /// A light without area: its selection probability.
+    pub pdf: f32,
+}
+
+/// A spot's falloff toward unit direction `d` from its position (Mitsuba's `falloff_curve`).
+fn spot_falloff(l: &DeltaLight, d: Vec3) -> f32 {
+    let c = l.axis.dot(d);
+    let beam = if c >= l.cos_beam {
+        1.0
+    } else {
+        (l.cutoff - atan2_poly((1.0 - c * c).max(0.0).sqrt(), c)) * l.inv_transition
+    };
+    if c > l.cos_cutoff { beam } else { 0.0 }
 }
 
 /// The environment map that `globals` describe, if the environment is one.
@@ -73,30 +93,68 @@ pub fn env_sample(flat: &FlatScene, globals: &Globals, u_cell: Vec2, u_pos: Vec2
     }
 }
 
-/// With probability `env_select_prob` a direction toward the environment ([`env_sample`]);
-/// otherwise an emissive triangle with probability proportional to its area, then a uniform point
-/// on it (area density (1 − env_select_prob) / total emissive area).
+/// With probability `env_select_prob` a direction toward the environment ([`env_sample`]); with
+/// `light_select_prob` one of the lights without area, each equally likely, as seen from shading
+/// point `x`; otherwise an emissive triangle with probability proportional to its area, then a
+/// uniform point on it (area density: the rest of the probability over the total emissive area).
 pub fn sample_emitter(
     flat: &FlatScene,
     globals: &Globals,
     u_select: f32,
-    u_pos: Vec2,
-    u_cell: Vec2,
+    (u_pos, u_cell): (Vec2, Vec2),
+    x: Vec3,
 ) -> Option<EmitterSample> {
+    let none = EmitterSample {
+        point: Vec3::ZERO,
+        normal: Vec3::ZERO,
+        radiance: Vec3::ZERO,
+        param: globals.env_param,
+        environment: false,
+        delta: false,
+        distant: false,
+        factor: 1.0,
+        pdf: 0.0,
+    };
     if u_select < globals.env_select_prob {
         let dir = env_sample(flat, globals, u_cell, u_pos);
         return Some(EmitterSample {
             point: dir,
-            normal: Vec3::ZERO,
             radiance: env_radiance(flat, globals, dir),
-            param: globals.env_param,
             environment: true,
+            ..none
+        });
+    }
+    if u_select < globals.env_select_prob + globals.light_select_prob {
+        let n = globals.light_count;
+        let t = (u_select - globals.env_select_prob) / globals.light_select_prob;
+        let l = &flat.lights[((t * n as f32) as u32).min(n - 1) as usize];
+        let (point, factor) = if l.kind == LIGHT_DIRECTIONAL {
+            (-l.axis, 1.0)
+        } else {
+            let d = x - l.position;
+            let d2 = d.dot(d);
+            let falloff = if l.kind == LIGHT_SPOT { spot_falloff(l, d * (1.0 / d2.sqrt())) } else { 1.0 };
+            (l.position, falloff / d2)
+        };
+        if !(factor > 0.0 && factor < f32::MAX) {
+            return None;
+        }
+        return Some(EmitterSample {
+            point,
+            radiance: param_color(flat, l.p_intensity) * factor,
+            param: l.p_intensity,
+            delta: true,
+            distant: l.kind == LIGHT_DIRECTIONAL,
+            factor,
+            pdf: globals.light_select_prob / n as f32,
+            ..none
         });
     }
     if flat.emitters.is_empty() {
         return None;
     }
-    let u_select = (u_select - globals.env_select_prob) / (1.0 - globals.env_select_prob);
+    let taken = globals.env_select_prob + globals.light_select_prob;
+    let u_select = (u_select - taken) / (1.0 - taken);
     let (mut lo, mut hi) = (0usize, flat.emitters.len() - 1);
     while lo < hi {
         let mid = (lo + hi) / 2;
@@ -106,20 +164,15 @@ pub fn sample_emitter(
     let b = sample_uniform_triangle(u_pos);
     let point = (1.0 - b.x - b.y) * e.v0 + b.x * e.v1 + b.y * e.v2;
     let normal = (e.v1 - e.v0).cross(e.v2 - e.v0).normalize();
-    Some(EmitterSample {
-        point,
-        normal,
-        radiance: param_color(flat, e.p_radiance),
-        param: e.p_radiance,
-        environment: false,
-    })
+    Some(EmitterSample { point, normal, radiance: param_color(flat, e.p_radiance), param: e.p_radiance, ..none })
 }
 
 /// Solid-angle density of reaching an emitter point at `dist` whose normal makes cosine
 /// `cos_emitter` with the direction back to the shading point.
 pub fn emitter_pdf_solid_angle(globals: &Globals, dist: f32, cos_emitter: f32) -> f32 {
     if cos_emitter > 0.0 {
-        (1.0 - globals.env_select_prob) * dist * dist / (cos_emitter * globals.emitter_total_area)
+        let p = 1.0 - globals.env_select_prob - globals.light_select_prob;
+        p * dist * dist / (cos_emitter * globals.emitter_total_area)
     } else {
         0.0
     }

@@ -149,7 +149,7 @@ fn env_cell_uniforms(globals: &Globals, key: RngKey, pixel: u32, sample: u32, ve
 
 /// Adds `g` times the derivative of NEE's emitter sample's radiance to `sink`.
 fn emitter_backward(globals: &Globals, es: &EmitterSample, g: Vec3, sink: &mut GradSink<'_>) {
-    if es.environment { env_backward(globals, es.point, g, sink) } else { sink.add_rgb(es.param, g) }
+    if es.environment { env_backward(globals, es.point, g, sink) } else { sink.add_rgb(es.param, g * es.factor) }
 }
 
 /// One camera path of `view` through `pixel` (row-major index) for sample `sample`: its radiance (primal,
@@ -248,12 +248,19 @@ pub fn trace_path<const ADJOINT: bool>(
                 let u_select = u_em[(DIM_EMITTER_SELECT % 4) as usize];
                 let es = if nee {
                     let u_cell = env_cell_uniforms(globals, key, pixel, sample, vertex);
-                    sample_emitter(flat, globals, u_select, Vec2::new(u_em[pos], u_em[pos + 1]), u_cell)
+                    sample_emitter(flat, globals, u_select, (Vec2::new(u_em[pos], u_em[pos + 1]), u_cell), x)
                 } else {
                     None
                 };
                 if let Some(es) = es {
-                    let (wl, p_e, shadow_tmax) = if es.environment {
+                    let (wl, p_e, shadow_tmax) = if es.delta {
+                        if es.distant {
+                            (es.point, es.pdf, f32::MAX)
+                        } else {
+                            let dist = (es.point - x).length();
+                            ((es.point - x).normalize(), es.pdf, dist * (1.0 - SHADOW_EPSILON))
+                        }
+                    } else if es.environment {
                         (es.point, environment_pdf(flat, globals, es.point), f32::MAX)
                     } else {
                         let to_light = es.point - x;
@@ -266,7 +273,8 @@ pub fn trace_path<const ADJOINT: bool>(
                         let segment = (x, wl, shadow_tmax);
                         let counters = (pixel, sample, vertex);
                         let tr = medium::shadow_transmittance(flat, key, current, segment, counters, None);
-                        let w_n = mis_power(p_e, f);
+                        // No phase sample reaches a light without area: NEE alone finds it.
+                        let w_n = if es.delta { 1.0 } else { mis_power(p_e, f) };
                         let contribution = throughput * tr * w_n * f * es.radiance / p_e;
                         radiance += sign * contribution;
                         if ADJOINT && max_component(tr) > 0.0 {
@@ -341,12 +349,19 @@ pub fn trace_path<const ADJOINT: bool>(
         let u_select = u_em[(DIM_EMITTER_SELECT % 4) as usize];
         let es = if nee {
             let u_cell = env_cell_uniforms(globals, key, pixel, sample, vertex);
-            sample_emitter(flat, globals, u_select, Vec2::new(u_em[pos], u_em[pos + 1]), u_cell)
+            sample_emitter(flat, globals, u_select, (Vec2::new(u_em[pos], u_em[pos + 1]), u_cell), s.p)
         } else {
             None
         };
         if let Some(es) = es {
-            let (wl, p_e, shadow_tmax, origin) = if es.environment {
+            let (wl, p_e, shadow_tmax, origin) = if es.delta && es.distant {
+                (es.point, es.pdf, f32::MAX, offset_origin(s.p, s.ng, es.point))
+            } else if es.delta {
+                let origin = offset_origin(s.p, s.ng, es.point - s.p);
+                let to_light = es.point - origin;
+                let dist = to_light.length();
+                (to_light / dist, es.pdf, dist * (1.0 - SHADOW_EPSILON), origin)
+            } else if es.environment {
                 (es.point, environment_pdf(flat, globals, es.point), f32::MAX, offset_origin(s.p, s.ng, es.point))
             } else {
                 let origin = offset_origin(s.p, s.ng, es.point - s.p);
@@ -378,7 +393,10 @@ pub fn trace_path<const ADJOINT: bool>(
             };
             if max_component(tr) > 0.0 {
                 let pdf_f = bsdf_pdf(&bsdf, wi, wo);
-                let w_n = if !diff {
+                let w_n = if es.delta {
+                    // No BSDF sample reaches a light without area: NEE alone finds it.
+                    if diff { 1.0 / (w1 + w2) } else { 1.0 }
+                } else if !diff {
                     mis_power(p_e, pdf_f)
                 } else {
                     // Appendix B: the NEE direction as produced by BSDF or differential sampling here.

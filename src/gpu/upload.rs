@@ -24,6 +24,8 @@ pub(crate) struct GpuScene {
     pub fields: Buffer,
     /// The environment map's sampling cells (they follow its texels: rewritten with the parameters).
     pub env_cells: Buffer,
+    /// The lights without area.
+    pub lights: Buffer,
 }
 
 impl GpuScene {
@@ -41,6 +43,7 @@ impl GpuScene {
             media: Buffer::storage_with(ctx, "media", &flat.media)?,
             fields: Buffer::storage_with(ctx, "media fields", &flat.fields)?,
             env_cells: Buffer::storage_with(ctx, "environment map cells", &flat.env_cells)?,
+            lights: Buffer::storage_with(ctx, "lights", &flat.lights)?,
         })
     }
 
@@ -57,6 +60,7 @@ impl GpuScene {
             addr_media: self.media.device_address(),
             addr_fields: self.fields.device_address(),
             addr_env_cells: self.env_cells.device_address(),
+            addr_lights: self.lights.device_address(),
             ..*globals
         }
     }

@@ -36,6 +36,9 @@ pub fn scene_features(flat: &FlatScene, env_param: u32) -> u32 {
     if !flat.env_cells.is_empty() {
         f |= F_ENV_MAP;
     }
+    if !flat.lights.is_empty() {
+        f |= F_LIGHTS;
+    }
     if !flat.media.is_empty() {
         f |= F_MEDIA;
     }
@@ -83,7 +86,8 @@ pub fn param_kinds(flat: &FlatScene, env: (u32, u32), begin: u32, end: u32) -> P
             }
         }
     }
-    if flat.emitters.iter().any(|e| overlaps(e.p_radiance, 3)) {
+    if flat.emitters.iter().any(|e| overlaps(e.p_radiance, 3)) || flat.lights.iter().any(|l| overlaps(l.p_intensity, 3))
+    {
         k = k.union(ParamKinds::EMISSION);
     }
     if overlaps(env.0, env.1) {
@@ -103,7 +107,7 @@ pub fn param_kinds(flat: &FlatScene, env: (u32, u32), begin: u32, end: u32) -> P
 /// `kinds` (empty for the primal kernel).
 pub fn request_features(scene: u32, options: &RenderOptions, kinds: ParamKinds) -> u32 {
     let mut f = scene;
-    if options.nee && scene & (F_EMITTERS | F_ENV) != 0 {
+    if options.nee && scene & (F_EMITTERS | F_ENV | F_LIGHTS) != 0 {
         f |= F_NEE;
     }
     if matches!(options.strategy, Strategy::Diff { .. }) {
@@ -114,7 +118,7 @@ pub fn request_features(scene: u32, options: &RenderOptions, kinds: ParamKinds) 
 
 /// A short human-readable name of a variant, for logs: `nee env diffuse conductor[beckmann] ∂alpha`.
 pub fn describe(features: u32) -> String {
-    const NAMES: [(u32, &str); 20] = [
+    const NAMES: [(u32, &str); 21] = [
         (F_NEE, "nee"),
         (F_ENV, "env"),
         (F_EMITTERS, "emitters"),
@@ -128,6 +132,7 @@ pub fn describe(features: u32) -> String {
         (F_TWO_SIDED, "two-sided"),
         (F_MEDIA, "media"),
         (F_ENV_MAP, "env-map"),
+        (F_LIGHTS, "lights"),
         (G_COLOR, "∂color"),
         (G_TEXTURE, "∂texture"),
         (G_ALPHA, "∂alpha"),

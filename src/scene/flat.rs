@@ -5,14 +5,14 @@ use glam::Vec3;
 
 use crate::bvh::{self, Bvh};
 use crate::contract::{
-    EmitterTri, EnvCell, FIELD_CONSTANT, FIELD_GRID, FieldDesc, MAT_BLEND, MAT_DIFFUSE, MAT_NULL, MAT_ROUGH_CONDUCTOR,
-    Material as GpuMaterial, MediumDesc, NO_EMITTER, NO_MEDIUM, NO_PARAM, PHASE_HG, PHASE_ISOTROPIC, TEX_CHECKER,
-    TEX_NEAREST, TEX_WRAP_CLAMP, TEX_WRAP_MIRROR, TriShading,
+    DeltaLight, EmitterTri, EnvCell, FIELD_CONSTANT, FIELD_GRID, FieldDesc, LIGHT_DIRECTIONAL, LIGHT_POINT, LIGHT_SPOT,
+    MAT_BLEND, MAT_DIFFUSE, MAT_NULL, MAT_ROUGH_CONDUCTOR, Material as GpuMaterial, MediumDesc, NO_EMITTER, NO_MEDIUM,
+    NO_PARAM, PHASE_HG, PHASE_ISOTROPIC, TEX_CHECKER, TEX_NEAREST, TEX_WRAP_CLAMP, TEX_WRAP_MIRROR, TriShading,
 };
 use crate::error::Result;
 use crate::scene::medium::{Field, Phase};
 use crate::scene::shapes::triangle_area;
-use crate::scene::{Albedo, Material, Scene, Wrap};
+use crate::scene::{Albedo, Light, LightShape, Material, Scene, Wrap};
 
 /// The GPU-layout arrays of one scene.
 #[derive(Clone, Debug, Default, PartialEq)]
@@ -35,6 +35,8 @@ pub struct FlatScene {
     pub fields: Vec<FieldDesc>,
     /// The environment map's sampling cells (`crate::scene::envmap`); empty without a map.
     pub env_cells: Vec<EnvCell>,
+    /// Lights without area, in the scene's order.
+    pub lights: Vec<DeltaLight>,
 }
 
 /// Gives `scene` and its flattened twin `flat` the values of `params`, which must have the scene
@@ -140,6 +142,7 @@ impl FlatScene {
             media,
             fields,
             env_cells,
+            lights: scene.lights.iter().map(|l| flatten_light(scene, l)).collect(),
         })
     }
 
@@ -148,6 +151,41 @@ impl FlatScene {
         let t = &self.bvh.tris[slot as usize];
         (t.v1 - t.v0).cross(t.v2 - t.v0).normalize()
     }
+}
+
+/// The kernels' form of a light without area.
+fn flatten_light(scene: &Scene, light: &Light) -> DeltaLight {
+    let p_intensity = scene.params.entry(light.intensity).offset;
+    let mut d = DeltaLight {
+        kind: LIGHT_POINT,
+        p_intensity,
+        position: Vec3::ZERO,
+        axis: Vec3::Z,
+        cos_cutoff: -1.0,
+        cos_beam: -1.0,
+        cutoff: std::f32::consts::PI,
+        inv_transition: 0.0,
+    };
+    match light.shape {
+        LightShape::Point { position } => d.position = position,
+        LightShape::Spot { position, axis, cutoff, beam_width } => {
+            // Mitsuba's spot: its radians, cosines and slope from the angles in degrees.
+            let (cutoff, beam) = (cutoff.to_radians(), beam_width.to_radians());
+            d = DeltaLight {
+                kind: LIGHT_SPOT,
+                position,
+                axis,
+                cos_cutoff: cutoff.cos(),
+                cos_beam: beam.cos(),
+                cutoff,
+                // Unused when the beam fills the cone (every lit direction is within the beam).
+                inv_transition: if cutoff > beam { 1.0 / (cutoff - beam) } else { 0.0 },
+                ..d
+            };
+        }
+        LightShape::Directional { direction } => d = DeltaLight { kind: LIGHT_DIRECTIONAL, axis: direction, ..d },
+    }
+    d
 }
 
 /// The sampling cells of `scene`'s environment map, if it has one.

@@ -45,6 +45,43 @@ pub struct Texture {
     pub wrap: Wrap,
 }
 
+/// A light without area (Mitsuba's `point`, `spot` and `directional`): next-event estimation
+/// reaches it, no ray can hit it.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Light {
+    /// Where and how it shines.
+    pub shape: LightShape,
+    /// The RGB intensity (point, spot: W/sr) or irradiance (directional) parameter.
+    pub intensity: ParamId,
+}
+
+/// The geometry of a [`Light`].
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum LightShape {
+    /// Intensity / distance² in every direction.
+    Point {
+        /// Position.
+        position: Vec3,
+    },
+    /// A point light inside a cone around `axis`: full intensity within `beam_width` degrees of
+    /// it, falling linearly in angle to 0 at `cutoff` degrees (Mitsuba's `spot`).
+    Spot {
+        /// Position.
+        position: Vec3,
+        /// Unit axis of the cone.
+        axis: Vec3,
+        /// Cutoff angle in degrees, in (0, 90].
+        cutoff: f32,
+        /// Beam width in degrees, in (0, cutoff].
+        beam_width: f32,
+    },
+    /// Irradiance arriving along the unit `direction` (the way the light travels), everywhere.
+    Directional {
+        /// Direction of travel.
+        direction: Vec3,
+    },
+}
+
 /// How a bitmap's texel indices outside the image wrap (Mitsuba's `wrap_mode`).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub enum Wrap {
@@ -221,6 +258,8 @@ pub struct Scene {
     pub environment: Option<ParamId>,
     /// The environment map's layout when `environment` holds a map's texels.
     pub env_map: Option<envmap::EnvMap>,
+    /// Lights without area.
+    pub lights: Vec<Light>,
     /// Every differentiable value.
     pub params: ParamTable,
     /// Default maximum path depth (surface interactions) for this scene.
@@ -279,6 +318,7 @@ impl Scene {
             media: Vec::new(),
             environment: None,
             env_map: None,
+            lights: Vec::new(),
             params: ParamTable::default(),
             max_depth: 6,
             default_spp: None,
@@ -497,6 +537,28 @@ impl Scene {
                     "environment map".into(),
                     format!("its {}×{} texels do not match its parameter ({len:?} values)", map.width, map.height),
                 ));
+            }
+        }
+        for (i, l) in self.lights.iter().enumerate() {
+            let bad = |m: &str| Err(err(format!("light {i}"), m.into()));
+            let unit = |v: Vec3| v.is_finite() && (v.length() - 1.0).abs() < 1e-4;
+            match l.shape {
+                LightShape::Point { position } if !position.is_finite() => return bad("non-finite position"),
+                LightShape::Spot { position, axis, cutoff, beam_width } => {
+                    if !position.is_finite() || !unit(axis) {
+                        return bad("non-finite position or an axis that is not a unit vector");
+                    }
+                    if !(cutoff > 0.0 && cutoff <= 90.0 && beam_width > 0.0 && beam_width <= cutoff) {
+                        return bad("a spot needs 0 < beam_width ≤ cutoff_angle ≤ 90 degrees");
+                    }
+                }
+                LightShape::Directional { direction } if !unit(direction) => {
+                    return bad("a direction that is not a unit vector");
+                }
+                _ => {}
+            }
+            if self.params.entry(l.intensity).len != 3 {
+                return bad("its intensity is not one RGB value");
             }
         }
         for (i, m) in self.materials.iter().enumerate() {

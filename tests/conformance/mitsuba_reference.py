@@ -87,6 +87,10 @@ MATRIX = {
     "emitter_envmap": dict(features=["envmap", "EXR", "scale", "to_world rotation", "seen directly",
                                      "roughconductor under it"],
                            grads=["sky.data", "floor.bsdf.reflectance.value"]),
+    "emitter_point_spot_directional": dict(features=["point (position)", "spot (to_world, cutoff, beam width)",
+                                                     "directional (direction)", "NEE only"],
+                                           grads=["bulb.intensity.value", "lamp.intensity.value",
+                                                  "sun.irradiance.value"]),
     # ---- shape
     "shape_obj_smooth": dict(features=["obj", "vertex normals"], grads=["mesh.bsdf.reflectance.value"]),
     "shape_obj_no_normals": dict(features=["obj without normals (smooth, angle-weighted)", "quads", "non-uniform scale"],
@@ -129,6 +133,9 @@ MATRIX = {
     # ---- medium
     "medium_homogeneous_grey": dict(features=["homogeneous", "float sigma_t", "float albedo", "isotropic"],
                                     grads=["cloud.interior_medium.sigma_t.value.value", "cloud.interior_medium.albedo.value.value"]),
+    "medium_point_spot_directional": dict(features=["homogeneous", "point, spot, directional only",
+                                                    "NEE from medium vertices"],
+                                          grads=["bulb.intensity.value", "lamp.intensity.value"]),
     "medium_homogeneous_rgb": dict(features=["homogeneous", "rgb sigma_t", "rgb albedo", "scale"],
                                    grads=["cloud.interior_medium.albedo.value.value"]),
     "medium_homogeneous_constvolume": dict(features=["homogeneous", "constvolume sigma_t/albedo"],
@@ -252,6 +259,7 @@ POWER = {
     "medium_homogeneous_constvolume": {"gradient_bias": 1.0},
     "medium_homogeneous_grey": {"gradient_bias": 1.0},
     "medium_homogeneous_rgb": {"gradient_bias": 0.2, "primal_bias": 0.02},
+    "medium_point_spot_directional": {"gradient_bias": 0.1, "primal_bias": 0.02},
     "medium_issue_heterogeneous": {"gradient_bias": 1.0},
     "medium_issue_homogeneous": {"gradient_bias": 1.0},
     "medium_scale": {"gradient_bias": 1.0},

@@ -294,7 +294,10 @@ impl<'a> Loader<'a> {
         self.refuse_sensors_in_media(&sensors)?;
         self.refuse_overlapping_media()?;
         super::super::load::apply_environment(&mut self.scene, self.options.environment)?;
-        if self.scene.meshes.iter().all(|m| m.emitter.is_none()) && self.scene.environment.is_none() {
+        if self.scene.meshes.iter().all(|m| m.emitter.is_none())
+            && self.scene.environment.is_none()
+            && self.scene.lights.is_empty()
+        {
             let w = self.x.warning(
                 root,
                 "the scene has no emitters: it renders black unless lit by an environment (LoadOptions::environment)",
@@ -565,11 +568,19 @@ impl<'a> Loader<'a> {
         let p = Props::parse(&self.x, node)?;
         match p.kind.as_str() {
             "constant" | "envmap" => {}
+            "point" | "spot" | "directional" => {
+                let name = self.top_name(node)?;
+                self.light(&p, &name)?;
+                return self.finish(&p);
+            }
             "area" => return Err(self.x.err(node, "an 'area' emitter must be nested in a <shape>")),
             other => {
                 return Err(self.x.err(
                     node,
-                    format!("unsupported plugin '{other}' (supported: constant, envmap; area inside a <shape>)"),
+                    format!(
+                        "unsupported plugin '{other}' (supported: constant, directional, envmap, point, spot; area \
+                         inside a <shape>)"
+                    ),
                 ));
             }
         }
@@ -585,6 +596,75 @@ impl<'a> Loader<'a> {
             set.map_err(|e| self.located(node, e))?;
         }
         self.finish(&p)
+    }
+
+    /// Mitsuba's `point` (`intensity`, `position` or `to_world`), `spot` (`intensity`,
+    /// `cutoff_angle` 20°, `beam_width` ¾ of it, `to_world`: the cone looks along its +z) and
+    /// `directional` (`irradiance`, `direction` or `to_world`: it shines along its +z). The
+    /// intensity or irradiance is parameter `NAME.intensity.value` or `NAME.irradiance.value`.
+    fn light(&mut self, p: &Props<'a>, name: &str) -> Result<()> {
+        use crate::scene::{Light, LightShape};
+        let kind = p.kind.as_str();
+        if let Some(t) = p.object("texture") {
+            return Err(self.x.err(t, format!("a textured '{kind}' is not supported")));
+        }
+        let to_world = p.transform(&self.x, "to_world")?;
+        // `position` / `direction` and `to_world` are exclusive (Mitsuba refuses both).
+        let exclusive = |other: &str| -> Result<()> {
+            match (&to_world, p.node_of(other)) {
+                (Some(_), Some(n)) => {
+                    Err(self.x.err(n, format!("only one of '{other}' and 'to_world' may be given to '{kind}'")))
+                }
+                _ => Ok(()),
+            }
+        };
+        let matrix = to_world.map_or(glam::Mat4::IDENTITY, |(t, _)| t.matrix);
+        let axis = matrix.transform_vector3(Vec3::Z).normalize_or_zero();
+        let shape = match kind {
+            "point" => {
+                exclusive("position")?;
+                let position = match p.point(&self.x, "position")? {
+                    Some((v, _)) => v,
+                    None => matrix.w_axis.truncate(),
+                };
+                LightShape::Point { position }
+            }
+            "spot" => {
+                let cutoff = self.float_in(p, "cutoff_angle", Some(20.0), (0.0, 90.0))?;
+                let beam_width = self.float_in(p, "beam_width", Some(cutoff * 0.75), (0.0, 90.0))?;
+                if !(cutoff > 0.0 && beam_width > 0.0 && beam_width <= cutoff) {
+                    return Err(self.x.err(
+                        p.node,
+                        format!("'spot' needs 0 < beam_width ≤ cutoff_angle, got {beam_width} and {cutoff}"),
+                    ));
+                }
+                LightShape::Spot { position: matrix.w_axis.truncate(), axis, cutoff, beam_width }
+            }
+            _ => {
+                exclusive("direction")?;
+                let direction = match p.point(&self.x, "direction")? {
+                    Some((v, n)) => {
+                        let d = v.normalize_or_zero();
+                        if d == Vec3::ZERO {
+                            return Err(self.x.err(n, "'direction' must not be zero"));
+                        }
+                        d
+                    }
+                    None => axis,
+                };
+                LightShape::Directional { direction }
+            }
+        };
+        if matches!(shape, LightShape::Spot { axis, .. } | LightShape::Directional { direction: axis } if axis == Vec3::ZERO)
+        {
+            return Err(self.x.err(p.node, format!("the 'to_world' of '{kind}' collapses its +z axis")));
+        }
+        let what = if kind == "directional" { "irradiance" } else { "intensity" };
+        let value = self.radiance_in(p, what, Vec3::ONE, bounds::RADIANCE)?;
+        let intensity = self.scene.params.add(&format!("{name}.{what}.value"), &value.to_array(), bounds::RADIANCE);
+        let intensity = intensity.map_err(|e| self.located(p.node, e))?;
+        self.scene.lights.push(Light { shape, intensity });
+        Ok(())
     }
 
     /// Mitsuba's `envmap`: a latitude-longitude image (EXR, HDR, or PNG and other 8-bit formats,

@@ -26,7 +26,8 @@ fn err(dir: &Path, body: &str) -> String {
 
 /// A 4 × 3 Radiance HDR image whose texel (i, j) is (i, j, 0.5) + 1.
 fn write_hdr(path: &Path) -> Vec<f32> {
-    let texels: Vec<f32> = (0..3).flat_map(|j| (0..4).flat_map(move |i| [1.0 + i as f32, 1.0 + j as f32, 1.5])).collect();
+    let texels: Vec<f32> =
+        (0..3).flat_map(|j| (0..4).flat_map(move |i| [1.0 + i as f32, 1.0 + j as f32, 1.5])).collect();
     let pixels: Vec<image::Rgb<f32>> = texels.chunks(3).map(|c| image::Rgb([c[0], c[1], c[2]])).collect();
     let file = std::fs::File::create(path).unwrap();
     image::codecs::hdr::HdrEncoder::new(file).encode(&pixels, 4, 3).unwrap();
@@ -72,10 +73,15 @@ fn bad_envmaps_are_refused_by_name() {
     let cases = [
         (r#"<emitter type="envmap"/>"#.to_string(), "'envmap' needs the property 'filename'"),
         (
-            format!(r#"<emitter type="envmap">{file}<transform name="to_world"><scale value="2"/></transform></emitter>"#),
+            format!(
+                r#"<emitter type="envmap">{file}<transform name="to_world"><scale value="2"/></transform></emitter>"#
+            ),
             "an envmap's 'to_world' must be a rotation (no scale, shear or mirroring)",
         ),
-        (r#"<emitter type="envmap"><string name="filename" value="row.png"/></emitter>"#.into(), "an environment map needs at least 2 rows, it has 1"),
+        (
+            r#"<emitter type="envmap"><string name="filename" value="row.png"/></emitter>"#.into(),
+            "an environment map needs at least 2 rows, it has 1",
+        ),
         (
             r#"<emitter type="envmap"><string name="filename" value="none.exr"/></emitter>"#.into(),
             "image file 'none.exr' not found",
@@ -84,7 +90,10 @@ fn bad_envmaps_are_refused_by_name() {
             format!(r#"<emitter type="envmap">{file}</emitter><emitter type="constant"/>"#),
             "a scene has at most one environment emitter (constant or envmap)",
         ),
-        (format!(r#"<emitter type="envmap">{file}<float name="scale" value="-1"/></emitter>"#), "'scale' must lie in [0, ∞), got -1"),
+        (
+            format!(r#"<emitter type="envmap">{file}<float name="scale" value="-1"/></emitter>"#),
+            "'scale' must lie in [0, ∞), got -1",
+        ),
     ];
     for (body, expected) in cases {
         let e = err(dir.path(), &body);
@@ -94,4 +103,62 @@ fn bad_envmaps_are_refused_by_name() {
     let options = LoadOptions { environment: Some([1.0, 1.0, 1.0]), ..LoadOptions::default() };
     let e = load(dir.path(), &format!(r#"<emitter type="envmap" id="sky">{file}</emitter>"#), &options).unwrap_err();
     assert!(e.to_string().contains("the scene's own environment 'sky.data' is a map (envmap)"), "{e}");
+}
+
+#[test]
+fn point_spot_and_directional_lights_take_mitsubas_properties() {
+    use crate::scene::LightShape;
+    let dir = tempfile::tempdir().unwrap();
+    let body = r#"<emitter type="point" id="bulb"><point name="position" value="1, 2, 3"/><rgb name="intensity" value="4, 5, 6"/></emitter>
+        <emitter type="point" id="moved"><transform name="to_world"><translate x="-1"/></transform></emitter>
+        <emitter type="spot" id="lamp"><transform name="to_world"><lookat origin="0, 3, 0" target="0, 0, 0" up="0, 0, 1"/></transform>
+            <float name="cutoff_angle" value="40"/></emitter>
+        <emitter type="directional" id="sun"><vector name="direction" value="0, -2, 0"/></emitter>"#;
+    let scene = load(dir.path(), body, &LoadOptions::default()).unwrap();
+    assert_eq!(scene.lights.len(), 4);
+    assert_eq!(scene.lights[0].shape, LightShape::Point { position: Vec3::new(1.0, 2.0, 3.0) });
+    assert_eq!(scene.params.get(scene.params.find("bulb.intensity.value").unwrap()), [4.0, 5.0, 6.0]);
+    assert_eq!(scene.lights[1].shape, LightShape::Point { position: Vec3::new(-1.0, 0.0, 0.0) });
+    let LightShape::Spot { position, axis, cutoff, beam_width } = scene.lights[2].shape else { panic!() };
+    assert!(position.abs_diff_eq(Vec3::new(0.0, 3.0, 0.0), 1e-6) && axis.abs_diff_eq(-Vec3::Y, 1e-6));
+    assert_eq!((cutoff, beam_width), (40.0, 30.0));
+    assert_eq!(scene.lights[3].shape, LightShape::Directional { direction: -Vec3::Y });
+    // Intensity 1 by default, as Mitsuba.
+    assert_eq!(scene.params.get(scene.params.find("sun.irradiance.value").unwrap()), [1.0, 1.0, 1.0]);
+    assert!(scene.warnings.is_empty(), "{:?}", scene.warnings);
+}
+
+#[test]
+fn bad_lights_are_refused_by_name() {
+    let dir = tempfile::tempdir().unwrap();
+    let cases = [
+        (
+            r#"<emitter type="point"><point name="position" value="0, 1, 0"/><transform name="to_world"><translate x="1"/></transform></emitter>"#,
+            "only one of 'position' and 'to_world' may be given to 'point'",
+        ),
+        (
+            r#"<emitter type="spot"><float name="cutoff_angle" value="10"/><float name="beam_width" value="20"/></emitter>"#,
+            "'spot' needs 0 < beam_width ≤ cutoff_angle, got 20 and 10",
+        ),
+        (
+            r#"<emitter type="spot"><float name="cutoff_angle" value="120"/></emitter>"#,
+            "'cutoff_angle' must lie in [0, 90], got 120",
+        ),
+        (
+            r#"<emitter type="directional"><vector name="direction" value="0, 0, 0"/></emitter>"#,
+            "'direction' must not be zero",
+        ),
+        (
+            r#"<emitter type="spot"><texture name="texture" type="bitmap"/></emitter>"#,
+            "a textured 'spot' is not supported",
+        ),
+        (
+            r#"<emitter type="projector"/>"#,
+            "unsupported plugin 'projector' (supported: constant, directional, envmap, point, spot;",
+        ),
+    ];
+    for (body, expected) in cases {
+        let e = err(dir.path(), body);
+        assert!(e.contains(expected), "{body}: {e}");
+    }
 }

@@ -373,12 +373,13 @@ fn element_and_property_errors() {
         (r#"<texture type="bitmap"/>"#, "<texture>: 'bitmap' needs the property 'filename'"),
         (r#"<emitter type="area"/>"#, "<emitter>: an 'area' emitter must be nested in a <shape>"),
         (
-            r#"<emitter type="envmap"/>"#,
-            "<emitter>: unsupported plugin 'envmap' (supported: constant; area inside a <shape>)",
+            r#"<emitter type="projector"/>"#,
+            "<emitter>: unsupported plugin 'projector' (supported: constant, directional, envmap, point, spot; area \
+             inside a <shape>)",
         ),
         (
             r#"<emitter type="constant"/><emitter type="constant"/>"#,
-            "<emitter>: a scene has at most one constant emitter",
+            "<emitter>: a scene has at most one environment emitter (constant or envmap)",
         ),
         (
             r#"<integrator type="ptracer"/>"#,
