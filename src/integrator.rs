@@ -122,7 +122,8 @@ impl Strategy {
     ///
     /// # Errors
     /// [`Error::InvalidArgument`] naming `Strategy::from_name`, `Strategy::Diff::q` or the target for an unknown strategy,
-    /// a q outside [0, 1] or an unknown parameter.
+    /// a q outside [0, 1], an unknown parameter, or a rough plastic's roughness (no differential
+    /// sampler for it).
     pub fn from_name(scene: &Scene, name: &str, q: f32, target: &str) -> Result<Strategy> {
         match name {
             "bsdf" => Ok(Strategy::Bsdf),
@@ -137,6 +138,19 @@ impl Strategy {
                     parameter: target.to_string(),
                     message: "no such parameter to drive the differential sampler (see `pathgrad params SCENE`)".into(),
                 })?;
+                let plastic = scene
+                    .materials
+                    .iter()
+                    .any(|m| matches!(m, crate::scene::Material::RoughPlastic { alpha, .. } if *alpha == target));
+                if plastic {
+                    return Err(Error::InvalidArgument {
+                        parameter: scene.params.entry(target).name.clone(),
+                        message: "is a rough plastic's roughness, which the differential sampler does not cover \
+                                  (it samples the derivative of a rough conductor's or a blend's lobe): use the \
+                                  bsdf strategy"
+                            .into(),
+                    });
+                }
                 Ok(Strategy::Diff { target, q })
             }
             other => Err(Error::InvalidArgument {
@@ -410,6 +424,7 @@ impl RenderOptions {
             addr_fields: glam::UVec2::ZERO,
             addr_env_cells: glam::UVec2::ZERO,
             addr_lights: glam::UVec2::ZERO,
+            addr_tables: glam::UVec2::ZERO,
             light_count: flat.lights.len() as u32,
             light_select_prob,
             env_select_prob,

@@ -135,10 +135,19 @@ impl ParamTable {
                 }
             }
             if chosen.len() == before && !self.entries.iter().any(|e| glob_match(pattern, &e.name)) {
+                // Mitsuba exposes indices of refraction; pathgrad does not (yet).
+                let last = pattern.rsplit('.').find(|p| *p != "value").unwrap_or("");
+                let ior = if matches!(last, "eta" | "int_ior" | "ext_ior") {
+                    ": pathgrad exposes no index of refraction as a parameter (a dielectric's acts through \
+                     the directions it refracts into, which detached derivatives hold fixed; attached \
+                     derivatives are a later issue)"
+                } else {
+                    ""
+                };
                 return Err(Error::InvalidArgument {
                     parameter: pattern.to_string(),
                     message: format!(
-                        "matches no parameter (known: {})",
+                        "matches no parameter{ior} (known: {})",
                         self.entries.iter().map(|e| e.name.as_str()).collect::<Vec<_>>().join(", ")
                     ),
                 });

@@ -1,4 +1,5 @@
-// BSDFs: Lambertian, rough conductor (Beckmann/GGX, VNDF sampling), blend (twin of src/bsdf/).
+// BSDFs: Lambertian, rough conductor (Beckmann/GGX, VNDF sampling), rough plastic, blend (twin
+// of src/bsdf/).
 // Local frame, normal +z; eval returns f̂ = f·max(0, cos θo); pdfs are solid-angle densities of wo.
 #ifndef PATHGRAD_BSDF_GLSL
 #define PATHGRAD_BSDF_GLSL
@@ -8,7 +9,9 @@
 #include "features.glsl"
 
 
-struct Leaf { uint kind; uint distribution; float alpha; vec3 color; vec3 eta; vec3 k; };
+// A rough plastic keeps (η, coating sampling weight, nonlinear) in `eta`, its specular
+// reflectance in `k` and its coating table's offset in `table` (Material's layout).
+struct Leaf { uint kind; uint distribution; float alpha; vec3 color; vec3 eta; vec3 k; uint table; };
 struct Bsdf { Leaf leaf0; Leaf leaf1; float weight; bool blend; };
 struct BsdfSample { vec3 wo; float pdf; vec3 value; bool valid; };
 
@@ -17,9 +20,19 @@ bool is_beckmann(uint distribution) {
     return !HAS(F_GGX) || (HAS(F_BECKMANN) && distribution == DIST_BECKMANN);
 }
 
+// Whether leaf `kind` is a rough plastic, folded to a constant when the kernel has no other kind.
+bool is_plastic(uint kind) {
+    return HAS(F_PLASTIC) && ((!HAS(F_DIFFUSE) && !HAS(F_CONDUCTOR)) || kind == LEAF_ROUGH_PLASTIC);
+}
+
 // Whether leaf `kind` is Lambertian, folded to a constant when the kernel has only one kind.
 bool is_diffuse(uint kind) {
-    return !HAS(F_CONDUCTOR) || (HAS(F_DIFFUSE) && kind == LEAF_DIFFUSE);
+    return (!HAS(F_CONDUCTOR) && !HAS(F_PLASTIC)) || (HAS(F_DIFFUSE) && kind == LEAF_DIFFUSE);
+}
+
+// Whether leaf `kind` is a rough conductor.
+bool is_conductor(uint kind) {
+    return !is_plastic(kind) && !is_diffuse(kind);
 }
 
 // ---- Lambertian (ALGORITHMS.md §4.1) ----
@@ -175,9 +188,9 @@ vec2 sample_beckmann_slopes(float cos_theta, vec2 u) {
     return vec2(slope, erfinv_approx(2.0 * u.y - 1.0));
 }
 
-// A reflected direction about a visible normal; valid = false when it falls below the surface.
-bool microfacet_sample(uint distribution, float alpha, vec3 wi, vec2 u, out vec3 wo) {
-    wo = vec3(0.0);
+// A microfacet normal drawn from the normals visible from wi (upper hemisphere).
+bool microfacet_visible_normal(uint distribution, float alpha, vec3 wi, vec2 u, out vec3 h) {
+    h = vec3(0.0, 0.0, 1.0);
     if (wi.z <= 0.0) return false;
     vec3 ws = normalize(vec3(alpha * wi.x, alpha * wi.y, wi.z));
     float sin2 = ws.x * ws.x + ws.y * ws.y;
@@ -192,13 +205,97 @@ bool microfacet_sample(uint distribution, float alpha, vec3 wi, vec2 u, out vec3
     float mx = (cos_phi * slope.x - sin_phi * slope.y) * alpha;
     float my = (sin_phi * slope.x + cos_phi * slope.y) * alpha;
     if (isnan(mx) || isinf(mx) || isnan(my) || isinf(my)) return false;
-    vec3 h = normalize(vec3(-mx, -my, 1.0));
+    h = normalize(vec3(-mx, -my, 1.0));
+    return true;
+}
+
+// A reflected direction about a visible normal; valid = false when it falls below the surface.
+bool microfacet_sample(uint distribution, float alpha, vec3 wi, vec2 u, out vec3 wo) {
+    wo = vec3(0.0);
+    vec3 h;
+    if (!microfacet_visible_normal(distribution, alpha, wi, u, h)) return false;
     wo = 2.0 * dot(wi, h) * h - wi;
     return wo.z > 0.0 && dot(wi, h) > 0.0;
 }
 
+// ---- rough plastic (src/bsdf/rough_plastic.rs states the model) ----
+// The coating tables, read through the scene's addresses in the render kernels (lib/abi.glsl,
+// included before this file there); the BSDF probes have no scene, no rough plastic, and read 0.
+#ifdef PATHGRAD_ABI_GLSL
+layout(buffer_reference, scalar, buffer_reference_align = 4) readonly buffer TableArray { float v[]; };
+#define coating_table(i) (TableArray(globals.addr_tables).v[i])
+#else
+#define coating_table(i) 0.0
+#endif
+
+// Linear interpolation at μ in the table's T (offset 0) or ∂T/∂α (offset COATING_RES).
+float coating_lerp(uint table, uint offset, float mu) {
+    float x = mu * float(COATING_RES - 1u);
+    uint i = min(uint(x), COATING_RES - 2u);
+    float v0 = coating_table(table + offset + i);
+    float v1 = coating_table(table + offset + i + 1u);
+    return v0 + (v1 - v0) * (x - float(i));
+}
+
+// Dielectric Fresnel reflectance (total internal reflection gives 1).
+float fresnel_dielectric(float cos_i, float eta) {
+    bool outside = cos_i >= 0.0;
+    float eta_it = outside ? eta : 1.0 / eta;
+    float eta_ti = outside ? 1.0 / eta : eta;
+    float cos_t2 = 1.0 - (1.0 - cos_i * cos_i) * eta_ti * eta_ti;
+    float ci = abs(cos_i);
+    float ct = sqrt(max(cos_t2, 0.0));
+    if (eta == 1.0) return 0.0;
+    if (ci == 0.0) return 1.0;
+    float a_s = (ci - eta_it * ct) / (ci + eta_it * ct);
+    float a_p = (ct - eta_it * ci) / (ct + eta_it * ci);
+    return 0.5 * (a_s * a_s + a_p * a_p);
+}
+
+float plastic_coating_probability(Leaf l, float cos_i) {
+    float t_i = coating_lerp(l.table, 0u, cos_i);
+    float ps = (1.0 - t_i) * l.eta.y;
+    float pd = t_i * (1.0 - l.eta.y);
+    return ps / (ps + pd);
+}
+
+// 1 / (1 − ρ̄ Rᵢ) per channel.
+vec3 plastic_renormalisation(Leaf l) {
+    vec3 rbar = l.eta.z != 0.0 ? l.color : vec3(1.0);
+    return vec3(1.0) / (vec3(1.0) - rbar * coating_table(l.table + 2u * COATING_RES));
+}
+
+vec3 plastic_eval_pdf(Leaf l, vec3 wi, vec3 wo, out float pdf) {
+    pdf = 0.0;
+    if (wi.z <= 0.0 || wo.z <= 0.0) return vec3(0.0);
+    vec3 h = normalize(wi + wo);
+    float d = microfacet_d(l.distribution, l.alpha, h);
+    float gi = microfacet_g1(l.distribution, l.alpha, wi, h);
+    float p = plastic_coating_probability(l, wi.z);
+    pdf = p * (d * gi / (4.0 * wi.z)) + (1.0 - p) * wo.z * INV_PI;
+    float scalar = d == 0.0 ? 0.0 : d * gi * microfacet_g1(l.distribution, l.alpha, wo, h) / (4.0 * wi.z);
+    float t_i = coating_lerp(l.table, 0u, wi.z);
+    float t_o = coating_lerp(l.table, 0u, wo.z);
+    float base = INV_PI / (l.eta.x * l.eta.x) * wo.z * t_i * t_o;
+    return l.k * (fresnel_dielectric(dot(wi, h), l.eta.x) * scalar) + l.color * plastic_renormalisation(l) * base;
+}
+
+bool plastic_sample(Leaf l, vec3 wi, float u_lobe, vec2 u, out vec3 wo) {
+    wo = vec3(0.0);
+    if (wi.z <= 0.0) return false;
+    if (u_lobe < plastic_coating_probability(l, wi.z)) {
+        vec3 m;
+        if (!microfacet_visible_normal(l.distribution, l.alpha, wi, u, m)) return false;
+        wo = 2.0 * dot(wi, m) * m - wi;
+    } else {
+        wo = sample_cosine_hemisphere(u);
+    }
+    return wo.z > 0.0;
+}
+
 // ---- leaves ----
 vec3 leaf_eval_pdf(Leaf l, vec3 wi, vec3 wo, out float pdf) {
+    if (is_plastic(l.kind)) return plastic_eval_pdf(l, wi, wo, pdf);
     if (is_diffuse(l.kind)) {
         pdf = diffuse_pdf(wi, wo);
         return diffuse_eval(l.color, wi, wo);
@@ -214,7 +311,9 @@ float leaf_pdf(Leaf l, vec3 wi, vec3 wo) {
     leaf_eval_pdf(l, wi, wo, pdf);
     return pdf;
 }
-bool leaf_sample(Leaf l, vec3 wi, vec2 u, out vec3 wo) {
+// u_lobe picks a lobe of a leaf of several (rescaled by the blend's choice, bsdf_sample).
+bool leaf_sample(Leaf l, vec3 wi, float u_lobe, vec2 u, out vec3 wo) {
+    if (is_plastic(l.kind)) return plastic_sample(l, wi, u_lobe, u, wo);
     if (is_diffuse(l.kind)) {
         wo = vec3(0.0);
         if (wi.z <= 0.0) return false;
@@ -228,7 +327,37 @@ bool leaf_sample(Leaf l, vec3 wi, vec2 u, out vec3 wo) {
 struct LeafGrad { vec3 color; vec3 alpha; };
 struct BsdfGrad { LeafGrad leaf0; LeafGrad leaf1; vec3 weight; };
 
+// ∂f̂/∂ρ and ∂f̂/∂α of a rough plastic (twin of PlasticLeaf::eval_grad).
+LeafGrad plastic_eval_grad(Leaf l, vec3 wi, vec3 wo, vec3 adj) {
+    if (wi.z <= 0.0 || wo.z <= 0.0) return LeafGrad(vec3(0.0), vec3(0.0));
+    vec3 h = normalize(wi + wo);
+    float f = fresnel_dielectric(dot(wi, h), l.eta.x);
+    float dscalar = 0.0;
+    float d = microfacet_d(l.distribution, l.alpha, h);
+    if (d != 0.0) {
+        float gi, dgi, go, dgo;
+        microfacet_g1_and_dalpha(l.distribution, l.alpha, wi, h, gi, dgi);
+        microfacet_g1_and_dalpha(l.distribution, l.alpha, wo, h, go, dgo);
+        float dd = microfacet_d_dalpha_of(l.distribution, l.alpha, h, d);
+        dscalar = (dd * gi * go + d * (dgi * go + gi * dgo)) / (4.0 * wi.z);
+    }
+    float t_i = coating_lerp(l.table, 0u, wi.z);
+    float t_o = coating_lerp(l.table, 0u, wo.z);
+    float dt_i = coating_lerp(l.table, COATING_RES, wi.z);
+    float dt_o = coating_lerp(l.table, COATING_RES, wo.z);
+    float k = INV_PI / (l.eta.x * l.eta.x) * wo.z;
+    vec3 n = plastic_renormalisation(l);
+    bool nonlinear = l.eta.z != 0.0;
+    vec3 rbar = nonlinear ? l.color : vec3(1.0);
+    float dinternal = coating_table(l.table + 2u * COATING_RES + 1u);
+    vec3 d_diffuse = (nonlinear ? n * n : n) * (k * t_i * t_o);
+    vec3 d_alpha = l.k * (f * dscalar) + l.color * n * (k * (dt_i * t_o + t_i * dt_o))
+        + l.color * n * n * rbar * (dinternal * k * t_i * t_o);
+    return LeafGrad(adj * d_diffuse, adj * d_alpha);
+}
+
 LeafGrad leaf_eval_grad(Leaf l, vec3 wi, vec3 wo, vec3 adj) {
+    if (is_plastic(l.kind)) return plastic_eval_grad(l, wi, wo, adj);
     if (is_diffuse(l.kind)) return LeafGrad(adj * diffuse_eval(vec3(1.0), wi, wo), vec3(0.0));
     vec3 f;
     float scalar, dscalar;
@@ -278,9 +407,19 @@ BsdfGrad bsdf_eval_grad(Bsdf b, vec3 wi, vec3 wo, vec3 adj) {
 // u_lobe picks the blend child (RNG dim 4); u drives the direction (dims 5, 6).
 BsdfSample bsdf_sample(Bsdf b, vec3 wi, float u_lobe, vec2 u) {
     BsdfSample s = BsdfSample(vec3(0.0), 0.0, vec3(0.0), false);
-    Leaf leaf = (HAS(F_BLEND) && b.blend && u_lobe <= blend_weight(b)) ? b.leaf1 : b.leaf0;
+    // The blend's choice, and u_lobe rescaled within it for the leaf's own (twin: pick_leaf).
+    Leaf leaf = b.leaf0;
+    if (HAS(F_BLEND) && b.blend) {
+        float w = blend_weight(b);
+        if (u_lobe <= w) {
+            leaf = b.leaf1;
+            u_lobe = u_lobe / w;
+        } else {
+            u_lobe = (u_lobe - w) / (1.0 - w);
+        }
+    }
     vec3 wo;
-    if (!leaf_sample(leaf, wi, u, wo)) return s;
+    if (!leaf_sample(leaf, wi, u_lobe, u, wo)) return s;
     s.wo = wo;
     s.value = bsdf_eval_pdf(b, wi, wo, s.pdf);
     s.valid = s.pdf > 0.0;

@@ -134,11 +134,11 @@ float diff_pdf_part(uint distribution, float alpha, bool positive, vec3 wi, vec3
 }
 
 // ---- BSDF level (ALGORITHMS.md §4.1, §4.3) ----
-bool bsdf_diff_capable(Bsdf b) { return (HAS(F_BLEND) && b.blend) || !is_diffuse(b.leaf0.kind); }
+bool bsdf_diff_capable(Bsdf b) { return (HAS(F_BLEND) && b.blend) || is_conductor(b.leaf0.kind); }
 
 float bsdf_pdf_diff(Bsdf b, vec3 wi, vec3 wo) {
     if (HAS(F_BLEND) && b.blend) return 0.5 * (leaf_pdf(b.leaf0, wi, wo) + leaf_pdf(b.leaf1, wi, wo));
-    if (is_diffuse(b.leaf0.kind)) return leaf_pdf(b.leaf0, wi, wo);
+    if (!is_conductor(b.leaf0.kind)) return leaf_pdf(b.leaf0, wi, wo);
     return diff_pdf(b.leaf0.distribution, b.leaf0.alpha, wi, wo);
 }
 
@@ -149,9 +149,10 @@ BsdfSample bsdf_sample_diff(Bsdf b, vec3 wi, float u_sign, float u_lobe, vec2 u)
     vec3 wo;
     bool ok;
     if (HAS(F_BLEND) && b.blend) {
-        ok = leaf_sample(u_lobe <= 0.5 ? b.leaf1 : b.leaf0, wi, u, wo);
-    } else if (is_diffuse(b.leaf0.kind)) {
-        ok = leaf_sample(b.leaf0, wi, u, wo);
+        bool second = u_lobe <= 0.5;
+        ok = leaf_sample(second ? b.leaf1 : b.leaf0, wi, second ? u_lobe / 0.5 : (u_lobe - 0.5) / 0.5, u, wo);
+    } else if (!is_conductor(b.leaf0.kind)) {
+        ok = leaf_sample(b.leaf0, wi, u_lobe, u, wo);
     } else {
         ok = sample_diff_part(b.leaf0.distribution, b.leaf0.alpha, wi, u_sign < 0.5, u, wo);
     }

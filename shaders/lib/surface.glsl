@@ -114,10 +114,12 @@ vec3 texture_lookup(Material m, vec2 uv) {
 
 Leaf leaf_from_material(Material m, vec2 uv) {
     Leaf l;
-    bool conductor = !is_diffuse(m.tag);
-    l.kind = conductor ? LEAF_ROUGH_CONDUCTOR : LEAF_DIFFUSE;
+    bool plastic = is_plastic(m.tag);
+    bool conductor = is_conductor(m.tag);
+    l.kind = plastic ? LEAF_ROUGH_PLASTIC : (conductor ? LEAF_ROUGH_CONDUCTOR : LEAF_DIFFUSE);
     l.distribution = m.distribution;
-    l.alpha = conductor ? params[m.p_alpha] : 0.0;
+    l.alpha = (conductor || plastic) ? params[m.p_alpha] : 0.0;
+    l.table = m.table;
     l.color = (HAS(F_TEXTURE) && m.tex_width > 0u) ? texture_lookup(m, uv) : param_rgb(m.p_color);
     l.eta = m.eta;
     l.k = m.k;
@@ -202,7 +204,7 @@ void push_leaf(Material m, vec2 uv, LeafGrad g) {
     } else if (HAS(G_COLOR)) {
         push_rgb(m.p_color, g.color);
     }
-    if (HAS(G_ALPHA) && !is_diffuse(m.tag)) push_entry(m.p_alpha, g.alpha);
+    if (HAS(G_ALPHA) && !is_diffuse(m.tag)) push_entry(m.p_alpha, g.alpha);  // conductor or plastic
 }
 
 // An emitter's radiance term: one RGB value, or the four texels of the environment map around

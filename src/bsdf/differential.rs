@@ -200,7 +200,7 @@ pub fn bsdf_pdf_diff(b: &Bsdf, wi: Vec3, wo: Vec3) -> f32 {
     }
     match b.leaves[0] {
         Leaf::RoughConductor { distribution, alpha, .. } => diff_pdf(distribution, alpha, wi, wo),
-        Leaf::Diffuse { .. } => leaf_pdf(&b.leaves[0], wi, wo),
+        Leaf::Diffuse { .. } | Leaf::RoughPlastic(_) => leaf_pdf(&b.leaves[0], wi, wo),
     }
 }
 
@@ -210,13 +210,15 @@ pub fn bsdf_pdf_diff(b: &Bsdf, wi: Vec3, wo: Vec3) -> f32 {
 /// is [`bsdf_pdf_diff`] at the sampled direction; `None` for an invalid sample.
 pub fn bsdf_sample_diff(b: &Bsdf, wi: Vec3, u_sign: f32, u_lobe: f32, u: Vec2) -> Option<BsdfSample> {
     let wo = if b.blend {
-        leaf_sample(if u_lobe <= 0.5 { &b.leaves[1] } else { &b.leaves[0] }, wi, u)?
+        let (leaf, u_lobe) =
+            if u_lobe <= 0.5 { (&b.leaves[1], u_lobe / 0.5) } else { (&b.leaves[0], (u_lobe - 0.5) / 0.5) };
+        leaf_sample(leaf, wi, u_lobe, u)?
     } else {
         match b.leaves[0] {
             Leaf::RoughConductor { distribution, alpha, .. } => {
                 sample_diff_part(distribution, alpha, wi, u_sign < 0.5, u)?
             }
-            Leaf::Diffuse { .. } => leaf_sample(&b.leaves[0], wi, u)?,
+            Leaf::Diffuse { .. } | Leaf::RoughPlastic(_) => leaf_sample(&b.leaves[0], wi, u_lobe, u)?,
         }
     };
     let pdf = bsdf_pdf_diff(b, wi, wo);

@@ -9,6 +9,7 @@ pub mod blend;
 pub mod differential;
 pub mod diffuse;
 pub mod rough_conductor;
+pub mod rough_plastic;
 
 use glam::{Vec2, Vec3};
 
@@ -16,6 +17,11 @@ pub use rough_conductor::Distribution;
 
 /// A BSDF without children: what one material of the scene resolves to.
 #[derive(Clone, Copy, Debug, PartialEq)]
+#[allow(
+    clippy::large_enum_variant,
+    reason = "a rough plastic carries its coating table by value (520 bytes), so a leaf stays Copy like its \
+              GLSL twin; the CPU reference copies one per vertex, nothing next to its traversal"
+)]
 pub enum Leaf {
     /// Lambertian diffuse.
     Diffuse {
@@ -35,6 +41,8 @@ pub enum Leaf {
         /// Imaginary part of the complex index of refraction.
         k: Vec3,
     },
+    /// Rough plastic: a rough dielectric coating on a Lambertian base.
+    RoughPlastic(rough_plastic::PlasticLeaf),
 }
 
 /// A resolved BSDF: one leaf, or the blend `(1 − w)·leaves[0] + w·leaves[1]`.
@@ -94,6 +102,10 @@ pub fn leaf_eval_grad(leaf: &Leaf, wi: Vec3, wo: Vec3, adj: Vec3) -> LeafGrad {
             let (f, scalar, dscalar) = rough_conductor::microfacet_eval_parts(distribution, alpha, eta, k, wi, wo);
             LeafGrad { color: adj * f * scalar, alpha: adj * f * specular * dscalar }
         }
+        Leaf::RoughPlastic(p) => {
+            let (color, alpha) = p.eval_grad(wi, wo);
+            LeafGrad { color: adj * color, alpha: adj * alpha }
+        }
     }
 }
 
@@ -125,6 +137,7 @@ pub fn leaf_eval(leaf: &Leaf, wi: Vec3, wo: Vec3) -> Vec3 {
         Leaf::RoughConductor { distribution, alpha, specular, eta, k } => {
             rough_conductor::microfacet_eval(distribution, alpha, specular, eta, k, wi, wo)
         }
+        Leaf::RoughPlastic(p) => p.eval(wi, wo),
     }
 }
 
@@ -135,16 +148,19 @@ pub fn leaf_pdf(leaf: &Leaf, wi: Vec3, wo: Vec3) -> f32 {
         Leaf::RoughConductor { distribution, alpha, .. } => {
             rough_conductor::microfacet_pdf(distribution, alpha, wi, wo)
         }
+        Leaf::RoughPlastic(p) => p.pdf(wi, wo),
     }
 }
 
-/// A direction sampled from one leaf with the direction uniforms `u`, or `None` if invalid.
-pub fn leaf_sample(leaf: &Leaf, wi: Vec3, u: Vec2) -> Option<Vec3> {
+/// A direction sampled from one leaf with the lobe uniform `u_lobe` (a leaf of several lobes
+/// picks one with it) and the direction uniforms `u`, or `None` if invalid.
+pub fn leaf_sample(leaf: &Leaf, wi: Vec3, u_lobe: f32, u: Vec2) -> Option<Vec3> {
     match *leaf {
         Leaf::Diffuse { .. } => diffuse::diffuse_sample(wi, u),
         Leaf::RoughConductor { distribution, alpha, .. } => {
             rough_conductor::microfacet_sample(distribution, alpha, wi, u)
         }
+        Leaf::RoughPlastic(p) => p.sample(wi, u_lobe, u),
     }
 }
 
@@ -158,12 +174,22 @@ pub fn bsdf_pdf(b: &Bsdf, wi: Vec3, wo: Vec3) -> f32 {
     if b.blend { blend::blend_pdf(b, wi, wo) } else { leaf_pdf(&b.leaves[0], wi, wo) }
 }
 
+/// The leaf that `u_lobe` picks (a blend's child 1 when u_lobe ≤ w) and `u_lobe` rescaled to
+/// [0, 1) within that choice, for the leaf's own lobe choice.
+pub fn pick_leaf(b: &Bsdf, u_lobe: f32) -> (&Leaf, f32) {
+    if !b.blend {
+        return (&b.leaves[0], u_lobe);
+    }
+    let w = blend::blend_weight(b);
+    if u_lobe <= w { (&b.leaves[1], u_lobe / w) } else { (&b.leaves[0], (u_lobe - w) / (1.0 - w)) }
+}
+
 /// Samples a direction: `u_lobe` picks the blend child (RNG dim 4), `u` drives the direction
 /// (dims 5, 6). Returns `None` for an invalid sample (the path ends). The returned value and pdf
 /// are the whole BSDF's, re-evaluated at the sampled direction.
 pub fn bsdf_sample(b: &Bsdf, wi: Vec3, u_lobe: f32, u: Vec2) -> Option<BsdfSample> {
-    let leaf = if b.blend && u_lobe <= blend::blend_weight(b) { &b.leaves[1] } else { &b.leaves[0] };
-    let wo = leaf_sample(leaf, wi, u)?;
+    let (leaf, u_lobe) = pick_leaf(b, u_lobe);
+    let wo = leaf_sample(leaf, wi, u_lobe, u)?;
     let pdf = bsdf_pdf(b, wi, wo);
     if !(pdf > 0.0) {
         return None;

@@ -137,6 +137,21 @@ pub fn microfacet_g1_dalpha(distribution: Distribution, alpha: f32, v: Vec3, h: 
     }
 }
 
+/// The scalar D(h)·G1(wi, h)·G1(wo, h)/(4 cos θi) at half vector `h` and its α-derivative
+/// (wi, wo in the upper hemisphere); 0 where D underflows.
+pub fn microfacet_eval_scalar_parts(distribution: Distribution, alpha: f32, wi: Vec3, wo: Vec3, h: Vec3) -> (f32, f32) {
+    let d = microfacet_d(distribution, alpha, h);
+    if d == 0.0 {
+        return (0.0, 0.0);
+    }
+    let (gi, go) = (microfacet_g1(distribution, alpha, wi, h), microfacet_g1(distribution, alpha, wo, h));
+    let dd = microfacet_d_dalpha(distribution, alpha, h);
+    let (dgi, dgo) =
+        (microfacet_g1_dalpha(distribution, alpha, wi, h), microfacet_g1_dalpha(distribution, alpha, wo, h));
+    let inv = 1.0 / (4.0 * wi.z);
+    (d * gi * go * inv, (dd * gi * go + d * (dgi * go + gi * dgo)) * inv)
+}
+
 /// The parts of f̂ that the gradient needs: Fresnel F, the scalar D·G1·G1/(4 cos θi) and its
 /// α-derivative; f̂ = F · specular · scalar. Zero outside the valid configuration.
 pub fn microfacet_eval_parts(
@@ -214,6 +229,13 @@ fn sample_beckmann_slopes(cos_theta: f32, u: Vec2) -> Vec2 {
 
 /// A reflected direction about a visible normal, or `None` if it falls below the surface.
 pub fn microfacet_sample(distribution: Distribution, alpha: f32, wi: Vec3, u: Vec2) -> Option<Vec3> {
+    let h = microfacet_visible_normal(distribution, alpha, wi, u)?;
+    let wo = 2.0 * wi.dot(h) * h - wi;
+    (wo.z > 0.0 && wi.dot(h) > 0.0).then_some(wo)
+}
+
+/// A microfacet normal drawn from the normals visible from `wi` (upper hemisphere), or `None`.
+pub fn microfacet_visible_normal(distribution: Distribution, alpha: f32, wi: Vec3, u: Vec2) -> Option<Vec3> {
     if wi.z <= 0.0 {
         return None;
     }
@@ -236,7 +258,5 @@ pub fn microfacet_sample(distribution: Distribution, alpha: f32, wi: Vec3, u: Ve
     if !(mx.is_finite() && my.is_finite()) {
         return None;
     }
-    let h = Vec3::new(-mx, -my, 1.0).normalize();
-    let wo = 2.0 * wi.dot(h) * h - wi;
-    (wo.z > 0.0 && wi.dot(h) > 0.0).then_some(wo)
+    Some(Vec3::new(-mx, -my, 1.0).normalize())
 }

@@ -7,7 +7,7 @@ use crate::rng::{PassTag, RngKey, Stream, uniform4};
 use crate::stats::{Chi2Config, chi2_directions, dump_table, sidak};
 
 /// Every chi-square test in this file, for the Šidák correction of the 1 % family-wise level.
-const CHI2_TESTS: usize = 1 + 2 * 3 * 3 + 3;
+const CHI2_TESTS: usize = 1 + 2 * 3 * 3 + 3 + 2 * 3;
 const FAMILY_ALPHA: f64 = 0.01;
 
 fn uniforms(test: u32, i: usize) -> (f32, Vec2) {
@@ -18,6 +18,23 @@ fn uniforms(test: u32, i: usize) -> (f32, Vec2) {
 fn incident(cos_theta: f32) -> Vec3 {
     let sin = (1.0 - cos_theta * cos_theta).max(0.0).sqrt();
     Vec3::new(sin * 0.8, sin * 0.6, cos_theta)
+}
+
+/// A rough plastic (η of bk7 in air) with its coating table at `alpha`.
+fn plastic(distribution: Distribution, alpha: f32, diffuse: Vec3, nonlinear: bool) -> Leaf {
+    let eta = 1.5046 / 1.000_277;
+    let mut table = [0.0; crate::contract::COATING_TABLE_LEN as usize];
+    table.copy_from_slice(&rough_plastic::CoatingTable::new(distribution, alpha, eta).flatten());
+    Leaf::RoughPlastic(rough_plastic::PlasticLeaf {
+        distribution,
+        alpha,
+        diffuse,
+        specular: Vec3::new(1.0, 0.9, 0.8),
+        eta,
+        specular_weight: 0.6,
+        nonlinear,
+        table,
+    })
 }
 
 fn conductor(distribution: Distribution, alpha: f32) -> Leaf {
@@ -83,6 +100,18 @@ fn chi2_blend() {
     }
 }
 
+#[test]
+fn chi2_rough_plastics() {
+    let mut test = 60;
+    for (distribution, alpha) in [(Distribution::Beckmann, 0.3), (Distribution::Ggx, 0.08)] {
+        let b = Bsdf::leaf(plastic(distribution, alpha, Vec3::new(0.2, 0.5, 0.8), false));
+        for cos_i in [0.95, 0.5, 0.08] {
+            test += 1;
+            check_chi2(&format!("plastic-{distribution:?}-alpha{alpha}-cos{cos_i}"), test, &b, incident(cos_i));
+        }
+    }
+}
+
 fn all_bsdfs() -> Vec<Bsdf> {
     let mut v = vec![Bsdf::leaf(Leaf::Diffuse { albedo: Vec3::new(0.2, 0.5, 0.9) })];
     for d in [Distribution::Beckmann, Distribution::Ggx] {
@@ -93,6 +122,13 @@ fn all_bsdfs() -> Vec<Bsdf> {
     v.push(Bsdf {
         leaves: [Leaf::Diffuse { albedo: Vec3::splat(0.5) }, conductor(Distribution::Ggx, 0.1)],
         weight: 0.3,
+        blend: true,
+    });
+    v.push(Bsdf::leaf(plastic(Distribution::Beckmann, 0.3, Vec3::new(0.2, 0.5, 0.9), false)));
+    v.push(Bsdf::leaf(plastic(Distribution::Ggx, 0.1, Vec3::new(0.7, 0.4, 0.1), true)));
+    v.push(Bsdf {
+        leaves: [plastic(Distribution::Ggx, 0.2, Vec3::splat(0.5), false), conductor(Distribution::Beckmann, 0.2)],
+        weight: 0.4,
         blend: true,
     });
     v
@@ -175,13 +211,15 @@ fn derivatives_match_finite_differences() {
                 let Some(s) = bsdf_sample(b, wi, ul, u) else { continue };
                 let g = bsdf_eval_grad(b, wi, s.wo, adj);
                 // (analytic derivative, function of a perturbation) per differentiable value.
-                let mut cases: Vec<(f32, Perturb, f32)> = Vec::new();
+                // (analytic, perturbation, value, relative FD step).
+                let mut cases: Vec<(f32, Perturb, f32, f32)> = Vec::new();
                 for leaf in 0..if b.blend { 2 } else { 1 } {
                     for c in 0..3 {
                         let base = *b;
                         let value = match base.leaves[leaf] {
                             Leaf::Diffuse { albedo } => albedo[c],
                             Leaf::RoughConductor { specular, .. } => specular[c],
+                            Leaf::RoughPlastic(p) => p.diffuse[c],
                         };
                         cases.push((
                             g.leaves[leaf].color[c],
@@ -190,10 +228,30 @@ fn derivatives_match_finite_differences() {
                                 match &mut x.leaves[leaf] {
                                     Leaf::Diffuse { albedo } => albedo[c] = v,
                                     Leaf::RoughConductor { specular, .. } => specular[c] = v,
+                                    Leaf::RoughPlastic(p) => p.diffuse[c] = v,
                                 }
                                 x
                             }),
                             value,
+                            1e-3,
+                        ));
+                    }
+                    // A plastic's α moves its coating table too: rebuilt for each value (costly,
+                    // so for the first samples only).
+                    if let Leaf::RoughPlastic(p) = b.leaves[leaf]
+                        && i < 3
+                    {
+                        let base = *b;
+                        cases.push((
+                            g.leaves[leaf].alpha.dot(Vec3::ONE),
+                            Box::new(move |v| {
+                                let mut x = base;
+                                x.leaves[leaf] = plastic(p.distribution, v, p.diffuse, p.nonlinear);
+                                x
+                            }),
+                            p.alpha,
+                            // The table's f32 quadrature is noisy below about 10⁻³ of α.
+                            1e-2,
                         ));
                     }
                     if let Leaf::RoughConductor { alpha, .. } = b.leaves[leaf] {
@@ -208,16 +266,22 @@ fn derivatives_match_finite_differences() {
                                 x
                             }),
                             alpha,
+                            1e-3,
                         ));
                     }
                 }
                 if b.blend {
                     let base = *b;
-                    cases.push((g.weight.dot(Vec3::ONE), Box::new(move |v| Bsdf { weight: v, ..base }), b.weight));
+                    cases.push((
+                        g.weight.dot(Vec3::ONE),
+                        Box::new(move |v| Bsdf { weight: v, ..base }),
+                        b.weight,
+                        1e-3,
+                    ));
                 }
                 let scale = objective(b, wi, s.wo).abs().max(1e-12);
-                for (analytic, with, value) in &cases {
-                    let h = 1e-3 * value.abs().max(1e-2);
+                for (analytic, with, value, step) in &cases {
+                    let h = step * value.abs().max(1e-2);
                     let fd = (objective(&with(value + h), wi, s.wo) - objective(&with(value - h), wi, s.wo))
                         / f64::from(2.0 * h);
                     let tol =

@@ -161,6 +161,12 @@ contract_constants! {
     F_ENV_MAP = 1 << 12;
     /// Feature bit: lights without area (point, spot, directional).
     F_LIGHTS = 1 << 13;
+    /// Feature bit: rough-plastic leaves.
+    F_PLASTIC = 1 << 14;
+    /// Entries of a rough plastic's coating transmittance table (μ = k/63, k = 0..63).
+    COATING_RES = 64;
+    /// Floats of one coating table as the kernels read it: T, ∂T/∂α, Rᵢ, ∂Rᵢ/∂α.
+    COATING_TABLE_LEN = 130;
     /// Feature bit: gradients of constant colours (albedo, specular reflectance).
     G_COLOR = 1 << 16;
     /// Feature bit: gradients of texels.

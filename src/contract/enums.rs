@@ -52,6 +52,8 @@ contract_enums! {
         Blend = MAT_BLEND = 2,
         /// No surface: a medium's index-matched boundary, which paths pass through.
         Null = MAT_NULL = 3,
+        /// Rough plastic (a rough dielectric coating on a Lambertian base).
+        RoughPlastic = MAT_ROUGH_PLASTIC = 4,
     }
 
     /// What `DeltaLight::kind` holds.
@@ -86,6 +88,8 @@ contract_enums! {
         Diffuse = LEAF_DIFFUSE = 0,
         /// Rough conductor.
         RoughConductor = LEAF_ROUGH_CONDUCTOR = 1,
+        /// Rough plastic.
+        RoughPlastic = LEAF_ROUGH_PLASTIC = 4,
     }
 
     /// Microfacet distribution.

@@ -99,6 +99,8 @@ contract_structs! {
         addr_env_cells: UVec2,
         /// Device address of the lights without area (`DeltaLight`).
         addr_lights: UVec2,
+        /// Device address of the rough plastics' coating tables (`Material::table`).
+        addr_tables: UVec2,
     }
 
     /// One view of a request: its pinhole camera and the key word of its paths. The image (and
@@ -266,15 +268,20 @@ contract_structs! {
         p_alpha: u32,
         /// Parameter offset of the blend weight (blend).
         p_weight: u32,
-        /// Real part of the conductor's complex index of refraction (RGB).
+        /// Real part of the conductor's complex index of refraction (RGB). Rough plastic: (η =
+        /// int_ior/ext_ior, the coating's sampling weight w, 1 if `nonlinear` else 0).
         eta: Vec3,
-        /// Imaginary part of the conductor's complex index of refraction (RGB).
+        /// Imaginary part of the conductor's complex index of refraction (RGB). Rough plastic: its
+        /// specular reflectance.
         k: Vec3,
         /// Textured: row 0 of the texture-coordinate transform, u' = dot(uv_row0, (u, v, 1))
         /// (Mitsuba's `to_uv`; (1, 0, 0) for none).
         uv_row0: Vec3,
         /// Textured: row 1, v' = dot(uv_row1, (u, v, 1)) ((0, 1, 0) for none).
         uv_row1: Vec3,
+        /// Rough plastic: offset of its coating table in the tables array
+        /// (`COATING_TABLE_LEN` floats: T(μ), ∂T/∂α, Rᵢ, ∂Rᵢ/∂α).
+        table: u32,
     }
 
     /// One emissive triangle, in the order of its area CDF.

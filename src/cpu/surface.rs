@@ -2,10 +2,12 @@
 
 use glam::Vec3;
 
+use crate::bsdf::rough_plastic::PlasticLeaf;
 use crate::bsdf::{Bsdf, Distribution, Leaf, LeafGrad, bsdf_eval_grad};
 use crate::bvh::Hit;
 use crate::contract::{
-    MAT_BLEND, MAT_ROUGH_CONDUCTOR, Material, TEX_CHECKER, TEX_NEAREST, TEX_WRAP_CLAMP, TEX_WRAP_MIRROR,
+    COATING_TABLE_LEN, MAT_BLEND, MAT_ROUGH_CONDUCTOR, MAT_ROUGH_PLASTIC, Material, TEX_CHECKER, TEX_NEAREST,
+    TEX_WRAP_CLAMP, TEX_WRAP_MIRROR,
 };
 use crate::cpu::path::GradSink;
 use crate::scene::flat::FlatScene;
@@ -108,14 +110,35 @@ pub fn texture_lookup(params: &[f32], m: &Material, uv: glam::Vec2) -> Vec3 {
         + param_rgb(params, texel[3]) * weight[3]
 }
 
-fn leaf_from_material(params: &[f32], m: &Material, uv: glam::Vec2) -> Leaf {
+fn leaf_from_material(flat: &FlatScene, m: &Material, uv: glam::Vec2) -> Leaf {
+    let params = &flat.params[..];
     let color = if m.tex_width > 0 { texture_lookup(params, m, uv) } else { param_rgb(params, m.p_color) };
-    if m.tag == MAT_ROUGH_CONDUCTOR {
-        let distribution =
-            if m.distribution == Distribution::Ggx as u32 { Distribution::Ggx } else { Distribution::Beckmann };
-        Leaf::RoughConductor { distribution, alpha: params[m.p_alpha as usize], specular: color, eta: m.eta, k: m.k }
-    } else {
-        Leaf::Diffuse { albedo: color }
+    let distribution =
+        if m.distribution == Distribution::Ggx as u32 { Distribution::Ggx } else { Distribution::Beckmann };
+    match m.tag {
+        MAT_ROUGH_CONDUCTOR => Leaf::RoughConductor {
+            distribution,
+            alpha: params[m.p_alpha as usize],
+            specular: color,
+            eta: m.eta,
+            k: m.k,
+        },
+        MAT_ROUGH_PLASTIC => {
+            let at = m.table as usize;
+            let mut table = [0.0; COATING_TABLE_LEN as usize];
+            table.copy_from_slice(&flat.tables[at..at + COATING_TABLE_LEN as usize]);
+            Leaf::RoughPlastic(PlasticLeaf {
+                distribution,
+                alpha: params[m.p_alpha as usize],
+                diffuse: color,
+                specular: m.k,
+                eta: m.eta.x,
+                specular_weight: m.eta.y,
+                nonlinear: m.eta.z != 0.0,
+                table,
+            })
+        }
+        _ => Leaf::Diffuse { albedo: color },
     }
 }
 
@@ -123,11 +146,11 @@ fn leaf_from_material(params: &[f32], m: &Material, uv: glam::Vec2) -> Leaf {
 pub fn resolve_bsdf(flat: &FlatScene, id: u32, uv: glam::Vec2) -> Bsdf {
     let m = &flat.materials[id as usize];
     if m.tag == MAT_BLEND {
-        let a = leaf_from_material(&flat.params, &flat.materials[m.child0 as usize], uv);
-        let b = leaf_from_material(&flat.params, &flat.materials[m.child1 as usize], uv);
+        let a = leaf_from_material(flat, &flat.materials[m.child0 as usize], uv);
+        let b = leaf_from_material(flat, &flat.materials[m.child1 as usize], uv);
         Bsdf { leaves: [a, b], weight: flat.params[m.p_weight as usize], blend: true }
     } else {
-        let a = leaf_from_material(&flat.params, m, uv);
+        let a = leaf_from_material(flat, m, uv);
         Bsdf { leaves: [a, a], weight: 0.0, blend: false }
     }
 }
@@ -149,7 +172,7 @@ fn leaf_backward(m: &Material, uv: glam::Vec2, g: &LeafGrad, sink: &mut GradSink
     } else {
         sink.add_rgb(m.p_color, g.color);
     }
-    if m.tag == MAT_ROUGH_CONDUCTOR {
+    if m.tag == MAT_ROUGH_CONDUCTOR || m.tag == MAT_ROUGH_PLASTIC {
         sink.add(m.p_alpha, g.alpha);
     }
 }

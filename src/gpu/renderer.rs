@@ -336,6 +336,9 @@ impl Backend for Renderer {
         if !self.flat.env_cells.is_empty() {
             self.gpu.env_cells.upload(&self.flat.env_cells)?;
         }
+        if !self.flat.tables.is_empty() {
+            self.gpu.tables.upload(&self.flat.tables)?;
+        }
         Ok(())
     }
 

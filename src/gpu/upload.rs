@@ -26,6 +26,8 @@ pub(crate) struct GpuScene {
     pub env_cells: Buffer,
     /// The lights without area.
     pub lights: Buffer,
+    /// The rough plastics' coating tables (they follow the roughness: rewritten with the parameters).
+    pub tables: Buffer,
 }
 
 impl GpuScene {
@@ -44,6 +46,7 @@ impl GpuScene {
             fields: Buffer::storage_with(ctx, "media fields", &flat.fields)?,
             env_cells: Buffer::storage_with(ctx, "environment map cells", &flat.env_cells)?,
             lights: Buffer::storage_with(ctx, "lights", &flat.lights)?,
+            tables: Buffer::storage_with(ctx, "coating tables", &flat.tables)?,
         })
     }
 
@@ -61,6 +64,7 @@ impl GpuScene {
             addr_fields: self.fields.device_address(),
             addr_env_cells: self.env_cells.device_address(),
             addr_lights: self.lights.device_address(),
+            addr_tables: self.tables.device_address(),
             ..*globals
         }
     }

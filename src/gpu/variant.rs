@@ -17,6 +17,7 @@ pub fn scene_features(flat: &FlatScene, env_param: u32) -> u32 {
         f |= match m.tag {
             MAT_DIFFUSE => F_DIFFUSE,
             MAT_ROUGH_CONDUCTOR => F_CONDUCTOR | if m.distribution == DIST_BECKMANN { F_BECKMANN } else { F_GGX },
+            MAT_ROUGH_PLASTIC => F_PLASTIC | if m.distribution == DIST_BECKMANN { F_BECKMANN } else { F_GGX },
             MAT_NULL => F_MEDIA,
             _ => F_BLEND,
         };
@@ -70,12 +71,12 @@ pub fn param_kinds(flat: &FlatScene, env: (u32, u32), begin: u32, end: u32) -> P
     let mut k = ParamKinds::NONE;
     for m in &flat.materials {
         match m.tag {
-            MAT_DIFFUSE | MAT_ROUGH_CONDUCTOR => {
+            MAT_DIFFUSE | MAT_ROUGH_CONDUCTOR | MAT_ROUGH_PLASTIC => {
                 let texels = if m.tex_width > 0 { m.tex_width * m.tex_height } else { 1 };
                 if overlaps(m.p_color, 3 * texels) {
                     k = k.union(if m.tex_width > 0 { ParamKinds::TEXTURE } else { ParamKinds::COLOR });
                 }
-                if m.tag == MAT_ROUGH_CONDUCTOR && overlaps(m.p_alpha, 1) {
+                if m.tag != MAT_DIFFUSE && overlaps(m.p_alpha, 1) {
                     k = k.union(ParamKinds::ALPHA);
                 }
             }
@@ -118,7 +119,7 @@ pub fn request_features(scene: u32, options: &RenderOptions, kinds: ParamKinds) 
 
 /// A short human-readable name of a variant, for logs: `nee env diffuse conductor[beckmann] ∂alpha`.
 pub fn describe(features: u32) -> String {
-    const NAMES: [(u32, &str); 21] = [
+    const NAMES: [(u32, &str); 22] = [
         (F_NEE, "nee"),
         (F_ENV, "env"),
         (F_EMITTERS, "emitters"),
@@ -133,6 +134,7 @@ pub fn describe(features: u32) -> String {
         (F_MEDIA, "media"),
         (F_ENV_MAP, "env-map"),
         (F_LIGHTS, "lights"),
+        (F_PLASTIC, "plastic"),
         (G_COLOR, "∂color"),
         (G_TEXTURE, "∂texture"),
         (G_ALPHA, "∂alpha"),

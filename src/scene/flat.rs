@@ -3,11 +3,14 @@
 
 use glam::Vec3;
 
+use crate::bsdf::Distribution;
+use crate::bsdf::rough_plastic::CoatingTable;
 use crate::bvh::{self, Bvh};
 use crate::contract::{
-    DeltaLight, EmitterTri, EnvCell, FIELD_CONSTANT, FIELD_GRID, FieldDesc, LIGHT_DIRECTIONAL, LIGHT_POINT, LIGHT_SPOT,
-    MAT_BLEND, MAT_DIFFUSE, MAT_NULL, MAT_ROUGH_CONDUCTOR, Material as GpuMaterial, MediumDesc, NO_EMITTER, NO_MEDIUM,
-    NO_PARAM, PHASE_HG, PHASE_ISOTROPIC, TEX_CHECKER, TEX_NEAREST, TEX_WRAP_CLAMP, TEX_WRAP_MIRROR, TriShading,
+    COATING_TABLE_LEN, DIST_GGX, DeltaLight, EmitterTri, EnvCell, FIELD_CONSTANT, FIELD_GRID, FieldDesc,
+    LIGHT_DIRECTIONAL, LIGHT_POINT, LIGHT_SPOT, MAT_BLEND, MAT_DIFFUSE, MAT_NULL, MAT_ROUGH_CONDUCTOR,
+    MAT_ROUGH_PLASTIC, Material as GpuMaterial, MediumDesc, NO_EMITTER, NO_MEDIUM, NO_PARAM, PHASE_HG, PHASE_ISOTROPIC,
+    TEX_CHECKER, TEX_NEAREST, TEX_WRAP_CLAMP, TEX_WRAP_MIRROR, TriShading,
 };
 use crate::error::Result;
 use crate::scene::medium::{Field, Phase};
@@ -37,6 +40,8 @@ pub struct FlatScene {
     pub env_cells: Vec<EnvCell>,
     /// Lights without area, in the scene's order.
     pub lights: Vec<DeltaLight>,
+    /// The rough plastics' coating tables (`Material::table`); they follow the roughness.
+    pub tables: Vec<f32>,
 }
 
 /// Gives `scene` and its flattened twin `flat` the values of `params`, which must have the scene
@@ -63,6 +68,9 @@ pub(crate) fn replace_params(
         desc.majorant = medium.majorant(&scene.params);
     }
     flat.env_cells = env_cells(scene)?;
+    if flat.materials.iter().any(|m| m.tag == MAT_ROUGH_PLASTIC) {
+        flat.tables = coating_tables(&mut flat.materials, &flat.params);
+    }
     Ok(())
 }
 
@@ -128,7 +136,8 @@ impl FlatScene {
         if let Some(last) = emitters.last_mut() {
             last.cdf = 1.0;
         }
-        let materials = scene.materials.iter().map(|m| flatten_material(scene, m)).collect();
+        let mut materials: Vec<GpuMaterial> = scene.materials.iter().map(|m| flatten_material(scene, m)).collect();
+        let tables = coating_tables(&mut materials, scene.params.values());
         let (media, fields) = flatten_media(scene);
         let bvh = bvh::build(&triangles)?;
         let env_cells = env_cells(scene)?;
@@ -143,6 +152,7 @@ impl FlatScene {
             fields,
             env_cells,
             lights: scene.lights.iter().map(|l| flatten_light(scene, l)).collect(),
+            tables,
         })
     }
 
@@ -196,14 +206,12 @@ fn env_cells(scene: &Scene) -> Result<Vec<EnvCell>> {
     }
 }
 
-fn flatten_material(scene: &Scene, m: &Material) -> GpuMaterial {
+/// The colour fields of a material whose colour is `albedo`: a constant, a checkerboard or a bitmap.
+fn albedo_fields(scene: &Scene, albedo: Albedo) -> GpuMaterial {
     let offset = |id| scene.params.entry(id).offset;
-    match *m {
-        Material::Diffuse { albedo: Albedo::Rgb(albedo) } => {
-            GpuMaterial { tag: MAT_DIFFUSE, p_color: offset(albedo), ..Default::default() }
-        }
-        Material::Diffuse { albedo: Albedo::Checker { colors, to_uv } } => GpuMaterial {
-            tag: MAT_DIFFUSE,
+    match albedo {
+        Albedo::Rgb(albedo) => GpuMaterial { p_color: offset(albedo), ..Default::default() },
+        Albedo::Checker { colors, to_uv } => GpuMaterial {
             p_color: offset(colors),
             tex_width: 2,
             tex_height: 1,
@@ -212,10 +220,9 @@ fn flatten_material(scene: &Scene, m: &Material) -> GpuMaterial {
             uv_row1: to_uv[1],
             ..Default::default()
         },
-        Material::Diffuse { albedo: Albedo::Bitmap(t) } => {
+        Albedo::Bitmap(t) => {
             let t = &scene.textures[t.0 as usize];
             GpuMaterial {
-                tag: MAT_DIFFUSE,
                 p_color: offset(t.texels),
                 tex_width: t.width,
                 tex_height: t.height,
@@ -230,6 +237,22 @@ fn flatten_material(scene: &Scene, m: &Material) -> GpuMaterial {
                 ..Default::default()
             }
         }
+    }
+}
+
+/// The mean of a colour over its channels and (textured) texels: Mitsuba's `Texture::mean`.
+fn albedo_mean(scene: &Scene, albedo: Albedo) -> f32 {
+    let values = match albedo {
+        Albedo::Rgb(id) | Albedo::Checker { colors: id, .. } => scene.params.get(id),
+        Albedo::Bitmap(t) => scene.params.get(scene.textures[t.0 as usize].texels),
+    };
+    (values.iter().map(|&v| f64::from(v)).sum::<f64>() / values.len().max(1) as f64) as f32
+}
+
+fn flatten_material(scene: &Scene, m: &Material) -> GpuMaterial {
+    let offset = |id| scene.params.entry(id).offset;
+    match *m {
+        Material::Diffuse { albedo } => GpuMaterial { tag: MAT_DIFFUSE, ..albedo_fields(scene, albedo) },
         Material::TwoSided(child) => {
             GpuMaterial { two_sided: 1, ..flatten_material(scene, &scene.materials[child.0 as usize]) }
         }
@@ -242,6 +265,18 @@ fn flatten_material(scene: &Scene, m: &Material) -> GpuMaterial {
             k,
             ..Default::default()
         },
+        Material::RoughPlastic { distribution, alpha, diffuse, specular, eta, nonlinear } => {
+            // Mitsuba's sampling weight of the coating from the mean reflectances.
+            let (d_mean, s_mean) = (albedo_mean(scene, diffuse), (specular.x + specular.y + specular.z) / 3.0);
+            GpuMaterial {
+                tag: MAT_ROUGH_PLASTIC,
+                distribution: distribution as u32,
+                p_alpha: offset(alpha),
+                eta: Vec3::new(eta, s_mean / (d_mean + s_mean), f32::from(u8::from(nonlinear))),
+                k: specular,
+                ..albedo_fields(scene, diffuse)
+            }
+        }
         Material::Blend { weight, children } => GpuMaterial {
             tag: MAT_BLEND,
             child0: children[0].0,
@@ -251,6 +286,29 @@ fn flatten_material(scene: &Scene, m: &Material) -> GpuMaterial {
         },
         Material::Null => GpuMaterial { tag: MAT_NULL, ..Default::default() },
     }
+}
+
+/// Gives every rough plastic of `materials` its coating table ([`CoatingTable`]) at the current
+/// roughness `params` and returns the tables: one slot per rough plastic in material order, so
+/// the layout never changes when the roughness does; equal (distribution, α, η) are computed once.
+fn coating_tables(materials: &mut [GpuMaterial], params: &[f32]) -> Vec<f32> {
+    let mut tables: Vec<f32> = Vec::new();
+    let mut made: Vec<((u32, u32, u32), usize)> = Vec::new();
+    for m in materials.iter_mut().filter(|m| m.tag == MAT_ROUGH_PLASTIC) {
+        let alpha = params[m.p_alpha as usize];
+        let key = (m.distribution, alpha.to_bits(), m.eta.x.to_bits());
+        let at = tables.len();
+        m.table = at as u32;
+        match made.iter().find(|(k, _)| *k == key) {
+            Some(&(_, from)) => tables.extend_from_within(from..from + COATING_TABLE_LEN as usize),
+            None => {
+                let distribution = if m.distribution == DIST_GGX { Distribution::Ggx } else { Distribution::Beckmann };
+                tables.extend(CoatingTable::new(distribution, alpha, m.eta.x).flatten());
+                made.push((key, at));
+            }
+        }
+    }
+    tables
 }
 
 /// The media and their fields (two per medium, extinction then albedo).

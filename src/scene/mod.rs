@@ -133,6 +133,21 @@ pub enum Material {
         /// Imaginary part of the complex index of refraction (RGB); eta = 0, k = 1 gives F ≡ 1.
         k: Vec3,
     },
+    /// Rough plastic (Mitsuba's `roughplastic`, `crate::bsdf::rough_plastic`).
+    RoughPlastic {
+        /// Microfacet distribution of the coating.
+        distribution: Distribution,
+        /// Roughness alpha, 1 value.
+        alpha: ParamId,
+        /// Diffuse reflectance of the base in [0, 1], constant or textured.
+        diffuse: Albedo,
+        /// Specular reflectance of the coating (a constant, not a parameter).
+        specular: Vec3,
+        /// int_ior / ext_ior.
+        eta: f32,
+        /// Mitsuba's `nonlinear`: the base's internal scattering darkens and saturates its colour.
+        nonlinear: bool,
+    },
     /// `(1 − w)·child0 + w·child1` of two leaf materials (ALGORITHMS.md §4.3).
     Blend {
         /// Weight w of child 1, 1 value in [0, 1].

@@ -154,6 +154,8 @@ fn gradients_match_finite_differences() {
         (builtin::load("blend").unwrap(), "object.weight.value"),
         (builtin::load("blend").unwrap(), "coat.alpha.value"),
         (scenes::textured_environment(), "environment.radiance.value"),
+        (scenes::conformance("bsdf_roughplastic"), "ball.bsdf.alpha"),
+        (scenes::conformance("bsdf_roughplastic"), "floor.bsdf.alpha"),
     ];
     for (scene, name) in checks {
         let mut renderer = Renderer::new(&gpu.ctx, &scene).unwrap();

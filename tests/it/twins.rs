@@ -65,6 +65,9 @@ fn probe_case(
         Leaf::RoughConductor { distribution, alpha, specular, eta, k } => {
             (LEAF_ROUGH_CONDUCTOR, distribution as u32, alpha, specular, eta, k)
         }
+        // The probes read no coating tables: rough plastics are compared path by path on scenes
+        // (cpu_vs_gpu, gradients).
+        Leaf::RoughPlastic(_) => panic!("the BSDF probes have no rough plastics"),
     };
     let (l0, l1) = (fields(&b.leaves[0]), fields(&b.leaves[1]));
     pathgrad::contract::BsdfProbeCase {

@@ -1,4 +1,5 @@
-//! `<bsdf>` (diffuse, roughconductor, blendbsdf, twosided) and `<texture type="bitmap">`.
+//! `<bsdf>` (diffuse, roughconductor, roughplastic, blendbsdf, twosided) and `<texture
+//! type="bitmap">`.
 
 use std::path::Path;
 
@@ -11,7 +12,34 @@ use crate::error::Result;
 use crate::scene::{Albedo, Material, MaterialId, Wrap, bounds};
 
 /// The BSDF plugins pathgrad reads.
-const SUPPORTED_BSDFS: &str = "blendbsdf, diffuse, null, roughconductor, twosided";
+const SUPPORTED_BSDFS: &str = "blendbsdf, diffuse, null, roughconductor, roughplastic, twosided";
+
+/// Mitsuba's named indices of refraction (`int_ior`, `ext_ior` as a string).
+const IORS: &[(&str, f32)] = &[
+    ("vacuum", 1.0),
+    ("helium", 1.000_036),
+    ("hydrogen", 1.000_132),
+    ("air", 1.000_277),
+    ("carbon dioxide", 1.000_45),
+    ("water", 1.333),
+    ("acetone", 1.36),
+    ("ethanol", 1.361),
+    ("carbon tetrachloride", 1.461),
+    ("glycerol", 1.4729),
+    ("benzene", 1.501),
+    ("silicone oil", 1.520_45),
+    ("bromine", 1.661),
+    ("water ice", 1.31),
+    ("fused quartz", 1.458),
+    ("pyrex", 1.47),
+    ("acrylic glass", 1.49),
+    ("polypropylene", 1.49),
+    ("bk7", 1.5046),
+    ("sodium chloride", 1.544),
+    ("amber", 1.55),
+    ("pet", 1.575),
+    ("diamond", 2.419),
+];
 
 /// Conductor presets for `roughconductor`'s `material`: RGB (eta, k) for Au, Ag, Cu, Al and Cr,
 /// the widely used RGB reductions of the measured spectra that Mitsuba tabulates (as in Mitsuba
@@ -76,6 +104,7 @@ impl<'a> Loader<'a> {
                 }
             }
             "roughconductor" => self.rough_conductor(&p, name)?,
+            "roughplastic" => self.rough_plastic(&p, name, depth)?,
             "null" => {
                 self.finish(&p)?;
                 self.scene.add_material(Material::Null)
@@ -104,8 +133,8 @@ impl<'a> Loader<'a> {
                     _ => {
                         return Err(self.x.err(
                             node,
-                            "'blendbsdf' children must both be diffuse/roughconductor, or both twosided wrappers \
-                             of those (pathgrad blends two leaf BSDFs)",
+                            "'blendbsdf' children must both be diffuse/roughconductor/roughplastic, or both \
+                             twosided wrappers of those (pathgrad blends two leaf BSDFs)",
                         ));
                     }
                 }
@@ -145,19 +174,95 @@ impl<'a> Loader<'a> {
     }
 
     fn is_leaf(&self, id: MaterialId) -> bool {
-        matches!(self.material(id), Some(Material::Diffuse { .. } | Material::RoughConductor { .. }))
+        matches!(
+            self.material(id),
+            Some(Material::Diffuse { .. } | Material::RoughConductor { .. } | Material::RoughPlastic { .. })
+        )
     }
 
-    fn rough_conductor(&mut self, p: &Props<'a>, name: &str) -> Result<MaterialId> {
-        let x = &self.x;
-        let distribution = match p.string(x, "distribution")? {
+    /// A microfacet BSDF's `distribution` (Beckmann by default).
+    fn distribution(&self, p: &Props<'a>) -> Result<Distribution> {
+        Ok(match p.string(&self.x, "distribution")? {
             None => Distribution::Beckmann,
             Some((s, n)) => match s.as_str() {
                 "beckmann" => Distribution::Beckmann,
                 "ggx" => Distribution::Ggx,
-                _ => return Err(x.err(n, format!("unsupported distribution '{s}' (supported: beckmann, ggx)"))),
+                _ => {
+                    return Err(self.x.err(n, format!("unsupported distribution '{s}' (supported: beckmann, ggx)")));
+                }
             },
+        })
+    }
+
+    /// An index of refraction `name`: a number, or one of Mitsuba's named materials (`default`
+    /// when absent).
+    fn ior(&self, p: &Props<'a>, name: &str, default: &str) -> Result<f32> {
+        let named = |s: &str, n: El<'a>| {
+            let lower = s.to_lowercase();
+            IORS.iter().find(|(k, _)| *k == lower).map(|&(_, v)| v).ok_or_else(|| {
+                let known: Vec<&str> = IORS.iter().map(|c| c.0).collect();
+                self.x.err(
+                    n,
+                    format!("unknown index of refraction '{s}' for '{name}' (a number, or: {})", known.join(", ")),
+                )
+            })
         };
+        let is_string = p.node_of(name).is_some_and(|n| n.has_tag_name("string"));
+        if !is_string && let Some((v, n)) = p.float(&self.x, name)? {
+            if !(v > 0.0 && v.is_finite()) {
+                return Err(self.x.err(n, format!("'{name}' must be a positive number, got {v}")));
+            }
+            return Ok(v);
+        }
+        match p.string(&self.x, name)? {
+            Some((s, n)) => named(&s, n),
+            None => named(default, p.node),
+        }
+    }
+
+    /// Mitsuba's `roughplastic`: `distribution` (Beckmann), isotropic `alpha` (0.1), texturable
+    /// `diffuse_reflectance` (0.5), `specular_reflectance` (1, a constant), `int_ior`
+    /// (polypropylene) and `ext_ior` (air), `nonlinear`. Parameters `NAME.alpha` (Mitsuba's key:
+    /// its α is a number, not a texture) and `NAME.diffuse_reflectance.value` (or `.data`).
+    fn rough_plastic(&mut self, p: &Props<'a>, name: &str, depth: usize) -> Result<MaterialId> {
+        let distribution = self.distribution(p)?;
+        if p.has("alpha_u") || p.has("alpha_v") {
+            return Err(self.x.err(p.node, "'roughplastic' has no anisotropic roughness (Mitsuba refuses it too)"));
+        }
+        let alpha = self.float_in(p, "alpha", Some(0.1), bounds::ALPHA)?;
+        if let Some(t) = p.object("specular_reflectance") {
+            return Err(self
+                .x
+                .err(t, "a textured 'specular_reflectance' of 'roughplastic' is not supported (a colour is)"));
+        }
+        let specular = self.color_in(p, "specular_reflectance", Vec3::ONE, bounds::REFLECTANCE)?;
+        let (int_ior, ext_ior) = (self.ior(p, "int_ior", "polypropylene")?, self.ior(p, "ext_ior", "air")?);
+        if int_ior == ext_ior {
+            return Err(self.x.err(p.node, "'int_ior' and 'ext_ior' must differ"));
+        }
+        let nonlinear = p.boolean(&self.x, "nonlinear", false)?;
+        p.boolean(&self.x, "sample_visible", true)?;
+        let diffuse = match p.object("diffuse_reflectance") {
+            Some(t) => self.texture(t, format!("{name}.diffuse_reflectance"), depth + 1)?,
+            None => {
+                let rho = self.color_in(p, "diffuse_reflectance", Vec3::splat(0.5), bounds::REFLECTANCE)?;
+                let id = self.scene.params.add(
+                    &format!("{name}.diffuse_reflectance.value"),
+                    &rho.to_array(),
+                    bounds::REFLECTANCE,
+                );
+                Albedo::Rgb(id.map_err(|e| self.located(p.node, e))?)
+            }
+        };
+        let alpha = self.scene.params.add(&format!("{name}.alpha"), &[alpha], bounds::ALPHA);
+        let alpha = alpha.map_err(|e| self.located(p.node, e))?;
+        let eta = int_ior / ext_ior;
+        Ok(self.scene.add_material(Material::RoughPlastic { distribution, alpha, diffuse, specular, eta, nonlinear }))
+    }
+
+    fn rough_conductor(&mut self, p: &Props<'a>, name: &str) -> Result<MaterialId> {
+        let distribution = self.distribution(p)?;
+        let x = &self.x;
         // Mitsuba's key is the property given: `alpha`, or `alpha_u` and `alpha_v`, of which
         // pathgrad (isotropic) exposes `alpha_u`, which `alpha_v` must equal and follows.
         let anisotropic = p.has("alpha_u") || p.has("alpha_v");

@@ -690,3 +690,55 @@ fn default_bsdfs_are_mitsubas() {
     assert_eq!(param(&s, "plain.bsdf.reflectance.value"), [0.5, 0.5, 0.5]);
     assert_eq!(param(&s, "light.bsdf.reflectance.value"), [0.0, 0.0, 0.0]);
 }
+
+#[test]
+fn roughplastic_takes_mitsubas_properties_and_names() {
+    let light = r#"<emitter type="constant"/>"#;
+    let scene = load_ok(&format!(
+        r#"{light}<shape type="cube" id="a"><bsdf type="roughplastic"/></shape>
+        <shape type="cube" id="b"><bsdf type="roughplastic"><string name="distribution" value="ggx"/>
+            <float name="alpha" value="0.25"/><rgb name="diffuse_reflectance" value="0.1, 0.2, 0.3"/>
+            <string name="int_ior" value="Diamond"/><float name="ext_ior" value="1.2"/>
+            <boolean name="nonlinear" value="true"/><rgb name="specular_reflectance" value="0.5"/></bsdf></shape>"#
+    ));
+    let plastics: Vec<_> =
+        scene.materials.iter().filter(|m| matches!(m, Material::RoughPlastic { .. })).cloned().collect();
+    let [
+        Material::RoughPlastic { distribution: d0, eta: e0, nonlinear: n0, specular: s0, .. },
+        Material::RoughPlastic { distribution: d1, eta: e1, nonlinear: n1, specular: s1, .. },
+    ] = plastics[..]
+    else {
+        panic!("{plastics:?}")
+    };
+    // Mitsuba's defaults: Beckmann, polypropylene in air, linear, white specular.
+    assert_eq!((d0, n0, s0), (Distribution::Beckmann, false, Vec3::ONE));
+    assert!((e0 - 1.49 / 1.000_277).abs() < 1e-6);
+    assert_eq!((d1, n1, s1), (Distribution::Ggx, true, Vec3::splat(0.5)));
+    assert!((e1 - 2.419 / 1.2).abs() < 1e-6);
+    let get = |n: &str| scene.params.get(scene.params.find(n).unwrap_or_else(|| panic!("{n}"))).to_vec();
+    assert_eq!(get("a.bsdf.alpha"), [0.1]);
+    assert_eq!(get("a.bsdf.diffuse_reflectance.value"), [0.5; 3]);
+    assert_eq!(get("b.bsdf.alpha"), [0.25]);
+    assert_eq!(get("b.bsdf.diffuse_reflectance.value"), [0.1, 0.2, 0.3]);
+}
+
+#[test]
+fn bad_roughplastics_are_refused_by_name() {
+    let light = r#"<emitter type="constant"/>"#;
+    let cases = [
+        (r#"<float name="alpha_u" value="0.1"/>"#, "'roughplastic' has no anisotropic roughness"),
+        (r#"<string name="int_ior" value="unobtainium"/>"#, "unknown index of refraction 'unobtainium' for 'int_ior'"),
+        (r#"<float name="int_ior" value="1.000277"/>"#, "'int_ior' and 'ext_ior' must differ"),
+        (r#"<float name="ext_ior" value="-1"/>"#, "'ext_ior' must be a positive number, got -1"),
+        (
+            r#"<texture type="bitmap" name="specular_reflectance"><string name="filename" value="x.png"/></texture>"#,
+            "a textured 'specular_reflectance' of 'roughplastic' is not supported",
+        ),
+        (r#"<string name="distribution" value="phong"/>"#, "unsupported distribution 'phong'"),
+    ];
+    for (inner, expected) in cases {
+        let body = format!(r#"{light}<shape type="cube"><bsdf type="roughplastic">{inner}</bsdf></shape>"#);
+        let e = load(&body).map(|_| ()).unwrap_err().to_string();
+        assert!(e.contains(expected), "{inner}: {e}");
+    }
+}
