@@ -30,7 +30,8 @@ fn fixtures_give_their_pinned_messages() {
     let cases: &[(&str, String)] = &[
         (
             "unsupported_plugin.xml",
-            "5:5: <bsdf id=\"shiny\">: unsupported plugin 'plastic' (supported: blendbsdf, diffuse, null, roughconductor, twosided)"
+            "5:5: <bsdf id=\"shiny\">: unsupported plugin 'plastic' (supported: blendbsdf, diffuse, null, roughconductor, \
+             roughplastic, twosided)"
                 .into(),
         ),
         ("bad_rgb.xml", "7:13: <rgb name=\"reflectance\">: value: expected a number, got 'x'".into()),
@@ -358,7 +359,8 @@ fn element_and_property_errors() {
         ),
         (
             r#"<bsdf type="blendbsdf"><float name="weight" value="0.5"/><bsdf type="diffuse"/><bsdf type="twosided"><bsdf type="diffuse"/></bsdf></bsdf>"#,
-            "<bsdf>: 'blendbsdf' children must both be diffuse/roughconductor, or both twosided wrappers of those (pathgrad blends two leaf BSDFs)",
+            "<bsdf>: 'blendbsdf' children must both be diffuse/roughconductor/roughplastic, or both twosided wrappers of \
+             those (pathgrad blends two leaf BSDFs)",
         ),
         (r#"<bsdf type="twosided"/>"#, "<bsdf>: 'twosided' needs 1 nested BSDF, got 0"),
         (
