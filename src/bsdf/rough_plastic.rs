@@ -120,11 +120,17 @@ fn table_mu(k: usize) -> f32 {
 /// T and Rᵢ for one α.
 fn coating_values(distribution: Distribution, alpha: f32, eta: f32) -> (Vec<f32>, f32) {
     let dir = |mu: f32| Vec3::new((1.0 - mu * mu).max(0.0).sqrt(), 0.0, mu);
+    use rayon::prelude::*;
     let transmittance = (0..COATING_RES as usize)
+        .into_par_iter()
         .map(|k| coating_integral(distribution, alpha, dir(table_mu(k)), eta, true) as f32)
         .collect();
+    // Summed in index order after the parallel map, so the value does not depend on the threads.
     let internal = (0..COATING_RES as usize)
+        .into_par_iter()
         .map(|k| coating_integral(distribution, alpha, dir(table_mu(k)), 1.0 / eta, false) * f64::from(table_mu(k)))
+        .collect::<Vec<f64>>()
+        .iter()
         .sum::<f64>()
         / f64::from(COATING_RES)
         * 2.0;

@@ -60,6 +60,11 @@ pub(crate) fn replace_params(
             message: "the table's layout differs from the scene's".into(),
         });
     }
+    // A rough plastic's coating table follows its roughness: rebuilt only when some α moved.
+    let alpha_moved = flat
+        .materials
+        .iter()
+        .any(|m| m.tag == MAT_ROUGH_PLASTIC && flat.params[m.p_alpha as usize] != params.values()[m.p_alpha as usize]);
     scene.params = params.clone();
     flat.params = params.values().to_vec();
     // The majorants follow the densities (ALGORITHMS.md §8: recomputed when parameters change),
@@ -68,7 +73,7 @@ pub(crate) fn replace_params(
         desc.majorant = medium.majorant(&scene.params);
     }
     flat.env_cells = env_cells(scene)?;
-    if flat.materials.iter().any(|m| m.tag == MAT_ROUGH_PLASTIC) {
+    if alpha_moved {
         flat.tables = coating_tables(&mut flat.materials, &flat.params);
     }
     Ok(())
