@@ -328,7 +328,8 @@ bool path_step(inout PathState st) {
                 capable = diff && material_capable(s.material);
 
                 // ---- emitter sampling: the sample and its unoccluded terms; the shadow ray is pass 1's ----
-                if (nee) {
+                // A BSDF of delta lobes only gets no next-event estimation: no emitter sample meets them.
+                if (nee && !bsdf_is_smooth(bsdf)) {
                     vec4 u_em = draw_block(st.key1, st.pixel, st.sample_index, vertex, DIM_EMITTER_SELECT / 4u);
                     es = sample_emitter(u_em[DIM_EMITTER_SELECT % 4u], vec2(u_em[DIM_EMITTER_POS % 4u], u_em[DIM_EMITTER_POS % 4u + 1u]), env_cell_uniforms(st.key1, st.pixel, st.sample_index, vertex), s.p);
                     if (es.valid) {
@@ -456,7 +457,8 @@ bool path_step(inout PathState st) {
         } else {
             st.throughput *= bs.value / pdf_f;
             st.prev_pdf_f = pdf_f;
-            st.prev_nee = nee;
+            // An emitter found through a delta lobe counts whole: NEE could not have sampled it.
+            st.prev_nee = nee && !bs.delta;
             st.prev_sum = st.w1 + st.w2;
             if (capable) {
                 st.w1 += globals.diff_q * st.w2 * pdf_d / pdf_f;

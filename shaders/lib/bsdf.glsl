@@ -13,7 +13,11 @@
 // reflectance in `k` and its coating table's offset in `table` (Material's layout).
 struct Leaf { uint kind; uint distribution; float alpha; vec3 color; vec3 eta; vec3 k; uint table; };
 struct Bsdf { Leaf leaf0; Leaf leaf1; float weight; bool blend; };
-struct BsdfSample { vec3 wo; float pdf; vec3 value; bool valid; };
+// A delta lobe's sample (`delta`) has its choice probability as `pdf` and its weight × pdf as
+// `value` (src/bsdf/specular.rs).
+struct BsdfSample { vec3 wo; float pdf; vec3 value; bool valid; bool delta; };
+struct LeafGrad { vec3 color; vec3 alpha; };
+struct BsdfGrad { LeafGrad leaf0; LeafGrad leaf1; vec3 weight; };
 
 // Whether `distribution` is Beckmann, folded to a constant when the kernel has only one of the two.
 bool is_beckmann(uint distribution) {
@@ -22,17 +26,22 @@ bool is_beckmann(uint distribution) {
 
 // Whether leaf `kind` is a rough plastic, folded to a constant when the kernel has no other kind.
 bool is_plastic(uint kind) {
-    return HAS(F_PLASTIC) && ((!HAS(F_DIFFUSE) && !HAS(F_CONDUCTOR)) || kind == LEAF_ROUGH_PLASTIC);
+    return HAS(F_PLASTIC) && ((!HAS(F_DIFFUSE) && !HAS(F_CONDUCTOR) && !HAS(F_DELTA)) || kind == LEAF_ROUGH_PLASTIC);
+}
+
+// Whether leaf `kind` is smooth (conductor, dielectric, thin dielectric: kinds from LEAF_CONDUCTOR).
+bool is_delta(uint kind) {
+    return HAS(F_DELTA) && ((!HAS(F_DIFFUSE) && !HAS(F_CONDUCTOR) && !HAS(F_PLASTIC)) || kind >= LEAF_CONDUCTOR);
 }
 
 // Whether leaf `kind` is Lambertian, folded to a constant when the kernel has only one kind.
 bool is_diffuse(uint kind) {
-    return (!HAS(F_CONDUCTOR) && !HAS(F_PLASTIC)) || (HAS(F_DIFFUSE) && kind == LEAF_DIFFUSE);
+    return (!HAS(F_CONDUCTOR) && !HAS(F_PLASTIC) && !HAS(F_DELTA)) || (HAS(F_DIFFUSE) && kind == LEAF_DIFFUSE);
 }
 
 // Whether leaf `kind` is a rough conductor.
 bool is_conductor(uint kind) {
-    return !is_plastic(kind) && !is_diffuse(kind);
+    return !is_plastic(kind) && !is_delta(kind) && !is_diffuse(kind);
 }
 
 // ---- Lambertian (ALGORITHMS.md §4.1) ----
@@ -293,8 +302,76 @@ bool plastic_sample(Leaf l, vec3 wi, float u_lobe, vec2 u, out vec3 wo) {
     return wo.z > 0.0;
 }
 
+// ---- smooth leaves (src/bsdf/specular.rs): color = reflectance, k = transmittance (dielectrics)
+// or the conductor's k, eta = the conductor's η or (η, –, –) ----
+
+// The lobe u_lobe chooses: direction, choice probability, weight per unit of its colour, and
+// whether it transmits; false where the leaf has nothing to give (a conductor seen from below).
+bool smooth_lobe(Leaf l, vec3 wi, float u_lobe, out vec3 wo, out float pdf, out vec3 unit, out bool transmitted) {
+    wo = vec3(-wi.x, -wi.y, wi.z);
+    pdf = 1.0;
+    unit = vec3(1.0);
+    transmitted = false;
+    if (l.kind == LEAF_CONDUCTOR) {
+        if (wi.z <= 0.0) return false;
+        unit = fresnel_conductor(wi.z, l.eta, l.k);
+        return true;
+    }
+    bool thin = l.kind == LEAF_THIN_DIELECTRIC;
+    float cos_i = thin ? abs(wi.z) : wi.z;
+    float r = fresnel_dielectric(cos_i, l.eta.x);
+    if (thin) r = r * 2.0 / (1.0 + r);
+    if (u_lobe <= r) {
+        pdf = r;
+    } else {
+        pdf = 1.0 - r;
+        transmitted = true;
+        if (thin) {
+            wo = -wi;
+        } else {
+            // Mitsuba's fresnel: the transmitted cosine and η_t/η_i for wi's side.
+            bool outside = wi.z >= 0.0;
+            float eta_ti = outside ? 1.0 / l.eta.x : l.eta.x;
+            float ct = sqrt(max(1.0 - (1.0 - wi.z * wi.z) * eta_ti * eta_ti, 0.0));
+            wo = vec3(-eta_ti * wi.x, -eta_ti * wi.y, outside ? -ct : ct);
+            unit = vec3(eta_ti * eta_ti);
+        }
+    }
+    return pdf > 0.0;
+}
+
+// Whether b has only delta lobes (its vertices get no next-event estimation).
+bool bsdf_is_smooth(Bsdf b) {
+    return HAS(F_DELTA) && !(HAS(F_BLEND) && b.blend) && is_delta(b.leaf0.kind);
+}
+
+BsdfSample smooth_sample(Leaf l, vec3 wi, float u_lobe) {
+    BsdfSample s = BsdfSample(vec3(0.0), 0.0, vec3(0.0), false, true);
+    vec3 unit;
+    bool transmitted;
+    s.valid = smooth_lobe(l, wi, u_lobe, s.wo, s.pdf, unit, transmitted);
+    s.value = unit * (transmitted ? l.k : l.color) * s.pdf;
+    return s;
+}
+
+// ∂value/∂colour per channel of the sample toward wo, times adj; alpha.x = 1 marks a transmitted
+// sample (its colour parameter is the transmittance, right after the reflectance).
+LeafGrad smooth_value_grad(Leaf l, vec3 wi, vec3 wo, vec3 adj) {
+    bool transmitted = wi.z * wo.z < 0.0;
+    vec3 w;
+    float pdf;
+    vec3 unit;
+    bool t;
+    if (!smooth_lobe(l, wi, transmitted ? 1.0 : 0.0, w, pdf, unit, t)) return LeafGrad(vec3(0.0), vec3(0.0));
+    return LeafGrad(adj * unit * pdf, vec3(transmitted ? 1.0 : 0.0, 0.0, 0.0));
+}
+
 // ---- leaves ----
 vec3 leaf_eval_pdf(Leaf l, vec3 wi, vec3 wo, out float pdf) {
+    if (is_delta(l.kind)) {
+        pdf = 0.0;
+        return vec3(0.0);
+    }
     if (is_plastic(l.kind)) return plastic_eval_pdf(l, wi, wo, pdf);
     if (is_diffuse(l.kind)) {
         pdf = diffuse_pdf(wi, wo);
@@ -313,6 +390,9 @@ float leaf_pdf(Leaf l, vec3 wi, vec3 wo) {
 }
 // u_lobe picks a lobe of a leaf of several (rescaled by the blend's choice, bsdf_sample).
 bool leaf_sample(Leaf l, vec3 wi, float u_lobe, vec2 u, out vec3 wo) {
+    wo = vec3(0.0, 0.0, 1.0);
+    // A smooth leaf's sample carries its weight: bsdf_sample takes it whole.
+    if (is_delta(l.kind)) return false;
     if (is_plastic(l.kind)) return plastic_sample(l, wi, u_lobe, u, wo);
     if (is_diffuse(l.kind)) {
         wo = vec3(0.0);
@@ -324,8 +404,6 @@ bool leaf_sample(Leaf l, vec3 wi, float u_lobe, vec2 u, out vec3 wo) {
 }
 
 // ---- parameter derivatives, kept per image channel (twin of bsdf_eval_grad in src/bsdf/mod.rs) ----
-struct LeafGrad { vec3 color; vec3 alpha; };
-struct BsdfGrad { LeafGrad leaf0; LeafGrad leaf1; vec3 weight; };
 
 // ∂f̂/∂ρ and ∂f̂/∂α of a rough plastic (twin of PlasticLeaf::eval_grad).
 LeafGrad plastic_eval_grad(Leaf l, vec3 wi, vec3 wo, vec3 adj) {
@@ -357,6 +435,7 @@ LeafGrad plastic_eval_grad(Leaf l, vec3 wi, vec3 wo, vec3 adj) {
 }
 
 LeafGrad leaf_eval_grad(Leaf l, vec3 wi, vec3 wo, vec3 adj) {
+    if (is_delta(l.kind)) return smooth_value_grad(l, wi, wo, adj);
     if (is_plastic(l.kind)) return plastic_eval_grad(l, wi, wo, adj);
     if (is_diffuse(l.kind)) return LeafGrad(adj * diffuse_eval(vec3(1.0), wi, wo), vec3(0.0));
     vec3 f;
@@ -406,7 +485,8 @@ BsdfGrad bsdf_eval_grad(Bsdf b, vec3 wi, vec3 wo, vec3 adj) {
 
 // u_lobe picks the blend child (RNG dim 4); u drives the direction (dims 5, 6).
 BsdfSample bsdf_sample(Bsdf b, vec3 wi, float u_lobe, vec2 u) {
-    BsdfSample s = BsdfSample(vec3(0.0), 0.0, vec3(0.0), false);
+    if (!(HAS(F_BLEND) && b.blend) && is_delta(b.leaf0.kind)) return smooth_sample(b.leaf0, wi, u_lobe);
+    BsdfSample s = BsdfSample(vec3(0.0), 0.0, vec3(0.0), false, false);
     // The blend's choice, and u_lobe rescaled within it for the leaf's own (twin: pick_leaf).
     Leaf leaf = b.leaf0;
     if (HAS(F_BLEND) && b.blend) {

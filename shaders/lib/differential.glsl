@@ -145,7 +145,7 @@ float bsdf_pdf_diff(Bsdf b, vec3 wi, vec3 wo) {
 // Conductor: positive part if u_sign < 0.5. Blend: child 1 if u_lobe ≤ ½, else child 0, with the
 // child's primal sampler. Diffuse: its primal sampler. Value f̂ and pdf bsdf_pdf_diff of the whole BSDF.
 BsdfSample bsdf_sample_diff(Bsdf b, vec3 wi, float u_sign, float u_lobe, vec2 u) {
-    BsdfSample s = BsdfSample(vec3(0.0), 0.0, vec3(0.0), false);
+    BsdfSample s = BsdfSample(vec3(0.0), 0.0, vec3(0.0), false, false);
     vec3 wo;
     bool ok;
     if (HAS(F_BLEND) && b.blend) {

@@ -116,13 +116,20 @@ Leaf leaf_from_material(Material m, vec2 uv) {
     Leaf l;
     bool plastic = is_plastic(m.tag);
     bool conductor = is_conductor(m.tag);
-    l.kind = plastic ? LEAF_ROUGH_PLASTIC : (conductor ? LEAF_ROUGH_CONDUCTOR : LEAF_DIFFUSE);
+    bool delta = is_delta(m.tag);
+    l.kind = delta ? m.tag : (plastic ? LEAF_ROUGH_PLASTIC : (conductor ? LEAF_ROUGH_CONDUCTOR : LEAF_DIFFUSE));
     l.distribution = m.distribution;
     l.alpha = (conductor || plastic) ? params[m.p_alpha] : 0.0;
     l.table = m.table;
-    l.color = (HAS(F_TEXTURE) && m.tex_width > 0u) ? texture_lookup(m, uv) : param_rgb(m.p_color);
+    if (delta) {
+        // Each colour a parameter, or (NO_PARAM) a constant: the reflectance in uv_row0, a
+        // dielectric's transmittance in k.
+        l.color = m.p_color != NO_PARAM ? param_rgb(m.p_color) : m.uv_row0;
+    } else {
+        l.color = (HAS(F_TEXTURE) && m.tex_width > 0u) ? texture_lookup(m, uv) : param_rgb(m.p_color);
+    }
     l.eta = m.eta;
-    l.k = m.k;
+    l.k = (delta && m.tag != MAT_CONDUCTOR && m.p_alpha != NO_PARAM) ? param_rgb(m.p_alpha) : m.k;
     return l;
 }
 
@@ -191,6 +198,13 @@ void push_rgb(uint offset, vec3 g) {
 }
 
 void push_leaf(Material m, vec2 uv, LeafGrad g) {
+    if (is_delta(m.tag)) {
+        // The reflectance, or (a transmitted sample, marked in alpha.x) the transmittance; a
+        // constant has no parameter.
+        uint p = g.alpha.x > 0.5 ? m.p_alpha : m.p_color;
+        if (HAS(G_COLOR) && p != NO_PARAM) push_rgb(p, g.color);
+        return;
+    }
     if (HAS(F_TEXTURE) && m.tex_width > 0u) {
         if (HAS(G_TEXTURE)) {
             uint texel[4];
@@ -204,7 +218,7 @@ void push_leaf(Material m, vec2 uv, LeafGrad g) {
     } else if (HAS(G_COLOR)) {
         push_rgb(m.p_color, g.color);
     }
-    if (HAS(G_ALPHA) && !is_diffuse(m.tag)) push_entry(m.p_alpha, g.alpha);  // conductor or plastic
+    if (HAS(G_ALPHA) && (is_conductor(m.tag) || is_plastic(m.tag))) push_entry(m.p_alpha, g.alpha);
 }
 
 // An emitter's radiance term: one RGB value, or the four texels of the environment map around

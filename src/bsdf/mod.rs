@@ -10,6 +10,7 @@ pub mod differential;
 pub mod diffuse;
 pub mod rough_conductor;
 pub mod rough_plastic;
+pub mod specular;
 
 use glam::{Vec2, Vec3};
 
@@ -43,6 +44,8 @@ pub enum Leaf {
     },
     /// Rough plastic: a rough dielectric coating on a Lambertian base.
     RoughPlastic(rough_plastic::PlasticLeaf),
+    /// A smooth BSDF: lobes that are Dirac deltas, sampled only ([`specular`]).
+    Smooth(specular::SmoothLeaf),
 }
 
 /// A resolved BSDF: one leaf, or the blend `(1 − w)·leaves[0] + w·leaves[1]`.
@@ -70,8 +73,12 @@ pub struct BsdfSample {
     pub wo: Vec3,
     /// Density of the whole BSDF's sampling at `wo`.
     pub pdf: f32,
-    /// f̂(wi, wo) of the whole BSDF, so the throughput weight is `value / pdf`.
+    /// f̂(wi, wo) of the whole BSDF, so the throughput weight is `value / pdf`; for a delta lobe,
+    /// its weight times `pdf`.
     pub value: Vec3,
+    /// A delta lobe's sample: `pdf` is the lobe's choice probability, and no other technique
+    /// (next-event estimation) can produce the direction.
+    pub delta: bool,
 }
 
 /// The gradient of Σ_c adj_c · f̂_c with respect to one leaf's differentiable values, kept per
@@ -106,6 +113,10 @@ pub fn leaf_eval_grad(leaf: &Leaf, wi: Vec3, wo: Vec3, adj: Vec3) -> LeafGrad {
             let (color, alpha) = p.eval_grad(wi, wo);
             LeafGrad { color: adj * color, alpha: adj * alpha }
         }
+        Leaf::Smooth(s) => {
+            let g = s.value_grad(wi, wo);
+            LeafGrad { color: adj * g.color, alpha: g.alpha }
+        }
     }
 }
 
@@ -138,6 +149,7 @@ pub fn leaf_eval(leaf: &Leaf, wi: Vec3, wo: Vec3) -> Vec3 {
             rough_conductor::microfacet_eval(distribution, alpha, specular, eta, k, wi, wo)
         }
         Leaf::RoughPlastic(p) => p.eval(wi, wo),
+        Leaf::Smooth(_) => Vec3::ZERO,
     }
 }
 
@@ -149,6 +161,7 @@ pub fn leaf_pdf(leaf: &Leaf, wi: Vec3, wo: Vec3) -> f32 {
             rough_conductor::microfacet_pdf(distribution, alpha, wi, wo)
         }
         Leaf::RoughPlastic(p) => p.pdf(wi, wo),
+        Leaf::Smooth(_) => 0.0,
     }
 }
 
@@ -161,6 +174,8 @@ pub fn leaf_sample(leaf: &Leaf, wi: Vec3, u_lobe: f32, u: Vec2) -> Option<Vec3> 
             rough_conductor::microfacet_sample(distribution, alpha, wi, u)
         }
         Leaf::RoughPlastic(p) => p.sample(wi, u_lobe, u),
+        // A smooth leaf's sample carries its weight: bsdf_sample takes it whole.
+        Leaf::Smooth(_) => None,
     }
 }
 
@@ -188,13 +203,16 @@ pub fn pick_leaf(b: &Bsdf, u_lobe: f32) -> (&Leaf, f32) {
 /// (dims 5, 6). Returns `None` for an invalid sample (the path ends). The returned value and pdf
 /// are the whole BSDF's, re-evaluated at the sampled direction.
 pub fn bsdf_sample(b: &Bsdf, wi: Vec3, u_lobe: f32, u: Vec2) -> Option<BsdfSample> {
+    if let (false, Leaf::Smooth(s)) = (b.blend, &b.leaves[0]) {
+        return s.sample(wi, u_lobe);
+    }
     let (leaf, u_lobe) = pick_leaf(b, u_lobe);
     let wo = leaf_sample(leaf, wi, u_lobe, u)?;
     let pdf = bsdf_pdf(b, wi, wo);
     if !(pdf > 0.0) {
         return None;
     }
-    Some(BsdfSample { wo, pdf, value: bsdf_eval(b, wi, wo) })
+    Some(BsdfSample { wo, pdf, value: bsdf_eval(b, wi, wo), delta: false })
 }
 
 #[cfg(test)]

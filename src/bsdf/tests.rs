@@ -220,6 +220,7 @@ fn derivatives_match_finite_differences() {
                             Leaf::Diffuse { albedo } => albedo[c],
                             Leaf::RoughConductor { specular, .. } => specular[c],
                             Leaf::RoughPlastic(p) => p.diffuse[c],
+                            Leaf::Smooth(s) => s.reflectance[c],
                         };
                         cases.push((
                             g.leaves[leaf].color[c],
@@ -229,6 +230,7 @@ fn derivatives_match_finite_differences() {
                                     Leaf::Diffuse { albedo } => albedo[c] = v,
                                     Leaf::RoughConductor { specular, .. } => specular[c] = v,
                                     Leaf::RoughPlastic(p) => p.diffuse[c] = v,
+                                    Leaf::Smooth(s) => s.reflectance[c] = v,
                                 }
                                 x
                             }),

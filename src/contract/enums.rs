@@ -54,6 +54,12 @@ contract_enums! {
         Null = MAT_NULL = 3,
         /// Rough plastic (a rough dielectric coating on a Lambertian base).
         RoughPlastic = MAT_ROUGH_PLASTIC = 4,
+        /// Smooth conductor (a mirror).
+        Conductor = MAT_CONDUCTOR = 5,
+        /// Smooth dielectric interface.
+        Dielectric = MAT_DIELECTRIC = 6,
+        /// Thin dielectric sheet.
+        ThinDielectric = MAT_THIN_DIELECTRIC = 7,
     }
 
     /// What `DeltaLight::kind` holds.
@@ -90,6 +96,12 @@ contract_enums! {
         RoughConductor = LEAF_ROUGH_CONDUCTOR = 1,
         /// Rough plastic.
         RoughPlastic = LEAF_ROUGH_PLASTIC = 4,
+        /// Smooth conductor (kinds from here on are smooth: sampled only).
+        Conductor = LEAF_CONDUCTOR = 5,
+        /// Smooth dielectric.
+        Dielectric = LEAF_DIELECTRIC = 6,
+        /// Thin dielectric.
+        ThinDielectric = LEAF_THIN_DIELECTRIC = 7,
     }
 
     /// Microfacet distribution.

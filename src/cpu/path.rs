@@ -4,6 +4,7 @@
 use glam::{Vec2, Vec3};
 
 use crate::bsdf::differential::{bsdf_pdf_diff, bsdf_sample_diff};
+use crate::bsdf::specular::is_smooth;
 use crate::bsdf::{bsdf_eval, bsdf_pdf, bsdf_sample};
 use crate::bvh::{Ray, closest_hit, occluded};
 use crate::contract::{
@@ -347,7 +348,8 @@ pub fn trace_path<const ADJOINT: bool>(
         let u_em = draw_block(key, pixel, sample, vertex, DIM_EMITTER_SELECT / 4);
         let pos = (DIM_EMITTER_POS % 4) as usize;
         let u_select = u_em[(DIM_EMITTER_SELECT % 4) as usize];
-        let es = if nee {
+        // A BSDF of delta lobes only gets no next-event estimation: no emitter sample can meet them.
+        let es = if nee && !is_smooth(&bsdf) {
             let u_cell = env_cell_uniforms(globals, key, pixel, sample, vertex);
             sample_emitter(flat, globals, u_select, (Vec2::new(u_em[pos], u_em[pos + 1]), u_cell), s.p)
         } else {
@@ -449,7 +451,8 @@ pub fn trace_path<const ADJOINT: bool>(
         }
         throughput *= bs.value / pdf_f;
         prev_pdf_f = pdf_f;
-        prev_nee = nee;
+        // An emitter found through a delta lobe counts whole: NEE could not have sampled it.
+        prev_nee = nee && !bs.delta;
         prev_sum = w1 + w2;
         if capable {
             w1 += globals.diff_q * w2 * pdf_d / pdf_f;

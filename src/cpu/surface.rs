@@ -3,11 +3,12 @@
 use glam::Vec3;
 
 use crate::bsdf::rough_plastic::PlasticLeaf;
+use crate::bsdf::specular::{SmoothKind, SmoothLeaf};
 use crate::bsdf::{Bsdf, Distribution, Leaf, LeafGrad, bsdf_eval_grad};
 use crate::bvh::Hit;
 use crate::contract::{
-    COATING_TABLE_LEN, MAT_BLEND, MAT_ROUGH_CONDUCTOR, MAT_ROUGH_PLASTIC, Material, TEX_CHECKER, TEX_NEAREST,
-    TEX_WRAP_CLAMP, TEX_WRAP_MIRROR,
+    COATING_TABLE_LEN, MAT_BLEND, MAT_CONDUCTOR, MAT_DIELECTRIC, MAT_ROUGH_CONDUCTOR, MAT_ROUGH_PLASTIC,
+    MAT_THIN_DIELECTRIC, Material, NO_PARAM, TEX_CHECKER, TEX_NEAREST, TEX_WRAP_CLAMP, TEX_WRAP_MIRROR,
 };
 use crate::cpu::path::GradSink;
 use crate::scene::flat::FlatScene;
@@ -112,7 +113,13 @@ pub fn texture_lookup(params: &[f32], m: &Material, uv: glam::Vec2) -> Vec3 {
 
 fn leaf_from_material(flat: &FlatScene, m: &Material, uv: glam::Vec2) -> Leaf {
     let params = &flat.params[..];
-    let color = if m.tex_width > 0 { texture_lookup(params, m, uv) } else { param_rgb(params, m.p_color) };
+    let color = if m.tex_width > 0 {
+        texture_lookup(params, m, uv)
+    } else if m.p_color == NO_PARAM {
+        Vec3::ZERO // a smooth leaf's constant colour: read below
+    } else {
+        param_rgb(params, m.p_color)
+    };
     let distribution =
         if m.distribution == Distribution::Ggx as u32 { Distribution::Ggx } else { Distribution::Beckmann };
     match m.tag {
@@ -138,6 +145,21 @@ fn leaf_from_material(flat: &FlatScene, m: &Material, uv: glam::Vec2) -> Leaf {
                 table,
             })
         }
+        MAT_CONDUCTOR | MAT_DIELECTRIC | MAT_THIN_DIELECTRIC => Leaf::Smooth(SmoothLeaf {
+            kind: match m.tag {
+                MAT_CONDUCTOR => SmoothKind::Conductor,
+                MAT_DIELECTRIC => SmoothKind::Dielectric,
+                _ => SmoothKind::ThinDielectric,
+            },
+            reflectance: if m.p_color == NO_PARAM { m.uv_row0 } else { param_rgb(params, m.p_color) },
+            transmittance: match (m.tag, m.p_alpha) {
+                (MAT_CONDUCTOR, _) => Vec3::ZERO,
+                (_, NO_PARAM) => m.k,
+                (_, p) => param_rgb(params, p),
+            },
+            eta: m.eta,
+            k: m.k,
+        }),
         _ => Leaf::Diffuse { albedo: color },
     }
 }
@@ -167,6 +189,15 @@ pub fn texture_backward(m: &Material, uv: glam::Vec2, g: Vec3, sink: &mut GradSi
 }
 
 fn leaf_backward(m: &Material, uv: glam::Vec2, g: &LeafGrad, sink: &mut GradSink<'_>) {
+    if is_smooth_tag(m.tag) {
+        // A smooth leaf's colour is its reflectance, or (a transmitted sample, marked in
+        // alpha.x) its transmittance; a constant has no parameter.
+        let p = if g.alpha.x > 0.5 { m.p_alpha } else { m.p_color };
+        if p != NO_PARAM {
+            sink.add_rgb(p, g.color);
+        }
+        return;
+    }
     if m.tex_width > 0 {
         texture_backward(m, uv, g.color, sink);
     } else {
@@ -175,6 +206,11 @@ fn leaf_backward(m: &Material, uv: glam::Vec2, g: &LeafGrad, sink: &mut GradSink
     if m.tag == MAT_ROUGH_CONDUCTOR || m.tag == MAT_ROUGH_PLASTIC {
         sink.add(m.p_alpha, g.alpha);
     }
+}
+
+/// Whether material tag `tag` is a smooth (delta) BSDF's.
+fn is_smooth_tag(tag: u32) -> bool {
+    matches!(tag, MAT_CONDUCTOR | MAT_DIELECTRIC | MAT_THIN_DIELECTRIC)
 }
 
 /// GRAD(f̂(wi, wo), adj): the BSDF's parameters at this surface point.

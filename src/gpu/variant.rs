@@ -18,6 +18,7 @@ pub fn scene_features(flat: &FlatScene, env_param: u32) -> u32 {
             MAT_DIFFUSE => F_DIFFUSE,
             MAT_ROUGH_CONDUCTOR => F_CONDUCTOR | if m.distribution == DIST_BECKMANN { F_BECKMANN } else { F_GGX },
             MAT_ROUGH_PLASTIC => F_PLASTIC | if m.distribution == DIST_BECKMANN { F_BECKMANN } else { F_GGX },
+            MAT_CONDUCTOR | MAT_DIELECTRIC | MAT_THIN_DIELECTRIC => F_DELTA,
             MAT_NULL => F_MEDIA,
             _ => F_BLEND,
         };
@@ -71,6 +72,12 @@ pub fn param_kinds(flat: &FlatScene, env: (u32, u32), begin: u32, end: u32) -> P
     let mut k = ParamKinds::NONE;
     for m in &flat.materials {
         match m.tag {
+            MAT_CONDUCTOR | MAT_DIELECTRIC | MAT_THIN_DIELECTRIC => {
+                // Reflectance and (dielectrics) transmittance, each a parameter or NO_PARAM.
+                if overlaps(m.p_color, 3) || (m.tag != MAT_CONDUCTOR && overlaps(m.p_alpha, 3)) {
+                    k = k.union(ParamKinds::COLOR);
+                }
+            }
             MAT_DIFFUSE | MAT_ROUGH_CONDUCTOR | MAT_ROUGH_PLASTIC => {
                 let texels = if m.tex_width > 0 { m.tex_width * m.tex_height } else { 1 };
                 if overlaps(m.p_color, 3 * texels) {
@@ -119,7 +126,7 @@ pub fn request_features(scene: u32, options: &RenderOptions, kinds: ParamKinds) 
 
 /// A short human-readable name of a variant, for logs: `nee env diffuse conductor[beckmann] ∂alpha`.
 pub fn describe(features: u32) -> String {
-    const NAMES: [(u32, &str); 22] = [
+    const NAMES: [(u32, &str); 23] = [
         (F_NEE, "nee"),
         (F_ENV, "env"),
         (F_EMITTERS, "emitters"),
@@ -135,6 +142,7 @@ pub fn describe(features: u32) -> String {
         (F_ENV_MAP, "env-map"),
         (F_LIGHTS, "lights"),
         (F_PLASTIC, "plastic"),
+        (F_DELTA, "smooth"),
         (G_COLOR, "∂color"),
         (G_TEXTURE, "∂texture"),
         (G_ALPHA, "∂alpha"),

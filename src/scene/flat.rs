@@ -5,17 +5,19 @@ use glam::Vec3;
 
 use crate::bsdf::Distribution;
 use crate::bsdf::rough_plastic::CoatingTable;
+use crate::bsdf::specular::SmoothKind;
 use crate::bvh::{self, Bvh};
 use crate::contract::{
     COATING_TABLE_LEN, DIST_GGX, DeltaLight, EmitterTri, EnvCell, FIELD_CONSTANT, FIELD_GRID, FieldDesc,
-    LIGHT_DIRECTIONAL, LIGHT_POINT, LIGHT_SPOT, MAT_BLEND, MAT_DIFFUSE, MAT_NULL, MAT_ROUGH_CONDUCTOR,
-    MAT_ROUGH_PLASTIC, Material as GpuMaterial, MediumDesc, NO_EMITTER, NO_MEDIUM, NO_PARAM, PHASE_HG, PHASE_ISOTROPIC,
-    TEX_CHECKER, TEX_NEAREST, TEX_WRAP_CLAMP, TEX_WRAP_MIRROR, TriShading,
+    LIGHT_DIRECTIONAL, LIGHT_POINT, LIGHT_SPOT, MAT_BLEND, MAT_CONDUCTOR, MAT_DIELECTRIC, MAT_DIFFUSE, MAT_NULL,
+    MAT_ROUGH_CONDUCTOR, MAT_ROUGH_PLASTIC, MAT_THIN_DIELECTRIC, Material as GpuMaterial, MediumDesc, NO_EMITTER,
+    NO_MEDIUM, NO_PARAM, PHASE_HG, PHASE_ISOTROPIC, TEX_CHECKER, TEX_NEAREST, TEX_WRAP_CLAMP, TEX_WRAP_MIRROR,
+    TriShading,
 };
 use crate::error::Result;
 use crate::scene::medium::{Field, Phase};
 use crate::scene::shapes::triangle_area;
-use crate::scene::{Albedo, Light, LightShape, Material, Scene, Wrap};
+use crate::scene::{Albedo, Light, LightShape, Material, Scene, SmoothColour, Wrap};
 
 /// The GPU-layout arrays of one scene.
 #[derive(Clone, Debug, Default, PartialEq)]
@@ -280,6 +282,28 @@ fn flatten_material(scene: &Scene, m: &Material) -> GpuMaterial {
                 eta: Vec3::new(eta, s_mean / (d_mean + s_mean), f32::from(u8::from(nonlinear))),
                 k: specular,
                 ..albedo_fields(scene, diffuse)
+            }
+        }
+        Material::Smooth { kind, reflectance, transmittance, eta, k } => {
+            // Each colour a parameter (p_color, p_alpha) or a constant (uv_row0; k for a
+            // dielectric's transmittance, whose k is free).
+            let split = |c: SmoothColour| match c {
+                SmoothColour::Param(id) => (offset(id), Vec3::ZERO),
+                SmoothColour::Constant(v) => (NO_PARAM, v),
+            };
+            let ((p_color, r), (p_alpha, t)) = (split(reflectance), split(transmittance));
+            GpuMaterial {
+                tag: match kind {
+                    SmoothKind::Conductor => MAT_CONDUCTOR,
+                    SmoothKind::Dielectric => MAT_DIELECTRIC,
+                    SmoothKind::ThinDielectric => MAT_THIN_DIELECTRIC,
+                },
+                p_color,
+                p_alpha,
+                uv_row0: r,
+                eta,
+                k: if kind == SmoothKind::Conductor { k } else { t },
+                ..Default::default()
             }
         }
         Material::Blend { weight, children } => GpuMaterial {

@@ -82,6 +82,16 @@ pub enum LightShape {
     },
 }
 
+/// A smooth BSDF's reflectance or transmittance: a parameter, or (as Mitsuba, where the file does
+/// not give it) a constant.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum SmoothColour {
+    /// The RGB parameter.
+    Param(ParamId),
+    /// A fixed colour.
+    Constant(Vec3),
+}
+
 /// How a bitmap's texel indices outside the image wrap (Mitsuba's `wrap_mode`).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub enum Wrap {
@@ -147,6 +157,20 @@ pub enum Material {
         eta: f32,
         /// Mitsuba's `nonlinear`: the base's internal scattering darkens and saturates its colour.
         nonlinear: bool,
+    },
+    /// A smooth (delta) BSDF: Mitsuba's `conductor`, `dielectric` or `thindielectric`
+    /// (`crate::bsdf::specular`).
+    Smooth {
+        /// Which one.
+        kind: crate::bsdf::specular::SmoothKind,
+        /// RGB specular reflectance.
+        reflectance: SmoothColour,
+        /// RGB specular transmittance (dielectrics).
+        transmittance: SmoothColour,
+        /// Conductor: the real part of the complex index of refraction; dielectrics: η in `x`.
+        eta: Vec3,
+        /// Conductor: the imaginary part.
+        k: Vec3,
     },
     /// `(1 − w)·child0 + w·child1` of two leaf materials (ALGORITHMS.md §4.3).
     Blend {

@@ -80,6 +80,14 @@ MATRIX = {
                               grads=["ball.bsdf.diffuse_reflectance.value", "ball.bsdf.alpha",
                                      "floor.bsdf.diffuse_reflectance.data"],
                               fd={"ball.bsdf.alpha": 0.002}, seeds=64),
+    # Mitsuba's prb differentiates a vertex by re-evaluating its BSDF, which is 0 for a delta
+    # lobe: its own gradients of these colours are 0. They are compared with its finite
+    # differences (each colour acts linearly, so they are exact up to noise).
+    "bsdf_smooth": dict(features=["dielectric (bk7 by name)", "conductor (eta/k)", "thindielectric",
+                                  "specular_reflectance / specular_transmittance", "caustics through glass"],
+                        grads=["ball.bsdf.specular_transmittance.value", "marker.bsdf.specular_reflectance.value"],
+                        fd={"ball.bsdf.specular_transmittance.value": None,
+                            "marker.bsdf.specular_reflectance.value": None}),
     "bsdf_blend": dict(features=["blendbsdf", "weight", "diffuse + roughconductor"],
                        grads=["ball.bsdf.weight.value", "ball.bsdf.bsdf_0.reflectance.value"]),
     "bsdf_twosided_diffuse": dict(features=["twosided", "diffuse", "back faces"], grads=["sided.bsdf.brdf_0.reflectance.value"]),

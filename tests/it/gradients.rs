@@ -156,6 +156,8 @@ fn gradients_match_finite_differences() {
         (scenes::textured_environment(), "environment.radiance.value"),
         (scenes::conformance("bsdf_roughplastic"), "ball.bsdf.alpha"),
         (scenes::conformance("bsdf_roughplastic"), "floor.bsdf.alpha"),
+        (scenes::conformance("bsdf_smooth"), "marker.bsdf.specular_reflectance.value"),
+        (scenes::conformance("bsdf_smooth"), "ball.bsdf.specular_transmittance.value"),
     ];
     for (scene, name) in checks {
         let mut renderer = Renderer::new(&gpu.ctx, &scene).unwrap();

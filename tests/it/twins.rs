@@ -68,6 +68,16 @@ fn probe_case(
         // The probes read no coating tables: rough plastics are compared path by path on scenes
         // (cpu_vs_gpu, gradients).
         Leaf::RoughPlastic(_) => panic!("the BSDF probes have no rough plastics"),
+        Leaf::Smooth(l) => {
+            use pathgrad::bsdf::specular::SmoothKind;
+            let kind = match l.kind {
+                SmoothKind::Conductor => pathgrad::contract::LEAF_CONDUCTOR,
+                SmoothKind::Dielectric => pathgrad::contract::LEAF_DIELECTRIC,
+                SmoothKind::ThinDielectric => pathgrad::contract::LEAF_THIN_DIELECTRIC,
+            };
+            let k = if l.kind == SmoothKind::Conductor { l.k } else { l.transmittance };
+            (kind, 0, 0.0, l.reflectance, l.eta, k)
+        }
     };
     let (l0, l1) = (fields(&b.leaves[0]), fields(&b.leaves[1]));
     pathgrad::contract::BsdfProbeCase {

@@ -8,11 +8,13 @@ use glam::Vec3;
 use super::loader::{Loader, MAX_NESTING};
 use super::xml::{El, Props};
 use crate::bsdf::Distribution;
+use crate::bsdf::specular::SmoothKind;
 use crate::error::Result;
-use crate::scene::{Albedo, Material, MaterialId, Wrap, bounds};
+use crate::scene::{Albedo, Material, MaterialId, SmoothColour, Wrap, bounds};
 
 /// The BSDF plugins pathgrad reads.
-const SUPPORTED_BSDFS: &str = "blendbsdf, diffuse, null, roughconductor, roughplastic, twosided";
+const SUPPORTED_BSDFS: &str =
+    "blendbsdf, conductor, dielectric, diffuse, null, roughconductor, roughplastic, thindielectric, twosided";
 
 /// Mitsuba's named indices of refraction (`int_ior`, `ext_ior` as a string).
 const IORS: &[(&str, f32)] = &[
@@ -105,6 +107,9 @@ impl<'a> Loader<'a> {
             }
             "roughconductor" => self.rough_conductor(&p, name)?,
             "roughplastic" => self.rough_plastic(&p, name, depth)?,
+            "conductor" => self.smooth(&p, name, SmoothKind::Conductor)?,
+            "dielectric" => self.smooth(&p, name, SmoothKind::Dielectric)?,
+            "thindielectric" => self.smooth(&p, name, SmoothKind::ThinDielectric)?,
             "null" => {
                 self.finish(&p)?;
                 self.scene.add_material(Material::Null)
@@ -260,6 +265,65 @@ impl<'a> Loader<'a> {
         Ok(self.scene.add_material(Material::RoughPlastic { distribution, alpha, diffuse, specular, eta, nonlinear }))
     }
 
+    /// A conductor's complex index of refraction: `material` (a preset) or `eta`/`k` (Mitsuba's
+    /// default: eta 0, k 1, Fresnel ≡ 1).
+    fn conductor_ior(&self, p: &Props<'a>) -> Result<(Vec3, Vec3)> {
+        let x = &self.x;
+        match p.string(x, "material")? {
+            Some((m, n)) if m != "none" => {
+                if p.has("eta") || p.has("k") {
+                    return Err(x.err(n, "give either 'material' or 'eta'/'k', not both"));
+                }
+                conductor(&m).ok_or_else(|| {
+                    let known: Vec<&str> = CONDUCTORS.iter().map(|c| c.0).collect();
+                    x.err(n, format!("unknown conductor material '{m}' (supported: {})", known.join(", ")))
+                })
+            }
+            _ => {
+                let eta = self.color_in(p, "eta", Vec3::ZERO, (0.0, f32::MAX))?;
+                let k = self.color_in(p, "k", Vec3::ONE, (0.0, f32::MAX))?;
+                Ok((eta, k))
+            }
+        }
+    }
+
+    /// Mitsuba's smooth `conductor` (`specular_reflectance`, `material` or `eta`/`k`),
+    /// `dielectric` and `thindielectric` (`int_ior` bk7, `ext_ior` air, `specular_reflectance`,
+    /// `specular_transmittance`). Parameters as Mitsuba's: `NAME.specular_reflectance.value`
+    /// always for a conductor, and for the dielectrics each colour only when the file gives it
+    /// (a constant otherwise).
+    fn smooth(&mut self, p: &Props<'a>, name: &str, kind: SmoothKind) -> Result<MaterialId> {
+        for slot in ["specular_reflectance", "specular_transmittance"] {
+            if let Some(t) = p.object(slot) {
+                return Err(self
+                    .x
+                    .err(t, format!("a textured '{slot}' of '{}' is not supported (a colour is)", p.kind)));
+            }
+        }
+        let conductor = kind == SmoothKind::Conductor;
+        let (eta, k) = if conductor {
+            self.conductor_ior(p)?
+        } else {
+            let (int_ior, ext_ior) = (self.ior(p, "int_ior", "bk7")?, self.ior(p, "ext_ior", "air")?);
+            if int_ior == ext_ior {
+                return Err(self.x.err(p.node, "'int_ior' and 'ext_ior' must differ"));
+            }
+            (Vec3::new(int_ior / ext_ior, 0.0, 0.0), Vec3::ZERO)
+        };
+        let mut colour = |key: &str, always: bool| -> Result<SmoothColour> {
+            let value = self.color_in(p, key, Vec3::ONE, bounds::REFLECTANCE)?;
+            if !(always || p.has(key)) {
+                return Ok(SmoothColour::Constant(value));
+            }
+            let id = self.scene.params.add(&format!("{name}.{key}.value"), &value.to_array(), bounds::REFLECTANCE);
+            Ok(SmoothColour::Param(id.map_err(|e| self.located(p.node, e))?))
+        };
+        let reflectance = colour("specular_reflectance", conductor)?;
+        let transmittance =
+            if conductor { SmoothColour::Constant(Vec3::ZERO) } else { colour("specular_transmittance", false)? };
+        Ok(self.scene.add_material(Material::Smooth { kind, reflectance, transmittance, eta, k }))
+    }
+
     fn rough_conductor(&mut self, p: &Props<'a>, name: &str) -> Result<MaterialId> {
         let distribution = self.distribution(p)?;
         let x = &self.x;
@@ -280,23 +344,7 @@ impl<'a> Loader<'a> {
             self.float_in(p, "alpha", Some(0.1), bounds::ALPHA)?
         };
         let specular = self.color_in(p, "specular_reflectance", Vec3::ONE, bounds::REFLECTANCE)?;
-        let material = p.string(x, "material")?;
-        let (eta, k) = match material {
-            Some((m, n)) if m != "none" => {
-                if p.has("eta") || p.has("k") {
-                    return Err(x.err(n, "give either 'material' or 'eta'/'k', not both"));
-                }
-                conductor(&m).ok_or_else(|| {
-                    let known: Vec<&str> = CONDUCTORS.iter().map(|c| c.0).collect();
-                    x.err(n, format!("unknown conductor material '{m}' (supported: {})", known.join(", ")))
-                })?
-            }
-            _ => {
-                let eta = self.color_in(p, "eta", Vec3::ZERO, (0.0, f32::MAX))?;
-                let k = self.color_in(p, "k", Vec3::ONE, (0.0, f32::MAX))?;
-                (eta, k)
-            }
-        };
+        let (eta, k) = self.conductor_ior(p)?;
         // VNDF sampling is what pathgrad does; `false` would only change the noise.
         p.boolean(x, "sample_visible", true)?;
         let key = if anisotropic { "alpha_u" } else { "alpha" };

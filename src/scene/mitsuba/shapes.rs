@@ -323,7 +323,20 @@ impl<'a> Loader<'a> {
             [_, second, ..] => return Err(self.x.err(second, "a shape takes one emitter")),
         };
         let interior = match interior {
-            Some(m) => Some(self.medium(m, format!("{name}.interior_medium"))?),
+            Some(m) => {
+                let refracting = matches!(
+                    self.scene.materials.get(material.0 as usize),
+                    Some(crate::scene::Material::Smooth { kind, .. }) if *kind != crate::bsdf::specular::SmoothKind::Conductor
+                );
+                if refracting {
+                    return Err(self.x.err(
+                        m,
+                        "a medium inside a dielectric is not supported yet: paths enter media through a 'null' \
+                         boundary",
+                    ));
+                }
+                Some(self.medium(m, format!("{name}.interior_medium"))?)
+            }
             None => None,
         };
         let overflowed_before = self.scene.overflowed_triangles;

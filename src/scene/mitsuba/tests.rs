@@ -742,3 +742,49 @@ fn bad_roughplastics_are_refused_by_name() {
         assert!(e.contains(expected), "{inner}: {e}");
     }
 }
+
+#[test]
+fn smooth_bsdfs_take_mitsubas_properties_and_names() {
+    use crate::bsdf::specular::SmoothKind;
+    use crate::scene::SmoothColour;
+    let light = r#"<emitter type="constant"/>"#;
+    let scene = load_ok(&format!(
+        r#"{light}<shape type="cube" id="m"><bsdf type="conductor"><string name="material" value="Au"/></bsdf></shape>
+        <shape type="cube" id="g"><bsdf type="dielectric"><rgb name="specular_transmittance" value="0.9, 0.8, 0.7"/></bsdf></shape>
+        <shape type="cube" id="t"><bsdf type="thindielectric"><float name="int_ior" value="1.3"/></bsdf></shape>"#
+    ));
+    let smooth: Vec<_> = scene.materials.iter().filter(|m| matches!(m, Material::Smooth { .. })).cloned().collect();
+    let [
+        Material::Smooth { kind: k0, reflectance: r0, .. },
+        Material::Smooth { kind: k1, reflectance: r1, transmittance: t1, eta: e1, .. },
+        Material::Smooth { kind: k2, transmittance: t2, eta: e2, .. },
+    ] = smooth[..]
+    else {
+        panic!("{smooth:?}")
+    };
+    assert_eq!((k0, k1, k2), (SmoothKind::Conductor, SmoothKind::Dielectric, SmoothKind::ThinDielectric));
+    // A conductor's reflectance is always a parameter; a dielectric's colours only when given.
+    assert!(matches!(r0, SmoothColour::Param(_)));
+    assert_eq!(r1, SmoothColour::Constant(Vec3::ONE));
+    assert!(matches!(t1, SmoothColour::Param(_)));
+    assert_eq!(t2, SmoothColour::Constant(Vec3::ONE));
+    assert!((e1.x - 1.5046 / 1.000_277).abs() < 1e-6 && (e2.x - 1.3 / 1.000_277).abs() < 1e-6);
+    assert_eq!(param(&scene, "g.bsdf.specular_transmittance.value"), [0.9, 0.8, 0.7]);
+    assert_eq!(param(&scene, "m.bsdf.specular_reflectance.value"), [1.0; 3]);
+    assert!(scene.params.find("g.bsdf.specular_reflectance.value").is_none());
+    // Not inside a blend, and no medium inside a dielectric.
+    let e = load(&format!(
+        r#"{light}<shape type="cube"><bsdf type="blendbsdf"><float name="weight" value="0.5"/><bsdf type="dielectric"/><bsdf type="diffuse"/></bsdf></shape>"#
+    ))
+    .map(|_| ())
+    .unwrap_err()
+    .to_string();
+    assert!(e.contains("'blendbsdf' children must both be diffuse/roughconductor/roughplastic"), "{e}");
+    let e = load(&format!(
+        r#"{light}<shape type="cube"><bsdf type="dielectric"/><medium type="homogeneous" name="interior"/></shape>"#
+    ))
+    .map(|_| ())
+    .unwrap_err()
+    .to_string();
+    assert!(e.contains("a medium inside a dielectric is not supported yet"), "{e}");
+}
