@@ -24,24 +24,34 @@ bool is_beckmann(uint distribution) {
     return !HAS(F_GGX) || (HAS(F_BECKMANN) && distribution == DIST_BECKMANN);
 }
 
-// Whether leaf `kind` is a rough plastic, folded to a constant when the kernel has no other kind.
+// The leaf kinds' feature bits; a kind test folds to a constant when the kernel has no other kind.
+#define LEAF_KIND_BITS (F_DIFFUSE | F_CONDUCTOR | F_PLASTIC | F_DELTA | F_SMOOTH_PLASTIC)
+bool only_kind(uint bit) { return (FEATURES & uint(LEAF_KIND_BITS)) == uint(bit); }
+
+// Whether leaf `kind` is a rough plastic.
 bool is_plastic(uint kind) {
-    return HAS(F_PLASTIC) && ((!HAS(F_DIFFUSE) && !HAS(F_CONDUCTOR) && !HAS(F_DELTA)) || kind == LEAF_ROUGH_PLASTIC);
+    return HAS(F_PLASTIC) && (only_kind(F_PLASTIC) || kind == LEAF_ROUGH_PLASTIC);
 }
 
-// Whether leaf `kind` is smooth (conductor, dielectric, thin dielectric: kinds from LEAF_CONDUCTOR).
+// Whether leaf `kind` is purely smooth (conductor, dielectric, thin dielectric).
 bool is_delta(uint kind) {
-    return HAS(F_DELTA) && ((!HAS(F_DIFFUSE) && !HAS(F_CONDUCTOR) && !HAS(F_PLASTIC)) || kind >= LEAF_CONDUCTOR);
+    return HAS(F_DELTA) && (only_kind(F_DELTA) || (kind >= LEAF_CONDUCTOR && kind <= LEAF_THIN_DIELECTRIC));
 }
 
-// Whether leaf `kind` is Lambertian, folded to a constant when the kernel has only one kind.
+// Whether leaf `kind` is a smooth plastic.
+bool is_smooth_plastic(uint kind) {
+    return HAS(F_SMOOTH_PLASTIC) && (only_kind(F_SMOOTH_PLASTIC) || kind == LEAF_PLASTIC);
+}
+
+// Whether leaf `kind` is Lambertian.
 bool is_diffuse(uint kind) {
-    return (!HAS(F_CONDUCTOR) && !HAS(F_PLASTIC) && !HAS(F_DELTA)) || (HAS(F_DIFFUSE) && kind == LEAF_DIFFUSE);
+    return (FEATURES & uint(F_CONDUCTOR | F_PLASTIC | F_DELTA | F_SMOOTH_PLASTIC)) == 0u
+        || (HAS(F_DIFFUSE) && kind == LEAF_DIFFUSE);
 }
 
 // Whether leaf `kind` is a rough conductor.
 bool is_conductor(uint kind) {
-    return !is_plastic(kind) && !is_delta(kind) && !is_diffuse(kind);
+    return !is_plastic(kind) && !is_delta(kind) && !is_smooth_plastic(kind) && !is_diffuse(kind);
 }
 
 // ---- Lambertian (ALGORITHMS.md §4.1) ----
@@ -366,8 +376,67 @@ LeafGrad smooth_value_grad(Leaf l, vec3 wi, vec3 wo, vec3 adj) {
     return LeafGrad(adj * unit * pdf, vec3(transmitted ? 1.0 : 0.0, 0.0, 0.0));
 }
 
+// ---- smooth plastic (src/bsdf/plastic.rs): color = ρ, k = the coating's colour, eta = (η, w,
+// nonlinear) ----
+
+// Mitsuba's fitted diffuse Fresnel reflectance.
+float fresnel_diffuse_reflectance(float eta) {
+    float inv = 1.0 / eta;
+    if (eta < 1.0) return 0.0636 * inv + eta * (eta * -1.4399 + 0.7099) + 0.6681;
+    return 0.919317 + inv * (-3.4793 + inv * (6.75335 + inv * (-7.80989 + inv * (4.98554 + inv * -1.36881))));
+}
+
+// The probability of sampling the coating at cos θi (and F(cos θi) in f_i).
+float splastic_coating(Leaf l, float cos_i, out float f_i) {
+    f_i = fresnel_dielectric(cos_i, l.eta.x);
+    float ps = f_i * l.eta.y;
+    float pd = (1.0 - f_i) * (1.0 - l.eta.y);
+    return ps / (ps + pd);
+}
+
+// 1 / (1 − ρ̄ F_dr(1/η)) per channel.
+vec3 splastic_renormalisation(Leaf l) {
+    vec3 rbar = l.eta.z != 0.0 ? l.color : vec3(1.0);
+    return vec3(1.0) / (vec3(1.0) - rbar * fresnel_diffuse_reflectance(1.0 / l.eta.x));
+}
+
+// The base's f̂ per unit of ρ before the renormalisation.
+float splastic_base(Leaf l, vec3 wi, vec3 wo) {
+    float f_i = fresnel_dielectric(wi.z, l.eta.x);
+    float f_o = fresnel_dielectric(wo.z, l.eta.x);
+    return wo.z * INV_PI / (l.eta.x * l.eta.x) * (1.0 - f_i) * (1.0 - f_o);
+}
+
+vec3 splastic_eval_pdf(Leaf l, vec3 wi, vec3 wo, out float pdf) {
+    pdf = 0.0;
+    if (wi.z <= 0.0 || wo.z <= 0.0) return vec3(0.0);
+    float f_i;
+    pdf = (1.0 - splastic_coating(l, wi.z, f_i)) * wo.z * INV_PI;
+    return l.color * splastic_renormalisation(l) * splastic_base(l, wi, wo);
+}
+
+BsdfSample splastic_sample(Leaf l, vec3 wi, float u_lobe, vec2 u) {
+    BsdfSample s = BsdfSample(vec3(0.0), 0.0, vec3(0.0), false, false);
+    if (wi.z <= 0.0) return s;
+    float f_i;
+    float p = splastic_coating(l, wi.z, f_i);
+    if (u_lobe < p) return BsdfSample(vec3(-wi.x, -wi.y, wi.z), p, l.k * f_i, true, true);
+    s.wo = sample_cosine_hemisphere(u);
+    s.value = splastic_eval_pdf(l, wi, s.wo, s.pdf);
+    s.valid = s.pdf > 0.0;
+    return s;
+}
+
+// ∂f̂/∂ρ per channel, times adj: the base's, or 0 toward the mirror direction (the coating's sample).
+LeafGrad splastic_eval_grad(Leaf l, vec3 wi, vec3 wo, vec3 adj) {
+    if (wi.z <= 0.0 || wo.z <= 0.0 || wo == vec3(-wi.x, -wi.y, wi.z)) return LeafGrad(vec3(0.0), vec3(0.0));
+    vec3 n = splastic_renormalisation(l);
+    return LeafGrad(adj * (l.eta.z != 0.0 ? n * n : n) * splastic_base(l, wi, wo), vec3(0.0));
+}
+
 // ---- leaves ----
 vec3 leaf_eval_pdf(Leaf l, vec3 wi, vec3 wo, out float pdf) {
+    if (is_smooth_plastic(l.kind)) return splastic_eval_pdf(l, wi, wo, pdf);
     if (is_delta(l.kind)) {
         pdf = 0.0;
         return vec3(0.0);
@@ -391,8 +460,8 @@ float leaf_pdf(Leaf l, vec3 wi, vec3 wo) {
 // u_lobe picks a lobe of a leaf of several (rescaled by the blend's choice, bsdf_sample).
 bool leaf_sample(Leaf l, vec3 wi, float u_lobe, vec2 u, out vec3 wo) {
     wo = vec3(0.0, 0.0, 1.0);
-    // A smooth leaf's sample carries its weight: bsdf_sample takes it whole.
-    if (is_delta(l.kind)) return false;
+    // A leaf with a delta lobe samples itself whole: bsdf_sample takes its sample.
+    if (is_delta(l.kind) || is_smooth_plastic(l.kind)) return false;
     if (is_plastic(l.kind)) return plastic_sample(l, wi, u_lobe, u, wo);
     if (is_diffuse(l.kind)) {
         wo = vec3(0.0);
@@ -436,6 +505,7 @@ LeafGrad plastic_eval_grad(Leaf l, vec3 wi, vec3 wo, vec3 adj) {
 
 LeafGrad leaf_eval_grad(Leaf l, vec3 wi, vec3 wo, vec3 adj) {
     if (is_delta(l.kind)) return smooth_value_grad(l, wi, wo, adj);
+    if (is_smooth_plastic(l.kind)) return splastic_eval_grad(l, wi, wo, adj);
     if (is_plastic(l.kind)) return plastic_eval_grad(l, wi, wo, adj);
     if (is_diffuse(l.kind)) return LeafGrad(adj * diffuse_eval(vec3(1.0), wi, wo), vec3(0.0));
     vec3 f;
@@ -486,6 +556,7 @@ BsdfGrad bsdf_eval_grad(Bsdf b, vec3 wi, vec3 wo, vec3 adj) {
 // u_lobe picks the blend child (RNG dim 4); u drives the direction (dims 5, 6).
 BsdfSample bsdf_sample(Bsdf b, vec3 wi, float u_lobe, vec2 u) {
     if (!(HAS(F_BLEND) && b.blend) && is_delta(b.leaf0.kind)) return smooth_sample(b.leaf0, wi, u_lobe);
+    if (!(HAS(F_BLEND) && b.blend) && is_smooth_plastic(b.leaf0.kind)) return splastic_sample(b.leaf0, wi, u_lobe, u);
     BsdfSample s = BsdfSample(vec3(0.0), 0.0, vec3(0.0), false, false);
     // The blend's choice, and u_lobe rescaled within it for the leaf's own (twin: pick_leaf).
     Leaf leaf = b.leaf0;

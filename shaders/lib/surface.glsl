@@ -117,7 +117,8 @@ Leaf leaf_from_material(Material m, vec2 uv) {
     bool plastic = is_plastic(m.tag);
     bool conductor = is_conductor(m.tag);
     bool delta = is_delta(m.tag);
-    l.kind = delta ? m.tag : (plastic ? LEAF_ROUGH_PLASTIC : (conductor ? LEAF_ROUGH_CONDUCTOR : LEAF_DIFFUSE));
+    l.kind = (delta || is_smooth_plastic(m.tag)) ? m.tag
+        : (plastic ? LEAF_ROUGH_PLASTIC : (conductor ? LEAF_ROUGH_CONDUCTOR : LEAF_DIFFUSE));
     l.distribution = m.distribution;
     l.alpha = (conductor || plastic) ? params[m.p_alpha] : 0.0;
     l.table = m.table;

@@ -8,6 +8,7 @@
 pub mod blend;
 pub mod differential;
 pub mod diffuse;
+pub mod plastic;
 pub mod rough_conductor;
 pub mod rough_plastic;
 pub mod specular;
@@ -46,6 +47,8 @@ pub enum Leaf {
     RoughPlastic(rough_plastic::PlasticLeaf),
     /// A smooth BSDF: lobes that are Dirac deltas, sampled only ([`specular`]).
     Smooth(specular::SmoothLeaf),
+    /// Smooth plastic: a delta coating over a Lambertian base ([`plastic`]).
+    SmoothPlastic(plastic::SmoothPlasticLeaf),
 }
 
 /// A resolved BSDF: one leaf, or the blend `(1 − w)·leaves[0] + w·leaves[1]`.
@@ -117,6 +120,7 @@ pub fn leaf_eval_grad(leaf: &Leaf, wi: Vec3, wo: Vec3, adj: Vec3) -> LeafGrad {
             let g = s.value_grad(wi, wo);
             LeafGrad { color: adj * g.color, alpha: g.alpha }
         }
+        Leaf::SmoothPlastic(p) => LeafGrad { color: adj * p.eval_grad(wi, wo).color, alpha: Vec3::ZERO },
     }
 }
 
@@ -150,6 +154,7 @@ pub fn leaf_eval(leaf: &Leaf, wi: Vec3, wo: Vec3) -> Vec3 {
         }
         Leaf::RoughPlastic(p) => p.eval(wi, wo),
         Leaf::Smooth(_) => Vec3::ZERO,
+        Leaf::SmoothPlastic(p) => p.eval(wi, wo),
     }
 }
 
@@ -162,6 +167,7 @@ pub fn leaf_pdf(leaf: &Leaf, wi: Vec3, wo: Vec3) -> f32 {
         }
         Leaf::RoughPlastic(p) => p.pdf(wi, wo),
         Leaf::Smooth(_) => 0.0,
+        Leaf::SmoothPlastic(p) => p.pdf(wi, wo),
     }
 }
 
@@ -174,8 +180,8 @@ pub fn leaf_sample(leaf: &Leaf, wi: Vec3, u_lobe: f32, u: Vec2) -> Option<Vec3> 
             rough_conductor::microfacet_sample(distribution, alpha, wi, u)
         }
         Leaf::RoughPlastic(p) => p.sample(wi, u_lobe, u),
-        // A smooth leaf's sample carries its weight: bsdf_sample takes it whole.
-        Leaf::Smooth(_) => None,
+        // A leaf with a delta lobe samples itself whole: bsdf_sample takes its sample.
+        Leaf::Smooth(_) | Leaf::SmoothPlastic(_) => None,
     }
 }
 
@@ -203,8 +209,10 @@ pub fn pick_leaf(b: &Bsdf, u_lobe: f32) -> (&Leaf, f32) {
 /// (dims 5, 6). Returns `None` for an invalid sample (the path ends). The returned value and pdf
 /// are the whole BSDF's, re-evaluated at the sampled direction.
 pub fn bsdf_sample(b: &Bsdf, wi: Vec3, u_lobe: f32, u: Vec2) -> Option<BsdfSample> {
-    if let (false, Leaf::Smooth(s)) = (b.blend, &b.leaves[0]) {
-        return s.sample(wi, u_lobe);
+    match (b.blend, &b.leaves[0]) {
+        (false, Leaf::Smooth(s)) => return s.sample(wi, u_lobe),
+        (false, Leaf::SmoothPlastic(p)) => return p.sample(wi, u_lobe, u),
+        _ => {}
     }
     let (leaf, u_lobe) = pick_leaf(b, u_lobe);
     let wo = leaf_sample(leaf, wi, u_lobe, u)?;

@@ -221,6 +221,7 @@ fn derivatives_match_finite_differences() {
                             Leaf::RoughConductor { specular, .. } => specular[c],
                             Leaf::RoughPlastic(p) => p.diffuse[c],
                             Leaf::Smooth(s) => s.reflectance[c],
+                            Leaf::SmoothPlastic(p) => p.diffuse[c],
                         };
                         cases.push((
                             g.leaves[leaf].color[c],
@@ -231,6 +232,7 @@ fn derivatives_match_finite_differences() {
                                     Leaf::RoughConductor { specular, .. } => specular[c] = v,
                                     Leaf::RoughPlastic(p) => p.diffuse[c] = v,
                                     Leaf::Smooth(s) => s.reflectance[c] = v,
+                                    Leaf::SmoothPlastic(p) => p.diffuse[c] = v,
                                 }
                                 x
                             }),

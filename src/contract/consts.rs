@@ -165,6 +165,8 @@ contract_constants! {
     F_PLASTIC = 1 << 14;
     /// Feature bit: smooth (delta) leaves: conductor, dielectric, thin dielectric.
     F_DELTA = 1 << 15;
+    /// Feature bit: smooth-plastic leaves (a delta coating over a Lambertian base).
+    F_SMOOTH_PLASTIC = 1 << 23;
     /// Entries of a rough plastic's coating transmittance table (μ = k/63, k = 0..63).
     COATING_RES = 64;
     /// Floats of one coating table as the kernels read it: T, ∂T/∂α, Rᵢ, ∂Rᵢ/∂α.

@@ -60,6 +60,8 @@ contract_enums! {
         Dielectric = MAT_DIELECTRIC = 6,
         /// Thin dielectric sheet.
         ThinDielectric = MAT_THIN_DIELECTRIC = 7,
+        /// Smooth plastic (a delta coating over a Lambertian base).
+        Plastic = MAT_PLASTIC = 8,
     }
 
     /// What `DeltaLight::kind` holds.
@@ -100,8 +102,10 @@ contract_enums! {
         Conductor = LEAF_CONDUCTOR = 5,
         /// Smooth dielectric.
         Dielectric = LEAF_DIELECTRIC = 6,
-        /// Thin dielectric.
+        /// Thin dielectric (the last purely smooth kind).
         ThinDielectric = LEAF_THIN_DIELECTRIC = 7,
+        /// Smooth plastic.
+        Plastic = LEAF_PLASTIC = 8,
     }
 
     /// Microfacet distribution.

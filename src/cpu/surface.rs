@@ -2,12 +2,13 @@
 
 use glam::Vec3;
 
+use crate::bsdf::plastic::SmoothPlasticLeaf;
 use crate::bsdf::rough_plastic::PlasticLeaf;
 use crate::bsdf::specular::{SmoothKind, SmoothLeaf};
 use crate::bsdf::{Bsdf, Distribution, Leaf, LeafGrad, bsdf_eval_grad};
 use crate::bvh::Hit;
 use crate::contract::{
-    COATING_TABLE_LEN, MAT_BLEND, MAT_CONDUCTOR, MAT_DIELECTRIC, MAT_ROUGH_CONDUCTOR, MAT_ROUGH_PLASTIC,
+    COATING_TABLE_LEN, MAT_BLEND, MAT_CONDUCTOR, MAT_DIELECTRIC, MAT_PLASTIC, MAT_ROUGH_CONDUCTOR, MAT_ROUGH_PLASTIC,
     MAT_THIN_DIELECTRIC, Material, NO_PARAM, TEX_CHECKER, TEX_NEAREST, TEX_WRAP_CLAMP, TEX_WRAP_MIRROR,
 };
 use crate::cpu::path::GradSink;
@@ -145,6 +146,13 @@ fn leaf_from_material(flat: &FlatScene, m: &Material, uv: glam::Vec2) -> Leaf {
                 table,
             })
         }
+        MAT_PLASTIC => Leaf::SmoothPlastic(SmoothPlasticLeaf {
+            diffuse: color,
+            specular: m.k,
+            eta: m.eta.x,
+            specular_weight: m.eta.y,
+            nonlinear: m.eta.z != 0.0,
+        }),
         MAT_CONDUCTOR | MAT_DIELECTRIC | MAT_THIN_DIELECTRIC => Leaf::Smooth(SmoothLeaf {
             kind: match m.tag {
                 MAT_CONDUCTOR => SmoothKind::Conductor,

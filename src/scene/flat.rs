@@ -10,9 +10,9 @@ use crate::bvh::{self, Bvh};
 use crate::contract::{
     COATING_TABLE_LEN, DIST_GGX, DeltaLight, EmitterTri, EnvCell, FIELD_CONSTANT, FIELD_GRID, FieldDesc,
     LIGHT_DIRECTIONAL, LIGHT_POINT, LIGHT_SPOT, MAT_BLEND, MAT_CONDUCTOR, MAT_DIELECTRIC, MAT_DIFFUSE, MAT_NULL,
-    MAT_ROUGH_CONDUCTOR, MAT_ROUGH_PLASTIC, MAT_THIN_DIELECTRIC, Material as GpuMaterial, MediumDesc, NO_EMITTER,
-    NO_MEDIUM, NO_PARAM, PHASE_HG, PHASE_ISOTROPIC, TEX_CHECKER, TEX_NEAREST, TEX_WRAP_CLAMP, TEX_WRAP_MIRROR,
-    TriShading,
+    MAT_PLASTIC, MAT_ROUGH_CONDUCTOR, MAT_ROUGH_PLASTIC, MAT_THIN_DIELECTRIC, Material as GpuMaterial, MediumDesc,
+    NO_EMITTER, NO_MEDIUM, NO_PARAM, PHASE_HG, PHASE_ISOTROPIC, TEX_CHECKER, TEX_NEAREST, TEX_WRAP_CLAMP,
+    TEX_WRAP_MIRROR, TriShading,
 };
 use crate::error::Result;
 use crate::scene::medium::{Field, Phase};
@@ -279,6 +279,15 @@ fn flatten_material(scene: &Scene, m: &Material) -> GpuMaterial {
                 tag: MAT_ROUGH_PLASTIC,
                 distribution: distribution as u32,
                 p_alpha: offset(alpha),
+                eta: Vec3::new(eta, s_mean / (d_mean + s_mean), f32::from(u8::from(nonlinear))),
+                k: specular,
+                ..albedo_fields(scene, diffuse)
+            }
+        }
+        Material::SmoothPlastic { diffuse, specular, eta, nonlinear } => {
+            let (d_mean, s_mean) = (albedo_mean(scene, diffuse), (specular.x + specular.y + specular.z) / 3.0);
+            GpuMaterial {
+                tag: MAT_PLASTIC,
                 eta: Vec3::new(eta, s_mean / (d_mean + s_mean), f32::from(u8::from(nonlinear))),
                 k: specular,
                 ..albedo_fields(scene, diffuse)

@@ -158,6 +158,17 @@ pub enum Material {
         /// Mitsuba's `nonlinear`: the base's internal scattering darkens and saturates its colour.
         nonlinear: bool,
     },
+    /// Smooth plastic (Mitsuba's `plastic`, `crate::bsdf::plastic`).
+    SmoothPlastic {
+        /// Diffuse reflectance of the base in [0, 1], constant or textured.
+        diffuse: Albedo,
+        /// Specular reflectance of the coating (a constant, not a parameter).
+        specular: Vec3,
+        /// int_ior / ext_ior.
+        eta: f32,
+        /// Mitsuba's `nonlinear`.
+        nonlinear: bool,
+    },
     /// A smooth (delta) BSDF: Mitsuba's `conductor`, `dielectric` or `thindielectric`
     /// (`crate::bsdf::specular`).
     Smooth {

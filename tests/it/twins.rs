@@ -68,6 +68,14 @@ fn probe_case(
         // The probes read no coating tables: rough plastics are compared path by path on scenes
         // (cpu_vs_gpu, gradients).
         Leaf::RoughPlastic(_) => panic!("the BSDF probes have no rough plastics"),
+        Leaf::SmoothPlastic(p) => (
+            pathgrad::contract::LEAF_PLASTIC,
+            0,
+            0.0,
+            p.diffuse,
+            Vec3::new(p.eta, p.specular_weight, if p.nonlinear { 1.0 } else { 0.0 }),
+            p.specular,
+        ),
         Leaf::Smooth(l) => {
             use pathgrad::bsdf::specular::SmoothKind;
             let kind = match l.kind {

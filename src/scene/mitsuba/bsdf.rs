@@ -14,7 +14,7 @@ use crate::scene::{Albedo, Material, MaterialId, SmoothColour, Wrap, bounds};
 
 /// The BSDF plugins pathgrad reads.
 const SUPPORTED_BSDFS: &str =
-    "blendbsdf, conductor, dielectric, diffuse, null, roughconductor, roughplastic, thindielectric, twosided";
+    "blendbsdf, conductor, dielectric, diffuse, null, plastic, roughconductor, roughplastic, thindielectric, twosided";
 
 /// Mitsuba's named indices of refraction (`int_ior`, `ext_ior` as a string).
 const IORS: &[(&str, f32)] = &[
@@ -107,6 +107,7 @@ impl<'a> Loader<'a> {
             }
             "roughconductor" => self.rough_conductor(&p, name)?,
             "roughplastic" => self.rough_plastic(&p, name, depth)?,
+            "plastic" => self.smooth_plastic(&p, name, depth)?,
             "conductor" => self.smooth(&p, name, SmoothKind::Conductor)?,
             "dielectric" => self.smooth(&p, name, SmoothKind::Dielectric)?,
             "thindielectric" => self.smooth(&p, name, SmoothKind::ThinDielectric)?,
@@ -225,20 +226,14 @@ impl<'a> Loader<'a> {
         }
     }
 
-    /// Mitsuba's `roughplastic`: `distribution` (Beckmann), isotropic `alpha` (0.1), texturable
-    /// `diffuse_reflectance` (0.5), `specular_reflectance` (1, a constant), `int_ior`
-    /// (polypropylene) and `ext_ior` (air), `nonlinear`. Parameters `NAME.alpha` (Mitsuba's key:
-    /// its α is a number, not a texture) and `NAME.diffuse_reflectance.value` (or `.data`).
-    fn rough_plastic(&mut self, p: &Props<'a>, name: &str, depth: usize) -> Result<MaterialId> {
-        let distribution = self.distribution(p)?;
-        if p.has("alpha_u") || p.has("alpha_v") {
-            return Err(self.x.err(p.node, "'roughplastic' has no anisotropic roughness (Mitsuba refuses it too)"));
-        }
-        let alpha = self.float_in(p, "alpha", Some(0.1), bounds::ALPHA)?;
+    /// A plastic's `diffuse_reflectance` (texturable, 0.5: `NAME.diffuse_reflectance.value` or
+    /// `.data`), constant `specular_reflectance` (1) and `int_ior`/`ext_ior` (polypropylene in
+    /// air) as η, and `nonlinear`.
+    fn plastic_common(&mut self, p: &Props<'a>, name: &str, depth: usize) -> Result<(Albedo, Vec3, f32, bool)> {
         if let Some(t) = p.object("specular_reflectance") {
             return Err(self
                 .x
-                .err(t, "a textured 'specular_reflectance' of 'roughplastic' is not supported (a colour is)"));
+                .err(t, format!("a textured 'specular_reflectance' of '{}' is not supported (a colour is)", p.kind)));
         }
         let specular = self.color_in(p, "specular_reflectance", Vec3::ONE, bounds::REFLECTANCE)?;
         let (int_ior, ext_ior) = (self.ior(p, "int_ior", "polypropylene")?, self.ior(p, "ext_ior", "air")?);
@@ -246,7 +241,6 @@ impl<'a> Loader<'a> {
             return Err(self.x.err(p.node, "'int_ior' and 'ext_ior' must differ"));
         }
         let nonlinear = p.boolean(&self.x, "nonlinear", false)?;
-        p.boolean(&self.x, "sample_visible", true)?;
         let diffuse = match p.object("diffuse_reflectance") {
             Some(t) => self.texture(t, format!("{name}.diffuse_reflectance"), depth + 1)?,
             None => {
@@ -259,9 +253,29 @@ impl<'a> Loader<'a> {
                 Albedo::Rgb(id.map_err(|e| self.located(p.node, e))?)
             }
         };
+        Ok((diffuse, specular, int_ior / ext_ior, nonlinear))
+    }
+
+    /// Mitsuba's smooth `plastic` ([`Loader::plastic_common`]'s properties).
+    fn smooth_plastic(&mut self, p: &Props<'a>, name: &str, depth: usize) -> Result<MaterialId> {
+        let (diffuse, specular, eta, nonlinear) = self.plastic_common(p, name, depth)?;
+        Ok(self.scene.add_material(Material::SmoothPlastic { diffuse, specular, eta, nonlinear }))
+    }
+
+    /// Mitsuba's `roughplastic`: `distribution` (Beckmann), isotropic `alpha` (0.1), texturable
+    /// `diffuse_reflectance` (0.5), `specular_reflectance` (1, a constant), `int_ior`
+    /// (polypropylene) and `ext_ior` (air), `nonlinear`. Parameters `NAME.alpha` (Mitsuba's key:
+    /// its α is a number, not a texture) and `NAME.diffuse_reflectance.value` (or `.data`).
+    fn rough_plastic(&mut self, p: &Props<'a>, name: &str, depth: usize) -> Result<MaterialId> {
+        let distribution = self.distribution(p)?;
+        if p.has("alpha_u") || p.has("alpha_v") {
+            return Err(self.x.err(p.node, "'roughplastic' has no anisotropic roughness (Mitsuba refuses it too)"));
+        }
+        let alpha = self.float_in(p, "alpha", Some(0.1), bounds::ALPHA)?;
+        p.boolean(&self.x, "sample_visible", true)?;
+        let (diffuse, specular, eta, nonlinear) = self.plastic_common(p, name, depth)?;
         let alpha = self.scene.params.add(&format!("{name}.alpha"), &[alpha], bounds::ALPHA);
         let alpha = alpha.map_err(|e| self.located(p.node, e))?;
-        let eta = int_ior / ext_ior;
         Ok(self.scene.add_material(Material::RoughPlastic { distribution, alpha, diffuse, specular, eta, nonlinear }))
     }
 

@@ -30,8 +30,8 @@ fn fixtures_give_their_pinned_messages() {
     let cases: &[(&str, String)] = &[
         (
             "unsupported_plugin.xml",
-            "5:5: <bsdf id=\"shiny\">: unsupported plugin 'plastic' (supported: blendbsdf, conductor, dielectric, diffuse, \
-             null, roughconductor, roughplastic, thindielectric, twosided)"
+            "5:5: <bsdf id=\"shiny\">: unsupported plugin 'pplastic' (supported: blendbsdf, conductor, dielectric, diffuse, \
+             null, plastic, roughconductor, roughplastic, thindielectric, twosided)"
                 .into(),
         ),
         ("bad_rgb.xml", "7:13: <rgb name=\"reflectance\">: value: expected a number, got 'x'".into()),
