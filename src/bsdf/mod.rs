@@ -2,8 +2,10 @@
 //!
 //! Conventions (ALGORITHMS.md §0): local frame with the shading normal on +z; `wi` points back
 //! toward the camera side, `wo` toward the light side; `eval` returns the cosine-weighted value
-//! f̂ = f·max(0, cos θo); densities are solid-angle densities of `wo`. All BSDFs are one-sided:
-//! zero when cos θi ≤ 0 or cos θo ≤ 0.
+//! f̂ = f·max(0, cos θo); densities are solid-angle densities of `wo`. Reflecting BSDFs are
+//! one-sided: zero when cos θi ≤ 0 or cos θo ≤ 0. The dielectrics ([`specular`]) take light from
+//! either side and are sampled only, as is a smooth plastic's coating ([`plastic`]): their samples
+//! are marked `BsdfSample::delta`.
 
 pub mod blend;
 pub mod differential;
