@@ -52,7 +52,9 @@ uvec2 env_cell_at(vec3 dir, out vec2 f) {
     float y = clamp(uv.y, 0.0, 1.0) * float(globals.env_height - 1u);
     float y0 = min(floor(y), float(globals.env_height - 2u));
     f = vec2(x - x0, y - y0);
-    return uvec2(uint(((int(x0) % w) + w) % w), uint(y0));
+    // x ∈ [−½, W − ½): x0 is −1 (the last column, wrapped) up to W − 1. No % of a negative
+    // number: GLSL leaves its result undefined.
+    return uvec2(x0 < 0.0 ? uint(w - 1) : min(uint(x0), uint(w - 1)), uint(y0));
 }
 
 // The parameter offsets of the four texels around `dir` and their bilinear weights.

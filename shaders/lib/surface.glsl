@@ -50,15 +50,22 @@ vec3 offset_origin(vec3 p, vec3 ng, vec3 dir) {
     return p + ng * (dot(ng, dir) > 0.0 ? scale : -scale);
 }
 
+// i mod n in [0, n) for any sign of i (GLSL leaves % of a negative operand undefined).
+int euclid_mod(int i, int n) {
+    int q = i / n;   // rounds toward zero for either sign
+    int r = i - q * n;
+    return r < 0 ? r + n : r;
+}
+
 // Texel index i of a row or column of n texels under wrap mode `mode` (Mitsuba's `repeat`,
 // `mirror`, `clamp`).
 int wrap_texel(int i, int n, uint mode) {
     if ((mode & TEX_WRAP_CLAMP) != 0u) return clamp(i, 0, n - 1);
     if ((mode & TEX_WRAP_MIRROR) != 0u) {
-        int m = ((i % (2 * n)) + 2 * n) % (2 * n);
+        int m = euclid_mod(i, 2 * n);
         return m < n ? m : 2 * n - 1 - m;
     }
-    return ((i % n) + n) % n;
+    return euclid_mod(i, n);
 }
 
 // The four texels a lookup at uv reads (row 0 is v = 0): their parameter offsets (RGB at
