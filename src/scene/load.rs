@@ -39,6 +39,47 @@ pub struct LoadOptions {
     /// with its own constant environment has that one's radiance replaced instead (with a
     /// warning; the parameter keeps its name).
     pub environment: Option<[f32; 3]>,
+    /// An environment map file (EXR, Radiance HDR, or PNG and other 8-bit formats, sRGB-decoded)
+    /// lighting the scene as Mitsuba's `envmap` does with its default frame and scale 1: latitude
+    /// and longitude, +y up. Its texels are the parameter `env.data`. Not together with
+    /// `environment`, nor on a scene that has an environment of its own.
+    pub environment_map: Option<std::path::PathBuf>,
+}
+
+/// Applies [`LoadOptions::environment`] and [`LoadOptions::environment_map`] to a scene being
+/// loaded, before its loader decides whether it has any light.
+///
+/// # Errors
+/// As [`apply_environment`]; an unreadable map, both options, or a map for a scene with an
+/// environment of its own.
+pub(crate) fn apply_environments(scene: &mut Scene, options: &LoadOptions) -> Result<()> {
+    let Some(path) = &options.environment_map else { return apply_environment(scene, options.environment) };
+    let invalid =
+        |message: String| Error::InvalidArgument { parameter: "LoadOptions::environment_map".into(), message };
+    let bad = |message: String| Err(invalid(message));
+    if options.environment.is_some() {
+        return bad("give a constant environment or a map, not both".into());
+    }
+    if let Some(id) = scene.environment {
+        return bad(format!(
+            "the scene has an environment of its own ('{}'); a map from the options replaces none",
+            scene.params.entry(id).name
+        ));
+    }
+    let shown = path.display();
+    if !path.is_file() {
+        return bad(format!("environment map '{shown}' not found"));
+    }
+    let (width, height, texels) =
+        read_image_linear(path, false).map_err(|m| invalid(format!("reading '{shown}': {m}")))?;
+    if height < 2 {
+        return bad(format!("'{shown}': an environment map needs at least 2 rows, it has {height}"));
+    }
+    if let Some(v) = texels.iter().find(|v| !(v.is_finite() && **v >= 0.0)) {
+        return bad(format!("'{shown}': a texel has value {v} (radiance must be finite and ≥ 0)"));
+    }
+    let map = super::envmap::EnvMap { width, height, scale: 1.0, to_local: glam::Mat3::IDENTITY };
+    scene.set_environment_map("env.data", map, &texels)
 }
 
 /// Applies [`LoadOptions::environment`] to a scene being loaded, before its loader decides
@@ -122,7 +163,7 @@ pub fn load_with(spec: &str, options: &LoadOptions) -> Result<Scene> {
     }
     let mut scene = if let Some(name) = spec.strip_prefix("builtin:") {
         let mut scene = builtin::load(name)?;
-        apply_environment(&mut scene, options.environment)?;
+        apply_environments(&mut scene, options)?;
         scene
     } else {
         match ext.as_deref() {
@@ -224,6 +265,42 @@ pub(crate) fn decode_image(bytes: &[u8]) -> std::result::Result<image::DynamicIm
         },
         e => e.to_string(),
     })
+}
+
+/// Decodes an image into linear RGB texels, row 0 = the file's top row (Mitsuba's v = 0). PNG
+/// (and any other 8- or 16-bit format the `image` crate reads) is sRGB-encoded unless `raw`; EXR
+/// and Radiance HDR are linear.
+pub(crate) fn read_image_linear(path: &Path, raw: bool) -> std::result::Result<(u32, u32, Vec<f32>), String> {
+    let is_exr = path.extension().and_then(|e| e.to_str()).is_some_and(|e| e.eq_ignore_ascii_case("exr"));
+    if is_exr {
+        let image = exr::prelude::read_first_rgba_layer_from_file(
+            path,
+            |size, _| (size.width(), vec![0.0f32; size.width() * size.height() * 3]),
+            |(width, texels): &mut (usize, Vec<f32>), pos, (r, g, b, _a): (f32, f32, f32, f32)| {
+                let i = 3 * (pos.y() * *width + pos.x());
+                if let Some(t) = texels.get_mut(i..i + 3) {
+                    t.copy_from_slice(&[r, g, b]);
+                }
+            },
+        )
+        .map_err(|e| e.to_string())?;
+        let size = image.layer_data.size;
+        let (w, h) = (u32::try_from(size.width()), u32::try_from(size.height()));
+        let (Ok(w), Ok(h)) = (w, h) else { return Err("image too large".into()) };
+        return Ok((w, h, image.layer_data.channel_data.pixels.1));
+    }
+    let bytes = std::fs::read(path).map_err(|e| e.to_string())?;
+    let decoded = crate::scene::load::decode_image(&bytes)?;
+    let linear = matches!(decoded.color(), image::ColorType::Rgb32F | image::ColorType::Rgba32F);
+    let image = decoded.to_rgb32f();
+    let (w, h) = image.dimensions();
+    let mut texels = image.into_raw();
+    if !raw && !linear {
+        for t in &mut texels {
+            *t = crate::scene::gltf::srgb_to_linear(*t);
+        }
+    }
+    Ok((w, h, texels))
 }
 
 #[cfg(test)]

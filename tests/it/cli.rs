@@ -263,9 +263,18 @@ fn env_lights_a_gltf_asset_without_lights() {
     let (lit, stderr) = render(&["--env", "0.5,1,2"], "lit.exr");
     assert!(lit[0] > 0.0 && lit[0] < lit[1] && lit[1] < lit[2], "{lit:?}");
     assert!(!stderr.contains("no emitters"), "{stderr}");
+    // A map file lights it too: a 4 × 2 sky, brighter in blue, as the map's texels `env.data`.
+    let sky = dir.path().join("sky.exr");
+    let texels: Vec<f32> = (0..8).flat_map(|_| [0.5, 1.0, 2.0]).collect();
+    pathgrad::image::Image::from_rgb(4, 2, texels).unwrap().write_exr(&sky).unwrap();
+    let (mapped, stderr) = render(&["--env", sky.to_str().unwrap()], "mapped.exr");
+    assert!(mapped[0] > 0.0 && mapped[0] < mapped[1] && mapped[1] < mapped[2], "{mapped:?}");
+    // A constant map of the constant's radiance lights it the same way (up to noise).
+    assert!(mapped.iter().zip(&lit).all(|(m, l)| (m - l).abs() < 0.05 * l), "{mapped:?} vs {lit:?}");
+    assert!(!stderr.contains("no emitters"), "{stderr}");
     for (bad, message) in [
         ("1,2", "2 values: give R,G,B or one number"),
-        ("sky.exr", "'sky.exr' is not a number"),
+        ("missing.exr", "environment map 'missing.exr' not found"),
         ("0,-1,0", "must be finite and ≥ 0"),
     ] {
         let o =

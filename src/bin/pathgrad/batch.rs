@@ -89,9 +89,10 @@ struct Item {
     width: Option<u32>,
     #[serde(default, skip_serializing_if = "Option::is_none")]
     height: Option<u32>,
-    /// A constant environment of this linear RGB radiance (`--env`): `[r, g, b]`.
+    /// An environment (`--env`): a constant linear RGB radiance `[r, g, b]`, or a map file
+    /// relative to the manifest's folder.
     #[serde(default, skip_serializing_if = "Option::is_none")]
-    env: Option<[f32; 3]>,
+    env: Option<crate::common::EnvArg>,
     /// Surface interactions per path; -1 unbounded.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     max_depth: Option<i64>,
@@ -214,8 +215,9 @@ fn shard(args: &BatchArgs, var: impl Fn(&str) -> Option<String>) -> Result<(u64,
     Ok((i, n))
 }
 
-/// What a loaded scene depends on: file, defines, sensor, size, environment (as bits).
-type SceneKey = (String, Vec<(String, String)>, Option<String>, Option<u32>, Option<u32>, Option<[u32; 3]>);
+/// What a loaded scene depends on: file, defines, sensor, size, environment (radiance bits or the
+/// resolved map file).
+type SceneKey = (String, Vec<(String, String)>, Option<String>, Option<u32>, Option<u32>, Option<String>);
 
 struct Runner {
     manifest_dir: PathBuf,
@@ -245,9 +247,24 @@ impl Runner {
     /// The loaded scene and backend of `item`, loading them on first use.
     fn backend(&mut self, item: &Item) -> Result<&mut (pathgrad::scene::Scene, Box<dyn Backend>)> {
         let defines: Vec<(String, String)> = item.defines.iter().map(|(k, v)| (k.clone(), value_text(v))).collect();
-        let env = item.env.map(|e| e.map(f32::to_bits));
-        let key =
-            (self.resolve(&item.scene), defines, item.sensor.as_ref().map(value_text), item.width, item.height, env);
+        use crate::common::EnvArg;
+        let env = match &item.env {
+            None => None,
+            Some(EnvArg::Rgb(rgb)) => Some(EnvArg::Rgb(*rgb)),
+            Some(EnvArg::Map(path)) => Some(EnvArg::Map(PathBuf::from(self.resolve(&path.display().to_string())))),
+        };
+        let env_key = env.as_ref().map(|e| match e {
+            EnvArg::Rgb(rgb) => format!("{:?}", rgb.map(f32::to_bits)),
+            EnvArg::Map(path) => path.display().to_string(),
+        });
+        let key = (
+            self.resolve(&item.scene),
+            defines,
+            item.sensor.as_ref().map(value_text),
+            item.width,
+            item.height,
+            env_key,
+        );
         if !self.scenes.contains_key(&key) {
             let options = pathgrad::scene::LoadOptions {
                 defines: key.1.clone(),
@@ -255,7 +272,8 @@ impl Runner {
                 height: item.height,
                 allow_outside_folder: false,
                 sensor: key.2.clone(),
-                environment: item.env,
+                environment: EnvArg::options(env.as_ref()).0,
+                environment_map: EnvArg::options(env.as_ref()).1,
             };
             let scene = pathgrad::scene::load_with(&key.0, &options).with_context(|| format!("loading {}", key.0))?;
             let backend: Box<dyn Backend> = if self.cpu {
@@ -614,5 +632,17 @@ mod tests {
         assert_ne!(item_name(&item).unwrap(), item_name(&other).unwrap());
         assert_eq!(item_name(&Item { id: Some("a-1.b".into()), ..item.clone() }).unwrap(), "a-1.b");
         assert!(item_name(&Item { id: Some("../x".into()), ..item }).is_err());
+    }
+
+    #[test]
+    fn an_items_env_is_a_radiance_or_a_map_file() {
+        use crate::common::EnvArg;
+        let parse = |env: &str| -> Item {
+            serde_json::from_str(&format!(r#"{{"scene": "builtin:blend", "produce": ["image"], "env": {env}}}"#))
+                .unwrap()
+        };
+        assert_eq!(parse("[0.5, 1, 2]").env, Some(EnvArg::Rgb([0.5, 1.0, 2.0])));
+        assert_eq!(parse(r#""sky.exr""#).env, Some(EnvArg::Map(PathBuf::from("sky.exr"))));
+        assert!(serde_json::from_str::<Item>(r#"{"scene": "s", "produce": ["image"], "env": [1, 2]}"#).is_err());
     }
 }

@@ -57,20 +57,49 @@ pub(crate) struct RenderFlags {
     /// scene reads only the files beside and below it.
     #[arg(long)]
     pub(crate) allow_outside_folder: bool,
-    /// Light the scene with a constant environment of this linear RGB radiance (`R,G,B`, or one
-    /// number for grey): for scenes without lights of their own, as most glTF assets are. A
-    /// scene's own constant environment takes this radiance instead.
-    #[arg(long, value_name = "R,G,B", value_parser = parse_environment)]
-    pub(crate) env: Option<[f32; 3]>,
+    /// Light the scene with an environment: a constant linear RGB radiance (`R,G,B`, or one number
+    /// for grey), or an environment map file (EXR, HDR or PNG, latitude-longitude as Mitsuba's
+    /// `envmap`, parameter `env.data`): for scenes without lights of their own, as most glTF
+    /// assets are. A scene's own constant environment takes a constant's radiance instead; a map
+    /// is refused on a scene with an environment of its own.
+    #[arg(long, value_name = "R,G,B|FILE", value_parser = parse_environment)]
+    pub(crate) env: Option<EnvArg>,
 }
 
-/// `--env`: `R,G,B` or one number, each finite and ≥ 0.
-pub(crate) fn parse_environment(text: &str) -> std::result::Result<[f32; 3], String> {
-    let values: Vec<f32> = text
-        .split(',')
-        .map(|v| v.trim().parse::<f32>().map_err(|_| format!("'{}' is not a number", v.trim())))
-        .collect::<std::result::Result<_, _>>()
-        .map_err(|e| format!("{e}: give R,G,B or one number (an environment map file is not supported yet)"))?;
+/// What `--env` (and a batch item's `env`) gives: a constant radiance or a map file.
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(untagged)]
+pub(crate) enum EnvArg {
+    /// A constant linear RGB radiance.
+    Rgb([f32; 3]),
+    /// An environment map file.
+    Map(PathBuf),
+}
+
+impl EnvArg {
+    /// The two load options it sets: `environment` and `environment_map`.
+    pub(crate) fn options(env: Option<&EnvArg>) -> (Option<[f32; 3]>, Option<PathBuf>) {
+        match env {
+            None => (None, None),
+            Some(EnvArg::Rgb(rgb)) => (Some(*rgb), None),
+            Some(EnvArg::Map(path)) => (None, Some(path.clone())),
+        }
+    }
+
+    /// As the user gives it: `r,g,b` or the file.
+    pub(crate) fn show(env: Option<&EnvArg>) -> String {
+        match env {
+            None => "none".into(),
+            Some(EnvArg::Rgb([r, g, b])) => format!("{r},{g},{b}"),
+            Some(EnvArg::Map(path)) => path.display().to_string(),
+        }
+    }
+}
+
+/// `--env`: `R,G,B` or one number, each finite and ≥ 0; anything that is not numbers is a file.
+pub(crate) fn parse_environment(text: &str) -> std::result::Result<EnvArg, String> {
+    let numbers: Option<Vec<f32>> = text.split(',').map(|v| v.trim().parse::<f32>().ok()).collect();
+    let Some(values) = numbers else { return Ok(EnvArg::Map(PathBuf::from(text))) };
     let rgb = match values[..] {
         [v] => [v; 3],
         [r, g, b] => [r, g, b],
@@ -79,7 +108,7 @@ pub(crate) fn parse_environment(text: &str) -> std::result::Result<[f32; 3], Str
     if !rgb.iter().all(|v| v.is_finite() && *v >= 0.0) {
         return Err(format!("{rgb:?}: every channel must be finite and ≥ 0"));
     }
-    Ok(rgb)
+    Ok(EnvArg::Rgb(rgb))
 }
 
 impl RenderFlags {
@@ -104,7 +133,8 @@ impl RenderFlags {
             height: self.height,
             allow_outside_folder: self.allow_outside_folder,
             sensor: self.sensor.clone(),
-            environment: self.env,
+            environment: EnvArg::options(self.env.as_ref()).0,
+            environment_map: EnvArg::options(self.env.as_ref()).1,
         };
         Ok(pathgrad::scene::load_with(spec, &options)?)
     }

@@ -16,6 +16,7 @@ const FLAGS: &[(&str, &str)] = &[
     ("AdaptiveEstimator", "--adaptive-estimator"),
     ("GradMode::Deterministic", "--deterministic"),
     ("LoadOptions::allow_outside_folder", "--allow-outside-folder"),
+    ("LoadOptions::environment_map", "--env"),
     ("LoadOptions::environment", "--env"),
     ("DeviceChoice", "--device"),
     ("variance::runs", "--runs"),

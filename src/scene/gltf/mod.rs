@@ -137,7 +137,7 @@ pub fn load_with(path: &Path, options: &LoadOptions) -> Result<Scene> {
         e => e,
     })?;
     let mut scene = loader.scene;
-    crate::scene::load::apply_environment(&mut scene, options.environment)?;
+    crate::scene::load::apply_environments(&mut scene, options)?;
     if scene.meshes.iter().all(|m| m.emitter.is_none()) && scene.environment.is_none() {
         scene.warn(
             "the scene has no emitters (no material has an emissiveFactor): it renders black unless lit by an \

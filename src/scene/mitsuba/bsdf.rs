@@ -1,8 +1,6 @@
 //! `<bsdf>` (diffuse, roughconductor, roughplastic, blendbsdf, twosided) and `<texture
 //! type="bitmap">`.
 
-use std::path::Path;
-
 use glam::Vec3;
 
 use super::loader::{Loader, MAX_NESTING};
@@ -440,8 +438,8 @@ impl<'a> Loader<'a> {
                 .x
                 .err(file_node, format!("image file '{file}' not found (looked for {})", path.display())));
         }
-        let (width, height, texels) =
-            read_bitmap(&path, raw).map_err(|m| self.x.err(file_node, format!("reading '{file}': {m}")))?;
+        let (width, height, texels) = crate::scene::load::read_image_linear(&path, raw)
+            .map_err(|m| self.x.err(file_node, format!("reading '{file}': {m}")))?;
         if let Some((i, v)) = texels.iter().enumerate().find(|(_, v)| !(**v >= 0.0 && **v <= 1.0)) {
             let texel = i / 3;
             return Err(self.x.err(
@@ -493,45 +491,4 @@ impl<'a> Loader<'a> {
         debug_assert_eq!(self.scene.params.entry(second).offset, self.scene.params.entry(first).offset + 3);
         Ok(Albedo::Checker { colors: first, to_uv })
     }
-}
-
-/// Decodes an image into linear RGB texels, row 0 = the file's top row (Mitsuba's v = 0). PNG
-/// (and any other 8- or 16-bit format the `image` crate reads) is sRGB-encoded unless `raw`; EXR
-/// and Radiance HDR are linear.
-pub(super) fn read_bitmap(path: &Path, raw: bool) -> std::result::Result<(u32, u32, Vec<f32>), String> {
-    let is_exr = path.extension().and_then(|e| e.to_str()).is_some_and(|e| e.eq_ignore_ascii_case("exr"));
-    if is_exr {
-        let image = exr::prelude::read_first_rgba_layer_from_file(
-            path,
-            |size, _| (size.width(), vec![0.0f32; size.width() * size.height() * 3]),
-            |(width, texels): &mut (usize, Vec<f32>), pos, (r, g, b, _a): (f32, f32, f32, f32)| {
-                let i = 3 * (pos.y() * *width + pos.x());
-                if let Some(t) = texels.get_mut(i..i + 3) {
-                    t.copy_from_slice(&[r, g, b]);
-                }
-            },
-        )
-        .map_err(|e| e.to_string())?;
-        let size = image.layer_data.size;
-        let (w, h) = (u32::try_from(size.width()), u32::try_from(size.height()));
-        let (Ok(w), Ok(h)) = (w, h) else { return Err("image too large".into()) };
-        return Ok((w, h, image.layer_data.channel_data.pixels.1));
-    }
-    let bytes = std::fs::read(path).map_err(|e| e.to_string())?;
-    let decoded = crate::scene::load::decode_image(&bytes)?;
-    let linear = matches!(decoded.color(), image::ColorType::Rgb32F | image::ColorType::Rgba32F);
-    let image = decoded.to_rgb32f();
-    let (w, h) = image.dimensions();
-    let mut texels = image.into_raw();
-    if !raw && !linear {
-        for t in &mut texels {
-            *t = srgb_to_linear(*t);
-        }
-    }
-    Ok((w, h, texels))
-}
-
-/// The sRGB transfer function's inverse (IEC 61966-2-1).
-pub(super) fn srgb_to_linear(c: f32) -> f32 {
-    if c <= 0.04045 { c / 12.92 } else { ((c + 0.055) / 1.055).powf(2.4) }
 }

@@ -293,7 +293,7 @@ impl<'a> Loader<'a> {
         self.clip_warnings();
         self.refuse_sensors_in_media(&sensors)?;
         self.refuse_overlapping_media()?;
-        super::super::load::apply_environment(&mut self.scene, self.options.environment)?;
+        super::super::load::apply_environments(&mut self.scene, self.options)?;
         if self.scene.meshes.iter().all(|m| m.emitter.is_none())
             && self.scene.environment.is_none()
             && self.scene.lights.is_empty()
@@ -696,7 +696,7 @@ impl<'a> Loader<'a> {
                 .x
                 .err(file_node, format!("image file '{file}' not found (looked for {})", path.display())));
         }
-        let (width, height, texels) = super::bsdf::read_bitmap(&path, false)
+        let (width, height, texels) = crate::scene::load::read_image_linear(&path, false)
             .map_err(|m| self.x.err(file_node, format!("reading '{file}': {m}")))?;
         if height < 2 {
             return Err(self

@@ -452,7 +452,7 @@ fn bitmap_textures_are_linear_rgb() {
     let s = load_text(&xml, &dir.path().join("s.xml"), &[], obj_for_tests).unwrap();
     let texels = param(&s, "p.bsdf.reflectance.data");
     let expect: Vec<f32> =
-        [255u8, 0, 128, 10, 20, 30].iter().map(|&b| bsdf::srgb_to_linear(f32::from(b) / 255.0)).collect();
+        [255u8, 0, 128, 10, 20, 30].iter().map(|&b| crate::scene::gltf::srgb_to_linear(f32::from(b) / 255.0)).collect();
     assert_eq!(texels, expect);
     assert!((texels[2] - 0.2158605).abs() < 1e-6, "sRGB 128 is linear 0.2159");
     // A texture at scene level is Mitsuba's object_<address> whatever its id: pathgrad's _unnamed_N.

@@ -59,7 +59,7 @@ fn an_envmap_png_is_srgb_decoded() {
     let body = r#"<emitter type="envmap"><string name="filename" value="sky.png"/></emitter>"#;
     let scene = load(dir.path(), body, &LoadOptions::default()).unwrap();
     let values = scene.params.get(scene.environment.unwrap());
-    let srgb = |c: f32| super::bsdf::srgb_to_linear(c / 255.0);
+    let srgb = |c: f32| crate::scene::gltf::srgb_to_linear(c / 255.0);
     assert_eq!(&values[..3], &[1.0, srgb(128.0), 0.0]);
     assert!(Vec3::from_slice(&values[..3]).x > 0.99);
 }
@@ -161,4 +161,22 @@ fn bad_lights_are_refused_by_name() {
         let e = err(dir.path(), body);
         assert!(e.contains(expected), "{body}: {e}");
     }
+}
+
+#[test]
+fn an_environment_map_from_the_load_options_lights_a_scene_without_one() {
+    let dir = tempfile::tempdir().unwrap();
+    let texels = write_hdr(&dir.path().join("sky.hdr"));
+    let map = Some(dir.path().join("sky.hdr"));
+    let options = LoadOptions { environment_map: map.clone(), ..LoadOptions::default() };
+    let scene = load(dir.path(), "", &options).unwrap();
+    let id = scene.params.find("env.data").unwrap();
+    assert_eq!((scene.environment, scene.params.get(id)), (Some(id), &texels[..]));
+    assert_eq!(scene.env_map.map(|m| (m.width, m.height, m.scale)), Some((4, 3, 1.0)));
+    // Not with a constant too, nor over a scene's own environment.
+    let both = LoadOptions { environment: Some([1.0; 3]), ..options.clone() };
+    let e = load(dir.path(), "", &both).unwrap_err().to_string();
+    assert!(e.contains("give a constant environment or a map, not both"), "{e}");
+    let e = load(dir.path(), r#"<emitter type="constant" id="sky"/>"#, &options).unwrap_err().to_string();
+    assert!(e.contains("the scene has an environment of its own ('sky.radiance.value')"), "{e}");
 }

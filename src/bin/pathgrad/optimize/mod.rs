@@ -177,9 +177,9 @@ struct RunConfig {
     /// `--sensor`, if given.
     #[serde(default)]
     sensor: Option<String>,
-    /// `--env`, if given.
+    /// `--env`, if given: `[r, g, b]` or a map file.
     #[serde(default)]
-    env: Option<[f32; 3]>,
+    env: Option<crate::common::EnvArg>,
     /// `--view`s: the sensors (by name) and their target files.
     #[serde(default)]
     views: Vec<ViewConfig>,
@@ -373,7 +373,7 @@ fn start(args: &OptimizeArgs) -> Result<Session> {
         diff_param,
         allow_outside_folder: args.flags.allow_outside_folder,
         sensor: args.flags.sensor.clone(),
-        env: args.flags.env,
+        env: args.flags.env.clone(),
         views,
     };
     let dir = args.output.clone().unwrap_or_else(|| PathBuf::from(DEFAULT_OUTPUT));

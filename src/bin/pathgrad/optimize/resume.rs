@@ -124,7 +124,8 @@ pub(super) fn resume(args: &OptimizeArgs, dir: &Path, given: &BTreeSet<String>) 
         height: Some(config.height),
         allow_outside_folder: config.allow_outside_folder,
         sensor: config.sensor.clone(),
-        environment: config.env,
+        environment: crate::common::EnvArg::options(config.env.as_ref()).0,
+        environment_map: crate::common::EnvArg::options(config.env.as_ref()).1,
     };
     let scene = pathgrad::scene::load_with(&config.scene, &load)
         .with_context(|| format!("loading {} (from {})", config.scene, path.display()))?;
@@ -202,7 +203,7 @@ pub(super) fn check_unchanged(
         text(&c.allow_outside_folder),
     );
     check("sensor", "--sensor", args.flags.sensor.clone(), c.sensor.clone().unwrap_or_else(|| "0".into()));
-    let env = |e: &Option<[f32; 3]>| e.map_or("none".into(), |[r, g, b]| format!("{r},{g},{b}"));
+    let env = |e: &Option<crate::common::EnvArg>| crate::common::EnvArg::show(e.as_ref());
     check("env", "--env", args.flags.env.is_some().then(|| env(&args.flags.env)), env(&c.env));
     check("target_set", "--target-set", Some(pairs(&args.target_set)), pairs(&c.target_set));
     let views: Vec<String> = c
