@@ -30,6 +30,23 @@ pub fn fresnel_diffuse_reflectance(eta: f32) -> f32 {
 }
 
 /// A smooth plastic leaf's values.
+///
+/// ```
+/// use glam::{Vec2, Vec3};
+/// use pathgrad::bsdf::plastic::SmoothPlasticLeaf;
+/// let p = SmoothPlasticLeaf {
+///     diffuse: Vec3::splat(0.5),
+///     specular: Vec3::ONE,
+///     eta: 1.5,
+///     specular_weight: 0.5,
+///     nonlinear: false,
+/// };
+/// let wi = Vec3::new(0.6, 0.0, 0.8);
+/// // A small u_lobe takes the coating: a mirror delta; a large one the base, which eval gives.
+/// assert!(p.sample(wi, 0.0, Vec2::splat(0.5)).unwrap().delta);
+/// let base = p.sample(wi, 0.99, Vec2::splat(0.5)).unwrap();
+/// assert_eq!(base.value, p.eval(wi, base.wo));
+/// ```
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct SmoothPlasticLeaf {
     /// Diffuse reflectance ρ of the base.

@@ -49,6 +49,15 @@ pub fn fresnel_dielectric(cos_i: f32, eta: f32) -> (f32, f32, f32) {
 
 /// The coating's transmittance T(μ) at μ = max(10⁻⁶, k/63), k = 0..63, its internal diffuse
 /// reflectance Rᵢ, and the derivatives of both by α.
+///
+/// ```
+/// use pathgrad::bsdf::Distribution;
+/// use pathgrad::bsdf::rough_plastic::CoatingTable;
+/// let t = CoatingTable::new(Distribution::Ggx, 0.2, 1.5);
+/// // Light enters best at normal incidence; a rougher coating lets less in there.
+/// assert!(t.transmittance[63] > t.transmittance[0]);
+/// assert!(t.dtransmittance[63] < 0.0 && t.internal > 0.0 && t.internal < 1.0);
+/// ```
 #[derive(Clone, Debug, PartialEq)]
 pub struct CoatingTable {
     /// T at the 64 values of μ.

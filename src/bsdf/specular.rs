@@ -40,6 +40,24 @@ pub enum SmoothKind {
 }
 
 /// A smooth BSDF's values.
+///
+/// ```
+/// use glam::Vec3;
+/// use pathgrad::bsdf::specular::{SmoothKind, SmoothLeaf};
+/// let glass = SmoothLeaf {
+///     kind: SmoothKind::Dielectric,
+///     reflectance: Vec3::ONE,
+///     transmittance: Vec3::ONE,
+///     eta: Vec3::new(1.5, 0.0, 0.0),
+///     k: Vec3::ZERO,
+/// };
+/// // At normal incidence 4 % is reflected ((η − 1)/(η + 1))², the rest refracted straight down.
+/// let wi = Vec3::Z;
+/// let r = glass.sample(wi, 0.0).unwrap();
+/// let t = glass.sample(wi, 0.5).unwrap();
+/// assert!((r.pdf - 0.04).abs() < 1e-6 && r.wo == Vec3::Z && r.delta);
+/// assert!(t.wo.z < 0.0 && (t.pdf - 0.96).abs() < 1e-6);
+/// ```
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct SmoothLeaf {
     /// The kind.

@@ -24,6 +24,20 @@ use crate::error::{Error, Result};
 
 /// An environment map's layout; its texels are the scene's environment parameter
 /// ([`crate::scene::Scene::environment`]), `width × height` RGB values row by row.
+///
+/// ```
+/// use glam::{Mat3, Vec3};
+/// use pathgrad::scene::envmap::EnvMap;
+/// let map = EnvMap { width: 8, height: 5, scale: 1.0, to_local: Mat3::IDENTITY };
+/// // Straight up (+y) is row 0; its four texels are blended by weights that sum to 1.
+/// let (texels, weights) = map.footprint(Vec3::Y);
+/// assert!(texels.iter().all(|&t| t < 8 * 2));
+/// assert!((weights.iter().sum::<f32>() - 1.0).abs() < 1e-6);
+/// // Sampling cells: their densities integrate to 1 over the sphere.
+/// let cells = map.cells(&vec![1.0; 8 * 5 * 3])?;
+/// assert_eq!(cells.len(), 8 * 4);
+/// # Ok::<(), pathgrad::Error>(())
+/// ```
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct EnvMap {
     /// Texels in longitude.
