@@ -163,6 +163,12 @@ impl<'a> Loader<'a> {
                 if matches!(self.material(c), Some(Material::TwoSided(_))) {
                     return Err(self.x.err(child, "a 'twosided' BSDF cannot wrap another twosided one"));
                 }
+                if matches!(self.material(c), Some(Material::Smooth { kind, .. }) if kind != SmoothKind::Conductor) {
+                    return Err(self.x.err(
+                        child,
+                        "a 'twosided' BSDF cannot wrap one that transmits light (Mitsuba refuses it too)",
+                    ));
+                }
                 self.scene.add_material(Material::TwoSided(c))
             }
             other => {

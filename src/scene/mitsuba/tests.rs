@@ -787,4 +787,11 @@ fn smooth_bsdfs_take_mitsubas_properties_and_names() {
     .unwrap_err()
     .to_string();
     assert!(e.contains("a medium inside a dielectric is not supported yet"), "{e}");
+    let e = load(&format!(
+        r#"{light}<shape type="cube"><bsdf type="twosided"><bsdf type="thindielectric"/></bsdf></shape>"#
+    ))
+    .map(|_| ())
+    .unwrap_err()
+    .to_string();
+    assert!(e.contains("a 'twosided' BSDF cannot wrap one that transmits light"), "{e}");
 }
