@@ -153,21 +153,30 @@ float microfacet_d_dalpha_of(uint distribution, float alpha, vec3 h, float d) {
 }
 
 // f̂ = F · specular · scalar with scalar = D G1 G1 / (4 cos θi); also ∂scalar/∂α.
+// The scalar D(h)·G1(wi, h)·G1(wo, h)/(4 cos θi) and its α-derivative (wi, wo in the upper
+// hemisphere); 0 where D underflows. Twin: microfacet_eval_scalar_parts of rough_conductor.rs.
+void microfacet_scalar_parts(uint distribution, float alpha, vec3 wi, vec3 wo, vec3 h, out float scalar,
+                             out float dscalar) {
+    scalar = 0.0;
+    dscalar = 0.0;
+    float d = microfacet_d(distribution, alpha, h);
+    if (d == 0.0) return;
+    float gi, dgi, go, dgo;
+    microfacet_g1_and_dalpha(distribution, alpha, wi, h, gi, dgi);
+    microfacet_g1_and_dalpha(distribution, alpha, wo, h, go, dgo);
+    float dd = microfacet_d_dalpha_of(distribution, alpha, h, d);
+    float inv = 1.0 / (4.0 * wi.z);
+    scalar = d * gi * go * inv;
+    dscalar = (dd * gi * go + d * (dgi * go + gi * dgo)) * inv;
+}
+
 void microfacet_eval_parts(Leaf l, vec3 wi, vec3 wo, out vec3 f, out float scalar, out float dscalar) {
     f = vec3(0.0);
     scalar = 0.0;
     dscalar = 0.0;
     if (wi.z <= 0.0 || wo.z <= 0.0) return;
     vec3 h = normalize(wi + wo);
-    float d = microfacet_d(l.distribution, l.alpha, h);
-    if (d == 0.0) return;
-    float gi, dgi, go, dgo;
-    microfacet_g1_and_dalpha(l.distribution, l.alpha, wi, h, gi, dgi);
-    microfacet_g1_and_dalpha(l.distribution, l.alpha, wo, h, go, dgo);
-    float dd = microfacet_d_dalpha_of(l.distribution, l.alpha, h, d);
-    float inv = 1.0 / (4.0 * wi.z);
-    scalar = d * gi * go * inv;
-    dscalar = (dd * gi * go + d * (dgi * go + gi * dgo)) * inv;
+    microfacet_scalar_parts(l.distribution, l.alpha, wi, wo, h, scalar, dscalar);
     f = fresnel_conductor(dot(wi, h), l.eta, l.k);
 }
 
@@ -400,9 +409,8 @@ vec3 splastic_renormalisation(Leaf l) {
     return vec3(1.0) / (vec3(1.0) - rbar * fresnel_diffuse_reflectance(1.0 / l.eta.x));
 }
 
-// The base's f̂ per unit of ρ before the renormalisation.
-float splastic_base(Leaf l, vec3 wi, vec3 wo) {
-    float f_i = fresnel_dielectric(wi.z, l.eta.x);
+// The base's f̂ per unit of ρ toward wo before the renormalisation, given F(cos θi).
+float splastic_base(Leaf l, float f_i, vec3 wo) {
     float f_o = fresnel_dielectric(wo.z, l.eta.x);
     return wo.z * INV_PI / (l.eta.x * l.eta.x) * (1.0 - f_i) * (1.0 - f_o);
 }
@@ -412,7 +420,7 @@ vec3 splastic_eval_pdf(Leaf l, vec3 wi, vec3 wo, out float pdf) {
     if (wi.z <= 0.0 || wo.z <= 0.0) return vec3(0.0);
     float f_i;
     pdf = (1.0 - splastic_coating(l, wi.z, f_i)) * wo.z * INV_PI;
-    return l.color * splastic_renormalisation(l) * splastic_base(l, wi, wo);
+    return l.color * splastic_renormalisation(l) * splastic_base(l, f_i, wo);
 }
 
 BsdfSample splastic_sample(Leaf l, vec3 wi, float u_lobe, vec2 u) {
@@ -431,7 +439,7 @@ BsdfSample splastic_sample(Leaf l, vec3 wi, float u_lobe, vec2 u) {
 LeafGrad splastic_eval_grad(Leaf l, vec3 wi, vec3 wo, vec3 adj) {
     if (wi.z <= 0.0 || wo.z <= 0.0 || wo == vec3(-wi.x, -wi.y, wi.z)) return LeafGrad(vec3(0.0), vec3(0.0));
     vec3 n = splastic_renormalisation(l);
-    return LeafGrad(adj * (l.eta.z != 0.0 ? n * n : n) * splastic_base(l, wi, wo), vec3(0.0));
+    return LeafGrad(adj * (l.eta.z != 0.0 ? n * n : n) * splastic_base(l, fresnel_dielectric(wi.z, l.eta.x), wo), vec3(0.0));
 }
 
 // ---- leaves ----
@@ -479,15 +487,8 @@ LeafGrad plastic_eval_grad(Leaf l, vec3 wi, vec3 wo, vec3 adj) {
     if (wi.z <= 0.0 || wo.z <= 0.0) return LeafGrad(vec3(0.0), vec3(0.0));
     vec3 h = normalize(wi + wo);
     float f = fresnel_dielectric(dot(wi, h), l.eta.x);
-    float dscalar = 0.0;
-    float d = microfacet_d(l.distribution, l.alpha, h);
-    if (d != 0.0) {
-        float gi, dgi, go, dgo;
-        microfacet_g1_and_dalpha(l.distribution, l.alpha, wi, h, gi, dgi);
-        microfacet_g1_and_dalpha(l.distribution, l.alpha, wo, h, go, dgo);
-        float dd = microfacet_d_dalpha_of(l.distribution, l.alpha, h, d);
-        dscalar = (dd * gi * go + d * (dgi * go + gi * dgo)) / (4.0 * wi.z);
-    }
+    float scalar, dscalar;
+    microfacet_scalar_parts(l.distribution, l.alpha, wi, wo, h, scalar, dscalar);
     float t_i = coating_lerp(l.table, 0u, wi.z);
     float t_o = coating_lerp(l.table, 0u, wo.z);
     float dt_i = coating_lerp(l.table, COATING_RES, wi.z);

@@ -70,9 +70,9 @@ impl SmoothPlasticLeaf {
         (f, ps / (ps + pd))
     }
 
-    /// The base's f̂ per unit of ρ, before the renormalisation.
-    fn base_factor(&self, wi: Vec3, wo: Vec3) -> f32 {
-        let (f_i, f_o) = (fresnel_dielectric(wi.z, self.eta).0, fresnel_dielectric(wo.z, self.eta).0);
+    /// The base's f̂ per unit of ρ toward `wo`, before the renormalisation, given F(cos θi).
+    fn base_factor(&self, f_i: f32, wo: Vec3) -> f32 {
+        let f_o = fresnel_dielectric(wo.z, self.eta).0;
         wo.z * FRAC_1_PI / (self.eta * self.eta) * (1.0 - f_i) * (1.0 - f_o)
     }
 
@@ -87,7 +87,7 @@ impl SmoothPlasticLeaf {
         if wi.z <= 0.0 || wo.z <= 0.0 {
             return Vec3::ZERO;
         }
-        self.diffuse * self.renormalisation() * self.base_factor(wi, wo)
+        self.diffuse * self.renormalisation() * self.base_factor(fresnel_dielectric(wi.z, self.eta).0, wo)
     }
 
     /// The density with which the base's sampling draws `wo`.
@@ -120,7 +120,8 @@ impl SmoothPlasticLeaf {
             return LeafGrad::default();
         }
         let n = self.renormalisation();
-        LeafGrad { color: (if self.nonlinear { n * n } else { n }) * self.base_factor(wi, wo), alpha: Vec3::ZERO }
+        let base = self.base_factor(fresnel_dielectric(wi.z, self.eta).0, wo);
+        LeafGrad { color: (if self.nonlinear { n * n } else { n }) * base, alpha: Vec3::ZERO }
     }
 }
 

@@ -166,17 +166,7 @@ pub fn microfacet_eval_parts(
         return (Vec3::ZERO, 0.0, 0.0);
     }
     let h = (wi + wo).normalize();
-    let d = microfacet_d(distribution, alpha, h);
-    if d == 0.0 {
-        return (Vec3::ZERO, 0.0, 0.0);
-    }
-    let (gi, go) = (microfacet_g1(distribution, alpha, wi, h), microfacet_g1(distribution, alpha, wo, h));
-    let dd = microfacet_d_dalpha(distribution, alpha, h);
-    let (dgi, dgo) =
-        (microfacet_g1_dalpha(distribution, alpha, wi, h), microfacet_g1_dalpha(distribution, alpha, wo, h));
-    let inv = 1.0 / (4.0 * wi.z);
-    let scalar = d * gi * go * inv;
-    let dscalar = (dd * gi * go + d * (dgi * go + gi * dgo)) * inv;
+    let (scalar, dscalar) = microfacet_eval_scalar_parts(distribution, alpha, wi, wo, h);
     (fresnel_conductor(wi.dot(h), eta, k), scalar, dscalar)
 }
 

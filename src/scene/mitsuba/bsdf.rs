@@ -438,14 +438,7 @@ impl<'a> Loader<'a> {
                 self.x.warning(n, format!("property 'format' = '{v}' of 'bitmap' ignored: pathgrad uses 'variant'"));
             self.scene.warn(w);
         }
-        let path = self.scene_file(&file).map_err(|m| self.x.err(file_node, m))?;
-        if !path.is_file() {
-            return Err(self
-                .x
-                .err(file_node, format!("image file '{file}' not found (looked for {})", path.display())));
-        }
-        let (width, height, texels) = crate::scene::load::read_image_linear(&path, raw)
-            .map_err(|m| self.x.err(file_node, format!("reading '{file}': {m}")))?;
+        let (width, height, texels) = self.image_file(&file, file_node, raw)?;
         if let Some((i, v)) = texels.iter().enumerate().find(|(_, v)| !(**v >= 0.0 && **v <= 1.0)) {
             let texel = i / 3;
             return Err(self.x.err(

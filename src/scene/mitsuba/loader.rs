@@ -563,6 +563,22 @@ impl<'a> Loader<'a> {
         }
     }
 
+    /// The image `file` named at `file_node` (a `bitmap`'s or an `envmap`'s), found by the scene's
+    /// folder rule and decoded to linear RGB ([`crate::scene::load::read_image_linear`]).
+    ///
+    /// # Errors
+    /// A file outside the folder, missing, or undecodable, located at `file_node`.
+    pub(super) fn image_file(&self, file: &str, file_node: El<'a>, raw: bool) -> Result<(u32, u32, Vec<f32>)> {
+        let path = self.scene_file(file).map_err(|m| self.x.err(file_node, m))?;
+        if !path.is_file() {
+            return Err(self
+                .x
+                .err(file_node, format!("image file '{file}' not found (looked for {})", path.display())));
+        }
+        crate::scene::load::read_image_linear(&path, raw)
+            .map_err(|m| self.x.err(file_node, format!("reading '{file}': {m}")))
+    }
+
     /// A top-level `<emitter>`: the environment, constant or a map.
     fn environment(&mut self, node: El<'a>) -> Result<()> {
         let p = Props::parse(&self.x, node)?;
@@ -690,14 +706,7 @@ impl<'a> Loader<'a> {
             );
             self.scene.warn(w);
         }
-        let path = self.scene_file(&file).map_err(|m| self.x.err(file_node, m))?;
-        if !path.is_file() {
-            return Err(self
-                .x
-                .err(file_node, format!("image file '{file}' not found (looked for {})", path.display())));
-        }
-        let (width, height, texels) = crate::scene::load::read_image_linear(&path, false)
-            .map_err(|m| self.x.err(file_node, format!("reading '{file}': {m}")))?;
+        let (width, height, texels) = self.image_file(&file, file_node, false)?;
         if height < 2 {
             return Err(self
                 .x
