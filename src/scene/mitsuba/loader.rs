@@ -110,6 +110,7 @@ pub(super) fn load_text_with(text: &str, file: &Path, options: &LoadOptions, mes
         clips: Vec::new(),
         meshes,
         options,
+        direct_emitter_samples: None,
     };
     loader.run(doc.root_element(), &options.defines)?;
     loader.scene.validate()?;
@@ -167,6 +168,9 @@ pub(super) struct Loader<'a> {
     pub meshes: MeshLoader,
     /// The rendered size and the folder rule.
     pub options: &'a LoadOptions,
+    /// A `direct` integrator's `emitter_samples` above 1, where it was given: Mitsuba 3.9.1 then
+    /// over-weights lights without area ([`Loader::direct_delta_warning`]).
+    pub direct_emitter_samples: Option<(i64, El<'a>)>,
 }
 
 impl<'a> Loader<'a> {
@@ -291,6 +295,10 @@ impl<'a> Loader<'a> {
             }
         }
         self.clip_warnings();
+        for w in self.x.take_warnings() {
+            self.scene.warn(w);
+        }
+        self.direct_delta_warning();
         self.refuse_sensors_in_media(&sensors)?;
         self.refuse_overlapping_media()?;
         super::super::load::apply_environments(&mut self.scene, self.options)?;
@@ -493,6 +501,26 @@ impl<'a> Loader<'a> {
         self.ids.get(&id).copied().ok_or_else(|| self.x.err(node, format!("reference to unknown id '{id}'")))
     }
 
+    /// Mitsuba 3.9.1's `direct` integrator adds each of its `emitter_samples` light samples with
+    /// weight 1 when the light is a point, spot or directional one (its MIS weight there omits the
+    /// 1/`emitter_samples` factor it applies to area lights), so Mitsuba renders those lights
+    /// `emitter_samples` times too bright. pathgrad renders the correct expectation; it says so.
+    fn direct_delta_warning(&mut self) {
+        let Some((n, node)) = self.direct_emitter_samples else { return };
+        if self.scene.lights.is_empty() {
+            return;
+        }
+        let w = self.x.warning(
+            node,
+            format!(
+                "emitter_samples = {n}: Mitsuba 3.9.1's 'direct' integrator adds every sample of a point, spot or \
+                 directional light with weight 1 instead of 1/{n}, so Mitsuba renders their light {n}× too bright; \
+                 pathgrad renders the correct image (not Mitsuba's)"
+            ),
+        );
+        self.scene.warn(w);
+    }
+
     /// Reports the unread properties of `p` (warnings) and unclaimed nested objects (errors).
     ///
     /// # Errors
@@ -500,6 +528,7 @@ impl<'a> Loader<'a> {
     pub fn finish(&mut self, p: &Props<'a>) -> Result<()> {
         let mut warnings = Vec::new();
         p.finish(&self.x, &mut warnings)?;
+        warnings.extend(self.x.take_warnings());
         for w in warnings {
             self.scene.warn(w);
         }

@@ -336,6 +336,11 @@ impl<'a> Loader<'a> {
             for count in ["emitter_samples", "bsdf_samples", "shading_samples"] {
                 p.integer(&self.x, count)?;
             }
+            let emitter_samples = match p.integer(&self.x, "emitter_samples")? {
+                Some(v) => Some(v),
+                None => p.integer(&self.x, "shading_samples")?,
+            };
+            self.direct_emitter_samples = emitter_samples.filter(|&(n, _)| n > 1);
             self.scene.max_depth = 2;
             let w = self.x.warning(
                 node,

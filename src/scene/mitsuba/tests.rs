@@ -100,7 +100,16 @@ fn transform_elements_match_hand_matrices() {
     let rz = rows([[0., -1., 0., 0.], [1., 0., 0., 0.], [0., 0., 1., 0.], [0., 0., 0., 1.]]);
     assert_mat_eq(xml_transform(r#"<rotate z="1" angle="90"/>"#), rz, 1e-7);
     let ry = rows([[0., 0., 1., 0.], [0., 1., 0., 0.], [-1., 0., 0., 0.], [0., 0., 0., 1.]]);
-    assert_mat_eq(xml_transform(r#"<rotate value="0, 2, 0" angle="90"/>"#), ry, 1e-7);
+    assert_mat_eq(xml_transform(r#"<rotate value="0, 1, 0" angle="90"/>"#), ry, 1e-7);
+    // A non-unit axis is used as given, as Mitsuba 3.9.1 does (`mi.ScalarTransform4f().rotate([0, 1, 1],
+    // 15).matrix` printed these numbers): not a rotation.
+    let sheared = rows([
+        [0.965926, -0.258819, 0.258819, 0.],
+        [0.258819, 1., 0.0340742, 0.],
+        [-0.258819, 0.0340742, 1., 0.],
+        [0., 0., 0., 1.],
+    ]);
+    assert_mat_eq(xml_transform(r#"<rotate x="0" y="1" z="1" angle="15"/>"#), sheared, 1e-6);
     let m = xml_transform(r#"<matrix value="1 2 3 4  5 6 7 8  9 10 11 12  0 0 0 1"/>"#);
     assert_eq!(m, rows([[1., 2., 3., 4.], [5., 6., 7., 8.], [9., 10., 11., 12.], [0., 0., 0., 1.]]));
     let m3 = xml_transform(r#"<matrix value="0 -1 0  1 0 0  0 0 1"/>"#);
@@ -794,4 +803,31 @@ fn smooth_bsdfs_take_mitsubas_properties_and_names() {
     .unwrap_err()
     .to_string();
     assert!(e.contains("a 'twosided' BSDF cannot wrap one that transmits light"), "{e}");
+}
+
+#[test]
+fn a_rotation_about_a_non_unit_axis_warns() {
+    let s = load_ok(
+        r#"<shape type="cube" id="a"><transform name="to_world"><rotate x="0" y="1" z="1" angle="15"/></transform></shape>
+           <shape type="cube" id="b"><transform name="to_world"><rotate y="1" angle="15"/></transform></shape>"#,
+    );
+    let sheared: Vec<_> = s.warnings.iter().filter(|w| w.contains("rotation axis")).collect();
+    assert_eq!(sheared.len(), 1, "{:?}", s.warnings);
+    assert!(sheared[0].contains(": the rotation axis (0, 1, 1) has length 1.414"), "{}", sheared[0]);
+}
+
+#[test]
+fn direct_with_several_light_samples_warns_of_mitsubas_delta_light_weight() {
+    let point = r#"<emitter type="point"><point name="position" x="0" y="0" z="3"/></emitter><shape type="cube"/>"#;
+    let direct = |n: u32| format!(r#"<integer name="emitter_samples" value="{n}"/>"#);
+    let with = |integrator: &str, lights: &str| {
+        load_ok(&format!(r#"<integrator type="direct">{integrator}</integrator>{lights}"#)).warnings
+    };
+    let flagged = |w: Vec<String>| w.iter().filter(|w| w.contains("too bright")).count();
+    assert_eq!(flagged(with(&direct(4), point)), 1);
+    assert!(with(&direct(4), point).iter().any(|w| w.contains("emitter_samples = 4") && w.contains("4× too bright")));
+    assert_eq!(flagged(with(r#"<integer name="shading_samples" value="2"/>"#, point)), 1);
+    assert_eq!(flagged(with(&direct(1), point)), 0, "one sample is weighted right");
+    let area = r#"<shape type="cube"><emitter type="area"/></shape>"#;
+    assert_eq!(flagged(with(&direct(4), area)), 0, "area lights are weighted right");
 }

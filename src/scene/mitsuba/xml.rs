@@ -49,6 +49,9 @@ pub(super) struct Xml<'a> {
     defines: HashMap<String, Define>,
     /// Where the document's bytes came from, when it has files spliced in (`<include>`).
     sources: Option<&'a super::include::Sources>,
+    /// Warnings raised while reading values (a `<rotate>` about a non-unit axis), waiting for the
+    /// loader to take them ([`Xml::take_warnings`]).
+    notes: std::cell::RefCell<Vec<String>>,
 }
 
 /// Whether `name` is a valid `$name` identifier: `[A-Za-z_][A-Za-z0-9_]*`.
@@ -72,7 +75,7 @@ pub(super) fn describe(node: El<'_>) -> String {
 impl<'a> Xml<'a> {
     /// Wraps a parsed document.
     pub fn new(file: String, doc: &'a roxmltree::Document<'a>) -> Xml<'a> {
-        Xml { file, doc, defines: HashMap::new(), sources: None }
+        Xml { file, doc, defines: HashMap::new(), sources: None, notes: std::cell::RefCell::default() }
     }
 
     /// Locates nodes in the files `sources` spliced together (the document is its text).
@@ -110,6 +113,17 @@ impl<'a> Xml<'a> {
     /// A located warning about `node`: `file:line:col: message`.
     pub fn warning(&self, node: El<'_>, message: impl std::fmt::Display) -> String {
         format!("{}: {message}", self.loc(node))
+    }
+
+    /// Records a located warning about `node` for the loader to report.
+    pub fn note(&self, node: El<'_>, message: impl std::fmt::Display) {
+        let w = self.warning(node, message);
+        self.notes.borrow_mut().push(w);
+    }
+
+    /// The warnings recorded by [`Xml::note`] since the last call, in order.
+    pub fn take_warnings(&self) -> Vec<String> {
+        std::mem::take(&mut self.notes.borrow_mut())
     }
 
     /// Attribute `name` of `node` with every `$name` replaced by its define.
@@ -655,7 +669,21 @@ pub(super) fn transform(x: &Xml<'_>, node: El<'_>) -> Result<Transform> {
                 if axis.length_squared() == 0.0 || !axis.length_squared().is_finite() {
                     return Err(x.err(c, "the rotation axis must be a non-zero vector"));
                 }
-                Mat4::from_axis_angle(axis.normalize(), angle.to_radians())
+                if (axis.length() - 1.0).abs() > 1e-5 {
+                    x.note(
+                        c,
+                        format!(
+                            "the rotation axis ({}, {}, {}) has length {}: as Mitsuba 3 does, the matrix is built \
+                             from the axis as given (cos θ·I + (1 − cos θ)·a·aᵀ + sin θ·[a]×), which scales and \
+                             shears unless the axis is a unit vector; normalise the axis for a pure rotation",
+                            axis.x,
+                            axis.y,
+                            axis.z,
+                            axis.length()
+                        ),
+                    );
+                }
+                rotation_as_given(axis, angle.to_radians())
             }
             "matrix" => {
                 x.check_attrs(c, &["value"])?;
@@ -697,6 +725,20 @@ pub(super) fn transform(x: &Xml<'_>, node: El<'_>) -> Result<Transform> {
         return Err(x.err(node, "projective transforms are not supported (the last row must be 0 0 0 1)"));
     }
     Ok(Transform { matrix, lookat: if count == 1 { lookat } else { None } })
+}
+
+/// Rodrigues' matrix `cos θ·I + (1 − cos θ)·a·aᵀ + sin θ·[a]×` with the axis `a` as given, as
+/// Mitsuba 3 builds a `<rotate>` (it does not normalise the axis): a rotation only for a unit axis.
+pub(super) fn rotation_as_given(a: Vec3, theta: f32) -> Mat4 {
+    let (s, c) = theta.sin_cos();
+    let k = 1.0 - c;
+    let col = |e: Vec3, cross: Vec3| (a * (k * a.dot(e)) + e * c + cross * s).extend(0.0);
+    Mat4::from_cols(
+        col(Vec3::X, a.cross(Vec3::X)),
+        col(Vec3::Y, a.cross(Vec3::Y)),
+        col(Vec3::Z, a.cross(Vec3::Z)),
+        Vec4::W,
+    )
 }
 
 /// Mitsuba's look-at matrix: columns `left = up × dir`, `up' = dir × left`, `dir`, `origin`, so
