@@ -200,9 +200,11 @@ pub fn bsdf_pdf_diff(b: &Bsdf, wi: Vec3, wo: Vec3) -> f32 {
     }
     match b.leaves[0] {
         Leaf::RoughConductor { distribution, alpha, .. } => diff_pdf(distribution, alpha, wi, wo),
-        Leaf::Diffuse { .. } | Leaf::RoughPlastic(_) | Leaf::Smooth(_) | Leaf::SmoothPlastic(_) => {
-            leaf_pdf(&b.leaves[0], wi, wo)
-        }
+        Leaf::Diffuse { .. }
+        | Leaf::RoughPlastic(_)
+        | Leaf::RoughDielectric(_)
+        | Leaf::Smooth(_)
+        | Leaf::SmoothPlastic(_) => leaf_pdf(&b.leaves[0], wi, wo),
     }
 }
 
@@ -220,9 +222,11 @@ pub fn bsdf_sample_diff(b: &Bsdf, wi: Vec3, u_sign: f32, u_lobe: f32, u: Vec2) -
             Leaf::RoughConductor { distribution, alpha, .. } => {
                 sample_diff_part(distribution, alpha, wi, u_sign < 0.5, u)?
             }
-            Leaf::Diffuse { .. } | Leaf::RoughPlastic(_) | Leaf::Smooth(_) | Leaf::SmoothPlastic(_) => {
-                leaf_sample(&b.leaves[0], wi, u_lobe, u)?
-            }
+            Leaf::Diffuse { .. }
+            | Leaf::RoughPlastic(_)
+            | Leaf::RoughDielectric(_)
+            | Leaf::Smooth(_)
+            | Leaf::SmoothPlastic(_) => leaf_sample(&b.leaves[0], wi, u_lobe, u)?,
         }
     };
     let pdf = bsdf_pdf_diff(b, wi, wo);

@@ -3,8 +3,8 @@
 //! Conventions (ALGORITHMS.md §0): local frame with the shading normal on +z; `wi` points back
 //! toward the camera side, `wo` toward the light side; `eval` returns the cosine-weighted value
 //! f̂ = f·max(0, cos θo); densities are solid-angle densities of `wo`. Reflecting BSDFs are
-//! one-sided: zero when cos θi ≤ 0 or cos θo ≤ 0. The dielectrics ([`specular`]) take light from
-//! either side and are sampled only, as is a smooth plastic's coating ([`plastic`]): their samples
+//! one-sided: zero when cos θi ≤ 0 or cos θo ≤ 0. The dielectrics ([`specular`],
+//! [`rough_dielectric`]) take light from either side; the smooth ones are sampled only, as is a smooth plastic's coating ([`plastic`]): their samples
 //! are marked `BsdfSample::delta`.
 
 pub mod blend;
@@ -12,6 +12,7 @@ pub mod differential;
 pub mod diffuse;
 pub mod plastic;
 pub mod rough_conductor;
+pub mod rough_dielectric;
 pub mod rough_plastic;
 pub mod specular;
 
@@ -47,6 +48,8 @@ pub enum Leaf {
     },
     /// Rough plastic: a rough dielectric coating on a Lambertian base.
     RoughPlastic(rough_plastic::PlasticLeaf),
+    /// Rough dielectric: a rough interface that reflects and refracts ([`rough_dielectric`]).
+    RoughDielectric(rough_dielectric::RoughDielectricLeaf),
     /// A smooth BSDF: lobes that are Dirac deltas, sampled only ([`specular`]).
     Smooth(specular::SmoothLeaf),
     /// Smooth plastic: a delta coating over a Lambertian base ([`plastic`]).
@@ -95,6 +98,9 @@ pub struct LeafGrad {
     pub color: Vec3,
     /// With respect to the roughness α, per image channel.
     pub alpha: Vec3,
+    /// With respect to colour channel c of the transmittance (dielectrics: transmitted
+    /// directions), as `color` is for the reflectance.
+    pub trans: Vec3,
 }
 
 /// The gradient of Σ_c adj_c · f̂_c with respect to every differentiable value of a BSDF.
@@ -109,20 +115,27 @@ pub struct BsdfGrad {
 /// ∂(adj · f̂)/∂(leaf values) at (wi, wo) (ALGORITHMS.md §4.1–4.2).
 pub fn leaf_eval_grad(leaf: &Leaf, wi: Vec3, wo: Vec3, adj: Vec3) -> LeafGrad {
     match *leaf {
-        Leaf::Diffuse { .. } => LeafGrad { color: adj * diffuse::diffuse_eval(Vec3::ONE, wi, wo), alpha: Vec3::ZERO },
+        Leaf::Diffuse { .. } => {
+            LeafGrad { color: adj * diffuse::diffuse_eval(Vec3::ONE, wi, wo), ..LeafGrad::default() }
+        }
         Leaf::RoughConductor { distribution, alpha, specular, eta, k } => {
             let (f, scalar, dscalar) = rough_conductor::microfacet_eval_parts(distribution, alpha, eta, k, wi, wo);
-            LeafGrad { color: adj * f * scalar, alpha: adj * f * specular * dscalar }
+            LeafGrad { color: adj * f * scalar, alpha: adj * f * specular * dscalar, trans: Vec3::ZERO }
         }
         Leaf::RoughPlastic(p) => {
             let (color, alpha) = p.eval_grad(wi, wo);
-            LeafGrad { color: adj * color, alpha: adj * alpha }
+            LeafGrad { color: adj * color, alpha: adj * alpha, trans: Vec3::ZERO }
+        }
+        Leaf::RoughDielectric(d) => {
+            let (colour, transmits, alpha) = d.eval_grad(wi, wo);
+            let (color, trans) = if transmits { (Vec3::ZERO, adj * colour) } else { (adj * colour, Vec3::ZERO) };
+            LeafGrad { color, alpha: adj * alpha, trans }
         }
         Leaf::Smooth(s) => {
             let g = s.value_grad(wi, wo);
-            LeafGrad { color: adj * g.color, alpha: g.alpha }
+            LeafGrad { color: adj * g.color, alpha: Vec3::ZERO, trans: adj * g.trans }
         }
-        Leaf::SmoothPlastic(p) => LeafGrad { color: adj * p.eval_grad(wi, wo).color, alpha: Vec3::ZERO },
+        Leaf::SmoothPlastic(p) => LeafGrad { color: adj * p.eval_grad(wi, wo).color, ..LeafGrad::default() },
     }
 }
 
@@ -155,6 +168,7 @@ pub fn leaf_eval(leaf: &Leaf, wi: Vec3, wo: Vec3) -> Vec3 {
             rough_conductor::microfacet_eval(distribution, alpha, specular, eta, k, wi, wo)
         }
         Leaf::RoughPlastic(p) => p.eval(wi, wo),
+        Leaf::RoughDielectric(d) => d.eval(wi, wo),
         Leaf::Smooth(_) => Vec3::ZERO,
         Leaf::SmoothPlastic(p) => p.eval(wi, wo),
     }
@@ -168,6 +182,7 @@ pub fn leaf_pdf(leaf: &Leaf, wi: Vec3, wo: Vec3) -> f32 {
             rough_conductor::microfacet_pdf(distribution, alpha, wi, wo)
         }
         Leaf::RoughPlastic(p) => p.pdf(wi, wo),
+        Leaf::RoughDielectric(d) => d.pdf(wi, wo),
         Leaf::Smooth(_) => 0.0,
         Leaf::SmoothPlastic(p) => p.pdf(wi, wo),
     }
@@ -182,6 +197,7 @@ pub fn leaf_sample(leaf: &Leaf, wi: Vec3, u_lobe: f32, u: Vec2) -> Option<Vec3> 
             rough_conductor::microfacet_sample(distribution, alpha, wi, u)
         }
         Leaf::RoughPlastic(p) => p.sample(wi, u_lobe, u),
+        Leaf::RoughDielectric(d) => d.sample(wi, u_lobe, u),
         // A leaf with a delta lobe samples itself whole: bsdf_sample takes its sample.
         Leaf::Smooth(_) | Leaf::SmoothPlastic(_) => None,
     }

@@ -121,7 +121,7 @@ impl SmoothPlasticLeaf {
         }
         let n = self.renormalisation();
         let base = self.base_factor(fresnel_dielectric(wi.z, self.eta).0, wo);
-        LeafGrad { color: (if self.nonlinear { n * n } else { n }) * base, alpha: Vec3::ZERO }
+        LeafGrad { color: (if self.nonlinear { n * n } else { n }) * base, ..LeafGrad::default() }
     }
 }
 

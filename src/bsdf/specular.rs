@@ -14,8 +14,8 @@
 //!   reflections summed), weight s_r; or straight through, weight s_t.
 //!
 //! The derivative of `value` by the reflectance (or transmittance) is `value` over it: what
-//! [`delta_value_grad`] reports in `LeafGrad::color`, with `LeafGrad::alpha.x` = 1 marking a
-//! transmitted sample of a dielectric, whose colour parameter is the transmittance.
+//! [`SmoothLeaf::value_grad`] reports in `LeafGrad::color` (or, for a transmitted sample,
+//! `LeafGrad::trans`).
 
 use glam::Vec3;
 
@@ -125,7 +125,8 @@ impl SmoothLeaf {
         let Some((_, pdf, unit, _)) = self.lobe(wi, if transmitted { 1.0 } else { 0.0 }) else {
             return LeafGrad::default();
         };
-        LeafGrad { color: unit * pdf, alpha: Vec3::new(if transmitted { 1.0 } else { 0.0 }, 0.0, 0.0) }
+        let (color, trans) = if transmitted { (Vec3::ZERO, unit * pdf) } else { (unit * pdf, Vec3::ZERO) };
+        LeafGrad { color, alpha: Vec3::ZERO, trans }
     }
 }
 
@@ -178,7 +179,8 @@ mod tests {
                     leaf.k = Vec3::new(3.0, 2.0, 1.5);
                     let Some(s) = leaf.sample(wi, u_lobe) else { continue };
                     let g = leaf.value_grad(wi, s.wo);
-                    let transmitted = g.alpha.x > 0.5;
+                    let transmitted = g.trans != Vec3::ZERO;
+                    let g_colour = if transmitted { g.trans } else { g.color };
                     let h = 1e-3;
                     for c in 0..3 {
                         let value_at = |v: f32| {
@@ -192,7 +194,7 @@ mod tests {
                         };
                         let x = if transmitted { leaf.transmittance[c] } else { leaf.reflectance[c] };
                         let fd = (value_at(x + h) - value_at(x - h)) / (2.0 * h);
-                        assert!((fd - g.color[c]).abs() < 1e-3, "{kind:?} {wi} {u_lobe}: {fd} vs {}", g.color[c]);
+                        assert!((fd - g_colour[c]).abs() < 1e-3, "{kind:?} {wi} {u_lobe}: {fd} vs {}", g_colour[c]);
                     }
                 }
             }

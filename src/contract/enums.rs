@@ -62,6 +62,8 @@ contract_enums! {
         ThinDielectric = MAT_THIN_DIELECTRIC = 7,
         /// Smooth plastic (a delta coating over a Lambertian base).
         Plastic = MAT_PLASTIC = 8,
+        /// Rough dielectric interface (reflects and refracts through microfacets).
+        RoughDielectric = MAT_ROUGH_DIELECTRIC = 9,
     }
 
     /// What `DeltaLight::kind` holds.
@@ -106,6 +108,8 @@ contract_enums! {
         ThinDielectric = LEAF_THIN_DIELECTRIC = 7,
         /// Smooth plastic.
         Plastic = LEAF_PLASTIC = 8,
+        /// Rough dielectric.
+        RoughDielectric = LEAF_ROUGH_DIELECTRIC = 9,
     }
 
     /// Microfacet distribution.

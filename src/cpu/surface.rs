@@ -3,13 +3,15 @@
 use glam::Vec3;
 
 use crate::bsdf::plastic::SmoothPlasticLeaf;
+use crate::bsdf::rough_dielectric::RoughDielectricLeaf;
 use crate::bsdf::rough_plastic::PlasticLeaf;
 use crate::bsdf::specular::{SmoothKind, SmoothLeaf};
 use crate::bsdf::{Bsdf, Distribution, Leaf, LeafGrad, bsdf_eval_grad};
 use crate::bvh::Hit;
 use crate::contract::{
-    COATING_TABLE_LEN, MAT_BLEND, MAT_CONDUCTOR, MAT_DIELECTRIC, MAT_PLASTIC, MAT_ROUGH_CONDUCTOR, MAT_ROUGH_PLASTIC,
-    MAT_THIN_DIELECTRIC, Material, NO_PARAM, TEX_CHECKER, TEX_NEAREST, TEX_WRAP_CLAMP, TEX_WRAP_MIRROR,
+    COATING_TABLE_LEN, MAT_BLEND, MAT_CONDUCTOR, MAT_DIELECTRIC, MAT_PLASTIC, MAT_ROUGH_CONDUCTOR,
+    MAT_ROUGH_DIELECTRIC, MAT_ROUGH_PLASTIC, MAT_THIN_DIELECTRIC, Material, NO_PARAM, TEX_CHECKER, TEX_NEAREST,
+    TEX_WRAP_CLAMP, TEX_WRAP_MIRROR,
 };
 use crate::cpu::path::GradSink;
 use crate::scene::flat::FlatScene;
@@ -146,6 +148,13 @@ fn leaf_from_material(flat: &FlatScene, m: &Material, uv: glam::Vec2) -> Leaf {
                 table,
             })
         }
+        MAT_ROUGH_DIELECTRIC => Leaf::RoughDielectric(RoughDielectricLeaf {
+            distribution,
+            alpha: params[m.p_alpha as usize],
+            reflectance: if m.p_color == NO_PARAM { m.uv_row0 } else { param_rgb(params, m.p_color) },
+            transmittance: if m.p_weight == NO_PARAM { m.k } else { param_rgb(params, m.p_weight) },
+            eta: m.eta.x,
+        }),
         MAT_PLASTIC => Leaf::SmoothPlastic(SmoothPlasticLeaf {
             diffuse: color,
             specular: m.k,
@@ -197,12 +206,17 @@ pub fn texture_backward(m: &Material, uv: glam::Vec2, g: Vec3, sink: &mut GradSi
 }
 
 fn leaf_backward(m: &Material, uv: glam::Vec2, g: &LeafGrad, sink: &mut GradSink<'_>) {
-    if is_smooth_tag(m.tag) {
-        // A smooth leaf's colour is its reflectance, or (a transmitted sample, marked in
-        // alpha.x) its transmittance; a constant has no parameter.
-        let p = if g.alpha.x > 0.5 { m.p_alpha } else { m.p_color };
-        if p != NO_PARAM {
-            sink.add_rgb(p, g.color);
+    if is_smooth_tag(m.tag) || m.tag == MAT_ROUGH_DIELECTRIC {
+        // A dielectric's reflectance and transmittance (a smooth leaf's transmittance parameter
+        // sits in p_alpha, a rough one's in p_weight); a constant has no parameter.
+        let p_trans = if m.tag == MAT_ROUGH_DIELECTRIC { m.p_weight } else { m.p_alpha };
+        for (p, g) in [(m.p_color, g.color), (p_trans, g.trans)] {
+            if p != NO_PARAM {
+                sink.add_rgb(p, g);
+            }
+        }
+        if m.tag == MAT_ROUGH_DIELECTRIC {
+            sink.add(m.p_alpha, g.alpha);
         }
         return;
     }

@@ -10,9 +10,9 @@ use crate::bvh::{self, Bvh};
 use crate::contract::{
     COATING_TABLE_LEN, DIST_GGX, DeltaLight, EmitterTri, EnvCell, FIELD_CONSTANT, FIELD_GRID, FieldDesc,
     LIGHT_DIRECTIONAL, LIGHT_POINT, LIGHT_SPOT, MAT_BLEND, MAT_CONDUCTOR, MAT_DIELECTRIC, MAT_DIFFUSE, MAT_NULL,
-    MAT_PLASTIC, MAT_ROUGH_CONDUCTOR, MAT_ROUGH_PLASTIC, MAT_THIN_DIELECTRIC, Material as GpuMaterial, MediumDesc,
-    NO_EMITTER, NO_MEDIUM, NO_PARAM, PHASE_HG, PHASE_ISOTROPIC, TEX_CHECKER, TEX_NEAREST, TEX_WRAP_CLAMP,
-    TEX_WRAP_MIRROR, TriShading,
+    MAT_PLASTIC, MAT_ROUGH_CONDUCTOR, MAT_ROUGH_DIELECTRIC, MAT_ROUGH_PLASTIC, MAT_THIN_DIELECTRIC,
+    Material as GpuMaterial, MediumDesc, NO_EMITTER, NO_MEDIUM, NO_PARAM, PHASE_HG, PHASE_ISOTROPIC, TEX_CHECKER,
+    TEX_NEAREST, TEX_WRAP_CLAMP, TEX_WRAP_MIRROR, TriShading,
 };
 use crate::error::Result;
 use crate::scene::medium::{Field, Phase};
@@ -312,6 +312,26 @@ fn flatten_material(scene: &Scene, m: &Material) -> GpuMaterial {
                 uv_row0: r,
                 eta,
                 k: if kind == SmoothKind::Conductor { k } else { t },
+                ..Default::default()
+            }
+        }
+        Material::RoughDielectric { distribution, alpha, reflectance, transmittance, eta } => {
+            // The reflectance a parameter (p_color) or a constant (uv_row0), the transmittance a
+            // parameter (p_weight, free in a leaf) or a constant (k).
+            let split = |c: SmoothColour| match c {
+                SmoothColour::Param(id) => (offset(id), Vec3::ZERO),
+                SmoothColour::Constant(v) => (NO_PARAM, v),
+            };
+            let ((p_color, r), (p_weight, t)) = (split(reflectance), split(transmittance));
+            GpuMaterial {
+                tag: MAT_ROUGH_DIELECTRIC,
+                distribution: distribution as u32,
+                p_color,
+                p_alpha: offset(alpha),
+                p_weight,
+                uv_row0: r,
+                eta: Vec3::new(eta, 0.0, 0.0),
+                k: t,
                 ..Default::default()
             }
         }

@@ -158,6 +158,19 @@ pub enum Material {
         /// Mitsuba's `nonlinear`: the base's internal scattering darkens and saturates its colour.
         nonlinear: bool,
     },
+    /// Rough dielectric (Mitsuba's `roughdielectric`, `crate::bsdf::rough_dielectric`).
+    RoughDielectric {
+        /// Microfacet distribution.
+        distribution: Distribution,
+        /// Roughness alpha, 1 value.
+        alpha: ParamId,
+        /// RGB specular reflectance.
+        reflectance: SmoothColour,
+        /// RGB specular transmittance.
+        transmittance: SmoothColour,
+        /// int_ior / ext_ior.
+        eta: f32,
+    },
     /// Smooth plastic (Mitsuba's `plastic`, `crate::bsdf::plastic`).
     SmoothPlastic {
         /// Diffuse reflectance of the base in [0, 1], constant or textured.
