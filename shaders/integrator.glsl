@@ -494,8 +494,10 @@ bool path_step(inout PathState st) {
                 BsdfGrad g = bsdf_eval_grad(bsdf, wi, grad_wo[k], grad_adj[k]);
                 gt.bsdf.leaf0.color += g.leaf0.color;
                 gt.bsdf.leaf0.alpha += g.leaf0.alpha;
+                gt.bsdf.leaf0.trans += g.leaf0.trans;
                 gt.bsdf.leaf1.color += g.leaf1.color;
                 gt.bsdf.leaf1.alpha += g.leaf1.alpha;
+                gt.bsdf.leaf1.trans += g.leaf1.trans;
                 gt.bsdf.weight += g.weight;
             }
         } else {

@@ -138,17 +138,22 @@ impl Strategy {
                     parameter: target.to_string(),
                     message: "no such parameter to drive the differential sampler (see `pathgrad params SCENE`)".into(),
                 })?;
-                let plastic = scene
-                    .materials
-                    .iter()
-                    .any(|m| matches!(m, crate::scene::Material::RoughPlastic { alpha, .. } if *alpha == target));
-                if plastic {
+                use crate::scene::Material;
+                let uncovered = scene.materials.iter().find_map(|m| match m {
+                    Material::RoughPlastic { alpha, .. } if *alpha == target => Some("a rough plastic's"),
+                    Material::RoughDielectric { alpha, .. } if *alpha == target => Some("a rough dielectric's"),
+                    _ => None,
+                });
+                if let Some(whose) = uncovered {
+                    // The paper's positive/negative split of ∂D/∂α carries over to these lobes, but
+                    // not their Fresnel-weighted lobe choice (plastic: coating/base; dielectric:
+                    // reflect/refract): not built.
                     return Err(Error::InvalidArgument {
                         parameter: scene.params.entry(target).name.clone(),
-                        message: "is a rough plastic's roughness, which the differential sampler does not cover \
-                                  (it samples the derivative of a rough conductor's or a blend's lobe): use the \
-                                  bsdf strategy"
-                            .into(),
+                        message: format!(
+                            "is {whose} roughness, which the differential sampler does not cover (it samples the \
+                             derivative of a rough conductor's or a blend's lobe): use the bsdf strategy"
+                        ),
                     });
                 }
                 Ok(Strategy::Diff { target, q })

@@ -1,4 +1,5 @@
-// BSDFs: Lambertian, rough conductor (Beckmann/GGX, VNDF sampling), rough plastic, blend (twin
+// BSDFs: Lambertian, rough conductor (Beckmann/GGX, VNDF sampling), rough plastic, rough and
+// smooth dielectrics, smooth conductor and plastic, blend (twin
 // of src/bsdf/).
 // Local frame, normal +z; eval returns f̂ = f·max(0, cos θo); pdfs are solid-angle densities of wo.
 #ifndef PATHGRAD_BSDF_GLSL
@@ -16,7 +17,9 @@ struct Bsdf { Leaf leaf0; Leaf leaf1; float weight; bool blend; };
 // A delta lobe's sample (`delta`) has its choice probability as `pdf` and its weight × pdf as
 // `value` (src/bsdf/specular.rs).
 struct BsdfSample { vec3 wo; float pdf; vec3 value; bool valid; bool delta; };
-struct LeafGrad { vec3 color; vec3 alpha; };
+// ∂ by the colour (albedo or reflectance), the roughness and a dielectric's transmittance, per
+// image channel.
+struct LeafGrad { vec3 color; vec3 alpha; vec3 trans; };
 struct BsdfGrad { LeafGrad leaf0; LeafGrad leaf1; vec3 weight; };
 
 // Whether `distribution` is Beckmann, folded to a constant when the kernel has only one of the two.
@@ -25,7 +28,7 @@ bool is_beckmann(uint distribution) {
 }
 
 // The leaf kinds' feature bits; a kind test folds to a constant when the kernel has no other kind.
-#define LEAF_KIND_BITS (F_DIFFUSE | F_CONDUCTOR | F_PLASTIC | F_DELTA | F_SMOOTH_PLASTIC)
+#define LEAF_KIND_BITS (F_DIFFUSE | F_CONDUCTOR | F_PLASTIC | F_DELTA | F_SMOOTH_PLASTIC | F_ROUGH_DIELECTRIC)
 bool only_kind(uint bit) { return (FEATURES & uint(LEAF_KIND_BITS)) == uint(bit); }
 
 // Whether leaf `kind` is a rough plastic.
@@ -43,15 +46,21 @@ bool is_smooth_plastic(uint kind) {
     return HAS(F_SMOOTH_PLASTIC) && (only_kind(F_SMOOTH_PLASTIC) || kind == LEAF_PLASTIC);
 }
 
+// Whether leaf `kind` is a rough dielectric.
+bool is_rough_dielectric(uint kind) {
+    return HAS(F_ROUGH_DIELECTRIC) && (only_kind(F_ROUGH_DIELECTRIC) || kind == LEAF_ROUGH_DIELECTRIC);
+}
+
 // Whether leaf `kind` is Lambertian.
 bool is_diffuse(uint kind) {
-    return (FEATURES & uint(F_CONDUCTOR | F_PLASTIC | F_DELTA | F_SMOOTH_PLASTIC)) == 0u
+    return (FEATURES & uint(F_CONDUCTOR | F_PLASTIC | F_DELTA | F_SMOOTH_PLASTIC | F_ROUGH_DIELECTRIC)) == 0u
         || (HAS(F_DIFFUSE) && kind == LEAF_DIFFUSE);
 }
 
 // Whether leaf `kind` is a rough conductor.
 bool is_conductor(uint kind) {
-    return !is_plastic(kind) && !is_delta(kind) && !is_smooth_plastic(kind) && !is_diffuse(kind);
+    return !is_plastic(kind) && !is_delta(kind) && !is_smooth_plastic(kind) && !is_rough_dielectric(kind)
+        && !is_diffuse(kind);
 }
 
 // ---- Lambertian (ALGORITHMS.md §4.1) ----
@@ -321,6 +330,94 @@ bool plastic_sample(Leaf l, vec3 wi, float u_lobe, vec2 u, out vec3 wo) {
     return wo.z > 0.0;
 }
 
+// ---- rough dielectric (src/bsdf/rough_dielectric.rs states the model): color = reflectance,
+// k = transmittance, eta.x = η ----
+
+// The half vector m of (wi, wo) (upper hemisphere), whether the pair reflects (refl), and η for wi's
+// side; false where the BSDF is 0 (grazing wi, or a direction seeing m from its other side).
+bool rdielectric_pair(Leaf l, vec3 wi, vec3 wo, out vec3 m, out bool refl, out float eta) {
+    refl = wi.z * wo.z > 0.0;
+    eta = wi.z > 0.0 ? l.eta.x : 1.0 / l.eta.x;
+    m = normalize(wi + wo * (refl ? 1.0 : eta));
+    if (m.z < 0.0) m = -m;
+    return wi.z != 0.0 && !any(isnan(m)) && dot(wi, m) * wi.z > 0.0 && dot(wo, m) * wo.z > 0.0;
+}
+
+// f̂ per unit of the lobe's colour divided by D·G (twin: unit_over_dg).
+float rdielectric_unit(bool refl, float eta, float f, vec3 wi, vec3 wo, vec3 m) {
+    if (refl) return f / (4.0 * abs(wi.z));
+    float im = dot(wi, m);
+    float om = dot(wo, m);
+    float d = im + eta * om;
+    return (1.0 - f) * abs(im * om / (wi.z * d * d));
+}
+
+vec3 rdielectric_eval_pdf(Leaf l, vec3 wi, vec3 wo, out float pdf) {
+    pdf = 0.0;
+    vec3 m;
+    bool refl;
+    float eta;
+    if (!rdielectric_pair(l, wi, wo, m, refl, eta)) return vec3(0.0);
+    vec3 up = wi.z > 0.0 ? wi : -wi;
+    float d = microfacet_d(l.distribution, l.alpha, m);
+    float gi = microfacet_g1(l.distribution, l.alpha, wi, m);
+    float f = fresnel_dielectric(dot(wi, m), l.eta.x);
+    float om = dot(wo, m);
+    float jacobian;
+    if (refl) {
+        jacobian = abs(1.0 / (4.0 * om));
+    } else {
+        float s = dot(wi, m) + eta * om;
+        jacobian = abs(eta * eta * om / (s * s));
+    }
+    // G1 of the mirrored wi equals G1 of wi (it depends on tan²θ and the side test only).
+    pdf = d * gi * max(dot(up, m), 0.0) / up.z * (refl ? f : 1.0 - f) * jacobian;
+    if (d == 0.0) return vec3(0.0);
+    float dg = d * gi * microfacet_g1(l.distribution, l.alpha, wo, m);
+    return (refl ? l.color : l.k) * (dg * rdielectric_unit(refl, eta, f, wi, wo, m));
+}
+
+bool rdielectric_sample(Leaf l, vec3 wi, float u_lobe, vec2 u, out vec3 wo) {
+    wo = vec3(0.0, 0.0, 1.0);
+    if (wi.z == 0.0) return false;
+    vec3 up = wi.z > 0.0 ? wi : -wi;
+    vec3 m;
+    if (!microfacet_visible_normal(l.distribution, l.alpha, up, u, m)) return false;
+    float im = dot(wi, m);
+    float f = fresnel_dielectric(im, l.eta.x);
+    bool refl = u_lobe <= f;
+    if (refl) {
+        wo = 2.0 * im * m - wi;
+    } else {
+        // Mitsuba's refract through m: η_t/η_i and the transmitted cosine for wi's side.
+        bool outside = im >= 0.0;
+        float eta_ti = outside ? 1.0 / l.eta.x : l.eta.x;
+        float ct = sqrt(max(1.0 - (1.0 - im * im) * eta_ti * eta_ti, 0.0));
+        wo = m * (im * eta_ti + (outside ? -ct : ct)) - wi * eta_ti;
+    }
+    return (wi.z * wo.z > 0.0) == refl && dot(wo, m) * wo.z > 0.0 && !any(isnan(wo));
+}
+
+// ∂f̂/∂(lobe colour) (in color, or in trans for a transmitted pair) and ∂f̂/∂α, times adj.
+LeafGrad rdielectric_eval_grad(Leaf l, vec3 wi, vec3 wo, vec3 adj) {
+    LeafGrad g = LeafGrad(vec3(0.0), vec3(0.0), vec3(0.0));
+    vec3 m;
+    bool refl;
+    float eta;
+    if (!rdielectric_pair(l, wi, wo, m, refl, eta)) return g;
+    float d = microfacet_d(l.distribution, l.alpha, m);
+    if (d == 0.0) return g;
+    float gi, dgi, go, dgo;
+    microfacet_g1_and_dalpha(l.distribution, l.alpha, wi, m, gi, dgi);
+    microfacet_g1_and_dalpha(l.distribution, l.alpha, wo, m, go, dgo);
+    float ddg = microfacet_d_dalpha_of(l.distribution, l.alpha, m, d) * gi * go + d * (dgi * go + gi * dgo);
+    float unit = rdielectric_unit(refl, eta, fresnel_dielectric(dot(wi, m), l.eta.x), wi, wo, m);
+    vec3 dcolour = adj * (d * gi * go * unit);
+    if (refl) g.color = dcolour; else g.trans = dcolour;
+    g.alpha = adj * (refl ? l.color : l.k) * (ddg * unit);
+    return g;
+}
+
 // ---- smooth leaves (src/bsdf/specular.rs): color = reflectance, k = transmittance (dielectrics)
 // or the conductor's k, eta = the conductor's η or (η, –, –) ----
 
@@ -373,16 +470,17 @@ BsdfSample smooth_sample(Leaf l, vec3 wi, float u_lobe) {
     return s;
 }
 
-// ∂value/∂colour per channel of the sample toward wo, times adj; alpha.x = 1 marks a transmitted
-// sample (its colour parameter is the transmittance, right after the reflectance).
+// ∂value/∂colour per channel of the sample toward wo, times adj: in `color` for the reflectance,
+// in `trans` for the transmittance (a transmitted sample).
 LeafGrad smooth_value_grad(Leaf l, vec3 wi, vec3 wo, vec3 adj) {
     bool transmitted = wi.z * wo.z < 0.0;
     vec3 w;
     float pdf;
     vec3 unit;
     bool t;
-    if (!smooth_lobe(l, wi, transmitted ? 1.0 : 0.0, w, pdf, unit, t)) return LeafGrad(vec3(0.0), vec3(0.0));
-    return LeafGrad(adj * unit * pdf, vec3(transmitted ? 1.0 : 0.0, 0.0, 0.0));
+    if (!smooth_lobe(l, wi, transmitted ? 1.0 : 0.0, w, pdf, unit, t)) return LeafGrad(vec3(0.0), vec3(0.0), vec3(0.0));
+    vec3 g = adj * unit * pdf;
+    return transmitted ? LeafGrad(vec3(0.0), vec3(0.0), g) : LeafGrad(g, vec3(0.0), vec3(0.0));
 }
 
 // ---- smooth plastic (src/bsdf/plastic.rs): color = ρ, k = the coating's colour, eta = (η, w,
@@ -437,9 +535,9 @@ BsdfSample splastic_sample(Leaf l, vec3 wi, float u_lobe, vec2 u) {
 
 // ∂f̂/∂ρ per channel, times adj: the base's, or 0 toward the mirror direction (the coating's sample).
 LeafGrad splastic_eval_grad(Leaf l, vec3 wi, vec3 wo, vec3 adj) {
-    if (wi.z <= 0.0 || wo.z <= 0.0 || wo == vec3(-wi.x, -wi.y, wi.z)) return LeafGrad(vec3(0.0), vec3(0.0));
+    if (wi.z <= 0.0 || wo.z <= 0.0 || wo == vec3(-wi.x, -wi.y, wi.z)) return LeafGrad(vec3(0.0), vec3(0.0), vec3(0.0));
     vec3 n = splastic_renormalisation(l);
-    return LeafGrad(adj * (l.eta.z != 0.0 ? n * n : n) * splastic_base(l, fresnel_dielectric(wi.z, l.eta.x), wo), vec3(0.0));
+    return LeafGrad(adj * (l.eta.z != 0.0 ? n * n : n) * splastic_base(l, fresnel_dielectric(wi.z, l.eta.x), wo), vec3(0.0), vec3(0.0));
 }
 
 // ---- leaves ----
@@ -450,6 +548,7 @@ vec3 leaf_eval_pdf(Leaf l, vec3 wi, vec3 wo, out float pdf) {
         return vec3(0.0);
     }
     if (is_plastic(l.kind)) return plastic_eval_pdf(l, wi, wo, pdf);
+    if (is_rough_dielectric(l.kind)) return rdielectric_eval_pdf(l, wi, wo, pdf);
     if (is_diffuse(l.kind)) {
         pdf = diffuse_pdf(wi, wo);
         return diffuse_eval(l.color, wi, wo);
@@ -471,6 +570,7 @@ bool leaf_sample(Leaf l, vec3 wi, float u_lobe, vec2 u, out vec3 wo) {
     // A leaf with a delta lobe samples itself whole: bsdf_sample takes its sample.
     if (is_delta(l.kind) || is_smooth_plastic(l.kind)) return false;
     if (is_plastic(l.kind)) return plastic_sample(l, wi, u_lobe, u, wo);
+    if (is_rough_dielectric(l.kind)) return rdielectric_sample(l, wi, u_lobe, u, wo);
     if (is_diffuse(l.kind)) {
         wo = vec3(0.0);
         if (wi.z <= 0.0) return false;
@@ -484,7 +584,7 @@ bool leaf_sample(Leaf l, vec3 wi, float u_lobe, vec2 u, out vec3 wo) {
 
 // ∂f̂/∂ρ and ∂f̂/∂α of a rough plastic (twin of PlasticLeaf::eval_grad).
 LeafGrad plastic_eval_grad(Leaf l, vec3 wi, vec3 wo, vec3 adj) {
-    if (wi.z <= 0.0 || wo.z <= 0.0) return LeafGrad(vec3(0.0), vec3(0.0));
+    if (wi.z <= 0.0 || wo.z <= 0.0) return LeafGrad(vec3(0.0), vec3(0.0), vec3(0.0));
     vec3 h = normalize(wi + wo);
     float f = fresnel_dielectric(dot(wi, h), l.eta.x);
     float scalar, dscalar;
@@ -501,18 +601,19 @@ LeafGrad plastic_eval_grad(Leaf l, vec3 wi, vec3 wo, vec3 adj) {
     vec3 d_diffuse = (nonlinear ? n * n : n) * (k * t_i * t_o);
     vec3 d_alpha = l.k * (f * dscalar) + l.color * n * (k * (dt_i * t_o + t_i * dt_o))
         + l.color * n * n * rbar * (dinternal * k * t_i * t_o);
-    return LeafGrad(adj * d_diffuse, adj * d_alpha);
+    return LeafGrad(adj * d_diffuse, adj * d_alpha, vec3(0.0));
 }
 
 LeafGrad leaf_eval_grad(Leaf l, vec3 wi, vec3 wo, vec3 adj) {
     if (is_delta(l.kind)) return smooth_value_grad(l, wi, wo, adj);
     if (is_smooth_plastic(l.kind)) return splastic_eval_grad(l, wi, wo, adj);
     if (is_plastic(l.kind)) return plastic_eval_grad(l, wi, wo, adj);
-    if (is_diffuse(l.kind)) return LeafGrad(adj * diffuse_eval(vec3(1.0), wi, wo), vec3(0.0));
+    if (is_rough_dielectric(l.kind)) return rdielectric_eval_grad(l, wi, wo, adj);
+    if (is_diffuse(l.kind)) return LeafGrad(adj * diffuse_eval(vec3(1.0), wi, wo), vec3(0.0), vec3(0.0));
     vec3 f;
     float scalar, dscalar;
     microfacet_eval_parts(l, wi, wo, f, scalar, dscalar);
-    return LeafGrad(adj * f * scalar, adj * f * l.color * dscalar);
+    return LeafGrad(adj * f * scalar, adj * f * l.color * dscalar, vec3(0.0));
 }
 
 // ---- blend (ALGORITHMS.md §4.3) and the whole BSDF ----
@@ -547,7 +648,7 @@ float bsdf_pdf(Bsdf b, vec3 wi, vec3 wo) {
 
 // ∂(adj · f̂)/∂(every value of b) at (wi, wo); the weight's derivative is f̂1 − f̂0 inside (0, 1).
 BsdfGrad bsdf_eval_grad(Bsdf b, vec3 wi, vec3 wo, vec3 adj) {
-    LeafGrad none = LeafGrad(vec3(0.0), vec3(0.0));
+    LeafGrad none = LeafGrad(vec3(0.0), vec3(0.0), vec3(0.0));
     if (!HAS(F_BLEND) || !b.blend) return BsdfGrad(leaf_eval_grad(b.leaf0, wi, wo, adj), none, vec3(0.0));
     float w = blend_weight(b);
     vec3 weight = (b.weight > 0.0 && b.weight < 1.0) ? adj * (leaf_eval(b.leaf1, wi, wo) - leaf_eval(b.leaf0, wi, wo)) : vec3(0.0);

@@ -124,12 +124,13 @@ Leaf leaf_from_material(Material m, vec2 uv) {
     bool plastic = is_plastic(m.tag);
     bool conductor = is_conductor(m.tag);
     bool delta = is_delta(m.tag);
-    l.kind = (delta || is_smooth_plastic(m.tag)) ? m.tag
+    bool rough_glass = is_rough_dielectric(m.tag);
+    l.kind = (delta || is_smooth_plastic(m.tag) || rough_glass) ? m.tag
         : (plastic ? LEAF_ROUGH_PLASTIC : (conductor ? LEAF_ROUGH_CONDUCTOR : LEAF_DIFFUSE));
     l.distribution = m.distribution;
-    l.alpha = (conductor || plastic) ? params[m.p_alpha] : 0.0;
+    l.alpha = (conductor || plastic || rough_glass) ? params[m.p_alpha] : 0.0;
     l.table = m.table;
-    if (delta) {
+    if (delta || rough_glass) {
         // Each colour a parameter, or (NO_PARAM) a constant: the reflectance in uv_row0, a
         // dielectric's transmittance in k.
         l.color = m.p_color != NO_PARAM ? param_rgb(m.p_color) : m.uv_row0;
@@ -137,7 +138,9 @@ Leaf leaf_from_material(Material m, vec2 uv) {
         l.color = (HAS(F_TEXTURE) && m.tex_width > 0u) ? texture_lookup(m, uv) : param_rgb(m.p_color);
     }
     l.eta = m.eta;
-    l.k = (delta && m.tag != MAT_CONDUCTOR && m.p_alpha != NO_PARAM) ? param_rgb(m.p_alpha) : m.k;
+    // A dielectric's transmittance parameter: p_alpha (smooth) or p_weight (rough).
+    uint p_trans = rough_glass ? m.p_weight : (delta && m.tag != MAT_CONDUCTOR ? m.p_alpha : NO_PARAM);
+    l.k = p_trans != NO_PARAM ? param_rgb(p_trans) : m.k;
     return l;
 }
 
@@ -176,7 +179,7 @@ struct GradTerms {
 };
 
 GradTerms no_grad_terms() {
-    LeafGrad none = LeafGrad(vec3(0.0), vec3(0.0));
+    LeafGrad none = LeafGrad(vec3(0.0), vec3(0.0), vec3(0.0));
     return GradTerms(NO_PARAM, vec2(0.0), BsdfGrad(none, none, vec3(0.0)), NO_PARAM, vec3(0.0), NO_PARAM, vec3(0.0),
                      vec3(0.0, 0.0, 1.0));
 }
@@ -206,11 +209,14 @@ void push_rgb(uint offset, vec3 g) {
 }
 
 void push_leaf(Material m, vec2 uv, LeafGrad g) {
-    if (is_delta(m.tag)) {
-        // The reflectance, or (a transmitted sample, marked in alpha.x) the transmittance; a
-        // constant has no parameter.
-        uint p = g.alpha.x > 0.5 ? m.p_alpha : m.p_color;
-        if (HAS(G_COLOR) && p != NO_PARAM) push_rgb(p, g.color);
+    bool rough_glass = is_rough_dielectric(m.tag);
+    if (is_delta(m.tag) || rough_glass) {
+        // The reflectance and the transmittance (p_alpha of a smooth leaf, p_weight of a rough
+        // one); a constant has no parameter.
+        uint p_trans = rough_glass ? m.p_weight : m.p_alpha;
+        if (HAS(G_COLOR) && m.p_color != NO_PARAM) push_rgb(m.p_color, g.color);
+        if (HAS(G_COLOR) && m.tag != MAT_CONDUCTOR && p_trans != NO_PARAM) push_rgb(p_trans, g.trans);
+        if (HAS(G_ALPHA) && rough_glass) push_entry(m.p_alpha, g.alpha);
         return;
     }
     if (HAS(F_TEXTURE) && m.tex_width > 0u) {

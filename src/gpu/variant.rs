@@ -20,6 +20,9 @@ pub fn scene_features(flat: &FlatScene, env_param: u32) -> u32 {
             MAT_ROUGH_PLASTIC => F_PLASTIC | if m.distribution == DIST_BECKMANN { F_BECKMANN } else { F_GGX },
             MAT_CONDUCTOR | MAT_DIELECTRIC | MAT_THIN_DIELECTRIC => F_DELTA,
             MAT_PLASTIC => F_SMOOTH_PLASTIC,
+            MAT_ROUGH_DIELECTRIC => {
+                F_ROUGH_DIELECTRIC | if m.distribution == DIST_BECKMANN { F_BECKMANN } else { F_GGX }
+            }
             MAT_NULL => F_MEDIA,
             _ => F_BLEND,
         };
@@ -79,6 +82,15 @@ pub fn param_kinds(flat: &FlatScene, env: (u32, u32), begin: u32, end: u32) -> P
                     k = k.union(ParamKinds::COLOR);
                 }
             }
+            MAT_ROUGH_DIELECTRIC => {
+                // Reflectance (p_color) and transmittance (p_weight), each a parameter or NO_PARAM.
+                if overlaps(m.p_color, 3) || overlaps(m.p_weight, 3) {
+                    k = k.union(ParamKinds::COLOR);
+                }
+                if overlaps(m.p_alpha, 1) {
+                    k = k.union(ParamKinds::ALPHA);
+                }
+            }
             MAT_DIFFUSE | MAT_ROUGH_CONDUCTOR | MAT_ROUGH_PLASTIC | MAT_PLASTIC => {
                 let texels = if m.tex_width > 0 { m.tex_width * m.tex_height } else { 1 };
                 if overlaps(m.p_color, 3 * texels) {
@@ -127,7 +139,7 @@ pub fn request_features(scene: u32, options: &RenderOptions, kinds: ParamKinds) 
 
 /// A short human-readable name of a variant, for logs: `nee env diffuse conductor[beckmann] ∂alpha`.
 pub fn describe(features: u32) -> String {
-    const NAMES: [(u32, &str); 24] = [
+    const NAMES: [(u32, &str); 25] = [
         (F_NEE, "nee"),
         (F_ENV, "env"),
         (F_EMITTERS, "emitters"),
@@ -145,6 +157,7 @@ pub fn describe(features: u32) -> String {
         (F_PLASTIC, "plastic"),
         (F_DELTA, "smooth"),
         (F_SMOOTH_PLASTIC, "smooth-plastic"),
+        (F_ROUGH_DIELECTRIC, "rough-dielectric"),
         (G_COLOR, "∂color"),
         (G_TEXTURE, "∂texture"),
         (G_ALPHA, "∂alpha"),

@@ -40,6 +40,14 @@ fn cases() -> Vec<(Scene, Vec<&'static str>)> {
             scenes::conformance("emitter_envmap"),
             vec!["sky.data", "ball.bsdf.alpha.value", "floor.bsdf.reflectance.value"],
         ),
+        (
+            scenes::conformance("bsdf_roughdielectric"),
+            vec![
+                "ball.bsdf.alpha.value",
+                "ball.bsdf.specular_transmittance.value",
+                "pane.bsdf.specular_reflectance.value",
+            ],
+        ),
     ]
 }
 
@@ -158,6 +166,9 @@ fn gradients_match_finite_differences() {
         (scenes::conformance("bsdf_roughplastic"), "floor.bsdf.alpha"),
         (scenes::conformance("bsdf_smooth"), "marker.bsdf.specular_reflectance.value"),
         (scenes::conformance("bsdf_smooth"), "ball.bsdf.specular_transmittance.value"),
+        (scenes::conformance("bsdf_roughdielectric"), "ball.bsdf.alpha.value"),
+        (scenes::conformance("bsdf_roughdielectric"), "pane.bsdf.alpha.value"),
+        (scenes::conformance("bsdf_roughdielectric"), "ball.bsdf.specular_transmittance.value"),
     ];
     for (scene, name) in checks {
         let mut renderer = Renderer::new(&gpu.ctx, &scene).unwrap();
@@ -197,6 +208,7 @@ fn replay_returns_to_zero_on_every_path() {
         pathgrad::scene::builtin::BUILTIN_SCENES.iter().map(|(n, _)| builtin::load(n).unwrap()).collect();
     all.push(scenes::textured_environment());
     all.push(scenes::open_furnace());
+    all.push(scenes::conformance("bsdf_roughdielectric"));
     for scene in &all {
         let opts = RenderOptions { width: 64, height: 64, spp: 2, seed: 1, ..RenderOptions::for_scene(scene) };
         let adjoint = adjoint_pattern(opts.width, opts.height);

@@ -68,6 +68,14 @@ fn probe_case(
         // The probes read no coating tables: rough plastics are compared path by path on scenes
         // (cpu_vs_gpu, gradients).
         Leaf::RoughPlastic(_) => panic!("the BSDF probes have no rough plastics"),
+        Leaf::RoughDielectric(d) => (
+            pathgrad::contract::LEAF_ROUGH_DIELECTRIC,
+            d.distribution as u32,
+            d.alpha,
+            d.reflectance,
+            Vec3::new(d.eta, 0.0, 0.0),
+            d.transmittance,
+        ),
         Leaf::SmoothPlastic(p) => (
             pathgrad::contract::LEAF_PLASTIC,
             0,
@@ -162,10 +170,22 @@ fn bsdf_gpu_equals_cpu() {
         };
         bsdfs.push(Bsdf { leaves: [Leaf::Diffuse { albedo: Vec3::new(0.1, 0.6, 0.35) }, coat], weight, blend: true });
     }
+    for distribution in [Distribution::Beckmann, Distribution::Ggx] {
+        for alpha in [0.02, 0.3, 0.8] {
+            bsdfs.push(Bsdf::leaf(Leaf::RoughDielectric(pathgrad::bsdf::rough_dielectric::RoughDielectricLeaf {
+                distribution,
+                alpha,
+                reflectance: Vec3::new(0.9, 0.8, 0.7),
+                transmittance: Vec3::new(0.6, 0.5, 0.4),
+                eta: 1.5,
+            })));
+        }
+    }
     let mut cases = Vec::new();
     let mut owners = Vec::new();
     for (bi, b) in bsdfs.iter().enumerate() {
-        for (wi_index, cos_i) in [1.0f32, 0.7, 0.2, 0.05, 0.01].into_iter().enumerate() {
+        // Directions from below meet only the dielectrics' inside.
+        for (wi_index, cos_i) in [1.0f32, 0.7, 0.2, 0.05, 0.01, -0.3, -0.9].into_iter().enumerate() {
             let sin_i = (1.0 - cos_i * cos_i).sqrt();
             let wi = Vec3::new(sin_i * 0.6, -sin_i * 0.8, cos_i);
             for j in 0..200u32 {

@@ -11,8 +11,8 @@ use crate::error::Result;
 use crate::scene::{Albedo, Material, MaterialId, SmoothColour, Wrap, bounds};
 
 /// The BSDF plugins pathgrad reads.
-const SUPPORTED_BSDFS: &str =
-    "blendbsdf, conductor, dielectric, diffuse, null, plastic, roughconductor, roughplastic, thindielectric, twosided";
+const SUPPORTED_BSDFS: &str = "blendbsdf, conductor, dielectric, diffuse, null, plastic, roughconductor, roughdielectric, roughplastic, \
+     thindielectric, twosided";
 
 /// Mitsuba's named indices of refraction (`int_ior`, `ext_ior` as a string).
 const IORS: &[(&str, f32)] = &[
@@ -106,6 +106,7 @@ impl<'a> Loader<'a> {
             "roughconductor" => self.rough_conductor(&p, name)?,
             "roughplastic" => self.rough_plastic(&p, name, depth)?,
             "plastic" => self.smooth_plastic(&p, name, depth)?,
+            "roughdielectric" => self.rough_dielectric(&p, name)?,
             "conductor" => self.smooth(&p, name, SmoothKind::Conductor)?,
             "dielectric" => self.smooth(&p, name, SmoothKind::Dielectric)?,
             "thindielectric" => self.smooth(&p, name, SmoothKind::ThinDielectric)?,
@@ -163,7 +164,9 @@ impl<'a> Loader<'a> {
                 if matches!(self.material(c), Some(Material::TwoSided(_))) {
                     return Err(self.x.err(child, "a 'twosided' BSDF cannot wrap another twosided one"));
                 }
-                if matches!(self.material(c), Some(Material::Smooth { kind, .. }) if kind != SmoothKind::Conductor) {
+                let transmits = matches!(self.material(c), Some(Material::Smooth { kind, .. }) if kind != SmoothKind::Conductor)
+                    || matches!(self.material(c), Some(Material::RoughDielectric { .. }));
+                if transmits {
                     return Err(self.x.err(
                         child,
                         "a 'twosided' BSDF cannot wrap one that transmits light (Mitsuba refuses it too)",
@@ -311,6 +314,21 @@ impl<'a> Loader<'a> {
     /// always for a conductor, and for the dielectrics each colour only when the file gives it
     /// (a constant otherwise).
     fn smooth(&mut self, p: &Props<'a>, name: &str, kind: SmoothKind) -> Result<MaterialId> {
+        self.refuse_textured_specular(p)?;
+        let conductor = kind == SmoothKind::Conductor;
+        let (eta, k) =
+            if conductor { self.conductor_ior(p)? } else { (Vec3::new(self.dielectric_eta(p)?, 0.0, 0.0), Vec3::ZERO) };
+        let reflectance = self.specular_colour(p, name, "specular_reflectance", conductor)?;
+        let transmittance = if conductor {
+            SmoothColour::Constant(Vec3::ZERO)
+        } else {
+            self.specular_colour(p, name, "specular_transmittance", false)?
+        };
+        Ok(self.scene.add_material(Material::Smooth { kind, reflectance, transmittance, eta, k }))
+    }
+
+    /// Refuses a texture as `specular_reflectance` or `specular_transmittance` by name.
+    fn refuse_textured_specular(&self, p: &Props<'a>) -> Result<()> {
         for slot in ["specular_reflectance", "specular_transmittance"] {
             if let Some(t) = p.object(slot) {
                 return Err(self
@@ -318,35 +336,24 @@ impl<'a> Loader<'a> {
                     .err(t, format!("a textured '{slot}' of '{}' is not supported (a colour is)", p.kind)));
             }
         }
-        let conductor = kind == SmoothKind::Conductor;
-        let (eta, k) = if conductor {
-            self.conductor_ior(p)?
-        } else {
-            let (int_ior, ext_ior) = (self.ior(p, "int_ior", "bk7")?, self.ior(p, "ext_ior", "air")?);
-            if int_ior == ext_ior {
-                return Err(self.x.err(p.node, "'int_ior' and 'ext_ior' must differ"));
-            }
-            (Vec3::new(int_ior / ext_ior, 0.0, 0.0), Vec3::ZERO)
-        };
-        let mut colour = |key: &str, always: bool| -> Result<SmoothColour> {
-            let value = self.color_in(p, key, Vec3::ONE, bounds::REFLECTANCE)?;
-            if !(always || p.has(key)) {
-                return Ok(SmoothColour::Constant(value));
-            }
-            let id = self.scene.params.add(&format!("{name}.{key}.value"), &value.to_array(), bounds::REFLECTANCE);
-            Ok(SmoothColour::Param(id.map_err(|e| self.located(p.node, e))?))
-        };
-        let reflectance = colour("specular_reflectance", conductor)?;
-        let transmittance =
-            if conductor { SmoothColour::Constant(Vec3::ZERO) } else { colour("specular_transmittance", false)? };
-        Ok(self.scene.add_material(Material::Smooth { kind, reflectance, transmittance, eta, k }))
+        Ok(())
     }
 
-    fn rough_conductor(&mut self, p: &Props<'a>, name: &str) -> Result<MaterialId> {
-        let distribution = self.distribution(p)?;
+    /// A dielectric's η = `int_ior` (bk7) / `ext_ior` (air), which must differ.
+    fn dielectric_eta(&self, p: &Props<'a>) -> Result<f32> {
+        let (int_ior, ext_ior) = (self.ior(p, "int_ior", "bk7")?, self.ior(p, "ext_ior", "air")?);
+        if int_ior == ext_ior {
+            return Err(self.x.err(p.node, "'int_ior' and 'ext_ior' must differ"));
+        }
+        Ok(int_ior / ext_ior)
+    }
+
+    /// A microfacet BSDF's isotropic roughness as the parameter Mitsuba names: `alpha` (0.1), or
+    /// `alpha_u` and `alpha_v`, of which pathgrad (isotropic) exposes `alpha_u`, which `alpha_v`
+    /// must equal and follows. `sample_visible` is read: pathgrad samples visible normals, and
+    /// `false` would change only the noise.
+    fn isotropic_alpha(&mut self, p: &Props<'a>, name: &str) -> Result<crate::params::ParamId> {
         let x = &self.x;
-        // Mitsuba's key is the property given: `alpha`, or `alpha_u` and `alpha_v`, of which
-        // pathgrad (isotropic) exposes `alpha_u`, which `alpha_v` must equal and follows.
         let anisotropic = p.has("alpha_u") || p.has("alpha_v");
         let alpha = if anisotropic {
             if p.has("alpha") {
@@ -361,14 +368,42 @@ impl<'a> Loader<'a> {
         } else {
             self.float_in(p, "alpha", Some(0.1), bounds::ALPHA)?
         };
-        let specular = self.color_in(p, "specular_reflectance", Vec3::ONE, bounds::REFLECTANCE)?;
-        let (eta, k) = self.conductor_ior(p)?;
-        // VNDF sampling is what pathgrad does; `false` would only change the noise.
         p.boolean(x, "sample_visible", true)?;
         let key = if anisotropic { "alpha_u" } else { "alpha" };
-        let params = &mut self.scene.params;
-        let alpha = params.add(&format!("{name}.{key}.value"), &[alpha], bounds::ALPHA);
-        let alpha = alpha.map_err(|e| self.located(p.node, e))?;
+        let alpha = self.scene.params.add(&format!("{name}.{key}.value"), &[alpha], bounds::ALPHA);
+        alpha.map_err(|e| self.located(p.node, e))
+    }
+
+    /// Mitsuba's `roughdielectric`: `distribution` (Beckmann), isotropic `alpha` (0.1, parameter
+    /// `NAME.alpha.value`), `int_ior` (bk7) and `ext_ior` (air), and `specular_reflectance` /
+    /// `specular_transmittance` (1; a parameter `NAME.KEY.value` only where the file gives it, as
+    /// Mitsuba's traversal).
+    fn rough_dielectric(&mut self, p: &Props<'a>, name: &str) -> Result<MaterialId> {
+        self.refuse_textured_specular(p)?;
+        let distribution = self.distribution(p)?;
+        let alpha = self.isotropic_alpha(p, name)?;
+        let eta = self.dielectric_eta(p)?;
+        let reflectance = self.specular_colour(p, name, "specular_reflectance", false)?;
+        let transmittance = self.specular_colour(p, name, "specular_transmittance", false)?;
+        Ok(self.scene.add_material(Material::RoughDielectric { distribution, alpha, reflectance, transmittance, eta }))
+    }
+
+    /// A specular colour `key` (1 by default): the parameter `NAME.KEY.value` where the file gives
+    /// it or `always`, else a constant (Mitsuba's dielectrics traverse only the colours given).
+    fn specular_colour(&mut self, p: &Props<'a>, name: &str, key: &str, always: bool) -> Result<SmoothColour> {
+        let value = self.color_in(p, key, Vec3::ONE, bounds::REFLECTANCE)?;
+        if !(always || p.has(key)) {
+            return Ok(SmoothColour::Constant(value));
+        }
+        let id = self.scene.params.add(&format!("{name}.{key}.value"), &value.to_array(), bounds::REFLECTANCE);
+        Ok(SmoothColour::Param(id.map_err(|e| self.located(p.node, e))?))
+    }
+
+    fn rough_conductor(&mut self, p: &Props<'a>, name: &str) -> Result<MaterialId> {
+        let distribution = self.distribution(p)?;
+        let alpha = self.isotropic_alpha(p, name)?;
+        let specular = self.color_in(p, "specular_reflectance", Vec3::ONE, bounds::REFLECTANCE)?;
+        let (eta, k) = self.conductor_ior(p)?;
         let specular = self.scene.params.add(
             &format!("{name}.specular_reflectance.value"),
             &specular.to_array(),

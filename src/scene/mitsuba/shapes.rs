@@ -327,6 +327,9 @@ impl<'a> Loader<'a> {
                 let refracting = matches!(
                     self.scene.materials.get(material.0 as usize),
                     Some(crate::scene::Material::Smooth { kind, .. }) if *kind != crate::bsdf::specular::SmoothKind::Conductor
+                ) || matches!(
+                    self.scene.materials.get(material.0 as usize),
+                    Some(crate::scene::Material::RoughDielectric { .. })
                 );
                 if refracting {
                     return Err(self.x.err(

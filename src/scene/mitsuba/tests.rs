@@ -12,7 +12,7 @@ use super::*;
 use crate::bsdf::Distribution;
 use crate::error::{Error, Result};
 use crate::scene::shapes::{Geometry, cuboid, quad, sphere, triangle_area};
-use crate::scene::{Albedo, Camera, LoadOptions, Material, builtin};
+use crate::scene::{Albedo, Camera, LoadOptions, Material, SmoothColour, builtin};
 
 /// A sensor looking down −z from (0, 0, 5) on a 64 × 48 film.
 pub(super) const SENSOR: &str = r#"<sensor type="perspective"><float name="fov" value="40"/><transform name="to_world"><lookat origin="0, 0, 5" target="0, 0, 0" up="0, 1, 0"/></transform><film type="hdrfilm"><integer name="width" value="64"/><integer name="height" value="48"/></film></sensor>"#;
@@ -830,4 +830,51 @@ fn direct_with_several_light_samples_warns_of_mitsubas_delta_light_weight() {
     assert_eq!(flagged(with(&direct(1), point)), 0, "one sample is weighted right");
     let area = r#"<shape type="cube"><emitter type="area"/></shape>"#;
     assert_eq!(flagged(with(&direct(4), area)), 0, "area lights are weighted right");
+}
+
+#[test]
+fn rough_dielectric_takes_mitsubas_properties_and_names() {
+    let s = load_ok(
+        r#"<shape type="cube" id="a"><bsdf type="roughdielectric"/></shape>
+           <shape type="cube" id="b"><bsdf type="roughdielectric"><string name="distribution" value="ggx"/>
+             <float name="alpha_u" value="0.3"/><float name="alpha_v" value="0.3"/><string name="int_ior" value="water"/>
+             <float name="ext_ior" value="1.2"/><rgb name="specular_transmittance" value="0.5, 0.6, 0.7"/></bsdf></shape>"#,
+    );
+    let glass: Vec<_> = s.materials.iter().filter(|m| matches!(m, Material::RoughDielectric { .. })).cloned().collect();
+    let [
+        Material::RoughDielectric { distribution: d0, reflectance: r0, transmittance: t0, eta: e0, .. },
+        Material::RoughDielectric { distribution: d1, reflectance: r1, transmittance: t1, eta: e1, .. },
+    ] = &glass[..]
+    else {
+        panic!("{glass:?}")
+    };
+    // Mitsuba's defaults: Beckmann, α 0.1, bk7 in air, colours 1 and not traversed.
+    assert_eq!((*d0, *d1), (Distribution::Beckmann, Distribution::Ggx));
+    assert!((e0 - 1.5046 / 1.000277).abs() < 1e-6 && (e1 - 1.333 / 1.2).abs() < 1e-6, "{e0} {e1}");
+    assert_eq!(
+        (*r0, *t0, *r1),
+        (SmoothColour::Constant(Vec3::ONE), SmoothColour::Constant(Vec3::ONE), SmoothColour::Constant(Vec3::ONE))
+    );
+    assert!(matches!(t1, SmoothColour::Param(_)));
+    assert_eq!(param(&s, "a.bsdf.alpha.value"), [0.1]);
+    assert_eq!(param(&s, "b.bsdf.alpha_u.value"), [0.3]);
+    assert_eq!(param(&s, "b.bsdf.specular_transmittance.value"), [0.5, 0.6, 0.7]);
+    for (body, message) in [
+        (r#"<bsdf type="twosided"><bsdf type="roughdielectric"/></bsdf>"#, "cannot wrap one that transmits light"),
+        (
+            r#"<bsdf type="roughdielectric"><float name="alpha_u" value="0.1"/><float name="alpha_v" value="0.2"/></bsdf>"#,
+            "anisotropic",
+        ),
+        (
+            r#"<bsdf type="roughdielectric"><texture name="specular_transmittance" type="bitmap"><string name="filename" value="x.png"/></texture></bsdf>"#,
+            "textured 'specular_transmittance'",
+        ),
+        (
+            r#"<bsdf type="roughdielectric"/><medium type="homogeneous" name="interior"/>"#,
+            "a medium inside a dielectric",
+        ),
+    ] {
+        let e = load(&format!(r#"<shape type="cube">{body}</shape>"#)).unwrap_err().to_string();
+        assert!(e.contains(message), "{body}: {e}");
+    }
 }
