@@ -102,6 +102,22 @@ struct PathState {
 
 // The camera ray of `pixel` of view `view` for sample `sample_index`: a primal path, or (adjoint)
 // its replay from the path's radiance `radiance_total` with adjoint radiance `adj_radiance`.
+// The camera ray through film point (sx, sy) ∈ [−1, 1]² (+y up), u_lens placing it on a thin
+// lens's aperture (twin: camera_ray of src/cpu/path.rs).
+Ray camera_ray(ViewCamera cam, float sx, float sy, vec2 u_lens) {
+    vec3 through = cam.forward + sx * cam.right + sy * cam.up;
+    if (cam.lens == LENS_ORTHOGRAPHIC) return make_ray(cam.origin + sx * cam.right + sy * cam.up, cam.forward);
+    if (cam.lens == LENS_THIN) {
+        // The pinhole ray meets the plane in focus at through · focus_distance (its forward
+        // component is 1); the ray leaves a point of the aperture for that point.
+        vec2 disk = sample_concentric_disk(u_lens) * cam.aperture_radius;
+        vec3 lens = cam.origin + disk.x * normalize(cam.right) + disk.y * normalize(cam.up);
+        vec3 focus = cam.origin + through * cam.focus_distance;
+        return make_ray(lens, normalize(focus - lens));
+    }
+    return make_ray(cam.origin, normalize(through));
+}
+
 PathState path_begin(uint view, uint pixel, uint sample_index, bool adjoint, vec3 adj_radiance, vec3 radiance_total) {
     ViewCamera cam = views[view];
     vec4 u_cam = draw_block(cam.key1, pixel, sample_index, 0u, DIM_PIXEL_JITTER / 4u);
@@ -112,7 +128,7 @@ PathState path_begin(uint view, uint pixel, uint sample_index, bool adjoint, vec
     float sx = 2.0 * fx / float(globals.width) - 1.0;
     float sy = 1.0 - 2.0 * fy / float(globals.height);
     PathState st;
-    st.ray = make_ray(cam.origin, normalize(cam.forward + sx * cam.right + sy * cam.up));
+    st.ray = camera_ray(cam, sx, sy, u_cam.zw);
     st.throughput = vec3(1.0);
     st.radiance = adjoint ? radiance_total : vec3(0.0);
     st.adj = adj_radiance;
@@ -178,6 +194,7 @@ bool path_step(inout PathState st) {
     vec3 tr = vec3(0.0);      // NEE's transmittance: 0 (occluded or no sample) or 1 (surfaces), ratio tracking (media)
     Ray shadow_ray;
     float shadow_tmax = 0.0;
+    uint shadow_medium = NO_MEDIUM;   // where the shadow ray starts: the path's medium, or across a dielectric boundary its shape's
     bool shadow_query = false;
     // A medium vertex below the maximum depth carries its NEE sample the same way: the phase
     // function's value, and (both kinds of vertex, kernels with media) the replay's weight of the
@@ -201,7 +218,7 @@ bool path_step(inout PathState st) {
         if (HAS(F_MEDIA)) {
             bool shadow = pass != 0u;
             Ray ray = shadow ? shadow_ray : st.ray;
-            uint m = st.medium;
+            uint m = shadow ? shadow_medium : st.medium;
             float remaining = shadow ? shadow_tmax : FLOAT_MAX;
             vec3 end_point = ray.origin + shadow_tmax * ray.dir;
             uint stream = shadow ? STREAM_RATIO_TRACKING : STREAM_DELTA_TRACKING;
@@ -239,6 +256,7 @@ bool path_step(inout PathState st) {
                 continue;
             }
             st.medium = m;
+            shadow_medium = m;
             st.ray = ray;
         } else {
             bool shadow = pass != 0u;
@@ -361,6 +379,7 @@ bool path_step(inout PathState st) {
                             shadow_tmax = dist * (1.0 - SHADOW_EPSILON);
                         }
                         nee_wo = to_local(frame, wl);
+                        if (HAS(F_MEDIA)) shadow_medium = medium_crossed(s.interior, s.ng, wl, st.medium);
                         float pdf_f;
                         nee_f = bsdf_eval_pdf(bsdf, wi, nee_wo, pdf_f);
                         // The adjoint also traces it where f is zero on the upper hemisphere (a black
@@ -482,6 +501,8 @@ bool path_step(inout PathState st) {
                 grad_wo[1] = bs.wo;
                 grad_adj[1] = st.adj * safe_div(st.radiance, bs.value);
                 vec3 wo_world = to_world(frame, bs.wo);
+                // A direction through a dielectric boundary enters or leaves its shape's medium.
+                if (HAS(F_MEDIA)) st.medium = medium_crossed(s.interior, s.ng, wo_world, st.medium);
                 st.ray = make_ray(offset_origin(s.p, s.ng, wo_world), wo_world);
             }
         }

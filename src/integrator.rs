@@ -1,6 +1,8 @@
 //! Options shared by the GPU renderer and the CPU reference: image size, samples, depth, seed.
 
-use crate::contract::{Globals, NO_PARAM, STRATEGY_BSDF, STRATEGY_DIFF, ViewCamera};
+use crate::contract::{
+    Globals, LENS_ORTHOGRAPHIC, LENS_PINHOLE, LENS_THIN, NO_PARAM, STRATEGY_BSDF, STRATEGY_DIFF, ViewCamera,
+};
 use crate::error::{Error, Result};
 use crate::params::ParamId;
 use crate::rng::{PassTag, RngKey};
@@ -362,14 +364,37 @@ impl RenderOptions {
         let forward = (c.target - c.position).normalize();
         let right = forward.cross(c.up).normalize();
         let up = right.cross(forward);
-        let tan_y = (c.fov_y_degrees.to_radians() * 0.5).tan();
-        let tan_x = tan_y * self.width as f32 / self.height as f32;
+        let aspect = self.width as f32 / self.height as f32;
         let (filter_kind, filter_radius, filter_alpha) = c.filter.constants();
+        // The film's half extents: per unit of depth (tangents) or, orthographic, in world units.
+        let (half_x, half_y, origin, lens, aperture_radius, focus_distance) = match c.lens {
+            crate::scene::Lens::Orthographic { half_height, stretch, near_clip } => (
+                half_height * aspect * stretch,
+                half_height,
+                c.position + forward * near_clip,
+                LENS_ORTHOGRAPHIC,
+                0.0,
+                0.0,
+            ),
+            lens => {
+                let tan_y = (c.fov_y_degrees.to_radians() * 0.5).tan();
+                let (kind, a, f) = match lens {
+                    crate::scene::Lens::Thin { aperture_radius, focus_distance } => {
+                        (LENS_THIN, aperture_radius, focus_distance)
+                    }
+                    _ => (LENS_PINHOLE, 0.0, 0.0),
+                };
+                (tan_y * aspect, tan_y, c.position, kind, a, f)
+            }
+        };
         ViewCamera {
-            origin: c.position,
-            right: right * tan_x,
-            up: up * tan_y,
+            origin,
+            right: right * half_x,
+            up: up * half_y,
             forward,
+            lens,
+            aperture_radius,
+            focus_distance,
             key1: RngKey::new(self.seed, view.stream, pass).0[1],
             filter_kind,
             filter_radius,

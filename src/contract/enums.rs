@@ -66,6 +66,16 @@ contract_enums! {
         RoughDielectric = MAT_ROUGH_DIELECTRIC = 9,
     }
 
+    /// What `ViewCamera::lens` holds.
+    enum LensKind {
+        /// A pinhole.
+        Pinhole = LENS_PINHOLE = 0,
+        /// A thin lens (depth of field).
+        Thin = LENS_THIN = 1,
+        /// An orthographic projection.
+        Orthographic = LENS_ORTHOGRAPHIC = 2,
+    }
+
     /// What `DeltaLight::kind` holds.
     enum LightKind {
         /// Mitsuba's `point`: intensity / distance².

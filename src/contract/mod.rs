@@ -49,7 +49,7 @@ mod tests {
     #[test]
     fn structs_have_no_padding() {
         assert_eq!(size_of::<Globals>(), 27 * 4 + 3 * 12 + 13 * 8);
-        assert_eq!(size_of::<ViewCamera>(), 4 * 12 + 4 * 4);
+        assert_eq!(size_of::<ViewCamera>(), 4 * 12 + 7 * 4);
         assert_eq!(size_of::<BvhNode>(), 80);
         assert_eq!(size_of::<TriPositions>(), 40);
         assert_eq!(size_of::<TriShading>(), 3 * 12 + 3 * 8 + 12);

@@ -106,14 +106,21 @@ contract_structs! {
     /// One view of a request: its pinhole camera and the key word of its paths. The image (and
     /// adjoint image) buffers hold the views' pixels one view after another.
     struct ViewCamera {
-        /// Pinhole position.
+        /// Pinhole position (orthographic: the film's centre, on the near plane).
         origin: Vec3,
-        /// Right axis scaled by tan(horizontal half field of view).
+        /// Right axis scaled by tan(horizontal half field of view) (orthographic: by the film's
+        /// half width in world units).
         right: Vec3,
-        /// Up axis scaled by tan(vertical half field of view).
+        /// Up axis scaled by tan(vertical half field of view) (orthographic: by the half height).
         up: Vec3,
         /// Viewing direction (unit).
         forward: Vec3,
+        /// `LENS_PINHOLE`, `LENS_THIN` or `LENS_ORTHOGRAPHIC`.
+        lens: u32,
+        /// Thin lens: the aperture's radius.
+        aperture_radius: f32,
+        /// Thin lens: the distance of the plane in focus.
+        focus_distance: f32,
         /// Philox key word 1 of the view's paths: `(stream << 8) | pass_tag`.
         key1: u32,
         /// The film's reconstruction filter: `FILTER_BOX`, `FILTER_TENT` or `FILTER_GAUSSIAN`.

@@ -9,8 +9,8 @@ use crate::bsdf::{bsdf_eval, bsdf_pdf, bsdf_sample};
 use crate::bvh::{Ray, closest_hit, occluded};
 use crate::contract::{
     DIM_DIFF_SIGN, DIM_DIRECTION, DIM_EMITTER_POS, DIM_EMITTER_SELECT, DIM_ENV_CELL, DIM_LOBE, DIM_PIXEL_JITTER,
-    DIM_ROULETTE, DIM_TECHNIQUE, Globals, MAT_BLEND, MAT_NULL, MAT_ROUGH_CONDUCTOR, MAX_NULL_CROSSINGS, NO_EMITTER,
-    NO_MEDIUM, NO_PARAM, STRATEGY_DIFF, ViewCamera,
+    DIM_ROULETTE, DIM_TECHNIQUE, Globals, LENS_ORTHOGRAPHIC, LENS_THIN, MAT_BLEND, MAT_NULL, MAT_ROUGH_CONDUCTOR,
+    MAX_NULL_CROSSINGS, NO_EMITTER, NO_MEDIUM, NO_PARAM, STRATEGY_DIFF, ViewCamera,
 };
 use crate::cpu::emitter::{
     EmitterSample, emitter_pdf_solid_angle, env_backward, env_radiance, environment_pdf, sample_emitter,
@@ -61,6 +61,24 @@ enum Event {
 
 fn max_component(v: Vec3) -> f32 {
     v.x.max(v.y).max(v.z)
+}
+
+/// The camera ray through film point (sx, sy) ∈ [−1, 1]² (+y up), `u_lens` placing it on a thin
+/// lens's aperture (block 0 of vertex 0, dims 2 and 3).
+fn camera_ray(view: &ViewCamera, sx: f32, sy: f32, u_lens: Vec2) -> Ray {
+    let through = view.forward + sx * view.right + sy * view.up;
+    match view.lens {
+        LENS_ORTHOGRAPHIC => Ray::new(view.origin + sx * view.right + sy * view.up, view.forward),
+        LENS_THIN => {
+            // The pinhole ray meets the plane in focus at `through · focus_distance` (its forward
+            // component is 1); the ray leaves a point of the aperture for that point.
+            let disk = crate::sampling::sample_concentric_disk(u_lens) * view.aperture_radius;
+            let lens = view.origin + disk.x * view.right.normalize() + disk.y * view.up.normalize();
+            let focus = view.origin + through * view.focus_distance;
+            Ray::new(lens, (focus - lens).normalize())
+        }
+        _ => Ray::new(view.origin, through.normalize()),
+    }
 }
 
 /// Whether the differential strategy may place its differential vertex on material `m`: its
@@ -178,7 +196,7 @@ pub fn trace_path<const ADJOINT: bool>(
     let fy = crate::sampling::filter_sample(kind, radius, alpha, py, globals.height, u_cam[1]);
     let sx = 2.0 * fx / globals.width as f32 - 1.0;
     let sy = 1.0 - 2.0 * fy / globals.height as f32;
-    let mut ray = Ray::new(view.origin, (view.forward + sx * view.right + sy * view.up).normalize());
+    let mut ray = camera_ray(view, sx, sy, Vec2::new(u_cam[2], u_cam[3]));
 
     let mut throughput = Vec3::ONE; // β (ALGORITHMS.md §3.1)
     let mut radiance = if ADJOINT { radiance_total } else { Vec3::ZERO }; // L (adjoint: the suffix)
@@ -355,6 +373,9 @@ pub fn trace_path<const ADJOINT: bool>(
         } else {
             None
         };
+        // The medium across this surface on each side: a shape's interior beyond a dielectric
+        // boundary, else the path's current one.
+        let interior = flat.shading[flat.bvh.prim_ids[hit.slot as usize] as usize].interior;
         if let Some(es) = es {
             let (wl, p_e, shadow_tmax, origin) = if es.delta && es.distant {
                 (es.point, es.pdf, f32::MAX, offset_origin(s.p, s.ng, es.point))
@@ -383,7 +404,7 @@ pub fn trace_path<const ADJOINT: bool>(
                 medium::shadow_transmittance(
                     flat,
                     key,
-                    current,
+                    medium::medium_crossed(interior, s.ng, wl, current),
                     (origin, wl, shadow_tmax),
                     (pixel, sample, vertex),
                     None,
@@ -411,7 +432,8 @@ pub fn trace_path<const ADJOINT: bool>(
                     let segment = (origin, wl, shadow_tmax);
                     let weight = adj_radiance * throughput * tr * w_n * f * es.radiance / p_e;
                     let counters = (pixel, sample, vertex);
-                    medium::shadow_transmittance(flat, key, current, segment, counters, Some((&mut *sink, weight)));
+                    let start = medium::medium_crossed(interior, s.ng, wl, current);
+                    medium::shadow_transmittance(flat, key, start, segment, counters, Some((&mut *sink, weight)));
                 }
                 if ADJOINT {
                     let adj = adj_radiance * throughput * tr * w_n * es.radiance / p_e;
@@ -478,6 +500,8 @@ pub fn trace_path<const ADJOINT: bool>(
         }
 
         let wo_world = frame.to_world(bs.wo);
+        // A direction through a dielectric boundary enters or leaves its shape's medium.
+        current = medium::medium_crossed(interior, s.ng, wo_world, current);
         ray = Ray::new(offset_origin(s.p, s.ng, wo_world), wo_world);
     }
     radiance

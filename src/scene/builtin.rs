@@ -52,6 +52,7 @@ fn cornell_box() -> Result<Scene> {
         width: 256,
         height: 256,
         filter: crate::scene::PixelFilter::Box,
+        lens: crate::scene::Lens::Pinhole,
     };
     let mut s = Scene::new("builtin:cornell-box", camera);
     let white = s.add_diffuse("white", Vec3::new(0.725, 0.71, 0.68))?;
@@ -90,6 +91,7 @@ fn furnace() -> Result<Scene> {
         width: 64,
         height: 64,
         filter: crate::scene::PixelFilter::Box,
+        lens: crate::scene::Lens::Pinhole,
     };
     let mut s = Scene::new("builtin:furnace", camera);
     let white = s.add_diffuse("object", Vec3::ONE)?;
@@ -123,6 +125,7 @@ fn blend() -> Result<Scene> {
         width: 256,
         height: 192,
         filter: crate::scene::PixelFilter::Box,
+        lens: crate::scene::Lens::Pinhole,
     };
     let mut s = Scene::new("builtin:blend", camera);
     let floor = s.add_diffuse("floor", Vec3::new(0.5, 0.5, 0.5))?;

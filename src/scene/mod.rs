@@ -249,6 +249,36 @@ pub struct Camera {
     pub height: u32,
     /// The film's reconstruction filter.
     pub filter: PixelFilter,
+    /// What projects the film onto the scene: a pinhole (`fov_y_degrees`), a thin lens around it,
+    /// or an orthographic projection.
+    pub lens: Lens,
+}
+
+/// A camera's projection (Mitsuba's `perspective`, `thinlens` and `orthographic` sensors).
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub enum Lens {
+    /// Rays from one point, through the film at `fov_y_degrees`.
+    #[default]
+    Pinhole,
+    /// Rays from a point on a disk of `aperture_radius` around the position, through the point of
+    /// the plane `focus_distance` ahead where the pinhole's ray meets it: in focus on that plane.
+    Thin {
+        /// The aperture's radius (world units).
+        aperture_radius: f32,
+        /// Distance from the lens to the plane in focus, along the view.
+        focus_distance: f32,
+    },
+    /// Parallel rays along the view from a film of `2·half_height` (and the render's aspect ×
+    /// `stretch` times that wide) in the plane `near_clip` ahead of the position.
+    Orthographic {
+        /// Half the film's height in world units.
+        half_height: f32,
+        /// The film's width per unit of height, over the render's aspect ratio (1 unless the
+        /// sensor's `to_world` scales x and y differently).
+        stretch: f32,
+        /// Where rays start, ahead of the position (Mitsuba's `near_clip`).
+        near_clip: f32,
+    },
 }
 
 /// A film's reconstruction filter, as Mitsuba 3's `rfilter`s: a pixel's value is the filter-

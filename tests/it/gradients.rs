@@ -209,6 +209,7 @@ fn replay_returns_to_zero_on_every_path() {
     all.push(scenes::textured_environment());
     all.push(scenes::open_furnace());
     all.push(scenes::conformance("bsdf_roughdielectric"));
+    all.push(scenes::conformance("medium_in_dielectric"));
     for scene in &all {
         let opts = RenderOptions { width: 64, height: 64, spp: 2, seed: 1, ..RenderOptions::for_scene(scene) };
         let adjoint = adjoint_pattern(opts.width, opts.height);

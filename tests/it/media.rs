@@ -148,19 +148,37 @@ fn a_heterogeneous_medium_exists_only_in_its_volume_box() {
 }
 
 /// An albedo-1 medium in a white furnace (environment 1, nothing else): light is neither lost
-/// nor gained, so every pixel is 1 in expectation, whatever the scattering. z-test, |z| < 4.
+/// nor gained, so every pixel is 1 in expectation, whatever the scattering — behind a null
+/// boundary, or behind smooth glass (whose refractions scale radiance by η² going in and 1/η²
+/// coming out, and trap some of it by total internal reflection for a while). z-test, |z| < 4.
+///
+/// Behind glass the extinction is grey: with an RGB σ_t, trapped paths scatter so often that the
+/// spectral tracking's weights make the 64-sample mean too noisy to test (Mitsuba's own volpath
+/// is off by 4 % at 4096 samples there). Rough glass is no furnace: a single-scattering microfacet
+/// interface loses energy at every crossing (GGX α 0.3 around this medium: 0.773 in pathgrad,
+/// 0.772 in Mitsuba 3.9.1's volpath, 4096 samples); the conformance matrix compares it instead.
 #[test]
 fn an_albedo_one_medium_in_a_white_furnace_is_white() {
+    for (boundary, sigma_t) in [
+        (r#"<bsdf type="null"/>"#, r#"<rgb name="sigma_t" value="2, 3, 4"/>"#),
+        (r#"<bsdf type="dielectric"/>"#, r#"<float name="sigma_t" value="3"/>"#),
+    ] {
+        furnace_is_white(boundary, sigma_t);
+    }
+}
+
+fn furnace_is_white(boundary: &str, sigma_t: &str) {
     let dir = tempfile::tempdir().unwrap();
     let s = scene(
         dir.path(),
         &format!(
             r#"{}<integrator type="volpath"><integer name="max_depth" value="-1"/></integrator><emitter type="constant"><rgb name="radiance" value="1, 1, 1"/></emitter>
-            <shape type="sphere" id="cloud"><bsdf type="null"/><medium type="homogeneous" name="interior"><rgb name="sigma_t" value="2, 3, 4"/><float name="albedo" value="1"/><phase type="hg"><float name="g" value="0.5"/></phase></medium></shape>"#,
+            <shape type="sphere" id="cloud">{boundary}<medium type="homogeneous" name="interior">{sigma_t}<float name="albedo" value="1"/><phase type="hg"><float name="g" value="0.5"/></phase></medium></shape>"#,
             sensor("0, 0, 4", 30.0, 16)
         ),
     );
     let image = Reference::new(&s).unwrap().render(&RenderOptions { spp: 64, seed: 5, ..RenderOptions::for_scene(&s) });
+    println!("{boundary}");
     for c in 0..3 {
         let channel: Vec<f32> = image.as_ref().unwrap().as_slice().iter().skip(c).step_by(3).copied().collect();
         let n = channel.len() as f64;

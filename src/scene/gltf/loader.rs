@@ -127,6 +127,7 @@ impl Loader<'_> {
             width: DEFAULT_WIDTH,
             height,
             filter: crate::scene::PixelFilter::Box,
+            lens: crate::scene::Lens::Pinhole,
         };
         // Named by its node (node names are unique: `unique_names`).
         self.cameras.push(crate::scene::Sensor { name: self.node_names[node].clone(), camera });

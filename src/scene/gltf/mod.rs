@@ -230,6 +230,7 @@ fn placeholder_camera() -> Camera {
         width: DEFAULT_WIDTH,
         height: DEFAULT_WIDTH,
         filter: crate::scene::PixelFilter::Box,
+        lens: crate::scene::Lens::Pinhole,
     }
 }
 

@@ -92,6 +92,7 @@ pub(super) fn load_text_with(text: &str, file: &Path, options: &LoadOptions, mes
         width: 1,
         height: 1,
         filter: crate::scene::PixelFilter::Box,
+        lens: crate::scene::Lens::Pinhole,
     };
     let mut loader = Loader {
         x: Xml::new(name.clone(), &doc).with_sources(&sources),

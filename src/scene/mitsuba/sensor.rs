@@ -14,7 +14,7 @@ use super::loader::Loader;
 use super::xml::{El, Props, Transform};
 use crate::error::Result;
 use crate::integrator::{DEFAULT_RR_DEPTH, UNBOUNDED_DEPTH_CAP};
-use crate::scene::{Camera, PixelFilter};
+use crate::scene::{Camera, Lens, PixelFilter};
 
 /// Mitsuba's default film size.
 const DEFAULT_FILM: (u32, u32) = (768, 576);
@@ -72,6 +72,9 @@ pub(super) fn vertical_fov(fov: f32, axis: FovAxis, width: u32, height: u32) -> 
     (2.0 * tan_y.atan().to_degrees()) as f32
 }
 
+/// The pinhole field of view an orthographic camera carries (unused by its lens).
+const DEFAULT_ORTHOGRAPHIC_FOV: f32 = 45.0;
+
 /// Mitsuba 3's `perspective` clip distances when the scene names none.
 const MITSUBA_NEAR_CLIP: f32 = 0.01;
 const MITSUBA_FAR_CLIP: f32 = 10_000.0;
@@ -80,8 +83,11 @@ impl<'a> Loader<'a> {
     /// Reads the sensor into `scene.camera` (and `default_spp`).
     pub(super) fn sensor(&mut self, node: El<'a>) -> Result<()> {
         let p = Props::parse(&self.x, node)?;
-        if p.kind != "perspective" {
-            return Err(self.x.err(node, format!("unsupported plugin '{}' (supported: perspective)", p.kind)));
+        if !matches!(p.kind.as_str(), "perspective" | "thinlens" | "orthographic") {
+            return Err(self.x.err(
+                node,
+                format!("unsupported plugin '{}' (supported: perspective, thinlens, orthographic)", p.kind),
+            ));
         }
         let films = p.take_nested(&["film"]);
         // Mitsuba's hdrfilm reconstructs with a Gaussian (σ = 0.5) unless told otherwise.
@@ -101,9 +107,29 @@ impl<'a> Loader<'a> {
             [s] => self.sampler(s)?,
             [_, second, ..] => return Err(self.x.err(second, "a sensor has at most one <sampler>")),
         }
-        // A pinhole has no focus: Mitsuba's `perspective` reads no `focus_distance` either (scenes
-        // written for `thinlens` keep it), so it changes nothing and is accepted silently.
-        p.float(&self.x, "focus_distance")?;
+        if p.kind == "orthographic" {
+            return self.orthographic(&p, width, height, filter);
+        }
+        let lens = if p.kind == "thinlens" {
+            let aperture_radius = match p.float(&self.x, "aperture_radius")? {
+                Some((r, _)) if r > 0.0 && r.is_finite() => r,
+                Some((r, n)) => return Err(self.x.err(n, format!("'aperture_radius' must be positive, got {r}"))),
+                None => return Err(self.x.err(node, "'thinlens' needs the property 'aperture_radius'")),
+            };
+            let far = p.float(&self.x, "far_clip")?.map_or(MITSUBA_FAR_CLIP, |(v, _)| v);
+            let focus_distance = match p.float(&self.x, "focus_distance")? {
+                Some((d, _)) if d > 0.0 && d.is_finite() => d,
+                Some((d, n)) => return Err(self.x.err(n, format!("'focus_distance' must be positive, got {d}"))),
+                // Mitsuba's default: the far clip distance.
+                None => far,
+            };
+            Lens::Thin { aperture_radius, focus_distance }
+        } else {
+            // A pinhole has no focus: Mitsuba's `perspective` reads no `focus_distance` either
+            // (scenes written for `thinlens` keep it), so it changes nothing and is accepted silently.
+            p.float(&self.x, "focus_distance")?;
+            Lens::Pinhole
+        };
         let axis = match p.string(&self.x, "fov_axis")? {
             None => FovAxis::X,
             Some((s, n)) => match s.to_ascii_lowercase().as_str() {
@@ -181,11 +207,39 @@ impl<'a> Loader<'a> {
             None => (Vec3::ZERO, Vec3::Z, Vec3::Y),
             Some((t, n)) => camera_frame(&t).map_err(|m| self.x.err(n, m))?,
         };
-        self.scene.camera = Camera { position, target, up, fov_y_degrees: fov_y, width, height, filter };
+        self.scene.camera = Camera { position, target, up, fov_y_degrees: fov_y, width, height, filter, lens };
         // Whether they clip anything is known once the shapes are built.
         let at = self.scene.warnings.len();
         for (near, depth, warning) in clips {
             self.clips.push(super::loader::PendingClip { camera: self.scene.camera, near, depth, warning, at });
+        }
+        Ok(())
+    }
+
+    /// Mitsuba's `orthographic` sensor: parallel rays along `to_world`'s z from the film, which
+    /// spans x ∈ [−1, 1] and y ∈ [−1/aspect, 1/aspect] of `to_world`'s frame (so its x and y
+    /// scales size it) on the plane `near_clip` ahead; pathgrad starts rays there as Mitsuba does,
+    /// and renders beyond `far_clip` (with a warning where that matters).
+    fn orthographic(&mut self, p: &Props<'a>, width: u32, height: u32, filter: PixelFilter) -> Result<()> {
+        let near = p.float(&self.x, "near_clip")?.map_or(MITSUBA_NEAR_CLIP, |(v, _)| v);
+        let far = p.float(&self.x, "far_clip")?;
+        let transform = p.transform(&self.x, "to_world")?;
+        self.finish(p)?;
+        let (position, target, up, scale) = match transform {
+            None => (Vec3::ZERO, Vec3::Z, Vec3::Y, Vec3::ONE),
+            Some((t, n)) => scaled_camera_frame(&t).map_err(|m| self.x.err(n, m))?,
+        };
+        let aspect = width as f32 / height as f32;
+        let lens =
+            Lens::Orthographic { half_height: scale.y / aspect, stretch: scale.x / scale.y, near_clip: near * scale.z };
+        // fov_y_degrees is the pinhole's: unused by this lens, a valid value for the checks.
+        self.scene.camera =
+            Camera { position, target, up, fov_y_degrees: DEFAULT_ORTHOGRAPHIC_FOV, width, height, filter, lens };
+        if let Some((depth, n)) = far {
+            let warning =
+                self.x.warning(n, "property 'far_clip' of 'orthographic' ignored: pathgrad's camera does not clip far");
+            let at = self.scene.warnings.len();
+            self.clips.push(super::loader::PendingClip { camera: self.scene.camera, near: false, depth, warning, at });
         }
         Ok(())
     }
@@ -411,6 +465,28 @@ impl<'a> Loader<'a> {
 ///
 /// # Errors
 /// A singular, mirroring, or non-similarity transform.
+/// An orthographic sensor's frame from its `to_world`: a rotation (without mirroring) times a
+/// scale per axis, and a translation. Returns position, target, up and the scale.
+///
+/// # Errors
+/// A singular, mirroring or sheared transform.
+pub(super) fn scaled_camera_frame(t: &Transform) -> std::result::Result<(Vec3, Vec3, Vec3, Vec3), String> {
+    let m: Mat4 = t.matrix;
+    let (x, y, z) = (m.x_axis.truncate(), m.y_axis.truncate(), m.z_axis.truncate());
+    let (lx, ly, lz) = (x.length(), y.length(), z.length());
+    if !(x.dot(y.cross(z)) > 0.0) {
+        return Err("the sensor's to_world is singular or mirrors the image (pathgrad's camera cannot)".into());
+    }
+    let orthogonal = x.dot(y).abs() <= SIMILARITY_TOLERANCE * lx * ly
+        && x.dot(z).abs() <= SIMILARITY_TOLERANCE * lx * lz
+        && y.dot(z).abs() <= SIMILARITY_TOLERANCE * ly * lz;
+    if !orthogonal {
+        return Err("an orthographic sensor's to_world must be a rotation, a scale per axis and a translation".into());
+    }
+    let position = m.w_axis.truncate();
+    Ok((position, position + z / lz, y / ly, Vec3::new(lx, ly, lz)))
+}
+
 pub(super) fn camera_frame(t: &Transform) -> std::result::Result<(Vec3, Vec3, Vec3), String> {
     let m: Mat4 = t.matrix;
     let (x, y, z) = (m.x_axis.truncate(), m.y_axis.truncate(), m.z_axis.truncate());

@@ -38,13 +38,21 @@ pub const MAX_SEGMENTS: u32 = 1024;
 /// that distance covers at most `rΔ²k/8 / (d · θpx)` pixels, where θpx is the smallest angle a
 /// pixel subtends (at the film's corner: `2 tan(fov/2)/h / (1 + tan²x + tan²y)`). Solving for the
 /// bound gives `Δ = √(8ε·d·θpx / (k·r))`. Rendering at k× the film's resolution scales the error
-/// by k.
+/// by k. An orthographic camera's pixel is `2·half_height/h` wide at any distance, which takes the
+/// place of `d·θpx`.
 pub fn segments_for(camera: &Camera, center: Vec3, radius: f32, cell: f32) -> u32 {
-    let tan_y = (camera.fov_y_degrees.to_radians() * 0.5).tan();
-    let tan_x = tan_y * camera.width as f32 / camera.height as f32;
-    let pixel_angle = 2.0 * tan_y / camera.height as f32 / (1.0 + tan_x * tan_x + tan_y * tan_y);
-    let distance = (center - camera.position).length() - radius;
-    let delta = (8.0 * MAX_CHORD_ERROR_PX * distance * pixel_angle / (cell * radius)).sqrt();
+    let pixel_size = match camera.lens {
+        crate::scene::Lens::Orthographic { half_height, stretch, .. } => {
+            2.0 * half_height * stretch.min(1.0) / camera.height as f32
+        }
+        _ => {
+            let tan_y = (camera.fov_y_degrees.to_radians() * 0.5).tan();
+            let tan_x = tan_y * camera.width as f32 / camera.height as f32;
+            let pixel_angle = 2.0 * tan_y / camera.height as f32 / (1.0 + tan_x * tan_x + tan_y * tan_y);
+            ((center - camera.position).length() - radius) * pixel_angle
+        }
+    };
+    let delta = (8.0 * MAX_CHORD_ERROR_PX * pixel_size / (cell * radius)).sqrt();
     let n = if delta.is_finite() && delta > 0.0 { (TAU / delta).ceil() } else { MAX_SEGMENTS as f32 };
     let n = (n as u32).clamp(MIN_SEGMENTS, MAX_SEGMENTS);
     n + n % 2
@@ -322,24 +330,10 @@ impl<'a> Loader<'a> {
             [e] => Some(self.area_emitter(e, &name)?),
             [_, second, ..] => return Err(self.x.err(second, "a shape takes one emitter")),
         };
+        // Paths enter the medium through the shape's boundary where it lets light through: a
+        // null or dielectric BSDF (an opaque one keeps it out).
         let interior = match interior {
-            Some(m) => {
-                let refracting = matches!(
-                    self.scene.materials.get(material.0 as usize),
-                    Some(crate::scene::Material::Smooth { kind, .. }) if *kind != crate::bsdf::specular::SmoothKind::Conductor
-                ) || matches!(
-                    self.scene.materials.get(material.0 as usize),
-                    Some(crate::scene::Material::RoughDielectric { .. })
-                );
-                if refracting {
-                    return Err(self.x.err(
-                        m,
-                        "a medium inside a dielectric is not supported yet: paths enter media through a 'null' \
-                         boundary",
-                    ));
-                }
-                Some(self.medium(m, format!("{name}.interior_medium"))?)
-            }
+            Some(m) => Some(self.medium(m, format!("{name}.interior_medium"))?),
             None => None,
         };
         let overflowed_before = self.scene.overflowed_triangles;

@@ -781,7 +781,7 @@ fn smooth_bsdfs_take_mitsubas_properties_and_names() {
     assert_eq!(param(&scene, "g.bsdf.specular_transmittance.value"), [0.9, 0.8, 0.7]);
     assert_eq!(param(&scene, "m.bsdf.specular_reflectance.value"), [1.0; 3]);
     assert!(scene.params.find("g.bsdf.specular_reflectance.value").is_none());
-    // Not inside a blend, and no medium inside a dielectric.
+    // Not inside a blend.
     let e = load(&format!(
         r#"{light}<shape type="cube"><bsdf type="blendbsdf"><float name="weight" value="0.5"/><bsdf type="dielectric"/><bsdf type="diffuse"/></bsdf></shape>"#
     ))
@@ -789,13 +789,6 @@ fn smooth_bsdfs_take_mitsubas_properties_and_names() {
     .unwrap_err()
     .to_string();
     assert!(e.contains("'blendbsdf' children must both be diffuse/roughconductor/roughplastic"), "{e}");
-    let e = load(&format!(
-        r#"{light}<shape type="cube"><bsdf type="dielectric"/><medium type="homogeneous" name="interior"/></shape>"#
-    ))
-    .map(|_| ())
-    .unwrap_err()
-    .to_string();
-    assert!(e.contains("a medium inside a dielectric is not supported yet"), "{e}");
     let e = load(&format!(
         r#"{light}<shape type="cube"><bsdf type="twosided"><bsdf type="thindielectric"/></bsdf></shape>"#
     ))
@@ -868,10 +861,6 @@ fn rough_dielectric_takes_mitsubas_properties_and_names() {
         (
             r#"<bsdf type="roughdielectric"><texture name="specular_transmittance" type="bitmap"><string name="filename" value="x.png"/></texture></bsdf>"#,
             "textured 'specular_transmittance'",
-        ),
-        (
-            r#"<bsdf type="roughdielectric"/><medium type="homogeneous" name="interior"/>"#,
-            "a medium inside a dielectric",
         ),
     ] {
         let e = load(&format!(r#"<shape type="cube">{body}</shape>"#)).unwrap_err().to_string();

@@ -31,7 +31,7 @@ fn fixtures_give_their_pinned_messages() {
         (
             "unsupported_plugin.xml",
             "5:5: <bsdf id=\"shiny\">: unsupported plugin 'pplastic' (supported: blendbsdf, conductor, dielectric, diffuse, \
-             null, plastic, roughconductor, roughplastic, thindielectric, twosided)"
+             null, plastic, roughconductor, roughdielectric, roughplastic, thindielectric, twosided)"
                 .into(),
         ),
         ("bad_rgb.xml", "7:13: <rgb name=\"reflectance\">: value: expected a number, got 'x'".into()),
@@ -461,7 +461,11 @@ fn sensor_errors() {
     }
     assert_eq!(
         doc_err(r#"<scene version="3.0.0"><sensor type="thinlens"/></scene>"#),
-        "doc.xml:1:24: <sensor>: unsupported plugin 'thinlens' (supported: perspective)"
+        "doc.xml:1:24: <sensor>: 'thinlens' needs the property 'aperture_radius'"
+    );
+    assert_eq!(
+        doc_err(r#"<scene version="3.0.0"><sensor type="radiancemeter"/></scene>"#),
+        "doc.xml:1:24: <sensor>: unsupported plugin 'radiancemeter' (supported: perspective, thinlens, orthographic)"
     );
 }
 

@@ -18,6 +18,7 @@ pub fn open_furnace() -> Scene {
         width: 48,
         height: 48,
         filter: PixelFilter::Box,
+        lens: pathgrad::scene::Lens::Pinhole,
     };
     let mut s = Scene::new("test:open-furnace", camera);
     let white = s.add_diffuse("object", Vec3::ONE).unwrap();
@@ -52,6 +53,7 @@ pub fn textured_environment() -> Scene {
         width: 64,
         height: 48,
         filter: PixelFilter::Box,
+        lens: pathgrad::scene::Lens::Pinhole,
     };
     let mut s = Scene::new("test:textured-environment", camera);
     let mut texels = Vec::new();
@@ -95,6 +97,7 @@ pub fn deep_meshes() -> Scene {
         width: 64,
         height: 48,
         filter: PixelFilter::Box,
+        lens: pathgrad::scene::Lens::Pinhole,
     };
     let mut s = Scene::new("test:deep-meshes", camera);
     let grey = s.add_diffuse("grey", Vec3::splat(0.6)).unwrap();
