@@ -109,6 +109,10 @@ MATRIX = {
     "bsdf_blend_twosided_leaves": dict(features=["blendbsdf of twosided leaves"], grads=["panel.bsdf.weight.value"]),
     "bsdf_twosided_blend": dict(features=["twosided(blendbsdf)", "shared bsdf ref"], grads=["coat.brdf_0.weight.value"]),
     "bsdf_null": dict(features=["null bsdf (no medium)"], grads=["ball.bsdf.reflectance.value"]),
+    "sensor_orthographic": dict(features=["orthographic", "to_world scale sizes the film", "near_clip"],
+                                grads=["ball.bsdf.reflectance.value", "box.bsdf.alpha.value"]),
+    "sensor_thinlens": dict(features=["thinlens", "aperture_radius", "focus_distance", "fov_axis smaller"],
+                            grads=["ball.bsdf.reflectance.value", "box.bsdf.reflectance.value"]),
     # ---- emitter
     "emitter_area_rgb": dict(features=["area", "rgb radiance", "emitter seen directly"], grads=["light.emitter.radiance.value"]),
     "emitter_area_spectrum": dict(features=["area", "<spectrum value> radiance"], grads=["light.emitter.radiance.value"]),

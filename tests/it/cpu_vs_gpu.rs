@@ -35,6 +35,8 @@ fn gpu_equals_cpu_per_path_on_every_builtin_and_test_scene() {
     scenes.push(crate::support::scenes::conformance("bsdf_plastic"));
     scenes.push(crate::support::scenes::conformance("bsdf_roughdielectric"));
     scenes.push(crate::support::scenes::conformance("medium_in_dielectric"));
+    scenes.push(crate::support::scenes::conformance("sensor_orthographic"));
+    scenes.push(crate::support::scenes::conformance("sensor_thinlens"));
     for scene in &scenes {
         let name = &scene.source;
         let opts = RenderOptions { width: 96, height: 96, spp: 1, seed: 7, ..RenderOptions::for_scene(scene) };

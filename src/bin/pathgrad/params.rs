@@ -1,6 +1,7 @@
 //! `pathgrad params`: a scene's differentiable parameters and its sensors.
 
 use anyhow::Result;
+use pathgrad::scene::Lens;
 
 pub(crate) fn params(spec: &str, defines: &[(String, String)], json: bool, allow_outside_folder: bool) -> Result<()> {
     let options =
@@ -24,9 +25,16 @@ pub(crate) fn params(spec: &str, defines: &[(String, String)], json: bool, allow
             .enumerate()
             .map(|(i, s)| {
                 let c = &s.camera;
+                let lens = match c.lens {
+                    Lens::Pinhole => serde_json::json!({"kind": "pinhole"}),
+                    Lens::Thin { aperture_radius, focus_distance } => serde_json::json!({"kind": "thin",
+                        "aperture_radius": aperture_radius, "focus_distance": focus_distance}),
+                    Lens::Orthographic { half_height, stretch, near_clip } => serde_json::json!({
+                        "kind": "orthographic", "half_height": half_height, "stretch": stretch, "near_clip": near_clip}),
+                };
                 serde_json::json!({"index": i, "name": s.name, "position": c.position.to_array(),
                     "target": c.target.to_array(), "up": c.up.to_array(), "fov_y_degrees": c.fov_y_degrees,
-                    "width": c.width, "height": c.height})
+                    "width": c.width, "height": c.height, "lens": lens})
             })
             .collect();
         println!("{}", serde_json::to_string_pretty(&serde_json::json!({"params": items, "sensors": sensors}))?);
@@ -44,12 +52,19 @@ pub(crate) fn params(spec: &str, defines: &[(String, String)], json: bool, allow
         println!("sensors (--sensor INDEX|NAME; the first is the default):");
         for (i, s) in scene.sensors.iter().enumerate() {
             let c = &s.camera;
+            let projection = match c.lens {
+                Lens::Pinhole => format!("fov_y {:.2}°", c.fov_y_degrees),
+                Lens::Thin { aperture_radius, focus_distance } => format!(
+                    "fov_y {:.2}°, thin lens of radius {aperture_radius} in focus at {focus_distance}",
+                    c.fov_y_degrees
+                ),
+                Lens::Orthographic { half_height, .. } => format!("orthographic, {:.3} high", 2.0 * half_height),
+            };
             println!(
-                "  {i}: {:<24} at {:?} towards {:?}, fov_y {:.2}°, {}×{}",
+                "  {i}: {:<24} at {:?} towards {:?}, {projection}, {}×{}",
                 s.name,
                 c.position.to_array(),
                 c.target.to_array(),
-                c.fov_y_degrees,
                 c.width,
                 c.height
             );

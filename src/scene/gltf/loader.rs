@@ -7,6 +7,9 @@ use glam::{Mat4, Quat, Vec2, Vec3};
 use json::validation::Checked;
 
 use crate::error::{Error, Result};
+
+/// The pinhole field of view an orthographic camera carries (unused by its lens; degrees).
+const DEFAULT_ORTHOGRAPHIC_FOV: f32 = 45.0;
 use crate::scene::Camera;
 use crate::scene::shapes::Geometry;
 
@@ -96,22 +99,41 @@ impl Loader<'_> {
         let root = self.root;
         let camera = &root.cameras[index];
         let at = format!("cameras[{index}]");
-        let perspective = match (&camera.type_, &camera.perspective) {
-            (Checked::Valid(json::camera::Type::Perspective), Some(p)) => p,
-            (Checked::Valid(json::camera::Type::Orthographic), _) => {
-                self.scene.warn(format!("{at}: orthographic cameras are not supported; ignored"));
-                return Ok(());
+        // (vertical fov, height, lens): a pinhole, or parallel rays from a film of half extents
+        // xmag × ymag on the plane znear ahead.
+        let (yfov, height, lens) = match (&camera.type_, &camera.perspective, &camera.orthographic) {
+            (Checked::Valid(json::camera::Type::Perspective), Some(perspective), _) => {
+                let yfov = perspective.yfov;
+                if !(yfov > 0.0 && yfov < std::f32::consts::PI) {
+                    return Err(self.error(at, format!("yfov {yfov} must lie in (0, π)")));
+                }
+                let height = match perspective.aspect_ratio {
+                    None => DEFAULT_WIDTH,
+                    Some(a) if a > 0.0 && a.is_finite() => ((DEFAULT_WIDTH as f32 / a).round() as u32).max(1),
+                    Some(a) => return Err(self.error(at, format!("aspectRatio {a} must be positive"))),
+                };
+                (yfov, height, crate::scene::Lens::Pinhole)
             }
-            _ => return Err(self.error(at, "needs type 'perspective' with a 'perspective' object")),
-        };
-        let yfov = perspective.yfov;
-        if !(yfov > 0.0 && yfov < std::f32::consts::PI) {
-            return Err(self.error(at, format!("yfov {yfov} must lie in (0, π)")));
-        }
-        let height = match perspective.aspect_ratio {
-            None => DEFAULT_WIDTH,
-            Some(a) if a > 0.0 && a.is_finite() => ((DEFAULT_WIDTH as f32 / a).round() as u32).max(1),
-            Some(a) => return Err(self.error(at, format!("aspectRatio {a} must be positive"))),
+            (Checked::Valid(json::camera::Type::Orthographic), _, Some(o)) => {
+                let (x, y) = (o.xmag.abs(), o.ymag.abs());
+                if !(x > 0.0 && y > 0.0 && x.is_finite() && y.is_finite()) {
+                    return Err(self.error(at, format!("xmag {} and ymag {} must be non-zero", o.xmag, o.ymag)));
+                }
+                let height = ((DEFAULT_WIDTH as f32 * y / x).round() as u32).max(1);
+                let aspect = DEFAULT_WIDTH as f32 / height as f32;
+                let lens = crate::scene::Lens::Orthographic {
+                    half_height: y,
+                    stretch: x / y / aspect,
+                    near_clip: o.znear.max(0.0),
+                };
+                (DEFAULT_ORTHOGRAPHIC_FOV.to_radians(), height, lens)
+            }
+            _ => {
+                return Err(self.error(
+                    at,
+                    "needs type 'perspective' with a 'perspective' object, or 'orthographic' with an 'orthographic' one",
+                ));
+            }
         };
         let position = world.transform_point3(Vec3::ZERO);
         let forward = world.transform_vector3(-Vec3::Z).normalize_or_zero();
@@ -127,7 +149,7 @@ impl Loader<'_> {
             width: DEFAULT_WIDTH,
             height,
             filter: crate::scene::PixelFilter::Box,
-            lens: crate::scene::Lens::Pinhole,
+            lens,
         };
         // Named by its node (node names are unique: `unique_names`).
         self.cameras.push(crate::scene::Sensor { name: self.node_names[node].clone(), camera });

@@ -357,3 +357,24 @@ fn an_environment_lights_a_scene_without_emitters() {
     let e = load_with(&data("no_camera.gltf"), &bad).unwrap_err().to_string();
     assert!(e.contains("LoadOptions::environment") && e.contains("must be finite and ≥ 0"), "{e}");
 }
+
+/// An orthographic camera becomes an orthographic lens: the film's half extents are xmag × ymag
+/// (its aspect ratio theirs), rays start on the plane znear ahead.
+#[test]
+fn an_orthographic_camera_maps_to_the_orthographic_lens() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut doc: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string("scenes/twin/twin.gltf").unwrap()).unwrap();
+    doc["cameras"] = serde_json::json!([{ "type": "orthographic",
+        "orthographic": { "xmag": 3.0, "ymag": 1.5, "znear": 0.25, "zfar": 100.0 } }]);
+    std::fs::copy("scenes/twin/twin.bin", dir.path().join("twin.bin")).unwrap();
+    let path = dir.path().join("ortho.gltf");
+    std::fs::write(&path, doc.to_string()).unwrap();
+    let s = load(&path).unwrap();
+    assert_eq!((s.camera.width, s.camera.height), (512, 256));
+    let crate::scene::Lens::Orthographic { half_height, stretch, near_clip } = s.camera.lens else {
+        panic!("{:?}", s.camera.lens)
+    };
+    assert_eq!((half_height, stretch, near_clip), (1.5, 1.0, 0.25));
+    s.validate().unwrap();
+}

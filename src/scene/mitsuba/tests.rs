@@ -867,3 +867,41 @@ fn rough_dielectric_takes_mitsubas_properties_and_names() {
         assert!(e.contains(message), "{body}: {e}");
     }
 }
+
+#[test]
+fn thinlens_and_orthographic_sensors_take_mitsubas_properties() {
+    use crate::scene::Lens;
+    let film = r#"<film type="hdrfilm"><integer name="width" value="40"/><integer name="height" value="20"/></film>"#;
+    let with = |sensor: &str| {
+        let xml =
+            format!(r#"<scene version="3.0.0">{sensor}<shape type="cube"><emitter type="area"/></shape></scene>"#);
+        load_text(&xml, Path::new("s.xml"), &[], obj_for_tests)
+    };
+    let lens = |sensor: &str| with(sensor).unwrap_or_else(|e| panic!("{e}")).camera.lens;
+    let thin = format!(r#"<sensor type="thinlens"><float name="aperture_radius" value="0.1"/>{film}</sensor>"#);
+    // Mitsuba's default focus distance is the far clip distance.
+    assert_eq!(lens(&thin), Lens::Thin { aperture_radius: 0.1, focus_distance: 10_000.0 });
+    let thin = thin.replace("</sensor>", r#"<float name="focus_distance" value="3"/></sensor>"#);
+    assert_eq!(lens(&thin), Lens::Thin { aperture_radius: 0.1, focus_distance: 3.0 });
+    // The film spans x ∈ [−1, 1] and y ∈ [−1/aspect, 1/aspect] of to_world's frame, whose x and
+    // y scales size it; rays start near_clip (times the z scale) ahead.
+    let ortho = format!(
+        r#"<sensor type="orthographic"><float name="near_clip" value="0.5"/><transform name="to_world"><scale x="3" y="2" z="4"/><lookat origin="0, 0, 5" target="0, 0, 0" up="0, 1, 0"/></transform>{film}</sensor>"#
+    );
+    assert_eq!(lens(&ortho), Lens::Orthographic { half_height: 1.0, stretch: 1.5, near_clip: 2.0 });
+    for (sensor, message) in [
+        (
+            format!(r#"<sensor type="thinlens"><float name="aperture_radius" value="0"/>{film}</sensor>"#),
+            "'aperture_radius' must be positive",
+        ),
+        (
+            format!(
+                r#"<sensor type="orthographic"><transform name="to_world"><matrix value="1 1 0 0 0 1 0 0 0 0 1 0 0 0 0 1"/></transform>{film}</sensor>"#
+            ),
+            "a rotation, a scale per axis and a translation",
+        ),
+    ] {
+        let e = with(&sensor).unwrap_err().to_string();
+        assert!(e.contains(message), "{sensor}: {e}");
+    }
+}
