@@ -338,7 +338,8 @@ bool path_step(inout PathState st) {
                 bsdf = resolve_bsdf(s.material, s.uv);
                 // A two-sided material seen from the back shades with the flipped normal.
                 if (HAS(F_TWO_SIDED) && materials[s.material].two_sided != 0u && dot(s.ns, wi_world) < 0.0) s.ns = -s.ns;
-                frame = shading_frame(s.ns);
+                frame = (HAS(F_ANISOTROPIC) && material_anisotropic(s.material)) ? tangent_frame(s.ns, s.ng, s.dpdu)
+                                                                                : shading_frame(s.ns);
                 wi = to_local(frame, wi_world);
                 gt.material = s.material;
                 gt.uv = s.uv;
@@ -516,9 +517,11 @@ bool path_step(inout PathState st) {
                 gt.bsdf.leaf0.color += g.leaf0.color;
                 gt.bsdf.leaf0.alpha += g.leaf0.alpha;
                 gt.bsdf.leaf0.trans += g.leaf0.trans;
+                gt.bsdf.leaf0.alpha_v += g.leaf0.alpha_v;
                 gt.bsdf.leaf1.color += g.leaf1.color;
                 gt.bsdf.leaf1.alpha += g.leaf1.alpha;
                 gt.bsdf.leaf1.trans += g.leaf1.trans;
+                gt.bsdf.leaf1.alpha_v += g.leaf1.alpha_v;
                 gt.bsdf.weight += g.weight;
             }
         } else {

@@ -143,6 +143,11 @@ impl Strategy {
                 use crate::scene::Material;
                 let uncovered = scene.materials.iter().find_map(|m| match m {
                     Material::RoughPlastic { alpha, .. } if *alpha == target => Some("a rough plastic's"),
+                    Material::RoughConductor { alpha, alpha_v, .. }
+                        if alpha != alpha_v && (*alpha == target || *alpha_v == target) =>
+                    {
+                        Some("an anisotropic rough conductor's")
+                    }
                     Material::RoughDielectric { alpha, .. } if *alpha == target => Some("a rough dielectric's"),
                     _ => None,
                 });
@@ -181,7 +186,8 @@ impl Strategy {
     pub fn has_differential_sampler(scene: &Scene, target: ParamId) -> bool {
         use crate::scene::Material;
         scene.materials.iter().any(|m| match m {
-            Material::RoughConductor { alpha, .. } => *alpha == target,
+            // The differential sampler is isotropic: an anisotropic conductor has none.
+            Material::RoughConductor { alpha, alpha_v, .. } => *alpha == target && alpha_v == alpha,
             Material::Blend { weight, .. } => *weight == target,
             _ => false,
         })

@@ -12,14 +12,16 @@
 
 // A rough plastic keeps (η, coating sampling weight, nonlinear) in `eta`, its specular
 // reflectance in `k` and its coating table's offset in `table` (Material's layout).
-struct Leaf { uint kind; uint distribution; float alpha; vec3 color; vec3 eta; vec3 k; uint table; };
+// A rough conductor's roughness is (alpha, alpha_v) (α_u along the frame's x, α_v along y); other
+// leaves read alpha only.
+struct Leaf { uint kind; uint distribution; float alpha; vec3 color; vec3 eta; vec3 k; uint table; float alpha_v; };
 struct Bsdf { Leaf leaf0; Leaf leaf1; float weight; bool blend; };
 // A delta lobe's sample (`delta`) has its choice probability as `pdf` and its weight × pdf as
 // `value` (src/bsdf/specular.rs).
 struct BsdfSample { vec3 wo; float pdf; vec3 value; bool valid; bool delta; };
 // ∂ by the colour (albedo or reflectance), the roughness and a dielectric's transmittance, per
 // image channel.
-struct LeafGrad { vec3 color; vec3 alpha; vec3 trans; };
+struct LeafGrad { vec3 color; vec3 alpha; vec3 trans; vec3 alpha_v; };
 struct BsdfGrad { LeafGrad leaf0; LeafGrad leaf1; vec3 weight; };
 
 // Whether `distribution` is Beckmann, folded to a constant when the kernel has only one of the two.
@@ -74,55 +76,60 @@ float diffuse_pdf(vec3 wi, vec3 wo) {
 // ---- rough conductor (ALGORITHMS.md §4.2) ----
 float tan2_theta(vec3 v) { return (v.x * v.x + v.y * v.y) / (v.z * v.z); }
 
-float microfacet_d(uint distribution, float alpha, vec3 h) {
+// D(h) for roughness a = (α_u, α_v): with T = (h_x²/α_u² + h_y²/α_v²)/h_z², Beckmann
+// e^{−T}/(π α_u α_v h_z⁴), GGX 1/(π α_u α_v h_z⁴ (1 + T)²) (twin: microfacet_d_aniso).
+float microfacet_d(uint distribution, vec2 a, vec3 h) {
     float c = h.z;
     if (c <= 0.0) return 0.0;
     float c2 = c * c;
-    float t = (h.x * h.x + h.y * h.y) / c2;
-    float a2 = alpha * alpha;
-    float d;
-    if (is_beckmann(distribution)) {
-        d = exp(-t / a2) / (PI * a2 * c2 * c2);
-    } else {
-        float s = a2 + t;
-        d = a2 / (PI * c2 * c2 * s * s);
-    }
+    float t = (h.x * h.x / (a.x * a.x) + h.y * h.y / (a.y * a.y)) / c2;
+    float norm = PI * a.x * a.y * c2 * c2;
+    float d = is_beckmann(distribution) ? exp(-t) / norm : 1.0 / (norm * (1.0 + t) * (1.0 + t));
     return d * c > D_UNDERFLOW ? d : 0.0;
 }
+float microfacet_d(uint distribution, float alpha, vec3 h) { return microfacet_d(distribution, vec2(alpha), h); }
 
-// Smith's G1 and its ∂/∂α (ALGORITHMS.md §4.2) from one evaluation: ∂G1/∂α is 0 where G1 is
-// constant (masked, or at normal incidence). Twin: microfacet_g1 and microfacet_g1_dalpha of
+// Smith's G1 and its derivatives by α_u and α_v (ALGORITHMS.md §4.2) from one evaluation, through
+// the projected roughness s² = (α_u² v_x² + α_v² v_y²)/v_z²: 0 where G1 is constant (masked, or at
+// normal incidence). Twin: microfacet_g1_aniso and microfacet_g1_dalpha_aniso of
 // src/bsdf/rough_conductor.rs, the same values.
-void microfacet_g1_and_dalpha(uint distribution, float alpha, vec3 v, vec3 h, out float g1, out float dg1) {
+void microfacet_g1_and_dalpha(uint distribution, vec2 a, vec3 v, vec3 h, out float g1, out vec2 dg1) {
     g1 = 0.0;
-    dg1 = 0.0;
+    dg1 = vec2(0.0);
     if (dot(v, h) * v.z <= 0.0) return;
-    float tan2 = tan2_theta(v);
-    if (tan2 == 0.0) {
+    if (tan2_theta(v) == 0.0) {
         g1 = 1.0;
         return;
     }
-    float s2 = alpha * alpha * tan2;
+    // precise: G1 must round the same whether or not a kernel also takes its derivative (which
+    // shares these values: the driver fused them differently when it was live), so kernels that
+    // differentiate fewer parameter kinds give the same bits.
+    precise float z2 = v.z * v.z;
+    precise float s2 = (a.x * a.x * v.x * v.x + a.y * a.y * v.y * v.y) / z2;
+    float dg_ds2;
     if (is_beckmann(distribution)) {
-        // Exact Smith Λ (not the rational fit): see src/bsdf/rough_conductor.rs. a > 0, so erf
+        // Exact Smith Λ (not the rational fit): see src/bsdf/rough_conductor.rs. b > 0, so erf
         // takes the exponential that Λ and the derivative use.
-        float a = 1.0 / sqrt(s2);
-        float e = exp(-a * a);
-        float lambda = 0.5 * (erf_nonnegative(a, e) - 1.0) + e / (2.0 * a * sqrt(PI));
+        precise float b = 1.0 / sqrt(s2);
+        precise float e = exp(-b * b);
+        precise float lambda = 0.5 * (erf_nonnegative(b, e) - 1.0) + e / (2.0 * b * sqrt(PI));
         g1 = 1.0 / (1.0 + lambda);
-        dg1 = -g1 * g1 * e / (2.0 * a * alpha * sqrt(PI));
-        return;
+        dg_ds2 = -g1 * g1 * e / (4.0 * b * s2 * sqrt(PI));
+    } else {
+        precise float root = sqrt(1.0 + s2);
+        g1 = 2.0 / (1.0 + root);
+        dg_ds2 = -1.0 / (root * (1.0 + root) * (1.0 + root));
     }
-    float root = sqrt(1.0 + s2);
-    g1 = 2.0 / (1.0 + root);
-    dg1 = -2.0 * (alpha * tan2 / root) / ((1.0 + root) * (1.0 + root));
+    dg1 = vec2(dg_ds2 * 2.0 * a.x * v.x * v.x / z2, dg_ds2 * 2.0 * a.y * v.y * v.y / z2);
 }
 
-float microfacet_g1(uint distribution, float alpha, vec3 v, vec3 h) {
-    float g1, dg1;
-    microfacet_g1_and_dalpha(distribution, alpha, v, h, g1, dg1);
+float microfacet_g1(uint distribution, vec2 a, vec3 v, vec3 h) {
+    float g1;
+    vec2 dg1;
+    microfacet_g1_and_dalpha(distribution, a, v, h, g1, dg1);
     return g1;
 }
+float microfacet_g1(uint distribution, float alpha, vec3 v, vec3 h) { return microfacet_g1(distribution, vec2(alpha), v, h); }
 
 vec3 fresnel_conductor(float c, vec3 eta, vec3 k) {
     float c2 = c * c;
@@ -143,49 +150,52 @@ vec3 microfacet_eval_pdf(Leaf l, vec3 wi, vec3 wo, out float pdf) {
     pdf = 0.0;
     if (wi.z <= 0.0 || wo.z <= 0.0) return vec3(0.0);
     vec3 h = normalize(wi + wo);
-    float d = microfacet_d(l.distribution, l.alpha, h);
-    float gi = microfacet_g1(l.distribution, l.alpha, wi, h);
+    vec2 a = vec2(l.alpha, l.alpha_v);
+    float d = microfacet_d(l.distribution, a, h);
+    float gi = microfacet_g1(l.distribution, a, wi, h);
     if (dot(wi, h) > 0.0 && dot(wo, h) > 0.0) pdf = d * gi / (4.0 * wi.z);
     if (d == 0.0) return vec3(0.0);
-    float g = gi * microfacet_g1(l.distribution, l.alpha, wo, h);
+    float g = gi * microfacet_g1(l.distribution, a, wo, h);
     return fresnel_conductor(dot(wi, h), l.eta, l.k) * l.color * (d * g / (4.0 * wi.z));
 }
 
-// ∂D/∂α (ALGORITHMS.md §4.2) given d = D(h); 0 where the underflow guard zeroes D (twin:
-// microfacet_d_dalpha, which computes D itself).
-float microfacet_d_dalpha_of(uint distribution, float alpha, vec3 h, float d) {
-    if (d == 0.0) return 0.0;
-    float t = (h.x * h.x + h.y * h.y) / (h.z * h.z);
-    float a2 = alpha * alpha;
-    if (is_beckmann(distribution)) return d * 2.0 * (t - a2) / (a2 * alpha);
-    return d * 2.0 * (t - a2) / (alpha * (a2 + t));
+// (∂D/∂α_u, ∂D/∂α_v) given d = D(h); 0 where the underflow guard zeroes D (twin:
+// microfacet_d_dalpha_aniso, which computes D itself).
+vec2 microfacet_d_dalpha_of(uint distribution, vec2 a, vec3 h, float d) {
+    if (d == 0.0) return vec2(0.0);
+    float x2 = h.x * h.x;
+    float y2 = h.y * h.y;
+    float z2 = h.z * h.z;
+    float scale = is_beckmann(distribution) ? 2.0 / z2 : 4.0 / (x2 / (a.x * a.x) + y2 / (a.y * a.y) + z2);
+    vec2 a3 = a * a * a;
+    return vec2(d * (scale * x2 / a3.x - 1.0 / a.x), d * (scale * y2 / a3.y - 1.0 / a.y));
 }
 
-// f̂ = F · specular · scalar with scalar = D G1 G1 / (4 cos θi); also ∂scalar/∂α.
-// The scalar D(h)·G1(wi, h)·G1(wo, h)/(4 cos θi) and its α-derivative (wi, wo in the upper
-// hemisphere); 0 where D underflows. Twin: microfacet_eval_scalar_parts of rough_conductor.rs.
-void microfacet_scalar_parts(uint distribution, float alpha, vec3 wi, vec3 wo, vec3 h, out float scalar,
-                             out float dscalar) {
+// The scalar D(h)·G1(wi, h)·G1(wo, h)/(4 cos θi) and its derivatives by α_u and α_v (wi, wo in
+// the upper hemisphere); 0 where D underflows. Twin: microfacet_eval_scalar_parts of
+// rough_conductor.rs. f̂ of a conductor is F · specular · scalar.
+void microfacet_scalar_parts(uint distribution, vec2 a, vec3 wi, vec3 wo, vec3 h, out float scalar, out vec2 dscalar) {
     scalar = 0.0;
-    dscalar = 0.0;
-    float d = microfacet_d(distribution, alpha, h);
+    dscalar = vec2(0.0);
+    float d = microfacet_d(distribution, a, h);
     if (d == 0.0) return;
-    float gi, dgi, go, dgo;
-    microfacet_g1_and_dalpha(distribution, alpha, wi, h, gi, dgi);
-    microfacet_g1_and_dalpha(distribution, alpha, wo, h, go, dgo);
-    float dd = microfacet_d_dalpha_of(distribution, alpha, h, d);
+    float gi, go;
+    vec2 dgi, dgo;
+    microfacet_g1_and_dalpha(distribution, a, wi, h, gi, dgi);
+    microfacet_g1_and_dalpha(distribution, a, wo, h, go, dgo);
+    vec2 dd = microfacet_d_dalpha_of(distribution, a, h, d);
     float inv = 1.0 / (4.0 * wi.z);
     scalar = d * gi * go * inv;
     dscalar = (dd * gi * go + d * (dgi * go + gi * dgo)) * inv;
 }
 
-void microfacet_eval_parts(Leaf l, vec3 wi, vec3 wo, out vec3 f, out float scalar, out float dscalar) {
+void microfacet_eval_parts(Leaf l, vec3 wi, vec3 wo, out vec3 f, out float scalar, out vec2 dscalar) {
     f = vec3(0.0);
     scalar = 0.0;
-    dscalar = 0.0;
+    dscalar = vec2(0.0);
     if (wi.z <= 0.0 || wo.z <= 0.0) return;
     vec3 h = normalize(wi + wo);
-    microfacet_scalar_parts(l.distribution, l.alpha, wi, wo, h, scalar, dscalar);
+    microfacet_scalar_parts(l.distribution, vec2(l.alpha, l.alpha_v), wi, wo, h, scalar, dscalar);
     f = fresnel_conductor(dot(wi, h), l.eta, l.k);
 }
 
@@ -226,10 +236,10 @@ vec2 sample_beckmann_slopes(float cos_theta, vec2 u) {
 }
 
 // A microfacet normal drawn from the normals visible from wi (upper hemisphere).
-bool microfacet_visible_normal(uint distribution, float alpha, vec3 wi, vec2 u, out vec3 h) {
+bool microfacet_visible_normal(uint distribution, vec2 a, vec3 wi, vec2 u, out vec3 h) {
     h = vec3(0.0, 0.0, 1.0);
     if (wi.z <= 0.0) return false;
-    vec3 ws = normalize(vec3(alpha * wi.x, alpha * wi.y, wi.z));
+    vec3 ws = normalize(vec3(a.x * wi.x, a.y * wi.y, wi.z));
     float sin2 = ws.x * ws.x + ws.y * ws.y;
     float sin_phi = 0.0;
     float cos_phi = 1.0;
@@ -239,18 +249,18 @@ bool microfacet_visible_normal(uint distribution, float alpha, vec3 wi, vec2 u, 
         cos_phi = clamp(ws.x * inv, -1.0, 1.0);
     }
     vec2 slope = is_beckmann(distribution) ? sample_beckmann_slopes(ws.z, u) : sample_ggx_slopes(ws.z, u);
-    float mx = (cos_phi * slope.x - sin_phi * slope.y) * alpha;
-    float my = (sin_phi * slope.x + cos_phi * slope.y) * alpha;
+    float mx = (cos_phi * slope.x - sin_phi * slope.y) * a.x;
+    float my = (sin_phi * slope.x + cos_phi * slope.y) * a.y;
     if (isnan(mx) || isinf(mx) || isnan(my) || isinf(my)) return false;
     h = normalize(vec3(-mx, -my, 1.0));
     return true;
 }
 
 // A reflected direction about a visible normal; valid = false when it falls below the surface.
-bool microfacet_sample(uint distribution, float alpha, vec3 wi, vec2 u, out vec3 wo) {
+bool microfacet_sample(uint distribution, vec2 a, vec3 wi, vec2 u, out vec3 wo) {
     wo = vec3(0.0);
     vec3 h;
-    if (!microfacet_visible_normal(distribution, alpha, wi, u, h)) return false;
+    if (!microfacet_visible_normal(distribution, a, wi, u, h)) return false;
     wo = 2.0 * dot(wi, h) * h - wi;
     return wo.z > 0.0 && dot(wi, h) > 0.0;
 }
@@ -322,7 +332,7 @@ bool plastic_sample(Leaf l, vec3 wi, float u_lobe, vec2 u, out vec3 wo) {
     if (wi.z <= 0.0) return false;
     if (u_lobe < plastic_coating_probability(l, wi.z)) {
         vec3 m;
-        if (!microfacet_visible_normal(l.distribution, l.alpha, wi, u, m)) return false;
+        if (!microfacet_visible_normal(l.distribution, vec2(l.alpha), wi, u, m)) return false;
         wo = 2.0 * dot(wi, m) * m - wi;
     } else {
         wo = sample_cosine_hemisphere(u);
@@ -382,7 +392,7 @@ bool rdielectric_sample(Leaf l, vec3 wi, float u_lobe, vec2 u, out vec3 wo) {
     if (wi.z == 0.0) return false;
     vec3 up = wi.z > 0.0 ? wi : -wi;
     vec3 m;
-    if (!microfacet_visible_normal(l.distribution, l.alpha, up, u, m)) return false;
+    if (!microfacet_visible_normal(l.distribution, vec2(l.alpha), up, u, m)) return false;
     float im = dot(wi, m);
     float f = fresnel_dielectric(im, l.eta.x);
     bool refl = u_lobe <= f;
@@ -400,17 +410,19 @@ bool rdielectric_sample(Leaf l, vec3 wi, float u_lobe, vec2 u, out vec3 wo) {
 
 // ∂f̂/∂(lobe colour) (in color, or in trans for a transmitted pair) and ∂f̂/∂α, times adj.
 LeafGrad rdielectric_eval_grad(Leaf l, vec3 wi, vec3 wo, vec3 adj) {
-    LeafGrad g = LeafGrad(vec3(0.0), vec3(0.0), vec3(0.0));
+    LeafGrad g = LeafGrad(vec3(0.0), vec3(0.0), vec3(0.0), vec3(0.0));
     vec3 m;
     bool refl;
     float eta;
     if (!rdielectric_pair(l, wi, wo, m, refl, eta)) return g;
     float d = microfacet_d(l.distribution, l.alpha, m);
     if (d == 0.0) return g;
-    float gi, dgi, go, dgo;
-    microfacet_g1_and_dalpha(l.distribution, l.alpha, wi, m, gi, dgi);
-    microfacet_g1_and_dalpha(l.distribution, l.alpha, wo, m, go, dgo);
-    float ddg = microfacet_d_dalpha_of(l.distribution, l.alpha, m, d) * gi * go + d * (dgi * go + gi * dgo);
+    float gi, go;
+    vec2 dgi, dgo;
+    microfacet_g1_and_dalpha(l.distribution, vec2(l.alpha), wi, m, gi, dgi);
+    microfacet_g1_and_dalpha(l.distribution, vec2(l.alpha), wo, m, go, dgo);
+    vec2 dd = microfacet_d_dalpha_of(l.distribution, vec2(l.alpha), m, d);
+    float ddg = (dd.x + dd.y) * gi * go + d * ((dgi.x + dgi.y) * go + gi * (dgo.x + dgo.y));
     float unit = rdielectric_unit(refl, eta, fresnel_dielectric(dot(wi, m), l.eta.x), wi, wo, m);
     vec3 dcolour = adj * (d * gi * go * unit);
     if (refl) g.color = dcolour; else g.trans = dcolour;
@@ -478,9 +490,9 @@ LeafGrad smooth_value_grad(Leaf l, vec3 wi, vec3 wo, vec3 adj) {
     float pdf;
     vec3 unit;
     bool t;
-    if (!smooth_lobe(l, wi, transmitted ? 1.0 : 0.0, w, pdf, unit, t)) return LeafGrad(vec3(0.0), vec3(0.0), vec3(0.0));
+    if (!smooth_lobe(l, wi, transmitted ? 1.0 : 0.0, w, pdf, unit, t)) return LeafGrad(vec3(0.0), vec3(0.0), vec3(0.0), vec3(0.0));
     vec3 g = adj * unit * pdf;
-    return transmitted ? LeafGrad(vec3(0.0), vec3(0.0), g) : LeafGrad(g, vec3(0.0), vec3(0.0));
+    return transmitted ? LeafGrad(vec3(0.0), vec3(0.0), g, vec3(0.0)) : LeafGrad(g, vec3(0.0), vec3(0.0), vec3(0.0));
 }
 
 // ---- smooth plastic (src/bsdf/plastic.rs): color = ρ, k = the coating's colour, eta = (η, w,
@@ -535,9 +547,9 @@ BsdfSample splastic_sample(Leaf l, vec3 wi, float u_lobe, vec2 u) {
 
 // ∂f̂/∂ρ per channel, times adj: the base's, or 0 toward the mirror direction (the coating's sample).
 LeafGrad splastic_eval_grad(Leaf l, vec3 wi, vec3 wo, vec3 adj) {
-    if (wi.z <= 0.0 || wo.z <= 0.0 || wo == vec3(-wi.x, -wi.y, wi.z)) return LeafGrad(vec3(0.0), vec3(0.0), vec3(0.0));
+    if (wi.z <= 0.0 || wo.z <= 0.0 || wo == vec3(-wi.x, -wi.y, wi.z)) return LeafGrad(vec3(0.0), vec3(0.0), vec3(0.0), vec3(0.0));
     vec3 n = splastic_renormalisation(l);
-    return LeafGrad(adj * (l.eta.z != 0.0 ? n * n : n) * splastic_base(l, fresnel_dielectric(wi.z, l.eta.x), wo), vec3(0.0), vec3(0.0));
+    return LeafGrad(adj * (l.eta.z != 0.0 ? n * n : n) * splastic_base(l, fresnel_dielectric(wi.z, l.eta.x), wo), vec3(0.0), vec3(0.0), vec3(0.0));
 }
 
 // ---- leaves ----
@@ -577,18 +589,20 @@ bool leaf_sample(Leaf l, vec3 wi, float u_lobe, vec2 u, out vec3 wo) {
         wo = sample_cosine_hemisphere(u);
         return wo.z > 0.0;
     }
-    return microfacet_sample(l.distribution, l.alpha, wi, u, wo);
+    return microfacet_sample(l.distribution, vec2(l.alpha, l.alpha_v), wi, u, wo);
 }
 
 // ---- parameter derivatives, kept per image channel (twin of bsdf_eval_grad in src/bsdf/mod.rs) ----
 
 // ∂f̂/∂ρ and ∂f̂/∂α of a rough plastic (twin of PlasticLeaf::eval_grad).
 LeafGrad plastic_eval_grad(Leaf l, vec3 wi, vec3 wo, vec3 adj) {
-    if (wi.z <= 0.0 || wo.z <= 0.0) return LeafGrad(vec3(0.0), vec3(0.0), vec3(0.0));
+    if (wi.z <= 0.0 || wo.z <= 0.0) return LeafGrad(vec3(0.0), vec3(0.0), vec3(0.0), vec3(0.0));
     vec3 h = normalize(wi + wo);
     float f = fresnel_dielectric(dot(wi, h), l.eta.x);
-    float scalar, dscalar;
-    microfacet_scalar_parts(l.distribution, l.alpha, wi, wo, h, scalar, dscalar);
+    float scalar;
+    vec2 dscalar2;
+    microfacet_scalar_parts(l.distribution, vec2(l.alpha), wi, wo, h, scalar, dscalar2);
+    float dscalar = dscalar2.x + dscalar2.y;
     float t_i = coating_lerp(l.table, 0u, wi.z);
     float t_o = coating_lerp(l.table, 0u, wo.z);
     float dt_i = coating_lerp(l.table, COATING_RES, wi.z);
@@ -601,7 +615,7 @@ LeafGrad plastic_eval_grad(Leaf l, vec3 wi, vec3 wo, vec3 adj) {
     vec3 d_diffuse = (nonlinear ? n * n : n) * (k * t_i * t_o);
     vec3 d_alpha = l.k * (f * dscalar) + l.color * n * (k * (dt_i * t_o + t_i * dt_o))
         + l.color * n * n * rbar * (dinternal * k * t_i * t_o);
-    return LeafGrad(adj * d_diffuse, adj * d_alpha, vec3(0.0));
+    return LeafGrad(adj * d_diffuse, adj * d_alpha, vec3(0.0), vec3(0.0));
 }
 
 LeafGrad leaf_eval_grad(Leaf l, vec3 wi, vec3 wo, vec3 adj) {
@@ -609,11 +623,12 @@ LeafGrad leaf_eval_grad(Leaf l, vec3 wi, vec3 wo, vec3 adj) {
     if (is_smooth_plastic(l.kind)) return splastic_eval_grad(l, wi, wo, adj);
     if (is_plastic(l.kind)) return plastic_eval_grad(l, wi, wo, adj);
     if (is_rough_dielectric(l.kind)) return rdielectric_eval_grad(l, wi, wo, adj);
-    if (is_diffuse(l.kind)) return LeafGrad(adj * diffuse_eval(vec3(1.0), wi, wo), vec3(0.0), vec3(0.0));
+    if (is_diffuse(l.kind)) return LeafGrad(adj * diffuse_eval(vec3(1.0), wi, wo), vec3(0.0), vec3(0.0), vec3(0.0));
     vec3 f;
-    float scalar, dscalar;
+    float scalar;
+    vec2 dscalar;
     microfacet_eval_parts(l, wi, wo, f, scalar, dscalar);
-    return LeafGrad(adj * f * scalar, adj * f * l.color * dscalar, vec3(0.0));
+    return LeafGrad(adj * f * scalar, adj * f * l.color * dscalar.x, vec3(0.0), adj * f * l.color * dscalar.y);
 }
 
 // ---- blend (ALGORITHMS.md §4.3) and the whole BSDF ----
@@ -648,7 +663,7 @@ float bsdf_pdf(Bsdf b, vec3 wi, vec3 wo) {
 
 // ∂(adj · f̂)/∂(every value of b) at (wi, wo); the weight's derivative is f̂1 − f̂0 inside (0, 1).
 BsdfGrad bsdf_eval_grad(Bsdf b, vec3 wi, vec3 wo, vec3 adj) {
-    LeafGrad none = LeafGrad(vec3(0.0), vec3(0.0), vec3(0.0));
+    LeafGrad none = LeafGrad(vec3(0.0), vec3(0.0), vec3(0.0), vec3(0.0));
     if (!HAS(F_BLEND) || !b.blend) return BsdfGrad(leaf_eval_grad(b.leaf0, wi, wo, adj), none, vec3(0.0));
     float w = blend_weight(b);
     vec3 weight = (b.weight > 0.0 && b.weight < 1.0) ? adj * (leaf_eval(b.leaf1, wi, wo) - leaf_eval(b.leaf0, wi, wo)) : vec3(0.0);

@@ -10,7 +10,9 @@
 
 // RAY_OFFSET and SHADOW_EPSILON come from src/contract/floats.rs.
 
-struct Surface { vec3 p; vec3 ng; vec3 ns; vec2 uv; uint material; uint emitter; uint interior; };
+// dpdu: ∂p/∂u of the triangle from its texture coordinates (kernels with anisotropic BSDFs; 0
+// where the coordinates are degenerate).
+struct Surface { vec3 p; vec3 ng; vec3 ns; vec2 uv; uint material; uint emitter; uint interior; vec3 dpdu; };
 
 // A triangle's shading data (TriShading, 18 words at a stride of 72 bytes) read as nine 64-bit
 // words, like the traversal's nodes and triangles (bvh.glsl): on lavapipe each word read is one
@@ -41,7 +43,41 @@ Surface surface_at(Hit hit) {
     s.material = w7.y;
     s.emitter = w8.x;
     s.interior = w8.y;
+    s.dpdu = vec3(0.0);
+    if (HAS(F_ANISOTROPIC)) {
+        vec2 uv0 = vec2(w4.y, w5.x);
+        vec2 d0 = vec2(w5.y, w6.x) - uv0;
+        vec2 d1 = vec2(w6.y, uintBitsToFloat(w7.x)) - uv0;
+        float det = d0.x * d1.y - d0.y * d1.x;
+        vec3 e0 = tri.v1 - tri.v0;
+        vec3 e1 = tri.v2 - tri.v0;
+        if (det != 0.0) s.dpdu = (d1.y * e0 - d0.y * e1) / det;
+    }
     return s;
+}
+
+// Whether material `id` is (or blends) an anisotropic rough conductor, whose shading frame must
+// follow the surface (twin: material_anisotropic of src/cpu/surface.rs).
+bool material_anisotropic(uint id) {
+    Material m = materials[id];
+    if (HAS(F_BLEND) && m.tag == MAT_BLEND) {
+        Material a = materials[m.child0];
+        Material b = materials[m.child1];
+        return (a.tag == MAT_ROUGH_CONDUCTOR && a.p_alpha_v != a.p_alpha)
+            || (b.tag == MAT_ROUGH_CONDUCTOR && b.p_alpha_v != b.p_alpha);
+    }
+    return m.tag == MAT_ROUGH_CONDUCTOR && m.p_alpha_v != m.p_alpha;
+}
+
+// Mitsuba's shading frame for anisotropic BSDFs: x along ∂p/∂u made orthogonal to ns (where the
+// texture coordinates are degenerate, the first axis of ng's coordinate system), y = ns × x
+// (twin: tangent_frame of src/cpu/surface.rs).
+ShadingFrame tangent_frame(vec3 ns, vec3 ng, vec3 dpdu) {
+    vec3 u = dpdu == vec3(0.0) ? shading_frame(ng).t : dpdu;
+    vec3 x = u - ns * dot(ns, u);
+    if (dot(x, x) == 0.0) return shading_frame(ns);
+    x = normalize(x);
+    return ShadingFrame(x, cross(ns, x), ns);
 }
 
 vec3 offset_origin(vec3 p, vec3 ng, vec3 dir) {
@@ -129,6 +165,7 @@ Leaf leaf_from_material(Material m, vec2 uv) {
         : (plastic ? LEAF_ROUGH_PLASTIC : (conductor ? LEAF_ROUGH_CONDUCTOR : LEAF_DIFFUSE));
     l.distribution = m.distribution;
     l.alpha = (conductor || plastic || rough_glass) ? params[m.p_alpha] : 0.0;
+    l.alpha_v = conductor ? params[m.p_alpha_v] : l.alpha;
     l.table = m.table;
     if (delta || rough_glass) {
         // Each colour a parameter, or (NO_PARAM) a constant: the reflectance in uv_row0, a
@@ -179,7 +216,7 @@ struct GradTerms {
 };
 
 GradTerms no_grad_terms() {
-    LeafGrad none = LeafGrad(vec3(0.0), vec3(0.0), vec3(0.0));
+    LeafGrad none = LeafGrad(vec3(0.0), vec3(0.0), vec3(0.0), vec3(0.0));
     return GradTerms(NO_PARAM, vec2(0.0), BsdfGrad(none, none, vec3(0.0)), NO_PARAM, vec3(0.0), NO_PARAM, vec3(0.0),
                      vec3(0.0, 0.0, 1.0));
 }
@@ -232,7 +269,13 @@ void push_leaf(Material m, vec2 uv, LeafGrad g) {
     } else if (HAS(G_COLOR)) {
         push_rgb(m.p_color, g.color);
     }
-    if (HAS(G_ALPHA) && (is_conductor(m.tag) || is_plastic(m.tag))) push_entry(m.p_alpha, g.alpha);
+    if (HAS(G_ALPHA) && is_conductor(m.tag) && m.p_alpha_v != m.p_alpha) {
+        push_entry(m.p_alpha, g.alpha);
+        push_entry(m.p_alpha_v, g.alpha_v);
+    } else if (HAS(G_ALPHA) && (is_conductor(m.tag) || is_plastic(m.tag))) {
+        // Isotropic: α_u and α_v are one parameter.
+        push_entry(m.p_alpha, g.alpha + g.alpha_v);
+    }
 }
 
 // An emitter's radiance term: one RGB value, or the four texels of the environment map around

@@ -40,7 +40,14 @@ fn incident(cos_theta: f32) -> Vec3 {
 }
 
 fn conductor(distribution: Distribution, alpha: f32) -> Bsdf {
-    Bsdf::leaf(Leaf::RoughConductor { distribution, alpha, specular: Vec3::ONE, eta: Vec3::ZERO, k: Vec3::ONE })
+    Bsdf::leaf(Leaf::RoughConductor {
+        distribution,
+        alpha,
+        alpha_v: alpha,
+        specular: Vec3::ONE,
+        eta: Vec3::ZERO,
+        k: Vec3::ONE,
+    })
 }
 
 fn blend(w: f32) -> Bsdf {

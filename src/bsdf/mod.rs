@@ -33,12 +33,14 @@ pub enum Leaf {
         /// RGB albedo.
         albedo: Vec3,
     },
-    /// Isotropic rough conductor.
+    /// Rough conductor, isotropic (`alpha_v` = `alpha`) or not.
     RoughConductor {
         /// Microfacet distribution.
         distribution: Distribution,
-        /// Roughness alpha.
+        /// Roughness α (α_u: along the shading frame's x).
         alpha: f32,
+        /// Roughness α_v along the shading frame's y.
+        alpha_v: f32,
         /// RGB specular reflectance (multiplies the Fresnel term).
         specular: Vec3,
         /// Real part of the complex index of refraction.
@@ -96,8 +98,11 @@ pub struct LeafGrad {
     /// With respect to colour channel c (albedo or specular reflectance): only image channel c
     /// depends on it, so component c is the whole derivative.
     pub color: Vec3,
-    /// With respect to the roughness α, per image channel.
+    /// With respect to the roughness α (α_u of an anisotropic conductor), per image channel.
     pub alpha: Vec3,
+    /// With respect to an anisotropic conductor's α_v, per image channel (0 for other leaves; an
+    /// isotropic conductor's total α-derivative is `alpha + alpha_v`).
+    pub alpha_v: Vec3,
     /// With respect to colour channel c of the transmittance (dielectrics: transmitted
     /// directions), as `color` is for the reflectance.
     pub trans: Vec3,
@@ -118,22 +123,28 @@ pub fn leaf_eval_grad(leaf: &Leaf, wi: Vec3, wo: Vec3, adj: Vec3) -> LeafGrad {
         Leaf::Diffuse { .. } => {
             LeafGrad { color: adj * diffuse::diffuse_eval(Vec3::ONE, wi, wo), ..LeafGrad::default() }
         }
-        Leaf::RoughConductor { distribution, alpha, specular, eta, k } => {
-            let (f, scalar, dscalar) = rough_conductor::microfacet_eval_parts(distribution, alpha, eta, k, wi, wo);
-            LeafGrad { color: adj * f * scalar, alpha: adj * f * specular * dscalar, trans: Vec3::ZERO }
+        Leaf::RoughConductor { distribution, alpha, alpha_v, specular, eta, k } => {
+            let a = Vec2::new(alpha, alpha_v);
+            let (f, scalar, dscalar) = rough_conductor::microfacet_eval_parts(distribution, a, eta, k, wi, wo);
+            LeafGrad {
+                color: adj * f * scalar,
+                alpha: adj * f * specular * dscalar.x,
+                alpha_v: adj * f * specular * dscalar.y,
+                trans: Vec3::ZERO,
+            }
         }
         Leaf::RoughPlastic(p) => {
             let (color, alpha) = p.eval_grad(wi, wo);
-            LeafGrad { color: adj * color, alpha: adj * alpha, trans: Vec3::ZERO }
+            LeafGrad { color: adj * color, alpha: adj * alpha, ..LeafGrad::default() }
         }
         Leaf::RoughDielectric(d) => {
             let (colour, transmits, alpha) = d.eval_grad(wi, wo);
             let (color, trans) = if transmits { (Vec3::ZERO, adj * colour) } else { (adj * colour, Vec3::ZERO) };
-            LeafGrad { color, alpha: adj * alpha, trans }
+            LeafGrad { color, alpha: adj * alpha, trans, ..LeafGrad::default() }
         }
         Leaf::Smooth(s) => {
             let g = s.value_grad(wi, wo);
-            LeafGrad { color: adj * g.color, alpha: Vec3::ZERO, trans: adj * g.trans }
+            LeafGrad { color: adj * g.color, trans: adj * g.trans, ..LeafGrad::default() }
         }
         Leaf::SmoothPlastic(p) => LeafGrad { color: adj * p.eval_grad(wi, wo).color, ..LeafGrad::default() },
     }
@@ -164,8 +175,8 @@ pub fn bsdf_eval_grad(b: &Bsdf, wi: Vec3, wo: Vec3, adj: Vec3) -> BsdfGrad {
 pub fn leaf_eval(leaf: &Leaf, wi: Vec3, wo: Vec3) -> Vec3 {
     match *leaf {
         Leaf::Diffuse { albedo } => diffuse::diffuse_eval(albedo, wi, wo),
-        Leaf::RoughConductor { distribution, alpha, specular, eta, k } => {
-            rough_conductor::microfacet_eval(distribution, alpha, specular, eta, k, wi, wo)
+        Leaf::RoughConductor { distribution, alpha, alpha_v, specular, eta, k } => {
+            rough_conductor::microfacet_eval(distribution, Vec2::new(alpha, alpha_v), specular, eta, k, wi, wo)
         }
         Leaf::RoughPlastic(p) => p.eval(wi, wo),
         Leaf::RoughDielectric(d) => d.eval(wi, wo),
@@ -178,8 +189,8 @@ pub fn leaf_eval(leaf: &Leaf, wi: Vec3, wo: Vec3) -> Vec3 {
 pub fn leaf_pdf(leaf: &Leaf, wi: Vec3, wo: Vec3) -> f32 {
     match *leaf {
         Leaf::Diffuse { .. } => diffuse::diffuse_pdf(wi, wo),
-        Leaf::RoughConductor { distribution, alpha, .. } => {
-            rough_conductor::microfacet_pdf(distribution, alpha, wi, wo)
+        Leaf::RoughConductor { distribution, alpha, alpha_v, .. } => {
+            rough_conductor::microfacet_pdf(distribution, Vec2::new(alpha, alpha_v), wi, wo)
         }
         Leaf::RoughPlastic(p) => p.pdf(wi, wo),
         Leaf::RoughDielectric(d) => d.pdf(wi, wo),
@@ -193,8 +204,8 @@ pub fn leaf_pdf(leaf: &Leaf, wi: Vec3, wo: Vec3) -> f32 {
 pub fn leaf_sample(leaf: &Leaf, wi: Vec3, u_lobe: f32, u: Vec2) -> Option<Vec3> {
     match *leaf {
         Leaf::Diffuse { .. } => diffuse::diffuse_sample(wi, u),
-        Leaf::RoughConductor { distribution, alpha, .. } => {
-            rough_conductor::microfacet_sample(distribution, alpha, wi, u)
+        Leaf::RoughConductor { distribution, alpha, alpha_v, .. } => {
+            rough_conductor::microfacet_sample(distribution, Vec2::new(alpha, alpha_v), wi, u)
         }
         Leaf::RoughPlastic(p) => p.sample(wi, u_lobe, u),
         Leaf::RoughDielectric(d) => d.sample(wi, u_lobe, u),

@@ -1,5 +1,8 @@
-//! Isotropic rough conductor with a Beckmann or GGX microfacet distribution, Smith masking,
-//! conductor Fresnel and visible-normal sampling (ALGORITHMS.md §4.2).
+//! Rough conductor with a Beckmann or GGX microfacet distribution, Smith masking, conductor
+//! Fresnel and visible-normal sampling (ALGORITHMS.md §4.2); isotropic (α) or anisotropic
+//! (α_u along the shading frame's x, α_v along y, Mitsuba's `alpha_u`/`alpha_v`). The `_aniso`
+//! functions take (α_u, α_v) and give derivatives by each; the isotropic ones are their α_u = α_v
+//! case, with the two derivatives summed.
 
 use std::f32::consts::{FRAC_1_PI, PI};
 
@@ -22,21 +25,40 @@ fn tan2_theta(v: Vec3) -> f32 {
 
 /// The normal distribution D(h).
 pub fn microfacet_d(distribution: Distribution, alpha: f32, h: Vec3) -> f32 {
+    microfacet_d_aniso(distribution, Vec2::splat(alpha), h)
+}
+
+/// D(h) for roughness (α_u, α_v): with T = (h_x²/α_u² + h_y²/α_v²)/h_z², Beckmann
+/// e^{−T}/(π α_u α_v h_z⁴), GGX 1/(π α_u α_v h_z⁴ (1 + T)²).
+pub fn microfacet_d_aniso(distribution: Distribution, alpha: Vec2, h: Vec3) -> f32 {
     let cos = h.z;
     if cos <= 0.0 {
         return 0.0;
     }
     let cos2 = cos * cos;
-    let t = (h.x * h.x + h.y * h.y) / cos2;
-    let a2 = alpha * alpha;
+    let t = (h.x * h.x / (alpha.x * alpha.x) + h.y * h.y / (alpha.y * alpha.y)) / cos2;
+    let norm = PI * alpha.x * alpha.y * cos2 * cos2;
     let d = match distribution {
-        Distribution::Beckmann => (-t / a2).exp() / (PI * a2 * cos2 * cos2),
-        Distribution::Ggx => {
-            let s = a2 + t;
-            a2 / (PI * cos2 * cos2 * s * s)
-        }
+        Distribution::Beckmann => (-t).exp() / norm,
+        Distribution::Ggx => 1.0 / (norm * (1.0 + t) * (1.0 + t)),
     };
     if d * cos > D_UNDERFLOW { d } else { 0.0 }
+}
+
+/// (∂D/∂α_u, ∂D/∂α_v); 0 where the underflow guard zeroes D. With S = h_x²/α_u² + h_y²/α_v² +
+/// h_z²: Beckmann ∂ ln D/∂α_u = 2h_x²/(α_u³ h_z²) − 1/α_u, GGX 4h_x²/(α_u³ S) − 1/α_u (and so for v).
+pub fn microfacet_d_dalpha_aniso(distribution: Distribution, alpha: Vec2, h: Vec3) -> Vec2 {
+    let d = microfacet_d_aniso(distribution, alpha, h);
+    if d == 0.0 {
+        return Vec2::ZERO;
+    }
+    let (x2, y2, z2) = (h.x * h.x, h.y * h.y, h.z * h.z);
+    let a3 = alpha * alpha * alpha;
+    let scale = match distribution {
+        Distribution::Beckmann => 2.0 / z2,
+        Distribution::Ggx => 4.0 / (x2 / (alpha.x * alpha.x) + y2 / (alpha.y * alpha.y) + z2),
+    };
+    Vec2::new(d * (scale * x2 / a3.x - 1.0 / alpha.x), d * (scale * y2 / a3.y - 1.0 / alpha.y))
 }
 
 /// Smith's masking G1(v, h) = 1 / (1 + Λ(a)), a = 1 / (α tan θv), exact for both distributions.
@@ -46,14 +68,23 @@ pub fn microfacet_d(distribution: Distribution, alpha: f32, h: Vec3) -> f32 {
 /// density disagree: the chi-square test measured 0.9736 valid samples against an integrated pdf of
 /// 0.9707 at α = 0.1, cos θi = 0.05. We use the exact Λ = (erf(a) − 1)/2 + e^{−a²}/(2a√π).
 pub fn microfacet_g1(distribution: Distribution, alpha: f32, v: Vec3, h: Vec3) -> f32 {
+    microfacet_g1_aniso(distribution, Vec2::splat(alpha), v, h)
+}
+
+/// The projected roughness term s² = α(φ_v)² tan²θ_v = (α_u² v_x² + α_v² v_y²)/v_z² of G1.
+fn g1_s2(alpha: Vec2, v: Vec3) -> f32 {
+    (alpha.x * alpha.x * v.x * v.x + alpha.y * alpha.y * v.y * v.y) / (v.z * v.z)
+}
+
+/// G1(v, h) for roughness (α_u, α_v): the isotropic Λ at the roughness projected on v's azimuth.
+pub fn microfacet_g1_aniso(distribution: Distribution, alpha: Vec2, v: Vec3, h: Vec3) -> f32 {
     if v.dot(h) * v.z <= 0.0 {
         return 0.0;
     }
-    let tan2 = tan2_theta(v);
-    if tan2 == 0.0 {
+    if tan2_theta(v) == 0.0 {
         return 1.0;
     }
-    let s2 = alpha * alpha * tan2;
+    let s2 = g1_s2(alpha, v);
     match distribution {
         Distribution::Beckmann => {
             let a = 1.0 / s2.sqrt();
@@ -80,7 +111,7 @@ pub fn fresnel_conductor(c: f32, eta: Vec3, k: Vec3) -> Vec3 {
 /// f̂ = F D G1(wi) G1(wo) / (4 cos θi).
 pub fn microfacet_eval(
     distribution: Distribution,
-    alpha: f32,
+    alpha: Vec2,
     specular: Vec3,
     eta: Vec3,
     k: Vec3,
@@ -91,15 +122,17 @@ pub fn microfacet_eval(
         return Vec3::ZERO;
     }
     let h = (wi + wo).normalize();
-    let d = microfacet_d(distribution, alpha, h);
+    let d = microfacet_d_aniso(distribution, alpha, h);
     if d == 0.0 {
         return Vec3::ZERO;
     }
-    let g = microfacet_g1(distribution, alpha, wi, h) * microfacet_g1(distribution, alpha, wo, h);
+    let g = microfacet_g1_aniso(distribution, alpha, wi, h) * microfacet_g1_aniso(distribution, alpha, wo, h);
     fresnel_conductor(wi.dot(h), eta, k) * specular * (d * g / (4.0 * wi.z))
 }
 
-/// ∂D/∂α (ALGORITHMS.md §4.2); 0 where the underflow guard zeroes D.
+/// ∂D/∂α (ALGORITHMS.md §4.2); 0 where the underflow guard zeroes D. Written with t − α² (not as
+/// the sum of [`microfacet_d_dalpha_aniso`]'s parts, which cancel where t ≈ α²) so that its sign
+/// change is exact to rounding, as the differential sampler's densities need.
 pub fn microfacet_d_dalpha(distribution: Distribution, alpha: f32, h: Vec3) -> f32 {
     let d = microfacet_d(distribution, alpha, h);
     if d == 0.0 {
@@ -111,6 +144,29 @@ pub fn microfacet_d_dalpha(distribution: Distribution, alpha: f32, h: Vec3) -> f
         Distribution::Beckmann => d * 2.0 * (t - a2) / (a2 * alpha),
         Distribution::Ggx => d * 2.0 * (t - a2) / (alpha * (a2 + t)),
     }
+}
+
+/// (∂G1/∂α_u, ∂G1/∂α_v) of [`microfacet_g1_aniso`]: ∂G1/∂s² · ∂s²/∂α_u with ∂s²/∂α_u =
+/// 2α_u v_x²/v_z²; 0 where G1 is constant (masked, or at normal incidence).
+pub fn microfacet_g1_dalpha_aniso(distribution: Distribution, alpha: Vec2, v: Vec3, h: Vec3) -> Vec2 {
+    if v.dot(h) * v.z <= 0.0 || tan2_theta(v) == 0.0 {
+        return Vec2::ZERO;
+    }
+    let s2 = g1_s2(alpha, v);
+    let dg_ds2 = match distribution {
+        Distribution::Beckmann => {
+            // G1 = 1/(1 + Λ(a)), a = 1/s: dΛ/da = −e^{−a²}/(2a²√π), da/ds² = −a/(2s²).
+            let a = 1.0 / s2.sqrt();
+            let g1 = microfacet_g1_aniso(distribution, alpha, v, h);
+            -g1 * g1 * (-a * a).exp() / (4.0 * a * s2 * PI.sqrt())
+        }
+        Distribution::Ggx => {
+            let root = (1.0 + s2).sqrt();
+            -1.0 / (root * (1.0 + root) * (1.0 + root))
+        }
+    };
+    let z2 = v.z * v.z;
+    Vec2::new(dg_ds2 * 2.0 * alpha.x * v.x * v.x / z2, dg_ds2 * 2.0 * alpha.y * v.y * v.y / z2)
 }
 
 /// ∂G1/∂α of [`microfacet_g1`]; 0 where G1 is constant (masked, or at normal incidence).
@@ -137,17 +193,25 @@ pub fn microfacet_g1_dalpha(distribution: Distribution, alpha: f32, v: Vec3, h: 
     }
 }
 
-/// The scalar D(h)·G1(wi, h)·G1(wo, h)/(4 cos θi) at half vector `h` and its α-derivative
-/// (wi, wo in the upper hemisphere); 0 where D underflows.
-pub fn microfacet_eval_scalar_parts(distribution: Distribution, alpha: f32, wi: Vec3, wo: Vec3, h: Vec3) -> (f32, f32) {
-    let d = microfacet_d(distribution, alpha, h);
+/// The scalar D(h)·G1(wi, h)·G1(wo, h)/(4 cos θi) at half vector `h` and its derivatives by α_u and
+/// α_v (wi, wo in the upper hemisphere); 0 where D underflows.
+pub fn microfacet_eval_scalar_parts(
+    distribution: Distribution,
+    alpha: Vec2,
+    wi: Vec3,
+    wo: Vec3,
+    h: Vec3,
+) -> (f32, Vec2) {
+    let d = microfacet_d_aniso(distribution, alpha, h);
     if d == 0.0 {
-        return (0.0, 0.0);
+        return (0.0, Vec2::ZERO);
     }
-    let (gi, go) = (microfacet_g1(distribution, alpha, wi, h), microfacet_g1(distribution, alpha, wo, h));
-    let dd = microfacet_d_dalpha(distribution, alpha, h);
-    let (dgi, dgo) =
-        (microfacet_g1_dalpha(distribution, alpha, wi, h), microfacet_g1_dalpha(distribution, alpha, wo, h));
+    let (gi, go) = (microfacet_g1_aniso(distribution, alpha, wi, h), microfacet_g1_aniso(distribution, alpha, wo, h));
+    let dd = microfacet_d_dalpha_aniso(distribution, alpha, h);
+    let (dgi, dgo) = (
+        microfacet_g1_dalpha_aniso(distribution, alpha, wi, h),
+        microfacet_g1_dalpha_aniso(distribution, alpha, wo, h),
+    );
     let inv = 1.0 / (4.0 * wi.z);
     (d * gi * go * inv, (dd * gi * go + d * (dgi * go + gi * dgo)) * inv)
 }
@@ -156,14 +220,14 @@ pub fn microfacet_eval_scalar_parts(distribution: Distribution, alpha: f32, wi: 
 /// α-derivative; f̂ = F · specular · scalar. Zero outside the valid configuration.
 pub fn microfacet_eval_parts(
     distribution: Distribution,
-    alpha: f32,
+    alpha: Vec2,
     eta: Vec3,
     k: Vec3,
     wi: Vec3,
     wo: Vec3,
-) -> (Vec3, f32, f32) {
+) -> (Vec3, f32, Vec2) {
     if wi.z <= 0.0 || wo.z <= 0.0 {
-        return (Vec3::ZERO, 0.0, 0.0);
+        return (Vec3::ZERO, 0.0, Vec2::ZERO);
     }
     let h = (wi + wo).normalize();
     let (scalar, dscalar) = microfacet_eval_scalar_parts(distribution, alpha, wi, wo, h);
@@ -171,7 +235,7 @@ pub fn microfacet_eval_parts(
 }
 
 /// Visible-normal sampling density D(h) G1(wi, h) / (4 cos θi).
-pub fn microfacet_pdf(distribution: Distribution, alpha: f32, wi: Vec3, wo: Vec3) -> f32 {
+pub fn microfacet_pdf(distribution: Distribution, alpha: Vec2, wi: Vec3, wo: Vec3) -> f32 {
     if wi.z <= 0.0 || wo.z <= 0.0 {
         return 0.0;
     }
@@ -179,7 +243,7 @@ pub fn microfacet_pdf(distribution: Distribution, alpha: f32, wi: Vec3, wo: Vec3
     if wi.dot(h) <= 0.0 || wo.dot(h) <= 0.0 {
         return 0.0;
     }
-    microfacet_d(distribution, alpha, h) * microfacet_g1(distribution, alpha, wi, h) / (4.0 * wi.z)
+    microfacet_d_aniso(distribution, alpha, h) * microfacet_g1_aniso(distribution, alpha, wi, h) / (4.0 * wi.z)
 }
 
 /// Slopes of the visible normals of the α = 1 GGX distribution seen at cos θ (Heitz & d'Eon 2014).
@@ -218,19 +282,19 @@ fn sample_beckmann_slopes(cos_theta: f32, u: Vec2) -> Vec2 {
 }
 
 /// A reflected direction about a visible normal, or `None` if it falls below the surface.
-pub fn microfacet_sample(distribution: Distribution, alpha: f32, wi: Vec3, u: Vec2) -> Option<Vec3> {
+pub fn microfacet_sample(distribution: Distribution, alpha: Vec2, wi: Vec3, u: Vec2) -> Option<Vec3> {
     let h = microfacet_visible_normal(distribution, alpha, wi, u)?;
     let wo = 2.0 * wi.dot(h) * h - wi;
     (wo.z > 0.0 && wi.dot(h) > 0.0).then_some(wo)
 }
 
 /// A microfacet normal drawn from the normals visible from `wi` (upper hemisphere), or `None`.
-pub fn microfacet_visible_normal(distribution: Distribution, alpha: f32, wi: Vec3, u: Vec2) -> Option<Vec3> {
+pub fn microfacet_visible_normal(distribution: Distribution, alpha: Vec2, wi: Vec3, u: Vec2) -> Option<Vec3> {
     if wi.z <= 0.0 {
         return None;
     }
     // Stretch wi to the α = 1 configuration.
-    let ws = Vec3::new(alpha * wi.x, alpha * wi.y, wi.z).normalize();
+    let ws = Vec3::new(alpha.x * wi.x, alpha.y * wi.y, wi.z).normalize();
     let sin2 = ws.x * ws.x + ws.y * ws.y;
     let (sin_phi, cos_phi) = if sin2 <= AZIMUTH_EPSILON * AZIMUTH_EPSILON {
         (0.0, 1.0)
@@ -243,8 +307,8 @@ pub fn microfacet_visible_normal(distribution: Distribution, alpha: f32, wi: Vec
         Distribution::Ggx => sample_ggx_slopes(ws.z, u),
     };
     // Rotate back to wi's azimuth and unstretch.
-    let mx = (cos_phi * slope.x - sin_phi * slope.y) * alpha;
-    let my = (sin_phi * slope.x + cos_phi * slope.y) * alpha;
+    let mx = (cos_phi * slope.x - sin_phi * slope.y) * alpha.x;
+    let my = (sin_phi * slope.x + cos_phi * slope.y) * alpha.y;
     if !(mx.is_finite() && my.is_finite()) {
         return None;
     }

@@ -25,7 +25,8 @@
 use glam::{Vec2, Vec3};
 
 use super::rough_conductor::{
-    Distribution, microfacet_d, microfacet_d_dalpha, microfacet_g1, microfacet_g1_dalpha, microfacet_visible_normal,
+    Distribution, microfacet_d, microfacet_d_dalpha_aniso, microfacet_g1, microfacet_g1_dalpha_aniso,
+    microfacet_visible_normal,
 };
 use super::rough_plastic::fresnel_dielectric;
 
@@ -142,7 +143,7 @@ impl RoughDielectricLeaf {
             return None;
         }
         let up = if wi.z > 0.0 { wi } else { -wi };
-        let m = microfacet_visible_normal(self.distribution, self.alpha, up, u)?;
+        let m = microfacet_visible_normal(self.distribution, Vec2::splat(self.alpha), up, u)?;
         let im = wi.dot(m);
         let (f, cos_t, eta_ti) = fresnel_dielectric(im, self.eta);
         let reflect = u_lobe <= f;
@@ -161,8 +162,11 @@ impl RoughDielectricLeaf {
             return (Vec3::ZERO, !p.reflect, Vec3::ZERO);
         }
         let (gi, go) = (microfacet_g1(dist, alpha, wi, m), microfacet_g1(dist, alpha, wo, m));
-        let (dgi, dgo) = (microfacet_g1_dalpha(dist, alpha, wi, m), microfacet_g1_dalpha(dist, alpha, wo, m));
-        let ddg = microfacet_d_dalpha(dist, alpha, m) * gi * go + d * (dgi * go + gi * dgo);
+        // The α_u and α_v parts summed, as the kernels compute them.
+        let a = Vec2::splat(alpha);
+        let dgi = microfacet_g1_dalpha_aniso(dist, a, wi, m).element_sum();
+        let dgo = microfacet_g1_dalpha_aniso(dist, a, wo, m).element_sum();
+        let ddg = microfacet_d_dalpha_aniso(dist, a, m).element_sum() * gi * go + d * (dgi * go + gi * dgo);
         let unit = Self::unit_over_dg(&p, fresnel_dielectric(wi.dot(m), self.eta).0, wi, wo);
         let colour = if p.reflect { self.reflectance } else { self.transmittance };
         (Vec3::splat(d * gi * go * unit), !p.reflect, colour * (ddg * unit))

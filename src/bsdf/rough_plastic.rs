@@ -105,7 +105,7 @@ fn coating_integral(distribution: Distribution, alpha: f32, wi: Vec3, eta: f32, 
     for &(x, wx) in &nodes {
         for &(y, wy) in &nodes {
             let u = Vec2::new((0.5 * x + 0.5) as f32, (0.5 * y + 0.5) as f32);
-            let Some(m) = microfacet_visible_normal(distribution, alpha, wi, u) else { continue };
+            let Some(m) = microfacet_visible_normal(distribution, Vec2::splat(alpha), wi, u) else { continue };
             let (f, cos_t, eta_ti) = fresnel_dielectric(wi.dot(m), eta);
             let (wo, share) = if transmit {
                 (m * (wi.dot(m) * eta_ti + cos_t) - wi * eta_ti, 1.0 - f)
@@ -229,7 +229,7 @@ impl PlasticLeaf {
         }
         let h = (wi + wo).normalize();
         let (f, _, _) = fresnel_dielectric(wi.dot(h), self.eta);
-        let (scalar, _) = microfacet_eval_scalar_parts(self.distribution, self.alpha, wi, wo, h);
+        let (scalar, _) = microfacet_eval_scalar_parts(self.distribution, Vec2::splat(self.alpha), wi, wo, h);
         let t_i = table_lerp(&self.table, 0, wi.z);
         let t_o = table_lerp(&self.table, 0, wo.z);
         let base = FRAC_1_PI / (self.eta * self.eta) * wo.z * t_i * t_o;
@@ -255,7 +255,7 @@ impl PlasticLeaf {
             return None;
         }
         if u_lobe < self.coating_probability(wi.z) {
-            let m = microfacet_visible_normal(self.distribution, self.alpha, wi, u)?;
+            let m = microfacet_visible_normal(self.distribution, Vec2::splat(self.alpha), wi, u)?;
             let wo = 2.0 * wi.dot(m) * m - wi;
             (wo.z > 0.0).then_some(wo)
         } else {
@@ -271,7 +271,7 @@ impl PlasticLeaf {
         }
         let h = (wi + wo).normalize();
         let (f, _, _) = fresnel_dielectric(wi.dot(h), self.eta);
-        let (_, dscalar) = microfacet_eval_scalar_parts(self.distribution, self.alpha, wi, wo, h);
+        let (_, dscalar) = microfacet_eval_scalar_parts(self.distribution, Vec2::splat(self.alpha), wi, wo, h);
         let (t_i, t_o) = (table_lerp(&self.table, 0, wi.z), table_lerp(&self.table, 0, wo.z));
         let (dt_i, dt_o) =
             (table_lerp(&self.table, COATING_RES as usize, wi.z), table_lerp(&self.table, COATING_RES as usize, wo.z));
@@ -283,7 +283,7 @@ impl PlasticLeaf {
         let dn = if self.nonlinear { n * n } else { n };
         let d_diffuse = dn * (k * t_i * t_o);
         // ∂/∂α: the coating's lobe, the two transmittances and the renormalisation.
-        let d_alpha = self.specular * (f * dscalar)
+        let d_alpha = self.specular * (f * dscalar.element_sum())
             + self.diffuse * n * (k * (dt_i * t_o + t_i * dt_o))
             + self.diffuse * n * n * rbar * (dinternal * k * t_i * t_o);
         (d_diffuse, d_alpha)

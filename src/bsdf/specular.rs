@@ -126,7 +126,7 @@ impl SmoothLeaf {
             return LeafGrad::default();
         };
         let (color, trans) = if transmitted { (Vec3::ZERO, unit * pdf) } else { (unit * pdf, Vec3::ZERO) };
-        LeafGrad { color, alpha: Vec3::ZERO, trans }
+        LeafGrad { color, trans, ..LeafGrad::default() }
     }
 }
 

@@ -7,7 +7,7 @@ use crate::rng::{PassTag, RngKey, Stream, uniform4};
 use crate::stats::{Chi2Config, chi2_directions, dump_table, sidak};
 
 /// Every chi-square test in this file, for the Šidák correction of the 1 % family-wise level.
-const CHI2_TESTS: usize = 1 + 2 * 3 * 3 + 3 + 2 * 3 + 2 * 2 * 4;
+const CHI2_TESTS: usize = 1 + 2 * 3 * 3 + 3 + 2 * 3 + 2 * 2 * 4 + 2 * 3;
 const FAMILY_ALPHA: f64 = 0.01;
 
 fn uniforms(test: u32, i: usize) -> (f32, Vec2) {
@@ -48,8 +48,34 @@ fn glass(distribution: Distribution, alpha: f32) -> Leaf {
     })
 }
 
+/// An anisotropic conductor: α_u along the frame's x, α_v along y.
+fn anisotropic(distribution: Distribution, alpha_u: f32, alpha_v: f32) -> Leaf {
+    Leaf::RoughConductor {
+        distribution,
+        alpha: alpha_u,
+        alpha_v,
+        specular: Vec3::new(0.9, 0.8, 0.7),
+        eta: Vec3::new(0.2, 0.9, 1.1),
+        k: Vec3::new(3.9, 2.4, 2.1),
+    }
+}
+
+/// Anisotropic conductors, the long axis along x and along y, seen at three azimuth-bearing
+/// incidences.
+#[test]
+fn chi2_anisotropic_conductors() {
+    let mut test = 90;
+    for (distribution, au, av) in [(Distribution::Beckmann, 0.1, 0.4), (Distribution::Ggx, 0.5, 0.08)] {
+        let b = Bsdf::leaf(anisotropic(distribution, au, av));
+        for cos_i in [0.95, 0.5, 0.1] {
+            test += 1;
+            check_chi2(&format!("anisotropic-{distribution:?}-{au}x{av}-cos{cos_i}"), test, &b, incident(cos_i));
+        }
+    }
+}
+
 fn conductor(distribution: Distribution, alpha: f32) -> Leaf {
-    Leaf::RoughConductor { distribution, alpha, specular: Vec3::ONE, eta: Vec3::ZERO, k: Vec3::ONE }
+    Leaf::RoughConductor { distribution, alpha, alpha_v: alpha, specular: Vec3::ONE, eta: Vec3::ZERO, k: Vec3::ONE }
 }
 
 fn check_chi2(name: &str, test: u32, bsdf: &Bsdf, wi: Vec3) {
@@ -156,6 +182,8 @@ fn all_bsdfs() -> Vec<Bsdf> {
         weight: 0.4,
         blend: true,
     });
+    v.push(Bsdf::leaf(anisotropic(Distribution::Beckmann, 0.1, 0.4)));
+    v.push(Bsdf::leaf(anisotropic(Distribution::Ggx, 0.5, 0.05)));
     v.push(Bsdf::leaf(glass(Distribution::Beckmann, 0.2)));
     v.push(Bsdf::leaf(glass(Distribution::Ggx, 0.05)));
     v
@@ -307,6 +335,21 @@ fn derivatives_match_finite_differences() {
                                 x
                             }),
                             d.alpha,
+                            1e-3,
+                        ));
+                    }
+                    if let Leaf::RoughConductor { alpha_v, .. } = b.leaves[leaf] {
+                        let base = *b;
+                        cases.push((
+                            g.leaves[leaf].alpha_v.dot(Vec3::ONE),
+                            Box::new(move |v| {
+                                let mut x = base;
+                                if let Leaf::RoughConductor { alpha_v, .. } = &mut x.leaves[leaf] {
+                                    *alpha_v = v;
+                                }
+                                x
+                            }),
+                            alpha_v,
                             1e-3,
                         ));
                     }

@@ -169,6 +169,8 @@ contract_constants! {
     F_SMOOTH_PLASTIC = 1 << 23;
     /// Feature bit: rough-dielectric leaves.
     F_ROUGH_DIELECTRIC = 1 << 24;
+    /// Feature bit: anisotropic rough conductors, whose shading frame follows the surface's ∂p/∂u.
+    F_ANISOTROPIC = 1 << 25;
     /// Entries of a rough plastic's coating transmittance table (μ = k/63, k = 0..63).
     COATING_RES = 64;
     /// Floats of one coating table as the kernels read it: T, ∂T/∂α, Rᵢ, ∂Rᵢ/∂α.

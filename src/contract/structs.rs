@@ -271,8 +271,10 @@ contract_structs! {
         tex_mode: u32,
         /// 1 if the material is seen from both sides.
         two_sided: u32,
-        /// Parameter offset of the roughness alpha (conductor).
+        /// Parameter offset of the roughness alpha (conductor: α_u).
         p_alpha: u32,
+        /// Rough conductor: parameter offset of α_v (`p_alpha` when isotropic).
+        p_alpha_v: u32,
         /// Parameter offset of the blend weight (blend).
         p_weight: u32,
         /// Real part of the conductor's complex index of refraction (RGB). Rough plastic: (η =
@@ -391,6 +393,10 @@ contract_structs! {
         u: Vec2,
         /// A fixed direction at which eval and pdf are also queried.
         wo_eval: Vec3,
+        /// Leaf 0's α_v (a rough conductor's; its α otherwise).
+        alpha_v0: f32,
+        /// Leaf 1's α_v.
+        alpha_v1: f32,
     }
 
     /// Test probe output for one `BsdfProbeCase`.

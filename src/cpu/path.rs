@@ -17,7 +17,8 @@ use crate::cpu::emitter::{
 };
 use crate::cpu::medium;
 use crate::cpu::surface::{
-    SHADOW_EPSILON, bsdf_backward, mis_power, offset_origin, param_color, resolve_bsdf, safe_div, surface_at,
+    SHADOW_EPSILON, bsdf_backward, material_anisotropic, mis_power, offset_origin, param_color, resolve_bsdf, safe_div,
+    surface_at, tangent_frame,
 };
 use crate::rng::{RngKey, Stream, uniform4};
 use crate::sampling::Frame;
@@ -357,7 +358,11 @@ pub fn trace_path<const ADJOINT: bool>(
         // A two-sided material seen from the back shades with the flipped normal.
         let ns =
             if flat.materials[s.material as usize].two_sided != 0 && s.ns.dot(wi_world) < 0.0 { -s.ns } else { s.ns };
-        let frame = Frame::from_normal(ns);
+        let frame = if material_anisotropic(flat, s.material) {
+            tangent_frame(ns, s.ng, s.dpdu)
+        } else {
+            Frame::from_normal(ns)
+        };
         let wi = frame.to_local(wi_world);
 
         let capable = diff && material_capable(flat, globals, s.material);

@@ -33,6 +33,8 @@ pub struct Surface {
     pub material: u32,
     /// Emitter index or `NO_EMITTER`.
     pub emitter: u32,
+    /// ∂p/∂u of the triangle from its texture coordinates (0 where they are degenerate).
+    pub dpdu: Vec3,
 }
 
 /// Resolves `hit`.
@@ -45,7 +47,35 @@ pub fn surface_at(flat: &FlatScene, hit: &Hit) -> Surface {
     let n = b0 * sh.n0 + hit.b1 * sh.n1 + hit.b2 * sh.n2;
     let ns = if n.dot(n) > 0.0 { n.normalize() } else { ng };
     let uv = b0 * sh.uv0 + hit.b1 * sh.uv1 + hit.b2 * sh.uv2;
-    Surface { p, ng, ns, uv, material: sh.material, emitter: sh.emitter }
+    let (d0, d1) = (sh.uv1 - sh.uv0, sh.uv2 - sh.uv0);
+    let det = d0.x * d1.y - d0.y * d1.x;
+    let (e0, e1) = (tri.v1 - tri.v0, tri.v2 - tri.v0);
+    let dpdu = if det != 0.0 { (d1.y * e0 - d0.y * e1) / det } else { Vec3::ZERO };
+    Surface { p, ng, ns, uv, material: sh.material, emitter: sh.emitter, dpdu }
+}
+
+/// Whether material `id` is (or blends) an anisotropic rough conductor, whose shading frame
+/// must follow the surface ([`tangent_frame`]).
+pub fn material_anisotropic(flat: &FlatScene, id: u32) -> bool {
+    let anisotropic = |m: &Material| m.tag == MAT_ROUGH_CONDUCTOR && m.p_alpha_v != m.p_alpha;
+    let m = &flat.materials[id as usize];
+    if m.tag == MAT_BLEND {
+        anisotropic(&flat.materials[m.child0 as usize]) || anisotropic(&flat.materials[m.child1 as usize])
+    } else {
+        anisotropic(m)
+    }
+}
+
+/// Mitsuba's shading frame for anisotropic BSDFs: x along ∂p/∂u made orthogonal to the shading
+/// normal `ns` (where the texture coordinates are degenerate, the first axis of the geometric
+/// normal's coordinate system, as Mitsuba's meshes without them), y = ns × x.
+pub fn tangent_frame(ns: Vec3, ng: Vec3, dpdu: Vec3) -> crate::sampling::Frame {
+    let u = if dpdu == Vec3::ZERO { crate::sampling::Frame::from_normal(ng).t } else { dpdu };
+    let s = (u - ns * ns.dot(u)).normalize_or_zero();
+    if s == Vec3::ZERO {
+        return crate::sampling::Frame::from_normal(ns);
+    }
+    crate::sampling::Frame { t: s, b: ns.cross(s), n: ns }
 }
 
 /// `p` moved off the surface to the side `dir` leaves to.
@@ -129,6 +159,7 @@ fn leaf_from_material(flat: &FlatScene, m: &Material, uv: glam::Vec2) -> Leaf {
         MAT_ROUGH_CONDUCTOR => Leaf::RoughConductor {
             distribution,
             alpha: params[m.p_alpha as usize],
+            alpha_v: params[m.p_alpha_v as usize],
             specular: color,
             eta: m.eta,
             k: m.k,
@@ -225,8 +256,12 @@ fn leaf_backward(m: &Material, uv: glam::Vec2, g: &LeafGrad, sink: &mut GradSink
     } else {
         sink.add_rgb(m.p_color, g.color);
     }
-    if m.tag == MAT_ROUGH_CONDUCTOR || m.tag == MAT_ROUGH_PLASTIC {
+    if m.tag == MAT_ROUGH_CONDUCTOR && m.p_alpha_v != m.p_alpha {
         sink.add(m.p_alpha, g.alpha);
+        sink.add(m.p_alpha_v, g.alpha_v);
+    } else if m.tag == MAT_ROUGH_CONDUCTOR || m.tag == MAT_ROUGH_PLASTIC {
+        // Isotropic: α_u and α_v are one parameter.
+        sink.add(m.p_alpha, g.alpha + g.alpha_v);
     }
 }
 

@@ -29,6 +29,9 @@ pub fn scene_features(flat: &FlatScene, env_param: u32) -> u32 {
         if m.tex_width > 0 {
             f |= F_TEXTURE;
         }
+        if m.tag == MAT_ROUGH_CONDUCTOR && m.p_alpha_v != m.p_alpha {
+            f |= F_ANISOTROPIC;
+        }
         if m.two_sided != 0 {
             f |= F_TWO_SIDED;
         }
@@ -96,7 +99,8 @@ pub fn param_kinds(flat: &FlatScene, env: (u32, u32), begin: u32, end: u32) -> P
                 if overlaps(m.p_color, 3 * texels) {
                     k = k.union(if m.tex_width > 0 { ParamKinds::TEXTURE } else { ParamKinds::COLOR });
                 }
-                if (m.tag == MAT_ROUGH_CONDUCTOR || m.tag == MAT_ROUGH_PLASTIC) && overlaps(m.p_alpha, 1) {
+                let alpha_v = m.tag == MAT_ROUGH_CONDUCTOR && overlaps(m.p_alpha_v, 1);
+                if (m.tag == MAT_ROUGH_CONDUCTOR || m.tag == MAT_ROUGH_PLASTIC) && overlaps(m.p_alpha, 1) || alpha_v {
                     k = k.union(ParamKinds::ALPHA);
                 }
             }
@@ -139,7 +143,7 @@ pub fn request_features(scene: u32, options: &RenderOptions, kinds: ParamKinds) 
 
 /// A short human-readable name of a variant, for logs: `nee env diffuse conductor[beckmann] ∂alpha`.
 pub fn describe(features: u32) -> String {
-    const NAMES: [(u32, &str); 25] = [
+    const NAMES: [(u32, &str); 26] = [
         (F_NEE, "nee"),
         (F_ENV, "env"),
         (F_EMITTERS, "emitters"),
@@ -158,6 +162,7 @@ pub fn describe(features: u32) -> String {
         (F_DELTA, "smooth"),
         (F_SMOOTH_PLASTIC, "smooth-plastic"),
         (F_ROUGH_DIELECTRIC, "rough-dielectric"),
+        (F_ANISOTROPIC, "anisotropic"),
         (G_COLOR, "∂color"),
         (G_TEXTURE, "∂texture"),
         (G_ALPHA, "∂alpha"),

@@ -263,11 +263,12 @@ fn flatten_material(scene: &Scene, m: &Material) -> GpuMaterial {
         Material::TwoSided(child) => {
             GpuMaterial { two_sided: 1, ..flatten_material(scene, &scene.materials[child.0 as usize]) }
         }
-        Material::RoughConductor { distribution, alpha, specular, eta, k } => GpuMaterial {
+        Material::RoughConductor { distribution, alpha, alpha_v, specular, eta, k } => GpuMaterial {
             tag: MAT_ROUGH_CONDUCTOR,
             distribution: distribution as u32,
             p_color: offset(specular),
             p_alpha: offset(alpha),
+            p_alpha_v: offset(alpha_v),
             eta,
             k,
             ..Default::default()

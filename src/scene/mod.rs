@@ -130,12 +130,14 @@ pub enum Material {
         /// RGB albedo in [0, 1], constant or textured.
         albedo: Albedo,
     },
-    /// Isotropic rough conductor (ALGORITHMS.md §4.2).
+    /// Rough conductor (ALGORITHMS.md §4.2), isotropic or anisotropic.
     RoughConductor {
         /// Microfacet distribution.
         distribution: Distribution,
-        /// Roughness alpha, 1 value.
+        /// Roughness alpha (α_u along the shading frame's x), 1 value.
         alpha: ParamId,
+        /// Roughness α_v along the shading frame's y: `alpha` itself when isotropic.
+        alpha_v: ParamId,
         /// RGB specular reflectance multiplying the Fresnel term.
         specular: ParamId,
         /// Real part of the complex index of refraction (RGB).
@@ -455,7 +457,7 @@ impl Scene {
             &specular.to_array(),
             bounds::REFLECTANCE,
         )?;
-        Ok(self.add_material(Material::RoughConductor { distribution, alpha, specular, eta, k }))
+        Ok(self.add_material(Material::RoughConductor { distribution, alpha, alpha_v: alpha, specular, eta, k }))
     }
 
     /// Adds a blend with parameter `{name}.weight.value`.

@@ -69,6 +69,10 @@ MATRIX = {
                                          grads=["ball.bsdf.alpha.value"]),
     "bsdf_roughconductor_eta_k": dict(features=["roughconductor", "ggx", "eta/k rgb"], grads=["ball.bsdf.alpha.value"]),
     "bsdf_roughconductor_material": dict(features=["roughconductor", "material Au"], grads=["ball.bsdf.alpha.value"]),
+    "bsdf_roughconductor_anisotropic": dict(features=["roughconductor alpha_u ≠ alpha_v", "beckmann and ggx",
+                                                      "material preset", "sphere and rectangle frames"],
+                                            grads=["ball.bsdf.alpha_v.value", "floor.bsdf.alpha_u.value",
+                                                   "floor.bsdf.alpha_v.value"]),
     "bsdf_roughconductor_alpha_uv": dict(features=["roughconductor", "alpha_u = alpha_v", "sample_visible false"],
                                          grads=["floor.bsdf.reflectance.value"]),
     # Mitsuba tabulates the coating's transmittance outside its autodiff, so its own α derivative
@@ -280,6 +284,8 @@ POWER = {
     "bsdf_twosided_blend": {"gradient_bias": 0.1},
     # The frosted ball's α: paths refract twice or more through it, each vertex a score.
     "bsdf_roughdielectric": {"gradient_bias": 0.8},
+    # The ball's α_u (0.05, Beckmann) is left out: its image mean cancels (it sees 240 %).
+    "bsdf_roughconductor_anisotropic": {"primal_bias": 0.015, "gradient_bias": 0.12},
     "medium_in_dielectric": {"primal_bias": 0.02, "gradient_bias": 0.15},
     "bsdf_twosided_roughconductor": {"gradient_bias": 0.1},
     "depth_1": {"primal_bias": 0.03},

@@ -37,6 +37,7 @@ fn gpu_equals_cpu_per_path_on_every_builtin_and_test_scene() {
     scenes.push(crate::support::scenes::conformance("medium_in_dielectric"));
     scenes.push(crate::support::scenes::conformance("sensor_orthographic"));
     scenes.push(crate::support::scenes::conformance("sensor_thinlens"));
+    scenes.push(crate::support::scenes::conformance("bsdf_roughconductor_anisotropic"));
     for scene in &scenes {
         let name = &scene.source;
         let opts = RenderOptions { width: 96, height: 96, spp: 1, seed: 7, ..RenderOptions::for_scene(scene) };

@@ -41,6 +41,10 @@ fn cases() -> Vec<(Scene, Vec<&'static str>)> {
             vec!["sky.data", "ball.bsdf.alpha.value", "floor.bsdf.reflectance.value"],
         ),
         (
+            scenes::conformance("bsdf_roughconductor_anisotropic"),
+            vec!["ball.bsdf.alpha_u.value", "ball.bsdf.alpha_v.value", "floor.bsdf.alpha_v.value"],
+        ),
+        (
             scenes::conformance("bsdf_roughdielectric"),
             vec![
                 "ball.bsdf.alpha.value",

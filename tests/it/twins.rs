@@ -61,9 +61,9 @@ fn probe_case(
     use pathgrad::bsdf::Leaf;
     use pathgrad::contract::{LEAF_DIFFUSE, LEAF_ROUGH_CONDUCTOR};
     let fields = |l: &Leaf| match *l {
-        Leaf::Diffuse { albedo } => (LEAF_DIFFUSE, 0, 0.0, albedo, Vec3::ZERO, Vec3::ZERO),
-        Leaf::RoughConductor { distribution, alpha, specular, eta, k } => {
-            (LEAF_ROUGH_CONDUCTOR, distribution as u32, alpha, specular, eta, k)
+        Leaf::Diffuse { albedo } => (LEAF_DIFFUSE, 0, 0.0, albedo, Vec3::ZERO, Vec3::ZERO, 0.0),
+        Leaf::RoughConductor { distribution, alpha, alpha_v, specular, eta, k } => {
+            (LEAF_ROUGH_CONDUCTOR, distribution as u32, alpha, specular, eta, k, alpha_v)
         }
         // The probes read no coating tables: rough plastics are compared path by path on scenes
         // (cpu_vs_gpu, gradients).
@@ -75,6 +75,7 @@ fn probe_case(
             d.reflectance,
             Vec3::new(d.eta, 0.0, 0.0),
             d.transmittance,
+            d.alpha,
         ),
         Leaf::SmoothPlastic(p) => (
             pathgrad::contract::LEAF_PLASTIC,
@@ -83,6 +84,7 @@ fn probe_case(
             p.diffuse,
             Vec3::new(p.eta, p.specular_weight, if p.nonlinear { 1.0 } else { 0.0 }),
             p.specular,
+            0.0,
         ),
         Leaf::Smooth(l) => {
             use pathgrad::bsdf::specular::SmoothKind;
@@ -92,7 +94,7 @@ fn probe_case(
                 SmoothKind::ThinDielectric => pathgrad::contract::LEAF_THIN_DIELECTRIC,
             };
             let k = if l.kind == SmoothKind::Conductor { l.k } else { l.transmittance };
-            (kind, 0, 0.0, l.reflectance, l.eta, k)
+            (kind, 0, 0.0, l.reflectance, l.eta, k, 0.0)
         }
     };
     let (l0, l1) = (fields(&b.leaves[0]), fields(&b.leaves[1]));
@@ -115,6 +117,8 @@ fn probe_case(
         u_lobe,
         u,
         wo_eval,
+        alpha_v0: l0.6,
+        alpha_v1: l1.6,
     }
 }
 
@@ -153,6 +157,7 @@ fn bsdf_gpu_equals_cpu() {
                 bsdfs.push(Bsdf::leaf(Leaf::RoughConductor {
                     distribution,
                     alpha,
+                    alpha_v: alpha,
                     specular: Vec3::new(0.9, 0.8, 0.7),
                     eta,
                     k,
@@ -164,11 +169,22 @@ fn bsdf_gpu_equals_cpu() {
         let coat = Leaf::RoughConductor {
             distribution: Distribution::Ggx,
             alpha: 0.05,
+            alpha_v: 0.05,
             specular: Vec3::ONE,
             eta: Vec3::ZERO,
             k: Vec3::ONE,
         };
         bsdfs.push(Bsdf { leaves: [Leaf::Diffuse { albedo: Vec3::new(0.1, 0.6, 0.35) }, coat], weight, blend: true });
+    }
+    for (distribution, alpha_v) in [(Distribution::Beckmann, 0.05), (Distribution::Ggx, 0.6)] {
+        bsdfs.push(Bsdf::leaf(Leaf::RoughConductor {
+            distribution,
+            alpha: 0.25,
+            alpha_v,
+            specular: Vec3::new(0.9, 0.8, 0.7),
+            eta: gold.0,
+            k: gold.1,
+        }));
     }
     for distribution in [Distribution::Beckmann, Distribution::Ggx] {
         for alpha in [0.02, 0.3, 0.8] {
@@ -291,6 +307,7 @@ fn diff_gpu_equals_cpu() {
             bsdfs.push(Bsdf::leaf(Leaf::RoughConductor {
                 distribution,
                 alpha,
+                alpha_v: alpha,
                 specular: Vec3::new(0.9, 0.8, 0.7),
                 eta: Vec3::ZERO,
                 k: Vec3::ONE,
@@ -301,6 +318,7 @@ fn diff_gpu_equals_cpu() {
         let coat = Leaf::RoughConductor {
             distribution: Distribution::Ggx,
             alpha: 0.05,
+            alpha_v: 0.05,
             specular: Vec3::ONE,
             eta: Vec3::ZERO,
             k: Vec3::ONE,

@@ -348,30 +348,50 @@ impl<'a> Loader<'a> {
         Ok(int_ior / ext_ior)
     }
 
-    /// A microfacet BSDF's isotropic roughness as the parameter Mitsuba names: `alpha` (0.1), or
-    /// `alpha_u` and `alpha_v`, of which pathgrad (isotropic) exposes `alpha_u`, which `alpha_v`
-    /// must equal and follows. `sample_visible` is read: pathgrad samples visible normals, and
-    /// `false` would change only the noise.
-    fn isotropic_alpha(&mut self, p: &Props<'a>, name: &str) -> Result<crate::params::ParamId> {
-        let x = &self.x;
+    /// A microfacet BSDF's roughness as the parameters Mitsuba names: `alpha` (0.1), or both
+    /// `alpha_u` and `alpha_v` (Mitsuba requires both), each its own parameter where `anisotropic`
+    /// BSDFs are allowed, else one `alpha_u` that `alpha_v` must equal. `sample_visible` is read:
+    /// pathgrad samples visible normals, and `false` would change only the noise. Returns (α_u,
+    /// α_v): the same parameter when isotropic.
+    fn microfacet_alpha(
+        &mut self,
+        p: &Props<'a>,
+        name: &str,
+        anisotropic_allowed: bool,
+    ) -> Result<(crate::params::ParamId, crate::params::ParamId)> {
         let anisotropic = p.has("alpha_u") || p.has("alpha_v");
-        let alpha = if anisotropic {
-            if p.has("alpha") {
-                return Err(x.err(p.node, "give either 'alpha' or 'alpha_u'/'alpha_v', not both"));
-            }
-            let u = self.float_in(p, "alpha_u", Some(0.1), bounds::ALPHA)?;
-            let v = self.float_in(p, "alpha_v", Some(0.1), bounds::ALPHA)?;
-            if u != v {
-                return Err(x.err(p.node, format!("anisotropic roughness ({u} ≠ {v}) is not supported")));
-            }
-            u
-        } else {
-            self.float_in(p, "alpha", Some(0.1), bounds::ALPHA)?
+        p.boolean(&self.x, "sample_visible", true)?;
+        let add = |loader: &mut Self, key: &str, value: f32| {
+            let id = loader.scene.params.add(&format!("{name}.{key}.value"), &[value], bounds::ALPHA);
+            id.map_err(|e| loader.located(p.node, e))
         };
-        p.boolean(x, "sample_visible", true)?;
-        let key = if anisotropic { "alpha_u" } else { "alpha" };
-        let alpha = self.scene.params.add(&format!("{name}.{key}.value"), &[alpha], bounds::ALPHA);
-        alpha.map_err(|e| self.located(p.node, e))
+        if !anisotropic {
+            let alpha = self.float_in(p, "alpha", Some(0.1), bounds::ALPHA)?;
+            let id = add(self, "alpha", alpha)?;
+            return Ok((id, id));
+        }
+        if p.has("alpha") {
+            return Err(self.x.err(p.node, "give either 'alpha' or 'alpha_u'/'alpha_v', not both"));
+        }
+        if !(p.has("alpha_u") && p.has("alpha_v")) {
+            return Err(self.x.err(p.node, "give both 'alpha_u' and 'alpha_v' (Mitsuba requires both)"));
+        }
+        let u = self.float_in(p, "alpha_u", None, bounds::ALPHA)?;
+        let v = self.float_in(p, "alpha_v", None, bounds::ALPHA)?;
+        if anisotropic_allowed {
+            return Ok((add(self, "alpha_u", u)?, add(self, "alpha_v", v)?));
+        }
+        if u != v {
+            return Err(self.x.err(
+                p.node,
+                format!(
+                    "anisotropic roughness ({u} ≠ {v}) of '{}' is not supported (of 'roughconductor' it is)",
+                    p.kind
+                ),
+            ));
+        }
+        let id = add(self, "alpha_u", u)?;
+        Ok((id, id))
     }
 
     /// Mitsuba's `roughdielectric`: `distribution` (Beckmann), isotropic `alpha` (0.1, parameter
@@ -381,7 +401,7 @@ impl<'a> Loader<'a> {
     fn rough_dielectric(&mut self, p: &Props<'a>, name: &str) -> Result<MaterialId> {
         self.refuse_textured_specular(p)?;
         let distribution = self.distribution(p)?;
-        let alpha = self.isotropic_alpha(p, name)?;
+        let (alpha, _) = self.microfacet_alpha(p, name, false)?;
         let eta = self.dielectric_eta(p)?;
         let reflectance = self.specular_colour(p, name, "specular_reflectance", false)?;
         let transmittance = self.specular_colour(p, name, "specular_transmittance", false)?;
@@ -401,7 +421,7 @@ impl<'a> Loader<'a> {
 
     fn rough_conductor(&mut self, p: &Props<'a>, name: &str) -> Result<MaterialId> {
         let distribution = self.distribution(p)?;
-        let alpha = self.isotropic_alpha(p, name)?;
+        let (alpha, alpha_v) = self.microfacet_alpha(p, name, true)?;
         let specular = self.color_in(p, "specular_reflectance", Vec3::ONE, bounds::REFLECTANCE)?;
         let (eta, k) = self.conductor_ior(p)?;
         let specular = self.scene.params.add(
@@ -410,7 +430,7 @@ impl<'a> Loader<'a> {
             bounds::REFLECTANCE,
         );
         let specular = specular.map_err(|e| self.located(p.node, e))?;
-        Ok(self.scene.add_material(Material::RoughConductor { distribution, alpha, specular, eta, k }))
+        Ok(self.scene.add_material(Material::RoughConductor { distribution, alpha, alpha_v, specular, eta, k }))
     }
 
     /// Builds (once) the texture `node` — a `<texture>` or a `<ref>` to one — named `name` unless

@@ -211,7 +211,7 @@ impl<'a> Loader<'a> {
         if sensors.is_empty() {
             return Err(self.x.err(
                 root,
-                "the scene has no <sensor>; pathgrad needs a perspective sensor (it has no default camera)",
+                "the scene has no <sensor>; pathgrad needs one (perspective, thinlens or orthographic: it has no default camera)",
             ));
         }
         // Every sensor, each with its own film and sampler; the chosen one is rendered.

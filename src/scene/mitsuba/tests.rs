@@ -396,7 +396,7 @@ fn bsdf_names_follow_mitsuba() {
     );
     assert_eq!(param(&s, "_unnamed_1.emitter.radiance.value"), [1.0; 3], "default radiance");
     assert_eq!(param(&s, "sky.radiance.value"), [0.1, 0.2, 0.3]);
-    let Material::RoughConductor { distribution, alpha, specular, eta, k } = s.materials[0] else { panic!() };
+    let Material::RoughConductor { distribution, alpha, specular, eta, k, .. } = s.materials[0] else { panic!() };
     assert_eq!(
         (distribution, s.params.get(alpha), s.params.get(specular)),
         (Distribution::Beckmann, &[0.1][..], &[1.0; 3][..])
@@ -422,9 +422,10 @@ fn rough_conductor_properties_and_presets() {
     assert_eq!((eta, k), bsdf::conductor("Au").unwrap());
     assert_eq!(s.params.get(alpha)[0], 0.2);
     assert_eq!(param(&s, "g.bsdf.specular_reflectance.value"), [0.9, 0.8, 0.7]);
-    // Mitsuba's key is the property the file gives; alpha_v follows alpha_u.
+    // Mitsuba's keys are the properties the file gives: alpha_u and alpha_v, two parameters.
     assert_eq!(param(&s, "au.bsdf.alpha_u.value"), [0.2]);
-    assert!(s.params.find("au.bsdf.alpha.value").is_none() && s.params.find("au.bsdf.alpha_v.value").is_none());
+    assert_eq!(param(&s, "au.bsdf.alpha_v.value"), [0.2]);
+    assert!(s.params.find("au.bsdf.alpha.value").is_none());
     for m in ["none", "Au", "Ag", "Cu", "Al", "Cr"] {
         let (eta, k) = bsdf::conductor(m).unwrap();
         assert!(eta.min_element() >= 0.0 && k.min_element() > 0.0, "{m}");
@@ -608,7 +609,7 @@ fn material_values(s: &Scene, m: &Material) -> String {
     let v = |p| format!("{:?}", s.params.get(p));
     match m {
         Material::Diffuse { albedo: Albedo::Rgb(a) } => format!("diffuse {}", v(*a)),
-        Material::RoughConductor { distribution, alpha, specular, eta, k } => {
+        Material::RoughConductor { distribution, alpha, specular, eta, k, .. } => {
             format!("conductor {distribution:?} {} {} {eta} {k}", v(*alpha), v(*specular))
         }
         other => format!("{other:?}"),
@@ -903,5 +904,29 @@ fn thinlens_and_orthographic_sensors_take_mitsubas_properties() {
     ] {
         let e = with(&sensor).unwrap_err().to_string();
         assert!(e.contains(message), "{sensor}: {e}");
+    }
+}
+
+#[test]
+fn anisotropic_roughness_is_two_parameters_of_a_conductor_only() {
+    let s = load_ok(
+        r#"<shape type="cube" id="a"><bsdf type="roughconductor"><float name="alpha_u" value="0.1"/><float name="alpha_v" value="0.3"/></bsdf></shape>
+           <shape type="cube" id="b"><bsdf type="roughconductor"><float name="alpha" value="0.2"/></bsdf></shape>"#,
+    );
+    assert_eq!((param(&s, "a.bsdf.alpha_u.value"), param(&s, "a.bsdf.alpha_v.value")), (vec![0.1], vec![0.3]));
+    let Material::RoughConductor { alpha, alpha_v, .. } = s.materials[1] else { panic!("{:?}", s.materials[1]) };
+    assert_eq!(alpha, alpha_v, "isotropic: one parameter");
+    for (bsdf, message) in [
+        (
+            r#"<bsdf type="roughconductor"><float name="alpha_u" value="0.1"/></bsdf>"#,
+            "give both 'alpha_u' and 'alpha_v'",
+        ),
+        (
+            r#"<bsdf type="roughdielectric"><float name="alpha_u" value="0.1"/><float name="alpha_v" value="0.2"/></bsdf>"#,
+            "anisotropic roughness (0.1 ≠ 0.2) of 'roughdielectric' is not supported",
+        ),
+    ] {
+        let e = load(&format!(r#"<shape type="cube">{bsdf}</shape>"#)).unwrap_err().to_string();
+        assert!(e.contains(message), "{bsdf}: {e}");
     }
 }

@@ -55,7 +55,7 @@ fn fixtures_give_their_pinned_messages() {
         ("singular_transform.xml", "6:9: <transform name=\"to_world\">: to_world is singular (it flattens the shape)".into()),
         (
             "no_sensor.xml",
-            "1:1: <scene>: the scene has no <sensor>; pathgrad needs a perspective sensor (it has no default camera)".into(),
+            "1:1: <scene>: the scene has no <sensor>; pathgrad needs one (perspective, thinlens or orthographic: it has no default camera)".into(),
         ),
         (
             "undefined_parameter.xml",
@@ -318,8 +318,8 @@ fn element_and_property_errors() {
             "<texture name=\"alpha\">: property 'alpha' of 'roughconductor' must be a <float>",
         ),
         (
-            r#"<bsdf type="roughconductor"><float name="alpha_u" value="0.1"/><float name="alpha_v" value="0.2"/></bsdf>"#,
-            "<bsdf>: anisotropic roughness (0.1 ≠ 0.2) is not supported",
+            r#"<bsdf type="roughdielectric"><float name="alpha_u" value="0.1"/><float name="alpha_v" value="0.2"/></bsdf>"#,
+            "<bsdf>: anisotropic roughness (0.1 ≠ 0.2) of 'roughdielectric' is not supported (of 'roughconductor' it is)",
         ),
         (
             r#"<bsdf type="roughconductor"><float name="alpha_u" value="0.1"/><float name="alpha" value="0.2"/></bsdf>"#,
