@@ -113,6 +113,8 @@ MATRIX = {
     "bsdf_blend_twosided_leaves": dict(features=["blendbsdf of twosided leaves"], grads=["panel.bsdf.weight.value"]),
     "bsdf_twosided_blend": dict(features=["twosided(blendbsdf)", "shared bsdf ref"], grads=["coat.brdf_0.weight.value"]),
     "bsdf_null": dict(features=["null bsdf (no medium)"], grads=["ball.bsdf.reflectance.value"]),
+    "shape_instance": dict(features=["shapegroup", "instance (flattened)", "to_world per instance", "shared bsdfs"],
+                           grads=["pair.shape.bsdf.reflectance.value", "pair.block.bsdf.alpha.value"]),
     "sensor_orthographic": dict(features=["orthographic", "to_world scale sizes the film", "near_clip"],
                                 grads=["ball.bsdf.reflectance.value", "box.bsdf.alpha.value"]),
     "sensor_thinlens": dict(features=["thinlens", "aperture_radius", "focus_distance", "fov_axis smaller"],
@@ -284,6 +286,7 @@ POWER = {
     "bsdf_twosided_blend": {"gradient_bias": 0.1},
     # The frosted ball's α: paths refract twice or more through it, each vertex a score.
     "bsdf_roughdielectric": {"gradient_bias": 0.8},
+    "shape_instance": {"gradient_bias": 0.25},
     # The ball's α_u (0.05, Beckmann) is left out: its image mean cancels (it sees 240 %).
     "bsdf_roughconductor_anisotropic": {"primal_bias": 0.015, "gradient_bias": 0.12},
     "medium_in_dielectric": {"primal_bias": 0.02, "gradient_bias": 0.15},

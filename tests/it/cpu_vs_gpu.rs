@@ -38,6 +38,7 @@ fn gpu_equals_cpu_per_path_on_every_builtin_and_test_scene() {
     scenes.push(crate::support::scenes::conformance("sensor_orthographic"));
     scenes.push(crate::support::scenes::conformance("sensor_thinlens"));
     scenes.push(crate::support::scenes::conformance("bsdf_roughconductor_anisotropic"));
+    scenes.push(crate::support::scenes::conformance("shape_instance"));
     for scene in &scenes {
         let name = &scene.source;
         let opts = RenderOptions { width: 96, height: 96, spp: 1, seed: 7, ..RenderOptions::for_scene(scene) };

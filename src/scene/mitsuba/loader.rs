@@ -112,6 +112,7 @@ pub(super) fn load_text_with(text: &str, file: &Path, options: &LoadOptions, mes
         meshes,
         options,
         direct_emitter_samples: None,
+        instancing: None,
     };
     loader.run(doc.root_element(), &options.defines)?;
     loader.scene.validate()?;
@@ -172,6 +173,9 @@ pub(super) struct Loader<'a> {
     /// A `direct` integrator's `emitter_samples` above 1, where it was given: Mitsuba 3.9.1 then
     /// over-weights lights without area ([`Loader::direct_delta_warning`]).
     pub direct_emitter_samples: Option<(i64, El<'a>)>,
+    /// While an `instance` builds its group's shapes: its `to_world` and the name (Mitsuba's key
+    /// `GROUP.CHILD`) of the shape being built.
+    pub instancing: Option<(glam::Mat4, String)>,
 }
 
 impl<'a> Loader<'a> {
@@ -263,8 +267,17 @@ impl<'a> Loader<'a> {
                     self.texture(c, name, 0)?;
                 }
                 "shape" => {
-                    self.shape(c)?;
-                    mesh_children.push(i);
+                    let before = self.scene.meshes.len();
+                    match self.x.attr(c, "type")?.as_deref() {
+                        // Built by the instances that refer to it.
+                        Some("shapegroup") => {
+                            self.shape_group_children(c)?;
+                        }
+                        Some("instance") => self.instance(c)?,
+                        _ => self.shape(c)?,
+                    }
+                    // Each mesh built goes back to this child's place in the document.
+                    mesh_children.extend(std::iter::repeat_n(i, self.scene.meshes.len() - before));
                 }
                 // Built by the shape that refers to it (checked below).
                 "emitter" if self.x.attr(c, "type")?.as_deref() == Some("area") && c.has_attribute("id") => {}
@@ -380,6 +393,71 @@ impl<'a> Loader<'a> {
         }
         first.extend(meshes);
         Ok(first)
+    }
+
+    /// The shapes of `shapegroup` `group` with their names: Mitsuba's `traverse` keys them by
+    /// their ids, or `shape`, `shape_1`, … for those without one.
+    ///
+    /// # Errors
+    /// Anything but plain shapes in the group (Mitsuba refuses emitters, nested groups and
+    /// instances too; pathgrad also media).
+    fn shape_group_children(&self, group: El<'a>) -> Result<Vec<(El<'a>, String)>> {
+        let mut seen = std::collections::HashMap::new();
+        let mut shapes = Vec::new();
+        for c in group.children().filter(|c| c.is_element()) {
+            if c.has_tag_name("string") && c.attribute("name") == Some("id") {
+                continue;
+            }
+            if !c.has_tag_name("shape") {
+                return Err(self.x.err(c, "a 'shapegroup' holds only <shape>s"));
+            }
+            let kind = self.x.attr(c, "type")?.unwrap_or_default();
+            if matches!(kind.as_str(), "shapegroup" | "instance") {
+                return Err(self.x.err(c, "nested shape groups and instances are not permitted (as in Mitsuba)"));
+            }
+            if let Some(e) = c.children().find(|e| e.has_tag_name("emitter")) {
+                return Err(self.x.err(e, "instancing of emitters is not supported (as in Mitsuba)"));
+            }
+            if let Some(m) = c.children().find(|e| e.has_tag_name("medium") || e.attribute("name") == Some("interior"))
+            {
+                return Err(self.x.err(m, "media inside a shape group are not supported"));
+            }
+            let key = match self.x.attr(c, "id")? {
+                Some(id) if !id.starts_with("_unnamed_") => id,
+                _ => "shape".to_string(),
+            };
+            let n = seen.entry(key.clone()).or_insert(0usize);
+            let unique = if *n == 0 { key.clone() } else { format!("{key}_{n}") };
+            *n += 1;
+            shapes.push((c, unique));
+        }
+        Ok(shapes)
+    }
+
+    /// An `instance`: its group's shapes, each built again under the instance's `to_world`
+    /// (pathgrad flattens instances into meshes; BSDFs are shared, so their parameters are the
+    /// group's, named `GROUP.CHILD.bsdf.…` as Mitsuba's).
+    ///
+    /// # Errors
+    /// No `<ref>` to a `shapegroup`, or what a shape of it refuses.
+    fn instance(&mut self, node: El<'a>) -> Result<()> {
+        let p = Props::parse(&self.x, node)?;
+        let to_world = p.transform(&self.x, "to_world")?.map_or(glam::Mat4::IDENTITY, |(t, _)| t.matrix);
+        let refs = p.take_nested(&["ref", "shape"]);
+        let [group] = refs[..] else {
+            return Err(self.x.err(node, "an 'instance' needs exactly one <ref> to a 'shapegroup'"));
+        };
+        let group = self.deref(group)?;
+        if !(group.has_tag_name("shape") && self.x.attr(group, "type")?.as_deref() == Some("shapegroup")) {
+            return Err(self.x.err(node, "an 'instance' refers only to a 'shapegroup'"));
+        }
+        self.finish(&p)?;
+        let group_name = self.top_name(group)?;
+        for (shape, key) in self.shape_group_children(group)? {
+            self.instancing = Some((to_world, format!("{group_name}.{key}")));
+            self.shape(shape)?;
+        }
+        Ok(())
     }
 
     /// Puts [`Scene::meshes`], built in traversal order from the children with indices

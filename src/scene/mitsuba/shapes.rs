@@ -172,12 +172,16 @@ const SIMILARITY_TOLERANCE: f32 = 1e-4;
 impl<'a> Loader<'a> {
     /// Adds the mesh of one `<shape>`.
     pub(super) fn shape(&mut self, node: El<'a>) -> Result<()> {
-        let name = self.top_name(node)?;
+        // A shape of a group, built by an instance: its key, under the instance's transform.
+        let (name, instance) = match self.instancing.take() {
+            Some((m, name)) => (name, m),
+            None => (self.top_name(node)?, Mat4::IDENTITY),
+        };
         let p = Props::parse(&self.x, node)?;
         let transform = p.transform(&self.x, "to_world")?;
         let (to_world, t_node) = match transform {
-            Some((t, n)) => (t.matrix, n),
-            None => (Mat4::IDENTITY, node),
+            Some((t, n)) => (instance * t.matrix, n),
+            None => (instance, node),
         };
         let det = Mat4::from_mat3(glam::Mat3::from_mat4(to_world)).determinant();
         if !(det.abs() > 0.0) {

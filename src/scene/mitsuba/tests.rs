@@ -930,3 +930,43 @@ fn anisotropic_roughness_is_two_parameters_of_a_conductor_only() {
         assert!(e.contains(message), "{bsdf}: {e}");
     }
 }
+
+#[test]
+fn instances_flatten_their_group_with_shared_bsdfs_and_mitsubas_names() {
+    let group = r#"<shape type="shapegroup" id="g">
+          <shape type="cube"><bsdf type="diffuse"/></shape>
+          <shape type="cube" id="c"><bsdf type="diffuse"/></shape>
+          <shape type="cube"><bsdf type="diffuse"/></shape>
+        </shape>"#;
+    let s = load_ok(&format!(
+        r#"{group}<shape type="instance"><ref id="g"/></shape>
+           <shape type="instance"><ref id="g"/><transform name="to_world"><translate x="5"/></transform></shape>
+           <shape type="cube"><emitter type="area"/></shape>"#
+    ));
+    // Two instances of three shapes, and the light; one material per shape of the group.
+    assert_eq!(s.meshes.len(), 7);
+    for name in ["g.shape.bsdf.reflectance.value", "g.c.bsdf.reflectance.value", "g.shape_1.bsdf.reflectance.value"] {
+        assert!(s.params.find(name).is_some(), "{name}");
+    }
+    assert_eq!(s.meshes[0].material, s.meshes[3].material);
+    let shift = s.meshes[3].positions[0] - s.meshes[0].positions[0];
+    assert!(shift.abs_diff_eq(Vec3::new(5.0, 0.0, 0.0), 1e-6), "{shift}");
+    for (body, message) in [
+        (
+            r#"<shape type="shapegroup" id="g"><shape type="cube"><emitter type="area"/></shape></shape><shape type="instance"><ref id="g"/></shape>"#,
+            "instancing of emitters is not supported",
+        ),
+        (r#"<shape type="instance"/>"#, "needs exactly one <ref> to a 'shapegroup'"),
+        (
+            r#"<bsdf type="diffuse" id="d"/><shape type="instance"><ref id="d"/></shape>"#,
+            "refers only to a 'shapegroup'",
+        ),
+        (
+            r#"<shape type="shapegroup" id="g"><shape type="instance"><ref id="g"/></shape></shape><shape type="instance"><ref id="g"/></shape>"#,
+            "nested shape groups and instances are not permitted",
+        ),
+    ] {
+        let e = load(body).unwrap_err().to_string();
+        assert!(e.contains(message), "{body}: {e}");
+    }
+}
