@@ -78,13 +78,29 @@ float tan2_theta(vec3 v) { return (v.x * v.x + v.y * v.y) / (v.z * v.z); }
 
 // D(h) for roughness a = (α_u, α_v): with T = (h_x²/α_u² + h_y²/α_v²)/h_z², Beckmann
 // e^{−T}/(π α_u α_v h_z⁴), GGX 1/(π α_u α_v h_z⁴ (1 + T)²) (twin: microfacet_d_aniso).
+// Isotropic roughness (α_u = α_v, always in kernels without anisotropic BSDFs) takes the
+// isotropic formulas: fewer operations, and the derivative's sign change at tan²θ = α² exact.
+bool isotropic(vec2 a) { return !HAS(F_ANISOTROPIC) || a.x == a.y; }
+
 float microfacet_d(uint distribution, vec2 a, vec3 h) {
     float c = h.z;
     if (c <= 0.0) return 0.0;
     float c2 = c * c;
-    float t = (h.x * h.x / (a.x * a.x) + h.y * h.y / (a.y * a.y)) / c2;
-    float norm = PI * a.x * a.y * c2 * c2;
-    float d = is_beckmann(distribution) ? exp(-t) / norm : 1.0 / (norm * (1.0 + t) * (1.0 + t));
+    float d;
+    if (isotropic(a)) {
+        float t = (h.x * h.x + h.y * h.y) / c2;
+        float a2 = a.x * a.x;
+        if (is_beckmann(distribution)) {
+            d = exp(-t / a2) / (PI * a2 * c2 * c2);
+        } else {
+            float s = a2 + t;
+            d = a2 / (PI * c2 * c2 * s * s);
+        }
+    } else {
+        float t = (h.x * h.x / (a.x * a.x) + h.y * h.y / (a.y * a.y)) / c2;
+        float norm = PI * a.x * a.y * c2 * c2;
+        d = is_beckmann(distribution) ? exp(-t) / norm : 1.0 / (norm * (1.0 + t) * (1.0 + t));
+    }
     return d * c > D_UNDERFLOW ? d : 0.0;
 }
 float microfacet_d(uint distribution, float alpha, vec3 h) { return microfacet_d(distribution, vec2(alpha), h); }
@@ -99,6 +115,24 @@ void microfacet_g1_and_dalpha(uint distribution, vec2 a, vec3 v, vec3 h, out flo
     if (dot(v, h) * v.z <= 0.0) return;
     if (tan2_theta(v) == 0.0) {
         g1 = 1.0;
+        return;
+    }
+    if (isotropic(a)) {
+        // The isotropic derivative whole, in x (callers sum the two).
+        float alpha = a.x;
+        float tan2 = tan2_theta(v);
+        float s2 = alpha * alpha * tan2;
+        if (is_beckmann(distribution)) {
+            float b = 1.0 / sqrt(s2);
+            float e = exp(-b * b);
+            float lambda = 0.5 * (erf_nonnegative(b, e) - 1.0) + e / (2.0 * b * sqrt(PI));
+            g1 = 1.0 / (1.0 + lambda);
+            dg1 = vec2(-g1 * g1 * e / (2.0 * b * alpha * sqrt(PI)), 0.0);
+            return;
+        }
+        float root = sqrt(1.0 + s2);
+        g1 = 2.0 / (1.0 + root);
+        dg1 = vec2(-2.0 * (alpha * tan2 / root) / ((1.0 + root) * (1.0 + root)), 0.0);
         return;
     }
     // precise: G1 must round the same whether or not a kernel also takes its derivative (which
@@ -163,6 +197,12 @@ vec3 microfacet_eval_pdf(Leaf l, vec3 wi, vec3 wo, out float pdf) {
 // microfacet_d_dalpha_aniso, which computes D itself).
 vec2 microfacet_d_dalpha_of(uint distribution, vec2 a, vec3 h, float d) {
     if (d == 0.0) return vec2(0.0);
+    if (isotropic(a)) {
+        float t = (h.x * h.x + h.y * h.y) / (h.z * h.z);
+        float a2 = a.x * a.x;
+        if (is_beckmann(distribution)) return vec2(d * 2.0 * (t - a2) / (a2 * a.x), 0.0);
+        return vec2(d * 2.0 * (t - a2) / (a.x * (a2 + t)), 0.0);
+    }
     float x2 = h.x * h.x;
     float y2 = h.y * h.y;
     float z2 = h.z * h.z;

@@ -29,18 +29,33 @@ pub fn microfacet_d(distribution: Distribution, alpha: f32, h: Vec3) -> f32 {
 }
 
 /// D(h) for roughness (α_u, α_v): with T = (h_x²/α_u² + h_y²/α_v²)/h_z², Beckmann
-/// e^{−T}/(π α_u α_v h_z⁴), GGX 1/(π α_u α_v h_z⁴ (1 + T)²).
+/// e^{−T}/(π α_u α_v h_z⁴), GGX 1/(π α_u α_v h_z⁴ (1 + T)²). Isotropic roughness (α_u = α_v)
+/// takes the isotropic formulas, here and in the derivatives: fewer operations (the kernels
+/// without anisotropic BSDFs compile only those), and the derivative's sign change at tan²θ = α²
+/// exact, which the differential sampler's densities need.
 pub fn microfacet_d_aniso(distribution: Distribution, alpha: Vec2, h: Vec3) -> f32 {
     let cos = h.z;
     if cos <= 0.0 {
         return 0.0;
     }
     let cos2 = cos * cos;
-    let t = (h.x * h.x / (alpha.x * alpha.x) + h.y * h.y / (alpha.y * alpha.y)) / cos2;
-    let norm = PI * alpha.x * alpha.y * cos2 * cos2;
-    let d = match distribution {
-        Distribution::Beckmann => (-t).exp() / norm,
-        Distribution::Ggx => 1.0 / (norm * (1.0 + t) * (1.0 + t)),
+    let d = if alpha.x == alpha.y {
+        let t = (h.x * h.x + h.y * h.y) / cos2;
+        let a2 = alpha.x * alpha.x;
+        match distribution {
+            Distribution::Beckmann => (-t / a2).exp() / (PI * a2 * cos2 * cos2),
+            Distribution::Ggx => {
+                let s = a2 + t;
+                a2 / (PI * cos2 * cos2 * s * s)
+            }
+        }
+    } else {
+        let t = (h.x * h.x / (alpha.x * alpha.x) + h.y * h.y / (alpha.y * alpha.y)) / cos2;
+        let norm = PI * alpha.x * alpha.y * cos2 * cos2;
+        match distribution {
+            Distribution::Beckmann => (-t).exp() / norm,
+            Distribution::Ggx => 1.0 / (norm * (1.0 + t) * (1.0 + t)),
+        }
     };
     if d * cos > D_UNDERFLOW { d } else { 0.0 }
 }
@@ -51,6 +66,16 @@ pub fn microfacet_d_dalpha_aniso(distribution: Distribution, alpha: Vec2, h: Vec
     let d = microfacet_d_aniso(distribution, alpha, h);
     if d == 0.0 {
         return Vec2::ZERO;
+    }
+    if alpha.x == alpha.y {
+        // The isotropic derivative whole, in x (the two parts sum to it).
+        let t = (h.x * h.x + h.y * h.y) / (h.z * h.z);
+        let (a, a2) = (alpha.x, alpha.x * alpha.x);
+        let whole = match distribution {
+            Distribution::Beckmann => d * 2.0 * (t - a2) / (a2 * a),
+            Distribution::Ggx => d * 2.0 * (t - a2) / (a * (a2 + t)),
+        };
+        return Vec2::new(whole, 0.0);
     }
     let (x2, y2, z2) = (h.x * h.x, h.y * h.y, h.z * h.z);
     let a3 = alpha * alpha * alpha;
@@ -84,7 +109,7 @@ pub fn microfacet_g1_aniso(distribution: Distribution, alpha: Vec2, v: Vec3, h: 
     if tan2_theta(v) == 0.0 {
         return 1.0;
     }
-    let s2 = g1_s2(alpha, v);
+    let s2 = if alpha.x == alpha.y { alpha.x * alpha.x * tan2_theta(v) } else { g1_s2(alpha, v) };
     match distribution {
         Distribution::Beckmann => {
             let a = 1.0 / s2.sqrt();
@@ -130,20 +155,9 @@ pub fn microfacet_eval(
     fresnel_conductor(wi.dot(h), eta, k) * specular * (d * g / (4.0 * wi.z))
 }
 
-/// ∂D/∂α (ALGORITHMS.md §4.2); 0 where the underflow guard zeroes D. Written with t − α² (not as
-/// the sum of [`microfacet_d_dalpha_aniso`]'s parts, which cancel where t ≈ α²) so that its sign
-/// change is exact to rounding, as the differential sampler's densities need.
+/// ∂D/∂α (ALGORITHMS.md §4.2); 0 where the underflow guard zeroes D.
 pub fn microfacet_d_dalpha(distribution: Distribution, alpha: f32, h: Vec3) -> f32 {
-    let d = microfacet_d(distribution, alpha, h);
-    if d == 0.0 {
-        return 0.0;
-    }
-    let t = (h.x * h.x + h.y * h.y) / (h.z * h.z);
-    let a2 = alpha * alpha;
-    match distribution {
-        Distribution::Beckmann => d * 2.0 * (t - a2) / (a2 * alpha),
-        Distribution::Ggx => d * 2.0 * (t - a2) / (alpha * (a2 + t)),
-    }
+    microfacet_d_dalpha_aniso(distribution, Vec2::splat(alpha), h).x
 }
 
 /// (∂G1/∂α_u, ∂G1/∂α_v) of [`microfacet_g1_aniso`]: ∂G1/∂s² · ∂s²/∂α_u with ∂s²/∂α_u =
@@ -151,6 +165,24 @@ pub fn microfacet_d_dalpha(distribution: Distribution, alpha: f32, h: Vec3) -> f
 pub fn microfacet_g1_dalpha_aniso(distribution: Distribution, alpha: Vec2, v: Vec3, h: Vec3) -> Vec2 {
     if v.dot(h) * v.z <= 0.0 || tan2_theta(v) == 0.0 {
         return Vec2::ZERO;
+    }
+    if alpha.x == alpha.y {
+        // The isotropic derivative whole, in x.
+        let (a, tan2) = (alpha.x, tan2_theta(v));
+        let s2 = a * a * tan2;
+        let whole = match distribution {
+            Distribution::Beckmann => {
+                // G1 = 1/(1 + Λ(b)), b = 1/(α tan θ): dΛ/db = −e^{−b²}/(2b²√π), db/dα = −b/α.
+                let b = 1.0 / s2.sqrt();
+                let g1 = microfacet_g1_aniso(distribution, alpha, v, h);
+                -g1 * g1 * (-b * b).exp() / (2.0 * b * a * PI.sqrt())
+            }
+            Distribution::Ggx => {
+                let root = (1.0 + s2).sqrt();
+                -2.0 * (a * tan2 / root) / ((1.0 + root) * (1.0 + root))
+            }
+        };
+        return Vec2::new(whole, 0.0);
     }
     let s2 = g1_s2(alpha, v);
     let dg_ds2 = match distribution {
@@ -171,26 +203,7 @@ pub fn microfacet_g1_dalpha_aniso(distribution: Distribution, alpha: Vec2, v: Ve
 
 /// ∂G1/∂α of [`microfacet_g1`]; 0 where G1 is constant (masked, or at normal incidence).
 pub fn microfacet_g1_dalpha(distribution: Distribution, alpha: f32, v: Vec3, h: Vec3) -> f32 {
-    if v.dot(h) * v.z <= 0.0 {
-        return 0.0;
-    }
-    let tan2 = tan2_theta(v);
-    if tan2 == 0.0 {
-        return 0.0;
-    }
-    let s2 = alpha * alpha * tan2;
-    match distribution {
-        Distribution::Beckmann => {
-            // G1 = 1/(1 + Λ(a)), a = 1/(α tan θ): dΛ/da = −e^{−a²}/(2a²√π), da/dα = −a/α.
-            let a = 1.0 / s2.sqrt();
-            let g1 = microfacet_g1(distribution, alpha, v, h);
-            -g1 * g1 * (-a * a).exp() / (2.0 * a * alpha * PI.sqrt())
-        }
-        Distribution::Ggx => {
-            let root = (1.0 + s2).sqrt();
-            -2.0 * (alpha * tan2 / root) / ((1.0 + root) * (1.0 + root))
-        }
-    }
+    microfacet_g1_dalpha_aniso(distribution, Vec2::splat(alpha), v, h).x
 }
 
 /// The scalar D(h)·G1(wi, h)·G1(wo, h)/(4 cos θi) at half vector `h` and its derivatives by α_u and

@@ -338,7 +338,10 @@ fn derivatives_match_finite_differences() {
                             1e-3,
                         ));
                     }
-                    if let Leaf::RoughConductor { alpha_v, .. } = b.leaves[leaf] {
+                    // An anisotropic conductor's α_v (an isotropic one's α moves both below).
+                    if let Leaf::RoughConductor { alpha, alpha_v, .. } = b.leaves[leaf]
+                        && alpha != alpha_v
+                    {
                         let base = *b;
                         cases.push((
                             g.leaves[leaf].alpha_v.dot(Vec3::ONE),
@@ -353,14 +356,20 @@ fn derivatives_match_finite_differences() {
                             1e-3,
                         ));
                     }
-                    if let Leaf::RoughConductor { alpha, .. } = b.leaves[leaf] {
+                    if let Leaf::RoughConductor { alpha, alpha_v, .. } = b.leaves[leaf] {
                         let base = *b;
+                        let isotropic = alpha == alpha_v;
+                        let analytic =
+                            g.leaves[leaf].alpha + if isotropic { g.leaves[leaf].alpha_v } else { Vec3::ZERO };
                         cases.push((
-                            g.leaves[leaf].alpha.dot(Vec3::ONE),
+                            analytic.dot(Vec3::ONE),
                             Box::new(move |v| {
                                 let mut x = base;
-                                if let Leaf::RoughConductor { alpha, .. } = &mut x.leaves[leaf] {
+                                if let Leaf::RoughConductor { alpha, alpha_v, .. } = &mut x.leaves[leaf] {
                                     *alpha = v;
+                                    if isotropic {
+                                        *alpha_v = v;
+                                    }
                                 }
                                 x
                             }),

@@ -16,7 +16,7 @@ use crate::scene::shapes::{Geometry, cuboid, merge, quad, triangle_area};
 use crate::scene::{Camera, MaterialId, bounds};
 
 /// The shape plugins pathgrad reads.
-const SUPPORTED_SHAPES: &str = "cube, cylinder, disk, obj, ply, rectangle, serialized, sphere";
+const SUPPORTED_SHAPES: &str = "cube, cylinder, disk, obj, ply, rectangle, serialized, sphere; shapegroup and instance";
 
 /// Largest distance, in pixels of the scene's film, between a tessellated curved shape and the
 /// true surface. A pixel straddling a silhouette of contrast C and coverage p has a 64-spp standard

@@ -228,8 +228,8 @@ fn element_and_property_errors() {
         (r#"<shape type="cube"><film type="hdrfilm"/></shape>"#, "<film>: a <film> is not expected inside 'cube'"),
         (r#"<shape/>"#, "<shape>: missing attribute 'type'"),
         (
-            r#"<shape type="shapegroup"/>"#,
-            "<shape>: unsupported plugin 'shapegroup' (supported: cube, cylinder, disk, obj, ply, rectangle, serialized, sphere)",
+            r#"<shape type="hair"/>"#,
+            "<shape>: unsupported plugin 'hair' (supported: cube, cylinder, disk, obj, ply, rectangle, serialized, sphere; shapegroup and instance)",
         ),
         (r#"<shape type="obj"/>"#, "<shape>: 'obj' needs the property 'filename'"),
         (
