@@ -460,6 +460,33 @@ impl Scene {
         Ok(self.add_material(Material::RoughConductor { distribution, alpha, alpha_v: alpha, specular, eta, k }))
     }
 
+    /// Adds a GGX rough dielectric of relative index `eta` with parameters `{name}.alpha.value` and
+    /// `{name}.specular_transmittance.value` (its reflectance is a constant 1).
+    ///
+    /// # Errors
+    /// As [`ParamTable::add`].
+    pub fn add_rough_dielectric(
+        &mut self,
+        name: &str,
+        alpha: f32,
+        transmittance: Vec3,
+        eta: f32,
+    ) -> Result<MaterialId> {
+        let alpha = self.params.add(&format!("{name}.alpha.value"), &[alpha], bounds::ALPHA)?;
+        let transmittance = self.params.add(
+            &format!("{name}.specular_transmittance.value"),
+            &transmittance.to_array(),
+            bounds::REFLECTANCE,
+        )?;
+        Ok(self.add_material(Material::RoughDielectric {
+            distribution: Distribution::Ggx,
+            alpha,
+            reflectance: SmoothColour::Constant(Vec3::ONE),
+            transmittance: SmoothColour::Param(transmittance),
+            eta,
+        }))
+    }
+
     /// Adds a blend with parameter `{name}.weight.value`.
     ///
     /// # Errors

@@ -179,7 +179,7 @@ class Converter:
         self.taken = set(self.node_names)
         self.materials = {}  # index (None: default) -> (name, xml, radiance, tex_coord)
         self.keys = {}  # pathgrad name -> Mitsuba key
-        self.shapes, self.sensor = [], None
+        self.shapes, self.emitters, self.sensor = [], [], None
 
     # ---- materials (src/scene/gltf/mod.rs, "Materials") ----
     def material(self, index):
@@ -191,7 +191,12 @@ class Converter:
         base = np.array(pbr.get("baseColorFactor", [1, 1, 1, 1])[:3], np.float64)
         metallic, roughness = pbr.get("metallicFactor", 1.0), pbr.get("roughnessFactor", 1.0)
         alpha = max(roughness * roughness, ALPHA_MIN)
-        prefix = f"{name}.brdf_0" if m.get("doubleSided") else name
+        ext = m.get("extensions", {})
+        ior = ext.get("KHR_materials_ior", {}).get("ior", 1.5)
+        f0 = ((ior - 1.0) / (ior + 1.0)) ** 2
+        transmits = ext.get("KHR_materials_transmission", {}).get("transmissionFactor", 0.0) > 0 and metallic < 1.0
+        double_sided = m.get("doubleSided") and not transmits
+        prefix = f"{name}.brdf_0" if double_sided else name
         texture, mean, tex_coord = None, base, None
         if "baseColorTexture" in pbr:
             info = pbr["baseColorTexture"]
@@ -210,9 +215,16 @@ class Converter:
             xml = conductor(mean)
             self.keys[f"{name}.alpha.value"] = f"{prefix}.alpha.value"
             self.keys[f"{name}.specular_reflectance.value"] = f"{prefix}.specular_reflectance.value"
+        elif transmits:
+            # A rough dielectric (transmission taken as 1, metallic as 0), tinted by the mean colour.
+            xml = (f'<bsdf type="roughdielectric"><string name="distribution" value="ggx"/>'
+                   f'<float name="alpha" value="{alpha:.9g}"/><float name="int_ior" value="{ior:.9g}"/>'
+                   f'<float name="ext_ior" value="1"/><rgb name="specular_transmittance" value="{rgb(mean)}"/></bsdf>')
+            self.keys[f"{name}.alpha.value"] = f"{prefix}.alpha.value"
+            self.keys[f"{name}.specular_transmittance.value"] = f"{prefix}.specular_transmittance.value"
         else:
-            w = DIELECTRIC_F0 + (1.0 - DIELECTRIC_F0) * metallic
-            specular = np.minimum((metallic * mean + DIELECTRIC_F0 * (1.0 - metallic)) / w, 1.0)
+            w = f0 + (1.0 - f0) * metallic
+            specular = np.minimum((metallic * mean + f0 * (1.0 - metallic)) / w, 1.0)
             if texture:
                 diffuse = (f'<bsdf type="diffuse"><texture type="bitmap" name="reflectance">'
                            f'<string name="filename" value="{texture}"/><boolean name="raw" value="true"/></texture></bsdf>')
@@ -225,7 +237,7 @@ class Converter:
             self.keys[f"{name}.weight.value"] = f"{prefix}.weight.value"
             self.keys[f"{name}.bsdf_1.alpha.value"] = f"{prefix}.bsdf_1.alpha.value"
             self.keys[f"{name}.bsdf_1.specular_reflectance.value"] = f"{prefix}.bsdf_1.specular_reflectance.value"
-        if m.get("doubleSided"):
+        if double_sided:
             xml = f'<bsdf type="twosided">\n        {xml}\n    </bsdf>'
         xml = xml.replace("<bsdf type=", f'<bsdf id="{name}" type=', 1)
         strength = m.get("extensions", {}).get("KHR_materials_emissive_strength", {}).get("emissiveStrength", 1.0)
@@ -258,11 +270,40 @@ class Converter:
             world = parent @ local_matrix(node)
             if "camera" in node and self.sensor is None:
                 self.camera(node["camera"], world, index)
+            if "KHR_lights_punctual" in node.get("extensions", {}):
+                self.light(node["extensions"]["KHR_lights_punctual"]["light"], world, index)
             if "mesh" in node:
                 self.mesh(index, node["mesh"], world)
             for child in reversed(node.get("children", [])):
                 stack.append((child, world))
         assert self.sensor is not None, "the conformance scenes carry a perspective camera"
+
+    # ---- lights (src/scene/gltf/mod.rs, "Lights") ----
+    def light(self, index, world, node):
+        light = self.doc["extensions"]["KHR_lights_punctual"]["lights"][index]
+        name = self.node_names[node]
+        value = np.array(light.get("color", [1, 1, 1]), np.float64) * light.get("intensity", 1.0)
+        position = world[:3, 3]
+        axis = world[:3, :3] @ np.array([0, 0, -1.0])
+        axis /= np.linalg.norm(axis)
+        kind = light["type"]
+        if kind == "point":
+            body = f'<point name="position" value="{rgb(position)}"/><rgb name="intensity" value="{rgb(value)}"/>'
+            key = "intensity"
+        elif kind == "spot":
+            spot = light.get("spot", {})
+            inner, outer = spot.get("innerConeAngle", 0.0), spot.get("outerConeAngle", math.pi / 4)
+            up = np.array([0, 1.0, 0]) if abs(axis[1]) < 0.9 else np.array([1.0, 0, 0])
+            body = (f'<transform name="to_world"><lookat origin="{rgb(position)}" target="{rgb(position + axis)}" '
+                    f'up="{rgb(up)}"/></transform><float name="cutoff_angle" value="{math.degrees(outer):.9g}"/>'
+                    f'<float name="beam_width" value="{max(math.degrees(inner), 1e-3):.9g}"/>'
+                    f'<rgb name="intensity" value="{rgb(value)}"/>')
+            key = "intensity"
+        else:
+            body = f'<vector name="direction" value="{rgb(axis)}"/><rgb name="irradiance" value="{rgb(value)}"/>'
+            key = "irradiance"
+        self.emitters.append(f'    <emitter type="{kind}" id="{name}">{body}</emitter>')
+        self.keys[f"{name}.{key}.value"] = f"{name}.{key}.value"
 
     def camera(self, index, world, node):
         p = self.doc["cameras"][index]["perspective"]
@@ -330,6 +371,7 @@ class Converter:
             '<scene version="3.0.0">',
             f'    <integrator type="prb"><integer name="max_depth" value="{max_depth}"/></integrator>',
             self.sensor,
+            *self.emitters,
             *[f"    {b}" for b in bsdfs],
             *self.shapes,
             "</scene>",

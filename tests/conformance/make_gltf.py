@@ -1,6 +1,12 @@
 #!/usr/bin/env python3
-"""Writes scenes/gltf_src/features.gltf: one small glTF 2.0 scene exercising the parts of the glTF
-loader that the showcase (scenes/gltf/showcase.gltf) does not, for the conformance matrix.
+"""Writes scenes/gltf_src/features.gltf and lights.gltf: small glTF 2.0 scenes exercising the parts
+of the glTF loader that the showcase (scenes/gltf/showcase.gltf) does not, for the conformance
+matrix.
+
+lights.gltf: a floor lit only by KHR_lights_punctual lights — a point light, a spot light (inner
+and outer cone angles) and a directional light, each on a rotated node — with a frosted-glass ball
+(KHR_materials_transmission 1, KHR_materials_ior 1.45, tinted) and a plastic box whose ior (1.7)
+sets its specular share.
 
 Deterministic, numpy and the standard library only:  python3 tests/conformance/make_gltf.py
 
@@ -167,6 +173,69 @@ def main():
     OUT.mkdir(parents=True, exist_ok=True)
     (OUT / "features.gltf").write_text(json.dumps(doc, indent=1) + "\n")
     print(f"wrote {OUT / 'features.gltf'}")
+    lights()
+
+
+def lights():
+    b = Builder()
+    p, n, t = quad()
+    floor = {"POSITION": b.positions(p * [5, 1, 5]), "NORMAL": b.vec3(n)}
+    floor_indices = b.add(np.asarray(t.reshape(-1), "<u2"), 5123, "SCALAR", 34963)
+    verts, faces = icosphere(2)
+    verts = np.array(verts)
+    ball = {"POSITION": b.positions(verts), "NORMAL": b.vec3(verts)}
+    ball_indices = b.add(np.asarray(np.array(faces).reshape(-1), "<u4"), 5125, "SCALAR", 34963)
+    box = {"POSITION": b.positions(cube_soup())}
+    # Rotations as quaternions (x, y, z, w): the spot and the sun look down (their -z) at an angle.
+    down_45 = [-0.3826834, 0.0, 0.0, 0.9238795]
+    down_60_turned = [-0.4829629, 0.2241439, 0.1294095, 0.8365163]
+    doc = {
+        "asset": {"version": "2.0", "generator": "pathgrad tests/conformance/make_gltf.py"},
+        "extensionsUsed": ["KHR_lights_punctual", "KHR_materials_transmission", "KHR_materials_ior"],
+        "extensions": {"KHR_lights_punctual": {"lights": [
+            {"type": "point", "color": [1.0, 0.9, 0.8], "intensity": 6.0},
+            {"type": "spot", "color": [0.6, 0.8, 1.0], "intensity": 25.0,
+             "spot": {"innerConeAngle": 0.25, "outerConeAngle": 0.5}},
+            {"type": "directional", "color": [1.0, 0.95, 0.85], "intensity": 0.8},
+        ]}},
+        "scene": 0,
+        "scenes": [{"nodes": [0, 1, 2, 3, 4, 5, 6]}],
+        "nodes": [
+            {"name": "camera", "camera": 0, "translation": [0.0, 1.6, 4.5],
+             "rotation": [-0.1736482, 0.0, 0.0, 0.9848078]},
+            {"name": "floor", "mesh": 0},
+            {"name": "ball", "mesh": 1, "translation": [-0.6, 0.5, 0.0], "scale": [0.5, 0.5, 0.5]},
+            {"name": "box", "mesh": 2, "translation": [0.8, 0.35, -0.3], "scale": [0.7, 0.7, 0.7],
+             "rotation": [0.0, 0.2588190, 0.0, 0.9659258]},
+            {"name": "bulb", "translation": [1.2, 2.0, 1.5], "extensions": {"KHR_lights_punctual": {"light": 0}}},
+            {"name": "spot", "translation": [-1.0, 2.5, 2.0], "rotation": down_45,
+             "extensions": {"KHR_lights_punctual": {"light": 1}}},
+            {"name": "sun", "rotation": down_60_turned, "extensions": {"KHR_lights_punctual": {"light": 2}}},
+        ],
+        "cameras": [{"type": "perspective", "perspective": {"yfov": 0.7, "aspectRatio": 1.25, "znear": 0.05}}],
+        "meshes": [
+            {"name": "floor", "primitives": [{"attributes": floor, "indices": floor_indices, "material": 0}]},
+            {"name": "ball", "primitives": [{"attributes": ball, "indices": ball_indices, "material": 1}]},
+            {"name": "box", "primitives": [{"attributes": box, "material": 2}]},
+        ],
+        "materials": [
+            {"name": "floor", "pbrMetallicRoughness": {
+                "baseColorFactor": [0.7, 0.7, 0.65, 1.0], "metallicFactor": 0.0, "roughnessFactor": 0.9}},
+            {"name": "glass", "pbrMetallicRoughness": {
+                "baseColorFactor": [0.9, 0.95, 0.8, 1.0], "metallicFactor": 0.0, "roughnessFactor": 0.35},
+             "extensions": {"KHR_materials_transmission": {"transmissionFactor": 1.0},
+                            "KHR_materials_ior": {"ior": 1.45}}},
+            {"name": "plastic", "pbrMetallicRoughness": {
+                "baseColorFactor": [0.2, 0.4, 0.8, 1.0], "metallicFactor": 0.0, "roughnessFactor": 0.4},
+             "extensions": {"KHR_materials_ior": {"ior": 1.7}}},
+        ],
+        "accessors": b.accessors,
+        "bufferViews": b.views,
+        "buffers": [{"byteLength": len(b.data),
+                     "uri": "data:application/octet-stream;base64," + base64.b64encode(bytes(b.data)).decode()}],
+    }
+    (OUT / "lights.gltf").write_text(json.dumps(doc, indent=1) + "\n")
+    print(f"wrote {OUT / 'lights.gltf'}")
 
 
 if __name__ == "__main__":

@@ -266,6 +266,12 @@ MATRIX = {
                           gltf="scenes/gltf_src/features.gltf", width=64,
                           grads=["tiles.base_color.data", "plastic.bsdf_0.reflectance.value", "lamp_0.emitter.radiance.value",
                                  "default_material.specular_reflectance.value"]),
+    "gltf_lights": dict(features=["KHR_lights_punctual point, spot, directional", "KHR_materials_transmission",
+                                  "KHR_materials_ior (dielectric and blend F0)"],
+                        gltf="scenes/gltf_src/lights.gltf", width=48,
+                        warnings=["KHR_lights_punctual: intensities"],
+                        grads=["spot.intensity.value", "sun.irradiance.value", "glass.specular_transmittance.value",
+                               "plastic.bsdf_0.reflectance.value"]),
 }
 
 # The bias each scene's comparison must be able to see where the defaults (1 % of the primal
@@ -287,6 +293,8 @@ POWER = {
     # The frosted ball's α: paths refract twice or more through it, each vertex a score.
     "bsdf_roughdielectric": {"gradient_bias": 0.8},
     "shape_instance": {"gradient_bias": 0.25},
+    # Light through the frosted ball and the plastic's specular share are caustic-like, rare paths.
+    "gltf_lights": {"gradient_bias": 0.3},
     # The ball's α_u (0.05, Beckmann) is left out: its image mean cancels (it sees 240 %).
     "bsdf_roughconductor_anisotropic": {"primal_bias": 0.015, "gradient_bias": 0.12},
     "medium_in_dielectric": {"primal_bias": 0.02, "gradient_bias": 0.15},

@@ -8,6 +8,9 @@ use json::validation::Checked;
 
 use crate::error::{Error, Result};
 
+/// A spot light's beam width when glTF's inner cone angle is 0 (pathgrad's spot needs one > 0).
+const MIN_BEAM_WIDTH_DEGREES: f32 = 1e-3;
+
 /// The pinhole field of view an orthographic camera carries (unused by its lens; degrees).
 const DEFAULT_ORTHOGRAPHIC_FOV: f32 = 45.0;
 use crate::scene::Camera;
@@ -55,6 +58,9 @@ impl Loader<'_> {
             if let Some(camera) = node.camera {
                 self.camera(index, camera.value(), &world)?;
             }
+            if let Some(light) = node.extensions.as_ref().and_then(|e| e.khr_lights_punctual.as_ref()) {
+                self.light(index, light.light.value(), &world)?;
+            }
             if let Some(mesh) = node.mesh {
                 self.mesh(index, mesh.value(), &world)?;
             }
@@ -91,6 +97,67 @@ impl Loader<'_> {
             return Err(self.error(format!("nodes[{index}]"), "transform is not finite"));
         }
         Ok(m)
+    }
+
+    // ---- lights (KHR_lights_punctual) ----
+
+    /// Light `index` of `KHR_lights_punctual` on node `node`: a point, spot or directional light
+    /// (the module's "Lights").
+    pub(super) fn light(&mut self, node: usize, index: usize, world: &Mat4) -> Result<()> {
+        use crate::scene::{Light, LightShape, bounds};
+        use json::extensions::scene::khr_lights_punctual::Type;
+        let root = self.root;
+        let at = format!("KHR_lights_punctual.lights[{index}]");
+        let lights = root.extensions.as_ref().and_then(|e| e.khr_lights_punctual.as_ref()).map(|l| &l.lights);
+        let Some(light) = lights.and_then(|l| l.get(index)) else {
+            return Err(self.error(format!("nodes[{node}]"), format!("refers to {at}, which does not exist")));
+        };
+        let colour = Vec3::from(light.color);
+        if !(colour.is_finite() && colour.min_element() >= 0.0 && light.intensity.is_finite() && light.intensity >= 0.0)
+        {
+            return Err(self.error(&at, "color and intensity must be finite and ≥ 0"));
+        }
+        if light.range.is_some() {
+            self.scene.warn(format!("{at}: 'range' is ignored (the light falls off as 1/distance² everywhere)"));
+        }
+        if !self.light_units_warned {
+            self.light_units_warned = true;
+            self.scene.warn(
+                "KHR_lights_punctual: intensities (candela; lux for directional lights) are used as pathgrad's \
+                 radiometric units, times the colour (no 683 lm/W conversion)"
+                    .to_string(),
+            );
+        }
+        let position = world.transform_point3(Vec3::ZERO);
+        let axis = world.transform_vector3(-Vec3::Z).normalize_or_zero();
+        if axis == Vec3::ZERO {
+            return Err(self.error(format!("nodes[{node}]"), "the light's transform is degenerate"));
+        }
+        let (shape, what) = match light.type_ {
+            Checked::Valid(Type::Point) => (LightShape::Point { position }, "intensity"),
+            Checked::Valid(Type::Spot) => {
+                let spot = light.spot.as_ref().ok_or_else(|| self.error(&at, "a spot light needs 'spot'"))?;
+                let (inner, outer) = (spot.inner_cone_angle, spot.outer_cone_angle);
+                if !(inner >= 0.0 && inner < outer && outer <= std::f32::consts::FRAC_PI_2) {
+                    return Err(self.error(
+                        &at,
+                        format!("spot angles need 0 ≤ innerConeAngle < outerConeAngle ≤ π/2, got {inner} and {outer}"),
+                    ));
+                }
+                // Mitsuba's spot: full intensity within the inner cone, falling linearly in angle
+                // to 0 at the outer one (glTF suggests a falloff in cos; documented).
+                let cutoff = outer.to_degrees();
+                let beam_width = inner.to_degrees().max(MIN_BEAM_WIDTH_DEGREES);
+                (LightShape::Spot { position, axis, cutoff, beam_width }, "intensity")
+            }
+            Checked::Valid(Type::Directional) => (LightShape::Directional { direction: axis }, "irradiance"),
+            Checked::Invalid => return Err(self.error(&at, "unknown light type")),
+        };
+        let name = &self.node_names[node];
+        let value = colour * light.intensity;
+        let intensity = self.scene.params.add(&format!("{name}.{what}.value"), &value.to_array(), bounds::RADIANCE)?;
+        self.scene.lights.push(Light { shape, intensity });
+        Ok(())
     }
 
     // ---- camera ----

@@ -34,7 +34,26 @@ impl Loader<'_> {
             return Err(self
                 .error(&at, format!("metallicFactor {metallic} and roughnessFactor {roughness} must lie in [0, 1]")));
         }
+        let ext = m.extensions.as_ref();
+        let ior = ext.and_then(|e| e.ior.as_ref()).map_or(1.5, |i| i.ior.0);
+        if !(ior >= 1.0 && ior.is_finite()) {
+            return Err(self.error(&at, format!("KHR_materials_ior: ior {ior} must be ≥ 1 (0 is not supported)")));
+        }
+        // The dielectric's reflectance at normal incidence (0.04 at glTF's default ior 1.5).
+        let f0 = ((ior - 1.0) / (ior + 1.0)).powi(2);
+        let transmission = ext.and_then(|e| e.transmission.as_ref());
+        let transmission_factor = transmission.map_or(0.0, |t| t.transmission_factor.0);
+        if !in_unit(transmission_factor) {
+            return Err(self.error(&at, format!("transmissionFactor {transmission_factor} must lie in [0, 1]")));
+        }
+        let transmits = transmission_factor > 0.0 && metallic < 1.0;
+        if transmits && ior == 1.0 {
+            return Err(self.error(&at, "a transmitting material needs an ior other than 1 (it would not refract)"));
+        }
         let mut ignored = Vec::new();
+        if transmission.is_some_and(|t| t.transmission_texture.is_some()) {
+            ignored.push("transmissionTexture");
+        }
         if pbr.metallic_roughness_texture.is_some() {
             ignored.push("metallicRoughnessTexture");
         }
@@ -65,22 +84,30 @@ impl Loader<'_> {
             let (w, h, texels) = self.image_texels(image, base)?;
             let sum = texels.chunks_exact(3).fold(Vec3::ZERO, |s, t| s + Vec3::new(t[0], t[1], t[2]));
             mean = sum / (w as f32 * h as f32);
-            if metallic > 0.0 {
+            if metallic > 0.0 || transmits {
                 self.scene.warn(format!(
-                    "{at} ('{name}'): the base-colour texture tints only the diffuse part; the metallic part uses its \
-                     mean colour {mean}"
+                    "{at} ('{name}'): the base-colour texture tints only the diffuse part; the metallic and \
+                     transmitting parts use its mean colour {mean}"
                 ));
             }
-            if metallic < 1.0 {
+            if metallic < 1.0 && !transmits {
                 texture = Some(self.scene.add_texture(&format!("{name}.base_color.data"), w, h, &texels)?);
             }
             tex_coord = Some(info.tex_coord);
         }
         let id = if metallic >= 1.0 {
             self.scene.add_rough_conductor(&name, Distribution::Ggx, alpha, mean, Vec3::ZERO, Vec3::ONE)?
+        } else if transmits {
+            if transmission_factor < 1.0 || metallic > 0.0 {
+                self.scene.warn(format!(
+                    "{at} ('{name}'): transmissionFactor {transmission_factor} with metallic {metallic} is rendered as \
+                     a rough dielectric alone (transmission 1, metallic 0): its diffuse and metallic shares are dropped"
+                ));
+            }
+            self.scene.add_rough_dielectric(&name, alpha, mean, ior)?
         } else {
-            let weight = DIELECTRIC_F0 + (1.0 - DIELECTRIC_F0) * metallic;
-            let specular = ((metallic * mean + Vec3::splat(DIELECTRIC_F0 * (1.0 - metallic))) / weight).min(Vec3::ONE);
+            let weight = f0 + (1.0 - f0) * metallic;
+            let specular = ((metallic * mean + Vec3::splat(f0 * (1.0 - metallic))) / weight).min(Vec3::ONE);
             let diffuse = match texture {
                 Some(t) => self.scene.add_material(Material::Diffuse { albedo: Albedo::Bitmap(t) }),
                 None => self.scene.add_diffuse(&format!("{name}.bsdf_0"), base)?,
@@ -95,7 +122,8 @@ impl Loader<'_> {
             )?;
             self.scene.add_blend(&name, weight, [diffuse, lobe])?
         };
-        let id = if m.double_sided { self.scene.add_material(Material::TwoSided(id)) } else { id };
+        // A dielectric is seen from both sides already (and a two-sided one would hide its inside).
+        let id = if m.double_sided && !transmits { self.scene.add_material(Material::TwoSided(id)) } else { id };
 
         let strength =
             m.extensions.as_ref().and_then(|e| e.emissive_strength.as_ref()).map_or(1.0, |s| s.emissive_strength.0);

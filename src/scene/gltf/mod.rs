@@ -13,9 +13,17 @@
 //! - **Meshes**: each primitive of mode `TRIANGLES` (4) becomes one pathgrad mesh — `POSITION`,
 //!   optional `NORMAL`, optional `TEXCOORD_n` (the set the base-colour texture names, else 0),
 //!   optional `indices` — transformed to world space. Other modes are rejected.
-//! - **Camera**: the first node (depth-first, in scene order) carrying a perspective camera. glTF
-//!   cameras look along their local −z with +y up; `yfov` is used, `znear`/`zfar` are ignored; the
-//!   image is 512 pixels wide and `round(512 / aspectRatio)` high (512 × 512 without `aspectRatio`).
+//! - **Camera**: the first node (depth-first, in scene order) carrying a camera. glTF cameras look
+//!   along their local −z with +y up. Perspective: `yfov` is used, `znear`/`zfar` are ignored; the
+//!   image is 512 pixels wide and `round(512 / aspectRatio)` high (512 × 512 without
+//!   `aspectRatio`). Orthographic: a film of half extents `xmag` × `ymag` (512 wide, its aspect
+//!   theirs), rays from `znear` ahead.
+//! - **Lights** (`KHR_lights_punctual`): `point` at its node's position, `spot` and `directional`
+//!   along its node's −z, with RGB intensity `color × intensity` (parameters
+//!   `<node>.intensity.value`, directional `<node>.irradiance.value`). Photometric units are read
+//!   as pathgrad's radiometric ones (no 683 lm/W conversion; one warning says so). A spot is
+//!   Mitsuba's: full intensity inside `innerConeAngle`, falling linearly in angle to 0 at
+//!   `outerConeAngle` (glTF suggests a falloff in cos). `range` is ignored with a warning.
 //!   **Without a perspective camera** the scene gets a default one, with a warning: yfov 45°,
 //!   512 × 512, looking down −z at the centre of the meshes' bounding box from the distance at
 //!   which their bounding sphere fills the view.
@@ -36,6 +44,8 @@
 //! | m < 1 | blend (1 − w)·diffuse(b) + w·conductor, w = 0.04 + 0.96·m; the conductor is GGX with α = max(r², 10⁻³), η = 0, k = 1, specular reflectance s = (m·b + 0.04·(1 − m)) / w (white 1 for m = 0) | `M.weight.value`, `M.bsdf_0.reflectance.value`, `M.bsdf_1.alpha.value`, `M.bsdf_1.specular_reflectance.value` |
 //! | base-colour texture | the diffuse albedo is the texture (sRGB bytes linearised, times `baseColorFactor`); the conductor uses the texture's mean colour (warned when m > 0) | `M.base_color.data` (texels, replaces `M.bsdf_0.reflectance.value`) |
 //! | `emissiveFactor` × `KHR_materials_emissive_strength` | area emitter on each mesh using the material (front faces), linear radiance | `<mesh>.emitter.radiance.value` |
+//! | `KHR_materials_ior` η (1.5) | F0 = ((η − 1)/(η + 1))² replaces 0.04 above (w = F0 + (1 − F0)·m, s = (m·b + F0·(1 − m))/w) | — |
+//! | `KHR_materials_transmission` t > 0, m < 1 | rough dielectric, GGX α = max(r², 10⁻³), η, transmittance b (its mean with a texture), reflectance 1; rendered as t = 1, m = 0 (warned when not so); never two-sided | `M.alpha.value`, `M.specular_transmittance.value` |
 //! | `doubleSided: true` | the material wrapped in `TwoSided` (names unchanged) | — |
 //! | no material | glTF's default material: b = 1, m = 1, r = 1 | as above with M = `default_material` |
 //!
@@ -43,7 +53,9 @@
 //! held at F0 = 0.04; for 0 < m < 1 it is glTF's mix of the two at normal incidence, with the
 //! dielectric's and the metal's GGX lobes (same α) merged into one conductor. Ignored, with a
 //! warning: `metallicRoughnessTexture`, `normalTexture`, `occlusionTexture`, `emissiveTexture`,
-//! alpha modes other than `OPAQUE`, and extensions other than `KHR_materials_emissive_strength`.
+//! `transmissionTexture`, alpha modes other than `OPAQUE`, and extensions other than
+//! `KHR_materials_emissive_strength`, `KHR_materials_ior`, `KHR_materials_transmission` and
+//! `KHR_lights_punctual`.
 //! Texture samplers are ignored: pathgrad filters bilinearly with repeat wrapping. glTF texture
 //! coordinates put v = 0 at the image's top row, which is pathgrad's row 0: no flip.
 //!
@@ -90,7 +102,8 @@ pub const DIELECTRIC_F0: f32 = 0.04;
 pub const FRESNEL_WARNING: &str = "materials: glTF's metallic-roughness BRDF is rendered with its Fresnel terms held \
      at normal incidence (F0), so reflections at grazing angles are dimmer, and diffuse parts slightly brighter, than \
      glTF's (see the pathgrad::scene::gltf docs)";
-const SUPPORTED_EXTENSIONS: &[&str] = &["KHR_materials_emissive_strength"];
+const SUPPORTED_EXTENSIONS: &[&str] =
+    &["KHR_materials_emissive_strength", "KHR_lights_punctual", "KHR_materials_transmission", "KHR_materials_ior"];
 
 /// Loads a `.gltf` or `.glb` file into a validated [`Scene`]; see the module docs for what is read
 /// and how materials map.
@@ -126,6 +139,7 @@ pub fn load_with(path: &Path, options: &LoadOptions) -> Result<Scene> {
         allow_outside_folder: options.allow_outside_folder,
         scene: Scene::new(&path.display().to_string(), placeholder_camera()),
         cameras: Vec::new(),
+        light_units_warned: false,
     };
     loader.taken_names = loader.node_names.iter().cloned().collect();
     // Errors raised below the loader (a parameter defined twice, say) get the file's name too.
@@ -138,10 +152,10 @@ pub fn load_with(path: &Path, options: &LoadOptions) -> Result<Scene> {
     })?;
     let mut scene = loader.scene;
     crate::scene::load::apply_environments(&mut scene, options)?;
-    if scene.meshes.iter().all(|m| m.emitter.is_none()) && scene.environment.is_none() {
+    if scene.meshes.iter().all(|m| m.emitter.is_none()) && scene.environment.is_none() && scene.lights.is_empty() {
         scene.warn(
-            "the scene has no emitters (no material has an emissiveFactor): it renders black unless lit by an \
-             environment (LoadOptions::environment)"
+            "the scene has no emitters (no material has an emissiveFactor, no KHR_lights_punctual light): it renders \
+             black unless lit by an environment (LoadOptions::environment)"
                 .into(),
         );
     }
@@ -306,6 +320,8 @@ struct Loader<'a> {
     scene: Scene,
     /// The perspective cameras found so far, in node order.
     cameras: Vec<crate::scene::Sensor>,
+    /// Whether the scene has been told how light intensities are read.
+    light_units_warned: bool,
 }
 
 /// An [`Error::Scene`] at `file: element`.

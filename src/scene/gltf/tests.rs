@@ -378,3 +378,30 @@ fn an_orthographic_camera_maps_to_the_orthographic_lens() {
     assert_eq!((half_height, stretch, near_clip), (1.5, 1.0, 0.25));
     s.validate().unwrap();
 }
+
+/// KHR_lights_punctual lights become point, spot and directional lights along their nodes' −z
+/// (colour × intensity, one warning about units); KHR_materials_transmission a rough dielectric of
+/// the material's ior; KHR_materials_ior the blend's F0.
+#[test]
+fn punctual_lights_transmission_and_ior() {
+    use crate::scene::{LightShape, Material};
+    let s = load(Path::new("tests/conformance/scenes/gltf_src/lights.gltf")).unwrap();
+    assert_eq!(s.lights.len(), 3);
+    assert!(s.warnings.iter().any(|w| w.contains("no 683 lm/W conversion")), "{:?}", s.warnings);
+    assert_close(&param(&s, "bulb.intensity.value"), &[6.0, 5.4, 4.8]);
+    assert_close(&param(&s, "spot.intensity.value"), &[15.0, 20.0, 25.0]);
+    assert_close(&param(&s, "sun.irradiance.value"), &[0.8, 0.76, 0.68]);
+    let LightShape::Spot { axis, cutoff, beam_width, .. } = s.lights[1].shape else { panic!("{:?}", s.lights[1]) };
+    assert!((cutoff - 0.5f32.to_degrees()).abs() < 1e-4 && (beam_width - 0.25f32.to_degrees()).abs() < 1e-4);
+    // The node turns −z 45° down.
+    assert!(axis.abs_diff_eq(Vec3::new(0.0, -(0.5f32).sqrt(), -(0.5f32).sqrt()), 1e-5), "{axis}");
+    let glass = s.materials.iter().find_map(|m| match m {
+        Material::RoughDielectric { eta, .. } => Some(*eta),
+        _ => None,
+    });
+    assert_eq!(glass, Some(1.45));
+    assert_close(&param(&s, "glass.specular_transmittance.value"), &[0.9, 0.95, 0.8]);
+    // ior 1.7: F0 = (0.7/2.7)².
+    assert_close(&param(&s, "plastic.weight.value"), &[(0.7f32 / 2.7).powi(2)]);
+    s.validate().unwrap();
+}
