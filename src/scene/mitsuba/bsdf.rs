@@ -1,6 +1,7 @@
 //! `<bsdf>` (diffuse, roughconductor, roughplastic, blendbsdf, twosided) and `<texture
 //! type="bitmap">`.
 
+use super::plugins::{Category, names};
 use glam::Vec3;
 
 use super::loader::{Loader, MAX_NESTING};
@@ -9,10 +10,6 @@ use crate::bsdf::Distribution;
 use crate::bsdf::specular::SmoothKind;
 use crate::error::Result;
 use crate::scene::{Albedo, Material, MaterialId, SmoothColour, Wrap, bounds};
-
-/// The BSDF plugins pathgrad reads.
-const SUPPORTED_BSDFS: &str = "blendbsdf, conductor, dielectric, diffuse, null, plastic, roughconductor, roughdielectric, roughplastic, \
-     thindielectric, twosided";
 
 /// Mitsuba's named indices of refraction (`int_ior`, `ext_ior` as a string).
 const IORS: &[(&str, f32)] = &[
@@ -175,7 +172,9 @@ impl<'a> Loader<'a> {
                 self.scene.add_material(Material::TwoSided(c))
             }
             other => {
-                return Err(self.x.err(node, format!("unsupported plugin '{other}' (supported: {SUPPORTED_BSDFS})")));
+                return Err(self
+                    .x
+                    .err(node, format!("unsupported plugin '{other}' (supported: {})", names(Category::Bsdf))));
             }
         };
         self.finish(&p)?;
@@ -460,7 +459,7 @@ impl<'a> Loader<'a> {
         if p.kind != "bitmap" {
             return Err(self
                 .x
-                .err(target, format!("unsupported plugin '{}' (supported: bitmap, checkerboard)", p.kind)));
+                .err(target, format!("unsupported plugin '{}' (supported: {})", p.kind, names(Category::Texture))));
         }
         let (file, file_node) = p
             .string(&self.x, "filename")?

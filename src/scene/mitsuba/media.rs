@@ -2,6 +2,7 @@
 //! constants, `constvolume` or `gridvolume` (`.vol` files), `scale`, and `isotropic` or `hg` phase
 //! functions; and the check that no sensor sits inside a medium.
 
+use super::plugins::{Category, names};
 use glam::{DVec3, Mat4, Vec3};
 
 use super::loader::Loader;
@@ -30,7 +31,7 @@ impl<'a> Loader<'a> {
             other => {
                 return Err(self.x.err(
                     target,
-                    format!("unsupported plugin '{other}' (supported media: homogeneous, heterogeneous)"),
+                    format!("unsupported plugin '{other}' (supported media: {})", names(Category::Medium)),
                 ));
             }
         };
@@ -127,7 +128,7 @@ impl<'a> Loader<'a> {
             }
             other => Err(self
                 .x
-                .err(volume, format!("unsupported plugin '{other}' (supported volumes: constvolume, gridvolume)"))),
+                .err(volume, format!("unsupported plugin '{other}' (supported volumes: {})", names(Category::Volume)))),
         }
     }
 
@@ -152,9 +153,10 @@ impl<'a> Loader<'a> {
                 Phase::HenyeyGreenstein { g }
             }
             other => {
-                return Err(self
-                    .x
-                    .err(node, format!("unsupported plugin '{other}' (supported phases: isotropic, hg)")));
+                return Err(self.x.err(
+                    node,
+                    format!("unsupported plugin '{other}' (supported phases: {})", names(Category::Phase)),
+                ));
             }
         };
         self.finish(&p)?;

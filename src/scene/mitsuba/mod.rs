@@ -99,6 +99,7 @@ mod bsdf;
 mod include;
 mod loader;
 mod media;
+pub mod plugins;
 mod sensor;
 mod shapes;
 mod spectrum;
@@ -116,6 +117,8 @@ mod tests_include;
 mod tests_media;
 #[cfg(test)]
 mod tests_names;
+#[cfg(test)]
+mod tests_plugins;
 
 use std::path::Path;
 

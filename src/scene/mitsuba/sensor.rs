@@ -8,6 +8,7 @@
 //! (`det M < 0`) would need a mirrored image, which pathgrad's camera cannot express: it is
 //! rejected rather than rendered mirrored.
 
+use super::plugins::{Category, names};
 use glam::{Mat4, Vec3};
 
 use super::loader::Loader;
@@ -84,10 +85,9 @@ impl<'a> Loader<'a> {
     pub(super) fn sensor(&mut self, node: El<'a>) -> Result<()> {
         let p = Props::parse(&self.x, node)?;
         if !matches!(p.kind.as_str(), "perspective" | "thinlens" | "orthographic") {
-            return Err(self.x.err(
-                node,
-                format!("unsupported plugin '{}' (supported: perspective, thinlens, orthographic)", p.kind),
-            ));
+            return Err(self
+                .x
+                .err(node, format!("unsupported plugin '{}' (supported: {})", p.kind, names(Category::Sensor))));
         }
         let films = p.take_nested(&["film"]);
         // Mitsuba's hdrfilm reconstructs with a Gaussian (σ = 0.5) unless told otherwise.

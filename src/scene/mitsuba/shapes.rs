@@ -5,6 +5,7 @@
 //! resolution, no point of the mesh lies more than [`MAX_CHORD_ERROR_PX`] pixels from the true
 //! surface (see [`segments_for`]).
 
+use super::plugins::{Category, names};
 use std::f32::consts::{PI, TAU};
 
 use glam::{Mat4, Vec2, Vec3, Vec4};
@@ -14,9 +15,6 @@ use super::xml::{El, Props};
 use crate::error::Result;
 use crate::scene::shapes::{Geometry, cuboid, merge, quad, triangle_area};
 use crate::scene::{Camera, MaterialId, bounds};
-
-/// The shape plugins pathgrad reads.
-const SUPPORTED_SHAPES: &str = "cube, cylinder, disk, obj, ply, rectangle, serialized, sphere; shapegroup and instance";
 
 /// Largest distance, in pixels of the scene's film, between a tessellated curved shape and the
 /// true surface. A pixel straddling a silhouette of contrast C and coverage p has a 64-spp standard
@@ -287,7 +285,9 @@ impl<'a> Loader<'a> {
                 unit_sphere(n / 2, n).transformed(&m)
             }
             other => {
-                return Err(self.x.err(node, format!("unsupported plugin '{other}' (supported: {SUPPORTED_SHAPES})")));
+                return Err(self
+                    .x
+                    .err(node, format!("unsupported plugin '{other}' (supported: {})", names(Category::Shape))));
             }
         };
         if p.boolean(&self.x, "flip_normals", false)? {

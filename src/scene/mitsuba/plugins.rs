@@ -1,0 +1,233 @@
+//! The Mitsuba plugins the XML loader accepts, with the properties it reads: one list, from which
+//! the loader's "supported: …" messages and `docs/mitsuba-plugins.md` are made, and which
+//! `tests_plugins` holds against the loader (every listed plugin is accepted, every other plugin of
+//! Mitsuba 3.9.1 is refused by name).
+
+/// What kind of object a plugin makes (the XML tag).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Category {
+    /// `<bsdf>`.
+    Bsdf,
+    /// `<emitter>`.
+    Emitter,
+    /// `<shape>`.
+    Shape,
+    /// `<texture>`.
+    Texture,
+    /// `<medium>`.
+    Medium,
+    /// `<phase>`.
+    Phase,
+    /// `<volume>`.
+    Volume,
+    /// `<sensor>`.
+    Sensor,
+    /// `<film>`.
+    Film,
+    /// `<rfilter>`.
+    Rfilter,
+    /// `<sampler>`.
+    Sampler,
+    /// `<integrator>`.
+    Integrator,
+}
+
+impl Category {
+    /// Every category, in the order the documentation lists them.
+    pub const ALL: [Category; 12] = [
+        Category::Bsdf,
+        Category::Emitter,
+        Category::Shape,
+        Category::Texture,
+        Category::Medium,
+        Category::Phase,
+        Category::Volume,
+        Category::Sensor,
+        Category::Film,
+        Category::Rfilter,
+        Category::Sampler,
+        Category::Integrator,
+    ];
+
+    /// The XML tag.
+    pub fn tag(self) -> &'static str {
+        match self {
+            Category::Bsdf => "bsdf",
+            Category::Emitter => "emitter",
+            Category::Shape => "shape",
+            Category::Texture => "texture",
+            Category::Medium => "medium",
+            Category::Phase => "phase",
+            Category::Volume => "volume",
+            Category::Sensor => "sensor",
+            Category::Film => "film",
+            Category::Rfilter => "rfilter",
+            Category::Sampler => "sampler",
+            Category::Integrator => "integrator",
+        }
+    }
+}
+
+/// One accepted plugin.
+#[derive(Clone, Copy, Debug)]
+pub struct Plugin {
+    /// Its kind.
+    pub category: Category,
+    /// Mitsuba's name (`type="…"`).
+    pub name: &'static str,
+    /// The properties read (Mitsuba's names), with pathgrad's parameters where they are ones.
+    pub properties: &'static str,
+    /// How pathgrad renders it where that is not simply Mitsuba's way.
+    pub note: &'static str,
+}
+
+const fn p(category: Category, name: &'static str, properties: &'static str, note: &'static str) -> Plugin {
+    Plugin { category, name, properties, note }
+}
+
+use Category::*;
+
+/// Every accepted plugin; within a category in the order the loader's messages list them.
+pub const PLUGINS: &[Plugin] = &[
+    p(
+        Bsdf,
+        "blendbsdf",
+        "`weight` (parameter `.weight.value`), two nested BSDFs",
+        "children: diffuse, roughconductor, roughplastic, or twosided wrappers of those",
+    ),
+    p(
+        Bsdf,
+        "conductor",
+        "`specular_reflectance`, `material` or `eta`/`k`",
+        "smooth: sampled only; gradient of the reflectance through the sampled weight",
+    ),
+    p(
+        Bsdf,
+        "dielectric",
+        "`int_ior`/`ext_ior` (numbers or Mitsuba's names), `specular_reflectance`, `specular_transmittance`",
+        "smooth; not inside blendbsdf or twosided",
+    ),
+    p(Bsdf, "diffuse", "`reflectance` (rgb, spectrum, bitmap or checkerboard)", ""),
+    p(Bsdf, "null", "—", "an index-matched boundary (media)"),
+    p(
+        Bsdf,
+        "plastic",
+        "`diffuse_reflectance` (texturable), `specular_reflectance` (constant), `int_ior`/`ext_ior`, `nonlinear`",
+        "",
+    ),
+    p(
+        Bsdf,
+        "roughconductor",
+        "`distribution`, `alpha` or `alpha_u`/`alpha_v` (parameters), `specular_reflectance`, `material` or `eta`/`k`, `sample_visible`",
+        "anisotropic: shading frame along ∂p/∂u",
+    ),
+    p(
+        Bsdf,
+        "roughdielectric",
+        "`distribution`, `alpha` (parameter), `int_ior`/`ext_ior`, `specular_reflectance`, `specular_transmittance`, `sample_visible`",
+        "isotropic; not inside blendbsdf or twosided",
+    ),
+    p(
+        Bsdf,
+        "roughplastic",
+        "`distribution`, `alpha` (parameter `.alpha`), `diffuse_reflectance` (texturable), `specular_reflectance`, `int_ior`/`ext_ior`, `nonlinear`, `sample_visible`",
+        "",
+    ),
+    p(Bsdf, "thindielectric", "`int_ior`/`ext_ior`, `specular_reflectance`, `specular_transmittance`", "smooth"),
+    p(Bsdf, "twosided", "one nested BSDF", "not around a transmitting BSDF (as Mitsuba)"),
+    p(Emitter, "constant", "`radiance`", "the environment"),
+    p(Emitter, "directional", "`irradiance`, `direction` or `to_world`", "next-event estimation only"),
+    p(
+        Emitter,
+        "envmap",
+        "`filename` (EXR, HDR, PNG), `scale`, `to_world` (a rotation)",
+        "texels are parameter `.data`",
+    ),
+    p(Emitter, "point", "`intensity`, `position` or `to_world`", "next-event estimation only"),
+    p(Emitter, "spot", "`intensity`, `cutoff_angle`, `beam_width`, `to_world`", "next-event estimation only"),
+    p(Emitter, "area", "`radiance`", "inside a <shape> (or referred to by one)"),
+    p(Shape, "cube", "`to_world`, `flip_normals`", ""),
+    p(Shape, "cylinder", "`p0`, `p1`, `radius`, `to_world`, `flip_normals`", "tessellated"),
+    p(Shape, "disk", "`to_world`, `flip_normals`", "tessellated"),
+    p(Shape, "obj", "`filename`, `to_world`, `face_normals`, `flip_normals`", ""),
+    p(Shape, "ply", "`filename`, `to_world`, `face_normals`, `flip_normals`", ""),
+    p(Shape, "rectangle", "`to_world`, `flip_normals`", ""),
+    p(Shape, "serialized", "`filename`, `shape_index`, `to_world`, `face_normals`, `flip_normals`", ""),
+    p(Shape, "sphere", "`center`, `radius`, `to_world` (a similarity), `flip_normals`", "tessellated to 0.02 px"),
+    p(Shape, "shapegroup", "nested shapes", "built by its instances"),
+    p(Shape, "instance", "a `<ref>` to a shapegroup, `to_world`", "flattened into meshes sharing the group's BSDFs"),
+    p(
+        Texture,
+        "bitmap",
+        "`filename`, `raw`, `filter_type`, `wrap_mode`, `to_uv`, `format`",
+        "texels are parameter `.data`",
+    ),
+    p(Texture, "checkerboard", "`color0`, `color1`, `to_uv`", ""),
+    p(Medium, "homogeneous", "`sigma_t`, `albedo`, `scale`, a phase", "inside a null or dielectric boundary"),
+    p(
+        Medium,
+        "heterogeneous",
+        "`sigma_t`, `albedo` (volumes), `scale`, a phase",
+        "inside a null or dielectric boundary",
+    ),
+    p(Phase, "isotropic", "—", ""),
+    p(Phase, "hg", "`g` (parameter)", ""),
+    p(Volume, "constvolume", "`value`", ""),
+    p(Volume, "gridvolume", "`filename` or data, `to_world`, `filter_type`", ""),
+    p(
+        Sensor,
+        "perspective",
+        "`fov`, `fov_axis`, `focal_length`, `to_world`, `near_clip`, `far_clip`",
+        "does not clip (warned where it matters)",
+    ),
+    p(Sensor, "thinlens", "as perspective, `aperture_radius`, `focus_distance`", ""),
+    p(Sensor, "orthographic", "`to_world` (its scale sizes the film), `near_clip`", ""),
+    p(Film, "hdrfilm", "`width`, `height`, an rfilter", ""),
+    p(Rfilter, "box", "—", ""),
+    p(Rfilter, "tent", "`radius`", ""),
+    p(Rfilter, "gaussian", "`stddev`", ""),
+    p(Sampler, "independent", "`sample_count`", ""),
+    p(Sampler, "stratified", "`sample_count`", "drawn as independent (warned)"),
+    p(Sampler, "multijitter", "`sample_count`", "drawn as independent (warned)"),
+    p(Sampler, "orthogonal", "`sample_count`", "drawn as independent (warned)"),
+    p(Sampler, "ldsampler", "`sample_count`", "drawn as independent (warned)"),
+    p(Integrator, "path", "`max_depth`, `rr_depth`, `hide_emitters`", ""),
+    p(Integrator, "prb", "as path", ""),
+    p(Integrator, "prb_basic", "as path", ""),
+    p(Integrator, "volpath", "as path", ""),
+    p(Integrator, "volpathmis", "as path", ""),
+    p(Integrator, "prbvolpath", "as path", ""),
+    p(
+        Integrator,
+        "direct",
+        "`emitter_samples`, `bsdf_samples`, `shading_samples`, `hide_emitters`",
+        "a path tracer of depth 2 (warned)",
+    ),
+    p(Integrator, "moment", "one nested integrator", "renders the nested one (warned)"),
+    p(Integrator, "aov", "one nested integrator", "renders the nested one (warned)"),
+];
+
+/// The names of `category`'s plugins, in the list's order, joined by ", " (for messages).
+pub fn names(category: Category) -> String {
+    PLUGINS.iter().filter(|p| p.category == category).map(|p| p.name).collect::<Vec<_>>().join(", ")
+}
+
+/// `docs/mitsuba-plugins.md`: a table per category.
+pub fn markdown() -> String {
+    let mut out = String::from(
+        "# Mitsuba plugins pathgrad reads\n\n\
+         Generated from `src/scene/mitsuba/plugins.rs` (the loader's own list; `cargo test` fails when\n\
+         this file is not what it generates: run the tests with `PATHGRAD_BLESS=1` to rewrite it).\n\
+         Every other plugin of Mitsuba 3.9.1 is refused by name. Parameters are Mitsuba's `traverse` keys.\n",
+    );
+    for category in Category::ALL {
+        out.push_str(&format!(
+            "\n## `<{}>`\n\n| plugin | properties read | notes |\n| --- | --- | --- |\n",
+            category.tag()
+        ));
+        for p in PLUGINS.iter().filter(|p| p.category == category) {
+            out.push_str(&format!("| `{}` | {} | {} |\n", p.name, p.properties, p.note));
+        }
+    }
+    out
+}
