@@ -292,7 +292,8 @@ POWER = {
     "bsdf_twosided_blend": {"gradient_bias": 0.1},
     # The frosted ball's α: paths refract twice or more through it, each vertex a score.
     "bsdf_roughdielectric": {"gradient_bias": 0.8},
-    "shape_instance": {"gradient_bias": 0.25},
+    "shape_instance": {"gradient_bias": 0.4},
+    "sensor_orthographic": {"gradient_bias": 0.1},
     # Light through the frosted ball and the plastic's specular share are caustic-like, rare paths.
     "gltf_lights": {"gradient_bias": 0.3},
     # The ball's α_u (0.05, Beckmann) is left out: its image mean cancels (it sees 240 %).
