@@ -165,7 +165,8 @@ Leaf leaf_from_material(Material m, vec2 uv) {
         : (plastic ? LEAF_ROUGH_PLASTIC : (conductor ? LEAF_ROUGH_CONDUCTOR : LEAF_DIFFUSE));
     l.distribution = m.distribution;
     l.alpha = (conductor || plastic || rough_glass) ? params[m.p_alpha] : 0.0;
-    l.alpha_v = conductor ? params[m.p_alpha_v] : l.alpha;
+    // Kernels without anisotropic BSDFs read no second roughness (α_v = α).
+    l.alpha_v = (HAS(F_ANISOTROPIC) && conductor) ? params[m.p_alpha_v] : l.alpha;
     l.table = m.table;
     if (delta || rough_glass) {
         // Each colour a parameter, or (NO_PARAM) a constant: the reflectance in uv_row0, a
