@@ -256,6 +256,14 @@ fn albedo_mean(scene: &Scene, albedo: Albedo) -> f32 {
     (values.iter().map(|&v| f64::from(v)).sum::<f64>() / values.len().max(1) as f64) as f32
 }
 
+/// A dielectric's or conductor's colour as (parameter offset, 0) or (`NO_PARAM`, the constant).
+fn split_colour(scene: &Scene, c: SmoothColour) -> (u32, Vec3) {
+    match c {
+        SmoothColour::Param(id) => (scene.params.entry(id).offset, Vec3::ZERO),
+        SmoothColour::Constant(v) => (NO_PARAM, v),
+    }
+}
+
 fn flatten_material(scene: &Scene, m: &Material) -> GpuMaterial {
     let offset = |id| scene.params.entry(id).offset;
     match *m {
@@ -297,11 +305,7 @@ fn flatten_material(scene: &Scene, m: &Material) -> GpuMaterial {
         Material::Smooth { kind, reflectance, transmittance, eta, k } => {
             // Each colour a parameter (p_color, p_alpha) or a constant (uv_row0; k for a
             // dielectric's transmittance, whose k is free).
-            let split = |c: SmoothColour| match c {
-                SmoothColour::Param(id) => (offset(id), Vec3::ZERO),
-                SmoothColour::Constant(v) => (NO_PARAM, v),
-            };
-            let ((p_color, r), (p_alpha, t)) = (split(reflectance), split(transmittance));
+            let ((p_color, r), (p_alpha, t)) = (split_colour(scene, reflectance), split_colour(scene, transmittance));
             GpuMaterial {
                 tag: match kind {
                     SmoothKind::Conductor => MAT_CONDUCTOR,
@@ -319,11 +323,7 @@ fn flatten_material(scene: &Scene, m: &Material) -> GpuMaterial {
         Material::RoughDielectric { distribution, alpha, reflectance, transmittance, eta } => {
             // The reflectance a parameter (p_color) or a constant (uv_row0), the transmittance a
             // parameter (p_weight, free in a leaf) or a constant (k).
-            let split = |c: SmoothColour| match c {
-                SmoothColour::Param(id) => (offset(id), Vec3::ZERO),
-                SmoothColour::Constant(v) => (NO_PARAM, v),
-            };
-            let ((p_color, r), (p_weight, t)) = (split(reflectance), split(transmittance));
+            let ((p_color, r), (p_weight, t)) = (split_colour(scene, reflectance), split_colour(scene, transmittance));
             GpuMaterial {
                 tag: MAT_ROUGH_DIELECTRIC,
                 distribution: distribution as u32,

@@ -26,19 +26,23 @@ fn gpu_equals_cpu_per_path_on_every_builtin_and_test_scene() {
     scenes.push(crate::support::scenes::textured_environment());
     scenes.push(crate::support::scenes::open_furnace());
     scenes.push(crate::support::scenes::deep_meshes());
-    scenes.push(crate::support::scenes::conformance("texture_checkerboard"));
-    scenes.push(crate::support::scenes::conformance("texture_filter_wrap"));
-    scenes.push(crate::support::scenes::conformance("emitter_envmap"));
-    scenes.push(crate::support::scenes::conformance("emitter_point_spot_directional"));
-    scenes.push(crate::support::scenes::conformance("bsdf_roughplastic"));
-    scenes.push(crate::support::scenes::conformance("bsdf_smooth"));
-    scenes.push(crate::support::scenes::conformance("bsdf_plastic"));
-    scenes.push(crate::support::scenes::conformance("bsdf_roughdielectric"));
-    scenes.push(crate::support::scenes::conformance("medium_in_dielectric"));
-    scenes.push(crate::support::scenes::conformance("sensor_orthographic"));
-    scenes.push(crate::support::scenes::conformance("sensor_thinlens"));
-    scenes.push(crate::support::scenes::conformance("bsdf_roughconductor_anisotropic"));
-    scenes.push(crate::support::scenes::conformance("shape_instance"));
+    for name in [
+        "texture_checkerboard",
+        "texture_filter_wrap",
+        "emitter_envmap",
+        "emitter_point_spot_directional",
+        "bsdf_roughplastic",
+        "bsdf_smooth",
+        "bsdf_plastic",
+        "bsdf_roughdielectric",
+        "medium_in_dielectric",
+        "sensor_orthographic",
+        "sensor_thinlens",
+        "bsdf_roughconductor_anisotropic",
+        "shape_instance",
+    ] {
+        scenes.push(crate::support::scenes::conformance(name));
+    }
     for scene in &scenes {
         let name = &scene.source;
         let opts = RenderOptions { width: 96, height: 96, spp: 1, seed: 7, ..RenderOptions::for_scene(scene) };
