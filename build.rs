@@ -1,10 +1,10 @@
-//! Compiles `shaders/*.comp` to SPIR-V with shaderc (Debian's libshaderc; see PLATFORM.md §3-4) and
+//! Compiles `shaders/*.comp` to SPIR-V with shaderc's `glslc` (Debian's; see [`Glslc`]) and
 //! writes `OUT_DIR/shaders.rs`, a table of (name, SPIR-V bytes) that `src/gpu/shaders.rs` includes.
 //!
 //! The host/GPU contract (`src/contract/`) is read here as well: its integer, enumeration and float
 //! constants become macro definitions, and its structs and push-constant blocks become
 //! `generated/contract.glsl`, so GLSL never restates them. A shader error fails the build with the
-//! file:line that shaderc reports.
+//! file:line that glslc reports.
 
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
@@ -96,7 +96,7 @@ fn contract_glsl() -> String {
     s
 }
 
-/// The include name under which the generated declarations are served.
+/// The include name under which the generated declarations are served (`#include <…>`).
 const GENERATED_CONTRACT: &str = "generated/contract.glsl";
 
 /// Builds `native/specialise.cpp` and links it with Debian's SPIRV-Tools optimizer (static
@@ -128,10 +128,28 @@ fn main() {
     let shader_dir = root.join("shaders");
     println!("cargo:rerun-if-changed=shaders");
     println!("cargo:rerun-if-changed=src/contract");
+    println!("cargo:rerun-if-env-changed=PATHGRAD_GLSLC");
 
-    let generated = contract_glsl();
-    let macros = contract_macros();
-    let compiler = shaderc::Compiler::new().expect("shaderc compiler could not be created");
+    // The generated declarations live in a folder of their own, searched first for `<…>` includes.
+    let include = out.join("include");
+    let generated_path = include.join(GENERATED_CONTRACT);
+    std::fs::create_dir_all(generated_path.parent().expect("the include name has a folder")).expect("OUT_DIR is writable");
+    std::fs::write(&generated_path, contract_glsl()).expect("OUT_DIR is writable");
+    let glslc = Glslc::find();
+    let mut args: Vec<String> = vec![
+        "-fshader-stage=compute".into(),
+        "--target-env=vulkan1.2".into(),
+        "--target-spv=spv1.5".into(),
+        // No debug information (no `-g`): the host specialiser (src/gpu/specialise.rs) parses
+        // every kernel at first use, and names and line records made the module 40 % larger
+        // and its work ~0.15 s longer.
+        "-O".into(),
+        format!("-I{}", include.display()),
+        format!("-I{}", shader_dir.display()),
+    ];
+    // Integers stay plain, so `#if` can compare them; GLSL converts them to uint where needed.
+    args.extend(contract_macros().into_iter().map(|(name, value)| format!("-D{name}={value}")));
+
     let mut sources: Vec<PathBuf> = walk(&shader_dir);
     sources.sort();
     for path in &sources {
@@ -139,7 +157,7 @@ fn main() {
     }
     let kernels: Vec<&PathBuf> = sources.iter().filter(|p| p.extension().is_some_and(|e| e == "comp")).collect();
     // Every core takes the next kernel until none is left (the adjoint variants take seconds each
-    // in shaderc's optimiser); the specialiser's C++ compiles beside them. The build script runs
+    // in the optimiser); the specialiser's C++ compiles beside them. The build script runs
     // twice in `scripts/test` (clippy's check and the test build), so this is CI time twice over.
     let next = std::sync::atomic::AtomicUsize::new(0);
     let workers = std::thread::available_parallelism().map_or(1, |n| n.get()).min(kernels.len().max(1));
@@ -152,7 +170,7 @@ fn main() {
                     loop {
                         let i = next.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
                         let Some(path) = kernels.get(i) else { return done };
-                        done.push((i, compile_kernel(&compiler, path, &shader_dir, &generated, &macros, &out)));
+                        done.push((i, glslc.compile(path, &args, &out)));
                     }
                 })
             })
@@ -171,56 +189,59 @@ fn main() {
     std::fs::write(out.join("shaders.rs"), table).expect("OUT_DIR is writable");
 }
 
-/// Compiles one `.comp` file to `out/<stem>.spv`; returns (stem, path of the SPIR-V).
-fn compile_kernel(
-    compiler: &shaderc::Compiler,
-    path: &Path,
-    shader_dir: &Path,
-    generated: &str,
-    macros: &[(&'static str, String)],
-    out: &Path,
-) -> (String, PathBuf) {
-    let name = path.file_stem().expect("a .comp file has a stem").to_string_lossy().into_owned();
-    let text = std::fs::read_to_string(path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
-    let mut opts = shaderc::CompileOptions::new().expect("shaderc options could not be created");
-    opts.set_target_env(shaderc::TargetEnv::Vulkan, shaderc::EnvVersion::Vulkan1_2 as u32);
-    opts.set_target_spirv(shaderc::SpirvVersion::V1_5);
-    // No debug information: the host specialiser (src/gpu/specialise.rs) parses every kernel
-    // at first use, and names and line records made the module 40 % larger and its work
-    // ~0.15 s longer.
-    opts.set_optimization_level(shaderc::OptimizationLevel::Performance);
-    for (macro_name, value) in macros {
-        // Integers stay plain, so `#if` can compare them; GLSL converts them to uint where needed.
-        opts.add_macro_definition(macro_name, Some(value));
-    }
-    let dir = shader_dir.to_path_buf();
-    let generated = generated.to_string();
-    opts.set_include_callback(move |requested, kind, requester, _depth| {
-        if requested == GENERATED_CONTRACT {
-            return Ok(shaderc::ResolvedInclude {
-                resolved_name: GENERATED_CONTRACT.to_string(),
-                content: generated.clone(),
-            });
+/// Debian's `glslc` (package `glslc`: shaderc's command-line compiler, with glslang and
+/// SPIRV-Tools linked into it), or the program that `PATHGRAD_GLSLC` names.
+///
+/// The kernels are compiled by running it rather than by linking libshaderc into this build
+/// script: Debian's libshaderc is under-linked (PLATFORM.md §3), and the link override that
+/// mends it lives in a `.cargo/config.toml`, which Cargo never applies to a crate that depends
+/// on pathgrad.
+struct Glslc {
+    program: PathBuf,
+}
+
+impl Glslc {
+    /// Finds the compiler, or stops the build saying which package provides it.
+    fn find() -> Glslc {
+        let program = std::env::var_os("PATHGRAD_GLSLC").map_or_else(|| PathBuf::from("glslc"), PathBuf::from);
+        match std::process::Command::new(&program).arg("--version").output() {
+            Ok(o) if o.status.success() => Glslc { program },
+            Ok(o) => panic!(
+                "{} --version failed ({}): {}",
+                program.display(),
+                o.status,
+                String::from_utf8_lossy(&o.stderr).trim()
+            ),
+            Err(e) => panic!(
+                "pathgrad compiles its GLSL kernels with shaderc's `glslc`, and `{}` could not be run ({e}).\n\
+                 Install it (Debian/Ubuntu: `apt-get install glslc`; pathgrad's scripts/setup does) or set \
+                 PATHGRAD_GLSLC to its path.",
+                program.display()
+            ),
         }
-        let base = match kind {
-            shaderc::IncludeType::Relative => {
-                Path::new(requester).parent().map(Path::to_path_buf).unwrap_or_else(|| dir.clone())
-            }
-            shaderc::IncludeType::Standard => dir.clone(),
-        };
-        let full = base.join(requested);
-        let content = std::fs::read_to_string(&full).map_err(|e| format!("{}: {e}", full.display()))?;
-        Ok(shaderc::ResolvedInclude { resolved_name: full.display().to_string(), content })
-    });
-    let artifact = compiler
-        .compile_into_spirv(&text, shaderc::ShaderKind::Compute, &path.display().to_string(), "main", Some(&opts))
-        .unwrap_or_else(|e| panic!("shader compilation failed:\n{e}"));
-    if artifact.get_num_warnings() > 0 {
-        println!("cargo:warning={}", artifact.get_warning_messages().replace('\n', " | "));
     }
-    let spv = out.join(format!("{name}.spv"));
-    std::fs::write(&spv, artifact.as_binary_u8()).unwrap_or_else(|e| panic!("{}: {e}", spv.display()));
-    (name, spv)
+
+    /// Compiles one `.comp` file to `out/<stem>.spv`; returns (stem, path of the SPIR-V).
+    /// A shader error stops the build with the file:line that glslc reports.
+    fn compile(&self, path: &Path, args: &[String], out: &Path) -> (String, PathBuf) {
+        let name = path.file_stem().expect("a .comp file has a stem").to_string_lossy().into_owned();
+        let spv = out.join(format!("{name}.spv"));
+        let output = std::process::Command::new(&self.program)
+            .args(args)
+            .arg("-o")
+            .arg(&spv)
+            .arg(path)
+            .output()
+            .unwrap_or_else(|e| panic!("{} could not be run: {e}", self.program.display()));
+        let messages = String::from_utf8_lossy(&output.stderr);
+        if !output.status.success() {
+            panic!("shader compilation failed:\n{messages}");
+        }
+        if !messages.trim().is_empty() {
+            println!("cargo:warning={}", messages.trim().replace('\n', " | "));
+        }
+        (name, spv)
+    }
 }
 
 /// Every file under `dir`, recursively.
