@@ -1,7 +1,7 @@
 // Integer constants shared by Rust and GLSL: binding numbers, random-number slots, feature bits, limits.
 //
 // This file is `include!`d by both `src/contract/mod.rs` and `build.rs`; build.rs hands the table to
-// shaderc as macro definitions, so no `.glsl` file spells any of these numbers. Keep it free of
+// glslc as macro definitions, so no `.glsl` file spells any of these numbers. Keep it free of
 // `use` items and of anything but the macro call below.
 
 macro_rules! contract_constants {

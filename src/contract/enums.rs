@@ -3,7 +3,7 @@
 //
 // `include!`d by `src/contract/mod.rs` and `build.rs`. Each variant names its GLSL macro and its
 // value once: Rust gets a `#[repr(u32)]` enum plus a `u32` constant of that name (for the `Pod`
-// struct fields that carry the tag), and build.rs hands the same (name, value) pairs to shaderc.
+// struct fields that carry the tag), and build.rs hands the same (name, value) pairs to glslc.
 // Keep this file free of `use` items.
 
 macro_rules! contract_enums {

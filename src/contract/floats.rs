@@ -2,7 +2,7 @@
 //
 // `include!`d by `src/contract/mod.rs` and `build.rs`. build.rs writes each value as the shortest
 // decimal that reads back to the same f32 (it checks that reading the literal as a double and
-// rounding, as glslang does, gives the same bits) and hands it to shaderc as a macro; the contract
+// rounding, as glslang does, gives the same bits) and hands it to glslc as a macro; the contract
 // probe (`tests/it/twins.rs`) reads every value back from a kernel and compares bits. Values are
 // f32 constant expressions; keep this file free of `use` items.
 

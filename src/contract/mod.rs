@@ -3,7 +3,7 @@
 //! Each item is written once, in Rust, in one of four files that `build.rs` also reads:
 //! `consts.rs` (integers: bindings, random-number slots, feature bits, limits), `floats.rs`
 //! (epsilons and clamps), `enums.rs` (tags and losses) and `structs.rs` (buffer layouts and push
-//! constants). build.rs turns them into shaderc macro definitions and `generated/contract.glsl`, so
+//! constants). build.rs turns them into glslc macro definitions (`-D`) and `generated/contract.glsl`, so
 //! no `.glsl` file restates a value; `tests/it/twins.rs` reads every value back from a kernel, and
 //! a source scan there refuses a shader that defines a contract name or a push-constant block of
 //! its own. The CPU reference, the BVH builder and the random numbers use the same items.
