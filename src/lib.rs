@@ -15,6 +15,12 @@
 //! crosses the host/GPU boundary. Thread safety: the plain data types (scenes, images, options,
 //! parameter tables, gradients) are `Send + Sync`; each handle type states its own.
 //!
+//! Cargo features: `cli` (on by default) builds the `pathgrad` program and the crates only it uses;
+//! an engine depends on `pathgrad = { …, default-features = false }` for the library alone. The
+//! build runs shaderc's `glslc` on the kernels (`PATHGRAD_GLSLC` names another) and needs
+//! SPIRV-Tools' static libraries and a C++ compiler for the kernel specialiser: see the README's
+//! "As a dependency".
+//!
 //! ```no_run
 //! use pathgrad::backend::Backend;
 //! use pathgrad::gpu::{Context, ContextDesc, Renderer};
