@@ -18,6 +18,7 @@ layout(set = 0, binding = BINDING_PROBE_OUT, scalar) writeonly buffer ProbeOut {
 PUSH_BvhProbePush;
 
 void main() {
+    bvh_init();
     uint i = gl_GlobalInvocationID.y * gl_NumWorkGroups.x * WORKGROUP_SIZE + gl_GlobalInvocationID.x;
     if (i >= ray_count) return;
     vec3 origin = vec3(probe_in[8u * i], probe_in[8u * i + 1u], probe_in[8u * i + 2u]);

@@ -79,6 +79,7 @@ bool item_pixel(uint item, out uint view, out uint pixel) {
 }
 
 void main() {
+    bvh_init();
     PathState st;
     uint sample_index = 0u;   // of the path in flight
     uint samples_left = 0u;   // of the item in flight, the one in flight included

@@ -124,6 +124,15 @@ void visit_node(uint i, Ray ray, uint octant, float tmin, float tmax, out uvec2 
 // compressed BVH's traversal rarely has more than four groups pending. The order of visits is
 // src/bvh.rs's either way.
 #define REG_STACK 4u
+// The traversal's step bound, set by bvh_init() at the top of every kernel that traverses, where
+// every lane is active: lavapipe in Mesa 25.2 (Ubuntu 24.04) can run a uniform-buffer load with no
+// lane active and then dereference a null descriptor (a segfault in the JIT code), and the
+// traversal runs inside the path loop's divergent control flow. A kernel that forgets bvh_init()
+// has a bound of 0 and raises STATUS_LOOP_BUDGET on its first traversal, so the mistake shows.
+uint bvh_max_steps = 0u;
+void bvh_init() {
+    bvh_max_steps = 26u * globals.node_count + 1u;
+}
 // Ylitie et al.'s traversal, one step per iteration, in the order of src/bvh.rs (`traverse`): a
 // step tests one pending triangle if there is one, else visits the next inner child hit of the
 // current node group (the highest bit: the nearest for the ray's octant) and pushes the rest of
@@ -145,7 +154,7 @@ Hit bvh_traverse(Ray ray, float tmin, float tmax, bool any_hit) {
     // Every node is visited and every triangle slot tested at most once, and a node's leaves hold
     // at most 24 triangles, so the step bound is never reached; but the compiler cannot know that,
     // so `finished` is not provably true after the loop and the check survives.
-    uint max_steps = 26u * globals.node_count + 1u;
+    uint max_steps = bvh_max_steps;
     bool finished = false;
     for (uint step = 0u; step <= max_steps; step++) {
         if (pending.y != 0u) {
