@@ -461,6 +461,7 @@ impl RenderOptions {
             addr_env_cells: glam::UVec2::ZERO,
             addr_lights: glam::UVec2::ZERO,
             addr_tables: glam::UVec2::ZERO,
+            addr_majorants: glam::UVec2::ZERO,
             light_count: flat.lights.len() as u32,
             light_select_prob,
             env_select_prob,

@@ -161,6 +161,92 @@ vec2 medium_span(uint m, Ray ray, float t_max) {
     return vec2(t0, t1);
 }
 
+// The majorant along a ray through medium m: its grid's cells one after another (a 3D DDA over
+// the unit cube of the sigma_t field, whose transform maps the ray there affinely, so distances
+// along it stay world distances), or the one majorant of a medium without a grid (cells 0).
+// Border cells extend beyond the cube, where lookups clamp. Twin of MajorantWalk in
+// src/cpu/medium.rs, operation for operation (`precise`: no fused multiply-adds the twin lacks).
+struct MajorantWalk {
+    uint base;      // the grid's offset in the majorant array
+    uvec3 cells;    // cells along each axis (x 0: no grid)
+    vec3 o;         // the ray's origin in the unit cube
+    vec3 d;         // its direction there
+    uvec3 cell;     // the current cell
+    float t;        // where the walk stands
+    float t_end;    // the end of the medium's span
+    float mu;       // the majorant without a grid
+};
+
+MajorantWalk majorant_walk(uint m, vec3 origin, vec3 dir, vec2 span) {
+    MediumDesc md = media[m];
+    MajorantWalk w = MajorantWalk(md.grid, uvec3(0u), vec3(0.0), vec3(0.0), uvec3(0u), span.x, span.y, md.majorant);
+    if (md.grid == NO_PARAM) return w;
+    FieldDesc f = load_field(md.sigma_t);
+    precise vec3 o = vec3(dot(f.row0, origin), dot(f.row1, origin), dot(f.row2, origin)) + f.shift;
+    precise vec3 d = vec3(dot(f.row0, dir), dot(f.row1, dir), dot(f.row2, dir));
+    w.cells = uvec3(md.grid_x, md.grid_y, md.grid_z);
+    w.o = o;
+    w.d = d;
+    precise vec3 p = o + span.x * d;
+    vec3 n = vec3(w.cells);
+    w.cell = uvec3(clamp(floor(p * n), vec3(0.0), n - 1.0));
+    return w;
+}
+
+// Where the ray leaves the current cell across an inner face of the grid along `axis`
+// (FLOAT_MAX when it never does).
+float walk_plane(MajorantWalk w, uint axis) {
+    uint c = w.cell[axis];
+    uint n = w.cells[axis];
+    float d = w.d[axis];
+    precise float t = FLOAT_MAX;
+    if (d > 0.0 && c + 1u < n) {
+        t = (float(c + 1u) / float(n) - w.o[axis]) / d;
+    } else if (d < 0.0 && c > 0u) {
+        t = (float(c) / float(n) - w.o[axis]) / d;
+    }
+    return t;
+}
+
+// Spends optical depth `tau` from where the walk stands: the tentative collision's distance (and
+// the majorant there in `mu`), or -1 when the span ends first.
+float walk_collide(inout MajorantWalk w, float tau, out float mu) {
+    mu = w.mu;
+    if (w.cells.x == 0u) {
+        float t = w.t + tau / w.mu;
+        if (!(t < w.t_end)) return -1.0;
+        w.t = t;
+        return t;
+    }
+    // Each pass leaves one cell, and a ray leaves at most this many.
+    uint passes = w.cells.x + w.cells.y + w.cells.z + 3u;
+    precise float left = tau;
+    [[dont_unroll]] for (uint i = 0u; i < passes; i++) {
+        float tx = walk_plane(w, 0u);
+        float ty = walk_plane(w, 1u);
+        float tz = walk_plane(w, 2u);
+        float t_exit = min(min(tx, ty), min(tz, w.t_end));
+        mu = FloatArray(globals.addr_majorants).v[w.base + (w.cell.z * w.cells.y + w.cell.y) * w.cells.x + w.cell.x];
+        if (mu > 0.0) {
+            precise float t = w.t + left / mu;
+            if (t < t_exit) {
+                w.t = t;
+                return t;
+            }
+            left -= max(t_exit - w.t, 0.0) * mu;
+        }
+        if (!(t_exit < w.t_end)) return -1.0;
+        w.t = max(w.t, t_exit);
+        uint axis = tx == t_exit ? 0u : (ty == t_exit ? 1u : 2u);
+        if (w.d[axis] > 0.0) {
+            w.cell[axis] += 1u;
+        } else {
+            w.cell[axis] -= 1u;
+        }
+    }
+    return -1.0;
+}
+
 // Tracking along `ray` in medium m up to t_max, only where the medium exists (medium_span), one sample per step from stream `stream` of
 // `vertex`, from step `step` on; the steps' weights multiply `weight`. Delta tracking (`ratio`
 // false) stops at a real collision and returns its distance; ratio tracking (true: shadow rays)
@@ -172,16 +258,16 @@ vec2 medium_span(uint m, Ray ray, float t_max) {
 // kernel inlines one copy of the field lookups and of medium_grad; twin of delta_track and
 // ratio_track in src/cpu/medium.rs.
 float track(uint m, Ray ray, float t_max, uvec2 key, uint pixel, uint sample_index, uint vertex, uint stream, bool ratio, inout uint step, inout vec3 weight, bool replay, vec3 gw) {
-    float majorant = media[m].majorant;
-    if (!(majorant > 0.0)) return -1.0;
+    if (!(media[m].majorant > 0.0)) return -1.0;
     vec2 span = medium_span(m, ray, t_max);
     if (!(span.x < span.y)) return -1.0;
-    float t = span.x;
+    MajorantWalk walk = majorant_walk(m, ray.origin, ray.dir, span);
     [[dont_unroll]] while (step < MAX_TRACKING_STEPS) {
         vec4 u = uniform4(key, pixel, sample_index, vertex, stream, 0u, step);
         step++;
-        t += -log(1.0 - u.x) / majorant;
-        if (!(t < span.y)) return -1.0;
+        float majorant;
+        float t = walk_collide(walk, -log(1.0 - u.x), majorant);
+        if (t < 0.0) return -1.0;
         vec3 x = ray.origin + t * ray.dir;
         vec3 field_sigma = field_rgb(media[m].sigma_t, x);
         vec3 sigma = params[media[m].p_scale] * field_sigma;   // the extinction: medium_extinction of the twin

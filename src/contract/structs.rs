@@ -101,6 +101,8 @@ contract_structs! {
         addr_lights: UVec2,
         /// Device address of the rough plastics' coating tables (`Material::table`).
         addr_tables: UVec2,
+        /// Device address of the media's majorant grids (`MediumDesc::grid`).
+        addr_majorants: UVec2,
     }
 
     /// One view of a request: its pinhole camera and the key word of its paths. The image (and
@@ -246,6 +248,16 @@ contract_structs! {
         lo: Vec3,
         /// The box's maximum corner (when `bounded`).
         hi: Vec3,
+        /// Offset of its majorant grid in the majorant array (`Globals::addr_majorants`), or
+        /// `NO_PARAM`: then `majorant` holds everywhere.
+        grid: u32,
+        /// The majorant grid's cells along x, over the unit cube of the `sigma_t` field (0
+        /// without a grid).
+        grid_x: u32,
+        /// Its cells along y.
+        grid_y: u32,
+        /// Its cells along z.
+        grid_z: u32,
     }
 
     /// A material; its differentiable values are offsets into the parameter array.

@@ -6,12 +6,17 @@
 //! collision at x is real with probability P = mean_c σ_t,c(x)/σ̄ and weights each channel by
 //! σ_s,c/(σ̄ P) (real) or (σ̄ − σ_t,c)/(σ̄ (1 − P)) (null), so every channel is unbiased; for a grey
 //! medium the weights are the albedo and 1, plain delta tracking.
+//!
+//! σ̄ is piecewise constant along a ray: a medium with a majorant grid
+//! ([`crate::scene::medium::MajorantGrid`]) walks its cells ([`MajorantWalk`]), drawing one optical
+//! depth per tentative collision and spending it cell by cell at each cell's own σ̄.
 
 use glam::Vec3;
 
 use crate::bvh::{Ray, closest_hit};
 use crate::contract::{
-    FIELD_CONSTANT, FieldDesc, MAT_NULL, MAX_NULL_CROSSINGS, MAX_TRACKING_STEPS, MediumDesc, NO_MEDIUM, PHASE_HG,
+    FIELD_CONSTANT, FLOAT_MAX, FieldDesc, MAT_NULL, MAX_NULL_CROSSINGS, MAX_TRACKING_STEPS, MediumDesc, NO_MEDIUM,
+    NO_PARAM, PHASE_HG,
 };
 use crate::cpu::path::GradSink;
 use crate::cpu::surface::{offset_origin, surface_at};
@@ -125,6 +130,119 @@ pub fn medium_span(m: &MediumDesc, origin: Vec3, dir: Vec3, t_max: f32) -> Optio
     (t0 < t1).then_some((t0, t1))
 }
 
+/// The majorant along a ray through a medium: its grid's cells one after another (a 3D DDA over
+/// the unit cube of the `sigma_t` field, whose transform maps the ray there affinely, so distances
+/// along it stay world distances), or the one majorant of a medium without a grid. Twin of
+/// `MajorantWalk` in `shaders/lib/medium.glsl`, operation for operation.
+struct MajorantWalk<'a> {
+    /// The grid's values (empty: `mu` everywhere).
+    values: &'a [f32],
+    /// Cells along each axis.
+    cells: [u32; 3],
+    /// The ray's origin in the unit cube.
+    o: [f32; 3],
+    /// Its direction there.
+    d: [f32; 3],
+    /// The current cell (border cells extend beyond the cube, where lookups clamp).
+    cell: [u32; 3],
+    /// Where the walk stands.
+    t: f32,
+    /// The end of the medium's span.
+    t_end: f32,
+    /// The majorant without a grid.
+    mu: f32,
+}
+
+impl<'a> MajorantWalk<'a> {
+    /// A walk over `(t0, t1)` of `origin + t·dir` in medium `m`.
+    fn new(flat: &'a FlatScene, m: &MediumDesc, origin: Vec3, dir: Vec3, (t0, t1): (f32, f32)) -> MajorantWalk<'a> {
+        let mut walk = MajorantWalk {
+            values: &[],
+            cells: [0; 3],
+            o: [0.0; 3],
+            d: [0.0; 3],
+            cell: [0; 3],
+            t: t0,
+            t_end: t1,
+            mu: m.majorant,
+        };
+        if m.grid == NO_PARAM {
+            return walk;
+        }
+        let f = &flat.fields[m.sigma_t as usize];
+        let o = Vec3::new(f.row0.dot(origin), f.row1.dot(origin), f.row2.dot(origin)) + f.shift;
+        let d = Vec3::new(f.row0.dot(dir), f.row1.dot(dir), f.row2.dot(dir));
+        walk.cells = [m.grid_x, m.grid_y, m.grid_z];
+        walk.values = &flat.majorants[m.grid as usize..][..(m.grid_x * m.grid_y * m.grid_z) as usize];
+        walk.o = o.to_array();
+        walk.d = d.to_array();
+        let p = o + t0 * d;
+        for axis in 0..3 {
+            let n = walk.cells[axis] as f32;
+            walk.cell[axis] = (p[axis] * n).floor().clamp(0.0, n - 1.0) as u32;
+        }
+        walk
+    }
+
+    /// Where the ray leaves the current cell across an inner face of the grid along `axis`
+    /// (`FLOAT_MAX` when it never does).
+    fn plane(&self, axis: usize) -> f32 {
+        let (c, n, o, d) = (self.cell[axis], self.cells[axis], self.o[axis], self.d[axis]);
+        if d > 0.0 && c + 1 < n {
+            ((c + 1) as f32 / n as f32 - o) / d
+        } else if d < 0.0 && c > 0 {
+            (c as f32 / n as f32 - o) / d
+        } else {
+            FLOAT_MAX
+        }
+    }
+
+    /// Spends optical depth `tau` from where the walk stands: the tentative collision's distance
+    /// and the majorant there, or `None` when the span ends first.
+    fn collide(&mut self, mut tau: f32) -> Option<(f32, f32)> {
+        if self.values.is_empty() {
+            let t = self.t + tau / self.mu;
+            if !(t < self.t_end) {
+                return None;
+            }
+            self.t = t;
+            return Some((t, self.mu));
+        }
+        // Each pass leaves one cell, and a ray leaves at most this many.
+        for _ in 0..self.cells.iter().sum::<u32>() + 3 {
+            let (tx, ty, tz) = (self.plane(0), self.plane(1), self.plane(2));
+            let t_exit = tx.min(ty).min(tz.min(self.t_end));
+            let [cx, cy, cz] = self.cell;
+            let mu = self.values[((cz * self.cells[1] + cy) * self.cells[0] + cx) as usize];
+            if mu > 0.0 {
+                let t = self.t + tau / mu;
+                if t < t_exit {
+                    self.t = t;
+                    return Some((t, mu));
+                }
+                tau -= (t_exit - self.t).max(0.0) * mu;
+            }
+            if !(t_exit < self.t_end) {
+                return None;
+            }
+            self.t = self.t.max(t_exit);
+            let axis = if tx == t_exit {
+                0
+            } else if ty == t_exit {
+                1
+            } else {
+                2
+            };
+            if self.d[axis] > 0.0 {
+                self.cell[axis] += 1;
+            } else {
+                self.cell[axis] -= 1;
+            }
+        }
+        None
+    }
+}
+
 /// Where a free flight along `ray` in medium `m` ends before `t_max`: `Some(t)` at a real
 /// collision, `None` if it reaches `t_max`; the spectral-tracking weight of the flight is
 /// multiplied into `weight`. Draws stream DT of `vertex` from step `*step` on, only over the part
@@ -146,18 +264,15 @@ pub fn delta_track(
     weight: &mut Vec3,
     mut grad: Option<(&mut GradSink<'_>, Vec3)>,
 ) -> Option<f32> {
-    let majorant = m.majorant;
-    if !(majorant > 0.0) {
+    if !(m.majorant > 0.0) {
         return None;
     }
-    let (mut t, t_end) = medium_span(m, ray.origin, ray.dir, t_max)?;
+    let span = medium_span(m, ray.origin, ray.dir, t_max)?;
+    let mut walk = MajorantWalk::new(flat, m, ray.origin, ray.dir, span);
     while *step < MAX_TRACKING_STEPS {
         let u = uniform4(key, pixel, sample, vertex, Stream::DeltaTracking, 0, *step);
         *step += 1;
-        t += -(1.0 - u[0]).ln() / majorant;
-        if !(t < t_end) {
-            return None;
-        }
+        let (t, majorant) = walk.collide(-(1.0 - u[0]).ln())?;
         let x = ray.origin + t * ray.dir;
         let sigma = medium_extinction(flat, m, x);
         let p_real = ((sigma.x + sigma.y + sigma.z) / (3.0 * majorant)).clamp(0.0, 1.0);
@@ -195,19 +310,16 @@ fn ratio_track(
     step: &mut u32,
     grad: &mut Option<(&mut GradSink<'_>, Vec3)>,
 ) -> Vec3 {
-    let majorant = m.majorant;
-    if !(majorant > 0.0) {
+    if !(m.majorant > 0.0) {
         return Vec3::ONE;
     }
-    let Some((mut t, t_end)) = medium_span(m, origin, dir, t_max) else { return Vec3::ONE };
+    let Some(span) = medium_span(m, origin, dir, t_max) else { return Vec3::ONE };
+    let mut walk = MajorantWalk::new(flat, m, origin, dir, span);
     let mut tr = Vec3::ONE;
     while *step < MAX_TRACKING_STEPS {
         let u = uniform4(key, pixel, sample, vertex, Stream::RatioTracking, 0, *step)[0];
         *step += 1;
-        t += -(1.0 - u).ln() / majorant;
-        if !(t < t_end) {
-            return tr;
-        }
+        let Some((t, majorant)) = walk.collide(-(1.0 - u).ln()) else { return tr };
         let x = origin + t * dir;
         let null = Vec3::splat(majorant) - medium_extinction(flat, m, x);
         tr *= null / majorant;

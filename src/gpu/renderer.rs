@@ -333,6 +333,9 @@ impl Backend for Renderer {
         if !self.flat.media.is_empty() {
             self.gpu.media.upload(&self.flat.media)?;
         }
+        if !self.flat.majorants.is_empty() {
+            self.gpu.majorants.upload(&self.flat.majorants)?;
+        }
         if !self.flat.env_cells.is_empty() {
             self.gpu.env_cells.upload(&self.flat.env_cells)?;
         }

@@ -22,6 +22,8 @@ pub(crate) struct GpuScene {
     pub media: Buffer,
     /// The media's fields.
     pub fields: Buffer,
+    /// The media's majorant grids (they follow the densities: rewritten with the parameters).
+    pub majorants: Buffer,
     /// The environment map's sampling cells (they follow its texels: rewritten with the parameters).
     pub env_cells: Buffer,
     /// The lights without area.
@@ -44,6 +46,7 @@ impl GpuScene {
             params: Buffer::storage_with(ctx, "param buffer", &flat.params)?,
             media: Buffer::storage_with(ctx, "media", &flat.media)?,
             fields: Buffer::storage_with(ctx, "media fields", &flat.fields)?,
+            majorants: Buffer::storage_with(ctx, "majorant grids", &flat.majorants)?,
             env_cells: Buffer::storage_with(ctx, "environment map cells", &flat.env_cells)?,
             lights: Buffer::storage_with(ctx, "lights", &flat.lights)?,
             tables: Buffer::storage_with(ctx, "coating tables", &flat.tables)?,
@@ -65,6 +68,7 @@ impl GpuScene {
             addr_env_cells: self.env_cells.device_address(),
             addr_lights: self.lights.device_address(),
             addr_tables: self.tables.device_address(),
+            addr_majorants: self.majorants.device_address(),
             ..*globals
         }
     }

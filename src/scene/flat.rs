@@ -38,6 +38,9 @@ pub struct FlatScene {
     pub media: Vec<MediumDesc>,
     /// Their extinction and albedo fields.
     pub fields: Vec<FieldDesc>,
+    /// The media's majorant grids (`MediumDesc::grid`), one after another; they follow the
+    /// densities.
+    pub majorants: Vec<f32>,
     /// The environment map's sampling cells (`crate::scene::envmap`); empty without a map.
     pub env_cells: Vec<EnvCell>,
     /// Lights without area, in the scene's order.
@@ -73,6 +76,9 @@ pub(crate) fn replace_params(
     // and an environment map's sampling cells follow its texels.
     for (desc, medium) in flat.media.iter_mut().zip(&scene.media) {
         desc.majorant = medium.majorant(&scene.params);
+        if let Some(grid) = medium.majorant_grid(&scene.params) {
+            flat.majorants[desc.grid as usize..][..grid.values.len()].copy_from_slice(&grid.values);
+        }
     }
     flat.env_cells = env_cells(scene)?;
     if alpha_moved {
@@ -145,7 +151,7 @@ impl FlatScene {
         }
         let mut materials: Vec<GpuMaterial> = scene.materials.iter().map(|m| flatten_material(scene, m)).collect();
         let tables = coating_tables(&mut materials, scene.params.values());
-        let (media, fields) = flatten_media(scene);
+        let (media, fields, majorants) = flatten_media(scene);
         let bvh = bvh::build(&triangles)?;
         let env_cells = env_cells(scene)?;
         Ok(FlatScene {
@@ -157,6 +163,7 @@ impl FlatScene {
             params: scene.params.values().to_vec(),
             media,
             fields,
+            majorants,
             env_cells,
             lights: scene.lights.iter().map(|l| flatten_light(scene, l)).collect(),
             tables,
@@ -370,8 +377,8 @@ fn coating_tables(materials: &mut [GpuMaterial], params: &[f32]) -> Vec<f32> {
     tables
 }
 
-/// The media and their fields (two per medium, extinction then albedo).
-fn flatten_media(scene: &Scene) -> (Vec<MediumDesc>, Vec<FieldDesc>) {
+/// The media, their fields (two per medium, extinction then albedo) and their majorant grids.
+fn flatten_media(scene: &Scene) -> (Vec<MediumDesc>, Vec<FieldDesc>, Vec<f32>) {
     let offset = |id| scene.params.entry(id).offset;
     let field = |f: &Field| match f {
         Field::Constant { value, channels } => {
@@ -394,6 +401,7 @@ fn flatten_media(scene: &Scene) -> (Vec<MediumDesc>, Vec<FieldDesc>) {
         }
     };
     let mut fields = Vec::new();
+    let mut majorants = Vec::new();
     let media = scene
         .media
         .iter()
@@ -405,6 +413,14 @@ fn flatten_media(scene: &Scene) -> (Vec<MediumDesc>, Vec<FieldDesc>) {
                 Phase::Isotropic => (PHASE_ISOTROPIC, NO_PARAM),
                 Phase::HenyeyGreenstein { g } => (PHASE_HG, offset(g)),
             };
+            let (grid, cells) = match m.majorant_grid(&scene.params) {
+                Some(g) => {
+                    let at = majorants.len() as u32;
+                    majorants.extend_from_slice(&g.values);
+                    (at, g.cells)
+                }
+                None => (NO_PARAM, glam::UVec3::ZERO),
+            };
             MediumDesc {
                 sigma_t: first,
                 albedo: first + 1,
@@ -415,8 +431,12 @@ fn flatten_media(scene: &Scene) -> (Vec<MediumDesc>, Vec<FieldDesc>) {
                 bounded: u32::from(m.extent.is_some()),
                 lo: m.extent.map_or(Vec3::ZERO, |e| e.0),
                 hi: m.extent.map_or(Vec3::ZERO, |e| e.1),
+                grid,
+                grid_x: cells.x,
+                grid_y: cells.y,
+                grid_z: cells.z,
             }
         })
         .collect();
-    (media, fields)
+    (media, fields, majorants)
 }

@@ -136,6 +136,76 @@ impl Medium {
     }
 }
 
+/// Voxels of a density grid per majorant-grid cell along each axis (at most
+/// [`MAJORANT_GRID_MAX`] cells per axis): tracking steps by each cell's own majorant, so one dense
+/// voxel sets the step length only near itself.
+pub const MAJORANT_CELL_VOXELS: u32 = 8;
+
+/// The most majorant-grid cells along one axis (a ray crosses at most the sum of the three).
+pub const MAJORANT_GRID_MAX: u32 = 64;
+
+/// A medium's majorant grid: cells over the unit cube of its `sigma_t` grid, each holding a
+/// majorant of the extinction wherever a lookup inside the cell can reach.
+#[derive(Clone, Debug, PartialEq)]
+pub struct MajorantGrid {
+    /// Cells along x, y and z.
+    pub cells: UVec3,
+    /// One majorant per cell, x fastest.
+    pub values: Vec<f32>,
+}
+
+impl Medium {
+    /// The majorant grid of a medium whose extinction is a voxel grid of more than one cell
+    /// ([`MAJORANT_CELL_VOXELS`]); `None` for a constant extinction or a small grid, which
+    /// [`Medium::majorant`] bounds as tightly.
+    ///
+    /// A cell's value is `scale · max σ_t` over the voxels that trilinear lookups at points in
+    /// the cell read (with one voxel of slack on each side for rounding at the cell's faces),
+    /// times 1 + [`crate::contract::MAJORANT_MARGIN`]. Points outside the unit cube (a rotated
+    /// volume's box) read the clamped border voxels, which the border cells include.
+    pub fn majorant_grid(&self, params: &ParamTable) -> Option<MajorantGrid> {
+        let Field::Grid { resolution: res, channels, values, .. } = &self.sigma_t else { return None };
+        let cells = UVec3::new(
+            res.x.div_ceil(MAJORANT_CELL_VOXELS).min(MAJORANT_GRID_MAX),
+            res.y.div_ceil(MAJORANT_CELL_VOXELS).min(MAJORANT_GRID_MAX),
+            res.z.div_ceil(MAJORANT_CELL_VOXELS).min(MAJORANT_GRID_MAX),
+        );
+        if cells == UVec3::ONE {
+            return None;
+        }
+        let voxels = params.get(*values);
+        let ch = *channels as usize;
+        let voxel_max: Vec<f32> = voxels.chunks_exact(ch).map(|v| v.iter().fold(0.0f32, |m, &x| m.max(x))).collect();
+        let factor = params.get(self.scale)[0] * (1.0 + crate::contract::MAJORANT_MARGIN);
+        // The voxels whose trilinear support meets cell i of n along an axis of r voxels: a point
+        // at local x in [i/n, (i+1)/n) reads voxels floor(x·r − 0.5) and one more.
+        let span = |i: u32, n: u32, r: u32| {
+            let lo = ((i as u64 * r as u64) / n as u64).saturating_sub(1);
+            let hi = ((i as u64 + 1) * r as u64).div_ceil(n as u64);
+            (lo as u32, (hi as u32).min(r - 1))
+        };
+        let mut values = Vec::with_capacity((cells.x * cells.y * cells.z) as usize);
+        for cz in 0..cells.z {
+            let (z0, z1) = span(cz, cells.z, res.z);
+            for cy in 0..cells.y {
+                let (y0, y1) = span(cy, cells.y, res.y);
+                for cx in 0..cells.x {
+                    let (x0, x1) = span(cx, cells.x, res.x);
+                    let mut m = 0.0f32;
+                    for z in z0..=z1 {
+                        for y in y0..=y1 {
+                            let row = ((z * res.y + y) * res.x) as usize;
+                            m = voxel_max[row + x0 as usize..=row + x1 as usize].iter().fold(m, |a, &v| a.max(v));
+                        }
+                    }
+                    values.push(m * factor);
+                }
+            }
+        }
+        Some(MajorantGrid { cells, values })
+    }
+}
+
 /// The world-space axis-aligned bound of the unit cube under `to_world` (its eight corners), as
 /// Mitsuba's `Volume::bbox`.
 pub fn unit_cube_bounds(to_world: Mat4) -> (Vec3, Vec3) {

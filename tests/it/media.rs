@@ -62,6 +62,45 @@ fn a_slab_transmits_exp_minus_sigma_d() {
     assert!(error < 0.02 * expected, "the test has the power to see a 2 % error");
 }
 
+/// One voxel of 3e38 in a grid of density 0.7 slows tracking only near itself: each medium has a
+/// majorant grid (`MajorantGrid`, 8 voxels a cell), so rays through the slab's middle, far from
+/// the hot corner, step at the majorant of their own cells. With one majorant for the whole grid
+/// every flight would end at `MAX_TRACKING_STEPS` with weight 0 (a black image). The slab is the
+/// one of `a_slab_transmits_exp_minus_sigma_d`, so each pixel is 2·exp(−1.4) in expectation, on
+/// the CPU reference and on the GPU.
+#[test]
+fn a_hot_voxel_slows_tracking_only_near_itself() {
+    let gpu = TestGpu::new();
+    let dir = tempfile::tempdir().unwrap();
+    let mut density = vec![0.7f32; 32 * 32 * 4];
+    density[(3 * 32 + 31) * 32 + 31] = 3e38;
+    std::fs::write(dir.path().join("hot.vol"), Grid::new(UVec3::new(32, 32, 4), 1, density).unwrap().to_bytes())
+        .unwrap();
+    let s = scene(
+        dir.path(),
+        &format!(
+            r#"{}<integrator type="volpath"/>
+            <shape type="cube" id="slab"><bsdf type="null"/><medium type="heterogeneous" name="interior">
+                <volume type="gridvolume" name="sigma_t"><string name="filename" value="hot.vol"/><transform name="to_world"><scale value="2"/><translate x="-1" y="-1" z="-1"/></transform></volume>
+                <float name="albedo" value="0"/></medium></shape>
+            <shape type="rectangle" id="light"><emitter type="area"><rgb name="radiance" value="2, 2, 2"/></emitter><transform name="to_world"><scale value="20"/><translate z="-4"/></transform></shape>"#,
+            sensor("0, 0, 6", 2.0, 16)
+        ),
+    );
+    let flat = pathgrad::scene::flat::FlatScene::new(&s).unwrap();
+    assert_eq!((flat.media[0].grid_x, flat.media[0].grid_y, flat.media[0].grid_z), (4, 4, 1));
+    let expected = 2.0 * (-0.7f64 * 2.0).exp();
+    let options = RenderOptions { spp: 64, seed: 1, ..RenderOptions::for_scene(&s) };
+    let cpu = Reference::new(&s).unwrap().render(&options).unwrap();
+    let gpu_image = pathgrad::gpu::Renderer::new(&gpu.ctx, &s).unwrap().render(&options).unwrap();
+    for (backend, image) in [("CPU", &cpu), ("GPU", &gpu_image)] {
+        let (mean, error) = mean_and_error(image);
+        println!("hot voxel, {backend}: {mean} ± {error}, expected {expected}");
+        assert!((mean - expected).abs() < 4.0 * error, "{backend}: {mean} ± {error} vs {expected}");
+        assert!(error < 0.02 * expected, "{backend}: the test has the power to see a 2 % error");
+    }
+}
+
 /// A heterogeneous grid of constant density whose box holds its shape renders bit for bit like
 /// the homogeneous medium of that density: the same majorant, the same extinction at every point
 /// of the shape, so the same decisions on every path.
@@ -251,8 +290,12 @@ fn differential_sampling_is_refused_in_media_scenes() {
 /// covers only part of its cube (the rest of the cube is vacuum), a homogeneous one (constant
 /// extinction, constant RGB albedo), null boundaries, surfaces and both emitter kinds, in `dir`.
 fn mixed_media(dir: &Path) -> Scene {
-    let density: Vec<f32> = (0..4 * 4 * 4 * 3).map(|i| 0.2 + 0.8 * ((i * 37 % 11) as f32 / 10.0)).collect();
-    std::fs::write(dir.join("density.vol"), Grid::new(UVec3::splat(4), 3, density).unwrap().to_bytes()).unwrap();
+    // 12×9×10 voxels: a majorant grid of 2×2×2 cells, the half x ≥ 6 three times denser, so the
+    // tracking walks cells of different majorants.
+    let density: Vec<f32> = (0..12 * 9 * 10 * 3)
+        .map(|i| (0.2 + 0.8 * ((i * 37 % 11) as f32 / 10.0)) * if (i / 3) % 12 >= 6 { 3.0 } else { 1.0 })
+        .collect();
+    std::fs::write(dir.join("density.vol"), Grid::new(UVec3::new(12, 9, 10), 3, density).unwrap().to_bytes()).unwrap();
     let albedo: Vec<f32> = (0..4 * 4 * 4 * 3).map(|i| 0.6 + 0.35 * ((i * 23 % 7) as f32 / 6.0)).collect();
     std::fs::write(dir.join("albedo.vol"), Grid::new(UVec3::splat(4), 3, albedo).unwrap().to_bytes()).unwrap();
     scene(
