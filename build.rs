@@ -133,7 +133,8 @@ fn main() {
     // The generated declarations live in a folder of their own, searched first for `<…>` includes.
     let include = out.join("include");
     let generated_path = include.join(GENERATED_CONTRACT);
-    std::fs::create_dir_all(generated_path.parent().expect("the include name has a folder")).expect("OUT_DIR is writable");
+    std::fs::create_dir_all(generated_path.parent().expect("the include name has a folder"))
+        .expect("OUT_DIR is writable");
     std::fs::write(&generated_path, contract_glsl()).expect("OUT_DIR is writable");
     let glslc = Glslc::find();
     let mut args: Vec<String> = vec![
