@@ -205,3 +205,40 @@ fn a_killed_shard_resumes_where_it_stopped() {
     let after: Vec<(String, Vec<u8>)> = item_files(&out).into_iter().filter(|(n, _)| !n.ends_with(".tmp")).collect();
     assert_eq!(after, item_files(&whole));
 }
+
+/// Issue 36, 5: manifest errors name the manifest's keys, not the command line's flags; an
+/// out-of-range sensor says how many the scene has; a manifest with a byte-order mark is read.
+#[test]
+fn issue_36_manifest_messages_name_its_keys() {
+    let dir = tempfile::tempdir().unwrap();
+    let item = |extra: &str| format!(r#"{{"scene": "builtin:blend", {extra}"produce": ["image"]}}"#);
+    let lines = [
+        item(r#""width": 0, "#),
+        item(r#""width": 20000, "height": 6, "#),
+        item(r#""width": 8, "height": 6, "spp": 0, "#),
+        item(r#""width": 8, "height": 6, "max_depth": 0, "#),
+        item(r#""width": 8, "height": 6, "sensor": 5, "#),
+    ];
+    let manifest = dir.path().join("m.jsonl");
+    std::fs::write(&manifest, format!("\u{feff}{}\n", lines.join("\n"))).unwrap();
+    let out = dir.path().join("out");
+    let o = batch(&manifest, &out, &[], &[]);
+    assert!(!o.status.success());
+    let rows = summary(&out.join("summary.jsonl"));
+    let expected = [
+        "m.jsonl:1: invalid 'width'/'height': must be between 1 and 16384",
+        "m.jsonl:2: invalid 'width'/'height': must be between 1 and 16384",
+        "m.jsonl:3: invalid 'spp': must be between 1 and",
+        "m.jsonl:4: invalid 'max_depth': must be at least 1 (or -1 for unbounded)",
+        "no sensor '5': the scene has 1 sensor (0: camera)",
+    ];
+    for (row, want) in rows.iter().zip(expected) {
+        let error = row["error"].as_str().unwrap();
+        assert!(error.contains(want) && !error.contains("--"), "{want:?}: {error}");
+    }
+    assert_eq!(rows.len(), 5);
+    // The byte-order mark is not part of the first item.
+    let good = dir.path().join("good.jsonl");
+    std::fs::write(&good, format!("\u{feff}{}\n", item(r#""width": 8, "height": 6, "spp": 1, "#))).unwrap();
+    ok(&batch(&good, &dir.path().join("good"), &[], &[]));
+}

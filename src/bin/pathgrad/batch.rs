@@ -32,7 +32,7 @@ pub(crate) struct BatchArgs {
     output: PathBuf,
     /// Run the items with index ≡ I (mod N). Without it: SLURM_ARRAY_TASK_ID of
     /// SLURM_ARRAY_TASK_COUNT, or JOB_COMPLETION_INDEX of --shards N, else every item.
-    #[arg(long, value_name = "I/N")]
+    #[arg(long, value_name = "I/N", allow_hyphen_values = true)]
     shard: Option<String>,
     /// The number of shards of a Kubernetes Indexed Job (its JOB_COMPLETION_INDEX is the shard).
     #[arg(long, value_name = "N", conflicts_with = "shard")]
@@ -147,6 +147,8 @@ struct Status {
 /// Reads the manifest: every non-blank line that does not start with `#` is an item.
 fn read_manifest(path: &Path) -> Result<Vec<Entry>> {
     let text = std::fs::read_to_string(path).with_context(|| format!("reading the manifest {}", path.display()))?;
+    // A byte-order mark (Windows editors write one) is not part of the first item.
+    let text = text.strip_prefix('\u{feff}').unwrap_or(&text);
     let mut entries = Vec::new();
     let mut names: BTreeMap<String, usize> = BTreeMap::new();
     for (i, raw) in text.lines().enumerate() {
@@ -189,7 +191,12 @@ fn shard(args: &BatchArgs, var: impl Fn(&str) -> Option<String>) -> Result<(u64,
     };
     let (i, n, from) = if let Some(s) = &args.shard {
         let (i, n) = s.split_once('/').ok_or_else(|| anyhow!("invalid --shard {s}: give I/N, e.g. 0/4"))?;
-        (number("--shard", i)?, number("--shard", n)?, format!("--shard {s}"))
+        let part = |text: &str| {
+            text.trim()
+                .parse::<u64>()
+                .map_err(|_| anyhow!("invalid --shard {s}: '{text}' is not a non-negative integer"))
+        };
+        (part(i)?, part(n)?, format!("--shard {s}"))
     } else if let Some(id) = var("SLURM_ARRAY_TASK_ID") {
         let count = var("SLURM_ARRAY_TASK_COUNT")
             .ok_or_else(|| anyhow!("SLURM_ARRAY_TASK_ID is set but SLURM_ARRAY_TASK_COUNT is not"))?;
@@ -313,6 +320,12 @@ impl Runner {
             }
             None => None,
         };
+        // Checked before the scene loads, whose camera would speak of an image size instead.
+        for size in [item.width, item.height].into_iter().flatten() {
+            if !(1..=pathgrad::integrator::MAX_IMAGE_SIZE).contains(&size) {
+                bail!("invalid 'width'/'height': must be between 1 and {}", pathgrad::integrator::MAX_IMAGE_SIZE);
+            }
+        }
         let out = self.out.clone();
         let (scene, backend) = self.backend(item)?;
         let mut table = scene.params.clone();
@@ -444,7 +457,12 @@ pub(crate) fn batch(args: &BatchArgs) -> Result<()> {
                     None => match runner.run(item, name, &record) {
                         Ok(outputs) => status(Some(name), "ok", outputs, None),
                         Err(e) => {
-                            let e = format!("{}:{}: {}", args.manifest.display(), entry.line, crate::error_message(&e));
+                            let e = format!(
+                                "{}:{}: {}",
+                                args.manifest.display(),
+                                entry.line,
+                                crate::error_message_with(&e, crate::flags::with_keys)
+                            );
                             status(Some(name), "failed", Vec::new(), Some(e))
                         }
                     },

@@ -299,6 +299,9 @@ pub(crate) fn parse_views(
     let mut out: Vec<(View, Option<PathBuf>, usize)> = Vec::new();
     for spec in specs {
         let (sensor, target) = match spec.split_once('=') {
+            Some((s, "")) => {
+                bail!("invalid --view {spec}: the target path after '=' is empty (give --view {s}=TARGET.exr)")
+            }
             Some((s, t)) => (s, Some(PathBuf::from(t))),
             None => (spec.as_str(), None),
         };
@@ -349,9 +352,12 @@ pub(crate) fn view_targets(
     }
     views
         .iter()
-        .map(|(_, path)| {
+        .map(|(view, path)| {
             let path = path.as_deref().expect("parse_views checked that every view names a target");
-            let image = target_image(renderer, scene, opts, Some(path), &[])?;
+            let image = target_image(renderer, scene, opts, Some(path), &[]).with_context(|| {
+                let sensor = scene.sensors.get(view.stream as usize).map_or("?", |s| s.name.as_str());
+                format!("--view {sensor}={}", path.display())
+            })?;
             if (image.width(), image.height()) != (opts.width, opts.height) {
                 bail!(
                     "invalid --view target {}: it is {}×{} but the views render at {}×{}",
