@@ -33,13 +33,19 @@ fn manifest(dir: &Path, count: usize) -> PathBuf {
     path
 }
 
-fn batch(manifest: &Path, out: &Path, args: &[&str], env: &[(&str, &str)]) -> Output {
+/// `pathgrad batch MANIFEST -o OUT ARGS` without the schedulers' variables of the test's own
+/// environment.
+fn batch_command(manifest: &Path, out: &Path, args: &[&str]) -> std::process::Command {
     let mut command = pathgrad();
     command.arg("batch").arg(manifest).arg("-o").arg(out).args(args);
     for var in ["SLURM_ARRAY_TASK_ID", "SLURM_ARRAY_TASK_COUNT", "SLURM_ARRAY_TASK_MIN", "JOB_COMPLETION_INDEX"] {
         command.env_remove(var);
     }
-    command.envs(env.iter().copied()).output().unwrap()
+    command
+}
+
+fn batch(manifest: &Path, out: &Path, args: &[&str], env: &[(&str, &str)]) -> Output {
+    batch_command(manifest, out, args).envs(env.iter().copied()).output().unwrap()
 }
 
 fn ok(o: &Output) {
@@ -55,12 +61,16 @@ fn summary(path: &Path) -> Vec<serde_json::Value> {
     std::fs::read_to_string(path).unwrap().lines().map(|l| serde_json::from_str(l).unwrap()).collect()
 }
 
-/// The item files of a run (everything but summaries), by name.
+/// The item files of a run (everything but summaries and hidden files: the shards' locks and
+/// any temporaries), by name.
 fn item_files(dir: &Path) -> Vec<(String, Vec<u8>)> {
     let mut files: Vec<(String, Vec<u8>)> = std::fs::read_dir(dir)
         .unwrap()
         .map(|e| e.unwrap().path())
-        .filter(|p| !p.file_name().unwrap().to_str().unwrap().starts_with("summary"))
+        .filter(|p| {
+            let name = p.file_name().unwrap().to_str().unwrap();
+            !name.starts_with('.') && !name.starts_with("summary")
+        })
         .filter(|p| p.file_name().unwrap() != "totals.json")
         .map(|p| (p.file_name().unwrap().to_str().unwrap().to_string(), std::fs::read(&p).unwrap()))
         .collect();
@@ -134,8 +144,8 @@ fn a_rerun_completes_only_the_missing_items() {
     let statuses: Vec<String> =
         summary(&out.join("summary.jsonl")).iter().map(|r| r["status"].as_str().unwrap().to_string()).collect();
     assert_eq!(statuses, ["skipped", "skipped", "skipped", "ok", "ok"]);
-    let after: Vec<(String, Vec<u8>)> = item_files(&out).into_iter().filter(|(n, _)| !n.ends_with(".tmp")).collect();
-    assert_eq!(after, complete);
+    assert!(!out.join(format!(".{}.exr.99999-0.tmp", name(3))).exists(), "the shard removes its temporaries");
+    assert_eq!(item_files(&out), complete);
 }
 
 /// Bad lines — an unknown key, a missing scene, a bad value, a missing target — are reported with
@@ -202,8 +212,104 @@ fn a_killed_shard_resumes_where_it_stopped() {
     if ran == 0 {
         println!("the shard finished every item before the kill landed: only the skip was exercised");
     }
-    let after: Vec<(String, Vec<u8>)> = item_files(&out).into_iter().filter(|(n, _)| !n.ends_with(".tmp")).collect();
-    assert_eq!(after, item_files(&whole));
+    let left: Vec<String> = std::fs::read_dir(&out)
+        .unwrap()
+        .map(|e| e.unwrap().file_name().into_string().unwrap())
+        .filter(|n| n.ends_with(".tmp"))
+        .collect();
+    assert!(left.is_empty(), "the rerun removes what the kill left: {left:?}");
+    assert_eq!(item_files(&out), item_files(&whole));
+}
+
+/// A manifest of `count` small image items with ids `a0`, `a1`, …, each with seed `seed + i`.
+fn id_manifest(dir: &Path, file: &str, count: usize, seed: usize) -> PathBuf {
+    let lines: Vec<String> = (0..count)
+        .map(|i| {
+            format!(
+                r#"{{"id": "a{i}", "scene": "builtin:blend", "width": 8, "height": 6, "spp": 1, "seed": {}, "produce": ["image"]}}"#,
+                seed + i
+            )
+        })
+        .collect();
+    let path = dir.join(file);
+    std::fs::write(&path, lines.join("\n") + "\n").unwrap();
+    path
+}
+
+fn stderr(o: &Output) -> String {
+    String::from_utf8_lossy(&o.stderr).into_owned()
+}
+
+/// Issue 36, 2: two processes of one shard started together into one directory: one runs, the
+/// other is refused at once (it holds no lock); two different shards share the directory.
+#[test]
+fn issue_36_one_process_per_shard_and_directory() {
+    let dir = tempfile::tempdir().unwrap();
+    let manifest = id_manifest(dir.path(), "m.jsonl", 8, 0);
+    let out = dir.path().join("out");
+    let spawn = |args: &[&str]| {
+        batch_command(&manifest, &out, args)
+            .stdout(std::process::Stdio::piped())
+            .stderr(std::process::Stdio::piped())
+            .spawn()
+            .unwrap()
+    };
+    let (p, q) = (spawn(&["--json"]), spawn(&["--json"]));
+    let outputs = [p.wait_with_output().unwrap(), q.wait_with_output().unwrap()];
+    let refused: Vec<&Output> = outputs.iter().filter(|o| !o.status.success()).collect();
+    assert_eq!(refused.len(), 1, "exactly one is refused: {:?}", outputs.iter().map(stderr).collect::<Vec<_>>());
+    let e = stderr(refused[0]);
+    assert!(e.contains("another pathgrad batch is running shard 0/1 in") && e.contains("out"), "{e}");
+    let ran = outputs.iter().find(|o| o.status.success()).unwrap();
+    let report: serde_json::Value = serde_json::from_slice(&ran.stdout).unwrap();
+    assert_eq!(report["ok"], 8, "{report}");
+    let rows = summary(&out.join("summary.jsonl"));
+    assert!(rows.iter().all(|r| r["status"] == "ok") && rows.len() == 8, "{rows:?}");
+    // Different shards of one manifest share a directory by design.
+    let shared = dir.path().join("shared");
+    let spawn_shard = |shard: &str| {
+        batch_command(&manifest, &shared, &["--shard", shard])
+            .stdout(std::process::Stdio::null())
+            .stderr(std::process::Stdio::piped())
+            .spawn()
+            .unwrap()
+    };
+    let (p, q) = (spawn_shard("0/2"), spawn_shard("1/2"));
+    ok(&p.wait_with_output().unwrap());
+    ok(&q.wait_with_output().unwrap());
+}
+
+/// Issue 36, 3: temporaries a killed run left for the shard's own files — one of a temporary
+/// among them, and ones whose process id is alive — are removed when the shard starts again,
+/// although every item is finished; temporaries of other names and other files stay.
+#[test]
+fn issue_36_a_shard_removes_its_stale_temporaries_when_it_starts() {
+    let dir = tempfile::tempdir().unwrap();
+    let manifest = id_manifest(dir.path(), "m.jsonl", 2, 0);
+    let out = dir.path().join("out");
+    ok(&batch(&manifest, &out, &[], &[]));
+    // A live process id: these temporaries are stale because this shard holds its lock.
+    let pid = std::process::id();
+    let stale = [
+        format!("..a0.exr.{pid}-785.tmp.{pid}-788.tmp"),
+        format!(".a1.json.{pid}-3.tmp"),
+        format!(".summary.jsonl.{pid}-9.tmp"),
+        ".a0.png.2147483632-1.tmp".to_string(),
+    ];
+    let kept = [".b0.exr.2147483632-1.tmp", ".a0.exr.notes.tmp", ".summary.shard-1-of-2.jsonl.2147483632-1.tmp"];
+    for name in stale.iter().map(String::as_str).chain(kept) {
+        std::fs::write(out.join(name), b"").unwrap();
+    }
+    let o = batch(&manifest, &out, &["--json"], &[]);
+    ok(&o);
+    let report: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    assert_eq!(report["skipped"], 2, "{report}");
+    for name in &stale {
+        assert!(!out.join(name).exists(), "{name} is left");
+    }
+    for name in kept {
+        assert!(out.join(name).exists(), "{name} was removed");
+    }
 }
 
 /// Issue 36, 5: manifest errors name the manifest's keys, not the command line's flags; an

@@ -6,8 +6,12 @@
 //! written atomically, its record `NAME.json` last: a rerun skips every item whose record holds
 //! the same item, so a killed shard resumes where it stopped and any sharding writes the same
 //! files. Seeds come from the items, never from their position in a shard.
+//!
+//! One process at a time runs a shard into a directory: it holds the shard's lock (an exclusive
+//! `flock` on `.SUMMARY.lock`, as `optimize` holds its run directory) and, under it, removes the
+//! temporaries that killed runs of the shard left. Different shards share a directory.
 
-use std::collections::BTreeMap;
+use std::collections::{BTreeMap, BTreeSet};
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
@@ -381,6 +385,7 @@ impl Runner {
             refuse_non_finite(&image, &format!("the image gradient ∂I/∂{param}"))?;
             images.push((format!("{name}.image_gradient"), image, true));
         }
+        // Keep ITEM_FILES in step with the names written here.
         let mut set = pathgrad::output::OutputSet::new();
         let mut outputs = Vec::new();
         for (stem, image, signed) in &images {
@@ -404,6 +409,54 @@ impl Runner {
     }
 }
 
+/// What an item named NAME may write: `NAME` and each of these.
+const ITEM_FILES: [&str; 5] = [".exr", ".png", ".image_gradient.exr", ".image_gradient.png", ".json"];
+
+/// Takes the shard's lock: an exclusive `flock` on `.SUMMARY.lock` in the output directory `out`
+/// (the empty file stays; the lock goes with the process), so that one process at a time runs
+/// a shard into a directory, as `optimize` holds its run directory. Other shards, writing other
+/// summaries and items, have other locks.
+fn lock_shard(out: &Path, summary: &Path, (i, n): (u64, u64)) -> Result<std::fs::File> {
+    let name = summary.file_name().expect("the summary has a file name").to_string_lossy();
+    let path = out.join(format!(".{name}.lock"));
+    let handle = std::fs::OpenOptions::new()
+        .write(true)
+        .create(true)
+        .truncate(false)
+        .open(&path)
+        .with_context(|| format!("creating the shard's lock {}", path.display()))?;
+    crate::common::try_lock(
+        handle,
+        || {
+            format!(
+                "-o {}: another pathgrad batch is running shard {i}/{n} in this directory (it holds {})",
+                out.display(),
+                path.display()
+            )
+        },
+        || format!("locking {}", path.display()),
+    )
+}
+
+/// Removes the temporaries that killed runs of this shard left in `out`: those of its items'
+/// files and its summary, whichever process made them. Called under the shard's lock, when no
+/// live process writes those files (other shards write other names); a process id in a
+/// temporary's name would not tell, since shards sharing a directory may run on other machines.
+fn remove_shard_temporaries(out: &Path, summary: &Path, mine: &[&Entry]) -> Result<()> {
+    let mut files: BTreeSet<String> = BTreeSet::new();
+    files.insert(summary.file_name().expect("the summary has a file name").to_string_lossy().into_owned());
+    for entry in mine {
+        if let Ok((_, name)) = &entry.item {
+            files.extend(ITEM_FILES.iter().map(|suffix| format!("{name}{suffix}")));
+        }
+    }
+    let removed = pathgrad::output::remove_temporaries(out, |file| files.contains(file))?;
+    for path in removed {
+        tracing::debug!(path = %path.display(), "removed a temporary a killed run of this shard left");
+    }
+    Ok(())
+}
+
 /// Whether `name`'s record in `out` holds `record`: the item was finished by an earlier run.
 fn finished(out: &Path, name: &str, record: &Value) -> Option<Vec<String>> {
     let text = std::fs::read_to_string(out.join(format!("{name}.json"))).ok()?;
@@ -425,6 +478,8 @@ pub(crate) fn batch(args: &BatchArgs) -> Result<()> {
         format!("summary.shard-{shard_i}-of-{shard_n}.jsonl")
     });
     let mine: Vec<&Entry> = entries.iter().filter(|e| e.index as u64 % shard_n == shard_i).collect();
+    let _lock = lock_shard(&args.output, &summary_path, (shard_i, shard_n))?;
+    remove_shard_temporaries(&args.output, &summary_path, &mine)?;
     let manifest_dir = args.manifest.parent().map(Path::to_path_buf).unwrap_or_default();
     let mut runner = Runner {
         manifest_dir,

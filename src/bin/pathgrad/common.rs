@@ -503,6 +503,22 @@ pub(crate) fn progress_bar(len: u64, what: &str, hidden: bool) -> indicatif::Pro
     progress
 }
 
+/// Takes an exclusive advisory lock (`flock`) on `handle` (a file or a directory) without waiting,
+/// held until the returned handle is dropped (the process ends, however it ends; on NFS the lock
+/// holds across machines). `busy` is the error when another process holds it, `failed` the context
+/// of any other failure.
+pub(crate) fn try_lock(
+    handle: std::fs::File,
+    busy: impl FnOnce() -> String,
+    failed: impl FnOnce() -> String,
+) -> Result<std::fs::File> {
+    match handle.try_lock() {
+        Ok(()) => Ok(handle),
+        Err(std::fs::TryLockError::WouldBlock) => bail!("{}", busy()),
+        Err(std::fs::TryLockError::Error(e)) => Err(anyhow::Error::new(e).context(failed())),
+    }
+}
+
 /// The PNG preview written beside an EXR output.
 pub(crate) fn preview_path(output: &Path) -> PathBuf {
     output.with_extension("png")
