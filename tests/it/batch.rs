@@ -240,6 +240,28 @@ fn stderr(o: &Output) -> String {
     String::from_utf8_lossy(&o.stderr).into_owned()
 }
 
+/// Issue 36, 1: two runs whose items have the same ids at the same indices but other seeds are
+/// refused by `reduce`, naming both directories, the index and the id; a second run of the same
+/// manifest into another directory still merges.
+#[test]
+fn issue_36_reduce_refuses_items_of_different_runs() {
+    let dir = tempfile::tempdir().unwrap();
+    let first = id_manifest(dir.path(), "first.jsonl", 3, 0);
+    let other = id_manifest(dir.path(), "other.jsonl", 3, 100);
+    let (a, again, b) = (dir.path().join("a"), dir.path().join("again"), dir.path().join("b"));
+    ok(&batch(&first, &a, &[], &[]));
+    ok(&batch(&first, &again, &[], &[]));
+    ok(&batch(&other, &b, &[], &[]));
+    reduce(&[&a, &again], &dir.path().join("same"));
+    let o = pathgrad().arg("reduce").arg(&a).arg(&b).arg("-o").arg(dir.path().join("mixed")).output().unwrap();
+    let e = stderr(&o);
+    assert!(!o.status.success(), "{e}");
+    for part in [a.display().to_string(), b.display().to_string(), "item 0 ('a0')".into(), "different items".into()] {
+        assert!(e.contains(&part), "{part:?} missing: {e}");
+    }
+    assert!(!dir.path().join("mixed").exists(), "nothing is written");
+}
+
 /// Issue 36, 2: two processes of one shard started together into one directory: one runs, the
 /// other is refused at once (it holds no lock); two different shards share the directory.
 #[test]
@@ -310,6 +332,33 @@ fn issue_36_a_shard_removes_its_stale_temporaries_when_it_starts() {
     for name in kept {
         assert!(out.join(name).exists(), "{name} was removed");
     }
+}
+
+/// Issue 36, 4: `reduce` refuses to write into one of several input directories (named directly or
+/// through a symbolic link, or by default); into its only input it still writes.
+#[test]
+fn issue_36_reduce_refuses_an_output_among_several_inputs() {
+    let dir = tempfile::tempdir().unwrap();
+    let manifest = id_manifest(dir.path(), "m.jsonl", 4, 0);
+    let (a, b) = (dir.path().join("a"), dir.path().join("b"));
+    ok(&batch(&manifest, &a, &["--shard", "0/2"], &[]));
+    ok(&batch(&manifest, &b, &["--shard", "1/2"], &[]));
+    let link = dir.path().join("link");
+    std::os::unix::fs::symlink(&a, &link).unwrap();
+    let before = item_files(&a);
+    for output in [Some(&a), Some(&link), None] {
+        let mut command = pathgrad();
+        command.arg("reduce").arg(&a).arg(&b);
+        if let Some(o) = output {
+            command.arg("-o").arg(o);
+        }
+        let o = command.output().unwrap();
+        let e = stderr(&o);
+        assert!(!o.status.success() && e.contains("is one of the input directories"), "{output:?}: {e}");
+        assert!(!a.join("summary.jsonl").exists() && item_files(&a) == before, "{output:?} wrote into a");
+    }
+    reduce(&[&a, &b], &dir.path().join("merged"));
+    reduce(&[&a], &a);
 }
 
 /// Issue 36, 5: manifest errors name the manifest's keys, not the command line's flags; an

@@ -58,7 +58,8 @@ pub(crate) struct ReduceArgs {
     /// Output directories of `pathgrad batch` (one per shard, or one they shared).
     #[arg(required = true)]
     dirs: Vec<PathBuf>,
-    /// Where the merged `summary.jsonl` and `totals.json` go [default: the first DIR].
+    /// Where the merged `summary.jsonl` and `totals.json` go: not one of several DIRs
+    /// [default: DIR, when there is one].
     #[arg(short, long, value_name = "DIR")]
     output: Option<PathBuf>,
     /// Print the totals as one JSON line.
@@ -557,7 +558,69 @@ pub(crate) fn batch(args: &BatchArgs) -> Result<()> {
     Ok(())
 }
 
+/// `path` absolute, with its symbolic links resolved, also where its last components do not exist
+/// yet (they are taken as written, `..` removing the component before it, as creating them would).
+fn resolved(path: &Path) -> PathBuf {
+    use std::path::Component;
+    let components: Vec<Component> = path.components().collect();
+    for k in (0..=components.len()).rev() {
+        let prefix: PathBuf = components[..k].iter().collect();
+        let prefix = if prefix.as_os_str().is_empty() { PathBuf::from(".") } else { prefix };
+        if let Ok(mut resolved) = std::fs::canonicalize(&prefix) {
+            for c in &components[k..] {
+                match c {
+                    Component::ParentDir => {
+                        resolved.pop();
+                    }
+                    Component::Normal(name) => resolved.push(name),
+                    _ => {}
+                }
+            }
+            return resolved;
+        }
+    }
+    path.to_path_buf()
+}
+
+/// Where `reduce` writes: `-o`, else the only input directory. Not one of several inputs: its
+/// merged `summary.jsonl` would name items whose records are in the others, so that a later
+/// `reduce` of it fails. (A directory above or below an input is fine: `reduce` reads only the
+/// top level of each input, and writes only `summary.jsonl` and `totals.json`.)
+fn reduce_output(args: &ReduceArgs) -> Result<PathBuf> {
+    let inputs: Vec<PathBuf> = args.dirs.iter().map(|d| resolved(d)).collect();
+    let out = args.output.clone().unwrap_or_else(|| args.dirs[0].clone());
+    let target = resolved(&out);
+    if inputs.iter().any(|d| *d != inputs[0])
+        && let Some(k) = inputs.iter().position(|d| *d == target)
+    {
+        let why = "its merged summary.jsonl would name items whose records are in the other inputs, and a later \
+                   reduce of it would fail: give -o a directory of its own";
+        match &args.output {
+            Some(_) => {
+                bail!("-o {} is one of the input directories ({}): {why}", out.display(), args.dirs[k].display())
+            }
+            None => bail!(
+                "without -o, reduce would write into {}, which is one of the input directories: {why}",
+                out.display()
+            ),
+        }
+    }
+    Ok(out)
+}
+
+/// The item a record `DIR/NAME.json` of `pathgrad batch` holds.
+fn record_item(dir: &Path, name: &str) -> Result<Value> {
+    let path = dir.join(format!("{name}.json"));
+    let text = std::fs::read_to_string(&path).with_context(|| format!("reading {}", path.display()))?;
+    let record: Value = serde_json::from_str(&text).with_context(|| format!("{}", path.display()))?;
+    record
+        .get("item")
+        .cloned()
+        .ok_or_else(|| anyhow!("{}: no \"item\" (not a record of pathgrad batch)", path.display()))
+}
+
 pub(crate) fn reduce(args: &ReduceArgs) -> Result<()> {
+    let out = reduce_output(args)?;
     let mut by_index: BTreeMap<usize, (Status, PathBuf)> = BTreeMap::new();
     for dir in &args.dirs {
         let mut found = false;
@@ -584,6 +647,24 @@ pub(crate) fn reduce(args: &ReduceArgs) -> Result<()> {
                         s.name.as_deref().unwrap_or("?"),
                         other.name.as_deref().unwrap_or("?")
                     ),
+                    // The same name can hold another item (another seed, say): compare the items
+                    // the records hold. Summaries in one directory share its records.
+                    Some((other, other_dir))
+                        if other.status != "failed"
+                            && s.status != "failed"
+                            && resolved(other_dir) != resolved(dir)
+                            && let Some(name) = s.name.as_deref()
+                            && record_item(other_dir, name)? != record_item(dir, name)? =>
+                    {
+                        bail!(
+                            "item {} ('{name}'): {} and {} hold different items under that name (another seed, \
+                             scene or setting): the directories hold different runs, and reduce merges the shards \
+                             of one run",
+                            s.index,
+                            other_dir.join(format!("{name}.json")).display(),
+                            dir.join(format!("{name}.json")).display()
+                        )
+                    }
                     // A finished entry wins over a failed one of an earlier attempt.
                     Some((other, _)) if other.status != "failed" && s.status == "failed" => {}
                     _ => {
@@ -625,7 +706,6 @@ pub(crate) fn reduce(args: &ReduceArgs) -> Result<()> {
             total.iter_mut().zip(&values).for_each(|(t, v)| *t += v);
         }
     }
-    let out = args.output.clone().unwrap_or_else(|| args.dirs[0].clone());
     std::fs::create_dir_all(&out).with_context(|| format!("creating -o {}", out.display()))?;
     let lines: Vec<String> =
         by_index.values().map(|(s, _)| serde_json::to_string(s)).collect::<serde_json::Result<_>>()?;
