@@ -17,6 +17,9 @@ pub const UNBOUNDED_DEPTH_CAP: u32 = 1024;
 /// close to the 32-bit sample counters. For more, average renders of independent seeds.
 pub const MAX_SPP: u32 = 1 << 20;
 
+/// The largest film width or height [`RenderOptions::validate`] accepts.
+pub const MAX_IMAGE_SIZE: u32 = 16_384;
+
 /// With both an environment and area emitters, next-event estimation picks the environment with
 /// this probability (Mitsuba picks among emitters uniformly; two emitter kinds give ½).
 pub const ENV_SELECT_PROB: f32 = 0.5;
@@ -302,8 +305,8 @@ impl RenderOptions {
     /// [`Error::InvalidArgument`] naming the option.
     pub fn validate(&self) -> Result<()> {
         let bad = |p: &str, m: &str| Err(Error::InvalidArgument { parameter: p.into(), message: m.into() });
-        if self.width == 0 || self.height == 0 || self.width > 16_384 || self.height > 16_384 {
-            return bad("RenderOptions::width/height", "must be between 1 and 16384");
+        if self.width == 0 || self.height == 0 || self.width > MAX_IMAGE_SIZE || self.height > MAX_IMAGE_SIZE {
+            return bad("RenderOptions::width/height", &format!("must be between 1 and {MAX_IMAGE_SIZE}"));
         }
         if self.spp == 0 || self.spp > MAX_SPP {
             return bad(

@@ -10,16 +10,22 @@
 //!   refused**, not silently replaced; so are directories, devices (`/dev/null`) and pipes.
 //! - A process killed mid-write (`kill -9`) leaves its temporary file behind. The next write of
 //!   the same destination removes such leftovers of our own naming whose process is gone (on
-//!   Linux, where `/proc` tells); nothing else in the directory is touched.
+//!   Linux, where `/proc` tells); nothing else in the directory is touched. A program that knows
+//!   no other process writes certain files (it holds a lock) removes all their temporaries with
+//!   [`remove_temporaries`].
 //!
 //! [`check_destination`] applies the same rules without writing, so that a command can refuse a
 //! bad output path before it spends minutes rendering. [`OutputSet`] stages several files and
-//! puts them in place together: a command that fails half-way leaves nothing new behind.
+//! puts them in place together: a command that fails half-way leaves nothing new behind. A staged
+//! file is itself a temporary: a write to it goes straight to it, with no temporary of its own
+//! (which a kill would leave under a name no later write of the destination recognises).
 
+use std::collections::BTreeSet;
 use std::ffi::{OsStr, OsString};
 use std::fs::{self, File, OpenOptions};
 use std::io::{BufWriter, Write};
 use std::path::{Path, PathBuf};
+use std::sync::Mutex;
 use std::sync::atomic::{AtomicU64, Ordering};
 
 use crate::error::{Error, Result};
@@ -29,6 +35,15 @@ const MAX_SYMLINK_HOPS: usize = 40;
 
 /// Distinguishes temporary files of concurrent writes from one process.
 static TEMP_COUNTER: AtomicU64 = AtomicU64::new(0);
+
+/// The temporary files that [`OutputSet`]s of this process staged and have not yet renamed or
+/// removed. [`write_atomically`] writes one of them directly: the set's commit is its rename.
+static STAGED: Mutex<BTreeSet<PathBuf>> = Mutex::new(BTreeSet::new());
+
+/// The staged temporaries, whatever a panicking thread left (the set stays valid).
+fn staged_temporaries() -> std::sync::MutexGuard<'static, BTreeSet<PathBuf>> {
+    STAGED.lock().unwrap_or_else(std::sync::PoisonError::into_inner)
+}
 
 fn output_error(path: &Path, message: impl Into<String>) -> Error {
     Error::Output { path: path.to_path_buf(), message: message.into() }
@@ -153,6 +168,50 @@ fn temp_owner(entry: &OsStr, file_name: &OsStr) -> Option<u32> {
     pid.parse().ok()
 }
 
+/// `name` without one layer of our temporary naming: `NAME` for `.NAME.PID-N.tmp`.
+fn strip_temp_layer(name: &str) -> Option<&str> {
+    let (inner, owner) = name.strip_prefix('.')?.strip_suffix(".tmp")?.rsplit_once('.')?;
+    let (pid, counter) = owner.split_once('-')?;
+    let digits = |s: &str| !s.is_empty() && s.bytes().all(|b| b.is_ascii_digit());
+    (digits(pid) && digits(counter) && !inner.is_empty()).then_some(inner)
+}
+
+/// The file name a temporary of ours was made for: `a.exr` for `.a.exr.PID-N.tmp`, and for a
+/// temporary of a temporary (`..a.exr.PID-N.tmp.PID-M.tmp`, which earlier builds left when a
+/// kill interrupted an image written into an [`OutputSet`]) as well; `None` for any other name.
+pub fn temporary_destination(name: &str) -> Option<&str> {
+    let mut name = strip_temp_layer(name)?;
+    while let Some(inner) = strip_temp_layer(name) {
+        name = inner;
+    }
+    Some(name)
+}
+
+/// Removes every temporary file of our naming in `dir` (temporaries of temporaries included)
+/// whose destination's file name `mine` accepts, whichever process wrote it; returns the removed
+/// paths. Only for a caller that knows no live process writes those destinations (it holds
+/// their lock): a temporary in use would be pulled from under its writer.
+///
+/// # Errors
+/// [`Error::Io`] naming `dir` if it cannot be listed, or a temporary if it cannot be removed.
+pub fn remove_temporaries(dir: &Path, mine: impl Fn(&str) -> bool) -> Result<Vec<PathBuf>> {
+    let entries = fs::read_dir(dir).map_err(|source| Error::Io { path: dir.to_path_buf(), source })?;
+    let mut removed = Vec::new();
+    for entry in entries {
+        let entry = entry.map_err(|source| Error::Io { path: dir.to_path_buf(), source })?;
+        let name = entry.file_name();
+        if !name.to_str().and_then(temporary_destination).is_some_and(&mine) {
+            continue;
+        }
+        match fs::remove_file(entry.path()) {
+            Ok(()) => removed.push(entry.path()),
+            Err(e) if e.kind() == std::io::ErrorKind::NotFound => {}
+            Err(source) => return Err(Error::Io { path: entry.path(), source }),
+        }
+    }
+    Ok(removed)
+}
+
 /// Removes temporary files of our naming for `target` whose process no longer runs. Only where
 /// `/proc` says which processes run (Linux); best effort, errors are ignored.
 fn remove_stale_temporaries(target: &Path) {
@@ -179,6 +238,15 @@ fn remove_stale_temporaries(target: &Path) {
 pub fn write_atomically(path: &Path, write: impl FnOnce(&mut BufWriter<File>) -> Result<()>) -> Result<()> {
     let io_error = |source| Error::Io { path: path.to_path_buf(), source };
     let target = check_existing(path)?;
+    if staged_temporaries().contains(&target) {
+        // Already a temporary: an OutputSet puts it in place, or removes it if the write fails.
+        let file = OpenOptions::new().write(true).create(true).truncate(true).open(&target).map_err(io_error)?;
+        let mut out = BufWriter::new(file);
+        write(&mut out)?;
+        out.flush().map_err(io_error)?;
+        let file = out.into_inner().map_err(|e| io_error(e.into_error()))?;
+        return file.sync_all().map_err(io_error);
+    }
     remove_stale_temporaries(&target);
     let temp = TempFile { path: temp_path(&target)?, kept: false };
     let file = OpenOptions::new().write(true).create_new(true).open(&temp.path).map_err(io_error)?;
@@ -278,6 +346,7 @@ impl OutputSet {
         remove_stale_temporaries(&target);
         let temp = temp_path(&target)?;
         let existed = target.exists();
+        staged_temporaries().insert(temp.clone());
         self.staged.push((temp.clone(), target, path.to_path_buf(), existed));
         Ok(temp)
     }
@@ -299,6 +368,7 @@ impl OutputSet {
             }
         }
         let staged = std::mem::take(&mut self.staged);
+        forget_staged(&staged);
         for (k, (temp, target, given, existed)) in staged.iter().enumerate() {
             if let Err(source) = fs::rename(temp, target) {
                 // Put the rest back for the drop to clean up.
@@ -314,8 +384,17 @@ impl OutputSet {
     }
 }
 
+/// Takes `staged`'s temporaries out of [`STAGED`]: they are renamed or about to be removed.
+fn forget_staged(staged: &[(PathBuf, PathBuf, PathBuf, bool)]) {
+    let mut set = staged_temporaries();
+    for (temp, _, _, _) in staged {
+        set.remove(temp);
+    }
+}
+
 impl Drop for OutputSet {
     fn drop(&mut self) {
+        forget_staged(&self.staged);
         for (temp, _, _, _) in &self.staged {
             let _ = fs::remove_file(temp);
         }
@@ -395,6 +474,42 @@ mod tests {
         let left = names(dir.path());
         assert!(!left.contains(&stale.file_name().unwrap().to_string_lossy().into_owned()), "{left:?}");
         assert_eq!(left.len(), 4, "only the stale temporary of out.exr went: {left:?}");
+    }
+
+    /// Issue 36, 3: a writer given a staged path writes that file itself; it makes no temporary
+    /// of the temporary (`..a.txt.PID-0.tmp.PID-1.tmp`), which a kill would leave behind under a
+    /// name no cleanup of `a.txt` recognises.
+    #[test]
+    fn issue_36_a_staged_file_gets_no_temporary_of_its_own() {
+        let dir = tempfile::tempdir().unwrap();
+        let mut set = OutputSet::new();
+        let staged = set.stage(&dir.path().join("a.txt")).unwrap();
+        let mut during = Vec::new();
+        write_atomically(&staged, |out| {
+            during = names(dir.path());
+            out.write_all(b"a").map_err(|source| Error::Io { path: staged.clone(), source })
+        })
+        .unwrap();
+        assert_eq!(during, [staged.file_name().unwrap().to_str().unwrap()], "while writing");
+        set.commit().unwrap();
+        assert_eq!(names(dir.path()), ["a.txt"]);
+        assert_eq!(fs::read_to_string(dir.path().join("a.txt")).unwrap(), "a");
+    }
+
+    #[test]
+    fn temporaries_are_recognised_through_their_layers_and_removed_by_destination() {
+        assert_eq!(temporary_destination(".a.exr.12-3.tmp"), Some("a.exr"));
+        assert_eq!(temporary_destination("..it0098.exr.25308-785.tmp.25308-788.tmp"), Some("it0098.exr"));
+        for other in ["a.exr", ".a.exr.notes.tmp", ".a.exr.12-.tmp", "..12-3.tmp", ".a.exr.12-3.tmpx"] {
+            assert_eq!(temporary_destination(other), None, "{other}");
+        }
+        let dir = tempfile::tempdir().unwrap();
+        for name in ["..a.exr.1-2.tmp.1-3.tmp", ".a.json.4-5.tmp", ".b.exr.1-2.tmp", "a.exr"] {
+            fs::write(dir.path().join(name), "").unwrap();
+        }
+        let removed = remove_temporaries(dir.path(), |d| d.starts_with("a.")).unwrap();
+        assert_eq!(removed.len(), 2);
+        assert_eq!(names(dir.path()), [".b.exr.1-2.tmp", "a.exr"]);
     }
 
     #[test]

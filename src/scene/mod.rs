@@ -393,9 +393,13 @@ impl Scene {
         let by_index = selector.trim().parse::<usize>().ok().filter(|&i| i < self.sensors.len());
         by_name.or(by_index).ok_or_else(|| {
             let list: Vec<String> = self.sensors.iter().enumerate().map(|(i, s)| format!("{i}: {}", s.name)).collect();
+            let count = match list.len() {
+                1 => "1 sensor".to_string(),
+                n => format!("{n} sensors"),
+            };
             Error::Scene {
                 location: self.source.clone(),
-                message: format!("no sensor '{selector}' (the scene has {})", list.join(", ")),
+                message: format!("no sensor '{selector}': the scene has {count} ({})", list.join(", ")),
             }
         })
     }

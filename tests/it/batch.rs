@@ -33,13 +33,19 @@ fn manifest(dir: &Path, count: usize) -> PathBuf {
     path
 }
 
-fn batch(manifest: &Path, out: &Path, args: &[&str], env: &[(&str, &str)]) -> Output {
+/// `pathgrad batch MANIFEST -o OUT ARGS` without the schedulers' variables of the test's own
+/// environment.
+fn batch_command(manifest: &Path, out: &Path, args: &[&str]) -> std::process::Command {
     let mut command = pathgrad();
     command.arg("batch").arg(manifest).arg("-o").arg(out).args(args);
     for var in ["SLURM_ARRAY_TASK_ID", "SLURM_ARRAY_TASK_COUNT", "SLURM_ARRAY_TASK_MIN", "JOB_COMPLETION_INDEX"] {
         command.env_remove(var);
     }
-    command.envs(env.iter().copied()).output().unwrap()
+    command
+}
+
+fn batch(manifest: &Path, out: &Path, args: &[&str], env: &[(&str, &str)]) -> Output {
+    batch_command(manifest, out, args).envs(env.iter().copied()).output().unwrap()
 }
 
 fn ok(o: &Output) {
@@ -55,12 +61,16 @@ fn summary(path: &Path) -> Vec<serde_json::Value> {
     std::fs::read_to_string(path).unwrap().lines().map(|l| serde_json::from_str(l).unwrap()).collect()
 }
 
-/// The item files of a run (everything but summaries), by name.
+/// The item files of a run (everything but summaries and hidden files: the shards' locks and
+/// any temporaries), by name.
 fn item_files(dir: &Path) -> Vec<(String, Vec<u8>)> {
     let mut files: Vec<(String, Vec<u8>)> = std::fs::read_dir(dir)
         .unwrap()
         .map(|e| e.unwrap().path())
-        .filter(|p| !p.file_name().unwrap().to_str().unwrap().starts_with("summary"))
+        .filter(|p| {
+            let name = p.file_name().unwrap().to_str().unwrap();
+            !name.starts_with('.') && !name.starts_with("summary")
+        })
         .filter(|p| p.file_name().unwrap() != "totals.json")
         .map(|p| (p.file_name().unwrap().to_str().unwrap().to_string(), std::fs::read(&p).unwrap()))
         .collect();
@@ -134,8 +144,8 @@ fn a_rerun_completes_only_the_missing_items() {
     let statuses: Vec<String> =
         summary(&out.join("summary.jsonl")).iter().map(|r| r["status"].as_str().unwrap().to_string()).collect();
     assert_eq!(statuses, ["skipped", "skipped", "skipped", "ok", "ok"]);
-    let after: Vec<(String, Vec<u8>)> = item_files(&out).into_iter().filter(|(n, _)| !n.ends_with(".tmp")).collect();
-    assert_eq!(after, complete);
+    assert!(!out.join(format!(".{}.exr.99999-0.tmp", name(3))).exists(), "the shard removes its temporaries");
+    assert_eq!(item_files(&out), complete);
 }
 
 /// Bad lines — an unknown key, a missing scene, a bad value, a missing target — are reported with
@@ -202,6 +212,188 @@ fn a_killed_shard_resumes_where_it_stopped() {
     if ran == 0 {
         println!("the shard finished every item before the kill landed: only the skip was exercised");
     }
-    let after: Vec<(String, Vec<u8>)> = item_files(&out).into_iter().filter(|(n, _)| !n.ends_with(".tmp")).collect();
-    assert_eq!(after, item_files(&whole));
+    let left: Vec<String> = std::fs::read_dir(&out)
+        .unwrap()
+        .map(|e| e.unwrap().file_name().into_string().unwrap())
+        .filter(|n| n.ends_with(".tmp"))
+        .collect();
+    assert!(left.is_empty(), "the rerun removes what the kill left: {left:?}");
+    assert_eq!(item_files(&out), item_files(&whole));
+}
+
+/// A manifest of `count` small image items with ids `a0`, `a1`, …, each with seed `seed + i`.
+fn id_manifest(dir: &Path, file: &str, count: usize, seed: usize) -> PathBuf {
+    let lines: Vec<String> = (0..count)
+        .map(|i| {
+            format!(
+                r#"{{"id": "a{i}", "scene": "builtin:blend", "width": 8, "height": 6, "spp": 1, "seed": {}, "produce": ["image"]}}"#,
+                seed + i
+            )
+        })
+        .collect();
+    let path = dir.join(file);
+    std::fs::write(&path, lines.join("\n") + "\n").unwrap();
+    path
+}
+
+fn stderr(o: &Output) -> String {
+    String::from_utf8_lossy(&o.stderr).into_owned()
+}
+
+/// Issue 36, 1: two runs whose items have the same ids at the same indices but other seeds are
+/// refused by `reduce`, naming both directories, the index and the id; a second run of the same
+/// manifest into another directory still merges.
+#[test]
+fn issue_36_reduce_refuses_items_of_different_runs() {
+    let dir = tempfile::tempdir().unwrap();
+    let first = id_manifest(dir.path(), "first.jsonl", 3, 0);
+    let other = id_manifest(dir.path(), "other.jsonl", 3, 100);
+    let (a, again, b) = (dir.path().join("a"), dir.path().join("again"), dir.path().join("b"));
+    ok(&batch(&first, &a, &[], &[]));
+    ok(&batch(&first, &again, &[], &[]));
+    ok(&batch(&other, &b, &[], &[]));
+    reduce(&[&a, &again], &dir.path().join("same"));
+    let o = pathgrad().arg("reduce").arg(&a).arg(&b).arg("-o").arg(dir.path().join("mixed")).output().unwrap();
+    let e = stderr(&o);
+    assert!(!o.status.success(), "{e}");
+    for part in [a.display().to_string(), b.display().to_string(), "item 0 ('a0')".into(), "different items".into()] {
+        assert!(e.contains(&part), "{part:?} missing: {e}");
+    }
+    assert!(!dir.path().join("mixed").exists(), "nothing is written");
+}
+
+/// Issue 36, 2: two processes of one shard started together into one directory: one runs, the
+/// other is refused at once (it holds no lock); two different shards share the directory.
+#[test]
+fn issue_36_one_process_per_shard_and_directory() {
+    let dir = tempfile::tempdir().unwrap();
+    let manifest = id_manifest(dir.path(), "m.jsonl", 8, 0);
+    let out = dir.path().join("out");
+    let spawn = |args: &[&str]| {
+        batch_command(&manifest, &out, args)
+            .stdout(std::process::Stdio::piped())
+            .stderr(std::process::Stdio::piped())
+            .spawn()
+            .unwrap()
+    };
+    let (p, q) = (spawn(&["--json"]), spawn(&["--json"]));
+    let outputs = [p.wait_with_output().unwrap(), q.wait_with_output().unwrap()];
+    let refused: Vec<&Output> = outputs.iter().filter(|o| !o.status.success()).collect();
+    assert_eq!(refused.len(), 1, "exactly one is refused: {:?}", outputs.iter().map(stderr).collect::<Vec<_>>());
+    let e = stderr(refused[0]);
+    assert!(e.contains("another pathgrad batch is running shard 0/1 in") && e.contains("out"), "{e}");
+    let ran = outputs.iter().find(|o| o.status.success()).unwrap();
+    let report: serde_json::Value = serde_json::from_slice(&ran.stdout).unwrap();
+    assert_eq!(report["ok"], 8, "{report}");
+    let rows = summary(&out.join("summary.jsonl"));
+    assert!(rows.iter().all(|r| r["status"] == "ok") && rows.len() == 8, "{rows:?}");
+    // Different shards of one manifest share a directory by design.
+    let shared = dir.path().join("shared");
+    let spawn_shard = |shard: &str| {
+        batch_command(&manifest, &shared, &["--shard", shard])
+            .stdout(std::process::Stdio::null())
+            .stderr(std::process::Stdio::piped())
+            .spawn()
+            .unwrap()
+    };
+    let (p, q) = (spawn_shard("0/2"), spawn_shard("1/2"));
+    ok(&p.wait_with_output().unwrap());
+    ok(&q.wait_with_output().unwrap());
+}
+
+/// Issue 36, 3: temporaries a killed run left for the shard's own files — one of a temporary
+/// among them, and ones whose process id is alive — are removed when the shard starts again,
+/// although every item is finished; temporaries of other names and other files stay.
+#[test]
+fn issue_36_a_shard_removes_its_stale_temporaries_when_it_starts() {
+    let dir = tempfile::tempdir().unwrap();
+    let manifest = id_manifest(dir.path(), "m.jsonl", 2, 0);
+    let out = dir.path().join("out");
+    ok(&batch(&manifest, &out, &[], &[]));
+    // A live process id: these temporaries are stale because this shard holds its lock.
+    let pid = std::process::id();
+    let stale = [
+        format!("..a0.exr.{pid}-785.tmp.{pid}-788.tmp"),
+        format!(".a1.json.{pid}-3.tmp"),
+        format!(".summary.jsonl.{pid}-9.tmp"),
+        ".a0.png.2147483632-1.tmp".to_string(),
+    ];
+    let kept = [".b0.exr.2147483632-1.tmp", ".a0.exr.notes.tmp", ".summary.shard-1-of-2.jsonl.2147483632-1.tmp"];
+    for name in stale.iter().map(String::as_str).chain(kept) {
+        std::fs::write(out.join(name), b"").unwrap();
+    }
+    let o = batch(&manifest, &out, &["--json"], &[]);
+    ok(&o);
+    let report: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    assert_eq!(report["skipped"], 2, "{report}");
+    for name in &stale {
+        assert!(!out.join(name).exists(), "{name} is left");
+    }
+    for name in kept {
+        assert!(out.join(name).exists(), "{name} was removed");
+    }
+}
+
+/// Issue 36, 4: `reduce` refuses to write into one of several input directories (named directly or
+/// through a symbolic link, or by default); into its only input it still writes.
+#[test]
+fn issue_36_reduce_refuses_an_output_among_several_inputs() {
+    let dir = tempfile::tempdir().unwrap();
+    let manifest = id_manifest(dir.path(), "m.jsonl", 4, 0);
+    let (a, b) = (dir.path().join("a"), dir.path().join("b"));
+    ok(&batch(&manifest, &a, &["--shard", "0/2"], &[]));
+    ok(&batch(&manifest, &b, &["--shard", "1/2"], &[]));
+    let link = dir.path().join("link");
+    std::os::unix::fs::symlink(&a, &link).unwrap();
+    let before = item_files(&a);
+    for output in [Some(&a), Some(&link), None] {
+        let mut command = pathgrad();
+        command.arg("reduce").arg(&a).arg(&b);
+        if let Some(o) = output {
+            command.arg("-o").arg(o);
+        }
+        let o = command.output().unwrap();
+        let e = stderr(&o);
+        assert!(!o.status.success() && e.contains("is one of the input directories"), "{output:?}: {e}");
+        assert!(!a.join("summary.jsonl").exists() && item_files(&a) == before, "{output:?} wrote into a");
+    }
+    reduce(&[&a, &b], &dir.path().join("merged"));
+    reduce(&[&a], &a);
+}
+
+/// Issue 36, 5: manifest errors name the manifest's keys, not the command line's flags; an
+/// out-of-range sensor says how many the scene has; a manifest with a byte-order mark is read.
+#[test]
+fn issue_36_manifest_messages_name_its_keys() {
+    let dir = tempfile::tempdir().unwrap();
+    let item = |extra: &str| format!(r#"{{"scene": "builtin:blend", {extra}"produce": ["image"]}}"#);
+    let lines = [
+        item(r#""width": 0, "#),
+        item(r#""width": 20000, "height": 6, "#),
+        item(r#""width": 8, "height": 6, "spp": 0, "#),
+        item(r#""width": 8, "height": 6, "max_depth": 0, "#),
+        item(r#""width": 8, "height": 6, "sensor": 5, "#),
+    ];
+    let manifest = dir.path().join("m.jsonl");
+    std::fs::write(&manifest, format!("\u{feff}{}\n", lines.join("\n"))).unwrap();
+    let out = dir.path().join("out");
+    let o = batch(&manifest, &out, &[], &[]);
+    assert!(!o.status.success());
+    let rows = summary(&out.join("summary.jsonl"));
+    let expected = [
+        "m.jsonl:1: invalid 'width'/'height': must be between 1 and 16384",
+        "m.jsonl:2: invalid 'width'/'height': must be between 1 and 16384",
+        "m.jsonl:3: invalid 'spp': must be between 1 and",
+        "m.jsonl:4: invalid 'max_depth': must be at least 1 (or -1 for unbounded)",
+        "no sensor '5': the scene has 1 sensor (0: camera)",
+    ];
+    for (row, want) in rows.iter().zip(expected) {
+        let error = row["error"].as_str().unwrap();
+        assert!(error.contains(want) && !error.contains("--"), "{want:?}: {error}");
+    }
+    assert_eq!(rows.len(), 5);
+    // The byte-order mark is not part of the first item.
+    let good = dir.path().join("good.jsonl");
+    std::fs::write(&good, format!("\u{feff}{}\n", item(r#""width": 8, "height": 6, "spp": 1, "#))).unwrap();
+    ok(&batch(&good, &dir.path().join("good"), &[], &[]));
 }

@@ -430,3 +430,36 @@ fn variance_checks_its_outputs_first() {
     assert!(stderr(&o).contains("summary.json: is read-only"), "{}", stderr(&o));
     assert_eq!(names(&out), ["summary.json"]);
 }
+
+/// Issue 36, 5: `--view` errors say they come from `--view` (an empty target path, a missing
+/// target file), and a negative `--shard` gets the shard's own error, not the parser's.
+#[test]
+fn issue_36_view_and_shard_messages_name_the_flag() {
+    let dir = tempfile::tempdir().unwrap();
+    let scene = concat!(env!("CARGO_MANIFEST_DIR"), "/scenes/two-sided/scene.xml");
+    let manifest = dir.path().join("m.jsonl");
+    std::fs::write(&manifest, "").unwrap();
+    let out = dir.path().join("out");
+    let out = out.to_str().unwrap();
+    let manifest = manifest.to_str().unwrap();
+    let cases: [(&[&str], &str); 3] = [
+        (
+            &["grad", scene, "--view", "front_camera=front.exr", "--view", "back_camera="],
+            "error: invalid --view back_camera=: the target path after '=' is empty (give --view back_camera=TARGET.exr)\n",
+        ),
+        (
+            &["grad", scene, "--view", "back_camera=missing.exr"],
+            "error: --view back_camera=missing.exr: missing.exr: No such file or directory (os error 2)\n",
+        ),
+        (
+            &["batch", manifest, "-o", out, "--shard", "-1/2"],
+            "error: invalid --shard -1/2: '-1' is not a non-negative integer\n",
+        ),
+    ];
+    for (args, want) in cases {
+        let o = pathgrad().current_dir(dir.path()).args(args).output().unwrap();
+        assert!(!o.status.success());
+        let e = stderr(&o);
+        assert!(e.ends_with(want), "{args:?}: expected it to end with {want:?}: {e:?}");
+    }
+}

@@ -174,7 +174,9 @@ fn the_cli_renders_the_chosen_sensor_and_lists_them() {
     let image = pathgrad::Image::read_exr(&out).unwrap();
     assert_eq!((image.width(), image.height()), (12, 20));
     let o = crate::cli::pathgrad().args(["render", &spec, "--sensor", "back", "-o"]).arg(&out).output().unwrap();
-    assert!(String::from_utf8_lossy(&o.stderr).contains("no sensor 'back' (the scene has 0: front, 1: side)"));
+    assert!(
+        String::from_utf8_lossy(&o.stderr).contains("no sensor 'back': the scene has 2 sensors (0: front, 1: side)")
+    );
     let o = crate::cli::pathgrad().args(["params", &spec, "--json"]).output().unwrap();
     let v: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
     let sensors = v["sensors"].as_array().unwrap();

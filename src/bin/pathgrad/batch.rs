@@ -6,8 +6,12 @@
 //! written atomically, its record `NAME.json` last: a rerun skips every item whose record holds
 //! the same item, so a killed shard resumes where it stopped and any sharding writes the same
 //! files. Seeds come from the items, never from their position in a shard.
+//!
+//! One process at a time runs a shard into a directory: it holds the shard's lock (an exclusive
+//! `flock` on `.SUMMARY.lock`, as `optimize` holds its run directory) and, under it, removes the
+//! temporaries that killed runs of the shard left. Different shards share a directory.
 
-use std::collections::BTreeMap;
+use std::collections::{BTreeMap, BTreeSet};
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
@@ -32,7 +36,7 @@ pub(crate) struct BatchArgs {
     output: PathBuf,
     /// Run the items with index ≡ I (mod N). Without it: SLURM_ARRAY_TASK_ID of
     /// SLURM_ARRAY_TASK_COUNT, or JOB_COMPLETION_INDEX of --shards N, else every item.
-    #[arg(long, value_name = "I/N")]
+    #[arg(long, value_name = "I/N", allow_hyphen_values = true)]
     shard: Option<String>,
     /// The number of shards of a Kubernetes Indexed Job (its JOB_COMPLETION_INDEX is the shard).
     #[arg(long, value_name = "N", conflicts_with = "shard")]
@@ -54,7 +58,8 @@ pub(crate) struct ReduceArgs {
     /// Output directories of `pathgrad batch` (one per shard, or one they shared).
     #[arg(required = true)]
     dirs: Vec<PathBuf>,
-    /// Where the merged `summary.jsonl` and `totals.json` go [default: the first DIR].
+    /// Where the merged `summary.jsonl` and `totals.json` go: not one of several DIRs
+    /// [default: DIR, when there is one].
     #[arg(short, long, value_name = "DIR")]
     output: Option<PathBuf>,
     /// Print the totals as one JSON line.
@@ -147,6 +152,8 @@ struct Status {
 /// Reads the manifest: every non-blank line that does not start with `#` is an item.
 fn read_manifest(path: &Path) -> Result<Vec<Entry>> {
     let text = std::fs::read_to_string(path).with_context(|| format!("reading the manifest {}", path.display()))?;
+    // A byte-order mark (Windows editors write one) is not part of the first item.
+    let text = text.strip_prefix('\u{feff}').unwrap_or(&text);
     let mut entries = Vec::new();
     let mut names: BTreeMap<String, usize> = BTreeMap::new();
     for (i, raw) in text.lines().enumerate() {
@@ -189,7 +196,12 @@ fn shard(args: &BatchArgs, var: impl Fn(&str) -> Option<String>) -> Result<(u64,
     };
     let (i, n, from) = if let Some(s) = &args.shard {
         let (i, n) = s.split_once('/').ok_or_else(|| anyhow!("invalid --shard {s}: give I/N, e.g. 0/4"))?;
-        (number("--shard", i)?, number("--shard", n)?, format!("--shard {s}"))
+        let part = |text: &str| {
+            text.trim()
+                .parse::<u64>()
+                .map_err(|_| anyhow!("invalid --shard {s}: '{text}' is not a non-negative integer"))
+        };
+        (part(i)?, part(n)?, format!("--shard {s}"))
     } else if let Some(id) = var("SLURM_ARRAY_TASK_ID") {
         let count = var("SLURM_ARRAY_TASK_COUNT")
             .ok_or_else(|| anyhow!("SLURM_ARRAY_TASK_ID is set but SLURM_ARRAY_TASK_COUNT is not"))?;
@@ -313,6 +325,12 @@ impl Runner {
             }
             None => None,
         };
+        // Checked before the scene loads, whose camera would speak of an image size instead.
+        for size in [item.width, item.height].into_iter().flatten() {
+            if !(1..=pathgrad::integrator::MAX_IMAGE_SIZE).contains(&size) {
+                bail!("invalid 'width'/'height': must be between 1 and {}", pathgrad::integrator::MAX_IMAGE_SIZE);
+            }
+        }
         let out = self.out.clone();
         let (scene, backend) = self.backend(item)?;
         let mut table = scene.params.clone();
@@ -368,6 +386,7 @@ impl Runner {
             refuse_non_finite(&image, &format!("the image gradient ∂I/∂{param}"))?;
             images.push((format!("{name}.image_gradient"), image, true));
         }
+        // Keep ITEM_FILES in step with the names written here.
         let mut set = pathgrad::output::OutputSet::new();
         let mut outputs = Vec::new();
         for (stem, image, signed) in &images {
@@ -391,6 +410,54 @@ impl Runner {
     }
 }
 
+/// What an item named NAME may write: `NAME` and each of these.
+const ITEM_FILES: [&str; 5] = [".exr", ".png", ".image_gradient.exr", ".image_gradient.png", ".json"];
+
+/// Takes the shard's lock: an exclusive `flock` on `.SUMMARY.lock` in the output directory `out`
+/// (the empty file stays; the lock goes with the process), so that one process at a time runs
+/// a shard into a directory, as `optimize` holds its run directory. Other shards, writing other
+/// summaries and items, have other locks.
+fn lock_shard(out: &Path, summary: &Path, (i, n): (u64, u64)) -> Result<std::fs::File> {
+    let name = summary.file_name().expect("the summary has a file name").to_string_lossy();
+    let path = out.join(format!(".{name}.lock"));
+    let handle = std::fs::OpenOptions::new()
+        .write(true)
+        .create(true)
+        .truncate(false)
+        .open(&path)
+        .with_context(|| format!("creating the shard's lock {}", path.display()))?;
+    crate::common::try_lock(
+        handle,
+        || {
+            format!(
+                "-o {}: another pathgrad batch is running shard {i}/{n} in this directory (it holds {})",
+                out.display(),
+                path.display()
+            )
+        },
+        || format!("locking {}", path.display()),
+    )
+}
+
+/// Removes the temporaries that killed runs of this shard left in `out`: those of its items'
+/// files and its summary, whichever process made them. Called under the shard's lock, when no
+/// live process writes those files (other shards write other names); a process id in a
+/// temporary's name would not tell, since shards sharing a directory may run on other machines.
+fn remove_shard_temporaries(out: &Path, summary: &Path, mine: &[&Entry]) -> Result<()> {
+    let mut files: BTreeSet<String> = BTreeSet::new();
+    files.insert(summary.file_name().expect("the summary has a file name").to_string_lossy().into_owned());
+    for entry in mine {
+        if let Ok((_, name)) = &entry.item {
+            files.extend(ITEM_FILES.iter().map(|suffix| format!("{name}{suffix}")));
+        }
+    }
+    let removed = pathgrad::output::remove_temporaries(out, |file| files.contains(file))?;
+    for path in removed {
+        tracing::debug!(path = %path.display(), "removed a temporary a killed run of this shard left");
+    }
+    Ok(())
+}
+
 /// Whether `name`'s record in `out` holds `record`: the item was finished by an earlier run.
 fn finished(out: &Path, name: &str, record: &Value) -> Option<Vec<String>> {
     let text = std::fs::read_to_string(out.join(format!("{name}.json"))).ok()?;
@@ -412,6 +479,8 @@ pub(crate) fn batch(args: &BatchArgs) -> Result<()> {
         format!("summary.shard-{shard_i}-of-{shard_n}.jsonl")
     });
     let mine: Vec<&Entry> = entries.iter().filter(|e| e.index as u64 % shard_n == shard_i).collect();
+    let _lock = lock_shard(&args.output, &summary_path, (shard_i, shard_n))?;
+    remove_shard_temporaries(&args.output, &summary_path, &mine)?;
     let manifest_dir = args.manifest.parent().map(Path::to_path_buf).unwrap_or_default();
     let mut runner = Runner {
         manifest_dir,
@@ -444,7 +513,12 @@ pub(crate) fn batch(args: &BatchArgs) -> Result<()> {
                     None => match runner.run(item, name, &record) {
                         Ok(outputs) => status(Some(name), "ok", outputs, None),
                         Err(e) => {
-                            let e = format!("{}:{}: {}", args.manifest.display(), entry.line, crate::error_message(&e));
+                            let e = format!(
+                                "{}:{}: {}",
+                                args.manifest.display(),
+                                entry.line,
+                                crate::error_message_with(&e, crate::flags::with_keys)
+                            );
                             status(Some(name), "failed", Vec::new(), Some(e))
                         }
                     },
@@ -484,7 +558,69 @@ pub(crate) fn batch(args: &BatchArgs) -> Result<()> {
     Ok(())
 }
 
+/// `path` absolute, with its symbolic links resolved, also where its last components do not exist
+/// yet (they are taken as written, `..` removing the component before it, as creating them would).
+fn resolved(path: &Path) -> PathBuf {
+    use std::path::Component;
+    let components: Vec<Component> = path.components().collect();
+    for k in (0..=components.len()).rev() {
+        let prefix: PathBuf = components[..k].iter().collect();
+        let prefix = if prefix.as_os_str().is_empty() { PathBuf::from(".") } else { prefix };
+        if let Ok(mut resolved) = std::fs::canonicalize(&prefix) {
+            for c in &components[k..] {
+                match c {
+                    Component::ParentDir => {
+                        resolved.pop();
+                    }
+                    Component::Normal(name) => resolved.push(name),
+                    _ => {}
+                }
+            }
+            return resolved;
+        }
+    }
+    path.to_path_buf()
+}
+
+/// Where `reduce` writes: `-o`, else the only input directory. Not one of several inputs: its
+/// merged `summary.jsonl` would name items whose records are in the others, so that a later
+/// `reduce` of it fails. (A directory above or below an input is fine: `reduce` reads only the
+/// top level of each input, and writes only `summary.jsonl` and `totals.json`.)
+fn reduce_output(args: &ReduceArgs) -> Result<PathBuf> {
+    let inputs: Vec<PathBuf> = args.dirs.iter().map(|d| resolved(d)).collect();
+    let out = args.output.clone().unwrap_or_else(|| args.dirs[0].clone());
+    let target = resolved(&out);
+    if inputs.iter().any(|d| *d != inputs[0])
+        && let Some(k) = inputs.iter().position(|d| *d == target)
+    {
+        let why = "its merged summary.jsonl would name items whose records are in the other inputs, and a later \
+                   reduce of it would fail: give -o a directory of its own";
+        match &args.output {
+            Some(_) => {
+                bail!("-o {} is one of the input directories ({}): {why}", out.display(), args.dirs[k].display())
+            }
+            None => bail!(
+                "without -o, reduce would write into {}, which is one of the input directories: {why}",
+                out.display()
+            ),
+        }
+    }
+    Ok(out)
+}
+
+/// The item a record `DIR/NAME.json` of `pathgrad batch` holds.
+fn record_item(dir: &Path, name: &str) -> Result<Value> {
+    let path = dir.join(format!("{name}.json"));
+    let text = std::fs::read_to_string(&path).with_context(|| format!("reading {}", path.display()))?;
+    let record: Value = serde_json::from_str(&text).with_context(|| format!("{}", path.display()))?;
+    record
+        .get("item")
+        .cloned()
+        .ok_or_else(|| anyhow!("{}: no \"item\" (not a record of pathgrad batch)", path.display()))
+}
+
 pub(crate) fn reduce(args: &ReduceArgs) -> Result<()> {
+    let out = reduce_output(args)?;
     let mut by_index: BTreeMap<usize, (Status, PathBuf)> = BTreeMap::new();
     for dir in &args.dirs {
         let mut found = false;
@@ -511,6 +647,24 @@ pub(crate) fn reduce(args: &ReduceArgs) -> Result<()> {
                         s.name.as_deref().unwrap_or("?"),
                         other.name.as_deref().unwrap_or("?")
                     ),
+                    // The same name can hold another item (another seed, say): compare the items
+                    // the records hold. Summaries in one directory share its records.
+                    Some((other, other_dir))
+                        if other.status != "failed"
+                            && s.status != "failed"
+                            && resolved(other_dir) != resolved(dir)
+                            && let Some(name) = s.name.as_deref()
+                            && record_item(other_dir, name)? != record_item(dir, name)? =>
+                    {
+                        bail!(
+                            "item {} ('{name}'): {} and {} hold different items under that name (another seed, \
+                             scene or setting): the directories hold different runs, and reduce merges the shards \
+                             of one run",
+                            s.index,
+                            other_dir.join(format!("{name}.json")).display(),
+                            dir.join(format!("{name}.json")).display()
+                        )
+                    }
                     // A finished entry wins over a failed one of an earlier attempt.
                     Some((other, _)) if other.status != "failed" && s.status == "failed" => {}
                     _ => {
@@ -552,7 +706,6 @@ pub(crate) fn reduce(args: &ReduceArgs) -> Result<()> {
             total.iter_mut().zip(&values).for_each(|(t, v)| *t += v);
         }
     }
-    let out = args.output.clone().unwrap_or_else(|| args.dirs[0].clone());
     std::fs::create_dir_all(&out).with_context(|| format!("creating -o {}", out.display()))?;
     let lines: Vec<String> =
         by_index.values().map(|(s, _)| serde_json::to_string(s)).collect::<serde_json::Result<_>>()?;

@@ -299,6 +299,9 @@ pub(crate) fn parse_views(
     let mut out: Vec<(View, Option<PathBuf>, usize)> = Vec::new();
     for spec in specs {
         let (sensor, target) = match spec.split_once('=') {
+            Some((s, "")) => {
+                bail!("invalid --view {spec}: the target path after '=' is empty (give --view {s}=TARGET.exr)")
+            }
             Some((s, t)) => (s, Some(PathBuf::from(t))),
             None => (spec.as_str(), None),
         };
@@ -349,9 +352,12 @@ pub(crate) fn view_targets(
     }
     views
         .iter()
-        .map(|(_, path)| {
+        .map(|(view, path)| {
             let path = path.as_deref().expect("parse_views checked that every view names a target");
-            let image = target_image(renderer, scene, opts, Some(path), &[])?;
+            let image = target_image(renderer, scene, opts, Some(path), &[]).with_context(|| {
+                let sensor = scene.sensors.get(view.stream as usize).map_or("?", |s| s.name.as_str());
+                format!("--view {sensor}={}", path.display())
+            })?;
             if (image.width(), image.height()) != (opts.width, opts.height) {
                 bail!(
                     "invalid --view target {}: it is {}×{} but the views render at {}×{}",
@@ -495,6 +501,22 @@ pub(crate) fn progress_bar(len: u64, what: &str, hidden: bool) -> indicatif::Pro
         indicatif::ProgressStyle::with_template(&template).expect("the template is valid").progress_chars("=> "),
     );
     progress
+}
+
+/// Takes an exclusive advisory lock (`flock`) on `handle` (a file or a directory) without waiting,
+/// held until the returned handle is dropped (the process ends, however it ends; on NFS the lock
+/// holds across machines). `busy` is the error when another process holds it, `failed` the context
+/// of any other failure.
+pub(crate) fn try_lock(
+    handle: std::fs::File,
+    busy: impl FnOnce() -> String,
+    failed: impl FnOnce() -> String,
+) -> Result<std::fs::File> {
+    match handle.try_lock() {
+        Ok(()) => Ok(handle),
+        Err(std::fs::TryLockError::WouldBlock) => bail!("{}", busy()),
+        Err(std::fs::TryLockError::Error(e)) => Err(anyhow::Error::new(e).context(failed())),
+    }
 }
 
 /// The PNG preview written beside an EXR output.

@@ -79,9 +79,15 @@ fn lavapipe_vector_width() {
 /// The error and its causes on one line, `a: b: c`, leaving out a cause whose text the line
 /// already ends with (pathgrad's errors print their OS error, which is also their source).
 fn error_message(e: &anyhow::Error) -> String {
+    error_message_with(e, flags::with_flags)
+}
+
+/// [`error_message`] with the library's option names spelled by `names` (the CLI's flags, or a
+/// manifest's keys: [`flags::with_keys`]).
+fn error_message_with(e: &anyhow::Error, names: fn(&str) -> String) -> String {
     let mut line = String::new();
     for cause in e.chain() {
-        let text = flags::with_flags(&cause.to_string());
+        let text = names(&cause.to_string());
         if line.ends_with(&text) {
             continue;
         }

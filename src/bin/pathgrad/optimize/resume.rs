@@ -53,16 +53,16 @@ pub(super) fn refuse_existing_run(dir: &Path) -> Result<()> {
 /// never write one directory; nothing is left in the directory. `flag` names the option in errors.
 pub(super) fn lock_dir(dir: &Path, flag: &str) -> Result<fs::File> {
     let handle = fs::File::open(dir).with_context(|| format!("{flag} {}: opening the directory", dir.display()))?;
-    match handle.try_lock() {
-        Ok(()) => Ok(handle),
-        Err(fs::TryLockError::WouldBlock) => bail!(
-            "{flag} {}: another pathgrad optimize is running in this directory (it holds its lock)",
-            dir.display()
-        ),
-        Err(fs::TryLockError::Error(e)) => {
-            Err(anyhow::Error::new(e).context(format!("{flag} {}: locking the directory", dir.display())))
-        }
-    }
+    crate::common::try_lock(
+        handle,
+        || {
+            format!(
+                "{flag} {}: another pathgrad optimize is running in this directory (it holds its lock)",
+                dir.display()
+            )
+        },
+        || format!("{flag} {}: locking the directory", dir.display()),
+    )
 }
 
 /// A resumed run: the state's options, checked against those given now.
