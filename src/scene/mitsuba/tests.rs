@@ -168,18 +168,17 @@ fn defines_substitute_and_cli_overrides_win() {
     assert_eq!(e.to_string(), "invalid -D 1x=1: the name must match [A-Za-z_][A-Za-z0-9_]*");
 }
 
-/// Issue 36, 6: the caller's defines cost linear time. Each unused one was looked up by a scan of
-/// all of them: 50 000 took 7.5 s in a test build, so 100 000 about 30 s, where a linear pass
-/// takes well under a second; 5 s leaves that margin on a loaded machine.
+/// Issue 36, 6: every unused define of many warns once. Their cost is linear now (each unused
+/// one was looked up by a scan of all of them: 200 000 took 73 s in the release binary, 1.6 s
+/// after; BENCHMARKS.md, "Hardening, second round"); speed is a benchmark's business, not a
+/// test's, so this checks only the result.
 #[test]
-fn issue_36_many_defines_load_in_linear_time() {
+fn issue_36_many_defines_each_warn_once() {
     let xml = format!(r#"<scene version="2.1.0">{SENSOR}<shape type="cube"/></scene>"#);
-    let cli: Vec<(String, String)> = (0..100_000).map(|i| (format!("d{i}"), "1".to_string())).collect();
-    let started = std::time::Instant::now();
+    let cli: Vec<(String, String)> = (0..20_000).map(|i| (format!("d{i}"), "1".to_string())).collect();
     let s = load_text(&xml, Path::new("d.xml"), &cli, obj_for_tests).unwrap();
-    let seconds = started.elapsed().as_secs_f64();
-    assert_eq!(s.warnings.iter().filter(|w| w.ends_with("is not used by the scene")).count(), 100_000);
-    assert!(seconds < 5.0, "100 000 defines took {seconds:.2} s");
+    assert_eq!(s.warnings.iter().filter(|w| w.ends_with("is not used by the scene")).count(), 20_000);
+    assert!(s.warnings.iter().any(|w| w.contains("d19999")));
 }
 
 #[test]
