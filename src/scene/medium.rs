@@ -144,6 +144,13 @@ pub const MAJORANT_CELL_VOXELS: u32 = 8;
 /// The most majorant-grid cells along one axis (a ray crosses at most the sum of the three).
 pub const MAJORANT_GRID_MAX: u32 = 64;
 
+/// A cell's majorant is this many times the largest extinction in it, unless the medium's one
+/// majorant is smaller. A majorant close to the density makes null collisions rare and their
+/// derivative weights 1/(σ̄ − σ_t) large: the density gradients' second moment grows as
+/// ∫ 1/(σ̄ − σ_t) dt while the cost grows as ∫ σ̄ dt, so σ̄ = 2σ_max halves the cost a
+/// global majorant pays in sparse cells while bounding the noise it adds.
+pub const MAJORANT_CELL_SLACK: f32 = 2.0;
+
 /// A medium's majorant grid: cells over the unit cube of its `sigma_t` grid, each holding a
 /// majorant of the extinction wherever a lookup inside the cell can reach.
 #[derive(Clone, Debug, PartialEq)]
@@ -159,9 +166,10 @@ impl Medium {
     /// ([`MAJORANT_CELL_VOXELS`]); `None` for a constant extinction or a small grid, which
     /// [`Medium::majorant`] bounds as tightly.
     ///
-    /// A cell's value is `scale · max σ_t` over the voxels that trilinear lookups at points in
-    /// the cell read (with one voxel of slack on each side for rounding at the cell's faces),
-    /// times 1 + [`crate::contract::MAJORANT_MARGIN`]. Points outside the unit cube (a rotated
+    /// A cell's value is [`MAJORANT_CELL_SLACK`] · `scale · max σ_t` over the voxels that
+    /// trilinear lookups at points in the cell read (with one voxel of slack on each side for
+    /// rounding at the cell's faces), times 1 + [`crate::contract::MAJORANT_MARGIN`], and at most
+    /// the medium's one majorant ([`Medium::majorant`]). Points outside the unit cube (a rotated
     /// volume's box) read the clamped border voxels, which the border cells include.
     pub fn majorant_grid(&self, params: &ParamTable) -> Option<MajorantGrid> {
         let Field::Grid { resolution: res, channels, values, .. } = &self.sigma_t else { return None };
@@ -177,6 +185,7 @@ impl Medium {
         let ch = *channels as usize;
         let voxel_max: Vec<f32> = voxels.chunks_exact(ch).map(|v| v.iter().fold(0.0f32, |m, &x| m.max(x))).collect();
         let factor = params.get(self.scale)[0] * (1.0 + crate::contract::MAJORANT_MARGIN);
+        let global = self.majorant(params);
         // The voxels whose trilinear support meets cell i of n along an axis of r voxels: a point
         // at local x in [i/n, (i+1)/n) reads voxels floor(x·r − 0.5) and one more.
         let span = |i: u32, n: u32, r: u32| {
@@ -198,7 +207,7 @@ impl Medium {
                             m = voxel_max[row + x0 as usize..=row + x1 as usize].iter().fold(m, |a, &v| a.max(v));
                         }
                     }
-                    values.push(m * factor);
+                    values.push((MAJORANT_CELL_SLACK * m * factor).min(global));
                 }
             }
         }
