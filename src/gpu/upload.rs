@@ -53,6 +53,28 @@ impl GpuScene {
         })
     }
 
+    /// Bytes of all the scene's buffers.
+    pub(crate) fn bytes(&self) -> u64 {
+        [
+            &self.nodes,
+            &self.tris,
+            &self.prim_ids,
+            &self.shading,
+            &self.materials,
+            &self.emitters,
+            &self.params,
+            &self.media,
+            &self.fields,
+            &self.majorants,
+            &self.env_cells,
+            &self.lights,
+            &self.tables,
+        ]
+        .iter()
+        .map(|b| b.size())
+        .sum()
+    }
+
     /// `globals` with the device addresses of the scene's arrays filled in.
     pub(crate) fn with_addresses(&self, globals: &Globals) -> Globals {
         Globals {

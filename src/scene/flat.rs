@@ -1,6 +1,8 @@
 //! `FlatScene`: the scene flattened into the arrays that the kernels read — and that the CPU
 //! reference reads too, so both back ends see the same data by construction.
 
+use std::time::Instant;
+
 use glam::Vec3;
 
 use crate::bsdf::Distribution;
@@ -15,6 +17,7 @@ use crate::contract::{
     TEX_NEAREST, TEX_WRAP_CLAMP, TEX_WRAP_MIRROR, TriShading,
 };
 use crate::error::Result;
+use crate::phases::PhaseReport;
 use crate::scene::medium::{Field, Phase};
 use crate::scene::shapes::triangle_area;
 use crate::scene::{Albedo, Light, LightShape, Material, Scene, SmoothColour, Wrap};
@@ -93,6 +96,16 @@ impl FlatScene {
     /// # Errors
     /// [`crate::Error::Scene`] from validation or the BVH build.
     pub fn new(scene: &Scene) -> Result<FlatScene> {
+        FlatScene::new_reporting(scene, &mut PhaseReport::new())
+    }
+
+    /// [`FlatScene::new`], recording two phases in `report`: `flatten` (validation and every
+    /// array but the BVH's) and then `bvh` (the build).
+    ///
+    /// # Errors
+    /// As [`FlatScene::new`]; what was recorded before the failure stays.
+    pub fn new_reporting(scene: &Scene, report: &mut PhaseReport) -> Result<FlatScene> {
+        let start = Instant::now();
         scene.validate()?;
         let mut triangles = Vec::with_capacity(scene.triangle_count());
         let mut shading = Vec::with_capacity(scene.triangle_count());
@@ -152,8 +165,13 @@ impl FlatScene {
         let mut materials: Vec<GpuMaterial> = scene.materials.iter().map(|m| flatten_material(scene, m)).collect();
         let tables = coating_tables(&mut materials, scene.params.values());
         let (media, fields, majorants) = flatten_media(scene);
-        let bvh = bvh::build(&triangles)?;
         let env_cells = env_cells(scene)?;
+        let lights = scene.lights.iter().map(|l| flatten_light(scene, l)).collect();
+        report.record("flatten", start);
+        let start = Instant::now();
+        let bvh = bvh::build(&triangles)?;
+        drop(triangles);
+        report.record("bvh", start);
         Ok(FlatScene {
             bvh,
             shading,
@@ -165,7 +183,7 @@ impl FlatScene {
             fields,
             majorants,
             env_cells,
-            lights: scene.lights.iter().map(|l| flatten_light(scene, l)).collect(),
+            lights,
             tables,
         })
     }

@@ -52,6 +52,29 @@ pub(crate) fn read_file(path: &Path) -> Result<Vec<u8>> {
     std::fs::read(path).map_err(|source| Error::Io { path: path.to_path_buf(), source })
 }
 
+thread_local! {
+    /// Seconds spent reading and decoding mesh files on this thread since the last
+    /// [`take_decode_time`], and the memory after the last one (see [`crate::phases`]).
+    static DECODE: std::cell::Cell<(f64, Option<crate::phases::Memory>)> = const { std::cell::Cell::new((0.0, None)) };
+}
+
+/// Runs `f` (a mesh file's read and decode) and adds its wall time to this thread's count, which
+/// [`crate::scene::load_reporting`] reports as the `parse` phase. A loader runs on the thread
+/// that called it, so the count is that load's.
+pub(crate) fn decoding<T>(f: impl FnOnce() -> T) -> T {
+    let start = std::time::Instant::now();
+    let out = f();
+    let seconds = start.elapsed().as_secs_f64();
+    DECODE.with(|d| d.set((d.get().0 + seconds, crate::phases::Memory::now())));
+    out
+}
+
+/// The seconds counted by [`decoding`] since the last call, and the memory after the last decode;
+/// resets the count.
+pub(crate) fn take_decode_time() -> (f64, Option<crate::phases::Memory>) {
+    DECODE.with(|d| d.replace((0.0, None)))
+}
+
 /// Runs `f`, returning `None` if it panics. Only for calls into third-party parsers whose
 /// freedom from panics on hostile input we cannot prove (see the module docs).
 pub(crate) fn catch_panic<T>(f: impl FnOnce() -> T) -> Option<T> {

@@ -30,6 +30,10 @@ const PLY_FACE_LISTS: [&str; 2] = ["vertex_indices", "vertex_index"];
 /// property set, a face of fewer than 3 vertices, an index out of range, a non-finite value, or a
 /// mesh without faces.
 pub fn load_ply(path: &Path) -> Result<Geometry> {
+    super::decoding(|| read_ply(path))
+}
+
+fn read_ply(path: &Path) -> Result<Geometry> {
     let bytes = read_file(path)?;
     if !(bytes.starts_with(b"ply\n") || bytes.starts_with(b"ply\r")) {
         return Err(scene_error(path, None, "not a PLY file (it does not start with the line 'ply')"));
