@@ -65,7 +65,7 @@ impl Reference {
         Ok(Reference { scene: scene.clone(), flat, report })
     }
 
-    /// How [`Reference::new`] went: its phases `flatten` and `bvh`
+    /// How [`Reference::new`] went: its phases `flatten`, `bvh` and `shading`
     /// ([`FlatScene::new_reporting`]).
     pub fn report(&self) -> &PhaseReport {
         &self.report

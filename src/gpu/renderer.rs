@@ -88,12 +88,12 @@ impl Renderer {
     /// Scene validation errors; Vulkan and allocation failures.
     pub fn new(ctx: &Arc<Context>, scene: &Scene) -> Result<Renderer> {
         let mut report = PhaseReport::new();
-        let flat = {
+        let mut flat = {
             let _span = tracing::info_span!("load", scene = %scene.source).entered();
             FlatScene::new_reporting(scene, &mut report)?
         };
         let start = Instant::now();
-        let gpu = GpuScene::new(ctx, &flat)?;
+        let gpu = GpuScene::new(ctx, &mut flat)?;
         report.record("upload", start);
         let env = variant::env_range(scene);
         let scene_features = variant::scene_features(&flat, env.0);
@@ -114,8 +114,8 @@ impl Renderer {
         })
     }
 
-    /// How [`Renderer::new`] went: its phases `flatten` and `bvh` ([`FlatScene::new_reporting`])
-    /// and `upload` (the scene's device buffers created and filled).
+    /// How [`Renderer::new`] went: its phases `flatten`, `bvh` and `shading`
+    /// ([`FlatScene::new_reporting`]) and `upload` (the scene's device buffers created and filled).
     pub fn report(&self) -> &PhaseReport {
         &self.report
     }
@@ -154,7 +154,10 @@ impl Renderer {
         &self.scene
     }
 
-    /// The flattened scene (what the CPU reference consumes too).
+    /// The flattened scene (what the CPU reference consumes too), without its per-triangle
+    /// arrays: the BVH's triangles and triangle ids and the shading data live on the device only,
+    /// so those three are empty here (the BVH's nodes, the materials, emitters, parameters and the
+    /// rest are kept).
     pub fn flat(&self) -> &FlatScene {
         &self.flat
     }

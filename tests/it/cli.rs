@@ -285,7 +285,7 @@ fn env_lights_a_gltf_asset_without_lights() {
 }
 
 /// Issue 38: `render --json` breaks the run into phases (parse, assemble, device, flatten, bvh,
-/// upload, render, write), each with non-negative seconds and, on Linux, the peak RSS at its end,
+/// shading, upload, render, write), each with non-negative seconds and, on Linux, the peak RSS at its end,
 /// and reports the device memory the scene's buffers take.
 #[test]
 fn issue_38_render_json_reports_every_phase() {
@@ -308,8 +308,8 @@ fn issue_38_render_json_reports_every_phase() {
     )
     .unwrap();
     for (backend, names, on_device) in [
-        (None, &["parse", "assemble", "device", "flatten", "bvh", "upload", "render", "write"][..], true),
-        (Some("--cpu"), &["parse", "assemble", "flatten", "bvh", "render", "write"][..], false),
+        (None, &["parse", "assemble", "device", "flatten", "bvh", "shading", "upload", "render", "write"][..], true),
+        (Some("--cpu"), &["parse", "assemble", "flatten", "bvh", "shading", "render", "write"][..], false),
     ] {
         let o = pathgrad()
             .args(["render", "--spp", "1", "--json"])

@@ -22,7 +22,7 @@ pub(crate) struct Opened {
     /// Microseconds spent building kernel variants so far (see `announce_compiles`).
     pub(crate) compile_us: std::sync::Arc<std::sync::atomic::AtomicU64>,
     /// The phases of opening it: `device` (the Vulkan context; GPU only), then the backend's own
-    /// (`flatten`, `bvh` and, on the GPU, `upload`).
+    /// (`flatten`, `bvh`, `shading` and, on the GPU, `upload`).
     pub(crate) report: PhaseReport,
     /// Bytes of device memory the scene's buffers take (GPU only).
     pub(crate) scene_device_bytes: Option<u64>,

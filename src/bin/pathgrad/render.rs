@@ -31,7 +31,7 @@ pub(crate) struct RenderArgs {
     #[arg(long, default_value_t = 0.0, allow_negative_numbers = true)]
     pub(crate) exposure: f32,
     /// Print a JSON summary instead of text. Its `phases` list each phase (parse, assemble,
-    /// device, flatten, bvh, upload, render, write) with its seconds and the process's RSS and
+    /// device, flatten, bvh, shading, upload, render, write) with its seconds and the process's RSS and
     /// peak RSS at its end (Linux only, else null); `device_bytes` gives the scene's device
     /// buffers (`scene`) and the most device buffer memory held at once (`peak`).
     #[arg(long)]
@@ -59,6 +59,8 @@ pub(crate) fn render(args: &RenderArgs) -> Result<()> {
     let progress = progress_bar(u64::from(opts.spp), "rendering [{bar:40}] {pos}/{len} spp", args.json);
     let start = Instant::now();
     let opened = args.flags.backend(&scene, &args.scene, args.json)?;
+    // The backend holds what it needs of the scene; this copy's meshes would only take memory.
+    drop(scene);
     report.extend(&opened.report);
     let mut backend = opened.backend;
     let device = backend.describe();
