@@ -120,6 +120,9 @@ pub fn build(triangles: &[[Vec3; 3]]) -> Result<Bvh> {
     let ratio = params.reinsertion_batch_ratio * params.post_collapse_reinsertion_batch_ratio_multiplier;
     reinsertion.run(&mut ploc, ratio, None);
     let build_time = start.elapsed();
+    // Each intermediate form is dropped as soon as the next is built, so at most two are alive:
+    // at 2 M triangles they take 100-300 MB each (issue 38).
+    drop(tris);
     let arena: Vec<TmpNode> = ploc
         .nodes
         .iter()
@@ -133,13 +136,18 @@ pub fn build(triangles: &[[Vec3; 3]]) -> Result<Bvh> {
             TmpNode { lo: n.aabb.min.into(), hi: n.aabb.max.into(), shape }
         })
         .collect();
+    drop(ploc);
     let mut shaper = Shaper { triangles, arena, heights: Vec::new(), bvh2: Bvh2::default() };
     shaper.heights = heights(&shaper.arena);
     let ploc_depth = shaper.heights[0];
     shaper.bvh2.nodes.push(Bvh2Node::default());
     shaper.place(0, 0, 1);
-    let cw = bvh2_to_cwbvh(&shaper.bvh2, BVH_LEAF_MAX, true, false);
+    let bvh2 = std::mem::take(&mut shaper.bvh2);
+    drop(shaper);
+    let cw = bvh2_to_cwbvh(&bvh2, BVH_LEAF_MAX, true, false);
+    drop(bvh2);
     let nodes: Vec<BvhNode> = cw.nodes.iter().map(|n| bytemuck::cast(*n)).collect();
+    drop(cw.nodes);
     let tris = cw
         .primitive_indices
         .iter()

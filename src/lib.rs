@@ -63,6 +63,7 @@ pub mod loss;
 pub mod optim;
 pub mod output;
 pub mod params;
+pub mod phases;
 pub mod prior;
 pub mod rng;
 pub mod sampling;

@@ -26,6 +26,7 @@ use crate::gpu::renderer::GradMode;
 use crate::image::Image;
 use crate::integrator::{RenderOptions, View};
 use crate::params::{Gradients, ParamTable};
+use crate::phases::PhaseReport;
 use crate::scene::Scene;
 use crate::scene::flat::FlatScene;
 
@@ -50,6 +51,7 @@ const GRADIENT_PARTS: usize = 64;
 pub struct Reference {
     scene: Scene,
     flat: FlatScene,
+    report: PhaseReport,
 }
 
 impl Reference {
@@ -58,7 +60,15 @@ impl Reference {
     /// # Errors
     /// Scene validation errors.
     pub fn new(scene: &Scene) -> Result<Reference> {
-        Ok(Reference { scene: scene.clone(), flat: FlatScene::new(scene)? })
+        let mut report = PhaseReport::new();
+        let flat = FlatScene::new_reporting(scene, &mut report)?;
+        Ok(Reference { scene: scene.clone(), flat, report })
+    }
+
+    /// How [`Reference::new`] went: its phases `flatten`, `bvh` and `shading`
+    /// ([`FlatScene::new_reporting`]).
+    pub fn report(&self) -> &PhaseReport {
+        &self.report
     }
 
     fn gradients(&self, sums: Vec<f64>) -> Gradients {

@@ -12,6 +12,12 @@ use crate::gpu::context::Context;
 use crate::gpu::pipeline::memory_barrier;
 
 /// A transfer's writes, as the source side of a barrier.
+/// The largest staging buffer [`Buffer::upload`] creates: a bigger upload goes through it chunk
+/// by chunk, so an upload never doubles its data in host memory (issue 38: a 2 M-triangle scene's
+/// 137 MiB shading array took as much again in staging). One wait per 16 MiB costs nothing
+/// measurable next to the copy.
+pub const UPLOAD_CHUNK_BYTES: usize = 16 << 20;
+
 const TRANSFER_WRITE: (vk::PipelineStageFlags, vk::AccessFlags) =
     (vk::PipelineStageFlags::TRANSFER, vk::AccessFlags::TRANSFER_WRITE);
 /// Compute reads and writes, as the destination side of a barrier.
@@ -150,7 +156,8 @@ impl Buffer {
         self.allocation.as_mut().and_then(Allocation::mapped_slice_mut)
     }
 
-    /// Copies `data` to the start of the buffer through a staging buffer and waits.
+    /// Copies `data` to the start of the buffer through a staging buffer of at most
+    /// [`UPLOAD_CHUNK_BYTES`], reused chunk after chunk, and waits.
     ///
     /// # Errors
     /// [`Error::InvalidArgument`] if `data` is larger than the buffer; Vulkan failures.
@@ -165,21 +172,26 @@ impl Buffer {
                 message: format!("{} bytes do not fit in {}", bytes.len(), self.size),
             });
         }
+        let chunk = bytes.len().min(UPLOAD_CHUNK_BYTES);
         let mut staging = Buffer::new(
             &self.ctx,
             &format!("{} (upload)", self.name),
-            bytes.len() as u64,
+            chunk as u64,
             vk::BufferUsageFlags::TRANSFER_SRC,
             MemoryLocation::CpuToGpu,
         )?;
-        staging.mapped_mut().expect("CpuToGpu memory is host visible")[..bytes.len()].copy_from_slice(bytes);
         let device = self.ctx.device();
-        self.ctx.submit_and_wait(&format!("upload {}", self.name), |cmd| {
-            let region = [vk::BufferCopy::default().size(bytes.len() as u64)];
-            // SAFETY: both buffers are alive until the submission is waited on.
-            unsafe { device.cmd_copy_buffer(cmd, staging.raw, self.raw, &region) };
-            memory_barrier(&self.ctx, cmd, TRANSFER_WRITE, SHADER_READ_WRITE);
-        })
+        for (k, part) in bytes.chunks(chunk).enumerate() {
+            staging.mapped_mut().expect("CpuToGpu memory is host visible")[..part.len()].copy_from_slice(part);
+            self.ctx.submit_and_wait(&format!("upload {}", self.name), |cmd| {
+                let region = [vk::BufferCopy::default().dst_offset((k * chunk) as u64).size(part.len() as u64)];
+                // SAFETY: both buffers are alive until the submission is waited on, and the region
+                // lies inside both (`part` is at most `chunk` bytes and ends within `self.size`).
+                unsafe { device.cmd_copy_buffer(cmd, staging.raw, self.raw, &region) };
+                memory_barrier(&self.ctx, cmd, TRANSFER_WRITE, SHADER_READ_WRITE);
+            })?;
+        }
+        Ok(())
     }
 
     /// Fills the whole buffer with zeros and waits.

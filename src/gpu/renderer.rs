@@ -5,6 +5,7 @@
 //! same device. `frame.rs` records the same plans into an engine's command buffers.
 
 use std::sync::Arc;
+use std::time::Instant;
 
 use crate::adaptive::PixelSampling;
 use crate::backend::Backend;
@@ -21,6 +22,7 @@ use crate::gpu::variant;
 use crate::image::Image;
 use crate::integrator::{ParamKinds, RenderOptions, View};
 use crate::params::{Gradients, ParamTable};
+use crate::phases::PhaseReport;
 use crate::rng::PassTag;
 use crate::scene::Scene;
 use crate::scene::flat::FlatScene;
@@ -69,6 +71,8 @@ pub struct Renderer {
     pub(crate) kernels: KernelCache,
     /// One path per invocation (drivers with a loop budget, PLATFORM.md §6.1).
     pub(crate) one_path_per_lane: bool,
+    /// The phases of [`Renderer::new`].
+    report: PhaseReport,
 }
 
 impl std::fmt::Debug for Renderer {
@@ -83,11 +87,14 @@ impl Renderer {
     /// # Errors
     /// Scene validation errors; Vulkan and allocation failures.
     pub fn new(ctx: &Arc<Context>, scene: &Scene) -> Result<Renderer> {
-        let flat = {
+        let mut report = PhaseReport::new();
+        let mut flat = {
             let _span = tracing::info_span!("load", scene = %scene.source).entered();
-            FlatScene::new(scene)?
+            FlatScene::new_reporting(scene, &mut report)?
         };
-        let gpu = GpuScene::new(ctx, &flat)?;
+        let start = Instant::now();
+        let gpu = GpuScene::new(ctx, &mut flat)?;
+        report.record("upload", start);
         let env = variant::env_range(scene);
         let scene_features = variant::scene_features(&flat, env.0);
         let scene_kinds = variant::param_kinds(&flat, env, 0, flat.params.len() as u32);
@@ -103,7 +110,21 @@ impl Renderer {
             scene_kinds,
             kernels: KernelCache::new(ctx),
             one_path_per_lane: ctx.info().loop_budget,
+            report,
         })
+    }
+
+    /// How [`Renderer::new`] went: its phases `flatten`, `bvh` and `shading`
+    /// ([`FlatScene::new_reporting`]) and `upload` (the scene's device buffers created and filled).
+    pub fn report(&self) -> &PhaseReport {
+        &self.report
+    }
+
+    /// Bytes of device memory the scene's buffers take (BVH nodes, triangles, triangle ids and
+    /// shading, materials, emitters, parameters, media, lights, tables): what the renderer holds
+    /// between renders, without a render's own images and gradient buffers.
+    pub fn scene_device_bytes(&self) -> u64 {
+        self.gpu.bytes()
     }
 
     /// Calls `observer` when a kernel variant is built (on its first use in this process), so a
@@ -133,7 +154,10 @@ impl Renderer {
         &self.scene
     }
 
-    /// The flattened scene (what the CPU reference consumes too).
+    /// The flattened scene (what the CPU reference consumes too), without its per-triangle
+    /// arrays: the BVH's triangles and triangle ids and the shading data live on the device only,
+    /// so those three are empty here (the BVH's nodes, the materials, emitters, parameters and the
+    /// rest are kept).
     pub fn flat(&self) -> &FlatScene {
         &self.flat
     }

@@ -1,9 +1,11 @@
 //! Loading a scene by name: `LoadOptions` (defines, the rendered size, where files may be read), the folder rule, image decoding.
 
 use std::path::{Component, Path, PathBuf};
+use std::time::Instant;
 
-use super::{Scene, builtin, gltf, mitsuba};
+use super::{Scene, builtin, gltf, mesh_io, mitsuba};
 use crate::error::{Error, Result};
+use crate::phases::{Memory, Phase, PhaseReport};
 
 /// How [`load_with`] reads a scene.
 ///
@@ -198,6 +200,28 @@ pub fn load_with(spec: &str, options: &LoadOptions) -> Result<Scene> {
     scene.camera.width = width;
     scene.camera.height = height;
     scene.validate()?;
+    Ok(scene)
+}
+
+/// Loads `spec` as [`load_with`] does and records two phases in `report`:
+///
+/// - `parse`: reading and decoding the mesh files (OBJ, PLY, `.serialized`; a glTF file's read
+///   and JSON/binary parse), summed over the scene's files, with the memory after the last one;
+/// - `assemble`: the rest of the load (the scene file, shapes, materials, parameters,
+///   validation), with the memory at its end.
+///
+/// # Errors
+/// As [`load_with`]; nothing is recorded on failure.
+pub fn load_reporting(spec: &str, options: &LoadOptions, report: &mut PhaseReport) -> Result<Scene> {
+    let start = Instant::now();
+    // A count left by an earlier, failed load on this thread is not this load's.
+    mesh_io::take_decode_time();
+    let loaded = load_with(spec, options);
+    let total = start.elapsed().as_secs_f64();
+    let (decode, decode_memory) = mesh_io::take_decode_time();
+    let scene = loaded?;
+    report.push(Phase { name: "parse", seconds: decode, memory: decode_memory.or_else(Memory::now) });
+    report.push(Phase { name: "assemble", seconds: (total - decode).max(0.0), memory: Memory::now() });
     Ok(scene)
 }
 

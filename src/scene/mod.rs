@@ -18,7 +18,7 @@ use crate::bsdf::Distribution;
 use crate::error::{Error, Result};
 use crate::params::{ParamId, ParamTable};
 
-pub use load::{LoadOptions, load, load_with};
+pub use load::{LoadOptions, load, load_reporting, load_with};
 
 /// Index of a material in [`Scene::materials`].
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]

@@ -283,3 +283,63 @@ fn env_lights_a_gltf_asset_without_lights() {
         assert!(!o.status.success() && stderr.contains(message), "--env {bad}: {stderr}");
     }
 }
+
+/// Issue 38: `render --json` breaks the run into phases (parse, assemble, device, flatten, bvh,
+/// shading, upload, render, write), each with non-negative seconds and, on Linux, the peak RSS at its end,
+/// and reports the device memory the scene's buffers take.
+#[test]
+fn issue_38_render_json_reports_every_phase() {
+    let dir = tempfile::tempdir().unwrap();
+    std::fs::copy("tests/data/mesh/quad_binary.ply", dir.path().join("quad.ply")).unwrap();
+    let scene = dir.path().join("scene.xml");
+    std::fs::write(
+        &scene,
+        r#"<scene version="3.0.0">
+    <sensor type="perspective">
+        <transform name="to_world"><lookat origin="0, 0, 4" target="0, 0, 0" up="0, 1, 0"/></transform>
+        <film type="hdrfilm"><integer name="width" value="16"/><integer name="height" value="16"/></film>
+    </sensor>
+    <shape type="ply"><string name="filename" value="quad.ply"/><bsdf type="diffuse"/></shape>
+    <shape type="rectangle">
+        <transform name="to_world"><translate z="3"/></transform>
+        <emitter type="area"><rgb name="radiance" value="1, 1, 1"/></emitter>
+    </shape>
+</scene>"#,
+    )
+    .unwrap();
+    for (backend, names, on_device) in [
+        (None, &["parse", "assemble", "device", "flatten", "bvh", "shading", "upload", "render", "write"][..], true),
+        (Some("--cpu"), &["parse", "assemble", "flatten", "bvh", "shading", "render", "write"][..], false),
+    ] {
+        let o = pathgrad()
+            .args(["render", "--spp", "1", "--json"])
+            .args(backend)
+            .arg(&scene)
+            .arg("-o")
+            .arg(dir.path().join("out.exr"))
+            .output()
+            .unwrap();
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        let summary: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+        let phases = summary["phases"].as_array().unwrap();
+        let found: Vec<_> = phases.iter().map(|p| p["name"].as_str().unwrap()).collect();
+        assert_eq!(found, names, "{summary}");
+        for p in phases {
+            assert!(p["seconds"].as_f64().unwrap() >= 0.0, "{p}");
+            if cfg!(target_os = "linux") {
+                let (rss, peak) = (p["rss_bytes"].as_u64().unwrap(), p["peak_rss_bytes"].as_u64().unwrap());
+                assert!(rss > 0 && peak >= rss, "{p}");
+            }
+        }
+        if cfg!(target_os = "linux") {
+            assert!(summary["peak_rss_bytes"].as_u64().unwrap() > 0, "{summary}");
+        }
+        let device = &summary["device_bytes"];
+        if on_device {
+            let (scene_bytes, peak) = (device["scene"].as_u64().unwrap(), device["peak"].as_u64().unwrap());
+            assert!(scene_bytes > 0 && peak >= scene_bytes, "{summary}");
+        } else {
+            assert!(device["scene"].is_null(), "the CPU reference has no device buffers: {summary}");
+        }
+    }
+}

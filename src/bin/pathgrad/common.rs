@@ -9,6 +9,7 @@ use pathgrad::backend::Backend;
 use pathgrad::gpu::{Context, ContextDesc, DeviceChoice, Renderer};
 use pathgrad::image::Image;
 use pathgrad::integrator::{RenderOptions, View};
+use pathgrad::phases::PhaseReport;
 
 /// Samples per pixel when neither `--spp` nor the scene names a number.
 pub(crate) const DEFAULT_SPP: u32 = 16;
@@ -20,6 +21,11 @@ pub(crate) struct Opened {
     pub(crate) ctx: Option<std::sync::Arc<pathgrad::gpu::Context>>,
     /// Microseconds spent building kernel variants so far (see `announce_compiles`).
     pub(crate) compile_us: std::sync::Arc<std::sync::atomic::AtomicU64>,
+    /// The phases of opening it: `device` (the Vulkan context; GPU only), then the backend's own
+    /// (`flatten`, `bvh`, `shading` and, on the GPU, `upload`).
+    pub(crate) report: PhaseReport,
+    /// Bytes of device memory the scene's buffers take (GPU only).
+    pub(crate) scene_device_bytes: Option<u64>,
 }
 
 /// Options every rendering command accepts.
@@ -115,18 +121,35 @@ impl RenderFlags {
     /// The backend these flags ask for, on `scene`: the CPU reference with `--cpu`, else a
     /// renderer on the chosen device (first compiles announced on stderr unless `quiet`).
     pub(crate) fn backend(&self, scene: &pathgrad::scene::Scene, spec: &str, quiet: bool) -> Result<Opened> {
+        let mut report = PhaseReport::new();
         if self.cpu {
             let cpu = pathgrad::cpu::Reference::new(scene).with_context(|| format!("loading {spec}"))?;
-            return Ok(Opened { backend: Box::new(cpu), ctx: None, compile_us: Default::default() });
+            report.extend(cpu.report());
+            let backend = Box::new(cpu);
+            return Ok(Opened { backend, ctx: None, compile_us: Default::default(), report, scene_device_bytes: None });
         }
+        let start = std::time::Instant::now();
         let ctx = context(&self.device)?;
+        report.record("device", start);
         let mut renderer = Renderer::new(&ctx, scene).with_context(|| format!("loading {spec}"))?;
+        report.extend(renderer.report());
+        let scene_device_bytes = Some(renderer.scene_device_bytes());
         let compile_us = announce_compiles(&mut renderer, quiet);
-        Ok(Opened { backend: Box::new(renderer), ctx: Some(ctx), compile_us })
+        Ok(Opened { backend: Box::new(renderer), ctx: Some(ctx), compile_us, report, scene_device_bytes })
     }
 
     /// Loads `spec` for these flags: curved shapes are tessellated for the size rendered.
     pub(crate) fn load(&self, spec: &str, defines: &[(String, String)]) -> Result<pathgrad::scene::Scene> {
+        self.load_reporting(spec, defines, &mut PhaseReport::new())
+    }
+
+    /// [`RenderFlags::load`], recording the phases `parse` and `assemble` in `report`.
+    pub(crate) fn load_reporting(
+        &self,
+        spec: &str,
+        defines: &[(String, String)],
+        report: &mut PhaseReport,
+    ) -> Result<pathgrad::scene::Scene> {
         let options = pathgrad::scene::LoadOptions {
             defines: defines.to_vec(),
             width: self.width,
@@ -136,7 +159,7 @@ impl RenderFlags {
             environment: EnvArg::options(self.env.as_ref()).0,
             environment_map: EnvArg::options(self.env.as_ref()).1,
         };
-        Ok(pathgrad::scene::load_with(spec, &options)?)
+        Ok(pathgrad::scene::load_reporting(spec, &options, report)?)
     }
 }
 

@@ -6,6 +6,7 @@ use std::time::Instant;
 use anyhow::{Context as _, Result, bail};
 use clap::Args;
 use pathgrad::output::OutputSet;
+use pathgrad::phases::{Memory, PhaseReport};
 
 use crate::common::{
     RenderFlags, check_output, options, parse_define, preview_path, progress_bar, refuse_non_finite, save,
@@ -29,7 +30,10 @@ pub(crate) struct RenderArgs {
     /// Exposure of PNG output in stops (negative darkens).
     #[arg(long, default_value_t = 0.0, allow_negative_numbers = true)]
     pub(crate) exposure: f32,
-    /// Print a JSON summary instead of text.
+    /// Print a JSON summary instead of text. Its `phases` list each phase (parse, assemble,
+    /// device, flatten, bvh, shading, upload, render, write) with its seconds and the process's RSS and
+    /// peak RSS at its end (Linux only, else null); `device_bytes` gives the scene's device
+    /// buffers (`scene`) and the most device buffer memory held at once (`peak`).
     #[arg(long)]
     pub(crate) json: bool,
     /// After the render, render the same image N more times in this process and report each
@@ -49,15 +53,22 @@ pub(crate) fn render(args: &RenderArgs) -> Result<()> {
     let main_file = outputs.stage(&args.output)?;
     let preview_file =
         if is_exr && !args.no_preview { Some(outputs.stage(&preview_path(&args.output))?) } else { None };
-    let scene = args.flags.load(&args.scene, &args.defines)?;
+    let mut report = PhaseReport::new();
+    let scene = args.flags.load_reporting(&args.scene, &args.defines, &mut report)?;
     let opts = options(&scene, &args.flags)?;
     let progress = progress_bar(u64::from(opts.spp), "rendering [{bar:40}] {pos}/{len} spp", args.json);
     let start = Instant::now();
-    let mut backend = args.flags.backend(&scene, &args.scene, args.json)?.backend;
+    let opened = args.flags.backend(&scene, &args.scene, args.json)?;
+    // The backend holds what it needs of the scene; this copy's meshes would only take memory.
+    drop(scene);
+    report.extend(&opened.report);
+    let mut backend = opened.backend;
     let device = backend.describe();
+    let render_start = Instant::now();
     let image = backend
         .render_pass(&opts, pathgrad::rng::PassTag::Primal, &mut |done, _| progress.set_position(u64::from(done)))
         .with_context(|| format!("rendering {}", args.scene))?;
+    report.record("render", render_start);
     let seconds = start.elapsed().as_secs_f64();
     progress.finish_and_clear();
     refuse_non_finite(&image, "the render")?;
@@ -69,10 +80,12 @@ pub(crate) fn render(args: &RenderArgs) -> Result<()> {
             .with_context(|| format!("rendering {} again (--repeat)", args.scene))?;
         repeat_s.push(start.elapsed().as_secs_f64());
     }
+    let write_start = Instant::now();
     save(&image, &main_file, is_exr, args.exposure)?;
     if let Some(preview) = &preview_file {
         image.write_png(preview, args.exposure)?;
     }
+    report.record("write", write_start);
     let written = outputs.destinations();
     outputs.commit()?;
     let samples = f64::from(opts.width) * f64::from(opts.height) * f64::from(opts.spp);
@@ -81,6 +94,11 @@ pub(crate) fn render(args: &RenderArgs) -> Result<()> {
             "scene": args.scene, "device": device, "width": opts.width, "height": opts.height, "spp": opts.spp,
             "max_depth": opts.max_depth, "seed": opts.seed, "time_s": seconds, "samples_per_second": samples / seconds,
             "mean": image.mean(), "outputs": written, "repeat_s": repeat_s,
+            "phases": phases_json(&report), "peak_rss_bytes": Memory::now().map(|m| m.peak_rss_bytes),
+            "device_bytes": {
+                "scene": opened.scene_device_bytes,
+                "peak": opened.ctx.as_ref().map(|c| c.peak_buffer_bytes()),
+            },
         });
         println!("{summary}");
     } else {
@@ -99,4 +117,19 @@ pub(crate) fn render(args: &RenderArgs) -> Result<()> {
         }
     }
     Ok(())
+}
+
+/// The phases of `report` as JSON objects: `name`, `seconds`, and (Linux) `rss_bytes` and
+/// `peak_rss_bytes` at the phase's end.
+pub(crate) fn phases_json(report: &PhaseReport) -> serde_json::Value {
+    report
+        .phases()
+        .iter()
+        .map(|p| {
+            serde_json::json!({
+                "name": p.name, "seconds": p.seconds,
+                "rss_bytes": p.memory.map(|m| m.rss_bytes), "peak_rss_bytes": p.memory.map(|m| m.peak_rss_bytes),
+            })
+        })
+        .collect()
 }

@@ -124,8 +124,7 @@ pub fn load(path: &Path) -> Result<Scene> {
 /// # Errors
 /// As [`load`].
 pub fn load_with(path: &Path, options: &LoadOptions) -> Result<Scene> {
-    let bytes = read_file(path)?;
-    let gltf = parse(path, &bytes)?;
+    let gltf = crate::scene::mesh_io::decoding(|| read_file(path).and_then(|bytes| parse(path, &bytes)))?;
     let root = gltf.document.as_json();
     let mut loader = Loader {
         path,

@@ -1,4 +1,4 @@
-//! Triangle meshes from Wavefront OBJ (`tobj`), PLY (`ply-rs-bw`) and Mitsuba `.serialized` files, as [`Geometry`](crate::scene::shapes::Geometry).
+//! Triangle meshes from Wavefront OBJ (`tobj`), PLY (`ply-rs-bw` for the header and ASCII payloads) and Mitsuba `.serialized` files, as [`Geometry`](crate::scene::shapes::Geometry).
 //!
 //! Both loaders merge everything the file holds into one [`Geometry`](crate::scene::shapes::Geometry): every OBJ object and group,
 //! every PLY face. Polygons are fan-triangulated. OBJ materials (`mtllib`, `usemtl`) are ignored —
@@ -50,6 +50,29 @@ pub(crate) fn scene_error(path: &Path, line: Option<usize>, message: impl Into<S
 /// Reads `path` whole; a missing file is an [`Error::Io`] naming it.
 pub(crate) fn read_file(path: &Path) -> Result<Vec<u8>> {
     std::fs::read(path).map_err(|source| Error::Io { path: path.to_path_buf(), source })
+}
+
+thread_local! {
+    /// Seconds spent reading and decoding mesh files on this thread since the last
+    /// [`take_decode_time`], and the memory after the last one (see [`crate::phases`]).
+    static DECODE: std::cell::Cell<(f64, Option<crate::phases::Memory>)> = const { std::cell::Cell::new((0.0, None)) };
+}
+
+/// Runs `f` (a mesh file's read and decode) and adds its wall time to this thread's count, which
+/// [`crate::scene::load_reporting`] reports as the `parse` phase. A loader runs on the thread
+/// that called it, so the count is that load's.
+pub(crate) fn decoding<T>(f: impl FnOnce() -> T) -> T {
+    let start = std::time::Instant::now();
+    let out = f();
+    let seconds = start.elapsed().as_secs_f64();
+    DECODE.with(|d| d.set((d.get().0 + seconds, crate::phases::Memory::now())));
+    out
+}
+
+/// The seconds counted by [`decoding`] since the last call, and the memory after the last decode;
+/// resets the count.
+pub(crate) fn take_decode_time() -> (f64, Option<crate::phases::Memory>) {
+    DECODE.with(|d| d.replace((0.0, None)))
 }
 
 /// Runs `f`, returning `None` if it panics. Only for calls into third-party parsers whose
@@ -108,6 +131,68 @@ mod tests {
         let obj = load_obj(&data("quad.obj")).unwrap();
         assert_eq!(obj.positions, ascii.positions);
         assert_eq!(obj.indices, ascii.indices);
+    }
+
+    /// The binary decoder (issue 38) reads every scalar type in both byte orders, skips the
+    /// properties and lists it does not use, and refuses a negative list length.
+    #[test]
+    fn ply_binary_of_every_type_and_order_matches_ascii() {
+        let ascii = load_ply(&data("quad_ascii.ply")).unwrap();
+        let dir = tempfile::tempdir().unwrap();
+        let vertices = [
+            [0.0, 0.0, 0.0, 0.0, 0.0],
+            [1.0, 0.0, 0.0, 1.0, 0.0],
+            [1.0, 1.0, 0.0, 1.0, 1.0],
+            [0.0, 1.0, 0.0, 0.0, 1.0],
+        ];
+        for big in [false, true] {
+            let mut bytes = format!(
+                "ply\nformat binary_{}_endian 1.0\nelement vertex 4\nproperty double x\nproperty uchar junk\n\
+                 property float y\nproperty short z\nproperty char nx\nproperty ushort ny\nproperty int nz\n\
+                 property uint u\nproperty float v\nelement face 1\nproperty list ushort float texcoord\n\
+                 property list uchar uint vertex_indices\nend_header\n",
+                if big { "big" } else { "little" }
+            )
+            .into_bytes();
+            let mut put = |b: &[u8]| {
+                let mut b = b.to_vec();
+                if big {
+                    b.reverse();
+                }
+                bytes.extend(b);
+            };
+            for [x, y, z, u, v] in vertices {
+                put(&f64::to_le_bytes(x));
+                put(&[7]);
+                put(&f32::to_le_bytes(y as f32));
+                put(&i16::to_le_bytes(z as i16));
+                put(&[0]);
+                put(&u16::to_le_bytes(0));
+                put(&i32::to_le_bytes(1));
+                put(&u32::to_le_bytes(u as u32));
+                put(&f32::to_le_bytes(v as f32));
+            }
+            put(&u16::to_le_bytes(2));
+            put(&f32::to_le_bytes(0.5));
+            put(&f32::to_le_bytes(0.25));
+            put(&[4]);
+            for i in [0u32, 1, 2, 3] {
+                put(&u32::to_le_bytes(i));
+            }
+            let path = dir.path().join("typed.ply");
+            std::fs::write(&path, &bytes).unwrap();
+            assert_eq!(load_ply(&path).unwrap(), ascii, "big endian: {big}");
+        }
+        let negative = b"ply\nformat binary_little_endian 1.0\nelement vertex 3\nproperty float x\n\
+            property float y\nproperty float z\nelement face 1\nproperty list char int vertex_indices\nend_header\n";
+        let mut bytes = negative.to_vec();
+        bytes.extend([0u8; 36]);
+        bytes.push(0xff);
+        bytes.extend([0u8; 12]);
+        let path = dir.path().join("negative.ply");
+        std::fs::write(&path, &bytes).unwrap();
+        let message = error(load_ply(&path));
+        assert!(message.ends_with("negative.ply: face 0: list 'vertex_indices' has the length -1"), "{message}");
     }
 
     #[test]

@@ -21,6 +21,10 @@ use crate::scene::shapes::Geometry;
 /// coordinate or normal where others do not; [`Error::Scene`](crate::Error::Scene) at `file` for a file with no
 /// vertices and faces ("not an OBJ mesh") or without faces.
 pub fn load_obj(path: &Path) -> Result<Geometry> {
+    super::decoding(|| read_obj(path))
+}
+
+fn read_obj(path: &Path) -> Result<Geometry> {
     let bytes = read_file(path)?;
     let text = std::str::from_utf8(&bytes).map_err(|e| {
         let line = bytes[..e.valid_up_to()].iter().filter(|&&b| b == b'\n').count() + 1;

@@ -1,5 +1,6 @@
-//! PLY through `ply-rs-bw`, ASCII or binary: header counts checked against the file size, then
-//! vertices (positions, normals, texture coordinates under their common names) and faces.
+//! PLY: the header through `ply-rs-bw`, counts checked against the file size; an ASCII payload
+//! through `ply-rs-bw` too, a binary one decoded here straight into the geometry (`decode_binary`);
+//! then vertices (positions, normals, texture coordinates under their common names) and faces.
 
 use std::path::Path;
 
@@ -30,6 +31,10 @@ const PLY_FACE_LISTS: [&str; 2] = ["vertex_indices", "vertex_index"];
 /// property set, a face of fewer than 3 vertices, an index out of range, a non-finite value, or a
 /// mesh without faces.
 pub fn load_ply(path: &Path) -> Result<Geometry> {
+    super::decoding(|| read_ply(path))
+}
+
+fn read_ply(path: &Path) -> Result<Geometry> {
     let bytes = read_file(path)?;
     if !(bytes.starts_with(b"ply\n") || bytes.starts_with(b"ply\r")) {
         return Err(scene_error(path, None, "not a PLY file (it does not start with the line 'ply')"));
@@ -49,50 +54,24 @@ fn parse_ply(path: &Path, bytes: &[u8]) -> Result<Geometry> {
     let first_line = bytes[..bytes.len() - payload.len()].iter().filter(|&&b| b == b'\n').count() + 1;
     let ascii = header.encoding == Encoding::Ascii;
     check_ply_sizes(path, &header.elements, payload, ascii)?;
+    let wanted = wanted_properties(path, &header.elements)?;
+    if !ascii {
+        return decode_binary(path, &header.elements, &wanted, payload, header.encoding == Encoding::BinaryBigEndian);
+    }
+    let Wanted { has_normals, uv_names, list_name } = wanted;
     let data = parser.read_payload(&mut reader, &header).map_err(|e| {
         let (line, message) = ply_message(&e);
-        scene_error(path, if ascii { line } else { None }, message)
+        scene_error(path, line, message)
     })?;
 
     // Where element `name` #index is reported: its payload line in ASCII files.
     let locate = |name: &str, index: usize| -> Option<usize> {
-        if !ascii {
-            return None;
-        }
         let before: usize = header.elements.iter().take_while(|(k, _)| k.as_str() != name).map(|(_, e)| e.count).sum();
         Some(first_line + before + index)
     };
     let element_error = |name: &str, index: usize, message: String| {
         scene_error(path, locate(name, index), format!("{name} {index}: {message}"))
     };
-
-    let vertex_def = header.elements.get("vertex").ok_or_else(|| scene_error(path, None, "has no 'vertex' element"))?;
-    let face_def = header
-        .elements
-        .get("face")
-        .ok_or_else(|| scene_error(path, None, "has no 'face' element (a point cloud is not a mesh)"))?;
-    for name in ["x", "y", "z"] {
-        scalar_property(path, vertex_def, name)?
-            .ok_or_else(|| scene_error(path, None, format!("element 'vertex' has no property '{name}'")))?;
-    }
-    let has_normals = optional_group(path, vertex_def, &["nx", "ny", "nz"])?;
-    let mut uv_names = None;
-    for (u, v) in PLY_UV_NAMES {
-        if optional_group(path, vertex_def, &[u, v])? {
-            uv_names = Some((u, v));
-            break;
-        }
-    }
-    let list_name = PLY_FACE_LISTS
-        .into_iter()
-        .find(|n| face_def.properties.contains_key(*n))
-        .ok_or_else(|| scene_error(path, None, "element 'face' has no 'vertex_indices' (or 'vertex_index') list"))?;
-    match &face_def.properties[list_name].data_type {
-        PropertyType::List(_, ScalarType::Float | ScalarType::Double) | PropertyType::Scalar(_) => {
-            return Err(scene_error(path, None, format!("property 'face.{list_name}' must be a list of integers")));
-        }
-        PropertyType::List(..) => {}
-    }
 
     let empty = Vec::new();
     let vertices = data.get("vertex").unwrap_or(&empty);
@@ -146,6 +125,215 @@ fn parse_ply(path: &Path, bytes: &[u8]) -> Result<Geometry> {
 }
 
 /// The line and the first line of the message of a `ply-rs-bw` error.
+/// The vertex and face properties the loader reads, checked against the header.
+struct Wanted {
+    /// `nx ny nz` are present.
+    has_normals: bool,
+    /// The texture coordinates' names, if present.
+    uv_names: Option<(&'static str, &'static str)>,
+    /// The face's index list.
+    list_name: &'static str,
+}
+
+/// Checks that `elements` has a `vertex` element with scalar `x y z` (and whole groups of normals
+/// and texture coordinates) and a `face` element with an integer index list, and names them.
+fn wanted_properties(path: &Path, elements: &ply_rs_bw::ply::KeyMap<ElementDef>) -> Result<Wanted> {
+    let vertex_def = elements.get("vertex").ok_or_else(|| scene_error(path, None, "has no 'vertex' element"))?;
+    let face_def = elements
+        .get("face")
+        .ok_or_else(|| scene_error(path, None, "has no 'face' element (a point cloud is not a mesh)"))?;
+    for name in ["x", "y", "z"] {
+        scalar_property(path, vertex_def, name)?
+            .ok_or_else(|| scene_error(path, None, format!("element 'vertex' has no property '{name}'")))?;
+    }
+    let has_normals = optional_group(path, vertex_def, &["nx", "ny", "nz"])?;
+    let mut uv_names = None;
+    for (u, v) in PLY_UV_NAMES {
+        if optional_group(path, vertex_def, &[u, v])? {
+            uv_names = Some((u, v));
+            break;
+        }
+    }
+    let list_name = PLY_FACE_LISTS
+        .into_iter()
+        .find(|n| face_def.properties.contains_key(*n))
+        .ok_or_else(|| scene_error(path, None, "element 'face' has no 'vertex_indices' (or 'vertex_index') list"))?;
+    match &face_def.properties[list_name].data_type {
+        PropertyType::List(_, ScalarType::Float | ScalarType::Double) | PropertyType::Scalar(_) => {
+            return Err(scene_error(path, None, format!("property 'face.{list_name}' must be a list of integers")));
+        }
+        PropertyType::List(..) => {}
+    }
+    Ok(Wanted { has_normals, uv_names, list_name })
+}
+
+/// What the binary decoder does with one property of an element.
+enum Action {
+    /// A scalar read into slot `.1` of the vertex's values (x y z, nx ny nz, u v).
+    Keep(ScalarType, usize),
+    /// A scalar skipped.
+    Skip(ScalarType),
+    /// The face's index list.
+    Indices(ScalarType, ScalarType),
+    /// Another list, skipped.
+    SkipList(ScalarType, ScalarType),
+}
+
+/// A binary payload read front to back.
+struct Payload<'a> {
+    bytes: &'a [u8],
+    at: usize,
+    big_endian: bool,
+}
+
+impl Payload<'_> {
+    /// The next `n` bytes; `None` at the end of the file.
+    fn take(&mut self, n: usize) -> Option<&[u8]> {
+        let end = self.at.checked_add(n).filter(|&e| e <= self.bytes.len())?;
+        let out = &self.bytes[self.at..end];
+        self.at = end;
+        Some(out)
+    }
+
+    /// The next scalar of type `t` as f64 (exact for every PLY type but double, which is itself);
+    /// `None` at the end of the file.
+    fn scalar(&mut self, t: &ScalarType) -> Option<f64> {
+        let big = self.big_endian;
+        let b = self.take(scalar_size(t) as usize)?;
+        macro_rules! read {
+            ($ty:ty) => {{
+                let bytes = b.try_into().expect("take returned the type's size");
+                if big { <$ty>::from_be_bytes(bytes) } else { <$ty>::from_le_bytes(bytes) }
+            }};
+        }
+        Some(match t {
+            ScalarType::Char => f64::from(read!(i8)),
+            ScalarType::UChar => f64::from(read!(u8)),
+            ScalarType::Short => f64::from(read!(i16)),
+            ScalarType::UShort => f64::from(read!(u16)),
+            ScalarType::Int => f64::from(read!(i32)),
+            ScalarType::UInt => f64::from(read!(u32)),
+            ScalarType::Float => f64::from(read!(f32)),
+            ScalarType::Double => read!(f64),
+        })
+    }
+}
+
+/// Decodes a binary payload straight into the geometry, one element after another, with the
+/// same values, checks and messages as the ASCII path (without line numbers: binary errors name
+/// the element and its 0-based index). Nothing per element is allocated, so memory is the
+/// geometry's (ply-rs-bw's `DefaultElement`s, a map per vertex and per face, took about 700 bytes
+/// a triangle: issue 38).
+fn decode_binary(
+    path: &Path,
+    elements: &ply_rs_bw::ply::KeyMap<ElementDef>,
+    wanted: &Wanted,
+    payload: &[u8],
+    big_endian: bool,
+) -> Result<Geometry> {
+    let vertex_count = elements.get("vertex").map_or(0, |e| e.count);
+    let mut names = vec!["x", "y", "z"];
+    if wanted.has_normals {
+        names.extend(["nx", "ny", "nz"]);
+    }
+    if let Some((u, v)) = wanted.uv_names {
+        names.extend([u, v]);
+    }
+    let mut g = Geometry { positions: Vec::with_capacity(vertex_count), ..Geometry::default() };
+    let mut normals = Vec::with_capacity(if wanted.has_normals { vertex_count } else { 0 });
+    let mut uvs = Vec::with_capacity(if wanted.uv_names.is_some() { vertex_count } else { 0 });
+    let mut input = Payload { bytes: payload, at: 0, big_endian };
+    let mut values = [0.0f32; 8];
+    let mut list: Vec<i64> = Vec::new();
+    for (name, def) in elements {
+        let (is_vertex, is_face) = (name == "vertex", name == "face");
+        let actions: Vec<Action> = def
+            .properties
+            .values()
+            .map(|p| match (&p.data_type, names.iter().position(|n| *n == p.name)) {
+                (PropertyType::Scalar(t), Some(slot)) if is_vertex => Action::Keep(t.clone(), slot),
+                (PropertyType::Scalar(t), _) => Action::Skip(t.clone()),
+                (PropertyType::List(c, t), _) if is_face && p.name == wanted.list_name => {
+                    Action::Indices(c.clone(), t.clone())
+                }
+                (PropertyType::List(c, t), _) => Action::SkipList(c.clone(), t.clone()),
+            })
+            .collect();
+        let ended = |i: usize| {
+            scene_error(
+                path,
+                None,
+                format!(
+                    "Unexpected end of file while reading binary element '{name}' (expected {}, got {i}).",
+                    def.count
+                ),
+            )
+        };
+        let element_error = |i: usize, message: String| scene_error(path, None, format!("{name} {i}: {message}"));
+        for i in 0..def.count {
+            for (action, prop) in actions.iter().zip(def.properties.keys()) {
+                match action {
+                    Action::Keep(t, slot) => {
+                        values[*slot] = input.scalar(t).ok_or_else(|| ended(i))? as f32;
+                    }
+                    Action::Skip(t) => {
+                        input.take(scalar_size(t) as usize).ok_or_else(|| ended(i))?;
+                    }
+                    Action::Indices(c, t) | Action::SkipList(c, t) => {
+                        let n = input.scalar(c).ok_or_else(|| ended(i))?;
+                        if !(n >= 0.0 && n.fract() == 0.0) {
+                            return Err(element_error(i, format!("list '{prop}' has the length {n}")));
+                        }
+                        let n = n as usize;
+                        if matches!(action, Action::Indices(..)) {
+                            list.clear();
+                            for _ in 0..n {
+                                list.push(input.scalar(t).ok_or_else(|| ended(i))? as i64);
+                            }
+                        } else {
+                            let bytes = n.checked_mul(scalar_size(t) as usize).ok_or_else(|| ended(i))?;
+                            input.take(bytes).ok_or_else(|| ended(i))?;
+                        }
+                    }
+                }
+            }
+            if is_vertex {
+                if let Some(k) = values[..names.len()].iter().position(|v| !v.is_finite()) {
+                    let message = format!("'{}' is not finite (NaN or infinity, or too large for f32)", names[k]);
+                    return Err(element_error(i, message));
+                }
+                g.positions.push(Vec3::new(values[0], values[1], values[2]));
+                if wanted.has_normals {
+                    normals.push(Vec3::new(values[3], values[4], values[5]));
+                }
+                if wanted.uv_names.is_some() {
+                    let k = if wanted.has_normals { 6 } else { 3 };
+                    uvs.push(Vec2::new(values[k], values[k + 1]));
+                }
+            } else if is_face {
+                if list.len() < 3 {
+                    return Err(element_error(i, format!("has {} vertices; a face needs at least 3", list.len())));
+                }
+                if let Some(bad) = list.iter().find(|&&k| k < 0 || k as u64 >= vertex_count as u64) {
+                    return Err(element_error(
+                        i,
+                        format!("vertex index {bad} is out of range ({vertex_count} vertices)"),
+                    ));
+                }
+                for k in 1..list.len() - 1 {
+                    g.indices.push([list[0] as u32, list[k] as u32, list[k + 1] as u32]);
+                }
+            }
+        }
+    }
+    if g.indices.is_empty() {
+        return Err(scene_error(path, None, "has no faces"));
+    }
+    g.normals = wanted.has_normals.then_some(normals);
+    g.uvs = wanted.uv_names.map(|_| uvs);
+    Ok(g)
+}
+
 fn ply_message(e: &ply_rs_bw::parser::ParseError) -> (Option<usize>, String) {
     let text = e.to_string();
     let text = match e.line() {

@@ -49,6 +49,10 @@ pub struct SerializedMesh {
 /// [`crate::Error::Io`] for an unreadable file; [`crate::Error::Scene`] naming the file for
 /// anything malformed, and for an index beyond the file's meshes.
 pub fn load_serialized(path: &Path, index: u32) -> Result<SerializedMesh> {
+    super::decoding(|| read_serialized(path, index))
+}
+
+fn read_serialized(path: &Path, index: u32) -> Result<SerializedMesh> {
     let bytes = read_file(path)?;
     let err = |m: String| scene_error(path, None, m);
     let (version, start) = mesh_start(&bytes, index).map_err(err)?;

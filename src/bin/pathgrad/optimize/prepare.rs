@@ -103,7 +103,7 @@ pub(super) fn prepare(
     } else {
         Some(with_values(&scene.params, &config.target_set, "--target-set")?)
     };
-    let Opened { backend: mut renderer, ctx, compile_us } = flags.backend(scene, &config.scene, quiet)?;
+    let Opened { backend: mut renderer, ctx, compile_us, .. } = flags.backend(scene, &config.scene, quiet)?;
     let final_opts = RenderOptions { spp: config.spp_final, ..options.render };
     if !config.views.is_empty() {
         let mut views = Vec::new();
