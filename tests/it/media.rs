@@ -488,9 +488,8 @@ fn media_gradients_match_finite_differences_on_the_cpu() {
     let dir = tempfile::tempdir().unwrap();
     // 12×9×10 voxels, a majorant grid of 2×2×2 cells (the half x ≥ 6 twice as dense): its
     // derivatives are taken against cell majorants.
-    let density: Vec<f32> = (0..12 * 9 * 10)
-        .map(|i| (0.5 + ((i * 29 % 13) as f32) / 12.0) * if i % 12 >= 6 { 2.0 } else { 1.0 })
-        .collect();
+    let density: Vec<f32> =
+        (0..12 * 9 * 10).map(|i| (0.5 + ((i * 29 % 13) as f32) / 12.0) * if i % 12 >= 6 { 2.0 } else { 1.0 }).collect();
     std::fs::write(dir.path().join("density.vol"), Grid::new(UVec3::new(12, 9, 10), 1, density).unwrap().to_bytes())
         .unwrap();
     let albedo: Vec<f32> = (0..64 * 3).map(|i| 0.5 + 0.4 * ((i * 23 % 7) as f32 / 6.0)).collect();
