@@ -8,7 +8,7 @@
 //! medium the weights are the albedo and 1, plain delta tracking.
 //!
 //! σ̄ is piecewise constant along a ray: a medium with a majorant grid
-//! ([`crate::scene::medium::MajorantGrid`]) walks its cells ([`MajorantWalk`]), drawing one optical
+//! ([`crate::scene::medium::MajorantGrid`]) walks its cells (`MajorantWalk`), drawing one optical
 //! depth per tentative collision and spending it cell by cell at each cell's own σ̄.
 
 use glam::Vec3;

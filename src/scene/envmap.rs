@@ -68,7 +68,7 @@ const ATAN_POLY: [f32; 8] = [
     -0.004_073_309_2,
 ];
 
-/// atan2(y, x) by [`ATAN_POLY`]: the kernels compute the same polynomial (`atan2_poly` in
+/// atan2(y, x) by `ATAN_POLY`: the kernels compute the same polynomial (`atan2_poly` in
 /// `shaders/lib/emitter.glsl`), because lavapipe's own `atan` and `acos` are approximations
 /// that differ from Rust's by about 10⁻⁵, which moves a map lookup measurably where the map is
 /// steep.
