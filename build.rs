@@ -195,7 +195,7 @@ fn main() {
 ///
 /// The kernels are compiled by running it rather than by linking libshaderc into this build
 /// script: Debian's libshaderc is under-linked (PLATFORM.md §3), and the link override that
-/// mends it lives in a `.cargo/config.toml`, which Cargo never applies to a crate that depends
+/// mended it had to live in a `.cargo/config.toml`, which Cargo never applies to a crate that depends
 /// on pathgrad.
 struct Glslc {
     program: PathBuf,
