@@ -11,13 +11,13 @@ use crate::error::{Error, Result, VkResultExt};
 use crate::gpu::context::Context;
 use crate::gpu::pipeline::memory_barrier;
 
-/// A transfer's writes, as the source side of a barrier.
 /// The largest staging buffer [`Buffer::upload`] creates: a bigger upload goes through it chunk
 /// by chunk, so an upload never doubles its data in host memory (issue 38: a 2 M-triangle scene's
 /// 137 MiB shading array took as much again in staging). One wait per 16 MiB costs nothing
 /// measurable next to the copy.
 pub const UPLOAD_CHUNK_BYTES: usize = 16 << 20;
 
+/// A transfer's writes, as the source side of a barrier.
 const TRANSFER_WRITE: (vk::PipelineStageFlags, vk::AccessFlags) =
     (vk::PipelineStageFlags::TRANSFER, vk::AccessFlags::TRANSFER_WRITE);
 /// Compute reads and writes, as the destination side of a barrier.

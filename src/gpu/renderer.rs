@@ -61,7 +61,6 @@ pub struct Renderer {
     scene: Scene,
     flat: FlatScene,
     pub(crate) gpu: GpuScene,
-    /// Parameter offset of the environment's radiance, or `NO_PARAM`.
     /// The environment's parameter values (offset, count), or `(NO_PARAM, 0)`.
     env: (u32, u32),
     /// Feature bits of what the scene contains.

@@ -95,13 +95,13 @@ pub const DEFAULT_WIDTH: u32 = 512;
 pub const DEFAULT_FOV_Y_DEGREES: f32 = 45.0;
 /// glTF's dielectric reflectance at normal incidence (F0 for IOR 1.5).
 pub const DIELECTRIC_F0: f32 = 0.04;
-/// Extensions whose content is used; others named in `extensionsUsed` are reported as ignored.
 /// The warning every glTF scene with a mesh carries: its materials are glTF's BRDF only at
 /// normal incidence (the module's "Materials"); the conformance matrix checks the mapping it
 /// documents against Mitsuba, not against glTF's own BRDF.
 pub const FRESNEL_WARNING: &str = "materials: glTF's metallic-roughness BRDF is rendered with its Fresnel terms held \
      at normal incidence (F0), so reflections at grazing angles are dimmer, and diffuse parts slightly brighter, than \
      glTF's (see the pathgrad::scene::gltf docs)";
+/// Extensions whose content is used; others named in `extensionsUsed` are reported as ignored.
 const SUPPORTED_EXTENSIONS: &[&str] =
     &["KHR_materials_emissive_strength", "KHR_lights_punctual", "KHR_materials_transmission", "KHR_materials_ior"];
 

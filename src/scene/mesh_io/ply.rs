@@ -124,7 +124,6 @@ fn parse_ply(path: &Path, bytes: &[u8]) -> Result<Geometry> {
     Ok(g)
 }
 
-/// The line and the first line of the message of a `ply-rs-bw` error.
 /// The vertex and face properties the loader reads, checked against the header.
 struct Wanted {
     /// `nx ny nz` are present.
@@ -334,6 +333,7 @@ fn decode_binary(
     Ok(g)
 }
 
+/// The line and the first line of the message of a `ply-rs-bw` error.
 fn ply_message(e: &ply_rs_bw::parser::ParseError) -> (Option<usize>, String) {
     let text = e.to_string();
     let text = match e.line() {

@@ -119,7 +119,6 @@ pub(super) fn load_text_with(text: &str, file: &Path, options: &LoadOptions, mes
     Ok(loader.scene)
 }
 
-/// State of one load.
 /// A sensor's clip distance waiting for the shapes ([`Loader::clip_warnings`]).
 pub(super) struct PendingClip {
     /// The sensor's camera.
@@ -134,6 +133,7 @@ pub(super) struct PendingClip {
     pub at: usize,
 }
 
+/// State of one load.
 pub(super) struct Loader<'a> {
     /// The document.
     pub x: Xml<'a>,
