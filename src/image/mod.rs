@@ -210,6 +210,17 @@ impl Image {
         &mut self.data
     }
 
+    /// The values, in the layout of [`as_slice`](Self::as_slice), without a copy.
+    ///
+    /// ```
+    /// let image = pathgrad::image::Image::from_rgb(1, 1, vec![0.5, 1.0, 2.0])?;
+    /// assert_eq!(image.into_rgb(), [0.5, 1.0, 2.0]);
+    /// # Ok::<(), pathgrad::Error>(())
+    /// ```
+    pub fn into_rgb(self) -> Vec<f32> {
+        self.data
+    }
+
     /// The NaN and infinite values: how many there are, and the first in storage order as
     /// `(x, y, channel name, value)`; `None` if every value is finite. Renders and loss targets
     /// are refused with this.

@@ -384,6 +384,36 @@ pub mod bounds {
 }
 
 impl Scene {
+    /// The array shape of parameter `id`, row-major, as Mitsuba's `traverse` lays its values out:
+    /// `[height, width, 3]` for a bitmap's or an environment map's texels, `[z, y, x, channels]`
+    /// for a medium's grid, `[len]` for everything else (`[3]` for a colour, `[1]` for a scalar).
+    /// The product of the shape is always the parameter's length.
+    ///
+    /// ```
+    /// let scene = pathgrad::scene::builtin::load("cornell-box")?;
+    /// let alpha = scene.params.find("sphere.bsdf.alpha.value").unwrap();
+    /// assert_eq!(scene.param_shape(alpha), [1]);
+    /// # Ok::<(), pathgrad::Error>(())
+    /// ```
+    pub fn param_shape(&self, id: ParamId) -> Vec<usize> {
+        if let Some(t) = self.textures.iter().find(|t| t.texels == id) {
+            return vec![t.height as usize, t.width as usize, 3];
+        }
+        if let (Some(map), Some(env)) = (&self.env_map, self.environment)
+            && env == id
+        {
+            return vec![map.height as usize, map.width as usize, 3];
+        }
+        for field in self.media.iter().flat_map(|m| [&m.sigma_t, &m.albedo]) {
+            if let medium::Field::Grid { resolution, channels, values, .. } = field
+                && *values == id
+            {
+                return vec![resolution.z as usize, resolution.y as usize, resolution.x as usize, *channels as usize];
+            }
+        }
+        vec![self.params.entry(id).len as usize]
+    }
+
     /// The sensor `selector` names: an index into [`Scene::sensors`] or a sensor's name.
     ///
     /// # Errors
