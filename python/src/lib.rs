@@ -24,6 +24,9 @@ use pathgrad::params::{Gradients, ParamId};
 use pathgrad::rng::PassTag;
 use pathgrad::scene::{Lens, LoadOptions};
 
+/// Parameter names with their array shapes, in the order results list them.
+type Shaped = Vec<(String, Vec<usize>)>;
+
 /// Samples per pixel when neither the call nor the scene says (the CLI's default too).
 const DEFAULT_SPP: u32 = 16;
 
@@ -148,7 +151,7 @@ impl State {
     }
 
     /// The parameters `wrt` names (all if `None`): their ids, and their names with shapes.
-    fn chosen(&self, wrt: Option<&[String]>) -> pathgrad::Result<(Vec<ParamId>, Vec<(String, Vec<usize>)>)> {
+    fn chosen(&self, wrt: Option<&[String]>) -> pathgrad::Result<(Vec<ParamId>, Shaped)> {
         let params = &self.scene.params;
         let ids = match wrt {
             None => (0..params.entries().len() as u32).map(ParamId).collect(),
@@ -413,7 +416,7 @@ fn backward<'py>(
     let device = Device::parse(device.as_deref());
     let mode = if deterministic { GradMode::Deterministic } else { GradMode::Float };
     let (gradients, names) = py
-        .detach(|| -> pathgrad::Result<(Gradients, Vec<(String, Vec<usize>)>)> {
+        .detach(|| -> pathgrad::Result<(Gradients, Shaped)> {
             let mut state = scene.lock();
             let mut options = state.options(spp, seed, max_depth)?;
             let views = state.views(&sensors)?;
@@ -431,7 +434,7 @@ fn backward<'py>(
 fn gradient_dict<'py>(
     py: Python<'py>,
     gradients: &Gradients,
-    names: Vec<(String, Vec<usize>)>,
+    names: Shaped,
 ) -> PyResult<Bound<'py, PyDict>> {
     let out = PyDict::new(py);
     for (name, shape) in names {
@@ -472,7 +475,7 @@ fn loss_and_gradient<'py>(
     let device = Device::parse(device.as_deref());
     let mode = if deterministic { GradMode::Deterministic } else { GradMode::Float };
     let (value, gradients, names) = py
-        .detach(|| -> pathgrad::Result<(f64, Gradients, Vec<(String, Vec<usize>)>)> {
+        .detach(|| -> pathgrad::Result<(f64, Gradients, Shaped)> {
             let mut state = scene.lock();
             let mut options = state.options(spp, seed, max_depth)?;
             let views = state.views(&sensors)?;
