@@ -11,8 +11,8 @@ use obvhs::bvh2::leaf_collapser::collapse;
 use obvhs::bvh2::reinsertion::ReinsertionOptimizer;
 use obvhs::bvh2::{Bvh2, node::Bvh2Node};
 use obvhs::cwbvh::bvh2_to_cwbvh::bvh2_to_cwbvh;
-use obvhs::ploc::PlocBuilder;
-use obvhs::triangle::Triangle;
+use obvhs::ploc::{PlocBuilder, PlocSearchDistance};
+use rayon::prelude::*;
 
 use crate::contract::{BVH_FAR_SCALE, BVH_LEAF_MAX, BVH_STACK_SIZE, BvhNode, TriPositions};
 use crate::error::{Error, Result};
@@ -88,62 +88,103 @@ struct TmpNode {
 /// # Errors
 /// [`Error::Scene`] for more triangles than a BVH can address (2²⁸).
 pub fn build(triangles: &[[Vec3; 3]]) -> Result<Bvh> {
-    if triangles.len() >= MAX_TRIANGLES {
+    build_from(triangles.len(), |id| triangles[id as usize])
+}
+
+/// [`build`] over `count` triangles that `triangle` gives by id (`0..count`), without a
+/// flattened copy of them: the scene's indexed meshes stay the only one (issue 38: at 2 M
+/// triangles a `[[Vec3; 3]]` array is 69 MiB of the build's peak).
+///
+/// # Errors
+/// As [`build`].
+pub fn build_from(count: usize, triangle: impl Fn(u32) -> [Vec3; 3] + Sync) -> Result<Bvh> {
+    build_impl(count, &triangle, false)
+}
+
+/// [`build_from`]; `always_shape` sends the PLOC tree through the depth-bounding rewrite even
+/// when it needs none (the tests compare both paths).
+fn build_impl(count: usize, triangle: &(impl Fn(u32) -> [Vec3; 3] + Sync), always_shape: bool) -> Result<Bvh> {
+    if count >= MAX_TRIANGLES {
         return Err(Error::Scene {
             location: "BVH".into(),
-            message: format!("{} triangles exceed the {} a BVH can address", triangles.len(), MAX_TRIANGLES),
+            message: format!("{count} triangles exceed the {MAX_TRIANGLES} a BVH can address"),
         });
     }
-    if triangles.is_empty() {
+    if count == 0 {
         // A root with eight empty slots: nothing is ever hit.
         let empty = BvhNode { exp_imask: 127 | 127 << 8 | 127 << 16, ..BvhNode::default() };
         return Ok(Bvh { nodes: vec![empty], tris: Vec::new(), prim_ids: Vec::new(), depth: 1 });
     }
-    let tris: Vec<Triangle> =
-        triangles.iter().map(|t| Triangle { v0: t[0].into(), v1: t[1].into(), v2: t[2].into() }).collect();
     // The steps of obvhs's `build_bvh2_from_tris` for one-triangle leaves (the tree is the same),
     // without its debug-build validation, which panics on trees the reinsertion made deeper than
-    // its own stack estimate (a fan-triangulated 1000-gon: depth 273 against 252).
+    // its own stack estimate (a fan-triangulated 1000-gon: depth 273 against 252). PLOC's leaves
+    // are made here from `triangle` as `PlocBuilder::build` makes them from a slice of obvhs
+    // `Triangle`s (the same boxes, the same total box), so no such slice (48 bytes a triangle)
+    // is ever made.
     let start = Instant::now();
     let params = BvhBuildParams::medium_build();
-    let ids = (0..tris.len() as u32).collect();
-    let mut ploc = PlocBuilder::with_capacity(tris.len()).build(
-        params.ploc_search_distance,
-        &tris,
-        ids,
-        params.sort_precision,
-        params.search_depth_threshold,
-    );
+    debug_assert!(matches!(params.ploc_search_distance, PlocSearchDistance::Medium));
+    let mut ploc = Bvh2::zeroed(count);
+    ploc.reset_for_reuse(count, Some((0..count as u32).collect()));
+    let mut builder = PlocBuilder::new();
+    builder.current_nodes = (0..count as u32)
+        .into_par_iter()
+        .map(|id| {
+            let [v0, v1, v2] = triangle(id);
+            Bvh2Node::new(Aabb::from_points(&[v0.into(), v1.into(), v2.into()]), 1, id)
+        })
+        .collect();
+    let total = builder.current_nodes.iter().fold(Aabb::empty(), |mut total, n| {
+        total.extend(n.aabb().min);
+        total.extend(n.aabb().max);
+        total
+    });
+    // `PlocSearchDistance::Medium` is obvhs's search distance 14 (`PlocBuilder::build_with_bvh`).
+    builder.build_ploc_from_leaves::<14, false>(&mut ploc, total, params.sort_precision, params.search_depth_threshold);
+    drop(builder);
     let mut reinsertion = ReinsertionOptimizer::default();
     reinsertion.run(&mut ploc, params.reinsertion_batch_ratio, None);
     collapse(&mut ploc, 1, params.collapse_traversal_cost);
     let ratio = params.reinsertion_batch_ratio * params.post_collapse_reinsertion_batch_ratio_multiplier;
     reinsertion.run(&mut ploc, ratio, None);
+    drop(reinsertion);
     let build_time = start.elapsed();
-    // Each intermediate form is dropped as soon as the next is built, so at most two are alive:
-    // at 2 M triangles they take 100-300 MB each (issue 38).
-    drop(tris);
-    let arena: Vec<TmpNode> = ploc
-        .nodes
-        .iter()
-        .map(|n| {
-            let shape = if n.prim_count > 0 {
-                let first = n.first_index as usize;
-                Shape::Leaf(ploc.primitive_indices[first..first + n.prim_count as usize].to_vec())
-            } else {
-                Shape::Inner([n.first_index as usize, n.first_index as usize + 1])
-            };
-            TmpNode { lo: n.aabb.min.into(), hi: n.aabb.max.into(), shape }
-        })
-        .collect();
-    drop(ploc);
-    let mut shaper = Shaper { triangles, arena, heights: Vec::new(), bvh2: Bvh2::default() };
-    shaper.heights = heights(&shaper.arena);
-    let ploc_depth = shaper.heights[0];
-    shaper.bvh2.nodes.push(Bvh2Node::default());
-    shaper.place(0, 0, 1);
-    let bvh2 = std::mem::take(&mut shaper.bvh2);
-    drop(shaper);
+    // The conversion reads only the nodes and the primitive indices.
+    ploc.parents = Vec::new();
+    ploc.primitives_to_nodes = Vec::new();
+    ploc.primitive_indices_freelist = Vec::new();
+    let ploc_depth = bvh2_height(&ploc);
+    let fits = ploc_depth <= MAX_DEPTH && ploc.nodes.iter().all(|n| n.prim_count <= 1);
+    // A tree that fits the stack with one-triangle leaves is converted as PLOC left it: the
+    // rewrite below would give the same tree (same nodes, numbered in depth-first order), and the
+    // conversion depends on the tree, not on the numbering. Otherwise each intermediate form is
+    // dropped as soon as the next is built, so at most two are alive: at 2 M triangles they take
+    // 100-300 MB each (issue 38).
+    let bvh2 = if fits && !always_shape {
+        ploc
+    } else {
+        let arena: Vec<TmpNode> = ploc
+            .nodes
+            .iter()
+            .map(|n| {
+                let shape = if n.prim_count > 0 {
+                    let first = n.first_index as usize;
+                    Shape::Leaf(ploc.primitive_indices[first..first + n.prim_count as usize].to_vec())
+                } else {
+                    Shape::Inner([n.first_index as usize, n.first_index as usize + 1])
+                };
+                TmpNode { lo: n.aabb.min.into(), hi: n.aabb.max.into(), shape }
+            })
+            .collect();
+        drop(ploc);
+        let mut shaper = Shaper { triangle, arena, heights: Vec::new(), bvh2: Bvh2::default() };
+        shaper.heights = heights(&shaper.arena);
+        shaper.bvh2.nodes.push(Bvh2Node::default());
+        shaper.place(0, 0, 1);
+        let bvh2 = std::mem::take(&mut shaper.bvh2);
+        drop(shaper);
+        bvh2
+    };
     let cw = bvh2_to_cwbvh(&bvh2, BVH_LEAF_MAX, true, false);
     drop(bvh2);
     let nodes: Vec<BvhNode> = cw.nodes.iter().map(|n| bytemuck::cast(*n)).collect();
@@ -152,14 +193,14 @@ pub fn build(triangles: &[[Vec3; 3]]) -> Result<Bvh> {
         .primitive_indices
         .iter()
         .map(|&id| {
-            let t = &triangles[id as usize];
-            TriPositions { v0: t[0], v1: t[1], v2: t[2], ..TriPositions::default() }
+            let [v0, v1, v2] = triangle(id);
+            TriPositions { v0, v1, v2, ..TriPositions::default() }
         })
         .collect();
     let depth = cw_depth(&nodes);
     let bvh = Bvh { nodes, tris, prim_ids: cw.primitive_indices, depth };
     tracing::debug!(
-        triangles = triangles.len(),
+        triangles = count,
         nodes = bvh.nodes.len(),
         depth = bvh.depth,
         ploc_depth,
@@ -167,6 +208,22 @@ pub fn build(triangles: &[[Vec3; 3]]) -> Result<Bvh> {
         "BVH built"
     );
     Ok(bvh)
+}
+
+/// Inner nodes on the longest path down from the root of `bvh2` (0 for a lone leaf), as
+/// [`heights`] counts them, without recursion.
+fn bvh2_height(bvh2: &Bvh2) -> u32 {
+    let mut deepest = 0;
+    let mut stack = vec![(0u32, 0u32)];
+    while let Some((i, d)) = stack.pop() {
+        let n = &bvh2.nodes[i as usize];
+        if n.prim_count == 0 {
+            deepest = deepest.max(d + 1);
+            stack.push((n.first_index, d + 1));
+            stack.push((n.first_index + 1, d + 1));
+        }
+    }
+    deepest
 }
 
 /// Nodes on the longest path from the root down, without recursion.
@@ -208,14 +265,14 @@ fn heights(arena: &[TmpNode]) -> Vec<u32> {
 
 /// Writes the arena's tree as an obvhs binary tree of one-triangle leaves (siblings adjacent, as
 /// obvhs expects), rebuilding subtrees that would be too deep.
-struct Shaper<'a> {
-    triangles: &'a [[Vec3; 3]],
+struct Shaper<'a, F> {
+    triangle: &'a F,
     arena: Vec<TmpNode>,
     heights: Vec<u32>,
     bvh2: Bvh2,
 }
 
-impl Shaper<'_> {
+impl<F: Fn(u32) -> [Vec3; 3]> Shaper<'_, F> {
     /// Writes arena node `i` as binary node `slot` at depth `depth` (the root is 1), rebuilding
     /// it first if its subtree would not fit the stack or it is a leaf of several triangles.
     fn place(&mut self, mut i: usize, slot: usize, depth: u32) {
@@ -249,14 +306,14 @@ impl Shaper<'_> {
     /// Builds a subtree over `ids` by splitting at the median centroid along the widest axis
     /// (halving every time, whatever the geometry) down to single triangles; its arena index.
     fn median(&mut self, ids: &mut [u32]) -> usize {
-        let (lo, hi) = bounds(self.triangles, ids);
+        let (lo, hi) = bounds(self.triangle, ids);
         if ids.len() == 1 {
             self.arena.push(TmpNode { lo, hi, shape: Shape::Leaf(ids.to_vec()) });
             self.heights.push(0);
             return self.arena.len() - 1;
         }
         let centroid = |id: u32| {
-            let t = &self.triangles[id as usize];
+            let t = (self.triangle)(id);
             t[0] + t[1] + t[2]
         };
         let (clo, chi) =
@@ -296,9 +353,9 @@ fn collect_leaves(arena: &[TmpNode], i: usize, ids: &mut Vec<u32>) {
     }
 }
 
-fn bounds(triangles: &[[Vec3; 3]], ids: &[u32]) -> (Vec3, Vec3) {
+fn bounds(triangle: &impl Fn(u32) -> [Vec3; 3], ids: &[u32]) -> (Vec3, Vec3) {
     ids.iter().fold((Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY)), |(l, h), &id| {
-        let t = &triangles[id as usize];
+        let t = triangle(id);
         (l.min(t[0]).min(t[1]).min(t[2]), h.max(t[0]).max(t[1]).max(t[2]))
     })
 }
@@ -543,5 +600,28 @@ mod tests {
         assert_leaves_cover(&bvh, tris.len());
         let hit = closest_hit(&bvh, &Ray::new(Vec3::new(0.3, 0.2, 1.0), -Vec3::Z), 0.0, f32::MAX).unwrap();
         assert!((hit.t - 1.0).abs() < 1e-6);
+    }
+
+    /// A tree that fits the stack is converted as PLOC left it (issue 38); the rewrite into
+    /// depth-first order that deeper trees take gives the very same BVH.
+    #[test]
+    fn a_fitting_tree_converts_as_its_rewrite_does() {
+        // A bumpy 60 x 40 grid (4 800 triangles, several PLOC passes) and 100 stacked triangles.
+        let height = |x: u32, y: u32| ((x * 7 + y * 13) % 11) as f32 * 0.05;
+        let p = |x: u32, y: u32| Vec3::new(x as f32 * 0.1, height(x, y), y as f32 * 0.1);
+        let grid: Vec<[Vec3; 3]> = (0..60 * 40)
+            .flat_map(|k| {
+                let (x, y) = (k % 60, k / 60);
+                [[p(x, y), p(x + 1, y), p(x + 1, y + 1)], [p(x, y), p(x + 1, y + 1), p(x, y + 1)]]
+            })
+            .collect();
+        let stack: Vec<[Vec3; 3]> = (0..100).map(|i| tri(i as f32 * 0.1)).collect();
+        for tris in [grid, stack] {
+            let get = |id: u32| tris[id as usize];
+            let direct = build_impl(tris.len(), &get, false).unwrap();
+            let rewritten = build_impl(tris.len(), &get, true).unwrap();
+            assert_eq!(direct, rewritten);
+            assert_leaves_cover(&direct, tris.len());
+        }
     }
 }

@@ -107,9 +107,12 @@ impl FlatScene {
     pub fn new_reporting(scene: &Scene, report: &mut PhaseReport) -> Result<FlatScene> {
         let start = Instant::now();
         scene.validate()?;
-        let mut triangles = Vec::with_capacity(scene.triangle_count());
         let mut emitters = Vec::new();
+        // The first triangle id of every mesh: ids run through the meshes in order.
+        let mut firsts = Vec::with_capacity(scene.meshes.len());
+        let mut id = 0u32;
         for mesh in &scene.meshes {
+            firsts.push(id);
             for t in &mesh.indices {
                 let p = t.map(|i| mesh.positions[i as usize]);
                 let area = triangle_area(p[0], p[1], p[2]);
@@ -117,7 +120,7 @@ impl FlatScene {
                     && area > 0.0
                 {
                     emitters.push(EmitterTri {
-                        tri: triangles.len() as u32,
+                        tri: id,
                         p_radiance: scene.params.entry(radiance).offset,
                         cdf: 0.0,
                         area,
@@ -126,7 +129,7 @@ impl FlatScene {
                         v2: p[2],
                     });
                 }
-                triangles.push(p);
+                id += 1;
             }
         }
         let total: f64 = emitters.iter().map(|e| f64::from(e.area)).sum();
@@ -145,8 +148,15 @@ impl FlatScene {
         let lights = scene.lights.iter().map(|l| flatten_light(scene, l)).collect();
         report.record("flatten", start);
         let start = Instant::now();
-        let bvh = bvh::build(&triangles)?;
-        drop(triangles);
+        // Triangle `id`'s positions, read from its mesh: the BVH build needs no flattened copy.
+        let triangle = |id: u32| {
+            // The last mesh starting at or before `id`: an empty mesh shares its start with the
+            // next, so it is never the one found.
+            let m = firsts.partition_point(|&first| first <= id) - 1;
+            let mesh = &scene.meshes[m];
+            mesh.indices[(id - firsts[m]) as usize].map(|i| mesh.positions[i as usize])
+        };
+        let bvh = bvh::build_from(id as usize, triangle)?;
         report.record("bvh", start);
         // After the build, so that the BVH's intermediate forms and the shading data are never
         // alive together (issue 38: at 2 M triangles, 144 MB off the peak).

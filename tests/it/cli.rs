@@ -308,7 +308,7 @@ fn issue_38_render_json_reports_every_phase() {
     )
     .unwrap();
     for (backend, names, on_device) in [
-        (None, &["parse", "assemble", "device", "flatten", "bvh", "shading", "upload", "render", "write"][..], true),
+        (None, &["parse", "assemble", "flatten", "bvh", "shading", "device", "upload", "render", "write"][..], true),
         (Some("--cpu"), &["parse", "assemble", "flatten", "bvh", "shading", "render", "write"][..], false),
     ] {
         let o = pathgrad()

@@ -128,10 +128,17 @@ impl RenderFlags {
             let backend = Box::new(cpu);
             return Ok(Opened { backend, ctx: None, compile_us: Default::default(), report, scene_device_bytes: None });
         }
+        // Flattened (and its BVH built) before the device opens, so that the build's transient
+        // memory and the device's are never held together (issue 38).
+        let flat = {
+            let _span = tracing::info_span!("load", scene = %scene.source).entered();
+            pathgrad::scene::flat::FlatScene::new_reporting(scene, &mut report)
+                .with_context(|| format!("loading {spec}"))?
+        };
         let start = std::time::Instant::now();
         let ctx = context(&self.device)?;
         report.record("device", start);
-        let mut renderer = Renderer::new(&ctx, scene).with_context(|| format!("loading {spec}"))?;
+        let mut renderer = Renderer::from_flat(&ctx, scene, flat).with_context(|| format!("loading {spec}"))?;
         report.extend(renderer.report());
         let scene_device_bytes = Some(renderer.scene_device_bytes());
         let compile_us = announce_compiles(&mut renderer, quiet);
