@@ -18,7 +18,7 @@
 //! Cargo features: `cli` (on by default) builds the `pathgrad` program and the crates only it uses;
 //! an engine depends on `pathgrad = { …, default-features = false }` for the library alone. The
 //! build runs shaderc's `glslc` on the kernels (`PATHGRAD_GLSLC` names another) and needs
-//! SPIRV-Tools' static libraries and a C++ compiler for the kernel specialiser: see the README's
+//! SPIRV-Tools' static libraries and a C++ compiler for the kernel specialiser: see docs/library.md,
 //! "As a dependency".
 //!
 //! ```no_run
@@ -96,3 +96,8 @@ const _: fn() = || {
     send_sync::<ParamTable>();
     send_sync::<Gradients>();
 };
+
+/// The Rust examples of `docs/library.md`, compiled and run by `cargo test --doc`.
+#[cfg(doctest)]
+#[doc = include_str!("../docs/library.md")]
+pub struct LibraryDocs;

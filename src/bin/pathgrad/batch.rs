@@ -29,7 +29,7 @@ use crate::common::{DEFAULT_SPP, context, progress_bar, refuse_non_finite};
 
 #[derive(Args, Debug)]
 pub(crate) struct BatchArgs {
-    /// The manifest: one JSON object a line (README "Batch manifests").
+    /// The manifest: one JSON object a line (docs/batch.md).
     manifest: PathBuf,
     /// Output directory (shards may share it).
     #[arg(short, long, value_name = "DIR")]
