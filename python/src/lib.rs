@@ -41,7 +41,7 @@ fn to_py(e: pathgrad::Error) -> PyErr {
         E::Numeric { .. } | E::NonFiniteGradient { .. } => "NumericError",
         _ => "DeviceError",
     };
-    let message = e.to_string();
+    let message = python_names(&e.to_string());
     Python::attach(|py| {
         match py.import("pathgrad.errors").and_then(|m| m.getattr(class)) {
             Ok(ty) => PyErr::from_type(ty.cast_into().expect("pathgrad.errors holds exception classes"), message),
@@ -49,6 +49,24 @@ fn to_py(e: pathgrad::Error) -> PyErr {
             Err(_) => PyRuntimeError::new_err(message),
         }
     })
+}
+
+/// The library's option names (`RenderOptions::spp`) in `text` spelled as this package's keyword
+/// arguments (`spp`), as the command-line program spells them as its flags.
+fn python_names(text: &str) -> String {
+    const NAMES: &[(&str, &str)] = &[
+        ("RenderOptions::width/height", "width/height"),
+        ("RenderOptions::spp", "spp"),
+        ("RenderOptions::max_depth", "max_depth"),
+        ("GradMode::Deterministic", "deterministic"),
+        ("LoadOptions::allow_outside_folder", "allow_outside_folder"),
+        ("LoadOptions::environment_map", "env"),
+        ("LoadOptions::environment", "env"),
+        ("LoadOptions::sensor", "sensor"),
+        ("View::sensor", "sensor"),
+        ("DeviceChoice", "device"),
+    ];
+    NAMES.iter().fold(text.to_string(), |t, (library, python)| t.replace(library, python))
 }
 
 /// An `ArgumentError` naming `parameter`.
@@ -431,11 +449,7 @@ fn backward<'py>(
 }
 
 /// `{name: array of its shape}` for `names` out of `gradients`.
-fn gradient_dict<'py>(
-    py: Python<'py>,
-    gradients: &Gradients,
-    names: Shaped,
-) -> PyResult<Bound<'py, PyDict>> {
+fn gradient_dict<'py>(py: Python<'py>, gradients: &Gradients, names: Shaped) -> PyResult<Bound<'py, PyDict>> {
     let out = PyDict::new(py);
     for (name, shape) in names {
         let values = gradients.get(&name).expect("the gradients have the table's layout").to_vec();

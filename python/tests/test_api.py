@@ -191,6 +191,10 @@ def test_bad_scenes_and_files(tmp_path):
         pg.read_image(tmp_path / "missing.exr")
     with pytest.raises(pg.SceneError, match="only a Mitsuba XML scene"):
         pg.load("builtin:cornell-box", spp=4)
+    # Library messages name this package's keywords, not the Rust library's option names.
+    with pytest.raises(pg.ArgumentError) as refused:
+        pg.load("builtin:furnace", env=tmp_path / "sky.exr")
+    assert "invalid env" in str(refused.value) and "LoadOptions" not in str(refused.value)
     # Every error is a pathgrad.Error, and the argument errors are ValueErrors too.
     assert issubclass(pg.ArgumentError, ValueError) and issubclass(pg.SceneError, pg.Error)
 
