@@ -34,7 +34,15 @@ os.environ.setdefault("LP_NATIVE_VECTOR_WIDTH", "128")
 import numpy as np  # noqa: E402
 
 from . import _pathgrad as _native  # noqa: E402
-from .errors import ArgumentError, DeviceError, Error, FileError, NumericError, SceneError  # noqa: E402
+from .errors import (  # noqa: E402
+    ArgumentError,
+    DeviceError,
+    Error,
+    FileError,
+    NumericError,
+    SceneError,
+    UnknownParameterError,
+)
 
 __all__ = [
     "Scene",
@@ -51,6 +59,7 @@ __all__ = [
     "Error",
     "SceneError",
     "ArgumentError",
+    "UnknownParameterError",
     "FileError",
     "DeviceError",
     "NumericError",
@@ -264,6 +273,14 @@ def _count(value: Any, what: str, minimum: int, maximum: int = 2**32 - 1) -> Opt
     return int(value)
 
 
+def _depth(value: Any) -> Optional[int]:
+    if value is None:
+        return None
+    if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or not (value == -1 or 1 <= value <= 1024):
+        raise ArgumentError(f"invalid max_depth: {value!r}, expected an integer in [1, 1024], or -1 for unbounded")
+    return int(value)
+
+
 def _set_params(scene: Scene, params: Optional[Mapping[str, Any]]) -> None:
     if params is None:
         return
@@ -312,7 +329,7 @@ def render(
         _count(spp, "spp", 1, 1 << 20),
         _count(seed, "seed", 0),
         None if device is None else str(device),
-        max_depth,
+        _depth(max_depth),
     )
     return images if many else images[0]
 
@@ -370,7 +387,7 @@ def grad(
         _count(spp, "spp", 1, 1 << 20),
         _count(seed, "seed", 0),
         None if device is None else str(device),
-        max_depth,
+        _depth(max_depth),
         bool(deterministic),
     )
 
@@ -408,7 +425,7 @@ def loss_and_grad(
         _count(spp, "spp", 1, 1 << 20),
         _count(seed, "seed", 0),
         None if device is None else str(device),
-        max_depth,
+        _depth(max_depth),
         bool(deterministic),
     )
 
@@ -434,7 +451,7 @@ def image_gradient(
         _count(spp, "spp", 1, 1 << 20),
         _count(seed, "seed", 0),
         None if device is None else str(device),
-        max_depth,
+        _depth(max_depth),
     )[0]
 
 

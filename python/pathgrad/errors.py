@@ -1,6 +1,6 @@
 """pathgrad's exceptions: one class per kind of failure, each carrying the library's message."""
 
-__all__ = ["Error", "SceneError", "ArgumentError", "FileError", "DeviceError", "NumericError"]
+__all__ = ["Error", "SceneError", "ArgumentError", "UnknownParameterError", "FileError", "DeviceError", "NumericError"]
 
 
 class Error(Exception):
@@ -13,6 +13,14 @@ class SceneError(Error):
 
 class ArgumentError(Error, ValueError):
     """A bad argument: a wrong shape, dtype, name or value. The message names the argument."""
+
+
+class UnknownParameterError(ArgumentError, KeyError):
+    """A parameter name the scene does not have. Also a ``KeyError``, so that
+    ``scene.params.get(name)`` and ``name in scene.params`` behave as for a dict."""
+
+    def __str__(self) -> str:  # KeyError would show the message quoted
+        return str(self.args[0]) if self.args else ""
 
 
 class FileError(Error, OSError):

@@ -129,7 +129,7 @@ def render(
         spp_grad=_pg._count(spp if spp_grad is None else spp_grad, "spp_grad", 1, 1 << 20),
         seed=_pg._count(seed, "seed", 0),
         device=None if device is None else str(device),
-        max_depth=max_depth,
+        max_depth=_pg._depth(max_depth),
         deterministic=bool(deterministic),
     )
     return _Render.apply(scene, names, settings, *tensors)

@@ -41,7 +41,11 @@ fn to_py(e: pathgrad::Error) -> PyErr {
         E::Numeric { .. } | E::NonFiniteGradient { .. } => "NumericError",
         _ => "DeviceError",
     };
-    let message = python_names(&e.to_string());
+    error_of(class, python_names(&e.to_string()))
+}
+
+/// An exception of class `class` of `pathgrad.errors` carrying `message`.
+fn error_of(class: &str, message: String) -> PyErr {
     Python::attach(|py| {
         match py.import("pathgrad.errors").and_then(|m| m.getattr(class)) {
             Ok(ty) => PyErr::from_type(ty.cast_into().expect("pathgrad.errors holds exception classes"), message),
@@ -344,7 +348,10 @@ fn find(scene: &pathgrad::scene::Scene, name: &str) -> PyResult<pathgrad::params
     scene.params.find(name).ok_or_else(|| {
         let known: Vec<&str> = scene.params.entries().iter().map(|e| e.name.as_str()).collect();
         let shown = if known.len() > 12 { format!("{}, …", known[..12].join(", ")) } else { known.join(", ") };
-        argument("parameter name", format!("'{name}' is not a parameter of {} (parameters: {shown})", scene.source))
+        error_of(
+            "UnknownParameterError",
+            format!("invalid parameter name: '{name}' is not a parameter of {} (parameters: {shown})", scene.source),
+        )
     })
 }
 

@@ -84,6 +84,9 @@ def test_params_view(cornell):
     assert np.array_equal(params["red.reflectance.value"], np.float32([0.1, 0.2, 0.3]))
     before[0] = 0.9  # a copy: the scene does not change
     assert params["red.reflectance.value"][0] == np.float32(0.1)
+    assert params.get("nope") is None and params.get(ALPHA) is not None  # dict behaviour
+    with pytest.raises(KeyError):
+        params["nope"]
     params[ALPHA] = 0.25  # a scalar parameter takes a number
     assert params[ALPHA].shape == (1,)
     params.update({ALPHA: np.float32([0.35])})
@@ -166,6 +169,7 @@ def test_the_gil_is_released_while_rendering(cornell):
         (lambda s: pg.render(s, seed=-1), pg.ArgumentError, "invalid seed"),
         (lambda s: pg.render(s, sensor=3), pg.SceneError, "sensor"),
         (lambda s: pg.render(s, max_depth=0), pg.ArgumentError, "max_depth"),
+        (lambda s: pg.render(s, max_depth=2.5), pg.ArgumentError, "max_depth"),
         (lambda s: pg.render(s, device="7"), pg.DeviceError, "7"),
         (lambda s: pg.render("builtin:cornell-box"), pg.ArgumentError, "expected a pathgrad.Scene"),
         (lambda s: pg.grad(s, np.ones((20, 24))), pg.ArgumentError, r"adjoint: shape \(20, 24\), expected \(20, 24, 3\)"),
