@@ -178,3 +178,27 @@ pub(crate) unsafe fn out_slice<'a, T>(ptr: *mut T, count: usize, wanted: usize, 
     // SAFETY: non-null with `count` writable values (the caller's guarantee).
     Ok(unsafe { std::slice::from_raw_parts_mut(ptr, count) })
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn message() -> String {
+        // SAFETY: the getter returns a NUL-terminated string.
+        unsafe { CStr::from_ptr(pg_last_error_message()) }.to_string_lossy().into_owned()
+    }
+
+    /// A panic becomes a status and a message, and does not unwind into the caller.
+    #[test]
+    fn a_panic_is_a_status() {
+        let status = guard("pg_test", || panic!("on purpose"));
+        assert_eq!(status, PgStatus::Panic);
+        assert!(message().contains("pg_test: pathgrad panicked") && message().contains("on purpose"), "{}", message());
+        // A success leaves the message; a failure replaces it, on this thread only.
+        assert_eq!(guard("pg_test", || Ok(())), PgStatus::Ok);
+        assert!(message().contains("on purpose"));
+        std::thread::spawn(|| assert_eq!(message(), "")).join().unwrap();
+        assert_eq!(guard("pg_other", || Err(Failure::argument("bad\0value"))), PgStatus::InvalidArgument);
+        assert_eq!(message(), "pg_other: bad value");
+    }
+}
