@@ -1,5 +1,5 @@
 /* pathgrad's C API: a differentiable path tracer on Vulkan compute.
- * Link libpathgrad_c (static: also -lstdc++ -lm -lpthread -ldl) and the Vulkan loader.
+ * Link libpathgrad_c (static: also -lstdc++ -lgcc_s -lm -lpthread -ldl) and the Vulkan loader.
  * Lifetime and thread-safety rules: capi/README.md. */
 
 #ifndef PATHGRAD_H

@@ -34,3 +34,22 @@ fn c_example_compiles_and_runs() {
     assert!(run.status.success(), "the C example failed ({})", run.status);
     assert!(stdout.contains("validation messages: 0"), "the example's last line reports no validation messages");
 }
+
+/// The header is also valid C++ (the `extern "C"` guards), for engines in C++.
+#[test]
+fn header_compiles_as_cpp() {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let source = Path::new(env!("CARGO_TARGET_TMPDIR")).join("pathgrad-header.cpp");
+    std::fs::write(
+        &source,
+        "#include \"pathgrad.h\"\nint main() { PgContext *c = nullptr; return pg_context_create(nullptr, &c); }\n",
+    )
+    .expect("write the C++ probe");
+    let status = Command::new(std::env::var("CXX").unwrap_or_else(|_| "c++".into()))
+        .args(["-std=c++17", "-Wall", "-Wextra", "-Werror", "-fsyntax-only", "-I"])
+        .arg(root.join("include"))
+        .arg(&source)
+        .status()
+        .expect("run c++ (install g++)");
+    assert!(status.success(), "include/pathgrad.h does not compile as C++");
+}

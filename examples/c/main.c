@@ -275,6 +275,15 @@ int main(void) {
                          .api_version = VK_API_VERSION_1_2,
                          .device_create_info = &setup.create_info};
   PgContext *ctx = NULL;
+  /* A device created without what pathgrad needs is refused, naming each thing missing. */
+  VkDeviceCreateInfo bare = setup.create_info;
+  bare.pNext = NULL;
+  bare.enabledExtensionCount = 0;
+  PgVulkanDevice without = lent;
+  without.device_create_info = &bare;
+  if (pg_context_from_vulkan(&without, &ctx) != PG_STATUS_NOT_ENABLED || ctx != NULL)
+    return fail("a device without pathgrad's features is refused");
+  printf("refused: %s\n", pg_last_error_message());
   PG_CHECK(pg_context_from_vulkan(&lent, &ctx));
   printf("pathgrad %s on the host's device: %s\n", pg_version(), pg_context_device_name(ctx));
 
