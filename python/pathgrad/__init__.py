@@ -281,6 +281,11 @@ def _depth(value: Any) -> Optional[int]:
     return int(value)
 
 
+def _settings(spp: Any, seed: Any, device: Any, max_depth: Any) -> Tuple[Optional[int], int, Optional[str], Optional[int]]:
+    """The arguments every render and gradient takes, checked, in the native functions' order."""
+    return _count(spp, "spp", 1, 1 << 20), _count(seed, "seed", 0), None if device is None else str(device), _depth(max_depth)
+
+
 def _set_params(scene: Scene, params: Optional[Mapping[str, Any]]) -> None:
     if params is None:
         return
@@ -326,10 +331,7 @@ def render(
     images = _native.render(
         scene._native,
         indices,
-        _count(spp, "spp", 1, 1 << 20),
-        _count(seed, "seed", 0),
-        None if device is None else str(device),
-        _depth(max_depth),
+        *_settings(spp, seed, device, max_depth),
     )
     return images if many else images[0]
 
@@ -384,10 +386,7 @@ def grad(
         values,
         indices,
         _wrt(scene, wrt),
-        _count(spp, "spp", 1, 1 << 20),
-        _count(seed, "seed", 0),
-        None if device is None else str(device),
-        _depth(max_depth),
+        *_settings(spp, seed, device, max_depth),
         bool(deterministic),
     )
 
@@ -422,10 +421,7 @@ def loss_and_grad(
         indices,
         loss,
         _wrt(scene, wrt),
-        _count(spp, "spp", 1, 1 << 20),
-        _count(seed, "seed", 0),
-        None if device is None else str(device),
-        _depth(max_depth),
+        *_settings(spp, seed, device, max_depth),
         bool(deterministic),
     )
 
@@ -448,10 +444,7 @@ def image_gradient(
     return _native.image_gradient(
         scene._native,
         name,
-        _count(spp, "spp", 1, 1 << 20),
-        _count(seed, "seed", 0),
-        None if device is None else str(device),
-        _depth(max_depth),
+        *_settings(spp, seed, device, max_depth),
     )[0]
 
 
