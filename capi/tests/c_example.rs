@@ -5,16 +5,22 @@
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
-/// The folder cargo put this crate's libraries in: the test binary lives in its `deps/`.
-fn library_dir() -> PathBuf {
+/// This crate's static library as `cargo test` left it: in `target/<profile>/deps/`, beside the
+/// test binary (a `cargo build` also copies it one folder up, which `cargo test` does not).
+fn static_library() -> PathBuf {
     let exe = std::env::current_exe().expect("the test's path");
-    exe.parent().and_then(Path::parent).expect("target/<profile>/deps/<test>").to_path_buf()
+    let deps = exe.parent().expect("target/<profile>/deps/<test>");
+    [deps, deps.parent().unwrap_or(deps)]
+        .iter()
+        .map(|d| d.join("libpathgrad_c.a"))
+        .find(|p| p.exists())
+        .unwrap_or_else(|| deps.join("libpathgrad_c.a"))
 }
 
 #[test]
 fn c_example_compiles_and_runs() {
     let root = Path::new(env!("CARGO_MANIFEST_DIR"));
-    let library = library_dir().join("libpathgrad_c.a");
+    let library = static_library();
     assert!(library.exists(), "{} is missing (cargo builds it with the tests)", library.display());
     let program = Path::new(env!("CARGO_TARGET_TMPDIR")).join("pathgrad-c-example");
     let compiled = Command::new(std::env::var("CC").unwrap_or_else(|_| "cc".into()))
