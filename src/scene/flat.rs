@@ -178,7 +178,9 @@ impl FlatScene {
         // alive together (issue 38: at 2 M triangles, 144 MB off the peak).
         let shading = if with_shading {
             let start = Instant::now();
-            let shading = shading_iter(scene, &emitters).collect();
+            // Sized first: collecting a `flat_map` would grow the array by doubling.
+            let mut shading = Vec::with_capacity(scene.triangle_count());
+            shading.extend(shading_iter(scene, &emitters));
             report.record("shading", start);
             shading
         } else {
