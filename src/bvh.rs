@@ -10,7 +10,6 @@ use obvhs::aabb::Aabb;
 use obvhs::bvh2::leaf_collapser::collapse;
 use obvhs::bvh2::reinsertion::ReinsertionOptimizer;
 use obvhs::bvh2::{Bvh2, node::Bvh2Node};
-use obvhs::cwbvh::bvh2_to_cwbvh::bvh2_to_cwbvh;
 use obvhs::ploc::{PlocBuilder, PlocSearchDistance};
 use rayon::prelude::*;
 
@@ -18,6 +17,8 @@ use crate::contract::{BVH_FAR_SCALE, BVH_LEAF_MAX, BVH_STACK_SIZE, BvhNode, TriP
 use crate::error::{Error, Result};
 
 pub use crate::contract::MIN_DIR_COMPONENT;
+
+mod convert;
 
 /// A built BVH: nodes plus the triangles in leaf order.
 #[derive(Clone, Debug, Default, PartialEq)]
@@ -79,9 +80,10 @@ struct TmpNode {
     shape: Shape,
 }
 
-/// Builds a BVH over `triangles`: obvhs's PLOC build and reinsertion (`medium_build`) into a binary tree of
-/// one-triangle leaves, its depth bounded, converted by obvhs into compressed 8-wide nodes with
-/// leaves of up to [`BVH_LEAF_MAX`] triangles and children ordered for the ray octant. Any valid
+/// Builds a BVH over `triangles`: obvhs's PLOC build and reinsertion (`medium_build`) into a
+/// binary tree of one-triangle leaves, its depth bounded, converted (obvhs's conversion with a
+/// smaller decision table, `convert`) into compressed 8-wide nodes with leaves of up to
+/// [`BVH_LEAF_MAX`] triangles and children ordered for the ray octant. Any valid
 /// mesh builds: subtrees deeper than the traversal stack allows (a fan-triangulated 1000-gon
 /// gives PLOC depth ~270) are rebuilt below depth `REBUILD_DEPTH` by median splits.
 ///
@@ -115,6 +117,39 @@ fn build_impl(count: usize, triangle: &(impl Fn(u32) -> [Vec3; 3] + Sync), alway
         let empty = BvhNode { exp_imask: 127 | 127 << 8 | 127 << 16, ..BvhNode::default() };
         return Ok(Bvh { nodes: vec![empty], tris: Vec::new(), prim_ids: Vec::new(), depth: 1 });
     }
+    let (bvh2, ploc_depth, build_time) = binary_tree(count, triangle, always_shape);
+    // obvhs's `bvh2_to_cwbvh` with a decision table of 1 byte per (node, slot) instead of 8.
+    let (cw_nodes, prim_ids) = convert::bvh2_to_cwbvh(&bvh2, BVH_LEAF_MAX);
+    drop(bvh2);
+    let nodes: Vec<BvhNode> = cw_nodes.iter().map(|n| bytemuck::cast(*n)).collect();
+    drop(cw_nodes);
+    let tris = prim_ids
+        .iter()
+        .map(|&id| {
+            let [v0, v1, v2] = triangle(id);
+            TriPositions { v0, v1, v2, ..TriPositions::default() }
+        })
+        .collect();
+    let depth = cw_depth(&nodes);
+    let bvh = Bvh { nodes, tris, prim_ids, depth };
+    tracing::debug!(
+        triangles = count,
+        nodes = bvh.nodes.len(),
+        depth = bvh.depth,
+        ploc_depth,
+        ?build_time,
+        "BVH built"
+    );
+    Ok(bvh)
+}
+
+/// The binary tree of one-triangle leaves that [`build_impl`] converts, with PLOC's depth and
+/// the build's time (`count` > 0).
+fn binary_tree(
+    count: usize,
+    triangle: &(impl Fn(u32) -> [Vec3; 3] + Sync),
+    always_shape: bool,
+) -> (Bvh2, u32, std::time::Duration) {
     // The steps of obvhs's `build_bvh2_from_tris` for one-triangle leaves (the tree is the same),
     // without its debug-build validation, which panics on trees the reinsertion made deeper than
     // its own stack estimate (a fan-triangulated 1000-gon: depth 273 against 252). PLOC's leaves
@@ -185,29 +220,7 @@ fn build_impl(count: usize, triangle: &(impl Fn(u32) -> [Vec3; 3] + Sync), alway
         drop(shaper);
         bvh2
     };
-    let cw = bvh2_to_cwbvh(&bvh2, BVH_LEAF_MAX, true, false);
-    drop(bvh2);
-    let nodes: Vec<BvhNode> = cw.nodes.iter().map(|n| bytemuck::cast(*n)).collect();
-    drop(cw.nodes);
-    let tris = cw
-        .primitive_indices
-        .iter()
-        .map(|&id| {
-            let [v0, v1, v2] = triangle(id);
-            TriPositions { v0, v1, v2, ..TriPositions::default() }
-        })
-        .collect();
-    let depth = cw_depth(&nodes);
-    let bvh = Bvh { nodes, tris, prim_ids: cw.primitive_indices, depth };
-    tracing::debug!(
-        triangles = count,
-        nodes = bvh.nodes.len(),
-        depth = bvh.depth,
-        ploc_depth,
-        ?build_time,
-        "BVH built"
-    );
-    Ok(bvh)
+    (bvh2, ploc_depth, build_time)
 }
 
 /// Inner nodes on the longest path down from the root of `bvh2` (0 for a lone leaf), as

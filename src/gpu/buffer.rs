@@ -162,34 +162,67 @@ impl Buffer {
     /// # Errors
     /// [`Error::InvalidArgument`] if `data` is larger than the buffer; Vulkan failures.
     pub fn upload<T: bytemuck::Pod>(&self, data: &[T]) -> Result<()> {
-        let bytes: &[u8] = bytemuck::cast_slice(data);
-        if bytes.is_empty() {
+        let mut rest = data;
+        self.upload_with(data.len(), |chunk: &mut [T]| {
+            let (part, after) = rest.split_at(chunk.len());
+            chunk.copy_from_slice(part);
+            rest = after;
+        })
+    }
+
+    /// Writes `count` elements to the start of the buffer as `fill` makes them: `fill` is called
+    /// with successive slices of a staging buffer of at most [`UPLOAD_CHUNK_BYTES`], reused chunk
+    /// after chunk, and must fill each slice it is given (the next elements in order); waits.
+    /// Data generated this way never exists whole in host memory (issue 38: the shading data).
+    ///
+    /// # Errors
+    /// [`Error::InvalidArgument`] if `count` elements are larger than the buffer; Vulkan failures.
+    pub fn upload_with<T: bytemuck::Pod>(&self, count: usize, mut fill: impl FnMut(&mut [T])) -> Result<()> {
+        let size = size_of::<T>();
+        let total = count * size;
+        if total == 0 {
             return Ok(());
         }
-        if bytes.len() as u64 > self.size {
+        if total as u64 > self.size {
             return Err(Error::InvalidArgument {
                 parameter: self.name.clone(),
-                message: format!("{} bytes do not fit in {}", bytes.len(), self.size),
+                message: format!("{total} bytes do not fit in {}", self.size),
             });
         }
-        let chunk = bytes.len().min(UPLOAD_CHUNK_BYTES);
+        // Whole elements per chunk, so that each chunk can be handed to `fill` as a `[T]`.
+        let per_chunk = (UPLOAD_CHUNK_BYTES / size).max(1).min(count);
         let mut staging = Buffer::new(
             &self.ctx,
             &format!("{} (upload)", self.name),
-            chunk as u64,
+            (per_chunk * size) as u64,
             vk::BufferUsageFlags::TRANSFER_SRC,
             MemoryLocation::CpuToGpu,
         )?;
+        // Used only where the mapped memory is not aligned for `T` (Vulkan promises no alignment
+        // for it beyond the allocation's): a chunk is filled here and copied.
+        let mut aligned: Vec<T> = Vec::new();
         let device = self.ctx.device();
-        for (k, part) in bytes.chunks(chunk).enumerate() {
-            staging.mapped_mut().expect("CpuToGpu memory is host visible")[..part.len()].copy_from_slice(part);
+        let mut first = 0;
+        while first < count {
+            let len = per_chunk.min(count - first);
+            let mapped = &mut staging.mapped_mut().expect("CpuToGpu memory is host visible")[..len * size];
+            match bytemuck::try_cast_slice_mut::<u8, T>(mapped) {
+                Ok(chunk) => fill(chunk),
+                Err(_) => {
+                    aligned.resize(len, T::zeroed());
+                    fill(&mut aligned);
+                    mapped.copy_from_slice(bytemuck::cast_slice(&aligned));
+                }
+            }
             self.ctx.submit_and_wait(&format!("upload {}", self.name), |cmd| {
-                let region = [vk::BufferCopy::default().dst_offset((k * chunk) as u64).size(part.len() as u64)];
+                let region = [vk::BufferCopy::default().dst_offset((first * size) as u64).size((len * size) as u64)];
                 // SAFETY: both buffers are alive until the submission is waited on, and the region
-                // lies inside both (`part` is at most `chunk` bytes and ends within `self.size`).
+                // lies inside both (`len` elements fit the staging buffer and end within
+                // `self.size`, checked above).
                 unsafe { device.cmd_copy_buffer(cmd, staging.raw, self.raw, &region) };
                 memory_barrier(&self.ctx, cmd, TRANSFER_WRITE, SHADER_READ_WRITE);
             })?;
+            first += len;
         }
         Ok(())
     }

@@ -89,22 +89,25 @@ impl Renderer {
         let mut report = PhaseReport::new();
         let flat = {
             let _span = tracing::info_span!("load", scene = %scene.source).entered();
-            FlatScene::new_reporting(scene, &mut report)?
+            FlatScene::for_device_reporting(scene, &mut report)?
         };
         Renderer::with_report(ctx, scene, flat, report)
     }
 
     /// [`Renderer::new`] from `flat`, the flattened form of this very `scene`
-    /// ([`FlatScene::new`] or [`FlatScene::new_reporting`]), for a caller that flattens before it
-    /// opens the device: the BVH build's transient memory and the device's are then never held
-    /// together (issue 38: the CLI saves about 65 MB of peak this way on lavapipe). Its
-    /// [`Renderer::report`] holds the `upload` phase only.
+    /// ([`FlatScene::for_device_reporting`], or [`FlatScene::new`] with its shading data, which is
+    /// then uploaded as it is), for a caller that flattens before it opens the device: the BVH
+    /// build's transient memory and the device's are then never held together (issue 38: the CLI
+    /// saves about 65 MB of peak this way on lavapipe). Without shading data the upload makes it
+    /// from `scene` chunk by chunk. Its [`Renderer::report`] holds the `upload` phase only.
     ///
     /// # Errors
     /// [`Error::InvalidArgument`] if `flat` cannot be `scene`'s (its triangle, material or
-    /// parameter counts differ); Vulkan and allocation failures.
+    /// parameter counts, or its shading data's where it has any, differ); Vulkan and allocation
+    /// failures.
     pub fn from_flat(ctx: &Arc<Context>, scene: &Scene, flat: FlatScene) -> Result<Renderer> {
         if flat.bvh.prim_ids.len() != scene.triangle_count()
+            || !(flat.shading.is_empty() || flat.shading.len() == scene.triangle_count())
             || flat.materials.len() != scene.materials.len()
             || flat.params.len() != scene.params.values().len()
         {
@@ -124,7 +127,7 @@ impl Renderer {
         mut report: PhaseReport,
     ) -> Result<Renderer> {
         let start = Instant::now();
-        let gpu = GpuScene::new(ctx, &mut flat)?;
+        let gpu = GpuScene::new(ctx, scene, &mut flat)?;
         report.record("upload", start);
         let env = variant::env_range(scene);
         let scene_features = variant::scene_features(&flat, env.0);
@@ -145,8 +148,9 @@ impl Renderer {
         })
     }
 
-    /// How [`Renderer::new`] went: its phases `flatten`, `bvh` and `shading`
-    /// ([`FlatScene::new_reporting`]) and `upload` (the scene's device buffers created and filled).
+    /// How [`Renderer::new`] went: its phases `flatten` and `bvh`
+    /// ([`FlatScene::for_device_reporting`]) and `upload` (the scene's device buffers created and
+    /// filled, the shading data made on the way).
     pub fn report(&self) -> &PhaseReport {
         &self.report
     }

@@ -3,10 +3,12 @@
 use std::sync::Arc;
 
 use crate::contract::Globals;
+use crate::contract::TriShading;
 use crate::error::Result;
 use crate::gpu::buffer::Buffer;
 use crate::gpu::context::Context;
-use crate::scene::flat::FlatScene;
+use crate::scene::Scene;
+use crate::scene::flat::{FlatScene, shading_iter};
 
 /// The scene's arrays on the device.
 pub(crate) struct GpuScene {
@@ -33,11 +35,13 @@ pub(crate) struct GpuScene {
 }
 
 impl GpuScene {
-    /// Uploads `flat`, emptying its per-triangle arrays — the BVH's triangles and triangle ids,
-    /// and the shading data — each as soon as it is on the device: from then on they live there
-    /// only (issue 38: at 2 M triangles they are 250 MB of host memory, and on a CPU device the
-    /// device copy is host memory too).
-    pub(crate) fn new(ctx: &Arc<Context>, flat: &mut FlatScene) -> Result<GpuScene> {
+    /// Uploads `flat`, the flattened form of `scene`, emptying its per-triangle arrays — the
+    /// BVH's triangles and triangle ids, and the shading data if it has any — each as soon as it
+    /// is on the device: from then on they live there only (issue 38: at 2 M triangles they are
+    /// 250 MB of host memory, and on a CPU device the device copy is host memory too). Without
+    /// shading data (`FlatScene::for_device_reporting`) it is made from `scene` chunk by chunk
+    /// straight into the staging buffer, so the whole array never exists on the host.
+    pub(crate) fn new(ctx: &Arc<Context>, scene: &Scene, flat: &mut FlatScene) -> Result<GpuScene> {
         let _span = tracing::info_span!("upload").entered();
         // One statement each: a host array taken into a temporary of the struct expression below
         // would live until the whole expression ends, so all of them would outlive their uploads
@@ -45,7 +49,19 @@ impl GpuScene {
         let nodes = Buffer::storage_with(ctx, "BVH nodes", &flat.bvh.nodes)?;
         let tris = Buffer::storage_with(ctx, "triangles (leaf order)", &std::mem::take(&mut flat.bvh.tris))?;
         let prim_ids = Buffer::storage_with(ctx, "triangle ids", &std::mem::take(&mut flat.bvh.prim_ids))?;
-        let shading = Buffer::storage_with(ctx, "triangle shading", &std::mem::take(&mut flat.shading))?;
+        let shading = if flat.shading.is_empty() {
+            let count = scene.triangle_count();
+            let shading = Buffer::storage(ctx, "triangle shading", (count * size_of::<TriShading>()) as u64)?;
+            let mut made = shading_iter(scene, &flat.emitters);
+            shading.upload_with(count, |chunk: &mut [TriShading]| {
+                for (slot, s) in chunk.iter_mut().zip(&mut made) {
+                    *slot = s;
+                }
+            })?;
+            shading
+        } else {
+            Buffer::storage_with(ctx, "triangle shading", &std::mem::take(&mut flat.shading))?
+        };
         Ok(GpuScene {
             nodes,
             tris,

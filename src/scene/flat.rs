@@ -105,6 +105,22 @@ impl FlatScene {
     /// # Errors
     /// As [`FlatScene::new`]; what was recorded before the failure stays.
     pub fn new_reporting(scene: &Scene, report: &mut PhaseReport) -> Result<FlatScene> {
+        FlatScene::build(scene, report, true)
+    }
+
+    /// [`FlatScene::new_reporting`] without the triangles' shading data (`shading` is empty) and
+    /// its phase: what a renderer needs, since [`crate::gpu::Renderer::from_flat`] makes the
+    /// shading data from the scene chunk by chunk straight into its upload, so that the whole
+    /// array never exists in host memory (issue 38: 72 bytes a triangle, 137 MiB at 2 M). The
+    /// CPU reference needs [`FlatScene::new_reporting`]'s.
+    ///
+    /// # Errors
+    /// As [`FlatScene::new`]; what was recorded before the failure stays.
+    pub fn for_device_reporting(scene: &Scene, report: &mut PhaseReport) -> Result<FlatScene> {
+        FlatScene::build(scene, report, false)
+    }
+
+    fn build(scene: &Scene, report: &mut PhaseReport, with_shading: bool) -> Result<FlatScene> {
         let start = Instant::now();
         scene.validate()?;
         let mut emitters = Vec::new();
@@ -160,9 +176,16 @@ impl FlatScene {
         report.record("bvh", start);
         // After the build, so that the BVH's intermediate forms and the shading data are never
         // alive together (issue 38: at 2 M triangles, 144 MB off the peak).
-        let start = Instant::now();
-        let shading = shading(scene, &emitters);
-        report.record("shading", start);
+        let shading = if with_shading {
+            let start = Instant::now();
+            // Sized first: collecting a `flat_map` would grow the array by doubling.
+            let mut shading = Vec::with_capacity(scene.triangle_count());
+            shading.extend(shading_iter(scene, &emitters));
+            report.record("shading", start);
+            shading
+        } else {
+            Vec::new()
+        };
         Ok(FlatScene {
             bvh,
             shading,
@@ -188,13 +211,12 @@ impl FlatScene {
 
 /// The shading data of every triangle, by original triangle id: vertex normals (the face normal
 /// without them), texture coordinates, material, emitter (`emitters` lists the emissive triangles
-/// in id order) and interior medium.
-fn shading(scene: &Scene, emitters: &[EmitterTri]) -> Vec<TriShading> {
-    let mut shading = Vec::with_capacity(scene.triangle_count());
+/// in id order) and interior medium. Both back ends' shading comes from here: collected by the CPU
+/// reference, written chunk by chunk into the upload by a renderer.
+pub(crate) fn shading_iter<'a>(scene: &'a Scene, emitters: &'a [EmitterTri]) -> impl Iterator<Item = TriShading> + 'a {
     let mut next_emitter = emitters.iter().map(|e| e.tri).enumerate().peekable();
-    for mesh in &scene.meshes {
-        for t in &mesh.indices {
-            let id = shading.len() as u32;
+    scene.meshes.iter().flat_map(|mesh| mesh.indices.iter().map(move |t| (mesh, t))).zip(0u32..).map(
+        move |((mesh, t), id)| {
             let n = match &mesh.normals {
                 Some(normals) => t.map(|i| normals[i as usize]),
                 None => {
@@ -210,7 +232,7 @@ fn shading(scene: &Scene, emitters: &[EmitterTri]) -> Vec<TriShading> {
                 Some((k, _)) => k as u32,
                 None => NO_EMITTER,
             };
-            shading.push(TriShading {
+            TriShading {
                 n0: n[0],
                 n1: n[1],
                 n2: n[2],
@@ -220,10 +242,9 @@ fn shading(scene: &Scene, emitters: &[EmitterTri]) -> Vec<TriShading> {
                 material: mesh.material.0,
                 emitter,
                 interior: mesh.interior.map_or(NO_MEDIUM, |m| m.0),
-            });
-        }
-    }
-    shading
+            }
+        },
+    )
 }
 
 /// The kernels' form of a light without area.

@@ -43,3 +43,33 @@ fn parameter_changes_reach_the_gpu() {
         assert!((2.0 * a - b).abs() <= 1e-5 * b.abs() + 1e-7, "{a} vs {b}");
     }
 }
+
+/// Issue 38: uploads cross the staging buffer's chunk boundaries intact, whether copied from a
+/// slice or made chunk by chunk, with an element size (72 bytes, a triangle's shading) that does
+/// not divide the chunk.
+#[test]
+fn issue_38_uploads_cross_chunk_boundaries() {
+    use pathgrad::gpu::Buffer;
+    use pathgrad::gpu::buffer::UPLOAD_CHUNK_BYTES;
+    let gpu = TestGpu::new();
+    let per_chunk = UPLOAD_CHUNK_BYTES / 72;
+    let count = 2 * per_chunk + 5;
+    let word = |i: usize, k: usize| (i * 18 + k) as u32;
+    let data: Vec<[u32; 18]> = (0..count).map(|i| std::array::from_fn(|k| word(i, k))).collect();
+    let copied = Buffer::storage_with(&gpu.ctx, "copied", &data).unwrap();
+    assert_eq!(copied.download::<[u32; 18]>(count).unwrap(), data);
+    drop(copied);
+    let made = Buffer::storage(&gpu.ctx, "made", (count * 72) as u64).unwrap();
+    let (mut next, mut sizes) = (0, Vec::new());
+    made.upload_with(count, |chunk: &mut [[u32; 18]]| {
+        sizes.push(chunk.len());
+        for slot in chunk {
+            *slot = std::array::from_fn(|k| word(next, k));
+            next += 1;
+        }
+    })
+    .unwrap();
+    assert_eq!(sizes, [per_chunk, per_chunk, 5]);
+    assert_eq!(made.download::<[u32; 18]>(count).unwrap(), data);
+    assert!(made.upload_with(count + 1, |_: &mut [[u32; 18]]| ()).is_err(), "more than the buffer holds");
+}

@@ -21,8 +21,8 @@ pub(crate) struct Opened {
     pub(crate) ctx: Option<std::sync::Arc<pathgrad::gpu::Context>>,
     /// Microseconds spent building kernel variants so far (see `announce_compiles`).
     pub(crate) compile_us: std::sync::Arc<std::sync::atomic::AtomicU64>,
-    /// The phases of opening it: `device` (the Vulkan context; GPU only), then the backend's own
-    /// (`flatten`, `bvh`, `shading` and, on the GPU, `upload`).
+    /// The phases of opening it: `flatten` and `bvh`, then `shading` (CPU reference only: on the
+    /// GPU the shading data is made during `upload`), or `device` (the Vulkan context) and `upload`.
     pub(crate) report: PhaseReport,
     /// Bytes of device memory the scene's buffers take (GPU only).
     pub(crate) scene_device_bytes: Option<u64>,
@@ -132,7 +132,7 @@ impl RenderFlags {
         // memory and the device's are never held together (issue 38).
         let flat = {
             let _span = tracing::info_span!("load", scene = %scene.source).entered();
-            pathgrad::scene::flat::FlatScene::new_reporting(scene, &mut report)
+            pathgrad::scene::flat::FlatScene::for_device_reporting(scene, &mut report)
                 .with_context(|| format!("loading {spec}"))?
         };
         let start = std::time::Instant::now();

@@ -31,8 +31,8 @@ pub(crate) struct RenderArgs {
     #[arg(long, default_value_t = 0.0, allow_negative_numbers = true)]
     pub(crate) exposure: f32,
     /// Print a JSON summary instead of text. Its `phases` list each phase (parse, assemble,
-    /// device, flatten, bvh, shading, upload, render, write) with its seconds and the process's RSS and
-    /// peak RSS at its end (Linux only, else null); `device_bytes` gives the scene's device
+    /// flatten, bvh, then shading on the CPU reference or device and upload on a GPU, render,
+    /// write) with its seconds and the process's RSS and peak RSS at its end (Linux only, else null); `device_bytes` gives the scene's device
     /// buffers (`scene`) and the most device buffer memory held at once (`peak`).
     #[arg(long)]
     pub(crate) json: bool,
