@@ -143,7 +143,7 @@ void texture_footprint(uint offset, uint width, uint height, uint mode, vec2 uv,
     weight[3] = fx * fy;
 }
 
-// RGB at offset i of the tables array (a normal map's texel).
+// RGB at offset i of the tables array: a normal map's texel (twin: param_rgb over FlatScene::tables).
 vec3 table_rgb(uint i) { return vec3(coating_table(i), coating_table(i + 1u), coating_table(i + 2u)); }
 
 // The height's gradient of bump map m at uv times its scale (twin: bump_gradient of

@@ -588,18 +588,44 @@ impl<'a> Loader<'a> {
         Ok(())
     }
 
-    /// The `bitmap` texture `texture` of a map wrapper (`what`: "a normal map", "a bump map"),
-    /// whose texels must lie in [0, 1] unless `range` is empty (see [`Loader::bitmap`]).
+    /// The texture `texture` of a map wrapper (`what`: "a normal map", "a bump map"): a `bitmap`,
+    /// whose texels must lie in [0, 1] unless `range` is empty (see [`Loader::bitmap`]), or a
+    /// `rawconstant` (Mitsuba's constant without colour conversion: a `vector` or a `float`), one
+    /// texel read as a nearest lookup (exactly its value).
     fn map_bitmap(&mut self, texture: El<'a>, what: &str, range: &str) -> Result<NormalMapTexture> {
         let texture = self.deref(texture)?;
         let tp = Props::parse(&self.x, texture)?;
-        if !texture.has_tag_name("texture") || tp.kind != "bitmap" {
-            return Err(self.x.err(
-                texture,
-                format!("{what} must be a 'bitmap' texture, got '{}' (pathgrad reads no other)", tp.kind),
-            ));
-        }
-        let map = self.bitmap(&tp, texture, range)?;
+        let map = match (texture.has_tag_name("texture"), tp.kind.as_str()) {
+            (true, "bitmap") => self.bitmap(&tp, texture, range)?,
+            (true, "rawconstant") => {
+                let value = match tp.point(&self.x, "value") {
+                    Ok(Some((v, _))) => v,
+                    _ => match tp.float(&self.x, "value")? {
+                        Some((v, _)) => Vec3::splat(v),
+                        None => return Err(self.x.err(texture, "'rawconstant' needs the property 'value'")),
+                    },
+                };
+                if !value.is_finite() {
+                    return Err(self.x.err(texture, format!("'rawconstant' value {value} is not finite")));
+                }
+                NormalMapTexture {
+                    width: 1,
+                    height: 1,
+                    texels: value.to_array().to_vec(),
+                    nearest: true,
+                    wrap: Wrap::Repeat,
+                }
+            }
+            _ => {
+                return Err(self.x.err(
+                    texture,
+                    format!(
+                        "{what} must be a 'bitmap' or 'rawconstant' texture, got '{}' (pathgrad reads no other)",
+                        tp.kind
+                    ),
+                ));
+            }
+        };
         self.finish(&tp)?;
         Ok(map)
     }

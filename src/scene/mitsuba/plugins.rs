@@ -98,7 +98,7 @@ pub const PLUGINS: &[Plugin] = &[
     p(
         Bsdf,
         "bumpmap",
-        "one nested texture (a `bitmap`: heights, the luminance of its texels), `scale`, one nested BSDF (parameters `.nested_bsdf.…`)",
+        "one nested texture (a `bitmap` or `rawconstant`: heights, the luminance of its texels), `scale`, one nested BSDF (parameters `.nested_bsdf.…`)",
         "as Mitsuba (∂p/∂u, ∂p/∂v moved by the heights' gradient, flipped normals, shadow terminator); the heights are not parameters; nested BSDF not anisotropic; inside twosided, not around it; not inside blendbsdf",
     ),
     p(
@@ -117,7 +117,7 @@ pub const PLUGINS: &[Plugin] = &[
     p(
         Bsdf,
         "normalmap",
-        "texture `normalmap` (a `bitmap`), one nested BSDF (parameters `.nested_bsdf.…`)",
+        "texture `normalmap` (a `bitmap` or `rawconstant`), one nested BSDF (parameters `.nested_bsdf.…`)",
         "frame from ∂p/∂u as Mitsuba, with its flipped normals and shadow terminator; the map's texels are not parameters; inside twosided, not around it; not inside blendbsdf",
     ),
     p(Bsdf, "null", "—", "an index-matched boundary (media)"),

@@ -38,6 +38,12 @@ fn issue_31_a_normal_map_holds_its_texels_and_names_its_bsdf_as_mitsuba() {
     assert!(matches!(s.materials[nested.0 as usize], Material::RoughConductor { .. }) && map == 0);
     let Material::TwoSided(inner) = s.materials[s.meshes[1].material.0 as usize] else { panic!("not two-sided") };
     assert!(matches!(s.materials[inner.0 as usize], Material::NormalMap { .. }));
+    // Mitsuba's identity test scene's texture: a `rawconstant` vector, one exact texel.
+    let c = load_with_map(
+        r#"<shape type="cube"><bsdf type="normalmap"><texture name="normalmap" type="rawconstant"><vector name="value" value="0.5, 0.5, 1"/></texture><bsdf type="diffuse"/></bsdf></shape>"#,
+    )
+    .unwrap();
+    assert_eq!((c.normal_maps[0].texels.as_slice(), c.normal_maps[0].nearest), ([0.5, 0.5, 1.0].as_slice(), true));
     let err = s.params.select(&["box.bsdf.normalmap.data"]).unwrap_err().to_string();
     assert!(err.contains("a normal or bump map's texels are not parameters"), "{err}");
 }
@@ -84,7 +90,7 @@ fn issue_31_normal_maps_refuse_what_they_do_not_read_by_name() {
         (
             r#"<bsdf type="normalmap"><texture name="normalmap" type="checkerboard"/><bsdf type="diffuse"/></bsdf>"#
                 .into(),
-            "a normal map must be a 'bitmap' texture, got 'checkerboard'",
+            "a normal map must be a 'bitmap' or 'rawconstant' texture, got 'checkerboard'",
         ),
         (
             format!(
