@@ -140,7 +140,7 @@ fn mapped_normal(flat: &FlatScene, m: &Material, s: &Surface, front: crate::samp
 /// [`tangent_frame`] of the normal that faces wi; `mirrored` when a two-sided material is seen
 /// from the back, whose frame is then (s, t, −n), as Mitsuba's `twosided` flips only the z
 /// coordinate and leaves the map's normal in the front's coordinates) and the direction
-/// `wi_world`: the map's normal n in that frame ([`mapped_normal`]), its x and y negated where it
+/// `wi_world`: the map's normal n in that frame (`mapped_normal`), its x and y negated where it
 /// faces away from wi (`flip_invalid_normals`), normalised; s = (1, 0, 0) made orthogonal to n,
 /// t = n × s. Returns the perturbed frame in world space and the BSDF's wrapper.
 ///

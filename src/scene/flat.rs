@@ -174,6 +174,12 @@ impl FlatScene {
         })
     }
 
+    /// How many leading values of [`FlatScene::tables`] are coating tables (they follow the
+    /// roughness); the normal maps' texels after them never change.
+    pub fn coating_tables_len(&self) -> usize {
+        self.materials.iter().filter(|m| m.tag == MAT_ROUGH_PLASTIC).count() * COATING_TABLE_LEN as usize
+    }
+
     /// The geometric (winding) normal of the triangle in leaf slot `slot`, unit length.
     pub fn face_normal(&self, slot: u32) -> Vec3 {
         let t = &self.bvh.tris[slot as usize];
