@@ -18,6 +18,9 @@ void main() {
     b.leaf1 = Leaf(c.kind1, c.dist1, c.alpha1, c.color1, c.eta1, c.k1, 0u, c.alpha_v1);
     b.weight = c.weight;
     b.blend = c.blend != 0u;
+    b.mapped = false;
+    b.base_n = vec3(0.0, 0.0, 1.0);
+    b.nmap_alpha2 = 0.0;
     BsdfSample s = bsdf_sample(b, c.wi, c.u_lobe, c.u);
     results[i] = BsdfProbeResult(s.wo, s.pdf, s.value, s.valid ? 1u : 0u, bsdf_eval(b, c.wi, c.wo_eval), bsdf_pdf(b, c.wi, c.wo_eval));
 }

@@ -22,6 +22,9 @@ void main() {
     b.leaf1 = Leaf(c.kind1, c.dist1, c.alpha1, c.color1, c.eta1, c.k1, 0u, c.alpha_v1);
     b.weight = c.weight;
     b.blend = c.blend != 0u;
+    b.mapped = false;
+    b.base_n = vec3(0.0, 0.0, 1.0);
+    b.nmap_alpha2 = 0.0;
     BsdfSample s = bsdf_sample_diff(b, c.wi, c.u_lobe, c.u_lobe, c.u);
     vec3 extra = vec3(lambert_w0(-c.u_lobe / EULER_E), lambert_wm1((c.u_lobe - 1.0) / EULER_E),
                       diff_sample_x(c.dist0, c.u.x < 0.5, c.u.y));

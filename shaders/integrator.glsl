@@ -337,9 +337,12 @@ bool path_step(inout PathState st) {
                 shade = true;
                 bsdf = resolve_bsdf(s.material, s.uv);
                 // A two-sided material seen from the back shades with the flipped normal.
-                if (HAS(F_TWO_SIDED) && materials[s.material].two_sided != 0u && dot(s.ns, wi_world) < 0.0) s.ns = -s.ns;
-                frame = (HAS(F_ANISOTROPIC) && material_anisotropic(s.material)) ? tangent_frame(s.ns, s.ng, s.dpdu)
-                                                                                : shading_frame(s.ns);
+                bool mirrored = HAS(F_TWO_SIDED) && materials[s.material].two_sided != 0u && dot(s.ns, wi_world) < 0.0;
+                vec3 ns = mirrored ? -s.ns : s.ns;
+                bool mapped = HAS(F_NORMAL_MAP) && materials[s.material].nmap_width > 0u;
+                frame = (mapped || (HAS(F_ANISOTROPIC) && material_anisotropic(s.material))) ? tangent_frame(ns, s.ng, s.dpdu)
+                                                                                            : shading_frame(ns);
+                if (mapped) frame = normal_map_frame(materials[s.material], s, frame, mirrored, wi_world, bsdf);
                 wi = to_local(frame, wi_world);
                 gt.material = s.material;
                 gt.uv = s.uv;

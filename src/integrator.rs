@@ -145,15 +145,33 @@ impl Strategy {
                 })?;
                 use crate::scene::Material;
                 let uncovered = scene.materials.iter().find_map(|m| match m {
-                    Material::RoughPlastic { alpha, .. } if *alpha == target => Some("a rough plastic's"),
+                    Material::RoughPlastic { alpha, .. } if *alpha == target => Some("a rough plastic's roughness"),
                     Material::RoughConductor { alpha, alpha_v, .. }
                         if alpha != alpha_v && (*alpha == target || *alpha_v == target) =>
                     {
-                        Some("an anisotropic rough conductor's")
+                        Some("an anisotropic rough conductor's roughness")
                     }
-                    Material::RoughDielectric { alpha, .. } if *alpha == target => Some("a rough dielectric's"),
+                    Material::RoughDielectric { alpha, .. } if *alpha == target => {
+                        Some("a rough dielectric's roughness")
+                    }
                     _ => None,
                 });
+                // A normal-mapped material's lobes live in the perturbed frame, whose wrapper the
+                // differential sampler's densities do not include.
+                let uses = |id: crate::scene::MaterialId| match scene.materials.get(id.0 as usize) {
+                    Some(Material::RoughConductor { alpha, alpha_v, .. }) => *alpha == target || *alpha_v == target,
+                    Some(Material::Blend { weight, .. }) => *weight == target,
+                    _ => false,
+                };
+                let mapped = scene.materials.iter().any(|m| match m {
+                    Material::NormalMap { nested, .. } | Material::BumpMap { nested, .. } => {
+                        uses(*nested)
+                            || matches!(scene.materials.get(nested.0 as usize), Some(Material::Blend { children, .. })
+                                if children.iter().any(|c| uses(*c)))
+                    }
+                    _ => false,
+                });
+                let uncovered = uncovered.or(mapped.then_some("a normal-mapped material's roughness or blend weight"));
                 if let Some(whose) = uncovered {
                     // The paper's positive/negative split of ∂D/∂α carries over to these lobes, but
                     // not their Fresnel-weighted lobe choice (plastic: coating/base; dielectric:
@@ -161,8 +179,9 @@ impl Strategy {
                     return Err(Error::InvalidArgument {
                         parameter: scene.params.entry(target).name.clone(),
                         message: format!(
-                            "is {whose} roughness, which the differential sampler does not cover (it samples the \
-                             derivative of a rough conductor's or a blend's lobe): use the bsdf strategy"
+                            "is {whose}, which the differential sampler does not cover (it samples the \
+                             derivative of a rough conductor's or a blend's lobe, without a normal map): use the \
+                             bsdf strategy"
                         ),
                     });
                 }

@@ -141,6 +141,10 @@ impl ParamTable {
                     ": pathgrad exposes no index of refraction as a parameter (a dielectric's acts through \
                      the directions it refracts into, which detached derivatives hold fixed; attached \
                      derivatives are a later issue)"
+                } else if pattern.contains("normalmap") || pattern.contains("nested_texture") {
+                    ": a normal or bump map's texels are not parameters in pathgrad (they move the shading \
+                     frame, whose derivative is not built; Mitsuba's `normalmap.data`, `nested_texture.data`); \
+                     the nested BSDF's parameters (`….nested_bsdf.…`) are"
                 } else {
                     ""
                 };

@@ -15,7 +15,9 @@
 // A rough conductor's roughness is (alpha, alpha_v) (α_u along the frame's x, α_v along y); other
 // leaves read alpha only.
 struct Leaf { uint kind; uint distribution; float alpha; vec3 color; vec3 eta; vec3 k; uint table; float alpha_v; };
-struct Bsdf { Leaf leaf0; Leaf leaf1; float weight; bool blend; };
+// A normal map's wrapper (`mapped`; twin: Perturbed of src/bsdf/mod.rs): the local frame is the
+// perturbed one; base_n is the unperturbed normal in it, nmap_alpha2 the shadow terminator's α².
+struct Bsdf { Leaf leaf0; Leaf leaf1; float weight; bool blend; bool mapped; vec3 base_n; float nmap_alpha2; };
 // A delta lobe's sample (`delta`) has its choice probability as `pdf` and its weight × pdf as
 // `value` (src/bsdf/specular.rs).
 struct BsdfSample { vec3 wo; float pdf; vec3 value; bool valid; bool delta; };
@@ -674,9 +676,21 @@ LeafGrad leaf_eval_grad(Leaf l, vec3 wi, vec3 wo, vec3 adj) {
 // ---- blend (ALGORITHMS.md §4.3) and the whole BSDF ----
 float blend_weight(Bsdf b) { return clamp(b.weight, 0.0, 1.0); }
 
-// f̂ at (wi, wo) and, in `pdf`, the density with which bsdf_sample draws wo: one evaluation of
-// each leaf for both.
-vec3 bsdf_eval_pdf(Bsdf b, vec3 wi, vec3 wo, out float pdf) {
+// A normal map's factor of f̂ toward wo (perturbed frame): Estevez et al.'s shadow terminator
+// 2 / (1 + √(1 + α² tan²θo)) with θo from the unperturbed normal, 0 where wo crosses one horizon
+// but not the other; 1 without a map (twin: Perturbed::factor).
+float perturbed_factor(Bsdf b, vec3 wo) {
+    if (!HAS(F_NORMAL_MAP) || !b.mapped) return 1.0;
+    float c = dot(wo, b.base_n);
+    if (!(c * wo.z > 0.0)) return 0.0;
+    float c2 = c * c;
+    float tan2 = max(1.0 - c2, 0.0) / c2;
+    return 2.0 / (1.0 + sqrt(1.0 + b.nmap_alpha2 * tan2));
+}
+
+// f̂ and density of the leaves (or blend) without a normal map's wrapper: one evaluation of each
+// leaf for both (twin: unperturbed_eval and unperturbed_pdf).
+vec3 unperturbed_eval_pdf(Bsdf b, vec3 wi, vec3 wo, out float pdf) {
     float pdf0;
     vec3 f0 = leaf_eval_pdf(b.leaf0, wi, wo, pdf0);
     if (!HAS(F_BLEND) || !b.blend) {
@@ -688,6 +702,18 @@ vec3 bsdf_eval_pdf(Bsdf b, vec3 wi, vec3 wo, out float pdf) {
     vec3 f1 = leaf_eval_pdf(b.leaf1, wi, wo, pdf1);
     pdf = pdf0 * (1.0 - w) + pdf1 * w;
     return f0 * (1.0 - w) + f1 * w;
+}
+
+// f̂ at (wi, wo) and, in `pdf`, the density with which bsdf_sample draws wo (twin: bsdf_eval and
+// bsdf_pdf).
+vec3 bsdf_eval_pdf(Bsdf b, vec3 wi, vec3 wo, out float pdf) {
+    vec3 f = unperturbed_eval_pdf(b, wi, wo, pdf);
+    if (HAS(F_NORMAL_MAP) && b.mapped) {
+        float factor = perturbed_factor(b, wo);
+        f *= factor;
+        if (factor == 0.0) pdf = 0.0;
+    }
+    return f;
 }
 
 vec3 bsdf_eval(Bsdf b, vec3 wi, vec3 wo) {
@@ -704,14 +730,15 @@ float bsdf_pdf(Bsdf b, vec3 wi, vec3 wo) {
 // ∂(adj · f̂)/∂(every value of b) at (wi, wo); the weight's derivative is f̂1 − f̂0 inside (0, 1).
 BsdfGrad bsdf_eval_grad(Bsdf b, vec3 wi, vec3 wo, vec3 adj) {
     LeafGrad none = LeafGrad(vec3(0.0), vec3(0.0), vec3(0.0), vec3(0.0));
+    if (HAS(F_NORMAL_MAP) && b.mapped) adj *= perturbed_factor(b, wo);
     if (!HAS(F_BLEND) || !b.blend) return BsdfGrad(leaf_eval_grad(b.leaf0, wi, wo, adj), none, vec3(0.0));
     float w = blend_weight(b);
     vec3 weight = (b.weight > 0.0 && b.weight < 1.0) ? adj * (leaf_eval(b.leaf1, wi, wo) - leaf_eval(b.leaf0, wi, wo)) : vec3(0.0);
     return BsdfGrad(leaf_eval_grad(b.leaf0, wi, wo, adj * (1.0 - w)), leaf_eval_grad(b.leaf1, wi, wo, adj * w), weight);
 }
 
-// u_lobe picks the blend child (RNG dim 4); u drives the direction (dims 5, 6).
-BsdfSample bsdf_sample(Bsdf b, vec3 wi, float u_lobe, vec2 u) {
+// bsdf_sample without a normal map's wrapper (twin: unperturbed_sample).
+BsdfSample unperturbed_sample(Bsdf b, vec3 wi, float u_lobe, vec2 u) {
     if (!(HAS(F_BLEND) && b.blend) && is_delta(b.leaf0.kind)) return smooth_sample(b.leaf0, wi, u_lobe);
     if (!(HAS(F_BLEND) && b.blend) && is_smooth_plastic(b.leaf0.kind)) return splastic_sample(b.leaf0, wi, u_lobe, u);
     BsdfSample s = BsdfSample(vec3(0.0), 0.0, vec3(0.0), false, false);
@@ -729,8 +756,20 @@ BsdfSample bsdf_sample(Bsdf b, vec3 wi, float u_lobe, vec2 u) {
     vec3 wo;
     if (!leaf_sample(leaf, wi, u_lobe, u, wo)) return s;
     s.wo = wo;
-    s.value = bsdf_eval_pdf(b, wi, wo, s.pdf);
+    s.value = unperturbed_eval_pdf(b, wi, wo, s.pdf);
     s.valid = s.pdf > 0.0;
+    return s;
+}
+
+// u_lobe picks the blend child (RNG dim 4); u drives the direction (dims 5, 6). A normal map's
+// wrapper invalidates a wo that crosses one horizon only and weighs the rest by its factor.
+BsdfSample bsdf_sample(Bsdf b, vec3 wi, float u_lobe, vec2 u) {
+    BsdfSample s = unperturbed_sample(b, wi, u_lobe, u);
+    if (HAS(F_NORMAL_MAP) && b.mapped && s.valid) {
+        float factor = perturbed_factor(b, s.wo);
+        s.value *= factor;
+        s.valid = factor != 0.0;
+    }
     return s;
 }
 

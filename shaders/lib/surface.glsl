@@ -10,9 +10,10 @@
 
 // RAY_OFFSET and SHADOW_EPSILON come from src/contract/floats.rs.
 
-// dpdu: ∂p/∂u of the triangle from its texture coordinates (kernels with anisotropic BSDFs; 0
-// where the coordinates are degenerate).
-struct Surface { vec3 p; vec3 ng; vec3 ns; vec2 uv; uint material; uint emitter; uint interior; vec3 dpdu; };
+// dpdu: ∂p/∂u of the triangle from its texture coordinates (kernels with anisotropic BSDFs or
+// normal maps; 0 where the coordinates are degenerate).
+// dpdv: ∂p/∂v likewise (kernels with normal or bump maps).
+struct Surface { vec3 p; vec3 ng; vec3 ns; vec2 uv; uint material; uint emitter; uint interior; vec3 dpdu; vec3 dpdv; };
 
 // A triangle's shading data (TriShading, 18 words at a stride of 72 bytes) read as nine 64-bit
 // words, like the traversal's nodes and triangles (bvh.glsl): on lavapipe each word read is one
@@ -44,7 +45,8 @@ Surface surface_at(Hit hit) {
     s.emitter = w8.x;
     s.interior = w8.y;
     s.dpdu = vec3(0.0);
-    if (HAS(F_ANISOTROPIC)) {
+    s.dpdv = vec3(0.0);
+    if (HAS(F_ANISOTROPIC) || HAS(F_NORMAL_MAP)) {
         vec2 uv0 = vec2(w4.y, w5.x);
         vec2 d0 = vec2(w5.y, w6.x) - uv0;
         vec2 d1 = vec2(w6.y, uintBitsToFloat(w7.x)) - uv0;
@@ -52,6 +54,7 @@ Surface surface_at(Hit hit) {
         vec3 e0 = tri.v1 - tri.v0;
         vec3 e1 = tri.v2 - tri.v0;
         if (det != 0.0) s.dpdu = (d1.y * e0 - d0.y * e1) / det;
+        if (HAS(F_NORMAL_MAP) && det != 0.0) s.dpdv = (d0.x * e1 - d1.x * e0) / det;
     }
     return s;
 }
@@ -140,6 +143,77 @@ void texture_footprint(uint offset, uint width, uint height, uint mode, vec2 uv,
     weight[3] = fx * fy;
 }
 
+// RGB at offset i of the tables array: a normal map's texel (twin: param_rgb over FlatScene::tables).
+vec3 table_rgb(uint i) { return vec3(coating_table(i), coating_table(i + 1u), coating_table(i + 2u)); }
+
+// The height's gradient of bump map m at uv times its scale (twin: bump_gradient of
+// src/cpu/surface.rs); one height a texel at m.nmap.
+vec2 bump_gradient(Material m, vec2 uv) {
+    if ((m.nmap_mode & TEX_NEAREST) != 0u) return vec2(0.0);
+    uint texel[4];
+    float weight[4];
+    texture_footprint(m.nmap, m.nmap_width, m.nmap_height, m.nmap_mode, uv, texel, weight);
+    float h[4];
+    for (uint k = 0u; k < 4u; k++) h[k] = coating_table(m.nmap + (texel[k] - m.nmap) / 3u);
+    float x = uv.x * float(m.nmap_width) - 0.5;
+    float y = uv.y * float(m.nmap_height) - 0.5;
+    float fx = x - floor(x);
+    float fy = y - floor(y);
+    float dx = (1.0 - fy) * (h[1] - h[0]) + fy * (h[3] - h[2]);
+    float dy = (1.0 - fx) * (h[2] - h[0]) + fx * (h[3] - h[1]);
+    return vec2(dx * float(m.nmap_width), dy * float(m.nmap_height)) * m.nmap_scale;
+}
+
+// The perturbed normal of a normal or bump map in the front-side frame `front` (twin:
+// mapped_normal of src/cpu/surface.rs, which states the conventions).
+vec3 mapped_normal(Material m, Surface s, ShadingFrame front) {
+    if ((m.nmap_mode & NMAP_BUMP) == 0u) {
+        uint texel[4];
+        float weight[4];
+        texture_footprint(m.nmap, m.nmap_width, m.nmap_height, m.nmap_mode, s.uv, texel, weight);
+        vec3 rgb = vec3(0.0);
+        for (uint k = 0u; k < 4u; k++) rgb += table_rgb(texel[k]) * weight[k];
+        return rgb * 2.0 - vec3(1.0);
+    }
+    vec2 g = bump_gradient(m, s.uv);
+    vec3 dpdu = s.dpdu;
+    vec3 dpdv = s.dpdv;
+    if (dpdu == vec3(0.0)) {
+        ShadingFrame f = shading_frame(s.ng);
+        dpdu = f.t;
+        dpdv = f.b;
+    }
+    vec3 ns = front.n;
+    vec3 du = dpdu + ns * (g.x - dot(ns, dpdu));
+    vec3 dv = dpdv + ns * (g.y - dot(ns, dpdv));
+    vec3 c = cross(du, dv);
+    vec3 n = dot(c, c) > 0.0 ? normalize(c) : vec3(0.0);
+    if (dot(s.ng, n) < 0.0) n = -n;
+    return to_local(front, n);
+}
+
+// Mitsuba's `normalmap` and `bumpmap` frame for material m at surface s (its ns seen from the
+// front) from the unperturbed frame `base` (mirrored: a two-sided material seen from the back)
+// and wi_world; sets the BSDF's wrapper (twin: normal_map_frame of src/cpu/surface.rs, which
+// states the conventions).
+ShadingFrame normal_map_frame(Material m, Surface s, ShadingFrame base, bool mirrored, vec3 wi_world, inout Bsdf b) {
+    if (mirrored) base.b = -base.b;
+    ShadingFrame front = base;
+    if (mirrored) front.n = -base.n;
+    vec3 n = mapped_normal(m, s, front);
+    vec3 wi = to_local(base, wi_world);
+    if (wi.z * dot(wi, n) <= 0.0) n = vec3(-n.x, -n.y, n.z);
+    n = n == vec3(0.0) ? vec3(0.0, 0.0, 1.0) : normalize(n);
+    vec3 t_axis = vec3(1.0, 0.0, 0.0) - n * n.x;
+    t_axis = t_axis == vec3(0.0) ? vec3(0.0, 0.0, 1.0) : normalize(t_axis);
+    vec3 b_axis = cross(n, t_axis);
+    float nz2 = n.z * n.z;
+    b.mapped = true;
+    b.base_n = vec3(t_axis.z, b_axis.z, n.z);
+    b.nmap_alpha2 = min(0.125 * (max(1.0 - nz2, 0.0) / nz2), 1.0);
+    return ShadingFrame(to_world(base, t_axis), to_world(base, b_axis), to_world(base, n));
+}
+
 // A textured material's texture coordinates: the hit's through its `to_uv` rows.
 vec2 texture_uv(Material m, vec2 uv) {
     vec3 p = vec3(uv, 1.0);
@@ -197,6 +271,9 @@ Bsdf resolve_bsdf(uint material_id, vec2 uv) {
         b.weight = 0.0;
         b.blend = false;
     }
+    b.mapped = false;
+    b.base_n = vec3(0.0, 0.0, 1.0);
+    b.nmap_alpha2 = 0.0;
     return b;
 }
 

@@ -55,6 +55,7 @@ fn blend(w: f32) -> Bsdf {
         leaves: [Leaf::Diffuse { albedo: Vec3::new(0.1, 0.6, 0.35) }, conductor(Distribution::Ggx, 0.2).leaves[0]],
         weight: w,
         blend: true,
+        perturbed: None,
     }
 }
 

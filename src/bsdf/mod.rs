@@ -58,7 +58,8 @@ pub enum Leaf {
     SmoothPlastic(plastic::SmoothPlasticLeaf),
 }
 
-/// A resolved BSDF: one leaf, or the blend `(1 − w)·leaves[0] + w·leaves[1]`.
+/// A resolved BSDF: one leaf, or the blend `(1 − w)·leaves[0] + w·leaves[1]`, perhaps in a
+/// perturbed frame (a normal map).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Bsdf {
     /// The leaves; only `leaves[0]` is used unless `blend`.
@@ -67,12 +68,40 @@ pub struct Bsdf {
     pub weight: f32,
     /// Whether this is a blend.
     pub blend: bool,
+    /// A normal map's wrapper: the local frame (of `wi`, `wo`) is the perturbed one.
+    pub perturbed: Option<Perturbed>,
 }
 
 impl Bsdf {
     /// A single-leaf BSDF.
     pub fn leaf(leaf: Leaf) -> Bsdf {
-        Bsdf { leaves: [leaf, leaf], weight: 0.0, blend: false }
+        Bsdf { leaves: [leaf, leaf], weight: 0.0, blend: false, perturbed: None }
+    }
+}
+
+/// What Mitsuba's `normalmap` adds to the BSDF it wraps, whose local frame is the perturbed one
+/// (`crate::cpu::surface::normal_map_frame`): f̂ and the density are zero toward a `wo` on
+/// different sides of the perturbed and the unperturbed horizons, and f̂ is multiplied by Estevez
+/// et al.'s shadow terminator (Ray Tracing Gems, 2019; Mitsuba's `normalmap_helpers.h`).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Perturbed {
+    /// The unperturbed shading normal in the perturbed local frame.
+    pub base_n: Vec3,
+    /// The terminator's α² = min(tan²θ/8, 1) of the perturbed normal in the unperturbed frame.
+    pub alpha2: f32,
+}
+
+impl Perturbed {
+    /// The factor of f̂ toward `wo` (perturbed frame): 2 / (1 + √(1 + α² tan²θo)) with θo
+    /// measured from the unperturbed normal, 0 where `wo` crosses one horizon but not the other.
+    pub fn factor(&self, wo: Vec3) -> f32 {
+        let c = wo.dot(self.base_n);
+        if !(c * wo.z > 0.0) {
+            return 0.0;
+        }
+        let c2 = c * c;
+        let tan2 = (1.0 - c2).max(0.0) / c2;
+        2.0 / (1.0 + (1.0 + self.alpha2 * tan2).sqrt())
     }
 }
 
@@ -153,6 +182,7 @@ pub fn leaf_eval_grad(leaf: &Leaf, wi: Vec3, wo: Vec3, adj: Vec3) -> LeafGrad {
 /// ∂(adj · f̂)/∂(every value of `b`) at (wi, wo); the blend weight's derivative is f̂1 − f̂0 inside
 /// (0, 1) and 0 where its clamp is active (ALGORITHMS.md §4.3).
 pub fn bsdf_eval_grad(b: &Bsdf, wi: Vec3, wo: Vec3, adj: Vec3) -> BsdfGrad {
+    let adj = b.perturbed.map_or(adj, |p| adj * p.factor(wo));
     if !b.blend {
         return BsdfGrad {
             leaves: [leaf_eval_grad(&b.leaves[0], wi, wo, adj), LeafGrad::default()],
@@ -214,14 +244,28 @@ pub fn leaf_sample(leaf: &Leaf, wi: Vec3, u_lobe: f32, u: Vec2) -> Option<Vec3> 
     }
 }
 
-/// f̂(wi, wo) of the whole BSDF.
-pub fn bsdf_eval(b: &Bsdf, wi: Vec3, wo: Vec3) -> Vec3 {
+/// f̂(wi, wo) of the leaves (or blend), without a normal map's factor.
+fn unperturbed_eval(b: &Bsdf, wi: Vec3, wo: Vec3) -> Vec3 {
     if b.blend { blend::blend_eval(b, wi, wo) } else { leaf_eval(&b.leaves[0], wi, wo) }
 }
 
-/// Sampling density of the whole BSDF at `wo`.
-pub fn bsdf_pdf(b: &Bsdf, wi: Vec3, wo: Vec3) -> f32 {
+/// Sampling density of the leaves (or blend) at `wo`, without a normal map's mask.
+fn unperturbed_pdf(b: &Bsdf, wi: Vec3, wo: Vec3) -> f32 {
     if b.blend { blend::blend_pdf(b, wi, wo) } else { leaf_pdf(&b.leaves[0], wi, wo) }
+}
+
+/// f̂(wi, wo) of the whole BSDF.
+pub fn bsdf_eval(b: &Bsdf, wi: Vec3, wo: Vec3) -> Vec3 {
+    let f = unperturbed_eval(b, wi, wo);
+    b.perturbed.map_or(f, |p| f * p.factor(wo))
+}
+
+/// Sampling density of the whole BSDF at `wo` (0 where a normal map's wrapper refuses `wo`).
+pub fn bsdf_pdf(b: &Bsdf, wi: Vec3, wo: Vec3) -> f32 {
+    match b.perturbed {
+        Some(p) if p.factor(wo) == 0.0 => 0.0,
+        _ => unperturbed_pdf(b, wi, wo),
+    }
 }
 
 /// The leaf that `u_lobe` picks (a blend's child 1 when u_lobe ≤ w) and `u_lobe` rescaled to
@@ -238,6 +282,18 @@ pub fn pick_leaf(b: &Bsdf, u_lobe: f32) -> (&Leaf, f32) {
 /// (dims 5, 6). Returns `None` for an invalid sample (the path ends). The returned value and pdf
 /// are the whole BSDF's, re-evaluated at the sampled direction.
 pub fn bsdf_sample(b: &Bsdf, wi: Vec3, u_lobe: f32, u: Vec2) -> Option<BsdfSample> {
+    let s = unperturbed_sample(b, wi, u_lobe, u)?;
+    let Some(p) = b.perturbed else { return Some(s) };
+    // A normal map's wrapper: the sample is invalid where wo crosses one horizon only.
+    let factor = p.factor(s.wo);
+    if factor == 0.0 {
+        return None;
+    }
+    Some(BsdfSample { value: s.value * factor, ..s })
+}
+
+/// [`bsdf_sample`] of the leaves (or blend), without a normal map's wrapper.
+fn unperturbed_sample(b: &Bsdf, wi: Vec3, u_lobe: f32, u: Vec2) -> Option<BsdfSample> {
     match (b.blend, &b.leaves[0]) {
         (false, Leaf::Smooth(s)) => return s.sample(wi, u_lobe),
         (false, Leaf::SmoothPlastic(p)) => return p.sample(wi, u_lobe, u),
@@ -245,11 +301,11 @@ pub fn bsdf_sample(b: &Bsdf, wi: Vec3, u_lobe: f32, u: Vec2) -> Option<BsdfSampl
     }
     let (leaf, u_lobe) = pick_leaf(b, u_lobe);
     let wo = leaf_sample(leaf, wi, u_lobe, u)?;
-    let pdf = bsdf_pdf(b, wi, wo);
+    let pdf = unperturbed_pdf(b, wi, wo);
     if !(pdf > 0.0) {
         return None;
     }
-    Some(BsdfSample { wo, pdf, value: bsdf_eval(b, wi, wo), delta: false })
+    Some(BsdfSample { wo, pdf, value: unperturbed_eval(b, wi, wo), delta: false })
 }
 
 #[cfg(test)]

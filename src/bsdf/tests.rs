@@ -132,6 +132,7 @@ fn chi2_blend() {
             leaves: [Leaf::Diffuse { albedo: Vec3::new(0.1, 0.6, 0.35) }, conductor(Distribution::Ggx, 0.2)],
             weight: w,
             blend: true,
+            perturbed: None,
         };
         check_chi2(&format!("blend-w{w}"), 40 + i as u32, &b, incident(0.7));
     }
@@ -174,6 +175,7 @@ fn all_bsdfs() -> Vec<Bsdf> {
         leaves: [Leaf::Diffuse { albedo: Vec3::splat(0.5) }, conductor(Distribution::Ggx, 0.1)],
         weight: 0.3,
         blend: true,
+        perturbed: None,
     });
     v.push(Bsdf::leaf(plastic(Distribution::Beckmann, 0.3, Vec3::new(0.2, 0.5, 0.9), false)));
     v.push(Bsdf::leaf(plastic(Distribution::Ggx, 0.1, Vec3::new(0.7, 0.4, 0.1), true)));
@@ -181,6 +183,7 @@ fn all_bsdfs() -> Vec<Bsdf> {
         leaves: [plastic(Distribution::Ggx, 0.2, Vec3::splat(0.5), false), conductor(Distribution::Beckmann, 0.2)],
         weight: 0.4,
         blend: true,
+        perturbed: None,
     });
     v.push(Bsdf::leaf(anisotropic(Distribution::Beckmann, 0.1, 0.4)));
     v.push(Bsdf::leaf(anisotropic(Distribution::Ggx, 0.5, 0.05)));

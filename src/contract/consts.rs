@@ -59,6 +59,9 @@ contract_constants! {
     /// `Material::tex_mode`: Mitsuba's checkerboard, a 2×1 texture whose first texel is read
     /// where the coordinates' fractional parts lie on the same side of 1/2, else its second.
     TEX_CHECKER = 8;
+    /// `Material::nmap_mode`: the map is a bump map (heights, one value a texel), not a normal
+    /// map (RGB).
+    NMAP_BUMP = 16;
 
     /// `TriShading::emitter` of a triangle that does not emit.
     NO_EMITTER = 0xFFFF_FFFF;
@@ -171,6 +174,9 @@ contract_constants! {
     F_ROUGH_DIELECTRIC = 1 << 24;
     /// Feature bit: anisotropic rough conductors, whose shading frame follows the surface's ∂p/∂u.
     F_ANISOTROPIC = 1 << 25;
+    /// Feature bit: normal or bump maps (Mitsuba's `normalmap`, `bumpmap`), which perturb the
+    /// shading frame built on ∂p/∂u.
+    F_NORMAL_MAP = 1 << 26;
     /// Entries of a rough plastic's coating transmittance table (μ = k/63, k = 0..63).
     COATING_RES = 64;
     /// Floats of one coating table as the kernels read it: T, ∂T/∂α, Rᵢ, ∂Rᵢ/∂α.

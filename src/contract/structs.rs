@@ -303,6 +303,19 @@ contract_structs! {
         /// Rough plastic: offset of its coating table in the tables array
         /// (`COATING_TABLE_LEN` floats: T(μ), ∂T/∂α, Rᵢ, ∂Rᵢ/∂α).
         table: u32,
+        /// Normal or bump map (Mitsuba's `normalmap`, `bumpmap` around this material): offset of
+        /// its texels in the tables array (RGB for a normal map, one value for a bump map; row 0
+        /// at v = 0); none when `nmap_width` is 0.
+        nmap: u32,
+        /// Normal or bump map width in texels; 0 without a map.
+        nmap_width: u32,
+        /// Normal or bump map height in texels.
+        nmap_height: u32,
+        /// Normal or bump map lookup: `TEX_NEAREST` and wrap bits as `tex_mode`, or-ed with
+        /// `NMAP_BUMP` for a bump map.
+        nmap_mode: u32,
+        /// Bump map: Mitsuba's `scale` of the height's gradient (unused by a normal map).
+        nmap_scale: f32,
     }
 
     /// One emissive triangle, in the order of its area CDF.

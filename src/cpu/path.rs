@@ -17,8 +17,8 @@ use crate::cpu::emitter::{
 };
 use crate::cpu::medium;
 use crate::cpu::surface::{
-    SHADOW_EPSILON, bsdf_backward, material_anisotropic, mis_power, offset_origin, param_color, resolve_bsdf, safe_div,
-    surface_at, tangent_frame,
+    SHADOW_EPSILON, bsdf_backward, material_anisotropic, material_normal_mapped, mis_power, normal_map_frame,
+    offset_origin, param_color, resolve_bsdf, safe_div, surface_at, tangent_frame,
 };
 use crate::rng::{RngKey, Stream, uniform4};
 use crate::sampling::Frame;
@@ -354,15 +354,22 @@ pub fn trace_path<const ADJOINT: bool>(
             break;
         }
 
-        let bsdf = resolve_bsdf(flat, s.material, s.uv);
+        let mut bsdf = resolve_bsdf(flat, s.material, s.uv);
         // A two-sided material seen from the back shades with the flipped normal.
-        let ns =
-            if flat.materials[s.material as usize].two_sided != 0 && s.ns.dot(wi_world) < 0.0 { -s.ns } else { s.ns };
-        let frame = if material_anisotropic(flat, s.material) {
+        let mirrored = flat.materials[s.material as usize].two_sided != 0 && s.ns.dot(wi_world) < 0.0;
+        let ns = if mirrored { -s.ns } else { s.ns };
+        let mapped = material_normal_mapped(flat, s.material);
+        let mut frame = if mapped || material_anisotropic(flat, s.material) {
             tangent_frame(ns, s.ng, s.dpdu)
         } else {
             Frame::from_normal(ns)
         };
+        if mapped {
+            let (perturbed, wrapper) =
+                normal_map_frame(flat, &flat.materials[s.material as usize], &s, frame, mirrored, wi_world);
+            frame = perturbed;
+            bsdf.perturbed = Some(wrapper);
+        }
         let wi = frame.to_local(wi_world);
 
         let capable = diff && material_capable(flat, globals, s.material);

@@ -10,8 +10,8 @@ use crate::bsdf::{Bsdf, Distribution, Leaf, LeafGrad, bsdf_eval_grad};
 use crate::bvh::Hit;
 use crate::contract::{
     COATING_TABLE_LEN, MAT_BLEND, MAT_CONDUCTOR, MAT_DIELECTRIC, MAT_PLASTIC, MAT_ROUGH_CONDUCTOR,
-    MAT_ROUGH_DIELECTRIC, MAT_ROUGH_PLASTIC, MAT_THIN_DIELECTRIC, Material, NO_PARAM, TEX_CHECKER, TEX_NEAREST,
-    TEX_WRAP_CLAMP, TEX_WRAP_MIRROR,
+    MAT_ROUGH_DIELECTRIC, MAT_ROUGH_PLASTIC, MAT_THIN_DIELECTRIC, Material, NMAP_BUMP, NO_PARAM, TEX_CHECKER,
+    TEX_NEAREST, TEX_WRAP_CLAMP, TEX_WRAP_MIRROR,
 };
 use crate::cpu::path::GradSink;
 use crate::scene::flat::FlatScene;
@@ -35,6 +35,8 @@ pub struct Surface {
     pub emitter: u32,
     /// ∂p/∂u of the triangle from its texture coordinates (0 where they are degenerate).
     pub dpdu: Vec3,
+    /// ∂p/∂v of the triangle from its texture coordinates (0 where they are degenerate).
+    pub dpdv: Vec3,
 }
 
 /// Resolves `hit`.
@@ -51,7 +53,8 @@ pub fn surface_at(flat: &FlatScene, hit: &Hit) -> Surface {
     let det = d0.x * d1.y - d0.y * d1.x;
     let (e0, e1) = (tri.v1 - tri.v0, tri.v2 - tri.v0);
     let dpdu = if det != 0.0 { (d1.y * e0 - d0.y * e1) / det } else { Vec3::ZERO };
-    Surface { p, ng, ns, uv, material: sh.material, emitter: sh.emitter, dpdu }
+    let dpdv = if det != 0.0 { (d0.x * e1 - d1.x * e0) / det } else { Vec3::ZERO };
+    Surface { p, ng, ns, uv, material: sh.material, emitter: sh.emitter, dpdu, dpdv }
 }
 
 /// Whether material `id` is (or blends) an anisotropic rough conductor, whose shading frame
@@ -76,6 +79,99 @@ pub fn tangent_frame(ns: Vec3, ng: Vec3, dpdu: Vec3) -> crate::sampling::Frame {
         return crate::sampling::Frame::from_normal(ns);
     }
     crate::sampling::Frame { t: s, b: ns.cross(s), n: ns }
+}
+
+/// Whether material `id` carries a normal map (its frame is [`normal_map_frame`]'s).
+pub fn material_normal_mapped(flat: &FlatScene, id: u32) -> bool {
+    flat.materials[id as usize].nmap_width > 0
+}
+
+/// The height's gradient (∂h/∂u, ∂h/∂v) of bump map `m` at `uv`, times its `scale` (Mitsuba's
+/// bitmap `eval_1_grad`: the bilinear interpolant's derivative; 0 for a nearest lookup). The
+/// heights are one value a texel at `m.nmap`.
+fn bump_gradient(flat: &FlatScene, m: &Material, uv: glam::Vec2) -> glam::Vec2 {
+    if m.nmap_mode & TEX_NEAREST != 0 {
+        return glam::Vec2::ZERO;
+    }
+    let (texel, _) = texture_footprint(m.nmap, m.nmap_width, m.nmap_height, m.nmap_mode, uv);
+    // The footprint's RGB offsets (3 per texel) as offsets of one height per texel.
+    let h = texel.map(|t| flat.tables[(m.nmap + (t - m.nmap) / 3) as usize]);
+    let x = uv.x * m.nmap_width as f32 - 0.5;
+    let y = uv.y * m.nmap_height as f32 - 0.5;
+    let (fx, fy) = (x - x.floor(), y - y.floor());
+    let dx = (1.0 - fy) * (h[1] - h[0]) + fy * (h[3] - h[2]);
+    let dy = (1.0 - fx) * (h[2] - h[0]) + fx * (h[3] - h[1]);
+    glam::Vec2::new(dx * m.nmap_width as f32, dy * m.nmap_height as f32) * m.nmap_scale
+}
+
+/// The perturbed normal of a normal or bump map in the front-side frame of ∂p/∂u (Mitsuba's
+/// coordinates, before `flip_invalid_normals`), unnormalised for a normal map: its RGB mapped to
+/// [−1, 1]; for a bump map (Mitsuba's `bumpmap.cpp`) ∂p/∂u and ∂p/∂v moved along the front normal
+/// `ns` to the height's gradient, their cross product turned to the side of `ng`. `front` is the
+/// unperturbed frame seen from the front.
+fn mapped_normal(flat: &FlatScene, m: &Material, s: &Surface, front: crate::sampling::Frame) -> Vec3 {
+    if m.nmap_mode & NMAP_BUMP == 0 {
+        let (texel, weight) = texture_footprint(m.nmap, m.nmap_width, m.nmap_height, m.nmap_mode, s.uv);
+        let mut rgb = Vec3::ZERO;
+        for (t, w) in texel.into_iter().zip(weight) {
+            rgb += param_rgb(&flat.tables, t) * w;
+        }
+        return rgb * 2.0 - Vec3::ONE;
+    }
+    let g = bump_gradient(flat, m, s.uv);
+    // Mitsuba falls back to ng's coordinate system where the texture coordinates are degenerate.
+    let (dpdu, dpdv) = if s.dpdu == Vec3::ZERO {
+        let f = crate::sampling::Frame::from_normal(s.ng);
+        (f.t, f.b)
+    } else {
+        (s.dpdu, s.dpdv)
+    };
+    let ns = front.n;
+    let du = dpdu + ns * (g.x - ns.dot(dpdu));
+    let dv = dpdv + ns * (g.y - ns.dot(dpdv));
+    let c = du.cross(dv);
+    let n = if c.dot(c) > 0.0 { c.normalize() } else { Vec3::ZERO };
+    let n = if s.ng.dot(n) < 0.0 { -n } else { n };
+    front.to_local(n)
+}
+
+/// Mitsuba's `normalmap` and `bumpmap` frame (their `frame()`, 3.9.1) for material `m` at the
+/// surface `s` (its `ns` seen from the front), from the unperturbed frame `base` (∂p/∂u's,
+/// [`tangent_frame`] of the normal that faces wi; `mirrored` when a two-sided material is seen
+/// from the back, whose frame is then (s, t, −n), as Mitsuba's `twosided` flips only the z
+/// coordinate and leaves the map's normal in the front's coordinates) and the direction
+/// `wi_world`: the map's normal n in that frame (`mapped_normal`), its x and y negated where it
+/// faces away from wi (`flip_invalid_normals`), normalised; s = (1, 0, 0) made orthogonal to n,
+/// t = n × s. Returns the perturbed frame in world space and the BSDF's wrapper.
+///
+/// Mitsuba's bump map takes s from the world-space ∂p/∂u made orthogonal to the local n (mixing
+/// two frames): it differs from this s by a rotation about n, which only anisotropic BSDFs see, so
+/// the loader refuses them inside a bump map. A map normal of 0 (not a direction) shades with the
+/// unperturbed normal, and a horizontal n = (±1, 0, 0) takes s = z, where Mitsuba's
+/// normalisations would give NaN.
+pub fn normal_map_frame(
+    flat: &FlatScene,
+    m: &Material,
+    s: &Surface,
+    base: crate::sampling::Frame,
+    mirrored: bool,
+    wi_world: Vec3,
+) -> (crate::sampling::Frame, crate::bsdf::Perturbed) {
+    let base = if mirrored { crate::sampling::Frame { b: -base.b, ..base } } else { base };
+    let front = if mirrored { crate::sampling::Frame { n: -base.n, ..base } } else { base };
+    let mut n = mapped_normal(flat, m, s, front);
+    let wi = base.to_local(wi_world);
+    if wi.z * wi.dot(n) <= 0.0 {
+        n = Vec3::new(-n.x, -n.y, n.z);
+    }
+    let n = if n == Vec3::ZERO { Vec3::Z } else { n.normalize() };
+    let t_axis = Vec3::X - n * n.x;
+    let t_axis = if t_axis == Vec3::ZERO { Vec3::Z } else { t_axis.normalize() };
+    let b_axis = n.cross(t_axis);
+    let frame = crate::sampling::Frame { t: base.to_world(t_axis), b: base.to_world(b_axis), n: base.to_world(n) };
+    let nz2 = n.z * n.z;
+    let alpha2 = (0.125 * ((1.0 - nz2).max(0.0) / nz2)).min(1.0);
+    (frame, crate::bsdf::Perturbed { base_n: Vec3::new(t_axis.z, b_axis.z, n.z), alpha2 })
 }
 
 /// `p` moved off the surface to the side `dir` leaves to.
@@ -218,10 +314,10 @@ pub fn resolve_bsdf(flat: &FlatScene, id: u32, uv: glam::Vec2) -> Bsdf {
     if m.tag == MAT_BLEND {
         let a = leaf_from_material(flat, &flat.materials[m.child0 as usize], uv);
         let b = leaf_from_material(flat, &flat.materials[m.child1 as usize], uv);
-        Bsdf { leaves: [a, b], weight: flat.params[m.p_weight as usize], blend: true }
+        Bsdf { leaves: [a, b], weight: flat.params[m.p_weight as usize], blend: true, perturbed: None }
     } else {
         let a = leaf_from_material(flat, m, uv);
-        Bsdf { leaves: [a, a], weight: 0.0, blend: false }
+        Bsdf { leaves: [a, a], weight: 0.0, blend: false, perturbed: None }
     }
 }
 

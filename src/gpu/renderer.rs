@@ -398,8 +398,10 @@ impl Backend for Renderer {
         if !self.flat.env_cells.is_empty() {
             self.gpu.env_cells.upload(&self.flat.env_cells)?;
         }
-        if !self.flat.tables.is_empty() {
-            self.gpu.tables.upload(&self.flat.tables)?;
+        // Only the coating tables follow the parameters; the normal maps after them are constants.
+        let coating = self.flat.coating_tables_len();
+        if coating > 0 {
+            self.gpu.tables.upload(&self.flat.tables[..coating])?;
         }
         Ok(())
     }

@@ -30,7 +30,8 @@ pub(crate) struct GpuScene {
     pub env_cells: Buffer,
     /// The lights without area.
     pub lights: Buffer,
-    /// The rough plastics' coating tables (they follow the roughness: rewritten with the parameters).
+    /// The rough plastics' coating tables (they follow the roughness: rewritten with the
+    /// parameters), then the normal and bump maps' texels (constants).
     pub tables: Buffer,
 }
 
@@ -75,7 +76,7 @@ impl GpuScene {
             majorants: Buffer::storage_with(ctx, "majorant grids", &flat.majorants)?,
             env_cells: Buffer::storage_with(ctx, "environment map cells", &flat.env_cells)?,
             lights: Buffer::storage_with(ctx, "lights", &flat.lights)?,
-            tables: Buffer::storage_with(ctx, "coating tables", &flat.tables)?,
+            tables: Buffer::storage_with(ctx, "coating tables and normal maps", &flat.tables)?,
         })
     }
 

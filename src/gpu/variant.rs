@@ -32,6 +32,9 @@ pub fn scene_features(flat: &FlatScene, env_param: u32) -> u32 {
         if m.tag == MAT_ROUGH_CONDUCTOR && m.p_alpha_v != m.p_alpha {
             f |= F_ANISOTROPIC;
         }
+        if m.nmap_width > 0 {
+            f |= F_NORMAL_MAP;
+        }
         if m.two_sided != 0 {
             f |= F_TWO_SIDED;
         }
@@ -143,7 +146,7 @@ pub fn request_features(scene: u32, options: &RenderOptions, kinds: ParamKinds) 
 
 /// A short human-readable name of a variant, for logs: `nee env diffuse conductor[beckmann] ∂alpha`.
 pub fn describe(features: u32) -> String {
-    const NAMES: [(u32, &str); 26] = [
+    const NAMES: [(u32, &str); 27] = [
         (F_NEE, "nee"),
         (F_ENV, "env"),
         (F_EMITTERS, "emitters"),
@@ -163,6 +166,7 @@ pub fn describe(features: u32) -> String {
         (F_SMOOTH_PLASTIC, "smooth-plastic"),
         (F_ROUGH_DIELECTRIC, "rough-dielectric"),
         (F_ANISOTROPIC, "anisotropic"),
+        (F_NORMAL_MAP, "normal-map"),
         (G_COLOR, "∂color"),
         (G_TEXTURE, "∂texture"),
         (G_ALPHA, "∂alpha"),

@@ -13,8 +13,8 @@ use crate::contract::{
     COATING_TABLE_LEN, DIST_GGX, DeltaLight, EmitterTri, EnvCell, FIELD_CONSTANT, FIELD_GRID, FieldDesc,
     LIGHT_DIRECTIONAL, LIGHT_POINT, LIGHT_SPOT, MAT_BLEND, MAT_CONDUCTOR, MAT_DIELECTRIC, MAT_DIFFUSE, MAT_NULL,
     MAT_PLASTIC, MAT_ROUGH_CONDUCTOR, MAT_ROUGH_DIELECTRIC, MAT_ROUGH_PLASTIC, MAT_THIN_DIELECTRIC,
-    Material as GpuMaterial, MediumDesc, NO_EMITTER, NO_MEDIUM, NO_PARAM, PHASE_HG, PHASE_ISOTROPIC, TEX_CHECKER,
-    TEX_NEAREST, TEX_WRAP_CLAMP, TEX_WRAP_MIRROR, TriShading,
+    Material as GpuMaterial, MediumDesc, NMAP_BUMP, NO_EMITTER, NO_MEDIUM, NO_PARAM, PHASE_HG, PHASE_ISOTROPIC,
+    TEX_CHECKER, TEX_NEAREST, TEX_WRAP_CLAMP, TEX_WRAP_MIRROR, TriShading,
 };
 use crate::error::Result;
 use crate::phases::PhaseReport;
@@ -48,7 +48,8 @@ pub struct FlatScene {
     pub env_cells: Vec<EnvCell>,
     /// Lights without area, in the scene's order.
     pub lights: Vec<DeltaLight>,
-    /// The rough plastics' coating tables (`Material::table`); they follow the roughness.
+    /// The rough plastics' coating tables (`Material::table`), which follow the roughness, then
+    /// the normal maps' texels (`Material::nmap`).
     pub tables: Vec<f32>,
 }
 
@@ -85,7 +86,10 @@ pub(crate) fn replace_params(
     }
     flat.env_cells = env_cells(scene)?;
     if alpha_moved {
-        flat.tables = coating_tables(&mut flat.materials, &flat.params);
+        // The coating tables lead the array and keep their layout; the normal maps after them
+        // are constants.
+        let coating = coating_tables(&mut flat.materials, &flat.params);
+        flat.tables[..coating.len()].copy_from_slice(&coating);
     }
     Ok(())
 }
@@ -158,7 +162,8 @@ impl FlatScene {
             last.cdf = 1.0;
         }
         let mut materials: Vec<GpuMaterial> = scene.materials.iter().map(|m| flatten_material(scene, m)).collect();
-        let tables = coating_tables(&mut materials, scene.params.values());
+        let mut tables = coating_tables(&mut materials, scene.params.values());
+        normal_map_tables(scene, &mut materials, &mut tables);
         let (media, fields, majorants) = flatten_media(scene);
         let env_cells = env_cells(scene)?;
         let lights = scene.lights.iter().map(|l| flatten_light(scene, l)).collect();
@@ -200,6 +205,12 @@ impl FlatScene {
             lights,
             tables,
         })
+    }
+
+    /// How many leading values of [`FlatScene::tables`] are coating tables (they follow the
+    /// roughness); the normal maps' texels after them never change.
+    pub fn coating_tables_len(&self) -> usize {
+        self.materials.iter().filter(|m| m.tag == MAT_ROUGH_PLASTIC).count() * COATING_TABLE_LEN as usize
     }
 
     /// The geometric (winding) normal of the triangle in leaf slot `slot`, unit length.
@@ -310,12 +321,7 @@ fn albedo_fields(scene: &Scene, albedo: Albedo) -> GpuMaterial {
                 p_color: offset(t.texels),
                 tex_width: t.width,
                 tex_height: t.height,
-                tex_mode: if t.nearest { TEX_NEAREST } else { 0 }
-                    | match t.wrap {
-                        Wrap::Repeat => 0,
-                        Wrap::Mirror => TEX_WRAP_MIRROR,
-                        Wrap::Clamp => TEX_WRAP_CLAMP,
-                    },
+                tex_mode: texture_mode(t.nearest, t.wrap),
                 uv_row0: Vec3::X,
                 uv_row1: Vec3::Y,
                 ..Default::default()
@@ -421,6 +427,50 @@ fn flatten_material(scene: &Scene, m: &Material) -> GpuMaterial {
             ..Default::default()
         },
         Material::Null => GpuMaterial { tag: MAT_NULL, ..Default::default() },
+        Material::NormalMap { nested, map } | Material::BumpMap { nested, map, .. } => {
+            // `nmap` holds the map's index until `normal_map_tables` places its texels.
+            let t = &scene.normal_maps[map as usize];
+            let (bump, scale) = match *m {
+                Material::BumpMap { scale, .. } => (NMAP_BUMP, scale),
+                _ => (0, 0.0),
+            };
+            GpuMaterial {
+                nmap: map,
+                nmap_width: t.width,
+                nmap_height: t.height,
+                nmap_mode: texture_mode(t.nearest, t.wrap) | bump,
+                nmap_scale: scale,
+                ..flatten_material(scene, &scene.materials[nested.0 as usize])
+            }
+        }
+    }
+}
+
+/// `Material::tex_mode`'s filter and wrap bits.
+fn texture_mode(nearest: bool, wrap: Wrap) -> u32 {
+    (if nearest { TEX_NEAREST } else { 0 })
+        | match wrap {
+            Wrap::Repeat => 0,
+            Wrap::Mirror => TEX_WRAP_MIRROR,
+            Wrap::Clamp => TEX_WRAP_CLAMP,
+        }
+}
+
+/// Appends the texels of every normal map that `materials` use to `tables` (once per map) and
+/// points each material's `nmap` at them.
+fn normal_map_tables(scene: &Scene, materials: &mut [GpuMaterial], tables: &mut Vec<f32>) {
+    let mut placed: Vec<(u32, u32)> = Vec::new();
+    for m in materials.iter_mut().filter(|m| m.nmap_width > 0) {
+        let map = m.nmap;
+        m.nmap = match placed.iter().find(|(i, _)| *i == map) {
+            Some(&(_, at)) => at,
+            None => {
+                let at = tables.len() as u32;
+                tables.extend_from_slice(&scene.normal_maps[map as usize].texels);
+                placed.push((map, at));
+                at
+            }
+        };
     }
 }
 

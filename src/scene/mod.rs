@@ -210,6 +210,43 @@ pub enum Material {
     TwoSided(MaterialId),
     /// No surface: an index-matched boundary of a medium (Mitsuba's `null`); rays pass through.
     Null,
+    /// `nested` shaded in a frame that a normal map perturbs (Mitsuba's `normalmap`): the map's
+    /// RGB in [0, 1], mapped to [−1, 1], is the shading normal in the frame of ∂p/∂u
+    /// (`crate::cpu::surface::normal_map_frame`). The map's texels are not parameters.
+    NormalMap {
+        /// The BSDF in the perturbed frame: a leaf or a blend (two-sided outside the map only).
+        nested: MaterialId,
+        /// Index in [`Scene::normal_maps`] (RGB texels).
+        map: u32,
+    },
+    /// `nested` shaded in a frame that a bump map perturbs (Mitsuba's `bumpmap`): ∂p/∂u and ∂p/∂v
+    /// moved along the normal by `scale` times the height's gradient
+    /// (`crate::cpu::surface::normal_map_frame`). The heights are not parameters.
+    BumpMap {
+        /// The BSDF in the perturbed frame: a leaf or a blend, not anisotropic.
+        nested: MaterialId,
+        /// Index in [`Scene::normal_maps`] (one height a texel: the texture's luminance).
+        map: u32,
+        /// Mitsuba's `scale` of the gradient.
+        scale: f32,
+    },
+}
+
+/// A normal map's or bump map's texels (Mitsuba's `bitmap` nested in `normalmap`/`bumpmap`):
+/// constants, not parameters (pathgrad does not differentiate the shading frame).
+#[derive(Clone, Debug, PartialEq)]
+pub struct NormalMapTexture {
+    /// Width in texels.
+    pub width: u32,
+    /// Height in texels.
+    pub height: u32,
+    /// The texels, row-major, row 0 at v = 0: RGB in [0, 1] (a normal map) or one height a texel
+    /// (a bump map).
+    pub texels: Vec<f32>,
+    /// Nearest texel instead of bilinear interpolation.
+    pub nearest: bool,
+    /// How texel indices outside the image wrap.
+    pub wrap: Wrap,
 }
 
 /// A triangle mesh with one material, optionally emitting.
@@ -346,6 +383,8 @@ pub struct Scene {
     pub sensor: usize,
     /// Bitmap textures.
     pub textures: Vec<Texture>,
+    /// The texels of normal maps ([`Material::NormalMap`]).
+    pub normal_maps: Vec<NormalMapTexture>,
     /// Participating media, each inside the meshes whose `interior` it is.
     pub media: Vec<medium::Medium>,
     /// The environment's radiance seen by rays that leave the scene, if any: one RGB value
@@ -444,6 +483,7 @@ impl Scene {
             sensors: vec![Sensor { name: "camera".into(), camera }],
             sensor: 0,
             textures: Vec::new(),
+            normal_maps: Vec::new(),
             media: Vec::new(),
             environment: None,
             env_map: None,
@@ -681,6 +721,12 @@ impl Scene {
                         Some(Material::Null) => {
                             return Err(err(format!("material {i}"), "a blend's children must not be null".into()));
                         }
+                        Some(Material::NormalMap { .. } | Material::BumpMap { .. }) => {
+                            return Err(err(
+                                format!("material {i}"),
+                                "a blend's children must not be normal- or bump-mapped (map the blend instead)".into(),
+                            ));
+                        }
                         Some(_) => {}
                     }
                 }
@@ -718,6 +764,30 @@ impl Scene {
             }
         }
         for (i, m) in self.materials.iter().enumerate() {
+            let (nested, map, channels) = match *m {
+                Material::NormalMap { nested, map } => (nested, map, 3),
+                Material::BumpMap { nested, map, .. } => (nested, map, 1),
+                _ => (MaterialId(0), u32::MAX, 0),
+            };
+            if channels > 0 {
+                let bad = |message: &str| Err(err(format!("material {i}"), format!("a normal or bump map {message}")));
+                match self.materials.get(nested.0 as usize) {
+                    None => return bad("around a material that does not exist"),
+                    Some(
+                        Material::NormalMap { .. } | Material::BumpMap { .. } | Material::TwoSided(_) | Material::Null,
+                    ) => {
+                        return bad("around a normal or bump map, a two-sided wrapper or a null BSDF");
+                    }
+                    Some(_) => {}
+                }
+                match self.normal_maps.get(map as usize) {
+                    Some(t)
+                        if t.width > 0
+                            && t.height > 0
+                            && t.texels.len() == channels * (t.width * t.height) as usize => {}
+                    _ => return bad("whose texture does not exist or does not match its size"),
+                }
+            }
             if let Material::TwoSided(c) = m
                 && matches!(self.materials.get(c.0 as usize), Some(Material::Null))
             {

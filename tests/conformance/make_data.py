@@ -255,6 +255,36 @@ def background_checker():
     return img
 
 
+def normal_bumps():
+    """8 x 8 tangent-space normal map (read with raw=true): n = normalize(0.9 sin a, 0.7 cos b, 1)
+    with a, b = 2π(x + ½)/8, 2π(y + ½)/8, stored as round(255 (n + 1)/2); x and y tilt differently,
+    so a swapped or mirrored tangent frame changes the image. Its top-left texel tilts past 70°
+    (n = (0.95, 0.1, 0.3) normalised), where the shadow terminator's α² is clamped to 1."""
+    img = np.zeros((8, 8, 3), np.uint8)
+    for y in range(8):
+        for x in range(8):
+            a, b = 2 * math.pi * (x + 0.5) / 8, 2 * math.pi * (y + 0.5) / 8
+            n = np.array([0.9 * math.sin(a), 0.7 * math.cos(b), 1.0])
+            if x == 0 and y == 0:
+                n = np.array([0.95, 0.1, 0.3])
+            n /= np.linalg.norm(n)
+            img[y, x] = np.round(255 * (n + 1) / 2).astype(np.uint8)
+    return img
+
+
+def bump_heights():
+    """8 x 8 bump map (read with raw=true): height h = 0.5 + 0.3 sin(a) cos(b) with a, b as in
+    `normal_bumps`, stored as RGB (h + 0.1, h, h − 0.1), so its luminance (what Mitsuba's bump
+    map differentiates) is not any one channel."""
+    img = np.zeros((8, 8, 3), np.uint8)
+    for y in range(8):
+        for x in range(8):
+            a, b = 2 * math.pi * (x + 0.5) / 8, 2 * math.pi * (y + 0.5) / 8
+            h = 0.5 + 0.3 * math.sin(a) * math.cos(b)
+            img[y, x] = np.round(255 * np.clip([h + 0.1, h, h - 0.1], 0, 1)).astype(np.uint8)
+    return img
+
+
 # ---- grids ----
 
 def write_exr(path, rgb):
@@ -381,6 +411,8 @@ def main():
     write_png(DATA / "checker.png", checker_texture())
     write_png(DATA / "ramp_raw.png", ramp_texture())
     write_png(DATA / "background_checker.png", background_checker())
+    write_png(DATA / "normal_bumps.png", normal_bumps())
+    write_png(DATA / "bump_heights.png", bump_heights())
     write_exr(DATA / "sky.exr", sky_texels())
     write_vol(DATA / "blob.vol", blob_grid())
     write_vol(DATA / "albedo_rgb.vol", albedo_grid())

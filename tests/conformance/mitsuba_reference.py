@@ -73,6 +73,18 @@ MATRIX = {
                                                       "material preset", "sphere and rectangle frames"],
                                             grads=["ball.bsdf.alpha_v.value", "floor.bsdf.alpha_u.value",
                                                    "floor.bsdf.alpha_v.value"]),
+    # Normal maps: an 8x8 map whose x and y tilts differ (a swapped or mirrored tangent frame shows),
+    # bilinear and nearest, around a diffuse ball, a GGX floor and, inside twosided, a panel seen
+    # from its back; one texel tilts past 70 degrees (the shadow terminator's clamp).
+    "bsdf_normalmap": dict(features=["normalmap (bitmap raw)", "diffuse, roughconductor, twosided(normalmap)",
+                                     "sphere and rectangle frames", "shadow terminator", "flipped normals"],
+                           grads=["floor.bsdf.nested_bsdf.alpha.value", "ball.bsdf.nested_bsdf.reflectance.value",
+                                  "panel.bsdf.brdf_0.nested_bsdf.reflectance.value"]),
+    # Bump maps: heights whose luminance is not one channel, scale 0.5 and 0.3, repeat and clamp.
+    "bsdf_bumpmap": dict(features=["bumpmap (bitmap raw, luminance)", "scale", "diffuse, roughconductor, twosided(bumpmap)",
+                                   "sphere and rectangle dp/du, dp/dv", "shadow terminator"],
+                         grads=["floor.bsdf.nested_bsdf.alpha.value", "ball.bsdf.nested_bsdf.reflectance.value",
+                                "panel.bsdf.brdf_0.nested_bsdf.reflectance.value"]),
     "bsdf_roughconductor_alpha_uv": dict(features=["roughconductor", "alpha_u = alpha_v", "sample_visible false"],
                                          grads=["floor.bsdf.reflectance.value"]),
     # Mitsuba tabulates the coating's transmittance outside its autodiff, so its own α derivative

@@ -40,6 +40,8 @@ fn gpu_equals_cpu_per_path_on_every_builtin_and_test_scene() {
         "sensor_thinlens",
         "bsdf_roughconductor_anisotropic",
         "shape_instance",
+        "bsdf_normalmap",
+        "bsdf_bumpmap",
     ] {
         scenes.push(crate::support::scenes::conformance(name));
     }

@@ -52,6 +52,18 @@ fn cases() -> Vec<(Scene, Vec<&'static str>)> {
                 "pane.bsdf.specular_reflectance.value",
             ],
         ),
+        (
+            scenes::conformance("bsdf_normalmap"),
+            vec![
+                "floor.bsdf.nested_bsdf.alpha.value",
+                "ball.bsdf.nested_bsdf.reflectance.value",
+                "panel.bsdf.brdf_0.nested_bsdf.reflectance.value",
+            ],
+        ),
+        (
+            scenes::conformance("bsdf_bumpmap"),
+            vec!["floor.bsdf.nested_bsdf.alpha.value", "panel.bsdf.brdf_0.nested_bsdf.reflectance.value"],
+        ),
     ]
 }
 
@@ -173,6 +185,9 @@ fn gradients_match_finite_differences() {
         (scenes::conformance("bsdf_roughdielectric"), "ball.bsdf.alpha.value"),
         (scenes::conformance("bsdf_roughdielectric"), "pane.bsdf.alpha.value"),
         (scenes::conformance("bsdf_roughdielectric"), "ball.bsdf.specular_transmittance.value"),
+        (scenes::conformance("bsdf_normalmap"), "floor.bsdf.nested_bsdf.alpha.value"),
+        (scenes::conformance("bsdf_normalmap"), "panel.bsdf.brdf_0.nested_bsdf.reflectance.value"),
+        (scenes::conformance("bsdf_bumpmap"), "floor.bsdf.nested_bsdf.alpha.value"),
     ];
     for (scene, name) in checks {
         let mut renderer = Renderer::new(&gpu.ctx, &scene).unwrap();

@@ -17,6 +17,7 @@ mod gradients;
 mod hardening;
 mod loop_budget;
 mod media;
+mod normal_maps;
 mod optimize;
 mod optimize_cli;
 mod resources;

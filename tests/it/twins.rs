@@ -174,7 +174,12 @@ fn bsdf_gpu_equals_cpu() {
             eta: Vec3::ZERO,
             k: Vec3::ONE,
         };
-        bsdfs.push(Bsdf { leaves: [Leaf::Diffuse { albedo: Vec3::new(0.1, 0.6, 0.35) }, coat], weight, blend: true });
+        bsdfs.push(Bsdf {
+            leaves: [Leaf::Diffuse { albedo: Vec3::new(0.1, 0.6, 0.35) }, coat],
+            weight,
+            blend: true,
+            perturbed: None,
+        });
     }
     for (distribution, alpha_v) in [(Distribution::Beckmann, 0.05), (Distribution::Ggx, 0.6)] {
         bsdfs.push(Bsdf::leaf(Leaf::RoughConductor {
@@ -323,7 +328,12 @@ fn diff_gpu_equals_cpu() {
             eta: Vec3::ZERO,
             k: Vec3::ONE,
         };
-        bsdfs.push(Bsdf { leaves: [Leaf::Diffuse { albedo: Vec3::new(0.1, 0.6, 0.35) }, coat], weight, blend: true });
+        bsdfs.push(Bsdf {
+            leaves: [Leaf::Diffuse { albedo: Vec3::new(0.1, 0.6, 0.35) }, coat],
+            weight,
+            blend: true,
+            perturbed: None,
+        });
     }
     let mut cases = Vec::new();
     let mut owners = Vec::new();

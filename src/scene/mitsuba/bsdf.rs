@@ -9,7 +9,7 @@ use super::xml::{El, Props};
 use crate::bsdf::Distribution;
 use crate::bsdf::specular::SmoothKind;
 use crate::error::Result;
-use crate::scene::{Albedo, Material, MaterialId, SmoothColour, Wrap, bounds};
+use crate::scene::{Albedo, Material, MaterialId, NormalMapTexture, SmoothColour, Wrap, bounds};
 
 /// Mitsuba's named indices of refraction (`int_ior`, `ext_ior` as a string).
 const IORS: &[(&str, f32)] = &[
@@ -111,6 +111,8 @@ impl<'a> Loader<'a> {
                 self.finish(&p)?;
                 self.scene.add_material(Material::Null)
             }
+            "normalmap" => self.normal_map(&p, name, depth)?,
+            "bumpmap" => self.bump_map(&p, name, depth)?,
             "blendbsdf" => {
                 let weight = self.float_in(&p, "weight", None, bounds::WEIGHT)?;
                 let children = p.take_nested(&["bsdf", "ref"]);
@@ -161,8 +163,13 @@ impl<'a> Loader<'a> {
                 if matches!(self.material(c), Some(Material::TwoSided(_))) {
                     return Err(self.x.err(child, "a 'twosided' BSDF cannot wrap another twosided one"));
                 }
-                let transmits = matches!(self.material(c), Some(Material::Smooth { kind, .. }) if kind != SmoothKind::Conductor)
-                    || matches!(self.material(c), Some(Material::RoughDielectric { .. }));
+                // What a normal map wraps is what transmits or not.
+                let inner = match self.material(c) {
+                    Some(Material::NormalMap { nested, .. } | Material::BumpMap { nested, .. }) => nested,
+                    _ => c,
+                };
+                let transmits = matches!(self.material(inner), Some(Material::Smooth { kind, .. }) if kind != SmoothKind::Conductor)
+                    || matches!(self.material(inner), Some(Material::RoughDielectric { .. }));
                 if transmits {
                     return Err(self.x.err(
                         child,
@@ -461,6 +468,25 @@ impl<'a> Loader<'a> {
                 .x
                 .err(target, format!("unsupported plugin '{}' (supported: {})", p.kind, names(Category::Texture))));
         }
+        let bitmap = self.bitmap(&p, target, "reflectances must be at most 1")?;
+        let t = self
+            .scene
+            .add_texture(&format!("{name}.data"), bitmap.width, bitmap.height, &bitmap.texels)
+            .map_err(|e| self.located(target, e))?;
+        let texture = &mut self.scene.textures[t.0 as usize];
+        (texture.nearest, texture.wrap) = (bitmap.nearest, bitmap.wrap);
+        self.finish(&p)?;
+        self.textures.insert(target.id(), Albedo::Bitmap(t));
+        Ok(Albedo::Bitmap(t))
+    }
+
+    /// The texels and lookup of the `bitmap` `p` (node `target`): Mitsuba's `filename`, `raw`,
+    /// `filter_type`, `wrap_mode` (`format` ignored with a warning).
+    ///
+    /// # Errors
+    /// A missing or undecodable file, bad property values, a texel outside [0, 1] (`what` says
+    /// why; empty: any finite value is read).
+    fn bitmap(&mut self, p: &Props<'a>, target: El<'a>, what: &str) -> Result<NormalMapTexture> {
         let (file, file_node) = p
             .string(&self.x, "filename")?
             .ok_or_else(|| self.x.err(target, "'bitmap' needs the property 'filename'"))?;
@@ -493,26 +519,162 @@ impl<'a> Loader<'a> {
             self.scene.warn(w);
         }
         let (width, height, texels) = self.image_file(&file, file_node, raw)?;
-        if let Some((i, v)) = texels.iter().enumerate().find(|(_, v)| !(**v >= 0.0 && **v <= 1.0)) {
+        let upper = if what.is_empty() { f32::MAX } else { 1.0 };
+        let lower = if what.is_empty() { f32::MIN } else { 0.0 };
+        if let Some((i, v)) = texels.iter().enumerate().find(|(_, v)| !(**v >= lower && **v <= upper)) {
             let texel = i / 3;
             return Err(self.x.err(
                 file_node,
                 format!(
-                    "'{file}': texel ({}, {}) has value {v} outside [0, 1] (reflectances must be at most 1)",
+                    "'{file}': texel ({}, {}) has value {v} outside [{lower}, {upper}] ({what})",
                     texel % width as usize,
                     texel / width as usize
                 ),
             ));
         }
-        let t = self
-            .scene
-            .add_texture(&format!("{name}.data"), width, height, &texels)
-            .map_err(|e| self.located(target, e))?;
-        let texture = &mut self.scene.textures[t.0 as usize];
-        (texture.nearest, texture.wrap) = (nearest, wrap);
-        self.finish(&p)?;
-        self.textures.insert(target.id(), Albedo::Bitmap(t));
-        Ok(Albedo::Bitmap(t))
+        Ok(NormalMapTexture { width, height, texels, nearest, wrap })
+    }
+
+    /// Mitsuba's `bumpmap` around its one nested BSDF: its one nested texture (a `bitmap` of any
+    /// name) is read as heights (the luminance of its RGB) into
+    /// [`crate::scene::Scene::normal_maps`], not the parameters; `scale` (1); the nested BSDF's
+    /// parameters are named `NAME.nested_bsdf.…` (Mitsuba's traverse).
+    fn bump_map(&mut self, p: &Props<'a>, name: &str, depth: usize) -> Result<MaterialId> {
+        let node = p.node;
+        self.refuse_non_default_map_flags(p, "bumpmap")?;
+        let scale = self.float_in(p, "scale", Some(1.0), (f32::MIN, f32::MAX))?;
+        let textures = p.take_nested(&["texture"]);
+        let [texture] = textures[..] else {
+            return Err(self.x.err(node, format!("'bumpmap' needs 1 nested <texture>, got {}", textures.len())));
+        };
+        let map = self.map_bitmap(texture, "a bump map", "")?;
+        let heights = map
+            .texels
+            .chunks(3)
+            .map(|c| {
+                if c[0] == c[1] && c[1] == c[2] { c[0] } else { 0.212_671 * c[0] + 0.715_160 * c[1] + 0.072_169 * c[2] }
+            })
+            .collect();
+        let map = NormalMapTexture { texels: heights, ..map };
+        let nested = self.map_nested(p, name, depth, "bumpmap")?;
+        let anisotropic = |id: MaterialId| matches!(self.material(id), Some(Material::RoughConductor { alpha, alpha_v, .. }) if alpha != alpha_v);
+        let children = match self.material(nested) {
+            Some(Material::Blend { children, .. }) => children.to_vec(),
+            _ => vec![nested],
+        };
+        if children.into_iter().any(anisotropic) {
+            return Err(self.x.err(
+                node,
+                "an anisotropic BSDF inside a 'bumpmap' is not supported: Mitsuba 3.9.1 orients its tangent by \
+                 mixing world and local coordinates, which only anisotropic BSDFs show (a 'normalmap' is fine)",
+            ));
+        }
+        self.scene.normal_maps.push(map);
+        let map = self.scene.normal_maps.len() as u32 - 1;
+        Ok(self.scene.add_material(Material::BumpMap { nested, map, scale }))
+    }
+
+    /// Refuses `flip_invalid_normals` and `use_shadowing_function` other than Mitsuba's default
+    /// (true) on map wrapper `kind`.
+    fn refuse_non_default_map_flags(&self, p: &Props<'a>, kind: &str) -> Result<()> {
+        for key in ["flip_invalid_normals", "use_shadowing_function"] {
+            if !p.boolean(&self.x, key, true)? {
+                return Err(self.x.err(
+                    p.node,
+                    format!("'{key}' = false of '{kind}' is not supported (pathgrad follows Mitsuba's default)"),
+                ));
+            }
+        }
+        Ok(())
+    }
+
+    /// The texture `texture` of a map wrapper (`what`: "a normal map", "a bump map"): a `bitmap`,
+    /// whose texels must lie in [0, 1] unless `range` is empty (see [`Loader::bitmap`]), or a
+    /// `rawconstant` (Mitsuba's constant without colour conversion: a `vector` or a `float`), one
+    /// texel read as a nearest lookup (exactly its value).
+    fn map_bitmap(&mut self, texture: El<'a>, what: &str, range: &str) -> Result<NormalMapTexture> {
+        let texture = self.deref(texture)?;
+        let tp = Props::parse(&self.x, texture)?;
+        let map = match (texture.has_tag_name("texture"), tp.kind.as_str()) {
+            (true, "bitmap") => self.bitmap(&tp, texture, range)?,
+            (true, "rawconstant") => {
+                let value = match tp.point(&self.x, "value") {
+                    Ok(Some((v, _))) => v,
+                    _ => match tp.float(&self.x, "value")? {
+                        Some((v, _)) => Vec3::splat(v),
+                        None => return Err(self.x.err(texture, "'rawconstant' needs the property 'value'")),
+                    },
+                };
+                if !value.is_finite() {
+                    return Err(self.x.err(texture, format!("'rawconstant' value {value} is not finite")));
+                }
+                NormalMapTexture {
+                    width: 1,
+                    height: 1,
+                    texels: value.to_array().to_vec(),
+                    nearest: true,
+                    wrap: Wrap::Repeat,
+                }
+            }
+            _ => {
+                return Err(self.x.err(
+                    texture,
+                    format!(
+                        "{what} must be a 'bitmap' or 'rawconstant' texture, got '{}' (pathgrad reads no other)",
+                        tp.kind
+                    ),
+                ));
+            }
+        };
+        self.finish(&tp)?;
+        Ok(map)
+    }
+
+    /// The one BSDF nested in map wrapper `kind` (`p`), named `NAME.nested_bsdf`; refuses what
+    /// pathgrad cannot put inside a map.
+    fn map_nested(&mut self, p: &Props<'a>, name: &str, depth: usize, kind: &str) -> Result<MaterialId> {
+        let children = p.take_nested(&["bsdf", "ref"]);
+        let [child] = children[..] else {
+            return Err(self.x.err(p.node, format!("'{kind}' needs 1 nested BSDF, got {}", children.len())));
+        };
+        let nested = self.bsdf(child, format!("{name}.nested_bsdf"), depth + 1)?;
+        match self.material(nested) {
+            Some(Material::TwoSided(_)) => Err(self.x.err(
+                child,
+                format!(
+                    "a '{kind}' around a 'twosided' BSDF is not supported: put 'twosided' outside the map (pathgrad \
+                     applies the map in the frame the two-sided wrapper turns toward wi)"
+                ),
+            )),
+            Some(Material::NormalMap { .. } | Material::BumpMap { .. }) => {
+                Err(self.x.err(child, format!("a '{kind}' around another normal or bump map is not supported")))
+            }
+            Some(Material::Null) => {
+                Err(self.x.err(child, format!("a '{kind}' around a 'null' BSDF has nothing to shade")))
+            }
+            _ => Ok(nested),
+        }
+    }
+
+    /// Mitsuba's `normalmap` around the BSDF `node`'s one nested BSDF: its texture `normalmap` (a
+    /// `bitmap`, usually `raw`) is read into [`crate::scene::Scene::normal_maps`], not the
+    /// parameters; the nested BSDF's parameters are named `NAME.nested_bsdf.…` (Mitsuba's
+    /// traverse).
+    fn normal_map(&mut self, p: &Props<'a>, name: &str, depth: usize) -> Result<MaterialId> {
+        let node = p.node;
+        self.refuse_non_default_map_flags(p, "normalmap")?;
+        let texture = p.object("normalmap").ok_or_else(|| {
+            self.x.err(node, "'normalmap' needs a nested <texture name=\"normalmap\" type=\"bitmap\">")
+        })?;
+        let map = self.map_bitmap(
+            texture,
+            "a normal map",
+            "a normal map's RGB holds the normal's components mapped to [0, 1]",
+        )?;
+        let nested = self.map_nested(p, name, depth, "normalmap")?;
+        self.scene.normal_maps.push(map);
+        let map = self.scene.normal_maps.len() as u32 - 1;
+        Ok(self.scene.add_material(Material::NormalMap { nested, map }))
     }
 
     /// Mitsuba's `checkerboard` (`color0` 0.4 and `color1` 0.2 by default, each a colour — a

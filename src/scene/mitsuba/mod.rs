@@ -118,6 +118,8 @@ mod tests_media;
 #[cfg(test)]
 mod tests_names;
 #[cfg(test)]
+mod tests_normal_maps;
+#[cfg(test)]
 mod tests_plugins;
 
 use std::path::Path;

@@ -97,6 +97,12 @@ pub const PLUGINS: &[Plugin] = &[
     ),
     p(
         Bsdf,
+        "bumpmap",
+        "one nested texture (a `bitmap` or `rawconstant`: heights, the luminance of its texels), `scale`, one nested BSDF (parameters `.nested_bsdf.…`)",
+        "as Mitsuba (∂p/∂u, ∂p/∂v moved by the heights' gradient, flipped normals, shadow terminator); the heights are not parameters; nested BSDF not anisotropic; inside twosided, not around it; not inside blendbsdf",
+    ),
+    p(
+        Bsdf,
         "conductor",
         "`specular_reflectance`, `material` or `eta`/`k`",
         "smooth: sampled only; gradient of the reflectance through the sampled weight",
@@ -108,6 +114,12 @@ pub const PLUGINS: &[Plugin] = &[
         "smooth; not inside blendbsdf or twosided",
     ),
     p(Bsdf, "diffuse", "`reflectance` (rgb, spectrum, bitmap or checkerboard)", ""),
+    p(
+        Bsdf,
+        "normalmap",
+        "texture `normalmap` (a `bitmap` or `rawconstant`), one nested BSDF (parameters `.nested_bsdf.…`)",
+        "frame from ∂p/∂u as Mitsuba, with its flipped normals and shadow terminator; the map's texels are not parameters; inside twosided, not around it; not inside blendbsdf",
+    ),
     p(Bsdf, "null", "—", "an index-matched boundary (media)"),
     p(
         Bsdf,
