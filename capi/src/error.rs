@@ -72,8 +72,25 @@ impl From<pathgrad::Error> for Failure {
             E::InvalidArgument { .. } => PgStatus::InvalidArgument,
             E::Io { .. } | E::Output { .. } | E::Image { .. } => PgStatus::Io,
         };
-        Failure { status, message: e.to_string() }
+        Failure { status, message: c_names(&e.to_string()) }
     }
+}
+
+/// The library's Rust names in `text` (`RenderOptions::spp`, `Context::requirements()`) spelled as
+/// this API's, as the command-line program spells them as its flags.
+fn c_names(text: &str) -> String {
+    const NAMES: &[(&str, &str)] = &[
+        (
+            "Context::requirements() lists",
+            "pg_required_device_extension and capi/README.md (\"Lending a device\") list",
+        ),
+        ("RenderOptions::width/height", "PgFrameDesc.width/height"),
+        ("RenderOptions::spp", "PgFrameDesc.spp"),
+        ("RenderOptions::max_depth", "PgFrameDesc.max_depth"),
+        ("GradMode::Deterministic", "PgFrameDesc.deterministic"),
+        ("DeviceChoice", "PgContextDesc.device"),
+    ];
+    NAMES.iter().fold(text.to_string(), |t, (rust, c)| t.replace(rust, c))
 }
 
 thread_local! {

@@ -284,6 +284,8 @@ int main(void) {
   if (pg_context_from_vulkan(&without, &ctx) != PG_STATUS_NOT_ENABLED || ctx != NULL)
     return fail("a device without pathgrad's features is refused");
   printf("refused: %s\n", pg_last_error_message());
+  if (!strstr(pg_last_error_message(), "pg_required_device_extension"))
+    return fail("the refusal names this API's list of what to enable, not a Rust name");
   PG_CHECK(pg_context_from_vulkan(&lent, &ctx));
   printf("pathgrad %s on the host's device: %s\n", pg_version(), pg_context_device_name(ctx));
 
