@@ -18,7 +18,7 @@ use pathgrad::backend::Backend;
 use pathgrad::gpu::renderer::GradMode;
 use pathgrad::gpu::{Context, ContextDesc, DeviceChoice, Renderer};
 use pathgrad::image::Image;
-use pathgrad::integrator::{ParamKinds, RenderOptions, View};
+use pathgrad::integrator::{RenderOptions, View};
 use pathgrad::loss::Loss;
 use pathgrad::params::{Gradients, ParamId};
 use pathgrad::rng::PassTag;
@@ -448,7 +448,7 @@ fn backward<'py>(
             let adjoints = State::images(&options, views.len(), &adjoint, "adjoint")?;
             let (ids, names) = state.chosen(wrt.as_deref())?;
             let backend = state.backend(&device)?;
-            options.differentiate = if wrt.is_some() { backend.param_kinds(&ids) } else { ParamKinds::ALL };
+            options.differentiate = backend.param_kinds(&ids);
             Ok((backend.backward_views(&options, &views, &adjoints, mode)?, names))
         })
         .map_err(to_py)?;
