@@ -386,13 +386,17 @@ impl RenderOptions {
         RngKey::new(self.seed, 0, pass)
     }
 
-    /// The camera constants of `view` in `pass` (its aspect ratio is the render's, `width/height`).
+    /// The camera constants of `view` in `pass`. The image covers the camera's
+    /// [`FilmWindow`](crate::scene::FilmWindow) of a film with square pixels at the render's
+    /// size: the field of view spans the whole film, whose aspect ratio is the render's
+    /// `width/height` when the window is the whole film.
     pub fn view_camera(&self, view: &View, pass: PassTag) -> ViewCamera {
         let c = &view.camera;
         let forward = (c.target - c.position).normalize();
         let right = forward.cross(c.up).normalize();
         let up = right.cross(forward);
-        let aspect = self.width as f32 / self.height as f32;
+        let (film_width, film_height) = c.film_size(self.width, self.height);
+        let aspect = film_width / film_height;
         let (filter_kind, filter_radius, filter_alpha) = c.filter.constants();
         // The film's half extents: per unit of depth (tangents) or, orthographic, in world units.
         let (half_x, half_y, origin, lens, aperture_radius, focus_distance) = match c.lens {
@@ -415,11 +419,20 @@ impl RenderOptions {
                 (tan_y * aspect, tan_y, c.position, kind, a, f)
             }
         };
+        // The window's film point (sx, sy) ∈ [−1, 1]² is the whole film's (cx + ex·sx, cy + ey·sy):
+        // its centre moves the pinhole's direction through the film's centre (or the orthographic
+        // film's centre), its extent scales the axes.
+        let (right, up) = (right * half_x, up * half_y);
+        let w = &c.window;
+        let (ex, ey) = w.extent();
+        let centre = right * (w.min.x + w.max.x - 1.0) + up * (1.0 - w.min.y - w.max.y);
+        let (origin, through_centre) =
+            if lens == LENS_ORTHOGRAPHIC { (origin + centre, forward) } else { (origin, forward + centre) };
         ViewCamera {
             origin,
-            right: right * half_x,
-            up: up * half_y,
-            forward,
+            right: right * ex,
+            up: up * ey,
+            forward: through_centre,
             lens,
             aperture_radius,
             focus_distance,

@@ -115,7 +115,9 @@ contract_structs! {
         right: Vec3,
         /// Up axis scaled by tan(vertical half field of view) (orthographic: by the half height).
         up: Vec3,
-        /// Viewing direction (unit).
+        /// Pinhole and thin lens: the direction through the image's centre, whose component
+        /// along the unit viewing direction is 1 (the viewing direction itself unless the image
+        /// is a crop of the film). Orthographic: the unit viewing direction.
         forward: Vec3,
         /// `LENS_PINHOLE`, `LENS_THIN` or `LENS_ORTHOGRAPHIC`.
         lens: u32,

@@ -53,6 +53,7 @@ fn cornell_box() -> Result<Scene> {
         height: 256,
         filter: crate::scene::PixelFilter::Box,
         lens: crate::scene::Lens::Pinhole,
+        window: crate::scene::FilmWindow::default(),
     };
     let mut s = Scene::new("builtin:cornell-box", camera);
     let white = s.add_diffuse("white", Vec3::new(0.725, 0.71, 0.68))?;
@@ -92,6 +93,7 @@ fn furnace() -> Result<Scene> {
         height: 64,
         filter: crate::scene::PixelFilter::Box,
         lens: crate::scene::Lens::Pinhole,
+        window: crate::scene::FilmWindow::default(),
     };
     let mut s = Scene::new("builtin:furnace", camera);
     let white = s.add_diffuse("object", Vec3::ONE)?;
@@ -126,6 +128,7 @@ fn blend() -> Result<Scene> {
         height: 192,
         filter: crate::scene::PixelFilter::Box,
         lens: crate::scene::Lens::Pinhole,
+        window: crate::scene::FilmWindow::default(),
     };
     let mut s = Scene::new("builtin:blend", camera);
     let floor = s.add_diffuse("floor", Vec3::new(0.5, 0.5, 0.5))?;

@@ -291,6 +291,64 @@ pub struct Camera {
     /// What projects the film onto the scene: a pinhole (`fov_y_degrees`), a thin lens around it,
     /// or an orthographic projection.
     pub lens: Lens,
+    /// The part of the film the image covers (Mitsuba's `crop_*`): the whole film by default.
+    pub window: FilmWindow,
+}
+
+impl Camera {
+    /// The whole film's size in pixels at the image size `width × height`: the image covers
+    /// [`Camera::window`] of it, with square pixels.
+    pub fn film_size(&self, width: u32, height: u32) -> (f32, f32) {
+        let (w, h) = self.window.extent();
+        (width as f32 / w, height as f32 / h)
+    }
+}
+
+/// The rectangle of the film an image covers, in fractions of the film's width and height from
+/// its top-left corner (Mitsuba's `crop_offset_x/y` and `crop_width/height` over the film's
+/// size). The camera's field of view spans the whole film; the image's pixels sample this
+/// window only, so a cropped image is the matching block of the whole film's image (up to the
+/// reconstruction filter at the window's edges, which, as at the film's, sees no samples outside).
+///
+/// ```
+/// use pathgrad::scene::FilmWindow;
+/// // Columns 16..48 and rows 8..24 of a 64×32 film.
+/// let w = FilmWindow::from_pixels(64, 32, [16, 8], [32, 16]);
+/// assert_eq!((w.min.x, w.min.y, w.max.x, w.max.y), (0.25, 0.25, 0.75, 0.75));
+/// assert!(FilmWindow::default().is_whole());
+/// ```
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct FilmWindow {
+    /// Top-left corner, in [0, 1)².
+    pub min: glam::Vec2,
+    /// Bottom-right corner, in (0, 1]², greater than `min`.
+    pub max: glam::Vec2,
+}
+
+impl Default for FilmWindow {
+    fn default() -> Self {
+        FilmWindow { min: glam::Vec2::ZERO, max: glam::Vec2::ONE }
+    }
+}
+
+impl FilmWindow {
+    /// The window of `size` pixels at `offset` on a film of `width × height` pixels.
+    pub fn from_pixels(width: u32, height: u32, offset: [u32; 2], size: [u32; 2]) -> FilmWindow {
+        let film = glam::Vec2::new(width as f32, height as f32);
+        let min = glam::Vec2::new(offset[0] as f32, offset[1] as f32) / film;
+        let max = glam::Vec2::new((offset[0] + size[0]) as f32, (offset[1] + size[1]) as f32) / film;
+        FilmWindow { min, max }
+    }
+
+    /// Whether the window is the whole film.
+    pub fn is_whole(&self) -> bool {
+        *self == FilmWindow::default()
+    }
+
+    /// The window's width and height, in fractions of the film's.
+    pub fn extent(&self) -> (f32, f32) {
+        (self.max.x - self.min.x, self.max.y - self.min.y)
+    }
 }
 
 /// A camera's projection (Mitsuba's `perspective`, `thinlens` and `orthographic` sensors).
@@ -839,6 +897,13 @@ impl Scene {
                 "camera".into(),
                 "needs 0 < fov < 180, a target distinct from the position and an up vector not parallel to the view"
                     .into(),
+            ));
+        }
+        let w = &c.window;
+        if !(w.min.cmpge(glam::Vec2::ZERO).all() && w.max.cmple(glam::Vec2::ONE).all() && w.min.cmplt(w.max).all()) {
+            return Err(err(
+                "camera".into(),
+                format!("the film window must lie in [0, 1]² with min < max, got {:?} to {:?}", w.min, w.max),
             ));
         }
         if c.width == 0 || c.height == 0 {

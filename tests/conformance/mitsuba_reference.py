@@ -129,6 +129,10 @@ MATRIX = {
                            grads=["pair.shape.bsdf.reflectance.value", "pair.block.bsdf.alpha.value"]),
     "sensor_orthographic": dict(features=["orthographic", "to_world scale sizes the film", "near_clip"],
                                 grads=["ball.bsdf.reflectance.value", "box.bsdf.alpha.value"]),
+    "sensor_crop": dict(features=["hdrfilm crop_offset_x/y, crop_width/height", "perspective fov over the whole film"],
+                        grads=["ball.bsdf.reflectance.value", "box.bsdf.alpha.value"]),
+    "sensor_crop_orthographic": dict(features=["hdrfilm crop (default crop_height)", "orthographic"],
+                                     grads=["ball.bsdf.reflectance.value", "box.bsdf.alpha.value"]),
     "sensor_thinlens": dict(features=["thinlens", "aperture_radius", "focus_distance", "fov_axis smaller"],
                             grads=["ball.bsdf.reflectance.value", "box.bsdf.reflectance.value"]),
     # ---- emitter
@@ -306,6 +310,7 @@ POWER = {
     "bsdf_roughdielectric": {"gradient_bias": 0.8},
     "shape_instance": {"gradient_bias": 0.4},
     "sensor_orthographic": {"gradient_bias": 0.1},
+    "sensor_crop_orthographic": {"gradient_bias": 0.1},
     # Light through the frosted ball and the plastic's specular share are caustic-like, rare paths.
     "gltf_lights": {"gradient_bias": 0.3},
     # The ball's α_u (0.05, Beckmann) is left out: its image mean cancels (it sees 240 %).
@@ -455,7 +460,9 @@ def reverse_gradient(mi, dr, scene, params, key, integrator, spp, seeds, block, 
     import numpy as np
     sensor = scene.sensors()[0]
     film = sensor.film()
-    width, height = (int(v) for v in film.size())
+    # The image is the film's crop window (the whole film unless the scene crops it).
+    width, height = (int(v) for v in film.crop_size())
+    x0, y0 = (int(v) for v in film.crop_offset())
     size_key, offset_key = f"{sensor.id()}.film.crop_size", f"{sensor.id()}.film.crop_offset"
     dr.enable_grad(params[key])
     params.update()
@@ -466,7 +473,7 @@ def reverse_gradient(mi, dr, scene, params, key, integrator, spp, seeds, block, 
             for bx in range(0, width, block):
                 bw, bh = min(block, width - bx), min(block, height - by)
                 params[size_key] = mi.ScalarVector2u(bw, bh)
-                params[offset_key] = mi.ScalarPoint2u(bx, by)
+                params[offset_key] = mi.ScalarPoint2u(x0 + bx, y0 + by)
                 params.update()
                 index = (by // block) * -(-width // block) + bx // block
                 for c in range(3):
@@ -478,7 +485,7 @@ def reverse_gradient(mi, dr, scene, params, key, integrator, spp, seeds, block, 
                     img[by:by + bh, bx:bx + bw, c] = float(np.array(dr.grad(params[key]), dtype=np.float64).sum())
         stats.add(img)
     params[size_key] = mi.ScalarVector2u(width, height)
-    params[offset_key] = mi.ScalarPoint2u(0, 0)
+    params[offset_key] = mi.ScalarPoint2u(x0, y0)
     dr.disable_grad(params[key])
     params.update()
 
@@ -537,7 +544,7 @@ def run_scene(mi, dr, name, spec, args):
     n_seeds = args.seeds or spec.get("seeds", DEFAULT_SEEDS)
     seeds = list(range(n_seeds))
     block = args.block
-    film = scene.sensors()[0].film().size()
+    film = scene.sensors()[0].film().crop_size()
     width, height = int(film[0]), int(film[1])
     start = time.time()
 

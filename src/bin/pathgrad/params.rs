@@ -34,7 +34,8 @@ pub(crate) fn params(spec: &str, defines: &[(String, String)], json: bool, allow
                 };
                 serde_json::json!({"index": i, "name": s.name, "position": c.position.to_array(),
                     "target": c.target.to_array(), "up": c.up.to_array(), "fov_y_degrees": c.fov_y_degrees,
-                    "width": c.width, "height": c.height, "lens": lens})
+                    "width": c.width, "height": c.height, "lens": lens,
+                    "window": {"min": c.window.min.to_array(), "max": c.window.max.to_array()}})
             })
             .collect();
         println!("{}", serde_json::to_string_pretty(&serde_json::json!({"params": items, "sensors": sensors}))?);
@@ -60,8 +61,14 @@ pub(crate) fn params(spec: &str, defines: &[(String, String)], json: bool, allow
                 ),
                 Lens::Orthographic { half_height, .. } => format!("orthographic, {:.3} high", 2.0 * half_height),
             };
+            let window = if c.window.is_whole() {
+                String::new()
+            } else {
+                let (w, h) = c.film_size(c.width, c.height);
+                format!(", cropped at ({:.0}, {:.0}) from a {w:.0}×{h:.0} film", c.window.min.x * w, c.window.min.y * h)
+            };
             println!(
-                "  {i}: {:<24} at {:?} towards {:?}, {projection}, {}×{}",
+                "  {i}: {:<24} at {:?} towards {:?}, {projection}, {}×{}{window}",
                 s.name,
                 c.position.to_array(),
                 c.target.to_array(),

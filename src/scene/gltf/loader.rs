@@ -217,6 +217,7 @@ impl Loader<'_> {
             height,
             filter: crate::scene::PixelFilter::Box,
             lens,
+            window: crate::scene::FilmWindow::default(),
         };
         // Named by its node (node names are unique: `unique_names`).
         self.cameras.push(crate::scene::Sensor { name: self.node_names[node].clone(), camera });

@@ -244,6 +244,7 @@ fn placeholder_camera() -> Camera {
         height: DEFAULT_WIDTH,
         filter: crate::scene::PixelFilter::Box,
         lens: crate::scene::Lens::Pinhole,
+        window: crate::scene::FilmWindow::default(),
     }
 }
 

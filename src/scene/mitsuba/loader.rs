@@ -93,6 +93,7 @@ pub(super) fn load_text_with(text: &str, file: &Path, options: &LoadOptions, mes
         height: 1,
         filter: crate::scene::PixelFilter::Box,
         lens: crate::scene::Lens::Pinhole,
+        window: crate::scene::FilmWindow::default(),
     };
     let mut loader = Loader {
         x: Xml::new(name.clone(), &doc).with_sources(&sources),

@@ -194,7 +194,12 @@ pub const PLUGINS: &[Plugin] = &[
     ),
     p(Sensor, "thinlens", "as perspective, `aperture_radius`, `focus_distance`", ""),
     p(Sensor, "orthographic", "`to_world` (its scale sizes the film), `near_clip`", ""),
-    p(Film, "hdrfilm", "`width`, `height`, an rfilter", ""),
+    p(
+        Film,
+        "hdrfilm",
+        "`width`, `height`, `crop_offset_x`, `crop_offset_y`, `crop_width`, `crop_height`, an rfilter",
+        "`sample_border` refused",
+    ),
     p(Rfilter, "box", "—", ""),
     p(Rfilter, "tent", "`radius`", ""),
     p(Rfilter, "gaussian", "`stddev`", ""),

@@ -80,6 +80,23 @@ const DEFAULT_ORTHOGRAPHIC_FOV: f32 = 45.0;
 const MITSUBA_NEAR_CLIP: f32 = 0.01;
 const MITSUBA_FAR_CLIP: f32 = 10_000.0;
 
+/// What a `<film>` gives the sensor.
+struct Film {
+    /// The film's size in pixels (what the field of view spans).
+    width: u32,
+    height: u32,
+    /// The crop window's top-left pixel and size (the image's size; the film's when not cropped).
+    offset: [u32; 2],
+    crop: [u32; 2],
+    filter: PixelFilter,
+}
+
+impl Film {
+    fn window(&self) -> crate::scene::FilmWindow {
+        crate::scene::FilmWindow::from_pixels(self.width, self.height, self.offset, self.crop)
+    }
+}
+
 impl<'a> Loader<'a> {
     /// Reads the sensor into `scene.camera` (and `default_spp`).
     pub(super) fn sensor(&mut self, node: El<'a>) -> Result<()> {
@@ -91,11 +108,18 @@ impl<'a> Loader<'a> {
         }
         let films = p.take_nested(&["film"]);
         // Mitsuba's hdrfilm reconstructs with a Gaussian (σ = 0.5) unless told otherwise.
-        let (width, height, filter) = match films[..] {
-            [] => (DEFAULT_FILM.0, DEFAULT_FILM.1, PixelFilter::Gaussian { stddev: DEFAULT_GAUSSIAN_STDDEV }),
+        let film = match films[..] {
+            [] => Film {
+                width: DEFAULT_FILM.0,
+                height: DEFAULT_FILM.1,
+                offset: [0, 0],
+                crop: [DEFAULT_FILM.0, DEFAULT_FILM.1],
+                filter: PixelFilter::Gaussian { stddev: DEFAULT_GAUSSIAN_STDDEV },
+            },
             [f] => self.film(f)?,
             [_, second, ..] => return Err(self.x.err(second, "a sensor has at most one <film>")),
         };
+        let (width, height) = (film.width, film.height);
         // A sampler nested here or declared at scene level and referred to (`<ref id="…"/>`).
         let samplers = p.take_nested(&["sampler", "ref"]);
         let samplers = samplers.into_iter().map(|s| self.deref(s)).collect::<Result<Vec<_>>>()?;
@@ -108,7 +132,7 @@ impl<'a> Loader<'a> {
             [_, second, ..] => return Err(self.x.err(second, "a sensor has at most one <sampler>")),
         }
         if p.kind == "orthographic" {
-            return self.orthographic(&p, width, height, filter);
+            return self.orthographic(&p, &film);
         }
         let lens = if p.kind == "thinlens" {
             let aperture_radius = match p.float(&self.x, "aperture_radius")? {
@@ -207,7 +231,17 @@ impl<'a> Loader<'a> {
             None => (Vec3::ZERO, Vec3::Z, Vec3::Y),
             Some((t, n)) => camera_frame(&t).map_err(|m| self.x.err(n, m))?,
         };
-        self.scene.camera = Camera { position, target, up, fov_y_degrees: fov_y, width, height, filter, lens };
+        self.scene.camera = Camera {
+            position,
+            target,
+            up,
+            fov_y_degrees: fov_y,
+            width: film.crop[0],
+            height: film.crop[1],
+            filter: film.filter,
+            lens,
+            window: film.window(),
+        };
         // Whether they clip anything is known once the shapes are built.
         let at = self.scene.warnings.len();
         for (near, depth, warning) in clips {
@@ -220,7 +254,7 @@ impl<'a> Loader<'a> {
     /// spans x ∈ [−1, 1] and y ∈ [−1/aspect, 1/aspect] of `to_world`'s frame (so its x and y
     /// scales size it) on the plane `near_clip` ahead; pathgrad starts rays there as Mitsuba does,
     /// and renders beyond `far_clip` (with a warning where that matters).
-    fn orthographic(&mut self, p: &Props<'a>, width: u32, height: u32, filter: PixelFilter) -> Result<()> {
+    fn orthographic(&mut self, p: &Props<'a>, film: &Film) -> Result<()> {
         let near = p.float(&self.x, "near_clip")?.map_or(MITSUBA_NEAR_CLIP, |(v, _)| v);
         let far = p.float(&self.x, "far_clip")?;
         let transform = p.transform(&self.x, "to_world")?;
@@ -229,12 +263,21 @@ impl<'a> Loader<'a> {
             None => (Vec3::ZERO, Vec3::Z, Vec3::Y, Vec3::ONE),
             Some((t, n)) => scaled_camera_frame(&t).map_err(|m| self.x.err(n, m))?,
         };
-        let aspect = width as f32 / height as f32;
+        let aspect = film.width as f32 / film.height as f32;
         let lens =
             Lens::Orthographic { half_height: scale.y / aspect, stretch: scale.x / scale.y, near_clip: near * scale.z };
         // fov_y_degrees is the pinhole's: unused by this lens, a valid value for the checks.
-        self.scene.camera =
-            Camera { position, target, up, fov_y_degrees: DEFAULT_ORTHOGRAPHIC_FOV, width, height, filter, lens };
+        self.scene.camera = Camera {
+            position,
+            target,
+            up,
+            fov_y_degrees: DEFAULT_ORTHOGRAPHIC_FOV,
+            width: film.crop[0],
+            height: film.crop[1],
+            filter: film.filter,
+            lens,
+            window: film.window(),
+        };
         if let Some((depth, n)) = far {
             let warning =
                 self.x.warning(n, "property 'far_clip' of 'orthographic' ignored: pathgrad's camera does not clip far");
@@ -244,8 +287,9 @@ impl<'a> Loader<'a> {
         Ok(())
     }
 
-    /// A `<film>`: its size and reconstruction filter (Mitsuba's default: a Gaussian of σ 0.5).
-    fn film(&mut self, node: El<'a>) -> Result<(u32, u32, PixelFilter)> {
+    /// A `<film>`: its size, crop window and reconstruction filter (Mitsuba's default: a Gaussian
+    /// of σ 0.5).
+    fn film(&mut self, node: El<'a>) -> Result<Film> {
         let p = Props::parse(&self.x, node)?;
         if p.kind != "hdrfilm" {
             return Err(self.x.err(node, format!("unsupported plugin '{}' (supported: hdrfilm)", p.kind)));
@@ -257,6 +301,40 @@ impl<'a> Loader<'a> {
                     return Err(self.x.err(n, format!("'{name}' must lie in [1, {MAX_FILM}], got {v}")));
                 }
                 *s = v as u32;
+            }
+        }
+        // Mitsuba's crop window: the image covers only these pixels of the film.
+        let mut offset = [0u32; 2];
+        for (o, name) in offset.iter_mut().zip(["crop_offset_x", "crop_offset_y"]) {
+            if let Some((v, n)) = p.integer(&self.x, name)? {
+                if !(0..MAX_FILM).contains(&v) {
+                    return Err(self.x.err(n, format!("'{name}' must lie in [0, {MAX_FILM}), got {v}")));
+                }
+                *o = v as u32;
+            }
+        }
+        let mut crop = [size[0].saturating_sub(offset[0]), size[1].saturating_sub(offset[1])];
+        for (axis, name) in ["crop_width", "crop_height"].into_iter().enumerate() {
+            if let Some((v, n)) = p.integer(&self.x, name)? {
+                if !(1..=MAX_FILM).contains(&v) {
+                    return Err(self.x.err(n, format!("'{name}' must lie in [1, {MAX_FILM}], got {v}")));
+                }
+                crop[axis] = v as u32;
+            }
+        }
+        for (axis, (name, size_name)) in
+            [("crop_offset_x", "width"), ("crop_offset_y", "height")].into_iter().enumerate()
+        {
+            if crop[axis] == 0 || offset[axis] + crop[axis] > size[axis] {
+                let crop_name = ["crop_width", "crop_height"][axis];
+                let n = p.node_of(crop_name).or(p.node_of(name)).unwrap_or(node);
+                return Err(self.x.err(
+                    n,
+                    format!(
+                        "the crop window ({name} {} + {crop_name} {}) must lie inside the film's {size_name} {}",
+                        offset[axis], crop[axis], size[axis]
+                    ),
+                ));
             }
         }
         // Output encoding only: pathgrad picks it from the output file name.
@@ -304,7 +382,7 @@ impl<'a> Loader<'a> {
             [_, second, ..] => return Err(self.x.err(second, "a film has at most one <rfilter>")),
         };
         self.finish(&p)?;
-        Ok((size[0], size[1], filter))
+        Ok(Film { width: size[0], height: size[1], offset, crop, filter })
     }
 
     /// Reads a `<sampler>`'s sample count. Mitsuba's other samplers (`stratified`, `multijitter`,

@@ -39,14 +39,14 @@ pub const MAX_SEGMENTS: u32 = 1024;
 /// by k. An orthographic camera's pixel is `2·half_height/h` wide at any distance, which takes the
 /// place of `d·θpx`.
 pub fn segments_for(camera: &Camera, center: Vec3, radius: f32, cell: f32) -> u32 {
+    // The whole film's size (the image may be a crop of it).
+    let (width, height) = camera.film_size(camera.width, camera.height);
     let pixel_size = match camera.lens {
-        crate::scene::Lens::Orthographic { half_height, stretch, .. } => {
-            2.0 * half_height * stretch.min(1.0) / camera.height as f32
-        }
+        crate::scene::Lens::Orthographic { half_height, stretch, .. } => 2.0 * half_height * stretch.min(1.0) / height,
         _ => {
             let tan_y = (camera.fov_y_degrees.to_radians() * 0.5).tan();
-            let tan_x = tan_y * camera.width as f32 / camera.height as f32;
-            let pixel_angle = 2.0 * tan_y / camera.height as f32 / (1.0 + tan_x * tan_x + tan_y * tan_y);
+            let tan_x = tan_y * width / height;
+            let pixel_angle = 2.0 * tan_y / height / (1.0 + tan_x * tan_x + tan_y * tan_y);
             ((center - camera.position).length() - radius) * pixel_angle
         }
     };

@@ -921,6 +921,29 @@ fn thinlens_and_orthographic_sensors_take_mitsubas_properties() {
 }
 
 #[test]
+fn a_cropped_film_is_the_image_size_and_a_window_of_the_film() {
+    use crate::scene::FilmWindow;
+    let with = |film: &str, sensor: &str| {
+        let xml = format!(
+            r#"<scene version="3.0.0"><sensor type="{sensor}"><film type="hdrfilm"><integer name="width" value="40"/><integer name="height" value="20"/>{film}</film></sensor><shape type="cube"><emitter type="area"/></shape></scene>"#
+        );
+        load_text(&xml, Path::new("s.xml"), &[], obj_for_tests).unwrap_or_else(|e| panic!("{e}")).camera
+    };
+    let whole = with("", "perspective");
+    assert_eq!((whole.width, whole.height, whole.window), (40, 20, FilmWindow::default()));
+    let crop = r#"<integer name="crop_offset_x" value="10"/><integer name="crop_offset_y" value="5"/><integer name="crop_width" value="20"/>"#;
+    for sensor in ["perspective", "orthographic"] {
+        let c = with(crop, sensor);
+        // crop_height defaults to what lies below the offset.
+        assert_eq!((c.width, c.height), (20, 15), "{sensor}");
+        assert_eq!(c.window, FilmWindow::from_pixels(40, 20, [10, 5], [20, 15]), "{sensor}");
+        // The field of view and the orthographic film's size are the whole film's.
+        assert_eq!((c.fov_y_degrees, c.lens), (with("", sensor).fov_y_degrees, with("", sensor).lens), "{sensor}");
+        assert_eq!(c.film_size(c.width, c.height), (40.0, 20.0));
+    }
+}
+
+#[test]
 fn anisotropic_roughness_is_two_parameters_of_a_conductor_only() {
     let s = load_ok(
         r#"<shape type="cube" id="a"><bsdf type="roughconductor"><float name="alpha_u" value="0.1"/><float name="alpha_v" value="0.3"/></bsdf></shape>

@@ -435,6 +435,18 @@ fn sensor_errors() {
             "<float name=\"stddev\">: 'stddev' must lie in (0, 64] pixels, got -1",
         ),
         (
+            r#"<film type="hdrfilm"><integer name="width" value="64"/><integer name="crop_offset_x" value="40"/><integer name="crop_width" value="32"/></film>"#,
+            "<integer name=\"crop_width\">: the crop window (crop_offset_x 40 + crop_width 32) must lie inside the film's width 64",
+        ),
+        (
+            r#"<film type="hdrfilm"><integer name="height" value="64"/><integer name="crop_offset_y" value="64"/></film>"#,
+            "<integer name=\"crop_offset_y\">: the crop window (crop_offset_y 64 + crop_height 0) must lie inside the film's height 64",
+        ),
+        (
+            r#"<film type="hdrfilm"><integer name="crop_height" value="0"/></film>"#,
+            "<integer name=\"crop_height\">: 'crop_height' must lie in [1, 16384], got 0",
+        ),
+        (
             r#"<film type="hdrfilm"><boolean name="sample_border" value="true"/></film>"#,
             "<boolean name=\"sample_border\">: sample_border is not supported (pathgrad samples inside the film only)",
         ),

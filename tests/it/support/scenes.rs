@@ -19,6 +19,7 @@ pub fn open_furnace() -> Scene {
         height: 48,
         filter: PixelFilter::Box,
         lens: pathgrad::scene::Lens::Pinhole,
+        window: pathgrad::scene::FilmWindow::default(),
     };
     let mut s = Scene::new("test:open-furnace", camera);
     let white = s.add_diffuse("object", Vec3::ONE).unwrap();
@@ -54,6 +55,7 @@ pub fn textured_environment() -> Scene {
         height: 48,
         filter: PixelFilter::Box,
         lens: pathgrad::scene::Lens::Pinhole,
+        window: pathgrad::scene::FilmWindow::default(),
     };
     let mut s = Scene::new("test:textured-environment", camera);
     let mut texels = Vec::new();
@@ -98,6 +100,7 @@ pub fn deep_meshes() -> Scene {
         height: 48,
         filter: PixelFilter::Box,
         lens: pathgrad::scene::Lens::Pinhole,
+        window: pathgrad::scene::FilmWindow::default(),
     };
     let mut s = Scene::new("test:deep-meshes", camera);
     let grey = s.add_diffuse("grey", Vec3::splat(0.6)).unwrap();
