@@ -10,7 +10,8 @@ camera rules in Python, independently of pathgrad's Rust loader, and writes:
                               world space, one BSDF per material (id = pathgrad's material name),
                               area emitters for emissive materials, integrator `prb`
     OUT/NAME/*.ply            the meshes (binary, world space, with normals/uv as present)
-    OUT/NAME/*.exr            base-colour textures, linear and multiplied by baseColorFactor
+    OUT/NAME/*.exr            base-colour textures, linear and multiplied by baseColorFactor; normal
+                              textures as stored, their scale folded in (inside a normalmap)
 
 and returns the map from each parameter pathgrad exposes to the key Mitsuba's `mi.traverse`
 gives the same quantity, which the reference JSON stores (`pathgrad_keys`). Mitsuba renders the
@@ -197,6 +198,16 @@ class Converter:
         transmits = ext.get("KHR_materials_transmission", {}).get("transmissionFactor", 0.0) > 0 and metallic < 1.0
         double_sided = m.get("doubleSided") and not transmits
         prefix = f"{name}.brdf_0" if double_sided else name
+        # A normal texture wraps the material in a normalmap (inside the twosided), its scale
+        # folded into the stored texels: (2·rgb − 1)·(s, s, 1) kept as (n + 1)/2.
+        normal_map = None
+        if "normalTexture" in m:
+            info = m["normalTexture"]
+            source = self.doc["textures"][info["index"]]["source"]
+            texels = self.g.image_rgb(source)
+            texels[..., :2] = ((2.0 * texels[..., :2] - 1.0) * info.get("scale", 1.0) + 1.0) * 0.5
+            normal_map = self.write_texture(name, texels, "normal")
+            prefix += ".nested_bsdf"
         texture, mean, tex_coord = None, base, None
         if "baseColorTexture" in pbr:
             info = pbr["baseColorTexture"]
@@ -206,6 +217,10 @@ class Converter:
             assert metallic == 0.0, "a textured metallic material is approximated by pathgrad (warned); not converted"
             texture = self.write_texture(name, texels)
             tex_coord = info.get("texCoord", 0)
+        if "normalTexture" in m:
+            set_ = m["normalTexture"].get("texCoord", 0)
+            assert tex_coord in (None, set_), "pathgrad refuses two texture coordinate sets"
+            tex_coord = set_
 
         def conductor(specular):
             return (f'<bsdf type="roughconductor"><string name="distribution" value="ggx"/>'
@@ -237,6 +252,10 @@ class Converter:
             self.keys[f"{name}.weight.value"] = f"{prefix}.weight.value"
             self.keys[f"{name}.bsdf_1.alpha.value"] = f"{prefix}.bsdf_1.alpha.value"
             self.keys[f"{name}.bsdf_1.specular_reflectance.value"] = f"{prefix}.bsdf_1.specular_reflectance.value"
+        if normal_map:
+            xml = (f'<bsdf type="normalmap">\n        <texture type="bitmap" name="normalmap">'
+                   f'<string name="filename" value="{normal_map}"/><boolean name="raw" value="true"/></texture>\n'
+                   f'        {xml}\n    </bsdf>')
         if double_sided:
             xml = f'<bsdf type="twosided">\n        {xml}\n    </bsdf>'
         xml = xml.replace("<bsdf type=", f'<bsdf id="{name}" type=', 1)
@@ -246,10 +265,10 @@ class Converter:
         self.materials[index] = entry
         return entry
 
-    def write_texture(self, name, texels):
+    def write_texture(self, name, texels, kind="base_color"):
         import mitsuba as mi
         self.assets.mkdir(parents=True, exist_ok=True)
-        file = self.assets / f"{name}_base_color.exr"
+        file = self.assets / f"{name}_{kind}.exr"
         mi.Bitmap(texels.astype(np.float32), mi.Bitmap.PixelFormat.RGB).write(str(file))
         return f"{self.name}/{file.name}"
 

@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""Writes scenes/gltf_src/features.gltf and lights.gltf: small glTF 2.0 scenes exercising the parts
+"""Writes scenes/gltf_src/features.gltf, lights.gltf and normalmap.gltf: small glTF 2.0 scenes exercising the parts
 of the glTF loader that the showcase (scenes/gltf/showcase.gltf) does not, for the conformance
 matrix.
 
@@ -174,6 +174,7 @@ def main():
     (OUT / "features.gltf").write_text(json.dumps(doc, indent=1) + "\n")
     print(f"wrote {OUT / 'features.gltf'}")
     lights()
+    normal_maps()
 
 
 def lights():
@@ -236,6 +237,77 @@ def lights():
     }
     (OUT / "lights.gltf").write_text(json.dumps(doc, indent=1) + "\n")
     print(f"wrote {OUT / 'lights.gltf'}")
+
+
+def normal_texture():
+    """8 x 8 tangent-space normals, stored as (n + 1)/2: tilted towards +x in the left half and
+    towards -x in the right, towards +y in the top two rows and -y in the bottom two, so a flip in
+    u or v, a swapped channel or a mirrored bitangent changes the image."""
+    img = np.zeros((8, 8, 3), np.uint8)
+    for y in range(8):
+        for x in range(8):
+            sx = 0.6 if x < 4 else -0.3
+            sy = 0.5 if y < 2 else (-0.4 if y >= 6 else 0.0)
+            n = np.array([sx, sy, 1.0]) / np.linalg.norm([sx, sy, 1.0])
+            img[y, x] = np.round((n + 1.0) * 0.5 * 255.0)
+    return img
+
+
+def normal_maps():
+    """normalmap.gltf: glTF normal textures — a double-sided plastic floor (a blend, no base-colour texture)
+    with a normal texture of scale 0.7 repeated three times, a metallic panel facing the camera
+    with the same texture at scale 1, under an emissive quad."""
+    b = Builder()
+    p, n, t = quad()
+    uv = np.stack([p[:, 0] + 0.5, p[:, 2] + 0.5], axis=1)
+    floor = {"POSITION": b.positions(p * [5, 1, 5]), "NORMAL": b.vec3(n), "TEXCOORD_0": b.vec2(uv * 3.0)}
+    panel = {"POSITION": b.positions(p), "NORMAL": b.vec3(n), "TEXCOORD_0": b.vec2(uv)}
+    lamp = {"POSITION": b.positions(p), "NORMAL": b.vec3(n)}
+    indices = b.add(np.asarray(t.reshape(-1), "<u2"), 5123, "SCALAR", 34963)
+    png = png_bytes(normal_texture())
+    doc = {
+        "asset": {"version": "2.0", "generator": "pathgrad tests/conformance/make_gltf.py"},
+        "extensionsUsed": ["KHR_materials_emissive_strength"],
+        "scene": 0,
+        "scenes": [{"nodes": [0, 1, 2, 3]}],
+        "nodes": [
+            {"name": "camera", "camera": 0, "translation": [0.0, 2.0, 4.2],
+             "rotation": [-0.1736482, 0.0, 0.0, 0.9848078]},
+            {"name": "floor", "mesh": 0},
+            # a 1.4 x 1.4 panel tilted 60 degrees about x: its +y normal turns towards +z
+            {"name": "panel", "mesh": 1, "translation": [0.5, 0.75, 0.3], "scale": [1.4, 1.4, 1.4],
+             "rotation": [0.5, 0.0, 0.0, 0.8660254]},
+            # the lamp quad turned over (180 degrees about x): it faces -y
+            {"name": "lamp", "mesh": 2, "translation": [-0.6, 2.4, 0.8], "scale": [1.2, 1.0, 1.2],
+             "rotation": [1.0, 0.0, 0.0, 0.0]},
+        ],
+        "cameras": [{"type": "perspective", "perspective": {"yfov": 0.8, "aspectRatio": 1.25, "znear": 0.05}}],
+        "meshes": [
+            {"name": "floor", "primitives": [{"attributes": floor, "indices": indices, "material": 0}]},
+            {"name": "panel", "primitives": [{"attributes": panel, "indices": indices, "material": 1}]},
+            {"name": "lamp", "primitives": [{"attributes": lamp, "indices": indices, "material": 2}]},
+        ],
+        "materials": [
+            {"name": "bumpy", "doubleSided": True, "normalTexture": {"index": 0, "scale": 0.7},
+             "pbrMetallicRoughness": {"baseColorFactor": [0.7, 0.6, 0.5, 1.0], "metallicFactor": 0.0,
+                                      "roughnessFactor": 0.5}},
+            {"name": "brushed", "normalTexture": {"index": 0},
+             "pbrMetallicRoughness": {"baseColorFactor": [0.9, 0.8, 0.6, 1.0], "metallicFactor": 1.0,
+                                      "roughnessFactor": 0.3}},
+            {"name": "lamp", "emissiveFactor": [1.0, 0.9, 0.8],
+             "extensions": {"KHR_materials_emissive_strength": {"emissiveStrength": 6.0}},
+             "pbrMetallicRoughness": {"baseColorFactor": [0.0, 0.0, 0.0, 1.0], "metallicFactor": 0.0,
+                                      "roughnessFactor": 1.0}},
+        ],
+        "textures": [{"source": 0}],
+        "images": [{"uri": "data:image/png;base64," + base64.b64encode(png).decode()}],
+        "accessors": b.accessors,
+        "bufferViews": b.views,
+        "buffers": [{"byteLength": len(b.data),
+                     "uri": "data:application/octet-stream;base64," + base64.b64encode(bytes(b.data)).decode()}],
+    }
+    (OUT / "normalmap.gltf").write_text(json.dumps(doc, indent=1) + "\n")
+    print(f"wrote {OUT / 'normalmap.gltf'}")
 
 
 if __name__ == "__main__":

@@ -288,6 +288,11 @@ MATRIX = {
                         warnings=["KHR_lights_punctual: intensities"],
                         grads=["spot.intensity.value", "sun.irradiance.value", "glass.specular_transmittance.value",
                                "plastic.bsdf_0.reflectance.value"]),
+    "gltf_normalmap": dict(features=["glTF normalTexture (normalmap)", "normalTexture scale", "twosided(normalmap(blend))",
+                                     "normal-mapped conductor"],
+                           gltf="scenes/gltf_src/normalmap.gltf", width=48,
+                           grads=["bumpy.bsdf_0.reflectance.value", "brushed.specular_reflectance.value",
+                                  "lamp.emitter.radiance.value"]),
 }
 
 # The bias each scene's comparison must be able to see where the defaults (1 % of the primal

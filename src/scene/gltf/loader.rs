@@ -271,6 +271,14 @@ impl Loader<'_> {
             }
             let material = self.material(primitive.material.map(|m| m.value()))?;
             let geometry = self.geometry(&at, primitive, material.tex_coord)?;
+            if material.normal_mapped
+                && primitive.attributes.contains_key(&Checked::Valid(json::mesh::Semantic::Tangents))
+            {
+                self.scene.warn(format!(
+                    "{at}: TANGENT ignored: the normal texture's frame is ∂p/∂u of each triangle with bitangent n × t \
+                     (glTF's frame without tangents; MikkTSpace's per-vertex tangents and their handedness are not read)"
+                ));
+            }
             let name = if mesh.primitives.len() > 1 {
                 // One mesh per primitive: `node_j`, kept apart from every other node's name.
                 let name = fresh_name(&self.taken_names, format!("{}_{j}", self.node_names[node]));
@@ -322,7 +330,7 @@ impl Loader<'_> {
             None if tex_coord.is_some() => {
                 return Err(self.error(
                     at,
-                    format!("its material has a base-colour texture but the primitive has no TEXCOORD_{set}"),
+                    format!("its material has a base-colour or normal texture but the primitive has no TEXCOORD_{set}"),
                 ));
             }
             None => {}

@@ -57,9 +57,6 @@ impl Loader<'_> {
         if pbr.metallic_roughness_texture.is_some() {
             ignored.push("metallicRoughnessTexture");
         }
-        if m.normal_texture.is_some() {
-            ignored.push("normalTexture");
-        }
         if m.occlusion_texture.is_some() {
             ignored.push("occlusionTexture");
         }
@@ -95,6 +92,44 @@ impl Loader<'_> {
             }
             tex_coord = Some(info.tex_coord);
         }
+        // The normal texture, its `scale` folded into the texels: n = (2·rgb − 1)·(s, s, 1),
+        // stored as (n + 1)/2 (the kernels normalise the mapped normal).
+        let normal_map = match &m.normal_texture {
+            None => None,
+            Some(info) => {
+                if let Some(set) = tex_coord.filter(|&set| set != info.tex_coord) {
+                    return Err(self.error(
+                        &at,
+                        format!(
+                            "normalTexture reads TEXCOORD_{} but baseColorTexture TEXCOORD_{set}: pathgrad reads one \
+                             set of texture coordinates a primitive",
+                            info.tex_coord
+                        ),
+                    ));
+                }
+                tex_coord = Some(info.tex_coord);
+                let scale = info.scale;
+                if !scale.is_finite() {
+                    return Err(self.error(&at, format!("normalTexture scale {scale} must be finite")));
+                }
+                let image = root.textures[info.index.value()].source.value();
+                let (width, height, mut texels) = self.image_texels_linear(image)?;
+                for t in texels.chunks_exact_mut(3) {
+                    for c in 0..2 {
+                        t[c] = ((2.0 * t[c] - 1.0) * scale + 1.0) * 0.5;
+                    }
+                }
+                let map = crate::scene::NormalMapTexture {
+                    width,
+                    height,
+                    texels,
+                    nearest: false,
+                    wrap: crate::scene::Wrap::Repeat,
+                };
+                self.scene.normal_maps.push(map);
+                Some(self.scene.normal_maps.len() as u32 - 1)
+            }
+        };
         let id = if metallic >= 1.0 {
             self.scene.add_rough_conductor(&name, Distribution::Ggx, alpha, mean, Vec3::ZERO, Vec3::ONE)?
         } else if transmits {
@@ -122,6 +157,10 @@ impl Loader<'_> {
             )?;
             self.scene.add_blend(&name, weight, [diffuse, lobe])?
         };
+        let id = match normal_map {
+            Some(map) => self.scene.add_material(Material::NormalMap { nested: id, map }),
+            None => id,
+        };
         // A dielectric is seen from both sides already (and a two-sided one would hide its inside).
         let id = if m.double_sided && !transmits { self.scene.add_material(Material::TwoSided(id)) } else { id };
 
@@ -134,13 +173,30 @@ impl Loader<'_> {
                 format!("emitted radiance {radiance} (emissiveFactor × emissiveStrength) must be finite and ≥ 0"),
             ));
         }
-        let mapped = MappedMaterial { id, radiance: (radiance.max_element() > 0.0).then_some(radiance), tex_coord };
+        let mapped = MappedMaterial {
+            id,
+            radiance: (radiance.max_element() > 0.0).then_some(radiance),
+            tex_coord,
+            normal_mapped: normal_map.is_some(),
+        };
         self.materials[slot] = Some(mapped.clone());
         Ok(mapped)
     }
 
     /// Image `index` decoded to linear RGB texels (sRGB decoded, times `factor`), row 0 at the top.
     pub(super) fn image_texels(&mut self, index: usize, factor: Vec3) -> Result<(u32, u32, Vec<f32>)> {
+        let (width, height, mut texels) = self.image_texels_linear(index)?;
+        for t in texels.chunks_exact_mut(3) {
+            for c in 0..3 {
+                t[c] = (srgb_to_linear(t[c]) * factor[c]).clamp(0.0, 1.0);
+            }
+        }
+        Ok((width, height, texels))
+    }
+
+    /// Image `index`'s RGB as stored (values / 255 for 8-bit images; no transfer function), row 0
+    /// at the top (v = 0).
+    pub(super) fn image_texels_linear(&mut self, index: usize) -> Result<(u32, u32, Vec<f32>)> {
         let root = self.root;
         let image = &root.images[index];
         let at = format!("images[{index}]");
@@ -152,10 +208,6 @@ impl Loader<'_> {
         let decoded =
             crate::scene::load::decode_image(&bytes).map_err(|e| self.error(&at, format!("cannot decode: {e}")))?;
         let rgb = decoded.to_rgb32f();
-        let texels = rgb
-            .pixels()
-            .flat_map(|p| [0, 1, 2].map(|c| (srgb_to_linear(p.0[c]) * factor[c]).clamp(0.0, 1.0)))
-            .collect();
-        Ok((rgb.width(), rgb.height(), texels))
+        Ok((rgb.width(), rgb.height(), rgb.into_raw()))
     }
 }

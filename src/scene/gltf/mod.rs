@@ -11,7 +11,7 @@
 //!   reached twice (a cycle, or two parents) is an error. Skins and morph targets are ignored with a
 //!   warning (the bind pose is rendered).
 //! - **Meshes**: each primitive of mode `TRIANGLES` (4) becomes one pathgrad mesh — `POSITION`,
-//!   optional `NORMAL`, optional `TEXCOORD_n` (the set the base-colour texture names, else 0),
+//!   optional `NORMAL`, optional `TEXCOORD_n` (the set the base-colour and normal textures name, else 0),
 //!   optional `indices` — transformed to world space. Other modes are rejected.
 //! - **Camera**: the first node (depth-first, in scene order) carrying a camera. glTF cameras look
 //!   along their local −z with +y up. Perspective: `yfov` is used, `znear`/`zfar` are ignored; the
@@ -43,6 +43,7 @@
 //! | m = 1 | rough conductor, GGX, α = max(r², 10⁻³), specular reflectance b, η = 0, k = 1 (F ≡ 1) | `M.alpha.value`, `M.specular_reflectance.value` |
 //! | m < 1 | blend (1 − w)·diffuse(b) + w·conductor, w = 0.04 + 0.96·m; the conductor is GGX with α = max(r², 10⁻³), η = 0, k = 1, specular reflectance s = (m·b + 0.04·(1 − m)) / w (white 1 for m = 0) | `M.weight.value`, `M.bsdf_0.reflectance.value`, `M.bsdf_1.alpha.value`, `M.bsdf_1.specular_reflectance.value` |
 //! | base-colour texture | the diffuse albedo is the texture (sRGB bytes linearised, times `baseColorFactor`); the conductor uses the texture's mean colour (warned when m > 0) | `M.base_color.data` (texels, replaces `M.bsdf_0.reflectance.value`) |
+//! | normal texture | a normal map (Mitsuba's `normalmap`) around the material: the texel's RGB (stored values, no sRGB transfer) mapped to (2·rgb − 1)·(scale, scale, 1) is the shading normal in the frame (t, n × t, n), t = ∂p/∂u of the triangle orthogonalised against the shading normal n — the frame glTF prescribes without a `TANGENT` attribute, up to MikkTSpace's per-vertex smoothing; a `TANGENT` attribute is ignored with a warning; the texels are constants | — |
 //! | `emissiveFactor` × `KHR_materials_emissive_strength` | area emitter on each mesh using the material (front faces), linear radiance | `<mesh>.emitter.radiance.value` |
 //! | `KHR_materials_ior` η (1.5) | F0 = ((η − 1)/(η + 1))² replaces 0.04 above (w = F0 + (1 − F0)·m, s = (m·b + F0·(1 − m))/w) | — |
 //! | `KHR_materials_transmission` t > 0, m < 1 | rough dielectric, GGX α = max(r², 10⁻³), η, transmittance b (its mean with a texture), reflectance 1; rendered as t = 1, m = 0 (warned when not so); never two-sided | `M.alpha.value`, `M.specular_transmittance.value` |
@@ -52,7 +53,7 @@
 //! For m = 0 the blend is 0.96·diffuse(b) + 0.04·GGX — exactly glTF's dielectric with its Fresnel
 //! held at F0 = 0.04; for 0 < m < 1 it is glTF's mix of the two at normal incidence, with the
 //! dielectric's and the metal's GGX lobes (same α) merged into one conductor. Ignored, with a
-//! warning: `metallicRoughnessTexture`, `normalTexture`, `occlusionTexture`, `emissiveTexture`,
+//! warning: `metallicRoughnessTexture`, `occlusionTexture`, `emissiveTexture`,
 //! `transmissionTexture`, alpha modes other than `OPAQUE`, and extensions other than
 //! `KHR_materials_emissive_strength`, `KHR_materials_ior`, `KHR_materials_transmission` and
 //! `KHR_lights_punctual`.
@@ -298,8 +299,10 @@ struct MappedMaterial {
     id: MaterialId,
     /// Emitted radiance (linear RGB), if any component is positive.
     radiance: Option<Vec3>,
-    /// The `TEXCOORD_n` set the base-colour texture reads, if the material is textured.
+    /// The `TEXCOORD_n` set the base-colour and normal textures read, if the material is textured.
     tex_coord: Option<u32>,
+    /// Whether a normal texture perturbs the shading frame.
+    normal_mapped: bool,
 }
 
 struct Loader<'a> {

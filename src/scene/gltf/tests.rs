@@ -405,3 +405,48 @@ fn punctual_lights_transmission_and_ior() {
     assert_close(&param(&s, "plastic.weight.value"), &[(0.7f32 / 2.7).powi(2)]);
     s.validate().unwrap();
 }
+
+/// A normal texture wraps the material (inside `doubleSided`'s two-sided wrapper) in a normal map
+/// whose stored texels carry the texture's `scale` in x and y; a `TANGENT` attribute is ignored
+/// with a warning; two texture-coordinate sets are refused.
+#[test]
+fn normal_textures_become_normal_maps() {
+    let path = Path::new("tests/conformance/scenes/gltf_src/normalmap.gltf");
+    let s = load(path).unwrap();
+    s.validate().unwrap();
+    assert_eq!(s.normal_maps.len(), 2);
+    let maps: Vec<_> = s.materials.iter().filter(|m| matches!(m, Material::NormalMap { .. })).collect();
+    assert_eq!(maps.len(), 2);
+    assert!(
+        s.materials.iter().any(
+            |m| matches!(m, Material::TwoSided(id) if matches!(s.materials[id.0 as usize], Material::NormalMap { .. }))
+        ),
+        "bumpy is two-sided around its map"
+    );
+    // Texel (0, 0) is (0.6, 0.5, 1) normalised, stored as (n + 1)/2 in 8 bits; `bumpy` has scale
+    // 0.7 on x and y, `brushed` 1.
+    let n = Vec3::new(0.6, 0.5, 1.0).normalize();
+    let stored = ((n + Vec3::ONE) * 0.5 * 255.0).round() / 255.0;
+    let scaled = |c: f32, k: f32| ((2.0 * c - 1.0) * k + 1.0) * 0.5;
+    let (bumpy, brushed) = (&s.normal_maps[0].texels[..3], &s.normal_maps[1].texels[..3]);
+    assert_close(bumpy, &[scaled(stored.x, 0.7), scaled(stored.y, 0.7), stored.z]);
+    assert_close(brushed, &stored.to_array());
+    assert!(!s.warnings.iter().any(|w| w.contains("normalTexture")), "{:?}", s.warnings);
+
+    let mut doc: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(path).unwrap()).unwrap();
+    let dir = tempfile::tempdir().unwrap();
+    let write = |doc: &serde_json::Value| {
+        let p = dir.path().join("n.gltf");
+        std::fs::write(&p, doc.to_string()).unwrap();
+        load(&p)
+    };
+    // The panel's NORMAL accessor stands in for a TANGENT (glTF's are VEC4; the loader does not
+    // read it, so only the warning is checked).
+    let normal = doc["meshes"][1]["primitives"][0]["attributes"]["NORMAL"].clone();
+    doc["meshes"][1]["primitives"][0]["attributes"]["TANGENT"] = normal;
+    let s = write(&doc).unwrap();
+    assert!(s.warnings.iter().any(|w| w.contains("TANGENT ignored")), "{:?}", s.warnings);
+    doc["materials"][1]["pbrMetallicRoughness"]["baseColorTexture"] = serde_json::json!({"index": 0, "texCoord": 1});
+    let e = write(&doc).unwrap_err().to_string();
+    assert!(e.contains("normalTexture reads TEXCOORD_0 but baseColorTexture TEXCOORD_1"), "{e}");
+}
