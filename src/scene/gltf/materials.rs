@@ -115,8 +115,8 @@ impl Loader<'_> {
                 let image = root.textures[info.index.value()].source.value();
                 let (width, height, mut texels) = self.image_texels_linear(image)?;
                 for t in texels.chunks_exact_mut(3) {
-                    for c in 0..2 {
-                        t[c] = ((2.0 * t[c] - 1.0) * scale + 1.0) * 0.5;
+                    for c in &mut t[..2] {
+                        *c = ((2.0 * *c - 1.0) * scale + 1.0) * 0.5;
                     }
                 }
                 let map = crate::scene::NormalMapTexture {
