@@ -151,15 +151,13 @@ impl Strategy {
                     {
                         Some("an anisotropic rough conductor's roughness")
                     }
-                    Material::RoughDielectric { alpha, .. } if *alpha == target => {
-                        Some("a rough dielectric's roughness")
-                    }
                     _ => None,
                 });
                 // A normal-mapped material's lobes live in the perturbed frame, whose wrapper the
                 // differential sampler's densities do not include.
                 let uses = |id: crate::scene::MaterialId| match scene.materials.get(id.0 as usize) {
                     Some(Material::RoughConductor { alpha, alpha_v, .. }) => *alpha == target || *alpha_v == target,
+                    Some(Material::RoughDielectric { alpha, .. }) => *alpha == target,
                     Some(Material::Blend { weight, .. }) => *weight == target,
                     _ => false,
                 };
@@ -173,15 +171,15 @@ impl Strategy {
                 });
                 let uncovered = uncovered.or(mapped.then_some("a normal-mapped material's roughness or blend weight"));
                 if let Some(whose) = uncovered {
-                    // The paper's positive/negative split of ∂D/∂α carries over to these lobes, but
-                    // not their Fresnel-weighted lobe choice (plastic: coating/base; dielectric:
-                    // reflect/refract): not built.
+                    // The paper's positive/negative split of ∂D/∂α carries over to the plastic's
+                    // coating, but its base's α-dependence (through the coating's transmittance
+                    // tables) and the coating/base choice have no such split: not built.
                     return Err(Error::InvalidArgument {
                         parameter: scene.params.entry(target).name.clone(),
                         message: format!(
                             "is {whose}, which the differential sampler does not cover (it samples the \
-                             derivative of a rough conductor's or a blend's lobe, without a normal map): use the \
-                             bsdf strategy"
+                             derivative of a rough conductor's, a rough dielectric's or a blend's lobe, without a \
+                             normal map): use the bsdf strategy"
                         ),
                     });
                 }
@@ -203,13 +201,14 @@ impl Strategy {
     }
 
     /// Whether some material has a differential sampler for `target`: it is the roughness of a
-    /// rough conductor or the weight of a blend. If not, `diff` samples like `bsdf` (with
+    /// rough conductor or dielectric, or the weight of a blend. If not, `diff` samples like `bsdf` (with
     /// balance-heuristic MIS) and brings no variance reduction.
     pub fn has_differential_sampler(scene: &Scene, target: ParamId) -> bool {
         use crate::scene::Material;
         scene.materials.iter().any(|m| match m {
             // The differential sampler is isotropic: an anisotropic conductor has none.
             Material::RoughConductor { alpha, alpha_v, .. } => *alpha == target && alpha_v == alpha,
+            Material::RoughDielectric { alpha, .. } => *alpha == target,
             Material::Blend { weight, .. } => *weight == target,
             _ => false,
         })

@@ -100,6 +100,14 @@ float rdielectric_unit(bool refl, float eta, float f, vec3 wi, vec3 wo, vec3 m) 
     return (1.0 - f) * abs(im * om / (wi.z * d * d));
 }
 
+// |∂m/∂wo| of the pair (twin: jacobian).
+float rdielectric_jacobian(bool refl, float eta, vec3 wi, vec3 wo, vec3 m) {
+    float om = dot(wo, m);
+    if (refl) return abs(1.0 / (4.0 * om));
+    float s = dot(wi, m) + eta * om;
+    return abs(eta * eta * om / (s * s));
+}
+
 vec3 rdielectric_eval_pdf(Leaf l, vec3 wi, vec3 wo, out float pdf) {
     pdf = 0.0;
     vec3 m;
@@ -110,14 +118,7 @@ vec3 rdielectric_eval_pdf(Leaf l, vec3 wi, vec3 wo, out float pdf) {
     float d = microfacet_d(l.distribution, l.alpha, m);
     float gi = microfacet_g1(l.distribution, l.alpha, wi, m);
     float f = fresnel_dielectric(dot(wi, m), l.eta.x);
-    float om = dot(wo, m);
-    float jacobian;
-    if (refl) {
-        jacobian = abs(1.0 / (4.0 * om));
-    } else {
-        float s = dot(wi, m) + eta * om;
-        jacobian = abs(eta * eta * om / (s * s));
-    }
+    float jacobian = rdielectric_jacobian(refl, eta, wi, wo, m);
     // G1 of the mirrored wi equals G1 of wi (it depends on tan²θ and the side test only).
     pdf = d * gi * max(dot(up, m), 0.0) / up.z * (refl ? f : 1.0 - f) * jacobian;
     if (d == 0.0) return vec3(0.0);
@@ -125,12 +126,9 @@ vec3 rdielectric_eval_pdf(Leaf l, vec3 wi, vec3 wo, out float pdf) {
     return (refl ? l.color : l.k) * (dg * rdielectric_unit(refl, eta, f, wi, wo, m));
 }
 
-bool rdielectric_sample(Leaf l, vec3 wi, float u_lobe, vec2 u, out vec3 wo) {
-    wo = vec3(0.0, 0.0, 1.0);
-    if (wi.z == 0.0) return false;
-    vec3 up = wi.z > 0.0 ? wi : -wi;
-    vec3 m;
-    if (!microfacet_visible_normal(l.distribution, vec2(l.alpha), up, u, m)) return false;
+// Leaves through microfacet normal m: reflected with probability F(wi·m) (u_lobe ≤ F), else
+// refracted; false where the direction lands on the side its lobe does not serve (twin: scatter).
+bool rdielectric_scatter(Leaf l, vec3 wi, vec3 m, float u_lobe, out vec3 wo) {
     float im = dot(wi, m);
     float f = fresnel_dielectric(im, l.eta.x);
     bool refl = u_lobe <= f;
@@ -144,6 +142,15 @@ bool rdielectric_sample(Leaf l, vec3 wi, float u_lobe, vec2 u, out vec3 wo) {
         wo = m * (im * eta_ti + (outside ? -ct : ct)) - wi * eta_ti;
     }
     return (wi.z * wo.z > 0.0) == refl && dot(wo, m) * wo.z > 0.0 && !any(isnan(wo));
+}
+
+bool rdielectric_sample(Leaf l, vec3 wi, float u_lobe, vec2 u, out vec3 wo) {
+    wo = vec3(0.0, 0.0, 1.0);
+    if (wi.z == 0.0) return false;
+    vec3 up = wi.z > 0.0 ? wi : -wi;
+    vec3 m;
+    if (!microfacet_visible_normal(l.distribution, vec2(l.alpha), up, u, m)) return false;
+    return rdielectric_scatter(l, wi, m, u_lobe, wo);
 }
 
 // ∂f̂/∂(lobe colour) (in color, or in trans for a transmitted pair) and ∂f̂/∂α, times adj.

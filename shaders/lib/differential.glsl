@@ -92,17 +92,25 @@ float diff_sample_x(uint distribution, bool positive, float u_b) {
     return (1.0 + r) * (1.0 + r) / (1.0 - u_b);
 }
 
-// Reflection about a half vector from one signed part; false if cos θo ≤ 0, wi·h ≤ 0 or cos θh < 1e-9.
-bool sample_diff_part(uint distribution, float alpha, vec3 wi, bool positive, vec2 u, out vec3 wo) {
-    wo = vec3(0.0);
-    if (wi.z <= 0.0) return false;
+// A half vector (upper hemisphere) from one signed part; false if cos θh < 1e-9.
+bool sample_diff_half(uint distribution, float alpha, bool positive, vec2 u, out vec3 h) {
+    h = vec3(0.0, 0.0, 1.0);
     float x = diff_sample_x(distribution, positive, u.y);
     float t = alpha * alpha * x;
     float cos_h = 1.0 / sqrt(1.0 + t);
     if (!(cos_h >= DIFF_COS_EPSILON)) return false;
     float sin_h = sqrt(t) * cos_h;
     float phi = 2.0 * PI * u.x;
-    vec3 h = vec3(sin_h * cos(phi), sin_h * sin(phi), cos_h);
+    h = vec3(sin_h * cos(phi), sin_h * sin(phi), cos_h);
+    return true;
+}
+
+// Reflection about a half vector from one signed part; false if cos θo ≤ 0, wi·h ≤ 0 or cos θh < 1e-9.
+bool sample_diff_part(uint distribution, float alpha, vec3 wi, bool positive, vec2 u, out vec3 wo) {
+    wo = vec3(0.0);
+    if (wi.z <= 0.0) return false;
+    vec3 h;
+    if (!sample_diff_half(distribution, alpha, positive, u, h)) return false;
     float wih = dot(wi, h);
     wo = 2.0 * wih * h - wi;
     return wo.z > 0.0 && wih > 0.0;
@@ -133,17 +141,44 @@ float diff_pdf_part(uint distribution, float alpha, bool positive, vec3 wi, vec3
     return diff_pdf_part_h(distribution, alpha, h, positive) / (4.0 * woh);
 }
 
+// ---- rough dielectric (twin: sample_diff_dielectric, diff_pdf_dielectric) ----
+// A microfacet normal from one signed part in the hemisphere wi sees, then reflection with
+// probability F(wi·m) or refraction, as the primal sampler leaves its visible normal.
+bool sample_diff_dielectric(Leaf l, vec3 wi, bool positive, float u_lobe, vec2 u, out vec3 wo) {
+    wo = vec3(0.0, 0.0, 1.0);
+    if (wi.z == 0.0) return false;
+    vec3 m;
+    if (!sample_diff_half(l.distribution, l.alpha, positive, u, m)) return false;
+    vec3 up = wi.z > 0.0 ? wi : -wi;
+    if (dot(up, m) <= 0.0) return false;
+    return rdielectric_scatter(l, wi, m, u_lobe, wo);
+}
+
+// p_abs(m) · (F or 1 − F) · |∂m/∂wo|: the coin-mixed density.
+float diff_pdf_dielectric(Leaf l, vec3 wi, vec3 wo) {
+    vec3 m;
+    bool refl;
+    float eta;
+    if (!rdielectric_pair(l, wi, wo, m, refl, eta)) return 0.0;
+    float f = fresnel_dielectric(dot(wi, m), l.eta.x);
+    return diff_pdf_abs_h(l.distribution, l.alpha, m) * (refl ? f : 1.0 - f) * rdielectric_jacobian(refl, eta, wi, wo, m);
+}
+
 // ---- BSDF level (ALGORITHMS.md §4.1, §4.3) ----
-bool bsdf_diff_capable(Bsdf b) { return (HAS(F_BLEND) && b.blend) || is_conductor(b.leaf0.kind); }
+bool bsdf_diff_capable(Bsdf b) {
+    return (HAS(F_BLEND) && b.blend) || is_conductor(b.leaf0.kind) || is_rough_dielectric(b.leaf0.kind);
+}
 
 float bsdf_pdf_diff(Bsdf b, vec3 wi, vec3 wo) {
     if (HAS(F_BLEND) && b.blend) return 0.5 * (leaf_pdf(b.leaf0, wi, wo) + leaf_pdf(b.leaf1, wi, wo));
+    if (is_rough_dielectric(b.leaf0.kind)) return diff_pdf_dielectric(b.leaf0, wi, wo);
     if (!is_conductor(b.leaf0.kind)) return leaf_pdf(b.leaf0, wi, wo);
     return diff_pdf(b.leaf0.distribution, b.leaf0.alpha, wi, wo);
 }
 
-// Conductor: positive part if u_sign < 0.5. Blend: child 1 if u_lobe ≤ ½, else child 0, with the
-// child's primal sampler. Diffuse: its primal sampler. Value f̂ and pdf bsdf_pdf_diff of the whole BSDF.
+// Rough conductor or dielectric: positive part if u_sign < 0.5 (the dielectric then reflects or
+// refracts by u_lobe). Blend: child 1 if u_lobe ≤ ½, else child 0, with the child's primal
+// sampler. Other leaves: their primal sampler. Value f̂ and pdf bsdf_pdf_diff of the whole BSDF.
 BsdfSample bsdf_sample_diff(Bsdf b, vec3 wi, float u_sign, float u_lobe, vec2 u) {
     BsdfSample s = BsdfSample(vec3(0.0), 0.0, vec3(0.0), false, false);
     vec3 wo;
@@ -151,6 +186,8 @@ BsdfSample bsdf_sample_diff(Bsdf b, vec3 wi, float u_sign, float u_lobe, vec2 u)
     if (HAS(F_BLEND) && b.blend) {
         bool second = u_lobe <= 0.5;
         ok = leaf_sample(second ? b.leaf1 : b.leaf0, wi, second ? u_lobe / 0.5 : (u_lobe - 0.5) / 0.5, u, wo);
+    } else if (is_rough_dielectric(b.leaf0.kind)) {
+        ok = sample_diff_dielectric(b.leaf0, wi, u_sign < 0.5, u_lobe, u, wo);
     } else if (!is_conductor(b.leaf0.kind)) {
         ok = leaf_sample(b.leaf0, wi, u_lobe, u, wo);
     } else {

@@ -8,6 +8,7 @@ use std::f32::consts::{E, PI};
 use glam::{Vec2, Vec3};
 
 use crate::bsdf::rough_conductor::Distribution;
+use crate::bsdf::rough_dielectric::RoughDielectricLeaf;
 use crate::bsdf::{Bsdf, BsdfSample, Leaf, bsdf_eval, leaf_pdf, leaf_sample};
 
 use crate::contract::{EULER_E_LO as E_LO, LAMBERT_SERIES_ONLY, LAMBERT_W0_SMALL, LAMBERT_WM1_SMALL};
@@ -139,12 +140,9 @@ pub fn diff_sample_x(distribution: Distribution, positive: bool, u_b: f32) -> f3
     }
 }
 
-/// A direction reflected about a half vector drawn from one signed part (φ = 2π u.x, x from u.y),
-/// or `None` if cos θo ≤ 0, wi·h ≤ 0, or cos θh < 1e-9.
-pub fn sample_diff_part(distribution: Distribution, alpha: f32, wi: Vec3, positive: bool, u: Vec2) -> Option<Vec3> {
-    if wi.z <= 0.0 {
-        return None;
-    }
+/// A half vector (upper hemisphere) drawn from one signed part with density
+/// [`diff_pdf_part_h`]: φ = 2π u.x, tan²θh = α²x with x from u.y; `None` if cos θh < 1e-9.
+pub fn sample_diff_half(distribution: Distribution, alpha: f32, positive: bool, u: Vec2) -> Option<Vec3> {
     let x = diff_sample_x(distribution, positive, u.y);
     let t = alpha * alpha * x;
     let cos_h = 1.0 / (1.0 + t).sqrt();
@@ -153,7 +151,16 @@ pub fn sample_diff_part(distribution: Distribution, alpha: f32, wi: Vec3, positi
     }
     let sin_h = t.sqrt() * cos_h;
     let phi = 2.0 * PI * u.x;
-    let h = Vec3::new(sin_h * phi.cos(), sin_h * phi.sin(), cos_h);
+    Some(Vec3::new(sin_h * phi.cos(), sin_h * phi.sin(), cos_h))
+}
+
+/// A direction reflected about a half vector drawn from one signed part (φ = 2π u.x, x from u.y),
+/// or `None` if cos θo ≤ 0, wi·h ≤ 0, or cos θh < 1e-9.
+pub fn sample_diff_part(distribution: Distribution, alpha: f32, wi: Vec3, positive: bool, u: Vec2) -> Option<Vec3> {
+    if wi.z <= 0.0 {
+        return None;
+    }
+    let h = sample_diff_half(distribution, alpha, positive, u)?;
     let wih = wi.dot(h);
     let wo = 2.0 * wih * h - wi;
     (wo.z > 0.0 && wih > 0.0).then_some(wo)
@@ -187,29 +194,64 @@ pub fn diff_pdf_part(distribution: Distribution, alpha: f32, positive: bool, wi:
     }
 }
 
-/// Whether the BSDF has a differential sampler: conductors and blends do, diffuse does not.
+/// Rough dielectric: a microfacet normal m drawn from one signed part of ∂α[D(m) cos θm] in the
+/// upper hemisphere (the hemisphere wi sees, mirrored when wi is below the surface), then
+/// reflection about m with probability F(wi·m) or refraction through it, as the primal sampler
+/// leaves through its visible normal (ALGORITHMS.md §4.2 carried to the dielectric's lobe
+/// choice); `None` for a normal wi does not see or a direction on the wrong side.
+pub fn sample_diff_dielectric(
+    leaf: &RoughDielectricLeaf,
+    wi: Vec3,
+    positive: bool,
+    u_lobe: f32,
+    u: Vec2,
+) -> Option<Vec3> {
+    if wi.z == 0.0 {
+        return None;
+    }
+    let m = sample_diff_half(leaf.distribution, leaf.alpha, positive, u)?;
+    let up = if wi.z > 0.0 { wi } else { -wi };
+    if up.dot(m) <= 0.0 {
+        return None;
+    }
+    leaf.scatter(wi, m, u_lobe)
+}
+
+/// Direction density of the rough dielectric's coin-mixed differential technique:
+/// p_abs(m) · (F or 1 − F) · |∂m/∂wo| = ½ of each signed part's.
+pub fn diff_pdf_dielectric(leaf: &RoughDielectricLeaf, wi: Vec3, wo: Vec3) -> f32 {
+    leaf.pdf_through(wi, wo, |m| diff_pdf_abs_h(leaf.distribution, leaf.alpha, m))
+}
+
+/// Direction density of one signed part's rough-dielectric sampler.
+pub fn diff_pdf_dielectric_part(leaf: &RoughDielectricLeaf, positive: bool, wi: Vec3, wo: Vec3) -> f32 {
+    leaf.pdf_through(wi, wo, |m| diff_pdf_part_h(leaf.distribution, leaf.alpha, m, positive))
+}
+
+/// Whether the BSDF has a differential sampler: rough conductors, rough dielectrics and blends
+/// do, the other leaves do not.
 pub fn bsdf_diff_capable(b: &Bsdf) -> bool {
-    b.blend || matches!(b.leaves[0], Leaf::RoughConductor { .. })
+    b.blend || matches!(b.leaves[0], Leaf::RoughConductor { .. } | Leaf::RoughDielectric(_))
 }
 
 /// Density of the differential technique: ½(p_f0 + p_f1) for a blend, the coin-mixed roughness
-/// density for a conductor, and the primal density for diffuse (ALGORITHMS.md §4.1).
+/// density for a rough conductor or dielectric, and the primal density for the other leaves
+/// (ALGORITHMS.md §4.1).
 pub fn bsdf_pdf_diff(b: &Bsdf, wi: Vec3, wo: Vec3) -> f32 {
     if b.blend {
         return 0.5 * (leaf_pdf(&b.leaves[0], wi, wo) + leaf_pdf(&b.leaves[1], wi, wo));
     }
     match b.leaves[0] {
         Leaf::RoughConductor { distribution, alpha, .. } => diff_pdf(distribution, alpha, wi, wo),
-        Leaf::Diffuse { .. }
-        | Leaf::RoughPlastic(_)
-        | Leaf::RoughDielectric(_)
-        | Leaf::Smooth(_)
-        | Leaf::SmoothPlastic(_) => leaf_pdf(&b.leaves[0], wi, wo),
+        Leaf::RoughDielectric(ref d) => diff_pdf_dielectric(d, wi, wo),
+        Leaf::Diffuse { .. } | Leaf::RoughPlastic(_) | Leaf::Smooth(_) | Leaf::SmoothPlastic(_) => {
+            leaf_pdf(&b.leaves[0], wi, wo)
+        }
     }
 }
 
-/// Samples the differential technique. Conductor: the positive part if `u_sign < 0.5`, else the
-/// negative one. Blend: child 1 if `u_lobe ≤ ½`, else child 0, sampled with the child's primal
+/// Samples the differential technique. Rough conductor or dielectric: the positive part if
+/// `u_sign < 0.5`, else the negative one (the dielectric then reflects or refracts by `u_lobe`). Blend: child 1 if `u_lobe ≤ ½`, else child 0, sampled with the child's primal
 /// sampler. Diffuse (not capable): its primal sampler. The value is the whole BSDF's f̂ and the pdf
 /// is [`bsdf_pdf_diff`] at the sampled direction; `None` for an invalid sample.
 pub fn bsdf_sample_diff(b: &Bsdf, wi: Vec3, u_sign: f32, u_lobe: f32, u: Vec2) -> Option<BsdfSample> {
@@ -222,11 +264,10 @@ pub fn bsdf_sample_diff(b: &Bsdf, wi: Vec3, u_sign: f32, u_lobe: f32, u: Vec2) -
             Leaf::RoughConductor { distribution, alpha, .. } => {
                 sample_diff_part(distribution, alpha, wi, u_sign < 0.5, u)?
             }
-            Leaf::Diffuse { .. }
-            | Leaf::RoughPlastic(_)
-            | Leaf::RoughDielectric(_)
-            | Leaf::Smooth(_)
-            | Leaf::SmoothPlastic(_) => leaf_sample(&b.leaves[0], wi, u_lobe, u)?,
+            Leaf::RoughDielectric(ref d) => sample_diff_dielectric(d, wi, u_sign < 0.5, u_lobe, u)?,
+            Leaf::Diffuse { .. } | Leaf::RoughPlastic(_) | Leaf::Smooth(_) | Leaf::SmoothPlastic(_) => {
+                leaf_sample(&b.leaves[0], wi, u_lobe, u)?
+            }
         }
     };
     let pdf = bsdf_pdf_diff(b, wi, wo);

@@ -22,8 +22,13 @@ const BLEND_WEIGHTS: [f32; 3] = [0.1, 0.5, 0.9];
 /// mass whatever the sampler does). In half-vector space stretched by 1/α the same samples spread
 /// over the hemisphere, where the quadrature resolves them (`check_chi2_half_vector`).
 const CHI2_IN_HALF_VECTOR_SPACE: [(f32, f32); 1] = [(0.05, 0.05)];
-/// Chi-square: per configuration p⁺, p⁻ and the coin-mixed sampler; three blends. KS: four inversions.
-const CHI2_TESTS: usize = DISTRIBUTIONS.len() * ALPHAS.len() * COS_I.len() * 3 + BLEND_WEIGHTS.len();
+/// Rough dielectrics' differential samplers: (α, cos θi) per distribution, from outside and from
+/// inside (where total internal reflection takes the grazing refractions).
+const DIELECTRIC_CASES: [(f32, f32); 4] = [(0.1, 0.8), (0.4, 0.3), (0.1, -0.7), (0.4, -0.3)];
+/// Chi-square: per configuration p⁺, p⁻ and the coin-mixed sampler (conductors and dielectrics);
+/// three blends. KS: four inversions.
+const CHI2_TESTS: usize =
+    DISTRIBUTIONS.len() * (ALPHAS.len() * COS_I.len() + DIELECTRIC_CASES.len()) * 3 + BLEND_WEIGHTS.len();
 const KS_TESTS: usize = 4;
 const STAT_TESTS: usize = CHI2_TESTS + KS_TESTS;
 const FAMILY_ALPHA: f64 = 0.01;
@@ -48,6 +53,16 @@ fn conductor(distribution: Distribution, alpha: f32) -> Bsdf {
         eta: Vec3::ZERO,
         k: Vec3::ONE,
     })
+}
+
+fn glass(distribution: Distribution, alpha: f32) -> RoughDielectricLeaf {
+    RoughDielectricLeaf {
+        distribution,
+        alpha,
+        reflectance: Vec3::new(0.9, 0.8, 0.7),
+        transmittance: Vec3::new(0.6, 0.5, 0.4),
+        eta: 1.5,
+    }
 }
 
 fn blend(w: f32) -> Bsdf {
@@ -403,6 +418,45 @@ fn chi2_differential_ggx() {
     chi2_conductor(Distribution::Ggx, 700);
 }
 
+/// Each signed part's rough-dielectric sampler against its own density, and the coin-mixed
+/// sampler against `bsdf_pdf_diff`, over the whole sphere of directions (reflected and refracted).
+#[test]
+fn chi2_differential_dielectric() {
+    let mut test = 1000;
+    for distribution in DISTRIBUTIONS {
+        for (alpha, cos_i) in DIELECTRIC_CASES {
+            let leaf = glass(distribution, alpha);
+            let wi = incident(cos_i);
+            for positive in [false, true] {
+                test += 1;
+                check_chi2(
+                    &format!(
+                        "diff-dielectric-{distribution:?}-alpha{alpha}-cos{cos_i}-{}",
+                        if positive { "pos" } else { "neg" }
+                    ),
+                    alpha,
+                    |i| {
+                        let u = uniforms(test, i);
+                        sample_diff_dielectric(&leaf, wi, positive, u[1], Vec2::new(u[2], u[3]))
+                    },
+                    |wo| f64::from(diff_pdf_dielectric_part(&leaf, positive, wi, wo)),
+                );
+            }
+            test += 1;
+            let b = Bsdf::leaf(Leaf::RoughDielectric(leaf));
+            check_chi2(
+                &format!("diff-dielectric-{distribution:?}-alpha{alpha}-cos{cos_i}-mixed"),
+                alpha,
+                |i| {
+                    let u = uniforms(test, i);
+                    bsdf_sample_diff(&b, wi, u[0], u[1], Vec2::new(u[2], u[3])).map(|s| s.wo)
+                },
+                |wo| f64::from(bsdf_pdf_diff(&b, wi, wo)),
+            );
+        }
+    }
+}
+
 #[test]
 fn chi2_differential_blend() {
     for (k, w) in BLEND_WEIGHTS.into_iter().enumerate() {
@@ -428,6 +482,7 @@ fn capability_flags() {
     assert!(bsdf_diff_capable(&conductor(Distribution::Beckmann, 0.3)));
     assert!(bsdf_diff_capable(&conductor(Distribution::Ggx, 0.3)));
     assert!(bsdf_diff_capable(&blend(0.5)));
+    assert!(bsdf_diff_capable(&Bsdf::leaf(Leaf::RoughDielectric(glass(Distribution::Ggx, 0.3)))));
 }
 
 /// The pdf and value a differential sample reports are `bsdf_pdf_diff` and `bsdf_eval` at its
@@ -438,10 +493,11 @@ fn sample_diff_agrees_with_pdf_and_eval() {
     for d in DISTRIBUTIONS {
         for a in [0.01, 0.05, 0.3, 0.8] {
             bsdfs.push(conductor(d, a));
+            bsdfs.push(Bsdf::leaf(Leaf::RoughDielectric(glass(d, a))));
         }
     }
     for (k, b) in bsdfs.iter().enumerate() {
-        for cos_i in [1.0, 0.7, 0.2, 0.05] {
+        for cos_i in [1.0, 0.7, 0.2, 0.05, -0.3, -0.9] {
             let wi = incident(cos_i);
             for i in 0..2000 {
                 let u = uniforms(900 + k as u32, i);
@@ -456,6 +512,12 @@ fn sample_diff_agrees_with_pdf_and_eval() {
                         let parts = 0.5
                             * (diff_pdf_part(distribution, alpha, true, wi, s.wo)
                                 + diff_pdf_part(distribution, alpha, false, wi, s.wo));
+                        assert!((parts - s.pdf).abs() <= 1e-5 * s.pdf, "{b:?}: ½(p⁺ + p⁻) = {parts} vs {}", s.pdf);
+                    }
+                    if let Leaf::RoughDielectric(ref d) = b.leaves[0] {
+                        let parts = 0.5
+                            * (diff_pdf_dielectric_part(d, true, wi, s.wo)
+                                + diff_pdf_dielectric_part(d, false, wi, s.wo));
                         assert!((parts - s.pdf).abs() <= 1e-5 * s.pdf, "{b:?}: ½(p⁺ + p⁻) = {parts} vs {}", s.pdf);
                     }
                 }

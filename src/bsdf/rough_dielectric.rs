@@ -125,6 +125,16 @@ impl RoughDielectricLeaf {
         colour * (self.dg(wi, wo, p.m) * Self::unit_over_dg(&p, f, wi, wo))
     }
 
+    /// The solid-angle density of wo when the half vector m is drawn with density `pdf_m(m)` (per
+    /// solid angle of m, in the upper hemisphere) and [`RoughDielectricLeaf::scatter`] leaves
+    /// through it: pdf_m(m) · (F or 1 − F) · |∂m/∂wo| at the half vector of (wi, wo); 0 where
+    /// the BSDF is.
+    pub fn pdf_through(&self, wi: Vec3, wo: Vec3, pdf_m: impl Fn(Vec3) -> f32) -> f32 {
+        let Some(p) = self.pair(wi, wo) else { return 0.0 };
+        let f = fresnel_dielectric(wi.dot(p.m), self.eta).0;
+        pdf_m(p.m) * if p.reflect { f } else { 1.0 - f } * Self::jacobian(&p, wi, wo)
+    }
+
     /// The solid-angle density with which [`RoughDielectricLeaf::sample`] draws wo.
     pub fn pdf(&self, wi: Vec3, wo: Vec3) -> f32 {
         let Some(p) = self.pair(wi, wo) else { return 0.0 };
@@ -144,6 +154,13 @@ impl RoughDielectricLeaf {
         }
         let up = if wi.z > 0.0 { wi } else { -wi };
         let m = microfacet_visible_normal(self.distribution, Vec2::splat(self.alpha), up, u)?;
+        self.scatter(wi, m, u_lobe)
+    }
+
+    /// The direction leaving through the microfacet normal m (upper hemisphere): reflected about
+    /// m with probability F(wi·m) (`u_lobe` ≤ F), else refracted through it; `None` where the
+    /// lobe's direction lands on the side it does not serve.
+    pub fn scatter(&self, wi: Vec3, m: Vec3, u_lobe: f32) -> Option<Vec3> {
         let im = wi.dot(m);
         let (f, cos_t, eta_ti) = fresnel_dielectric(im, self.eta);
         let reflect = u_lobe <= f;

@@ -17,6 +17,8 @@ fn cases() -> Vec<(Scene, &'static str, &'static str)> {
         (builtin::load("cornell-box").unwrap(), "sphere.bsdf.alpha.value", "white.reflectance.value"),
         (builtin::load("blend").unwrap(), "object.weight.value", "base.reflectance.value"),
         (scenes::textured_environment(), "ball.alpha.value", "environment.radiance.value"),
+        // A frosted (rough dielectric) pane: the differential vertex reflects or refracts.
+        (scenes::frosted_pane(), "pane.alpha.value", "environment.radiance.value"),
     ]
 }
 
@@ -113,8 +115,8 @@ fn mean_and_variance(v: &[f64]) -> (f64, f64) {
 /// NEE estimate the same image gradients (by image quadrant), loss gradients (of the driving
 /// parameter and of another one, which the differential strategy samples by the BSDF) and radiance
 /// as plain PRB with NEE; the loss is L2 against a render at a perturbed value, its adjoint fixed. Each comparison is Welch's t over 24 independent seeds per configuration
-/// (≥ 23 degrees of freedom): |t| < 5 has a false-alarm rate ≤ 4.7e-5 per value, ≤ 3e-3 over the
-/// 63 values here; never a tuned tolerance. The first scene is direct lighting only (one bounce).
+/// (≥ 23 degrees of freedom): |t| < 5 has a false-alarm rate ≤ 4.7e-5 per value, ≤ 4e-3 over the
+/// 84 values here; never a tuned tolerance. The first scene is direct lighting only (one bounce).
 #[test]
 fn every_strategy_is_unbiased_against_plain_prb() {
     const SEEDS: u32 = 24;
@@ -125,7 +127,7 @@ fn every_strategy_is_unbiased_against_plain_prb() {
         if i == 0 {
             runs.push((scene.clone(), target, other, Some(2)));
         }
-        if i < 2 {
+        if i != 2 {
             runs.push((scene, target, other, None));
         }
     }

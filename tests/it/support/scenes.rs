@@ -85,6 +85,37 @@ pub fn textured_environment() -> Scene {
     s
 }
 
+/// A frosted (rough dielectric, GGX α 0.2) pane filling most of the view, a small area light behind
+/// it and a dim environment: the pane's roughness spreads the light it transmits, so the image
+/// depends strongly on α through both of the dielectric's lobes.
+pub fn frosted_pane() -> Scene {
+    let camera = Camera {
+        position: Vec3::new(0.0, 0.0, 3.0),
+        target: Vec3::ZERO,
+        up: Vec3::Y,
+        fov_y_degrees: 40.0,
+        width: 32,
+        height: 32,
+        filter: PixelFilter::Box,
+        lens: pathgrad::scene::Lens::Pinhole,
+        window: pathgrad::scene::FilmWindow::default(),
+    };
+    let mut s = Scene::new("test:frosted-pane", camera);
+    let glass = s.add_rough_dielectric("pane", 0.2, Vec3::new(0.9, 0.85, 0.8), 1.5).unwrap();
+    let black = s.add_diffuse("light", Vec3::ZERO).unwrap();
+    // Normals a × b: the pane and the light face +z, the camera.
+    s.add_mesh("pane", quad(Vec3::ZERO, Vec3::X * 0.8, Vec3::Y * 0.8), glass, None).unwrap();
+    s.add_mesh(
+        "light",
+        quad(Vec3::new(0.2, 0.1, -1.0), Vec3::X * 0.15, Vec3::Y * 0.15),
+        black,
+        Some(Vec3::splat(20.0)),
+    )
+    .unwrap();
+    s.set_environment("environment.radiance.value", Vec3::new(0.2, 0.25, 0.3)).unwrap();
+    s
+}
+
 /// Meshes whose PLOC trees are deeper than the traversal stack (issue "Fast kernels" item 4): a
 /// 1000-vertex convex polygon triangulated as a fan (the floor) and a 1000-segment cylinder with
 /// 1000-gon fan caps, under an area light. Before the builder bounded the depth these failed with
