@@ -25,6 +25,7 @@ import argparse
 import importlib.machinery
 import importlib.util
 import math
+import re
 import subprocess
 import sys
 import tempfile
@@ -59,7 +60,9 @@ def pathgrad_means(binary, scene, width, spp, seeds, tmp):
                              capture_output=True, text=True, timeout=1800)
         if run.returncode != 0:
             raise RuntimeError(run.stderr.strip().splitlines()[-1])
-        warnings = [line.split("WARN", 1)[-1].strip() for line in run.stderr.splitlines() if "WARN" in line]
+        # "WARN target: FILE:LINE:COL: message" -> the message.
+        warnings = [re.sub(r"^.*?\.(xml|gltf|glb)(:\d+:\d+)?: ", "", line.split("WARN", 1)[-1].strip())
+                    for line in run.stderr.splitlines() if "WARN" in line]
         img = np.array(mi.Bitmap(str(out)), np.float64)
         size = (img.shape[1], img.shape[0])
         means.append(img.reshape(-1, img.shape[-1])[:, :3].mean(axis=0))
