@@ -42,10 +42,10 @@
 
 
 // Whether the differential strategy may place its differential vertex on material `m`: its
-// roughness (rough conductor or dielectric) or weight (blend) is the target parameter.
+// roughness (rough conductor, dielectric or plastic) or weight (blend) is the target parameter.
 bool material_capable(uint m) {
     uint tag = materials[m].tag;
-    uint p = (tag == MAT_ROUGH_CONDUCTOR || tag == MAT_ROUGH_DIELECTRIC) ? materials[m].p_alpha
+    uint p = (tag == MAT_ROUGH_CONDUCTOR || tag == MAT_ROUGH_DIELECTRIC || tag == MAT_ROUGH_PLASTIC) ? materials[m].p_alpha
         : (tag == MAT_BLEND ? materials[m].p_weight : NO_PARAM);
     return p >= globals.diff_begin && p < globals.diff_end;
 }

@@ -127,8 +127,8 @@ impl Strategy {
     ///
     /// # Errors
     /// [`Error::InvalidArgument`] naming `Strategy::from_name`, `Strategy::Diff::q` or the target for an unknown strategy,
-    /// a q outside [0, 1], an unknown parameter, or a rough plastic's roughness (no differential
-    /// sampler for it).
+    /// a q outside [0, 1], an unknown parameter, or a parameter no differential sampler covers (an
+    /// anisotropic conductor's roughness, a normal-mapped material's).
     pub fn from_name(scene: &Scene, name: &str, q: f32, target: &str) -> Result<Strategy> {
         match name {
             "bsdf" => Ok(Strategy::Bsdf),
@@ -145,7 +145,6 @@ impl Strategy {
                 })?;
                 use crate::scene::Material;
                 let uncovered = scene.materials.iter().find_map(|m| match m {
-                    Material::RoughPlastic { alpha, .. } if *alpha == target => Some("a rough plastic's roughness"),
                     Material::RoughConductor { alpha, alpha_v, .. }
                         if alpha != alpha_v && (*alpha == target || *alpha_v == target) =>
                     {
@@ -157,7 +156,9 @@ impl Strategy {
                 // differential sampler's densities do not include.
                 let uses = |id: crate::scene::MaterialId| match scene.materials.get(id.0 as usize) {
                     Some(Material::RoughConductor { alpha, alpha_v, .. }) => *alpha == target || *alpha_v == target,
-                    Some(Material::RoughDielectric { alpha, .. }) => *alpha == target,
+                    Some(Material::RoughDielectric { alpha, .. } | Material::RoughPlastic { alpha, .. }) => {
+                        *alpha == target
+                    }
                     Some(Material::Blend { weight, .. }) => *weight == target,
                     _ => false,
                 };
@@ -171,15 +172,12 @@ impl Strategy {
                 });
                 let uncovered = uncovered.or(mapped.then_some("a normal-mapped material's roughness or blend weight"));
                 if let Some(whose) = uncovered {
-                    // The paper's positive/negative split of ∂D/∂α carries over to the plastic's
-                    // coating, but its base's α-dependence (through the coating's transmittance
-                    // tables) and the coating/base choice have no such split: not built.
                     return Err(Error::InvalidArgument {
                         parameter: scene.params.entry(target).name.clone(),
                         message: format!(
                             "is {whose}, which the differential sampler does not cover (it samples the \
-                             derivative of a rough conductor's, a rough dielectric's or a blend's lobe, without a \
-                             normal map): use the bsdf strategy"
+                             derivative of a rough conductor's, dielectric's or plastic's lobe or a blend's weight, \
+                             without a normal map): use the bsdf strategy"
                         ),
                     });
                 }
@@ -201,14 +199,14 @@ impl Strategy {
     }
 
     /// Whether some material has a differential sampler for `target`: it is the roughness of a
-    /// rough conductor or dielectric, or the weight of a blend. If not, `diff` samples like `bsdf` (with
+    /// rough conductor, dielectric or plastic, or the weight of a blend. If not, `diff` samples like `bsdf` (with
     /// balance-heuristic MIS) and brings no variance reduction.
     pub fn has_differential_sampler(scene: &Scene, target: ParamId) -> bool {
         use crate::scene::Material;
         scene.materials.iter().any(|m| match m {
             // The differential sampler is isotropic: an anisotropic conductor has none.
             Material::RoughConductor { alpha, alpha_v, .. } => *alpha == target && alpha_v == alpha,
-            Material::RoughDielectric { alpha, .. } => *alpha == target,
+            Material::RoughDielectric { alpha, .. } | Material::RoughPlastic { alpha, .. } => *alpha == target,
             Material::Blend { weight, .. } => *weight == target,
             _ => false,
         })

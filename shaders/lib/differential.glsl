@@ -164,20 +164,38 @@ float diff_pdf_dielectric(Leaf l, vec3 wi, vec3 wo) {
     return diff_pdf_abs_h(l.distribution, l.alpha, m) * (refl ? f : 1.0 - f) * rdielectric_jacobian(refl, eta, wi, wo, m);
 }
 
+// ---- rough plastic (twin: sample_diff_plastic, diff_pdf_plastic) ----
+// The coating's lobe by a signed part with the coating's probability, else the base by the cosine.
+bool sample_diff_plastic(Leaf l, vec3 wi, bool positive, float u_lobe, vec2 u, out vec3 wo) {
+    wo = vec3(0.0);
+    if (wi.z <= 0.0) return false;
+    if (u_lobe < plastic_coating_probability(l, wi.z)) return sample_diff_part(l.distribution, l.alpha, wi, positive, u, wo);
+    wo = sample_cosine_hemisphere(u);
+    return wo.z > 0.0;
+}
+
+float diff_pdf_plastic(Leaf l, vec3 wi, vec3 wo) {
+    if (wi.z <= 0.0 || wo.z <= 0.0) return 0.0;
+    float p = plastic_coating_probability(l, wi.z);
+    return p * diff_pdf(l.distribution, l.alpha, wi, wo) + (1.0 - p) * wo.z * INV_PI;
+}
+
 // ---- BSDF level (ALGORITHMS.md §4.1, §4.3) ----
 bool bsdf_diff_capable(Bsdf b) {
-    return (HAS(F_BLEND) && b.blend) || is_conductor(b.leaf0.kind) || is_rough_dielectric(b.leaf0.kind);
+    return (HAS(F_BLEND) && b.blend) || is_conductor(b.leaf0.kind) || is_rough_dielectric(b.leaf0.kind)
+        || is_plastic(b.leaf0.kind);
 }
 
 float bsdf_pdf_diff(Bsdf b, vec3 wi, vec3 wo) {
     if (HAS(F_BLEND) && b.blend) return 0.5 * (leaf_pdf(b.leaf0, wi, wo) + leaf_pdf(b.leaf1, wi, wo));
     if (is_rough_dielectric(b.leaf0.kind)) return diff_pdf_dielectric(b.leaf0, wi, wo);
+    if (is_plastic(b.leaf0.kind)) return diff_pdf_plastic(b.leaf0, wi, wo);
     if (!is_conductor(b.leaf0.kind)) return leaf_pdf(b.leaf0, wi, wo);
     return diff_pdf(b.leaf0.distribution, b.leaf0.alpha, wi, wo);
 }
 
-// Rough conductor or dielectric: positive part if u_sign < 0.5 (the dielectric then reflects or
-// refracts by u_lobe). Blend: child 1 if u_lobe ≤ ½, else child 0, with the child's primal
+// Rough conductor, dielectric or plastic: positive part if u_sign < 0.5 (the dielectric then
+// reflects or refracts by u_lobe; the plastic takes its coating so with the coating's probability). Blend: child 1 if u_lobe ≤ ½, else child 0, with the child's primal
 // sampler. Other leaves: their primal sampler. Value f̂ and pdf bsdf_pdf_diff of the whole BSDF.
 BsdfSample bsdf_sample_diff(Bsdf b, vec3 wi, float u_sign, float u_lobe, vec2 u) {
     BsdfSample s = BsdfSample(vec3(0.0), 0.0, vec3(0.0), false, false);
@@ -188,6 +206,8 @@ BsdfSample bsdf_sample_diff(Bsdf b, vec3 wi, float u_sign, float u_lobe, vec2 u)
         ok = leaf_sample(second ? b.leaf1 : b.leaf0, wi, second ? u_lobe / 0.5 : (u_lobe - 0.5) / 0.5, u, wo);
     } else if (is_rough_dielectric(b.leaf0.kind)) {
         ok = sample_diff_dielectric(b.leaf0, wi, u_sign < 0.5, u_lobe, u, wo);
+    } else if (is_plastic(b.leaf0.kind)) {
+        ok = sample_diff_plastic(b.leaf0, wi, u_sign < 0.5, u_lobe, u, wo);
     } else if (!is_conductor(b.leaf0.kind)) {
         ok = leaf_sample(b.leaf0, wi, u_lobe, u, wo);
     } else {

@@ -9,6 +9,7 @@ use glam::{Vec2, Vec3};
 
 use crate::bsdf::rough_conductor::Distribution;
 use crate::bsdf::rough_dielectric::RoughDielectricLeaf;
+use crate::bsdf::rough_plastic::PlasticLeaf;
 use crate::bsdf::{Bsdf, BsdfSample, Leaf, bsdf_eval, leaf_pdf, leaf_sample};
 
 use crate::contract::{EULER_E_LO as E_LO, LAMBERT_SERIES_ONLY, LAMBERT_W0_SMALL, LAMBERT_WM1_SMALL};
@@ -228,14 +229,50 @@ pub fn diff_pdf_dielectric_part(leaf: &RoughDielectricLeaf, positive: bool, wi: 
     leaf.pdf_through(wi, wo, |m| diff_pdf_part_h(leaf.distribution, leaf.alpha, m, positive))
 }
 
-/// Whether the BSDF has a differential sampler: rough conductors, rough dielectrics and blends
-/// do, the other leaves do not.
+/// Rough plastic: with the coating's probability P(cos θi) of its primal sampler, a reflection
+/// about a half vector drawn from one signed part of ∂α[D cos θh] (the coating's lobe, as a
+/// conductor's); otherwise the base by the cosine, as the primal sampler (the base depends on α
+/// only through the coating's transmittance, smoothly in direction). `None` as the parts' sampler.
+pub fn sample_diff_plastic(leaf: &PlasticLeaf, wi: Vec3, positive: bool, u_lobe: f32, u: Vec2) -> Option<Vec3> {
+    if wi.z <= 0.0 {
+        return None;
+    }
+    if u_lobe < leaf.coating_probability(wi.z) {
+        sample_diff_part(leaf.distribution, leaf.alpha, wi, positive, u)
+    } else {
+        let wo = crate::sampling::sample_cosine_hemisphere(u);
+        (wo.z > 0.0).then_some(wo)
+    }
+}
+
+/// The rough plastic's differential density, with `coat` the coating part's density at (wi, wo):
+/// P·coat + (1 − P)·cos θo/π.
+fn plastic_mixture(leaf: &PlasticLeaf, wi: Vec3, wo: Vec3, coat: f32) -> f32 {
+    if wi.z <= 0.0 || wo.z <= 0.0 {
+        return 0.0;
+    }
+    let p = leaf.coating_probability(wi.z);
+    p * coat + (1.0 - p) * wo.z * std::f32::consts::FRAC_1_PI
+}
+
+/// Direction density of the rough plastic's coin-mixed differential technique.
+pub fn diff_pdf_plastic(leaf: &PlasticLeaf, wi: Vec3, wo: Vec3) -> f32 {
+    plastic_mixture(leaf, wi, wo, diff_pdf(leaf.distribution, leaf.alpha, wi, wo))
+}
+
+/// Direction density of one signed part's rough-plastic sampler.
+pub fn diff_pdf_plastic_part(leaf: &PlasticLeaf, positive: bool, wi: Vec3, wo: Vec3) -> f32 {
+    plastic_mixture(leaf, wi, wo, diff_pdf_part(leaf.distribution, leaf.alpha, positive, wi, wo))
+}
+
+/// Whether the BSDF has a differential sampler: rough conductors, dielectrics and plastics and
+/// blends do, the other leaves do not.
 pub fn bsdf_diff_capable(b: &Bsdf) -> bool {
-    b.blend || matches!(b.leaves[0], Leaf::RoughConductor { .. } | Leaf::RoughDielectric(_))
+    b.blend || matches!(b.leaves[0], Leaf::RoughConductor { .. } | Leaf::RoughDielectric(_) | Leaf::RoughPlastic(_))
 }
 
 /// Density of the differential technique: ½(p_f0 + p_f1) for a blend, the coin-mixed roughness
-/// density for a rough conductor or dielectric, and the primal density for the other leaves
+/// density for a rough conductor, dielectric or plastic, and the primal density for the other leaves
 /// (ALGORITHMS.md §4.1).
 pub fn bsdf_pdf_diff(b: &Bsdf, wi: Vec3, wo: Vec3) -> f32 {
     if b.blend {
@@ -244,14 +281,14 @@ pub fn bsdf_pdf_diff(b: &Bsdf, wi: Vec3, wo: Vec3) -> f32 {
     match b.leaves[0] {
         Leaf::RoughConductor { distribution, alpha, .. } => diff_pdf(distribution, alpha, wi, wo),
         Leaf::RoughDielectric(ref d) => diff_pdf_dielectric(d, wi, wo),
-        Leaf::Diffuse { .. } | Leaf::RoughPlastic(_) | Leaf::Smooth(_) | Leaf::SmoothPlastic(_) => {
-            leaf_pdf(&b.leaves[0], wi, wo)
-        }
+        Leaf::RoughPlastic(ref p) => diff_pdf_plastic(p, wi, wo),
+        Leaf::Diffuse { .. } | Leaf::Smooth(_) | Leaf::SmoothPlastic(_) => leaf_pdf(&b.leaves[0], wi, wo),
     }
 }
 
-/// Samples the differential technique. Rough conductor or dielectric: the positive part if
-/// `u_sign < 0.5`, else the negative one (the dielectric then reflects or refracts by `u_lobe`). Blend: child 1 if `u_lobe ≤ ½`, else child 0, sampled with the child's primal
+/// Samples the differential technique. Rough conductor, dielectric or plastic: the positive part
+/// if `u_sign < 0.5`, else the negative one (the dielectric then reflects or refracts by `u_lobe`;
+/// the plastic samples its coating so with its coating probability, else its base). Blend: child 1 if `u_lobe ≤ ½`, else child 0, sampled with the child's primal
 /// sampler. Diffuse (not capable): its primal sampler. The value is the whole BSDF's f̂ and the pdf
 /// is [`bsdf_pdf_diff`] at the sampled direction; `None` for an invalid sample.
 pub fn bsdf_sample_diff(b: &Bsdf, wi: Vec3, u_sign: f32, u_lobe: f32, u: Vec2) -> Option<BsdfSample> {
@@ -265,7 +302,8 @@ pub fn bsdf_sample_diff(b: &Bsdf, wi: Vec3, u_sign: f32, u_lobe: f32, u: Vec2) -
                 sample_diff_part(distribution, alpha, wi, u_sign < 0.5, u)?
             }
             Leaf::RoughDielectric(ref d) => sample_diff_dielectric(d, wi, u_sign < 0.5, u_lobe, u)?,
-            Leaf::Diffuse { .. } | Leaf::RoughPlastic(_) | Leaf::Smooth(_) | Leaf::SmoothPlastic(_) => {
+            Leaf::RoughPlastic(ref p) => sample_diff_plastic(p, wi, u_sign < 0.5, u_lobe, u)?,
+            Leaf::Diffuse { .. } | Leaf::Smooth(_) | Leaf::SmoothPlastic(_) => {
                 leaf_sample(&b.leaves[0], wi, u_lobe, u)?
             }
         }

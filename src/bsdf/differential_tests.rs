@@ -27,8 +27,11 @@ const CHI2_IN_HALF_VECTOR_SPACE: [(f32, f32); 1] = [(0.05, 0.05)];
 const DIELECTRIC_CASES: [(f32, f32); 4] = [(0.1, 0.8), (0.4, 0.3), (0.1, -0.7), (0.4, -0.3)];
 /// Chi-square: per configuration p⁺, p⁻ and the coin-mixed sampler (conductors and dielectrics);
 /// three blends. KS: four inversions.
+/// Rough plastics' differential samplers: (α, cos θi, nonlinear) per distribution.
+const PLASTIC_CASES: [(f32, f32, bool); 3] = [(0.1, 0.8, false), (0.4, 0.3, true), (0.05, 0.95, false)];
 const CHI2_TESTS: usize =
-    DISTRIBUTIONS.len() * (ALPHAS.len() * COS_I.len() + DIELECTRIC_CASES.len()) * 3 + BLEND_WEIGHTS.len();
+    DISTRIBUTIONS.len() * (ALPHAS.len() * COS_I.len() + DIELECTRIC_CASES.len() + PLASTIC_CASES.len()) * 3
+        + BLEND_WEIGHTS.len();
 const KS_TESTS: usize = 4;
 const STAT_TESTS: usize = CHI2_TESTS + KS_TESTS;
 const FAMILY_ALPHA: f64 = 0.01;
@@ -457,6 +460,52 @@ fn chi2_differential_dielectric() {
     }
 }
 
+fn plastic(distribution: Distribution, alpha: f32, nonlinear: bool) -> PlasticLeaf {
+    match crate::bsdf::tests::plastic(distribution, alpha, Vec3::new(0.2, 0.5, 0.8), nonlinear) {
+        Leaf::RoughPlastic(p) => p,
+        other => unreachable!("{other:?}"),
+    }
+}
+
+/// Each signed part's rough-plastic sampler (coating by the part, base by the cosine) against its
+/// own density, and the coin-mixed sampler against `bsdf_pdf_diff`.
+#[test]
+fn chi2_differential_plastic() {
+    let mut test = 1100;
+    for distribution in DISTRIBUTIONS {
+        for (alpha, cos_i, nonlinear) in PLASTIC_CASES {
+            let leaf = plastic(distribution, alpha, nonlinear);
+            let wi = incident(cos_i);
+            for positive in [false, true] {
+                test += 1;
+                check_chi2(
+                    &format!(
+                        "diff-plastic-{distribution:?}-alpha{alpha}-cos{cos_i}-{}",
+                        if positive { "pos" } else { "neg" }
+                    ),
+                    alpha,
+                    |i| {
+                        let u = uniforms(test, i);
+                        sample_diff_plastic(&leaf, wi, positive, u[1], Vec2::new(u[2], u[3]))
+                    },
+                    |wo| f64::from(diff_pdf_plastic_part(&leaf, positive, wi, wo)),
+                );
+            }
+            test += 1;
+            let b = Bsdf::leaf(Leaf::RoughPlastic(leaf.clone()));
+            check_chi2(
+                &format!("diff-plastic-{distribution:?}-alpha{alpha}-cos{cos_i}-mixed"),
+                alpha,
+                |i| {
+                    let u = uniforms(test, i);
+                    bsdf_sample_diff(&b, wi, u[0], u[1], Vec2::new(u[2], u[3])).map(|s| s.wo)
+                },
+                |wo| f64::from(bsdf_pdf_diff(&b, wi, wo)),
+            );
+        }
+    }
+}
+
 #[test]
 fn chi2_differential_blend() {
     for (k, w) in BLEND_WEIGHTS.into_iter().enumerate() {
@@ -483,6 +532,7 @@ fn capability_flags() {
     assert!(bsdf_diff_capable(&conductor(Distribution::Ggx, 0.3)));
     assert!(bsdf_diff_capable(&blend(0.5)));
     assert!(bsdf_diff_capable(&Bsdf::leaf(Leaf::RoughDielectric(glass(Distribution::Ggx, 0.3)))));
+    assert!(bsdf_diff_capable(&Bsdf::leaf(Leaf::RoughPlastic(plastic(Distribution::Ggx, 0.3, false)))));
 }
 
 /// The pdf and value a differential sample reports are `bsdf_pdf_diff` and `bsdf_eval` at its
@@ -494,6 +544,7 @@ fn sample_diff_agrees_with_pdf_and_eval() {
         for a in [0.01, 0.05, 0.3, 0.8] {
             bsdfs.push(conductor(d, a));
             bsdfs.push(Bsdf::leaf(Leaf::RoughDielectric(glass(d, a))));
+            bsdfs.push(Bsdf::leaf(Leaf::RoughPlastic(plastic(d, a, a > 0.1))));
         }
     }
     for (k, b) in bsdfs.iter().enumerate() {
@@ -512,6 +563,11 @@ fn sample_diff_agrees_with_pdf_and_eval() {
                         let parts = 0.5
                             * (diff_pdf_part(distribution, alpha, true, wi, s.wo)
                                 + diff_pdf_part(distribution, alpha, false, wi, s.wo));
+                        assert!((parts - s.pdf).abs() <= 1e-5 * s.pdf, "{b:?}: ½(p⁺ + p⁻) = {parts} vs {}", s.pdf);
+                    }
+                    if let Leaf::RoughPlastic(ref p) = b.leaves[0] {
+                        let parts = 0.5
+                            * (diff_pdf_plastic_part(p, true, wi, s.wo) + diff_pdf_plastic_part(p, false, wi, s.wo));
                         assert!((parts - s.pdf).abs() <= 1e-5 * s.pdf, "{b:?}: ½(p⁺ + p⁻) = {parts} vs {}", s.pdf);
                     }
                     if let Leaf::RoughDielectric(ref d) = b.leaves[0] {

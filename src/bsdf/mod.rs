@@ -309,4 +309,4 @@ fn unperturbed_sample(b: &Bsdf, wi: Vec3, u_lobe: f32, u: Vec2) -> Option<BsdfSa
 }
 
 #[cfg(test)]
-mod tests;
+pub(crate) mod tests;

@@ -21,7 +21,7 @@ fn incident(cos_theta: f32) -> Vec3 {
 }
 
 /// A rough plastic (η of bk7 in air) with its coating table at `alpha`.
-fn plastic(distribution: Distribution, alpha: f32, diffuse: Vec3, nonlinear: bool) -> Leaf {
+pub(crate) fn plastic(distribution: Distribution, alpha: f32, diffuse: Vec3, nonlinear: bool) -> Leaf {
     let eta = 1.5046 / 1.000_277;
     let mut table = [0.0; crate::contract::COATING_TABLE_LEN as usize];
     table.copy_from_slice(&rough_plastic::CoatingTable::new(distribution, alpha, eta).flatten());

@@ -10,7 +10,8 @@ use crate::bvh::{Ray, closest_hit, occluded};
 use crate::contract::{
     DIM_DIFF_SIGN, DIM_DIRECTION, DIM_EMITTER_POS, DIM_EMITTER_SELECT, DIM_ENV_CELL, DIM_LOBE, DIM_PIXEL_JITTER,
     DIM_ROULETTE, DIM_TECHNIQUE, Globals, LENS_ORTHOGRAPHIC, LENS_THIN, MAT_BLEND, MAT_NULL, MAT_ROUGH_CONDUCTOR,
-    MAT_ROUGH_DIELECTRIC, MAX_NULL_CROSSINGS, NO_EMITTER, NO_MEDIUM, NO_PARAM, STRATEGY_DIFF, ViewCamera,
+    MAT_ROUGH_DIELECTRIC, MAT_ROUGH_PLASTIC, MAX_NULL_CROSSINGS, NO_EMITTER, NO_MEDIUM, NO_PARAM, STRATEGY_DIFF,
+    ViewCamera,
 };
 use crate::cpu::emitter::{
     EmitterSample, emitter_pdf_solid_angle, env_backward, env_radiance, environment_pdf, sample_emitter,
@@ -83,11 +84,11 @@ fn camera_ray(view: &ViewCamera, sx: f32, sy: f32, u_lens: Vec2) -> Ray {
 }
 
 /// Whether the differential strategy may place its differential vertex on material `m`: its
-/// roughness (rough conductor or dielectric) or weight (blend) is the target parameter.
+/// roughness (rough conductor, dielectric or plastic) or weight (blend) is the target parameter.
 fn material_capable(flat: &FlatScene, globals: &Globals, m: u32) -> bool {
     let mat = &flat.materials[m as usize];
     let p = match mat.tag {
-        MAT_ROUGH_CONDUCTOR | MAT_ROUGH_DIELECTRIC => mat.p_alpha,
+        MAT_ROUGH_CONDUCTOR | MAT_ROUGH_DIELECTRIC | MAT_ROUGH_PLASTIC => mat.p_alpha,
         MAT_BLEND => mat.p_weight,
         _ => NO_PARAM,
     };

@@ -1007,18 +1007,21 @@ fn instances_flatten_their_group_with_shared_bsdfs_and_mitsubas_names() {
     }
 }
 
-/// `--strategy diff` covers a rough dielectric's roughness (issue 31) and refuses a rough
-/// plastic's by name.
+/// `--strategy diff` covers rough dielectrics' and rough plastics' roughness (issue 31) and
+/// refuses an anisotropic conductor's by name.
 #[test]
-fn the_differential_strategy_covers_rough_dielectrics_and_refuses_rough_plastics() {
+fn the_differential_strategy_covers_rough_dielectrics_and_plastics() {
     use crate::integrator::Strategy;
     let s = load_ok(
         r#"<shape type="cube" id="glass"><bsdf type="roughdielectric"><float name="alpha" value="0.1"/></bsdf></shape>
-           <shape type="cube" id="coat"><bsdf type="roughplastic"><float name="alpha" value="0.1"/></bsdf></shape>"#,
+           <shape type="cube" id="coat"><bsdf type="roughplastic"><float name="alpha" value="0.1"/></bsdf></shape>
+           <shape type="cube" id="brushed"><bsdf type="roughconductor"><float name="alpha_u" value="0.1"/><float name="alpha_v" value="0.3"/></bsdf></shape>"#,
     );
-    let glass = Strategy::from_name(&s, "diff", 0.5, "glass.bsdf.alpha.value").unwrap();
-    assert!(matches!(glass, Strategy::Diff { .. }));
-    assert!(Strategy::has_differential_sampler(&s, s.params.find("glass.bsdf.alpha.value").unwrap()));
-    let err = Strategy::from_name(&s, "diff", 0.5, "coat.bsdf.alpha").unwrap_err().to_string();
-    assert!(err.contains("coat.bsdf.alpha") && err.contains("a rough plastic's roughness"), "{err}");
+    // Mitsuba's roughplastic names its roughness `alpha`, without `.value`.
+    for name in ["glass.bsdf.alpha.value", "coat.bsdf.alpha"] {
+        assert!(matches!(Strategy::from_name(&s, "diff", 0.5, name).unwrap(), Strategy::Diff { .. }), "{name}");
+        assert!(Strategy::has_differential_sampler(&s, s.params.find(name).unwrap()), "{name}");
+    }
+    let err = Strategy::from_name(&s, "diff", 0.5, "brushed.bsdf.alpha_u.value").unwrap_err().to_string();
+    assert!(err.contains("brushed.bsdf.alpha_u.value") && err.contains("anisotropic"), "{err}");
 }

@@ -170,3 +170,9 @@ pub fn conformance(name: &str) -> Scene {
     let path = format!("{}/tests/conformance/scenes/{name}.xml", env!("CARGO_MANIFEST_DIR"));
     pathgrad::scene::load(&path, &[]).unwrap_or_else(|e| panic!("{path}: {e}"))
 }
+
+/// `tests/data/xml/NAME.xml`.
+pub fn xml(name: &str) -> Scene {
+    let path = format!("{}/tests/data/xml/{name}.xml", env!("CARGO_MANIFEST_DIR"));
+    pathgrad::scene::load(&path, &[]).unwrap_or_else(|e| panic!("{path}: {e}"))
+}
