@@ -492,7 +492,7 @@ fn chi2_differential_plastic() {
                 );
             }
             test += 1;
-            let b = Bsdf::leaf(Leaf::RoughPlastic(leaf.clone()));
+            let b = Bsdf::leaf(Leaf::RoughPlastic(leaf));
             check_chi2(
                 &format!("diff-plastic-{distribution:?}-alpha{alpha}-cos{cos_i}-mixed"),
                 alpha,
