@@ -124,7 +124,7 @@ fn build_impl(count: usize, triangle: &(impl Fn(u32) -> [Vec3; 3] + Sync), alway
     let nodes: Vec<BvhNode> = cw_nodes.iter().map(|n| bytemuck::cast(*n)).collect();
     drop(cw_nodes);
     let tris = prim_ids
-        .iter()
+        .par_iter()
         .map(|&id| {
             let [v0, v1, v2] = triangle(id);
             TriPositions { v0, v1, v2, ..TriPositions::default() }
