@@ -10,7 +10,7 @@ use obvhs::aabb::Aabb;
 use obvhs::bvh2::leaf_collapser::collapse;
 use obvhs::bvh2::reinsertion::ReinsertionOptimizer;
 use obvhs::bvh2::{Bvh2, node::Bvh2Node};
-use obvhs::ploc::{PlocBuilder, PlocSearchDistance};
+use obvhs::ploc::{PlocSearchDistance, SortPrecision};
 use rayon::prelude::*;
 
 use crate::contract::{BVH_FAR_SCALE, BVH_LEAF_MAX, BVH_STACK_SIZE, BvhNode, TriPositions};
@@ -19,6 +19,7 @@ use crate::error::{Error, Result};
 pub use crate::contract::MIN_DIR_COMPONENT;
 
 mod convert;
+mod ploc;
 
 /// A built BVH: nodes plus the triangles in leaf order.
 #[derive(Clone, Debug, Default, PartialEq)]
@@ -152,31 +153,15 @@ fn binary_tree(
 ) -> (Bvh2, u32, std::time::Duration) {
     // The steps of obvhs's `build_bvh2_from_tris` for one-triangle leaves (the tree is the same),
     // without its debug-build validation, which panics on trees the reinsertion made deeper than
-    // its own stack estimate (a fan-triangulated 1000-gon: depth 273 against 252). PLOC's leaves
-    // are made here from `triangle` as `PlocBuilder::build` makes them from a slice of obvhs
-    // `Triangle`s (the same boxes, the same total box), so no such slice (48 bytes a triangle)
-    // is ever made.
+    // its own stack estimate (a fan-triangulated 1000-gon: depth 273 against 252). PLOC is ours
+    // (`ploc`: obvhs's tree from `triangle` directly, in smaller working arrays), so no slice of
+    // obvhs `Triangle`s (48 bytes a triangle) is ever made.
     let start = Instant::now();
     let params = BvhBuildParams::medium_build();
     debug_assert!(matches!(params.ploc_search_distance, PlocSearchDistance::Medium));
-    let mut ploc = Bvh2::zeroed(count);
-    ploc.reset_for_reuse(count, Some((0..count as u32).collect()));
-    let mut builder = PlocBuilder::new();
-    builder.current_nodes = (0..count as u32)
-        .into_par_iter()
-        .map(|id| {
-            let [v0, v1, v2] = triangle(id);
-            Bvh2Node::new(Aabb::from_points(&[v0.into(), v1.into(), v2.into()]), 1, id)
-        })
-        .collect();
-    let total = builder.current_nodes.iter().fold(Aabb::empty(), |mut total, n| {
-        total.extend(n.aabb().min);
-        total.extend(n.aabb().max);
-        total
-    });
-    // `PlocSearchDistance::Medium` is obvhs's search distance 14 (`PlocBuilder::build_with_bvh`).
-    builder.build_ploc_from_leaves::<14, false>(&mut ploc, total, params.sort_precision, params.search_depth_threshold);
-    drop(builder);
+    debug_assert!(matches!(params.sort_precision, SortPrecision::U64));
+    // obvhs's PLOC (`PlocSearchDistance::Medium` is its search distance 14), in less memory.
+    let mut ploc = ploc::build(count, triangle, params.search_depth_threshold);
     let mut reinsertion = ReinsertionOptimizer::default();
     reinsertion.run(&mut ploc, params.reinsertion_batch_ratio, None);
     collapse(&mut ploc, 1, params.collapse_traversal_cost);
