@@ -2,7 +2,8 @@
 //! Hierarchy Construction"): obvhs 0.4.0's `PlocBuilder::build_ploc_from_leaves` for search
 //! distance 14 and a search-depth threshold (obvhs is MIT / Apache-2.0), float operation for
 //! float operation and tie for tie, so it gives obvhs's binary tree — in less memory (issue 38):
-//! the clusters of each pass are 32-byte boxes instead of obvhs's 48-byte `Bvh2Node`s, the Morton
+//! the clusters are 32-byte boxes instead of obvhs's 48-byte `Bvh2Node`s, in one array instead of
+//! two (each pass writes the next one's over its own), the Morton
 //! codes are freed after the sort instead of becoming the merge buffer, and the output tree is
 //! allocated only after the sort (with `convert`'s parallel conversion, the BVH phase's peak RSS
 //! at 2 M triangles went from 464 to 365 MiB).
@@ -17,6 +18,10 @@ use rayon::prelude::*;
 
 /// Clusters searched on either side for the best partner (obvhs's `PlocSearchDistance::Medium`).
 pub(super) const SEARCH_DISTANCE: usize = 14;
+
+/// The clusters of a pass the merge keeps copies of: more than `SEARCH_DISTANCE`.
+const RECENT: usize = 16;
+const _: () = assert!(RECENT > SEARCH_DISTANCE);
 
 /// A cluster: its box and where it is (a triangle id for a leaf, its first child's index in the
 /// output tree for an inner node).
@@ -74,8 +79,7 @@ pub(super) fn build(
         .par_iter()
         .fold(|| (Vec3::INFINITY, Vec3::NEG_INFINITY), |(lo, hi), c| (lo.min(c.min), hi.max(c.max)))
         .reduce(|| (Vec3::INFINITY, Vec3::NEG_INFINITY), |a, b| (a.0.min(b.0), a.1.max(b.1)));
-    let mut current = sort_by_morton(leaves, lo, hi);
-    let mut next = vec![Cluster::default(); count];
+    let mut clusters = sort_by_morton(leaves, lo, hi);
     let mut merge = vec![0i8; count];
 
     let mut nodes = vec![Bvh2Node::default(); 2 * count - 1];
@@ -83,37 +87,41 @@ pub(super) fn build(
     let mut depth = 0usize;
     let mut n = count;
     while n > 1 {
-        let clusters = &current[..n];
-        find_partners(clusters, &mut merge[..n], depth < search_depth_threshold);
+        find_partners(&clusters[..n], &mut merge[..n], depth < search_depth_threshold);
         // obvhs's sequential merge: a pair merges where both chose each other, the parent taking
-        // the later one's place; the output tree is filled from its end.
+        // the later one's place; the output tree is filled from its end. The next pass's
+        // clusters are written over this pass's in place (obvhs has a second array): step
+        // `index` writes at most at `index` after reading it, and its partner, at most
+        // `SEARCH_DISTANCE` before it, is read from the copies of the last steps' clusters.
         let merge = &merge[..n];
+        let mut recent = [Cluster::default(); RECENT];
         let mut kept = 0;
         for index in 0..n {
+            let cluster = clusters[index];
+            recent[index % RECENT] = cluster;
             let best = (index as i64 + merge[index] as i64) as usize;
             if best as i64 + merge[best] as i64 != index as i64 {
-                next[kept] = clusters[index];
+                clusters[kept] = cluster;
                 kept += 1;
                 continue;
             }
             if best > index {
                 continue;
             }
-            let (left, right) = (clusters[index], clusters[best]);
+            let (left, right) = (cluster, recent[best % RECENT]);
             insert_index -= 2;
             nodes[insert_index] = left.node();
             nodes[insert_index + 1] = right.node();
             let (min, max) = left.union(&right);
-            next[kept] = Cluster { min, leaf: 0, max, index: insert_index as u32 };
+            clusters[kept] = Cluster { min, leaf: 0, max, index: insert_index as u32 };
             kept += 1;
         }
-        std::mem::swap(&mut current, &mut next);
         n = kept;
         depth += 1;
     }
     debug_assert_eq!(insert_index, 1);
-    nodes[0] = current[0].node();
-    drop((current, next, merge));
+    nodes[0] = clusters[0].node();
+    drop((clusters, merge));
 
     let mut bvh = Bvh2::zeroed(0);
     bvh.nodes = nodes;
