@@ -10,7 +10,7 @@ use obvhs::aabb::Aabb;
 use obvhs::bvh2::leaf_collapser::collapse;
 use obvhs::bvh2::reinsertion::ReinsertionOptimizer;
 use obvhs::bvh2::{Bvh2, node::Bvh2Node};
-use obvhs::ploc::{PlocBuilder, PlocSearchDistance};
+use obvhs::ploc::{PlocSearchDistance, SortPrecision};
 use rayon::prelude::*;
 
 use crate::contract::{BVH_FAR_SCALE, BVH_LEAF_MAX, BVH_STACK_SIZE, BvhNode, TriPositions};
@@ -19,6 +19,8 @@ use crate::error::{Error, Result};
 pub use crate::contract::MIN_DIR_COMPONENT;
 
 mod convert;
+mod depth;
+mod ploc;
 
 /// A built BVH: nodes plus the triangles in leaf order.
 #[derive(Clone, Debug, Default, PartialEq)]
@@ -124,7 +126,7 @@ fn build_impl(count: usize, triangle: &(impl Fn(u32) -> [Vec3; 3] + Sync), alway
     let nodes: Vec<BvhNode> = cw_nodes.iter().map(|n| bytemuck::cast(*n)).collect();
     drop(cw_nodes);
     let tris = prim_ids
-        .iter()
+        .par_iter()
         .map(|&id| {
             let [v0, v1, v2] = triangle(id);
             TriPositions { v0, v1, v2, ..TriPositions::default() }
@@ -152,31 +154,15 @@ fn binary_tree(
 ) -> (Bvh2, u32, std::time::Duration) {
     // The steps of obvhs's `build_bvh2_from_tris` for one-triangle leaves (the tree is the same),
     // without its debug-build validation, which panics on trees the reinsertion made deeper than
-    // its own stack estimate (a fan-triangulated 1000-gon: depth 273 against 252). PLOC's leaves
-    // are made here from `triangle` as `PlocBuilder::build` makes them from a slice of obvhs
-    // `Triangle`s (the same boxes, the same total box), so no such slice (48 bytes a triangle)
-    // is ever made.
+    // its own stack estimate (a fan-triangulated 1000-gon: depth 273 against 252). PLOC is ours
+    // (`ploc`: obvhs's tree from `triangle` directly, in smaller working arrays), so no slice of
+    // obvhs `Triangle`s (48 bytes a triangle) is ever made.
     let start = Instant::now();
     let params = BvhBuildParams::medium_build();
     debug_assert!(matches!(params.ploc_search_distance, PlocSearchDistance::Medium));
-    let mut ploc = Bvh2::zeroed(count);
-    ploc.reset_for_reuse(count, Some((0..count as u32).collect()));
-    let mut builder = PlocBuilder::new();
-    builder.current_nodes = (0..count as u32)
-        .into_par_iter()
-        .map(|id| {
-            let [v0, v1, v2] = triangle(id);
-            Bvh2Node::new(Aabb::from_points(&[v0.into(), v1.into(), v2.into()]), 1, id)
-        })
-        .collect();
-    let total = builder.current_nodes.iter().fold(Aabb::empty(), |mut total, n| {
-        total.extend(n.aabb().min);
-        total.extend(n.aabb().max);
-        total
-    });
-    // `PlocSearchDistance::Medium` is obvhs's search distance 14 (`PlocBuilder::build_with_bvh`).
-    builder.build_ploc_from_leaves::<14, false>(&mut ploc, total, params.sort_precision, params.search_depth_threshold);
-    drop(builder);
+    debug_assert!(matches!(params.sort_precision, SortPrecision::U64));
+    // obvhs's PLOC (`PlocSearchDistance::Medium` is its search distance 14), in less memory.
+    let mut ploc = ploc::build(count, triangle, params.search_depth_threshold);
     let mut reinsertion = ReinsertionOptimizer::default();
     reinsertion.run(&mut ploc, params.reinsertion_batch_ratio, None);
     collapse(&mut ploc, 1, params.collapse_traversal_cost);
@@ -189,13 +175,17 @@ fn binary_tree(
     ploc.primitives_to_nodes = Vec::new();
     ploc.primitive_indices_freelist = Vec::new();
     let ploc_depth = bvh2_height(&ploc);
-    let fits = ploc_depth <= MAX_DEPTH && ploc.nodes.iter().all(|n| n.prim_count <= 1);
-    // A tree that fits the stack with one-triangle leaves is converted as PLOC left it: the
-    // rewrite below would give the same tree (same nodes, numbered in depth-first order), and the
-    // conversion depends on the tree, not on the numbering. Otherwise each intermediate form is
-    // dropped as soon as the next is built, so at most two are alive: at 2 M triangles they take
-    // 100-300 MB each (issue 38).
-    let bvh2 = if fits && !always_shape {
+    let one_per_leaf = ploc.nodes.iter().all(|n| n.prim_count <= 1);
+    // A tree with one-triangle leaves is converted as PLOC left it, its subtrees too deep for the
+    // stack rebuilt in place (`depth`): the rewrite below would give the same tree (same nodes,
+    // numbered in depth-first order), and the conversion depends on the tree, not on the
+    // numbering. The rewrite, whose arena holds the whole tree again (56 bytes a node and a heap
+    // `Vec` a leaf: about 4.6 GiB at 20 M triangles, issue 38), is left for leaves of several
+    // triangles, which this build never makes.
+    let bvh2 = if one_per_leaf && !always_shape {
+        if ploc_depth > MAX_DEPTH {
+            depth::bound_in_place(&mut ploc, triangle, MAX_DEPTH, REBUILD_DEPTH);
+        }
         ploc
     } else {
         let arena: Vec<TmpNode> = ploc
@@ -615,10 +605,11 @@ mod tests {
         assert!((hit.t - 1.0).abs() < 1e-6);
     }
 
-    /// A tree that fits the stack is converted as PLOC left it (issue 38); the rewrite into
-    /// depth-first order that deeper trees take gives the very same BVH.
+    /// A tree that fits the stack is converted as PLOC left it, and a deeper one after its deep
+    /// subtrees are rebuilt in place (issue 38); the rewrite into depth-first order that leaves of
+    /// several triangles take gives the very same BVH.
     #[test]
-    fn a_fitting_tree_converts_as_its_rewrite_does() {
+    fn ploc_trees_convert_as_their_rewrite_does() {
         // A bumpy 60 x 40 grid (4 800 triangles, several PLOC passes) and 100 stacked triangles.
         let height = |x: u32, y: u32| ((x * 7 + y * 13) % 11) as f32 * 0.05;
         let p = |x: u32, y: u32| Vec3::new(x as f32 * 0.1, height(x, y), y as f32 * 0.1);
@@ -629,7 +620,13 @@ mod tests {
             })
             .collect();
         let stack: Vec<[Vec3; 3]> = (0..100).map(|i| tri(i as f32 * 0.1)).collect();
-        for tris in [grid, stack] {
+        // A fan whose PLOC tree is far too deep: rebuilt in place, it is the rewrite's tree.
+        let ring = |k: u32| {
+            let a = k as f32 / 1000.0 * std::f32::consts::TAU;
+            Vec3::new(a.cos(), a.sin(), 0.0)
+        };
+        let fan: Vec<[Vec3; 3]> = (1..999).map(|k| [ring(0), ring(k), ring(k + 1)]).collect();
+        for tris in [grid, stack, fan] {
             let get = |id: u32| tris[id as usize];
             let direct = build_impl(tris.len(), &get, false).unwrap();
             let rewritten = build_impl(tris.len(), &get, true).unwrap();

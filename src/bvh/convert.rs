@@ -5,11 +5,15 @@
 //! an f32 cost, a kind and two slot numbers). A decision's cost is read only by its parent, so
 //! here each subtree returns its seven costs up the recursion instead of storing them (issue 38:
 //! at 2 M triangles the table is 27 MiB instead of 214 MiB, which was the BVH build's summit).
+//! Subtrees are costed and converted in parallel, then renumbered into obvhs's order.
 //! `tests::converts_as_obvhs_does` compares both on several trees.
+
+use std::sync::atomic::{AtomicU8, Ordering};
 
 use glam::{Vec3A, vec3a};
 use obvhs::bvh2::Bvh2;
 use obvhs::cwbvh::node::CwBvhNode;
+use rayon::prelude::*;
 
 /// A slot of a compressed node per ray octant, as obvhs: `order_children` assigns children to them.
 const DIRECTIONS: usize = 8;
@@ -49,40 +53,94 @@ impl Decision {
 /// obvhs's `Decision::default()`: a distribution into slots 0 and 0.
 const DEFAULT: Decision = Decision(DISTRIBUTE);
 
+/// Binary depth above which `Converter::calculate_cost` costs a node's two subtrees in
+/// parallel (up to 2¹⁰ tasks). Each task writes only its own nodes' decisions, so the result does
+/// not depend on the thread count or on scheduling.
+const PARALLEL_COST_DEPTH: u32 = 10;
+/// Compressed depth above which `Converter::convert_subtree` converts a node's inner children in
+/// parallel (up to 8³ subtrees), each numbered on its own and then renumbered into place.
+const PARALLEL_CONVERT_DEPTH: u32 = 3;
+
 /// Converts `bvh2` (leaves of one primitive) into compressed 8-wide nodes with leaves of up to
 /// `max_prims_per_leaf` (at most 3) primitives, children ordered by ray octant: the nodes and the
 /// primitive indices in leaf order, equal to `bvh2_to_cwbvh(bvh2, max_prims_per_leaf, true,
-/// false)`'s.
+/// false)`'s. Subtrees are costed and converted on rayon's threads (issue 38).
 pub(super) fn bvh2_to_cwbvh(bvh2: &Bvh2, max_prims_per_leaf: u32) -> (Vec<CwBvhNode>, Vec<u32>) {
+    bvh2_to_cwbvh_split(bvh2, max_prims_per_leaf, PARALLEL_COST_DEPTH, PARALLEL_CONVERT_DEPTH)
+}
+
+/// [`bvh2_to_cwbvh`] with the depths down to which work is split (the tests vary them).
+fn bvh2_to_cwbvh_split(
+    bvh2: &Bvh2,
+    max_prims_per_leaf: u32,
+    cost_depth: u32,
+    convert_depth: u32,
+) -> (Vec<CwBvhNode>, Vec<u32>) {
     if bvh2.nodes.is_empty() {
         return (Vec::new(), Vec::new());
     }
-    // obvhs's capacities: one node per primitive is more than a tree of 8-wide nodes needs, and
-    // what is never written is never touched, so growing never copies the nodes.
-    let mut nodes = Vec::with_capacity(bvh2.primitive_indices.len());
-    nodes.push(CwBvhNode::default());
-    let mut c = Converter {
+    let c = Converter {
         bvh2,
-        nodes,
-        primitive_indices: Vec::with_capacity(bvh2.primitive_indices.len()),
-        decisions: vec![DEFAULT; bvh2.nodes.len() * 7],
+        decisions: (0..bvh2.nodes.len() * 7).map(|_| AtomicU8::new(DEFAULT.0)).collect(),
+        max_prims_per_leaf,
+        cost_depth,
+        convert_depth,
     };
-    c.calculate_cost(0, max_prims_per_leaf);
-    c.convert(0, 0);
-    (c.nodes, c.primitive_indices)
+    c.calculate_cost(0, 0);
+    let root = c.convert_subtree(0, 0);
+    (root.nodes, root.primitive_indices)
 }
 
 struct Converter<'a> {
     bvh2: &'a Bvh2,
+    /// Seven [`Decision`]s per binary node; each is written once, by the task costing its node.
+    decisions: Vec<AtomicU8>,
+    max_prims_per_leaf: u32,
+    cost_depth: u32,
+    convert_depth: u32,
+}
+
+/// A converted subtree numbered on its own: its root compressed node at 0, then its
+/// descendants in obvhs's depth-first order, and its primitives in leaf order from 0.
+struct Subtree {
     nodes: Vec<CwBvhNode>,
     primitive_indices: Vec<u32>,
-    decisions: Vec<Decision>,
+}
+
+impl Subtree {
+    /// A subtree whose root's fields are set and whose descendants are still to be written.
+    fn new() -> Subtree {
+        Subtree { nodes: vec![CwBvhNode::default()], primitive_indices: Vec::new() }
+    }
+
+    /// Writes compressed node `index8` for binary node `index2` and recurses on its inner
+    /// children (obvhs's `convert_to_cwbvh_impl`).
+    fn convert(&mut self, c: &Converter, index8: usize, index2: usize) {
+        let (node, children) = c.node(index2, self.nodes.len() as u32, &mut self.primitive_indices);
+        self.nodes.resize(self.nodes.len() + node.imask.count_ones() as usize, CwBvhNode::default());
+        self.nodes[index8] = node;
+        let mut offset = 0;
+        for (i, &child) in children.iter().enumerate() {
+            if child != EMPTY && node.imask & (1 << i) != 0 {
+                self.convert(c, (node.child_base_idx + offset) as usize, child as usize);
+                offset += 1;
+            }
+        }
+    }
 }
 
 impl Converter<'_> {
+    fn decision(&self, at: usize) -> Decision {
+        Decision(self.decisions[at].load(Ordering::Relaxed))
+    }
+
+    fn set_decision(&self, at: usize, d: Decision) {
+        self.decisions[at].store(d.0, Ordering::Relaxed);
+    }
+
     /// Fills node `node_index`'s seven decisions and returns its primitive count and the seven
-    /// decisions' costs (obvhs's `calculate_cost_impl`).
-    fn calculate_cost(&mut self, node_index: usize, max_prims_per_leaf: u32) -> (u32, [f32; 7]) {
+    /// decisions' costs (obvhs's `calculate_cost_impl`); `depth` is the node's (the root's 0).
+    fn calculate_cost(&self, node_index: usize, depth: u32) -> (u32, [f32; 7]) {
         let node = &self.bvh2.nodes[node_index];
         let half_area = node.aabb().half_area();
         let (first_index, prim_count) = (node.first_index as usize, node.prim_count);
@@ -92,15 +150,23 @@ impl Converter<'_> {
             assert_eq!(prim_count, 1, "the conversion expects leaves of one primitive");
             let cost_leaf = half_area * (prim_count as f32) * PRIM_COST;
             costs = [cost_leaf; 7];
-            self.decisions[at..at + 7].fill(Decision::new(LEAF, 0, 0));
+            for k in 0..7 {
+                self.set_decision(at + k, Decision::new(LEAF, 0, 0));
+            }
             return (prim_count, costs);
         }
-        let (left_count, left) = self.calculate_cost(first_index, max_prims_per_leaf);
-        let (right_count, right) = self.calculate_cost(first_index + 1, max_prims_per_leaf);
+        let ((left_count, left), (right_count, right)) = if depth < self.cost_depth {
+            rayon::join(
+                || self.calculate_cost(first_index, depth + 1),
+                || self.calculate_cost(first_index + 1, depth + 1),
+            )
+        } else {
+            (self.calculate_cost(first_index, depth + 1), self.calculate_cost(first_index + 1, depth + 1))
+        };
         let num_primitives = left_count + right_count;
         // Slot budget 1 (i = 0; i = 1 in the paper).
         {
-            let cost_leaf = if num_primitives <= max_prims_per_leaf {
+            let cost_leaf = if num_primitives <= self.max_prims_per_leaf {
                 (num_primitives as f32) * half_area * PRIM_COST
             } else {
                 f32::INFINITY
@@ -116,7 +182,7 @@ impl Converter<'_> {
             }
             let cost_internal = cost_distribute + half_area;
             let (kind, cost) = if cost_leaf < cost_internal { (LEAF, cost_leaf) } else { (INTERNAL, cost_internal) };
-            self.decisions[at] = Decision::new(kind, distribute_left, distribute_right);
+            self.set_decision(at, Decision::new(kind, distribute_left, distribute_right));
             costs[0] = cost;
         }
         // Slot budgets 2–7 (the paper's i = 2..7).
@@ -132,19 +198,61 @@ impl Converter<'_> {
                 }
             }
             costs[i] = cost_distribute;
-            self.decisions[at + i] = if distribute_left != u8::MAX {
+            let d = if distribute_left != u8::MAX {
                 Decision::new(DISTRIBUTE, distribute_left, distribute_right)
             } else {
-                self.decisions[at + i - 1]
+                self.decision(at + i - 1)
             };
+            self.set_decision(at + i, d);
         }
         (num_primitives, costs)
     }
 
-    /// Writes compressed node `index8` for binary node `index2` and recurses on its inner
-    /// children (obvhs's `convert_to_cwbvh_impl`).
-    fn convert(&mut self, index8: usize, index2: usize) {
-        let mut node = self.nodes[index8];
+    /// The subtree under binary node `index2`, at compressed depth `depth` (the root's 0): above
+    /// `convert_depth` its inner children's subtrees are converted in parallel, each numbered on
+    /// its own, then renumbered into place — the numbers obvhs's single depth-first pass gives,
+    /// as in it a compressed node's descendants and primitives are each one contiguous run.
+    fn convert_subtree(&self, index2: usize, depth: u32) -> Subtree {
+        let mut out = Subtree::new();
+        if depth >= self.convert_depth {
+            out.convert(self, 0, index2);
+            return out;
+        }
+        let (node, children) = self.node(index2, 1, &mut out.primitive_indices);
+        let inner: Vec<usize> = (0..8)
+            .filter(|&i| children[i] != EMPTY && node.imask & (1 << i) != 0)
+            .map(|i| children[i] as usize)
+            .collect();
+        let subtrees: Vec<Subtree> = inner.par_iter().map(|&child| self.convert_subtree(child, depth + 1)).collect();
+        out.nodes[0] = node;
+        // The inner children's own nodes, then each one's descendants in turn.
+        let mut base = 1 + subtrees.len() as u32;
+        let mut shifts = Vec::with_capacity(subtrees.len());
+        for sub in &subtrees {
+            let shift = (base - 1, out.primitive_indices.len() as u32);
+            base += sub.nodes.len() as u32 - 1;
+            shifts.push(shift);
+            out.primitive_indices.extend_from_slice(&sub.primitive_indices);
+        }
+        out.nodes.reserve(base as usize - 1);
+        let moved = |n: &CwBvhNode, (nodes, prims): (u32, u32)| CwBvhNode {
+            child_base_idx: n.child_base_idx + nodes,
+            primitive_base_idx: n.primitive_base_idx + prims,
+            ..*n
+        };
+        for (sub, &shift) in subtrees.iter().zip(&shifts) {
+            out.nodes.push(moved(&sub.nodes[0], shift));
+        }
+        for (sub, &shift) in subtrees.iter().zip(&shifts) {
+            out.nodes.extend(sub.nodes[1..].iter().map(|n| moved(n, shift)));
+        }
+        out
+    }
+
+    /// Compressed node for binary node `index2`, its children's first index `child_base` and
+    /// its leaves' primitives appended to `primitive_indices`; its binary children by slot.
+    fn node(&self, index2: usize, child_base: u32, primitive_indices: &mut Vec<u32>) -> (CwBvhNode, [u32; 8]) {
+        let mut node = CwBvhNode::default();
         let aabb = self.bvh2.nodes[index2].aabb();
         let node_p = aabb.min;
         node.p = node_p.into();
@@ -157,9 +265,9 @@ impl Converter<'_> {
         self.get_children(index2, &mut children, &mut child_count, 0);
         self.order_children(index2, &mut children, child_count);
         node.imask = 0;
-        node.primitive_base_idx = self.primitive_indices.len() as u32;
-        node.child_base_idx = self.nodes.len() as u32;
-        let (mut num_internal_nodes, mut num_primitives) = (0, 0u32);
+        node.primitive_base_idx = primitive_indices.len() as u32;
+        node.child_base_idx = child_base;
+        let mut num_primitives = 0u32;
         for (i, &child) in children.iter().enumerate() {
             if child == EMPTY {
                 continue;
@@ -175,8 +283,8 @@ impl Converter<'_> {
             node.child_max_x[i] = child_max.x as u8;
             node.child_max_y[i] = child_max.y as u8;
             node.child_max_z[i] = child_max.z as u8;
-            if self.decisions[child as usize * 7].kind() == LEAF {
-                let count = self.count_primitives(child as usize);
+            if self.decision(child as usize * 7).kind() == LEAF {
+                let count = self.count_primitives(child as usize, primitive_indices);
                 node.child_meta[i] = num_primitives as u8
                     | match count {
                         1 => 0b0010_0000,
@@ -189,28 +297,20 @@ impl Converter<'_> {
                 // INTERNAL: a child's slot-budget-1 decision is never a distribution.
                 node.imask |= 1 << i;
                 node.child_meta[i] = (24 + i as u8) | 0b0010_0000;
-                num_internal_nodes += 1;
             }
         }
-        self.nodes.resize(self.nodes.len() + num_internal_nodes, CwBvhNode::default());
-        self.nodes[index8] = node;
-        let mut offset = 0;
-        for (i, &child) in children.iter().enumerate() {
-            if child != EMPTY && node.imask & (1 << i) != 0 {
-                self.convert((node.child_base_idx + offset) as usize, child as usize);
-                offset += 1;
-            }
-        }
+        (node, children)
     }
 
     /// Appends the primitives under binary node `index` in leaf order; their count.
-    fn count_primitives(&mut self, index: usize) -> u32 {
+    fn count_primitives(&self, index: usize, primitive_indices: &mut Vec<u32>) -> u32 {
         let node = self.bvh2.nodes[index];
         if node.is_leaf() {
-            self.primitive_indices.push(self.bvh2.primitive_indices[node.first_index as usize]);
+            primitive_indices.push(self.bvh2.primitive_indices[node.first_index as usize]);
             return node.prim_count;
         }
-        self.count_primitives(node.first_index as usize) + self.count_primitives(node.first_index as usize + 1)
+        self.count_primitives(node.first_index as usize, primitive_indices)
+            + self.count_primitives(node.first_index as usize + 1, primitive_indices)
     }
 
     /// The binary nodes that become the children of compressed node `index` with slot budget `i`.
@@ -221,10 +321,10 @@ impl Converter<'_> {
             *child_count += 1;
             return;
         }
-        let decision = self.decisions[index * 7 + i];
+        let decision = self.decision(index * 7 + i);
         let first = node.first_index as usize;
         for (child, budget) in [(first, decision.left()), (first + 1, decision.right())] {
-            if self.decisions[child * 7 + budget].kind() == DISTRIBUTE {
+            if self.decision(child * 7 + budget).kind() == DISTRIBUTE {
                 self.get_children(child, children, child_count, budget);
             } else {
                 children[*child_count] = child as u32;
@@ -311,10 +411,14 @@ mod tests {
             .collect();
         for tris in [soup(1), soup(2), soup(9), soup(1000), soup(20_000), grid] {
             let bvh2 = super::super::binary_tree(tris.len(), &|id| tris[id as usize], false).0;
-            let ours = bvh2_to_cwbvh(&bvh2, crate::contract::BVH_LEAF_MAX);
             let theirs = obvhs::cwbvh::bvh2_to_cwbvh::bvh2_to_cwbvh(&bvh2, crate::contract::BVH_LEAF_MAX, true, false);
-            assert!(ours.0 == theirs.nodes, "nodes differ at {} triangles", tris.len());
-            assert_eq!(ours.1, theirs.primitive_indices, "leaf order at {} triangles", tris.len());
+            // Serial, the default split, and splits so deep that most subtrees are renumbered.
+            for (cost_depth, convert_depth) in [(0, 0), (PARALLEL_COST_DEPTH, PARALLEL_CONVERT_DEPTH), (40, 12)] {
+                let ours = bvh2_to_cwbvh_split(&bvh2, crate::contract::BVH_LEAF_MAX, cost_depth, convert_depth);
+                let n = tris.len();
+                assert!(ours.0 == theirs.nodes, "nodes differ at {n} triangles, split {cost_depth}/{convert_depth}");
+                assert_eq!(ours.1, theirs.primitive_indices, "leaf order at {n} triangles, split {convert_depth}");
+            }
         }
     }
 }

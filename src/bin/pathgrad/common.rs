@@ -1,6 +1,7 @@
 //! What every command shares: the rendering flags and the backend they open, targets, parameter
 //! values, progress bars and output files.
 
+use std::borrow::Cow;
 use std::path::{Path, PathBuf};
 
 use anyhow::{Context as _, Result, bail};
@@ -121,9 +122,19 @@ impl RenderFlags {
     /// The backend these flags ask for, on `scene`: the CPU reference with `--cpu`, else a
     /// renderer on the chosen device (first compiles announced on stderr unless `quiet`).
     pub(crate) fn backend(&self, scene: &pathgrad::scene::Scene, spec: &str, quiet: bool) -> Result<Opened> {
+        self.open(Cow::Borrowed(scene), spec, quiet)
+    }
+
+    /// [`RenderFlags::backend`] for a caller that no longer needs `scene`: a renderer takes it
+    /// over instead of a copy, so the two are never held together (issue 38).
+    pub(crate) fn backend_owned(&self, scene: pathgrad::scene::Scene, spec: &str, quiet: bool) -> Result<Opened> {
+        self.open(Cow::Owned(scene), spec, quiet)
+    }
+
+    fn open(&self, scene: Cow<'_, pathgrad::scene::Scene>, spec: &str, quiet: bool) -> Result<Opened> {
         let mut report = PhaseReport::new();
         if self.cpu {
-            let cpu = pathgrad::cpu::Reference::new(scene).with_context(|| format!("loading {spec}"))?;
+            let cpu = pathgrad::cpu::Reference::new(&scene).with_context(|| format!("loading {spec}"))?;
             report.extend(cpu.report());
             let backend = Box::new(cpu);
             return Ok(Opened { backend, ctx: None, compile_us: Default::default(), report, scene_device_bytes: None });
@@ -132,13 +143,14 @@ impl RenderFlags {
         // memory and the device's are never held together (issue 38).
         let flat = {
             let _span = tracing::info_span!("load", scene = %scene.source).entered();
-            pathgrad::scene::flat::FlatScene::for_device_reporting(scene, &mut report)
+            pathgrad::scene::flat::FlatScene::for_device_reporting(&scene, &mut report)
                 .with_context(|| format!("loading {spec}"))?
         };
         let start = std::time::Instant::now();
         let ctx = context(&self.device)?;
         report.record("device", start);
-        let mut renderer = Renderer::from_flat(&ctx, scene, flat).with_context(|| format!("loading {spec}"))?;
+        let mut renderer =
+            Renderer::from_flat(&ctx, scene.into_owned(), flat).with_context(|| format!("loading {spec}"))?;
         report.extend(renderer.report());
         let scene_device_bytes = Some(renderer.scene_device_bytes());
         let compile_us = announce_compiles(&mut renderer, quiet);

@@ -22,6 +22,7 @@ use cli::{Cli, Command};
 
 fn main() -> ExitCode {
     lavapipe_vector_width();
+    return_freed_memory();
     let cli = Cli::parse();
     let default_level = match cli.verbose {
         0 => "warn",
@@ -73,6 +74,25 @@ fn lavapipe_vector_width() {
         // SAFETY: the first thing `main` does, before any thread exists that could read the
         // environment at the same time.
         unsafe { std::env::set_var("LP_NATIVE_VECTOR_WIDTH", "128") };
+    }
+}
+
+/// glibc's malloc serves blocks of 128 KiB and more by `mmap` and unmaps them when freed, but
+/// raises that threshold (up to 32 MiB) each time such a block is freed, after which blocks below
+/// it come from the heap, whose freed middle is never returned to the system. A big scene's
+/// loading and BVH build free many such arrays of a few to a few tens of MiB, and at 2 M
+/// triangles the heap kept about 75 MiB of them for the rest of the process (issue 38,
+/// BENCHMARKS.md): setting the threshold, to its default, turns that raising off.
+fn return_freed_memory() {
+    #[cfg(all(target_os = "linux", target_env = "gnu"))]
+    {
+        unsafe extern "C" {
+            fn mallopt(param: std::ffi::c_int, value: std::ffi::c_int) -> std::ffi::c_int;
+        }
+        /// glibc's `M_MMAP_THRESHOLD` (malloc.h).
+        const M_MMAP_THRESHOLD: std::ffi::c_int = -3;
+        // SAFETY: `mallopt` only sets an allocator parameter; called before any thread exists.
+        unsafe { mallopt(M_MMAP_THRESHOLD, 128 * 1024) };
     }
 }
 

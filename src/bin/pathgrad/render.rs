@@ -58,9 +58,8 @@ pub(crate) fn render(args: &RenderArgs) -> Result<()> {
     let opts = options(&scene, &args.flags)?;
     let progress = progress_bar(u64::from(opts.spp), "rendering [{bar:40}] {pos}/{len} spp", args.json);
     let start = Instant::now();
-    let opened = args.flags.backend(&scene, &args.scene, args.json)?;
-    // The backend holds what it needs of the scene; this copy's meshes would only take memory.
-    drop(scene);
+    // The backend takes the scene over: a copy's meshes would only take memory.
+    let opened = args.flags.backend_owned(scene, &args.scene, args.json)?;
     report.extend(&opened.report);
     let mut backend = opened.backend;
     let device = backend.describe();

@@ -1,0 +1,266 @@
+//! PLOC (Meister & Bittner 2018, "Parallel Locally-Ordered Clustering for Bounding Volume
+//! Hierarchy Construction"): obvhs 0.4.0's `PlocBuilder::build_ploc_from_leaves` for search
+//! distance 14 and a search-depth threshold (obvhs is MIT / Apache-2.0), float operation for
+//! float operation and tie for tie, so it gives obvhs's binary tree — in less memory (issue 38):
+//! the clusters are 32-byte boxes instead of obvhs's 48-byte `Bvh2Node`s, in one array instead of
+//! two (each pass writes the next one's over its own), the Morton
+//! codes are freed after the sort instead of becoming the merge buffer, and the output tree is
+//! allocated only after the sort (with `convert`'s parallel conversion, the BVH phase's peak RSS
+//! at 2 M triangles went from 464 to 365 MiB).
+//! `tests::builds_obvhs_tree` compares both.
+
+use bytemuck::{Pod, Zeroable};
+use glam::{Vec3, Vec3A};
+use obvhs::aabb::Aabb;
+use obvhs::bvh2::{Bvh2, DEFAULT_MAX_STACK_DEPTH, node::Bvh2Node};
+use obvhs::ploc::morton::morton_encode_u64_unorm;
+use rayon::prelude::*;
+
+/// Clusters searched on either side for the best partner (obvhs's `PlocSearchDistance::Medium`).
+pub(super) const SEARCH_DISTANCE: usize = 14;
+
+/// The clusters of a pass the merge keeps copies of: more than `SEARCH_DISTANCE`.
+const RECENT: usize = 16;
+const _: () = assert!(RECENT > SEARCH_DISTANCE);
+
+/// A cluster: its box and where it is (a triangle id for a leaf, its first child's index in the
+/// output tree for an inner node).
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+struct Cluster {
+    min: Vec3,
+    leaf: u32,
+    max: Vec3,
+    index: u32,
+}
+
+impl Cluster {
+    fn union(&self, other: &Cluster) -> (Vec3, Vec3) {
+        (self.min.min(other.min), self.max.max(other.max))
+    }
+
+    /// Half the surface area of the union of two clusters' boxes, as obvhs's `Aabb::half_area`.
+    fn merged_half_area(&self, other: &Cluster) -> f32 {
+        let (lo, hi) = self.union(other);
+        let d = hi - lo;
+        (d.x + d.y) * d.z + d.x * d.y
+    }
+
+    fn node(&self) -> Bvh2Node {
+        Bvh2Node::new(Aabb::new(Vec3A::from(self.min), Vec3A::from(self.max)), self.leaf, self.index)
+    }
+}
+
+/// obvhs's 64-bit Morton key: the same layout, so that rayon's unstable sort orders ties as it
+/// does in obvhs.
+#[derive(Clone, Copy, Pod, Zeroable)]
+#[repr(C)]
+struct Morton64 {
+    code: u64,
+    index: u64,
+}
+
+/// Builds obvhs's PLOC tree over `count` (> 0) triangles that `triangle` gives by id: one-triangle
+/// leaves whose `first_index` is the triangle id, and identity `primitive_indices`. Below
+/// `search_depth_threshold` passes the search distance is 1, as obvhs's.
+pub(super) fn build(
+    count: usize,
+    triangle: &(impl Fn(u32) -> [Vec3; 3] + Sync),
+    search_depth_threshold: usize,
+) -> Bvh2 {
+    assert!(count > 0 && count < u32::MAX as usize / 2);
+    let leaves: Vec<Cluster> = (0..count as u32)
+        .into_par_iter()
+        .map(|id| {
+            let [v0, v1, v2] = triangle(id);
+            Cluster { min: v0.min(v1).min(v2), leaf: 1, max: v0.max(v1).max(v2), index: id }
+        })
+        .collect();
+    let (lo, hi) = leaves
+        .par_iter()
+        .fold(|| (Vec3::INFINITY, Vec3::NEG_INFINITY), |(lo, hi), c| (lo.min(c.min), hi.max(c.max)))
+        .reduce(|| (Vec3::INFINITY, Vec3::NEG_INFINITY), |a, b| (a.0.min(b.0), a.1.max(b.1)));
+    let mut clusters = sort_by_morton(leaves, lo, hi);
+    let mut merge = vec![0i8; count];
+
+    let mut nodes = vec![Bvh2Node::default(); 2 * count - 1];
+    let mut insert_index = nodes.len();
+    let mut depth = 0usize;
+    let mut n = count;
+    while n > 1 {
+        find_partners(&clusters[..n], &mut merge[..n], depth < search_depth_threshold);
+        // obvhs's sequential merge: a pair merges where both chose each other, the parent taking
+        // the later one's place; the output tree is filled from its end. The next pass's
+        // clusters are written over this pass's in place (obvhs has a second array): step
+        // `index` writes at most at `index` after reading it, and its partner, at most
+        // `SEARCH_DISTANCE` before it, is read from the copies of the last steps' clusters.
+        let merge = &merge[..n];
+        let mut recent = [Cluster::default(); RECENT];
+        let mut kept = 0;
+        for index in 0..n {
+            let cluster = clusters[index];
+            recent[index % RECENT] = cluster;
+            let best = (index as i64 + merge[index] as i64) as usize;
+            if best as i64 + merge[best] as i64 != index as i64 {
+                clusters[kept] = cluster;
+                kept += 1;
+                continue;
+            }
+            if best > index {
+                continue;
+            }
+            let (left, right) = (cluster, recent[best % RECENT]);
+            insert_index -= 2;
+            nodes[insert_index] = left.node();
+            nodes[insert_index + 1] = right.node();
+            let (min, max) = left.union(&right);
+            clusters[kept] = Cluster { min, leaf: 0, max, index: insert_index as u32 };
+            kept += 1;
+        }
+        n = kept;
+        depth += 1;
+    }
+    debug_assert_eq!(insert_index, 1);
+    nodes[0] = clusters[0].node();
+    drop((clusters, merge));
+
+    let mut bvh = Bvh2::zeroed(0);
+    bvh.nodes = nodes;
+    bvh.primitive_indices = (0..count as u32).collect();
+    bvh.max_depth = DEFAULT_MAX_STACK_DEPTH.max(depth + 1);
+    bvh.children_are_ordered_after_parents = true;
+    bvh
+}
+
+/// The leaves in the order of their centres' 63-bit Morton codes in the box `lo`–`hi` (obvhs's
+/// `sort_nodes_by_morton` with `SortPrecision::U64`: f64 centres, rayon's unstable sort).
+fn sort_by_morton(leaves: Vec<Cluster>, lo: Vec3, hi: Vec3) -> Vec<Cluster> {
+    let scale = 1.0 / (hi - lo).as_dvec3();
+    let offset = -lo.as_dvec3() * scale;
+    let mut mortons: Vec<Morton64> = leaves
+        .par_iter()
+        .enumerate()
+        .map(|(index, c)| {
+            let center = ((c.max + c.min) * 0.5).as_dvec3() * scale + offset;
+            Morton64 { code: morton_encode_u64_unorm(center), index: index as u64 }
+        })
+        .collect();
+    mortons.par_sort_unstable_by_key(|m| m.code);
+    mortons.par_iter().map(|m| leaves[m.index as usize]).collect()
+}
+
+/// For each cluster, the offset (−14 to 14) of the partner it would merge with: the neighbour
+/// within the search distance whose union with it has the least half area, the last one on ties
+/// (obvhs's `find_best_node`); with `nearest_only`, the cheaper of its two neighbours' unions,
+/// the left one on ties (obvhs's search distance 1).
+fn find_partners(clusters: &[Cluster], merge: &mut [i8], nearest_only: bool) {
+    let n = clusters.len();
+    let chunk = n.div_ceil(rayon::current_num_threads() * 4).max(4096);
+    if nearest_only {
+        let cost = |i: usize| clusters[i].merged_half_area(&clusters[i + 1]);
+        merge[..n - 1].par_chunks_mut(chunk).enumerate().for_each(|(c, out)| {
+            let start = c * chunk;
+            let mut last = if start == 0 { f32::INFINITY } else { cost(start - 1) };
+            for (k, m) in out.iter_mut().enumerate() {
+                let c = cost(start + k);
+                *m = if last < c { -1 } else { 1 };
+                last = c;
+            }
+        });
+        merge[n - 1] = -1;
+        return;
+    }
+    merge.par_chunks_mut(chunk).enumerate().for_each(|(c, out)| {
+        let start = c * chunk;
+        // cache[i % D][j % D]: the union cost of clusters i < j, computed when i was searched.
+        let mut cache = [[0.0f32; SEARCH_DISTANCE]; SEARCH_DISTANCE];
+        for (k, m) in out.iter_mut().enumerate() {
+            let index = start + k;
+            let (mut best, mut best_cost) = (index, f32::INFINITY);
+            for other in index.saturating_sub(SEARCH_DISTANCE)..index {
+                let cost = if other >= start {
+                    cache[other % SEARCH_DISTANCE][index % SEARCH_DISTANCE]
+                } else {
+                    clusters[index].merged_half_area(&clusters[other])
+                };
+                if cost <= best_cost {
+                    (best, best_cost) = (other, cost);
+                }
+            }
+            for other in index + 1..(index + SEARCH_DISTANCE + 1).min(n) {
+                let cost = clusters[index].merged_half_area(&clusters[other]);
+                cache[index % SEARCH_DISTANCE][other % SEARCH_DISTANCE] = cost;
+                if cost <= best_cost {
+                    (best, best_cost) = (other, cost);
+                }
+            }
+            *m = (best as i64 - index as i64) as i8;
+        }
+    });
+}
+
+#[cfg(test)]
+mod tests {
+    use obvhs::ploc::PlocBuilder;
+
+    use super::*;
+
+    /// obvhs's PLOC over the same leaves, as `bvh::binary_tree` ran it before this module.
+    fn obvhs_tree(tris: &[[Vec3; 3]], threshold: usize) -> Bvh2 {
+        let mut bvh = Bvh2::zeroed(tris.len());
+        bvh.reset_for_reuse(tris.len(), Some((0..tris.len() as u32).collect()));
+        let mut builder = PlocBuilder::new();
+        builder.current_nodes = tris
+            .iter()
+            .enumerate()
+            .map(|(id, t)| Bvh2Node::new(Aabb::from_points(&[t[0].into(), t[1].into(), t[2].into()]), 1, id as u32))
+            .collect();
+        let total = builder.current_nodes.iter().fold(Aabb::empty(), |mut total, n| {
+            total.extend(n.aabb().min);
+            total.extend(n.aabb().max);
+            total
+        });
+        let precision = obvhs::ploc::SortPrecision::U64;
+        builder.build_ploc_from_leaves::<SEARCH_DISTANCE, false>(&mut bvh, total, precision, threshold);
+        bvh
+    }
+
+    #[test]
+    fn builds_obvhs_tree() {
+        // A soup with duplicate centres (equal Morton codes) and degenerate triangles, a grid
+        // (ties in cost), and a large soup split into many parallel chunks.
+        let soup = |n: u32, scale: f32| -> Vec<[Vec3; 3]> {
+            let mut state = 0x2545_f491u32;
+            let mut next = move || {
+                state ^= state << 13;
+                state ^= state >> 17;
+                state ^= state << 5;
+                state as f32 / u32::MAX as f32
+            };
+            (0..n)
+                .map(|k| {
+                    let c = Vec3::new(next(), next(), next()) * scale;
+                    let s = if k % 13 == 0 { 0.0 } else { 0.05 };
+                    let c = if k % 7 == 0 { Vec3::splat(0.5) } else { c };
+                    [c, c + Vec3::new(next(), next(), 0.0) * s, c + Vec3::new(0.0, next(), next()) * s]
+                })
+                .collect()
+        };
+        let grid: Vec<[Vec3; 3]> = (0..80 * 80)
+            .map(|k| {
+                let (x, y) = ((k % 80) as f32, (k / 80) as f32);
+                [Vec3::new(x, y, 0.0), Vec3::new(x + 1.0, y, 0.0), Vec3::new(x, y + 1.0, 0.0)]
+            })
+            .collect();
+        for tris in [soup(1, 1.0), soup(2, 1.0), soup(29, 1.0), soup(3000, 1.0), grid, soup(60_000, 100.0)] {
+            for threshold in [0, 3] {
+                let ours = build(tris.len(), &|id| tris[id as usize], threshold);
+                let theirs = obvhs_tree(&tris, threshold);
+                let n = tris.len();
+                let bytes = |b: &Bvh2| bytemuck::cast_slice::<Bvh2Node, u8>(&b.nodes).to_vec();
+                assert!(bytes(&ours) == bytes(&theirs), "nodes differ at {n} triangles, threshold {threshold}");
+                assert_eq!(ours.primitive_indices, theirs.primitive_indices);
+                assert_eq!(ours.max_depth, theirs.max_depth, "{n} triangles");
+            }
+        }
+    }
+}
