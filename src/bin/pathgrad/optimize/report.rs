@@ -91,6 +91,8 @@ pub(super) fn write_state(s: &Session, stopped: &str) -> Result<()> {
         adam_steps: adam.steps.clone(),
         stopped: stopped.to_string(),
     };
+    // The control variates' estimate first: state.json then never points past it.
+    super::control::write(&s.dir, &s.run, &s.ids)?;
     Ok(write_bytes_atomically(s.dir.join("state.json"), serde_json::to_string_pretty(&state)?.as_bytes())?)
 }
 
