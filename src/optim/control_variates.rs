@@ -323,7 +323,7 @@ mod tests {
         for (i, x) in xs.iter().enumerate() {
             let g = image(x);
             let h = (i > 0).then(|| vec![g.clone()]);
-            let f = state.step(&cv, &[g.clone()], h.as_deref()).unwrap().remove(0);
+            let f = state.step(&cv, std::slice::from_ref(&g), h.as_deref()).unwrap().remove(0);
             assert_eq!(state.var_h, state.var_g);
             assert_eq!(state.var_h, state.cov);
             for c in 0..3 {
@@ -357,7 +357,7 @@ mod tests {
             state.var_h.fill(0.0);
             state.var_g.fill(0.0);
             state.cov.fill(0.0);
-            let f = state.step(&cv, &[g.clone()], Some(&[h.clone()])).unwrap().remove(0);
+            let f = state.step(&cv, std::slice::from_ref(&g), Some(std::slice::from_ref(&h))).unwrap().remove(0);
             assert_eq!(state.weight, [0.0; 3]);
             assert_eq!(f, g);
         }

@@ -181,10 +181,13 @@ fn moments(images: &[Vec<f32>]) -> (Vec<f64>, Vec<f64>) {
     (mean, var)
 }
 
+/// Images per step, per run.
+type PerStep = Vec<Vec<Vec<f32>>>;
+
 /// Runs of the control-variate estimate along a fixed trajectory of the blend weight
 /// (θ_i = 0.8 − δ·i), G_i and H_i rendered by the kernels with seed base + i: returns, per run,
 /// the estimate F_i after each of `steps` steps and a plain render at θ_i with seed base + 500 + i.
-fn control_variate_runs(delta: f32, runs: u32, steps: usize) -> (Vec<Vec<Vec<f32>>>, Vec<Vec<Vec<f32>>>) {
+fn control_variate_runs(delta: f32, runs: u32, steps: usize) -> (PerStep, PerStep) {
     let gpu = TestGpu::new();
     let scene = builtin::load("blend").unwrap();
     let mut renderer = Renderer::new(&gpu.ctx, &scene).unwrap();
