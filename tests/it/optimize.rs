@@ -5,6 +5,7 @@
 //! iterations equal the plain run bit for bit, and the running estimate is unbiased along a fixed
 //! trajectory (a z-test over seeds) and less noisy than a plain pass 1.
 
+use pathgrad::adaptive::AdaptiveEstimator;
 use pathgrad::backend::Backend;
 use pathgrad::gpu::Renderer;
 use pathgrad::gpu::renderer::GradMode;
@@ -129,7 +130,8 @@ fn a_short_optimisation_recovers_the_blend_weight_and_a_wrong_sign_does_not() {
     assert!((wrong_mean - 0.4).abs() > 10.0 * TOLERANCE, "ascending the loss ended at {wrong_mean}");
 }
 
-/// With control variates, iterations 0–2 are the plain run's bit for bit (fixed-point gradients):
+/// With control variates, iterations 0–2 are the plain run's bit for bit (fixed-point gradients;
+/// with uniform and with adaptive pixel sampling of the gradient pass):
 /// the first iteration's estimate is its G, and the weight v is 0 through the warm-up (step 1)
 /// and at step 2 (one update of the statistics: zero variance). From iteration 3 on v > 0 and
 /// the runs part — which shows that the comparison can fail.
@@ -147,28 +149,30 @@ fn control_variates_equal_the_plain_run_while_the_weight_is_zero() {
     start.set("object.weight.value", &[0.8]).unwrap();
     let id = start.find("object.weight.value").unwrap();
     let mode = GradMode::Deterministic;
-    let plain =
-        IterationOptions { render, spp_primal: 3, adaptive: None, loss: Loss::RelMse, mode, control_variates: None };
-    let with_cv = IterationOptions { control_variates: Some(ControlVariateOptions::default()), ..plain };
-    let mut a = Optimization::new(start.clone(), &[id], AdamOptions::with_learning_rate(0.05), plain).unwrap();
-    let mut b = Optimization::new(start, &[id], AdamOptions::with_learning_rate(0.05), with_cv).unwrap();
-    for t in 0..5 {
-        let (la, ga) = a.gradient(&mut renderer, &target).unwrap();
-        let (lb, gb) = b.gradient(&mut renderer, &target).unwrap();
-        if t <= 2 {
-            assert_eq!((la, ga.values()), (lb, gb.values()), "iteration {t}: v = 0, the plain estimate");
-            assert!(b.control_variates().state.as_ref().is_none_or(|s| s.weight.iter().all(|&w| w == 0.0)));
-        } else {
-            assert_ne!(la, lb, "iteration {t}: v > 0 changes the loss image");
+    for adaptive in [None, Some(AdaptiveEstimator::default())] {
+        let plain =
+            IterationOptions { render, spp_primal: 3, adaptive, loss: Loss::RelMse, mode, control_variates: None };
+        let with_cv = IterationOptions { control_variates: Some(ControlVariateOptions::default()), ..plain };
+        let mut a = Optimization::new(start.clone(), &[id], AdamOptions::with_learning_rate(0.05), plain).unwrap();
+        let mut b = Optimization::new(start.clone(), &[id], AdamOptions::with_learning_rate(0.05), with_cv).unwrap();
+        for t in 0..5 {
+            let (la, ga) = a.gradient(&mut renderer, &target).unwrap();
+            let (lb, gb) = b.gradient(&mut renderer, &target).unwrap();
+            if t <= 2 {
+                assert_eq!((la, ga.values()), (lb, gb.values()), "iteration {t}: v = 0, the plain estimate");
+                assert!(b.control_variates().state.as_ref().is_none_or(|s| s.weight.iter().all(|&w| w == 0.0)));
+            } else {
+                assert_ne!(la, lb, "iteration {t}: v > 0 changes the loss image");
+            }
+            a.apply(la, &ga).unwrap();
+            b.apply(lb, &gb).unwrap();
         }
-        a.apply(la, &ga).unwrap();
-        b.apply(lb, &gb).unwrap();
+        let state = b.control_variates().state.as_ref().unwrap();
+        assert_eq!((state.steps, state.updates), (5, 4));
+        assert!(state.weight.iter().any(|&w| w > 0.0));
+        // The previous parameters are the last iteration's: where iteration 5 renders H.
+        assert_ne!(b.control_variates().previous.as_ref().unwrap().get(id), b.params().get(id));
     }
-    let state = b.control_variates().state.as_ref().unwrap();
-    assert_eq!((state.steps, state.updates), (5, 4));
-    assert!(state.weight.iter().any(|&w| w > 0.0));
-    // The previous parameters are the last iteration's: where iteration 5 renders H.
-    assert_ne!(b.control_variates().previous.as_ref().unwrap().get(id), b.params().get(id));
 }
 
 /// Per-pixel mean and variance over runs.
