@@ -8,225 +8,31 @@
 //! their paths independent of each other (ALGORITHMS.md §2.3). A gradient value that is NaN or
 //! infinite stops the step before anything is written: [`Error::NonFiniteGradient`] names the
 //! iteration and the parameter, and the parameters and Adam's moments stay as they were.
+//!
+//! With [`IterationOptions::control_variates`], pass 1 is rendered twice per iteration, at the
+//! current and at the previous parameters with the same seed, and the loss and adjoint images
+//! are taken from the recursive control-variate estimate of [`control_variates`] instead of the
+//! plain render; the gradient pass is unchanged.
 
-use crate::adaptive::{AdaptiveEstimator, AdaptiveOptions};
-use crate::backend::Backend;
+mod adam;
+pub mod control_variates;
+
+pub use adam::{Adam, AdamOptions, AdamState, BETA1, BETA2, DEFAULT_LEARNING_RATE, EPSILON};
+pub use control_variates::{ControlVariateOptions, ControlVariateState};
+
+use crate::adaptive::{AdaptiveEstimator, AdaptiveOptions, PixelSampling};
+use crate::backend::{Backend, check_views};
 use crate::error::{Error, Result};
 use crate::gpu::renderer::GradMode;
 use crate::image::Image;
 use crate::integrator::{RenderOptions, View};
-use crate::loss::Loss;
+use crate::loss::{Loss, loss_and_adjoint};
 use crate::params::{Gradients, ParamId, ParamTable};
 use crate::prior::Smoothness;
 
-/// Adam's first-moment decay β₁ (ALGORITHMS.md §7.2, the paper's default).
-pub const BETA1: f64 = 0.9;
-/// Adam's second-moment decay β₂.
-pub const BETA2: f64 = 0.999;
-/// Adam's ε, added to √v (not to the bias-corrected √v̂), so a zero gradient history gives a
-/// zero step instead of 0/0.
-pub const EPSILON: f64 = 1e-8;
-/// The learning rate when none is given (the Dragon configuration of ALGORITHMS.md §7.3).
-pub const DEFAULT_LEARNING_RATE: f64 = 0.01;
 /// ε of the relative parameter error ((θ − θ*)/(θ* + ε))² (ALGORITHMS.md §7.1), so a true value
 /// of 0 does not divide by zero.
 pub const PARAM_ERROR_EPSILON: f64 = 1e-3;
-
-/// Adam's hyper-parameters.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct AdamOptions {
-    /// The learning rate η.
-    pub learning_rate: f64,
-    /// First-moment decay β₁.
-    pub beta1: f64,
-    /// Second-moment decay β₂.
-    pub beta2: f64,
-    /// ε added to √v.
-    pub epsilon: f64,
-}
-
-impl Default for AdamOptions {
-    fn default() -> AdamOptions {
-        AdamOptions { learning_rate: DEFAULT_LEARNING_RATE, beta1: BETA1, beta2: BETA2, epsilon: EPSILON }
-    }
-}
-
-impl AdamOptions {
-    /// The paper's defaults with learning rate `learning_rate`.
-    pub fn with_learning_rate(learning_rate: f64) -> AdamOptions {
-        AdamOptions { learning_rate, ..AdamOptions::default() }
-    }
-
-    /// Checks ranges.
-    ///
-    /// # Errors
-    /// [`Error::InvalidArgument`] naming `AdamOptions::learning_rate` for a learning rate that is not positive and
-    /// finite, or the decay rates and ε outside their ranges.
-    pub fn validate(&self) -> Result<()> {
-        let bad = |p: &str, m: String| Err(Error::InvalidArgument { parameter: p.into(), message: m });
-        if !(self.learning_rate > 0.0 && self.learning_rate.is_finite()) {
-            return bad("AdamOptions::learning_rate", format!("{} must be positive and finite", self.learning_rate));
-        }
-        for (name, beta) in [("Adam beta1", self.beta1), ("Adam beta2", self.beta2)] {
-            if !(0.0..1.0).contains(&beta) {
-                return bad(name, format!("{beta} is not in [0, 1)"));
-            }
-        }
-        if !(self.epsilon > 0.0 && self.epsilon.is_finite()) {
-            return bad("Adam epsilon", format!("{} must be positive and finite", self.epsilon));
-        }
-        Ok(())
-    }
-}
-
-/// Adam's state: the moments m and v of every optimised value, and each parameter's step count t.
-#[derive(Clone, Debug, Default, PartialEq)]
-pub struct AdamState {
-    /// First moments, one per optimised value, parameters in [`Adam::params`] order.
-    pub m: Vec<f64>,
-    /// Second moments, laid out as `m`.
-    pub v: Vec<f64>,
-    /// Steps taken, one per optimised parameter.
-    pub steps: Vec<u64>,
-}
-
-/// Adam over some of a [`ParamTable`]'s parameters (ALGORITHMS.md §7.2): per value
-/// m ← β₁m + (1−β₁)g, v ← β₂v + (1−β₂)g², θ ← θ − η_t·m/(√v + ε) with the bias-corrected step
-/// η_t = η·√(1−β₂ᵗ)/(1−β₁ᵗ), then θ is projected onto the parameter's bounds (clamped: alpha to
-/// [1e-3, 1], weights and albedo to [0, 1]; see [`crate::scene::bounds`]).
-///
-/// ```
-/// use pathgrad::optim::{Adam, AdamOptions};
-/// use pathgrad::params::{Gradients, ParamTable};
-/// let mut table = ParamTable::default();
-/// let w = table.add("object.weight.value", &[0.5], (0.0, 1.0))?;
-/// let mut adam = Adam::new(&table, &[w], AdamOptions::with_learning_rate(0.1))?;
-/// // A positive gradient moves the weight down by about the learning rate.
-/// let gradient = Gradients::new(&table, vec![2.0]);
-/// adam.step(&mut table, &gradient, 0)?;
-/// assert!((table.get(w)[0] - 0.4).abs() < 1e-6);
-/// // Steps beyond the bound are projected onto it.
-/// for t in 1..20 {
-///     adam.step(&mut table, &gradient, t)?;
-/// }
-/// assert_eq!(table.get(w)[0], 0.0);
-/// # Ok::<(), pathgrad::Error>(())
-/// ```
-#[derive(Clone, Debug, PartialEq)]
-pub struct Adam {
-    options: AdamOptions,
-    params: Vec<ParamId>,
-    state: AdamState,
-}
-
-impl Adam {
-    /// Adam with zero moments over `params` of `table`.
-    ///
-    /// # Errors
-    /// As [`AdamOptions::validate`]; [`Error::InvalidArgument`] for an empty or repeated
-    /// parameter list.
-    pub fn new(table: &ParamTable, params: &[ParamId], options: AdamOptions) -> Result<Adam> {
-        let values: usize = params.iter().map(|&p| table.entry(p).len as usize).sum();
-        let state = AdamState { m: vec![0.0; values], v: vec![0.0; values], steps: vec![0; params.len()] };
-        Adam::with_state(table, params, options, state)
-    }
-
-    /// Adam over `params` of `table` continuing from `state` (as saved from [`Adam::state`]).
-    ///
-    /// # Errors
-    /// As [`Adam::new`]; [`Error::InvalidArgument`] if `state` does not have the layout of
-    /// `params` or holds non-finite or negative moments.
-    pub fn with_state(table: &ParamTable, params: &[ParamId], options: AdamOptions, state: AdamState) -> Result<Adam> {
-        options.validate()?;
-        let bad = |m: String| Err(Error::InvalidArgument { parameter: "optimised parameters".into(), message: m });
-        if params.is_empty() {
-            return bad("none given".into());
-        }
-        for (i, p) in params.iter().enumerate() {
-            if params[..i].contains(p) {
-                return bad(format!("{} is listed twice", table.entry(*p).name));
-            }
-        }
-        let values: usize = params.iter().map(|&p| table.entry(p).len as usize).sum();
-        let state_error = |m: String| Err(Error::InvalidArgument { parameter: "Adam state".into(), message: m });
-        if state.m.len() != values || state.v.len() != values || state.steps.len() != params.len() {
-            return state_error(format!(
-                "has {} + {} moments and {} step counts for {values} values of {} parameters",
-                state.m.len(),
-                state.v.len(),
-                state.steps.len(),
-                params.len()
-            ));
-        }
-        if state.m.iter().any(|m| !m.is_finite()) || state.v.iter().any(|v| !(v.is_finite() && *v >= 0.0)) {
-            return state_error("holds a non-finite or negative moment".into());
-        }
-        Ok(Adam { options, params: params.to_vec(), state })
-    }
-
-    /// The optimised parameters, in the order of the state's moments.
-    pub fn params(&self) -> &[ParamId] {
-        &self.params
-    }
-
-    /// The hyper-parameters.
-    pub fn options(&self) -> &AdamOptions {
-        &self.options
-    }
-
-    /// The moments and step counts (what a resumed run needs).
-    pub fn state(&self) -> &AdamState {
-        &self.state
-    }
-
-    /// One Adam step on `table` with `gradients` (the table's layout) at optimisation iteration
-    /// `iteration` (used in error messages only), then the projection onto each parameter's
-    /// bounds. Values of parameters that are not optimised are left alone.
-    ///
-    /// # Errors
-    /// [`Error::NonFiniteGradient`] naming `iteration`, the parameter and the value's index if an
-    /// optimised value's gradient is NaN or infinite — checked before anything changes, so the
-    /// table and the state are untouched; [`Error::InvalidArgument`] if `gradients` has another
-    /// layout than `table`.
-    pub fn step(&mut self, table: &mut ParamTable, gradients: &Gradients, iteration: u64) -> Result<()> {
-        gradients.check_layout(table)?;
-        for &p in &self.params {
-            let e = table.entry(p);
-            let g = &gradients.values()[e.offset as usize..(e.offset + e.len) as usize];
-            if let Some(index) = g.iter().position(|v| !v.is_finite()) {
-                return Err(Error::NonFiniteGradient {
-                    iteration,
-                    parameter: e.name.clone(),
-                    index: index as u32,
-                    value: g[index],
-                });
-            }
-        }
-        let AdamOptions { learning_rate, beta1, beta2, epsilon } = self.options;
-        let mut k = 0;
-        for (i, &p) in self.params.iter().enumerate() {
-            let e = table.entry(p).clone();
-            self.state.steps[i] += 1;
-            let t = self.state.steps[i] as f64;
-            let eta = learning_rate * (1.0 - beta2.powf(t)).sqrt() / (1.0 - beta1.powf(t));
-            let (lo, hi) = (f64::from(e.bounds.0), f64::from(e.bounds.1));
-            let range = e.offset as usize..(e.offset + e.len) as usize;
-            let mut values = table.values()[range.clone()].to_vec();
-            for (value, &g) in values.iter_mut().zip(&gradients.values()[range]) {
-                let g = f64::from(g);
-                let (m, v) = (&mut self.state.m[k], &mut self.state.v[k]);
-                *m = beta1 * *m + (1.0 - beta1) * g;
-                *v = beta2 * *v + (1.0 - beta2) * g * g;
-                let theta = f64::from(*value) - eta * *m / (v.sqrt() + epsilon);
-                // Clamping in f64 to bounds that are f32 values, then rounding, stays within them.
-                *value = theta.clamp(lo, hi) as f32;
-                k += 1;
-            }
-            table.set(&e.name, &values).expect("projected values lie within the parameter's bounds");
-        }
-        Ok(())
-    }
-}
 
 /// The relative squared parameter error of ALGORITHMS.md §7.1, ((θ − θ*)/(θ* + ε))² with
 /// ε = [`PARAM_ERROR_EPSILON`], averaged over the values.
@@ -264,6 +70,9 @@ pub struct IterationOptions {
     pub loss: Loss,
     /// How the gradient is accumulated.
     pub mode: GradMode,
+    /// Recursive control variates across iterations (Nicolet et al. 2023) on the loss image, or
+    /// none: pass 1 is then rendered once per iteration and used as it is.
+    pub control_variates: Option<ControlVariateOptions>,
 }
 
 impl IterationOptions {
@@ -279,6 +88,9 @@ impl IterationOptions {
     /// [`Error::InvalidArgument`] naming the option.
     pub fn validate(&self) -> Result<()> {
         self.render.validate()?;
+        if let Some(cv) = &self.control_variates {
+            cv.validate()?;
+        }
         AdaptiveOptions { spp_primal: self.spp_primal, estimator: AdaptiveEstimator::default() }.validate()
     }
 }
@@ -317,8 +129,15 @@ pub struct StepReport {
 /// let mut start = scene.params.clone();
 /// start.set("object.weight.value", &[0.8])?;
 /// let weight = start.find("object.weight.value").unwrap();
-/// let options =
-///     IterationOptions { render, spp_primal: 6, adaptive: None, loss: Loss::RelMse, mode: GradMode::Float };
+/// let options = IterationOptions {
+///     render,
+///     spp_primal: 6,
+///     adaptive: None,
+///     loss: Loss::RelMse,
+///     mode: GradMode::Float,
+///     // Recursive control variates on the loss image; `None` renders it plainly.
+///     control_variates: Some(Default::default()),
+/// };
 /// let mut run = Optimization::new(start, &[weight], AdamOptions::with_learning_rate(0.01), options)?;
 /// for _ in 0..100 {
 ///     let report = run.step(&mut renderer, &target)?;
@@ -333,6 +152,22 @@ pub struct Optimization {
     adam: Adam,
     iteration: u64,
     prior: Option<Smoothness>,
+    /// The control variates' committed state (with [`IterationOptions::control_variates`]).
+    control: ControlVariates,
+    /// The state the last [`Optimization::gradient_views`] computed for iteration `.0`, which
+    /// [`Optimization::apply`] commits.
+    pending: Option<(u64, ControlVariateState)>,
+}
+
+/// The control variates' state between iterations: the running estimate and its statistics, and
+/// the parameters the last iteration rendered its G at (θ_{i−1}, where this iteration renders H).
+/// Both are `None` before the first iteration.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct ControlVariates {
+    /// The running estimate and its statistics.
+    pub state: Option<ControlVariateState>,
+    /// The parameters of the last iteration.
+    pub previous: Option<ParamTable>,
 }
 
 impl Optimization {
@@ -357,7 +192,58 @@ impl Optimization {
     /// As [`IterationOptions::validate`].
     pub fn resume(params: ParamTable, adam: Adam, iteration: u64, options: IterationOptions) -> Result<Optimization> {
         options.validate()?;
-        Ok(Optimization { options, params, adam, iteration, prior: None })
+        Ok(Optimization {
+            options,
+            params,
+            adam,
+            iteration,
+            prior: None,
+            control: ControlVariates::default(),
+            pending: None,
+        })
+    }
+
+    /// The same run continuing from the control variates' state `control` (as saved from
+    /// [`Optimization::control_variates`] after the same iteration).
+    ///
+    /// # Errors
+    /// [`Error::InvalidArgument`] naming `IterationOptions::control_variates` if the run has no
+    /// control variates, "control-variate state" if `control` has one of its parts but not the
+    /// other, a size other than the render's, a step count other than the iteration count, or
+    /// parameters of another layout.
+    pub fn with_control_variates(self, control: ControlVariates) -> Result<Optimization> {
+        let bad = |p: &str, m: String| Err(Error::InvalidArgument { parameter: p.into(), message: m });
+        if self.options.control_variates.is_none() {
+            return bad("IterationOptions::control_variates", "the run has none, so it takes no state".into());
+        }
+        match (&control.state, &control.previous) {
+            (None, None) => {}
+            (Some(state), Some(previous)) => {
+                state.check(self.options.render.width, self.options.render.height, state.views)?;
+                if state.steps != self.iteration {
+                    return bad(
+                        "control-variate state",
+                        format!("has {} steps but the run is at iteration {}", state.steps, self.iteration),
+                    );
+                }
+                if previous.entries() != self.params.entries() {
+                    return bad("control-variate state", "its parameters have another layout than the run's".into());
+                }
+            }
+            _ => {
+                return bad(
+                    "control-variate state",
+                    "has an estimate without parameters or parameters without one".into(),
+                );
+            }
+        }
+        Ok(Optimization { control, pending: None, ..self })
+    }
+
+    /// The control variates' committed state (empty without control variates or before the first
+    /// iteration).
+    pub fn control_variates(&self) -> &ControlVariates {
+        &self.control
     }
 
     /// The same run with `prior` added to the objective: every gradient from now on includes its
@@ -393,12 +279,15 @@ impl Optimization {
 
     /// The loss and its gradient at the current parameters with the seed of the next iteration:
     /// uploads the parameters to `renderer`, renders pass 1, and runs the gradient pass (uniform
-    /// or adaptive). Changes nothing in the run; [`Optimization::apply`] takes the step.
+    /// or adaptive). Changes neither the parameters nor Adam; [`Optimization::apply`] takes the
+    /// step. With control variates it also renders pass 1 at the previous iteration's parameters
+    /// and holds the new running estimate until [`Optimization::apply`] commits it (calling this
+    /// again before then recomputes the same estimate).
     ///
     /// # Errors
     /// Those of [`Backend::set_params`], [`Backend::loss_and_gradient_split`] and
     /// [`Backend::loss_and_gradient_adaptive`] (a target of the wrong size, Vulkan failures).
-    pub fn gradient(&self, backend: &mut dyn Backend, target: &Image) -> Result<(f64, Gradients)> {
+    pub fn gradient(&mut self, backend: &mut dyn Backend, target: &Image) -> Result<(f64, Gradients)> {
         let view = View::current(backend.scene());
         self.gradient_views(backend, &[view], std::slice::from_ref(target))
     }
@@ -408,21 +297,44 @@ impl Optimization {
     /// ([`Optimization::with_prior`]) the gradient includes the prior's; the loss does not.
     ///
     /// # Errors
-    /// As [`Optimization::gradient`]; targets not one per view.
+    /// As [`Optimization::gradient`]; targets not one per view; with control variates, another
+    /// number of views than the run's earlier iterations had.
     pub fn gradient_views(
-        &self,
+        &mut self,
         backend: &mut dyn Backend,
         views: &[View],
         targets: &[Image],
     ) -> Result<(f64, Gradients)> {
-        backend.set_params(&self.params)?;
-        let o = &self.options;
+        let o = self.options;
         let render = o.at(self.iteration);
-        let (loss, gradients) = match o.adaptive {
-            None => backend.loss_and_gradient_views(&render, o.spp_primal, views, targets, o.loss, o.mode)?,
-            Some(estimator) => {
-                let adaptive = AdaptiveOptions { spp_primal: o.spp_primal, estimator };
-                backend.loss_and_gradient_views_adaptive(&render, &adaptive, views, targets, o.loss, o.mode)?
+        let (loss, gradients) = match o.control_variates {
+            None => {
+                backend.set_params(&self.params)?;
+                match o.adaptive {
+                    None => backend.loss_and_gradient_views(&render, o.spp_primal, views, targets, o.loss, o.mode)?,
+                    Some(estimator) => {
+                        let adaptive = AdaptiveOptions { spp_primal: o.spp_primal, estimator };
+                        backend.loss_and_gradient_views_adaptive(&render, &adaptive, views, targets, o.loss, o.mode)?
+                    }
+                }
+            }
+            Some(cv) => {
+                backend.prepare_gradient(&render, o.spp_primal, o.mode, o.adaptive.is_some())?;
+                let (loss, adjoints, state) = self.control_variate_pass1(backend, &cv, &render, views, targets)?;
+                self.pending = Some((self.iteration, state));
+                let sum = match o.adaptive {
+                    None => backend.backward_views(&render, views, &adjoints, o.mode)?,
+                    Some(estimator) => {
+                        if adjoints.iter().all(|a| a.as_slice().iter().all(|&v| v == 0.0)) {
+                            let n = self.params.values().len();
+                            Gradients::new(&self.params, vec![0.0; n])
+                        } else {
+                            let sampling = PixelSampling::from_adjoint(&Image::stack(&adjoints)?, estimator)?;
+                            backend.backward_adaptive_views(&render, views, &adjoints, &sampling, o.mode)?
+                        }
+                    }
+                };
+                (loss, Gradients::sum_divided(&[sum], views.len())?)
             }
         };
         match &self.prior {
@@ -431,15 +343,85 @@ impl Optimization {
         }
     }
 
+    /// Pass 1 with control variates: H_i at the previous parameters (after the first iteration)
+    /// and G_i at the current ones, both with the iteration's seed and pass 1's estimator, the
+    /// running estimate F_i, and each view's loss and adjoint image at F_i. Leaves the current
+    /// parameters on `backend`. Returns the mean loss, the adjoints and the new state.
+    fn control_variate_pass1(
+        &self,
+        backend: &mut dyn Backend,
+        cv: &ControlVariateOptions,
+        render: &RenderOptions,
+        views: &[View],
+        targets: &[Image],
+    ) -> Result<(f64, Vec<Image>, ControlVariateState)> {
+        let o = &self.options;
+        let pass1 = render.loss_pass(o.spp_primal)?;
+        render.validate()?;
+        check_views(views, targets, render, "target image")?;
+        // Pass 1 as the plain step renders it: with the gradient kernel for uniform sampling,
+        // with the render kernel for adaptive sampling (Backend::loss_and_gradient_views{,_adaptive}).
+        let kernel = if o.adaptive.is_none() { Some(o.mode) } else { None };
+        let mut state = match &self.control.state {
+            Some(state) => state.clone(),
+            None => ControlVariateState::new(render.width, render.height, views.len() as u32),
+        };
+        let h = match &self.control.previous {
+            Some(previous) => {
+                backend.set_params(previous)?;
+                Some(backend.render_loss_pass(render, &pass1, views, kernel)?)
+            }
+            None => None,
+        };
+        backend.set_params(&self.params)?;
+        let g = backend.render_loss_pass(render, &pass1, views, kernel)?;
+        let estimates = state.step(cv, &g, h.as_deref()).map_err(|e| match e {
+            Error::InvalidArgument { parameter, message } if parameter == "G" || parameter == "H" => {
+                Error::InvalidArgument {
+                    parameter: "views".into(),
+                    message: format!("with control variates every iteration has the same views: {message}"),
+                }
+            }
+            e => e,
+        })?;
+        let mut total = 0.0;
+        let mut adjoints = Vec::with_capacity(views.len());
+        for (f, target) in estimates.iter().zip(targets) {
+            let (loss, adjoint) = loss_and_adjoint(f, target, o.loss)?;
+            total += loss;
+            adjoints.push(adjoint);
+        }
+        Ok((total / views.len() as f64, adjoints, state))
+    }
+
     /// Takes the Adam step of the next iteration with `gradients` (whose pass-1 loss was `loss`)
-    /// and counts the iteration.
+    /// and counts the iteration; with control variates, commits the running estimate that
+    /// [`Optimization::gradient_views`] computed for this iteration.
     ///
     /// # Errors
     /// [`Error::NonFiniteGradient`] (nothing changes, the iteration is not counted) and the
-    /// other errors of [`Adam::step`].
+    /// other errors of [`Adam::step`]; [`Error::InvalidArgument`] naming
+    /// `Optimization::apply` with control variates when no gradient of this iteration was taken.
     pub fn apply(&mut self, loss: f64, gradients: &Gradients) -> Result<StepReport> {
         let iteration = self.iteration;
+        let committed = match (self.options.control_variates, &self.pending) {
+            (None, _) => None,
+            (Some(_), Some((at, state))) if *at == iteration => Some(state.clone()),
+            (Some(_), _) => {
+                return Err(Error::InvalidArgument {
+                    parameter: "Optimization::apply".into(),
+                    message: format!(
+                        "with control variates, iteration {iteration} needs its gradient (Optimization::gradient) first"
+                    ),
+                });
+            }
+        };
+        let before = committed.as_ref().map(|_| self.params.clone());
         self.adam.step(&mut self.params, gradients, iteration)?;
+        if let Some(state) = committed {
+            self.control = ControlVariates { state: Some(state), previous: before };
+            self.pending = None;
+        }
         self.iteration += 1;
         let mut norm2 = 0.0;
         for &p in self.adam.params() {
@@ -476,132 +458,55 @@ impl Optimization {
 mod tests {
     use super::*;
 
-    impl Adam {
-        /// A step with gradient values `g` in `table`'s layout.
-        fn step_with(&mut self, table: &mut ParamTable, g: Vec<f32>, iteration: u64) -> Result<()> {
-            let gradients = Gradients::new(table, g);
-            self.step(table, &gradients, iteration)
-        }
+    fn run(control_variates: Option<ControlVariateOptions>) -> Optimization {
+        let mut table = ParamTable::default();
+        let w = table.add("object.weight.value", &[0.5], (0.0, 1.0)).unwrap();
+        let scene = crate::scene::builtin::load("blend").unwrap();
+        let render = RenderOptions { width: 4, height: 3, spp: 1, ..RenderOptions::for_scene(&scene) };
+        let options = IterationOptions {
+            render,
+            spp_primal: 1,
+            adaptive: None,
+            loss: Loss::L2,
+            mode: GradMode::Float,
+            control_variates,
+        };
+        Optimization::new(table, &[w], AdamOptions::default(), options).unwrap()
     }
 
-    fn table() -> (ParamTable, ParamId, ParamId, ParamId) {
-        let mut t = ParamTable::default();
-        let albedo = t.add("wall.reflectance.value", &[0.5, 0.5, 0.5], (0.0, 1.0)).unwrap();
-        let alpha = t.add("sphere.bsdf.alpha.value", &[0.5], (1e-3, 1.0)).unwrap();
-        let other = t.add("light.emitter.radiance.value", &[2.0, 2.0, 2.0], (0.0, f32::INFINITY)).unwrap();
-        (t, albedo, alpha, other)
-    }
-
-    /// The first two steps against values worked out by hand from ALGORITHMS.md §7.2 with η = 0.1,
-    /// θ₀ = 0.5, g₁ = 0.5, g₂ = −0.25:
-    /// step 1: m = 0.05, v = 2.5e-4, η₁ = 0.1·√0.001/0.1 = 0.0316228, Δ = η₁·0.05/(0.0158114 + 1e-8)
-    /// = 0.0999999368 → θ₁ = 0.4000000632;
-    /// step 2: m = 0.9·0.05 − 0.1·0.25 = 0.02, v = 0.999·2.5e-4 + 0.001·0.0625 = 3.1225e-4,
-    /// η₂ = 0.1·√(1 − 0.999²)/(1 − 0.9²) = 0.1·0.0447102/0.19 = 0.0235317,
-    /// Δ = 0.0235317·0.02/0.0176706 = 0.0266337 → θ₂ = 0.3733664.
-    /// Values are stored as f32, so they agree to f32 rounding (a relative 6e-8 per step).
+    /// With control variates a step commits the estimate its gradient computed: `apply` without
+    /// a gradient of this iteration is refused by name and changes nothing; a state is refused by
+    /// a run without control variates, and one whose step count is not the run's iteration.
     #[test]
-    fn first_two_steps_match_the_hand_computation() {
-        let (mut t, albedo, alpha, other) = table();
-        let mut adam = Adam::new(&t, &[alpha, albedo], AdamOptions::with_learning_rate(0.1)).unwrap();
-        adam.step_with(&mut t, vec![0.0, 0.5, -0.5, 0.5, 7.0, 7.0, 7.0], 0).unwrap();
-        assert!((f64::from(t.get(alpha)[0]) - 0.400_000_063_2).abs() < 1e-7, "{:?}", t.get(alpha));
-        let s = adam.state();
-        // Moments are laid out in the order the parameters were given: alpha first, then albedo.
-        assert!((s.m[0] - 0.05).abs() < 1e-12 && (s.v[0] - 2.5e-4).abs() < 1e-15, "{s:?}");
-        assert_eq!(s.steps, [1, 1]);
-        // A zero gradient gives a zero step; ±g give ∓η (to ε).
-        assert_eq!(t.get(albedo)[0], 0.5);
-        assert!((t.get(albedo)[1] - 0.4).abs() < 1e-6 && (t.get(albedo)[2] - 0.6).abs() < 1e-6);
-        adam.step_with(&mut t, vec![0.0, 0.5, -0.5, -0.25, 7.0, 7.0, 7.0], 1).unwrap();
-        assert!((f64::from(t.get(alpha)[0]) - 0.373_366_4).abs() < 1e-7, "{:?}", t.get(alpha));
-        assert!((adam.state().m[0] - 0.02).abs() < 1e-12 && (adam.state().v[0] - 3.1225e-4).abs() < 1e-15);
-        assert_eq!(t.get(other), [2.0, 2.0, 2.0], "a parameter that is not optimised keeps its values");
-    }
-
-    /// On f(θ) = Σ (θᵢ − cᵢ)² with noiseless gradients Adam reaches the minimum after 2 000 steps
-    /// at η = 0.01 (the whole way is at most 0.45, ≥ 45 steps of η): in f64 the same iteration ends
-    /// within 1e-15 of cᵢ, so the bound is f32 storage of θ (an ulp below 1 is 6e-8); 1e-5 leaves
-    /// a margin for steps that round away near the minimum.
-    #[test]
-    fn adam_converges_on_a_quadratic() {
-        let (mut t, albedo, alpha, _) = table();
-        let centre = [0.2f32, 0.7, 0.9, 0.05];
-        let mut adam = Adam::new(&t, &[albedo, alpha], AdamOptions::default()).unwrap();
-        for it in 0..2000 {
-            let v = t.values().to_vec();
-            let mut g = vec![0.0; v.len()];
-            for (i, c) in centre.iter().enumerate() {
-                g[i] = 2.0 * (v[i] - c);
-            }
-            adam.step_with(&mut t, g, it).unwrap();
-        }
-        for (got, want) in t.values()[..4].iter().zip(centre) {
-            assert!((got - want).abs() < 1e-5, "{:?} vs {centre:?}", t.values());
-        }
-    }
-
-    /// A minimum outside the bounds: the iterate sits on the bound, never beyond it, for albedo
-    /// ([0, 1]) and roughness ([1e-3, 1]).
-    #[test]
-    fn steps_are_projected_onto_the_bounds() {
-        let (mut t, albedo, alpha, _) = table();
-        let mut adam = Adam::new(&t, &[albedo, alpha], AdamOptions::with_learning_rate(0.2)).unwrap();
-        // Gradients pull channel 0 up, 1 and 2 down, alpha down.
-        for it in 0..20 {
-            adam.step_with(&mut t, vec![-1.0, 1.0, 1e6, 1.0, 0.0, 0.0, 0.0], it).unwrap();
-            assert!(t.values()[..3].iter().all(|v| (0.0..=1.0).contains(v)));
-            assert!((1e-3..=1.0).contains(&t.get(alpha)[0]));
-        }
-        assert_eq!(t.get(albedo), [1.0, 0.0, 0.0]);
-        assert_eq!(t.get(alpha), [1e-3]);
-        // And back off the bound once the gradient has turned long enough for m to change sign
-        // (m ≈ 0.88 after 20 steps of g = 1; 20 steps of g = −1 take it to ≈ −0.78).
-        for it in 20..40 {
-            adam.step_with(&mut t, vec![0.0, 0.0, 0.0, -1.0, 0.0, 0.0, 0.0], it).unwrap();
-        }
-        assert!(t.get(alpha)[0] > 1e-3);
-    }
-
-    /// NaN or ±∞ in an optimised value's gradient is an error naming the iteration and the
-    /// parameter (name and index); the parameters and Adam's state are as before the call. A
-    /// NaN in a parameter that is not optimised does not matter.
-    #[test]
-    fn non_finite_gradients_are_rejected_and_change_nothing() {
-        let (mut t, albedo, alpha, _) = table();
-        let mut adam = Adam::new(&t, &[alpha, albedo], AdamOptions::default()).unwrap();
-        adam.step_with(&mut t, vec![0.1, 0.2, 0.3, 0.4, 0.0, 0.0, 0.0], 0).unwrap();
-        let (t_before, adam_before) = (t.clone(), adam.clone());
-        for (bad, index, name) in
-            [(f32::NAN, 2, "wall.reflectance.value[2]"), (f32::INFINITY, 3, "sphere.bsdf.alpha.value[0]")]
-        {
-            for value in [bad, -bad] {
-                let mut g = vec![0.1, 0.2, 0.3, 0.4, 0.0, 0.0, 0.0];
-                g[index] = value;
-                let err = adam.step_with(&mut t, g, 17).unwrap_err();
-                assert!(matches!(err, Error::NonFiniteGradient { iteration: 17, .. }), "{err:?}");
-                let text = err.to_string();
-                assert!(text.contains("iteration 17") && text.contains(name), "{text}");
-                assert_eq!(t, t_before);
-                assert_eq!(adam, adam_before);
-            }
-        }
-        adam.step_with(&mut t, vec![0.1, 0.2, 0.3, 0.4, f32::NAN, 0.0, 0.0], 1).unwrap();
-        assert_eq!(adam.state().steps, [2, 2]);
-    }
-
-    #[test]
-    fn bad_options_and_states_are_rejected() {
-        let (t, albedo, alpha, _) = table();
-        for lr in [0.0, -0.1, f64::NAN, f64::INFINITY] {
-            let e = Adam::new(&t, &[alpha], AdamOptions::with_learning_rate(lr)).unwrap_err().to_string();
-            assert!(e.contains("AdamOptions::learning_rate"), "{e}");
-        }
-        assert!(Adam::new(&t, &[], AdamOptions::default()).unwrap_err().to_string().contains("none given"));
-        assert!(Adam::new(&t, &[alpha, alpha], AdamOptions::default()).unwrap_err().to_string().contains("twice"));
-        let short = AdamState { m: vec![0.0; 3], v: vec![0.0; 3], steps: vec![0; 2] };
-        let e = Adam::with_state(&t, &[alpha, albedo], AdamOptions::default(), short).unwrap_err().to_string();
-        assert!(e.contains("Adam state"), "{e}");
+    fn control_variate_states_are_refused_where_they_cannot_apply() {
+        let mut cv = run(Some(ControlVariateOptions::default()));
+        let g = Gradients::new(cv.params(), vec![1.0]);
+        let e = cv.apply(0.0, &g).unwrap_err().to_string();
+        assert!(e.contains("Optimization::apply") && e.contains("iteration 0 needs its gradient"), "{e}");
+        assert_eq!((cv.iteration(), cv.params().values()), (0, &[0.5][..]));
+        // Without control variates the same call steps.
+        let mut plain = run(None);
+        plain.apply(0.0, &g).unwrap();
+        let state = ControlVariateState::new(4, 3, 1);
+        let control = ControlVariates { state: Some(state.clone()), previous: Some(plain.params().clone()) };
+        let e = plain.clone().with_control_variates(control.clone()).unwrap_err().to_string();
+        assert!(e.contains("IterationOptions::control_variates"), "{e}");
+        // A fresh state (0 steps) for a run at iteration 0 is accepted; at another iteration not.
+        let fresh = run(Some(ControlVariateOptions::default()));
+        fresh.clone().with_control_variates(control.clone()).unwrap();
+        let later = Optimization { iteration: 3, ..fresh.clone() };
+        let e = later.with_control_variates(control.clone()).unwrap_err().to_string();
+        assert!(e.contains("control-variate state") && e.contains("0 steps") && e.contains("iteration 3"), "{e}");
+        let half = ControlVariates { state: Some(state), previous: None };
+        assert!(fresh.clone().with_control_variates(half).unwrap_err().to_string().contains("without parameters"));
+        let wrong_size = ControlVariates { state: Some(ControlVariateState::new(5, 3, 1)), ..control };
+        assert!(fresh.with_control_variates(wrong_size).unwrap_err().to_string().contains("5×3"));
+        let bad = IterationOptions {
+            control_variates: Some(ControlVariateOptions { beta1: 1.0, beta2: 0.999 }),
+            ..*run(None).options()
+        };
+        let e = Optimization::resume(run(None).params().clone(), run(None).adam().clone(), 0, bad).unwrap_err();
+        assert!(e.to_string().contains("ControlVariateOptions::beta1"), "{e}");
     }
 
     #[test]

@@ -300,3 +300,131 @@ fn optimize_and_variance_run_on_the_cpu_reference_like_on_the_gpu() {
         assert!((a - b).abs() <= 1e-3 * a.abs().max(b.abs()), "{}: GPU {a} vs CPU {b}", rg["technique"]);
     }
 }
+
+/// `--control-variates`: five iterations (the weights start at the fourth), then `--resume` to
+/// eight, give the eight-in-one-go run's rows bit for bit (fixed-point gradients): the running
+/// estimate, its statistics and the previous parameters travel in `control_variates.bin`.
+/// Turning the flag on at `--resume` is refused by name, and so is a state file that does not
+/// belong to the run; the first three iterations are the plain run's (the weight is still 0).
+#[test]
+fn control_variates_resume_bit_for_bit_and_match_plain_while_the_weight_is_zero() {
+    let dir = tempfile::tempdir().unwrap();
+    let (whole, split, plain) = (dir.path().join("whole"), dir.path().join("split"), dir.path().join("plain"));
+    let cv = ["--control-variates", "--deterministic", "--seed", "3", "--lr", "0.05"];
+    ok(&run(SMALL, &[&cv[..], &["--iters", "8", "-o", whole.to_str().unwrap()]].concat()));
+    ok(&run(SMALL, &[&cv[..], &["--iters", "5", "-o", split.to_str().unwrap()]].concat()));
+    ok(&run(SMALL, &[&cv[1..], &["--iters", "5", "-o", plain.to_str().unwrap()]].concat()));
+    assert!(split.join("control_variates.bin").is_file());
+    let o = run(&["optimize", "--resume", split.to_str().unwrap(), "--iters", "5", "--json"], &[]);
+    ok(&o);
+    let summary: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    assert!(summary["outputs"].to_string().contains("control_variates.bin"), "{summary}");
+    assert!(!plain.join("control_variates.bin").exists());
+    // Turning them on for a run that had none is refused (left out, a run keeps its own setting).
+    let o = run(&["optimize", "--resume", plain.to_str().unwrap(), "--control-variates", "--iters", "6"], &[]);
+    let stderr = String::from_utf8_lossy(&o.stderr);
+    assert!(!o.status.success() && stderr.contains("--control-variates true (the run has false)"), "{stderr}");
+    // A state file of another iteration (the plain run has none; take the whole run's) is refused.
+    let saved = std::fs::read(split.join("control_variates.bin")).unwrap();
+    std::fs::copy(whole.join("control_variates.bin"), split.join("control_variates.bin")).unwrap();
+    let o = run(&["optimize", "--resume", split.to_str().unwrap(), "--iters", "8"], &[]);
+    let stderr = String::from_utf8_lossy(&o.stderr);
+    assert!(!o.status.success() && stderr.contains("after 8 iterations but state.json is after 5"), "{stderr}");
+    std::fs::write(split.join("control_variates.bin"), &saved[..saved.len() - 1]).unwrap();
+    let o = run(&["optimize", "--resume", split.to_str().unwrap(), "--iters", "8"], &[]);
+    let stderr = String::from_utf8_lossy(&o.stderr);
+    assert!(!o.status.success() && stderr.contains("truncated"), "{stderr}");
+    std::fs::write(split.join("control_variates.bin"), &saved).unwrap();
+    ok(&run(&["optimize", "--resume", split.to_str().unwrap(), "--iters", "8"], &[]));
+    let ((_, resumed), (_, straight), (_, plain_rows)) = (rows(&split), rows(&whole), rows(&plain));
+    assert_eq!(resumed.len(), 8);
+    for (a, b) in resumed.iter().zip(&straight) {
+        assert_eq!((&a[0], &a[2..]), (&b[0], &b[2..]), "everything but the wall time agrees bit for bit");
+    }
+    for (t, (a, b)) in straight.iter().zip(&plain_rows).enumerate() {
+        if t < 3 {
+            assert_eq!(&a[2..], &b[2..], "iteration {t}: v = 0, the plain run");
+        } else {
+            assert_ne!(a[2], b[2], "iteration {t}: the control variates change the loss");
+        }
+    }
+}
+
+/// `optimize --cpu --control-variates` follows the GPU run within the GPU-vs-CPU gradient
+/// tolerance (1e-3 relative), through iterations where the weights are in use: the control
+/// variates are host-side and the same on both back ends.
+#[test]
+fn control_variates_run_on_the_cpu_reference_like_on_the_gpu() {
+    let dir = tempfile::tempdir().unwrap();
+    let (gpu, cpu) = (dir.path().join("gpu"), dir.path().join("cpu"));
+    let cv = ["--control-variates", "--iters", "5"];
+    ok(&run(SMALL, &[&cv[..], &["-o", gpu.to_str().unwrap()]].concat()));
+    ok(&run(SMALL, &[&cv[..], &["--cpu", "-o", cpu.to_str().unwrap()]].concat()));
+    let ((header, on_gpu), (_, on_cpu)) = (rows(&gpu), rows(&cpu));
+    assert_eq!(on_gpu.len(), 5);
+    for (g, c) in on_gpu.iter().zip(&on_cpu) {
+        for column in ["loss", "object.weight.value", "grad_norm"] {
+            let i = header.iter().position(|h| h == column).unwrap();
+            let (a, b): (f64, f64) = (g[i].parse().unwrap(), c[i].parse().unwrap());
+            assert!((a - b).abs() <= 1e-3 * a.abs().max(b.abs()), "iteration {}: {column} GPU {a} vs CPU {b}", g[0]);
+        }
+    }
+}
+
+/// `--control-variates` over two `--view`s keeps one running estimate per view (the state file
+/// says two views of 16×16) and, as with one view, equals the plain run bit for bit through the
+/// warm-up (iterations 0–2) and parts from it once the weights are in use.
+#[test]
+fn control_variates_keep_an_estimate_per_view() {
+    let dir = tempfile::tempdir().unwrap();
+    let scene = concat!(env!("CARGO_MANIFEST_DIR"), "/scenes/two-sided/scene.xml");
+    let args = |out: &Path, cv: bool| {
+        let mut a = vec![
+            "optimize",
+            scene,
+            "--param",
+            "front.reflectance.value=0.5",
+            "--param",
+            "back.reflectance.value=0.5",
+            "--target-set",
+            "front.reflectance.value=0.7,0.3,0.2",
+            "--target-set",
+            "back.reflectance.value=0.2,0.4,0.7",
+            "--view",
+            "front_camera",
+            "--view",
+            "back_camera",
+            "--width",
+            "16",
+            "--height",
+            "16",
+            "--spp",
+            "4",
+            "--iters",
+            "5",
+            "--deterministic",
+            "--lr",
+            "0.03",
+            "-o",
+        ];
+        a.push(out.to_str().unwrap());
+        if cv {
+            a.push("--control-variates");
+        }
+        run(&a, &[])
+    };
+    let (with_cv, plain) = (dir.path().join("cv"), dir.path().join("plain"));
+    ok(&args(&with_cv, true));
+    ok(&args(&plain, false));
+    let state = std::fs::read(with_cv.join("control_variates.bin")).unwrap();
+    let word = |at: usize| u32::from_le_bytes(state[at..at + 4].try_into().unwrap());
+    assert_eq!((word(24), word(28), word(32)), (16, 16, 2), "width, height and views of the state");
+    let ((_, a), (_, b)) = (rows(&with_cv), rows(&plain));
+    for (t, (a, b)) in a.iter().zip(&b).enumerate() {
+        if t < 3 {
+            assert_eq!(&a[2..], &b[2..], "iteration {t}");
+        } else {
+            assert_ne!(a[2], b[2], "iteration {t}");
+        }
+    }
+}

@@ -29,6 +29,7 @@ use serde::{Deserialize, Serialize};
 use crate::common::{RenderFlags, StrategyArgs, options, parse_define, parse_views, with_values};
 use crate::curves::History;
 
+mod control;
 mod prepare;
 mod report;
 mod resume;
@@ -112,6 +113,12 @@ pub(super) struct OptimizeArgs {
     /// reproducible.
     #[arg(long)]
     deterministic: bool,
+    /// Recursive control variates across iterations (Nicolet et al. 2023): pass 1 is rendered at
+    /// the current and at the previous parameters with the same random numbers, and the loss
+    /// and its adjoint image are taken from a per-pixel running estimate that reuses the earlier
+    /// iterations' images. Costs a second pass 1 per iteration; the gradient pass is unchanged.
+    #[arg(long)]
+    control_variates: bool,
     /// Output directory [default: optimize-out].
     #[arg(short, long, value_name = "DIR", conflicts_with = "resume")]
     output: Option<PathBuf>,
@@ -162,6 +169,9 @@ struct RunConfig {
     adaptive: bool,
     adaptive_estimator: String,
     deterministic: bool,
+    /// `--control-variates`.
+    #[serde(default)]
+    control_variates: bool,
     width: u32,
     height: u32,
     max_depth: Option<u32>,
@@ -363,6 +373,7 @@ fn start(args: &OptimizeArgs) -> Result<Session> {
             .clone()
             .unwrap_or_else(|| AdaptiveEstimator::default().name().to_string()),
         deterministic: args.deterministic,
+        control_variates: args.control_variates,
         width: opts.width,
         height: opts.height,
         max_depth: opts.max_depth,

@@ -11,7 +11,7 @@ use pathgrad::gpu::renderer::GradMode;
 use pathgrad::image::Image;
 use pathgrad::integrator::{RenderOptions, Strategy};
 use pathgrad::loss::Loss;
-use pathgrad::optim::{AdamOptions, IterationOptions, Optimization};
+use pathgrad::optim::{AdamOptions, ControlVariateOptions, IterationOptions, Optimization};
 use pathgrad::params::{ParamId, ParamTable};
 use pathgrad::prior::Smoothness;
 use pathgrad::scene::Scene;
@@ -69,6 +69,7 @@ pub(super) fn iteration_options(scene: &Scene, config: &RunConfig) -> Result<Ite
         adaptive: if config.adaptive { Some(config.adaptive_estimator.parse()?) } else { None },
         loss: config.loss.parse::<Loss>()?,
         mode: if config.deterministic { GradMode::Deterministic } else { GradMode::Float },
+        control_variates: config.control_variates.then(ControlVariateOptions::default),
     };
     options.validate()?;
     Ok(options)

@@ -91,6 +91,8 @@ pub(super) fn write_state(s: &Session, stopped: &str) -> Result<()> {
         adam_steps: adam.steps.clone(),
         stopped: stopped.to_string(),
     };
+    // The control variates' estimate first: state.json then never points past it.
+    super::control::write(&s.dir, &s.run, &s.ids)?;
     Ok(write_bytes_atomically(s.dir.join("state.json"), serde_json::to_string_pretty(&state)?.as_bytes())?)
 }
 
@@ -129,10 +131,14 @@ impl Session {
 pub(super) fn summary(s: &Session, stopped: &str, json: bool) {
     let last = s.history.last();
     let params = values_of(s.run.params(), &s.ids);
-    let outputs: Vec<PathBuf> = ["history.csv", "curves.svg", "final.exr", "final.png", "params.json", "state.json"]
-        .iter()
-        .map(|f| s.dir.join(f))
-        .collect();
+    let mut outputs: Vec<PathBuf> =
+        ["history.csv", "curves.svg", "final.exr", "final.png", "params.json", "state.json"]
+            .iter()
+            .map(|f| s.dir.join(f))
+            .collect();
+    if s.dir.join(super::control::FILE).is_file() {
+        outputs.push(s.dir.join(super::control::FILE));
+    }
     let ctx = s.ctx.as_deref();
     // The smoothness prior's value at the final parameters (--smooth).
     let prior = s.run.prior().map(|p| p.value(s.run.params()));

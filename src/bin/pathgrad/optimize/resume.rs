@@ -149,8 +149,13 @@ pub(super) fn resume(args: &OptimizeArgs, dir: &Path, given: &BTreeSet<String>) 
     let mut history = History::new(&scene.params, &ids, prepared.truth.is_some());
     let csv = dir.join("history.csv");
     history.read(&csv, state.iteration)?;
-    let run =
-        with_smoothness(Optimization::resume(table, adam, state.iteration, prepared.options)?, &scene, &ids, &config)?;
+    let run = with_smoothness(
+        Optimization::resume(table.clone(), adam, state.iteration, prepared.options)?,
+        &scene,
+        &ids,
+        &config,
+    )?;
+    let run = if config.control_variates { super::control::read(dir, run, &table, &ids)? } else { run };
     history.rewrite(&csv)?;
     Ok(Session {
         _lock: lock,
@@ -228,6 +233,7 @@ pub(super) fn check_unchanged(
     check("adaptive", "--adaptive", Some(text(&args.adaptive)), text(&c.adaptive));
     check("adaptive_estimator", "--adaptive-estimator", args.adaptive_estimator.clone(), c.adaptive_estimator.clone());
     check("deterministic", "--deterministic", Some(text(&args.deterministic)), text(&c.deterministic));
+    check("control_variates", "--control-variates", Some(text(&args.control_variates)), text(&c.control_variates));
     check("spp", "--spp", args.flags.spp.map(|v| text(&v)), text(&c.spp_final));
     check("width", "--width", args.flags.width.map(|v| text(&v)), text(&c.width));
     check("height", "--height", args.flags.height.map(|v| text(&v)), text(&c.height));
