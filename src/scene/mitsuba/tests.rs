@@ -439,7 +439,7 @@ fn rough_conductor_properties_and_presets() {
     assert_eq!(param(&s, "au.bsdf.alpha_u.value"), [0.2]);
     assert_eq!(param(&s, "au.bsdf.alpha_v.value"), [0.2]);
     assert!(s.params.find("au.bsdf.alpha.value").is_none());
-    for m in ["none", "Au", "Ag", "Cu", "Al", "Cr"] {
+    for m in ["none", "Au", "Ag", "Cu", "Al", "Cr", "a-C"] {
         let (eta, k) = bsdf::conductor(m).unwrap();
         assert!(eta.min_element() >= 0.0 && k.min_element() > 0.0, "{m}");
     }
