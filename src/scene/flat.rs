@@ -359,12 +359,11 @@ fn flatten_material(scene: &Scene, m: &Material) -> GpuMaterial {
         Material::RoughConductor { distribution, alpha, alpha_v, specular, eta, k } => GpuMaterial {
             tag: MAT_ROUGH_CONDUCTOR,
             distribution: distribution as u32,
-            p_color: offset(specular),
             p_alpha: scalar_slot(scene, alpha),
             p_alpha_v: scalar_slot(scene, alpha_v),
             eta,
             k,
-            ..Default::default()
+            ..albedo_fields(scene, specular)
         },
         Material::RoughPlastic { distribution, alpha, diffuse, specular, eta, nonlinear } => {
             // Mitsuba's sampling weight of the coating from the mean reflectances.

@@ -142,8 +142,8 @@ pub enum Material {
         /// Roughness α_v along the shading frame's y: `alpha` itself when isotropic; 1 value or a
         /// texture's texels.
         alpha_v: ParamId,
-        /// RGB specular reflectance multiplying the Fresnel term.
-        specular: ParamId,
+        /// RGB specular reflectance multiplying the Fresnel term, constant or textured.
+        specular: Albedo,
         /// Real part of the complex index of refraction (RGB).
         eta: Vec3,
         /// Imaginary part of the complex index of refraction (RGB); eta = 0, k = 1 gives F ≡ 1.
@@ -539,6 +539,7 @@ impl Scene {
             &specular.to_array(),
             bounds::REFLECTANCE,
         )?;
+        let specular = Albedo::Rgb(specular);
         Ok(self.add_material(Material::RoughConductor { distribution, alpha, alpha_v: alpha, specular, eta, k }))
     }
 

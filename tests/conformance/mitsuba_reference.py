@@ -67,6 +67,11 @@ MATRIX = {
                                            "blendbsdf weight checkerboard of floats"],
                                  grads=["ball.bsdf.weight.data", "floor.bsdf.weight.color0.value",
                                         "floor.bsdf.weight.color1.value"]),
+    "texture_specular_reflectance": dict(features=["roughconductor specular_reflectance bitmap (sRGB)",
+                                                   "roughconductor specular_reflectance checkerboard of colours"],
+                                         grads=["floor.bsdf.specular_reflectance.data",
+                                                "ball.bsdf.specular_reflectance.color0.value",
+                                                "ball.bsdf.specular_reflectance.color1.value"]),
     "bsdf_diffuse_bitmap": dict(features=["diffuse", "bitmap sRGB PNG", "rectangle uv"], grads=["panel.bsdf.reflectance.data"]),
     # Mitsuba names a top-level texture reached through <ref> by its address (object_...), so its
     # data has no stable key: the gradient is the floor's.

@@ -44,6 +44,7 @@ fn gpu_equals_cpu_per_path_on_every_builtin_and_test_scene() {
         "bsdf_bumpmap",
         "texture_roughness",
         "texture_blend_weight",
+        "texture_specular_reflectance",
     ] {
         scenes.push(crate::support::scenes::conformance(name));
     }

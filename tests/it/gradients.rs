@@ -72,6 +72,10 @@ fn cases() -> Vec<(Scene, Vec<&'static str>)> {
             scenes::conformance("texture_blend_weight"),
             vec!["ball.bsdf.weight.data", "floor.bsdf.weight.color0.value", "floor.bsdf.weight.color1.value"],
         ),
+        (
+            scenes::conformance("texture_specular_reflectance"),
+            vec!["floor.bsdf.specular_reflectance.data", "ball.bsdf.specular_reflectance.color1.value"],
+        ),
     ]
 }
 
@@ -201,6 +205,7 @@ fn gradients_match_finite_differences() {
         (scenes::conformance("texture_roughness"), "pane.bsdf.alpha.color1.value"),
         (scenes::conformance("texture_blend_weight"), "ball.bsdf.weight.data"),
         (scenes::conformance("texture_blend_weight"), "floor.bsdf.weight.color1.value"),
+        (scenes::conformance("texture_specular_reflectance"), "floor.bsdf.specular_reflectance.data"),
     ];
     for (scene, name) in checks {
         let mut renderer = Renderer::new(&gpu.ctx, &scene).unwrap();

@@ -453,17 +453,26 @@ impl<'a> Loader<'a> {
         Ok(SmoothColour::Param(id.map_err(|e| self.located(p.node, e))?))
     }
 
+    /// Mitsuba's `roughconductor`: `distribution`, the roughness of
+    /// [`Loader::microfacet_alpha`], `specular_reflectance` (1; a colour, parameter
+    /// `NAME.specular_reflectance.value`, or a `bitmap`/`checkerboard` as a diffuse reflectance
+    /// is), `material` or `eta`/`k`.
     fn rough_conductor(&mut self, p: &Props<'a>, name: &str) -> Result<MaterialId> {
         let distribution = self.distribution(p)?;
         let (alpha, alpha_v) = self.microfacet_alpha(p, name, true)?;
-        let specular = self.color_in(p, "specular_reflectance", Vec3::ONE, bounds::REFLECTANCE)?;
+        let specular = match p.object("specular_reflectance") {
+            Some(t) => self.texture(t, format!("{name}.specular_reflectance"), 1)?,
+            None => {
+                let specular = self.color_in(p, "specular_reflectance", Vec3::ONE, bounds::REFLECTANCE)?;
+                let specular = self.scene.params.add(
+                    &format!("{name}.specular_reflectance.value"),
+                    &specular.to_array(),
+                    bounds::REFLECTANCE,
+                );
+                Albedo::Rgb(specular.map_err(|e| self.located(p.node, e))?)
+            }
+        };
         let (eta, k) = self.conductor_ior(p)?;
-        let specular = self.scene.params.add(
-            &format!("{name}.specular_reflectance.value"),
-            &specular.to_array(),
-            bounds::REFLECTANCE,
-        );
-        let specular = specular.map_err(|e| self.located(p.node, e))?;
         Ok(self.scene.add_material(Material::RoughConductor { distribution, alpha, alpha_v, specular, eta, k }))
     }
 

@@ -130,7 +130,7 @@ pub const PLUGINS: &[Plugin] = &[
     p(
         Bsdf,
         "roughconductor",
-        "`distribution`, `alpha` or `alpha_u`/`alpha_v` (parameters or one-channel textures), `specular_reflectance`, `material` or `eta`/`k`, `sample_visible`",
+        "`distribution`, `alpha` or `alpha_u`/`alpha_v` (parameters or one-channel textures), `specular_reflectance` (rgb, spectrum, bitmap or checkerboard), `material` or `eta`/`k`, `sample_visible`",
         "anisotropic: shading frame along ∂p/∂u",
     ),
     p(

@@ -1,5 +1,6 @@
 //! Textures on scalar properties (issue 31, item 3): roughness and blend weights as one-channel
-//! bitmaps or checkerboards of floats, named as Mitsuba's `traverse`, and what is refused by name.
+//! bitmaps or checkerboards of floats, and a conductor's textured reflectance, named as Mitsuba's
+//! `traverse`, and what is refused by name.
 
 use super::loader::load_text;
 use super::tests::{obj_for_tests, wrap};
@@ -61,6 +62,23 @@ fn issue_31_textured_roughness_and_weights_are_parameters_named_as_mitsuba() {
     // The differential sampler has no target among texels.
     let err = crate::integrator::Strategy::from_name(&s, "diff", 0.5, "c.bsdf.weight.data").unwrap_err().to_string();
     assert!(err.contains("a texture's texels"), "{err}");
+}
+
+#[test]
+fn issue_31_a_roughconductors_specular_reflectance_takes_a_colour_texture() {
+    let s = load_with_images(
+        r#"<shape type="cube" id="a"><bsdf type="roughconductor"><texture type="bitmap" name="specular_reflectance"><string name="filename" value="rgb.png"/></texture></bsdf></shape>
+           <shape type="cube" id="b"><bsdf type="roughconductor"><texture type="checkerboard" name="specular_reflectance"/></bsdf></shape>"#,
+    )
+    .unwrap();
+    let specular = |i: usize| match s.materials[s.meshes[i].material.0 as usize] {
+        Material::RoughConductor { specular, .. } => specular,
+        ref other => panic!("not a conductor: {other:?}"),
+    };
+    assert!(matches!(specular(0), crate::scene::Albedo::Bitmap(_)));
+    assert!(matches!(specular(1), crate::scene::Albedo::Checker { .. }));
+    assert!(s.params.find("a.bsdf.specular_reflectance.data").is_some());
+    assert!(s.params.find("b.bsdf.specular_reflectance.color0.value").is_some());
 }
 
 #[test]
