@@ -171,6 +171,9 @@ impl Strategy {
                     _ => false,
                 });
                 let uncovered = uncovered.or(mapped.then_some("a normal-mapped material's roughness or blend weight"));
+                // A texture's texels each act on part of the surface: the sampler's one scalar
+                // target per material does not describe them.
+                let uncovered = uncovered.or(scene.scalar_texture(target).map(|_| "a texture's texels"));
                 if let Some(whose) = uncovered {
                     return Err(Error::InvalidArgument {
                         parameter: scene.params.entry(target).name.clone(),

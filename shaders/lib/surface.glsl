@@ -229,6 +229,45 @@ vec3 texture_lookup(Material m, vec2 uv) {
         + param_rgb(texel[3]) * weight[3];
 }
 
+// ---- scalar textures (a roughness or blend weight with SCALAR_TEXTURE set; twin:
+// scalar_footprint and friends of src/cpu/surface.rs) ----
+bool scalar_textured(uint slot) { return HAS(F_PARAM_TEXTURE) && (slot & SCALAR_TEXTURE) != 0u; }
+
+// Word i of the scalar texture descriptor at offset d of the tables array.
+uint texture_desc_word(uint d, uint i) { return floatBitsToUint(coating_table(d + i)); }
+
+// The texels' parameter offsets and weights of the lookup of scalar texture `slot` at the hit's
+// texture coordinates uv (its `to_uv` applied; one value a texel).
+void scalar_footprint(uint slot, vec2 uv, out uint texel[4], out float weight[4]) {
+    uint d = slot & ~SCALAR_TEXTURE;
+    vec3 p = vec3(uv, 1.0);
+    vec3 row0 = vec3(coating_table(d + 4u), coating_table(d + 5u), coating_table(d + 6u));
+    vec3 row1 = vec3(coating_table(d + 7u), coating_table(d + 8u), coating_table(d + 9u));
+    vec2 t = vec2(dot(row0, p), dot(row1, p));
+    texture_footprint(0u, texture_desc_word(d, 1u), texture_desc_word(d, 2u), texture_desc_word(d, 3u), t, texel, weight);
+    uint offset = texture_desc_word(d, 0u);
+    // texture_footprint's offsets step 3 a texel (RGB); these texels hold one value.
+    for (uint k = 0u; k < 4u; k++) texel[k] = offset + texel[k] / 3u;
+}
+
+// The value of scalar texture `slot` at uv.
+float scalar_lookup(uint slot, vec2 uv) {
+    uint texel[4];
+    float weight[4];
+    scalar_footprint(slot, uv, texel, weight);
+    return params[texel[0]] * weight[0] + params[texel[1]] * weight[1] + params[texel[2]] * weight[2]
+        + params[texel[3]] * weight[3];
+}
+
+// A blend weight: its parameter, or its texture at uv.
+float scalar_value(uint slot, vec2 uv) { return scalar_textured(slot) ? scalar_lookup(slot, uv) : params[slot]; }
+
+// A roughness: its parameter, or its texture at uv clamped to ALPHA_TEXTURE_FLOOR as Mitsuba's
+// microfacet distribution clamps it.
+float alpha_value(uint slot, vec2 uv) {
+    return scalar_textured(slot) ? max(scalar_lookup(slot, uv), ALPHA_TEXTURE_FLOOR) : params[slot];
+}
+
 Leaf leaf_from_material(Material m, vec2 uv) {
     Leaf l;
     bool plastic = is_plastic(m.tag);
@@ -238,9 +277,9 @@ Leaf leaf_from_material(Material m, vec2 uv) {
     l.kind = (delta || is_smooth_plastic(m.tag) || rough_glass) ? m.tag
         : (plastic ? LEAF_ROUGH_PLASTIC : (conductor ? LEAF_ROUGH_CONDUCTOR : LEAF_DIFFUSE));
     l.distribution = m.distribution;
-    l.alpha = (conductor || plastic || rough_glass) ? params[m.p_alpha] : 0.0;
+    l.alpha = (conductor || plastic || rough_glass) ? alpha_value(m.p_alpha, uv) : 0.0;
     // Kernels without anisotropic BSDFs read no second roughness (α_v = α).
-    l.alpha_v = (HAS(F_ANISOTROPIC) && conductor) ? params[m.p_alpha_v] : l.alpha;
+    l.alpha_v = (HAS(F_ANISOTROPIC) && conductor) ? alpha_value(m.p_alpha_v, uv) : l.alpha;
     l.table = m.table;
     if (delta || rough_glass) {
         // Each colour a parameter, or (NO_PARAM) a constant: the reflectance in uv_row0, a
@@ -263,7 +302,7 @@ Bsdf resolve_bsdf(uint material_id, vec2 uv) {
     if (HAS(F_BLEND) && m.tag == MAT_BLEND) {
         b.leaf0 = leaf_from_material(materials[m.child0], uv);
         b.leaf1 = leaf_from_material(materials[m.child1], uv);
-        b.weight = params[m.p_weight];
+        b.weight = scalar_value(m.p_weight, uv);
         b.blend = true;
     } else {
         b.leaf0 = leaf_from_material(m, uv);
@@ -323,6 +362,23 @@ void push_rgb(uint offset, vec3 g) {
     push_entry(offset + 2u, vec3(0.0, 0.0, g.z));
 }
 
+// A scalar slot's derivative g (per image channel): its parameter's entry, or for a texture the
+// footprint's texels, added at once (not entries: up to 12 of them a vertex would outgrow
+// GRAD_ENTRIES); a roughness clamped to ALPHA_TEXTURE_FLOOR has none.
+void push_scalar(uint slot, vec2 uv, vec3 g, bool roughness) {
+    if (!scalar_textured(slot)) {
+        push_entry(slot, g);
+        return;
+    }
+    uint texel[4];
+    float weight[4];
+    scalar_footprint(slot, uv, texel, weight);
+    if (roughness && scalar_lookup(slot, uv) < ALPHA_TEXTURE_FLOOR) return;
+    for (uint k = 0u; k < 4u; k++) {
+        if (weight[k] != 0.0) param_grad(texel[k], g * weight[k]);
+    }
+}
+
 void push_leaf(Material m, vec2 uv, LeafGrad g) {
     bool rough_glass = is_rough_dielectric(m.tag);
     if (is_delta(m.tag) || rough_glass) {
@@ -331,7 +387,7 @@ void push_leaf(Material m, vec2 uv, LeafGrad g) {
         uint p_trans = rough_glass ? m.p_weight : m.p_alpha;
         if (HAS(G_COLOR) && m.p_color != NO_PARAM) push_rgb(m.p_color, g.color);
         if (HAS(G_COLOR) && m.tag != MAT_CONDUCTOR && p_trans != NO_PARAM) push_rgb(p_trans, g.trans);
-        if (HAS(G_ALPHA) && rough_glass) push_entry(m.p_alpha, g.alpha);
+        if (HAS(G_ALPHA) && rough_glass) push_scalar(m.p_alpha, uv, g.alpha, true);
         return;
     }
     if (HAS(F_TEXTURE) && m.tex_width > 0u) {
@@ -348,11 +404,11 @@ void push_leaf(Material m, vec2 uv, LeafGrad g) {
         push_rgb(m.p_color, g.color);
     }
     if (HAS(G_ALPHA) && is_conductor(m.tag) && m.p_alpha_v != m.p_alpha) {
-        push_entry(m.p_alpha, g.alpha);
-        push_entry(m.p_alpha_v, g.alpha_v);
+        push_scalar(m.p_alpha, uv, g.alpha, true);
+        push_scalar(m.p_alpha_v, uv, g.alpha_v, true);
     } else if (HAS(G_ALPHA) && (is_conductor(m.tag) || is_plastic(m.tag))) {
         // Isotropic: α_u and α_v are one parameter.
-        push_entry(m.p_alpha, g.alpha + g.alpha_v);
+        push_scalar(m.p_alpha, uv, g.alpha + g.alpha_v, true);
     }
 }
 
@@ -381,7 +437,7 @@ void scatter_terms(GradTerms t) {
         if (HAS(F_BLEND) && m.tag == MAT_BLEND) {
             push_leaf(materials[m.child0], t.uv, t.bsdf.leaf0);
             push_leaf(materials[m.child1], t.uv, t.bsdf.leaf1);
-            if (HAS(G_WEIGHT)) push_entry(m.p_weight, t.bsdf.weight);
+            if (HAS(G_WEIGHT)) push_scalar(m.p_weight, t.uv, t.bsdf.weight, false);
         } else {
             push_leaf(m, t.uv, t.bsdf.leaf0);
         }

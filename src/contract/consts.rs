@@ -177,6 +177,16 @@ contract_constants! {
     /// Feature bit: normal or bump maps (Mitsuba's `normalmap`, `bumpmap`), which perturb the
     /// shading frame built on ∂p/∂u.
     F_NORMAL_MAP = 1 << 26;
+    /// Feature bit: textured scalar parameters (roughness, blend weight): a `Material` offset with
+    /// `SCALAR_TEXTURE` set names a texture descriptor in the tables array.
+    F_PARAM_TEXTURE = 1 << 27;
+    /// A `Material::p_alpha`, `p_alpha_v` or (blend) `p_weight` with this bit set is not a
+    /// parameter offset: its other bits are the offset in the tables array of a one-channel
+    /// texture's descriptor (`TEXTURE_DESC_LEN` words: texel offset, width, height, `TEX_*` mode,
+    /// then the `to_uv` rows 0 and 1, three floats each).
+    SCALAR_TEXTURE = 0x8000_0000;
+    /// Words of a scalar texture's descriptor in the tables array (`SCALAR_TEXTURE`).
+    TEXTURE_DESC_LEN = 10;
     /// Entries of a rough plastic's coating transmittance table (μ = k/63, k = 0..63).
     COATING_RES = 64;
     /// Floats of one coating table as the kernels read it: T, ∂T/∂α, Rᵢ, ∂Rᵢ/∂α.

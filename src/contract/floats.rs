@@ -30,6 +30,10 @@ contract_floats! {
     /// The f32 rounding error of e, so that 1 + e·x is formed without cancellation near x = −1/e.
     EULER_E_LO = (std::f64::consts::E - std::f32::consts::E as f64) as f32;
 
+    /// The smallest roughness a textured α takes (Mitsuba's microfacet distribution clamps α to
+    /// this; a texel may be 0): below it the lookup is clamped and its derivative is 0.
+    ALPHA_TEXTURE_FLOOR = 1e-4;
+
     /// Offset of spawned rays, relative to the largest coordinate (at least 1): they must not re-hit
     /// the triangle they start on.
     RAY_OFFSET = 1e-4;

@@ -285,11 +285,14 @@ contract_structs! {
         tex_mode: u32,
         /// 1 if the material is seen from both sides.
         two_sided: u32,
-        /// Parameter offset of the roughness alpha (conductor: α_u).
+        /// Parameter offset of the roughness alpha (conductor: α_u); of a rough conductor or
+        /// dielectric, `SCALAR_TEXTURE` with its texture's descriptor when textured.
         p_alpha: u32,
-        /// Rough conductor: parameter offset of α_v (`p_alpha` when isotropic).
+        /// Rough conductor: parameter offset of α_v (`p_alpha` when isotropic), or a texture as
+        /// `p_alpha`.
         p_alpha_v: u32,
-        /// Parameter offset of the blend weight (blend).
+        /// Parameter offset of the blend weight (blend), or `SCALAR_TEXTURE` with its texture's
+        /// descriptor when textured.
         p_weight: u32,
         /// Real part of the conductor's complex index of refraction (RGB). Rough plastic: (η =
         /// int_ior/ext_ior, the coating's sampling weight w, 1 if `nonlinear` else 0).

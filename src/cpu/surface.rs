@@ -8,10 +8,11 @@ use crate::bsdf::rough_plastic::PlasticLeaf;
 use crate::bsdf::specular::{SmoothKind, SmoothLeaf};
 use crate::bsdf::{Bsdf, Distribution, Leaf, LeafGrad, bsdf_eval_grad};
 use crate::bvh::Hit;
+use crate::contract::ALPHA_TEXTURE_FLOOR;
 use crate::contract::{
     COATING_TABLE_LEN, MAT_BLEND, MAT_CONDUCTOR, MAT_DIELECTRIC, MAT_PLASTIC, MAT_ROUGH_CONDUCTOR,
-    MAT_ROUGH_DIELECTRIC, MAT_ROUGH_PLASTIC, MAT_THIN_DIELECTRIC, Material, NMAP_BUMP, NO_PARAM, TEX_CHECKER,
-    TEX_NEAREST, TEX_WRAP_CLAMP, TEX_WRAP_MIRROR,
+    MAT_ROUGH_DIELECTRIC, MAT_ROUGH_PLASTIC, MAT_THIN_DIELECTRIC, Material, NMAP_BUMP, NO_PARAM, SCALAR_TEXTURE,
+    TEX_CHECKER, TEX_NEAREST, TEX_WRAP_CLAMP, TEX_WRAP_MIRROR, TEXTURE_DESC_LEN,
 };
 use crate::cpu::path::GradSink;
 use crate::scene::flat::FlatScene;
@@ -240,6 +241,66 @@ pub fn texture_lookup(params: &[f32], m: &Material, uv: glam::Vec2) -> Vec3 {
         + param_rgb(params, texel[3]) * weight[3]
 }
 
+/// Whether a scalar slot (roughness, blend weight) holds a texture (`SCALAR_TEXTURE`).
+fn scalar_textured(slot: u32) -> bool {
+    slot != NO_PARAM && slot & SCALAR_TEXTURE != 0
+}
+
+/// The texels' parameter offsets and weights of the lookup of scalar texture `slot` at the hit's
+/// texture coordinates `uv` (its `to_uv` applied; one value a texel; twin of the GLSL's).
+pub fn scalar_footprint(flat: &FlatScene, slot: u32, uv: glam::Vec2) -> ([u32; 4], [f32; 4]) {
+    let d = (slot & !SCALAR_TEXTURE) as usize;
+    let desc = &flat.tables[d..d + TEXTURE_DESC_LEN as usize];
+    let p = Vec3::new(uv.x, uv.y, 1.0);
+    let t = glam::Vec2::new(Vec3::new(desc[4], desc[5], desc[6]).dot(p), Vec3::new(desc[7], desc[8], desc[9]).dot(p));
+    let (texel, weight) = texture_footprint(0, desc[1].to_bits(), desc[2].to_bits(), desc[3].to_bits(), t);
+    // texture_footprint's offsets step 3 a texel (RGB); these texels hold one value.
+    (texel.map(|k| desc[0].to_bits() + k / 3), weight)
+}
+
+/// The value of scalar texture `slot` at `uv`.
+fn scalar_lookup(flat: &FlatScene, slot: u32, uv: glam::Vec2) -> f32 {
+    let (texel, weight) = scalar_footprint(flat, slot, uv);
+    flat.params[texel[0] as usize] * weight[0]
+        + flat.params[texel[1] as usize] * weight[1]
+        + flat.params[texel[2] as usize] * weight[2]
+        + flat.params[texel[3] as usize] * weight[3]
+}
+
+/// A blend weight: its parameter, or its texture at `uv`.
+fn scalar_value(flat: &FlatScene, slot: u32, uv: glam::Vec2) -> f32 {
+    if scalar_textured(slot) { scalar_lookup(flat, slot, uv) } else { flat.params[slot as usize] }
+}
+
+/// A roughness: its parameter, or its texture at `uv` clamped to [`ALPHA_TEXTURE_FLOOR`] as
+/// Mitsuba's microfacet distribution clamps it.
+fn alpha_value(flat: &FlatScene, slot: u32, uv: glam::Vec2) -> f32 {
+    if scalar_textured(slot) {
+        scalar_lookup(flat, slot, uv).max(ALPHA_TEXTURE_FLOOR)
+    } else {
+        flat.params[slot as usize]
+    }
+}
+
+/// A scalar slot's derivative `g` (per image channel): its parameter's, or for a texture the
+/// footprint's texels weighted as the lookup weighs them; a roughness clamped to
+/// [`ALPHA_TEXTURE_FLOOR`] has none.
+fn scalar_backward(flat: &FlatScene, slot: u32, uv: glam::Vec2, g: Vec3, roughness: bool, sink: &mut GradSink<'_>) {
+    if !scalar_textured(slot) {
+        sink.add(slot, g);
+        return;
+    }
+    let (texel, weight) = scalar_footprint(flat, slot, uv);
+    if roughness && scalar_lookup(flat, slot, uv) < ALPHA_TEXTURE_FLOOR {
+        return;
+    }
+    for (t, w) in texel.into_iter().zip(weight) {
+        if w != 0.0 {
+            sink.add(t, g * w);
+        }
+    }
+}
+
 fn leaf_from_material(flat: &FlatScene, m: &Material, uv: glam::Vec2) -> Leaf {
     let params = &flat.params[..];
     let color = if m.tex_width > 0 {
@@ -254,8 +315,8 @@ fn leaf_from_material(flat: &FlatScene, m: &Material, uv: glam::Vec2) -> Leaf {
     match m.tag {
         MAT_ROUGH_CONDUCTOR => Leaf::RoughConductor {
             distribution,
-            alpha: params[m.p_alpha as usize],
-            alpha_v: params[m.p_alpha_v as usize],
+            alpha: alpha_value(flat, m.p_alpha, uv),
+            alpha_v: alpha_value(flat, m.p_alpha_v, uv),
             specular: color,
             eta: m.eta,
             k: m.k,
@@ -277,7 +338,7 @@ fn leaf_from_material(flat: &FlatScene, m: &Material, uv: glam::Vec2) -> Leaf {
         }
         MAT_ROUGH_DIELECTRIC => Leaf::RoughDielectric(RoughDielectricLeaf {
             distribution,
-            alpha: params[m.p_alpha as usize],
+            alpha: alpha_value(flat, m.p_alpha, uv),
             reflectance: if m.p_color == NO_PARAM { m.uv_row0 } else { param_rgb(params, m.p_color) },
             transmittance: if m.p_weight == NO_PARAM { m.k } else { param_rgb(params, m.p_weight) },
             eta: m.eta.x,
@@ -314,7 +375,7 @@ pub fn resolve_bsdf(flat: &FlatScene, id: u32, uv: glam::Vec2) -> Bsdf {
     if m.tag == MAT_BLEND {
         let a = leaf_from_material(flat, &flat.materials[m.child0 as usize], uv);
         let b = leaf_from_material(flat, &flat.materials[m.child1 as usize], uv);
-        Bsdf { leaves: [a, b], weight: flat.params[m.p_weight as usize], blend: true, perturbed: None }
+        Bsdf { leaves: [a, b], weight: scalar_value(flat, m.p_weight, uv), blend: true, perturbed: None }
     } else {
         let a = leaf_from_material(flat, m, uv);
         Bsdf { leaves: [a, a], weight: 0.0, blend: false, perturbed: None }
@@ -332,7 +393,7 @@ pub fn texture_backward(m: &Material, uv: glam::Vec2, g: Vec3, sink: &mut GradSi
     }
 }
 
-fn leaf_backward(m: &Material, uv: glam::Vec2, g: &LeafGrad, sink: &mut GradSink<'_>) {
+fn leaf_backward(flat: &FlatScene, m: &Material, uv: glam::Vec2, g: &LeafGrad, sink: &mut GradSink<'_>) {
     if is_smooth_tag(m.tag) || m.tag == MAT_ROUGH_DIELECTRIC {
         // A dielectric's reflectance and transmittance (a smooth leaf's transmittance parameter
         // sits in p_alpha, a rough one's in p_weight); a constant has no parameter.
@@ -343,7 +404,7 @@ fn leaf_backward(m: &Material, uv: glam::Vec2, g: &LeafGrad, sink: &mut GradSink
             }
         }
         if m.tag == MAT_ROUGH_DIELECTRIC {
-            sink.add(m.p_alpha, g.alpha);
+            scalar_backward(flat, m.p_alpha, uv, g.alpha, true, sink);
         }
         return;
     }
@@ -353,11 +414,11 @@ fn leaf_backward(m: &Material, uv: glam::Vec2, g: &LeafGrad, sink: &mut GradSink
         sink.add_rgb(m.p_color, g.color);
     }
     if m.tag == MAT_ROUGH_CONDUCTOR && m.p_alpha_v != m.p_alpha {
-        sink.add(m.p_alpha, g.alpha);
-        sink.add(m.p_alpha_v, g.alpha_v);
+        scalar_backward(flat, m.p_alpha, uv, g.alpha, true, sink);
+        scalar_backward(flat, m.p_alpha_v, uv, g.alpha_v, true, sink);
     } else if m.tag == MAT_ROUGH_CONDUCTOR || m.tag == MAT_ROUGH_PLASTIC {
         // Isotropic: α_u and α_v are one parameter.
-        sink.add(m.p_alpha, g.alpha + g.alpha_v);
+        scalar_backward(flat, m.p_alpha, uv, g.alpha + g.alpha_v, true, sink);
     }
 }
 
@@ -381,11 +442,11 @@ pub fn bsdf_backward(
     let g = bsdf_eval_grad(bsdf, wi, wo, adj);
     let m = &flat.materials[material as usize];
     if m.tag == MAT_BLEND {
-        leaf_backward(&flat.materials[m.child0 as usize], uv, &g.leaves[0], sink);
-        leaf_backward(&flat.materials[m.child1 as usize], uv, &g.leaves[1], sink);
-        sink.add(m.p_weight, g.weight);
+        leaf_backward(flat, &flat.materials[m.child0 as usize], uv, &g.leaves[0], sink);
+        leaf_backward(flat, &flat.materials[m.child1 as usize], uv, &g.leaves[1], sink);
+        scalar_backward(flat, m.p_weight, uv, g.weight, false, sink);
     } else {
-        leaf_backward(m, uv, &g.leaves[0], sink);
+        leaf_backward(flat, m, uv, &g.leaves[0], sink);
     }
 }
 

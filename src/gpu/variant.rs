@@ -35,6 +35,16 @@ pub fn scene_features(flat: &FlatScene, env_param: u32) -> u32 {
         if m.nmap_width > 0 {
             f |= F_NORMAL_MAP;
         }
+        let textured = |slot: u32| slot != NO_PARAM && slot & SCALAR_TEXTURE != 0;
+        let scalar_textured = match m.tag {
+            MAT_ROUGH_CONDUCTOR => textured(m.p_alpha) || textured(m.p_alpha_v),
+            MAT_ROUGH_DIELECTRIC => textured(m.p_alpha),
+            MAT_BLEND => textured(m.p_weight),
+            _ => false,
+        };
+        if scalar_textured {
+            f |= F_PARAM_TEXTURE;
+        }
         if m.two_sided != 0 {
             f |= F_TWO_SIDED;
         }
@@ -79,6 +89,11 @@ pub fn kinds_of(scene: &crate::scene::Scene, flat: &FlatScene, ids: &[crate::par
 /// [`env_range`].
 pub fn param_kinds(flat: &FlatScene, env: (u32, u32), begin: u32, end: u32) -> ParamKinds {
     let overlaps = |offset: u32, len: u32| offset != NO_PARAM && offset < end && begin < offset.saturating_add(len);
+    // A scalar slot: one value, or a texture's texels (`SCALAR_TEXTURE`).
+    let overlaps_slot = |slot: u32| {
+        let (offset, len) = scalar_slot_range(flat, slot);
+        overlaps(offset, len)
+    };
     let mut k = ParamKinds::NONE;
     for m in &flat.materials {
         match m.tag {
@@ -93,7 +108,7 @@ pub fn param_kinds(flat: &FlatScene, env: (u32, u32), begin: u32, end: u32) -> P
                 if overlaps(m.p_color, 3) || overlaps(m.p_weight, 3) {
                     k = k.union(ParamKinds::COLOR);
                 }
-                if overlaps(m.p_alpha, 1) {
+                if overlaps_slot(m.p_alpha) {
                     k = k.union(ParamKinds::ALPHA);
                 }
             }
@@ -102,13 +117,13 @@ pub fn param_kinds(flat: &FlatScene, env: (u32, u32), begin: u32, end: u32) -> P
                 if overlaps(m.p_color, 3 * texels) {
                     k = k.union(if m.tex_width > 0 { ParamKinds::TEXTURE } else { ParamKinds::COLOR });
                 }
-                let alpha_v = m.tag == MAT_ROUGH_CONDUCTOR && overlaps(m.p_alpha_v, 1);
-                if (m.tag == MAT_ROUGH_CONDUCTOR || m.tag == MAT_ROUGH_PLASTIC) && overlaps(m.p_alpha, 1) || alpha_v {
+                let alpha_v = m.tag == MAT_ROUGH_CONDUCTOR && overlaps_slot(m.p_alpha_v);
+                if (m.tag == MAT_ROUGH_CONDUCTOR || m.tag == MAT_ROUGH_PLASTIC) && overlaps_slot(m.p_alpha) || alpha_v {
                     k = k.union(ParamKinds::ALPHA);
                 }
             }
             _ => {
-                if overlaps(m.p_weight, 1) {
+                if overlaps_slot(m.p_weight) {
                     k = k.union(ParamKinds::WEIGHT);
                 }
             }
@@ -131,6 +146,17 @@ pub fn param_kinds(flat: &FlatScene, env: (u32, u32), begin: u32, end: u32) -> P
     k
 }
 
+/// The parameter values a scalar slot of a `Material` reads, as (offset, count): one value, or a
+/// scalar texture's texels (`SCALAR_TEXTURE`: its descriptor in `flat.tables`).
+pub fn scalar_slot_range(flat: &FlatScene, slot: u32) -> (u32, u32) {
+    if slot == NO_PARAM || slot & SCALAR_TEXTURE == 0 {
+        return (slot, 1);
+    }
+    let d = (slot & !SCALAR_TEXTURE) as usize;
+    let word = |i: usize| flat.tables[d + i].to_bits();
+    (word(0), word(1) * word(2))
+}
+
 /// The feature bits of a pass with `options` on a scene with `scene` bits, differentiating
 /// `kinds` (empty for the primal kernel).
 pub fn request_features(scene: u32, options: &RenderOptions, kinds: ParamKinds) -> u32 {
@@ -146,7 +172,7 @@ pub fn request_features(scene: u32, options: &RenderOptions, kinds: ParamKinds) 
 
 /// A short human-readable name of a variant, for logs: `nee env diffuse conductor[beckmann] ∂alpha`.
 pub fn describe(features: u32) -> String {
-    const NAMES: [(u32, &str); 27] = [
+    const NAMES: [(u32, &str); 28] = [
         (F_NEE, "nee"),
         (F_ENV, "env"),
         (F_EMITTERS, "emitters"),
@@ -167,6 +193,7 @@ pub fn describe(features: u32) -> String {
         (F_ROUGH_DIELECTRIC, "rough-dielectric"),
         (F_ANISOTROPIC, "anisotropic"),
         (F_NORMAL_MAP, "normal-map"),
+        (F_PARAM_TEXTURE, "scalar-texture"),
         (G_COLOR, "∂color"),
         (G_TEXTURE, "∂texture"),
         (G_ALPHA, "∂alpha"),

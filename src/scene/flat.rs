@@ -14,9 +14,10 @@ use crate::contract::{
     LIGHT_DIRECTIONAL, LIGHT_POINT, LIGHT_SPOT, MAT_BLEND, MAT_CONDUCTOR, MAT_DIELECTRIC, MAT_DIFFUSE, MAT_NULL,
     MAT_PLASTIC, MAT_ROUGH_CONDUCTOR, MAT_ROUGH_DIELECTRIC, MAT_ROUGH_PLASTIC, MAT_THIN_DIELECTRIC,
     Material as GpuMaterial, MediumDesc, NMAP_BUMP, NO_EMITTER, NO_MEDIUM, NO_PARAM, PHASE_HG, PHASE_ISOTROPIC,
-    TEX_CHECKER, TEX_NEAREST, TEX_WRAP_CLAMP, TEX_WRAP_MIRROR, TriShading,
+    SCALAR_TEXTURE, TEX_CHECKER, TEX_NEAREST, TEX_WRAP_CLAMP, TEX_WRAP_MIRROR, TriShading,
 };
 use crate::error::Result;
+use crate::params::ParamId;
 use crate::phases::PhaseReport;
 use crate::scene::medium::{Field, Phase};
 use crate::scene::shapes::triangle_area;
@@ -164,6 +165,7 @@ impl FlatScene {
         let mut materials: Vec<GpuMaterial> = scene.materials.iter().map(|m| flatten_material(scene, m)).collect();
         let mut tables = coating_tables(&mut materials, scene.params.values());
         normal_map_tables(scene, &mut materials, &mut tables);
+        scalar_texture_tables(scene, &mut materials, &mut tables);
         let (media, fields, majorants) = flatten_media(scene);
         let env_cells = env_cells(scene)?;
         let lights = scene.lights.iter().map(|l| flatten_light(scene, l)).collect();
@@ -357,12 +359,11 @@ fn flatten_material(scene: &Scene, m: &Material) -> GpuMaterial {
         Material::RoughConductor { distribution, alpha, alpha_v, specular, eta, k } => GpuMaterial {
             tag: MAT_ROUGH_CONDUCTOR,
             distribution: distribution as u32,
-            p_color: offset(specular),
-            p_alpha: offset(alpha),
-            p_alpha_v: offset(alpha_v),
+            p_alpha: scalar_slot(scene, alpha),
+            p_alpha_v: scalar_slot(scene, alpha_v),
             eta,
             k,
-            ..Default::default()
+            ..albedo_fields(scene, specular)
         },
         Material::RoughPlastic { distribution, alpha, diffuse, specular, eta, nonlinear } => {
             // Mitsuba's sampling weight of the coating from the mean reflectances.
@@ -411,7 +412,7 @@ fn flatten_material(scene: &Scene, m: &Material) -> GpuMaterial {
                 tag: MAT_ROUGH_DIELECTRIC,
                 distribution: distribution as u32,
                 p_color,
-                p_alpha: offset(alpha),
+                p_alpha: scalar_slot(scene, alpha),
                 p_weight,
                 uv_row0: r,
                 eta: Vec3::new(eta, 0.0, 0.0),
@@ -423,7 +424,7 @@ fn flatten_material(scene: &Scene, m: &Material) -> GpuMaterial {
             tag: MAT_BLEND,
             child0: children[0].0,
             child1: children[1].0,
-            p_weight: offset(weight),
+            p_weight: scalar_slot(scene, weight),
             ..Default::default()
         },
         Material::Null => GpuMaterial { tag: MAT_NULL, ..Default::default() },
@@ -442,6 +443,54 @@ fn flatten_material(scene: &Scene, m: &Material) -> GpuMaterial {
                 nmap_scale: scale,
                 ..flatten_material(scene, &scene.materials[nested.0 as usize])
             }
+        }
+    }
+}
+
+/// A scalar slot's value in `Material`: the parameter's offset, or for a textured one
+/// `SCALAR_TEXTURE` with the texture's index in [`Scene::scalar_textures`] until
+/// `scalar_texture_tables` places its descriptor.
+fn scalar_slot(scene: &Scene, id: ParamId) -> u32 {
+    match scene.scalar_textures.iter().position(|t| t.texels == id) {
+        Some(i) => SCALAR_TEXTURE | i as u32,
+        None => scene.params.entry(id).offset,
+    }
+}
+
+/// Appends the descriptor of every scalar texture that `materials` use to `tables` (once per
+/// texture; `TEXTURE_DESC_LEN` words as `SCALAR_TEXTURE` states) and points their slots at them.
+fn scalar_texture_tables(scene: &Scene, materials: &mut [GpuMaterial], tables: &mut Vec<f32>) {
+    let mut placed: Vec<(u32, u32)> = Vec::new();
+    let mut place = |slot: &mut u32, tables: &mut Vec<f32>| {
+        if *slot == NO_PARAM || *slot & SCALAR_TEXTURE == 0 {
+            return;
+        }
+        let index = *slot & !SCALAR_TEXTURE;
+        let at = match placed.iter().find(|(i, _)| *i == index) {
+            Some(&(_, at)) => at,
+            None => {
+                let t = &scene.scalar_textures[index as usize];
+                let at = tables.len() as u32;
+                let mode = if t.checker { TEX_CHECKER } else { texture_mode(t.nearest, t.wrap) };
+                let words = [scene.params.entry(t.texels).offset, t.width, t.height, mode];
+                tables.extend(words.map(f32::from_bits));
+                tables.extend(t.to_uv[0].to_array());
+                tables.extend(t.to_uv[1].to_array());
+                placed.push((index, at));
+                at
+            }
+        };
+        *slot = SCALAR_TEXTURE | at;
+    };
+    for m in materials.iter_mut() {
+        match m.tag {
+            MAT_ROUGH_CONDUCTOR => {
+                place(&mut m.p_alpha, tables);
+                place(&mut m.p_alpha_v, tables);
+            }
+            MAT_ROUGH_DIELECTRIC => place(&mut m.p_alpha, tables),
+            MAT_BLEND => place(&mut m.p_weight, tables),
+            _ => {}
         }
     }
 }

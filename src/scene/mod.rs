@@ -9,6 +9,7 @@ pub(crate) mod load;
 pub mod medium;
 pub mod mesh_io;
 pub mod mitsuba;
+pub mod scalar_texture;
 pub mod shapes;
 pub mod volume;
 
@@ -19,6 +20,7 @@ use crate::error::{Error, Result};
 use crate::params::{ParamId, ParamTable};
 
 pub use load::{LoadOptions, load, load_reporting, load_with};
+pub use scalar_texture::ScalarTexture;
 
 /// Index of a material in [`Scene::materials`].
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -134,12 +136,14 @@ pub enum Material {
     RoughConductor {
         /// Microfacet distribution.
         distribution: Distribution,
-        /// Roughness alpha (α_u along the shading frame's x), 1 value.
+        /// Roughness alpha (α_u along the shading frame's x), 1 value, or a texture's texels
+        /// ([`Scene::scalar_texture`]).
         alpha: ParamId,
-        /// Roughness α_v along the shading frame's y: `alpha` itself when isotropic.
+        /// Roughness α_v along the shading frame's y: `alpha` itself when isotropic; 1 value or a
+        /// texture's texels.
         alpha_v: ParamId,
-        /// RGB specular reflectance multiplying the Fresnel term.
-        specular: ParamId,
+        /// RGB specular reflectance multiplying the Fresnel term, constant or textured.
+        specular: Albedo,
         /// Real part of the complex index of refraction (RGB).
         eta: Vec3,
         /// Imaginary part of the complex index of refraction (RGB); eta = 0, k = 1 gives F ≡ 1.
@@ -164,7 +168,7 @@ pub enum Material {
     RoughDielectric {
         /// Microfacet distribution.
         distribution: Distribution,
-        /// Roughness alpha, 1 value.
+        /// Roughness alpha, 1 value or a texture's texels ([`Scene::scalar_texture`]).
         alpha: ParamId,
         /// RGB specular reflectance.
         reflectance: SmoothColour,
@@ -200,7 +204,7 @@ pub enum Material {
     },
     /// `(1 − w)·child0 + w·child1` of two leaf materials (ALGORITHMS.md §4.3).
     Blend {
-        /// Weight w of child 1, 1 value in [0, 1].
+        /// Weight w of child 1, 1 value in [0, 1] or a texture's texels ([`Scene::scalar_texture`]).
         weight: ParamId,
         /// The two children; neither may be a blend or two-sided wrapper.
         children: [MaterialId; 2],
@@ -443,6 +447,9 @@ pub struct Scene {
     pub textures: Vec<Texture>,
     /// The texels of normal maps ([`Material::NormalMap`]).
     pub normal_maps: Vec<NormalMapTexture>,
+    /// Textures on scalar parameters (roughness, blend weights), found by their texels'
+    /// parameter ([`Scene::scalar_texture`]).
+    pub scalar_textures: Vec<ScalarTexture>,
     /// Participating media, each inside the meshes whose `interior` it is.
     pub media: Vec<medium::Medium>,
     /// The environment's radiance seen by rays that leave the scene, if any: one RGB value
@@ -542,6 +549,7 @@ impl Scene {
             sensor: 0,
             textures: Vec::new(),
             normal_maps: Vec::new(),
+            scalar_textures: Vec::new(),
             media: Vec::new(),
             environment: None,
             env_map: None,
@@ -589,6 +597,7 @@ impl Scene {
             &specular.to_array(),
             bounds::REFLECTANCE,
         )?;
+        let specular = Albedo::Rgb(specular);
         Ok(self.add_material(Material::RoughConductor { distribution, alpha, alpha_v: alpha, specular, eta, k }))
     }
 

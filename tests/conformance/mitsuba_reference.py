@@ -57,6 +57,21 @@ MATRIX = {
     "texture_filter_wrap": dict(features=["bitmap filter_type nearest", "wrap_mode mirror", "wrap_mode clamp",
                                           "uv outside [0, 1]"],
                                 grads=["mirrored.bsdf.reflectance.data", "clamped.bsdf.reflectance.data"]),
+    # Textures on scalar properties (issue 31): roughness and blend weights as one-channel bitmaps
+    # and checkerboards of floats; a 0 roughness texel is clamped to Mitsuba's 1e-4.
+    "texture_roughness": dict(features=["roughconductor alpha_u bitmap (one channel, raw)", "alpha_v checkerboard of floats",
+                                        "roughdielectric alpha checkerboard with a 0 texel", "to_uv"],
+                              grads=["ball.bsdf.alpha_u.data", "ball.bsdf.alpha_v.color1.value",
+                                     "pane.bsdf.alpha.color1.value"]),
+    "texture_blend_weight": dict(features=["blendbsdf weight bitmap (one channel, raw, nearest)",
+                                           "blendbsdf weight checkerboard of floats"],
+                                 grads=["ball.bsdf.weight.data", "floor.bsdf.weight.color0.value",
+                                        "floor.bsdf.weight.color1.value"]),
+    "texture_specular_reflectance": dict(features=["roughconductor specular_reflectance bitmap (sRGB)",
+                                                   "roughconductor specular_reflectance checkerboard of colours"],
+                                         grads=["floor.bsdf.specular_reflectance.data",
+                                                "ball.bsdf.specular_reflectance.color0.value",
+                                                "ball.bsdf.specular_reflectance.color1.value"]),
     "bsdf_diffuse_bitmap": dict(features=["diffuse", "bitmap sRGB PNG", "rectangle uv"], grads=["panel.bsdf.reflectance.data"]),
     # Mitsuba names a top-level texture reached through <ref> by its address (object_...), so its
     # data has no stable key: the gradient is the floor's.
@@ -322,6 +337,12 @@ POWER = {
     "bsdf_roughconductor_anisotropic": {"primal_bias": 0.015, "gradient_bias": 0.12},
     "medium_in_dielectric": {"primal_bias": 0.02, "gradient_bias": 0.15},
     "bsdf_twosided_roughconductor": {"gradient_bias": 0.1},
+    # Textured roughness: the pane's α (GGX glass, light through it rare) sees 24 %, the ball's
+    # bitmap α_u 16 % (its texels' derivatives cancel in part over the image).
+    "texture_roughness": {"gradient_bias": 0.25},
+    # The ball's weight texels: red, where the diffuse (0.8) and the conductor nearly agree, has a
+    # derivative near 0 (it sees 6.6 %).
+    "texture_blend_weight": {"gradient_bias": 0.07},
     "depth_1": {"primal_bias": 0.03},
     "depth_2": {"primal_bias": 0.02},
     # The open room of depth_2 under other names (its small light makes the primal noisy).

@@ -42,6 +42,9 @@ fn gpu_equals_cpu_per_path_on_every_builtin_and_test_scene() {
         "shape_instance",
         "bsdf_normalmap",
         "bsdf_bumpmap",
+        "texture_roughness",
+        "texture_blend_weight",
+        "texture_specular_reflectance",
     ] {
         scenes.push(crate::support::scenes::conformance(name));
     }

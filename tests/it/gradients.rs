@@ -64,6 +64,18 @@ fn cases() -> Vec<(Scene, Vec<&'static str>)> {
             scenes::conformance("bsdf_bumpmap"),
             vec!["floor.bsdf.nested_bsdf.alpha.value", "panel.bsdf.brdf_0.nested_bsdf.reflectance.value"],
         ),
+        (
+            scenes::conformance("texture_roughness"),
+            vec!["ball.bsdf.alpha_u.data", "ball.bsdf.alpha_v.color1.value", "pane.bsdf.alpha.color1.value"],
+        ),
+        (
+            scenes::conformance("texture_blend_weight"),
+            vec!["ball.bsdf.weight.data", "floor.bsdf.weight.color0.value", "floor.bsdf.weight.color1.value"],
+        ),
+        (
+            scenes::conformance("texture_specular_reflectance"),
+            vec!["floor.bsdf.specular_reflectance.data", "ball.bsdf.specular_reflectance.color1.value"],
+        ),
     ]
 }
 
@@ -188,6 +200,12 @@ fn gradients_match_finite_differences() {
         (scenes::conformance("bsdf_normalmap"), "floor.bsdf.nested_bsdf.alpha.value"),
         (scenes::conformance("bsdf_normalmap"), "panel.bsdf.brdf_0.nested_bsdf.reflectance.value"),
         (scenes::conformance("bsdf_bumpmap"), "floor.bsdf.nested_bsdf.alpha.value"),
+        (scenes::conformance("texture_roughness"), "ball.bsdf.alpha_u.data"),
+        (scenes::conformance("texture_roughness"), "ball.bsdf.alpha_v.color1.value"),
+        (scenes::conformance("texture_roughness"), "pane.bsdf.alpha.color1.value"),
+        (scenes::conformance("texture_blend_weight"), "ball.bsdf.weight.data"),
+        (scenes::conformance("texture_blend_weight"), "floor.bsdf.weight.color1.value"),
+        (scenes::conformance("texture_specular_reflectance"), "floor.bsdf.specular_reflectance.data"),
     ];
     for (scene, name) in checks {
         let mut renderer = Renderer::new(&gpu.ctx, &scene).unwrap();

@@ -38,7 +38,7 @@ const IORS: &[(&str, f32)] = &[
     ("diamond", 2.419),
 ];
 
-/// Conductor presets for `roughconductor`'s `material`: RGB (eta, k) for Au, Ag, Cu, Al and Cr,
+/// Conductor presets for `roughconductor`'s `material`: RGB (eta, k) for Au, Ag, Cu, Al, Cr and a-C,
 /// the widely used RGB reductions of the measured spectra that Mitsuba tabulates (as in Mitsuba
 /// 0.5's RGB mode and Tungsten), rounded to 4 decimals. Mitsuba 3 in an RGB variant integrates the
 /// spectral curves itself, so colours can differ slightly: give `eta` and `k` explicitly for an
@@ -50,6 +50,9 @@ const CONDUCTORS: &[(&str, [f32; 3], [f32; 3])] = &[
     ("Cu", [0.2004, 0.924, 1.1022], [3.9129, 2.4528, 2.1422]),
     ("Al", [1.6575, 0.8804, 0.5212], [9.2239, 6.2695, 4.837]),
     ("Cr", [4.3697, 2.9167, 1.6547], [5.2064, 4.2314, 3.7549]),
+    // Amorphous carbon: the RGB values Mitsuba 3.9.1's `scalar_rgb` variant computes (its
+    // `traverse` of a roughconductor with this preset).
+    ("a-C", [2.94405, 2.22714, 1.96816], [0.887465, 0.799299, 0.81529]),
 ];
 
 /// The (eta, k) of conductor preset `name`.
@@ -114,7 +117,12 @@ impl<'a> Loader<'a> {
             "normalmap" => self.normal_map(&p, name, depth)?,
             "bumpmap" => self.bump_map(&p, name, depth)?,
             "blendbsdf" => {
-                let weight = self.float_in(&p, "weight", None, bounds::WEIGHT)?;
+                // The weight's parameter follows the children's, as it always has (a texture's too).
+                let weight_texture = p.object("weight");
+                let weight_value = match weight_texture {
+                    None => Some(self.float_in(&p, "weight", None, bounds::WEIGHT)?),
+                    Some(_) => None,
+                };
                 let children = p.take_nested(&["bsdf", "ref"]);
                 let [c0, c1] = children[..] else {
                     return Err(self.x.err(node, format!("'blendbsdf' needs 2 nested BSDFs, got {}", children.len())));
@@ -122,17 +130,28 @@ impl<'a> Loader<'a> {
                 self.finish(&p)?;
                 let a = self.bsdf(c0, format!("{name}.bsdf_0"), depth + 1)?;
                 let b = self.bsdf(c1, format!("{name}.bsdf_1"), depth + 1)?;
+                let weight = match (weight_texture, weight_value) {
+                    (Some(t), _) => self.scalar_texture(t, format!("{name}.weight"), bounds::WEIGHT)?,
+                    (None, value) => {
+                        let id = self.scene.params.add(
+                            &format!("{name}.weight.value"),
+                            &[value.unwrap_or(0.0)],
+                            bounds::WEIGHT,
+                        );
+                        id.map_err(|e| self.located(node, e))?
+                    }
+                };
                 let (ma, mb) = (self.material(a), self.material(b));
                 match (ma, mb) {
                     (Some(Material::TwoSided(a)), Some(Material::TwoSided(b)))
                         if self.is_leaf(a) && self.is_leaf(b) =>
                     {
                         // blend(twosided(a), twosided(b)) = twosided(blend(a, b)).
-                        let blend = self.scene.add_blend(name, weight, [a, b]).map_err(|e| self.located(node, e))?;
+                        let blend = self.scene.add_material(Material::Blend { weight, children: [a, b] });
                         self.scene.add_material(Material::TwoSided(blend))
                     }
                     _ if self.is_leaf(a) && self.is_leaf(b) => {
-                        self.scene.add_blend(name, weight, [a, b]).map_err(|e| self.located(node, e))?
+                        self.scene.add_material(Material::Blend { weight, children: [a, b] })
                     }
                     _ => {
                         return Err(self.x.err(
@@ -284,6 +303,9 @@ impl<'a> Loader<'a> {
         if p.has("alpha_u") || p.has("alpha_v") {
             return Err(self.x.err(p.node, "'roughplastic' has no anisotropic roughness (Mitsuba refuses it too)"));
         }
+        if let Some(t) = p.object("alpha") {
+            return Err(self.x.err(t, "a textured 'alpha' of 'roughplastic' is not supported (Mitsuba's is a number)"));
+        }
         let alpha = self.float_in(p, "alpha", Some(0.1), bounds::ALPHA)?;
         p.boolean(&self.x, "sample_visible", true)?;
         let (diffuse, specular, eta, nonlinear) = self.plastic_common(p, name, depth)?;
@@ -356,9 +378,10 @@ impl<'a> Loader<'a> {
 
     /// A microfacet BSDF's roughness as the parameters Mitsuba names: `alpha` (0.1), or both
     /// `alpha_u` and `alpha_v` (Mitsuba requires both), each its own parameter where `anisotropic`
-    /// BSDFs are allowed, else one `alpha_u` that `alpha_v` must equal. `sample_visible` is read:
-    /// pathgrad samples visible normals, and `false` would change only the noise. Returns (α_u,
-    /// α_v): the same parameter when isotropic.
+    /// BSDFs are allowed, else one `alpha_u` that `alpha_v` must equal. Each may be a texture
+    /// ([`Loader::scalar_property`]: texels in [0, 1], clamped to Mitsuba's floor of 10⁻⁴ when
+    /// looked up). `sample_visible` is read: pathgrad samples visible normals, and `false` would
+    /// change only the noise. Returns (α_u, α_v): the same parameter when isotropic.
     fn microfacet_alpha(
         &mut self,
         p: &Props<'a>,
@@ -367,13 +390,9 @@ impl<'a> Loader<'a> {
     ) -> Result<(crate::params::ParamId, crate::params::ParamId)> {
         let anisotropic = p.has("alpha_u") || p.has("alpha_v");
         p.boolean(&self.x, "sample_visible", true)?;
-        let add = |loader: &mut Self, key: &str, value: f32| {
-            let id = loader.scene.params.add(&format!("{name}.{key}.value"), &[value], bounds::ALPHA);
-            id.map_err(|e| loader.located(p.node, e))
-        };
+        let texels = (0.0, 1.0);
         if !anisotropic {
-            let alpha = self.float_in(p, "alpha", Some(0.1), bounds::ALPHA)?;
-            let id = add(self, "alpha", alpha)?;
+            let id = self.scalar_property(p, name, "alpha", Some(0.1), bounds::ALPHA, texels)?;
             return Ok((id, id));
         }
         if p.has("alpha") {
@@ -382,11 +401,19 @@ impl<'a> Loader<'a> {
         if !(p.has("alpha_u") && p.has("alpha_v")) {
             return Err(self.x.err(p.node, "give both 'alpha_u' and 'alpha_v' (Mitsuba requires both)"));
         }
+        if anisotropic_allowed {
+            let u = self.scalar_property(p, name, "alpha_u", None, bounds::ALPHA, texels)?;
+            let v = self.scalar_property(p, name, "alpha_v", None, bounds::ALPHA, texels)?;
+            return Ok((u, v));
+        }
+        if let Some(t) = p.object("alpha_u").or_else(|| p.object("alpha_v")) {
+            return Err(self.x.err(
+                t,
+                format!("a textured 'alpha_u'/'alpha_v' of '{}' is not supported (a textured 'alpha' is)", p.kind),
+            ));
+        }
         let u = self.float_in(p, "alpha_u", None, bounds::ALPHA)?;
         let v = self.float_in(p, "alpha_v", None, bounds::ALPHA)?;
-        if anisotropic_allowed {
-            return Ok((add(self, "alpha_u", u)?, add(self, "alpha_v", v)?));
-        }
         if u != v {
             return Err(self.x.err(
                 p.node,
@@ -396,7 +423,8 @@ impl<'a> Loader<'a> {
                 ),
             ));
         }
-        let id = add(self, "alpha_u", u)?;
+        let id = self.scene.params.add(&format!("{name}.alpha_u.value"), &[u], bounds::ALPHA);
+        let id = id.map_err(|e| self.located(p.node, e))?;
         Ok((id, id))
     }
 
@@ -425,17 +453,26 @@ impl<'a> Loader<'a> {
         Ok(SmoothColour::Param(id.map_err(|e| self.located(p.node, e))?))
     }
 
+    /// Mitsuba's `roughconductor`: `distribution`, the roughness of
+    /// [`Loader::microfacet_alpha`], `specular_reflectance` (1; a colour, parameter
+    /// `NAME.specular_reflectance.value`, or a `bitmap`/`checkerboard` as a diffuse reflectance
+    /// is), `material` or `eta`/`k`.
     fn rough_conductor(&mut self, p: &Props<'a>, name: &str) -> Result<MaterialId> {
         let distribution = self.distribution(p)?;
         let (alpha, alpha_v) = self.microfacet_alpha(p, name, true)?;
-        let specular = self.color_in(p, "specular_reflectance", Vec3::ONE, bounds::REFLECTANCE)?;
+        let specular = match p.object("specular_reflectance") {
+            Some(t) => self.texture(t, format!("{name}.specular_reflectance"), 1)?,
+            None => {
+                let specular = self.color_in(p, "specular_reflectance", Vec3::ONE, bounds::REFLECTANCE)?;
+                let specular = self.scene.params.add(
+                    &format!("{name}.specular_reflectance.value"),
+                    &specular.to_array(),
+                    bounds::REFLECTANCE,
+                );
+                Albedo::Rgb(specular.map_err(|e| self.located(p.node, e))?)
+            }
+        };
         let (eta, k) = self.conductor_ior(p)?;
-        let specular = self.scene.params.add(
-            &format!("{name}.specular_reflectance.value"),
-            &specular.to_array(),
-            bounds::REFLECTANCE,
-        );
-        let specular = specular.map_err(|e| self.located(p.node, e))?;
         Ok(self.scene.add_material(Material::RoughConductor { distribution, alpha, alpha_v, specular, eta, k }))
     }
 
@@ -486,7 +523,7 @@ impl<'a> Loader<'a> {
     /// # Errors
     /// A missing or undecodable file, bad property values, a texel outside [0, 1] (`what` says
     /// why; empty: any finite value is read).
-    fn bitmap(&mut self, p: &Props<'a>, target: El<'a>, what: &str) -> Result<NormalMapTexture> {
+    pub(super) fn bitmap(&mut self, p: &Props<'a>, target: El<'a>, what: &str) -> Result<NormalMapTexture> {
         let (file, file_node) = p
             .string(&self.x, "filename")?
             .ok_or_else(|| self.x.err(target, "'bitmap' needs the property 'filename'"))?;

@@ -106,6 +106,7 @@ pub(super) fn load_text_with(text: &str, file: &Path, options: &LoadOptions, mes
         top_names: HashMap::new(),
         materials: HashMap::new(),
         textures: HashMap::new(),
+        scalar_textures: HashMap::new(),
         media: HashMap::new(),
         medium_shapes: Vec::new(),
         in_progress: Vec::new(),
@@ -158,6 +159,8 @@ pub(super) struct Loader<'a> {
     pub materials: HashMap<NodeId, MaterialId>,
     /// Textures already built, by element.
     pub textures: HashMap<NodeId, Albedo>,
+    /// Textures on scalar slots already built, by element: their texels' parameter.
+    pub scalar_textures: HashMap<NodeId, crate::params::ParamId>,
     /// Media already built, by element.
     pub media: HashMap<NodeId, crate::scene::medium::MediumId>,
     /// The shapes with an interior medium: their mesh index and element (for the overlap check).

@@ -100,6 +100,7 @@ mod include;
 mod loader;
 mod media;
 pub mod plugins;
+mod scalar_texture;
 mod sensor;
 mod shapes;
 mod spectrum;
@@ -121,6 +122,8 @@ mod tests_names;
 mod tests_normal_maps;
 #[cfg(test)]
 mod tests_plugins;
+#[cfg(test)]
+mod tests_scalar_textures;
 
 use std::path::Path;
 

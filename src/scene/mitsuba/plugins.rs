@@ -92,7 +92,7 @@ pub const PLUGINS: &[Plugin] = &[
     p(
         Bsdf,
         "blendbsdf",
-        "`weight` (parameter `.weight.value`), two nested BSDFs",
+        "`weight` (parameter `.weight.value`, or a one-channel texture: `.weight.data`), two nested BSDFs",
         "children: diffuse, roughconductor, roughplastic, or twosided wrappers of those",
     ),
     p(
@@ -130,19 +130,19 @@ pub const PLUGINS: &[Plugin] = &[
     p(
         Bsdf,
         "roughconductor",
-        "`distribution`, `alpha` or `alpha_u`/`alpha_v` (parameters), `specular_reflectance`, `material` or `eta`/`k`, `sample_visible`",
+        "`distribution`, `alpha` or `alpha_u`/`alpha_v` (parameters or one-channel textures), `specular_reflectance` (rgb, spectrum, bitmap or checkerboard), `material` or `eta`/`k`, `sample_visible`",
         "anisotropic: shading frame along ∂p/∂u",
     ),
     p(
         Bsdf,
         "roughdielectric",
-        "`distribution`, `alpha` (parameter), `int_ior`/`ext_ior`, `specular_reflectance`, `specular_transmittance`, `sample_visible`",
+        "`distribution`, `alpha` (parameter or one-channel texture), `int_ior`/`ext_ior`, `specular_reflectance`, `specular_transmittance`, `sample_visible`",
         "isotropic; not inside blendbsdf or twosided",
     ),
     p(
         Bsdf,
         "roughplastic",
-        "`distribution`, `alpha` (parameter `.alpha`), `diffuse_reflectance` (texturable), `specular_reflectance`, `int_ior`/`ext_ior`, `nonlinear`, `sample_visible`",
+        "`distribution`, `alpha` (parameter `.alpha`, a number as Mitsuba's), `diffuse_reflectance` (texturable), `specular_reflectance`, `int_ior`/`ext_ior`, `nonlinear`, `sample_visible`",
         "",
     ),
     p(Bsdf, "thindielectric", "`int_ior`/`ext_ior`, `specular_reflectance`, `specular_transmittance`", "smooth"),
@@ -172,9 +172,14 @@ pub const PLUGINS: &[Plugin] = &[
         Texture,
         "bitmap",
         "`filename`, `raw`, `filter_type`, `wrap_mode`, `to_uv`, `format`",
-        "texels are parameter `.data`",
+        "texels are parameter `.data`; on a float property (roughness, blend weight) the image must have one channel",
     ),
-    p(Texture, "checkerboard", "`color0`, `color1`, `to_uv`", ""),
+    p(
+        Texture,
+        "checkerboard",
+        "`color0`, `color1`, `to_uv`",
+        "colours on a colour property, `<float>`s on a float property (roughness, blend weight), where `color1` is read where `color0` would be on a colour property, as Mitsuba 3.9.1 does",
+    ),
     p(Medium, "homogeneous", "`sigma_t`, `albedo`, `scale`, a phase", "inside a null or dielectric boundary"),
     p(
         Medium,

@@ -409,7 +409,10 @@ fn bsdf_names_follow_mitsuba() {
     );
     assert_eq!(param(&s, "_unnamed_1.emitter.radiance.value"), [1.0; 3], "default radiance");
     assert_eq!(param(&s, "sky.radiance.value"), [0.1, 0.2, 0.3]);
-    let Material::RoughConductor { distribution, alpha, specular, eta, k, .. } = s.materials[0] else { panic!() };
+    let Material::RoughConductor { distribution, alpha, specular: Albedo::Rgb(specular), eta, k, .. } = s.materials[0]
+    else {
+        panic!()
+    };
     assert_eq!(
         (distribution, s.params.get(alpha), s.params.get(specular)),
         (Distribution::Beckmann, &[0.1][..], &[1.0; 3][..])
@@ -439,7 +442,7 @@ fn rough_conductor_properties_and_presets() {
     assert_eq!(param(&s, "au.bsdf.alpha_u.value"), [0.2]);
     assert_eq!(param(&s, "au.bsdf.alpha_v.value"), [0.2]);
     assert!(s.params.find("au.bsdf.alpha.value").is_none());
-    for m in ["none", "Au", "Ag", "Cu", "Al", "Cr"] {
+    for m in ["none", "Au", "Ag", "Cu", "Al", "Cr", "a-C"] {
         let (eta, k) = bsdf::conductor(m).unwrap();
         assert!(eta.min_element() >= 0.0 && k.min_element() > 0.0, "{m}");
     }
@@ -622,7 +625,7 @@ fn material_values(s: &Scene, m: &Material) -> String {
     let v = |p| format!("{:?}", s.params.get(p));
     match m {
         Material::Diffuse { albedo: Albedo::Rgb(a) } => format!("diffuse {}", v(*a)),
-        Material::RoughConductor { distribution, alpha, specular, eta, k, .. } => {
+        Material::RoughConductor { distribution, alpha, specular: Albedo::Rgb(specular), eta, k, .. } => {
             format!("conductor {distribution:?} {} {} {eta} {k}", v(*alpha), v(*specular))
         }
         other => format!("{other:?}"),

@@ -314,8 +314,8 @@ fn element_and_property_errors() {
             "<rgb name=\"alpha\">: property 'alpha' of 'roughconductor' must be a <float>",
         ),
         (
-            r#"<bsdf type="roughconductor"><texture type="bitmap" name="alpha"/></bsdf>"#,
-            "<texture name=\"alpha\">: property 'alpha' of 'roughconductor' must be a <float>",
+            r#"<bsdf type="roughplastic"><texture type="bitmap" name="alpha"/></bsdf>"#,
+            "<texture name=\"alpha\">: a textured 'alpha' of 'roughplastic' is not supported (Mitsuba's is a number)",
         ),
         (
             r#"<bsdf type="roughdielectric"><float name="alpha_u" value="0.1"/><float name="alpha_v" value="0.2"/></bsdf>"#,
@@ -335,7 +335,7 @@ fn element_and_property_errors() {
         ),
         (
             r#"<bsdf type="roughconductor"><string name="material" value="Unobtainium"/></bsdf>"#,
-            "<string name=\"material\">: unknown conductor material 'Unobtainium' (supported: none, Au, Ag, Cu, Al, Cr)",
+            "<string name=\"material\">: unknown conductor material 'Unobtainium' (supported: none, Au, Ag, Cu, Al, Cr, a-C)",
         ),
         (
             r#"<bsdf type="roughconductor"><rgb name="k" value="-1"/></bsdf>"#,
@@ -354,8 +354,8 @@ fn element_and_property_errors() {
             "<bsdf>: 'blendbsdf' needs 2 nested BSDFs, got 1",
         ),
         (
-            r#"<bsdf type="blendbsdf"><texture type="bitmap" name="weight"/></bsdf>"#,
-            "<texture name=\"weight\">: property 'weight' of 'blendbsdf' must be a <float>",
+            r#"<bsdf type="blendbsdf"><texture type="checkerboard" name="weight"><float name="color1" value="2"/></texture><bsdf type="diffuse"/><bsdf type="diffuse"/></bsdf>"#,
+            "<float name=\"color1\">: 'color1' must lie in [0, 1], got 2",
         ),
         (
             r#"<bsdf type="blendbsdf"><float name="weight" value="0.5"/><bsdf type="diffuse"/><bsdf type="twosided"><bsdf type="diffuse"/></bsdf></bsdf>"#,

@@ -1,0 +1,37 @@
+//! Textures on scalar parameters (roughness, blend weight): one-channel texels that are one parameter.
+
+use glam::Vec3;
+
+use super::Wrap;
+use crate::params::ParamId;
+
+/// A one-channel texture on a scalar slot (Mitsuba's `bitmap` or `checkerboard` given as a
+/// roughness `alpha`/`alpha_u`/`alpha_v` or a `blendbsdf` `weight`): its texels are the parameter
+/// `texels` (`width × height` values row by row, row 0 at v = 0; a checkerboard's two colours as
+/// two texels), looked up at the hit's texture coordinates through `to_uv`. A material whose
+/// scalar parameter is `texels` reads it through this texture ([`crate::scene::Scene::scalar_texture`]).
+#[derive(Clone, Debug, PartialEq)]
+pub struct ScalarTexture {
+    /// The texels' parameter.
+    pub texels: ParamId,
+    /// Width in texels (2 for a checkerboard).
+    pub width: u32,
+    /// Height in texels (1 for a checkerboard).
+    pub height: u32,
+    /// Nearest texel instead of bilinear interpolation.
+    pub nearest: bool,
+    /// How texel indices outside the image wrap.
+    pub wrap: Wrap,
+    /// Mitsuba's checkerboard: texel 0 where the fractional parts of (u, v) lie on the same side
+    /// of 1/2, else texel 1.
+    pub checker: bool,
+    /// `u' = dot(to_uv[0], (u, v, 1))`, `v' = dot(to_uv[1], (u, v, 1))`.
+    pub to_uv: [Vec3; 2],
+}
+
+impl super::Scene {
+    /// The scalar texture whose texels are parameter `id`, if `id` is one.
+    pub fn scalar_texture(&self, id: ParamId) -> Option<&ScalarTexture> {
+        self.scalar_textures.iter().find(|t| t.texels == id)
+    }
+}
