@@ -20,7 +20,7 @@ fn cases() -> Vec<(Scene, &'static str, &'static str)> {
         // A frosted (rough dielectric) pane: the differential vertex reflects or refracts.
         (scenes::frosted_pane(), "pane.alpha.value", "environment.radiance.value"),
         // A rough plastic panel: the coating by the derivative's parts, the base by the cosine.
-        (scenes::xml("diff_plastic_panel"), "panel.bsdf.alpha", "panel.bsdf.diffuse_reflectance.value"),
+        (scenes::data_scene("diff_plastic_panel"), "panel.bsdf.alpha", "panel.bsdf.diffuse_reflectance.value"),
     ]
 }
 

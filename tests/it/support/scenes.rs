@@ -171,8 +171,8 @@ pub fn conformance(name: &str) -> Scene {
     pathgrad::scene::load(&path, &[]).unwrap_or_else(|e| panic!("{path}: {e}"))
 }
 
-/// `tests/data/xml/NAME.xml`.
-pub fn xml(name: &str) -> Scene {
-    let path = format!("{}/tests/data/xml/{name}.xml", env!("CARGO_MANIFEST_DIR"));
+/// `tests/data/scenes/NAME.xml` (scenes written for one test; `tests/data/xml/` holds malformed ones).
+pub fn data_scene(name: &str) -> Scene {
+    let path = format!("{}/tests/data/scenes/{name}.xml", env!("CARGO_MANIFEST_DIR"));
     pathgrad::scene::load(&path, &[]).unwrap_or_else(|e| panic!("{path}: {e}"))
 }
