@@ -187,6 +187,7 @@ mod tests {
             texels: id,
             nearest: false,
             wrap: crate::scene::Wrap::Repeat,
+            to_uv: [glam::Vec3::X, glam::Vec3::Y],
         });
         let scalar = scene.params.find("red.reflectance.value").unwrap();
         (scene, id, scalar)

@@ -324,8 +324,8 @@ fn albedo_fields(scene: &Scene, albedo: Albedo) -> GpuMaterial {
                 tex_width: t.width,
                 tex_height: t.height,
                 tex_mode: texture_mode(t.nearest, t.wrap),
-                uv_row0: Vec3::X,
-                uv_row1: Vec3::Y,
+                uv_row0: t.to_uv[0],
+                uv_row1: t.to_uv[1],
                 ..Default::default()
             }
         }

@@ -45,6 +45,10 @@ pub struct Texture {
     pub nearest: bool,
     /// How texel indices outside the image wrap.
     pub wrap: Wrap,
+    /// Mitsuba's `to_uv`: rows 0 and 1 of the 2D affine map applied to the hit's texture
+    /// coordinates before the lookup, u' = row0 · (u, v, 1), v' = row1 · (u, v, 1)
+    /// (`[Vec3::X, Vec3::Y]`: none).
+    pub to_uv: [Vec3; 2],
 }
 
 /// A light without area (Mitsuba's `point`, `spot` and `directional`): next-event estimation
@@ -707,7 +711,14 @@ impl Scene {
             });
         }
         let texels = self.params.add(name, texels, bounds::REFLECTANCE)?;
-        self.textures.push(Texture { width, height, texels, nearest: false, wrap: Wrap::Repeat });
+        self.textures.push(Texture {
+            width,
+            height,
+            texels,
+            nearest: false,
+            wrap: Wrap::Repeat,
+            to_uv: [Vec3::X, Vec3::Y],
+        });
         Ok(TextureId(self.textures.len() as u32 - 1))
     }
 

@@ -57,6 +57,8 @@ MATRIX = {
     "texture_filter_wrap": dict(features=["bitmap filter_type nearest", "wrap_mode mirror", "wrap_mode clamp",
                                           "uv outside [0, 1]"],
                                 grads=["mirrored.bsdf.reflectance.data", "clamped.bsdf.reflectance.data"]),
+    "texture_to_uv": dict(features=["bitmap to_uv (scale, translate, rotate)", "wrap_mode repeat"],
+                          grads=["mirrored.bsdf.reflectance.data", "clamped.bsdf.reflectance.data"]),
     # Textures on scalar properties (issue 31): roughness and blend weights as one-channel bitmaps
     # and checkerboards of floats; a 0 roughness texel is clamped to Mitsuba's 1e-4.
     "texture_roughness": dict(features=["roughconductor alpha_u bitmap (one channel, raw)", "alpha_v checkerboard of floats",

@@ -506,15 +506,28 @@ impl<'a> Loader<'a> {
                 .err(target, format!("unsupported plugin '{}' (supported: {})", p.kind, names(Category::Texture))));
         }
         let bitmap = self.bitmap(&p, target, "reflectances must be at most 1")?;
+        let to_uv = self.to_uv(&p)?;
         let t = self
             .scene
             .add_texture(&format!("{name}.data"), bitmap.width, bitmap.height, &bitmap.texels)
             .map_err(|e| self.located(target, e))?;
         let texture = &mut self.scene.textures[t.0 as usize];
-        (texture.nearest, texture.wrap) = (bitmap.nearest, bitmap.wrap);
+        (texture.nearest, texture.wrap, texture.to_uv) = (bitmap.nearest, bitmap.wrap, to_uv);
         self.finish(&p)?;
         self.textures.insert(target.id(), Albedo::Bitmap(t));
         Ok(Albedo::Bitmap(t))
+    }
+
+    /// A texture's `to_uv` as rows 0 and 1 of the 4×4 matrix, columns x, y and the translation:
+    /// Mitsuba's 2D map of texture coordinates (identity rows without one).
+    pub(super) fn to_uv(&self, p: &Props<'a>) -> Result<[Vec3; 2]> {
+        Ok(match p.transform(&self.x, "to_uv")? {
+            None => [Vec3::X, Vec3::Y],
+            Some((t, _)) => {
+                let m = t.matrix;
+                [0, 1].map(|r| Vec3::new(m.col(0)[r], m.col(1)[r], m.col(3)[r]))
+            }
+        })
     }
 
     /// The texels and lookup of the `bitmap` `p` (node `target`): Mitsuba's `filename`, `raw`,
@@ -727,14 +740,7 @@ impl<'a> Loader<'a> {
         }
         let color0 = self.color_in(p, "color0", Vec3::splat(0.4), bounds::REFLECTANCE)?;
         let color1 = self.color_in(p, "color1", Vec3::splat(0.2), bounds::REFLECTANCE)?;
-        // Rows 0 and 1 of the 4×4 `to_uv`, columns x, y and the translation: Mitsuba's 2D map.
-        let to_uv = match p.transform(&self.x, "to_uv")? {
-            None => [Vec3::X, Vec3::Y],
-            Some((t, _)) => {
-                let m = t.matrix;
-                [0, 1].map(|r| Vec3::new(m.col(0)[r], m.col(1)[r], m.col(3)[r]))
-            }
-        };
+        let to_uv = self.to_uv(p)?;
         self.finish(p)?;
         let first = self.scene.params.add(&format!("{name}.color0.value"), &color0.to_array(), bounds::REFLECTANCE);
         let first = first.map_err(|e| self.located(p.node, e))?;

@@ -104,6 +104,18 @@ impl<'a> Loader<'a> {
                 {
                     return Err(self.x.err(node, format!("filter_type '{filter}' is not supported (only trilinear)")));
                 }
+                // Mitsuba's default `clamp`; repetition or mirroring of the grid outside the unit
+                // cube is not built (a scene relying on it would render differently).
+                if let Some((wrap, node)) = v.string(&self.x, "wrap_mode")?
+                    && wrap != "clamp"
+                {
+                    return Err(self.x.err(
+                        node,
+                        format!(
+                            "wrap_mode '{wrap}' of a 'gridvolume' is not supported (only clamp, Mitsuba's default)"
+                        ),
+                    ));
+                }
                 if v.boolean(&self.x, "use_grid_bbox", false)? {
                     return Err(self
                         .x

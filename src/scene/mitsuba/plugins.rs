@@ -190,7 +190,12 @@ pub const PLUGINS: &[Plugin] = &[
     p(Phase, "isotropic", "—", ""),
     p(Phase, "hg", "`g` (parameter)", ""),
     p(Volume, "constvolume", "`value`", ""),
-    p(Volume, "gridvolume", "`filename` or data, `to_world`, `filter_type`", ""),
+    p(
+        Volume,
+        "gridvolume",
+        "`filename` or data, `to_world`, `filter_type`, `wrap_mode` clamp",
+        "`wrap_mode` repeat and mirror refused",
+    ),
     p(
         Sensor,
         "perspective",

@@ -1,8 +1,6 @@
 //! Textures on scalar properties (a roughness, a `blendbsdf` weight): `bitmap` and `checkerboard`
 //! with one channel, their texels one parameter.
 
-use glam::Vec3;
-
 use super::loader::Loader;
 use super::plugins::{Category, names};
 use super::xml::{El, Props};
@@ -58,13 +56,7 @@ impl<'a> Loader<'a> {
             "checkerboard" => {
                 let color0 = self.float_in(&p, "color0", Some(0.4), range)?;
                 let color1 = self.float_in(&p, "color1", Some(0.2), range)?;
-                let to_uv = match p.transform(&self.x, "to_uv")? {
-                    None => [Vec3::X, Vec3::Y],
-                    Some((t, _)) => {
-                        let m = t.matrix;
-                        [0, 1].map(|r| Vec3::new(m.col(0)[r], m.col(1)[r], m.col(3)[r]))
-                    }
-                };
+                let to_uv = self.to_uv(&p)?;
                 self.finish(&p)?;
                 // Mitsuba 3.9.1's checkerboard, looked up as a float (its `eval_1`), reads
                 // `color1` where its colour lookup reads `color0` and the other way round: the
@@ -121,13 +113,7 @@ impl<'a> Loader<'a> {
                     }
                     texels.push(c[0]);
                 }
-                let to_uv = match p.transform(&self.x, "to_uv")? {
-                    None => [Vec3::X, Vec3::Y],
-                    Some((t, _)) => {
-                        let m = t.matrix;
-                        [0, 1].map(|r| Vec3::new(m.col(0)[r], m.col(1)[r], m.col(3)[r]))
-                    }
-                };
+                let to_uv = self.to_uv(&p)?;
                 self.finish(&p)?;
                 let id = self.scene.params.add(&format!("{name}.data"), &texels, range);
                 ScalarTexture {

@@ -44,7 +44,7 @@ const MEDIA: &str = r#"
     <medium type="heterogeneous" name="interior">
         <volume type="gridvolume" name="sigma_t"><string name="filename" value="density.vol"/>
             <transform name="to_world"><scale value="2"/><translate x="-1" y="-1" z="-1"/></transform></volume>
-        <volume type="gridvolume" name="albedo"><string name="filename" value="colour.vol"/></volume>
+        <volume type="gridvolume" name="albedo"><string name="filename" value="colour.vol"/><string name="wrap_mode" value="clamp"/></volume>
         <float name="scale" value="3"/>
     </medium>
 </shape>
@@ -149,6 +149,12 @@ fn bad_media_are_refused_with_their_location() {
             "s.interior_medium.albedo.value.value".into(),
         ),
         (shape(r#"<medium type="homogeneous" name="exterior"/>"#), "exterior media are not supported".into()),
+        (
+            shape(
+                r#"<medium type="heterogeneous" name="interior"><volume type="gridvolume" name="sigma_t"><string name="filename" value="density.vol"/><string name="wrap_mode" value="repeat"/></volume></medium>"#,
+            ),
+            "wrap_mode 'repeat' of a 'gridvolume' is not supported (only clamp, Mitsuba's default)".into(),
+        ),
         (
             shape(
                 r#"<medium type="heterogeneous" name="interior"><volume type="gridvolume" name="sigma_t"><string name="filename" value="none.vol"/></volume></medium>"#,
