@@ -482,6 +482,9 @@ impl<'a> Loader<'a> {
             self.warn_hide_emitters(&p, node)?;
             return self.finish(&p);
         }
+        if matches!(p.kind.as_str(), "volpath" | "volpathmis" | "prbvolpath") {
+            self.volpath_integrator = Some(node);
+        }
         if !matches!(p.kind.as_str(), "path" | "prb" | "prb_basic" | "volpath" | "volpathmis" | "prbvolpath") {
             return Err(self.x.err(
                 node,

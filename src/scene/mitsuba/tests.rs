@@ -1028,3 +1028,22 @@ fn the_differential_strategy_covers_rough_dielectrics_and_plastics() {
     let err = Strategy::from_name(&s, "diff", 0.5, "brushed.bsdf.alpha_u.value").unwrap_err().to_string();
     assert!(err.contains("brushed.bsdf.alpha_u.value") && err.contains("anisotropic"), "{err}");
 }
+
+/// A volpath-family integrator with a finite max_depth and a thindielectric says that Mitsuba
+/// counts depth differently there; path and an unbounded depth do not.
+#[test]
+fn volpath_depth_through_thin_dielectrics_is_warned() {
+    let scene = |integrator: &str| {
+        format!(
+            r#"<scene version="3.0.0">{integrator}<sensor type="perspective"/><shape type="cube"><bsdf type="thindielectric"/></shape><shape type="sphere"><emitter type="area"/></shape></scene>"#
+        )
+    };
+    let warned = |integrator: &str| {
+        let s = load_text(&scene(integrator), Path::new("s.xml"), &[], obj_for_tests).unwrap();
+        s.warnings.iter().any(|w| w.contains("do not count a thindielectric's transmission"))
+    };
+    assert!(warned(r#"<integrator type="volpath"><integer name="max_depth" value="6"/></integrator>"#));
+    assert!(warned(r#"<integrator type="prbvolpath"><integer name="max_depth" value="3"/></integrator>"#));
+    assert!(!warned(r#"<integrator type="path"><integer name="max_depth" value="6"/></integrator>"#));
+    assert!(!warned(r#"<integrator type="volpath"/>"#));
+}
