@@ -195,8 +195,9 @@ float bsdf_pdf_diff(Bsdf b, vec3 wi, vec3 wo) {
 }
 
 // Rough conductor, dielectric or plastic: positive part if u_sign < 0.5 (the dielectric then
-// reflects or refracts by u_lobe; the plastic takes its coating so with the coating's probability). Blend: child 1 if u_lobe ≤ ½, else child 0, with the child's primal
-// sampler. Other leaves: their primal sampler. Value f̂ and pdf bsdf_pdf_diff of the whole BSDF.
+// reflects or refracts by u_lobe; the plastic takes its coating so with the coating's
+// probability). Blend: child 1 if u_lobe ≤ ½, else child 0, with the child's primal sampler.
+// Other leaves: their primal sampler. Value f̂ and pdf bsdf_pdf_diff of the whole BSDF.
 BsdfSample bsdf_sample_diff(Bsdf b, vec3 wi, float u_sign, float u_lobe, vec2 u) {
     BsdfSample s = BsdfSample(vec3(0.0), 0.0, vec3(0.0), false, false);
     vec3 wo;

@@ -272,8 +272,8 @@ pub fn bsdf_diff_capable(b: &Bsdf) -> bool {
 }
 
 /// Density of the differential technique: ½(p_f0 + p_f1) for a blend, the coin-mixed roughness
-/// density for a rough conductor, dielectric or plastic, and the primal density for the other leaves
-/// (ALGORITHMS.md §4.1).
+/// density for a rough conductor, dielectric or plastic, and the primal density for the other
+/// leaves (ALGORITHMS.md §4.1).
 pub fn bsdf_pdf_diff(b: &Bsdf, wi: Vec3, wo: Vec3) -> f32 {
     if b.blend {
         return 0.5 * (leaf_pdf(&b.leaves[0], wi, wo) + leaf_pdf(&b.leaves[1], wi, wo));
@@ -288,8 +288,9 @@ pub fn bsdf_pdf_diff(b: &Bsdf, wi: Vec3, wo: Vec3) -> f32 {
 
 /// Samples the differential technique. Rough conductor, dielectric or plastic: the positive part
 /// if `u_sign < 0.5`, else the negative one (the dielectric then reflects or refracts by `u_lobe`;
-/// the plastic samples its coating so with its coating probability, else its base). Blend: child 1 if `u_lobe ≤ ½`, else child 0, sampled with the child's primal
-/// sampler. Diffuse (not capable): its primal sampler. The value is the whole BSDF's f̂ and the pdf
+/// the plastic samples its coating so with its coating probability, else its base). Blend: child
+/// 1 if `u_lobe ≤ ½`, else child 0, sampled with the child's primal sampler. Other leaves (not
+/// capable): their primal sampler. The value is the whole BSDF's f̂ and the pdf
 /// is [`bsdf_pdf_diff`] at the sampled direction; `None` for an invalid sample.
 pub fn bsdf_sample_diff(b: &Bsdf, wi: Vec3, u_sign: f32, u_lobe: f32, u: Vec2) -> Option<BsdfSample> {
     let wo = if b.blend {

@@ -58,13 +58,11 @@ fn conductor(distribution: Distribution, alpha: f32) -> Bsdf {
     })
 }
 
+/// The rough dielectric of the BSDF tests (bk7 in air), as its leaf.
 fn glass(distribution: Distribution, alpha: f32) -> RoughDielectricLeaf {
-    RoughDielectricLeaf {
-        distribution,
-        alpha,
-        reflectance: Vec3::new(0.9, 0.8, 0.7),
-        transmittance: Vec3::new(0.6, 0.5, 0.4),
-        eta: 1.5,
+    match crate::bsdf::tests::glass(distribution, alpha) {
+        Leaf::RoughDielectric(g) => g,
+        other => unreachable!("{other:?}"),
     }
 }
 

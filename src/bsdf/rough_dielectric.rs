@@ -137,12 +137,12 @@ impl RoughDielectricLeaf {
 
     /// The solid-angle density with which [`RoughDielectricLeaf::sample`] draws wo.
     pub fn pdf(&self, wi: Vec3, wo: Vec3) -> f32 {
-        let Some(p) = self.pair(wi, wo) else { return 0.0 };
+        // The normals visible from wi's side.
         let up = if wi.z > 0.0 { wi } else { -wi };
-        let d = microfacet_d(self.distribution, self.alpha, p.m);
-        let visible = d * microfacet_g1(self.distribution, self.alpha, up, p.m) * up.dot(p.m).max(0.0) / up.z;
-        let f = fresnel_dielectric(wi.dot(p.m), self.eta).0;
-        visible * if p.reflect { f } else { 1.0 - f } * Self::jacobian(&p, wi, wo)
+        self.pdf_through(wi, wo, |m| {
+            let d = microfacet_d(self.distribution, self.alpha, m);
+            d * microfacet_g1(self.distribution, self.alpha, up, m) * up.dot(m).max(0.0) / up.z
+        })
     }
 
     /// A direction: a visible normal m from `u`, then reflection about m with probability F

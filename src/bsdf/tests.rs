@@ -38,7 +38,7 @@ pub(crate) fn plastic(distribution: Distribution, alpha: f32, diffuse: Vec3, non
 }
 
 /// A rough dielectric (η of bk7 in air).
-fn glass(distribution: Distribution, alpha: f32) -> Leaf {
+pub(crate) fn glass(distribution: Distribution, alpha: f32) -> Leaf {
     Leaf::RoughDielectric(rough_dielectric::RoughDielectricLeaf {
         distribution,
         alpha,
