@@ -231,7 +231,7 @@ vec3 texture_lookup(Material m, vec2 uv) {
 
 // ---- scalar textures (a roughness or blend weight with SCALAR_TEXTURE set; twin:
 // scalar_footprint and friends of src/cpu/surface.rs) ----
-bool scalar_textured(uint slot) { return HAS(F_PARAM_TEXTURE) && (slot & SCALAR_TEXTURE) != 0u; }
+bool scalar_textured(uint slot) { return HAS(F_PARAM_TEXTURE) && slot != NO_PARAM && (slot & SCALAR_TEXTURE) != 0u; }
 
 // Word i of the scalar texture descriptor at offset d of the tables array.
 uint texture_desc_word(uint d, uint i) { return floatBitsToUint(coating_table(d + i)); }

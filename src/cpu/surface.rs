@@ -284,7 +284,7 @@ fn alpha_value(flat: &FlatScene, slot: u32, uv: glam::Vec2) -> f32 {
 
 /// A scalar slot's derivative `g` (per image channel): its parameter's, or for a texture the
 /// footprint's texels weighted as the lookup weighs them; a roughness clamped to
-/// [`ALPHA_TEXTURE_FLOOR`] has none.
+/// [`ALPHA_TEXTURE_FLOOR`] has none (twin: `push_scalar` of `shaders/lib/surface.glsl`).
 fn scalar_backward(flat: &FlatScene, slot: u32, uv: glam::Vec2, g: Vec3, roughness: bool, sink: &mut GradSink<'_>) {
     if !scalar_textured(slot) {
         sink.add(slot, g);
