@@ -92,8 +92,19 @@ struct Film {
 }
 
 impl Film {
-    fn window(&self) -> crate::scene::FilmWindow {
-        crate::scene::FilmWindow::from_pixels(self.width, self.height, self.offset, self.crop)
+    /// The camera of this film: the image is its crop window.
+    fn camera(&self, position: Vec3, target: Vec3, up: Vec3, fov_y_degrees: f32, lens: Lens) -> Camera {
+        Camera {
+            position,
+            target,
+            up,
+            fov_y_degrees,
+            width: self.crop[0],
+            height: self.crop[1],
+            filter: self.filter,
+            lens,
+            window: crate::scene::FilmWindow::from_pixels(self.width, self.height, self.offset, self.crop),
+        }
     }
 }
 
@@ -231,17 +242,7 @@ impl<'a> Loader<'a> {
             None => (Vec3::ZERO, Vec3::Z, Vec3::Y),
             Some((t, n)) => camera_frame(&t).map_err(|m| self.x.err(n, m))?,
         };
-        self.scene.camera = Camera {
-            position,
-            target,
-            up,
-            fov_y_degrees: fov_y,
-            width: film.crop[0],
-            height: film.crop[1],
-            filter: film.filter,
-            lens,
-            window: film.window(),
-        };
+        self.scene.camera = film.camera(position, target, up, fov_y, lens);
         // Whether they clip anything is known once the shapes are built.
         let at = self.scene.warnings.len();
         for (near, depth, warning) in clips {
@@ -267,17 +268,7 @@ impl<'a> Loader<'a> {
         let lens =
             Lens::Orthographic { half_height: scale.y / aspect, stretch: scale.x / scale.y, near_clip: near * scale.z };
         // fov_y_degrees is the pinhole's: unused by this lens, a valid value for the checks.
-        self.scene.camera = Camera {
-            position,
-            target,
-            up,
-            fov_y_degrees: DEFAULT_ORTHOGRAPHIC_FOV,
-            width: film.crop[0],
-            height: film.crop[1],
-            filter: film.filter,
-            lens,
-            window: film.window(),
-        };
+        self.scene.camera = film.camera(position, target, up, DEFAULT_ORTHOGRAPHIC_FOV, lens);
         if let Some((depth, n)) = far {
             let warning =
                 self.x.warning(n, "property 'far_clip' of 'orthographic' ignored: pathgrad's camera does not clip far");
