@@ -9,10 +9,11 @@ use pathgrad::adaptive::AdaptiveEstimator;
 use pathgrad::backend::Backend;
 use pathgrad::gpu::Renderer;
 use pathgrad::gpu::renderer::GradMode;
+use pathgrad::image::Image;
 use pathgrad::integrator::RenderOptions;
 use pathgrad::loss::{Loss, loss_and_adjoint};
 use pathgrad::optim::{AdamOptions, ControlVariateOptions, ControlVariateState, IterationOptions, Optimization};
-use pathgrad::params::Gradients;
+use pathgrad::params::{Gradients, ParamId, ParamTable};
 use pathgrad::scene::builtin;
 
 use crate::support::TestGpu;
@@ -33,6 +34,19 @@ const TARGET_SPP: u32 = 512;
 /// The target's seed; the iterations use seeds 0, 1, … (fewer than this), so no pass shares a key.
 const TARGET_SEED: u32 = 1_000;
 
+/// The built-in blend scene on a 16×12 render (1 spp, seed 7), its 8-spp target at seed 99 and
+/// the parameters with the blend weight moved to 0.8 (its id returned).
+fn blend_from_weight_08(gpu: &TestGpu) -> (Renderer, RenderOptions, Image, ParamTable, ParamId) {
+    let scene = builtin::load("blend").unwrap();
+    let mut renderer = Renderer::new(&gpu.ctx, &scene).unwrap();
+    let render = RenderOptions { width: 16, height: 12, spp: 1, seed: 7, ..RenderOptions::for_scene(&scene) };
+    let target = renderer.render(&RenderOptions { spp: 8, seed: 99, ..render }).unwrap();
+    let mut start = scene.params.clone();
+    start.set("object.weight.value", &[0.8]).unwrap();
+    let id = start.find("object.weight.value").unwrap();
+    (renderer, render, target, start, id)
+}
+
 /// Iteration t of [`Optimization`] is, bit for bit (fixed-point gradients), pass 1 rendered with
 /// spp_primal samples and seed base + t, the loss and adjoint on the host, and the gradient pass
 /// with spp_grad samples and the same seed — also after a step changed the parameters.
@@ -42,13 +56,7 @@ fn an_iteration_is_pass_one_at_spp_primal_then_the_gradient_at_spp_grad_with_see
     if !gpu.ctx.info().int64_atomics {
         return;
     }
-    let scene = builtin::load("blend").unwrap();
-    let mut renderer = Renderer::new(&gpu.ctx, &scene).unwrap();
-    let render = RenderOptions { width: 16, height: 12, spp: 1, seed: 7, ..RenderOptions::for_scene(&scene) };
-    let target = renderer.render(&RenderOptions { spp: 8, seed: 99, ..render }).unwrap();
-    let mut start = scene.params.clone();
-    start.set("object.weight.value", &[0.8]).unwrap();
-    let id = start.find("object.weight.value").unwrap();
+    let (mut renderer, render, target, start, id) = blend_from_weight_08(&gpu);
     let mode = GradMode::Deterministic;
     let options =
         IterationOptions { render, spp_primal: 3, adaptive: None, loss: Loss::RelMse, mode, control_variates: None };
@@ -141,13 +149,7 @@ fn control_variates_equal_the_plain_run_while_the_weight_is_zero() {
     if !gpu.ctx.info().int64_atomics {
         return;
     }
-    let scene = builtin::load("blend").unwrap();
-    let mut renderer = Renderer::new(&gpu.ctx, &scene).unwrap();
-    let render = RenderOptions { width: 16, height: 12, spp: 1, seed: 7, ..RenderOptions::for_scene(&scene) };
-    let target = renderer.render(&RenderOptions { spp: 8, seed: 99, ..render }).unwrap();
-    let mut start = scene.params.clone();
-    start.set("object.weight.value", &[0.8]).unwrap();
-    let id = start.find("object.weight.value").unwrap();
+    let (mut renderer, render, target, start, id) = blend_from_weight_08(&gpu);
     let mode = GradMode::Deterministic;
     for adaptive in [None, Some(AdaptiveEstimator::default())] {
         let plain =
