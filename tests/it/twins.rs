@@ -295,9 +295,12 @@ fn loss_gpu_equals_host() {
 }
 
 /// `shaders/lib/differential.glsl` against `src/bsdf/differential.rs`: the differential sampler and
-/// its density for conductors (both parts, α from 0.01 to 0.8), blends and diffuse, incident angles
-/// down to cos θi = 0.01, plus Lambert W on both branches and the four inversions. The probe passes
-/// `u_lobe` as both `u_sign` and `u_lobe` (each BSDF kind reads only one of them).
+/// its density for conductors (both parts, α from 0.01 to 0.8), rough dielectrics (also from
+/// inside), blends and diffuse, incident angles down to cos θi = 0.01, plus Lambert W on both
+/// branches and the four inversions. The probe passes `u_lobe` as both `u_sign` and `u_lobe` (a
+/// dielectric reads both: its part and its reflect/refract choice are then correlated, which a
+/// probe may be). Rough plastics need their coating tables, which the probes do not upload: their
+/// differential sampler is compared path by path (`strategies`, the plastic panel).
 #[test]
 fn diff_gpu_equals_cpu() {
     use glam::{Vec2, Vec3};
@@ -317,6 +320,13 @@ fn diff_gpu_equals_cpu() {
                 eta: Vec3::ZERO,
                 k: Vec3::ONE,
             }));
+            bsdfs.push(Bsdf::leaf(Leaf::RoughDielectric(pathgrad::bsdf::rough_dielectric::RoughDielectricLeaf {
+                distribution,
+                alpha,
+                reflectance: Vec3::new(0.9, 0.8, 0.7),
+                transmittance: Vec3::new(0.6, 0.5, 0.4),
+                eta: 1.5,
+            })));
         }
     }
     for weight in [0.1, 0.5, 0.9] {
@@ -338,7 +348,8 @@ fn diff_gpu_equals_cpu() {
     let mut cases = Vec::new();
     let mut owners = Vec::new();
     for (bi, b) in bsdfs.iter().enumerate() {
-        for (wi_index, cos_i) in [1.0f32, 0.7, 0.2, 0.05, 0.01].into_iter().enumerate() {
+        let inside: &[f32] = if matches!(b.leaves[0], Leaf::RoughDielectric(_)) { &[-0.7, -0.2] } else { &[] };
+        for (wi_index, &cos_i) in [1.0f32, 0.7, 0.2, 0.05, 0.01].iter().chain(inside).enumerate() {
             let sin_i = (1.0 - cos_i * cos_i).sqrt();
             let wi = Vec3::new(sin_i * 0.6, -sin_i * 0.8, cos_i);
             for j in 0..200u32 {
