@@ -344,8 +344,8 @@ POWER = {
     # Textured roughness: the pane's α (GGX glass, light through it rare) sees 24 %, the ball's
     # bitmap α_u 16 % (its texels' derivatives cancel in part over the image).
     # The anisotropic ball's textured α_u and α_v (a bitmap and a checkerboard of floats): at the
-    # matrix's budget they see 16 % and 6 % (image means 0.89–0.90 and 0.93–0.94 of Mitsuba's
-    # within that power): a weak row, to tighten with a better-conditioned scene.
+    # matrix's budget they see 16 % and 6–17 % (image means 0.89–0.90 and 0.75–0.94 of Mitsuba's
+    # across runs, within that power): a weak row, to tighten with a better-conditioned scene.
     "texture_roughness": {"gradient_bias": 0.2},
     "depth_1": {"primal_bias": 0.03},
     "depth_2": {"primal_bias": 0.02},
