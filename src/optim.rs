@@ -13,12 +13,18 @@
 //! current and at the previous parameters with the same seed, and the loss and adjoint images
 //! are taken from the recursive control-variate estimate of [`control_variates`] instead of the
 //! plain render; the gradient pass is unchanged.
+//!
+//! With [`IterationOptions::gradient_reuse`], each iteration takes its loss gradient twice, at the
+//! current and at the previous parameters with the same seed, and hands Adam the running
+//! estimate of [`gradient_reuse`] instead of the plain gradient.
 
 mod adam;
 pub mod control_variates;
+pub mod gradient_reuse;
 
 pub use adam::{Adam, AdamOptions, AdamState, BETA1, BETA2, DEFAULT_LEARNING_RATE, EPSILON};
-pub use control_variates::{ControlVariateOptions, ControlVariateState};
+pub use control_variates::{ControlVariateOptions, ControlVariateState, RunningEstimate};
+pub use gradient_reuse::GradientReuse;
 
 use crate::adaptive::{AdaptiveEstimator, AdaptiveOptions, PixelSampling};
 use crate::backend::{Backend, check_views};
@@ -73,6 +79,10 @@ pub struct IterationOptions {
     /// Recursive control variates across iterations (Nicolet et al. 2023) on the loss image, or
     /// none: pass 1 is then rendered once per iteration and used as it is.
     pub control_variates: Option<ControlVariateOptions>,
+    /// Gradient reuse across iterations ([`gradient_reuse`], after Bálint et al. 2023) with
+    /// these decays of its running statistics, or none: each iteration's gradient is then used
+    /// as it is. Not together with [`IterationOptions::control_variates`].
+    pub gradient_reuse: Option<ControlVariateOptions>,
 }
 
 impl IterationOptions {
@@ -90,6 +100,17 @@ impl IterationOptions {
         self.render.validate()?;
         if let Some(cv) = &self.control_variates {
             cv.validate()?;
+        }
+        if let Some(reuse) = &self.gradient_reuse {
+            reuse.validate()?;
+            if self.control_variates.is_some() {
+                return Err(Error::InvalidArgument {
+                    parameter: "IterationOptions::gradient_reuse".into(),
+                    message: "does not combine with control variates on the loss image (each would need the \
+                              other's state at the previous parameters): choose one"
+                        .into(),
+                });
+            }
         }
         AdaptiveOptions { spp_primal: self.spp_primal, estimator: AdaptiveEstimator::default() }.validate()
     }
@@ -137,6 +158,9 @@ pub struct StepReport {
 ///     mode: GradMode::Float,
 ///     // Recursive control variates on the loss image; `None` renders it plainly.
 ///     control_variates: Some(Default::default()),
+///     // Gradient reuse across iterations would be `Some(Default::default())` (not with control
+///     // variates).
+///     gradient_reuse: None,
 /// };
 /// let mut run = Optimization::new(start, &[weight], AdamOptions::with_learning_rate(0.01), options)?;
 /// for _ in 0..100 {
@@ -157,6 +181,11 @@ pub struct Optimization {
     /// The state the last [`Optimization::gradient_views`] computed for iteration `.0`, which
     /// [`Optimization::apply`] commits.
     pending: Option<(u64, ControlVariateState)>,
+    /// Gradient reuse's committed state (with [`IterationOptions::gradient_reuse`]).
+    reuse: GradientReuse,
+    /// The state the last [`Optimization::gradient_views`] computed for iteration `.0`, with
+    /// reuse.
+    pending_reuse: Option<(u64, RunningEstimate)>,
 }
 
 /// The control variates' state between iterations: the running estimate and its statistics, and
@@ -200,6 +229,8 @@ impl Optimization {
             prior: None,
             control: ControlVariates::default(),
             pending: None,
+            reuse: GradientReuse::default(),
+            pending_reuse: None,
         })
     }
 
@@ -220,10 +251,10 @@ impl Optimization {
             (None, None) => {}
             (Some(state), Some(previous)) => {
                 state.check(self.options.render.width, self.options.render.height, state.views)?;
-                if state.steps != self.iteration {
+                if state.running.steps != self.iteration {
                     return bad(
                         "control-variate state",
-                        format!("has {} steps but the run is at iteration {}", state.steps, self.iteration),
+                        format!("has {} steps but the run is at iteration {}", state.running.steps, self.iteration),
                     );
                 }
                 if previous.entries() != self.params.entries() {
@@ -244,6 +275,50 @@ impl Optimization {
     /// iteration).
     pub fn control_variates(&self) -> &ControlVariates {
         &self.control
+    }
+
+    /// The same run continuing from gradient reuse's state `reuse` (as saved from
+    /// [`Optimization::gradient_reuse`] after the same iteration).
+    ///
+    /// # Errors
+    /// [`Error::InvalidArgument`] naming `IterationOptions::gradient_reuse` if the run has no
+    /// gradient reuse, "gradient-reuse state" if `reuse` has one of its parts but not the other, a
+    /// number of values other than the run optimises, a step count other than the iteration
+    /// count, or parameters of another layout.
+    pub fn with_gradient_reuse(self, reuse: GradientReuse) -> Result<Optimization> {
+        let bad = |p: &str, m: String| Err(Error::InvalidArgument { parameter: p.into(), message: m });
+        if self.options.gradient_reuse.is_none() {
+            return bad("IterationOptions::gradient_reuse", "the run has none, so it takes no state".into());
+        }
+        match (&reuse.state, &reuse.previous) {
+            (None, None) => {}
+            (Some(state), Some(previous)) => {
+                let values: usize = self.adam.params().iter().map(|&p| self.params.entry(p).len as usize).sum();
+                state.check(values, "gradient-reuse state")?;
+                if state.steps != self.iteration {
+                    return bad(
+                        "gradient-reuse state",
+                        format!("has {} steps but the run is at iteration {}", state.steps, self.iteration),
+                    );
+                }
+                if previous.entries() != self.params.entries() {
+                    return bad("gradient-reuse state", "its parameters have another layout than the run's".into());
+                }
+            }
+            _ => {
+                return bad(
+                    "gradient-reuse state",
+                    "has an estimate without parameters or parameters without one".into(),
+                );
+            }
+        }
+        Ok(Optimization { reuse, pending_reuse: None, ..self })
+    }
+
+    /// Gradient reuse's committed state (empty without gradient reuse or before the first
+    /// iteration).
+    pub fn gradient_reuse(&self) -> &GradientReuse {
+        &self.reuse
     }
 
     /// The same run with `prior` added to the objective: every gradient from now on includes its
@@ -307,18 +382,9 @@ impl Optimization {
     ) -> Result<(f64, Gradients)> {
         let o = self.options;
         let render = o.at(self.iteration);
-        let (loss, gradients) = match o.control_variates {
-            None => {
-                backend.set_params(&self.params)?;
-                match o.adaptive {
-                    None => backend.loss_and_gradient_views(&render, o.spp_primal, views, targets, o.loss, o.mode)?,
-                    Some(estimator) => {
-                        let adaptive = AdaptiveOptions { spp_primal: o.spp_primal, estimator };
-                        backend.loss_and_gradient_views_adaptive(&render, &adaptive, views, targets, o.loss, o.mode)?
-                    }
-                }
-            }
-            Some(cv) => {
+        let (loss, gradients) = match (o.control_variates, o.gradient_reuse) {
+            (None, None) => self.plain_gradient(backend, &self.params, &render, views, targets)?,
+            (Some(cv), _) => {
                 backend.prepare_gradient(&render, o.spp_primal, o.mode, o.adaptive.is_some())?;
                 let (loss, adjoints, state) = self.control_variate_pass1(backend, &cv, &render, views, targets)?;
                 self.pending = Some((self.iteration, state));
@@ -336,10 +402,49 @@ impl Optimization {
                 };
                 (loss, Gradients::sum_divided(&[sum], views.len())?)
             }
+            (None, Some(reuse)) => {
+                // H at the previous parameters first, so that the current ones stay on the backend.
+                let h = match &self.reuse.previous {
+                    Some(previous) => Some(self.plain_gradient(backend, previous, &render, views, targets)?.1),
+                    None => None,
+                };
+                let (loss, g) = self.plain_gradient(backend, &self.params, &render, views, targets)?;
+                let (f, state) = gradient_reuse::step(
+                    &reuse,
+                    self.reuse.state.as_ref(),
+                    &self.params,
+                    self.adam.params(),
+                    &g,
+                    h.as_ref(),
+                )?;
+                self.pending_reuse = Some((self.iteration, state));
+                (loss, f)
+            }
         };
         match &self.prior {
             None => Ok((loss, gradients)),
             Some(prior) => Ok((loss, prior.add_gradient(&self.params, &gradients)?)),
+        }
+    }
+
+    /// The plain step's loss and gradient at `params` with the render options `render`: pass 1,
+    /// then the gradient pass (uniform or adaptive). Leaves `params` on `backend`.
+    fn plain_gradient(
+        &self,
+        backend: &mut dyn Backend,
+        params: &ParamTable,
+        render: &RenderOptions,
+        views: &[View],
+        targets: &[Image],
+    ) -> Result<(f64, Gradients)> {
+        let o = &self.options;
+        backend.set_params(params)?;
+        match o.adaptive {
+            None => backend.loss_and_gradient_views(render, o.spp_primal, views, targets, o.loss, o.mode),
+            Some(estimator) => {
+                let adaptive = AdaptiveOptions { spp_primal: o.spp_primal, estimator };
+                backend.loss_and_gradient_views_adaptive(render, &adaptive, views, targets, o.loss, o.mode)
+            }
         }
     }
 
@@ -404,23 +509,33 @@ impl Optimization {
     /// `Optimization::apply` with control variates when no gradient of this iteration was taken.
     pub fn apply(&mut self, loss: f64, gradients: &Gradients) -> Result<StepReport> {
         let iteration = self.iteration;
+        let missing = |what: &str| {
+            Err(Error::InvalidArgument {
+                parameter: "Optimization::apply".into(),
+                message: format!(
+                    "with {what}, iteration {iteration} needs its gradient (Optimization::gradient) first"
+                ),
+            })
+        };
         let committed = match (self.options.control_variates, &self.pending) {
             (None, _) => None,
             (Some(_), Some((at, state))) if *at == iteration => Some(state.clone()),
-            (Some(_), _) => {
-                return Err(Error::InvalidArgument {
-                    parameter: "Optimization::apply".into(),
-                    message: format!(
-                        "with control variates, iteration {iteration} needs its gradient (Optimization::gradient) first"
-                    ),
-                });
-            }
+            (Some(_), _) => return missing("control variates"),
         };
-        let before = committed.as_ref().map(|_| self.params.clone());
+        let reused = match (self.options.gradient_reuse, &self.pending_reuse) {
+            (None, _) => None,
+            (Some(_), Some((at, state))) if *at == iteration => Some(state.clone()),
+            (Some(_), _) => return missing("gradient reuse"),
+        };
+        let before = (committed.is_some() || reused.is_some()).then(|| self.params.clone());
         self.adam.step(&mut self.params, gradients, iteration)?;
         if let Some(state) = committed {
-            self.control = ControlVariates { state: Some(state), previous: before };
+            self.control = ControlVariates { state: Some(state), previous: before.clone() };
             self.pending = None;
+        }
+        if let Some(state) = reused {
+            self.reuse = GradientReuse { state: Some(state), previous: before };
+            self.pending_reuse = None;
         }
         self.iteration += 1;
         let mut norm2 = 0.0;
@@ -470,6 +585,7 @@ mod tests {
             loss: Loss::L2,
             mode: GradMode::Float,
             control_variates,
+            gradient_reuse: None,
         };
         Optimization::new(table, &[w], AdamOptions::default(), options).unwrap()
     }
@@ -503,6 +619,7 @@ mod tests {
         assert!(fresh.with_control_variates(wrong_size).unwrap_err().to_string().contains("5×3"));
         let bad = IterationOptions {
             control_variates: Some(ControlVariateOptions { beta1: 1.0, beta2: 0.999 }),
+            gradient_reuse: None,
             ..*run(None).options()
         };
         let e = Optimization::resume(run(None).params().clone(), run(None).adam().clone(), 0, bad).unwrap_err();

@@ -64,16 +64,12 @@ impl ControlVariateOptions {
     }
 }
 
-/// The running estimate and its statistics, per view, pixel and channel (views one after another,
-/// each W·H·3 values in [`Image`] order). Every array has the same length.
+/// A running estimate F_i = v_i·(F_{i−1} − H_i) + G_i of a vector of values and the statistics
+/// its weights come from, one of each per value: the recursion shared by the loss image's control
+/// variates ([`ControlVariateState`]) and the gradient's reuse across iterations
+/// ([`crate::optim::gradient_reuse`]). Every array has the same length.
 #[derive(Clone, Debug, PartialEq)]
-pub struct ControlVariateState {
-    /// Width of each view's image.
-    pub width: u32,
-    /// Height of each view's image.
-    pub height: u32,
-    /// Views.
-    pub views: u32,
+pub struct RunningEstimate {
     /// Steps combined so far (the authors' `it`); 0: the next step's estimate is its G.
     pub steps: u64,
     /// Updates of the running statistics (the authors' `n`): one per step after the first.
@@ -96,25 +92,31 @@ pub struct ControlVariateState {
     pub cov: Vec<f64>,
 }
 
-impl ControlVariateState {
-    /// The state before the first step, for `views` views of `width`×`height`.
-    pub fn new(width: u32, height: u32, views: u32) -> ControlVariateState {
-        let n = width as usize * height as usize * 3 * views as usize;
-        ControlVariateState {
-            width,
-            height,
-            views,
+impl RunningEstimate {
+    /// The state before the first step, for `len` values.
+    pub fn new(len: usize) -> RunningEstimate {
+        RunningEstimate {
             steps: 0,
             updates: 0,
-            estimate: vec![0.0; n],
-            weight: vec![0.0; n],
-            estimate_variance: vec![0.0; n],
-            mean_h: vec![0.0; n],
-            mean_g: vec![0.0; n],
-            var_h: vec![0.0; n],
-            var_g: vec![0.0; n],
-            cov: vec![0.0; n],
+            estimate: vec![0.0; len],
+            weight: vec![0.0; len],
+            estimate_variance: vec![0.0; len],
+            mean_h: vec![0.0; len],
+            mean_g: vec![0.0; len],
+            var_h: vec![0.0; len],
+            var_g: vec![0.0; len],
+            cov: vec![0.0; len],
         }
+    }
+
+    /// The number of values.
+    pub fn len(&self) -> usize {
+        self.estimate.len()
+    }
+
+    /// Whether it holds no values.
+    pub fn is_empty(&self) -> bool {
+        self.estimate.is_empty()
     }
 
     /// The arrays, in a fixed order (for saving and loading a state).
@@ -131,7 +133,7 @@ impl ControlVariateState {
         ]
     }
 
-    /// The arrays, mutably, in the order of [`ControlVariateState::arrays`].
+    /// The arrays, mutably, in the order of [`RunningEstimate::arrays`].
     pub fn arrays_mut(&mut self) -> [&mut Vec<f64>; 8] {
         [
             &mut self.estimate,
@@ -145,22 +147,15 @@ impl ControlVariateState {
         ]
     }
 
-    /// Checks that the arrays have the layout of `views` views of `width`×`height` and hold finite
-    /// statistics (a state read back from a file).
+    /// Checks that every array holds `len` values and the counts are consistent (a state read
+    /// back from a file).
     ///
     /// # Errors
-    /// [`Error::InvalidArgument`] naming "control-variate state".
-    pub fn check(&self, width: u32, height: u32, views: u32) -> Result<()> {
-        let bad = |m: String| Err(Error::InvalidArgument { parameter: "control-variate state".into(), message: m });
-        if (self.width, self.height, self.views) != (width, height, views) {
-            return bad(format!(
-                "is for {} view(s) of {}×{}, the run has {views} of {width}×{height}",
-                self.views, self.width, self.height
-            ));
-        }
-        let n = width as usize * height as usize * 3 * views as usize;
-        if self.arrays().iter().any(|a| a.len() != n) {
-            return bad(format!("arrays are not of {n} values"));
+    /// [`Error::InvalidArgument`] naming `what`.
+    pub fn check(&self, len: usize, what: &str) -> Result<()> {
+        let bad = |m: String| Err(Error::InvalidArgument { parameter: what.into(), message: m });
+        if self.arrays().iter().any(|a| a.len() != len) {
+            return bad(format!("arrays are not of {len} values"));
         }
         if self.updates > self.steps {
             return bad(format!("{} updates in {} steps", self.updates, self.steps));
@@ -168,9 +163,9 @@ impl ControlVariateState {
         Ok(())
     }
 
-    /// One step: combines this iteration's `g` (G_i, one image per view) and `h` (H_i: the same
-    /// random numbers at the previous parameters; `None` only on the first step) into the new
-    /// estimate F_i, updates the statistics, and returns F_i per view (rounded to f32).
+    /// One step: combines this iteration's `g` (G_i) and `h` (H_i: the same random numbers at
+    /// the previous parameters; `None` only on the first step) into the new estimate F_i,
+    /// updates the statistics, and returns F_i.
     ///
     /// In order, as the authors' code: if `steps > WARMUP`, the weight is recomputed per value
     /// from the bias-corrected statistics of the steps before this one,
@@ -179,32 +174,32 @@ impl ControlVariateState {
     /// the statistics take (H, G).
     ///
     /// # Errors
-    /// [`Error::InvalidArgument`] for images of another size or count, or no `h` after the
-    /// first step.
+    /// [`Error::InvalidArgument`] naming `G` or `H` for another number of values than the
+    /// state's, or no `h` after the first step.
     ///
     /// ```
-    /// use pathgrad::image::Image;
-    /// use pathgrad::optim::{ControlVariateOptions, ControlVariateState};
-    /// let mut state = ControlVariateState::new(1, 1, 1);
-    /// let cv = ControlVariateOptions::default();
-    /// let g = Image::from_rgb(1, 1, vec![1.0, 2.0, 3.0])?;
+    /// use pathgrad::optim::{ControlVariateOptions, RunningEstimate};
+    /// let mut state = RunningEstimate::new(2);
+    /// let options = ControlVariateOptions::default();
     /// // The first step's estimate is G itself.
-    /// assert_eq!(state.step(&cv, &[g.clone()], None)?[0], g);
+    /// assert_eq!(state.step(&options, &[1.0, 2.0], None)?, &[1.0, 2.0]);
     /// # Ok::<(), pathgrad::Error>(())
     /// ```
-    pub fn step(&mut self, options: &ControlVariateOptions, g: &[Image], h: Option<&[Image]>) -> Result<Vec<Image>> {
+    pub fn step(&mut self, options: &ControlVariateOptions, g: &[f64], h: Option<&[f64]>) -> Result<&[f64]> {
         options.validate()?;
-        self.check_images(g, "G")?;
-        if let Some(h) = h {
-            self.check_images(h, "H")?;
-        } else if self.steps > 0 {
-            return Err(Error::InvalidArgument {
-                parameter: "H".into(),
-                message: format!("step {} needs the image at the previous parameters", self.steps),
-            });
+        let bad = |p: &str, m: String| Err(Error::InvalidArgument { parameter: p.into(), message: m });
+        if g.len() != self.len() {
+            return bad("G", format!("has {} values, the estimate {}", g.len(), self.len()));
         }
-        let g: Vec<f64> = g.iter().flat_map(|i| i.as_slice()).map(|&v| f64::from(v)).collect();
-        let h: Option<Vec<f64>> = h.map(|h| h.iter().flat_map(|i| i.as_slice()).map(|&v| f64::from(v)).collect());
+        match h {
+            Some(h) if h.len() != self.len() => {
+                return bad("H", format!("has {} values, the estimate {}", h.len(), self.len()));
+            }
+            None if self.steps > 0 => {
+                return bad("H", format!("step {} needs the values at the previous parameters", self.steps));
+            }
+            _ => {}
+        }
         let ControlVariateOptions { beta1, beta2 } = *options;
         if self.steps > WARMUP {
             let correction = 1.0 - beta2.powf(self.updates as f64);
@@ -215,8 +210,8 @@ impl ControlVariateState {
                 self.estimate_variance[k] = vn;
             }
         }
-        match &h {
-            None => self.estimate.copy_from_slice(&g),
+        match h {
+            None => self.estimate.copy_from_slice(g),
             Some(h) => {
                 for k in 0..g.len() {
                     let w = self.weight[k];
@@ -225,7 +220,7 @@ impl ControlVariateState {
             }
         }
         if self.steps > 0
-            && let Some(h) = &h
+            && let Some(h) = h
         {
             // The bias-corrected means are updated in place, m̂ ← m̂ + (1 − β₁)(x − m̂)/(1 − β₁ⁿ⁺¹),
             // which is the authors' m ← β₁m + (1 − β₁)x, m̂ = m/(1 − β₁ⁿ⁺¹) rearranged so that the
@@ -245,8 +240,82 @@ impl ControlVariateState {
             self.updates += 1;
         }
         self.steps += 1;
+        Ok(&self.estimate)
+    }
+}
+
+/// The running estimate of the loss image and its statistics, per view, pixel and channel (views
+/// one after another, each W·H·3 values in [`Image`] order).
+#[derive(Clone, Debug, PartialEq)]
+pub struct ControlVariateState {
+    /// Width of each view's image.
+    pub width: u32,
+    /// Height of each view's image.
+    pub height: u32,
+    /// Views.
+    pub views: u32,
+    /// The estimate and its statistics, W·H·3·views values.
+    pub running: RunningEstimate,
+}
+
+impl ControlVariateState {
+    /// The state before the first step, for `views` views of `width`×`height`.
+    pub fn new(width: u32, height: u32, views: u32) -> ControlVariateState {
+        let n = width as usize * height as usize * 3 * views as usize;
+        ControlVariateState { width, height, views, running: RunningEstimate::new(n) }
+    }
+
+    /// Checks that the arrays have the layout of `views` views of `width`×`height` and hold finite
+    /// statistics (a state read back from a file).
+    ///
+    /// # Errors
+    /// [`Error::InvalidArgument`] naming "control-variate state".
+    pub fn check(&self, width: u32, height: u32, views: u32) -> Result<()> {
+        if (self.width, self.height, self.views) != (width, height, views) {
+            return Err(Error::InvalidArgument {
+                parameter: "control-variate state".into(),
+                message: format!(
+                    "is for {} view(s) of {}×{}, the run has {views} of {width}×{height}",
+                    self.views, self.width, self.height
+                ),
+            });
+        }
+        self.running.check(width as usize * height as usize * 3 * views as usize, "control-variate state")
+    }
+
+    /// One step of [`RunningEstimate::step`] on the loss images: `g` (G_i, one image per view)
+    /// and `h` (H_i: the same random numbers at the previous parameters; `None` only on the first
+    /// step) give the new estimate F_i per view (rounded to f32).
+    ///
+    /// # Errors
+    /// [`Error::InvalidArgument`] for images of another size or count, or no `h` after the
+    /// first step.
+    ///
+    /// ```
+    /// use pathgrad::image::Image;
+    /// use pathgrad::optim::{ControlVariateOptions, ControlVariateState};
+    /// let mut state = ControlVariateState::new(1, 1, 1);
+    /// let cv = ControlVariateOptions::default();
+    /// let g = Image::from_rgb(1, 1, vec![1.0, 2.0, 3.0])?;
+    /// // The first step's estimate is G itself.
+    /// assert_eq!(state.step(&cv, &[g.clone()], None)?[0], g);
+    /// # Ok::<(), pathgrad::Error>(())
+    /// ```
+    pub fn step(&mut self, options: &ControlVariateOptions, g: &[Image], h: Option<&[Image]>) -> Result<Vec<Image>> {
+        self.check_images(g, "G")?;
+        if let Some(h) = h {
+            self.check_images(h, "H")?;
+        } else if self.running.steps > 0 {
+            return Err(Error::InvalidArgument {
+                parameter: "H".into(),
+                message: format!("step {} needs the image at the previous parameters", self.running.steps),
+            });
+        }
+        let g: Vec<f64> = g.iter().flat_map(|i| i.as_slice()).map(|&v| f64::from(v)).collect();
+        let h: Option<Vec<f64>> = h.map(|h| h.iter().flat_map(|i| i.as_slice()).map(|&v| f64::from(v)).collect());
+        let estimate = self.running.step(options, &g, h.as_deref())?;
         let per_view = self.width as usize * self.height as usize * 3;
-        self.estimate
+        estimate
             .chunks(per_view)
             .map(|f| Image::from_rgb(self.width, self.height, f.iter().map(|&v| v as f32).collect()))
             .collect()
@@ -324,22 +393,22 @@ mod tests {
             let g = image(x);
             let h = (i > 0).then(|| vec![g.clone()]);
             let f = state.step(&cv, std::slice::from_ref(&g), h.as_deref()).unwrap().remove(0);
-            assert_eq!(state.var_h, state.var_g);
-            assert_eq!(state.var_h, state.cov);
+            assert_eq!(state.running.var_h, state.running.var_g);
+            assert_eq!(state.running.var_h, state.running.cov);
             for c in 0..3 {
-                let w = state.weight[c];
+                let w = state.running.weight[c];
                 if i <= 2 {
                     assert_eq!(w, 0.0, "step {i}");
                     assert_eq!(f.as_slice()[c], x[c]);
                 } else {
                     assert!(w > 0.0 && w <= 1.0, "step {i}: v = {w}");
                     let want: f64 = w * previous[c] + (1.0 - w) * f64::from(x[c]);
-                    assert!((state.estimate[c] - want).abs() < 1e-12, "step {i}");
+                    assert!((state.running.estimate[c] - want).abs() < 1e-12, "step {i}");
                 }
             }
-            previous = state.estimate.clone();
+            previous = state.running.estimate.clone();
         }
-        assert_eq!((state.steps, state.updates), (6, 5));
+        assert_eq!((state.running.steps, state.running.updates), (6, 5));
     }
 
     /// v ≡ 0 (forced: a state whose statistics are all zero keeps v = 0/0 → 0) gives F = G bit
@@ -348,17 +417,17 @@ mod tests {
     fn a_zero_weight_gives_g_itself() {
         let cv = ControlVariateOptions::default();
         let mut state = ControlVariateState::new(1, 1, 1);
-        state.steps = 5;
-        state.estimate = vec![9.0, -3.0, 1e30];
+        state.running.steps = 5;
+        state.running.estimate = vec![9.0, -3.0, 1e30];
         let g = image(&[0.1, 0.2, 0.3]);
         let h = image(&[f32::INFINITY, 7.0, -1.0]);
         // Constant H and G: zero variances, zero covariance.
         for _ in 0..3 {
-            state.var_h.fill(0.0);
-            state.var_g.fill(0.0);
-            state.cov.fill(0.0);
+            state.running.var_h.fill(0.0);
+            state.running.var_g.fill(0.0);
+            state.running.cov.fill(0.0);
             let f = state.step(&cv, std::slice::from_ref(&g), Some(std::slice::from_ref(&h))).unwrap().remove(0);
-            assert_eq!(state.weight, [0.0; 3]);
+            assert_eq!(state.running.weight, [0.0; 3]);
             assert_eq!(f, g);
         }
     }
@@ -373,8 +442,8 @@ mod tests {
         state.step(&cv, &[image(&[0.0, 0.0, 0.0])], None).unwrap();
         state.step(&cv, &[image(&[2.0, 2.0, 2.0])], Some(&[image(&[1.0, 1.0, 1.0])])).unwrap();
         // One update: the bias-corrected means are the samples, the variances exactly zero.
-        assert_eq!((state.mean_h[0], state.mean_g[0]), (1.0, 2.0));
-        assert_eq!((state.var_h[0], state.var_g[0], state.cov[0]), (0.0, 0.0, 0.0));
+        assert_eq!((state.running.mean_h[0], state.running.mean_g[0]), (1.0, 2.0));
+        assert_eq!((state.running.var_h[0], state.running.var_g[0], state.running.cov[0]), (0.0, 0.0, 0.0));
         state.step(&cv, &[image(&[5.0, 5.0, 5.0])], Some(&[image(&[3.0, 3.0, 3.0])])).unwrap();
         let (b1, b2) = (0.9f64, 0.999f64);
         let (mh, mg) =
@@ -384,16 +453,16 @@ mod tests {
         let var_h = (1.0 - b2) * dx1 * dx2;
         let var_g = (1.0 - b2) * dy1 * dy2;
         let cov = (1.0 - b2) * dx1 * dy2;
-        assert!((state.var_h[0] - var_h).abs() < 1e-15, "{} vs {var_h}", state.var_h[0]);
-        assert!((state.var_g[0] - var_g).abs() < 1e-15);
-        assert!((state.cov[0] - cov).abs() < 1e-15);
+        assert!((state.running.var_h[0] - var_h).abs() < 1e-15, "{} vs {var_h}", state.running.var_h[0]);
+        assert!((state.running.var_g[0] - var_g).abs() < 1e-15);
+        assert!((state.running.cov[0] - cov).abs() < 1e-15);
         // Step 2 still had v = 0 (one update, zero statistics); step 3 uses these.
-        assert_eq!(state.weight[0], 0.0);
+        assert_eq!(state.running.weight[0], 0.0);
         let c = 1.0 - b2 * b2;
         let (w, _) = weight(0.0, 0.0, var_h / c, var_g / c, cov / c);
         state.step(&cv, &[image(&[4.0, 4.0, 4.0])], Some(&[image(&[3.5, 3.5, 3.5])])).unwrap();
-        assert!((state.weight[0] - w).abs() < 1e-15 && w > 0.0, "v = {} vs {w}", state.weight[0]);
-        assert!((state.estimate[0] - (w * (5.0 - 3.5) + 4.0)).abs() < 1e-12);
+        assert!((state.running.weight[0] - w).abs() < 1e-15 && w > 0.0, "v = {} vs {w}", state.running.weight[0]);
+        assert!((state.running.estimate[0] - (w * (5.0 - 3.5) + 4.0)).abs() < 1e-12);
     }
 
     #[test]

@@ -3,7 +3,9 @@
 //! roughness and a blend weight, and a negative control with the gradient's sign flipped fails
 //! the same criterion. With control variates (`IterationOptions::control_variates`): the warm-up
 //! iterations equal the plain run bit for bit, and the running estimate is unbiased along a fixed
-//! trajectory (a z-test over seeds) and less noisy than a plain pass 1.
+//! trajectory (a z-test over seeds) and less noisy than a plain pass 1. With gradient reuse
+//! (`IterationOptions::gradient_reuse`) the same holds for the running gradient estimate against
+//! plain gradients.
 
 use pathgrad::adaptive::AdaptiveEstimator;
 use pathgrad::backend::Backend;
@@ -11,8 +13,12 @@ use pathgrad::gpu::Renderer;
 use pathgrad::gpu::renderer::GradMode;
 use pathgrad::image::Image;
 use pathgrad::integrator::RenderOptions;
+use pathgrad::integrator::View;
 use pathgrad::loss::{Loss, loss_and_adjoint};
-use pathgrad::optim::{AdamOptions, ControlVariateOptions, ControlVariateState, IterationOptions, Optimization};
+use pathgrad::optim::{
+    AdamOptions, ControlVariateOptions, ControlVariateState, IterationOptions, Optimization, RunningEstimate,
+    gradient_reuse,
+};
 use pathgrad::params::{Gradients, ParamId, ParamTable};
 use pathgrad::scene::builtin;
 
@@ -58,8 +64,15 @@ fn an_iteration_is_pass_one_at_spp_primal_then_the_gradient_at_spp_grad_with_see
     }
     let (mut renderer, render, target, start, id) = blend_from_weight_08(&gpu);
     let mode = GradMode::Deterministic;
-    let options =
-        IterationOptions { render, spp_primal: 3, adaptive: None, loss: Loss::RelMse, mode, control_variates: None };
+    let options = IterationOptions {
+        render,
+        spp_primal: 3,
+        adaptive: None,
+        loss: Loss::RelMse,
+        mode,
+        control_variates: None,
+        gradient_reuse: None,
+    };
     let mut run = Optimization::new(start, &[id], AdamOptions::default(), options).unwrap();
     for t in 0..2u32 {
         let (loss, gradients) = run.gradient(&mut renderer, &target).unwrap();
@@ -97,8 +110,15 @@ fn optimise(scene: &str, param: &str, init: f32, truth: f32, iterations: usize, 
     let mut start = scene.params.clone();
     start.set(param, &[init]).unwrap();
     let id = start.find(param).unwrap();
-    let options =
-        IterationOptions { render, spp_primal: 16, adaptive: None, loss: Loss::RelMse, mode, control_variates: None };
+    let options = IterationOptions {
+        render,
+        spp_primal: 16,
+        adaptive: None,
+        loss: Loss::RelMse,
+        mode,
+        control_variates: None,
+        gradient_reuse: None,
+    };
     let mut run = Optimization::new(start, &[id], AdamOptions::with_learning_rate(LR), options).unwrap();
     let mut iterates = Vec::new();
     for _ in 0..iterations {
@@ -152,8 +172,15 @@ fn control_variates_equal_the_plain_run_while_the_weight_is_zero() {
     let (mut renderer, render, target, start, id) = blend_from_weight_08(&gpu);
     let mode = GradMode::Deterministic;
     for adaptive in [None, Some(AdaptiveEstimator::default())] {
-        let plain =
-            IterationOptions { render, spp_primal: 3, adaptive, loss: Loss::RelMse, mode, control_variates: None };
+        let plain = IterationOptions {
+            render,
+            spp_primal: 3,
+            adaptive,
+            loss: Loss::RelMse,
+            mode,
+            control_variates: None,
+            gradient_reuse: None,
+        };
         let with_cv = IterationOptions { control_variates: Some(ControlVariateOptions::default()), ..plain };
         let mut a = Optimization::new(start.clone(), &[id], AdamOptions::with_learning_rate(0.05), plain).unwrap();
         let mut b = Optimization::new(start.clone(), &[id], AdamOptions::with_learning_rate(0.05), with_cv).unwrap();
@@ -162,7 +189,7 @@ fn control_variates_equal_the_plain_run_while_the_weight_is_zero() {
             let (lb, gb) = b.gradient(&mut renderer, &target).unwrap();
             if t <= 2 {
                 assert_eq!((la, ga.values()), (lb, gb.values()), "iteration {t}: v = 0, the plain estimate");
-                assert!(b.control_variates().state.as_ref().is_none_or(|s| s.weight.iter().all(|&w| w == 0.0)));
+                assert!(b.control_variates().state.as_ref().is_none_or(|s| s.running.weight.iter().all(|&w| w == 0.0)));
             } else {
                 assert_ne!(la, lb, "iteration {t}: v > 0 changes the loss image");
             }
@@ -170,8 +197,8 @@ fn control_variates_equal_the_plain_run_while_the_weight_is_zero() {
             b.apply(lb, &gb).unwrap();
         }
         let state = b.control_variates().state.as_ref().unwrap();
-        assert_eq!((state.steps, state.updates), (5, 4));
-        assert!(state.weight.iter().any(|&w| w > 0.0));
+        assert_eq!((state.running.steps, state.running.updates), (5, 4));
+        assert!(state.running.weight.iter().any(|&w| w > 0.0));
         // The previous parameters are the last iteration's: where iteration 5 renders H.
         assert_ne!(b.control_variates().previous.as_ref().unwrap().get(id), b.params().get(id));
     }
@@ -273,6 +300,88 @@ fn the_control_variate_estimate_is_unbiased_along_a_trajectory_and_less_noisy() 
         println!(
             "δ = {delta}: smallest p over {tests} values {worst:.3e} (level {alpha:.1e}); image mean {m:.4} ± {se:.4}"
         );
+        if delta > 0.0 {
+            assert!(ratios[k] < 0.8, "δ = {delta}: Var F / Var G = {} at step {k}", ratios[k]);
+        }
+    }
+}
+
+/// Runs of the gradient-reuse estimate along a fixed trajectory of the blend weight
+/// (θ_i = 0.8 − δ·i; L2 loss against the scene at weight 0.2), G_i and H_i the kernels' loss
+/// gradients (pass 1 and gradient pass, 4 spp each, 32×24) with seed base + i: returns, per run, the
+/// estimate F_i after each of `steps` steps and a plain gradient at θ_i with seed base + 500 + i.
+fn gradient_reuse_runs(delta: f32, runs: u32, steps: usize) -> (Vec<Vec<f64>>, Vec<Vec<f64>>) {
+    let gpu = TestGpu::new();
+    let scene = builtin::load("blend").unwrap();
+    let mut renderer = Renderer::new(&gpu.ctx, &scene).unwrap();
+    let options = ControlVariateOptions::default();
+    let id = scene.params.find("object.weight.value").unwrap();
+    let mut table = scene.params.clone();
+    table.set("object.weight.value", &[0.2]).unwrap();
+    renderer.set_params(&table).unwrap();
+    let base = RenderOptions { width: 32, height: 24, spp: 4, ..RenderOptions::for_scene(&scene) };
+    let target = renderer.render(&RenderOptions { spp: 64, seed: 99_999, ..base }).unwrap();
+    let view = View::current(&scene);
+    let mut gradient = |table: &ParamTable, seed: u32| -> Gradients {
+        renderer.set_params(table).unwrap();
+        let at = RenderOptions { seed, ..base };
+        let views = [view.clone()];
+        renderer
+            .loss_and_gradient_views(&at, 4, &views, std::slice::from_ref(&target), Loss::L2, GradMode::Float)
+            .unwrap()
+            .1
+    };
+    let (mut estimates, mut plain) = (vec![Vec::new(); steps], vec![Vec::new(); steps]);
+    for run in 0..runs {
+        let mut state: Option<RunningEstimate> = None;
+        for i in 0..steps {
+            let seed = 1000 * run + i as u32;
+            let h = (i > 0).then(|| {
+                table.set("object.weight.value", &[0.8 - delta * (i - 1) as f32]).unwrap();
+                gradient(&table, seed)
+            });
+            table.set("object.weight.value", &[0.8 - delta * i as f32]).unwrap();
+            let g = gradient(&table, seed);
+            let (f, next) = gradient_reuse::step(&options, state.as_ref(), &table, &[id], &g, h.as_ref()).unwrap();
+            state = Some(next);
+            estimates[i].push(f64::from(f.get("object.weight.value").unwrap()[0]));
+            // A plain gradient at θ_i on paths of its own (independent of every F).
+            plain[i].push(f64::from(gradient(&table, seed + 500).get("object.weight.value").unwrap()[0]));
+        }
+    }
+    (estimates, plain)
+}
+
+/// The gradient-reuse estimate F_k after k = 8 steps along a fixed trajectory has the expectation
+/// of a plain gradient at θ_k: the mean of F_k over 128 runs against the mean of the runs'
+/// independent plain gradients at θ_k, Welch's t at level 0.001, for a still (δ = 0) and a moving
+/// (δ = 0.02) trajectory. Power check: the standard error of the difference is below 5 % of the
+/// plain mean, so a bias of a quarter (|t| > 5) fails, e.g. F ← v(F + H) + G. And the
+/// estimate is less noisy: Var F_8 below 0.8× the plain gradient's on the moving trajectory
+/// (ratios per step printed; BENCHMARKS.md).
+#[test]
+fn the_gradient_reuse_estimate_is_unbiased_along_a_trajectory_and_less_noisy() {
+    const RUNS: u32 = 128;
+    const STEPS: usize = 9;
+    let moments = |x: &[f64]| {
+        let n = x.len() as f64;
+        let m = x.iter().sum::<f64>() / n;
+        (m, x.iter().map(|v| (v - m).powi(2)).sum::<f64>() / (n - 1.0))
+    };
+    for delta in [0.0f32, 0.02] {
+        let (estimates, plain) = gradient_reuse_runs(delta, RUNS, STEPS);
+        let ratios: Vec<f64> = (0..STEPS).map(|i| moments(&estimates[i]).1 / moments(&plain[i]).1).collect();
+        println!("δ = {delta}: Var F_i / Var G_i for i = 0..{STEPS}: {ratios:.3?}");
+        let k = STEPS - 1;
+        let ((mf, vf), (mg, vg)) = (moments(&estimates[k]), moments(&plain[k]));
+        let n = f64::from(RUNS);
+        let se = (vf / n + vg / n).sqrt();
+        let t = (mf - mg) / se;
+        let dof = se.powi(4) / ((vf / n).powi(2) / (n - 1.0) + (vg / n).powi(2) / (n - 1.0));
+        let p = pathgrad::stats::student_t_two_sided(t, dof);
+        println!("δ = {delta}: F_8 {mf:.5e} vs plain {mg:.5e}, t = {t:.2}, p = {p:.3e}, se {se:.2e}");
+        assert!(p > 0.001, "δ = {delta}: F_8 {mf} vs plain {mg} (t = {t:.2}, p = {p:.2e})");
+        assert!(se < 0.05 * mg.abs(), "δ = {delta}: standard error {se} against a mean of {mg}: too weak a test");
         if delta > 0.0 {
             assert!(ratios[k] < 0.8, "δ = {delta}: Var F / Var G = {} at step {k}", ratios[k]);
         }

@@ -350,6 +350,47 @@ fn control_variates_resume_bit_for_bit_and_match_plain_while_the_weight_is_zero(
     }
 }
 
+/// `--reuse`: five iterations, then `--resume` to eight, give the eight-in-one-go run's rows bit
+/// for bit (fixed-point gradients): the running gradient estimate, its statistics and the previous
+/// parameters travel in `gradient_reuse.bin`. The first three iterations are the plain run's (the
+/// weights start at the fourth; G is the plain gradient with the same seed), the fourth is not.
+/// A truncated state file is refused, and so is `--reuse` with `--control-variates`.
+#[test]
+fn gradient_reuse_resumes_bit_for_bit_and_matches_plain_while_the_weight_is_zero() {
+    let dir = tempfile::tempdir().unwrap();
+    let (whole, split, plain) = (dir.path().join("whole"), dir.path().join("split"), dir.path().join("plain"));
+    let reuse = ["--reuse", "--deterministic", "--seed", "3", "--lr", "0.05"];
+    ok(&run(SMALL, &[&reuse[..], &["--iters", "8", "-o", whole.to_str().unwrap()]].concat()));
+    ok(&run(SMALL, &[&reuse[..], &["--iters", "5", "-o", split.to_str().unwrap()]].concat()));
+    ok(&run(SMALL, &[&reuse[1..], &["--iters", "5", "-o", plain.to_str().unwrap()]].concat()));
+    assert!(split.join("gradient_reuse.bin").is_file() && !plain.join("gradient_reuse.bin").exists());
+    let saved = std::fs::read(split.join("gradient_reuse.bin")).unwrap();
+    std::fs::write(split.join("gradient_reuse.bin"), &saved[..saved.len() - 1]).unwrap();
+    let o = run(&["optimize", "--resume", split.to_str().unwrap(), "--iters", "8"], &[]);
+    let stderr = String::from_utf8_lossy(&o.stderr);
+    assert!(!o.status.success() && stderr.contains("gradient-reuse state") && stderr.contains("truncated"), "{stderr}");
+    std::fs::write(split.join("gradient_reuse.bin"), &saved).unwrap();
+    let o = run(&["optimize", "--resume", split.to_str().unwrap(), "--iters", "8", "--json"], &[]);
+    ok(&o);
+    let summary: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    assert!(summary["outputs"].to_string().contains("gradient_reuse.bin"), "{summary}");
+    let ((_, resumed), (_, straight), (_, plain_rows)) = (rows(&split), rows(&whole), rows(&plain));
+    assert_eq!(resumed.len(), 8);
+    for (a, b) in resumed.iter().zip(&straight) {
+        assert_eq!((&a[0], &a[2..]), (&b[0], &b[2..]), "everything but the wall time agrees bit for bit");
+    }
+    for (t, (a, b)) in straight.iter().zip(&plain_rows).enumerate() {
+        if t < 3 {
+            assert_eq!(&a[2..], &b[2..], "iteration {t}: v = 0, the plain run");
+        } else if t == 3 {
+            assert_ne!(&a[2..], &b[2..], "iteration {t}: the reused gradient moves the parameters otherwise");
+        }
+    }
+    let o = run(SMALL, &["--reuse", "--control-variates", "-o", dir.path().join("both").to_str().unwrap()]);
+    let stderr = String::from_utf8_lossy(&o.stderr);
+    assert!(!o.status.success() && stderr.contains("--reuse") && stderr.contains("--control-variates"), "{stderr}");
+}
+
 /// `optimize --cpu --control-variates` follows the GPU run within the GPU-vs-CPU gradient
 /// tolerance (1e-3 relative), through iterations where the weights are in use: the control
 /// variates are host-side and the same on both back ends.

@@ -119,6 +119,13 @@ pub(super) struct OptimizeArgs {
     /// iterations' images. Costs a second pass 1 per iteration; the gradient pass is unchanged.
     #[arg(long)]
     control_variates: bool,
+    /// Gradient reuse across iterations (after Bálint et al. 2023): each iteration takes the loss
+    /// gradient at the current and at the previous parameters with the same random numbers, and
+    /// Adam steps with a per-parameter running estimate that carries the earlier iterations'
+    /// gradients forward along the trajectory. Costs a second gradient (both passes) per
+    /// iteration. Not with --control-variates.
+    #[arg(long, conflicts_with = "control_variates")]
+    reuse: bool,
     /// Output directory [default: optimize-out].
     #[arg(short, long, value_name = "DIR", conflicts_with = "resume")]
     output: Option<PathBuf>,
@@ -172,6 +179,9 @@ struct RunConfig {
     /// `--control-variates`.
     #[serde(default)]
     control_variates: bool,
+    /// `--reuse`.
+    #[serde(default)]
+    reuse: bool,
     width: u32,
     height: u32,
     max_depth: Option<u32>,
@@ -374,6 +384,7 @@ fn start(args: &OptimizeArgs) -> Result<Session> {
             .unwrap_or_else(|| AdaptiveEstimator::default().name().to_string()),
         deterministic: args.deterministic,
         control_variates: args.control_variates,
+        reuse: args.reuse,
         width: opts.width,
         height: opts.height,
         max_depth: opts.max_depth,

@@ -70,6 +70,7 @@ pub(super) fn iteration_options(scene: &Scene, config: &RunConfig) -> Result<Ite
         loss: config.loss.parse::<Loss>()?,
         mode: if config.deterministic { GradMode::Deterministic } else { GradMode::Float },
         control_variates: config.control_variates.then(ControlVariateOptions::default),
+        gradient_reuse: config.reuse.then(ControlVariateOptions::default),
     };
     options.validate()?;
     Ok(options)

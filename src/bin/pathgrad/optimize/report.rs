@@ -136,8 +136,10 @@ pub(super) fn summary(s: &Session, stopped: &str, json: bool) {
             .iter()
             .map(|f| s.dir.join(f))
             .collect();
-    if s.dir.join(super::control::FILE).is_file() {
-        outputs.push(s.dir.join(super::control::FILE));
+    for file in [super::control::FILE, super::control::REUSE_FILE] {
+        if s.dir.join(file).is_file() {
+            outputs.push(s.dir.join(file));
+        }
     }
     let ctx = s.ctx.as_deref();
     // The smoothness prior's value at the final parameters (--smooth).

@@ -156,6 +156,7 @@ pub(super) fn resume(args: &OptimizeArgs, dir: &Path, given: &BTreeSet<String>) 
         &config,
     )?;
     let run = if config.control_variates { super::control::read(dir, run, &table, &ids)? } else { run };
+    let run = if config.reuse { super::control::read_reuse(dir, run, &table, &ids)? } else { run };
     history.rewrite(&csv)?;
     Ok(Session {
         _lock: lock,
@@ -234,6 +235,7 @@ pub(super) fn check_unchanged(
     check("adaptive_estimator", "--adaptive-estimator", args.adaptive_estimator.clone(), c.adaptive_estimator.clone());
     check("deterministic", "--deterministic", Some(text(&args.deterministic)), text(&c.deterministic));
     check("control_variates", "--control-variates", Some(text(&args.control_variates)), text(&c.control_variates));
+    check("reuse", "--reuse", Some(text(&args.reuse)), text(&c.reuse));
     check("spp", "--spp", args.flags.spp.map(|v| text(&v)), text(&c.spp_final));
     check("width", "--width", args.flags.width.map(|v| text(&v)), text(&c.width));
     check("height", "--height", args.flags.height.map(|v| text(&v)), text(&c.height));
