@@ -357,7 +357,9 @@ impl Optimization {
     /// or adaptive). Changes neither the parameters nor Adam; [`Optimization::apply`] takes the
     /// step. With control variates it also renders pass 1 at the previous iteration's parameters
     /// and holds the new running estimate until [`Optimization::apply`] commits it (calling this
-    /// again before then recomputes the same estimate).
+    /// again before then recomputes the same estimate). With gradient reuse it also takes the
+    /// gradient at the previous iteration's parameters (first, so the current ones stay on
+    /// `renderer`) and returns the running gradient estimate, held the same way.
     ///
     /// # Errors
     /// Those of [`Backend::set_params`], [`Backend::loss_and_gradient_split`] and
