@@ -31,7 +31,25 @@ FieldDesc load_field(uint f) {
     return FieldDesc(w0.x, w0.y, w1.x, w1.y, w2.x, w2.y, vec3(w3, w4.x), vec3(w4.y, w5), vec3(w6, w7.x), vec3(w7.y, w8));
 }
 
-// Field `f` at world point p per channel (trilinear at p·res − 0.5 with clamping, as Mitsuba); a
+// The voxels a trilinear lookup of grid field d at local point `local` reads: the lower and upper
+// index per axis and the fraction t towards the upper one. The voxel coordinate is local·res − 0.5,
+// clamped to [0, res − 1] for FIELD_GRID (Mitsuba's default clamp), otherwise its two indices per
+// axis wrapped (repeat, mirror) as a bitmap's texels are. Twin of footprint in src/scene/volume.rs.
+void grid_footprint(FieldDesc d, vec3 local, out uvec3 lo, out uvec3 hi, out vec3 t) {
+    uvec3 res = uvec3(d.res_x, d.res_y, d.res_z);
+    vec3 r = vec3(res);
+    vec3 u = local * r - 0.5;
+    if (d.kind == FIELD_GRID) u = clamp(u, vec3(0.0), r - 1.0);
+    vec3 f = floor(u);
+    ivec3 i = ivec3(f);
+    ivec3 n = ivec3(res);
+    uint mode = d.kind == FIELD_GRID ? TEX_WRAP_CLAMP : d.kind == FIELD_GRID_MIRROR ? TEX_WRAP_MIRROR : 0u;
+    lo = uvec3(wrap_texel(i.x, n.x, mode), wrap_texel(i.y, n.y, mode), wrap_texel(i.z, n.z, mode));
+    hi = uvec3(wrap_texel(i.x + 1, n.x, mode), wrap_texel(i.y + 1, n.y, mode), wrap_texel(i.z + 1, n.z, mode));
+    t = u - f;
+}
+
+// Field `f` at world point p per channel (trilinear, grid_footprint's voxels, as Mitsuba); a
 // grey field's one channel in all three. One lookup body, looped over the channels, so each call
 // site inlines eight voxel loads rather than twenty-four; the twin is rgb in src/cpu/medium.rs.
 vec3 field_rgb(uint f, vec3 p) {
@@ -41,11 +59,9 @@ vec3 field_rgb(uint f, vec3 p) {
     }
     vec3 local = vec3(dot(d.row0, p), dot(d.row1, p), dot(d.row2, p)) + d.shift;
     uvec3 res = uvec3(d.res_x, d.res_y, d.res_z);
-    vec3 r = vec3(res);
-    vec3 u = clamp(local * r - 0.5, vec3(0.0), r - 1.0);
-    uvec3 lo = uvec3(floor(u));
-    uvec3 hi = min(lo + 1u, res - 1u);
-    vec3 t = u - vec3(lo);
+    uvec3 lo, hi;
+    vec3 t;
+    grid_footprint(d, local, lo, hi, t);
     float v[3];
     [[dont_unroll]] for (uint c = 0u; c < d.channels; c++) {
 #define VOXEL(VX, VY, VZ) params[d.offset + (((VZ) * res.y + (VY)) * res.x + (VX)) * d.channels + c]
@@ -101,11 +117,9 @@ void medium_grad(uint m, vec3 x, vec3 field_sigma, vec3 w_sigma, vec3 w_albedo) 
         if (w == vec3(0.0)) continue;
         FieldDesc d = load_field(f);
         uvec3 res = uvec3(d.res_x, d.res_y, d.res_z);
-        vec3 r = vec3(res);
-        vec3 u = clamp((vec3(dot(d.row0, x), dot(d.row1, x), dot(d.row2, x)) + d.shift) * r - 0.5, vec3(0.0), r - 1.0);
-        uvec3 lo = uvec3(floor(u));
-        uvec3 hi = min(lo + 1u, res - 1u);
-        vec3 t = u - vec3(lo);
+        uvec3 lo, hi;
+        vec3 t;
+        if (d.kind != FIELD_CONSTANT) grid_footprint(d, vec3(dot(d.row0, x), dot(d.row1, x), dot(d.row2, x)) + d.shift, lo, hi, t);
         uint corners = d.kind == FIELD_CONSTANT ? 1u : 8u;
         [[dont_unroll]] for (uint corner = 0u; corner < corners; corner++) {
             uint base = d.offset;

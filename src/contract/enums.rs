@@ -90,8 +90,13 @@ contract_enums! {
     enum FieldKind {
         /// One value (per channel) everywhere.
         Constant = FIELD_CONSTANT = 0,
-        /// A trilinearly interpolated voxel grid over the unit cube under its transform.
+        /// A trilinearly interpolated voxel grid over the unit cube under its transform, its
+        /// indices clamped to the grid (Mitsuba's default `wrap_mode`).
         Grid = FIELD_GRID = 1,
+        /// The same grid tiled over space (`wrap_mode` repeat).
+        GridRepeat = FIELD_GRID_REPEAT = 2,
+        /// The same grid tiled with every other tile mirrored (`wrap_mode` mirror).
+        GridMirror = FIELD_GRID_MIRROR = 3,
     }
 
     /// A medium's phase function.

@@ -15,13 +15,14 @@ use glam::Vec3;
 
 use crate::bvh::{Ray, closest_hit};
 use crate::contract::{
-    FIELD_CONSTANT, FLOAT_MAX, FieldDesc, MAT_NULL, MAX_NULL_CROSSINGS, MAX_TRACKING_STEPS, MediumDesc, NO_MEDIUM,
-    NO_PARAM, PHASE_HG,
+    FIELD_CONSTANT, FIELD_GRID_MIRROR, FIELD_GRID_REPEAT, FLOAT_MAX, FieldDesc, MAT_NULL, MAX_NULL_CROSSINGS,
+    MAX_TRACKING_STEPS, MediumDesc, NO_MEDIUM, NO_PARAM, PHASE_HG,
 };
 use crate::cpu::path::GradSink;
 use crate::cpu::surface::{offset_origin, surface_at};
 use crate::rng::{RngKey, Stream, uniform4};
 use crate::sampling::Frame;
+use crate::scene::Wrap;
 use crate::scene::flat::FlatScene;
 
 /// Differential path sampling places its vertex among surface vertices only: in a scene with
@@ -59,7 +60,16 @@ fn field_at(flat: &FlatScene, f: &FieldDesc, p: Vec3, c: u32) -> f32 {
     let res = glam::UVec3::new(f.res_x, f.res_y, f.res_z);
     let count = (f.res_x * f.res_y * f.res_z * f.channels) as usize;
     let values = &flat.params[f.offset as usize..f.offset as usize + count];
-    crate::scene::volume::lookup(values, res, f.channels, local, c)
+    crate::scene::volume::lookup(values, res, f.channels, local, c, grid_wrap(f))
+}
+
+/// How a grid field's voxel indices wrap, from its kind.
+fn grid_wrap(f: &FieldDesc) -> Wrap {
+    match f.kind {
+        FIELD_GRID_REPEAT => Wrap::Repeat,
+        FIELD_GRID_MIRROR => Wrap::Mirror,
+        _ => Wrap::Clamp,
+    }
 }
 
 fn rgb(flat: &FlatScene, f: &FieldDesc, p: Vec3) -> Vec3 {
@@ -394,11 +404,7 @@ pub fn shadow_transmittance(
 /// [`crate::scene::volume::lookup`] interpolates them).
 fn trilinear(f: &FieldDesc, local: Vec3) -> [(u32, f32); 8] {
     let res = glam::UVec3::new(f.res_x, f.res_y, f.res_z);
-    let r = res.as_vec3();
-    let u = (local * r - 0.5).clamp(Vec3::ZERO, r - 1.0);
-    let lo = u.floor().as_uvec3();
-    let hi = (lo + 1).min(res - 1);
-    let t = u - lo.as_vec3();
+    let (lo, hi, t) = crate::scene::volume::footprint(res, local, grid_wrap(f));
     let mut out = [(0u32, 0.0f32); 8];
     for (k, o) in out.iter_mut().enumerate() {
         let pick = |bit: usize, a: u32, b: u32| if k & bit == 0 { a } else { b };

@@ -190,14 +190,15 @@ fn param_rgb(params: &[f32], offset: u32) -> Vec3 {
 /// Texel index `i` of a row or column of `n` texels under wrap mode `mode` (Mitsuba's `repeat`,
 /// `mirror`, `clamp`).
 fn wrap_texel(i: i32, n: i32, mode: u32) -> i32 {
-    if mode & TEX_WRAP_CLAMP != 0 {
-        return i.clamp(0, n - 1);
-    }
-    if mode & TEX_WRAP_MIRROR != 0 {
-        let m = i.rem_euclid(2 * n);
-        return if m < n { m } else { 2 * n - 1 - m };
-    }
-    i.rem_euclid(n)
+    use crate::scene::Wrap;
+    let wrap = if mode & TEX_WRAP_CLAMP != 0 {
+        Wrap::Clamp
+    } else if mode & TEX_WRAP_MIRROR != 0 {
+        Wrap::Mirror
+    } else {
+        Wrap::Repeat
+    };
+    wrap.index(i, n)
 }
 
 /// The four texels a lookup at `uv` reads (row 0 is v = 0): their parameter offsets (RGB at

@@ -10,11 +10,11 @@ use crate::bsdf::rough_plastic::CoatingTable;
 use crate::bsdf::specular::SmoothKind;
 use crate::bvh::{self, Bvh};
 use crate::contract::{
-    COATING_TABLE_LEN, DIST_GGX, DeltaLight, EmitterTri, EnvCell, FIELD_CONSTANT, FIELD_GRID, FieldDesc,
-    LIGHT_DIRECTIONAL, LIGHT_POINT, LIGHT_SPOT, MAT_BLEND, MAT_CONDUCTOR, MAT_DIELECTRIC, MAT_DIFFUSE, MAT_NULL,
-    MAT_PLASTIC, MAT_ROUGH_CONDUCTOR, MAT_ROUGH_DIELECTRIC, MAT_ROUGH_PLASTIC, MAT_THIN_DIELECTRIC,
-    Material as GpuMaterial, MediumDesc, NMAP_BUMP, NO_EMITTER, NO_MEDIUM, NO_PARAM, PHASE_HG, PHASE_ISOTROPIC,
-    SCALAR_TEXTURE, TEX_CHECKER, TEX_NEAREST, TEX_WRAP_CLAMP, TEX_WRAP_MIRROR, TriShading,
+    COATING_TABLE_LEN, DIST_GGX, DeltaLight, EmitterTri, EnvCell, FIELD_CONSTANT, FIELD_GRID, FIELD_GRID_MIRROR,
+    FIELD_GRID_REPEAT, FieldDesc, LIGHT_DIRECTIONAL, LIGHT_POINT, LIGHT_SPOT, MAT_BLEND, MAT_CONDUCTOR, MAT_DIELECTRIC,
+    MAT_DIFFUSE, MAT_NULL, MAT_PLASTIC, MAT_ROUGH_CONDUCTOR, MAT_ROUGH_DIELECTRIC, MAT_ROUGH_PLASTIC,
+    MAT_THIN_DIELECTRIC, Material as GpuMaterial, MediumDesc, NMAP_BUMP, NO_EMITTER, NO_MEDIUM, NO_PARAM, PHASE_HG,
+    PHASE_ISOTROPIC, SCALAR_TEXTURE, TEX_CHECKER, TEX_NEAREST, TEX_WRAP_CLAMP, TEX_WRAP_MIRROR, TriShading,
 };
 use crate::error::Result;
 use crate::params::ParamId;
@@ -553,10 +553,14 @@ fn flatten_media(scene: &Scene) -> (Vec<MediumDesc>, Vec<FieldDesc>, Vec<f32>) {
         Field::Constant { value, channels } => {
             FieldDesc { kind: FIELD_CONSTANT, channels: *channels, offset: offset(*value), ..Default::default() }
         }
-        Field::Grid { resolution, channels, values, to_local } => {
+        Field::Grid { resolution, channels, values, to_local, wrap } => {
             let rows = to_local.transpose();
             FieldDesc {
-                kind: FIELD_GRID,
+                kind: match wrap {
+                    Wrap::Clamp => FIELD_GRID,
+                    Wrap::Repeat => FIELD_GRID_REPEAT,
+                    Wrap::Mirror => FIELD_GRID_MIRROR,
+                },
                 channels: *channels,
                 offset: offset(*values),
                 res_x: resolution.x,

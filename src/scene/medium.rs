@@ -20,6 +20,7 @@
 use glam::{Mat4, UVec3, Vec3};
 
 use crate::params::{ParamId, ParamTable};
+use crate::scene::Wrap;
 
 /// Index of a medium in [`crate::scene::Scene::media`].
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -46,6 +47,8 @@ pub enum Field {
         values: ParamId,
         /// World to the grid's unit cube (the inverse of the volume's `to_world`).
         to_local: Mat4,
+        /// How voxel indices outside the grid wrap (Mitsuba's `wrap_mode`, default clamp).
+        wrap: Wrap,
     },
 }
 
@@ -55,12 +58,13 @@ impl Field {
     pub fn eval(&self, params: &ParamTable, p: Vec3, c: u32) -> f32 {
         match self {
             Field::Constant { value, channels } => params.get(*value)[(c.min(channels - 1)) as usize],
-            Field::Grid { resolution, channels, values, to_local } => crate::scene::volume::lookup(
+            Field::Grid { resolution, channels, values, to_local, wrap } => crate::scene::volume::lookup(
                 params.get(*values),
                 *resolution,
                 *channels,
                 to_local.transform_point3(p),
                 c.min(channels - 1),
+                *wrap,
             ),
         }
     }

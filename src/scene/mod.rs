@@ -98,7 +98,8 @@ pub enum SmoothColour {
     Constant(Vec3),
 }
 
-/// How a bitmap's texel indices outside the image wrap (Mitsuba's `wrap_mode`).
+/// How a bitmap's texel indices, or a grid volume's voxel indices, outside the image or grid wrap
+/// (Mitsuba's `wrap_mode`; a bitmap's default is `Repeat`, a grid volume's `Clamp`).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub enum Wrap {
     /// Tiled.
@@ -108,6 +109,27 @@ pub enum Wrap {
     Mirror,
     /// The edge texels extend.
     Clamp,
+}
+
+impl Wrap {
+    /// Index `i` of a row of `n` texels or voxels, wrapped into [0, n).
+    ///
+    /// ```
+    /// use pathgrad::scene::Wrap;
+    /// assert_eq!([-1, 0, 3, 4].map(|i| Wrap::Repeat.index(i, 4)), [3, 0, 3, 0]);
+    /// assert_eq!([-1, 0, 3, 4, 8].map(|i| Wrap::Mirror.index(i, 4)), [0, 0, 3, 3, 0]);
+    /// assert_eq!([-1, 0, 3, 4].map(|i| Wrap::Clamp.index(i, 4)), [0, 0, 3, 3]);
+    /// ```
+    pub fn index(self, i: i32, n: i32) -> i32 {
+        match self {
+            Wrap::Clamp => i.clamp(0, n - 1),
+            Wrap::Mirror => {
+                let m = i.rem_euclid(2 * n);
+                if m < n { m } else { 2 * n - 1 - m }
+            }
+            Wrap::Repeat => i.rem_euclid(n),
+        }
+    }
 }
 
 /// Where a diffuse albedo comes from.

@@ -12,13 +12,14 @@
 //!
 //! The Mitsuba loader reads `gridvolume` files with [`Grid::read`] (`scene/mitsuba/media.rs`); the
 //! scene's media (`scene/medium.rs`) and the CPU reference (`cpu/medium.rs`) look values up with
-//! [`lookup`], whose GLSL twin is the kernels' `field_at` (`shaders/lib/medium.glsl`).
+//! [`lookup`], whose GLSL twin is the kernels' `field_rgb` (`shaders/lib/medium.glsl`).
 
 use std::path::Path;
 
 use glam::{UVec3, Vec3};
 
 use crate::error::{Error, Result};
+use crate::scene::Wrap;
 
 /// Bytes before the values.
 const HEADER_BYTES: usize = 48;
@@ -161,7 +162,7 @@ impl Grid {
     /// voxel coordinate p·res − 0.5 is clamped to [0, res − 1] on each axis and interpolated
     /// between its eight neighbours (so outside the cube the nearest face's values hold).
     pub fn lookup(&self, p: Vec3, c: u32) -> f32 {
-        lookup(&self.values, self.resolution, self.channels, p, c)
+        lookup(&self.values, self.resolution, self.channels, p, c, Wrap::Clamp)
     }
 
     /// The largest value of channel `c` (a majorant for delta tracking).
@@ -170,13 +171,11 @@ impl Grid {
     }
 }
 
-/// [`Grid::lookup`] on the voxel values `values` of a grid of `resolution` with `channels`.
-pub fn lookup(values: &[f32], resolution: UVec3, channels: u32, p: Vec3, c: u32) -> f32 {
-    let r = resolution.as_vec3();
-    let u = (p * r - 0.5).clamp(Vec3::ZERO, r - 1.0);
-    let lo = u.floor().as_uvec3();
-    let hi = (lo + 1).min(resolution - 1);
-    let t = u - lo.as_vec3();
+/// [`Grid::lookup`] on the voxel values `values` of a grid of `resolution` with `channels`, voxel
+/// indices outside the grid wrapped by `wrap` (Mitsuba's `gridvolume` default is
+/// [`Wrap::Clamp`]).
+pub fn lookup(values: &[f32], resolution: UVec3, channels: u32, p: Vec3, c: u32, wrap: Wrap) -> f32 {
+    let (lo, hi, t) = footprint(resolution, p, wrap);
     let at = |x: u32, y: u32, z: u32| values[(((z * resolution.y + y) * resolution.x + x) * channels + c) as usize];
     let lerp = |a: f32, b: f32, w: f32| a + (b - a) * w;
     let x00 = lerp(at(lo.x, lo.y, lo.z), at(hi.x, lo.y, lo.z), t.x);
@@ -184,6 +183,25 @@ pub fn lookup(values: &[f32], resolution: UVec3, channels: u32, p: Vec3, c: u32)
     let x01 = lerp(at(lo.x, lo.y, hi.z), at(hi.x, lo.y, hi.z), t.x);
     let x11 = lerp(at(lo.x, hi.y, hi.z), at(hi.x, hi.y, hi.z), t.x);
     lerp(lerp(x00, x10, t.y), lerp(x01, x11, t.y), t.z)
+}
+
+/// The voxels a trilinear lookup at `p` in the unit cube reads and its weights: the lower and
+/// upper voxel index per axis and the fraction t towards the upper one. The continuous voxel
+/// coordinate is p·res − 0.5; with [`Wrap::Clamp`] it is first clamped to [0, res − 1] (so outside
+/// the cube the nearest face's values hold), otherwise the two indices per axis are wrapped
+/// ([`Wrap::index`]). Shared by the lookups and their gradients (the kernels' `field_rgb` twin).
+pub fn footprint(resolution: UVec3, p: Vec3, wrap: Wrap) -> (UVec3, UVec3, Vec3) {
+    let r = resolution.as_vec3();
+    let mut u = p * r - 0.5;
+    if wrap == Wrap::Clamp {
+        u = u.clamp(Vec3::ZERO, r - 1.0);
+    }
+    let f = u.floor();
+    let (i, n) = (f.as_ivec3(), resolution.as_ivec3());
+    let index = |i: i32, n: i32| wrap.index(i, n) as u32;
+    let lo = UVec3::new(index(i.x, n.x), index(i.y, n.y), index(i.z, n.z));
+    let hi = UVec3::new(index(i.x + 1, n.x), index(i.y + 1, n.y), index(i.z + 1, n.z));
+    (lo, hi, u - f)
 }
 
 #[cfg(test)]
@@ -227,6 +245,31 @@ mod tests {
         assert_eq!(g.max(0), 23.0);
         let rgb = Grid::new(UVec3::ONE, 3, vec![0.2, 0.5, 0.9]).unwrap();
         assert_eq!((rgb.lookup(Vec3::splat(0.7), 2), rgb.max(1)), (0.9, 0.5));
+    }
+
+    /// Mitsuba's `gridvolume.eval_1` on the ramp with each `wrap_mode` (values printed by Mitsuba
+    /// 3.9.1, `scalar_rgb`, trilinear): inside but near a face (where repeat blends in the far
+    /// face), and outside on every axis.
+    #[test]
+    fn lookup_wraps_as_mitsuba_does() {
+        let g = ramp();
+        let points = [
+            Vec3::new(0.3, 0.5, 0.9),
+            Vec3::new(-0.3, 1.2, 0.5),
+            Vec3::new(1.6, -0.45, 2.3),
+            Vec3::new(-1.1, 0.05, -0.7),
+            Vec3::new(0.95, 0.9, 1.05),
+        ];
+        for (wrap, mitsuba) in [
+            (Wrap::Repeat, [18.3, 10.1, 7.199_999, 6.300_001, 9.200_004]),
+            (Wrap::Mirror, [20.1, 12.9, 6.199_998, 14.8, 23.0]),
+            (Wrap::Clamp, [20.1, 13.0, 19.0, 0.0, 23.0]),
+        ] {
+            for (p, m) in points.iter().zip(mitsuba) {
+                let v = lookup(&g.values, g.resolution, 1, *p, 0, wrap);
+                assert!((v - m).abs() < 1e-4, "{wrap:?} at {p}: {v} vs Mitsuba {m}");
+            }
+        }
     }
 
     /// Every malformed file is refused with a message naming the file and what is wrong, before

@@ -232,6 +232,10 @@ MATRIX = {
                                 fd={"cloud.interior_medium.scale": 0.2}),
     "medium_grid_albedo": dict(features=["heterogeneous", "grid sigma_t", "grid rgb albedo", "hg g=0.3"],
                                grads=["cloud.interior_medium.albedo.data"]),
+    "medium_grid_repeat": dict(features=["heterogeneous", "grid rgb albedo", "wrap_mode repeat"],
+                               grads=["cloud.interior_medium.albedo.data"]),
+    "medium_grid_mirror": dict(features=["heterogeneous", "grid rgb albedo", "wrap_mode mirror"],
+                               grads=["cloud.interior_medium.albedo.data"]),
     "medium_grid_sigma_t_rgb": dict(features=["heterogeneous", "grid rgb sigma_t"], grads=["cloud.interior_medium.sigma_t.data"]),
     "medium_grid_partial": dict(features=["heterogeneous", "grid smaller than its shape"], grads=["cloud.interior_medium.sigma_t.data"]),
     # Mitsuba's prbvolpath derivative of a constant heterogeneous sigma_t is biased: its majorant

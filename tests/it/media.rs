@@ -287,7 +287,9 @@ fn differential_sampling_is_refused_in_media_scenes() {
 }
 
 /// A scene with a heterogeneous RGB medium (grid extinction and albedo, HG phase) whose σ_t box
-/// covers only part of its cube (the rest of the cube is vacuum), a homogeneous one (constant
+/// covers only part of its cube (the rest of the cube is vacuum; its indices wrap by repeat, which
+/// inside the box blends the far face in at the faces) and whose albedo grid is smaller than the
+/// cube and mirrored over the rest of it (`wrap_mode` mirror), a homogeneous one (constant
 /// extinction, constant RGB albedo), null boundaries, surfaces and both emitter kinds, in `dir`.
 fn mixed_media(dir: &Path) -> Scene {
     // 12×9×10 voxels: a majorant grid of 2×2×2 cells, the half x ≥ 6 three times denser, so the
@@ -305,8 +307,8 @@ fn mixed_media(dir: &Path) -> Scene {
             <shape type="rectangle" id="light"><emitter type="area"><rgb name="radiance" value="6, 6, 5"/></emitter><transform name="to_world"><rotate x="1" angle="90"/><translate y="3"/></transform></shape>
             <shape type="rectangle" id="floor"><bsdf type="diffuse"/><transform name="to_world"><scale value="4"/><rotate x="1" angle="-90"/><translate y="-1.05"/></transform></shape>
             <shape type="cube" id="smoke"><bsdf type="null"/><medium type="heterogeneous" name="interior">
-                <volume type="gridvolume" name="sigma_t"><string name="filename" value="density.vol"/><transform name="to_world"><scale value="1.5"/><translate x="-0.9" y="-0.6" z="-0.7"/></transform></volume>
-                <volume type="gridvolume" name="albedo"><string name="filename" value="albedo.vol"/><transform name="to_world"><scale value="2"/><translate x="-1" y="-1" z="-1"/></transform></volume>
+                <volume type="gridvolume" name="sigma_t"><string name="filename" value="density.vol"/><string name="wrap_mode" value="repeat"/><transform name="to_world"><scale value="1.5"/><translate x="-0.9" y="-0.6" z="-0.7"/></transform></volume>
+                <volume type="gridvolume" name="albedo"><string name="filename" value="albedo.vol"/><string name="wrap_mode" value="mirror"/><transform name="to_world"><scale value="0.7"/><translate x="-0.45" y="-0.2" z="-0.3"/></transform></volume>
                 <float name="scale" value="2"/><phase type="hg"><float name="g" value="0.5"/></phase></medium>
                 <transform name="to_world"><translate x="-0.6"/><scale value="0.8"/></transform></shape>
             <shape type="sphere" id="fog"><bsdf type="null"/><medium type="homogeneous" name="interior"><float name="sigma_t" value="1.5"/><rgb name="albedo" value="0.95, 0.9, 0.85"/></medium>

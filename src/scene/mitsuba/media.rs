@@ -8,6 +8,7 @@ use glam::{DVec3, Mat4, Vec3};
 use super::loader::Loader;
 use super::xml::{El, Props};
 use crate::error::Result;
+use crate::scene::Wrap;
 use crate::scene::medium::{Field, Medium, MediumId, Phase, bounds, unit_cube_bounds};
 use crate::scene::volume::Grid;
 
@@ -104,18 +105,21 @@ impl<'a> Loader<'a> {
                 {
                     return Err(self.x.err(node, format!("filter_type '{filter}' is not supported (only trilinear)")));
                 }
-                // Mitsuba's default `clamp`; repetition or mirroring of the grid outside the unit
-                // cube is not built (a scene relying on it would render differently).
-                if let Some((wrap, node)) = v.string(&self.x, "wrap_mode")?
-                    && wrap != "clamp"
-                {
-                    return Err(self.x.err(
-                        node,
-                        format!(
-                            "wrap_mode '{wrap}' of a 'gridvolume' is not supported (only clamp, Mitsuba's default)"
-                        ),
-                    ));
-                }
+                // Mitsuba's default is `clamp` (a bitmap's is `repeat`).
+                let wrap = match v.string(&self.x, "wrap_mode")? {
+                    None => Wrap::Clamp,
+                    Some((mode, node)) => match mode.as_str() {
+                        "clamp" => Wrap::Clamp,
+                        "repeat" => Wrap::Repeat,
+                        "mirror" => Wrap::Mirror,
+                        other => {
+                            return Err(self.x.err(
+                                node,
+                                format!("'wrap_mode' must be 'repeat', 'mirror' or 'clamp', got '{other}'"),
+                            ));
+                        }
+                    },
+                };
                 if v.boolean(&self.x, "use_grid_bbox", false)? {
                     return Err(self
                         .x
@@ -135,6 +139,7 @@ impl<'a> Loader<'a> {
                     channels: grid.channels,
                     values,
                     to_local: to_world.inverse(),
+                    wrap,
                 };
                 Ok((field, to_world))
             }

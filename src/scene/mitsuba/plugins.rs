@@ -190,12 +190,7 @@ pub const PLUGINS: &[Plugin] = &[
     p(Phase, "isotropic", "—", ""),
     p(Phase, "hg", "`g` (parameter)", ""),
     p(Volume, "constvolume", "`value`", ""),
-    p(
-        Volume,
-        "gridvolume",
-        "`filename` or data, `to_world`, `filter_type`, `wrap_mode` clamp",
-        "`wrap_mode` repeat and mirror refused",
-    ),
+    p(Volume, "gridvolume", "`filename` or data, `to_world`, `filter_type`, `wrap_mode` (clamp, repeat, mirror)", ""),
     p(
         Sensor,
         "perspective",

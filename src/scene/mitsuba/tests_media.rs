@@ -151,9 +151,9 @@ fn bad_media_are_refused_with_their_location() {
         (shape(r#"<medium type="homogeneous" name="exterior"/>"#), "exterior media are not supported".into()),
         (
             shape(
-                r#"<medium type="heterogeneous" name="interior"><volume type="gridvolume" name="sigma_t"><string name="filename" value="density.vol"/><string name="wrap_mode" value="repeat"/></volume></medium>"#,
+                r#"<medium type="heterogeneous" name="interior"><volume type="gridvolume" name="sigma_t"><string name="filename" value="density.vol"/><string name="wrap_mode" value="tile"/></volume></medium>"#,
             ),
-            "wrap_mode 'repeat' of a 'gridvolume' is not supported (only clamp, Mitsuba's default)".into(),
+            "'wrap_mode' must be 'repeat', 'mirror' or 'clamp', got 'tile'".into(),
         ),
         (
             shape(
