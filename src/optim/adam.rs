@@ -47,13 +47,13 @@ impl AdamOptions {
         if !(self.learning_rate > 0.0 && self.learning_rate.is_finite()) {
             return bad("AdamOptions::learning_rate", format!("{} must be positive and finite", self.learning_rate));
         }
-        for (name, beta) in [("Adam beta1", self.beta1), ("Adam beta2", self.beta2)] {
+        for (name, beta) in [("AdamOptions::beta1", self.beta1), ("AdamOptions::beta2", self.beta2)] {
             if !(0.0..1.0).contains(&beta) {
                 return bad(name, format!("{beta} is not in [0, 1)"));
             }
         }
         if !(self.epsilon > 0.0 && self.epsilon.is_finite()) {
-            return bad("Adam epsilon", format!("{} must be positive and finite", self.epsilon));
+            return bad("AdamOptions::epsilon", format!("{} must be positive and finite", self.epsilon));
         }
         Ok(())
     }

@@ -178,7 +178,7 @@ fn optimize_bad_input_names_the_flag_and_leaves_nothing_behind() {
     let small = pathgrad::image::Image::new(8, 8);
     small.write_exr(dir.path().join("small.exr")).unwrap();
     let base = ["optimize", "builtin:cornell-box", "--width", "16", "--spp-primal", "1"];
-    let cases: [(&[&str], &str); 10] = [
+    let cases: [(&[&str], &str); 11] = [
         (&["--target-set", "sphere.bsdf.alpha.value=0.1"], "give at least one --param"),
         (
             &["--target-set", "sphere.bsdf.alpha.value=0.1", "--param", "nope=0.3"],
@@ -202,6 +202,10 @@ fn optimize_bad_input_names_the_flag_and_leaves_nothing_behind() {
         (
             &["--target-set", "sphere.bsdf.alpha.value=0.1", "--param", "sphere.bsdf.alpha.value", "--lr", "0"],
             "invalid --lr",
+        ),
+        (
+            &["--target-set", "sphere.bsdf.alpha.value=0.1", "--param", "sphere.bsdf.alpha.value", "--beta1", "1"],
+            "invalid --beta1: 1 is not in [0, 1)",
         ),
         (
             &[

@@ -14,6 +14,7 @@ const FLAGS: &[(&str, &str)] = &[
     ("Strategy::Diff::q", "--q"),
     ("Strategy::from_name", "--strategy"),
     ("AdamOptions::learning_rate", "--lr"),
+    ("AdamOptions::beta1", "--beta1"),
     ("AdaptiveEstimator", "--adaptive-estimator"),
     ("GradMode::Deterministic", "--deterministic"),
     ("LoadOptions::allow_outside_folder", "--allow-outside-folder"),

@@ -87,6 +87,10 @@ pub(super) struct OptimizeArgs {
     /// Adam's learning rate [default: 0.01].
     #[arg(long)]
     lr: Option<f64>,
+    /// Adam's first-moment decay β₁, in [0, 1) [default: 0.9]; 0 steps with each iteration's
+    /// gradient alone (no momentum).
+    #[arg(long, value_name = "B")]
+    beta1: Option<f64>,
     /// Add a smoothness prior of this weight λ to the objective: λ times the mean squared
     /// difference between neighbouring voxels (texels) of every optimised volume grid (bitmap
     /// texture). It steadies grids that the views determine poorly; the loss shown stays the
@@ -165,6 +169,9 @@ struct RunConfig {
     iters: u64,
     time_budget: Option<f64>,
     lr: f64,
+    /// `--beta1` (Adam's first-moment decay).
+    #[serde(default = "default_beta1")]
+    beta1: f64,
     /// `--smooth`: the smoothness prior's weight, if any.
     #[serde(default)]
     smooth: Option<f64>,
@@ -203,6 +210,11 @@ struct RunConfig {
     /// `--view`s: the sensors (by name) and their target files.
     #[serde(default)]
     views: Vec<ViewConfig>,
+}
+
+/// Adam's β₁ of a run saved before `--beta1` existed.
+fn default_beta1() -> f64 {
+    pathgrad::optim::BETA1
 }
 
 /// One `--view` of a run.
@@ -372,6 +384,7 @@ fn start(args: &OptimizeArgs) -> Result<Session> {
         iters: args.iters.unwrap_or(DEFAULT_ITERS),
         time_budget: args.time_budget,
         lr: args.lr.unwrap_or(pathgrad::optim::DEFAULT_LEARNING_RATE),
+        beta1: args.beta1.unwrap_or(pathgrad::optim::BETA1),
         smooth: args.smooth,
         spp_primal: args.spp_primal.unwrap_or(DEFAULT_SPP_PRIMAL),
         spp_grad: args.spp_grad.unwrap_or(DEFAULT_SPP_GRAD),

@@ -22,7 +22,7 @@ use pathgrad::integrator::View;
 use super::*;
 
 pub(super) fn adam_options(config: &RunConfig) -> Result<AdamOptions> {
-    let o = AdamOptions::with_learning_rate(config.lr);
+    let o = AdamOptions { beta1: config.beta1, ..AdamOptions::with_learning_rate(config.lr) };
     o.validate()?;
     Ok(o)
 }

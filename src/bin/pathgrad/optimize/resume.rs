@@ -227,6 +227,7 @@ pub(super) fn check_unchanged(
         .collect::<Result<_>>()?;
     check("views", "--view", Some(given_views.join(" ")), views.join(" "));
     check("lr", "--lr", args.lr.map(|v| text(&v)), text(&c.lr));
+    check("beta1", "--beta1", args.beta1.map(|v| text(&v)), text(&c.beta1));
     check("smooth", "--smooth", args.smooth.map(|v| text(&v)), c.smooth.map_or("none".into(), |v| text(&v)));
     check("spp_primal", "--spp-primal", args.spp_primal.map(|v| text(&v)), text(&c.spp_primal));
     check("spp_grad", "--spp-grad", args.spp_grad.map(|v| text(&v)), text(&c.spp_grad));
