@@ -15,41 +15,68 @@
 // dpdv: ∂p/∂v likewise (kernels with normal or bump maps).
 struct Surface { vec3 p; vec3 ng; vec3 ns; vec2 uv; uint material; uint emitter; uint interior; vec3 dpdu; vec3 dpdv; };
 
-// A triangle's shading data (TriShading, 18 words at a stride of 72 bytes) read as nine 64-bit
-// words, like the traversal's nodes and triangles (bvh.glsl): on lavapipe each word read is one
-// gather whatever its width.
-struct ShadingWords { uint64_t w0; uint64_t w1; uint64_t w2; uint64_t w3; uint64_t w4; uint64_t w5; uint64_t w6; uint64_t w7; uint64_t w8; };
-layout(buffer_reference, scalar, buffer_reference_align = 8) readonly buffer ShadingWordArray { ShadingWords v[]; };
+// A triangle's vertex indices and mesh (TriVertices, 16 bytes) read as two 64-bit words, like
+// the traversal's nodes and triangles (bvh.glsl): on lavapipe each word read is one gather
+// whatever its width. The meshes' records, vertex normals, uvs and emitter indices beside them.
+struct TriVertexWords { uint64_t w0; uint64_t w1; };
+layout(buffer_reference, scalar, buffer_reference_align = 8) readonly buffer TriVertexWordArray { TriVertexWords v[]; };
+layout(buffer_reference, scalar, buffer_reference_align = 4) readonly buffer MeshShadingArray { MeshShading v[]; };
+layout(buffer_reference, scalar, buffer_reference_align = 4) readonly buffer Vec3Array { vec3 v[]; };
+layout(buffer_reference, scalar, buffer_reference_align = 4) readonly buffer Vec2Array { vec2 v[]; };
+
+// The winding normal of a triangle without vertex normals as the host's glam computes it
+// ((v1 − v0) × (v2 − v0) times the reciprocal of its length, or 0 where that is not finite and
+// positive): the same floats as the per-triangle normals this replaced (twin: surface_at of
+// src/cpu/surface.rs).
+vec3 face_normal(TriPositions tri) {
+    precise vec3 a = tri.v1 - tri.v0;
+    precise vec3 b = tri.v2 - tri.v0;
+    precise vec3 c = vec3(a.y * b.z - b.y * a.z, a.z * b.x - b.z * a.x, a.x * b.y - b.x * a.y);
+    precise float len = sqrt(c.x * c.x + c.y * c.y + c.z * c.z);
+    precise float rcp = 1.0 / len;
+    return (!isinf(rcp) && !isnan(rcp) && rcp > 0.0) ? c * rcp : vec3(0.0);
+}
 
 Surface surface_at(Hit hit) {
     TriPositions tri = load_tri(hit.slot);
-    ShadingWordArray a = ShadingWordArray(globals.addr_shading);
-    uint i = prim_ids[hit.slot];
-    vec2 w0 = word_floats(a.v[i].w0);             // n0.xy
-    vec2 w1 = word_floats(a.v[i].w1);             // n0.z, n1.x
-    vec2 w2 = word_floats(a.v[i].w2);             // n1.yz
-    vec2 w3 = word_floats(a.v[i].w3);             // n2.xy
-    vec2 w4 = word_floats(a.v[i].w4);             // n2.z, uv0.x
-    vec2 w5 = word_floats(a.v[i].w5);             // uv0.y, uv1.x
-    vec2 w6 = word_floats(a.v[i].w6);             // uv1.y, uv2.x
-    uvec2 w7 = unpackUint2x32(a.v[i].w7);         // uv2.y, material
-    uvec2 w8 = unpackUint2x32(a.v[i].w8);         // emitter, interior
+    TriVertexWordArray a = TriVertexWordArray(globals.addr_tri_vertices);
+    uint id = prim_ids[hit.slot];
+    uvec2 w0 = unpackUint2x32(a.v[id].w0);        // i0, i1
+    uvec2 w1 = unpackUint2x32(a.v[id].w1);        // i2, mesh
+    MeshShading m = MeshShadingArray(globals.addr_meshes).v[w1.y];
+    vec3 n0, n1, n2;
+    if (m.normal_base == NO_ARRAY) {
+        n0 = face_normal(tri);
+        n1 = n0;
+        n2 = n0;
+    } else {
+        Vec3Array normals = Vec3Array(globals.addr_normals);
+        n0 = normals.v[m.normal_base + w0.x];
+        n1 = normals.v[m.normal_base + w0.y];
+        n2 = normals.v[m.normal_base + w1.x];
+    }
+    vec2 uv0 = vec2(0.0), uv1 = vec2(0.0), uv2 = vec2(0.0);
+    if (m.uv_base != NO_ARRAY) {
+        Vec2Array uvs = Vec2Array(globals.addr_uvs);
+        uv0 = uvs.v[m.uv_base + w0.x];
+        uv1 = uvs.v[m.uv_base + w0.y];
+        uv2 = uvs.v[m.uv_base + w1.x];
+    }
     float b0 = 1.0 - hit.b1 - hit.b2;
     Surface s;
     s.p = b0 * tri.v0 + hit.b1 * tri.v1 + hit.b2 * tri.v2;
     s.ng = normalize(cross(tri.v1 - tri.v0, tri.v2 - tri.v0));
-    vec3 n = b0 * vec3(w0, w1.x) + hit.b1 * vec3(w1.y, w2) + hit.b2 * vec3(w3, w4.x);
+    vec3 n = b0 * n0 + hit.b1 * n1 + hit.b2 * n2;
     s.ns = dot(n, n) > 0.0 ? normalize(n) : s.ng;
-    s.uv = b0 * vec2(w4.y, w5.x) + hit.b1 * vec2(w5.y, w6.x) + hit.b2 * vec2(w6.y, uintBitsToFloat(w7.x));
-    s.material = w7.y;
-    s.emitter = w8.x;
-    s.interior = w8.y;
+    s.uv = b0 * uv0 + hit.b1 * uv1 + hit.b2 * uv2;
+    s.material = m.material;
+    s.emitter = m.emitter_base == NO_ARRAY ? NO_EMITTER : UintArray(globals.addr_emitter_ids).v[m.emitter_base + id - m.first_tri];
+    s.interior = m.interior;
     s.dpdu = vec3(0.0);
     s.dpdv = vec3(0.0);
     if (HAS(F_ANISOTROPIC) || HAS(F_NORMAL_MAP)) {
-        vec2 uv0 = vec2(w4.y, w5.x);
-        vec2 d0 = vec2(w5.y, w6.x) - uv0;
-        vec2 d1 = vec2(w6.y, uintBitsToFloat(w7.x)) - uv0;
+        vec2 d0 = uv1 - uv0;
+        vec2 d1 = uv2 - uv0;
         float det = d0.x * d1.y - d0.y * d1.x;
         vec3 e0 = tri.v1 - tri.v0;
         vec3 e1 = tri.v2 - tri.v0;

@@ -1,10 +1,11 @@
 //! The binary tree → CWBVH conversion: obvhs 0.4.0's `cwbvh::bvh2_to_cwbvh` (Ylitie et al. 2017,
 //! after jan-van-bergen/GPU-Raytracer's `BVH8Converter.cpp`; obvhs is MIT / Apache-2.0), step for
 //! step and float operation for float operation, so it gives the same nodes and leaf order —
-//! with a decision table of one byte per (binary node, slot) instead of obvhs's eight (`Decision`:
-//! an f32 cost, a kind and two slot numbers). A decision's cost is read only by its parent, so
+//! with a decision table of one byte per (inner binary node, slot) instead of obvhs's eight per
+//! (binary node, slot) (`Decision`: an f32 cost, a kind and two slot numbers; a leaf's are
+//! constant, so the table holds inner nodes only, about 7 bytes a triangle). A decision's cost is read only by its parent, so
 //! here each subtree returns its seven costs up the recursion instead of storing them (issue 38:
-//! at 2 M triangles the table is 27 MiB instead of 214 MiB, which was the BVH build's summit).
+//! at 2 M triangles the table is 13 MiB instead of 214 MiB, which was the BVH build's summit).
 //! Subtrees are costed and converted in parallel, then renumbered into obvhs's order.
 //! `tests::converts_as_obvhs_does` compares both on several trees.
 
@@ -81,19 +82,27 @@ fn bvh2_to_cwbvh_split(
     }
     let c = Converter {
         bvh2,
-        decisions: (0..bvh2.nodes.len() * 7).map(|_| AtomicU8::new(DEFAULT.0)).collect(),
+        decisions: (0..(bvh2.nodes.len() / 2 + 1) * 7).map(|_| AtomicU8::new(DEFAULT.0)).collect(),
         max_prims_per_leaf,
         cost_depth,
         convert_depth,
     };
     c.calculate_cost(0, 0);
-    let root = c.convert_subtree(0, 0);
+    let root = match c.convert_parts(0, 0) {
+        Parts::Whole(root) => root,
+        Parts::Split(root, subtrees) => {
+            // The decision table (7 bytes a binary node) is not needed to join.
+            drop(c);
+            join(root, subtrees)
+        }
+    };
     (root.nodes, root.primitive_indices)
 }
 
 struct Converter<'a> {
     bvh2: &'a Bvh2,
-    /// Seven [`Decision`]s per binary node; each is written once, by the task costing its node.
+    /// Seven [`Decision`]s per inner binary node (`Converter::slot`); each is written once, by
+    /// the task costing its node.
     decisions: Vec<AtomicU8>,
     max_prims_per_leaf: u32,
     cost_depth: u32,
@@ -129,13 +138,64 @@ impl Subtree {
     }
 }
 
+/// A subtree converted in parts: whole, or its root (with its own leaves' primitives) and its
+/// inner children's subtrees, still to be joined.
+enum Parts {
+    Whole(Subtree),
+    Split(Subtree, Vec<Subtree>),
+}
+
+/// Joins root `out` and its inner children's `subtrees` into one subtree in obvhs's order: the
+/// children's own nodes, then each one's descendants in turn. Each child's subtree is freed as
+/// soon as it is copied, so the copy and the parts are never both whole (issue 38: at 20 M
+/// triangles the compressed nodes and leaf order are about 230 MiB).
+fn join(mut out: Subtree, subtrees: Vec<Subtree>) -> Subtree {
+    let mut base = 1 + subtrees.len() as u32;
+    let mut prims = out.primitive_indices.len() as u32;
+    let mut shifts = Vec::with_capacity(subtrees.len());
+    for sub in &subtrees {
+        shifts.push((base - 1, prims));
+        base += sub.nodes.len() as u32 - 1;
+        prims += sub.primitive_indices.len() as u32;
+    }
+    out.nodes.reserve(base as usize - 1);
+    out.primitive_indices.reserve(prims as usize - out.primitive_indices.len());
+    let moved = |n: &CwBvhNode, (nodes, prims): (u32, u32)| CwBvhNode {
+        child_base_idx: n.child_base_idx + nodes,
+        primitive_base_idx: n.primitive_base_idx + prims,
+        ..*n
+    };
+    for (sub, &shift) in subtrees.iter().zip(&shifts) {
+        out.nodes.push(moved(&sub.nodes[0], shift));
+    }
+    for (sub, shift) in subtrees.into_iter().zip(shifts) {
+        out.nodes.extend(sub.nodes[1..].iter().map(|n| moved(n, shift)));
+        out.primitive_indices.extend_from_slice(&sub.primitive_indices);
+    }
+    out
+}
+
 impl Converter<'_> {
-    fn decision(&self, at: usize) -> Decision {
-        Decision(self.decisions[at].load(Ordering::Relaxed))
+    /// Where inner binary node `node`'s seven decisions start: its children's pair, whose first
+    /// index halved numbers the inner nodes (sibling pairs never overlap), so the table holds
+    /// inner nodes only. A leaf's decisions are all `LEAF` and are not stored.
+    fn slot(&self, node: usize) -> Option<usize> {
+        let n = &self.bvh2.nodes[node];
+        (!n.is_leaf()).then(|| n.first_index as usize / 2 * 7)
     }
 
-    fn set_decision(&self, at: usize, d: Decision) {
-        self.decisions[at].store(d.0, Ordering::Relaxed);
+    /// Node `node`'s decision for slot budget `k + 1`.
+    fn decision(&self, node: usize, k: usize) -> Decision {
+        match self.slot(node) {
+            Some(at) => Decision(self.decisions[at + k].load(Ordering::Relaxed)),
+            None => Decision::new(LEAF, 0, 0),
+        }
+    }
+
+    /// Sets inner node `node`'s decision for slot budget `k + 1`.
+    fn set_decision(&self, node: usize, k: usize, d: Decision) {
+        let at = self.slot(node).expect("only inner nodes' decisions are stored");
+        self.decisions[at + k].store(d.0, Ordering::Relaxed);
     }
 
     /// Fills node `node_index`'s seven decisions and returns its primitive count and the seven
@@ -144,15 +204,11 @@ impl Converter<'_> {
         let node = &self.bvh2.nodes[node_index];
         let half_area = node.aabb().half_area();
         let (first_index, prim_count) = (node.first_index as usize, node.prim_count);
-        let at = node_index * 7;
         let mut costs = [0.0f32; 7];
         if prim_count != 0 {
             assert_eq!(prim_count, 1, "the conversion expects leaves of one primitive");
             let cost_leaf = half_area * (prim_count as f32) * PRIM_COST;
             costs = [cost_leaf; 7];
-            for k in 0..7 {
-                self.set_decision(at + k, Decision::new(LEAF, 0, 0));
-            }
             return (prim_count, costs);
         }
         let ((left_count, left), (right_count, right)) = if depth < self.cost_depth {
@@ -182,7 +238,7 @@ impl Converter<'_> {
             }
             let cost_internal = cost_distribute + half_area;
             let (kind, cost) = if cost_leaf < cost_internal { (LEAF, cost_leaf) } else { (INTERNAL, cost_internal) };
-            self.set_decision(at, Decision::new(kind, distribute_left, distribute_right));
+            self.set_decision(node_index, 0, Decision::new(kind, distribute_left, distribute_right));
             costs[0] = cost;
         }
         // Slot budgets 2–7 (the paper's i = 2..7).
@@ -201,9 +257,9 @@ impl Converter<'_> {
             let d = if distribute_left != u8::MAX {
                 Decision::new(DISTRIBUTE, distribute_left, distribute_right)
             } else {
-                self.decision(at + i - 1)
+                self.decision(node_index, i - 1)
             };
-            self.set_decision(at + i, d);
+            self.set_decision(node_index, i, d);
         }
         (num_primitives, costs)
     }
@@ -213,10 +269,19 @@ impl Converter<'_> {
     /// its own, then renumbered into place — the numbers obvhs's single depth-first pass gives,
     /// as in it a compressed node's descendants and primitives are each one contiguous run.
     fn convert_subtree(&self, index2: usize, depth: u32) -> Subtree {
+        match self.convert_parts(index2, depth) {
+            Parts::Whole(out) => out,
+            Parts::Split(out, subtrees) => join(out, subtrees),
+        }
+    }
+
+    /// [`Converter::convert_subtree`] with its last step, the join of the parallel parts, left to
+    /// the caller (the root's is made after the decision table is freed).
+    fn convert_parts(&self, index2: usize, depth: u32) -> Parts {
         let mut out = Subtree::new();
         if depth >= self.convert_depth {
             out.convert(self, 0, index2);
-            return out;
+            return Parts::Whole(out);
         }
         let (node, children) = self.node(index2, 1, &mut out.primitive_indices);
         let inner: Vec<usize> = (0..8)
@@ -225,28 +290,7 @@ impl Converter<'_> {
             .collect();
         let subtrees: Vec<Subtree> = inner.par_iter().map(|&child| self.convert_subtree(child, depth + 1)).collect();
         out.nodes[0] = node;
-        // The inner children's own nodes, then each one's descendants in turn.
-        let mut base = 1 + subtrees.len() as u32;
-        let mut shifts = Vec::with_capacity(subtrees.len());
-        for sub in &subtrees {
-            let shift = (base - 1, out.primitive_indices.len() as u32);
-            base += sub.nodes.len() as u32 - 1;
-            shifts.push(shift);
-            out.primitive_indices.extend_from_slice(&sub.primitive_indices);
-        }
-        out.nodes.reserve(base as usize - 1);
-        let moved = |n: &CwBvhNode, (nodes, prims): (u32, u32)| CwBvhNode {
-            child_base_idx: n.child_base_idx + nodes,
-            primitive_base_idx: n.primitive_base_idx + prims,
-            ..*n
-        };
-        for (sub, &shift) in subtrees.iter().zip(&shifts) {
-            out.nodes.push(moved(&sub.nodes[0], shift));
-        }
-        for (sub, &shift) in subtrees.iter().zip(&shifts) {
-            out.nodes.extend(sub.nodes[1..].iter().map(|n| moved(n, shift)));
-        }
-        out
+        Parts::Split(out, subtrees)
     }
 
     /// Compressed node for binary node `index2`, its children's first index `child_base` and
@@ -283,7 +327,7 @@ impl Converter<'_> {
             node.child_max_x[i] = child_max.x as u8;
             node.child_max_y[i] = child_max.y as u8;
             node.child_max_z[i] = child_max.z as u8;
-            if self.decision(child as usize * 7).kind() == LEAF {
+            if self.decision(child as usize, 0).kind() == LEAF {
                 let count = self.count_primitives(child as usize, primitive_indices);
                 node.child_meta[i] = num_primitives as u8
                     | match count {
@@ -321,10 +365,10 @@ impl Converter<'_> {
             *child_count += 1;
             return;
         }
-        let decision = self.decision(index * 7 + i);
+        let decision = self.decision(index, i);
         let first = node.first_index as usize;
         for (child, budget) in [(first, decision.left()), (first + 1, decision.right())] {
-            if self.decision(child * 7 + budget).kind() == DISTRIBUTE {
+            if self.decision(child, budget).kind() == DISTRIBUTE {
                 self.get_children(child, children, child_count, budget);
             } else {
                 children[*child_count] = child as u32;

@@ -24,7 +24,8 @@ contract_constants! {
     BINDING_TRIS = 2;
     /// Binding: the original triangle id of each leaf slot (`uint[]`).
     BINDING_PRIM_IDS = 3;
-    /// Binding: per-triangle shading data by original id (`TriShading[]`).
+    /// Binding: unused since the shading data is read through device addresses
+    /// (`Globals::addr_tri_vertices` and the arrays beside it).
     BINDING_SHADING = 4;
     /// Binding: materials (`Material[]`).
     BINDING_MATERIALS = 5;
@@ -63,11 +64,13 @@ contract_constants! {
     /// map (RGB).
     NMAP_BUMP = 16;
 
-    /// `TriShading::emitter` of a triangle that does not emit.
+    /// The emitter index of a triangle that does not emit (`MeshShading::emitter_base`).
     NO_EMITTER = 0xFFFF_FFFF;
     /// A parameter offset that refers to nothing (e.g. no environment).
     NO_PARAM = 0xFFFF_FFFF;
-    /// `TriShading::interior` of a triangle whose mesh holds no medium, and the medium of a path
+    /// A `MeshShading` offset of per-vertex or per-triangle data the mesh does not have.
+    NO_ARRAY = 0xFFFF_FFFF;
+    /// `MeshShading::interior` of a mesh that holds no medium, and the medium of a path
     /// in vacuum.
     NO_MEDIUM = 0xFFFF_FFFF;
     /// Bisection steps of a pixel filter's sample (`sampling::filter_sample`): 2⁻²⁴ of the

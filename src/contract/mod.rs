@@ -48,11 +48,12 @@ mod tests {
     /// Scalar layout packs 4-byte scalars and vectors of them with no padding: sizes are field sums.
     #[test]
     fn structs_have_no_padding() {
-        assert_eq!(size_of::<Globals>(), 27 * 4 + 3 * 12 + 14 * 8);
+        assert_eq!(size_of::<Globals>(), 27 * 4 + 3 * 12 + 18 * 8);
         assert_eq!(size_of::<ViewCamera>(), 4 * 12 + 7 * 4);
         assert_eq!(size_of::<BvhNode>(), 80);
         assert_eq!(size_of::<TriPositions>(), 40);
-        assert_eq!(size_of::<TriShading>(), 3 * 12 + 3 * 8 + 12);
+        assert_eq!(size_of::<TriVertices>(), 16);
+        assert_eq!(size_of::<MeshShading>(), 6 * 4);
         assert_eq!(size_of::<FieldDesc>(), 6 * 4 + 4 * 12);
         assert_eq!(size_of::<MediumDesc>(), 11 * 4 + 2 * 12);
         assert_eq!(size_of::<Material>(), 18 * 4 + 4 * 12);

@@ -81,8 +81,18 @@ contract_structs! {
         addr_tris: UVec2,
         /// Device address of the leaf slots' triangle ids.
         addr_prim_ids: UVec2,
-        /// Device address of the per-triangle shading data.
-        addr_shading: UVec2,
+        /// Device address of the triangles' vertex indices and meshes (`TriVertices`, by
+        /// original id).
+        addr_tri_vertices: UVec2,
+        /// Device address of the meshes' shading records (`MeshShading`).
+        addr_meshes: UVec2,
+        /// Device address of the vertex normals of the meshes that have them (`Vec3`, one a
+        /// vertex, mesh after mesh).
+        addr_normals: UVec2,
+        /// Device address of the texture coordinates of the meshes that have them (`Vec2`).
+        addr_uvs: UVec2,
+        /// Device address of the emissive meshes' per-triangle emitter indices (`u32`).
+        addr_emitter_ids: UVec2,
         /// Device address of the materials.
         addr_materials: UVec2,
         /// Device address of the emitters.
@@ -180,27 +190,46 @@ contract_structs! {
         pad0: u32,
     }
 
-    /// Per-triangle shading data, indexed by the original triangle id.
-    struct TriShading {
-        /// Vertex normal 0 (unit).
-        n0: Vec3,
-        /// Vertex normal 1 (unit).
-        n1: Vec3,
-        /// Vertex normal 2 (unit).
-        n2: Vec3,
-        /// Texture coordinate 0.
-        uv0: Vec2,
-        /// Texture coordinate 1.
-        uv1: Vec2,
-        /// Texture coordinate 2.
-        uv2: Vec2,
+    /// A triangle's vertices and mesh, indexed by the original triangle id: 16 bytes a triangle.
+    /// With [`MeshShading`] and the per-vertex normals (12 bytes a vertex) and texture
+    /// coordinates (8) of the meshes that have them, this is the shading data the kernels read
+    /// (issue 38: it replaced a 72-byte per-triangle record of three normals, three uv pairs,
+    /// material, emitter and medium). A closed mesh has about half as many vertices as
+    /// triangles, so the device holds per triangle: positions in leaf order 40 bytes
+    /// ([`TriPositions`]), leaf slot to id 4, this 16, normals about 6 and uvs about 4 where the
+    /// mesh has them, CWBVH nodes about 8 — about 74 bytes for a mesh with normals and no uvs
+    /// (124 before).
+    struct TriVertices {
+        /// Index of vertex 0 in its mesh's vertex arrays.
+        i0: u32,
+        /// Index of vertex 1.
+        i1: u32,
+        /// Index of vertex 2.
+        i2: u32,
+        /// Index of its mesh in the `MeshShading` array.
+        mesh: u32,
+    }
+
+    /// What the triangles of one mesh share: material, interior medium, and where its per-vertex
+    /// data and its triangles' emitter indices start.
+    struct MeshShading {
         /// Index into the material array.
         material: u32,
-        /// Index into the emitter array, or `NO_EMITTER`.
-        emitter: u32,
-        /// Index into the media of the medium inside the triangle's mesh (behind its winding
-        /// normal), or `NO_MEDIUM`.
+        /// Index into the media of the medium inside the mesh (behind its winding normal), or
+        /// `NO_MEDIUM`.
         interior: u32,
+        /// Original id of its first triangle.
+        first_tri: u32,
+        /// Offset of its vertex 0's normal in the vertex-normal array (`Globals::addr_normals`),
+        /// or `NO_ARRAY`: the mesh has no vertex normals and shades with its face normals.
+        normal_base: u32,
+        /// Offset of its vertex 0's texture coordinates in the uv array (`Globals::addr_uvs`), or
+        /// `NO_ARRAY`: every coordinate is 0.
+        uv_base: u32,
+        /// Offset of its first triangle's emitter index in the emitter-index array
+        /// (`Globals::addr_emitter_ids`: an index into the emitters, or `NO_EMITTER` for a
+        /// triangle of no area), or `NO_ARRAY`: the mesh does not emit.
+        emitter_base: u32,
     }
 
     /// A field of a medium (extinction or albedo): a constant or a grid. A grid's local point is

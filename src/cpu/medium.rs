@@ -388,7 +388,7 @@ pub fn shadow_transmittance(
         if flat.materials[s.material as usize].tag != MAT_NULL {
             return Vec3::ZERO;
         }
-        m = medium_crossed(flat.shading[flat.bvh.prim_ids[hit.slot as usize] as usize].interior, s.ng, dir, m);
+        m = medium_crossed(flat.mesh_of(hit.slot).interior, s.ng, dir, m);
         o = offset_origin(s.p, s.ng, dir);
         if t_max < f32::MAX {
             remaining = (end - o).dot(dir);

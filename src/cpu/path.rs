@@ -239,7 +239,7 @@ pub fn trace_path<const ADJOINT: bool>(
             if crossings > MAX_NULL_CROSSINGS {
                 break Event::Lost;
             }
-            let interior = flat.shading[flat.bvh.prim_ids[hit.slot as usize] as usize].interior;
+            let interior = flat.mesh_of(hit.slot).interior;
             current = medium::medium_crossed(interior, s.ng, ray.dir, current);
             travelled += hit.t;
             ray = Ray::new(offset_origin(s.p, s.ng, ray.dir), ray.dir);
@@ -388,7 +388,7 @@ pub fn trace_path<const ADJOINT: bool>(
         };
         // The medium across this surface on each side: a shape's interior beyond a dielectric
         // boundary, else the path's current one.
-        let interior = flat.shading[flat.bvh.prim_ids[hit.slot as usize] as usize].interior;
+        let interior = flat.mesh_of(hit.slot).interior;
         if let Some(es) = es {
             let (wl, p_e, shadow_tmax, origin) = if es.delta && es.distant {
                 (es.point, es.pdf, f32::MAX, offset_origin(s.p, s.ng, es.point))

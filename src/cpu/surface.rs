@@ -11,8 +11,8 @@ use crate::bvh::Hit;
 use crate::contract::ALPHA_TEXTURE_FLOOR;
 use crate::contract::{
     COATING_TABLE_LEN, MAT_BLEND, MAT_CONDUCTOR, MAT_DIELECTRIC, MAT_PLASTIC, MAT_ROUGH_CONDUCTOR,
-    MAT_ROUGH_DIELECTRIC, MAT_ROUGH_PLASTIC, MAT_THIN_DIELECTRIC, Material, NMAP_BUMP, NO_PARAM, SCALAR_TEXTURE,
-    TEX_CHECKER, TEX_NEAREST, TEX_WRAP_CLAMP, TEX_WRAP_MIRROR, TEXTURE_DESC_LEN,
+    MAT_ROUGH_DIELECTRIC, MAT_ROUGH_PLASTIC, MAT_THIN_DIELECTRIC, Material, NMAP_BUMP, NO_ARRAY, NO_EMITTER, NO_PARAM,
+    SCALAR_TEXTURE, TEX_CHECKER, TEX_NEAREST, TEX_WRAP_CLAMP, TEX_WRAP_MIRROR, TEXTURE_DESC_LEN,
 };
 use crate::cpu::path::GradSink;
 use crate::scene::flat::FlatScene;
@@ -40,22 +40,41 @@ pub struct Surface {
     pub dpdv: Vec3,
 }
 
-/// Resolves `hit`.
+/// Resolves `hit`: the mesh's vertex normals (its face normal where it has none) and texture
+/// coordinates (0 where it has none) interpolated, its material, its triangle's emitter.
 pub fn surface_at(flat: &FlatScene, hit: &Hit) -> Surface {
     let tri = &flat.bvh.tris[hit.slot as usize];
-    let sh = &flat.shading[flat.bvh.prim_ids[hit.slot as usize] as usize];
+    let id = flat.bvh.prim_ids[hit.slot as usize];
+    let tv = &flat.tri_vertices[id as usize];
+    let m = &flat.meshes[tv.mesh as usize];
+    let vertices = [tv.i0, tv.i1, tv.i2];
+    let [n0, n1, n2] = if m.normal_base == NO_ARRAY {
+        [(tri.v1 - tri.v0).cross(tri.v2 - tri.v0).normalize_or_zero(); 3]
+    } else {
+        vertices.map(|i| flat.normals[(m.normal_base + i) as usize])
+    };
+    let [uv0, uv1, uv2] = if m.uv_base == NO_ARRAY {
+        [glam::Vec2::ZERO; 3]
+    } else {
+        vertices.map(|i| flat.uvs[(m.uv_base + i) as usize])
+    };
+    let emitter = if m.emitter_base == NO_ARRAY {
+        NO_EMITTER
+    } else {
+        flat.emitter_ids[(m.emitter_base + id - m.first_tri) as usize]
+    };
     let b0 = 1.0 - hit.b1 - hit.b2;
     let p = b0 * tri.v0 + hit.b1 * tri.v1 + hit.b2 * tri.v2;
     let ng = (tri.v1 - tri.v0).cross(tri.v2 - tri.v0).normalize();
-    let n = b0 * sh.n0 + hit.b1 * sh.n1 + hit.b2 * sh.n2;
+    let n = b0 * n0 + hit.b1 * n1 + hit.b2 * n2;
     let ns = if n.dot(n) > 0.0 { n.normalize() } else { ng };
-    let uv = b0 * sh.uv0 + hit.b1 * sh.uv1 + hit.b2 * sh.uv2;
-    let (d0, d1) = (sh.uv1 - sh.uv0, sh.uv2 - sh.uv0);
+    let uv = b0 * uv0 + hit.b1 * uv1 + hit.b2 * uv2;
+    let (d0, d1) = (uv1 - uv0, uv2 - uv0);
     let det = d0.x * d1.y - d0.y * d1.x;
     let (e0, e1) = (tri.v1 - tri.v0, tri.v2 - tri.v0);
     let dpdu = if det != 0.0 { (d1.y * e0 - d0.y * e1) / det } else { Vec3::ZERO };
     let dpdv = if det != 0.0 { (d0.x * e1 - d1.x * e0) / det } else { Vec3::ZERO };
-    Surface { p, ng, ns, uv, material: sh.material, emitter: sh.emitter, dpdu, dpdv }
+    Surface { p, ng, ns, uv, material: m.material, emitter, dpdu, dpdv }
 }
 
 /// Whether material `id` is (or blends) an anisotropic rough conductor, whose shading frame

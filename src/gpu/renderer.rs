@@ -104,12 +104,13 @@ impl Renderer {
     /// peak. Its [`Renderer::report`] holds the `upload` phase only.
     ///
     /// # Errors
-    /// [`Error::InvalidArgument`] if `flat` cannot be `scene`'s (its triangle, material or
+    /// [`Error::InvalidArgument`] if `flat` cannot be `scene`'s (its triangle, mesh, material or
     /// parameter counts, or its shading data's where it has any, differ); Vulkan and allocation
     /// failures.
     pub fn from_flat(ctx: &Arc<Context>, scene: Scene, flat: FlatScene) -> Result<Renderer> {
         if flat.bvh.prim_ids.len() != scene.triangle_count()
-            || !(flat.shading.is_empty() || flat.shading.len() == scene.triangle_count())
+            || !(flat.tri_vertices.is_empty() || flat.tri_vertices.len() == scene.triangle_count())
+            || flat.meshes.len() != scene.meshes.len()
             || flat.materials.len() != scene.materials.len()
             || flat.params.len() != scene.params.values().len()
         {
@@ -152,9 +153,10 @@ impl Renderer {
         &self.report
     }
 
-    /// Bytes of device memory the scene's buffers take (BVH nodes, triangles, triangle ids and
-    /// shading, materials, emitters, parameters, media, lights, tables): what the renderer holds
-    /// between renders, without a render's own images and gradient buffers.
+    /// Bytes of device memory the scene's buffers take (BVH nodes, triangles, triangle ids,
+    /// vertex indices, vertex normals and uvs, meshes, materials, emitters, parameters, media,
+    /// lights, tables): what the renderer holds between renders, without a render's own images
+    /// and gradient buffers.
     pub fn scene_device_bytes(&self) -> u64 {
         self.gpu.bytes()
     }

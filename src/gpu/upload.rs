@@ -3,19 +3,27 @@
 use std::sync::Arc;
 
 use crate::contract::Globals;
-use crate::contract::TriShading;
 use crate::error::Result;
 use crate::gpu::buffer::Buffer;
 use crate::gpu::context::Context;
 use crate::scene::Scene;
-use crate::scene::flat::{FlatScene, shading_iter};
+use crate::scene::flat::{FlatScene, normal_count, normals_iter, tri_vertices_iter, uv_count, uvs_iter};
 
 /// The scene's arrays on the device.
 pub(crate) struct GpuScene {
     pub nodes: Buffer,
     pub tris: Buffer,
     pub prim_ids: Buffer,
-    pub shading: Buffer,
+    /// Each triangle's vertex indices and mesh (`TriVertices`, by original id).
+    pub tri_vertices: Buffer,
+    /// The meshes' shading records.
+    pub meshes: Buffer,
+    /// The vertex normals of the meshes that have them.
+    pub normals: Buffer,
+    /// The texture coordinates of the meshes that have them.
+    pub uvs: Buffer,
+    /// The emissive meshes' per-triangle emitter indices.
+    pub emitter_ids: Buffer,
     pub materials: Buffer,
     pub emitters: Buffer,
     /// One f32 per parameter value (`ParamTable` offsets): what `Renderer::set_params` rewrites.
@@ -36,12 +44,12 @@ pub(crate) struct GpuScene {
 }
 
 impl GpuScene {
-    /// Uploads `flat`, the flattened form of `scene`, emptying its per-triangle arrays — the
-    /// BVH's triangles and triangle ids, and the shading data if it has any — each as soon as it
-    /// is on the device: from then on they live there only (issue 38: at 2 M triangles they are
-    /// 250 MB of host memory, and on a CPU device the device copy is host memory too). Without
-    /// shading data (`FlatScene::for_device_reporting`) it is made from `scene` chunk by chunk
-    /// straight into the staging buffer, so the whole array never exists on the host.
+    /// Uploads `flat`, the flattened form of `scene`, emptying its per-triangle and per-vertex
+    /// arrays — the BVH's triangles and triangle ids, and the shading data (vertex indices,
+    /// normals, texture coordinates) if it has any — each as soon as it is on the device: from
+    /// then on they live there only (issue 38: on a CPU device the device copy is host memory
+    /// too). Without shading data (`FlatScene::for_device_reporting`) it is copied from `scene`'s
+    /// meshes chunk by chunk straight into the staging buffer, so no host copy of it exists.
     pub(crate) fn new(ctx: &Arc<Context>, scene: &Scene, flat: &mut FlatScene) -> Result<GpuScene> {
         let _span = tracing::info_span!("upload").entered();
         // One statement each: a host array taken into a temporary of the struct expression below
@@ -50,24 +58,30 @@ impl GpuScene {
         let nodes = Buffer::storage_with(ctx, "BVH nodes", &flat.bvh.nodes)?;
         let tris = Buffer::storage_with(ctx, "triangles (leaf order)", &std::mem::take(&mut flat.bvh.tris))?;
         let prim_ids = Buffer::storage_with(ctx, "triangle ids", &std::mem::take(&mut flat.bvh.prim_ids))?;
-        let shading = if flat.shading.is_empty() {
-            let count = scene.triangle_count();
-            let shading = Buffer::storage(ctx, "triangle shading", (count * size_of::<TriShading>()) as u64)?;
-            let mut made = shading_iter(scene, &flat.emitters);
-            shading.upload_with(count, |chunk: &mut [TriShading]| {
-                for (slot, s) in chunk.iter_mut().zip(&mut made) {
-                    *slot = s;
-                }
-            })?;
-            shading
+        let tri_vertices = if flat.tri_vertices.is_empty() {
+            streamed(ctx, "triangle vertices", scene.triangle_count(), tri_vertices_iter(scene))?
         } else {
-            Buffer::storage_with(ctx, "triangle shading", &std::mem::take(&mut flat.shading))?
+            Buffer::storage_with(ctx, "triangle vertices", &std::mem::take(&mut flat.tri_vertices))?
+        };
+        let normals = if flat.normals.is_empty() {
+            streamed(ctx, "vertex normals", normal_count(scene), normals_iter(scene))?
+        } else {
+            Buffer::storage_with(ctx, "vertex normals", &std::mem::take(&mut flat.normals))?
+        };
+        let uvs = if flat.uvs.is_empty() {
+            streamed(ctx, "texture coordinates", uv_count(scene), uvs_iter(scene))?
+        } else {
+            Buffer::storage_with(ctx, "texture coordinates", &std::mem::take(&mut flat.uvs))?
         };
         Ok(GpuScene {
             nodes,
             tris,
             prim_ids,
-            shading,
+            tri_vertices,
+            meshes: Buffer::storage_with(ctx, "mesh shading", &flat.meshes)?,
+            normals,
+            uvs,
+            emitter_ids: Buffer::storage_with(ctx, "emitter ids", &flat.emitter_ids)?,
             materials: Buffer::storage_with(ctx, "materials", &flat.materials)?,
             emitters: Buffer::storage_with(ctx, "emitters", &flat.emitters)?,
             params: Buffer::storage_with(ctx, "param buffer", &flat.params)?,
@@ -86,7 +100,11 @@ impl GpuScene {
             &self.nodes,
             &self.tris,
             &self.prim_ids,
-            &self.shading,
+            &self.tri_vertices,
+            &self.meshes,
+            &self.normals,
+            &self.uvs,
+            &self.emitter_ids,
             &self.materials,
             &self.emitters,
             &self.params,
@@ -108,7 +126,11 @@ impl GpuScene {
             addr_nodes: self.nodes.device_address(),
             addr_tris: self.tris.device_address(),
             addr_prim_ids: self.prim_ids.device_address(),
-            addr_shading: self.shading.device_address(),
+            addr_tri_vertices: self.tri_vertices.device_address(),
+            addr_meshes: self.meshes.device_address(),
+            addr_normals: self.normals.device_address(),
+            addr_uvs: self.uvs.device_address(),
+            addr_emitter_ids: self.emitter_ids.device_address(),
             addr_materials: self.materials.device_address(),
             addr_emitters: self.emitters.device_address(),
             addr_params: self.params.device_address(),
@@ -121,4 +143,21 @@ impl GpuScene {
             ..*globals
         }
     }
+}
+
+/// A storage buffer of the `count` elements of `items`, written chunk by chunk into the reused
+/// staging buffer (`Buffer::upload_with`): the whole array never exists on the host.
+fn streamed<T: bytemuck::Pod>(
+    ctx: &Arc<Context>,
+    name: &str,
+    count: usize,
+    mut items: impl Iterator<Item = T>,
+) -> Result<Buffer> {
+    let buffer = Buffer::storage(ctx, name, (count * size_of::<T>()) as u64)?;
+    buffer.upload_with(count, |chunk: &mut [T]| {
+        for (slot, item) in chunk.iter_mut().zip(&mut items) {
+            *slot = item;
+        }
+    })?;
+    Ok(buffer)
 }

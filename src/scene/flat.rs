@@ -3,7 +3,7 @@
 
 use std::time::Instant;
 
-use glam::Vec3;
+use glam::{Vec2, Vec3};
 
 use crate::bsdf::Distribution;
 use crate::bsdf::rough_plastic::CoatingTable;
@@ -13,8 +13,9 @@ use crate::contract::{
     COATING_TABLE_LEN, DIST_GGX, DeltaLight, EmitterTri, EnvCell, FIELD_CONSTANT, FIELD_GRID, FIELD_GRID_MIRROR,
     FIELD_GRID_REPEAT, FieldDesc, LIGHT_DIRECTIONAL, LIGHT_POINT, LIGHT_SPOT, MAT_BLEND, MAT_CONDUCTOR, MAT_DIELECTRIC,
     MAT_DIFFUSE, MAT_NULL, MAT_PLASTIC, MAT_ROUGH_CONDUCTOR, MAT_ROUGH_DIELECTRIC, MAT_ROUGH_PLASTIC,
-    MAT_THIN_DIELECTRIC, Material as GpuMaterial, MediumDesc, NMAP_BUMP, NO_EMITTER, NO_MEDIUM, NO_PARAM, PHASE_HG,
-    PHASE_ISOTROPIC, SCALAR_TEXTURE, TEX_CHECKER, TEX_NEAREST, TEX_WRAP_CLAMP, TEX_WRAP_MIRROR, TriShading,
+    MAT_THIN_DIELECTRIC, Material as GpuMaterial, MediumDesc, MeshShading, NMAP_BUMP, NO_ARRAY, NO_EMITTER, NO_MEDIUM,
+    NO_PARAM, PHASE_HG, PHASE_ISOTROPIC, SCALAR_TEXTURE, TEX_CHECKER, TEX_NEAREST, TEX_WRAP_CLAMP, TEX_WRAP_MIRROR,
+    TriVertices,
 };
 use crate::error::Result;
 use crate::params::ParamId;
@@ -28,8 +29,21 @@ use crate::scene::{Albedo, Light, LightShape, Material, Scene, SmoothColour, Wra
 pub struct FlatScene {
     /// BVH nodes and leaf-ordered triangles.
     pub bvh: Bvh,
-    /// Shading data by original triangle id.
-    pub shading: Vec<TriShading>,
+    /// Each triangle's vertex indices and mesh, by original triangle id (16 bytes a triangle;
+    /// empty from [`FlatScene::for_device_reporting`], whose upload makes them from the scene).
+    pub tri_vertices: Vec<TriVertices>,
+    /// The meshes' shading records (material, medium, where their per-vertex data starts), one
+    /// a mesh of the scene.
+    pub meshes: Vec<MeshShading>,
+    /// The vertex normals of the meshes that have them, mesh after mesh (12 bytes a vertex;
+    /// empty from [`FlatScene::for_device_reporting`]).
+    pub normals: Vec<Vec3>,
+    /// The texture coordinates of the meshes that have them, mesh after mesh (8 bytes a vertex;
+    /// empty from [`FlatScene::for_device_reporting`]).
+    pub uvs: Vec<Vec2>,
+    /// The emitter index (or `NO_EMITTER`) of every triangle of the emissive meshes
+    /// (`MeshShading::emitter_base`).
+    pub emitter_ids: Vec<u32>,
     /// Materials.
     pub materials: Vec<GpuMaterial>,
     /// Emissive triangles with their cumulative area distribution.
@@ -105,7 +119,9 @@ impl FlatScene {
     }
 
     /// [`FlatScene::new`], recording three phases in `report`: `flatten` (validation and every
-    /// array but the BVH's and the triangles' shading), `bvh` (the build) and `shading`.
+    /// array but the BVH's and the per-triangle and per-vertex shading data), `bvh` (the build)
+    /// and `shading` (those: [`FlatScene::tri_vertices`], [`FlatScene::normals`],
+    /// [`FlatScene::uvs`]).
     ///
     /// # Errors
     /// As [`FlatScene::new`]; what was recorded before the failure stays.
@@ -113,11 +129,11 @@ impl FlatScene {
         FlatScene::build(scene, report, true)
     }
 
-    /// [`FlatScene::new_reporting`] without the triangles' shading data (`shading` is empty) and
-    /// its phase: what a renderer needs, since [`crate::gpu::Renderer::from_flat`] makes the
-    /// shading data from the scene chunk by chunk straight into its upload, so that the whole
-    /// array never exists in host memory (issue 38: 72 bytes a triangle, 137 MiB at 2 M). The
-    /// CPU reference needs [`FlatScene::new_reporting`]'s.
+    /// [`FlatScene::new_reporting`] without the per-triangle and per-vertex shading data
+    /// (`tri_vertices`, `normals` and `uvs` are empty) and its phase: what a renderer needs,
+    /// since [`crate::gpu::Renderer::from_flat`] uploads them from the scene chunk by chunk, so
+    /// that no host copy of them exists (issue 38). The CPU reference needs
+    /// [`FlatScene::new_reporting`]'s.
     ///
     /// # Errors
     /// As [`FlatScene::new`]; what was recorded before the failure stays.
@@ -181,21 +197,30 @@ impl FlatScene {
         };
         let bvh = bvh::build_from(id as usize, triangle)?;
         report.record("bvh", start);
+        let (meshes, emitter_ids) = mesh_shading(scene, &emitters);
         // After the build, so that the BVH's intermediate forms and the shading data are never
-        // alive together (issue 38: at 2 M triangles, 144 MB off the peak).
-        let shading = if with_shading {
+        // alive together (issue 38).
+        let (tri_vertices, normals, uvs) = if with_shading {
             let start = Instant::now();
-            // Sized first: collecting a `flat_map` would grow the array by doubling.
-            let mut shading = Vec::with_capacity(scene.triangle_count());
-            shading.extend(shading_iter(scene, &emitters));
+            // Sized first: collecting a `flat_map` would grow the arrays by doubling.
+            let mut tri_vertices = Vec::with_capacity(scene.triangle_count());
+            tri_vertices.extend(tri_vertices_iter(scene));
+            let mut normals = Vec::with_capacity(normal_count(scene));
+            normals.extend(normals_iter(scene));
+            let mut uvs = Vec::with_capacity(uv_count(scene));
+            uvs.extend(uvs_iter(scene));
             report.record("shading", start);
-            shading
+            (tri_vertices, normals, uvs)
         } else {
-            Vec::new()
+            (Vec::new(), Vec::new(), Vec::new())
         };
         Ok(FlatScene {
             bvh,
-            shading,
+            tri_vertices,
+            meshes,
+            normals,
+            uvs,
+            emitter_ids,
             materials,
             emitters,
             emitter_total_area: total as f32,
@@ -215,6 +240,12 @@ impl FlatScene {
         self.materials.iter().filter(|m| m.tag == MAT_ROUGH_PLASTIC).count() * COATING_TABLE_LEN as usize
     }
 
+    /// The shading record of the mesh of the triangle in leaf slot `slot`.
+    pub fn mesh_of(&self, slot: u32) -> &MeshShading {
+        let id = self.bvh.prim_ids[slot as usize];
+        &self.meshes[self.tri_vertices[id as usize].mesh as usize]
+    }
+
     /// The geometric (winding) normal of the triangle in leaf slot `slot`, unit length.
     pub fn face_normal(&self, slot: u32) -> Vec3 {
         let t = &self.bvh.tris[slot as usize];
@@ -222,42 +253,72 @@ impl FlatScene {
     }
 }
 
-/// The shading data of every triangle, by original triangle id: vertex normals (the face normal
-/// without them), texture coordinates, material, emitter (`emitters` lists the emissive triangles
-/// in id order) and interior medium. Both back ends' shading comes from here: collected by the CPU
-/// reference, written chunk by chunk into the upload by a renderer.
-pub(crate) fn shading_iter<'a>(scene: &'a Scene, emitters: &'a [EmitterTri]) -> impl Iterator<Item = TriShading> + 'a {
+/// The meshes' shading records and the emissive meshes' per-triangle emitter indices
+/// (`emitters` lists the emissive triangles in id order; a triangle of no area is not one of
+/// them and gets `NO_EMITTER`). The per-vertex offsets count the vertices of the earlier meshes
+/// that have normals (uvs): [`normals_iter`] and [`uvs_iter`] lay them out so.
+pub(crate) fn mesh_shading(scene: &Scene, emitters: &[EmitterTri]) -> (Vec<MeshShading>, Vec<u32>) {
     let mut next_emitter = emitters.iter().map(|e| e.tri).enumerate().peekable();
-    scene.meshes.iter().flat_map(|mesh| mesh.indices.iter().map(move |t| (mesh, t))).zip(0u32..).map(
-        move |((mesh, t), id)| {
-            let n = match &mesh.normals {
-                Some(normals) => t.map(|i| normals[i as usize]),
-                None => {
-                    let p = t.map(|i| mesh.positions[i as usize]);
-                    [(p[1] - p[0]).cross(p[2] - p[0]).normalize_or_zero(); 3]
-                }
-            };
-            let uv = match &mesh.uvs {
-                Some(uvs) => t.map(|i| uvs[i as usize]),
-                None => [glam::Vec2::ZERO; 3],
-            };
-            let emitter = match next_emitter.next_if(|&(_, tri)| tri == id) {
-                Some((k, _)) => k as u32,
-                None => NO_EMITTER,
-            };
-            TriShading {
-                n0: n[0],
-                n1: n[1],
-                n2: n[2],
-                uv0: uv[0],
-                uv1: uv[1],
-                uv2: uv[2],
+    let (mut first_tri, mut normals, mut uvs) = (0u32, 0u32, 0u32);
+    let mut emitter_ids = Vec::new();
+    let meshes = scene
+        .meshes
+        .iter()
+        .map(|mesh| {
+            let record = MeshShading {
                 material: mesh.material.0,
-                emitter,
                 interior: mesh.interior.map_or(NO_MEDIUM, |m| m.0),
+                first_tri,
+                normal_base: mesh.normals.as_ref().map_or(NO_ARRAY, |_| normals),
+                uv_base: mesh.uvs.as_ref().map_or(NO_ARRAY, |_| uvs),
+                emitter_base: mesh.emitter.map_or(NO_ARRAY, |_| emitter_ids.len() as u32),
+            };
+            if mesh.emitter.is_some() {
+                for id in first_tri..first_tri + mesh.indices.len() as u32 {
+                    emitter_ids.push(match next_emitter.next_if(|&(_, tri)| tri == id) {
+                        Some((k, _)) => k as u32,
+                        None => NO_EMITTER,
+                    });
+                }
             }
-        },
-    )
+            first_tri += mesh.indices.len() as u32;
+            normals += mesh.normals.as_ref().map_or(0, Vec::len) as u32;
+            uvs += mesh.uvs.as_ref().map_or(0, Vec::len) as u32;
+            record
+        })
+        .collect();
+    (meshes, emitter_ids)
+}
+
+/// Every triangle's vertex indices (into its mesh's vertices) and mesh index, by original
+/// triangle id. Both back ends' come from here: collected by the CPU reference, written chunk by
+/// chunk into the upload by a renderer.
+pub(crate) fn tri_vertices_iter(scene: &Scene) -> impl Iterator<Item = TriVertices> + '_ {
+    scene
+        .meshes
+        .iter()
+        .zip(0u32..)
+        .flat_map(|(mesh, m)| mesh.indices.iter().map(move |t| TriVertices { i0: t[0], i1: t[1], i2: t[2], mesh: m }))
+}
+
+/// The vertex normals of the meshes that have them, mesh after mesh (`MeshShading::normal_base`).
+pub(crate) fn normals_iter(scene: &Scene) -> impl Iterator<Item = Vec3> + '_ {
+    scene.meshes.iter().filter_map(|m| m.normals.as_deref()).flatten().copied()
+}
+
+/// How many normals [`normals_iter`] gives.
+pub(crate) fn normal_count(scene: &Scene) -> usize {
+    scene.meshes.iter().filter_map(|m| m.normals.as_ref()).map(Vec::len).sum()
+}
+
+/// The texture coordinates of the meshes that have them, mesh after mesh (`MeshShading::uv_base`).
+pub(crate) fn uvs_iter(scene: &Scene) -> impl Iterator<Item = Vec2> + '_ {
+    scene.meshes.iter().filter_map(|m| m.uvs.as_deref()).flatten().copied()
+}
+
+/// How many coordinate pairs [`uvs_iter`] gives.
+pub(crate) fn uv_count(scene: &Scene) -> usize {
+    scene.meshes.iter().filter_map(|m| m.uvs.as_ref()).map(Vec::len).sum()
 }
 
 /// The kernels' form of a light without area.

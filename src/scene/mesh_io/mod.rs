@@ -195,6 +195,69 @@ mod tests {
         assert!(message.ends_with("negative.ply: face 0: list 'vertex_indices' has the length -1"), "{message}");
     }
 
+    /// The streamed binary decoder (issue 38) across its read buffer's refills (1 MiB) and its
+    /// parallel vertex batches (65 536 vertices): an element of lists, then 70 000 vertices of
+    /// 41-byte records and 50 000 faces (triangles and quads) give the geometry of the same mesh
+    /// written as ASCII.
+    #[test]
+    fn ply_binary_streamed_across_chunks_matches_ascii() {
+        let dir = tempfile::tempdir().unwrap();
+        let (n, faces) = (70_000u32, 50_000u32);
+        let value = |i: u32, k: u32| ((i * 7 + k * 13) % 1000) as f32 * 0.001 + k as f32;
+        let header = |format: &str| {
+            format!(
+                "ply\nformat {format} 1.0\nelement junk 2\nproperty list uchar float values\n\
+                 element vertex {n}\nproperty float x\nproperty float y\n\
+                 property float z\nproperty uchar flag\nproperty float nx\nproperty float ny\nproperty float nz\n\
+                 property double u\nproperty double v\nelement face {faces}\nproperty list uchar int vertex_indices\n\
+                 end_header\n"
+            )
+        };
+        let face = |f: u32| -> Vec<u32> {
+            let a = (f * 3) % (n - 3);
+            if f.is_multiple_of(5) { vec![a, a + 1, a + 2, a + 3] } else { vec![a, a + 2, a + 1] }
+        };
+        let mut ascii = header("ascii") + "2 0.5 0.25\n0\n";
+        let mut binary = header("binary_little_endian").into_bytes();
+        // An element read scalar by scalar before the vertices: the buffer is then full of
+        // unread bytes when the first vertex batch asks for more than it holds.
+        binary.extend([2u8]);
+        binary.extend(0.5f32.to_le_bytes());
+        binary.extend(0.25f32.to_le_bytes());
+        binary.push(0);
+        for i in 0..n {
+            let v: Vec<f32> = (0..8).map(|k| value(i, k)).collect();
+            ascii.push_str(&format!("{} {} {} 3 {} {} {} {} {}\n", v[0], v[1], v[2], v[3], v[4], v[5], v[6], v[7]));
+            for (k, x) in v.iter().enumerate() {
+                if k == 3 {
+                    binary.push(3);
+                }
+                if k < 6 {
+                    binary.extend(x.to_le_bytes());
+                } else {
+                    binary.extend(f64::from(*x).to_le_bytes());
+                }
+            }
+        }
+        for f in 0..faces {
+            let list = face(f);
+            ascii.push_str(&format!("{}", list.len()));
+            binary.push(list.len() as u8);
+            for i in list {
+                ascii.push_str(&format!(" {i}"));
+                binary.extend((i as i32).to_le_bytes());
+            }
+            ascii.push('\n');
+        }
+        let (a, b) = (dir.path().join("big_ascii.ply"), dir.path().join("big_binary.ply"));
+        std::fs::write(&a, ascii).unwrap();
+        std::fs::write(&b, binary).unwrap();
+        let from_ascii = load_ply(&a).unwrap();
+        assert_eq!(from_ascii.positions.len(), n as usize);
+        assert_eq!(from_ascii.indices.len(), (faces + faces / 5) as usize);
+        assert_eq!(load_ply(&b).unwrap(), from_ascii);
+    }
+
     #[test]
     fn ply_with_double_coordinates_and_st_names() {
         let g = load_ply(&data("quad_double_st.ply")).unwrap();

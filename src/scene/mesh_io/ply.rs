@@ -1,14 +1,23 @@
 //! PLY: the header through `ply-rs-bw`, counts checked against the file size; an ASCII payload
-//! through `ply-rs-bw` too, a binary one decoded here straight into the geometry (`decode_binary`);
-//! then vertices (positions, normals, texture coordinates under their common names) and faces.
+//! through `ply-rs-bw` too (the file read whole), a binary one streamed from the file in chunks and
+//! decoded here straight into the geometry (`decode_binary`; vertices of fixed-size records in
+//! parallel); then vertices (positions, normals, texture coordinates under their common names)
+//! and faces.
 
+use std::io::{BufRead, Read, Seek};
 use std::path::Path;
 
 use glam::{Vec2, Vec3};
 use ply_rs_bw::ply::{DefaultElement, ElementDef, Encoding, Property, PropertyType, ScalarType};
+use rayon::prelude::*;
 
 use super::{catch_panic, read_file, scene_error};
-use crate::error::Result;
+use crate::error::{Error, Result};
+
+/// Bytes a binary payload is read in (and the header's read buffer).
+const STREAM_BYTES: usize = 1 << 20;
+/// Vertices decoded at once (in parallel) when every vertex property is a scalar.
+const VERTEX_BATCH: usize = 1 << 16;
 use crate::scene::shapes::Geometry;
 
 /// The vertex properties that may hold texture coordinates, in order of preference.
@@ -35,15 +44,52 @@ pub fn load_ply(path: &Path) -> Result<Geometry> {
 }
 
 fn read_ply(path: &Path) -> Result<Geometry> {
-    let bytes = read_file(path)?;
-    if !(bytes.starts_with(b"ply\n") || bytes.starts_with(b"ply\r")) {
+    let io = |source| Error::Io { path: path.to_path_buf(), source };
+    let file = std::fs::File::open(path).map_err(io)?;
+    let file_len = file.metadata().map_err(io)?.len();
+    let mut input = std::io::BufReader::with_capacity(STREAM_BYTES, file);
+    let start = input.fill_buf().map_err(io)?;
+    if !(start.starts_with(b"ply\n") || start.starts_with(b"ply\r")) {
         return Err(scene_error(path, None, "not a PLY file (it does not start with the line 'ply')"));
     }
-    catch_panic(|| parse_ply(path, &bytes))
+    catch_panic(|| parse_ply(path, input, file_len))
         .unwrap_or_else(|| Err(scene_error(path, None, "the PLY parser (ply-rs-bw) panicked on this file")))
 }
 
-fn parse_ply(path: &Path, bytes: &[u8]) -> Result<Geometry> {
+/// Reads the header from `input` (the file from its start, `file_len` bytes); a binary payload
+/// is then streamed from `input` (issue 38: the 477 MiB file of 20 M triangles is never held
+/// whole), an ASCII one is read whole and parsed by `ply-rs-bw`.
+fn parse_ply(path: &Path, mut input: std::io::BufReader<std::fs::File>, file_len: u64) -> Result<Geometry> {
+    let io = |source| Error::Io { path: path.to_path_buf(), source };
+    let parser = ply_rs_bw::parser::Parser::<DefaultElement>::new();
+    let header = parser.read_header(&mut ply_rs_bw::parser::Reader::new(&mut input)).map_err(|e| {
+        let (line, message) = ply_message(&e);
+        scene_error(path, line, format!("PLY header: {message}"))
+    })?;
+    if header.encoding == Encoding::Ascii {
+        return parse_ascii(path, &read_file(path)?);
+    }
+    let payload_len = file_len.saturating_sub(input.stream_position().map_err(io)?);
+    check_binary_sizes(path, &header.elements, payload_len)?;
+    let wanted = wanted_properties(path, &header.elements)?;
+    let mut stream = Stream {
+        reader: input,
+        buf: vec![0; STREAM_BYTES],
+        at: 0,
+        end: 0,
+        big_endian: header.encoding == Encoding::BinaryBigEndian,
+        error: None,
+    };
+    let decoded = decode_binary(path, &header.elements, &wanted, &mut stream);
+    // A read that failed ended the payload early: the error is the read's, not the file's.
+    match stream.error {
+        Some(source) if decoded.is_err() => Err(io(source)),
+        _ => decoded,
+    }
+}
+
+/// An ASCII PLY file, whole.
+fn parse_ascii(path: &Path, bytes: &[u8]) -> Result<Geometry> {
     let parser = ply_rs_bw::parser::Parser::<DefaultElement>::new();
     let mut reader = ply_rs_bw::parser::Reader::new(bytes);
     let header = parser.read_header(&mut reader).map_err(|e| {
@@ -52,12 +98,8 @@ fn parse_ply(path: &Path, bytes: &[u8]) -> Result<Geometry> {
     })?;
     let payload = &bytes[bytes.len() - reader.get_ref().len()..];
     let first_line = bytes[..bytes.len() - payload.len()].iter().filter(|&&b| b == b'\n').count() + 1;
-    let ascii = header.encoding == Encoding::Ascii;
-    check_ply_sizes(path, &header.elements, payload, ascii)?;
+    check_ascii_sizes(path, &header.elements, payload)?;
     let wanted = wanted_properties(path, &header.elements)?;
-    if !ascii {
-        return decode_binary(path, &header.elements, &wanted, payload, header.encoding == Encoding::BinaryBigEndian);
-    }
     let Wanted { has_normals, uv_names, list_name } = wanted;
     let data = parser.read_payload(&mut reader, &header).map_err(|e| {
         let (line, message) = ply_message(&e);
@@ -178,57 +220,126 @@ enum Action {
     SkipList(ScalarType, ScalarType),
 }
 
-/// A binary payload read front to back.
-struct Payload<'a> {
-    bytes: &'a [u8],
-    at: usize,
-    big_endian: bool,
+/// The scalar of type `t` in `b` (its size) as f64 (exact for every PLY type but double, which
+/// is itself).
+fn decode_scalar(b: &[u8], t: &ScalarType, big: bool) -> f64 {
+    macro_rules! read {
+        ($ty:ty) => {{
+            let bytes = b.try_into().expect("the caller gives the type's size");
+            if big { <$ty>::from_be_bytes(bytes) } else { <$ty>::from_le_bytes(bytes) }
+        }};
+    }
+    match t {
+        ScalarType::Char => f64::from(read!(i8)),
+        ScalarType::UChar => f64::from(read!(u8)),
+        ScalarType::Short => f64::from(read!(i16)),
+        ScalarType::UShort => f64::from(read!(u16)),
+        ScalarType::Int => f64::from(read!(i32)),
+        ScalarType::UInt => f64::from(read!(u32)),
+        ScalarType::Float => f64::from(read!(f32)),
+        ScalarType::Double => read!(f64),
+    }
 }
 
-impl Payload<'_> {
-    /// The next `n` bytes; `None` at the end of the file.
+/// A binary payload streamed front to back from the file through a buffer of `STREAM_BYTES` (or
+/// more, for a larger request), refilled as it empties.
+struct Stream<R: Read> {
+    reader: R,
+    buf: Vec<u8>,
+    /// The unread bytes are `buf[at..end]`.
+    at: usize,
+    end: usize,
+    big_endian: bool,
+    /// The read that failed, if one did: the payload ends there.
+    error: Option<std::io::Error>,
+}
+
+impl<R: Read> Stream<R> {
+    /// The next `n` bytes; `None` at the end of the file (or of what could be read).
     fn take(&mut self, n: usize) -> Option<&[u8]> {
-        let end = self.at.checked_add(n).filter(|&e| e <= self.bytes.len())?;
-        let out = &self.bytes[self.at..end];
-        self.at = end;
+        if self.end - self.at < n {
+            self.refill(n);
+            if self.end - self.at < n {
+                return None;
+            }
+        }
+        let out = &self.buf[self.at..self.at + n];
+        self.at += n;
         Some(out)
     }
 
-    /// The next scalar of type `t` as f64 (exact for every PLY type but double, which is itself);
-    /// `None` at the end of the file.
+    /// Skips `n` bytes without growing the buffer; `None` at the end of the file.
+    fn skip(&mut self, mut n: usize) -> Option<()> {
+        while n > 0 {
+            let k = n.min(STREAM_BYTES);
+            self.take(k)?;
+            n -= k;
+        }
+        Some(())
+    }
+
+    /// The next scalar of type `t` as f64; `None` at the end of the file.
     fn scalar(&mut self, t: &ScalarType) -> Option<f64> {
         let big = self.big_endian;
-        let b = self.take(scalar_size(t) as usize)?;
-        macro_rules! read {
-            ($ty:ty) => {{
-                let bytes = b.try_into().expect("take returned the type's size");
-                if big { <$ty>::from_be_bytes(bytes) } else { <$ty>::from_le_bytes(bytes) }
-            }};
-        }
-        Some(match t {
-            ScalarType::Char => f64::from(read!(i8)),
-            ScalarType::UChar => f64::from(read!(u8)),
-            ScalarType::Short => f64::from(read!(i16)),
-            ScalarType::UShort => f64::from(read!(u16)),
-            ScalarType::Int => f64::from(read!(i32)),
-            ScalarType::UInt => f64::from(read!(u32)),
-            ScalarType::Float => f64::from(read!(f32)),
-            ScalarType::Double => read!(f64),
-        })
+        Some(decode_scalar(self.take(scalar_size(t) as usize)?, t, big))
     }
+
+    /// Bytes that can still be read, as far as the buffer and the file allow (reads the rest of
+    /// the file into the buffer up to its size; used to name where a payload ended).
+    fn available(&mut self) -> usize {
+        self.refill(self.buf.len());
+        self.end - self.at
+    }
+
+    /// Moves the unread bytes to the front and reads until the buffer holds `n` bytes (growing it
+    /// if needed) or is full, or the file ends.
+    fn refill(&mut self, n: usize) {
+        self.buf.copy_within(self.at..self.end, 0);
+        self.end -= self.at;
+        self.at = 0;
+        if self.buf.len() < n {
+            self.buf.resize(n, 0);
+        }
+        while self.end < self.buf.len() && self.error.is_none() {
+            match self.reader.read(&mut self.buf[self.end..]) {
+                Ok(0) => break,
+                Ok(k) => self.end += k,
+                Err(e) if e.kind() == std::io::ErrorKind::Interrupted => {}
+                Err(e) => self.error = Some(e),
+            }
+        }
+    }
+}
+
+/// One fixed-size vertex record's wanted values (slots as `Action::Keep` names them).
+fn decode_record(record: &[u8], actions: &[Action], big: bool) -> [f32; 8] {
+    let (mut values, mut at) = ([0.0f32; 8], 0);
+    for action in actions {
+        match action {
+            Action::Keep(t, slot) => {
+                let size = scalar_size(t) as usize;
+                values[*slot] = decode_scalar(&record[at..at + size], t, big) as f32;
+                at += size;
+            }
+            Action::Skip(t) => at += scalar_size(t) as usize,
+            Action::Indices(..) | Action::SkipList(..) => unreachable!("a fixed-size record has no lists"),
+        }
+    }
+    values
 }
 
 /// Decodes a binary payload straight into the geometry, one element after another, with the
 /// same values, checks and messages as the ASCII path (without line numbers: binary errors name
 /// the element and its 0-based index). Nothing per element is allocated, so memory is the
-/// geometry's (ply-rs-bw's `DefaultElement`s, a map per vertex and per face, took about 700 bytes
-/// a triangle: issue 38).
-fn decode_binary(
+/// geometry's and the stream's buffer (ply-rs-bw's `DefaultElement`s, a map per vertex and per
+/// face, took about 700 bytes a triangle; the whole file was read first: issue 38). Vertices
+/// whose properties are all scalars (fixed-size records) are decoded `VERTEX_BATCH` at a time in
+/// parallel.
+fn decode_binary<R: Read>(
     path: &Path,
     elements: &ply_rs_bw::ply::KeyMap<ElementDef>,
     wanted: &Wanted,
-    payload: &[u8],
-    big_endian: bool,
+    input: &mut Stream<R>,
 ) -> Result<Geometry> {
     let vertex_count = elements.get("vertex").map_or(0, |e| e.count);
     let mut names = vec!["x", "y", "z"];
@@ -241,7 +352,7 @@ fn decode_binary(
     let mut g = Geometry { positions: Vec::with_capacity(vertex_count), ..Geometry::default() };
     let mut normals = Vec::with_capacity(if wanted.has_normals { vertex_count } else { 0 });
     let mut uvs = Vec::with_capacity(if wanted.uv_names.is_some() { vertex_count } else { 0 });
-    let mut input = Payload { bytes: payload, at: 0, big_endian };
+    let big_endian = input.big_endian;
     let mut values = [0.0f32; 8];
     let mut list: Vec<i64> = Vec::new();
     for (name, def) in elements {
@@ -269,6 +380,41 @@ fn decode_binary(
             )
         };
         let element_error = |i: usize, message: String| scene_error(path, None, format!("{name} {i}: {message}"));
+        let fixed = actions.iter().all(|a| matches!(a, Action::Keep(..) | Action::Skip(..)));
+        if is_vertex && fixed {
+            let record: usize = actions
+                .iter()
+                .map(|a| match a {
+                    Action::Keep(t, _) | Action::Skip(t) => scalar_size(t) as usize,
+                    Action::Indices(..) | Action::SkipList(..) => 0,
+                })
+                .sum();
+            let mut done = 0;
+            while done < def.count {
+                let k = (def.count - done).min(VERTEX_BATCH);
+                let Some(bytes) = input.take(k * record) else {
+                    return Err(ended(done + input.available() / record.max(1)));
+                };
+                let batch: Vec<[f32; 8]> =
+                    bytes.par_chunks_exact(record).map(|r| decode_record(r, &actions, big_endian)).collect();
+                for (j, values) in batch.iter().enumerate() {
+                    if let Some(k) = values[..names.len()].iter().position(|v| !v.is_finite()) {
+                        let message = format!("'{}' is not finite (NaN or infinity, or too large for f32)", names[k]);
+                        return Err(element_error(done + j, message));
+                    }
+                    g.positions.push(Vec3::new(values[0], values[1], values[2]));
+                    if wanted.has_normals {
+                        normals.push(Vec3::new(values[3], values[4], values[5]));
+                    }
+                    if wanted.uv_names.is_some() {
+                        let k = if wanted.has_normals { 6 } else { 3 };
+                        uvs.push(Vec2::new(values[k], values[k + 1]));
+                    }
+                }
+                done += k;
+            }
+            continue;
+        }
         for i in 0..def.count {
             for (action, prop) in actions.iter().zip(def.properties.keys()) {
                 match action {
@@ -276,7 +422,7 @@ fn decode_binary(
                         values[*slot] = input.scalar(t).ok_or_else(|| ended(i))? as f32;
                     }
                     Action::Skip(t) => {
-                        input.take(scalar_size(t) as usize).ok_or_else(|| ended(i))?;
+                        input.skip(scalar_size(t) as usize).ok_or_else(|| ended(i))?;
                     }
                     Action::Indices(c, t) | Action::SkipList(c, t) => {
                         let n = input.scalar(c).ok_or_else(|| ended(i))?;
@@ -291,7 +437,7 @@ fn decode_binary(
                             }
                         } else {
                             let bytes = n.checked_mul(scalar_size(t) as usize).ok_or_else(|| ended(i))?;
-                            input.take(bytes).ok_or_else(|| ended(i))?;
+                            input.skip(bytes).ok_or_else(|| ended(i))?;
                         }
                     }
                 }
@@ -343,36 +489,34 @@ fn ply_message(e: &ply_rs_bw::parser::ParseError) -> (Option<usize>, String) {
     (e.line(), text.lines().next().unwrap_or("").trim().to_string())
 }
 
-/// Rejects element counts the payload cannot hold, before the parser allocates for them: in ASCII
-/// each element takes a line; in binary at least the sizes of its scalars and list counts.
-fn check_ply_sizes(
-    path: &Path,
-    elements: &ply_rs_bw::ply::KeyMap<ElementDef>,
-    payload: &[u8],
-    ascii: bool,
-) -> Result<()> {
-    if ascii {
-        let mut lines = payload.iter().filter(|&&b| b == b'\n').count();
-        if payload.last().is_some_and(|&b| b != b'\n') {
-            lines += 1;
-        }
-        let mut needed = 0usize;
-        for (name, e) in elements {
-            let available = lines.saturating_sub(needed);
-            needed = needed.saturating_add(e.count);
-            if needed > lines {
-                return Err(scene_error(
-                    path,
-                    None,
-                    format!(
-                        "element '{name}' declares {} items but the file ends after {available} of them (truncated?)",
-                        e.count
-                    ),
-                ));
-            }
-        }
-        return Ok(());
+/// Rejects element counts an ASCII payload cannot hold, before the parser allocates for them:
+/// each element takes a line.
+fn check_ascii_sizes(path: &Path, elements: &ply_rs_bw::ply::KeyMap<ElementDef>, payload: &[u8]) -> Result<()> {
+    let mut lines = payload.iter().filter(|&&b| b == b'\n').count();
+    if payload.last().is_some_and(|&b| b != b'\n') {
+        lines += 1;
     }
+    let mut needed = 0usize;
+    for (name, e) in elements {
+        let available = lines.saturating_sub(needed);
+        needed = needed.saturating_add(e.count);
+        if needed > lines {
+            return Err(scene_error(
+                path,
+                None,
+                format!(
+                    "element '{name}' declares {} items but the file ends after {available} of them (truncated?)",
+                    e.count
+                ),
+            ));
+        }
+    }
+    Ok(())
+}
+
+/// Rejects element counts a binary payload of `payload_len` bytes cannot hold, before anything
+/// is allocated for them: each element takes at least the sizes of its scalars and list counts.
+fn check_binary_sizes(path: &Path, elements: &ply_rs_bw::ply::KeyMap<ElementDef>, payload_len: u64) -> Result<()> {
     let mut needed = 0u64;
     for (name, e) in elements {
         let min_size: u64 = e
@@ -390,14 +534,13 @@ fn check_ply_sizes(
             ));
         }
         needed = needed.saturating_add(min_size.saturating_mul(e.count as u64));
-        if needed > payload.len() as u64 {
+        if needed > payload_len {
             return Err(scene_error(
                 path,
                 None,
                 format!(
                     "element '{name}' declares {} items, which need more than the {} bytes left in the file (truncated?)",
-                    e.count,
-                    payload.len()
+                    e.count, payload_len
                 ),
             ));
         }
