@@ -12,6 +12,9 @@
 //! product, to be compared as a ratio to the baseline's. Wall time is what a user waits; on a
 //! machine shared with other work it is noisy, so the process's CPU time (all threads, lavapipe's
 //! included; Linux only) is measured beside it — on a CPU device it is the work an estimate costs.
+//!
+//! [`choose_strategy`] is the same measurement made small: a pilot of a few low-spp image gradients
+//! per candidate strategy, interleaved, that picks the most efficient one (`--strategy auto`).
 
 use std::time::Instant;
 
@@ -20,7 +23,7 @@ use crate::backend::Backend;
 use crate::error::{Error, Result};
 use crate::gpu::renderer::GradMode;
 use crate::image::Image;
-use crate::integrator::RenderOptions;
+use crate::integrator::{PlacementMis, RenderOptions, Strategy};
 use crate::loss::{Loss, loss_and_adjoint};
 use crate::params::ParamId;
 
@@ -160,14 +163,14 @@ fn check_runs(runs: u32) -> Result<()> {
 ///
 /// ```no_run
 /// use pathgrad::gpu::{Context, ContextDesc, Renderer};
-/// use pathgrad::integrator::{RenderOptions, Strategy};
+/// use pathgrad::integrator::{PlacementMis, RenderOptions, Strategy};
 ///
 /// let scene = pathgrad::scene::builtin::load("blend")?;
 /// let ctx = Context::new(&ContextDesc::default())?;
 /// let mut renderer = Renderer::new(&ctx, &scene)?;
 /// let bsdf = RenderOptions { spp: 2, ..RenderOptions::for_scene(&scene) };
 /// let weight = scene.params.find("object.weight.value").unwrap();
-/// let diff = RenderOptions { strategy: Strategy::Diff { target: weight, q: 0.5 }, ..bsdf };
+/// let diff = RenderOptions { strategy: Strategy::Diff { target: weight, q: 0.5, placement: PlacementMis::Balance }, ..bsdf };
 /// let param = "object.weight.value";
 /// let a = pathgrad::variance::image_gradient_variance(&mut renderer, &bsdf, param, 32, &mut |_| {})?;
 /// let b = pathgrad::variance::image_gradient_variance(&mut renderer, &diff, param, 32, &mut |_| {})?;
@@ -312,9 +315,222 @@ pub fn loss_gradient_variance(
     })
 }
 
+/// The probabilities of the differential technique that [`choose_strategy`] tries.
+pub const PILOT_QS: [f32; 3] = [0.5, 0.75, 0.9];
+
+/// Pilot times within this fraction of the fastest candidate's count as equal to it: on a shared
+/// machine one run's timing varies by about this much, and the cost differences between the
+/// candidates (the differential strategy is about a tenth slower per sample) are of that order, so
+/// within it the choice goes by variance alone — and the same seed then picks the same strategy.
+pub const PILOT_TIME_TIE: f64 = 0.15;
+
+/// A later candidate replaces an earlier pick only if its variance × time is below the pick's by
+/// more than this fraction: a pilot of a few runs cannot resolve smaller differences, and candidates
+/// that sample alike (a blend at weight ½, where the differential density is the BSDF's) then keep
+/// the first of them instead of a winner by rounding.
+pub const PILOT_MARGIN: f64 = 0.05;
+
+/// How much [`choose_strategy`] spends: `runs` image gradients of `spp` samples per pixel per
+/// candidate, at the request's resolution.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct PilotBudget {
+    /// Estimates per candidate (at least 2: a variance needs two).
+    pub runs: u32,
+    /// Samples per pixel of each estimate.
+    pub spp: u32,
+}
+
+impl Default for PilotBudget {
+    /// 4 runs of 1 spp per candidate: 16 one-sample image gradients for four candidates.
+    fn default() -> PilotBudget {
+        PilotBudget { runs: 4, spp: 1 }
+    }
+}
+
+/// What the pilot measured for one candidate strategy.
+#[derive(Clone, Debug)]
+pub struct PilotCandidate {
+    /// The candidate.
+    pub strategy: Strategy,
+    /// Per-pixel variance of ∂I/∂θ averaged over pixels and channels, at the pilot's spp.
+    pub variance: f64,
+    /// Wall time of its fastest estimate, in seconds (the least disturbed by other work).
+    pub seconds_per_estimate: f64,
+    /// Variance × time, with times within [`PILOT_TIME_TIE`] of the fastest taken as the fastest's:
+    /// the figure the choice minimises (by more than [`PILOT_MARGIN`] to displace an earlier one).
+    pub efficiency: f64,
+}
+
+/// The result of [`choose_strategy`].
+#[derive(Clone, Debug)]
+pub struct StrategyChoice {
+    /// The most efficient candidate.
+    pub strategy: Strategy,
+    /// Every candidate, in the order tried (`bsdf` first, then q ascending; within
+    /// [`PILOT_MARGIN`] the earlier one is kept).
+    pub candidates: Vec<PilotCandidate>,
+    /// Wall time of the whole pilot (warm-up included), in seconds.
+    pub seconds: f64,
+    /// CPU time of the process during the pilot, in seconds (see [`process_cpu_seconds`]).
+    pub cpu_seconds: Option<f64>,
+    /// Image gradients rendered (warm-up included).
+    pub renders: u32,
+    /// Samples rendered in all, per pixel (the pilot's cost in units of one 1-spp image gradient).
+    pub samples_per_pixel: u64,
+}
+
+/// Picks, for the image gradient ∂I/∂`param` under `options` (resolution, NEE, depth, seed), the
+/// strategy with the least variance × time: plain `bsdf` and, where some material has a
+/// differential sampler for `param`, `diff` driven by `param` at each q of [`PILOT_QS`] with its
+/// placements weighted by `placement`. Each candidate renders `budget.runs` image gradients of
+/// `budget.spp` spp with seeds `options.seed + i`, interleaved run by run so that a slow spell of
+/// the machine falls on all of them; kernels are warmed up first, untimed. Variances are those of
+/// [`image_gradient_variance`], times those of each candidate's fastest estimate; times within
+/// [`PILOT_TIME_TIE`] of the fastest count as equal, and a candidate displaces an earlier one only
+/// if better by more than [`PILOT_MARGIN`], so the same seed picks the same strategy.
+///
+/// ```no_run
+/// use pathgrad::gpu::{Context, ContextDesc, Renderer};
+/// use pathgrad::integrator::{PlacementMis, RenderOptions};
+/// use pathgrad::variance::{PilotBudget, choose_strategy};
+///
+/// let scene = pathgrad::scene::builtin::load("blend")?;
+/// let ctx = Context::new(&ContextDesc::default())?;
+/// let mut renderer = Renderer::new(&ctx, &scene)?;
+/// let opts = RenderOptions { width: 64, height: 64, ..RenderOptions::for_scene(&scene) };
+/// let choice = choose_strategy(&mut renderer, &opts, "object.weight.value", PlacementMis::Balance, PilotBudget::default())?;
+/// println!("picked {:?} in {:.2} s", choice.strategy, choice.seconds);
+/// # Ok::<(), pathgrad::Error>(())
+/// ```
+///
+/// # Errors
+/// [`Error::InvalidArgument`] naming `PilotBudget::runs` (below 2) or `PilotBudget::spp` (0), an
+/// unknown parameter, a parameter the differential sampler refuses by name
+/// ([`Strategy::from_name`]); as [`Backend::image_gradient`].
+pub fn choose_strategy(
+    backend: &mut dyn Backend,
+    options: &RenderOptions,
+    param: &str,
+    placement: PlacementMis,
+    budget: PilotBudget,
+) -> Result<StrategyChoice> {
+    if budget.runs < 2 {
+        return Err(Error::InvalidArgument {
+            parameter: "PilotBudget::runs".into(),
+            message: format!("{}: a variance needs at least 2 runs", budget.runs),
+        });
+    }
+    if budget.spp == 0 {
+        return Err(Error::InvalidArgument {
+            parameter: "PilotBudget::spp".into(),
+            message: "must be at least 1".into(),
+        });
+    }
+    let scene = backend.scene();
+    let target = scene.params.find(param).ok_or_else(|| Error::InvalidArgument {
+        parameter: param.to_string(),
+        message: "no such parameter to choose a strategy for (see `pathgrad params SCENE`)".into(),
+    })?;
+    let mut strategies = vec![Strategy::Bsdf];
+    if Strategy::has_differential_sampler(scene, target) {
+        for q in PILOT_QS {
+            strategies.push(Strategy::from_name(scene, "diff", q, param)?.with_placement(placement));
+        }
+    }
+    let base = RenderOptions { spp: budget.spp, ..*options };
+    base.validate()?;
+    let (start, cpu_start) = (Instant::now(), process_cpu_seconds());
+    let mut renders = 0u32;
+    // Warm-up, untimed: lavapipe compiles a kernel at its first dispatch; the diff candidates
+    // differ only in uniforms, so one warm-up serves them all.
+    for strategy in strategies.iter().take(2) {
+        backend.image_gradient(&RenderOptions { spp: 1, strategy: *strategy, ..base }, param)?;
+        renders += 1;
+    }
+    let len = base.width as usize * base.height as usize * 3;
+    let mut moments: Vec<Moments> = strategies.iter().map(|_| Moments::new(len)).collect();
+    let mut fastest = vec![f64::INFINITY; strategies.len()];
+    for i in 0..budget.runs {
+        for (k, strategy) in strategies.iter().enumerate() {
+            let run = RenderOptions { seed: base.seed.wrapping_add(i), strategy: *strategy, ..base };
+            let mut clock = Stopwatch::new();
+            let gradient = clock.time(|| backend.image_gradient(&run, param))?;
+            fastest[k] = fastest[k].min(clock.wall);
+            moments[k].add(gradient.as_slice().iter().map(|&v| f64::from(v)));
+            renders += 1;
+        }
+    }
+    let measured: Vec<(Strategy, f64, f64)> = strategies
+        .iter()
+        .zip(&moments)
+        .zip(&fastest)
+        .map(|((s, m), &t)| {
+            let variance = m.variance();
+            (*s, variance.iter().sum::<f64>() / variance.len() as f64, t)
+        })
+        .collect();
+    let candidates = pilot_efficiencies(&measured);
+    let best = pilot_pick(&candidates);
+    let cpu_seconds = match (cpu_start, process_cpu_seconds()) {
+        (Some(a), Some(b)) => Some(b - a),
+        _ => None,
+    };
+    let warm_up = strategies.len().min(2) as u64;
+    Ok(StrategyChoice {
+        strategy: candidates[best].strategy,
+        seconds: start.elapsed().as_secs_f64(),
+        cpu_seconds,
+        renders,
+        samples_per_pixel: warm_up + u64::from(budget.runs) * u64::from(budget.spp) * strategies.len() as u64,
+        candidates,
+    })
+}
+
+/// Each candidate's (strategy, variance, seconds per estimate) with its efficiency: variance × time,
+/// a time within [`PILOT_TIME_TIE`] of the fastest taken as the fastest.
+fn pilot_efficiencies(measured: &[(Strategy, f64, f64)]) -> Vec<PilotCandidate> {
+    let fastest = measured.iter().map(|m| m.2).fold(f64::INFINITY, f64::min);
+    measured
+        .iter()
+        .map(|&(strategy, variance, seconds)| {
+            let time = if seconds <= fastest * (1.0 + PILOT_TIME_TIE) { fastest } else { seconds };
+            // A NaN variance (a non-finite gradient) must never win.
+            let efficiency = if variance.is_finite() { efficiency(variance, time) } else { f64::INFINITY };
+            PilotCandidate { strategy, variance, seconds_per_estimate: seconds, efficiency }
+        })
+        .collect()
+}
+
+/// The index of the candidate [`choose_strategy`] picks: the first, displaced by each later one
+/// whose efficiency is below the pick's by more than [`PILOT_MARGIN`].
+fn pilot_pick(candidates: &[PilotCandidate]) -> usize {
+    (1..candidates.len()).fold(0, |best, k| {
+        if candidates[k].efficiency < (1.0 - PILOT_MARGIN) * candidates[best].efficiency { k } else { best }
+    })
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn pilot_times_within_the_tie_count_as_equal() {
+        let diff = |q| Strategy::Diff { target: ParamId(0), q, placement: PlacementMis::Balance };
+        // 10 % slower: the time counts as the fastest's, the variance decides.
+        let c = pilot_efficiencies(&[(Strategy::Bsdf, 2.0, 1.0), (diff(0.5), 1.5, 1.1)]);
+        assert_eq!(c[1].efficiency, 1.5);
+        assert_eq!(c[1].seconds_per_estimate, 1.1);
+        // Twice as slow: the time counts, and the lower variance no longer pays.
+        let c = pilot_efficiencies(&[(Strategy::Bsdf, 2.0, 1.0), (diff(0.5), 1.5, 2.0), (diff(0.9), f64::NAN, 1.0)]);
+        assert_eq!(c[1].efficiency, 3.0);
+        assert_eq!(c[0].efficiency, 2.0);
+        assert_eq!(c[2].efficiency, f64::INFINITY);
+        assert_eq!(pilot_pick(&c), 0);
+        // Within the margin the earlier candidate stays; beyond it the later one wins.
+        let c = pilot_efficiencies(&[(Strategy::Bsdf, 1.0, 1.0), (diff(0.5), 0.96, 1.0), (diff(0.9), 0.9, 1.0)]);
+        assert_eq!(pilot_pick(&c[..2]), 0);
+        assert_eq!(pilot_pick(&c), 2);
+    }
 
     #[test]
     fn moments_match_the_two_pass_formulas() {

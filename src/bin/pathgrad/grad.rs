@@ -96,6 +96,8 @@ pub(crate) fn grad(args: &GradArgs) -> Result<()> {
     }
     with_values(&scene.params, &args.target_set, "--target-set").context("--target-set")?;
     let mut renderer = args.flags.backend(&scene, &args.scene, args.json)?.backend;
+    let pilot = args.sampling.choose(renderer.as_mut(), first_param, &mut opts)?;
+    let strategy = crate::common::strategy_json(&scene, &opts.strategy);
     let start = Instant::now();
     if let (Some(name), Some((output, outputs, exr_file, png_file))) = (&args.image_gradient, image_gradient_outputs) {
         let image = renderer.image_gradient(&opts, name).with_context(|| format!("differentiating {}", args.scene))?;
@@ -108,7 +110,7 @@ pub(crate) fn grad(args: &GradArgs) -> Result<()> {
         if args.json {
             println!(
                 "{}",
-                serde_json::json!({"param": name, "time_s": seconds, "outputs": [output, preview], "mean": image.mean()})
+                serde_json::json!({"param": name, "time_s": seconds, "outputs": [output, preview], "mean": image.mean(), "strategy": strategy, "pilot": pilot})
             );
         } else {
             println!("∂I/∂{name} in {seconds:.2} s → {}, {}", output.display(), preview.display());
@@ -150,8 +152,19 @@ pub(crate) fn grad(args: &GradArgs) -> Result<()> {
                 (name, serde_json::json!(values))
             })
             .collect();
-        println!("{}", serde_json::json!({"loss": value, "gradients": map, "time_s": seconds, "repeat_s": repeat_s}));
+        println!(
+            "{}",
+            serde_json::json!({"loss": value, "gradients": map, "time_s": seconds, "repeat_s": repeat_s, "strategy": strategy, "pilot": pilot})
+        );
     } else {
+        if let Some(pilot) = &pilot {
+            println!(
+                "--strategy auto: {} (pilot {:.2} s, {} image gradients)",
+                pilot["picked"]["technique"].as_str().unwrap_or("?"),
+                pilot["pilot_s"].as_f64().unwrap_or(f64::NAN),
+                pilot["pilot_renders"]
+            );
+        }
         println!("loss ({}) = {value:.6e}   ({seconds:.2} s)", args.loss);
         if let Some(best) = repeat_s.iter().copied().reduce(f64::min) {
             println!("  {} repeats: fastest {best:.3} s", repeat_s.len());
