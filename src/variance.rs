@@ -371,6 +371,9 @@ pub struct StrategyChoice {
     pub candidates: Vec<PilotCandidate>,
     /// Wall time of the whole pilot (warm-up included), in seconds.
     pub seconds: f64,
+    /// Of which the warm-up: the first dispatch of each kernel, where a driver compiles it (on
+    /// lavapipe seconds, once per scene and kernel; any run with that kernel pays it once).
+    pub warm_up_seconds: f64,
     /// CPU time of the process during the pilot, in seconds (see [`process_cpu_seconds`]).
     pub cpu_seconds: Option<f64>,
     /// Image gradients rendered (warm-up included).
@@ -447,6 +450,7 @@ pub fn choose_strategy(
         backend.image_gradient(&RenderOptions { spp: 1, strategy: *strategy, ..base }, param)?;
         renders += 1;
     }
+    let warm_up_seconds = start.elapsed().as_secs_f64();
     let len = base.width as usize * base.height as usize * 3;
     let mut moments: Vec<Moments> = strategies.iter().map(|_| Moments::new(len)).collect();
     let mut fastest = vec![f64::INFINITY; strategies.len()];
@@ -479,6 +483,7 @@ pub fn choose_strategy(
     Ok(StrategyChoice {
         strategy: candidates[best].strategy,
         seconds: start.elapsed().as_secs_f64(),
+        warm_up_seconds,
         cpu_seconds,
         renders,
         samples_per_pixel: warm_up + u64::from(budget.runs) * u64::from(budget.spp) * strategies.len() as u64,

@@ -245,11 +245,12 @@ impl StrategyArgs {
         opts.strategy = choice.strategy;
         let json = pilot_json(backend.scene(), target, &choice);
         tracing::info!(
-            "--strategy auto picked {} for {target} (pilot: {} image gradients, {} spp per pixel in all, {:.2} s)",
+            "--strategy auto picked {} for {target} (pilot: {} image gradients, {} spp per pixel in all, {:.2} s of which {:.2} s kernel warm-up)",
             strategy_label(&choice.strategy),
             choice.renders,
             choice.samples_per_pixel,
-            choice.seconds
+            choice.seconds,
+            choice.warm_up_seconds
         );
         Ok(Some(json))
     }
@@ -348,6 +349,7 @@ pub(crate) fn pilot_json(
         "param": param,
         "candidates": candidates,
         "pilot_s": choice.seconds,
+        "pilot_warm_up_s": choice.warm_up_seconds,
         "pilot_cpu_s": choice.cpu_seconds,
         "pilot_renders": choice.renders,
         "pilot_spp": choice.samples_per_pixel,

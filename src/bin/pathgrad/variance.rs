@@ -207,11 +207,12 @@ pub(crate) fn run(args: &VarianceArgs) -> Result<()> {
             variance::choose_strategy(renderer.as_mut(), &opts, target, auto_placement, PilotBudget::default())
                 .context("running the auto row's pilot")?;
         tracing::info!(
-            "auto picked {} (pilot: {} image gradients, {} spp per pixel in all, {:.2} s)",
+            "auto picked {} (pilot: {} image gradients, {} spp per pixel in all, {:.2} s of which {:.2} s kernel warm-up)",
             strategy_label(&choice.strategy),
             choice.renders,
             choice.samples_per_pixel,
-            choice.seconds
+            choice.seconds,
+            choice.warm_up_seconds
         );
         for row in rows.iter_mut().filter(|r| r.auto) {
             row.strategy = choice.strategy;
