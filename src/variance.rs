@@ -23,7 +23,7 @@ use crate::backend::Backend;
 use crate::error::{Error, Result};
 use crate::gpu::renderer::GradMode;
 use crate::image::Image;
-use crate::integrator::{PlacementMis, RenderOptions, Strategy};
+use crate::integrator::{PlacementMis, RenderOptions, Strategy, check_spp_primal};
 use crate::loss::{Loss, loss_and_adjoint};
 use crate::params::ParamId;
 
@@ -352,13 +352,30 @@ impl Default for PilotBudget {
 pub struct PilotCandidate {
     /// The candidate.
     pub strategy: Strategy,
-    /// Per-pixel variance of ∂I/∂θ averaged over pixels and channels, at the pilot's spp.
+    /// Per-pixel variance of ∂I/∂θ averaged over pixels and channels, at the pilot's spp; with a
+    /// [`PilotLoss`], the summed variance of the loss gradient's values.
     pub variance: f64,
-    /// Wall time of its fastest estimate, in seconds (the least disturbed by other work).
+    /// Wall time of its fastest estimate, in seconds (the least disturbed by other work); with a
+    /// [`PilotLoss`], plus the fastest pass 1.
     pub seconds_per_estimate: f64,
     /// Variance × time, with times within [`PILOT_TIME_TIE`] of the fastest taken as the fastest's:
     /// the figure the choice minimises (by more than [`PILOT_MARGIN`] to displace an earlier one).
     pub efficiency: f64,
+}
+
+/// With a loss, [`choose_strategy`] measures the variance of the loss gradient (pass 1 at
+/// `spp_primal`, shared by the candidates, then each candidate's gradient pass with uniform pixel
+/// sampling) instead of the image gradient's.
+#[derive(Clone, Copy, Debug)]
+pub struct PilotLoss<'a> {
+    /// The image the loss compares against.
+    pub target: &'a Image,
+    /// The loss.
+    pub loss: Loss,
+    /// Samples per pixel of pass 1.
+    pub spp_primal: u32,
+    /// The parameters whose gradient is measured (the trace of their covariance is the variance).
+    pub params: &'a [ParamId],
 }
 
 /// The result of [`choose_strategy`].
@@ -376,9 +393,9 @@ pub struct StrategyChoice {
     pub warm_up_seconds: f64,
     /// CPU time of the process during the pilot, in seconds (see [`process_cpu_seconds`]).
     pub cpu_seconds: Option<f64>,
-    /// Image gradients rendered (warm-up included).
+    /// Gradient passes and pass-1 renders (warm-up included).
     pub renders: u32,
-    /// Samples rendered in all, per pixel (the pilot's cost in units of one 1-spp image gradient).
+    /// Samples rendered in all, per pixel, gradient passes and pass-1 renders together.
     pub samples_per_pixel: u64,
 }
 
@@ -390,7 +407,9 @@ pub struct StrategyChoice {
 /// the machine falls on all of them; kernels are warmed up first, untimed. Variances are those of
 /// [`image_gradient_variance`], times those of each candidate's fastest estimate; times within
 /// [`PILOT_TIME_TIE`] of the fastest count as equal, and a candidate displaces an earlier one only
-/// if better by more than [`PILOT_MARGIN`], so the same seed picks the same strategy.
+/// if better by more than [`PILOT_MARGIN`], so the same seed picks the same strategy. With `loss`,
+/// the figure is the loss gradient's variance instead (see [`PilotLoss`]): what an optimisation
+/// pays for, which the image gradient's variance need not predict.
 ///
 /// ```no_run
 /// use pathgrad::gpu::{Context, ContextDesc, Renderer};
@@ -401,7 +420,8 @@ pub struct StrategyChoice {
 /// let ctx = Context::new(&ContextDesc::default())?;
 /// let mut renderer = Renderer::new(&ctx, &scene)?;
 /// let opts = RenderOptions { width: 64, height: 64, ..RenderOptions::for_scene(&scene) };
-/// let choice = choose_strategy(&mut renderer, &opts, "object.weight.value", PlacementMis::Balance, PilotBudget::default())?;
+/// let choice =
+///     choose_strategy(&mut renderer, &opts, "object.weight.value", PlacementMis::Balance, PilotBudget::default(), None)?;
 /// println!("picked {:?} in {:.2} s", choice.strategy, choice.seconds);
 /// # Ok::<(), pathgrad::Error>(())
 /// ```
@@ -409,13 +429,15 @@ pub struct StrategyChoice {
 /// # Errors
 /// [`Error::InvalidArgument`] naming `PilotBudget::runs` (below 2) or `PilotBudget::spp` (0), an
 /// unknown parameter, a parameter the differential sampler refuses by name
-/// ([`Strategy::from_name`]); as [`Backend::image_gradient`].
+/// ([`Strategy::from_name`]), `spp_primal` = 0 or no parameter in `loss`; as
+/// [`Backend::image_gradient`], [`Backend::loss_image`] and [`Backend::backward`].
 pub fn choose_strategy(
     backend: &mut dyn Backend,
     options: &RenderOptions,
     param: &str,
     placement: PlacementMis,
     budget: PilotBudget,
+    loss: Option<&PilotLoss>,
 ) -> Result<StrategyChoice> {
     if budget.runs < 2 {
         return Err(Error::InvalidArgument {
@@ -442,26 +464,72 @@ pub fn choose_strategy(
     }
     let base = RenderOptions { spp: budget.spp, ..*options };
     base.validate()?;
+    let entries: Vec<_> = match loss {
+        None => Vec::new(),
+        Some(l) => {
+            check_spp_primal(l.spp_primal)?;
+            if l.params.is_empty() {
+                return Err(Error::InvalidArgument {
+                    parameter: "PilotLoss::params".into(),
+                    message: "no parameter to measure".into(),
+                });
+            }
+            l.params.iter().map(|&id| scene.params.entry(id).clone()).collect()
+        }
+    };
     let (start, cpu_start) = (Instant::now(), process_cpu_seconds());
-    let mut renders = 0u32;
+    let (mut renders, mut samples) = (0u32, 0u64);
+    // One estimate: the image gradient, or the loss gradient's values from pass 1's adjoint.
+    let mut estimate = |backend: &mut dyn Backend, run: &RenderOptions, adjoint: Option<&Image>| -> Result<Vec<f64>> {
+        renders += 1;
+        samples += u64::from(run.spp);
+        Ok(match adjoint {
+            None => backend.image_gradient(run, param)?.as_slice().iter().map(|&v| f64::from(v)).collect(),
+            Some(adjoint) => {
+                let g = backend.backward(run, adjoint, GradMode::Float)?;
+                let values = g.values();
+                entries
+                    .iter()
+                    .flat_map(|e| &values[e.offset as usize..(e.offset + e.len) as usize])
+                    .map(|&v| f64::from(v))
+                    .collect()
+            }
+        })
+    };
+    // Pass 1 of run `seed` (loss mode): the adjoint image all candidates share.
+    let pass1 = |backend: &mut dyn Backend, run: &RenderOptions, renders: &mut u32, samples: &mut u64| {
+        loss.map(|l| {
+            *renders += 1;
+            *samples += u64::from(l.spp_primal);
+            backend.loss_image(run, l.spp_primal, l.target, l.loss).map(|(_, adjoint)| adjoint)
+        })
+        .transpose()
+    };
     // Warm-up, untimed: lavapipe compiles a kernel at its first dispatch; the diff candidates
     // differ only in uniforms, so one warm-up serves them all.
+    let (mut pass1_renders, mut pass1_samples) = (0u32, 0u64);
+    let warm = RenderOptions { spp: 1, ..base };
+    let adjoint = pass1(backend, &warm, &mut pass1_renders, &mut pass1_samples)?;
     for strategy in strategies.iter().take(2) {
-        backend.image_gradient(&RenderOptions { spp: 1, strategy: *strategy, ..base }, param)?;
-        renders += 1;
+        estimate(backend, &RenderOptions { strategy: *strategy, ..warm }, adjoint.as_ref())?;
     }
     let warm_up_seconds = start.elapsed().as_secs_f64();
-    let len = base.width as usize * base.height as usize * 3;
-    let mut moments: Vec<Moments> = strategies.iter().map(|_| Moments::new(len)).collect();
+    let mut moments: Vec<Option<Moments>> = strategies.iter().map(|_| None).collect();
     let mut fastest = vec![f64::INFINITY; strategies.len()];
+    let mut fastest_pass1 = if loss.is_some() { f64::INFINITY } else { 0.0 };
     for i in 0..budget.runs {
+        let seeded = RenderOptions { seed: base.seed.wrapping_add(i), ..base };
+        let mut clock = Stopwatch::new();
+        let adjoint = clock.time(|| pass1(backend, &seeded, &mut pass1_renders, &mut pass1_samples))?;
+        if loss.is_some() {
+            fastest_pass1 = fastest_pass1.min(clock.wall);
+        }
         for (k, strategy) in strategies.iter().enumerate() {
-            let run = RenderOptions { seed: base.seed.wrapping_add(i), strategy: *strategy, ..base };
+            let run = RenderOptions { strategy: *strategy, ..seeded };
             let mut clock = Stopwatch::new();
-            let gradient = clock.time(|| backend.image_gradient(&run, param))?;
+            let values = clock.time(|| estimate(backend, &run, adjoint.as_ref()))?;
             fastest[k] = fastest[k].min(clock.wall);
-            moments[k].add(gradient.as_slice().iter().map(|&v| f64::from(v)));
-            renders += 1;
+            moments[k].get_or_insert_with(|| Moments::new(values.len())).add(values);
         }
     }
     let measured: Vec<(Strategy, f64, f64)> = strategies
@@ -469,8 +537,9 @@ pub fn choose_strategy(
         .zip(&moments)
         .zip(&fastest)
         .map(|((s, m), &t)| {
-            let variance = m.variance();
-            (*s, variance.iter().sum::<f64>() / variance.len() as f64, t)
+            let variance = m.as_ref().expect("at least 2 runs").variance();
+            let figure = variance.iter().sum::<f64>() / if loss.is_some() { 1.0 } else { variance.len() as f64 };
+            (*s, figure, t + fastest_pass1)
         })
         .collect();
     let candidates = pilot_efficiencies(&measured);
@@ -479,14 +548,13 @@ pub fn choose_strategy(
         (Some(a), Some(b)) => Some(b - a),
         _ => None,
     };
-    let warm_up = strategies.len().min(2) as u64;
     Ok(StrategyChoice {
         strategy: candidates[best].strategy,
         seconds: start.elapsed().as_secs_f64(),
         warm_up_seconds,
         cpu_seconds,
-        renders,
-        samples_per_pixel: warm_up + u64::from(budget.runs) * u64::from(budget.spp) * strategies.len() as u64,
+        renders: renders + pass1_renders,
+        samples_per_pixel: samples + pass1_samples,
         candidates,
     })
 }

@@ -233,7 +233,7 @@ fn the_pilot_measures_every_candidate_and_the_same_seed_picks_the_same_strategy(
     let param = "object.weight.value";
     let opts = RenderOptions { width: 24, height: 18, spp: 4, seed: 11, ..RenderOptions::for_scene(&scene) };
     let budget = PilotBudget { runs: 3, spp: 1 };
-    let a = choose_strategy(&mut renderer, &opts, param, PlacementMis::Balance, budget).unwrap();
+    let a = choose_strategy(&mut renderer, &opts, param, PlacementMis::Balance, budget, None).unwrap();
     let qs: Vec<Option<f32>> = a
         .candidates
         .iter()
@@ -270,11 +270,27 @@ fn the_pilot_measures_every_candidate_and_the_same_seed_picks_the_same_strategy(
         }
     }
     assert_eq!(a.strategy, pick.strategy);
-    let b = choose_strategy(&mut renderer, &opts, param, PlacementMis::Balance, budget).unwrap();
+    let b = choose_strategy(&mut renderer, &opts, param, PlacementMis::Balance, budget, None).unwrap();
     assert_eq!(b.strategy, a.strategy, "the same seed: {:?} then {:?}", a.candidates, b.candidates);
 
-    let c = choose_strategy(&mut renderer, &opts, "base.reflectance.value", PlacementMis::Balance, budget).unwrap();
+    // On the loss gradient: each candidate's figure is loss_gradient_variance's, pass 1 shared.
+    let target = renderer.render(&RenderOptions { seed: 99, ..opts }).unwrap();
+    let ids = [scene.params.find(param).unwrap()];
+    let measure = variance::PilotLoss { target: &target, loss: Loss::L2, spp_primal: 2, params: &ids };
+    let l = choose_strategy(&mut renderer, &opts, param, PlacementMis::Balance, budget, Some(&measure)).unwrap();
+    assert_eq!((l.renders, l.samples_per_pixel), (3 + 3 * 5, (2 + 2) + 3 * (2 + 4)));
+    for c in &l.candidates {
+        let setup = LossGradientSetup { target: &target, loss: Loss::L2, spp_primal: 2, adaptive: None, params: &ids };
+        let run = RenderOptions { spp: 1, strategy: c.strategy, ..opts };
+        let r = variance::loss_gradient_variance(&mut renderer, &run, &setup, 3, &mut |_| {}).unwrap();
+        assert!(r.total_variance > 0.0);
+        let (a, b) = (c.variance, r.total_variance);
+        assert!((a - b).abs() <= 1e-4 * b, "{:?}: {a} vs {b}", c.strategy);
+    }
+
+    let c =
+        choose_strategy(&mut renderer, &opts, "base.reflectance.value", PlacementMis::Balance, budget, None).unwrap();
     assert_eq!((c.strategy, c.candidates.len()), (Strategy::Bsdf, 1));
-    let e = choose_strategy(&mut renderer, &opts, param, PlacementMis::Balance, PilotBudget { runs: 1, spp: 1 });
+    let e = choose_strategy(&mut renderer, &opts, param, PlacementMis::Balance, PilotBudget { runs: 1, spp: 1 }, None);
     assert!(e.unwrap_err().to_string().contains("PilotBudget::runs"));
 }

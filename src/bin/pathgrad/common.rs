@@ -219,14 +219,16 @@ impl StrategyArgs {
     }
 
     /// With `--strategy auto`: runs the pilot ([`pathgrad::variance::choose_strategy`]) for the
-    /// parameter `--diff-param` names, else `default_target`, under `opts` (its resolution, NEE and
-    /// seed), sets `opts.strategy` to its choice, says what it picked (info line) and returns the
-    /// choice as JSON; without, `None`.
+    /// parameter `--diff-param` names, else `default_target`, under `opts` (its resolution, NEE,
+    /// seed and parameter kinds) — on the loss gradient with `loss`, else on the image gradient —
+    /// sets `opts.strategy` to its choice, says what it picked (info line) and returns the choice
+    /// as JSON; without, `None`.
     pub(crate) fn choose(
         &self,
         backend: &mut dyn pathgrad::backend::Backend,
         default_target: Option<&str>,
         opts: &mut RenderOptions,
+        loss: Option<&pathgrad::variance::PilotLoss>,
     ) -> Result<Option<serde_json::Value>> {
         if self.strategy != "auto" {
             return Ok(None);
@@ -240,12 +242,13 @@ impl StrategyArgs {
             target,
             self.placement()?,
             pathgrad::variance::PilotBudget::default(),
+            loss,
         )
         .context("running --strategy auto's pilot")?;
         opts.strategy = choice.strategy;
-        let json = pilot_json(backend.scene(), target, &choice);
+        let json = pilot_json(backend.scene(), target, &choice, loss.is_some());
         tracing::info!(
-            "--strategy auto picked {} for {target} (pilot: {} image gradients, {} spp per pixel in all, {:.2} s of which {:.2} s kernel warm-up)",
+            "--strategy auto picked {} for {target} (pilot: {} renders, {} spp per pixel in all, {:.2} s of which {:.2} s kernel warm-up)",
             strategy_label(&choice.strategy),
             choice.renders,
             choice.samples_per_pixel,
@@ -331,6 +334,7 @@ pub(crate) fn pilot_json(
     scene: &pathgrad::scene::Scene,
     param: &str,
     choice: &pathgrad::variance::StrategyChoice,
+    loss: bool,
 ) -> serde_json::Value {
     let candidates: Vec<serde_json::Value> = choice
         .candidates
@@ -347,6 +351,7 @@ pub(crate) fn pilot_json(
     serde_json::json!({
         "picked": strategy_json(scene, &choice.strategy),
         "param": param,
+        "measure": if loss { "loss gradient" } else { "image gradient" },
         "candidates": candidates,
         "pilot_s": choice.seconds,
         "pilot_warm_up_s": choice.warm_up_seconds,

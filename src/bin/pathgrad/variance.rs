@@ -199,15 +199,38 @@ pub(crate) fn run(args: &VarianceArgs) -> Result<()> {
     let device = renderer.describe();
     // Only the kind of the parameter measured is compiled into the gradient kernels.
     opts.differentiate = renderer.param_kinds(&[param]);
-    // `auto`: the pilot picks the strategy of its rows, at the run's resolution and seed.
+    // Loss-gradient mode's loss, target and pass-1 spp.
+    let loss_setup = match loss_mode {
+        false => None,
+        true => {
+            let loss: pathgrad::loss::Loss = args.loss.as_deref().unwrap_or("relmse").parse()?;
+            let target = target_image(renderer.as_mut(), &scene, &opts, args.target.as_deref(), &args.target_set)?;
+            Some((loss, target, args.spp_primal.unwrap_or(3 * opts.spp)))
+        }
+    };
+    let params = [param];
+    // `auto`: the pilot picks the strategy of its rows, at the run's resolution and seed, on what
+    // the run measures (the loss gradient with uniform pixels, or the image gradient).
     let mut pilot = None;
     if rows.iter().any(|r| r.auto) {
         let target = args.diff_param.as_deref().unwrap_or(&args.param);
-        let choice =
-            variance::choose_strategy(renderer.as_mut(), &opts, target, auto_placement, PilotBudget::default())
-                .context("running the auto row's pilot")?;
+        let measure = loss_setup.as_ref().map(|(loss, image, spp_primal)| variance::PilotLoss {
+            target: image,
+            loss: *loss,
+            spp_primal: *spp_primal,
+            params: &params,
+        });
+        let choice = variance::choose_strategy(
+            renderer.as_mut(),
+            &opts,
+            target,
+            auto_placement,
+            PilotBudget::default(),
+            measure.as_ref(),
+        )
+        .context("running the auto row's pilot")?;
         tracing::info!(
-            "auto picked {} (pilot: {} image gradients, {} spp per pixel in all, {:.2} s of which {:.2} s kernel warm-up)",
+            "auto picked {} (pilot: {} renders, {} spp per pixel in all, {:.2} s of which {:.2} s kernel warm-up)",
             strategy_label(&choice.strategy),
             choice.renders,
             choice.samples_per_pixel,
@@ -218,7 +241,7 @@ pub(crate) fn run(args: &VarianceArgs) -> Result<()> {
             row.strategy = choice.strategy;
             row.label = row.label.replacen("auto", &format!("auto: {}", strategy_label(&choice.strategy)), 1);
         }
-        pilot = Some(pilot_json(&scene, target, &choice));
+        pilot = Some(pilot_json(&scene, target, &choice, measure.is_some()));
     }
     let runs = u64::from(args.runs) * rows.len() as u64;
     let progress = progress_bar(runs, "{msg:>16} [{bar:40}] {pos}/{len} runs", args.json);
@@ -226,12 +249,8 @@ pub(crate) fn run(args: &VarianceArgs) -> Result<()> {
     let mut measured = Vec::with_capacity(rows.len());
     let mut outputs: Option<Outputs> = None;
     let mode;
-    if loss_mode {
+    if let Some((loss, target, spp_primal)) = loss_setup {
         mode = "loss";
-        let loss: pathgrad::loss::Loss = args.loss.as_deref().unwrap_or("relmse").parse()?;
-        let target = target_image(renderer.as_mut(), &scene, &opts, args.target.as_deref(), &args.target_set)?;
-        let spp_primal = args.spp_primal.unwrap_or(3 * opts.spp);
-        let params = [param];
         // Warm-up, untimed: lavapipe compiles each kernel at its first dispatch.
         for adaptive in [false, true].into_iter().filter(|&a| !a || args.adaptive) {
             let setup = LossGradientSetup {

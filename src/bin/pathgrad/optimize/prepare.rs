@@ -15,7 +15,7 @@ use pathgrad::optim::{AdamOptions, ControlVariateOptions, IterationOptions, Opti
 use pathgrad::params::{ParamId, ParamTable};
 use pathgrad::prior::Smoothness;
 use pathgrad::scene::Scene;
-use pathgrad::variance::{PilotBudget, choose_strategy};
+use pathgrad::variance::{PilotBudget, PilotLoss, choose_strategy};
 
 use crate::common::{Opened, RenderFlags, target_image, view_targets, with_values};
 use pathgrad::integrator::View;
@@ -115,27 +115,6 @@ pub(super) fn prepare(
         Some(with_values(&scene.params, &config.target_set, "--target-set")?)
     };
     let Opened { backend: mut renderer, ctx, compile_us, .. } = flags.backend(scene, &config.scene, quiet)?;
-    if config.strategy == "auto" && config.pilot.is_none() {
-        let param = config.diff_param.clone().context("--strategy auto: no parameter to pilot on")?;
-        let placement = PlacementMis::from_name(&config.placement_mis)?;
-        let choice = choose_strategy(renderer.as_mut(), &options.render, &param, placement, PilotBudget::default())
-            .context("running --strategy auto's pilot")?;
-        tracing::info!(
-            "--strategy auto picked {} for {param} (pilot: {} image gradients, {} spp per pixel in all, {:.2} s of which {:.2} s kernel warm-up)",
-            crate::common::strategy_label(&choice.strategy),
-            choice.renders,
-            choice.samples_per_pixel,
-            choice.seconds,
-            choice.warm_up_seconds
-        );
-        let q = match choice.strategy {
-            Strategy::Diff { q, .. } => q,
-            Strategy::Bsdf => config.q,
-        };
-        let report = crate::common::pilot_json(scene, &param, &choice);
-        config.pilot = Some(PilotChoice { strategy: choice.strategy.name().to_string(), q, report });
-        options.render.strategy = iteration_options(scene, config)?.render.strategy;
-    }
     let final_opts = RenderOptions { spp: config.spp_final, ..options.render };
     if !config.views.is_empty() {
         let mut views = Vec::new();
@@ -145,6 +124,7 @@ pub(super) fn prepare(
         }
         let targets = view_targets(renderer.as_mut(), scene, &final_opts, &views, &config.target_set)?;
         options.render.differentiate = renderer.param_kinds(ids);
+        pilot(config, scene, renderer.as_mut(), &mut options, None)?;
         let views = views.into_iter().map(|(v, _)| v).collect();
         return Ok(Prepared { renderer, ctx, compile_us, views, targets, truth, options });
     }
@@ -160,8 +140,45 @@ pub(super) fn prepare(
         );
     }
     options.render.differentiate = renderer.param_kinds(ids);
+    let measure = PilotLoss { target: &target, loss: options.loss, spp_primal: config.spp_primal, params: ids };
+    pilot(config, scene, renderer.as_mut(), &mut options, Some(&measure))?;
     let views = vec![View::current(scene)];
     Ok(Prepared { renderer, ctx, compile_us, views, targets: vec![target], truth, options })
+}
+
+/// `--strategy auto` without a stored choice: runs the pilot at the gradient pass's options — on the
+/// loss gradient with `measure` (one view), else on the image gradient — stores its choice in
+/// `config` and sets it in `options`.
+fn pilot(
+    config: &mut RunConfig,
+    scene: &Scene,
+    renderer: &mut dyn Backend,
+    options: &mut IterationOptions,
+    measure: Option<&PilotLoss>,
+) -> Result<()> {
+    if config.strategy != "auto" || config.pilot.is_some() {
+        return Ok(());
+    }
+    let param = config.diff_param.clone().context("--strategy auto: no parameter to pilot on")?;
+    let placement = PlacementMis::from_name(&config.placement_mis)?;
+    let choice = choose_strategy(renderer, &options.render, &param, placement, PilotBudget::default(), measure)
+        .context("running --strategy auto's pilot")?;
+    tracing::info!(
+        "--strategy auto picked {} for {param} (pilot: {} renders, {} spp per pixel in all, {:.2} s of which {:.2} s kernel warm-up)",
+        crate::common::strategy_label(&choice.strategy),
+        choice.renders,
+        choice.samples_per_pixel,
+        choice.seconds,
+        choice.warm_up_seconds
+    );
+    let q = match choice.strategy {
+        Strategy::Diff { q, .. } => q,
+        Strategy::Bsdf => config.q,
+    };
+    let report = crate::common::pilot_json(scene, &param, &choice, measure.is_some());
+    config.pilot = Some(PilotChoice { strategy: choice.strategy.name().to_string(), q, report });
+    options.render.strategy = iteration_options(scene, config)?.render.strategy;
+    Ok(())
 }
 
 pub(super) fn values_of(table: &ParamTable, ids: &[ParamId]) -> BTreeMap<String, Vec<f64>> {
