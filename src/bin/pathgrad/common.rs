@@ -268,10 +268,10 @@ impl StrategyArgs {
     ) -> Result<()> {
         use pathgrad::integrator::Strategy;
         opts.nee = !self.no_nee;
-        if self.strategy != "diff" {
-            if let Some(q) = self.q {
-                bail!("--q {q} applies only to --strategy diff (this run uses {}; auto chooses q)", self.strategy);
-            }
+        if self.strategy != "diff"
+            && let Some(q) = self.q
+        {
+            bail!("--q {q} applies only to --strategy diff (this run uses {}; auto chooses q)", self.strategy);
         }
         if self.strategy == "bsdf" {
             if let Some(name) = &self.diff_param {
