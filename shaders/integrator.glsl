@@ -7,10 +7,11 @@
 // the power heuristic. Strategy DIFF (Su & Gkioulekas) makes one capable vertex — a material whose
 // roughness or blend weight is the target parameter — the differential vertex with probability q,
 // sampling the BSDF's derivative there; every contribution is divided by the mixture density of
-// all placements, carried as the running sums w1, w2 (§5.2) with the Appendix-B NEE weights (§5.3).
-// After each update β, w1, w2 and the previous vertex's sum are divided by w1 + w2 (§5.6), so a
-// vertex starts with w1 + w2 = 1. With no capable vertex DIFF is BSDF sampling with the balance
-// heuristic.
+// all placements, carried as the running sums w1, w2 (§5.2) with the Appendix-B NEE weights (§5.3),
+// or (PLACEMENT_POWER) weighted by the power heuristic over the placements, which needs two more
+// scalars, v1 and the chosen vertex's term (§5.7). After each update β, w1, w2 and the previous
+// vertex's sum are divided by w1 + w2 (§5.6), so a vertex starts with w1 + w2 = 1. With no capable
+// vertex DIFF is BSDF sampling with the balance heuristic (power placements: the power heuristic).
 //
 // The loop is written as one step per vertex on a `PathState` (path_begin, path_step), so the
 // kernel's scheduler (shaders/kernel.glsl) can start a lane's next path the moment its current one
@@ -50,12 +51,83 @@ bool material_capable(uint m) {
     return p >= globals.diff_begin && p < globals.diff_end;
 }
 
+// The differential strategy's running state (ALGORITHMS.md §5.2, §5.7): constant per path,
+// whatever its length. After each update everything is rescaled so that w1 + w2 = 1 (§5.6).
+struct Mixture {
+    bool power;        // power-heuristic placements (PLACEMENT_POWER); else the balance heuristic
+    float w1;          // Σ over the capable vertices so far of their placement terms q·w2·p_∂f/p_f
+    float w2;          // the density factor of "no differential vertex yet", (1 − q)^(capable vertices)
+    float v1;          // Σ of the squared placement terms (power heuristic)
+    float chosen;      // the placement term of the chosen differential vertex (power heuristic)
+    bool dx_taken;     // the differential vertex has been chosen
+    float prev_sum;    // w1 + w2 at the previous vertex before its update, in this vertex's units
+    float prev_sq;     // v1 + w2² at the previous vertex before its update, in this vertex's units
+};
+
+Mixture mixture_new(bool power) {
+    return Mixture(power, 0.0, 1.0, 0.0, 0.0, false, 1.0, 1.0);
+}
+
+// The placement factor of the technique that produced the path so far: the chosen vertex's term,
+// or w2 (no differential vertex yet).
+float mixture_technique(Mixture m) {
+    return m.dx_taken ? m.chosen : m.w2;
+}
+
+// v1 + w2²: Σ of the squared placement factors of the path so far.
+float mixture_squares(Mixture m) {
+    return m.v1 + m.w2 * m.w2;
+}
+
+// Next-event estimation's weight at a vertex (before its update) whose BSDF has densities pdf_f,
+// pdf_d (p_∂f; pdf_f where not capable) toward an emitter sampled with density p_e (`delta`: a
+// light without area), q_here the vertex's decision probability (§5.3, §5.7).
+float mixture_nee_weight(Mixture m, float q_here, float pdf_f, float pdf_d, float p_e, bool delta) {
+    if (!m.power) {
+        if (delta) return 1.0 / (m.w1 + m.w2);
+        return 1.0 / (m.w1 + m.w2 + (m.w1 * pdf_f + q_here * m.w2 * pdf_d + (1.0 - q_here) * m.w2 * pdf_f) / p_e);
+    }
+    if (delta) return mixture_technique(m) / mixture_squares(m);
+    float f = pdf_f / p_e;
+    float d = q_here * m.w2 * pdf_d / p_e;
+    float b = (1.0 - q_here) * m.w2 * pdf_f / p_e;
+    return mixture_technique(m) / (mixture_squares(m) + m.v1 * f * f + d * d + b * b);
+}
+
+// The update after a direction was sampled at a vertex (`capable`: it may be the differential
+// one; `use_dx`: it is) with densities pdf_f, pdf_d: returns the factor w1 + w2 by which the
+// throughput must be divided (1 at a vertex that is not capable), or 0 if the sums vanished.
+float mixture_update(inout Mixture m, bool capable, bool use_dx, float q, float pdf_f, float pdf_d) {
+    m.prev_sum = m.w1 + m.w2;
+    m.prev_sq = mixture_squares(m);
+    if (!capable) return 1.0;
+    float term = q * m.w2 * pdf_d / pdf_f;
+    m.w1 += term;
+    m.v1 += term * term;
+    if (use_dx) m.chosen = term;
+    m.w2 *= 1.0 - q;
+    float sum = m.w1 + m.w2;
+    if (!(sum > 0.0)) return 0.0;
+    m.w1 /= sum;
+    m.w2 /= sum;
+    m.chosen /= sum;
+    m.v1 /= sum * sum;
+    m.prev_sum /= sum;
+    m.prev_sq /= sum * sum;
+    return sum;
+}
+
 // MIS weight of radiance reached by BSDF sampling from the previous vertex, whose direction had
-// density `pdf_f` there and would have had density `pdf_e` under NEE (ALGORITHMS.md §3.1, §5.3).
-float hit_weight(bool diff, bool prev_nee, float pdf_f, float pdf_e, float prev_sum) {
+// density `pdf_f` there and would have had density `pdf_e` under NEE (ALGORITHMS.md §3.1, §5.3,
+// §5.7).
+float hit_weight(bool diff, bool prev_nee, float pdf_f, float pdf_e, Mixture m) {
+    if (m.power) {
+        float nee = prev_nee ? m.prev_sq * (pdf_e / pdf_f) * (pdf_e / pdf_f) : 0.0;
+        return mixture_technique(m) / (mixture_squares(m) + nee);
+    }
     if (!prev_nee) return 1.0;
     if (!diff) return mis_power(pdf_f, pdf_e);
-    return 1.0 / (1.0 + prev_sum * pdf_e / pdf_f);
+    return 1.0 / (1.0 + m.prev_sum * pdf_e / pdf_f);
 }
 
 // Block `block` of the main stream of a path's vertex, under its view's key word `key1`.
@@ -93,11 +165,8 @@ struct PathState {
     uint sample_index;
     uint vertex;       // index of the vertex the next step finds, from 1
     float prev_pdf_f;  // density with which the previous vertex sampled ray.dir
-    float prev_sum;    // w1 + w2 at the previous vertex before its update, rescaled
-    float w1;          // mixture sums of the differential strategy (ALGORITHMS.md §5.2)
-    float w2;
+    Mixture mix;       // the differential strategy's running sums (ALGORITHMS.md §5.2, §5.7)
     bool prev_nee;     // whether NEE at the previous vertex could have found this emitter
-    bool dx_taken;     // the differential vertex has been chosen
     bool adjoint;      // this is the replay of the path (adjoint mode)
 };
 
@@ -140,11 +209,8 @@ PathState path_begin(uint view, uint pixel, uint sample_index, bool adjoint, vec
     st.sample_index = sample_index;
     st.vertex = 1u;
     st.prev_pdf_f = 0.0;
-    st.prev_sum = 1.0;
-    st.w1 = 0.0;
-    st.w2 = 1.0;
+    st.mix = mixture_new(HAS(F_DIFF) && globals.strategy == STRATEGY_DIFF && globals.diff_placement == PLACEMENT_POWER);
     st.prev_nee = false;
-    st.dx_taken = false;
     st.adjoint = adjoint;
     return st;
 }
@@ -311,7 +377,7 @@ bool path_step(inout PathState st) {
         } else if (event == EVENT_ESCAPE) {
             // ---- environment hit ----
             if (HAS(F_ENV) && globals.env_param != NO_PARAM) {
-                float w_b = hit_weight(diff, st.prev_nee, st.prev_pdf_f, environment_pdf(st.ray.dir), st.prev_sum);
+                float w_b = hit_weight(diff, st.prev_nee, st.prev_pdf_f, environment_pdf(st.ray.dir), st.mix);
                 st.radiance += sign * (st.throughput * w_b * env_radiance(st.ray.dir));
                 if (HAS(G_ENV)) {
                     gt.hit_param = globals.env_param;
@@ -327,7 +393,7 @@ bool path_step(inout PathState st) {
             // ---- emitter hit ----
             float cos_emit = dot(s.ng, wi_world);
             if (HAS(F_EMITTERS) && s.emitter != NO_EMITTER && cos_emit > 0.0) {
-                float w_b = hit_weight(diff, st.prev_nee, st.prev_pdf_f, emitter_pdf_solid_angle(travelled + hit.t, cos_emit), st.prev_sum);
+                float w_b = hit_weight(diff, st.prev_nee, st.prev_pdf_f, emitter_pdf_solid_angle(travelled + hit.t, cos_emit), st.mix);
                 uint p_radiance = emitters[s.emitter].p_radiance;
                 st.radiance += sign * (st.throughput * w_b * param_rgb(p_radiance));
                 if (HAS(G_EMISSION)) { gt.hit_param = p_radiance; gt.hit = st.adj * st.throughput * w_b; }
@@ -393,14 +459,14 @@ bool path_step(inout PathState st) {
                         if (nee_pdf > 0.0 && (max_component(nee_f) > 0.0 || (adjoint && upper))) {
                             if (HAS(F_LIGHTS) && es.delta) {
                                 // No BSDF sample reaches a light without area: NEE alone finds it.
-                                nee_w = diff ? 1.0 / (st.w1 + st.w2) : 1.0;
+                                nee_w = diff ? mixture_nee_weight(st.mix, 0.0, 0.0, 0.0, 0.0, true) : 1.0;
                             } else if (!diff) {
                                 nee_w = mis_power(nee_pdf, pdf_f);
                             } else {
                                 // Appendix B: the NEE direction as produced by BSDF or differential sampling here.
                                 float q_here = capable ? globals.diff_q : 0.0;
                                 float pdf_d = capable ? bsdf_pdf_diff(bsdf, wi, nee_wo) : pdf_f;
-                                nee_w = 1.0 / (st.w1 + st.w2 + (st.w1 * pdf_f + q_here * st.w2 * pdf_d + (1.0 - q_here) * st.w2 * pdf_f) / nee_pdf);
+                                nee_w = mixture_nee_weight(st.mix, q_here, pdf_f, pdf_d, nee_pdf, false);
                             }
                             if (HAS(F_MEDIA)) nee_w_tr = st.adj * st.throughput * nee_w * nee_f * es.radiance / nee_pdf;
                             shadow_ray = make_ray(origin, wl);
@@ -439,7 +505,8 @@ bool path_step(inout PathState st) {
             if (adjoint) phase_grad(m, d, wo, st.adj * st.radiance / pdf);
             st.prev_pdf_f = pdf;
             st.prev_nee = nee;
-            st.prev_sum = 1.0;
+            st.mix.prev_sum = 1.0;
+            st.mix.prev_sq = mixture_squares(st.mix);
             if (!path_survives(st, vertex)) ended = true; else st.ray = make_ray(x_medium, wo);
         }
     }
@@ -461,7 +528,7 @@ bool path_step(inout PathState st) {
         vec4 u_bs = draw_block(st.key1, st.pixel, st.sample_index, vertex, DIM_LOBE / 4u);
         float u_lobe = u_bs[DIM_LOBE % 4u];
         vec2 u_dir = vec2(u_bs[DIM_DIRECTION % 4u], u_bs[DIM_DIRECTION % 4u + 1u]);
-        bool use_dx = capable && !st.dx_taken && u_bs[DIM_TECHNIQUE % 4u] < globals.diff_q;
+        bool use_dx = capable && !st.mix.dx_taken && u_bs[DIM_TECHNIQUE % 4u] < globals.diff_q;
         BsdfSample bs;
         float pdf_f;
         float pdf_d = 0.0;
@@ -483,21 +550,9 @@ bool path_step(inout PathState st) {
             st.prev_pdf_f = pdf_f;
             // An emitter found through a delta lobe counts whole: NEE could not have sampled it.
             st.prev_nee = nee && !bs.delta;
-            st.prev_sum = st.w1 + st.w2;
-            if (capable) {
-                st.w1 += globals.diff_q * st.w2 * pdf_d / pdf_f;
-                st.w2 *= 1.0 - globals.diff_q;
-                float sum = st.w1 + st.w2;
-                if (!(sum > 0.0)) {
-                    ended = true;
-                } else {
-                    st.w1 /= sum;
-                    st.w2 /= sum;
-                    st.throughput /= sum;
-                    st.prev_sum /= sum;
-                }
-            }
-            st.dx_taken = st.dx_taken || use_dx;
+            float sum = mixture_update(st.mix, capable, use_dx, globals.diff_q, pdf_f, pdf_d);
+            if (!(sum > 0.0)) ended = true; else st.throughput /= sum;
+            st.mix.dx_taken = st.mix.dx_taken || use_dx;
 
             // ---- Russian roulette ----
             if (!ended && !path_survives(st, vertex)) ended = true;

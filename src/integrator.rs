@@ -1,5 +1,6 @@
 //! Options shared by the GPU renderer and the CPU reference: image size, samples, depth, seed.
 
+pub use crate::contract::PlacementMis;
 use crate::contract::{
     Globals, LENS_ORTHOGRAPHIC, LENS_PINHOLE, LENS_THIN, NO_PARAM, STRATEGY_BSDF, STRATEGY_DIFF, ViewCamera,
 };
@@ -112,18 +113,54 @@ pub enum Strategy {
     /// Differential path sampling (Su & Gkioulekas): at each vertex whose material's roughness or
     /// blend weight *is* `target`, until one is chosen, sample the derivative of the BSDF by
     /// `target` with probability `q`; every contribution is divided by the mixture density of all
-    /// placements (running sums w₁, w₂; Appendix-B weights for next-event estimation).
+    /// placements (running sums w₁, w₂; Appendix-B weights for next-event estimation), or, with
+    /// [`PlacementMis::Power`], weighted by the power heuristic over the placements (ALGORITHMS.md §5.7).
     Diff {
         /// The parameter whose derivative drives the differential sampler.
         target: ParamId,
         /// Probability of the differential technique at a capable vertex, in [0, 1].
         q: f32,
+        /// How the placements of the differential vertex are weighted against each other.
+        placement: PlacementMis,
     },
+}
+
+impl PlacementMis {
+    /// The weighting named `name`: `balance` or `power`.
+    ///
+    /// ```
+    /// use pathgrad::integrator::PlacementMis;
+    /// assert_eq!(PlacementMis::from_name("power")?, PlacementMis::Power);
+    /// assert!(PlacementMis::from_name("max").is_err());
+    /// # Ok::<(), pathgrad::Error>(())
+    /// ```
+    ///
+    /// # Errors
+    /// [`Error::InvalidArgument`] naming `PlacementMis::from_name` for any other name.
+    pub fn from_name(name: &str) -> Result<PlacementMis> {
+        match name {
+            "balance" => Ok(PlacementMis::Balance),
+            "power" => Ok(PlacementMis::Power),
+            other => Err(Error::InvalidArgument {
+                parameter: "PlacementMis::from_name".into(),
+                message: format!("unknown placement weighting '{other}' (expected balance or power)"),
+            }),
+        }
+    }
+
+    /// Short name: `balance` or `power`.
+    pub fn name(self) -> &'static str {
+        match self {
+            PlacementMis::Balance => "balance",
+            PlacementMis::Power => "power",
+        }
+    }
 }
 
 impl Strategy {
     /// The strategy named `name` (`bsdf` or `diff`); `diff` samples the derivative by the parameter
-    /// `target` with probability `q`.
+    /// `target` with probability `q`, its placements weighted by the balance heuristic (set
+    /// [`Strategy::with_placement`] for the power heuristic).
     ///
     /// # Errors
     /// [`Error::InvalidArgument`] naming `Strategy::from_name`, `Strategy::Diff::q` or the target for an unknown strategy,
@@ -184,12 +221,28 @@ impl Strategy {
                         ),
                     });
                 }
-                Ok(Strategy::Diff { target, q })
+                Ok(Strategy::Diff { target, q, placement: PlacementMis::Balance })
             }
             other => Err(Error::InvalidArgument {
                 parameter: "Strategy::from_name".into(),
                 message: format!("unknown strategy '{other}' (expected bsdf or diff)"),
             }),
+        }
+    }
+
+    /// The same strategy with its placements weighted by `placement` (`bsdf` has none: unchanged).
+    ///
+    /// ```
+    /// use pathgrad::integrator::{PlacementMis, Strategy};
+    /// let scene = pathgrad::scene::builtin::load("blend")?;
+    /// let s = Strategy::from_name(&scene, "diff", 0.9, "object.weight.value")?.with_placement(PlacementMis::Power);
+    /// assert!(matches!(s, Strategy::Diff { placement: PlacementMis::Power, .. }));
+    /// # Ok::<(), pathgrad::Error>(())
+    /// ```
+    pub fn with_placement(self, placement: PlacementMis) -> Strategy {
+        match self {
+            Strategy::Diff { target, q, .. } => Strategy::Diff { target, q, placement },
+            Strategy::Bsdf => Strategy::Bsdf,
         }
     }
 
@@ -446,11 +499,11 @@ impl RenderOptions {
     /// The per-dispatch constants for `scene` (flattened as `flat`) in `pass`, for one view
     /// (`view_count` is set by the renderers for a request of several).
     pub fn globals(&self, scene: &Scene, flat: &FlatScene, pass: PassTag) -> Globals {
-        let (strategy, diff_q, diff_begin, diff_end) = match self.strategy {
-            Strategy::Bsdf => (STRATEGY_BSDF, 0.0, 0, 0),
-            Strategy::Diff { target, q } => {
+        let (strategy, diff_q, diff_begin, diff_end, diff_placement) = match self.strategy {
+            Strategy::Bsdf => (STRATEGY_BSDF, 0.0, 0, 0, PlacementMis::Balance),
+            Strategy::Diff { target, q, placement } => {
                 let e = scene.params.entry(target);
-                (STRATEGY_DIFF, q, e.offset, e.offset + e.len)
+                (STRATEGY_DIFF, q, e.offset, e.offset + e.len, placement)
             }
         };
         let key = self.key(pass);
@@ -481,6 +534,7 @@ impl RenderOptions {
             diff_q,
             diff_begin,
             diff_end,
+            diff_placement: diff_placement.value(),
             node_count: flat.bvh.nodes.len() as u32,
             primal_only: 0,
             addr_nodes: glam::UVec2::ZERO,

@@ -12,6 +12,9 @@
 //! product, to be compared as a ratio to the baseline's. Wall time is what a user waits; on a
 //! machine shared with other work it is noisy, so the process's CPU time (all threads, lavapipe's
 //! included; Linux only) is measured beside it — on a CPU device it is the work an estimate costs.
+//!
+//! [`choose_strategy`] is the same measurement made small: a pilot of a few low-spp image gradients
+//! per candidate strategy, interleaved, that picks the most efficient one (`--strategy auto`).
 
 use std::time::Instant;
 
@@ -20,7 +23,7 @@ use crate::backend::Backend;
 use crate::error::{Error, Result};
 use crate::gpu::renderer::GradMode;
 use crate::image::Image;
-use crate::integrator::RenderOptions;
+use crate::integrator::{PlacementMis, RenderOptions, Strategy, check_spp_primal};
 use crate::loss::{Loss, loss_and_adjoint};
 use crate::params::ParamId;
 
@@ -160,14 +163,14 @@ fn check_runs(runs: u32) -> Result<()> {
 ///
 /// ```no_run
 /// use pathgrad::gpu::{Context, ContextDesc, Renderer};
-/// use pathgrad::integrator::{RenderOptions, Strategy};
+/// use pathgrad::integrator::{PlacementMis, RenderOptions, Strategy};
 ///
 /// let scene = pathgrad::scene::builtin::load("blend")?;
 /// let ctx = Context::new(&ContextDesc::default())?;
 /// let mut renderer = Renderer::new(&ctx, &scene)?;
 /// let bsdf = RenderOptions { spp: 2, ..RenderOptions::for_scene(&scene) };
 /// let weight = scene.params.find("object.weight.value").unwrap();
-/// let diff = RenderOptions { strategy: Strategy::Diff { target: weight, q: 0.5 }, ..bsdf };
+/// let diff = RenderOptions { strategy: Strategy::Diff { target: weight, q: 0.5, placement: PlacementMis::Balance }, ..bsdf };
 /// let param = "object.weight.value";
 /// let a = pathgrad::variance::image_gradient_variance(&mut renderer, &bsdf, param, 32, &mut |_| {})?;
 /// let b = pathgrad::variance::image_gradient_variance(&mut renderer, &diff, param, 32, &mut |_| {})?;
@@ -312,9 +315,295 @@ pub fn loss_gradient_variance(
     })
 }
 
+/// The probabilities of the differential technique that [`choose_strategy`] tries.
+pub const PILOT_QS: [f32; 3] = [0.5, 0.75, 0.9];
+
+/// Pilot times within this fraction of the fastest candidate's count as equal to it: on a shared
+/// machine one run's timing varies by about this much, and the cost differences between the
+/// candidates (the differential strategy is about a tenth slower per sample) are of that order, so
+/// within it the choice goes by variance alone — and the same seed then picks the same strategy.
+pub const PILOT_TIME_TIE: f64 = 0.15;
+
+/// A later candidate replaces an earlier pick only if its variance × time is below the pick's by
+/// more than this fraction: a pilot of a few runs cannot resolve smaller differences, and candidates
+/// that sample alike (a blend at weight ½, where the differential density is the BSDF's) then keep
+/// the first of them instead of a winner by rounding.
+pub const PILOT_MARGIN: f64 = 0.05;
+
+/// How much [`choose_strategy`] spends: `runs` image gradients of `spp` samples per pixel per
+/// candidate, at the request's resolution.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct PilotBudget {
+    /// Estimates per candidate (at least 2: a variance needs two).
+    pub runs: u32,
+    /// Samples per pixel of each estimate.
+    pub spp: u32,
+}
+
+impl Default for PilotBudget {
+    /// 4 runs of 1 spp per candidate: 16 one-sample image gradients for four candidates.
+    fn default() -> PilotBudget {
+        PilotBudget { runs: 4, spp: 1 }
+    }
+}
+
+/// What the pilot measured for one candidate strategy.
+#[derive(Clone, Debug)]
+pub struct PilotCandidate {
+    /// The candidate.
+    pub strategy: Strategy,
+    /// Per-pixel variance of ∂I/∂θ averaged over pixels and channels, at the pilot's spp; with a
+    /// [`PilotLoss`], the summed variance of the loss gradient's values.
+    pub variance: f64,
+    /// Wall time of its fastest estimate, in seconds (the least disturbed by other work); with a
+    /// [`PilotLoss`], plus the fastest pass 1.
+    pub seconds_per_estimate: f64,
+    /// Variance × time, with times within [`PILOT_TIME_TIE`] of the fastest taken as the fastest's:
+    /// the figure the choice minimises (by more than [`PILOT_MARGIN`] to displace an earlier one).
+    pub efficiency: f64,
+}
+
+/// With a loss, [`choose_strategy`] measures the variance of the loss gradient (pass 1 at
+/// `spp_primal`, shared by the candidates, then each candidate's gradient pass with uniform pixel
+/// sampling) instead of the image gradient's.
+#[derive(Clone, Copy, Debug)]
+pub struct PilotLoss<'a> {
+    /// The image the loss compares against.
+    pub target: &'a Image,
+    /// The loss.
+    pub loss: Loss,
+    /// Samples per pixel of pass 1.
+    pub spp_primal: u32,
+    /// The parameters whose gradient is measured (the trace of their covariance is the variance).
+    pub params: &'a [ParamId],
+}
+
+/// The result of [`choose_strategy`].
+#[derive(Clone, Debug)]
+pub struct StrategyChoice {
+    /// The most efficient candidate.
+    pub strategy: Strategy,
+    /// Every candidate, in the order tried (`bsdf` first, then q ascending; within
+    /// [`PILOT_MARGIN`] the earlier one is kept).
+    pub candidates: Vec<PilotCandidate>,
+    /// Wall time of the whole pilot (warm-up included), in seconds.
+    pub seconds: f64,
+    /// Of which the warm-up: the first dispatch of each kernel, where a driver compiles it (on
+    /// lavapipe seconds, once per scene and kernel; any run with that kernel pays it once).
+    pub warm_up_seconds: f64,
+    /// CPU time of the process during the pilot, in seconds (see [`process_cpu_seconds`]).
+    pub cpu_seconds: Option<f64>,
+    /// Gradient passes and pass-1 renders (warm-up included).
+    pub renders: u32,
+    /// Samples rendered in all, per pixel, gradient passes and pass-1 renders together.
+    pub samples_per_pixel: u64,
+}
+
+/// Picks, for the image gradient ∂I/∂`param` under `options` (resolution, NEE, depth, seed), the
+/// strategy with the least variance × time: plain `bsdf` and, where some material has a
+/// differential sampler for `param`, `diff` driven by `param` at each q of [`PILOT_QS`] with its
+/// placements weighted by `placement`. Each candidate renders `budget.runs` image gradients of
+/// `budget.spp` spp with seeds `options.seed + i`, interleaved run by run so that a slow spell of
+/// the machine falls on all of them; kernels are warmed up first, untimed. Variances are those of
+/// [`image_gradient_variance`], times those of each candidate's fastest estimate; times within
+/// [`PILOT_TIME_TIE`] of the fastest count as equal, and a candidate displaces an earlier one only
+/// if better by more than [`PILOT_MARGIN`], so the same seed picks the same strategy. With `loss`,
+/// the figure is the loss gradient's variance instead (see [`PilotLoss`]): what an optimisation
+/// pays for, which the image gradient's variance need not predict.
+///
+/// ```no_run
+/// use pathgrad::gpu::{Context, ContextDesc, Renderer};
+/// use pathgrad::integrator::{PlacementMis, RenderOptions};
+/// use pathgrad::variance::{PilotBudget, choose_strategy};
+///
+/// let scene = pathgrad::scene::builtin::load("blend")?;
+/// let ctx = Context::new(&ContextDesc::default())?;
+/// let mut renderer = Renderer::new(&ctx, &scene)?;
+/// let opts = RenderOptions { width: 64, height: 64, ..RenderOptions::for_scene(&scene) };
+/// let choice =
+///     choose_strategy(&mut renderer, &opts, "object.weight.value", PlacementMis::Balance, PilotBudget::default(), None)?;
+/// println!("picked {:?} in {:.2} s", choice.strategy, choice.seconds);
+/// # Ok::<(), pathgrad::Error>(())
+/// ```
+///
+/// # Errors
+/// [`Error::InvalidArgument`] naming `PilotBudget::runs` (below 2) or `PilotBudget::spp` (0), an
+/// unknown parameter, a parameter the differential sampler refuses by name
+/// ([`Strategy::from_name`]), `spp_primal` = 0 or no parameter in `loss`; as
+/// [`Backend::image_gradient`], [`Backend::loss_image`] and [`Backend::backward`].
+pub fn choose_strategy(
+    backend: &mut dyn Backend,
+    options: &RenderOptions,
+    param: &str,
+    placement: PlacementMis,
+    budget: PilotBudget,
+    loss: Option<&PilotLoss>,
+) -> Result<StrategyChoice> {
+    if budget.runs < 2 {
+        return Err(Error::InvalidArgument {
+            parameter: "PilotBudget::runs".into(),
+            message: format!("{}: a variance needs at least 2 runs", budget.runs),
+        });
+    }
+    if budget.spp == 0 {
+        return Err(Error::InvalidArgument {
+            parameter: "PilotBudget::spp".into(),
+            message: "must be at least 1".into(),
+        });
+    }
+    let scene = backend.scene();
+    let target = scene.params.find(param).ok_or_else(|| Error::InvalidArgument {
+        parameter: param.to_string(),
+        message: "no such parameter to choose a strategy for (see `pathgrad params SCENE`)".into(),
+    })?;
+    let mut strategies = vec![Strategy::Bsdf];
+    if Strategy::has_differential_sampler(scene, target) {
+        for q in PILOT_QS {
+            strategies.push(Strategy::from_name(scene, "diff", q, param)?.with_placement(placement));
+        }
+    }
+    let base = RenderOptions { spp: budget.spp, ..*options };
+    base.validate()?;
+    let entries: Vec<_> = match loss {
+        None => Vec::new(),
+        Some(l) => {
+            check_spp_primal(l.spp_primal)?;
+            if l.params.is_empty() {
+                return Err(Error::InvalidArgument {
+                    parameter: "PilotLoss::params".into(),
+                    message: "no parameter to measure".into(),
+                });
+            }
+            l.params.iter().map(|&id| scene.params.entry(id).clone()).collect()
+        }
+    };
+    let (start, cpu_start) = (Instant::now(), process_cpu_seconds());
+    let (mut renders, mut samples) = (0u32, 0u64);
+    // One estimate: the image gradient, or the loss gradient's values from pass 1's adjoint.
+    let mut estimate = |backend: &mut dyn Backend, run: &RenderOptions, adjoint: Option<&Image>| -> Result<Vec<f64>> {
+        renders += 1;
+        samples += u64::from(run.spp);
+        Ok(match adjoint {
+            None => backend.image_gradient(run, param)?.as_slice().iter().map(|&v| f64::from(v)).collect(),
+            Some(adjoint) => {
+                let g = backend.backward(run, adjoint, GradMode::Float)?;
+                let values = g.values();
+                entries
+                    .iter()
+                    .flat_map(|e| &values[e.offset as usize..(e.offset + e.len) as usize])
+                    .map(|&v| f64::from(v))
+                    .collect()
+            }
+        })
+    };
+    // Pass 1 of run `seed` (loss mode): the adjoint image all candidates share.
+    let pass1 = |backend: &mut dyn Backend, run: &RenderOptions, renders: &mut u32, samples: &mut u64| {
+        loss.map(|l| {
+            *renders += 1;
+            *samples += u64::from(l.spp_primal);
+            backend.loss_image(run, l.spp_primal, l.target, l.loss).map(|(_, adjoint)| adjoint)
+        })
+        .transpose()
+    };
+    // Warm-up, untimed: lavapipe compiles a kernel at its first dispatch; the diff candidates
+    // differ only in uniforms, so one warm-up serves them all.
+    let (mut pass1_renders, mut pass1_samples) = (0u32, 0u64);
+    let warm = RenderOptions { spp: 1, ..base };
+    let adjoint = pass1(backend, &warm, &mut pass1_renders, &mut pass1_samples)?;
+    for strategy in strategies.iter().take(2) {
+        estimate(backend, &RenderOptions { strategy: *strategy, ..warm }, adjoint.as_ref())?;
+    }
+    let warm_up_seconds = start.elapsed().as_secs_f64();
+    let mut moments: Vec<Option<Moments>> = strategies.iter().map(|_| None).collect();
+    let mut fastest = vec![f64::INFINITY; strategies.len()];
+    let mut fastest_pass1 = if loss.is_some() { f64::INFINITY } else { 0.0 };
+    for i in 0..budget.runs {
+        let seeded = RenderOptions { seed: base.seed.wrapping_add(i), ..base };
+        let mut clock = Stopwatch::new();
+        let adjoint = clock.time(|| pass1(backend, &seeded, &mut pass1_renders, &mut pass1_samples))?;
+        if loss.is_some() {
+            fastest_pass1 = fastest_pass1.min(clock.wall);
+        }
+        for (k, strategy) in strategies.iter().enumerate() {
+            let run = RenderOptions { strategy: *strategy, ..seeded };
+            let mut clock = Stopwatch::new();
+            let values = clock.time(|| estimate(backend, &run, adjoint.as_ref()))?;
+            fastest[k] = fastest[k].min(clock.wall);
+            moments[k].get_or_insert_with(|| Moments::new(values.len())).add(values);
+        }
+    }
+    let measured: Vec<(Strategy, f64, f64)> = strategies
+        .iter()
+        .zip(&moments)
+        .zip(&fastest)
+        .map(|((s, m), &t)| {
+            let variance = m.as_ref().expect("at least 2 runs").variance();
+            let figure = variance.iter().sum::<f64>() / if loss.is_some() { 1.0 } else { variance.len() as f64 };
+            (*s, figure, t + fastest_pass1)
+        })
+        .collect();
+    let candidates = pilot_efficiencies(&measured);
+    let best = pilot_pick(&candidates);
+    let cpu_seconds = match (cpu_start, process_cpu_seconds()) {
+        (Some(a), Some(b)) => Some(b - a),
+        _ => None,
+    };
+    Ok(StrategyChoice {
+        strategy: candidates[best].strategy,
+        seconds: start.elapsed().as_secs_f64(),
+        warm_up_seconds,
+        cpu_seconds,
+        renders: renders + pass1_renders,
+        samples_per_pixel: samples + pass1_samples,
+        candidates,
+    })
+}
+
+/// Each candidate's (strategy, variance, seconds per estimate) with its efficiency: variance × time,
+/// a time within [`PILOT_TIME_TIE`] of the fastest taken as the fastest.
+fn pilot_efficiencies(measured: &[(Strategy, f64, f64)]) -> Vec<PilotCandidate> {
+    let fastest = measured.iter().map(|m| m.2).fold(f64::INFINITY, f64::min);
+    measured
+        .iter()
+        .map(|&(strategy, variance, seconds)| {
+            let time = if seconds <= fastest * (1.0 + PILOT_TIME_TIE) { fastest } else { seconds };
+            // A NaN variance (a non-finite gradient) must never win.
+            let efficiency = if variance.is_finite() { efficiency(variance, time) } else { f64::INFINITY };
+            PilotCandidate { strategy, variance, seconds_per_estimate: seconds, efficiency }
+        })
+        .collect()
+}
+
+/// The index of the candidate [`choose_strategy`] picks: the first, displaced by each later one
+/// whose efficiency is below the pick's by more than [`PILOT_MARGIN`].
+fn pilot_pick(candidates: &[PilotCandidate]) -> usize {
+    (1..candidates.len()).fold(0, |best, k| {
+        if candidates[k].efficiency < (1.0 - PILOT_MARGIN) * candidates[best].efficiency { k } else { best }
+    })
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn pilot_times_within_the_tie_count_as_equal() {
+        let diff = |q| Strategy::Diff { target: ParamId(0), q, placement: PlacementMis::Balance };
+        // 10 % slower: the time counts as the fastest's, the variance decides.
+        let c = pilot_efficiencies(&[(Strategy::Bsdf, 2.0, 1.0), (diff(0.5), 1.5, 1.1)]);
+        assert_eq!(c[1].efficiency, 1.5);
+        assert_eq!(c[1].seconds_per_estimate, 1.1);
+        // Twice as slow: the time counts, and the lower variance no longer pays.
+        let c = pilot_efficiencies(&[(Strategy::Bsdf, 2.0, 1.0), (diff(0.5), 1.5, 2.0), (diff(0.9), f64::NAN, 1.0)]);
+        assert_eq!(c[1].efficiency, 3.0);
+        assert_eq!(c[0].efficiency, 2.0);
+        assert_eq!(c[2].efficiency, f64::INFINITY);
+        assert_eq!(pilot_pick(&c), 0);
+        // Within the margin the earlier candidate stays; beyond it the later one wins.
+        let c = pilot_efficiencies(&[(Strategy::Bsdf, 1.0, 1.0), (diff(0.5), 0.96, 1.0), (diff(0.9), 0.9, 1.0)]);
+        assert_eq!(pilot_pick(&c[..2]), 0);
+        assert_eq!(pilot_pick(&c), 2);
+    }
 
     #[test]
     fn moments_match_the_two_pass_formulas() {

@@ -153,6 +153,15 @@ contract_enums! {
         Diff = STRATEGY_DIFF = 1,
     }
 
+    /// How the differential strategy weights its placements of the differential vertex
+    /// (`Globals::diff_placement`, ALGORITHMS.md §5.7).
+    enum PlacementMis {
+        /// Balance heuristic: every contribution divided by the mixture density (\[SG24\] Eq. 24).
+        Balance = PLACEMENT_BALANCE = 0,
+        /// Power heuristic (exponent 2) over the placements and, with NEE, the emitter samples.
+        Power = PLACEMENT_POWER = 1,
+    }
+
     /// A loss between a rendered image I and a target Ĩ, averaged over all W·H·3 values.
     enum Loss {
         /// Mean absolute difference; its adjoint is sign(I − Ĩ)/(3WH) (0 where equal).

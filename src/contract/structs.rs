@@ -69,6 +69,9 @@ contract_structs! {
         diff_begin: u32,
         /// Differential strategy: one past the target parameter's last value.
         diff_end: u32,
+        /// Differential strategy: `PLACEMENT_BALANCE` or `PLACEMENT_POWER`, the weighting of its
+        /// placements (ALGORITHMS.md §5.7).
+        diff_placement: u32,
         /// Number of BVH nodes.
         node_count: u32,
         /// Reverse-mode kernels over pixels: 1 adds each path's radiance to the accumulation

@@ -10,8 +10,8 @@ use crate::bvh::{Ray, closest_hit, occluded};
 use crate::contract::{
     DIM_DIFF_SIGN, DIM_DIRECTION, DIM_EMITTER_POS, DIM_EMITTER_SELECT, DIM_ENV_CELL, DIM_LOBE, DIM_PIXEL_JITTER,
     DIM_ROULETTE, DIM_TECHNIQUE, Globals, LENS_ORTHOGRAPHIC, LENS_THIN, MAT_BLEND, MAT_NULL, MAT_ROUGH_CONDUCTOR,
-    MAT_ROUGH_DIELECTRIC, MAT_ROUGH_PLASTIC, MAX_NULL_CROSSINGS, NO_EMITTER, NO_MEDIUM, NO_PARAM, STRATEGY_DIFF,
-    ViewCamera,
+    MAT_ROUGH_DIELECTRIC, MAT_ROUGH_PLASTIC, MAX_NULL_CROSSINGS, NO_EMITTER, NO_MEDIUM, NO_PARAM, PLACEMENT_POWER,
+    STRATEGY_DIFF, ViewCamera,
 };
 use crate::cpu::emitter::{
     EmitterSample, emitter_pdf_solid_angle, env_backward, env_radiance, environment_pdf, sample_emitter,
@@ -96,15 +96,106 @@ fn material_capable(flat: &FlatScene, globals: &Globals, m: u32) -> bool {
 }
 
 /// MIS weight of radiance reached by BSDF sampling from the previous vertex, whose direction had
-/// density `pdf_f` there and would have had density `pdf_e` under NEE (ALGORITHMS.md §3.1, §5.3).
-fn hit_weight(diff: bool, prev_nee: bool, pdf_f: f32, pdf_e: f32, prev_sum: f32) -> f32 {
+/// density `pdf_f` there and would have had density `pdf_e` under NEE (ALGORITHMS.md §3.1, §5.3,
+/// §5.7).
+fn hit_weight(diff: bool, prev_nee: bool, pdf_f: f32, pdf_e: f32, mix: &Mixture) -> f32 {
+    if mix.power {
+        let nee = if prev_nee { mix.prev_sq * (pdf_e / pdf_f) * (pdf_e / pdf_f) } else { 0.0 };
+        return mix.technique() / (mix.squares() + nee);
+    }
     if !prev_nee {
         return 1.0;
     }
     if !diff {
         return mis_power(pdf_f, pdf_e);
     }
-    1.0 / (1.0 + prev_sum * pdf_e / pdf_f)
+    1.0 / (1.0 + mix.prev_sum * pdf_e / pdf_f)
+}
+
+/// The differential strategy's running state (ALGORITHMS.md §5.2, §5.7): constant per path,
+/// whatever its length. After each update everything is rescaled so that w₁ + w₂ = 1 (§5.6).
+struct Mixture {
+    /// Power-heuristic placements (`PLACEMENT_POWER`); else the balance heuristic.
+    power: bool,
+    /// w₁: Σ over the capable vertices so far of their placement terms q·w₂·p_∂f/p_f.
+    w1: f32,
+    /// w₂: the density factor of "no differential vertex yet", (1 − q)^(capable vertices).
+    w2: f32,
+    /// v₁: Σ of the squared placement terms (power heuristic).
+    v1: f32,
+    /// The placement term of the chosen differential vertex, once one is chosen (power heuristic).
+    chosen: f32,
+    /// The differential vertex has been chosen.
+    dx_taken: bool,
+    /// w₁ + w₂ at the previous vertex before its update, in the current vertex's units.
+    prev_sum: f32,
+    /// v₁ + w₂² at the previous vertex before its update, in the current vertex's units.
+    prev_sq: f32,
+}
+
+impl Mixture {
+    fn new(power: bool) -> Mixture {
+        Mixture { power, w1: 0.0, w2: 1.0, v1: 0.0, chosen: 0.0, dx_taken: false, prev_sum: 1.0, prev_sq: 1.0 }
+    }
+
+    /// The placement factor of the technique that produced the path so far: the chosen vertex's
+    /// term, or w₂ (no differential vertex yet).
+    fn technique(&self) -> f32 {
+        if self.dx_taken { self.chosen } else { self.w2 }
+    }
+
+    /// v₁ + w₂²: Σ of the squared placement factors of the path so far.
+    fn squares(&self) -> f32 {
+        self.v1 + self.w2 * self.w2
+    }
+
+    /// Next-event estimation's weight at a vertex (before its update) whose BSDF has densities
+    /// `pdf_f`, `pdf_d` (p_∂f; `pdf_f` where not capable) toward an emitter sampled with density
+    /// `p_e` (`None`: a light without area), `q_here` the vertex's decision probability (§5.3, §5.7).
+    fn nee_weight(&self, q_here: f32, pdf_f: f32, pdf_d: f32, p_e: Option<f32>) -> f32 {
+        let (w1, w2) = (self.w1, self.w2);
+        match (self.power, p_e) {
+            (false, None) => 1.0 / (w1 + w2),
+            (false, Some(p_e)) => {
+                1.0 / (w1 + w2 + (w1 * pdf_f + q_here * w2 * pdf_d + (1.0 - q_here) * w2 * pdf_f) / p_e)
+            }
+            (true, None) => self.technique() / self.squares(),
+            (true, Some(p_e)) => {
+                let (f, d, b) = (pdf_f / p_e, q_here * w2 * pdf_d / p_e, (1.0 - q_here) * w2 * pdf_f / p_e);
+                self.technique() / (self.squares() + self.v1 * f * f + d * d + b * b)
+            }
+        }
+    }
+
+    /// The update after a direction was sampled at a vertex (`capable`: the vertex may be the
+    /// differential one; `use_dx`: it is) with densities `pdf_f`, `pdf_d`: returns the factor
+    /// w₁ + w₂ by which the throughput must be divided (1 at a vertex that is not capable), or
+    /// `None` if the sums vanished.
+    fn update(&mut self, capable: bool, use_dx: bool, q: f32, pdf_f: f32, pdf_d: f32) -> Option<f32> {
+        self.prev_sum = self.w1 + self.w2;
+        self.prev_sq = self.squares();
+        if !capable {
+            return Some(1.0);
+        }
+        let term = q * self.w2 * pdf_d / pdf_f;
+        self.w1 += term;
+        self.v1 += term * term;
+        if use_dx {
+            self.chosen = term;
+        }
+        self.w2 *= 1.0 - q;
+        let sum = self.w1 + self.w2;
+        if !(sum > 0.0) {
+            return None;
+        }
+        self.w1 /= sum;
+        self.w2 /= sum;
+        self.chosen /= sum;
+        self.v1 /= sum * sum;
+        self.prev_sum /= sum;
+        self.prev_sq /= sum * sum;
+        Some(sum)
+    }
 }
 
 pub use crate::contract::REPLAY_RESIDUAL_TOLERANCE;
@@ -207,9 +298,7 @@ pub fn trace_path<const ADJOINT: bool>(
     let nee = globals.nee != 0;
     let mut prev_pdf_f = 0.0f32; // density with which the previous vertex sampled ray.dir
     let mut prev_nee = false; // whether NEE at the previous vertex could have found this emitter
-    let mut prev_sum = 1.0f32; // w1 + w2 at the previous vertex before its update, rescaled
-    let (mut w1, mut w2) = (0.0f32, 1.0f32); // mixture sums of the differential strategy (§5.2)
-    let mut dx_taken = false; // the differential vertex has been chosen
+    let mut mix = Mixture::new(diff && globals.diff_placement == PLACEMENT_POWER); // §5.2, §5.7
     let media = medium::has_media(flat);
     let mut current = NO_MEDIUM; // the medium the path is in (cameras are in vacuum)
     for vertex in 1..=globals.max_depth {
@@ -249,7 +338,7 @@ pub fn trace_path<const ADJOINT: bool>(
             Event::Escape => {
                 // ---- environment hit ----
                 if globals.env_param != NO_PARAM {
-                    let w_b = hit_weight(diff, prev_nee, prev_pdf_f, environment_pdf(flat, globals, ray.dir), prev_sum);
+                    let w_b = hit_weight(diff, prev_nee, prev_pdf_f, environment_pdf(flat, globals, ray.dir), &mix);
                     radiance += sign * (throughput * w_b * env_radiance(flat, globals, ray.dir));
                     if ADJOINT {
                         env_backward(globals, ray.dir, adj_radiance * throughput * w_b, sink);
@@ -328,7 +417,8 @@ pub fn trace_path<const ADJOINT: bool>(
                 }
                 prev_pdf_f = pdf;
                 prev_nee = nee;
-                prev_sum = 1.0;
+                mix.prev_sum = 1.0;
+                mix.prev_sq = mix.squares();
                 if !path_survives(globals, key, (pixel, sample, vertex), &mut throughput) {
                     break;
                 }
@@ -344,7 +434,7 @@ pub fn trace_path<const ADJOINT: bool>(
         if s.emitter != NO_EMITTER && cos_emit > 0.0 {
             let distance = travelled + hit.t;
             let w_b =
-                hit_weight(diff, prev_nee, prev_pdf_f, emitter_pdf_solid_angle(globals, distance, cos_emit), prev_sum);
+                hit_weight(diff, prev_nee, prev_pdf_f, emitter_pdf_solid_angle(globals, distance, cos_emit), &mix);
             let p_radiance = flat.emitters[s.emitter as usize].p_radiance;
             radiance += sign * (throughput * w_b * param_color(flat, p_radiance));
             if ADJOINT {
@@ -431,14 +521,14 @@ pub fn trace_path<const ADJOINT: bool>(
                 let pdf_f = bsdf_pdf(&bsdf, wi, wo);
                 let w_n = if es.delta {
                     // No BSDF sample reaches a light without area: NEE alone finds it.
-                    if diff { 1.0 / (w1 + w2) } else { 1.0 }
+                    if diff { mix.nee_weight(0.0, 0.0, 0.0, None) } else { 1.0 }
                 } else if !diff {
                     mis_power(p_e, pdf_f)
                 } else {
                     // Appendix B: the NEE direction as produced by BSDF or differential sampling here.
                     let q_here = if capable { globals.diff_q } else { 0.0 };
                     let pdf_d = if capable { bsdf_pdf_diff(&bsdf, wi, wo) } else { pdf_f };
-                    1.0 / (w1 + w2 + (w1 * pdf_f + q_here * w2 * pdf_d + (1.0 - q_here) * w2 * pdf_f) / p_e)
+                    mix.nee_weight(q_here, pdf_f, pdf_d, Some(p_e))
                 };
                 radiance += sign * (throughput * tr * w_n * f * es.radiance / p_e);
                 if ADJOINT && media {
@@ -461,7 +551,7 @@ pub fn trace_path<const ADJOINT: bool>(
         let dir = (DIM_DIRECTION % 4) as usize;
         let u_lobe = u_bs[(DIM_LOBE % 4) as usize];
         let u_dir = Vec2::new(u_bs[dir], u_bs[dir + 1]);
-        let use_dx = capable && !dx_taken && u_bs[(DIM_TECHNIQUE % 4) as usize] < globals.diff_q;
+        let use_dx = capable && !mix.dx_taken && u_bs[(DIM_TECHNIQUE % 4) as usize] < globals.diff_q;
         let (bs, pdf_f, pdf_d) = if use_dx {
             let u_sign = draw_block(key, pixel, sample, vertex, DIM_DIFF_SIGN / 4)[(DIM_DIFF_SIGN % 4) as usize];
             let bs = bsdf_sample_diff(&bsdf, wi, u_sign, u_lobe, u_dir);
@@ -488,20 +578,11 @@ pub fn trace_path<const ADJOINT: bool>(
         prev_pdf_f = pdf_f;
         // An emitter found through a delta lobe counts whole: NEE could not have sampled it.
         prev_nee = nee && !bs.delta;
-        prev_sum = w1 + w2;
-        if capable {
-            w1 += globals.diff_q * w2 * pdf_d / pdf_f;
-            w2 *= 1.0 - globals.diff_q;
-            let sum = w1 + w2;
-            if !(sum > 0.0) {
-                break;
-            }
-            w1 /= sum;
-            w2 /= sum;
-            throughput /= sum;
-            prev_sum /= sum;
-        }
-        dx_taken = dx_taken || use_dx;
+        let Some(sum) = mix.update(capable, use_dx, globals.diff_q, pdf_f, pdf_d) else {
+            break;
+        };
+        throughput /= sum;
+        mix.dx_taken = mix.dx_taken || use_dx;
 
         // ---- Russian roulette ----
         if !path_survives(globals, key, (pixel, sample, vertex), &mut throughput) {

@@ -131,6 +131,42 @@ fn grad_prints_loss_and_gradients_as_json() {
     assert_eq!(g["sphere.bsdf.specular_reflectance.value"].as_array().unwrap().len(), 3);
 }
 
+/// `--strategy auto` says what its pilot picked, what each candidate measured and what the pilot
+/// cost, and the gradient is taken with the pick.
+#[test]
+fn grad_strategy_auto_reports_its_pilot() {
+    let o = pathgrad()
+        .args(["grad", "builtin:blend", "--target-set", "object.weight.value=0.3", "--param", "object.weight.value"])
+        .args(["--spp", "2", "--width", "16", "--height", "16", "--json", "--strategy", "auto", "-v"])
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let v: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    let pilot = &v["pilot"];
+    let candidates = pilot["candidates"].as_array().unwrap();
+    let names: Vec<&str> = candidates.iter().map(|c| c["technique"].as_str().unwrap()).collect();
+    assert_eq!(names, ["bsdf", "diff q=0.5", "diff q=0.75", "diff q=0.9"], "{v}");
+    assert!(pilot["pilot_s"].as_f64().unwrap() > 0.0, "{v}");
+    // Warm-up: one pass 1 and the two kernels; then 4 runs of one pass 1 and 4 candidates.
+    assert_eq!(pilot["pilot_renders"], 3 + 4 * 5, "{v}");
+    assert_eq!(pilot["measure"], "loss gradient", "{v}");
+    // The pick is the candidate of least variance × time, and the one the gradient used.
+    let best = candidates
+        .iter()
+        .min_by(|a, b| a["efficiency"].as_f64().unwrap().total_cmp(&b["efficiency"].as_f64().unwrap()))
+        .unwrap();
+    let picked = &pilot["picked"];
+    let label = picked["technique"].as_str().unwrap();
+    // Within 5 % the earlier candidate is kept (`PILOT_MARGIN`).
+    let efficiency =
+        |name: &str| candidates.iter().find(|c| c["technique"] == name).unwrap()["efficiency"].as_f64().unwrap();
+    assert!(efficiency(label) <= best["efficiency"].as_f64().unwrap() / 0.95, "{v}");
+    assert_eq!(&v["strategy"], picked, "{v}");
+    let stderr = String::from_utf8_lossy(&o.stderr);
+    assert!(stderr.contains(&format!("--strategy auto picked {label} for object.weight.value")), "{stderr}");
+    assert_eq!(picked["strategy"], if label == "bsdf" { "bsdf" } else { "diff" }, "{v}");
+}
+
 #[test]
 fn grad_writes_an_image_gradient_with_a_signed_preview() {
     let dir = tempfile::tempdir().unwrap();

@@ -321,7 +321,14 @@ fn a_gradient_steps_pass_1_runs_on_its_gradient_kernel_and_renders_the_primal_im
     assert_eq!(*built.lock().unwrap(), ["adjoint"], "the step builds only its gradient kernel");
     // So does a step with the differential strategy, whose kernel renders pass 1 with BSDF sampling.
     let target_id = scene.params.find("sphere.bsdf.alpha.value").unwrap();
-    let diff = RenderOptions { strategy: pathgrad::integrator::Strategy::Diff { target: target_id, q: 0.5 }, ..opts };
+    let diff = RenderOptions {
+        strategy: pathgrad::integrator::Strategy::Diff {
+            target: target_id,
+            q: 0.5,
+            placement: pathgrad::integrator::PlacementMis::Balance,
+        },
+        ..opts
+    };
     let mut renderer = Renderer::new(&gpu.ctx, &scene).unwrap();
     built.lock().unwrap().clear();
     renderer.set_compile_observer(Box::new(observer.clone()));

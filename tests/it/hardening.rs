@@ -185,7 +185,7 @@ fn non_finite_results_are_refused() {
 }
 
 /// Limits are stated and enforced: `--spp` at most 2²⁰, `--max-depth` at most 1024 (the cap of
-/// -1), and `--q`/`--diff-param` only with `--strategy diff`.
+/// -1), `--q` only with `--strategy diff`, `--diff-param`/`--placement-mis` only with `diff` or `auto`.
 #[test]
 fn limits_are_stated_and_ignored_flags_refused() {
     let base = ["render", "builtin:cornell-box", "-o", "never.exr", "--device", "99"];
@@ -205,6 +205,11 @@ fn limits_are_stated_and_ignored_flags_refused() {
         "{}",
         stderr(&o)
     );
+    let o = pathgrad().args(grad).args(["--placement-mis", "power"]).output().unwrap();
+    assert!(stderr(&o).contains("--placement-mis power applies only to --strategy diff or auto"), "{}", stderr(&o));
+    let diff = ["--strategy", "diff", "--diff-param", "sphere.bsdf.alpha.value"];
+    let o = pathgrad().args(grad).args(diff).args(["--placement-mis", "max"]).output().unwrap();
+    assert!(stderr(&o).contains("invalid --placement-mis: unknown placement weighting 'max'"), "{}", stderr(&o));
 }
 
 /// The built-in Cornell box and its XML twin are one scene: one set of parameter names (Mitsuba's

@@ -279,7 +279,14 @@ fn differential_sampling_is_refused_in_media_scenes() {
     let mut renderer = pathgrad::gpu::Renderer::new(&gpu.ctx, &s).unwrap();
     let opts = RenderOptions::for_scene(&s);
     let target = s.params.find("fog.interior_medium.scale").unwrap();
-    let diff = RenderOptions { strategy: pathgrad::integrator::Strategy::Diff { target, q: 0.5 }, ..opts };
+    let diff = RenderOptions {
+        strategy: pathgrad::integrator::Strategy::Diff {
+            target,
+            q: 0.5,
+            placement: pathgrad::integrator::PlacementMis::Balance,
+        },
+        ..opts
+    };
     let mut cpu = Reference::new(&s).unwrap();
     for e in [renderer.render(&diff).unwrap_err().to_string(), cpu.render(&diff).unwrap_err().to_string()] {
         assert!(e.contains("differential path sampling is not built"), "{e}");

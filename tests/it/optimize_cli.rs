@@ -473,3 +473,30 @@ fn control_variates_keep_an_estimate_per_view() {
         }
     }
 }
+
+/// `--strategy auto` pilots once, in the preparation: the choice is reported (`--json`, the info
+/// line), stored in `state.json`, and `--resume` continues with it without piloting again.
+#[test]
+fn strategy_auto_pilots_once_and_resume_reuses_its_choice() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("auto");
+    let o = run(SMALL, &["--strategy", "auto", "--iters", "2", "--json", "-v", "-o", out.to_str().unwrap()]);
+    ok(&o);
+    let stderr = String::from_utf8_lossy(&o.stderr);
+    assert!(stderr.contains("--strategy auto picked"), "{stderr}");
+    let summary: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    let pilot = &summary["pilot"];
+    assert_eq!(pilot["candidates"].as_array().unwrap().len(), 4, "{summary}");
+    assert!(pilot["pilot_s"].as_f64().unwrap() > 0.0, "{summary}");
+    assert_eq!(&summary["strategy"], &pilot["picked"], "{summary}");
+    let stored = json(&out.join("state.json"))["config"]["pilot"].clone();
+    assert_eq!(stored["report"], *pilot);
+    let o = run(&["optimize", "--resume", out.to_str().unwrap(), "--iters", "3", "--json", "-v"], &[]);
+    ok(&o);
+    let stderr = String::from_utf8_lossy(&o.stderr);
+    assert!(!stderr.contains("--strategy auto picked"), "resumed runs do not pilot again: {stderr}");
+    let resumed: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    assert_eq!(resumed["pilot"], *pilot);
+    assert_eq!(resumed["strategy"], pilot["picked"]);
+    assert_eq!(resumed["iterations"], 3);
+}

@@ -5,7 +5,7 @@ use pathgrad::backend::Backend;
 use pathgrad::gpu::Renderer;
 use pathgrad::gpu::renderer::GradMode;
 use pathgrad::image::Image;
-use pathgrad::integrator::{RenderOptions, Strategy};
+use pathgrad::integrator::{PlacementMis, RenderOptions, Strategy};
 use pathgrad::loss::{Loss, loss_and_adjoint};
 use pathgrad::scene::{Scene, builtin};
 
@@ -25,7 +25,7 @@ fn cases() -> Vec<(Scene, &'static str, &'static str)> {
 }
 
 fn diff(scene: &Scene, target: &str, q: f32) -> Strategy {
-    Strategy::Diff { target: scene.params.find(target).unwrap(), q }
+    Strategy::Diff { target: scene.params.find(target).unwrap(), q, placement: PlacementMis::Balance }
 }
 
 #[test]
@@ -33,14 +33,16 @@ fn differential_strategy_gpu_equals_cpu_per_path() {
     let gpu = TestGpu::new();
     for (scene, target, other) in cases() {
         let mut renderer = Renderer::new(&gpu.ctx, &scene).unwrap();
-        for nee in [true, false] {
+        for (nee, placement) in
+            [(true, PlacementMis::Balance), (false, PlacementMis::Balance), (true, PlacementMis::Power)]
+        {
             let opts = RenderOptions {
                 width: 48,
                 height: 48,
                 spp: 1,
                 seed: 3,
                 nee,
-                strategy: diff(&scene, target, 0.5),
+                strategy: diff(&scene, target, 0.5).with_placement(placement),
                 ..RenderOptions::for_scene(&scene)
             };
             let images = [
@@ -61,11 +63,17 @@ fn differential_strategy_gpu_equals_cpu_per_path() {
                 // A gradient pixel sums terms of both signs: floor 1e-4 of the largest value; budget 1e-3 of
                 // the values (a few-ulp difference crossing a threshold).
                 let mismatched = crate::support::count_mismatches(g, c, 1e-4);
-                println!("{} (NEE {nee}) {what}: {mismatched} of {} values differ", scene.source, g.as_slice().len());
+                println!(
+                    "{} (NEE {nee}, {} placements) {what}: {mismatched} of {} values differ",
+                    scene.source,
+                    placement.name(),
+                    g.as_slice().len()
+                );
                 assert!(
                     mismatched as f64 <= 1e-3 * g.as_slice().len() as f64,
-                    "{} (NEE {nee}) {what}: {mismatched} mismatches",
-                    scene.source
+                    "{} (NEE {nee}, {} placements) {what}: {mismatched} mismatches",
+                    scene.source,
+                    placement.name()
                 );
             }
         }
@@ -113,12 +121,14 @@ fn mean_and_variance(v: &[f64]) -> (f64, f64) {
     (m, v.iter().map(|x| (x - m).powi(2)).sum::<f64>() / (v.len() as f64 - 1.0))
 }
 
-/// For each scene and NEE on or off, the differential strategy (q = 0.5) and BSDF sampling without
+/// For each scene and NEE on or off, the differential strategy (q = 0.5; balance-heuristic
+/// placements, and power-heuristic ones at q = 0.75, ALGORITHMS.md §5.7) and BSDF sampling without
 /// NEE estimate the same image gradients (by image quadrant), loss gradients (of the driving
 /// parameter and of another one, which the differential strategy samples by the BSDF) and radiance
-/// as plain PRB with NEE; the loss is L2 against a render at a perturbed value, its adjoint fixed. Each comparison is Welch's t over 24 independent seeds per configuration
-/// (≥ 23 degrees of freedom): |t| < 5 has a false-alarm rate ≤ 4.7e-5 per value, ≤ 5e-3 over the
-/// 105 values here; never a tuned tolerance. The first scene is direct lighting only (one bounce).
+/// as plain PRB with NEE; the loss is L2 against a render at a perturbed value, its adjoint fixed.
+/// Each comparison is Welch's t over 24 independent seeds per configuration (≥ 23 degrees of
+/// freedom): |t| < 5 has a false-alarm rate ≤ 4.7e-5 per value, ≤ 9e-3 over the 175 values here;
+/// never a tuned tolerance. The first scene is direct lighting only (one bounce).
 #[test]
 fn every_strategy_is_unbiased_against_plain_prb() {
     const SEEDS: u32 = 24;
@@ -159,6 +169,8 @@ fn every_strategy_is_unbiased_against_plain_prb() {
             ("diff", diff(&scene, target, 0.5), true),
             ("bsdf --no-nee", Strategy::Bsdf, false),
             ("diff --no-nee", diff(&scene, target, 0.5), false),
+            ("diff power q=0.75", diff(&scene, target, 0.75).with_placement(PlacementMis::Power), true),
+            ("diff power q=0.75 --no-nee", diff(&scene, target, 0.75).with_placement(PlacementMis::Power), false),
         ];
         let mut all: Vec<Vec<Estimate>> = Vec::new();
         for (_, strategy, nee) in configs {

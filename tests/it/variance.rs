@@ -5,10 +5,10 @@ use pathgrad::adaptive::{AdaptiveEstimator, PixelSampling};
 use pathgrad::backend::Backend;
 use pathgrad::gpu::Renderer;
 use pathgrad::gpu::renderer::GradMode;
-use pathgrad::integrator::{RenderOptions, Strategy};
+use pathgrad::integrator::{PlacementMis, RenderOptions, Strategy};
 use pathgrad::loss::{Loss, loss_and_adjoint};
 use pathgrad::scene::builtin;
-use pathgrad::variance::{self, LossGradientSetup, Moments, WEIGHTS_SEED_OFFSET};
+use pathgrad::variance::{self, LossGradientSetup, Moments, PilotBudget, WEIGHTS_SEED_OFFSET, choose_strategy};
 
 use crate::support::TestGpu;
 
@@ -30,7 +30,7 @@ fn image_gradient_variance_is_the_sample_variance_of_seeded_estimates() {
     let mut renderer = Renderer::new(&gpu.ctx, &scene).unwrap();
     let weight = scene.params.find("object.weight.value").unwrap();
     let param = "object.weight.value";
-    for strategy in [Strategy::Bsdf, Strategy::Diff { target: weight, q: 0.5 }] {
+    for strategy in [Strategy::Bsdf, Strategy::Diff { target: weight, q: 0.5, placement: PlacementMis::Balance }] {
         let opts =
             RenderOptions { width: 24, height: 18, spp: 1, seed: 40, strategy, ..RenderOptions::for_scene(&scene) };
         let mut calls = 0;
@@ -219,4 +219,78 @@ fn cli_variance_errors_name_the_flag_and_leave_nothing() {
         assert!(stderr.contains(message), "{args:?}: expected '{message}' in: {stderr}");
     }
     assert_eq!(std::fs::read_dir(dir.path()).unwrap().count(), 0, "no output was left behind");
+}
+
+/// `--strategy auto`'s pilot ([`choose_strategy`]): each candidate's variance is that of its seeded
+/// estimates (as [`variance::image_gradient_variance`] measures it), the pick is the candidate of
+/// least variance × time, the same seed picks the same strategy, and a parameter without a
+/// differential sampler has `bsdf` alone.
+#[test]
+fn the_pilot_measures_every_candidate_and_the_same_seed_picks_the_same_strategy() {
+    let gpu = TestGpu::new();
+    let scene = builtin::load("blend").unwrap();
+    let mut renderer = Renderer::new(&gpu.ctx, &scene).unwrap();
+    let param = "object.weight.value";
+    let opts = RenderOptions { width: 24, height: 18, spp: 4, seed: 11, ..RenderOptions::for_scene(&scene) };
+    let budget = PilotBudget { runs: 3, spp: 1 };
+    let a = choose_strategy(&mut renderer, &opts, param, PlacementMis::Balance, budget, None).unwrap();
+    let qs: Vec<Option<f32>> = a
+        .candidates
+        .iter()
+        .map(|c| match c.strategy {
+            Strategy::Diff { q, .. } => Some(q),
+            Strategy::Bsdf => None,
+        })
+        .collect();
+    assert_eq!(qs, [None, Some(0.5), Some(0.75), Some(0.9)]);
+    assert_eq!((a.renders, a.samples_per_pixel), (2 + 3 * 4, 2 + 3 * 4));
+    for c in &a.candidates {
+        let r = variance::image_gradient_variance(
+            &mut renderer,
+            &RenderOptions { spp: 1, strategy: c.strategy, ..opts },
+            param,
+            3,
+            &mut |_| {},
+        )
+        .unwrap();
+        assert!(r.mean_variance > 0.0);
+        assert!(
+            (c.variance - r.mean_variance).abs() <= 1e-4 * r.mean_variance,
+            "{:?}: {} vs {}",
+            c.strategy,
+            c.variance,
+            r.mean_variance
+        );
+    }
+    // The pick: the first candidate, displaced only by one better by more than PILOT_MARGIN.
+    let mut pick = &a.candidates[0];
+    for c in &a.candidates[1..] {
+        if c.efficiency < (1.0 - variance::PILOT_MARGIN) * pick.efficiency {
+            pick = c;
+        }
+    }
+    assert_eq!(a.strategy, pick.strategy);
+    let b = choose_strategy(&mut renderer, &opts, param, PlacementMis::Balance, budget, None).unwrap();
+    assert_eq!(b.strategy, a.strategy, "the same seed: {:?} then {:?}", a.candidates, b.candidates);
+
+    // On the loss gradient: each candidate's figure is loss_gradient_variance's, pass 1 shared.
+    let target = renderer.render(&RenderOptions { seed: 99, ..opts }).unwrap();
+    let ids = [scene.params.find(param).unwrap()];
+    let measure = variance::PilotLoss { target: &target, loss: Loss::L2, spp_primal: 2, params: &ids };
+    let l = choose_strategy(&mut renderer, &opts, param, PlacementMis::Balance, budget, Some(&measure)).unwrap();
+    assert_eq!((l.renders, l.samples_per_pixel), (3 + 3 * 5, (2 + 2) + 3 * (2 + 4)));
+    for c in &l.candidates {
+        let setup = LossGradientSetup { target: &target, loss: Loss::L2, spp_primal: 2, adaptive: None, params: &ids };
+        let run = RenderOptions { spp: 1, strategy: c.strategy, ..opts };
+        let r = variance::loss_gradient_variance(&mut renderer, &run, &setup, 3, &mut |_| {}).unwrap();
+        assert!(r.total_variance > 0.0);
+        let (a, b) = (c.variance, r.total_variance);
+        assert!((a - b).abs() <= 1e-4 * b, "{:?}: {a} vs {b}", c.strategy);
+    }
+
+    let c =
+        choose_strategy(&mut renderer, &opts, "base.reflectance.value", PlacementMis::Balance, budget, None).unwrap();
+    assert_eq!((c.strategy, c.candidates.len()), (Strategy::Bsdf, 1));
+    let e = choose_strategy(&mut renderer, &opts, param, PlacementMis::Balance, PilotBudget { runs: 1, spp: 1 }, None);
+    assert!(e.unwrap_err().to_string().contains("PilotBudget::runs"));
 }

@@ -185,10 +185,15 @@ impl RenderFlags {
 /// How gradient passes sample paths: every command that estimates gradients takes these.
 #[derive(Args, Debug, Clone)]
 pub(crate) struct StrategyArgs {
-    /// Gradient sampling strategy: `bsdf` (plain PRB, the baseline) or `diff` (differential path
-    /// sampling of one vertex, Su & Gkioulekas).
+    /// Gradient sampling strategy: `bsdf` (plain PRB, the baseline), `diff` (differential path
+    /// sampling of one vertex, Su & Gkioulekas) or `auto` (a short pilot of a few 1-spp image
+    /// gradients picks bsdf or diff and its q, whichever has the least variance × time).
     #[arg(long, default_value = "bsdf")]
     pub(crate) strategy: String,
+    /// How `diff` weights its placements of the differential vertex: `balance` (the mixture
+    /// density, the paper's) or `power` (the power heuristic) (only with `--strategy diff|auto`).
+    #[arg(long, value_name = "balance|power")]
+    pub(crate) placement_mis: Option<String>,
     /// Probability that `diff` makes a capable vertex the differential vertex [default: 0.5]
     /// (only with `--strategy diff`).
     #[arg(long)]
@@ -208,6 +213,51 @@ impl StrategyArgs {
         self.q.unwrap_or(pathgrad::integrator::DEFAULT_DIFF_Q)
     }
 
+    /// `--placement-mis`, or the balance heuristic.
+    pub(crate) fn placement(&self) -> Result<pathgrad::integrator::PlacementMis> {
+        Ok(pathgrad::integrator::PlacementMis::from_name(self.placement_mis.as_deref().unwrap_or("balance"))?)
+    }
+
+    /// With `--strategy auto`: runs the pilot ([`pathgrad::variance::choose_strategy`]) for the
+    /// parameter `--diff-param` names, else `default_target`, under `opts` (its resolution, NEE,
+    /// seed and parameter kinds) — on the loss gradient with `loss`, else on the image gradient —
+    /// sets `opts.strategy` to its choice, says what it picked (info line) and returns the choice
+    /// as JSON; without, `None`.
+    pub(crate) fn choose(
+        &self,
+        backend: &mut dyn pathgrad::backend::Backend,
+        default_target: Option<&str>,
+        opts: &mut RenderOptions,
+        loss: Option<&pathgrad::variance::PilotLoss>,
+    ) -> Result<Option<serde_json::Value>> {
+        if self.strategy != "auto" {
+            return Ok(None);
+        }
+        let Some(target) = self.diff_param.as_deref().or(default_target) else {
+            bail!("--strategy auto needs a parameter to pilot on: give --diff-param NAME");
+        };
+        let choice = pathgrad::variance::choose_strategy(
+            backend,
+            opts,
+            target,
+            self.placement()?,
+            pathgrad::variance::PilotBudget::default(),
+            loss,
+        )
+        .context("running --strategy auto's pilot")?;
+        opts.strategy = choice.strategy;
+        let json = pilot_json(backend.scene(), target, &choice, loss.is_some());
+        tracing::info!(
+            "--strategy auto picked {} for {target} (pilot: {} renders, {} spp per pixel in all, {:.2} s of which {:.2} s kernel warm-up)",
+            strategy_label(&choice.strategy),
+            choice.renders,
+            choice.samples_per_pixel,
+            choice.seconds,
+            choice.warm_up_seconds
+        );
+        Ok(Some(json))
+    }
+
     /// Sets `opts.strategy` and `opts.nee`; `default_target` is the parameter the command
     /// differentiates first. Warns when `diff` has no sampler for the target.
     pub(crate) fn apply(
@@ -218,23 +268,97 @@ impl StrategyArgs {
     ) -> Result<()> {
         use pathgrad::integrator::Strategy;
         opts.nee = !self.no_nee;
-        if self.strategy != "diff" {
-            if let Some(q) = self.q {
-                bail!("--q {q} applies only to --strategy diff (this run uses {})", self.strategy);
-            }
+        if self.strategy != "diff"
+            && let Some(q) = self.q
+        {
+            bail!("--q {q} applies only to --strategy diff (this run uses {}; auto chooses q)", self.strategy);
+        }
+        if self.strategy == "bsdf" {
             if let Some(name) = &self.diff_param {
-                bail!("--diff-param {name} applies only to --strategy diff (this run uses {})", self.strategy);
+                bail!("--diff-param {name} applies only to --strategy diff or auto (this run uses bsdf)");
+            }
+            if let Some(name) = &self.placement_mis {
+                bail!("--placement-mis {name} applies only to --strategy diff or auto (this run uses bsdf)");
             }
         }
+        let placement = self.placement()?;
         let target = self.diff_param.as_deref().or(default_target);
         opts.strategy = match (self.strategy.as_str(), target) {
             ("diff", None) => bail!("--strategy diff needs --diff-param NAME (the parameter that drives the sampler)"),
-            (name, target) => Strategy::from_name(scene, name, self.q(), target.unwrap_or(""))?,
+            // The pilot (`choose`) sets the strategy once the device is open; its target is checked here.
+            ("auto", Some(target)) => {
+                Strategy::from_name(scene, "diff", self.q(), target)?;
+                Strategy::Bsdf
+            }
+            ("auto", None) => bail!("--strategy auto needs a parameter to pilot on: give --diff-param NAME"),
+            (name, target) => Strategy::from_name(scene, name, self.q(), target.unwrap_or(""))
+                .with_context(|| format!("invalid --strategy {name}"))?
+                .with_placement(placement),
         };
         warn_without_sampler(scene, opts.strategy);
         opts.validate()?;
         Ok(())
     }
+}
+
+/// `bsdf`, or `diff q=Q` (with `power` placements: `diff q=Q power`).
+pub(crate) fn strategy_label(strategy: &pathgrad::integrator::Strategy) -> String {
+    use pathgrad::integrator::{PlacementMis, Strategy};
+    match strategy {
+        Strategy::Bsdf => "bsdf".into(),
+        Strategy::Diff { q, placement: PlacementMis::Balance, .. } => format!("diff q={q}"),
+        Strategy::Diff { q, placement: PlacementMis::Power, .. } => format!("diff q={q} power"),
+    }
+}
+
+/// A strategy as JSON: `{"technique", "strategy", "q", "placement_mis", "diff_param"}` (`null`s
+/// for bsdf; `technique` is [`strategy_label`]'s).
+pub(crate) fn strategy_json(
+    scene: &pathgrad::scene::Scene,
+    strategy: &pathgrad::integrator::Strategy,
+) -> serde_json::Value {
+    use pathgrad::integrator::Strategy;
+    match strategy {
+        Strategy::Bsdf => {
+            serde_json::json!({"technique": "bsdf", "strategy": "bsdf", "q": null, "placement_mis": null, "diff_param": null})
+        }
+        Strategy::Diff { target, q, placement } => serde_json::json!({
+            "technique": strategy_label(strategy), "strategy": "diff", "q": q, "placement_mis": placement.name(),
+            "diff_param": scene.params.entry(*target).name,
+        }),
+    }
+}
+
+/// What `--strategy auto`'s pilot picked and measured, with its cost, as JSON.
+pub(crate) fn pilot_json(
+    scene: &pathgrad::scene::Scene,
+    param: &str,
+    choice: &pathgrad::variance::StrategyChoice,
+    loss: bool,
+) -> serde_json::Value {
+    let candidates: Vec<serde_json::Value> = choice
+        .candidates
+        .iter()
+        .map(|c| {
+            serde_json::json!({
+                "technique": strategy_label(&c.strategy),
+                "variance": c.variance,
+                "seconds_per_estimate": c.seconds_per_estimate,
+                "efficiency": c.efficiency,
+            })
+        })
+        .collect();
+    serde_json::json!({
+        "picked": strategy_json(scene, &choice.strategy),
+        "param": param,
+        "measure": if loss { "loss gradient" } else { "image gradient" },
+        "candidates": candidates,
+        "pilot_s": choice.seconds,
+        "pilot_warm_up_s": choice.warm_up_seconds,
+        "pilot_cpu_s": choice.cpu_seconds,
+        "pilot_renders": choice.renders,
+        "pilot_spp": choice.samples_per_pixel,
+    })
 }
 
 /// Warns when `strategy` is `diff` driven by a parameter no material has a differential sampler for

@@ -13,6 +13,7 @@ const FLAGS: &[(&str, &str)] = &[
     ("LossGradientSetup::params", "--param"),
     ("Strategy::Diff::q", "--q"),
     ("Strategy::from_name", "--strategy"),
+    ("PlacementMis::from_name", "--placement-mis"),
     ("AdamOptions::learning_rate", "--lr"),
     ("AdamOptions::beta1", "--beta1"),
     ("AdaptiveEstimator", "--adaptive-estimator"),

@@ -96,8 +96,10 @@ pub(crate) fn grad(args: &GradArgs) -> Result<()> {
     }
     with_values(&scene.params, &args.target_set, "--target-set").context("--target-set")?;
     let mut renderer = args.flags.backend(&scene, &args.scene, args.json)?.backend;
-    let start = Instant::now();
     if let (Some(name), Some((output, outputs, exr_file, png_file))) = (&args.image_gradient, image_gradient_outputs) {
+        let pilot = args.sampling.choose(renderer.as_mut(), first_param, &mut opts, None)?;
+        let strategy = crate::common::strategy_json(&scene, &opts.strategy);
+        let start = Instant::now();
         let image = renderer.image_gradient(&opts, name).with_context(|| format!("differentiating {}", args.scene))?;
         let seconds = start.elapsed().as_secs_f64();
         refuse_non_finite(&image, &format!("the image gradient ∂I/∂{name}"))?;
@@ -108,7 +110,7 @@ pub(crate) fn grad(args: &GradArgs) -> Result<()> {
         if args.json {
             println!(
                 "{}",
-                serde_json::json!({"param": name, "time_s": seconds, "outputs": [output, preview], "mean": image.mean()})
+                serde_json::json!({"param": name, "time_s": seconds, "outputs": [output, preview], "mean": image.mean(), "strategy": strategy, "pilot": pilot})
             );
         } else {
             println!("∂I/∂{name} in {seconds:.2} s → {}, {}", output.display(), preview.display());
@@ -118,9 +120,13 @@ pub(crate) fn grad(args: &GradArgs) -> Result<()> {
     // Only the kinds of the parameters reported are compiled into the gradient kernel.
     opts.differentiate = renderer.param_kinds(&chosen);
     let mode = if args.deterministic { GradMode::Deterministic } else { GradMode::Float };
-    // time_s is the gradient step (render, loss, fused adjoint), not the --target-set render.
+    // time_s is the gradient step (render, loss, fused adjoint), not the --target-set render nor
+    // --strategy auto's pilot (on the loss gradient with one view; on the image gradient with several).
+    let pilot;
     let (value, gradients, seconds, repeat_s) = if views.is_empty() {
         let target = target_image(renderer.as_mut(), &scene, &opts, args.target.as_deref(), &args.target_set)?;
+        let measure = pathgrad::variance::PilotLoss { target: &target, loss, spp_primal: opts.spp, params: &chosen };
+        pilot = args.sampling.choose(renderer.as_mut(), first_param, &mut opts, Some(&measure))?;
         let start = Instant::now();
         let (value, gradients) = renderer
             .loss_and_gradient(&opts, &target, loss, mode)
@@ -130,6 +136,7 @@ pub(crate) fn grad(args: &GradArgs) -> Result<()> {
         (value, gradients, seconds, repeat_s)
     } else {
         let targets = view_targets(renderer.as_mut(), &scene, &opts, &views, &args.target_set)?;
+        pilot = args.sampling.choose(renderer.as_mut(), first_param, &mut opts, None)?;
         let list: Vec<View> = views.iter().map(|(v, _)| *v).collect();
         let start = Instant::now();
         let (value, gradients) = renderer
@@ -141,6 +148,7 @@ pub(crate) fn grad(args: &GradArgs) -> Result<()> {
         })?;
         (value, gradients, seconds, repeat_s)
     };
+    let strategy = crate::common::strategy_json(&scene, &opts.strategy);
     if args.json {
         let map: serde_json::Map<String, serde_json::Value> = chosen
             .iter()
@@ -150,8 +158,19 @@ pub(crate) fn grad(args: &GradArgs) -> Result<()> {
                 (name, serde_json::json!(values))
             })
             .collect();
-        println!("{}", serde_json::json!({"loss": value, "gradients": map, "time_s": seconds, "repeat_s": repeat_s}));
+        println!(
+            "{}",
+            serde_json::json!({"loss": value, "gradients": map, "time_s": seconds, "repeat_s": repeat_s, "strategy": strategy, "pilot": pilot})
+        );
     } else {
+        if let Some(pilot) = &pilot {
+            println!(
+                "--strategy auto: {} (pilot {:.2} s, {} image gradients)",
+                pilot["picked"]["technique"].as_str().unwrap_or("?"),
+                pilot["pilot_s"].as_f64().unwrap_or(f64::NAN),
+                pilot["pilot_renders"]
+            );
+        }
         println!("loss ({}) = {value:.6e}   ({seconds:.2} s)", args.loss);
         if let Some(best) = repeat_s.iter().copied().reduce(f64::min) {
             println!("  {} repeats: fastest {best:.3} s", repeat_s.len());

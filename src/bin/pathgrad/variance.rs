@@ -7,11 +7,13 @@ use std::path::PathBuf;
 use anyhow::{Context as _, Result, bail};
 use clap::Args;
 use pathgrad::adaptive::AdaptiveEstimator;
-use pathgrad::integrator::{RenderOptions, Strategy};
+use pathgrad::integrator::{DEFAULT_DIFF_Q, PlacementMis, RenderOptions, Strategy};
 use pathgrad::scene::Material;
-use pathgrad::variance::{self, LossGradientSetup};
+use pathgrad::variance::{self, LossGradientSetup, PilotBudget};
 
-use crate::common::{RenderFlags, options, parse_define, progress_bar, target_image, warn_without_sampler};
+use crate::common::{
+    RenderFlags, options, parse_define, pilot_json, progress_bar, strategy_label, target_image, warn_without_sampler,
+};
 
 /// Dynamic range of the variance PNGs: this many decades below the largest variance of any
 /// technique (one scale for all, so the maps compare by eye).
@@ -28,13 +30,18 @@ pub(crate) struct VarianceArgs {
     /// --diff-param says otherwise.
     #[arg(long, value_name = "NAME")]
     param: String,
-    /// Strategies to compare, comma-separated: bsdf, diff (default: both; bsdf alone in a scene
-    /// with participating media or null boundaries, where diff is not built).
+    /// Strategies to compare, comma-separated: bsdf, diff, auto (default: bsdf and diff; bsdf alone
+    /// in a scene with participating media or null boundaries, where diff is not built). `auto` is
+    /// the strategy `--strategy auto` picks from its pilot (run once, its cost reported apart).
     #[arg(long, value_delimiter = ',')]
     strategy: Option<Vec<String>>,
     /// Probabilities of `diff`'s differential vertex, comma-separated (one row each: a q sweep).
     #[arg(long, value_delimiter = ',', default_value = "0.5")]
     q: Vec<f32>,
+    /// Weightings of `diff`'s placements, comma-separated: balance, power (one row each; `auto`
+    /// uses the first).
+    #[arg(long, value_delimiter = ',', default_value = "balance")]
+    placement_mis: Vec<String>,
     /// Turn next-event estimation off for every strategy.
     #[arg(long)]
     no_nee: bool,
@@ -80,12 +87,15 @@ struct Technique {
     stem: String,
     strategy: Strategy,
     adaptive: bool,
+    /// The row of `auto`: its strategy is the pilot's choice, set once the device is open.
+    auto: bool,
 }
 
 /// The rows `args` asks for, in order: per strategy (per q for `diff`), uniform then adaptive.
-fn techniques(args: &VarianceArgs, scene: &pathgrad::scene::Scene) -> Result<Vec<Technique>> {
+fn techniques(args: &VarianceArgs, scene: &pathgrad::scene::Scene) -> Result<(Vec<Technique>, PlacementMis)> {
     let target = args.diff_param.as_deref().unwrap_or(&args.param);
     let mut rows = Vec::new();
+    let mut auto_placement = PlacementMis::Balance;
     let media = !scene.media.is_empty() || scene.materials.iter().any(|m| matches!(m, Material::Null));
     let default = if media {
         tracing::info!(
@@ -95,13 +105,30 @@ fn techniques(args: &VarianceArgs, scene: &pathgrad::scene::Scene) -> Result<Vec
     } else {
         vec!["bsdf".to_string(), "diff".to_string()]
     };
+    let placements =
+        args.placement_mis.iter().map(|p| PlacementMis::from_name(p)).collect::<pathgrad::Result<Vec<_>>>()?;
+    let Some(&first_placement) = placements.first() else { bail!("--placement-mis lists no weighting") };
     for name in args.strategy.as_ref().unwrap_or(&default) {
-        let qs: &[f32] = if name == "diff" { &args.q } else { &[0.0] };
-        for &q in qs {
-            let strategy = Strategy::from_name(scene, name, q, target)?;
+        let diff = name == "diff";
+        let qs: &[f32] = if diff { &args.q } else { &[0.0] };
+        let weightings: &[PlacementMis] = if diff { &placements } else { &[PlacementMis::Balance] };
+        for (&q, &placement) in qs.iter().flat_map(|q| weightings.iter().map(move |p| (q, p))) {
+            let auto = name == "auto";
+            let strategy = if auto {
+                Strategy::from_name(scene, "diff", DEFAULT_DIFF_Q, target)?;
+                Strategy::Bsdf
+            } else {
+                Strategy::from_name(scene, name, q, target)?.with_placement(placement)
+            };
             let (label, stem) = match strategy {
+                _ if auto => ("auto".to_string(), "auto".to_string()),
                 Strategy::Bsdf => ("bsdf".to_string(), "bsdf".to_string()),
-                Strategy::Diff { q, .. } => (format!("diff q={q}"), format!("diff-q{q}")),
+                Strategy::Diff { q, placement: PlacementMis::Balance, .. } => {
+                    (format!("diff q={q}"), format!("diff-q{q}"))
+                }
+                Strategy::Diff { q, placement: PlacementMis::Power, .. } => {
+                    (format!("diff q={q} power"), format!("diff-q{q}-power"))
+                }
             };
             for adaptive in [false, true] {
                 if adaptive && !args.adaptive {
@@ -115,7 +142,10 @@ fn techniques(args: &VarianceArgs, scene: &pathgrad::scene::Scene) -> Result<Vec
                 if rows.iter().any(|r: &Technique| r.stem == stem) {
                     bail!("--strategy/--q list '{label}' twice");
                 }
-                rows.push(Technique { label, stem, strategy, adaptive });
+                rows.push(Technique { label, stem, strategy, adaptive, auto });
+                if auto {
+                    auto_placement = first_placement;
+                }
             }
         }
     }
@@ -125,7 +155,7 @@ fn techniques(args: &VarianceArgs, scene: &pathgrad::scene::Scene) -> Result<Vec
     if let Some(row) = rows.iter().find(|r| r.strategy != Strategy::Bsdf) {
         warn_without_sampler(scene, row.strategy);
     }
-    Ok(rows)
+    Ok((rows, auto_placement))
 }
 
 /// What one technique measured, in either mode.
@@ -143,7 +173,7 @@ pub(crate) fn run(args: &VarianceArgs) -> Result<()> {
     let param = scene.params.find(&args.param).with_context(|| {
         format!("invalid --param {}: no such parameter (see `pathgrad params {}`)", args.param, args.scene)
     })?;
-    let rows = techniques(args, &scene)?;
+    let (mut rows, auto_placement) = techniques(args, &scene)?;
     let loss_mode = args.target.is_some() || !args.target_set.is_empty();
     if !loss_mode && (args.loss.is_some() || args.adaptive || args.spp_primal.is_some()) {
         bail!(
@@ -169,18 +199,58 @@ pub(crate) fn run(args: &VarianceArgs) -> Result<()> {
     let device = renderer.describe();
     // Only the kind of the parameter measured is compiled into the gradient kernels.
     opts.differentiate = renderer.param_kinds(&[param]);
+    // Loss-gradient mode's loss, target and pass-1 spp.
+    let loss_setup = match loss_mode {
+        false => None,
+        true => {
+            let loss: pathgrad::loss::Loss = args.loss.as_deref().unwrap_or("relmse").parse()?;
+            let target = target_image(renderer.as_mut(), &scene, &opts, args.target.as_deref(), &args.target_set)?;
+            Some((loss, target, args.spp_primal.unwrap_or(3 * opts.spp)))
+        }
+    };
+    let params = [param];
+    // `auto`: the pilot picks the strategy of its rows, at the run's resolution and seed, on what
+    // the run measures (the loss gradient with uniform pixels, or the image gradient).
+    let mut pilot = None;
+    if rows.iter().any(|r| r.auto) {
+        let target = args.diff_param.as_deref().unwrap_or(&args.param);
+        let measure = loss_setup.as_ref().map(|(loss, image, spp_primal)| variance::PilotLoss {
+            target: image,
+            loss: *loss,
+            spp_primal: *spp_primal,
+            params: &params,
+        });
+        let choice = variance::choose_strategy(
+            renderer.as_mut(),
+            &opts,
+            target,
+            auto_placement,
+            PilotBudget::default(),
+            measure.as_ref(),
+        )
+        .context("running the auto row's pilot")?;
+        tracing::info!(
+            "auto picked {} (pilot: {} renders, {} spp per pixel in all, {:.2} s of which {:.2} s kernel warm-up)",
+            strategy_label(&choice.strategy),
+            choice.renders,
+            choice.samples_per_pixel,
+            choice.seconds,
+            choice.warm_up_seconds
+        );
+        for row in rows.iter_mut().filter(|r| r.auto) {
+            row.strategy = choice.strategy;
+            row.label = row.label.replacen("auto", &format!("auto: {}", strategy_label(&choice.strategy)), 1);
+        }
+        pilot = Some(pilot_json(&scene, target, &choice, measure.is_some()));
+    }
     let runs = u64::from(args.runs) * rows.len() as u64;
     let progress = progress_bar(runs, "{msg:>16} [{bar:40}] {pos}/{len} runs", args.json);
 
     let mut measured = Vec::with_capacity(rows.len());
     let mut outputs: Option<Outputs> = None;
     let mode;
-    if loss_mode {
+    if let Some((loss, target, spp_primal)) = loss_setup {
         mode = "loss";
-        let loss: pathgrad::loss::Loss = args.loss.as_deref().unwrap_or("relmse").parse()?;
-        let target = target_image(renderer.as_mut(), &scene, &opts, args.target.as_deref(), &args.target_set)?;
-        let spp_primal = args.spp_primal.unwrap_or(3 * opts.spp);
-        let params = [param];
         // Warm-up, untimed: lavapipe compiles each kernel at its first dispatch.
         for adaptive in [false, true].into_iter().filter(|&a| !a || args.adaptive) {
             let setup = LossGradientSetup {
@@ -264,7 +334,7 @@ pub(crate) fn run(args: &VarianceArgs) -> Result<()> {
     }
     progress.finish_and_clear();
 
-    let baseline = rows.iter().position(|r| r.strategy == Strategy::Bsdf && !r.adaptive).unwrap_or(0);
+    let baseline = rows.iter().position(|r| r.strategy == Strategy::Bsdf && !r.adaptive && !r.auto).unwrap_or(0);
     let base = &measured[baseline];
     let ratio = |a: f64, b: f64| if b > 0.0 { a / b } else { f64::NAN };
     // Per row: variance, wall-time and CPU-time efficiency, each relative to the baseline.
@@ -291,6 +361,8 @@ pub(crate) fn run(args: &VarianceArgs) -> Result<()> {
                 "technique": row.label,
                 "strategy": row.strategy.name(),
                 "q": match row.strategy { Strategy::Diff { q, .. } => Some(q), Strategy::Bsdf => None },
+                "placement_mis": match row.strategy { Strategy::Diff { placement, .. } => Some(placement.name()), Strategy::Bsdf => None },
+                "auto": row.auto,
                 "adaptive": row.adaptive,
                 "variance": m.variance,
                 "variance_ratio": variance_ratio,
@@ -309,7 +381,7 @@ pub(crate) fn run(args: &VarianceArgs) -> Result<()> {
         "scene": args.scene, "param": args.param, "mode": mode, "runs": args.runs, "spp": opts.spp,
         "spp_primal": loss_mode.then(|| args.spp_primal.unwrap_or(3 * opts.spp)),
         "nee": opts.nee, "width": opts.width, "height": opts.height, "seed": opts.seed,
-        "baseline": rows[baseline].label, "device": device, "techniques": items,
+        "baseline": rows[baseline].label, "device": device, "techniques": items, "pilot": pilot,
     });
     let mut outputs = match outputs {
         Some(o) => o,
@@ -342,13 +414,13 @@ pub(crate) fn run(args: &VarianceArgs) -> Result<()> {
         device
     );
     println!(
-        "{:<22} {:>12} {:>10} {:>10} {:>10} {:>10} {:>10}",
+        "{:<28} {:>12} {:>10} {:>10} {:>10} {:>10} {:>10}",
         "technique", "variance", "ratio", "wall s", "var×wall", "cpu s", "var×cpu"
     );
     let cell = |v: Option<f64>, precision: usize| v.map_or("-".to_string(), |v| format!("{v:.precision$}"));
     for ((row, m), &(variance_ratio, wall, cpu)) in rows.iter().zip(&measured).zip(&relative) {
         println!(
-            "{:<22} {:>12.4e} {:>10.4} {:>10.4} {:>10.4} {:>10} {:>10}",
+            "{:<28} {:>12.4e} {:>10.4} {:>10.4} {:>10.4} {:>10} {:>10}",
             row.label,
             m.variance,
             variance_ratio,

@@ -196,8 +196,15 @@ struct RunConfig {
     strategy: String,
     q: f32,
     nee: bool,
-    /// The parameter driving `diff`'s sampler (resolved); `None` for `bsdf`.
+    /// The parameter driving `diff`'s sampler (resolved; with `auto`, the one piloted on); `None`
+    /// for `bsdf`.
     diff_param: Option<String>,
+    /// `--placement-mis`: how `diff` weights its placements.
+    #[serde(default = "balance")]
+    placement_mis: String,
+    /// `--strategy auto`: what the pilot in preparation picked, stored so that `--resume` reuses it.
+    #[serde(default)]
+    pilot: Option<PilotChoice>,
     /// `--allow-outside-folder`.
     #[serde(default)]
     allow_outside_folder: bool,
@@ -215,6 +222,19 @@ struct RunConfig {
 /// Adam's β₁ of a run saved before `--beta1` existed.
 fn default_beta1() -> f64 {
     pathgrad::optim::BETA1
+}
+
+fn balance() -> String {
+    "balance".into()
+}
+
+/// The strategy `--strategy auto`'s pilot picked (`bsdf` or `diff` at `q`) and its report (the
+/// `pilot` object of `grad --json`: candidates, their variance and time, the pilot's cost).
+#[derive(Serialize, Deserialize, Clone, Debug, PartialEq)]
+struct PilotChoice {
+    strategy: String,
+    q: f32,
+    report: serde_json::Value,
 }
 
 /// One `--view` of a run.
@@ -368,12 +388,14 @@ fn start(args: &OptimizeArgs) -> Result<Session> {
     let first = scene.params.entry(ids[0]).name.clone();
     args.sampling.apply(&scene, Some(&first), &mut opts)?;
     let diff_param = match opts.strategy {
+        // `auto` pilots on --diff-param, else on the first parameter optimised.
+        Strategy::Bsdf if args.sampling.strategy == "auto" => Some(args.sampling.diff_param.clone().unwrap_or(first)),
         Strategy::Bsdf => None,
         Strategy::Diff { target, .. } => Some(scene.params.entry(target).name.clone()),
     };
     let target = args.target.as_deref().map(absolute).transpose()?;
     let target_hash = target.as_deref().map(content_hash).transpose()?;
-    let config = RunConfig {
+    let mut config = RunConfig {
         scene: absolute_scene(spec)?,
         defines: args.defines.clone(),
         param_args: args.params.clone(),
@@ -406,6 +428,8 @@ fn start(args: &OptimizeArgs) -> Result<Session> {
         q: args.sampling.q(),
         nee: opts.nee,
         diff_param,
+        placement_mis: args.sampling.placement()?.name().to_string(),
+        pilot: None,
         allow_outside_folder: args.flags.allow_outside_folder,
         sensor: args.flags.sensor.clone(),
         env: args.flags.env.clone(),
@@ -415,7 +439,7 @@ fn start(args: &OptimizeArgs) -> Result<Session> {
     refuse_existing_run(&dir)?;
     let adam = Adam::new(&initial_table, &ids, adam_options(&config)?)?;
     let initial = values_of(&initial_table, &ids);
-    let prepared = prepare(&config, &scene, &ids, &args.flags, args.json)?;
+    let prepared = prepare(&mut config, &scene, &ids, &args.flags, args.json)?;
     let history = History::new(&scene.params, &ids, prepared.truth.is_some());
     let run = with_smoothness(Optimization::resume(initial_table, adam, 0, prepared.options)?, &scene, &ids, &config)?;
     fs::create_dir_all(&dir).with_context(|| format!("creating -o {}", dir.display()))?;

@@ -9,12 +9,13 @@ use std::sync::atomic::AtomicU64;
 use anyhow::{Result, bail};
 use pathgrad::gpu::renderer::GradMode;
 use pathgrad::image::Image;
-use pathgrad::integrator::{RenderOptions, Strategy};
+use pathgrad::integrator::{PlacementMis, RenderOptions, Strategy};
 use pathgrad::loss::Loss;
 use pathgrad::optim::{AdamOptions, ControlVariateOptions, IterationOptions, Optimization};
 use pathgrad::params::{ParamId, ParamTable};
 use pathgrad::prior::Smoothness;
 use pathgrad::scene::Scene;
+use pathgrad::variance::{PilotBudget, PilotLoss, choose_strategy};
 
 use crate::common::{Opened, RenderFlags, target_image, view_targets, with_values};
 use pathgrad::integrator::View;
@@ -39,9 +40,16 @@ pub(super) fn with_smoothness(
     Ok(run.with_prior(prior))
 }
 
-/// The render options of `config` on `scene`: the gradient pass's (spp = spp_grad).
+/// The render options of `config` on `scene`: the gradient pass's (spp = spp_grad). With
+/// `--strategy auto` before its pilot has run, the strategy is `bsdf` for now.
 pub(super) fn iteration_options(scene: &Scene, config: &RunConfig) -> Result<IterationOptions> {
-    let strategy = Strategy::from_name(scene, &config.strategy, config.q, config.diff_param.as_deref().unwrap_or(""))?;
+    let (name, q) = match &config.pilot {
+        Some(pilot) => (pilot.strategy.as_str(), pilot.q),
+        None if config.strategy == "auto" => ("bsdf", config.q),
+        None => (config.strategy.as_str(), config.q),
+    };
+    let strategy = Strategy::from_name(scene, name, q, config.diff_param.as_deref().unwrap_or(""))?
+        .with_placement(PlacementMis::from_name(&config.placement_mis)?);
     if config.spp_grad == 0 {
         bail!("invalid --spp-grad: must be at least 1");
     }
@@ -91,9 +99,11 @@ pub(super) struct Prepared {
 }
 
 /// Checks `config` on `scene`, creates the device and the renderer and renders or reads the target;
-/// the gradient passes compile only the parameter kinds of `ids`, the parameters optimised.
+/// the gradient passes compile only the parameter kinds of `ids`, the parameters optimised. With
+/// `--strategy auto` and no stored choice, runs the pilot at the gradient pass's options and stores
+/// its choice in `config` (a resumed run has it and does not pilot again).
 pub(super) fn prepare(
-    config: &RunConfig,
+    config: &mut RunConfig,
     scene: &Scene,
     ids: &[ParamId],
     flags: &RenderFlags,
@@ -115,6 +125,7 @@ pub(super) fn prepare(
         }
         let targets = view_targets(renderer.as_mut(), scene, &final_opts, &views, &config.target_set)?;
         options.render.differentiate = renderer.param_kinds(ids);
+        pilot(config, scene, renderer.as_mut(), &mut options, None)?;
         let views = views.into_iter().map(|(v, _)| v).collect();
         return Ok(Prepared { renderer, ctx, compile_us, views, targets, truth, options });
     }
@@ -130,8 +141,45 @@ pub(super) fn prepare(
         );
     }
     options.render.differentiate = renderer.param_kinds(ids);
+    let measure = PilotLoss { target: &target, loss: options.loss, spp_primal: config.spp_primal, params: ids };
+    pilot(config, scene, renderer.as_mut(), &mut options, Some(&measure))?;
     let views = vec![View::current(scene)];
     Ok(Prepared { renderer, ctx, compile_us, views, targets: vec![target], truth, options })
+}
+
+/// `--strategy auto` without a stored choice: runs the pilot at the gradient pass's options — on the
+/// loss gradient with `measure` (one view), else on the image gradient — stores its choice in
+/// `config` and sets it in `options`.
+fn pilot(
+    config: &mut RunConfig,
+    scene: &Scene,
+    renderer: &mut dyn Backend,
+    options: &mut IterationOptions,
+    measure: Option<&PilotLoss>,
+) -> Result<()> {
+    if config.strategy != "auto" || config.pilot.is_some() {
+        return Ok(());
+    }
+    let param = config.diff_param.clone().context("--strategy auto: no parameter to pilot on")?;
+    let placement = PlacementMis::from_name(&config.placement_mis)?;
+    let choice = choose_strategy(renderer, &options.render, &param, placement, PilotBudget::default(), measure)
+        .context("running --strategy auto's pilot")?;
+    tracing::info!(
+        "--strategy auto picked {} for {param} (pilot: {} renders, {} spp per pixel in all, {:.2} s of which {:.2} s kernel warm-up)",
+        crate::common::strategy_label(&choice.strategy),
+        choice.renders,
+        choice.samples_per_pixel,
+        choice.seconds,
+        choice.warm_up_seconds
+    );
+    let q = match choice.strategy {
+        Strategy::Diff { q, .. } => q,
+        Strategy::Bsdf => config.q,
+    };
+    let report = crate::common::pilot_json(scene, &param, &choice, measure.is_some());
+    config.pilot = Some(PilotChoice { strategy: choice.strategy.name().to_string(), q, report });
+    options.render.strategy = iteration_options(scene, config)?.render.strategy;
+    Ok(())
 }
 
 pub(super) fn values_of(table: &ParamTable, ids: &[ParamId]) -> BTreeMap<String, Vec<f64>> {

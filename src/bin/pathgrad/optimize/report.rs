@@ -147,6 +147,8 @@ pub(super) fn summary(s: &Session, stopped: &str, json: bool) {
     if json {
         let v = serde_json::json!({
             "iterations": s.run.iteration(),
+            "strategy": crate::common::strategy_json(&s.scene, &s.run.options().render.strategy),
+            "pilot": s.config.pilot.as_ref().map(|p| &p.report),
             "stopped": stopped,
             "time_s": s.elapsed,
             "setup_s": s.setup_s,
@@ -172,6 +174,13 @@ pub(super) fn summary(s: &Session, stopped: &str, json: bool) {
             last.and_then(|r| r.error).map(|e| format!(", parameter error {e:.4e}")).unwrap_or_default(),
             s.dir.display()
         );
+        if let Some(pilot) = &s.config.pilot {
+            println!(
+                "  --strategy auto picked {} (pilot {:.2} s)",
+                pilot.report["picked"]["technique"].as_str().unwrap_or(&pilot.strategy),
+                pilot.report["pilot_s"].as_f64().unwrap_or(f64::NAN)
+            );
+        }
         for (name, values) in &params {
             if values.len() <= 4 {
                 println!("  {name} = {values:?}");

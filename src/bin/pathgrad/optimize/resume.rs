@@ -145,7 +145,7 @@ pub(super) fn resume(args: &OptimizeArgs, dir: &Path, given: &BTreeSet<String>) 
     let adam_state = AdamState { m: state.adam_m.clone(), v: state.adam_v.clone(), steps: state.adam_steps.clone() };
     let adam = Adam::with_state(&table, &ids, adam_options(&config)?, adam_state)
         .with_context(|| format!("{}: Adam state", path.display()))?;
-    let prepared = prepare(&config, &scene, &ids, &args.flags, args.json)?;
+    let prepared = prepare(&mut config, &scene, &ids, &args.flags, args.json)?;
     let mut history = History::new(&scene.params, &ids, prepared.truth.is_some());
     let csv = dir.join("history.csv");
     history.read(&csv, state.iteration)?;
@@ -246,6 +246,7 @@ pub(super) fn check_unchanged(
     check("q", "--q", args.sampling.q.map(|q| text(&q)), text(&c.q));
     check("no_nee", "--no-nee", Some(text(&args.sampling.no_nee)), text(&!c.nee));
     check("diff_param", "--diff-param", args.sampling.diff_param.clone(), c.diff_param.clone().unwrap_or_default());
+    check("placement_mis", "--placement-mis", args.sampling.placement_mis.clone(), c.placement_mis.clone());
     if !conflicts.is_empty() {
         bail!(
             "--resume: {} conflict with the run in {} (leave them out to continue it as it was)",
