@@ -483,8 +483,9 @@ bool path_step(inout PathState st) {
 
         // ---- BSDF or differential sampling ----
         vec4 u_bs = draw_block(st.key1, st.pixel, st.sample_index, vertex, DIM_LOBE / 4u);
-        // A mask chose its nested BSDF with u_lobe < opacity: rescaled to [0, 1) for it.
-        float u_lobe = u_bs[DIM_LOBE % 4u] / mask_opacity;
+        // A mask chose its nested BSDF with u_lobe < opacity: rescaled to [0, 1) for it (kernels
+        // without masks keep no division).
+        float u_lobe = HAS(F_MASK) ? u_bs[DIM_LOBE % 4u] / mask_opacity : u_bs[DIM_LOBE % 4u];
         vec2 u_dir = vec2(u_bs[DIM_DIRECTION % 4u], u_bs[DIM_DIRECTION % 4u + 1u]);
         bool use_dx = capable && !st.dx_taken && u_bs[DIM_TECHNIQUE % 4u] < globals.diff_q;
         BsdfSample bs;

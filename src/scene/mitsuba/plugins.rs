@@ -118,7 +118,7 @@ pub const PLUGINS: &[Plugin] = &[
         Bsdf,
         "mask",
         "`opacity` (a parameter or a one-channel texture), one nested BSDF",
-        "the pass-through counts as a bounce (as `path`/`prb`); volpath with a finite `max_depth` refused",
+        "the pass-through counts as a bounce and stops shadow rays (as `path`/`prb`); volpath with a finite `max_depth` refused; not inside blendbsdf or a map",
     ),
     p(
         Bsdf,
