@@ -270,6 +270,8 @@ bool path_step(inout PathState st) {
     float nee_phase = 0.0;
     vec3 nee_w_tr = vec3(0.0);
 
+    float mask_opacity = 1.0;   // a masked surface's opacity (1: no mask)
+
     Hit hit;
     uint event;
     float travelled = 0.0;    // from the last vertex to the ray's origin, across null boundaries
@@ -398,8 +400,30 @@ bool path_step(inout PathState st) {
                 st.radiance += sign * (st.throughput * w_b * param_rgb(p_radiance));
                 if (HAS(G_EMISSION)) { gt.hit_param = p_radiance; gt.hit = st.adj * st.throughput * w_b; }
             }
+            // ---- mask: the nested BSDF with probability `opacity`, else straight through ----
+            // Mitsuba's `mask` samples its null transmission as a delta lobe that counts as a
+            // bounce (its `path` and `prb`); the choice is drawn first (u_lobe, rescaled for the
+            // nested BSDF as Mitsuba rescales it). In the replay the attached weight opacity or
+            // 1 − opacity over its detached value gives the opacity its derivative.
+            bool passes = false;
+            if (HAS(F_MASK) && vertex < globals.max_depth && materials[s.material].p_opacity != NO_PARAM) {
+                gt.mask = materials[s.material].p_opacity;
+                gt.uv = s.uv;
+                mask_opacity = mask_opacity_at(gt.mask, s.uv);
+                passes = !(draw_block(st.key1, st.pixel, st.sample_index, vertex, DIM_LOBE / 4u)[DIM_LOBE % 4u] < mask_opacity);
+                if (adjoint) gt.opacity = st.adj * st.radiance * (passes ? -1.0 / (1.0 - mask_opacity) : 1.0 / mask_opacity);
+            }
             if (vertex >= globals.max_depth) {
                 ended = true;
+            } else if (passes) {
+                // An emitter found through the pass counts whole: NEE could not have sampled it.
+                st.prev_nee = false;
+                if (!path_survives(st, vertex)) {
+                    ended = true;
+                } else {
+                    if (HAS(F_MEDIA)) st.medium = medium_crossed(s.interior, s.ng, st.ray.dir, st.medium);
+                    st.ray = make_ray(offset_origin(s.p, s.ng, st.ray.dir), st.ray.dir);
+                }
             } else {
                 shade = true;
                 bsdf = resolve_bsdf(s.material, s.uv);
@@ -526,7 +550,9 @@ bool path_step(inout PathState st) {
 
         // ---- BSDF or differential sampling ----
         vec4 u_bs = draw_block(st.key1, st.pixel, st.sample_index, vertex, DIM_LOBE / 4u);
-        float u_lobe = u_bs[DIM_LOBE % 4u];
+        // A mask chose its nested BSDF with u_lobe < opacity: rescaled to [0, 1) for it (kernels
+        // without masks keep no division).
+        float u_lobe = HAS(F_MASK) ? u_bs[DIM_LOBE % 4u] / mask_opacity : u_bs[DIM_LOBE % 4u];
         vec2 u_dir = vec2(u_bs[DIM_DIRECTION % 4u], u_bs[DIM_DIRECTION % 4u + 1u]);
         bool use_dx = capable && !st.mix.dx_taken && u_bs[DIM_TECHNIQUE % 4u] < globals.diff_q;
         BsdfSample bs;

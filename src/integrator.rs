@@ -59,7 +59,7 @@ impl ParamKinds {
     pub const TEXTURE: ParamKinds = ParamKinds(crate::contract::G_TEXTURE);
     /// Roughness of rough conductors.
     pub const ALPHA: ParamKinds = ParamKinds(crate::contract::G_ALPHA);
-    /// Blend weights.
+    /// Blend weights and mask opacities.
     pub const WEIGHT: ParamKinds = ParamKinds(crate::contract::G_WEIGHT);
     /// Emitted radiance of area emitters.
     pub const EMISSION: ParamKinds = ParamKinds(crate::contract::G_EMISSION);
@@ -208,6 +208,29 @@ impl Strategy {
                     _ => false,
                 });
                 let uncovered = uncovered.or(mapped.then_some("a normal-mapped material's roughness or blend weight"));
+                // A mask draws its pass-through before the technique choice; the strategy's mixture
+                // densities are not derived for it, so neither its opacity nor what it wraps is a target.
+                fn reaches(
+                    scene: &Scene,
+                    id: crate::scene::MaterialId,
+                    uses: &dyn Fn(crate::scene::MaterialId) -> bool,
+                ) -> bool {
+                    uses(id)
+                        || match scene.materials.get(id.0 as usize) {
+                            Some(
+                                Material::TwoSided(c)
+                                | Material::NormalMap { nested: c, .. }
+                                | Material::BumpMap { nested: c, .. },
+                            ) => reaches(scene, *c, uses),
+                            Some(Material::Blend { children, .. }) => children.iter().any(|c| uses(*c)),
+                            _ => false,
+                        }
+                }
+                let masked = scene.materials.iter().any(|m| match m {
+                    Material::Mask { nested, opacity } => *opacity == target || reaches(scene, *nested, &uses),
+                    _ => false,
+                });
+                let uncovered = uncovered.or(masked.then_some("a mask's opacity or a masked material's parameter"));
                 // A texture's texels each act on part of the surface: the sampler's one scalar
                 // target per material does not describe them.
                 let uncovered = uncovered.or(scene.scalar_texture(target).map(|_| "a texture's texels"));
@@ -217,7 +240,7 @@ impl Strategy {
                         message: format!(
                             "is {whose}, which the differential sampler does not cover (it samples the \
                              derivative of a rough conductor's, dielectric's or plastic's lobe or a blend's weight, \
-                             without a normal map): use the bsdf strategy"
+                             without a normal map or a mask): use the bsdf strategy"
                         ),
                     });
                 }

@@ -289,6 +289,10 @@ float scalar_lookup(uint slot, vec2 uv) {
 // A blend weight: its parameter, or its texture at uv.
 float scalar_value(uint slot, vec2 uv) { return scalar_textured(slot) ? scalar_lookup(slot, uv) : params[slot]; }
 
+// A mask's opacity at uv: its parameter or texture, clipped to [0, 1] as Mitsuba clips it (twin:
+// mask_opacity_at of src/cpu/surface.rs).
+float mask_opacity_at(uint slot, vec2 uv) { return clamp(scalar_value(slot, uv), 0.0, 1.0); }
+
 // A roughness: its parameter, or its texture at uv clamped to ALPHA_TEXTURE_FLOOR as Mitsuba's
 // microfacet distribution clamps it.
 float alpha_value(uint slot, vec2 uv) {
@@ -357,18 +361,20 @@ struct GradTerms {
     uint nee_param;   // RGB parameter of the emitter NEE reached, or NO_PARAM
     vec3 nee;
     vec3 env_dir;     // the direction of the environment's term (hit or NEE: a step has at most one)
+    uint mask;        // a mask's opacity slot (at uv), or NO_PARAM
+    vec3 opacity;     // its derivative term
 };
 
 GradTerms no_grad_terms() {
     LeafGrad none = LeafGrad(vec3(0.0), vec3(0.0), vec3(0.0), vec3(0.0));
     return GradTerms(NO_PARAM, vec2(0.0), BsdfGrad(none, none, vec3(0.0)), NO_PARAM, vec3(0.0), NO_PARAM, vec3(0.0),
-                     vec3(0.0, 0.0, 1.0));
+                     vec3(0.0, 0.0, 1.0), NO_PARAM, vec3(0.0));
 }
 
 // Most (offset, per-channel value) entries one vertex can produce: an RGB emitter, four RGB texels
-// of an environment map (NEE), two leaves of four RGB texels and a roughness each, a blend weight
-// (a step that hits the environment ends there: it has no other term).
-#define GRAD_ENTRIES 42
+// of an environment map (NEE), two leaves of four RGB texels and a roughness each, a blend weight,
+// a mask's opacity (a step that hits the environment ends there: it has no other term).
+#define GRAD_ENTRIES 43
 
 // The entries of the vertex being scattered. Globals, not parameters: GLSL passes arrays by
 // copy, and copying 33 entries in and out of every helper made the kernel several times larger.
@@ -469,6 +475,7 @@ void scatter_terms(GradTerms t) {
             push_leaf(m, t.uv, t.bsdf.leaf0);
         }
     }
+    if (HAS(F_MASK) && HAS(G_WEIGHT) && t.mask != NO_PARAM) push_scalar(t.mask, t.uv, t.opacity, false);
     [[dont_unroll]] for (uint i = 0u; i < grad_count; i++) param_grad(grad_offset[i], grad_value[i]);
 }
 

@@ -183,7 +183,10 @@ contract_constants! {
     /// Feature bit: textured scalar parameters (roughness, blend weight): a `Material` offset with
     /// `SCALAR_TEXTURE` set names a texture descriptor in the tables array.
     F_PARAM_TEXTURE = 1 << 27;
-    /// A `Material::p_alpha`, `p_alpha_v` or (blend) `p_weight` with this bit set is not a
+    /// Feature bit: masked materials (Mitsuba's `mask`): a `Material::p_opacity` other than
+    /// `NO_PARAM` lets a path pass straight through with probability 1 − opacity.
+    F_MASK = 1 << 28;
+    /// A `Material::p_alpha`, `p_alpha_v`, (blend) `p_weight` or `p_opacity` with this bit set is not a
     /// parameter offset: its other bits are the offset in the tables array of a one-channel
     /// texture's descriptor (`TEXTURE_DESC_LEN` words: texel offset, width, height, `TEX_*` mode,
     /// then the `to_uv` rows 0 and 1, three floats each).
@@ -200,7 +203,7 @@ contract_constants! {
     G_TEXTURE = 1 << 17;
     /// Feature bit: gradients of roughness.
     G_ALPHA = 1 << 18;
-    /// Feature bit: gradients of blend weights.
+    /// Feature bit: gradients of blend weights and mask opacities.
     G_WEIGHT = 1 << 19;
     /// Feature bit: gradients of emitted radiance (triangles).
     G_EMISSION = 1 << 20;

@@ -56,7 +56,7 @@ mod tests {
         assert_eq!(size_of::<MeshShading>(), 6 * 4);
         assert_eq!(size_of::<FieldDesc>(), 6 * 4 + 4 * 12);
         assert_eq!(size_of::<MediumDesc>(), 11 * 4 + 2 * 12);
-        assert_eq!(size_of::<Material>(), 18 * 4 + 4 * 12);
+        assert_eq!(size_of::<Material>(), 19 * 4 + 4 * 12);
         assert_eq!(size_of::<EmitterTri>(), 16 + 36);
         assert_eq!(size_of::<AliasEntry>(), 8);
         assert_eq!(size_of::<EnvCell>(), 12);

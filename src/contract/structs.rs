@@ -353,6 +353,9 @@ contract_structs! {
         nmap_mode: u32,
         /// Bump map: Mitsuba's `scale` of the height's gradient (unused by a normal map).
         nmap_scale: f32,
+        /// Mask (Mitsuba's `mask` around this material): parameter offset of its opacity, or
+        /// `SCALAR_TEXTURE` with its texture's descriptor; `NO_PARAM` without a mask.
+        p_opacity: u32,
     }
 
     /// One emissive triangle, in the order of its area CDF.

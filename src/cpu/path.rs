@@ -18,8 +18,8 @@ use crate::cpu::emitter::{
 };
 use crate::cpu::medium;
 use crate::cpu::surface::{
-    SHADOW_EPSILON, bsdf_backward, material_anisotropic, material_normal_mapped, mis_power, normal_map_frame,
-    offset_origin, param_color, resolve_bsdf, safe_div, surface_at, tangent_frame,
+    SHADOW_EPSILON, bsdf_backward, mask_opacity_at, material_anisotropic, material_normal_mapped, mis_power,
+    normal_map_frame, offset_origin, opacity_backward, param_color, resolve_bsdf, safe_div, surface_at, tangent_frame,
 };
 use crate::rng::{RngKey, Stream, uniform4};
 use crate::sampling::Frame;
@@ -441,6 +441,33 @@ pub fn trace_path<const ADJOINT: bool>(
                 sink.add_rgb(p_radiance, adj_radiance * throughput * w_b);
             }
         }
+        // ---- mask: the nested BSDF with probability `opacity`, else straight through ----
+        // Mitsuba's `mask` samples its null transmission as a delta lobe that counts as a bounce
+        // (its `path` and `prb`); the choice is drawn first (u_lobe, rescaled for the nested BSDF
+        // as Mitsuba rescales it). In the replay the attached weight opacity or 1 − opacity over
+        // its detached value gives the opacity its derivative.
+        let p_opacity = flat.materials[s.material as usize].p_opacity;
+        let mut mask_opacity = 1.0f32; // a masked surface's opacity (1: no mask)
+        if vertex < globals.max_depth && p_opacity != NO_PARAM {
+            mask_opacity = mask_opacity_at(flat, p_opacity, s.uv);
+            let u_mask = draw_block(key, pixel, sample, vertex, DIM_LOBE / 4)[(DIM_LOBE % 4) as usize];
+            let passes = !(u_mask < mask_opacity);
+            if ADJOINT {
+                let g = adj_radiance * radiance * if passes { -1.0 / (1.0 - mask_opacity) } else { 1.0 / mask_opacity };
+                opacity_backward(flat, p_opacity, s.uv, g, sink);
+            }
+            if passes {
+                // An emitter found through the pass counts whole: NEE could not have sampled it.
+                prev_nee = false;
+                if !path_survives(globals, key, (pixel, sample, vertex), &mut throughput) {
+                    break;
+                }
+                let interior = flat.mesh_of(hit.slot).interior;
+                current = medium::medium_crossed(interior, s.ng, ray.dir, current);
+                ray = Ray::new(offset_origin(s.p, s.ng, ray.dir), ray.dir);
+                continue;
+            }
+        }
         if vertex >= globals.max_depth {
             break;
         }
@@ -549,7 +576,8 @@ pub fn trace_path<const ADJOINT: bool>(
         // ---- BSDF or differential sampling ----
         let u_bs = draw_block(key, pixel, sample, vertex, DIM_LOBE / 4);
         let dir = (DIM_DIRECTION % 4) as usize;
-        let u_lobe = u_bs[(DIM_LOBE % 4) as usize];
+        // A mask chose its nested BSDF with u_lobe < opacity: rescaled to [0, 1) for it.
+        let u_lobe = u_bs[(DIM_LOBE % 4) as usize] / mask_opacity;
         let u_dir = Vec2::new(u_bs[dir], u_bs[dir + 1]);
         let use_dx = capable && !mix.dx_taken && u_bs[(DIM_TECHNIQUE % 4) as usize] < globals.diff_q;
         let (bs, pdf_f, pdf_d) = if use_dx {

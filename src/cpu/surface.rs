@@ -321,6 +321,17 @@ fn scalar_backward(flat: &FlatScene, slot: u32, uv: glam::Vec2, g: Vec3, roughne
     }
 }
 
+/// A mask's opacity at `uv`: its parameter or texture, clipped to [0, 1] as Mitsuba clips it
+/// (twin: `mask_opacity_at` of shaders/lib/surface.glsl).
+pub fn mask_opacity_at(flat: &FlatScene, slot: u32, uv: glam::Vec2) -> f32 {
+    scalar_value(flat, slot, uv).clamp(0.0, 1.0)
+}
+
+/// Adds `g` (per image channel) times the derivative of a mask's opacity at `uv` to `sink`.
+pub fn opacity_backward(flat: &FlatScene, slot: u32, uv: glam::Vec2, g: Vec3, sink: &mut GradSink<'_>) {
+    scalar_backward(flat, slot, uv, g, false, sink);
+}
+
 fn leaf_from_material(flat: &FlatScene, m: &Material, uv: glam::Vec2) -> Leaf {
     let params = &flat.params[..];
     let color = if m.tex_width > 0 {

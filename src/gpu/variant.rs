@@ -41,12 +41,15 @@ pub fn scene_features(flat: &FlatScene, env_param: u32) -> u32 {
             MAT_ROUGH_DIELECTRIC => textured(m.p_alpha),
             MAT_BLEND => textured(m.p_weight),
             _ => false,
-        };
+        } || textured(m.p_opacity);
         if scalar_textured {
             f |= F_PARAM_TEXTURE;
         }
         if m.two_sided != 0 {
             f |= F_TWO_SIDED;
+        }
+        if m.p_opacity != NO_PARAM {
+            f |= F_MASK;
         }
     }
     if !flat.emitters.is_empty() {
@@ -128,6 +131,10 @@ pub fn param_kinds(flat: &FlatScene, env: (u32, u32), begin: u32, end: u32) -> P
                 }
             }
         }
+        // A mask's opacity weighs its nested BSDF against passing through, as a blend's weight does.
+        if overlaps_slot(m.p_opacity) {
+            k = k.union(ParamKinds::WEIGHT);
+        }
     }
     if flat.emitters.iter().any(|e| overlaps(e.p_radiance, 3)) || flat.lights.iter().any(|l| overlaps(l.p_intensity, 3))
     {
@@ -172,7 +179,7 @@ pub fn request_features(scene: u32, options: &RenderOptions, kinds: ParamKinds) 
 
 /// A short human-readable name of a variant, for logs: `nee env diffuse conductor[beckmann] ∂alpha`.
 pub fn describe(features: u32) -> String {
-    const NAMES: [(u32, &str); 28] = [
+    const NAMES: [(u32, &str); 29] = [
         (F_NEE, "nee"),
         (F_ENV, "env"),
         (F_EMITTERS, "emitters"),
@@ -194,6 +201,7 @@ pub fn describe(features: u32) -> String {
         (F_ANISOTROPIC, "anisotropic"),
         (F_NORMAL_MAP, "normal-map"),
         (F_PARAM_TEXTURE, "scalar-texture"),
+        (F_MASK, "mask"),
         (G_COLOR, "∂color"),
         (G_TEXTURE, "∂texture"),
         (G_ALPHA, "∂alpha"),

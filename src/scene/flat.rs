@@ -178,7 +178,11 @@ impl FlatScene {
         if let Some(last) = emitters.last_mut() {
             last.cdf = 1.0;
         }
-        let mut materials: Vec<GpuMaterial> = scene.materials.iter().map(|m| flatten_material(scene, m)).collect();
+        let mut materials: Vec<GpuMaterial> = scene
+            .materials
+            .iter()
+            .map(|m| GpuMaterial { p_opacity: mask_slot(scene, m), ..flatten_material(scene, m) })
+            .collect();
         let mut tables = coating_tables(&mut materials, scene.params.values());
         normal_map_tables(scene, &mut materials, &mut tables);
         scalar_texture_tables(scene, &mut materials, &mut tables);
@@ -489,6 +493,8 @@ fn flatten_material(scene: &Scene, m: &Material) -> GpuMaterial {
             ..Default::default()
         },
         Material::Null => GpuMaterial { tag: MAT_NULL, ..Default::default() },
+        // The opacity is `mask_slot`'s, set on every flattened material.
+        Material::Mask { nested, .. } => flatten_material(scene, &scene.materials[nested.0 as usize]),
         Material::NormalMap { nested, map } | Material::BumpMap { nested, map, .. } => {
             // `nmap` holds the map's index until `normal_map_tables` places its texels.
             let t = &scene.normal_maps[map as usize];
@@ -505,6 +511,18 @@ fn flatten_material(scene: &Scene, m: &Material) -> GpuMaterial {
                 ..flatten_material(scene, &scene.materials[nested.0 as usize])
             }
         }
+    }
+}
+
+/// `Material::p_opacity` of `m`: its mask's opacity slot ([`scalar_slot`]), looking through the
+/// wrappers that flatten into one material (two-sided, normal and bump maps), or `NO_PARAM`.
+fn mask_slot(scene: &Scene, m: &Material) -> u32 {
+    match *m {
+        Material::Mask { opacity, .. } => scalar_slot(scene, opacity),
+        Material::TwoSided(c) | Material::NormalMap { nested: c, .. } | Material::BumpMap { nested: c, .. } => {
+            mask_slot(scene, &scene.materials[c.0 as usize])
+        }
+        _ => NO_PARAM,
     }
 }
 
@@ -553,6 +571,7 @@ fn scalar_texture_tables(scene: &Scene, materials: &mut [GpuMaterial], tables: &
             MAT_BLEND => place(&mut m.p_weight, tables),
             _ => {}
         }
+        place(&mut m.p_opacity, tables);
     }
 }
 

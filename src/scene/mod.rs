@@ -260,6 +260,16 @@ pub enum Material {
         /// Mitsuba's `scale` of the gradient.
         scale: f32,
     },
+    /// `nested` where the surface is opaque and nothing where it is not (Mitsuba's `mask`): a path
+    /// meeting it shades `nested` with probability `opacity` and otherwise passes straight through
+    /// (a null, delta transmission that counts as a bounce, as Mitsuba's `path` and `prb` count
+    /// it); shadow rays stop at it, as theirs do.
+    Mask {
+        /// The BSDF of the opaque part: a leaf, a blend, or a two-sided or mapped wrapper of one.
+        nested: MaterialId,
+        /// Opacity in [0, 1], 1 value or a texture's texels ([`Scene::scalar_texture`]).
+        opacity: ParamId,
+    },
 }
 
 /// A normal map's or bump map's texels (Mitsuba's `bitmap` nested in `normalmap`/`bumpmap`):
@@ -821,6 +831,12 @@ impl Scene {
                         Some(Material::Null) => {
                             return Err(err(format!("material {i}"), "a blend's children must not be null".into()));
                         }
+                        Some(Material::Mask { .. }) => {
+                            return Err(err(
+                                format!("material {i}"),
+                                "a blend's children must not be masks (mask the blend instead)".into(),
+                            ));
+                        }
                         Some(Material::NormalMap { .. } | Material::BumpMap { .. }) => {
                             return Err(err(
                                 format!("material {i}"),
@@ -874,9 +890,13 @@ impl Scene {
                 match self.materials.get(nested.0 as usize) {
                     None => return bad("around a material that does not exist"),
                     Some(
-                        Material::NormalMap { .. } | Material::BumpMap { .. } | Material::TwoSided(_) | Material::Null,
+                        Material::NormalMap { .. }
+                        | Material::BumpMap { .. }
+                        | Material::TwoSided(_)
+                        | Material::Null
+                        | Material::Mask { .. },
                     ) => {
-                        return bad("around a normal or bump map, a two-sided wrapper or a null BSDF");
+                        return bad("around a normal or bump map, a two-sided wrapper, a mask or a null BSDF");
                     }
                     Some(_) => {}
                 }
@@ -892,6 +912,20 @@ impl Scene {
                 && matches!(self.materials.get(c.0 as usize), Some(Material::Null))
             {
                 return Err(err(format!("material {i}"), "a two-sided wrapper of a null BSDF".into()));
+            }
+            if let Material::Mask { nested, opacity } = *m {
+                match self.materials.get(nested.0 as usize) {
+                    None | Some(Material::Mask { .. } | Material::Null) => {
+                        return Err(err(format!("material {i}"), "a mask around a missing, null or mask BSDF".into()));
+                    }
+                    Some(_) => {}
+                }
+                if self.params.entry(opacity).len != 1 && self.scalar_texture(opacity).is_none() {
+                    return Err(err(
+                        format!("material {i}"),
+                        "a mask's opacity is neither 1 value nor a texture".into(),
+                    ));
+                }
             }
         }
         for m in &self.meshes {

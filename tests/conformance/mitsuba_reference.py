@@ -143,6 +143,21 @@ MATRIX = {
     "bsdf_twosided_roughconductor": dict(features=["twosided", "roughconductor", "shared bsdf ref"], grads=["metal.brdf_0.alpha.value"]),
     "bsdf_blend_twosided_leaves": dict(features=["blendbsdf of twosided leaves"], grads=["panel.bsdf.weight.value"]),
     "bsdf_twosided_blend": dict(features=["twosided(blendbsdf)", "shared bsdf ref"], grads=["coat.brdf_0.weight.value"]),
+    # Masks (issue 31). Mitsuba's prb differentiates a vertex by re-evaluating its BSDF, which for
+    # a mask is the nested BSDF times the opacity: the pass-through (a delta lobe of weight
+    # 1 − opacity) evaluates to 0, so its share of the opacity's derivative is lost (`--check`).
+    # The image is linear in each opacity: compared with Mitsuba's central differences.
+    "bsdf_mask": dict(features=["mask (opacity float, default 0.5)", "mask of twosided diffuse, of roughconductor",
+                                "shadows of masks", "pass-through counted as a bounce"],
+                      grads=["panel.bsdf.opacity.value", "ball.bsdf.opacity.value",
+                             "panel.bsdf.nested_bsdf.brdf_0.reflectance.value", "ball.bsdf.nested_bsdf.alpha.value"],
+                      fd={"panel.bsdf.opacity.value": None, "ball.bsdf.opacity.value": None}, spp=2048, seeds=32),
+    "texture_mask_opacity": dict(features=["mask opacity bitmap (one channel, raw, bilinear)",
+                                           "mask opacity checkerboard of floats (to_uv)"],
+                                 grads=["panel.bsdf.opacity.data", "fence.bsdf.opacity.color0.value",
+                                        "fence.bsdf.opacity.color1.value"],
+                                 fd={"panel.bsdf.opacity.data": None, "fence.bsdf.opacity.color0.value": None,
+                                     "fence.bsdf.opacity.color1.value": None}, spp=2048, seeds=32),
     "bsdf_null": dict(features=["null bsdf (no medium)"], grads=["ball.bsdf.reflectance.value"]),
     "shape_instance": dict(features=["shapegroup", "instance (flattened)", "to_world per instance", "shared bsdfs"],
                            grads=["pair.shape.bsdf.reflectance.value", "pair.block.bsdf.alpha.value"]),
@@ -351,6 +366,11 @@ POWER = {
     # matrix's budget they see 16 % and 6–17 % (image means 0.89–0.90 and 0.75–0.94 of Mitsuba's
     # across runs, within that power): a weak row, to tighten with a better-conditioned scene.
     "texture_roughness": {"gradient_bias": 0.2},
+    # Masks: the GGX ball's α (as bsdf_roughconductor_ggx) and its opacity, whose blue derivative
+    # nearly cancels over the image (−0.005 against 0.017 in red), see 13–15 % at the budget; the
+    # fence's checkerboard opacities (blue, the smallest channel: 0.004) 11–14 %.
+    "bsdf_mask": {"gradient_bias": 0.2},
+    "texture_mask_opacity": {"gradient_bias": 0.15},
     "depth_1": {"primal_bias": 0.03},
     "depth_2": {"primal_bias": 0.02},
     # The open room of depth_2 under other names (its small light makes the primal noisy).

@@ -45,6 +45,8 @@ fn gpu_equals_cpu_per_path_on_every_builtin_and_test_scene() {
         "texture_roughness",
         "texture_blend_weight",
         "texture_specular_reflectance",
+        "bsdf_mask",
+        "texture_mask_opacity",
     ] {
         scenes.push(crate::support::scenes::conformance(name));
     }

@@ -73,6 +73,19 @@ fn cases() -> Vec<(Scene, Vec<&'static str>)> {
             vec!["ball.bsdf.weight.data", "floor.bsdf.weight.color0.value", "floor.bsdf.weight.color1.value"],
         ),
         (
+            scenes::conformance("bsdf_mask"),
+            vec![
+                "panel.bsdf.opacity.value",
+                "ball.bsdf.opacity.value",
+                "panel.bsdf.nested_bsdf.brdf_0.reflectance.value",
+                "ball.bsdf.nested_bsdf.alpha.value",
+            ],
+        ),
+        (
+            scenes::conformance("texture_mask_opacity"),
+            vec!["panel.bsdf.opacity.data", "fence.bsdf.opacity.color0.value", "fence.bsdf.opacity.color1.value"],
+        ),
+        (
             scenes::conformance("texture_specular_reflectance"),
             vec!["floor.bsdf.specular_reflectance.data", "ball.bsdf.specular_reflectance.color1.value"],
         ),
@@ -181,7 +194,6 @@ fn deterministic_gradients_are_bitwise_reproducible() {
 /// < 4 (a false alarm below 1e-4 per parameter), never a tuned tolerance.
 #[test]
 fn gradients_match_finite_differences() {
-    const SEEDS: u32 = 24;
     let gpu = TestGpu::new();
     let checks: Vec<(Scene, &str)> = vec![
         (builtin::load("cornell-box").unwrap(), "sphere.bsdf.alpha.value"),
@@ -207,6 +219,29 @@ fn gradients_match_finite_differences() {
         (scenes::conformance("texture_blend_weight"), "floor.bsdf.weight.color1.value"),
         (scenes::conformance("texture_specular_reflectance"), "floor.bsdf.specular_reflectance.data"),
     ];
+    check_finite_differences(&gpu, checks);
+}
+
+/// A mask's opacity (issue 31), constant and textured, against central finite differences as
+/// [`gradients_match_finite_differences`] checks the rest: the pass-through's share of the
+/// derivative is the one Mitsuba's prb loses.
+#[test]
+fn issue_31_mask_opacity_matches_finite_differences() {
+    let gpu = TestGpu::new();
+    check_finite_differences(
+        &gpu,
+        vec![
+            (scenes::conformance("bsdf_mask"), "panel.bsdf.opacity.value"),
+            (scenes::conformance("bsdf_mask"), "ball.bsdf.opacity.value"),
+            (scenes::conformance("texture_mask_opacity"), "panel.bsdf.opacity.data"),
+            (scenes::conformance("texture_mask_opacity"), "fence.bsdf.opacity.color0.value"),
+        ],
+    );
+}
+
+/// The Welch comparison of [`gradients_match_finite_differences`] on each (scene, parameter).
+fn check_finite_differences(gpu: &TestGpu, checks: Vec<(Scene, &str)>) {
+    const SEEDS: u32 = 24;
     for (scene, name) in checks {
         let mut renderer = Renderer::new(&gpu.ctx, &scene).unwrap();
         let base = RenderOptions { width: 32, height: 32, spp: 8, ..RenderOptions::for_scene(&scene) };
@@ -247,6 +282,7 @@ fn replay_returns_to_zero_on_every_path() {
     all.push(scenes::open_furnace());
     all.push(scenes::conformance("bsdf_roughdielectric"));
     all.push(scenes::conformance("medium_in_dielectric"));
+    all.push(scenes::conformance("bsdf_mask"));
     for scene in &all {
         let opts = RenderOptions { width: 64, height: 64, spp: 2, seed: 1, ..RenderOptions::for_scene(scene) };
         let adjoint = adjoint_pattern(opts.width, opts.height);

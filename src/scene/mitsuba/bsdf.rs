@@ -1,4 +1,4 @@
-//! `<bsdf>` (diffuse, roughconductor, roughplastic, blendbsdf, twosided) and `<texture
+//! `<bsdf>` (diffuse, roughconductor, roughplastic, blendbsdf, twosided, mask, …) and `<texture
 //! type="bitmap">`.
 
 use super::plugins::{Category, names};
@@ -114,6 +114,7 @@ impl<'a> Loader<'a> {
                 self.finish(&p)?;
                 self.scene.add_material(Material::Null)
             }
+            "mask" => self.mask(&p, name, depth)?,
             "normalmap" => self.normal_map(&p, name, depth)?,
             "bumpmap" => self.bump_map(&p, name, depth)?,
             "blendbsdf" => {
@@ -183,10 +184,15 @@ impl<'a> Loader<'a> {
                     return Err(self.x.err(child, "a 'twosided' BSDF cannot wrap another twosided one"));
                 }
                 // What a normal map wraps is what transmits or not.
-                let inner = match self.material(c) {
-                    Some(Material::NormalMap { nested, .. } | Material::BumpMap { nested, .. }) => nested,
-                    _ => c,
-                };
+                let mut inner = c;
+                while let Some(
+                    Material::NormalMap { nested, .. }
+                    | Material::BumpMap { nested, .. }
+                    | Material::Mask { nested, .. },
+                ) = self.material(inner)
+                {
+                    inner = nested;
+                }
                 let transmits = matches!(self.material(inner), Some(Material::Smooth { kind, .. }) if kind != SmoothKind::Conductor)
                     || matches!(self.material(inner), Some(Material::RoughDielectric { .. }));
                 if transmits {
@@ -624,6 +630,27 @@ impl<'a> Loader<'a> {
         Ok(self.scene.add_material(Material::BumpMap { nested, map, scale }))
     }
 
+    /// Mitsuba's `mask` around the BSDF `p`'s one nested BSDF (named `NAME.nested_bsdf`, Mitsuba's
+    /// traverse): `opacity` (0.5), a float (parameter `NAME.opacity.value`) or a one-channel
+    /// texture ([`Loader::scalar_property`]: `NAME.opacity.data`, or a checkerboard's
+    /// `.color0/.color1.value`). A mask around a mask or a `null` BSDF is refused by name, as is
+    /// one inside a `blendbsdf` (mask the blend instead).
+    fn mask(&mut self, p: &Props<'a>, name: &str, depth: usize) -> Result<MaterialId> {
+        let opacity = self.scalar_property(p, name, "opacity", Some(0.5), bounds::WEIGHT, (0.0, 1.0))?;
+        let children = p.take_nested(&["bsdf", "ref"]);
+        let [child] = children[..] else {
+            return Err(self.x.err(p.node, format!("'mask' needs 1 nested BSDF, got {}", children.len())));
+        };
+        let nested = self.bsdf(child, format!("{name}.nested_bsdf"), depth + 1)?;
+        match self.material(nested) {
+            Some(Material::Mask { .. }) => {
+                Err(self.x.err(child, "a 'mask' around another 'mask' is not supported (multiply their opacities)"))
+            }
+            Some(Material::Null) => Err(self.x.err(child, "a 'mask' around a 'null' BSDF has nothing to shade")),
+            _ => Ok(self.scene.add_material(Material::Mask { nested, opacity })),
+        }
+    }
+
     /// Refuses `flip_invalid_normals` and `use_shadowing_function` other than Mitsuba's default
     /// (true) on map wrapper `kind`.
     fn refuse_non_default_map_flags(&self, p: &Props<'a>, kind: &str) -> Result<()> {
@@ -702,6 +729,9 @@ impl<'a> Loader<'a> {
             Some(Material::Null) => {
                 Err(self.x.err(child, format!("a '{kind}' around a 'null' BSDF has nothing to shade")))
             }
+            Some(Material::Mask { .. }) => Err(self
+                .x
+                .err(child, format!("a '{kind}' around a 'mask' is not supported: put the 'mask' outside the map"))),
             _ => Ok(nested),
         }
     }

@@ -321,6 +321,7 @@ impl<'a> Loader<'a> {
         }
         self.direct_delta_warning();
         self.thin_dielectric_depth_warning();
+        self.refuse_masks_under_volpath()?;
         self.refuse_sensors_in_media(&sensors)?;
         self.refuse_overlapping_media()?;
         super::super::load::apply_environments(&mut self.scene, self.options)?;
@@ -634,6 +635,31 @@ impl<'a> Loader<'a> {
             ),
         );
         self.scene.warn(w);
+    }
+
+    /// Mitsuba's `volpath` family treats a `mask`'s pass-through as a null event: it is not a
+    /// bounce, and shadow rays pass masks with weight 1 − opacity. pathgrad renders a mask as
+    /// Mitsuba's `path` and `prb` do (a bounce; shadow rays stop at it), which has the same
+    /// expectation only when no path is cut short by `max_depth`: a volpath-family integrator
+    /// with a finite `max_depth` in a scene with a mask is refused by name.
+    ///
+    /// # Errors
+    /// That combination.
+    fn refuse_masks_under_volpath(&self) -> Result<()> {
+        let Some(node) = self.volpath_integrator else { return Ok(()) };
+        let masked = self.scene.materials.iter().any(|m| matches!(m, crate::scene::Material::Mask { .. }));
+        if !masked || self.scene.max_depth >= crate::integrator::UNBOUNDED_DEPTH_CAP {
+            return Ok(());
+        }
+        Err(self.x.err(
+            node,
+            format!(
+                "max_depth {} with a 'mask' BSDF: Mitsuba's volpath integrators do not count a mask's pass-through \
+                 as a bounce and let shadow rays through masks; pathgrad renders masks as Mitsuba's path and prb \
+                 do, which gives the same image only with max_depth -1 (use path or prb, or max_depth -1)",
+                self.scene.max_depth
+            ),
+        ))
     }
 
     /// Reports the unread properties of `p` (warnings) and unclaimed nested objects (errors).

@@ -39,7 +39,8 @@
 //!   `tests/data/mitsuba_names/` (`regenerate.py` there rewrites them). Mitsuba names a
 //!   scene-level object (a child of `<scene>`) by its `id`, and every other object after the
 //!   first path that reaches it, `PARENT.SLOT`: a shape's `bsdf`, `emitter` and
-//!   `interior_medium`, a blend's `bsdf_0`/`bsdf_1`, a twosided's `brdf_0`, a diffuse BSDF's
+//!   `interior_medium`, a blend's `bsdf_0`/`bsdf_1`, a twosided's `brdf_0`, a mask's (or normal
+//!   or bump map's) `nested_bsdf` and a mask's `opacity` texture, a diffuse BSDF's
 //!   `reflectance` texture, a medium's `sigma_t`, `albedo` and `phase_function`; an object
 //!   reached again keeps its first name. So a nested object's own `id` plays no part (a blend
 //!   nested in shape `ball` is `ball.bsdf` whatever its id), and a scene-level object is named by

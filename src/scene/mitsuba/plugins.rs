@@ -116,6 +116,12 @@ pub const PLUGINS: &[Plugin] = &[
     p(Bsdf, "diffuse", "`reflectance` (rgb, spectrum, bitmap or checkerboard)", ""),
     p(
         Bsdf,
+        "mask",
+        "`opacity` (a parameter or a one-channel texture), one nested BSDF",
+        "the pass-through counts as a bounce and stops shadow rays (as `path`/`prb`); volpath with a finite `max_depth` refused; not inside blendbsdf or a map",
+    ),
+    p(
+        Bsdf,
         "normalmap",
         "texture `normalmap` (a `bitmap` or `rawconstant`), one nested BSDF (parameters `.nested_bsdf.…`)",
         "frame from ∂p/∂u as Mitsuba, with its flipped normals and shadow terminator; the map's texels are not parameters; inside twosided, not around it; not inside blendbsdf",

@@ -115,3 +115,97 @@ fn issue_31_textures_on_scalar_properties_refuse_what_pathgrad_does_not_read_by_
         assert!(err.contains("s.xml:"), "the message names the file and line: {err}");
     }
 }
+
+#[test]
+fn issue_31_a_mask_reads_its_opacity_as_mitsuba_names_it() {
+    let s = load_with_images(&format!(
+        r#"<shape type="cube" id="a"><bsdf type="mask"><bsdf type="twosided"><bsdf type="diffuse"/></bsdf></bsdf></shape>
+           <shape type="cube" id="b"><bsdf type="mask"><float name="opacity" value="0.25"/><bsdf type="roughconductor"/></bsdf></shape>
+           <shape type="cube" id="c"><bsdf type="mask"><texture type="bitmap" name="opacity">{GREY}</texture><bsdf type="diffuse"/></bsdf></shape>
+           <shape type="cube" id="d"><bsdf type="mask"><texture type="checkerboard" name="opacity"/><bsdf type="diffuse"/></bsdf></shape>"#
+    ))
+    .unwrap();
+    let value = |name: &str| s.params.get(s.params.find(name).unwrap_or_else(|| panic!("{name} missing"))).to_vec();
+    assert_eq!(value("a.bsdf.opacity.value"), [0.5], "Mitsuba's default");
+    assert_eq!(value("b.bsdf.opacity.value"), [0.25]);
+    assert_eq!(value("c.bsdf.opacity.data"), [0.0, 1.0]);
+    assert_eq!(value("d.bsdf.opacity.color1.value"), [0.2]);
+    for name in ["a.bsdf.nested_bsdf.brdf_0.reflectance.value", "b.bsdf.nested_bsdf.alpha.value"] {
+        assert!(s.params.find(name).is_some(), "{name} missing");
+    }
+    let Material::Mask { nested, opacity } = s.materials[s.meshes[0].material.0 as usize] else { panic!("not a mask") };
+    assert!(matches!(s.materials[nested.0 as usize], Material::TwoSided(_)));
+    assert_eq!(opacity, s.params.find("a.bsdf.opacity.value").unwrap());
+    // Flattened: the nested material with the opacity's slot (a texture's descriptor for c).
+    let flat = crate::scene::flat::FlatScene::new(&s).unwrap();
+    let m = &flat.materials[s.meshes[0].material.0 as usize];
+    assert_eq!((m.tag, m.two_sided, m.p_opacity), (crate::contract::MAT_DIFFUSE, 1, s.params.entry(opacity).offset));
+    let c = &flat.materials[s.meshes[2].material.0 as usize];
+    assert_ne!(c.p_opacity & crate::contract::SCALAR_TEXTURE, 0);
+    assert!(flat.materials.iter().filter(|m| m.p_opacity == crate::contract::NO_PARAM).count() >= 4);
+}
+
+#[test]
+fn issue_31_masks_refuse_what_pathgrad_does_not_render_by_name() {
+    let cases = [
+        (r#"<bsdf type="mask"/>"#, "'mask' needs 1 nested BSDF, got 0"),
+        (
+            r#"<bsdf type="mask"><bsdf type="diffuse"/><bsdf type="diffuse"/></bsdf>"#,
+            "'mask' needs 1 nested BSDF, got 2",
+        ),
+        (
+            r#"<bsdf type="mask"><bsdf type="mask"><bsdf type="diffuse"/></bsdf></bsdf>"#,
+            "a 'mask' around another 'mask'",
+        ),
+        (r#"<bsdf type="mask"><bsdf type="null"/></bsdf>"#, "a 'mask' around a 'null' BSDF"),
+        (
+            r#"<bsdf type="mask"><float name="opacity" value="1.5"/><bsdf type="diffuse"/></bsdf>"#,
+            "'opacity' must lie in [0, 1]",
+        ),
+        (
+            r#"<bsdf type="mask"><texture type="bitmap" name="opacity"><string name="filename" value="rgb.png"/></texture><bsdf type="diffuse"/></bsdf>"#,
+            "is not grey (",
+        ),
+        (
+            r#"<bsdf type="blendbsdf"><float name="weight" value="0.5"/><bsdf type="mask"><bsdf type="diffuse"/></bsdf><bsdf type="diffuse"/></bsdf>"#,
+            "'blendbsdf' children must both be",
+        ),
+        (
+            r#"<bsdf type="normalmap"><texture type="bitmap" name="normalmap"><string name="filename" value="rgb.png"/></texture><bsdf type="mask"><bsdf type="diffuse"/></bsdf></bsdf>"#,
+            "a 'normalmap' around a 'mask' is not supported",
+        ),
+        (
+            r#"<bsdf type="twosided"><bsdf type="mask"><bsdf type="dielectric"/></bsdf></bsdf>"#,
+            "cannot wrap one that transmits light",
+        ),
+    ];
+    for (bsdf, expect) in cases {
+        let err = load_with_images(&format!(r#"<shape type="cube">{bsdf}</shape>"#)).unwrap_err().to_string();
+        assert!(err.contains(expect), "{bsdf}: {err}");
+        assert!(err.contains("s.xml:"), "the message names the file and line: {err}");
+    }
+    // Mitsuba's volpath family renders a mask differently unless max_depth is unbounded.
+    let mask = r#"<shape type="cube"><bsdf type="mask"><bsdf type="diffuse"/></bsdf></shape>"#;
+    let volpath = |depth: i32| {
+        load_with_images(&format!(
+            r#"<integrator type="volpath"><integer name="max_depth" value="{depth}"/></integrator>{mask}"#
+        ))
+    };
+    let err = volpath(6).unwrap_err().to_string();
+    assert!(err.contains("max_depth 6 with a 'mask' BSDF") && err.contains("s.xml:"), "{err}");
+    volpath(-1).unwrap();
+    load_with_images(&format!(r#"<integrator type="path"><integer name="max_depth" value="6"/></integrator>{mask}"#))
+        .unwrap();
+}
+
+#[test]
+fn issue_31_the_differential_strategy_refuses_a_mask_by_name() {
+    let s = load_with_images(
+        r#"<shape type="cube" id="box"><bsdf type="mask"><bsdf type="twosided"><bsdf type="roughconductor"/></bsdf></bsdf></shape>"#,
+    )
+    .unwrap();
+    for target in ["box.bsdf.opacity.value", "box.bsdf.nested_bsdf.brdf_0.alpha.value"] {
+        let err = crate::integrator::Strategy::from_name(&s, "diff", 0.5, target).unwrap_err().to_string();
+        assert!(err.contains("a mask's opacity or a masked material's parameter"), "{target}: {err}");
+    }
+}
