@@ -321,6 +321,8 @@ impl<'a> Loader<'a> {
         }
         self.direct_delta_warning();
         self.thin_dielectric_depth_warning();
+        let integrator = children.iter().find(|c| c.has_tag_name("integrator")).copied().unwrap_or(root);
+        self.null_outside_volpath_warning(integrator);
         self.refuse_masks_under_volpath()?;
         self.refuse_sensors_in_media(&sensors)?;
         self.refuse_overlapping_media()?;
@@ -633,6 +635,28 @@ impl<'a> Loader<'a> {
                  (raise max_depth, or use path or prb, to render the same image)",
                 self.scene.max_depth
             ),
+        );
+        self.scene.warn(w);
+    }
+
+    /// A `null` BSDF is an index-matched boundary in pathgrad: crossing it is no bounce and shadow
+    /// rays pass it — what Mitsuba's `volpath` family does. Mitsuba's `path` and `prb` (also its
+    /// default integrator) instead count the crossing as a bounce and stop shadow rays at the
+    /// surface, so next-event estimation misses the light behind it and their image is darker
+    /// than pathgrad's. pathgrad keeps its rendering (the one with the light transport's
+    /// expectation) and says so, at `node` (the integrator, or the scene when it names none).
+    fn null_outside_volpath_warning(&mut self, node: El<'a>) {
+        if self.volpath_integrator.is_some()
+            || !self.scene.materials.iter().any(|m| matches!(m, crate::scene::Material::Null))
+        {
+            return;
+        }
+        let w = self.x.warning(
+            node,
+            "a 'null' BSDF under Mitsuba's path or prb integrator (or its default, path): Mitsuba stops shadow \
+             rays at null surfaces and counts crossing one as a bounce, so its image misses light behind them; \
+             pathgrad renders null surfaces as Mitsuba's volpath does (light passes them), so its image is \
+             brighter there than Mitsuba's path render (use volpath or prbvolpath to compare)",
         );
         self.scene.warn(w);
     }

@@ -224,3 +224,22 @@ fn overlapping_media_are_refused() {
         load_in(dir.path(), &body).unwrap();
     }
 }
+
+/// A `null` BSDF under `path`, `prb` or no integrator (Mitsuba's default, path) is rendered as
+/// volpath renders it, with a warning at the integrator (or the scene) that Mitsuba's path image
+/// differs; under a volpath-family integrator, and without a null BSDF, there is no such warning.
+#[test]
+fn a_null_bsdf_outside_volpath_is_rendered_as_volpath_with_a_warning() {
+    let dir = tempfile::tempdir().unwrap();
+    let null = r#"<shape type="sphere"><bsdf type="null"/></shape>"#;
+    let warned = |integrator: &str, shape: &str| {
+        let scene = load_in(dir.path(), &format!("{integrator}{shape}")).unwrap();
+        scene.warnings.iter().any(|w| w.to_string().contains("a 'null' BSDF under Mitsuba's path or prb integrator"))
+    };
+    assert!(warned("", null));
+    assert!(warned(r#"<integrator type="path"/>"#, null));
+    assert!(warned(r#"<integrator type="prb"/>"#, null));
+    assert!(!warned(r#"<integrator type="volpath"/>"#, null));
+    assert!(!warned(r#"<integrator type="prbvolpath"/>"#, null));
+    assert!(!warned(r#"<integrator type="path"/>"#, r#"<shape type="sphere"><bsdf type="diffuse"/></shape>"#));
+}
