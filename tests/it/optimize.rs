@@ -325,7 +325,7 @@ fn gradient_reuse_runs(delta: f32, runs: u32, steps: usize) -> (Vec<Vec<f64>>, V
     let mut gradient = |table: &ParamTable, seed: u32| -> Gradients {
         renderer.set_params(table).unwrap();
         let at = RenderOptions { seed, ..base };
-        let views = [view.clone()];
+        let views = [view];
         renderer
             .loss_and_gradient_views(&at, 4, &views, std::slice::from_ref(&target), Loss::L2, GradMode::Float)
             .unwrap()
