@@ -5,8 +5,8 @@
 //! paper's *proportional* sample of ∇L(θ_i); G_i − H_i is its *finite-difference* sample of
 //! ∇L(θ_i) − ∇L(θ_{i−1}), low in variance because both ends share their paths. The meta-estimate
 //! F_i = v(F_{i−1} + G_i − H_i) + (1 − v)·G_i, rewritten F_i = v(F_{i−1} − H_i) + G_i, carries the
-//! earlier iterations' samples forward along the trajectory. Given the trajectory, E[F_{i−1}] =
-//! ∇L(θ_{i−1}) = E[H_i] and E[G_i] = ∇L(θ_i), so E[F_i] = ∇L(θ_i) for any weight v fixed before
+//! earlier iterations' samples forward along the trajectory. Given the trajectory, E(F_{i−1}) =
+//! ∇L(θ_{i−1}) = E(H_i) and E(G_i) = ∇L(θ_i), so E(F_i) = ∇L(θ_i) for any weight v fixed before
 //! the step's samples are drawn. The weight per value is the variance-minimising one,
 //! v = Cov(H, G)/(Var H + Var F), clamped to [0, 1], from running statistics of earlier steps —
 //! the same recursion as the loss image's control variates ([`RunningEstimate`], Nicolet et al.
