@@ -405,7 +405,8 @@ pub struct StrategyChoice {
 /// placements weighted by `placement`. Each candidate renders `budget.runs` image gradients of
 /// `budget.spp` spp with seeds `options.seed + i`, interleaved run by run so that a slow spell of
 /// the machine falls on all of them; kernels are warmed up first, untimed. Variances are those of
-/// [`image_gradient_variance`], times those of each candidate's fastest estimate; times within
+/// [`image_gradient_variance`], times those of each candidate's fastest estimate (the `diff`
+/// candidates, one kernel, share the fastest of theirs); times within
 /// [`PILOT_TIME_TIE`] of the fastest count as equal, and a candidate displaces an earlier one only
 /// if better by more than [`PILOT_MARGIN`], so the same seed picks the same strategy. With `loss`,
 /// the figure is the loss gradient's variance instead (see [`PilotLoss`]): what an optimisation
@@ -559,14 +560,22 @@ pub fn choose_strategy(
     })
 }
 
-/// Each candidate's (strategy, variance, seconds per estimate) with its efficiency: variance × time,
-/// a time within [`PILOT_TIME_TIE`] of the fastest taken as the fastest.
+/// Each candidate's (strategy, variance, seconds per estimate) with its efficiency: variance × time.
+/// The `diff` candidates run one kernel that differs only in its uniforms (q), so they share one
+/// time, the fastest of theirs: their choice goes by variance alone, which the seed fixes, and a
+/// slow spell of the machine during one of them cannot pick another q. A time within
+/// [`PILOT_TIME_TIE`] of the fastest is then taken as the fastest.
 fn pilot_efficiencies(measured: &[(Strategy, f64, f64)]) -> Vec<PilotCandidate> {
-    let fastest = measured.iter().map(|m| m.2).fold(f64::INFINITY, f64::min);
+    let is_diff = |s: &Strategy| matches!(s, Strategy::Diff { .. });
+    let diff_time = measured.iter().filter(|m| is_diff(&m.0)).map(|m| m.2).fold(f64::INFINITY, f64::min);
+    let shared = |m: &(Strategy, f64, f64)| if is_diff(&m.0) { diff_time } else { m.2 };
+    let fastest = measured.iter().map(shared).fold(f64::INFINITY, f64::min);
     measured
         .iter()
-        .map(|&(strategy, variance, seconds)| {
-            let time = if seconds <= fastest * (1.0 + PILOT_TIME_TIE) { fastest } else { seconds };
+        .map(|m| {
+            let &(strategy, variance, seconds) = m;
+            let seconds_shared = shared(m);
+            let time = if seconds_shared <= fastest * (1.0 + PILOT_TIME_TIE) { fastest } else { seconds_shared };
             // A NaN variance (a non-finite gradient) must never win.
             let efficiency = if variance.is_finite() { efficiency(variance, time) } else { f64::INFINITY };
             PilotCandidate { strategy, variance, seconds_per_estimate: seconds, efficiency }
@@ -594,11 +603,16 @@ mod tests {
         assert_eq!(c[1].efficiency, 1.5);
         assert_eq!(c[1].seconds_per_estimate, 1.1);
         // Twice as slow: the time counts, and the lower variance no longer pays.
-        let c = pilot_efficiencies(&[(Strategy::Bsdf, 2.0, 1.0), (diff(0.5), 1.5, 2.0), (diff(0.9), f64::NAN, 1.0)]);
+        let c = pilot_efficiencies(&[(Strategy::Bsdf, 2.0, 1.0), (diff(0.5), 1.5, 2.0), (diff(0.9), f64::NAN, 2.0)]);
         assert_eq!(c[1].efficiency, 3.0);
         assert_eq!(c[0].efficiency, 2.0);
         assert_eq!(c[2].efficiency, f64::INFINITY);
         assert_eq!(pilot_pick(&c), 0);
+        // The diff candidates share their fastest time: a slow spell during one q (here 3× on
+        // q = 0.5) does not change which q wins; its own time is still reported.
+        let c = pilot_efficiencies(&[(Strategy::Bsdf, 2.0, 1.0), (diff(0.5), 1.5, 3.0), (diff(0.9), 1.5, 1.0)]);
+        assert_eq!((c[1].efficiency, c[2].efficiency, c[1].seconds_per_estimate), (1.5, 1.5, 3.0));
+        assert_eq!(pilot_pick(&c), 1);
         // Within the margin the earlier candidate stays; beyond it the later one wins.
         let c = pilot_efficiencies(&[(Strategy::Bsdf, 1.0, 1.0), (diff(0.5), 0.96, 1.0), (diff(0.9), 0.9, 1.0)]);
         assert_eq!(pilot_pick(&c[..2]), 0);
