@@ -536,6 +536,23 @@ impl<'a> Loader<'a> {
         })
     }
 
+    /// The `wrap_mode` of a bitmap or grid volume (`repeat`, `mirror` or `clamp`), `default` where
+    /// none is given (a bitmap's is repeat, a grid volume's clamp).
+    ///
+    /// # Errors
+    /// Another value, located at the property.
+    pub(super) fn wrap_mode(&self, p: &Props<'a>, default: Wrap) -> Result<Wrap> {
+        match p.string(&self.x, "wrap_mode")? {
+            None => Ok(default),
+            Some((v, n)) => match v.as_str() {
+                "repeat" => Ok(Wrap::Repeat),
+                "mirror" => Ok(Wrap::Mirror),
+                "clamp" => Ok(Wrap::Clamp),
+                _ => Err(self.x.err(n, format!("'wrap_mode' must be 'repeat', 'mirror' or 'clamp', got '{v}'"))),
+            },
+        }
+    }
+
     /// The texels and lookup of the `bitmap` `p` (node `target`): Mitsuba's `filename`, `raw`,
     /// `filter_type`, `wrap_mode` (`format` ignored with a warning).
     ///
@@ -555,17 +572,7 @@ impl<'a> Loader<'a> {
                 return Err(self.x.err(n, format!("'filter_type' must be 'bilinear' or 'nearest', got '{v}'")));
             }
         };
-        let wrap = match p.string(&self.x, "wrap_mode")? {
-            None => Wrap::Repeat,
-            Some((v, n)) => match v.as_str() {
-                "repeat" => Wrap::Repeat,
-                "mirror" => Wrap::Mirror,
-                "clamp" => Wrap::Clamp,
-                _ => {
-                    return Err(self.x.err(n, format!("'wrap_mode' must be 'repeat', 'mirror' or 'clamp', got '{v}'")));
-                }
-            },
-        };
+        let wrap = self.wrap_mode(p, Wrap::Repeat)?;
         // `format` is the texels' storage: "variant" (the default) is float32, as pathgrad stores them.
         if let Some((v, n)) = p.string(&self.x, "format")?
             && v != "variant"

@@ -106,20 +106,7 @@ impl<'a> Loader<'a> {
                     return Err(self.x.err(node, format!("filter_type '{filter}' is not supported (only trilinear)")));
                 }
                 // Mitsuba's default is `clamp` (a bitmap's is `repeat`).
-                let wrap = match v.string(&self.x, "wrap_mode")? {
-                    None => Wrap::Clamp,
-                    Some((mode, node)) => match mode.as_str() {
-                        "clamp" => Wrap::Clamp,
-                        "repeat" => Wrap::Repeat,
-                        "mirror" => Wrap::Mirror,
-                        other => {
-                            return Err(self.x.err(
-                                node,
-                                format!("'wrap_mode' must be 'repeat', 'mirror' or 'clamp', got '{other}'"),
-                            ));
-                        }
-                    },
-                };
+                let wrap = self.wrap_mode(&v, Wrap::Clamp)?;
                 if v.boolean(&self.x, "use_grid_bbox", false)? {
                     return Err(self
                         .x
