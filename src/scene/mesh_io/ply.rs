@@ -311,6 +311,31 @@ impl<R: Read> Stream<R> {
     }
 }
 
+/// Appends one vertex's wanted values (slots as `Action::Keep` names them: position, then normal,
+/// then texture coordinates) to the arrays; the message of the first value (of `names`) that is not
+/// finite otherwise. Shared by the streamed binary records and the element-by-element reader.
+fn push_vertex(
+    values: &[f32; 8],
+    names: &[&str],
+    wanted: &Wanted,
+    positions: &mut Vec<Vec3>,
+    normals: &mut Vec<Vec3>,
+    uvs: &mut Vec<Vec2>,
+) -> std::result::Result<(), String> {
+    if let Some(k) = values[..names.len()].iter().position(|v| !v.is_finite()) {
+        return Err(format!("'{}' is not finite (NaN or infinity, or too large for f32)", names[k]));
+    }
+    positions.push(Vec3::new(values[0], values[1], values[2]));
+    if wanted.has_normals {
+        normals.push(Vec3::new(values[3], values[4], values[5]));
+    }
+    if wanted.uv_names.is_some() {
+        let k = if wanted.has_normals { 6 } else { 3 };
+        uvs.push(Vec2::new(values[k], values[k + 1]));
+    }
+    Ok(())
+}
+
 /// One fixed-size vertex record's wanted values (slots as `Action::Keep` names them).
 fn decode_record(record: &[u8], actions: &[Action], big: bool) -> [f32; 8] {
     let (mut values, mut at) = ([0.0f32; 8], 0);
@@ -398,18 +423,8 @@ fn decode_binary<R: Read>(
                 let batch: Vec<[f32; 8]> =
                     bytes.par_chunks_exact(record).map(|r| decode_record(r, &actions, big_endian)).collect();
                 for (j, values) in batch.iter().enumerate() {
-                    if let Some(k) = values[..names.len()].iter().position(|v| !v.is_finite()) {
-                        let message = format!("'{}' is not finite (NaN or infinity, or too large for f32)", names[k]);
-                        return Err(element_error(done + j, message));
-                    }
-                    g.positions.push(Vec3::new(values[0], values[1], values[2]));
-                    if wanted.has_normals {
-                        normals.push(Vec3::new(values[3], values[4], values[5]));
-                    }
-                    if wanted.uv_names.is_some() {
-                        let k = if wanted.has_normals { 6 } else { 3 };
-                        uvs.push(Vec2::new(values[k], values[k + 1]));
-                    }
+                    push_vertex(values, &names, wanted, &mut g.positions, &mut normals, &mut uvs)
+                        .map_err(|m| element_error(done + j, m))?;
                 }
                 done += k;
             }
@@ -443,18 +458,8 @@ fn decode_binary<R: Read>(
                 }
             }
             if is_vertex {
-                if let Some(k) = values[..names.len()].iter().position(|v| !v.is_finite()) {
-                    let message = format!("'{}' is not finite (NaN or infinity, or too large for f32)", names[k]);
-                    return Err(element_error(i, message));
-                }
-                g.positions.push(Vec3::new(values[0], values[1], values[2]));
-                if wanted.has_normals {
-                    normals.push(Vec3::new(values[3], values[4], values[5]));
-                }
-                if wanted.uv_names.is_some() {
-                    let k = if wanted.has_normals { 6 } else { 3 };
-                    uvs.push(Vec2::new(values[k], values[k + 1]));
-                }
+                push_vertex(&values, &names, wanted, &mut g.positions, &mut normals, &mut uvs)
+                    .map_err(|m| element_error(i, m))?;
             } else if is_face {
                 if list.len() < 3 {
                     return Err(element_error(i, format!("has {} vertices; a face needs at least 3", list.len())));
