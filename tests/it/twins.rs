@@ -122,6 +122,18 @@ fn probe_case(
     }
 }
 
+/// The rough dielectric both probes test (tinted reflectance and transmittance, η = 1.5).
+fn probe_rough_dielectric(distribution: pathgrad::bsdf::Distribution, alpha: f32) -> pathgrad::bsdf::Bsdf {
+    use pathgrad::bsdf::{Bsdf, Leaf};
+    Bsdf::leaf(Leaf::RoughDielectric(pathgrad::bsdf::rough_dielectric::RoughDielectricLeaf {
+        distribution,
+        alpha,
+        reflectance: glam::Vec3::new(0.9, 0.8, 0.7),
+        transmittance: glam::Vec3::new(0.6, 0.5, 0.4),
+        eta: 1.5,
+    }))
+}
+
 /// Runs a BSDF probe kernel over `cases` and reads its results back.
 fn run_bsdf_probe(
     gpu: &TestGpu,
@@ -193,13 +205,7 @@ fn bsdf_gpu_equals_cpu() {
     }
     for distribution in [Distribution::Beckmann, Distribution::Ggx] {
         for alpha in [0.02, 0.3, 0.8] {
-            bsdfs.push(Bsdf::leaf(Leaf::RoughDielectric(pathgrad::bsdf::rough_dielectric::RoughDielectricLeaf {
-                distribution,
-                alpha,
-                reflectance: Vec3::new(0.9, 0.8, 0.7),
-                transmittance: Vec3::new(0.6, 0.5, 0.4),
-                eta: 1.5,
-            })));
+            bsdfs.push(probe_rough_dielectric(distribution, alpha));
         }
     }
     let mut cases = Vec::new();
@@ -320,13 +326,7 @@ fn diff_gpu_equals_cpu() {
                 eta: Vec3::ZERO,
                 k: Vec3::ONE,
             }));
-            bsdfs.push(Bsdf::leaf(Leaf::RoughDielectric(pathgrad::bsdf::rough_dielectric::RoughDielectricLeaf {
-                distribution,
-                alpha,
-                reflectance: Vec3::new(0.9, 0.8, 0.7),
-                transmittance: Vec3::new(0.6, 0.5, 0.4),
-                eta: 1.5,
-            })));
+            bsdfs.push(probe_rough_dielectric(distribution, alpha));
         }
     }
     for weight in [0.1, 0.5, 0.9] {
