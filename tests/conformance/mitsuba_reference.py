@@ -300,6 +300,13 @@ MATRIX = {
     "integrator_direct": dict(features=["direct integrator (as path, max_depth 2)"], own_integrator=True,
                               warnings=["'direct' integrator"], grads=["back.bsdf.reflectance.value"]),
     "integrator_volpathmis": dict(features=["volpathmis integrator"], own_integrator=True, grads=[]),
+    "integrator_ptracer": dict(features=["ptracer integrator (as path, max_depth 3)"], own_integrator=True,
+                               warnings=["'ptracer' integrator"], grads=["back.bsdf.reflectance.value"]),
+    "integrator_prb_projective": dict(features=["prb_projective integrator (as prb, max_depth 3)"], own_integrator=True,
+                                      warnings=["'prb_projective' integrator"], grads=["ball.bsdf.reflectance.value"]),
+    "integrator_direct_projective": dict(features=["direct_projective integrator (as path, max_depth 2)"],
+                                         own_integrator=True, warnings=["'direct_projective' integrator"],
+                                         grads=["side.bsdf.reflectance.value"]),
     "integrator_moment_stratified": dict(features=["moment(path, max_depth 3)", "stratified sampler (as independent)"],
                                          own_integrator=True, warnings=["'moment' integrator", "sampler 'stratified'"],
                                          grads=[]),
@@ -377,6 +384,9 @@ POWER = {
     "depth_2": {"primal_bias": 0.02},
     # The open room of depth_2 under other names (its small light makes the primal noisy).
     "integrator_direct": {"primal_bias": 0.02},
+    "integrator_ptracer": {"primal_bias": 0.02},
+    "integrator_prb_projective": {"primal_bias": 0.02},
+    "integrator_direct_projective": {"primal_bias": 0.02},
     "integrator_moment_stratified": {"primal_bias": 0.02},
     "scene_file_include": {"primal_bias": 0.02},
     "medium_grid_partial": {"gradient_bias": 0.5},
@@ -434,7 +444,7 @@ def integrator_of(path):
     node = root.find("integrator")
     while node is not None and node.get("type") in ("moment", "aov"):
         node = node.find("integrator")
-    if node is not None and node.get("type") == "direct":
+    if node is not None and node.get("type") in ("direct", "direct_projective"):
         max_depth = 2
     if node is not None:
         for child in node:

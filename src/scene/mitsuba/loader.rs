@@ -115,6 +115,7 @@ pub(super) fn load_text_with(text: &str, file: &Path, options: &LoadOptions, mes
         options,
         direct_emitter_samples: None,
         volpath_integrator: None,
+        ptracer_integrator: None,
         instancing: None,
     };
     loader.run(doc.root_element(), &options.defines)?;
@@ -180,6 +181,8 @@ pub(super) struct Loader<'a> {
     pub direct_emitter_samples: Option<(i64, El<'a>)>,
     /// The `volpath`, `volpathmis` or `prbvolpath` integrator, if the scene names one.
     pub volpath_integrator: Option<El<'a>>,
+    /// The `ptracer` integrator, if the scene names one ([`Loader::ptracer_checks`]).
+    pub ptracer_integrator: Option<El<'a>>,
     /// While an `instance` builds its group's shapes: its `to_world` and the name (Mitsuba's key
     /// `GROUP.CHILD`) of the shape being built.
     pub instancing: Option<(glam::Mat4, String)>,
@@ -324,6 +327,7 @@ impl<'a> Loader<'a> {
         let integrator = children.iter().find(|c| c.has_tag_name("integrator")).copied().unwrap_or(root);
         self.null_outside_volpath_warning(integrator);
         self.refuse_masks_under_volpath()?;
+        self.ptracer_checks()?;
         self.refuse_sensors_in_media(&sensors)?;
         self.refuse_overlapping_media()?;
         super::super::load::apply_environments(&mut self.scene, self.options)?;
@@ -684,6 +688,40 @@ impl<'a> Loader<'a> {
                 self.scene.max_depth
             ),
         ))
+    }
+
+    /// Mitsuba's `ptracer` traces light paths and connects each vertex to the camera, so it
+    /// renders no path whose vertex seen by the camera is a smooth (delta) surface — a mirror,
+    /// glass — and renders no participating media. pathgrad renders `ptracer` scenes with its
+    /// path tracer: it says so once, says where the images differ (smooth BSDFs present), and
+    /// refuses media by name.
+    ///
+    /// # Errors
+    /// A `ptracer` scene with a medium.
+    fn ptracer_checks(&mut self) -> Result<()> {
+        let Some(node) = self.ptracer_integrator else { return Ok(()) };
+        if !self.scene.media.is_empty() {
+            return Err(self.x.err(
+                node,
+                "'ptracer' with a participating medium: Mitsuba's particle tracer does not render media \
+                 (use volpath)",
+            ));
+        }
+        let w = self.x.warning(
+            node,
+            "'ptracer' integrator: rendered as a path tracer of the same max_depth (the same image, other noise)",
+        );
+        self.scene.warn(w);
+        if self.scene.materials.iter().any(|m| matches!(m, crate::scene::Material::Smooth { .. })) {
+            let w = self.x.warning(
+                node,
+                "'ptracer' with a smooth conductor or dielectric: Mitsuba's particle tracer cannot connect a \
+                 smooth surface to the camera, so it renders what the camera sees in or through one black; \
+                 pathgrad renders it (not Mitsuba's image there)",
+            );
+            self.scene.warn(w);
+        }
+        Ok(())
     }
 
     /// Reports the unread properties of `p` (warnings) and unclaimed nested objects (errors).

@@ -231,6 +231,19 @@ pub const PLUGINS: &[Plugin] = &[
         "`emitter_samples`, `bsdf_samples`, `shading_samples`, `hide_emitters`",
         "a path tracer of depth 2 (warned)",
     ),
+    p(
+        Integrator,
+        "ptracer",
+        "`max_depth`, `rr_depth`, `hide_emitters`, `samples_per_pass`",
+        "a path tracer (warned); no media",
+    ),
+    p(
+        Integrator,
+        "prb_projective",
+        "as path; `sppc`, `sppp`, `sppi`, `guiding`, `guiding_proj`, `guiding_rounds`, `project_seed`, `proj_seed_spp`",
+        "as prb, no geometry gradients (warned)",
+    ),
+    p(Integrator, "direct_projective", "as prb_projective", "a path tracer of depth 2, no geometry gradients (warned)"),
     p(Integrator, "moment", "one nested integrator", "renders the nested one (warned)"),
     p(Integrator, "aov", "one nested integrator", "renders the nested one (warned)"),
 ];

@@ -426,7 +426,12 @@ impl<'a> Loader<'a> {
     /// The wrappers `moment` and `aov` render the integrator nested in them (their image is that
     /// integrator's; pathgrad writes no second moments or AOV channels) and say so once. `direct`
     /// is a path tracer of depth 2 (Mitsuba's `direct` estimates the same image, with other
-    /// noise: its sample counts per emitter and BSDF are ignored), also said once.
+    /// noise: its sample counts per emitter and BSDF are ignored), also said once. `ptracer`
+    /// (Mitsuba's particle tracer) is rendered as a path tracer of its `max_depth`: the same
+    /// image where the camera sees no smooth specular surface ([`Loader::ptracer_checks`] warns
+    /// otherwise, and refuses media, which Mitsuba's particle tracer does not render).
+    /// `prb_projective` and `direct_projective` render as `prb` and `direct`: their projective
+    /// terms differentiate geometry, which pathgrad keeps fixed; said once.
     pub(super) fn integrator(&mut self, node: El<'a>) -> Result<()> {
         let p = Props::parse(&self.x, node)?;
         if matches!(p.kind.as_str(), "moment" | "aov") {
@@ -473,15 +478,45 @@ impl<'a> Loader<'a> {
             self.warn_hide_emitters(&p, node)?;
             return self.finish(&p);
         }
+        if matches!(p.kind.as_str(), "direct_projective" | "prb_projective") {
+            self.projective_settings(&p)?;
+        }
+        if p.kind == "direct_projective" {
+            self.scene.max_depth = 2;
+            let w = self.x.warning(
+                node,
+                "'direct_projective' integrator: rendered as a path tracer of max_depth 2 (its image, other noise); \
+                 its projective sampling differentiates geometry, which pathgrad keeps fixed",
+            );
+            self.scene.warn(w);
+            p.integer(&self.x, "max_depth")?;
+            self.warn_hide_emitters(&p, node)?;
+            return self.finish(&p);
+        }
         if matches!(p.kind.as_str(), "volpath" | "volpathmis" | "prbvolpath") {
             self.volpath_integrator = Some(node);
         }
-        if !matches!(p.kind.as_str(), "path" | "prb" | "prb_basic" | "volpath" | "volpathmis" | "prbvolpath") {
+        if p.kind == "ptracer" {
+            p.integer(&self.x, "samples_per_pass")?;
+            self.ptracer_integrator = Some(node);
+        }
+        if p.kind == "prb_projective" {
+            let w = self.x.warning(
+                node,
+                "'prb_projective' integrator: rendered as prb (its image, other noise); its projective sampling \
+                 differentiates geometry, which pathgrad keeps fixed",
+            );
+            self.scene.warn(w);
+        }
+        if !matches!(
+            p.kind.as_str(),
+            "path" | "prb" | "prb_basic" | "volpath" | "volpathmis" | "prbvolpath" | "ptracer" | "prb_projective"
+        ) {
             return Err(self.x.err(
                 node,
                 format!(
                     "unsupported plugin '{}' (supported: path, prb, prb_basic, volpath, volpathmis, prbvolpath, \
-                     direct; moment and aov around one of them)",
+                     direct, ptracer, prb_projective, direct_projective; moment and aov around one of them)",
                     p.kind
                 ),
             ));
@@ -518,6 +553,22 @@ impl<'a> Loader<'a> {
         }
         self.warn_hide_emitters(&p, node)?;
         self.finish(&p)
+    }
+
+    /// Reads (and drops) the projective integrators' sampling settings: their sample counts and
+    /// guiding act only on the geometry-gradient terms, which pathgrad does not compute.
+    ///
+    /// # Errors
+    /// A setting of the wrong type.
+    fn projective_settings(&self, p: &Props<'a>) -> Result<()> {
+        for count in ["sppc", "sppp", "sppi", "guiding_rounds", "proj_seed_spp"] {
+            p.integer(&self.x, count)?;
+        }
+        for name in ["guiding", "project_seed"] {
+            p.string(&self.x, name)?;
+        }
+        p.boolean(&self.x, "guiding_proj", true)?;
+        Ok(())
     }
 
     /// An integrator's `hide_emitters` set to true: pathgrad shows emitters, and says so.

@@ -384,9 +384,9 @@ fn element_and_property_errors() {
             "<emitter>: a scene has at most one environment emitter (constant or envmap)",
         ),
         (
-            r#"<integrator type="ptracer"/>"#,
-            "<integrator>: unsupported plugin 'ptracer' (supported: path, prb, prb_basic, volpath, volpathmis, prbvolpath, \
-             direct; moment and aov around one of them)",
+            r#"<integrator type="depth"/>"#,
+            "<integrator>: unsupported plugin 'depth' (supported: path, prb, prb_basic, volpath, volpathmis, prbvolpath, \
+             direct, ptracer, prb_projective, direct_projective; moment and aov around one of them)",
         ),
         (
             r#"<integrator type="path"><integer name="max_depth" value="0"/></integrator>"#,

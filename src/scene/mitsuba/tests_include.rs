@@ -195,8 +195,59 @@ fn wrapped_and_direct_integrators_render_their_path_tracer() {
     );
     let empty = text(&format!(r#"{SENSOR}{LIGHT}<integrator type="moment"/>"#)).unwrap_err().to_string();
     assert!(empty.ends_with("'moment' needs a nested <integrator>"), "{empty}");
-    let unknown = text(&format!(r#"{SENSOR}{LIGHT}<integrator type="ptracer"/>"#)).unwrap_err().to_string();
-    assert!(unknown.contains("unsupported plugin 'ptracer'"), "{unknown}");
+    let unknown = text(&format!(r#"{SENSOR}{LIGHT}<integrator type="depth"/>"#)).unwrap_err().to_string();
+    assert!(unknown.contains("unsupported plugin 'depth'"), "{unknown}");
+}
+
+#[test]
+fn particle_and_projective_integrators_render_as_path_tracers_and_say_where_they_differ() {
+    let ptracer = text(&format!(
+        r#"{SENSOR}{LIGHT}<integrator type="ptracer"><integer name="max_depth" value="4"/><integer name="samples_per_pass" value="8"/></integrator>"#
+    ))
+    .unwrap();
+    assert_eq!(ptracer.max_depth, 4);
+    assert_eq!(ptracer.warnings.len(), 1, "{:?}", ptracer.warnings);
+    assert!(ptracer.warnings[0].ends_with(
+        "'ptracer' integrator: rendered as a path tracer of the same max_depth (the same image, other noise)"
+    ));
+    // A mirror: what the camera sees in it is black in Mitsuba's particle tracer.
+    let mirror = text(&format!(
+        r#"{SENSOR}{LIGHT}<integrator type="ptracer"/><shape type="rectangle"><bsdf type="conductor"/></shape>"#
+    ))
+    .unwrap();
+    assert_eq!(mirror.warnings.len(), 2, "{:?}", mirror.warnings);
+    assert!(
+        mirror.warnings[1].contains("renders what the camera sees in or through one black"),
+        "{:?}",
+        mirror.warnings
+    );
+    let medium = text(&format!(
+        r#"{SENSOR}{LIGHT}<integrator type="ptracer"/><shape type="cube"><bsdf type="null"/><medium type="homogeneous" name="interior"/></shape>"#
+    ))
+    .unwrap_err()
+    .to_string();
+    assert!(medium.contains("'ptracer' with a participating medium"), "{medium}");
+
+    let prb = text(&format!(
+        r#"{SENSOR}{LIGHT}<integrator type="prb_projective"><integer name="max_depth" value="5"/><integer name="sppc" value="16"/><string name="guiding" value="grid"/><boolean name="guiding_proj" value="false"/></integrator>"#
+    ))
+    .unwrap();
+    assert_eq!(prb.max_depth, 5);
+    assert_eq!(prb.warnings.len(), 1, "{:?}", prb.warnings);
+    assert!(prb.warnings[0].contains("'prb_projective' integrator: rendered as prb"), "{:?}", prb.warnings);
+    let direct = text(&format!(
+        r#"{SENSOR}{LIGHT}<integrator type="direct_projective"><integer name="sppp" value="4"/></integrator>"#
+    ))
+    .unwrap();
+    assert_eq!(direct.max_depth, 2);
+    assert_eq!(direct.warnings.len(), 1, "{:?}", direct.warnings);
+    assert!(direct.warnings[0].contains("'direct_projective' integrator: rendered as a path tracer of max_depth 2"));
+    let wrong = text(&format!(
+        r#"{SENSOR}{LIGHT}<integrator type="direct_projective"><string name="sppc" value="many"/></integrator>"#
+    ))
+    .unwrap_err()
+    .to_string();
+    assert!(wrong.contains("sppc"), "{wrong}");
 }
 
 #[test]
