@@ -243,6 +243,8 @@ bool path_step(inout PathState st) {
     // BSDF derivative terms of this vertex: (direction, adjoint weight) of NEE and of the sample.
     vec3 grad_wo[2] = vec3[2](vec3(0.0, 0.0, 1.0), vec3(0.0, 0.0, 1.0));
     vec3 grad_adj[2] = vec3[2](vec3(0.0), vec3(0.0));
+    // Whether the sampled direction (grad_wo[1]) is a delta lobe's: its value is the sample's.
+    bool grad_delta = false;
     bool ended = false;
     Bsdf bsdf;
     vec3 wi = vec3(0.0, 0.0, 1.0);
@@ -586,6 +588,7 @@ bool path_step(inout PathState st) {
                 // The path continues: everything later in `radiance` carries the factor f̂(wi, wo).
                 grad_wo[1] = bs.wo;
                 grad_adj[1] = st.adj * safe_div(st.radiance, bs.value);
+                grad_delta = bs.delta;
                 vec3 wo_world = to_world(frame, bs.wo);
                 // A direction through a dielectric boundary enters or leaves its shape's medium.
                 if (HAS(F_MEDIA)) st.medium = medium_crossed(s.interior, s.ng, wo_world, st.medium);
@@ -598,7 +601,7 @@ bool path_step(inout PathState st) {
         if ((HAS(G_COLOR) || HAS(G_TEXTURE) || HAS(G_ALPHA) || HAS(G_WEIGHT)) && gt.material != NO_PARAM) {
             [[dont_unroll]] for (uint k = 0u; k < 2u; k++) {
                 if (grad_adj[k] == vec3(0.0)) continue;
-                BsdfGrad g = bsdf_eval_grad(bsdf, wi, grad_wo[k], grad_adj[k]);
+                BsdfGrad g = bsdf_sample_grad(bsdf, wi, grad_wo[k], k == 1u && grad_delta, grad_adj[k]);
                 gt.bsdf.leaf0.color += g.leaf0.color;
                 gt.bsdf.leaf0.alpha += g.leaf0.alpha;
                 gt.bsdf.leaf0.trans += g.leaf0.trans;

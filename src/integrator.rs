@@ -231,6 +231,18 @@ impl Strategy {
                     _ => false,
                 });
                 let uncovered = uncovered.or(masked.then_some("a mask's opacity or a masked material's parameter"));
+                // A blend holding a smooth conductor samples a delta lobe, which the mixture's
+                // densities do not include.
+                let smooth = |c: &crate::scene::MaterialId| {
+                    matches!(scene.materials.get(c.0 as usize), Some(Material::Smooth { .. }))
+                };
+                let delta_blend = scene.materials.iter().any(|m| match m {
+                    Material::Blend { weight, children } => {
+                        children.iter().any(smooth) && (*weight == target || children.iter().any(|c| uses(*c)))
+                    }
+                    _ => false,
+                });
+                let uncovered = uncovered.or(delta_blend.then_some("a parameter of a blend holding a smooth conductor"));
                 // A texture's texels each act on part of the surface: the sampler's one scalar
                 // target per material does not describe them.
                 let uncovered = uncovered.or(scene.scalar_texture(target).map(|_| "a texture's texels"));
@@ -286,7 +298,12 @@ impl Strategy {
             // The differential sampler is isotropic: an anisotropic conductor has none.
             Material::RoughConductor { alpha, alpha_v, .. } => *alpha == target && alpha_v == alpha,
             Material::RoughDielectric { alpha, .. } | Material::RoughPlastic { alpha, .. } => *alpha == target,
-            Material::Blend { weight, .. } => *weight == target,
+            Material::Blend { weight, children } => {
+                *weight == target
+                    && !children
+                        .iter()
+                        .any(|c| matches!(scene.materials.get(c.0 as usize), Some(Material::Smooth { .. })))
+            }
             _ => false,
         })
     }

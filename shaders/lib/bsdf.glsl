@@ -218,7 +218,38 @@ BsdfGrad bsdf_eval_grad(Bsdf b, vec3 wi, vec3 wo, vec3 adj) {
     if (!HAS(F_BLEND) || !b.blend) return BsdfGrad(leaf_eval_grad(b.leaf0, wi, wo, adj), none, vec3(0.0));
     float w = blend_weight(b);
     vec3 weight = (b.weight > 0.0 && b.weight < 1.0) ? adj * (leaf_eval(b.leaf1, wi, wo) - leaf_eval(b.leaf0, wi, wo)) : vec3(0.0);
-    return BsdfGrad(leaf_eval_grad(b.leaf0, wi, wo, adj * (1.0 - w)), leaf_eval_grad(b.leaf1, wi, wo, adj * w), weight);
+    // A smooth leaf has no value off its delta directions (bsdf_delta_grad takes those).
+    LeafGrad g0 = is_delta(b.leaf0.kind) ? none : leaf_eval_grad(b.leaf0, wi, wo, adj * (1.0 - w));
+    LeafGrad g1 = is_delta(b.leaf1.kind) ? none : leaf_eval_grad(b.leaf1, wi, wo, adj * w);
+    return BsdfGrad(g0, g1, weight);
+}
+
+// bsdf_sample_grad of a blend's delta sample toward wo: its smooth leaf, chosen with probability
+// c (w for leaf1, 1 − w for leaf0), has the value c·v; the colours' derivatives are c·∂v, the
+// weight's ±v inside (0, 1) (twin: bsdf_delta_grad).
+BsdfGrad bsdf_delta_grad(Bsdf b, vec3 wi, vec3 wo, vec3 adj) {
+    LeafGrad none = LeafGrad(vec3(0.0), vec3(0.0), vec3(0.0), vec3(0.0));
+    BsdfGrad g = BsdfGrad(none, none, vec3(0.0));
+    float w = blend_weight(b);
+    bool inside = b.weight > 0.0 && b.weight < 1.0;
+    if (is_delta(b.leaf0.kind)) {
+        LeafGrad unit = smooth_value_grad(b.leaf0, wi, wo, vec3(1.0));
+        g.leaf0 = LeafGrad(adj * (1.0 - w) * unit.color, vec3(0.0), adj * (1.0 - w) * unit.trans, vec3(0.0));
+        if (inside) g.weight = -adj * (b.leaf0.color * unit.color + b.leaf0.k * unit.trans);
+    }
+    if (is_delta(b.leaf1.kind)) {
+        LeafGrad unit = smooth_value_grad(b.leaf1, wi, wo, vec3(1.0));
+        g.leaf1 = LeafGrad(adj * w * unit.color, vec3(0.0), adj * w * unit.trans, vec3(0.0));
+        if (inside) g.weight = adj * (b.leaf1.color * unit.color + b.leaf1.k * unit.trans);
+    }
+    return g;
+}
+
+// ∂(adj · value)/∂(every value of b) of a sample toward wo: a delta sample's value where `delta`,
+// else f̂ (twin: bsdf_sample_grad).
+BsdfGrad bsdf_sample_grad(Bsdf b, vec3 wi, vec3 wo, bool delta, vec3 adj) {
+    if (HAS(F_BLEND) && HAS(F_DELTA) && delta && b.blend) return bsdf_delta_grad(b, wi, wo, adj);
+    return bsdf_eval_grad(b, wi, wo, adj);
 }
 
 // bsdf_sample without a normal map's wrapper (twin: unperturbed_sample).
@@ -230,11 +261,22 @@ BsdfSample unperturbed_sample(Bsdf b, vec3 wi, float u_lobe, vec2 u) {
     Leaf leaf = b.leaf0;
     if (HAS(F_BLEND) && b.blend) {
         float w = blend_weight(b);
+        float c;
         if (u_lobe <= w) {
             leaf = b.leaf1;
             u_lobe = u_lobe / w;
+            c = w;
         } else {
             u_lobe = (u_lobe - w) / (1.0 - w);
+            c = 1.0 - w;
+        }
+        // A smooth leaf: its delta sample, weighted by the blend's choice probability (the other
+        // leaf has no value in a delta direction).
+        if (is_delta(leaf.kind)) {
+            BsdfSample d = smooth_sample(leaf, wi, u_lobe);
+            d.pdf *= c;
+            d.value *= c;
+            return d;
         }
     }
     vec3 wo;

@@ -195,10 +195,38 @@ pub fn bsdf_eval_grad(b: &Bsdf, wi: Vec3, wo: Vec3, adj: Vec3) -> BsdfGrad {
     } else {
         Vec3::ZERO
     };
-    BsdfGrad {
-        leaves: [leaf_eval_grad(&b.leaves[0], wi, wo, adj * (1.0 - w)), leaf_eval_grad(&b.leaves[1], wi, wo, adj * w)],
-        weight,
+    // A smooth leaf has no value off its delta directions ([`bsdf_delta_grad`] takes those).
+    let leaf_grad = |leaf: &Leaf, adj: Vec3| match leaf {
+        Leaf::Smooth(_) => LeafGrad::default(),
+        _ => leaf_eval_grad(leaf, wi, wo, adj),
+    };
+    BsdfGrad { leaves: [leaf_grad(&b.leaves[0], adj * (1.0 - w)), leaf_grad(&b.leaves[1], adj * w)], weight }
+}
+
+/// ∂(adj · value)/∂(every value of `b`) of a sample toward `wo`: a delta sample's value (its
+/// lobe's weight × choice probability) where `delta`, else f̂ ([`bsdf_eval_grad`]). A blend's
+/// smooth leaf, chosen with probability c (w for `leaves[1]`, 1 − w for `leaves[0]`), has the
+/// value c·v: its colours' derivatives are c·∂v, the weight's ±v inside (0, 1).
+pub fn bsdf_sample_grad(b: &Bsdf, wi: Vec3, wo: Vec3, delta: bool, adj: Vec3) -> BsdfGrad {
+    if !(delta && b.blend) {
+        return bsdf_eval_grad(b, wi, wo, adj);
     }
+    bsdf_delta_grad(b, wi, wo, adj)
+}
+
+/// [`bsdf_sample_grad`] of a blend's delta sample (the blend holds one smooth leaf).
+fn bsdf_delta_grad(b: &Bsdf, wi: Vec3, wo: Vec3, adj: Vec3) -> BsdfGrad {
+    let w = blend::blend_weight(b);
+    let mut g = BsdfGrad::default();
+    for (i, (leaf, c, sign)) in [(&b.leaves[0], 1.0 - w, -1.0), (&b.leaves[1], w, 1.0)].into_iter().enumerate() {
+        let Leaf::Smooth(s) = leaf else { continue };
+        let unit = s.value_grad(wi, wo);
+        g.leaves[i] = LeafGrad { color: adj * c * unit.color, trans: adj * c * unit.trans, ..LeafGrad::default() };
+        if b.weight > 0.0 && b.weight < 1.0 {
+            g.weight = adj * sign * (s.reflectance * unit.color + s.transmittance * unit.trans);
+        }
+    }
+    g
 }
 
 /// f̂ of one leaf.
@@ -300,6 +328,14 @@ fn unperturbed_sample(b: &Bsdf, wi: Vec3, u_lobe: f32, u: Vec2) -> Option<BsdfSa
         _ => {}
     }
     let (leaf, u_lobe) = pick_leaf(b, u_lobe);
+    // A blend's smooth leaf: its delta sample, weighted by the blend's choice probability (the
+    // blend's other leaf has no value in a delta direction).
+    if let Leaf::Smooth(smooth) = leaf {
+        let w = blend::blend_weight(b);
+        let c = if std::ptr::eq(leaf, &b.leaves[1]) { w } else { 1.0 - w };
+        let s = smooth.sample(wi, u_lobe)?;
+        return Some(BsdfSample { pdf: s.pdf * c, value: s.value * c, ..s });
+    }
     let wo = leaf_sample(leaf, wi, u_lobe, u)?;
     let pdf = unperturbed_pdf(b, wi, wo);
     if !(pdf > 0.0) {

@@ -409,3 +409,80 @@ fn derivatives_match_finite_differences() {
     }
     assert!(checked > 1000, "only {checked} derivatives checked");
 }
+
+/// A blend of a diffuse leaf and a smooth conductor: the conductor's delta sample comes with the
+/// blend's choice probability w, so E[value/pdf] is (1 − w)·albedo + w·F·reflectance (the diffuse
+/// leaf's f̂ integrates to its albedo; the mirror's value is F·reflectance); its derivatives by the
+/// weight and the conductor's reflectance are those of the sample's value (finite differences on
+/// the same uniforms), and off the mirror direction the conductor has no value and no derivative.
+#[test]
+fn a_blend_with_a_smooth_conductor_weighs_its_delta_sample_by_the_blend() {
+    use crate::bsdf::specular::{SmoothKind, SmoothLeaf};
+    let mirror = SmoothLeaf {
+        kind: SmoothKind::Conductor,
+        reflectance: Vec3::new(0.9, 0.7, 0.5),
+        transmittance: Vec3::ZERO,
+        eta: Vec3::new(0.2, 0.9, 1.1),
+        k: Vec3::new(3.9, 2.4, 2.2),
+    };
+    let albedo = Vec3::new(0.2, 0.6, 0.4);
+    let w = 0.3;
+    let blend = |w: f32, reflectance: Vec3| Bsdf {
+        leaves: [Leaf::Diffuse { albedo }, Leaf::Smooth(SmoothLeaf { reflectance, ..mirror })],
+        weight: w,
+        blend: true,
+        perturbed: None,
+    };
+    let b = blend(w, mirror.reflectance);
+    let wi = incident(0.7);
+    let fresnel = crate::bsdf::rough_conductor::fresnel_conductor(wi.z, mirror.eta, mirror.k);
+    let n = 200_000;
+    let (mut sum, mut sum2, mut deltas) = (Vec3::ZERO, Vec3::ZERO, 0usize);
+    for i in 0..n {
+        let (ul, u) = uniforms(900, i);
+        let s = bsdf_sample(&b, wi, ul, u).expect("the diffuse leaf and the mirror sample every wi above");
+        let weight = s.value / s.pdf;
+        if s.delta {
+            deltas += 1;
+            assert_eq!(s.wo, specular::reflect(wi));
+            assert!((s.pdf - w).abs() < 1e-6, "a delta sample's pdf is its choice probability: {}", s.pdf);
+            assert!((weight - fresnel * mirror.reflectance).abs().max_element() < 1e-5);
+        }
+        sum += weight;
+        sum2 += weight * weight;
+    }
+    let nf = n as f32;
+    let p = deltas as f64 / n as f64;
+    assert!((p - f64::from(w)).abs() < 4.0 * (f64::from(w * (1.0 - w)) / n as f64).sqrt(), "delta share {p}");
+    let mean = sum / nf;
+    let se = ((sum2 / nf - mean * mean) / nf).max(Vec3::ZERO).sqrt();
+    let expected = albedo * (1.0 - w) + fresnel * mirror.reflectance * w;
+    assert!(((mean - expected).abs() - se * 4.0).max_element() < 0.0, "E[value/pdf] {mean} ± {se}, expected {expected}");
+
+    // Derivatives of a delta sample's value, against central differences on the same uniforms.
+    let adj = Vec3::new(0.7, -0.3, 1.1);
+    let (ul, u) = (0.1, Vec2::new(0.3, 0.6)); // u_lobe ≤ w: the mirror
+    let s = bsdf_sample(&b, wi, ul, u).unwrap();
+    assert!(s.delta);
+    let g = bsdf_sample_grad(&b, wi, s.wo, true, adj);
+    let value = |b: &Bsdf| adj.dot(bsdf_sample(b, wi, ul, u).unwrap().value);
+    let h = 1e-3;
+    let fd_w = (value(&blend(w + h, mirror.reflectance)) - value(&blend(w - h, mirror.reflectance))) / (2.0 * h);
+    assert!((g.weight.dot(Vec3::ONE) - fd_w).abs() < 2e-3 * fd_w.abs().max(1.0), "weight {} vs {fd_w}", g.weight);
+    for c in 0..3 {
+        let with = |d: f32| {
+            let mut r = mirror.reflectance;
+            r[c] += d;
+            value(&blend(w, r))
+        };
+        let fd = (with(h) - with(-h)) / (2.0 * h);
+        assert!((g.leaves[1].color[c] - fd).abs() < 2e-3, "reflectance {c}: {} vs {fd}", g.leaves[1].color[c]);
+    }
+    assert_eq!(g.leaves[0], LeafGrad::default());
+    // Off the mirror direction (a diffuse sample, or next-event estimation): no mirror term.
+    let wo = Vec3::new(0.3, -0.2, 0.93).normalize();
+    let g = bsdf_sample_grad(&b, wi, wo, false, adj);
+    assert_eq!(g.leaves[1], LeafGrad::default());
+    let f0 = diffuse::diffuse_eval(albedo, wi, wo);
+    assert!((g.weight - adj * -f0).abs().max_element() < 1e-6, "{} vs {}", g.weight, adj * -f0);
+}

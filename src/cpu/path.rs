@@ -567,7 +567,7 @@ pub fn trace_path<const ADJOINT: bool>(
                 }
                 if ADJOINT {
                     let adj = adj_radiance * throughput * tr * w_n * es.radiance / p_e;
-                    bsdf_backward(flat, s.material, s.uv, &bsdf, wi, wo, adj, sink);
+                    bsdf_backward(flat, s.material, s.uv, &bsdf, wi, wo, false, adj, sink);
                     emitter_backward(globals, &es, adj_radiance * throughput * tr * w_n * f / p_e, sink);
                 }
             }
@@ -618,7 +618,8 @@ pub fn trace_path<const ADJOINT: bool>(
         }
         // The path continues: everything later in `radiance` carries the factor f̂(wi, wo).
         if ADJOINT {
-            bsdf_backward(flat, s.material, s.uv, &bsdf, wi, bs.wo, adj_radiance * safe_div(radiance, bs.value), sink);
+            let adj = adj_radiance * safe_div(radiance, bs.value);
+            bsdf_backward(flat, s.material, s.uv, &bsdf, wi, bs.wo, bs.delta, adj, sink);
         }
 
         let wo_world = frame.to_world(bs.wo);

@@ -6,7 +6,7 @@ use crate::bsdf::plastic::SmoothPlasticLeaf;
 use crate::bsdf::rough_dielectric::RoughDielectricLeaf;
 use crate::bsdf::rough_plastic::PlasticLeaf;
 use crate::bsdf::specular::{SmoothKind, SmoothLeaf};
-use crate::bsdf::{Bsdf, Distribution, Leaf, LeafGrad, bsdf_eval_grad};
+use crate::bsdf::{Bsdf, Distribution, Leaf, LeafGrad, bsdf_sample_grad};
 use crate::bvh::Hit;
 use crate::contract::ALPHA_TEXTURE_FLOOR;
 use crate::contract::{
@@ -458,7 +458,8 @@ fn is_smooth_tag(tag: u32) -> bool {
     matches!(tag, MAT_CONDUCTOR | MAT_DIELECTRIC | MAT_THIN_DIELECTRIC)
 }
 
-/// GRAD(f̂(wi, wo), adj): the BSDF's parameters at this surface point.
+/// GRAD(f̂(wi, wo), adj), or of a delta sample's value where `delta`
+/// ([`crate::bsdf::bsdf_sample_grad`]): the BSDF's parameters at this surface point.
 #[allow(clippy::too_many_arguments, reason = "the twin of the GLSL function, argument for argument")]
 pub fn bsdf_backward(
     flat: &FlatScene,
@@ -467,10 +468,11 @@ pub fn bsdf_backward(
     bsdf: &Bsdf,
     wi: Vec3,
     wo: Vec3,
+    delta: bool,
     adj: Vec3,
     sink: &mut GradSink<'_>,
 ) {
-    let g = bsdf_eval_grad(bsdf, wi, wo, adj);
+    let g = bsdf_sample_grad(bsdf, wi, wo, delta, adj);
     let m = &flat.materials[material as usize];
     if m.tag == MAT_BLEND {
         leaf_backward(flat, &flat.materials[m.child0 as usize], uv, &g.leaves[0], sink);

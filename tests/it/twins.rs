@@ -193,6 +193,20 @@ fn bsdf_gpu_equals_cpu() {
             perturbed: None,
         });
     }
+    // A smooth conductor blended with a diffuse leaf (either side): delta samples weighted by
+    // the blend's choice probability.
+    for (weight, mirror_first) in [(0.3, false), (0.6, true)] {
+        let mirror = Leaf::Smooth(pathgrad::bsdf::specular::SmoothLeaf {
+            kind: pathgrad::bsdf::specular::SmoothKind::Conductor,
+            reflectance: Vec3::new(0.9, 0.7, 0.5),
+            transmittance: Vec3::ZERO,
+            eta: gold.0,
+            k: gold.1,
+        });
+        let diffuse = Leaf::Diffuse { albedo: Vec3::new(0.2, 0.6, 0.4) };
+        let leaves = if mirror_first { [mirror, diffuse] } else { [diffuse, mirror] };
+        bsdfs.push(Bsdf { leaves, weight, blend: true, perturbed: None });
+    }
     for (distribution, alpha_v) in [(Distribution::Beckmann, 0.05), (Distribution::Ggx, 0.6)] {
         bsdfs.push(Bsdf::leaf(Leaf::RoughConductor {
             distribution,
@@ -232,6 +246,7 @@ fn bsdf_gpu_equals_cpu() {
     let close3 = |a: Vec3, b: Vec3| (0..3).all(|c| close(a[c], b[c]));
     let mut validity_flips = 0;
     let mut worst_dir = 0.0f32;
+    let mut delta_samples = 0;
     for ((c, g), &bi) in cases.iter().zip(&got).zip(&owners) {
         let b = &bsdfs[bi];
         assert!(
@@ -249,6 +264,13 @@ fn bsdf_gpu_equals_cpu() {
             bsdf_pdf(b, c.wi, c.wo_eval)
         );
         match (bsdf_sample(b, c.wi, c.u_lobe, c.u), g.valid != 0) {
+            (Some(s), true) if s.delta => {
+                // A delta sample: its pdf is a choice probability and its value a weight × pdf,
+                // not the BSDF's density and f̂ at wo.
+                delta_samples += 1;
+                assert!((s.wo - g.wo).length() < 1e-5, "{b:?} wi {}: wo {} vs {}", c.wi, s.wo, g.wo);
+                assert!(close(g.pdf, s.pdf) && close3(g.value, s.value), "{b:?}: delta sample {g:?} vs {s:?}");
+            }
             (Some(s), true) => {
                 worst_dir = worst_dir.max((s.wo - g.wo).length());
                 // The sampled direction itself may move by a few ulp through erfinv and the Newton
@@ -271,7 +293,11 @@ fn bsdf_gpu_equals_cpu() {
             _ => validity_flips += 1,
         }
     }
-    println!("{} cases: {validity_flips} validity flips, worst direction difference {worst_dir:.2e}", cases.len());
+    println!(
+        "{} cases: {validity_flips} validity flips, {delta_samples} delta samples, worst direction difference {worst_dir:.2e}",
+        cases.len()
+    );
+    assert!(delta_samples > 500, "only {delta_samples} delta samples compared");
     // A sample is invalid when wo.z or wi·h crosses 0; a few-ulp difference flips it only for
     // directions within ~1e-6 of the horizon: allow 1e-3 of the cases.
     assert!(validity_flips as f64 <= 1e-3 * cases.len() as f64, "{validity_flips} validity flips");

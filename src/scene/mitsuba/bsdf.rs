@@ -154,11 +154,18 @@ impl<'a> Loader<'a> {
                     _ if self.is_leaf(a) && self.is_leaf(b) => {
                         self.scene.add_material(Material::Blend { weight, children: [a, b] })
                     }
+                    _ if (self.is_leaf(a) && self.is_smooth_conductor(b))
+                        || (self.is_smooth_conductor(a) && self.is_leaf(b)) =>
+                    {
+                        self.warn_blend_with_delta(node);
+                        self.scene.add_material(Material::Blend { weight, children: [a, b] })
+                    }
                     _ => {
                         return Err(self.x.err(
                             node,
-                            "'blendbsdf' children must both be diffuse/roughconductor/roughplastic, or both \
-                             twosided wrappers of those (pathgrad blends two leaf BSDFs)",
+                            "'blendbsdf' children must both be diffuse/roughconductor/roughplastic, one of those and \
+                             a smooth 'conductor', or both twosided wrappers of diffuse/roughconductor/roughplastic \
+                             (pathgrad blends two leaf BSDFs)",
                         ));
                     }
                 }
@@ -182,6 +189,12 @@ impl<'a> Loader<'a> {
                 let c = self.bsdf(child, format!("{name}.brdf_0"), depth + 1)?;
                 if matches!(self.material(c), Some(Material::TwoSided(_))) {
                     return Err(self.x.err(child, "a 'twosided' BSDF cannot wrap another twosided one"));
+                }
+                if self.is_blend_with_delta(c) {
+                    return Err(self.x.err(
+                        child,
+                        "a 'twosided' around a 'blendbsdf' holding a smooth 'conductor' is not supported",
+                    ));
                 }
                 // What a normal map wraps is what transmits or not.
                 let mut inner = c;
@@ -215,6 +228,38 @@ impl<'a> Loader<'a> {
 
     fn material(&self, id: MaterialId) -> Option<Material> {
         self.scene.materials.get(id.0 as usize).cloned()
+    }
+
+    /// Whether material `id` is a smooth `conductor` (a blend may hold one beside a leaf).
+    fn is_smooth_conductor(&self, id: MaterialId) -> bool {
+        matches!(self.material(id), Some(Material::Smooth { kind: SmoothKind::Conductor, .. }))
+    }
+
+    /// Whether material `id` is a blend holding a smooth leaf (wrappers around one are refused).
+    fn is_blend_with_delta(&self, id: MaterialId) -> bool {
+        match self.material(id) {
+            Some(Material::Blend { children: [a, b], .. }) => {
+                self.is_smooth_conductor(a) || self.is_smooth_conductor(b)
+            }
+            _ => false,
+        }
+    }
+
+    /// Mitsuba 3.9.1's `blendbsdf` combines a sample of one child with the other child's density
+    /// as one-sample MIS: `(w·f̂₁ + (1 − w)·f̂₀)/(w·p₁ + (1 − w)·p₀)`. For a smooth child, whose
+    /// `p` is a discrete probability (1) and not a density, that sum mixes a probability with the
+    /// other child's density: the delta lobe's light comes out weighted by
+    /// `w·F/(w + (1 − w)·p₀)` instead of `F`, too dark wherever the other child's density is
+    /// positive (a mirror blended half and half with black diffuse: 0.39 instead of 0.5 at
+    /// normal incidence). pathgrad renders the correct expectation; it says so.
+    fn warn_blend_with_delta(&mut self, node: El<'a>) {
+        let w = self.x.warning(
+            node,
+            "'blendbsdf' with a smooth 'conductor': Mitsuba 3.9.1's blendbsdf weighs the smooth child's samples by \
+             a mixture of its discrete probability and the other child's density, which renders the mirror \
+             reflection too dark; pathgrad renders the correct image (not Mitsuba's)",
+        );
+        self.scene.warn(w);
     }
 
     fn is_leaf(&self, id: MaterialId) -> bool {
@@ -739,6 +784,9 @@ impl<'a> Loader<'a> {
             Some(Material::Mask { .. }) => Err(self
                 .x
                 .err(child, format!("a '{kind}' around a 'mask' is not supported: put the 'mask' outside the map"))),
+            _ if self.is_blend_with_delta(nested) => Err(self
+                .x
+                .err(child, format!("a '{kind}' around a 'blendbsdf' holding a smooth 'conductor' is not supported"))),
             _ => Ok(nested),
         }
     }
