@@ -242,7 +242,8 @@ impl Strategy {
                     }
                     _ => false,
                 });
-                let uncovered = uncovered.or(delta_blend.then_some("a parameter of a blend holding a smooth conductor"));
+                let uncovered =
+                    uncovered.or(delta_blend.then_some("a parameter of a blend holding a smooth conductor"));
                 // A texture's texels each act on part of the surface: the sampler's one scalar
                 // target per material does not describe them.
                 let uncovered = uncovered.or(scene.scalar_texture(target).map(|_| "a texture's texels"));

@@ -457,7 +457,10 @@ fn a_blend_with_a_smooth_conductor_weighs_its_delta_sample_by_the_blend() {
     let mean = sum / nf;
     let se = ((sum2 / nf - mean * mean) / nf).max(Vec3::ZERO).sqrt();
     let expected = albedo * (1.0 - w) + fresnel * mirror.reflectance * w;
-    assert!(((mean - expected).abs() - se * 4.0).max_element() < 0.0, "E[value/pdf] {mean} ± {se}, expected {expected}");
+    assert!(
+        ((mean - expected).abs() - se * 4.0).max_element() < 0.0,
+        "E[value/pdf] {mean} ± {se}, expected {expected}"
+    );
 
     // Derivatives of a delta sample's value, against central differences on the same uniforms.
     let adj = Vec3::new(0.7, -0.3, 1.1);

@@ -47,6 +47,7 @@ fn gpu_equals_cpu_per_path_on_every_builtin_and_test_scene() {
         "texture_specular_reflectance",
         "bsdf_mask",
         "texture_mask_opacity",
+        "bsdf_blend_conductor",
     ] {
         scenes.push(crate::support::scenes::conformance(name));
     }

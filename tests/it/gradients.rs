@@ -25,6 +25,14 @@ fn cases() -> Vec<(Scene, Vec<&'static str>)> {
         ),
         (builtin::load("blend").unwrap(), vec!["object.weight.value", "coat.alpha.value", "base.reflectance.value"]),
         (
+            scenes::conformance("bsdf_blend_conductor"),
+            vec![
+                "ball.bsdf.weight.value",
+                "ball.bsdf.bsdf_1.specular_reflectance.value",
+                "ball.bsdf.bsdf_0.reflectance.value",
+            ],
+        ),
+        (
             scenes::textured_environment(),
             vec!["floor.reflectance.data", "environment.radiance.value", "ball.alpha.value"],
         ),

@@ -93,7 +93,8 @@ pub const PLUGINS: &[Plugin] = &[
         Bsdf,
         "blendbsdf",
         "`weight` (parameter `.weight.value`, or a one-channel texture: `.weight.data`), two nested BSDFs",
-        "children: diffuse, roughconductor, roughplastic, or twosided wrappers of those",
+        "children: diffuse, roughconductor, roughplastic, or twosided wrappers of those; one of them beside a smooth \
+         conductor (Mitsuba 3.9.1 renders that darker: warned)",
     ),
     p(
         Bsdf,
