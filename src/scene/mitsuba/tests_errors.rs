@@ -359,8 +359,22 @@ fn element_and_property_errors() {
         ),
         (
             r#"<bsdf type="blendbsdf"><float name="weight" value="0.5"/><bsdf type="diffuse"/><bsdf type="twosided"><bsdf type="diffuse"/></bsdf></bsdf>"#,
-            "<bsdf>: 'blendbsdf' children must both be diffuse/roughconductor/roughplastic, or both twosided wrappers of \
-             those (pathgrad blends two leaf BSDFs)",
+            "<bsdf>: 'blendbsdf' children must both be diffuse/roughconductor/roughplastic, one of those and a smooth \
+             'conductor', or both twosided wrappers of diffuse/roughconductor/roughplastic (pathgrad blends two leaf BSDFs)",
+        ),
+        (
+            r#"<bsdf type="blendbsdf"><float name="weight" value="0.5"/><bsdf type="conductor"/><bsdf type="conductor"/></bsdf>"#,
+            "<bsdf>: 'blendbsdf' children must both be diffuse/roughconductor/roughplastic, one of those and a smooth \
+             'conductor', or both twosided wrappers of diffuse/roughconductor/roughplastic (pathgrad blends two leaf BSDFs)",
+        ),
+        (
+            r#"<bsdf type="blendbsdf"><float name="weight" value="0.5"/><bsdf type="diffuse"/><bsdf type="dielectric"/></bsdf>"#,
+            "<bsdf>: 'blendbsdf' children must both be diffuse/roughconductor/roughplastic, one of those and a smooth \
+             'conductor', or both twosided wrappers of diffuse/roughconductor/roughplastic (pathgrad blends two leaf BSDFs)",
+        ),
+        (
+            r#"<bsdf type="twosided"><bsdf type="blendbsdf"><float name="weight" value="0.5"/><bsdf type="diffuse"/><bsdf type="conductor"/></bsdf></bsdf>"#,
+            "<bsdf>: a 'twosided' around a 'blendbsdf' holding a smooth 'conductor' is not supported",
         ),
         (r#"<bsdf type="twosided"/>"#, "<bsdf>: 'twosided' needs 1 nested BSDF, got 0"),
         (
