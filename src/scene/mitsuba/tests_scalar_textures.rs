@@ -209,3 +209,17 @@ fn issue_31_the_differential_strategy_refuses_a_mask_by_name() {
         assert!(err.contains("a mask's opacity or a masked material's parameter"), "{target}: {err}");
     }
 }
+
+#[test]
+fn issue_31_the_differential_strategy_refuses_a_blend_holding_a_mirror_by_name() {
+    let s = load_with_images(
+        r#"<shape type="cube" id="box"><bsdf type="blendbsdf"><float name="weight" value="0.4"/><bsdf type="roughconductor"/><bsdf type="conductor"/></bsdf></shape>"#,
+    )
+    .unwrap();
+    for target in ["box.bsdf.weight.value", "box.bsdf.bsdf_0.alpha.value"] {
+        let err = crate::integrator::Strategy::from_name(&s, "diff", 0.5, target).unwrap_err().to_string();
+        assert!(err.contains("a parameter of a blend holding a smooth conductor"), "{target}: {err}");
+    }
+    let weight = s.params.find("box.bsdf.weight.value").unwrap();
+    assert!(!crate::integrator::Strategy::has_differential_sampler(&s, weight));
+}
