@@ -67,6 +67,11 @@ MATRIX = {
                               # matrix's budget its derivative sees only a 25-28 % bias (it varies run to
                               # run); tests/it/gradients.rs checks it against finite differences.
                               grads=["ball.bsdf.alpha_u.data", "ball.bsdf.alpha_v.color1.value"]),
+    # texture_roughness's anisotropic α_u texels see only a 20 % bias (a heavy-tailed estimator at
+    # α ≈ 0.05); this row checks textured roughness where the estimators are well conditioned.
+    "texture_roughness_isotropic": dict(features=["roughconductor alpha bitmap (one channel, raw), GGX, isotropic",
+                                                  "roughdielectric alpha checkerboard of floats 0.2 / 0.45 (primal)"],
+                                        grads=["ball.bsdf.alpha.data"], spp=4096, seeds=32),
     "texture_blend_weight": dict(features=["blendbsdf weight bitmap (one channel, raw, nearest)",
                                            "blendbsdf weight checkerboard of floats"],
                                  grads=["ball.bsdf.weight.data", "floor.bsdf.weight.color0.value",
@@ -388,6 +393,9 @@ POWER = {
     # matrix's budget they see 16 % and 6–17 % (image means 0.89–0.90 and 0.75–0.94 of Mitsuba's
     # across runs, within that power): a weak row, to tighten with a better-conditioned scene.
     "texture_roughness": {"gradient_bias": 0.2},
+    # The isotropic twin: the ramp's texels (α 0.08–0.9) see 8 % at 256 spp × 32 seeds (pathgrad's
+    # estimator dominates; Mitsuba's at 4096 × 32 adds 0.8 %), as the untextured roughness rows do.
+    "texture_roughness_isotropic": {"gradient_bias": 0.1},
     # Masks: the GGX ball's α (as bsdf_roughconductor_ggx) and its opacity, whose blue derivative
     # nearly cancels over the image (−0.005 against 0.017 in red), see 13–15 % at the budget; the
     # fence's checkerboard opacities (blue, the smallest channel: 0.004) 11–14 % in the runs that
