@@ -8,9 +8,9 @@
 //! allocated only after the sort (with `convert`'s parallel conversion, the BVH phase's peak RSS
 //! at 2 M triangles went from 464 to 365 MiB). The output tree is allocated zeroed, so its pages
 //! become resident only as merges fill them (from its end), and the cluster array is shrunk to
-//! what each pass leaves: the two are never both whole (at 20 M triangles, 1.8 GiB and 0.6 GiB).
-//! The output is the compact binary tree of `node2` (32-byte nodes instead of obvhs's 48: at 20 M
-//! triangles 1.2 GiB instead of 1.8). `tests::builds_obvhs_tree` compares both.
+//! what each pass leaves: the two are never both whole (at 20 M triangles, 1.2 GiB and 0.6 GiB).
+//! The output tree is in `node2`'s 32-byte nodes (obvhs's are 48: at 20 M triangles 1.2 GiB
+//! instead of 1.8), the same boxes and indices. `tests::builds_obvhs_tree` compares both.
 
 use bytemuck::{Pod, Zeroable};
 use glam::Vec3;
