@@ -202,8 +202,8 @@ mod tests {
     use super::super::node2::widen;
     use super::*;
 
-    /// Triangles of `n` random sizes and places (no two boxes of equal half area, so candidate
-    /// order is the same as obvhs's).
+    /// Triangles of `n` random sizes and places: candidates of equal half area, which this module
+    /// orders differently from obvhs's radix sort, are unlikely.
     fn soup(n: u32) -> Vec<[Vec3; 3]> {
         let mut state = 0x1234_5679u32;
         let mut next = move || {
