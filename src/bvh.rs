@@ -4,12 +4,8 @@
 
 use std::time::Instant;
 
-use glam::{UVec2, Vec3, Vec3A};
+use glam::{UVec2, Vec3};
 use obvhs::BvhBuildParams;
-use obvhs::aabb::Aabb;
-use obvhs::bvh2::leaf_collapser::collapse;
-use obvhs::bvh2::reinsertion::ReinsertionOptimizer;
-use obvhs::bvh2::{Bvh2, node::Bvh2Node};
 use obvhs::ploc::{PlocSearchDistance, SortPrecision};
 use rayon::prelude::*;
 
@@ -20,7 +16,11 @@ pub use crate::contract::MIN_DIR_COMPONENT;
 
 mod convert;
 mod depth;
+mod node2;
 mod ploc;
+mod reinsert;
+
+use node2::Node2;
 
 /// A built BVH: nodes plus the triangles in leaf order.
 #[derive(Clone, Debug, Default, PartialEq)]
@@ -82,9 +82,9 @@ struct TmpNode {
     shape: Shape,
 }
 
-/// Builds a BVH over `triangles`: obvhs's PLOC build and reinsertion (`medium_build`) into a
-/// binary tree of one-triangle leaves, its depth bounded, converted (obvhs's conversion with a
-/// smaller decision table, `convert`) into compressed 8-wide nodes with leaves of up to
+/// Builds a BVH over `triangles`: obvhs's PLOC build and reinsertion (`medium_build`'s, in less
+/// memory: `ploc`, `reinsert`) into a binary tree of one-triangle leaves, its depth bounded, converted (obvhs's conversion
+/// with a smaller decision table, `convert`) into compressed 8-wide nodes with leaves of up to
 /// [`BVH_LEAF_MAX`] triangles and children ordered for the ray octant. Any valid
 /// mesh builds: subtrees deeper than the traversal stack allows (a fan-triangulated 1000-gon
 /// gives PLOC depth ~270) are rebuilt below depth `REBUILD_DEPTH` by median splits.
@@ -151,77 +151,66 @@ fn binary_tree(
     count: usize,
     triangle: &(impl Fn(u32) -> [Vec3; 3] + Sync),
     always_shape: bool,
-) -> (Bvh2, u32, std::time::Duration) {
+) -> (Vec<Node2>, u32, std::time::Duration) {
     // The steps of obvhs's `build_bvh2_from_tris` for one-triangle leaves (the tree is the same),
     // without its debug-build validation, which panics on trees the reinsertion made deeper than
-    // its own stack estimate (a fan-triangulated 1000-gon: depth 273 against 252). PLOC is ours
-    // (`ploc`: obvhs's tree from `triangle` directly, in smaller working arrays), so no slice of
-    // obvhs `Triangle`s (48 bytes a triangle) is ever made.
+    // its own stack estimate (a fan-triangulated 1000-gon: depth 273 against 252). PLOC and
+    // reinsertion are ours (`ploc`, `reinsert`: obvhs's, on 32-byte nodes and in smaller working
+    // arrays), so neither a slice of obvhs `Triangle`s (48 bytes a triangle) nor obvhs's 48-byte
+    // nodes are ever made (issue 38).
     let start = Instant::now();
     let params = BvhBuildParams::medium_build();
     debug_assert!(matches!(params.ploc_search_distance, PlocSearchDistance::Medium));
     debug_assert!(matches!(params.sort_precision, SortPrecision::U64));
     // obvhs's PLOC (`PlocSearchDistance::Medium` is its search distance 14), in less memory.
-    let mut ploc = ploc::build(count, triangle, params.search_depth_threshold);
-    let mut reinsertion = ReinsertionOptimizer::default();
-    reinsertion.run(&mut ploc, params.reinsertion_batch_ratio, None);
-    collapse(&mut ploc, 1, params.collapse_traversal_cost);
+    let mut nodes = ploc::build(count, triangle, params.search_depth_threshold);
+    let mut parents = reinsert::parents(&nodes);
+    reinsert::run(&mut nodes, &mut parents, params.reinsertion_batch_ratio);
+    // obvhs's leaf collapse comes between the two passes; with leaves of one triangle it leaves
+    // the tree as it is.
     let ratio = params.reinsertion_batch_ratio * params.post_collapse_reinsertion_batch_ratio_multiplier;
-    reinsertion.run(&mut ploc, ratio, None);
-    drop(reinsertion);
+    reinsert::run(&mut nodes, &mut parents, ratio);
+    drop(parents);
     let build_time = start.elapsed();
-    // The conversion reads only the nodes and the primitive indices, made only now: reinsertion
-    // does not read them, and its own arrays are gone (issue 38: 76 MiB at 20 M triangles).
-    ploc.parents = Vec::new();
-    ploc.primitives_to_nodes = Vec::new();
-    ploc.primitive_indices_freelist = Vec::new();
-    ploc::identity_primitives(&mut ploc, count);
-    let ploc_depth = bvh2_height(&ploc);
-    let one_per_leaf = ploc.nodes.iter().all(|n| n.prim_count <= 1);
+    let ploc_depth = bvh2_height(&nodes);
     // A tree with one-triangle leaves is converted as PLOC left it, its subtrees too deep for the
     // stack rebuilt in place (`depth`): the rewrite below would give the same tree (same nodes,
     // numbered in depth-first order), and the conversion depends on the tree, not on the
     // numbering. The rewrite, whose arena holds the whole tree again (56 bytes a node and a heap
-    // `Vec` a leaf: about 4.6 GiB at 20 M triangles, issue 38), is left for leaves of several
-    // triangles, which this build never makes.
-    let bvh2 = if one_per_leaf && !always_shape {
+    // `Vec` a leaf: about 4.6 GiB at 20 M triangles, issue 38), is left for the tests.
+    let bvh2 = if !always_shape {
         if ploc_depth > MAX_DEPTH {
-            depth::bound_in_place(&mut ploc, triangle, MAX_DEPTH, REBUILD_DEPTH);
+            depth::bound_in_place(&mut nodes, triangle, MAX_DEPTH, REBUILD_DEPTH);
         }
-        ploc
+        nodes
     } else {
-        let arena: Vec<TmpNode> = ploc
-            .nodes
+        let arena: Vec<TmpNode> = nodes
             .iter()
             .map(|n| {
-                let shape = if n.prim_count > 0 {
-                    let first = n.first_index as usize;
-                    Shape::Leaf(ploc.primitive_indices[first..first + n.prim_count as usize].to_vec())
+                let shape = if n.is_leaf() {
+                    Shape::Leaf(vec![n.first_index])
                 } else {
                     Shape::Inner([n.first_index as usize, n.first_index as usize + 1])
                 };
-                TmpNode { lo: n.aabb.min.into(), hi: n.aabb.max.into(), shape }
+                TmpNode { lo: n.min, hi: n.max, shape }
             })
             .collect();
-        drop(ploc);
-        let mut shaper = Shaper { triangle, arena, heights: Vec::new(), bvh2: Bvh2::default() };
+        drop(nodes);
+        let mut shaper = Shaper { triangle, arena, heights: Vec::new(), nodes: vec![Node2::default()] };
         shaper.heights = heights(&shaper.arena);
-        shaper.bvh2.nodes.push(Bvh2Node::default());
         shaper.place(0, 0, 1);
-        let bvh2 = std::mem::take(&mut shaper.bvh2);
-        drop(shaper);
-        bvh2
+        shaper.nodes
     };
     (bvh2, ploc_depth, build_time)
 }
 
-/// Inner nodes on the longest path down from the root of `bvh2` (0 for a lone leaf), as
-/// [`heights`] counts them, without recursion.
-fn bvh2_height(bvh2: &Bvh2) -> u32 {
+/// Inner nodes on the longest path down from the root of the binary tree `nodes` (0 for a lone
+/// leaf), as [`heights`] counts them, without recursion.
+fn bvh2_height(nodes: &[Node2]) -> u32 {
     let mut deepest = 0;
     let mut stack = vec![(0u32, 0u32)];
     while let Some((i, d)) = stack.pop() {
-        let n = &bvh2.nodes[i as usize];
+        let n = &nodes[i as usize];
         if n.prim_count == 0 {
             deepest = deepest.max(d + 1);
             stack.push((n.first_index, d + 1));
@@ -268,13 +257,13 @@ fn heights(arena: &[TmpNode]) -> Vec<u32> {
     h
 }
 
-/// Writes the arena's tree as an obvhs binary tree of one-triangle leaves (siblings adjacent, as
-/// obvhs expects), rebuilding subtrees that would be too deep.
+/// Writes the arena's tree as a binary tree of one-triangle leaves (siblings adjacent, as
+/// obvhs's), rebuilding subtrees that would be too deep.
 struct Shaper<'a, F> {
     triangle: &'a F,
     arena: Vec<TmpNode>,
     heights: Vec<u32>,
-    bvh2: Bvh2,
+    nodes: Vec<Node2>,
 }
 
 impl<F: Fn(u32) -> [Vec3; 3]> Shaper<'_, F> {
@@ -290,18 +279,16 @@ impl<F: Fn(u32) -> [Vec3; 3]> Shaper<'_, F> {
             collect_leaves(&self.arena, i, &mut ids);
             i = self.median(&mut ids);
         }
-        let aabb = Aabb::new(Vec3A::from(self.arena[i].lo), Vec3A::from(self.arena[i].hi));
+        let (min, max) = (self.arena[i].lo, self.arena[i].hi);
         match self.arena[i].shape.clone() {
             Shape::Leaf(ids) => {
-                let first = self.bvh2.primitive_indices.len() as u32;
-                self.bvh2.primitive_indices.push(ids[0]);
-                self.bvh2.nodes[slot] = Bvh2Node::new(aabb, 1, first);
+                self.nodes[slot] = Node2 { min, prim_count: 1, max, first_index: ids[0] };
             }
             Shape::Inner([a, b]) => {
-                let first = self.bvh2.nodes.len();
-                self.bvh2.nodes.push(Bvh2Node::default());
-                self.bvh2.nodes.push(Bvh2Node::default());
-                self.bvh2.nodes[slot] = Bvh2Node::new(aabb, 0, first as u32);
+                let first = self.nodes.len();
+                self.nodes.push(Node2::default());
+                self.nodes.push(Node2::default());
+                self.nodes[slot] = Node2 { min, prim_count: 0, max, first_index: first as u32 };
                 self.place(a, first, depth + 1);
                 self.place(b, first + 1, depth + 1);
             }

@@ -12,9 +12,10 @@
 use std::sync::atomic::{AtomicU8, Ordering};
 
 use glam::{Vec3A, vec3a};
-use obvhs::bvh2::Bvh2;
 use obvhs::cwbvh::node::CwBvhNode;
 use rayon::prelude::*;
+
+use super::node2::Node2;
 
 /// A slot of a compressed node per ray octant, as obvhs: `order_children` assigns children to them.
 const DIRECTIONS: usize = 8;
@@ -62,27 +63,29 @@ const PARALLEL_COST_DEPTH: u32 = 10;
 /// parallel (up to 8³ subtrees), each numbered on its own and then renumbered into place.
 const PARALLEL_CONVERT_DEPTH: u32 = 3;
 
-/// Converts `bvh2` (leaves of one primitive) into compressed 8-wide nodes with leaves of up to
-/// `max_prims_per_leaf` (at most 3) primitives, children ordered by ray octant: the nodes and the
-/// primitive indices in leaf order, equal to `bvh2_to_cwbvh(bvh2, max_prims_per_leaf, true,
-/// false)`'s. Subtrees are costed and converted on rayon's threads (issue 38).
-pub(super) fn bvh2_to_cwbvh(bvh2: &Bvh2, max_prims_per_leaf: u32) -> (Vec<CwBvhNode>, Vec<u32>) {
+/// Converts the binary tree `bvh2` (leaves of one primitive, `node2`'s: a leaf's `first_index` is
+/// its primitive) into compressed 8-wide nodes with leaves of up to `max_prims_per_leaf` (at most
+/// 3) primitives, children ordered by ray octant: the nodes and the primitive indices in leaf
+/// order, equal to `bvh2_to_cwbvh(bvh2, max_prims_per_leaf, true, false)`'s on obvhs's
+/// `Bvh2` of the same nodes and the identity primitive mapping. Subtrees are costed and
+/// converted on rayon's threads (issue 38).
+pub(super) fn bvh2_to_cwbvh(bvh2: &[Node2], max_prims_per_leaf: u32) -> (Vec<CwBvhNode>, Vec<u32>) {
     bvh2_to_cwbvh_split(bvh2, max_prims_per_leaf, PARALLEL_COST_DEPTH, PARALLEL_CONVERT_DEPTH)
 }
 
 /// [`bvh2_to_cwbvh`] with the depths down to which work is split (the tests vary them).
 fn bvh2_to_cwbvh_split(
-    bvh2: &Bvh2,
+    bvh2: &[Node2],
     max_prims_per_leaf: u32,
     cost_depth: u32,
     convert_depth: u32,
 ) -> (Vec<CwBvhNode>, Vec<u32>) {
-    if bvh2.nodes.is_empty() {
+    if bvh2.is_empty() {
         return (Vec::new(), Vec::new());
     }
     let c = Converter {
         bvh2,
-        decisions: (0..(bvh2.nodes.len() / 2 + 1) * 7).map(|_| AtomicU8::new(DEFAULT.0)).collect(),
+        decisions: (0..(bvh2.len() / 2 + 1) * 7).map(|_| AtomicU8::new(DEFAULT.0)).collect(),
         max_prims_per_leaf,
         cost_depth,
         convert_depth,
@@ -100,7 +103,7 @@ fn bvh2_to_cwbvh_split(
 }
 
 struct Converter<'a> {
-    bvh2: &'a Bvh2,
+    bvh2: &'a [Node2],
     /// Seven [`Decision`]s per inner binary node (`Converter::slot`); each is written once, by
     /// the task costing its node.
     decisions: Vec<AtomicU8>,
@@ -180,7 +183,7 @@ impl Converter<'_> {
     /// index halved numbers the inner nodes (sibling pairs never overlap), so the table holds
     /// inner nodes only. A leaf's decisions are all `LEAF` and are not stored.
     fn slot(&self, node: usize) -> Option<usize> {
-        let n = &self.bvh2.nodes[node];
+        let n = &self.bvh2[node];
         (!n.is_leaf()).then(|| n.first_index as usize / 2 * 7)
     }
 
@@ -201,7 +204,7 @@ impl Converter<'_> {
     /// Fills node `node_index`'s seven decisions and returns its primitive count and the seven
     /// decisions' costs (obvhs's `calculate_cost_impl`); `depth` is the node's (the root's 0).
     fn calculate_cost(&self, node_index: usize, depth: u32) -> (u32, [f32; 7]) {
-        let node = &self.bvh2.nodes[node_index];
+        let node = &self.bvh2[node_index];
         let half_area = node.aabb().half_area();
         let (first_index, prim_count) = (node.first_index as usize, node.prim_count);
         let mut costs = [0.0f32; 7];
@@ -297,7 +300,7 @@ impl Converter<'_> {
     /// its leaves' primitives appended to `primitive_indices`; its binary children by slot.
     fn node(&self, index2: usize, child_base: u32, primitive_indices: &mut Vec<u32>) -> (CwBvhNode, [u32; 8]) {
         let mut node = CwBvhNode::default();
-        let aabb = self.bvh2.nodes[index2].aabb();
+        let aabb = self.bvh2[index2].aabb();
         let node_p = aabb.min;
         node.p = node_p.into();
         let e = ((aabb.max - aabb.min).max(Vec3A::splat(1e-20)) * DENOM).log2().ceil().exp2();
@@ -316,7 +319,7 @@ impl Converter<'_> {
             if child == EMPTY {
                 continue;
             }
-            let child_aabb = self.bvh2.nodes[child as usize].aabb();
+            let child_aabb = self.bvh2[child as usize].aabb();
             // obvhs's PAD of 0, kept so the float operations are the same.
             const PAD: f32 = 0.0;
             let child_min = ((child_aabb.min - node_p - PAD) * rcp_e).floor().clamp(Vec3A::ZERO, Vec3A::splat(255.0));
@@ -348,9 +351,9 @@ impl Converter<'_> {
 
     /// Appends the primitives under binary node `index` in leaf order; their count.
     fn count_primitives(&self, index: usize, primitive_indices: &mut Vec<u32>) -> u32 {
-        let node = self.bvh2.nodes[index];
+        let node = self.bvh2[index];
         if node.is_leaf() {
-            primitive_indices.push(self.bvh2.primitive_indices[node.first_index as usize]);
+            primitive_indices.push(node.first_index);
             return node.prim_count;
         }
         self.count_primitives(node.first_index as usize, primitive_indices)
@@ -359,7 +362,7 @@ impl Converter<'_> {
 
     /// The binary nodes that become the children of compressed node `index` with slot budget `i`.
     fn get_children(&self, index: usize, children: &mut [u32; 8], child_count: &mut usize, i: usize) {
-        let node = &self.bvh2.nodes[index];
+        let node = &self.bvh2[index];
         if node.is_leaf() {
             children[*child_count] = index as u32;
             *child_count += 1;
@@ -381,10 +384,10 @@ impl Converter<'_> {
     /// octant's direction with the child's offset from the parent's centre (obvhs's
     /// `order_children`).
     fn order_children(&self, index: usize, children: &mut [u32; 8], child_count: usize) {
-        let p = self.bvh2.nodes[index].aabb().center();
+        let p = self.bvh2[index].aabb().center();
         let mut cost = [[f32::MAX; DIRECTIONS]; 8];
         for (row, &child) in cost.iter_mut().zip(children.iter()).take(child_count) {
-            let v = self.bvh2.nodes[child as usize].aabb().center() - p;
+            let v = self.bvh2[child as usize].aabb().center() - p;
             for (s, slot) in row.iter_mut().enumerate() {
                 let d = vec3a(
                     if s & 0b100 != 0 { -1.0 } else { 1.0 },
@@ -455,7 +458,8 @@ mod tests {
             .collect();
         for tris in [soup(1), soup(2), soup(9), soup(1000), soup(20_000), grid] {
             let bvh2 = super::super::binary_tree(tris.len(), &|id| tris[id as usize], false).0;
-            let theirs = obvhs::cwbvh::bvh2_to_cwbvh::bvh2_to_cwbvh(&bvh2, crate::contract::BVH_LEAF_MAX, true, false);
+            let wide = super::super::node2::widen(&bvh2);
+            let theirs = obvhs::cwbvh::bvh2_to_cwbvh::bvh2_to_cwbvh(&wide, crate::contract::BVH_LEAF_MAX, true, false);
             // Serial, the default split, and splits so deep that most subtrees are renumbered.
             for (cost_depth, convert_depth) in [(0, 0), (PARALLEL_COST_DEPTH, PARALLEL_CONVERT_DEPTH), (40, 12)] {
                 let ours = bvh2_to_cwbvh_split(&bvh2, crate::contract::BVH_LEAF_MAX, cost_depth, convert_depth);
