@@ -1,6 +1,7 @@
 """Mitsuba 3.9.1's principled BSDF at fixed direction pairs: its value (`eval`), its density
 (`pdf`) and the forward-mode derivative of the value by every differentiable parameter, for the
-parameter sets below. Writes `mitsuba_bsdf.json` next to this file, which
+parameter sets below; and its directional albedo at four incidences by its own sampler (2^20
+samples: the mean of `sample`'s weights and its standard error). Writes `mitsuba_bsdf.json` next to this file, which
 `src/bsdf/principled/tests.rs` compares pathgrad's CPU principled BSDF against.
 
 Run: DRJIT_LIBLLVM_PATH=... python tests/data/principled/mitsuba_bsdf.py (variant llvm_ad_rgb).
@@ -93,6 +94,21 @@ def main():
             case["grad"][key] = [list(map(float, g[c])) for c in range(3)]
             dr.disable_grad(p)
             params = mi.traverse(bsdf)
+        # The directional albedo by Mitsuba's own sampler: the mean of its sample weights.
+        m = 1 << 20
+        albedo = []
+        for cos_i in [0.9, 0.5, 0.1, -0.5]:
+            sin_i = (1 - cos_i * cos_i) ** 0.5
+            si2 = dr.zeros(mi.SurfaceInteraction3f, m)
+            si2.wi = mi.Vector3f(sin_i * 0.8, sin_i * 0.6, cos_i)
+            si2.sh_frame = mi.Frame3f(mi.Vector3f(0, 0, 1))
+            sampler = mi.load_dict({"type": "independent"})
+            sampler.seed(7, m)
+            _, weight = bsdf.sample(ctx, si2, sampler.next_1d(), sampler.next_2d())
+            mean = [float(dr.mean(weight[c])[0]) if hasattr(dr.mean(weight[c]), "__getitem__") else float(dr.mean(weight[c])) for c in range(3)]
+            var = [float(dr.mean(dr.square(weight[c] - mean[c]))[0]) if hasattr(dr.mean(weight[c]), "__getitem__") else float(dr.mean(dr.square(weight[c] - mean[c]))) for c in range(3)]
+            albedo.append({"cos_i": cos_i, "mean": mean, "sigma": [(v / m) ** 0.5 for v in var]})
+        case["albedo"] = albedo
         out["cases"].append(case)
     here = os.path.dirname(os.path.abspath(__file__))
     with open(os.path.join(here, "mitsuba_bsdf.json"), "w") as f:
