@@ -161,10 +161,12 @@ fn directions(n: usize, seed: u32) -> Vec<Vec3> {
         .collect()
 }
 
-type Setter = fn(&mut PrincipledLeaf, f32);
+/// A scalar parameter with a derivative: its name, reader, writer and field of the gradient.
+type ScalarParam =
+    (&'static str, fn(&PrincipledLeaf) -> f32, fn(&mut PrincipledLeaf, f32), fn(&PrincipledGrad) -> Vec3);
 
-/// Every scalar parameter with a derivative: its name, reader, writer and field of the gradient.
-fn scalar_params() -> Vec<(&'static str, fn(&PrincipledLeaf) -> f32, Setter, fn(&PrincipledGrad) -> Vec3)> {
+/// Every scalar parameter with a derivative.
+fn scalar_params() -> Vec<ScalarParam> {
     vec![
         ("roughness", |l| l.roughness, |l, v| l.roughness = v, |g| g.roughness),
         ("anisotropic", |l| l.anisotropic, |l, v| l.anisotropic = v, |g| g.anisotropic),
