@@ -144,11 +144,17 @@ fn calc_schlick_weight(cos_i: f32, eta: f32) -> f32 {
     if eta_it > 1.0 { schlick_weight(cos_i.abs()) } else { schlick_weight(cos_t) }
 }
 
+/// 1 + (α² − 1) cos²θ of GTR1 written as sin²θ + α² cos²θ (h a unit vector), which does not cancel
+/// near the normal, where a glossy clearcoat's D lives.
+fn gtr1_denominator(a2: f32, h: Vec3) -> f32 {
+    h.x * h.x + h.y * h.y + a2 * h.z * h.z
+}
+
 /// Clearcoat's GTR1 distribution D(h) at α (Burley 2012): (α² − 1)/(π ln α² (1 + (α² − 1) cos²θ)),
 /// 0 where D·cos θ underflows.
 fn gtr1_d(alpha: f32, h: Vec3) -> f32 {
     let (c2, a2) = (h.z * h.z, alpha * alpha);
-    let d = (a2 - 1.0) / (PI * a2.ln() * (1.0 + (a2 - 1.0) * c2));
+    let d = (a2 - 1.0) / (PI * a2.ln() * gtr1_denominator(a2, h));
     if d * h.z > D_UNDERFLOW { d } else { 0.0 }
 }
 
@@ -159,7 +165,7 @@ fn gtr1_d_dalpha(alpha: f32, h: Vec3) -> f32 {
         return 0.0;
     }
     let (c2, a2) = (h.z * h.z, alpha * alpha);
-    let dln_da2 = 1.0 / (a2 - 1.0) - 1.0 / (a2 * a2.ln()) - c2 / (1.0 + (a2 - 1.0) * c2);
+    let dln_da2 = 1.0 / (a2 - 1.0) - 1.0 / (a2 * a2.ln()) - c2 / gtr1_denominator(a2, h);
     d * dln_da2 * 2.0 * alpha
 }
 
