@@ -1,6 +1,8 @@
 //! Mitsuba 3.9.1's `principled` BSDF (Burley's Disney BSDF as `src/bsdfs/principled.cpp` and
 //! `principledhelpers.h` define it): value, sampler, density and detached derivatives of the value
-//! by every parameter, on the CPU. Not yet a material of the scene loader nor of the kernels.
+//! by every parameter. Its GLSL twin is `shaders/lib/principled.glsl` (compared by
+//! `tests/it/twins.rs` through `shaders/principled_probe.comp`); neither is yet a material of the
+//! scene loader or of the render kernels, which refuse `principled` by name.
 //!
 //! Lobes, with brdf = (1 − metallic)(1 − spec_trans), bsdf = (1 − metallic)·spec_trans, the GGX
 //! distribution at (α_x, α_y) = max(0.001, r²/a, r²·a), a = √(1 − 0.9·anisotropic), the dielectric
@@ -43,6 +45,19 @@ use crate::sampling::{cosine_hemisphere_pdf, sample_cosine_hemisphere};
 pub const LUMINANCE: Vec3 = Vec3::new(0.212_671, 0.715_160, 0.072_169);
 
 /// The values of one principled BSDF at a shading point (textures already looked up).
+///
+/// ```
+/// use glam::{Vec2, Vec3};
+/// use pathgrad::bsdf::principled::PrincipledLeaf;
+/// let glass = PrincipledLeaf { spec_trans: 1.0, roughness: 0.2, ..PrincipledLeaf::default() };
+/// let wi = Vec3::new(0.0, 0.6, 0.8);
+/// // Toward the normal, most of a glass's light is refracted, weighted by the sampler's density.
+/// let wo = glass.sample(wi, 0.9, Vec2::new(0.3, 0.7)).unwrap();
+/// assert!(wo.z < 0.0 && glass.pdf(wi, wo) > 0.0 && glass.eval(wi, wo).x > 0.0);
+/// // The derivative by roughness of the value at that direction.
+/// let (_, grad) = glass.eval_grad(wi, wo);
+/// assert!(grad.roughness.x != 0.0);
+/// ```
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct PrincipledLeaf {
     /// `base_color` (RGB).

@@ -509,7 +509,13 @@ fn principled_gpu_equals_cpu() {
             flatness: 0.3,
             ..PrincipledLeaf::default()
         },
-        PrincipledLeaf { base_color: base, roughness: 0.6, anisotropic: 0.8, metallic: 0.9, ..PrincipledLeaf::default() },
+        PrincipledLeaf {
+            base_color: base,
+            roughness: 0.6,
+            anisotropic: 0.8,
+            metallic: 0.9,
+            ..PrincipledLeaf::default()
+        },
         PrincipledLeaf {
             base_color: Vec3::new(0.9, 0.95, 1.0),
             roughness: 0.05,
@@ -537,7 +543,8 @@ fn principled_gpu_equals_cpu() {
             let sin_i = (1.0 - cos_i * cos_i).sqrt();
             let wi = Vec3::new(sin_i * 0.6, -sin_i * 0.8, cos_i);
             for j in 0..400u32 {
-                let u = uniform4(RngKey::new(700 + li as u32, wi_index as u32, PassTag::Test), j, 0, 1, Stream::Main, 1, 0);
+                let u =
+                    uniform4(RngKey::new(700 + li as u32, wi_index as u32, PassTag::Test), j, 0, 1, Stream::Main, 1, 0);
                 let (u_lobe, uv) = (u[0], Vec2::new(u[1], u[2]));
                 // Half the queries at the sampled direction, half at one over the whole sphere.
                 let wo_eval = match l.sample(wi, u_lobe, uv) {
@@ -652,7 +659,12 @@ fn principled_gpu_equals_cpu() {
         cases.len()
     );
     assert!(near_critical_pairs <= cases.len() * 3 / 100, "{near_critical_pairs} pairs near the critical angle");
-    assert!(mismatches.is_empty(), "{} mismatches:\n{}", mismatches.len(), mismatches[..mismatches.len().min(20)].join("\n"));
+    assert!(
+        mismatches.is_empty(),
+        "{} mismatches:\n{}",
+        mismatches.len(),
+        mismatches[..mismatches.len().min(20)].join("\n")
+    );
     assert!(valid > cases.len() / 3 && nonzero_grads > cases.len());
     assert!(worst_dir < 1e-3, "sampled directions differ by {worst_dir}");
     assert!(validity_flips <= cases.len() / 1000, "{validity_flips} samples valid on one side only");
