@@ -168,7 +168,7 @@ fn gtr1_denominator(a2: f32, h: Vec3) -> f32 {
 /// Clearcoat's GTR1 distribution D(h) at α (Burley 2012): (α² − 1)/(π ln α² (1 + (α² − 1) cos²θ)),
 /// 0 where D·cos θ underflows.
 fn gtr1_d(alpha: f32, h: Vec3) -> f32 {
-    let (c2, a2) = (h.z * h.z, alpha * alpha);
+    let a2 = alpha * alpha;
     let d = (a2 - 1.0) / (PI * a2.ln() * gtr1_denominator(a2, h));
     if d * h.z > D_UNDERFLOW { d } else { 0.0 }
 }
