@@ -11,6 +11,7 @@ pub mod blend;
 pub mod differential;
 pub mod diffuse;
 pub mod plastic;
+pub mod principled;
 pub mod rough_conductor;
 pub mod rough_dielectric;
 pub mod rough_plastic;

@@ -479,6 +479,82 @@ contract_structs! {
         /// `bsdf_pdf` at `wo_eval`.
         eval_pdf: f32,
     }
+
+    /// Test probe input: one principled BSDF query (`shaders/principled_probe.comp`).
+    struct PrincipledProbeCase {
+        /// `base_color`.
+        base_color: Vec3,
+        /// `roughness`.
+        roughness: f32,
+        /// `anisotropic`.
+        anisotropic: f32,
+        /// `metallic`.
+        metallic: f32,
+        /// `spec_trans`.
+        spec_trans: f32,
+        /// η.
+        eta: f32,
+        /// `spec_tint`.
+        spec_tint: f32,
+        /// `sheen`.
+        sheen: f32,
+        /// `sheen_tint`.
+        sheen_tint: f32,
+        /// `clearcoat`.
+        clearcoat: f32,
+        /// `clearcoat_gloss`.
+        clearcoat_gloss: f32,
+        /// `flatness`.
+        flatness: f32,
+        /// Sampling rates: main specular, clearcoat, diffuse.
+        rates: Vec3,
+        /// Incident direction (local).
+        wi: Vec3,
+        /// Lobe uniform.
+        u_lobe: f32,
+        /// Direction uniforms.
+        u: Vec2,
+        /// A fixed direction at which the value, its derivatives and the density are queried.
+        wo_eval: Vec3,
+    }
+
+    /// Test probe output for one `PrincipledProbeCase`.
+    struct PrincipledProbeResult {
+        /// Sampled direction.
+        wo: Vec3,
+        /// 1 if the sample is valid.
+        valid: u32,
+        /// The value at `wo_eval`.
+        eval: Vec3,
+        /// The density at `wo_eval`.
+        pdf: f32,
+        /// ∂f̂/∂(base colour channel 0) at `wo_eval`, per image channel.
+        d_base0: Vec3,
+        /// ∂f̂/∂(base colour channel 1).
+        d_base1: Vec3,
+        /// ∂f̂/∂(base colour channel 2).
+        d_base2: Vec3,
+        /// ∂f̂/∂roughness.
+        d_roughness: Vec3,
+        /// ∂f̂/∂anisotropic.
+        d_anisotropic: Vec3,
+        /// ∂f̂/∂metallic.
+        d_metallic: Vec3,
+        /// ∂f̂/∂spec_trans.
+        d_spec_trans: Vec3,
+        /// ∂f̂/∂spec_tint.
+        d_spec_tint: Vec3,
+        /// ∂f̂/∂sheen.
+        d_sheen: Vec3,
+        /// ∂f̂/∂sheen_tint.
+        d_sheen_tint: Vec3,
+        /// ∂f̂/∂clearcoat.
+        d_clearcoat: Vec3,
+        /// ∂f̂/∂clearcoat_gloss.
+        d_clearcoat_gloss: Vec3,
+        /// ∂f̂/∂flatness.
+        d_flatness: Vec3,
+    }
 }
 
 contract_push_blocks! {
