@@ -375,9 +375,9 @@ fn element_and_property_errors() {
         (r#"<texture type="bitmap"/>"#, "<texture>: 'bitmap' needs the property 'filename'"),
         (r#"<emitter type="area"/>"#, "<emitter>: an 'area' emitter must be nested in a <shape>"),
         (
-            r#"<emitter type="projector"/>"#,
-            "<emitter>: unsupported plugin 'projector' (supported: constant, directional, envmap, point, spot; area \
-             inside a <shape>)",
+            r#"<emitter type="sunsky"/>"#,
+            "<emitter>: unsupported plugin 'sunsky' (supported: constant, directional, envmap, point, projector, \
+             spot; area inside a <shape>)",
         ),
         (
             r#"<emitter type="constant"/><emitter type="constant"/>"#,
