@@ -9,9 +9,9 @@ use crate::bsdf::{bsdf_eval, bsdf_pdf, bsdf_sample};
 use crate::bvh::{Ray, closest_hit, occluded};
 use crate::contract::{
     DIM_DIFF_SIGN, DIM_DIRECTION, DIM_EMITTER_POS, DIM_EMITTER_SELECT, DIM_ENV_CELL, DIM_LOBE, DIM_PIXEL_JITTER,
-    DIM_ROULETTE, DIM_TECHNIQUE, Globals, LENS_ORTHOGRAPHIC, LIGHT_SLOT, LENS_THIN, MAT_BLEND, MAT_NULL, MAT_ROUGH_CONDUCTOR,
-    MAT_ROUGH_DIELECTRIC, MAT_ROUGH_PLASTIC, MAX_NULL_CROSSINGS, NO_EMITTER, NO_MEDIUM, NO_PARAM, PLACEMENT_POWER,
-    STRATEGY_DIFF, ViewCamera,
+    DIM_ROULETTE, DIM_TECHNIQUE, Globals, LENS_ORTHOGRAPHIC, LENS_THIN, LIGHT_SLOT, MAT_BLEND, MAT_NULL,
+    MAT_ROUGH_CONDUCTOR, MAT_ROUGH_DIELECTRIC, MAT_ROUGH_PLASTIC, MAX_NULL_CROSSINGS, NO_EMITTER, NO_MEDIUM, NO_PARAM,
+    PLACEMENT_POWER, STRATEGY_DIFF, ViewCamera,
 };
 use crate::cpu::emitter::{
     EmitterSample, emitter_pdf_solid_angle, env_backward, env_radiance, environment_pdf, light_backward, sample_emitter,

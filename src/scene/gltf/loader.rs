@@ -150,7 +150,8 @@ impl Loader<'_> {
                 let beam_width = inner.to_degrees().max(MIN_BEAM_WIDTH_DEGREES);
                 // The frame matters only to a texture (glTF's lights have none): the node's axes,
                 // z turned to the axis (the node's −z).
-                let to_local = glam::Mat3::from_diagonal(Vec3::new(1.0, 1.0, -1.0)) * glam::Mat3::from_mat4(*world).inverse();
+                let to_local =
+                    glam::Mat3::from_diagonal(Vec3::new(1.0, 1.0, -1.0)) * glam::Mat3::from_mat4(*world).inverse();
                 (LightShape::Spot { position, axis, cutoff, beam_width, to_local }, "intensity")
             }
             Checked::Valid(Type::Directional) => (LightShape::Directional { direction: axis }, "irradiance"),

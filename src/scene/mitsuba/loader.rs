@@ -938,7 +938,10 @@ impl<'a> Loader<'a> {
         if p.kind != "bitmap" {
             return Err(self.x.err(
                 target,
-                format!("the texture of a '{kind}' must be a 'bitmap' (pathgrad reads no other here), got '{}'", p.kind),
+                format!(
+                    "the texture of a '{kind}' must be a 'bitmap' (pathgrad reads no other here), got '{}'",
+                    p.kind
+                ),
             ));
         }
         let bitmap = self.bitmap(&p, target, "")?;

@@ -169,7 +169,10 @@ fn bad_lights_are_refused_by_name() {
             r#"<emitter type="projector"><texture name="irradiance" type="bitmap"><string name="filename" value="no.png"/></texture></emitter>"#,
             "image file 'no.png' not found",
         ),
-        (r#"<emitter type="projector"><float name="fov" value="180"/></emitter>"#, "'fov' must lie in (0, 180) degrees, got 180"),
+        (
+            r#"<emitter type="projector"><float name="fov" value="180"/></emitter>"#,
+            "'fov' must lie in (0, 180) degrees, got 180",
+        ),
         (r#"<emitter type="projector"><float name="scale" value="-1"/></emitter>"#, "'scale' must lie in [0, "),
         (
             r#"<emitter type="sunsky"/>"#,
