@@ -377,7 +377,8 @@ contract_structs! {
     }
 
     /// A light without area (Mitsuba's `point`, `spot`, `directional`, `projector`): reached only
-    /// by next-event estimation, with weight 1 (no BSDF sample can hit it). 108 bytes a light.
+    /// by next-event estimation, with weight 1 (no BSDF sample can hit it). 112 bytes a light (48
+    /// before textured spots and projectors).
     struct DeltaLight {
         /// `LIGHT_POINT`, `LIGHT_SPOT`, `LIGHT_DIRECTIONAL` or `LIGHT_PROJECTOR`.
         kind: u32,
