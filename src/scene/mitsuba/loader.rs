@@ -594,8 +594,8 @@ impl<'a> Loader<'a> {
     }
 
     /// Mitsuba 3.9.1's `direct` integrator adds each of its `emitter_samples` light samples with
-    /// weight 1 when the light is a point, spot or directional one (its MIS weight there omits the
-    /// 1/`emitter_samples` factor it applies to area lights), so Mitsuba renders those lights
+    /// weight 1 when the light is a point, spot, directional or projector one (its MIS weight there
+    /// omits the 1/`emitter_samples` factor it applies to area lights), so Mitsuba renders those lights
     /// `emitter_samples` times too bright. pathgrad renders the correct expectation; it says so.
     fn direct_delta_warning(&mut self) {
         let Some((n, node)) = self.direct_emitter_samples else { return };
@@ -605,9 +605,9 @@ impl<'a> Loader<'a> {
         let w = self.x.warning(
             node,
             format!(
-                "emitter_samples = {n}: Mitsuba 3.9.1's 'direct' integrator adds every sample of a point, spot or \
-                 directional light with weight 1 instead of 1/{n}, so Mitsuba renders their light {n}× too bright; \
-                 pathgrad renders the correct image (not Mitsuba's)"
+                "emitter_samples = {n}: Mitsuba 3.9.1's 'direct' integrator adds every sample of a point, spot, \
+                 directional or projector light with weight 1 instead of 1/{n}, so Mitsuba renders their light {n}× \
+                 too bright; pathgrad renders the correct image (not Mitsuba's)"
             ),
         );
         self.scene.warn(w);
