@@ -242,3 +242,23 @@ fn textured_spots_and_projectors_take_mitsubas_properties() {
     assert!(uv_scale.abs_diff_eq(glam::Vec2::new(-0.5 * cot, -0.5 * cot * 4.0 / 3.0), 1e-5), "{uv_scale}");
     assert!(scene.warnings.is_empty(), "{:?}", scene.warnings);
 }
+
+/// A BMP (Mitsuba's `flower.bmp` of `emitter_projector_textured.xml`) is decoded as sRGB like a PNG.
+#[test]
+fn a_bmp_texture_is_srgb_decoded() {
+    let dir = tempfile::tempdir().unwrap();
+    let pixels: [u8; 6] = [255, 0, 128, 64, 32, 0];
+    let file = std::fs::File::create(dir.path().join("slide.bmp")).unwrap();
+    let mut writer = std::io::BufWriter::new(file);
+    image::codecs::bmp::BmpEncoder::new(&mut writer).encode(&pixels, 2, 1, image::ExtendedColorType::Rgb8).unwrap();
+    drop(writer);
+    let body = r#"<emitter type="projector" id="p"><texture name="irradiance" type="bitmap">
+        <string name="filename" value="slide.bmp"/></texture></emitter>"#;
+    let scene = load(dir.path(), body, &LoadOptions::default()).unwrap();
+    let texels = scene.params.get(scene.params.find("p.irradiance.data").unwrap()).to_vec();
+    let expected: Vec<f32> = pixels.iter().map(|&v| crate::scene::gltf::srgb_to_linear(f32::from(v) / 255.0)).collect();
+    assert_eq!(texels.len(), 6);
+    for (a, b) in texels.iter().zip(&expected) {
+        assert!((a - b).abs() < 1e-6, "{texels:?} vs {expected:?}");
+    }
+}
