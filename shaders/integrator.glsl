@@ -516,7 +516,7 @@ bool path_step(inout PathState st) {
                 if (es.environment ? HAS(G_ENV) : HAS(G_EMISSION)) {
                     gt.nee_param = es.param;
                     gt.nee = st.adj * st.throughput * tr * nee_w * nee_phase * es.factor / nee_pdf;
-                    gt.env_dir = es.point;
+                    gt.env_dir = (HAS(F_LIGHT_TEXTURE) && es.delta) ? es.normal : es.point;
                 }
             }
         }
@@ -546,7 +546,7 @@ bool path_step(inout PathState st) {
             if (es.environment ? HAS(G_ENV) : HAS(G_EMISSION)) {
                 gt.nee_param = es.param;
                 gt.nee = st.adj * st.throughput * tr * nee_w * nee_f * es.factor / nee_pdf;
-                gt.env_dir = es.point;
+                gt.env_dir = (HAS(F_LIGHT_TEXTURE) && es.delta) ? es.normal : es.point;
             }
         }
 

@@ -105,6 +105,8 @@ vec3 env_sample(vec2 u_cell, vec2 u_pos) {
 // or a light without area (`delta`): its position, or (`distant`, a directional light) the
 // direction toward it in `point`; its radiance is already divided by the distance² and weighted
 // by a spot's falloff, `factor` being that weight, and `pdf` is the light's selection probability.
+// A textured light or projector (F_LIGHT_TEXTURE) has `param` LIGHT_SLOT | its index and `normal`
+// the shading point it was sampled from (its texture lookup).
 struct EmitterSample {
     vec3 point; vec3 normal; vec3 radiance; uint param; bool environment; bool valid;
     bool delta; bool distant; float factor; float pdf;
@@ -116,6 +118,30 @@ float spot_falloff(DeltaLight l, vec3 d) {
     float beam = c >= l.cos_beam ? 1.0 : (l.cutoff - atan2_poly(sqrt(max(1.0 - c * c, 0.0)), c)) * l.inv_transition;
     return c > l.cos_cutoff ? beam : 0.0;
 }
+
+// What a textured spot or a projector `l` sends toward point `x`, apart from its parameters: the
+// texture coordinates of its lookup, and in `factor` a spot's falloff / distance² or a
+// projector's π / (z² cos θ); a factor of 0 where it sends nothing (twin: light_lookup in
+// src/cpu/emitter.rs).
+vec2 light_lookup(DeltaLight l, vec3 x, out float factor) {
+    vec3 d = x - l.position;
+    vec3 local = vec3(dot(l.row0, d), dot(l.row1, d), dot(l.row2, d));
+    vec2 uv = vec2(0.5) + l.uv_scale * vec2(local.x, local.y) / local.z;
+    float d2 = dot(d, d);
+    if (l.kind == LIGHT_PROJECTOR) {
+        bool inside = local.z > 0.0 && uv.x >= 0.0 && uv.x <= 1.0 && uv.y >= 0.0 && uv.y <= 1.0;
+        float cos_theta = dot(l.axis, d) / sqrt(d2);
+        factor = inside ? PI / (local.z * local.z * cos_theta) : 0.0;
+        return inside ? uv : vec2(0.0);
+    }
+    float falloff = spot_falloff(l, d * inversesqrt(d2));
+    factor = falloff / d2;
+    return falloff > 0.0 ? uv : vec2(0.0);
+}
+
+// Its intensity (or 1) × texture at uv (or 1) × scale (or 1); defined in surface.glsl, beside the
+// texture lookup.
+vec3 light_tint(DeltaLight l, vec2 uv);
 
 // With probability env_select_prob (u_select below it) a direction toward the environment
 // (env_sample); with light_select_prob one of the lights without area, each equally likely, as
@@ -135,10 +161,20 @@ EmitterSample sample_emitter(float u_select, vec2 u_pos, vec2 u_cell, vec3 x) {
     if (HAS(F_LIGHTS) && u_select < globals.env_select_prob + globals.light_select_prob) {
         uint n = globals.light_count;
         float t = (u_select - globals.env_select_prob) / globals.light_select_prob;
-        DeltaLight l = lights[min(uint(t * float(n)), n - 1u)];
+        uint index = min(uint(t * float(n)), n - 1u);
+        DeltaLight l = lights[index];
         s.delta = true;
         s.param = l.p_intensity;
         s.pdf = globals.light_select_prob / float(n);
+        if (HAS(F_LIGHT_TEXTURE) && (l.tex != NO_PARAM || l.kind == LIGHT_PROJECTOR)) {
+            vec2 uv = light_lookup(l, x, s.factor);
+            s.point = l.position;
+            s.normal = x;
+            s.param = LIGHT_SLOT | index;
+            s.valid = s.factor > 0.0 && s.factor < FLOAT_MAX;
+            s.radiance = s.valid ? light_tint(l, uv) * s.factor : vec3(0.0);
+            return s;
+        }
         if (l.kind == LIGHT_DIRECTIONAL) {
             s.distant = true;
             s.point = -l.axis;

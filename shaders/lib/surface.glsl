@@ -170,6 +170,23 @@ void texture_footprint(uint offset, uint width, uint height, uint mode, vec2 uv,
     weight[3] = fx * fy;
 }
 
+// A textured light's or projector's intensity (or 1) × texture at uv (or 1) × scale (or 1)
+// (declared in emitter.glsl; twin: light_tint in src/cpu/emitter.rs).
+vec3 light_texture(DeltaLight l, vec2 uv) {
+    uint texel[4];
+    float weight[4];
+    texture_footprint(l.tex, l.tex_width, l.tex_height, l.tex_mode, uv, texel, weight);
+    return param_rgb(texel[0]) * weight[0] + param_rgb(texel[1]) * weight[1] + param_rgb(texel[2]) * weight[2]
+        + param_rgb(texel[3]) * weight[3];
+}
+
+vec3 light_tint(DeltaLight l, vec2 uv) {
+    vec3 tint = l.p_intensity != NO_PARAM ? param_rgb(l.p_intensity) : vec3(1.0);
+    if (l.tex != NO_PARAM) tint *= light_texture(l, uv);
+    if (l.p_scale != NO_PARAM) tint *= params[l.p_scale];
+    return tint;
+}
+
 // RGB at offset i of the tables array: a normal map's texel (twin: param_rgb over FlatScene::tables).
 vec3 table_rgb(uint i) { return vec3(coating_table(i), coating_table(i + 1u), coating_table(i + 2u)); }
 
@@ -445,10 +462,34 @@ void push_leaf(Material m, vec2 uv, LeafGrad g) {
     }
 }
 
+// A textured light's or projector's term `g` (its factor included) toward shading point `x`: its
+// intensity and scale as entries, its four texels added at once (as push_scalar's).
+void push_light(DeltaLight l, vec3 g, vec3 x) {
+    float factor;
+    vec2 uv = light_lookup(l, x, factor);
+    vec3 intensity = l.p_intensity != NO_PARAM ? param_rgb(l.p_intensity) : vec3(1.0);
+    vec3 texture = l.tex != NO_PARAM ? light_texture(l, uv) : vec3(1.0);
+    float scale = l.p_scale != NO_PARAM ? params[l.p_scale] : 1.0;
+    if (l.p_intensity != NO_PARAM) push_rgb(l.p_intensity, g * texture * scale);
+    if (l.p_scale != NO_PARAM) push_entry(l.p_scale, g * intensity * texture);
+    if (l.tex != NO_PARAM) {
+        uint texel[4];
+        float weight[4];
+        texture_footprint(l.tex, l.tex_width, l.tex_height, l.tex_mode, uv, texel, weight);
+        vec3 t = g * intensity * scale;
+        for (uint k = 0u; k < 4u; k++) {
+            if (weight[k] != 0.0) param_grad_rgb(texel[k], t * weight[k]);
+        }
+    }
+}
+
 // An emitter's radiance term: one RGB value, or the four texels of the environment map around
-// `env_dir` weighted as its lookup weighs them.
+// `env_dir` weighted as its lookup weighs them, or a textured light's or projector's values
+// (`LIGHT_SLOT` | its index, `env_dir` the shading point).
 void push_emitter(uint offset, vec3 g, vec3 env_dir) {
-    if (HAS(F_ENV_MAP) && offset == globals.env_param) {
+    if (HAS(F_LIGHT_TEXTURE) && offset != NO_PARAM && (offset & LIGHT_SLOT) != 0u) {
+        push_light(lights[offset & ~LIGHT_SLOT], g, env_dir);
+    } else if (HAS(F_ENV_MAP) && offset == globals.env_param) {
         uint texel[4];
         float weight[4];
         env_footprint(env_dir, texel, weight);

@@ -186,6 +186,13 @@ contract_constants! {
     /// Feature bit: masked materials (Mitsuba's `mask`): a `Material::p_opacity` other than
     /// `NO_PARAM` lets a path pass straight through with probability 1 − opacity.
     F_MASK = 1 << 28;
+    /// Feature bit: lights without area that read a texture (a textured `spot`) or that are
+    /// projectors (`DeltaLight::tex`, `p_scale`, `uv_scale` and the frame rows).
+    F_LIGHT_TEXTURE = 1 << 29;
+    /// An `EmitterSample::param` (a gradient term's emitter) with this bit set is not a parameter
+    /// offset: its other bits are the index of a textured light or projector, whose intensity,
+    /// texels and scale the term reaches.
+    LIGHT_SLOT = 0x4000_0000;
     /// A `Material::p_alpha`, `p_alpha_v`, (blend) `p_weight` or `p_opacity` with this bit set is not a
     /// parameter offset: its other bits are the offset in the tables array of a one-channel
     /// texture's descriptor (`TEXTURE_DESC_LEN` words: texel offset, width, height, `TEX_*` mode,

@@ -84,6 +84,8 @@ contract_enums! {
         Spot = LIGHT_SPOT = 1,
         /// Mitsuba's `directional`: irradiance from one direction, at any distance.
         Directional = LIGHT_DIRECTIONAL = 2,
+        /// Mitsuba's `projector`: a pinhole that projects its irradiance texture (or constant).
+        Projector = LIGHT_PROJECTOR = 3,
     }
 
     /// What a `FieldDesc` holds.

@@ -3,9 +3,9 @@
 
 use glam::{Mat3, Vec2, Vec3};
 
-use crate::contract::{DeltaLight, Globals, LIGHT_DIRECTIONAL, LIGHT_SPOT};
+use crate::contract::{DeltaLight, Globals, LIGHT_DIRECTIONAL, LIGHT_PROJECTOR, LIGHT_SLOT, LIGHT_SPOT, NO_PARAM};
 use crate::cpu::path::GradSink;
-use crate::cpu::surface::param_color;
+use crate::cpu::surface::{param_color, texture_footprint};
 use crate::sampling::{UNIFORM_SPHERE_PDF, sample_uniform_sphere, sample_uniform_triangle};
 use crate::scene::envmap::{EnvMap, atan2_poly};
 use crate::scene::flat::FlatScene;
@@ -19,7 +19,8 @@ pub struct EmitterSample {
     pub normal: Vec3,
     /// Emitted radiance.
     pub radiance: Vec3,
-    /// Parameter offset of the radiance.
+    /// Parameter offset of the radiance; for a textured light or projector, `LIGHT_SLOT` or-ed
+    /// with its index ([`light_backward`] reaches its values).
     pub param: u32,
     /// Whether this samples the environment.
     pub environment: bool,
@@ -32,6 +33,8 @@ pub struct EmitterSample {
     pub factor: f32,
     /// A light without area: its selection probability.
     pub pdf: f32,
+    /// A light without area: the shading point it was sampled from (its texture lookup).
+    pub from: Vec3,
 }
 
 /// A spot's falloff toward unit direction `d` from its position (Mitsuba's `falloff_curve`).
@@ -43,6 +46,66 @@ fn spot_falloff(l: &DeltaLight, d: Vec3) -> f32 {
         (l.cutoff - atan2_poly((1.0 - c * c).max(0.0).sqrt(), c)) * l.inv_transition
     };
     if c > l.cos_cutoff { beam } else { 0.0 }
+}
+
+/// What a textured spot or a projector `l` sends toward point `x`, apart from its parameters:
+/// the texture coordinates of its lookup and its factor (a spot's falloff / distance², a
+/// projector's π / (z² cos θ)); a factor of 0 where it sends nothing.
+pub fn light_lookup(l: &DeltaLight, x: Vec3) -> (Vec2, f32) {
+    let d = x - l.position;
+    let local = Vec3::new(l.row0.dot(d), l.row1.dot(d), l.row2.dot(d));
+    let uv = Vec2::splat(0.5) + l.uv_scale * Vec2::new(local.x, local.y) / local.z;
+    let d2 = d.dot(d);
+    if l.kind == LIGHT_PROJECTOR {
+        let inside = local.z > 0.0 && uv.x >= 0.0 && uv.x <= 1.0 && uv.y >= 0.0 && uv.y <= 1.0;
+        let cos_theta = l.axis.dot(d) / d2.sqrt();
+        let factor = std::f32::consts::PI / (local.z * local.z * cos_theta);
+        (if inside { uv } else { Vec2::ZERO }, if inside { factor } else { 0.0 })
+    } else {
+        let falloff = spot_falloff(l, d * (1.0 / d2.sqrt()));
+        (if falloff > 0.0 { uv } else { Vec2::ZERO }, falloff / d2)
+    }
+}
+
+/// The parameter part of what a textured spot or a projector sends at lookup `uv`: intensity (or
+/// 1) × texture (or 1) × scale (or 1).
+fn light_tint(flat: &FlatScene, l: &DeltaLight, uv: Vec2) -> Vec3 {
+    let mut tint = if l.p_intensity != NO_PARAM { param_color(flat, l.p_intensity) } else { Vec3::ONE };
+    if l.tex != NO_PARAM {
+        tint *= texture_value(flat, l, uv);
+    }
+    if l.p_scale != NO_PARAM {
+        tint *= flat.params[l.p_scale as usize];
+    }
+    tint
+}
+
+fn texture_value(flat: &FlatScene, l: &DeltaLight, uv: Vec2) -> Vec3 {
+    let (texel, weight) = texture_footprint(l.tex, l.tex_width, l.tex_height, l.tex_mode, uv);
+    (0..4).fold(Vec3::ZERO, |acc, k| acc + param_color(flat, texel[k]) * weight[k])
+}
+
+/// Adds `g` times the derivative of what the textured spot or projector `l` sends toward `x`
+/// (its factor included in `g`) by its intensity, texels and scale to `sink`.
+pub fn light_backward(flat: &FlatScene, l: &DeltaLight, x: Vec3, g: Vec3, sink: &mut GradSink<'_>) {
+    let (uv, _) = light_lookup(l, x);
+    let intensity = if l.p_intensity != NO_PARAM { param_color(flat, l.p_intensity) } else { Vec3::ONE };
+    let texture = if l.tex != NO_PARAM { texture_value(flat, l, uv) } else { Vec3::ONE };
+    let scale = if l.p_scale != NO_PARAM { flat.params[l.p_scale as usize] } else { 1.0 };
+    if l.p_intensity != NO_PARAM {
+        sink.add_rgb(l.p_intensity, g * texture * scale);
+    }
+    if l.tex != NO_PARAM {
+        let (texel, weight) = texture_footprint(l.tex, l.tex_width, l.tex_height, l.tex_mode, uv);
+        for k in 0..4 {
+            if weight[k] != 0.0 {
+                sink.add_rgb(texel[k], g * intensity * (scale * weight[k]));
+            }
+        }
+    }
+    if l.p_scale != NO_PARAM {
+        sink.add(l.p_scale, g * intensity * texture);
+    }
 }
 
 /// The environment map that `globals` describe, if the environment is one.
@@ -114,6 +177,7 @@ pub fn sample_emitter(
         distant: false,
         factor: 1.0,
         pdf: 0.0,
+        from: x,
     };
     if u_select < globals.env_select_prob {
         let dir = env_sample(flat, globals, u_cell, u_pos);
@@ -127,7 +191,23 @@ pub fn sample_emitter(
     if u_select < globals.env_select_prob + globals.light_select_prob {
         let n = globals.light_count;
         let t = (u_select - globals.env_select_prob) / globals.light_select_prob;
-        let l = &flat.lights[((t * n as f32) as u32).min(n - 1) as usize];
+        let index = ((t * n as f32) as u32).min(n - 1);
+        let l = &flat.lights[index as usize];
+        if l.tex != NO_PARAM || l.kind == LIGHT_PROJECTOR {
+            let (uv, factor) = light_lookup(l, x);
+            if !(factor > 0.0 && factor < f32::MAX) {
+                return None;
+            }
+            return Some(EmitterSample {
+                point: l.position,
+                radiance: light_tint(flat, l, uv) * factor,
+                param: LIGHT_SLOT | index,
+                delta: true,
+                factor,
+                pdf: globals.light_select_prob / n as f32,
+                ..none
+            });
+        }
         let (point, factor) = if l.kind == LIGHT_DIRECTIONAL {
             (-l.axis, 1.0)
         } else {

@@ -9,12 +9,12 @@ use crate::bsdf::{bsdf_eval, bsdf_pdf, bsdf_sample};
 use crate::bvh::{Ray, closest_hit, occluded};
 use crate::contract::{
     DIM_DIFF_SIGN, DIM_DIRECTION, DIM_EMITTER_POS, DIM_EMITTER_SELECT, DIM_ENV_CELL, DIM_LOBE, DIM_PIXEL_JITTER,
-    DIM_ROULETTE, DIM_TECHNIQUE, Globals, LENS_ORTHOGRAPHIC, LENS_THIN, MAT_BLEND, MAT_NULL, MAT_ROUGH_CONDUCTOR,
-    MAT_ROUGH_DIELECTRIC, MAT_ROUGH_PLASTIC, MAX_NULL_CROSSINGS, NO_EMITTER, NO_MEDIUM, NO_PARAM, PLACEMENT_POWER,
-    STRATEGY_DIFF, ViewCamera,
+    DIM_ROULETTE, DIM_TECHNIQUE, Globals, LENS_ORTHOGRAPHIC, LENS_THIN, LIGHT_SLOT, MAT_BLEND, MAT_NULL,
+    MAT_ROUGH_CONDUCTOR, MAT_ROUGH_DIELECTRIC, MAT_ROUGH_PLASTIC, MAX_NULL_CROSSINGS, NO_EMITTER, NO_MEDIUM, NO_PARAM,
+    PLACEMENT_POWER, STRATEGY_DIFF, ViewCamera,
 };
 use crate::cpu::emitter::{
-    EmitterSample, emitter_pdf_solid_angle, env_backward, env_radiance, environment_pdf, sample_emitter,
+    EmitterSample, emitter_pdf_solid_angle, env_backward, env_radiance, environment_pdf, light_backward, sample_emitter,
 };
 use crate::cpu::medium;
 use crate::cpu::surface::{
@@ -260,8 +260,14 @@ fn env_cell_uniforms(globals: &Globals, key: RngKey, pixel: u32, sample: u32, ve
 }
 
 /// Adds `g` times the derivative of NEE's emitter sample's radiance to `sink`.
-fn emitter_backward(globals: &Globals, es: &EmitterSample, g: Vec3, sink: &mut GradSink<'_>) {
-    if es.environment { env_backward(globals, es.point, g, sink) } else { sink.add_rgb(es.param, g * es.factor) }
+fn emitter_backward(flat: &FlatScene, globals: &Globals, es: &EmitterSample, g: Vec3, sink: &mut GradSink<'_>) {
+    if es.environment {
+        env_backward(globals, es.point, g, sink)
+    } else if es.delta && es.param & LIGHT_SLOT != 0 {
+        light_backward(flat, &flat.lights[(es.param & !LIGHT_SLOT) as usize], es.from, g * es.factor, sink)
+    } else {
+        sink.add_rgb(es.param, g * es.factor)
+    }
 }
 
 /// One camera path of `view` through `pixel` (row-major index) for sample `sample`: its radiance (primal,
@@ -398,7 +404,7 @@ pub fn trace_path<const ADJOINT: bool>(
                                 counters,
                                 Some((&mut *sink, adj)),
                             );
-                            emitter_backward(globals, &es, adj_radiance * throughput * tr * w_n * f / p_e, sink);
+                            emitter_backward(flat, globals, &es, adj_radiance * throughput * tr * w_n * f / p_e, sink);
                         }
                     }
                 }
@@ -568,7 +574,7 @@ pub fn trace_path<const ADJOINT: bool>(
                 if ADJOINT {
                     let adj = adj_radiance * throughput * tr * w_n * es.radiance / p_e;
                     bsdf_backward(flat, s.material, s.uv, &bsdf, wi, wo, false, adj, sink);
-                    emitter_backward(globals, &es, adj_radiance * throughput * tr * w_n * f / p_e, sink);
+                    emitter_backward(flat, globals, &es, adj_radiance * throughput * tr * w_n * f / p_e, sink);
                 }
             }
         }

@@ -64,6 +64,9 @@ pub fn scene_features(flat: &FlatScene, env_param: u32) -> u32 {
     if !flat.lights.is_empty() {
         f |= F_LIGHTS;
     }
+    if flat.lights.iter().any(crate::scene::flat::light_textured) {
+        f |= F_LIGHT_TEXTURE;
+    }
     if !flat.media.is_empty() {
         f |= F_MEDIA;
     }
@@ -136,8 +139,10 @@ pub fn param_kinds(flat: &FlatScene, env: (u32, u32), begin: u32, end: u32) -> P
             k = k.union(ParamKinds::WEIGHT);
         }
     }
-    if flat.emitters.iter().any(|e| overlaps(e.p_radiance, 3)) || flat.lights.iter().any(|l| overlaps(l.p_intensity, 3))
-    {
+    let light = |l: &crate::contract::DeltaLight| {
+        overlaps(l.p_intensity, 3) || overlaps(l.p_scale, 1) || overlaps(l.tex, 3 * l.tex_width * l.tex_height)
+    };
+    if flat.emitters.iter().any(|e| overlaps(e.p_radiance, 3)) || flat.lights.iter().any(light) {
         k = k.union(ParamKinds::EMISSION);
     }
     if overlaps(env.0, env.1) {
@@ -179,7 +184,7 @@ pub fn request_features(scene: u32, options: &RenderOptions, kinds: ParamKinds) 
 
 /// A short human-readable name of a variant, for logs: `nee env diffuse conductor[beckmann] ∂alpha`.
 pub fn describe(features: u32) -> String {
-    const NAMES: [(u32, &str); 29] = [
+    const NAMES: [(u32, &str); 30] = [
         (F_NEE, "nee"),
         (F_ENV, "env"),
         (F_EMITTERS, "emitters"),
@@ -202,6 +207,7 @@ pub fn describe(features: u32) -> String {
         (F_NORMAL_MAP, "normal-map"),
         (F_PARAM_TEXTURE, "scalar-texture"),
         (F_MASK, "mask"),
+        (F_LIGHT_TEXTURE, "light-texture"),
         (G_COLOR, "∂color"),
         (G_TEXTURE, "∂texture"),
         (G_ALPHA, "∂alpha"),

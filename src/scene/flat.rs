@@ -11,11 +11,11 @@ use crate::bsdf::specular::SmoothKind;
 use crate::bvh::{self, Bvh};
 use crate::contract::{
     COATING_TABLE_LEN, DIST_GGX, DeltaLight, EmitterTri, EnvCell, FIELD_CONSTANT, FIELD_GRID, FIELD_GRID_MIRROR,
-    FIELD_GRID_REPEAT, FieldDesc, LIGHT_DIRECTIONAL, LIGHT_POINT, LIGHT_SPOT, MAT_BLEND, MAT_CONDUCTOR, MAT_DIELECTRIC,
-    MAT_DIFFUSE, MAT_NULL, MAT_PLASTIC, MAT_ROUGH_CONDUCTOR, MAT_ROUGH_DIELECTRIC, MAT_ROUGH_PLASTIC,
-    MAT_THIN_DIELECTRIC, Material as GpuMaterial, MediumDesc, MeshShading, NMAP_BUMP, NO_ARRAY, NO_EMITTER, NO_MEDIUM,
-    NO_PARAM, PHASE_HG, PHASE_ISOTROPIC, SCALAR_TEXTURE, TEX_CHECKER, TEX_NEAREST, TEX_WRAP_CLAMP, TEX_WRAP_MIRROR,
-    TriVertices,
+    FIELD_GRID_REPEAT, FieldDesc, LIGHT_DIRECTIONAL, LIGHT_POINT, LIGHT_PROJECTOR, LIGHT_SPOT, MAT_BLEND,
+    MAT_CONDUCTOR, MAT_DIELECTRIC, MAT_DIFFUSE, MAT_NULL, MAT_PLASTIC, MAT_ROUGH_CONDUCTOR, MAT_ROUGH_DIELECTRIC,
+    MAT_ROUGH_PLASTIC, MAT_THIN_DIELECTRIC, Material as GpuMaterial, MediumDesc, MeshShading, NMAP_BUMP, NO_ARRAY,
+    NO_EMITTER, NO_MEDIUM, NO_PARAM, PHASE_HG, PHASE_ISOTROPIC, SCALAR_TEXTURE, TEX_CHECKER, TEX_NEAREST,
+    TEX_WRAP_CLAMP, TEX_WRAP_MIRROR, TriVertices,
 };
 use crate::error::Result;
 use crate::params::ParamId;
@@ -327,7 +327,7 @@ pub(crate) fn uv_count(scene: &Scene) -> usize {
 
 /// The kernels' form of a light without area.
 fn flatten_light(scene: &Scene, light: &Light) -> DeltaLight {
-    let p_intensity = scene.params.entry(light.intensity).offset;
+    let p_intensity = light.intensity.map_or(NO_PARAM, |p| scene.params.entry(p).offset);
     let mut d = DeltaLight {
         kind: LIGHT_POINT,
         p_intensity,
@@ -337,12 +337,31 @@ fn flatten_light(scene: &Scene, light: &Light) -> DeltaLight {
         cos_beam: -1.0,
         cutoff: std::f32::consts::PI,
         inv_transition: 0.0,
+        tex: NO_PARAM,
+        tex_width: 0,
+        tex_height: 0,
+        tex_mode: 0,
+        p_scale: NO_PARAM,
+        uv_scale: Vec2::ZERO,
+        row0: Vec3::X,
+        row1: Vec3::Y,
+        row2: Vec3::Z,
+    };
+    if let Some(t) = light.texture {
+        let t = &scene.textures[t.0 as usize];
+        d.tex = scene.params.entry(t.texels).offset;
+        (d.tex_width, d.tex_height, d.tex_mode) = (t.width, t.height, texture_mode(t.nearest, t.wrap));
+    }
+    let rows = |m: glam::Mat3| {
+        let t = m.transpose();
+        (t.x_axis, t.y_axis, t.z_axis)
     };
     match light.shape {
         LightShape::Point { position } => d.position = position,
-        LightShape::Spot { position, axis, cutoff, beam_width } => {
+        LightShape::Spot { position, axis, cutoff, beam_width, to_local } => {
             // Mitsuba's spot: its radians, cosines and slope from the angles in degrees.
             let (cutoff, beam) = (cutoff.to_radians(), beam_width.to_radians());
+            let (row0, row1, row2) = rows(to_local);
             d = DeltaLight {
                 kind: LIGHT_SPOT,
                 position,
@@ -352,12 +371,35 @@ fn flatten_light(scene: &Scene, light: &Light) -> DeltaLight {
                 cutoff,
                 // Unused when the beam fills the cone (every lit direction is within the beam).
                 inv_transition: if cutoff > beam { 1.0 / (cutoff - beam) } else { 0.0 },
+                uv_scale: Vec2::splat(0.5 / cutoff.tan()),
+                row0,
+                row1,
+                row2,
                 ..d
             };
         }
         LightShape::Directional { direction } => d = DeltaLight { kind: LIGHT_DIRECTIONAL, axis: direction, ..d },
+        LightShape::Projector { position, to_local, normal, uv_scale, scale } => {
+            let (row0, row1, row2) = rows(to_local);
+            d = DeltaLight {
+                kind: LIGHT_PROJECTOR,
+                position,
+                axis: normal,
+                p_scale: scene.params.entry(scale).offset,
+                uv_scale,
+                row0,
+                row1,
+                row2,
+                ..d
+            };
+        }
     }
     d
+}
+
+/// Whether `light` needs the kernels' `F_LIGHT_TEXTURE` part: a texture or a projector.
+pub fn light_textured(light: &DeltaLight) -> bool {
+    light.tex != NO_PARAM || light.kind == LIGHT_PROJECTOR
 }
 
 /// The sampling cells of `scene`'s environment map, if it has one.

@@ -13,7 +13,7 @@ pub mod scalar_texture;
 pub mod shapes;
 pub mod volume;
 
-use glam::{Vec2, Vec3};
+use glam::{Mat3, Vec2, Vec3};
 
 use crate::bsdf::Distribution;
 use crate::error::{Error, Result};
@@ -51,14 +51,18 @@ pub struct Texture {
     pub to_uv: [Vec3; 2],
 }
 
-/// A light without area (Mitsuba's `point`, `spot` and `directional`): next-event estimation
-/// reaches it, no ray can hit it.
+/// A light without area (Mitsuba's `point`, `spot`, `directional` and `projector`): next-event
+/// estimation reaches it, no ray can hit it.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Light {
     /// Where and how it shines.
     pub shape: LightShape,
-    /// The RGB intensity (point, spot: W/sr) or irradiance (directional) parameter.
-    pub intensity: ParamId,
+    /// The RGB intensity (point, spot: W/sr) or irradiance (directional; a projector's constant
+    /// `irradiance`) parameter; `None` for a projector whose irradiance is its texture.
+    pub intensity: Option<ParamId>,
+    /// A spot's projected `texture` (multiplying its intensity) or a projector's `irradiance`
+    /// bitmap, looked up as [`LightShape::Spot`] and [`LightShape::Projector`] say.
+    pub texture: Option<TextureId>,
 }
 
 /// The geometry of a [`Light`].
@@ -80,6 +84,26 @@ pub enum LightShape {
         cutoff: f32,
         /// Beam width in degrees, in (0, cutoff].
         beam_width: f32,
+        /// The linear part of `to_world`⁻¹: a world offset from `position` into the light's frame,
+        /// whose +z is `axis`. A texture is looked up at u = ½ + ½ x / (z tan(cutoff)), v = ½ +
+        /// ½ y / (z tan(cutoff)) of the local offset (x, y, z) toward the lit point.
+        to_local: Mat3,
+    },
+    /// Mitsuba's `projector`: a pinhole at `position` that projects its irradiance (a texture or
+    /// a constant) through a perspective frustum, irradiance · π · scale / (z² cos θ) toward the
+    /// lit point at local (x, y, z), where cos θ = `normal` · (unit direction from `position`).
+    Projector {
+        /// Position.
+        position: Vec3,
+        /// The linear part of `to_world`⁻¹.
+        to_local: Mat3,
+        /// `to_world` · (0, 0, 1), not normalised.
+        normal: Vec3,
+        /// The lookup at u = ½ + uv_scale.x · x / z, v = ½ + uv_scale.y · y / z; light only where
+        /// both lie in [0, 1] and z > 0.
+        uv_scale: Vec2,
+        /// The parameter `scale` (one value).
+        scale: ParamId,
     },
     /// Irradiance arriving along the unit `direction` (the way the light travels), everywhere.
     Directional {
@@ -732,6 +756,22 @@ impl Scene {
     /// # Errors
     /// [`Error::Scene`] if the texel count is not `width × height × 3` or a texel is outside [0, 1].
     pub fn add_texture(&mut self, name: &str, width: u32, height: u32, texels: &[f32]) -> Result<TextureId> {
+        self.add_texture_in(name, width, height, texels, bounds::REFLECTANCE)
+    }
+
+    /// As [`Scene::add_texture`], the texels' parameter bounded by `range` (an emitter's texture:
+    /// [`bounds::RADIANCE`]).
+    ///
+    /// # Errors
+    /// As [`Scene::add_texture`].
+    pub fn add_texture_in(
+        &mut self,
+        name: &str,
+        width: u32,
+        height: u32,
+        texels: &[f32],
+        range: (f32, f32),
+    ) -> Result<TextureId> {
         if width == 0 || height == 0 || texels.len() != width as usize * height as usize * 3 {
             return Err(Error::Scene {
                 location: format!("texture {name}"),
@@ -742,7 +782,7 @@ impl Scene {
                 ),
             });
         }
-        let texels = self.params.add(name, texels, bounds::REFLECTANCE)?;
+        let texels = self.params.add(name, texels, range)?;
         self.textures.push(Texture {
             width,
             height,
@@ -862,8 +902,8 @@ impl Scene {
             let unit = |v: Vec3| v.is_finite() && (v.length() - 1.0).abs() < 1e-4;
             match l.shape {
                 LightShape::Point { position } if !position.is_finite() => return bad("non-finite position"),
-                LightShape::Spot { position, axis, cutoff, beam_width } => {
-                    if !position.is_finite() || !unit(axis) {
+                LightShape::Spot { position, axis, cutoff, beam_width, to_local } => {
+                    if !position.is_finite() || !unit(axis) || !to_local.is_finite() {
                         return bad("non-finite position or an axis that is not a unit vector");
                     }
                     if !(cutoff > 0.0 && cutoff <= 90.0 && beam_width > 0.0 && beam_width <= cutoff) {
@@ -873,10 +913,30 @@ impl Scene {
                 LightShape::Directional { direction } if !unit(direction) => {
                     return bad("a direction that is not a unit vector");
                 }
+                LightShape::Projector { position, to_local, normal, uv_scale, scale } => {
+                    if !(position.is_finite() && to_local.is_finite() && normal.is_finite() && uv_scale.is_finite()) {
+                        return bad("a non-finite projector frame");
+                    }
+                    if self.params.entry(scale).len != 1 {
+                        return bad("its scale is not one value");
+                    }
+                }
                 _ => {}
             }
-            if self.params.entry(l.intensity).len != 3 {
-                return bad("its intensity is not one RGB value");
+            match l.intensity {
+                Some(p) if self.params.entry(p).len != 3 => return bad("its intensity is not one RGB value"),
+                None if !matches!(l.shape, LightShape::Projector { .. }) || l.texture.is_none() => {
+                    return bad("only a textured projector has no intensity");
+                }
+                _ => {}
+            }
+            if let Some(t) = l.texture {
+                if t.0 as usize >= self.textures.len() {
+                    return bad("a texture that does not exist");
+                }
+                if !matches!(l.shape, LightShape::Spot { .. } | LightShape::Projector { .. }) {
+                    return bad("only a spot or a projector has a texture");
+                }
             }
         }
         for (i, m) in self.materials.iter().enumerate() {

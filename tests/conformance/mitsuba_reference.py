@@ -199,6 +199,13 @@ MATRIX = {
                                                      "directional (direction)", "NEE only"],
                                            grads=["bulb.intensity.value", "lamp.intensity.value",
                                                   "sun.irradiance.value"]),
+    # Textured lights (issue 31): a spot's projected bitmap, projectors of a bitmap and of a constant.
+    "emitter_spot_texture": dict(features=["spot texture (bitmap sRGB, bilinear)", "uv = ½ + ½ x / (z tan(cutoff))",
+                                           "NEE only"],
+                                 grads=["lamp.texture.data", "lamp.intensity.value"]),
+    "emitter_projector": dict(features=["projector irradiance bitmap (nearest, 3:2)", "projector constant irradiance",
+                                        "scale", "fov along x, fov_axis y", "NEE only"],
+                              grads=["slide.irradiance.data", "slide.scale", "flood.irradiance.value"]),
     # ---- shape
     "shape_obj_smooth": dict(features=["obj", "vertex normals"], grads=["mesh.bsdf.reflectance.value"]),
     "shape_obj_no_normals": dict(features=["obj without normals (smooth, angle-weighted)", "quads", "non-uniform scale"],

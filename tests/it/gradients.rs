@@ -119,7 +119,41 @@ fn adjoint_pattern(w: u32, h: u32) -> Image {
 #[test]
 fn image_gradients_gpu_equal_cpu_per_path() {
     let gpu = TestGpu::new();
-    for (scene, params) in cases() {
+    image_gradients_agree(&gpu, cases());
+}
+
+/// The textured lights of issue 31 (a spot's texture, projectors of a bitmap and of a constant):
+/// their primal images per path and their image gradients as
+/// [`image_gradients_gpu_equal_cpu_per_path`] compares the rest.
+#[test]
+fn issue_31_textured_lights_gpu_equal_cpu_per_path() {
+    let gpu = TestGpu::new();
+    for (scene, _) in textured_light_cases() {
+        let opts = RenderOptions { width: 48, height: 48, spp: 1, seed: 3, ..RenderOptions::for_scene(&scene) };
+        let g = Renderer::new(&gpu.ctx, &scene).unwrap().render(&opts).unwrap();
+        let c = pathgrad::cpu::render(&scene, &opts).unwrap();
+        let mismatched = crate::support::count_mismatches(&g, &c, 1e-4);
+        let lit = c.as_slice().iter().filter(|v| **v > 0.0).count();
+        println!("{}: {mismatched} of {} values differ ({lit} lit)", scene.source, g.as_slice().len());
+        assert!(lit > 0 && mismatched as f64 <= 1e-3 * g.as_slice().len() as f64, "{}", scene.source);
+    }
+    image_gradients_agree(&gpu, textured_light_cases());
+}
+
+/// The scenes and parameters of the textured lights (issue 31).
+fn textured_light_cases() -> Vec<(Scene, Vec<&'static str>)> {
+    vec![
+        (scenes::conformance("emitter_spot_texture"), vec!["lamp.texture.data", "lamp.intensity.value"]),
+        (
+            scenes::conformance("emitter_projector"),
+            vec!["slide.irradiance.data", "slide.scale", "flood.irradiance.value"],
+        ),
+    ]
+}
+
+/// Per pixel and channel, GPU and CPU forward-mode gradients of `cases` agree (one path a pixel).
+fn image_gradients_agree(gpu: &TestGpu, cases: Vec<(Scene, Vec<&'static str>)>) {
+    for (scene, params) in cases {
         let opts = RenderOptions { width: 48, height: 48, spp: 1, seed: 5, ..RenderOptions::for_scene(&scene) };
         let mut renderer = Renderer::new(&gpu.ctx, &scene).unwrap();
         for name in params {
@@ -245,6 +279,18 @@ fn issue_31_mask_opacity_matches_finite_differences() {
             (scenes::conformance("texture_mask_opacity"), "fence.bsdf.opacity.color0.value"),
         ],
     );
+}
+
+/// The textured lights' intensity, texels, scale and constant irradiance (issue 31) against
+/// central finite differences.
+#[test]
+fn issue_31_textured_lights_match_finite_differences() {
+    let gpu = TestGpu::new();
+    let checks = textured_light_cases()
+        .into_iter()
+        .flat_map(|(scene, params)| params.into_iter().map(move |p| (scene.clone(), p)))
+        .collect();
+    check_finite_differences(&gpu, checks);
 }
 
 /// The Welch comparison of [`gradients_match_finite_differences`] on each (scene, parameter).

@@ -148,7 +148,11 @@ impl Loader<'_> {
                 // to 0 at the outer one (glTF suggests a falloff in cos; documented).
                 let cutoff = outer.to_degrees();
                 let beam_width = inner.to_degrees().max(MIN_BEAM_WIDTH_DEGREES);
-                (LightShape::Spot { position, axis, cutoff, beam_width }, "intensity")
+                // The frame matters only to a texture (glTF's lights have none): the node's axes,
+                // z turned to the axis (the node's −z).
+                let to_local =
+                    glam::Mat3::from_diagonal(Vec3::new(1.0, 1.0, -1.0)) * glam::Mat3::from_mat4(*world).inverse();
+                (LightShape::Spot { position, axis, cutoff, beam_width, to_local }, "intensity")
             }
             Checked::Valid(Type::Directional) => (LightShape::Directional { direction: axis }, "irradiance"),
             Checked::Invalid => return Err(self.error(&at, "unknown light type")),
@@ -156,7 +160,7 @@ impl Loader<'_> {
         let name = &self.node_names[node];
         let value = colour * light.intensity;
         let intensity = self.scene.params.add(&format!("{name}.{what}.value"), &value.to_array(), bounds::RADIANCE)?;
-        self.scene.lights.push(Light { shape, intensity });
+        self.scene.lights.push(Light { shape, intensity: Some(intensity), texture: None });
         Ok(())
     }
 

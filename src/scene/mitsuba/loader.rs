@@ -598,8 +598,8 @@ impl<'a> Loader<'a> {
     }
 
     /// Mitsuba 3.9.1's `direct` integrator adds each of its `emitter_samples` light samples with
-    /// weight 1 when the light is a point, spot or directional one (its MIS weight there omits the
-    /// 1/`emitter_samples` factor it applies to area lights), so Mitsuba renders those lights
+    /// weight 1 when the light is a point, spot, directional or projector one (its MIS weight there
+    /// omits the 1/`emitter_samples` factor it applies to area lights), so Mitsuba renders those lights
     /// `emitter_samples` times too bright. pathgrad renders the correct expectation; it says so.
     fn direct_delta_warning(&mut self) {
         let Some((n, node)) = self.direct_emitter_samples else { return };
@@ -609,9 +609,9 @@ impl<'a> Loader<'a> {
         let w = self.x.warning(
             node,
             format!(
-                "emitter_samples = {n}: Mitsuba 3.9.1's 'direct' integrator adds every sample of a point, spot or \
-                 directional light with weight 1 instead of 1/{n}, so Mitsuba renders their light {n}× too bright; \
-                 pathgrad renders the correct image (not Mitsuba's)"
+                "emitter_samples = {n}: Mitsuba 3.9.1's 'direct' integrator adds every sample of a point, spot, \
+                 directional or projector light with weight 1 instead of 1/{n}, so Mitsuba renders their light {n}× \
+                 too bright; pathgrad renders the correct image (not Mitsuba's)"
             ),
         );
         self.scene.warn(w);
@@ -816,7 +816,7 @@ impl<'a> Loader<'a> {
         let p = Props::parse(&self.x, node)?;
         match p.kind.as_str() {
             "constant" | "envmap" => {}
-            "point" | "spot" | "directional" => {
+            "point" | "spot" | "directional" | "projector" => {
                 let name = self.top_name(node)?;
                 self.light(&p, &name)?;
                 return self.finish(&p);
@@ -826,8 +826,8 @@ impl<'a> Loader<'a> {
                 return Err(self.x.err(
                     node,
                     format!(
-                        "unsupported plugin '{other}' (supported: constant, directional, envmap, point, spot; area \
-                         inside a <shape>)"
+                        "unsupported plugin '{other}' (supported: constant, directional, envmap, point, projector, \
+                         spot; area inside a <shape>)"
                     ),
                 ));
             }
@@ -853,9 +853,14 @@ impl<'a> Loader<'a> {
     fn light(&mut self, p: &Props<'a>, name: &str) -> Result<()> {
         use crate::scene::{Light, LightShape};
         let kind = p.kind.as_str();
-        if let Some(t) = p.object("texture") {
-            return Err(self.x.err(t, format!("a textured '{kind}' is not supported")));
+        if kind == "projector" {
+            return self.projector(p, name);
         }
+        let texture = match p.object("texture") {
+            Some(t) if kind == "spot" => Some(self.light_texture(t, format!("{name}.texture"), kind)?),
+            Some(t) => return Err(self.x.err(t, format!("a textured '{kind}' is not supported"))),
+            None => None,
+        };
         let to_world = p.transform(&self.x, "to_world")?;
         // `position` / `direction` and `to_world` are exclusive (Mitsuba refuses both).
         let exclusive = |other: &str| -> Result<()> {
@@ -886,7 +891,8 @@ impl<'a> Loader<'a> {
                         format!("'spot' needs 0 < beam_width ≤ cutoff_angle, got {beam_width} and {cutoff}"),
                     ));
                 }
-                LightShape::Spot { position: matrix.w_axis.truncate(), axis, cutoff, beam_width }
+                let to_local = glam::Mat3::from_mat4(matrix).inverse();
+                LightShape::Spot { position: matrix.w_axis.truncate(), axis, cutoff, beam_width, to_local }
             }
             _ => {
                 exclusive("direction")?;
@@ -911,8 +917,95 @@ impl<'a> Loader<'a> {
         let value = self.radiance_in(p, what, Vec3::ONE, bounds::RADIANCE)?;
         let intensity = self.scene.params.add(&format!("{name}.{what}.value"), &value.to_array(), bounds::RADIANCE);
         let intensity = intensity.map_err(|e| self.located(p.node, e))?;
-        self.scene.lights.push(Light { shape, intensity });
+        self.scene.lights.push(Light { shape, intensity: Some(intensity), texture });
         Ok(())
+    }
+
+    /// Mitsuba's `projector`: `irradiance` (a constant, parameter `NAME.irradiance.value`, or a
+    /// `bitmap`, texels `NAME.irradiance.data`), `scale` (1, parameter `NAME.scale`), `fov` with
+    /// `fov_axis` or `focal_length` over the texture's aspect ratio (a constant's is 1), and
+    /// `to_world` (it looks along its +z).
+    fn projector(&mut self, p: &Props<'a>, name: &str) -> Result<()> {
+        use crate::scene::{Light, LightShape};
+        let (texture, intensity, (width, height)) = match p.object("irradiance") {
+            Some(t) => {
+                let t = self.light_texture(t, format!("{name}.irradiance"), "projector")?;
+                let tex = &self.scene.textures[t.0 as usize];
+                (Some(t), None, (tex.width, tex.height))
+            }
+            None => {
+                let value = self.radiance_in(p, "irradiance", Vec3::ONE, bounds::RADIANCE)?;
+                let irradiance =
+                    self.scene.params.add(&format!("{name}.irradiance.value"), &value.to_array(), bounds::RADIANCE);
+                (None, Some(irradiance.map_err(|e| self.located(p.node, e))?), (1, 1))
+            }
+        };
+        let scale = self.float_in(p, "scale", Some(1.0), (0.0, f32::MAX))?;
+        let scale = self.scene.params.add(&format!("{name}.scale"), &[scale], bounds::RADIANCE);
+        let scale = scale.map_err(|e| self.located(p.node, e))?;
+        // Mitsuba's perspective_projection over the texture's resolution: u = ½ − ½ cot x / z,
+        // v = ½ − ½ aspect cot y / z, cot = 1 / tan(fov_x / 2).
+        let fov_y = self.fov_y(p, width, height)?;
+        let aspect = width as f32 / height as f32;
+        let cot = 1.0 / ((fov_y * 0.5).to_radians().tan() * aspect);
+        let uv_scale = glam::Vec2::new(-0.5 * cot, -0.5 * aspect * cot);
+        let matrix = p.transform(&self.x, "to_world")?.map_or(glam::Mat4::IDENTITY, |(t, _)| t.matrix);
+        let shape = LightShape::Projector {
+            position: matrix.w_axis.truncate(),
+            to_local: glam::Mat3::from_mat4(matrix).inverse(),
+            normal: matrix.transform_vector3(Vec3::Z),
+            uv_scale,
+            scale,
+        };
+        self.scene.lights.push(Light { shape, intensity, texture });
+        Ok(())
+    }
+
+    /// The texture `node` of a light (`kind`: a spot's `texture`, a projector's `irradiance`): a
+    /// `bitmap` without `to_uv`, its texels (any value ≥ 0) the parameter `NAME.data`.
+    ///
+    /// # Errors
+    /// Another plugin, a `to_uv`, a negative texel, and what [`Loader::bitmap`] refuses.
+    fn light_texture(&mut self, node: El<'a>, name: String, kind: &str) -> Result<crate::scene::TextureId> {
+        let target = self.deref(node)?;
+        if !target.has_tag_name("texture") {
+            return Err(self.x.err(node, format!("refers to a <{}>, expected a <texture>", target.tag_name().name())));
+        }
+        let name = self.name_of(target, name)?;
+        let p = Props::parse(&self.x, target)?;
+        if p.kind != "bitmap" {
+            return Err(self.x.err(
+                target,
+                format!(
+                    "the texture of a '{kind}' must be a 'bitmap' (pathgrad reads no other here), got '{}'",
+                    p.kind
+                ),
+            ));
+        }
+        let bitmap = self.bitmap(&p, target, "")?;
+        if let Some((_, n)) = p.transform(&self.x, "to_uv")? {
+            return Err(self.x.err(n, format!("'to_uv' of the texture of a '{kind}' is not supported")));
+        }
+        if let Some(i) = bitmap.texels.iter().position(|v| *v < 0.0) {
+            let texel = i / 3;
+            return Err(self.x.err(
+                target,
+                format!(
+                    "texel ({}, {}) of the texture of a '{kind}' is negative ({})",
+                    texel % bitmap.width as usize,
+                    texel / bitmap.width as usize,
+                    bitmap.texels[i]
+                ),
+            ));
+        }
+        let t = self
+            .scene
+            .add_texture_in(&format!("{name}.data"), bitmap.width, bitmap.height, &bitmap.texels, bounds::RADIANCE)
+            .map_err(|e| self.located(target, e))?;
+        let texture = &mut self.scene.textures[t.0 as usize];
+        (texture.nearest, texture.wrap) = (bitmap.nearest, bitmap.wrap);
+        self.finish(&p)?;
+        Ok(t)
     }
 
     /// Mitsuba's `envmap`: a latitude-longitude image (EXR, HDR, or PNG and other 8-bit formats,

@@ -165,53 +165,7 @@ impl<'a> Loader<'a> {
             p.float(&self.x, "focus_distance")?;
             Lens::Pinhole
         };
-        let axis = match p.string(&self.x, "fov_axis")? {
-            None => FovAxis::X,
-            Some((s, n)) => match s.to_ascii_lowercase().as_str() {
-                "x" => FovAxis::X,
-                "y" => FovAxis::Y,
-                "diagonal" => FovAxis::Diagonal,
-                "smaller" => FovAxis::Smaller,
-                "larger" => FovAxis::Larger,
-                _ => {
-                    return Err(self
-                        .x
-                        .err(n, format!("unknown fov_axis '{s}' (supported: x, y, diagonal, smaller, larger)")));
-                }
-            },
-        };
-        let fov = p.float(&self.x, "fov")?;
-        let focal = p.string(&self.x, "focal_length")?;
-        let fov_y = match (fov, focal) {
-            (Some(_), Some((_, n))) => {
-                return Err(self.x.err(n, "give either 'fov' or 'focal_length', not both"));
-            }
-            (Some((f, n)), None) => {
-                if !(f > 0.0 && f < 180.0) {
-                    return Err(self.x.err(n, format!("'fov' must lie in (0, 180) degrees, got {f}")));
-                }
-                vertical_fov(f, axis, width, height)
-            }
-            (None, focal) => {
-                let mm = match focal {
-                    None => DEFAULT_FOCAL_LENGTH_MM,
-                    Some((s, n)) => {
-                        let digits = s.trim().trim_end_matches("mm");
-                        match digits.trim().parse::<f32>() {
-                            Ok(v) if v.is_finite() && v > 0.0 => v,
-                            _ => {
-                                return Err(self.x.err(
-                                    n,
-                                    format!("'focal_length' must be a positive length like '50mm', got '{s}'"),
-                                ));
-                            }
-                        }
-                    }
-                };
-                let diagonal_fov = 2.0 * (FILM_DIAGONAL_MM / (2.0 * mm)).atan().to_degrees();
-                vertical_fov(diagonal_fov, FovAxis::Diagonal, width, height)
-            }
-        };
+        let fov_y = self.fov_y(&p, width, height)?;
         let mut clips = Vec::new();
         for (clip, default) in [("near_clip", MITSUBA_NEAR_CLIP), ("far_clip", MITSUBA_FAR_CLIP)] {
             let (depth, warning) = match p.float(&self.x, clip)? {
@@ -255,6 +209,61 @@ impl<'a> Loader<'a> {
     /// spans x ∈ [−1, 1] and y ∈ [−1/aspect, 1/aspect] of `to_world`'s frame (so its x and y
     /// scales size it) on the plane `near_clip` ahead; pathgrad starts rays there as Mitsuba does,
     /// and renders beyond `far_clip` (with a warning where that matters).
+    /// The vertical field of view (degrees) that `p`'s Mitsuba `fov` and `fov_axis`, or its
+    /// `focal_length` (35 mm film, 50 mm by default), give a `width × height` image.
+    ///
+    /// # Errors
+    /// An unknown `fov_axis`, both `fov` and `focal_length`, values out of range.
+    pub(super) fn fov_y(&self, p: &Props<'a>, width: u32, height: u32) -> Result<f32> {
+        let axis = match p.string(&self.x, "fov_axis")? {
+            None => FovAxis::X,
+            Some((s, n)) => match s.to_ascii_lowercase().as_str() {
+                "x" => FovAxis::X,
+                "y" => FovAxis::Y,
+                "diagonal" => FovAxis::Diagonal,
+                "smaller" => FovAxis::Smaller,
+                "larger" => FovAxis::Larger,
+                _ => {
+                    return Err(self
+                        .x
+                        .err(n, format!("unknown fov_axis '{s}' (supported: x, y, diagonal, smaller, larger)")));
+                }
+            },
+        };
+        let fov = p.float(&self.x, "fov")?;
+        let focal = p.string(&self.x, "focal_length")?;
+        Ok(match (fov, focal) {
+            (Some(_), Some((_, n))) => {
+                return Err(self.x.err(n, "give either 'fov' or 'focal_length', not both"));
+            }
+            (Some((f, n)), None) => {
+                if !(f > 0.0 && f < 180.0) {
+                    return Err(self.x.err(n, format!("'fov' must lie in (0, 180) degrees, got {f}")));
+                }
+                vertical_fov(f, axis, width, height)
+            }
+            (None, focal) => {
+                let mm = match focal {
+                    None => DEFAULT_FOCAL_LENGTH_MM,
+                    Some((s, n)) => {
+                        let digits = s.trim().trim_end_matches("mm");
+                        match digits.trim().parse::<f32>() {
+                            Ok(v) if v.is_finite() && v > 0.0 => v,
+                            _ => {
+                                return Err(self.x.err(
+                                    n,
+                                    format!("'focal_length' must be a positive length like '50mm', got '{s}'"),
+                                ));
+                            }
+                        }
+                    }
+                };
+                let diagonal_fov = 2.0 * (FILM_DIAGONAL_MM / (2.0 * mm)).atan().to_degrees();
+                vertical_fov(diagonal_fov, FovAxis::Diagonal, width, height)
+            }
+        })
+    }
+
     fn orthographic(&mut self, p: &Props<'a>, film: &Film) -> Result<()> {
         let near = p.float(&self.x, "near_clip")?.map_or(MITSUBA_NEAR_CLIP, |(v, _)| v);
         let far = p.float(&self.x, "far_clip")?;

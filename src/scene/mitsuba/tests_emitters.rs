@@ -119,7 +119,7 @@ fn point_spot_and_directional_lights_take_mitsubas_properties() {
     assert_eq!(scene.lights[0].shape, LightShape::Point { position: Vec3::new(1.0, 2.0, 3.0) });
     assert_eq!(scene.params.get(scene.params.find("bulb.intensity.value").unwrap()), [4.0, 5.0, 6.0]);
     assert_eq!(scene.lights[1].shape, LightShape::Point { position: Vec3::new(-1.0, 0.0, 0.0) });
-    let LightShape::Spot { position, axis, cutoff, beam_width } = scene.lights[2].shape else { panic!() };
+    let LightShape::Spot { position, axis, cutoff, beam_width, .. } = scene.lights[2].shape else { panic!() };
     assert!(position.abs_diff_eq(Vec3::new(0.0, 3.0, 0.0), 1e-6) && axis.abs_diff_eq(-Vec3::Y, 1e-6));
     assert_eq!((cutoff, beam_width), (40.0, 30.0));
     assert_eq!(scene.lights[3].shape, LightShape::Directional { direction: -Vec3::Y });
@@ -149,14 +149,37 @@ fn bad_lights_are_refused_by_name() {
             "'direction' must not be zero",
         ),
         (
-            r#"<emitter type="spot"><texture name="texture" type="bitmap"/></emitter>"#,
-            "a textured 'spot' is not supported",
+            r#"<emitter type="point"><texture name="texture" type="bitmap"/></emitter>"#,
+            "a textured 'point' is not supported",
         ),
         (
-            r#"<emitter type="projector"/>"#,
-            "unsupported plugin 'projector' (supported: constant, directional, envmap, point, spot;",
+            r#"<emitter type="spot"><texture name="texture" type="checkerboard"/></emitter>"#,
+            "the texture of a 'spot' must be a 'bitmap' (pathgrad reads no other here), got 'checkerboard'",
+        ),
+        (
+            r#"<emitter type="projector"><texture name="irradiance" type="checkerboard"/></emitter>"#,
+            "the texture of a 'projector' must be a 'bitmap' (pathgrad reads no other here), got 'checkerboard'",
+        ),
+        (
+            r#"<emitter type="spot"><texture name="texture" type="bitmap"><string name="filename" value="sky.hdr"/>
+                <transform name="to_uv"><scale x="2"/></transform></texture></emitter>"#,
+            "'to_uv' of the texture of a 'spot' is not supported",
+        ),
+        (
+            r#"<emitter type="projector"><texture name="irradiance" type="bitmap"><string name="filename" value="no.png"/></texture></emitter>"#,
+            "image file 'no.png' not found",
+        ),
+        (
+            r#"<emitter type="projector"><float name="fov" value="180"/></emitter>"#,
+            "'fov' must lie in (0, 180) degrees, got 180",
+        ),
+        (r#"<emitter type="projector"><float name="scale" value="-1"/></emitter>"#, "'scale' must lie in [0, "),
+        (
+            r#"<emitter type="sunsky"/>"#,
+            "unsupported plugin 'sunsky' (supported: constant, directional, envmap, point, projector, spot;",
         ),
     ];
+    write_hdr(&dir.path().join("sky.hdr"));
     for (body, expected) in cases {
         let e = err(dir.path(), body);
         assert!(e.contains(expected), "{body}: {e}");
@@ -179,4 +202,63 @@ fn an_environment_map_from_the_load_options_lights_a_scene_without_one() {
     assert!(e.contains("give a constant environment or a map, not both"), "{e}");
     let e = load(dir.path(), r#"<emitter type="constant" id="sky"/>"#, &options).unwrap_err().to_string();
     assert!(e.contains("the scene has an environment of its own ('sky.radiance.value')"), "{e}");
+}
+
+/// A textured spot and a projector (constant or textured): their parameters under Mitsuba's
+/// `traverse` names and the frustum of the lookup.
+#[test]
+fn textured_spots_and_projectors_take_mitsubas_properties() {
+    use crate::scene::LightShape;
+    let dir = tempfile::tempdir().unwrap();
+    let texels = write_hdr(&dir.path().join("sky.hdr"));
+    let look = r#"<transform name="to_world"><lookat origin="0, 3, 0" target="0, 0, 0" up="0, 0, 1"/></transform>"#;
+    let body = format!(
+        r#"<emitter type="spot" id="lamp">{look}<float name="cutoff_angle" value="30"/>
+            <texture name="texture" type="bitmap"><string name="filename" value="sky.hdr"/></texture></emitter>
+        <emitter type="projector" id="flat">{look}<rgb name="irradiance" value="1, 2, 3"/><float name="fov" value="90"/></emitter>
+        <emitter type="projector" id="slide">{look}<float name="scale" value="2.5"/><float name="fov" value="60"/>
+            <texture name="irradiance" type="bitmap"><string name="filename" value="sky.hdr"/>
+            <string name="filter_type" value="nearest"/></texture></emitter>"#
+    );
+    let scene = load(dir.path(), &body, &LoadOptions::default()).unwrap();
+    let param = |name: &str| scene.params.get(scene.params.find(name).unwrap_or_else(|| panic!("{name}"))).to_vec();
+    assert_eq!(param("lamp.intensity.value"), [1.0; 3]);
+    assert_eq!(param("lamp.texture.data"), texels);
+    assert_eq!(param("flat.irradiance.value"), [1.0, 2.0, 3.0]);
+    assert_eq!(param("flat.scale"), [1.0]);
+    assert_eq!(param("slide.irradiance.data"), texels);
+    assert_eq!(param("slide.scale"), [2.5]);
+    let LightShape::Spot { to_local, .. } = scene.lights[0].shape else { panic!("{:?}", scene.lights[0]) };
+    // The spot's local +z is its axis, −y.
+    assert!((to_local * -Vec3::Y).abs_diff_eq(Vec3::Z, 1e-6), "{to_local}");
+    assert!(scene.lights[0].texture.is_some() && scene.lights[1].texture.is_none());
+    assert!(scene.lights[2].intensity.is_none() && scene.textures[scene.lights[2].texture.unwrap().0 as usize].nearest);
+    // A constant's aspect is 1: cot(45°) = 1 on both axes. The 4 × 3 slide's fov is along x.
+    let LightShape::Projector { uv_scale, normal, position, .. } = scene.lights[1].shape else { panic!() };
+    assert!(uv_scale.abs_diff_eq(glam::Vec2::new(-0.5, -0.5), 1e-6), "{uv_scale}");
+    assert!(normal.abs_diff_eq(-Vec3::Y, 1e-6) && position.abs_diff_eq(Vec3::new(0.0, 3.0, 0.0), 1e-6));
+    let LightShape::Projector { uv_scale, .. } = scene.lights[2].shape else { panic!() };
+    let cot = 1.0 / 30f32.to_radians().tan();
+    assert!(uv_scale.abs_diff_eq(glam::Vec2::new(-0.5 * cot, -0.5 * cot * 4.0 / 3.0), 1e-5), "{uv_scale}");
+    assert!(scene.warnings.is_empty(), "{:?}", scene.warnings);
+}
+
+/// A BMP (Mitsuba's `flower.bmp` of `emitter_projector_textured.xml`) is decoded as sRGB like a PNG.
+#[test]
+fn a_bmp_texture_is_srgb_decoded() {
+    let dir = tempfile::tempdir().unwrap();
+    let pixels: [u8; 6] = [255, 0, 128, 64, 32, 0];
+    let file = std::fs::File::create(dir.path().join("slide.bmp")).unwrap();
+    let mut writer = std::io::BufWriter::new(file);
+    image::codecs::bmp::BmpEncoder::new(&mut writer).encode(&pixels, 2, 1, image::ExtendedColorType::Rgb8).unwrap();
+    drop(writer);
+    let body = r#"<emitter type="projector" id="p"><texture name="irradiance" type="bitmap">
+        <string name="filename" value="slide.bmp"/></texture></emitter>"#;
+    let scene = load(dir.path(), body, &LoadOptions::default()).unwrap();
+    let texels = scene.params.get(scene.params.find("p.irradiance.data").unwrap()).to_vec();
+    let expected: Vec<f32> = pixels.iter().map(|&v| crate::scene::gltf::srgb_to_linear(f32::from(v) / 255.0)).collect();
+    assert_eq!(texels.len(), 6);
+    for (a, b) in texels.iter().zip(&expected) {
+        assert!((a - b).abs() < 1e-6, "{texels:?} vs {expected:?}");
+    }
 }

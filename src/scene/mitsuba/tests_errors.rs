@@ -36,6 +36,19 @@ fn fixtures_give_their_pinned_messages() {
         ),
         ("bad_rgb.xml", "7:13: <rgb name=\"reflectance\">: value: expected a number, got 'x'".into()),
         (
+            "spot_texture_checkerboard.xml",
+            "6:9: <texture name=\"texture\">: the texture of a 'spot' must be a 'bitmap' (pathgrad reads no other \
+             here), got 'checkerboard'"
+                .into(),
+        ),
+        (
+            "projector_missing_image.xml",
+            format!(
+                "7:13: <string name=\"filename\">: image file 'textures/missing.png' not found (looked for \
+                 {d}/textures/missing.png)"
+            ),
+        ),
+        (
             "missing_mesh.xml",
             format!(
                 "6:9: <string name=\"filename\">: mesh file 'meshes/missing.obj' not found (looked for {d}/meshes/missing.obj)"
@@ -389,9 +402,9 @@ fn element_and_property_errors() {
         (r#"<texture type="bitmap"/>"#, "<texture>: 'bitmap' needs the property 'filename'"),
         (r#"<emitter type="area"/>"#, "<emitter>: an 'area' emitter must be nested in a <shape>"),
         (
-            r#"<emitter type="projector"/>"#,
-            "<emitter>: unsupported plugin 'projector' (supported: constant, directional, envmap, point, spot; area \
-             inside a <shape>)",
+            r#"<emitter type="sunsky"/>"#,
+            "<emitter>: unsupported plugin 'sunsky' (supported: constant, directional, envmap, point, projector, \
+             spot; area inside a <shape>)",
         ),
         (
             r#"<emitter type="constant"/><emitter type="constant"/>"#,
