@@ -157,6 +157,16 @@ pub(super) fn resume(args: &OptimizeArgs, dir: &Path, given: &BTreeSet<String>) 
     )?;
     let run = if config.control_variates { super::control::read(dir, run, &table, &ids)? } else { run };
     let run = if config.reuse { super::control::read_reuse(dir, run, &table, &ids)? } else { run };
+    if state.hero.is_none()
+        && state.iteration > 0
+        && config.hero_weights.is_none()
+        && matches!(run.options().render.strategy, pathgrad::integrator::Strategy::Hero { .. })
+    {
+        bail!(
+            "{}: the run adapts its hero weights but the file has no `hero` state to continue them from",
+            path.display()
+        );
+    }
     let run = with_hero(run, &config, state.hero.as_ref())
         .with_context(|| format!("{}: hero state", path.display()))?;
     history.rewrite(&csv)?;
