@@ -736,3 +736,66 @@ pub fn trace_path<const ADJOINT: bool>(
     }
     radiance
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The hero strategy's incremental sums (ALGORITHMS.md §5.8) against brute force: over random
+    /// paths whose vertices are capable for target 0, 1 or neither, with random density ratios,
+    /// probabilities p and q, the rescaled W₁ + W₂ times the product of the rescale factors equals
+    /// Σ_k p_k (w₁ᵏ + w₂ᵏ) — the sum of every technique's density, each target's sums computed
+    /// alone by §5.2 — and next-event estimation's weight at the last vertex is 1 over
+    /// Σ_k p_k [w₁ᵏ + w₂ᵏ + (w₁ᵏ p_f + q_jᵏ w₂ᵏ p_∂f + (1 − q_jᵏ) w₂ᵏ p_f)/p_e], in the same units.
+    #[test]
+    fn hero_mixture_equals_the_sum_over_heroes_and_placements() {
+        let mut state = 0x2545_f491_4f6c_dd1du64;
+        let mut uniform = move || {
+            state ^= state << 13;
+            state ^= state >> 7;
+            state ^= state << 17;
+            ((state >> 40) as f64 + 0.5) / (1u64 << 24) as f64
+        };
+        for _ in 0..200 {
+            let p0 = 0.05 + 0.9 * uniform();
+            let q = (0.05 + 0.9 * uniform()) as f32;
+            let globals = Globals { hero_count: 2, hero_p0: p0 as f32, hero_p1: (1.0 - p0) as f32, ..Globals::default() };
+            let p = [f64::from(globals.hero_p0), f64::from(globals.hero_p1)];
+            let mut mix = Mixture::new(false);
+            mix.pick_hero(&globals, uniform() as f32);
+            let mut scale = 1.0f64;
+            let mut w = [(0.0f64, 1.0f64); 2];
+            let vertices = 1 + (uniform() * 6.0) as usize;
+            for _ in 0..vertices {
+                let kind = (uniform() * 3.0) as u32;
+                let k = if kind < 2 { kind } else { MAX_HEROES };
+                let r = (0.01 + 20.0 * uniform().powi(3)) as f32;
+                let pdf_f = (0.1 + uniform()) as f32;
+                let sum = mix.update_hero(k, q, pdf_f, r * pdf_f).unwrap();
+                scale *= f64::from(sum);
+                if k < MAX_HEROES {
+                    let (w1, w2) = &mut w[k as usize];
+                    *w1 += f64::from(q) * *w2 * f64::from(r);
+                    *w2 *= 1.0 - f64::from(q);
+                }
+            }
+            let brute: f64 = (0..2).map(|k| p[k] * (w[k].0 + w[k].1)).sum();
+            let incremental = f64::from(mix.w1 + mix.w2) * scale;
+            assert!((incremental - brute).abs() <= 1e-5 * brute, "{incremental} vs {brute}");
+            // Next-event estimation at one more vertex, capable for target `k` (or neither).
+            let kind = (uniform() * 3.0) as u32;
+            let k = if kind < 2 { kind } else { MAX_HEROES };
+            let (pdf_f, pdf_d, p_e) = ((0.1 + uniform()) as f32, (0.1 + 3.0 * uniform()) as f32, (0.1 + uniform()) as f32);
+            let (f, d, e) = (f64::from(pdf_f), f64::from(pdf_d), f64::from(p_e));
+            let brute_d: f64 = (0..2)
+                .map(|j| {
+                    let qj = if k == j as u32 { f64::from(q) } else { 0.0 };
+                    let (w1, w2) = w[j];
+                    p[j] * (w1 + w2 + (w1 * f + qj * w2 * d + (1.0 - qj) * w2 * f) / e)
+                })
+                .sum();
+            let weight = f64::from(mix.nee_weight_hero(k, q, pdf_f, pdf_d, Some(p_e))) / scale;
+            assert!((weight * brute_d - 1.0).abs() <= 1e-5, "NEE weight {weight} vs 1/{brute_d}");
+        }
+    }
+}
