@@ -2,8 +2,7 @@
 
 pub use crate::contract::PlacementMis;
 use crate::contract::{
-    Globals, LENS_ORTHOGRAPHIC, LENS_PINHOLE, LENS_THIN, MAX_HEROES, NO_PARAM, STRATEGY_BSDF, STRATEGY_DIFF,
-    ViewCamera,
+    Globals, LENS_ORTHOGRAPHIC, LENS_PINHOLE, LENS_THIN, MAX_HEROES, NO_PARAM, STRATEGY_BSDF, STRATEGY_DIFF, ViewCamera,
 };
 use crate::error::{Error, Result};
 use crate::params::ParamId;
@@ -166,7 +165,8 @@ impl HeroSet {
     /// `MAX_HEROES` targets or a repeated one, `HeroSet::weights` for a count that differs from the
     /// targets' or a weight that is not finite and positive.
     pub fn new(targets: &[ParamId], weights: Option<&[f32]>) -> Result<HeroSet> {
-        let bad = |parameter: &str, message: String| Err(Error::InvalidArgument { parameter: parameter.into(), message });
+        let bad =
+            |parameter: &str, message: String| Err(Error::InvalidArgument { parameter: parameter.into(), message });
         if targets.len() < 2 || targets.len() > MAX_HEROES as usize {
             return bad(
                 "HeroSet::targets",
@@ -176,7 +176,8 @@ impl HeroSet {
         if targets.iter().enumerate().any(|(i, t)| targets[..i].contains(t)) {
             return bad("HeroSet::targets", "a target appears twice".into());
         }
-        let mut set = HeroSet { targets: [ParamId(0); MAX_HEROES as usize], weights: [0.0; MAX_HEROES as usize], len: 0 };
+        let mut set =
+            HeroSet { targets: [ParamId(0); MAX_HEROES as usize], weights: [0.0; MAX_HEROES as usize], len: 0 };
         set.targets[..targets.len()].copy_from_slice(targets);
         set.len = targets.len() as u8;
         let uniform = vec![1.0; targets.len()];
@@ -386,9 +387,7 @@ fn diff_target(scene: &Scene, target: &str) -> Result<ParamId> {
     // differential sampler's densities do not include.
     let uses = |id: crate::scene::MaterialId| match scene.materials.get(id.0 as usize) {
         Some(Material::RoughConductor { alpha, alpha_v, .. }) => *alpha == target || *alpha_v == target,
-        Some(Material::RoughDielectric { alpha, .. } | Material::RoughPlastic { alpha, .. }) => {
-            *alpha == target
-        }
+        Some(Material::RoughDielectric { alpha, .. } | Material::RoughPlastic { alpha, .. }) => *alpha == target,
         Some(Material::Blend { weight, .. }) => *weight == target,
         _ => false,
     };
@@ -403,17 +402,11 @@ fn diff_target(scene: &Scene, target: &str) -> Result<ParamId> {
     let uncovered = uncovered.or(mapped.then_some("a normal-mapped material's roughness or blend weight"));
     // A mask draws its pass-through before the technique choice; the strategy's mixture
     // densities are not derived for it, so neither its opacity nor what it wraps is a target.
-    fn reaches(
-        scene: &Scene,
-        id: crate::scene::MaterialId,
-        uses: &dyn Fn(crate::scene::MaterialId) -> bool,
-    ) -> bool {
+    fn reaches(scene: &Scene, id: crate::scene::MaterialId, uses: &dyn Fn(crate::scene::MaterialId) -> bool) -> bool {
         uses(id)
             || match scene.materials.get(id.0 as usize) {
                 Some(
-                    Material::TwoSided(c)
-                    | Material::NormalMap { nested: c, .. }
-                    | Material::BumpMap { nested: c, .. },
+                    Material::TwoSided(c) | Material::NormalMap { nested: c, .. } | Material::BumpMap { nested: c, .. },
                 ) => reaches(scene, *c, uses),
                 Some(Material::Blend { children, .. }) => children.iter().any(|c| uses(*c)),
                 _ => false,

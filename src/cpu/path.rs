@@ -8,10 +8,10 @@ use crate::bsdf::specular::is_smooth;
 use crate::bsdf::{bsdf_eval, bsdf_pdf, bsdf_sample};
 use crate::bvh::{Ray, closest_hit, occluded};
 use crate::contract::{
-    DIM_DIFF_SIGN, DIM_DIRECTION, DIM_EMITTER_POS, DIM_EMITTER_SELECT, DIM_ENV_CELL, DIM_HERO, MAX_HEROES, DIM_LOBE, DIM_PIXEL_JITTER,
-    DIM_ROULETTE, DIM_TECHNIQUE, Globals, LENS_ORTHOGRAPHIC, LENS_THIN, MAT_BLEND, MAT_NULL, MAT_ROUGH_CONDUCTOR,
-    MAT_ROUGH_DIELECTRIC, MAT_ROUGH_PLASTIC, MAX_NULL_CROSSINGS, NO_EMITTER, NO_MEDIUM, NO_PARAM, PLACEMENT_POWER,
-    STRATEGY_DIFF, ViewCamera,
+    DIM_DIFF_SIGN, DIM_DIRECTION, DIM_EMITTER_POS, DIM_EMITTER_SELECT, DIM_ENV_CELL, DIM_HERO, DIM_LOBE,
+    DIM_PIXEL_JITTER, DIM_ROULETTE, DIM_TECHNIQUE, Globals, LENS_ORTHOGRAPHIC, LENS_THIN, MAT_BLEND, MAT_NULL,
+    MAT_ROUGH_CONDUCTOR, MAT_ROUGH_DIELECTRIC, MAT_ROUGH_PLASTIC, MAX_HEROES, MAX_NULL_CROSSINGS, NO_EMITTER,
+    NO_MEDIUM, NO_PARAM, PLACEMENT_POWER, STRATEGY_DIFF, ViewCamera,
 };
 use crate::cpu::emitter::{
     EmitterSample, emitter_pdf_solid_angle, env_backward, env_radiance, environment_pdf, sample_emitter,
@@ -759,7 +759,8 @@ mod tests {
         for _ in 0..200 {
             let p0 = 0.05 + 0.9 * uniform();
             let q = (0.05 + 0.9 * uniform()) as f32;
-            let globals = Globals { hero_count: 2, hero_p0: p0 as f32, hero_p1: (1.0 - p0) as f32, ..Globals::default() };
+            let globals =
+                Globals { hero_count: 2, hero_p0: p0 as f32, hero_p1: (1.0 - p0) as f32, ..Globals::default() };
             let p = [f64::from(globals.hero_p0), f64::from(globals.hero_p1)];
             let mut mix = Mixture::new(false);
             mix.pick_hero(&globals, uniform() as f32);
@@ -785,7 +786,8 @@ mod tests {
             // Next-event estimation at one more vertex, capable for target `k` (or neither).
             let kind = (uniform() * 3.0) as u32;
             let k = if kind < 2 { kind } else { MAX_HEROES };
-            let (pdf_f, pdf_d, p_e) = ((0.1 + uniform()) as f32, (0.1 + 3.0 * uniform()) as f32, (0.1 + uniform()) as f32);
+            let (pdf_f, pdf_d, p_e) =
+                ((0.1 + uniform()) as f32, (0.1 + 3.0 * uniform()) as f32, (0.1 + uniform()) as f32);
             let (f, d, e) = (f64::from(pdf_f), f64::from(pdf_d), f64::from(p_e));
             let brute_d: f64 = (0..2)
                 .map(|j| {

@@ -110,7 +110,10 @@ impl HeroAdaptation {
             });
         }
         if self.mean.iter().chain(&self.square).any(|v| !v.is_finite()) {
-            return Err(Error::InvalidArgument { parameter: "hero state".into(), message: "a value is not finite".into() });
+            return Err(Error::InvalidArgument {
+                parameter: "hero state".into(),
+                message: "a value is not finite".into(),
+            });
         }
         Ok(())
     }

@@ -570,7 +570,19 @@ fn hero_weights_adapt_and_resume_bit_for_bit() {
     let stderr = String::from_utf8_lossy(&o.stderr);
     assert!(!o.status.success() && stderr.contains("no `hero` state"), "{stderr}");
     // A hero that is not optimised: refused by name.
-    let o = run(&args[..9], &["--strategy", "diff", "--diff-param", "left.bsdf.alpha.value,floor.bsdf.weight.value", "--iters", "1", "-o", dir.path().join("x").to_str().unwrap()]);
+    let o = run(
+        &args[..9],
+        &[
+            "--strategy",
+            "diff",
+            "--diff-param",
+            "left.bsdf.alpha.value,floor.bsdf.weight.value",
+            "--iters",
+            "1",
+            "-o",
+            dir.path().join("x").to_str().unwrap(),
+        ],
+    );
     let stderr = String::from_utf8_lossy(&o.stderr);
     assert!(!o.status.success() && stderr.contains("floor.bsdf.weight.value is not optimised"), "{stderr}");
 }

@@ -263,7 +263,10 @@ fn hero_strategy_gpu_equals_cpu_per_path() {
             for (what, g, c) in &images {
                 assert!(c.as_slice().iter().any(|v| *v != 0.0), "{targets:?} {what}: all zero");
                 let mismatched = crate::support::count_mismatches(g, c, 1e-4);
-                println!("{targets:?} {weights:?} NEE {nee} {what}: {mismatched} of {} values differ", g.as_slice().len());
+                println!(
+                    "{targets:?} {weights:?} NEE {nee} {what}: {mismatched} of {} values differ",
+                    g.as_slice().len()
+                );
                 assert!(
                     mismatched as f64 <= 1e-3 * g.as_slice().len() as f64,
                     "{targets:?} {weights:?} NEE {nee} {what}: {mismatched} mismatches"
@@ -391,5 +394,8 @@ fn hero_strategy_is_unbiased_for_every_parameter() {
             }
         }
     }
-    assert!(weak.is_empty(), "a bias of {INJECTED} of the mean is below {T_LIMIT} standard errors (no power): {weak:?}");
+    assert!(
+        weak.is_empty(),
+        "a bias of {INJECTED} of the mean is below {T_LIMIT} standard errors (no power): {weak:?}"
+    );
 }

@@ -312,7 +312,10 @@ impl StrategyArgs {
             && let Some(names) = target.filter(|t| t.contains(','))
         {
             if self.strategy != "diff" {
-                bail!("--strategy {} takes one --diff-param, not several ({names}): use --strategy diff", self.strategy);
+                bail!(
+                    "--strategy {} takes one --diff-param, not several ({names}): use --strategy diff",
+                    self.strategy
+                );
             }
             if placement == pathgrad::integrator::PlacementMis::Power {
                 bail!("--placement-mis power is not built for several --diff-param ({names}): use balance");

@@ -147,7 +147,13 @@ fn techniques(args: &VarianceArgs, scene: &pathgrad::scene::Scene) -> Result<(Ve
                 if rows.iter().any(|r: &Technique| r.stem == stem) {
                     bail!("--strategy/--q list '{label}' twice");
                 }
-                rows.push(Technique { label: label.clone(), stem: stem.clone(), strategy, adaptive: false, auto: false });
+                rows.push(Technique {
+                    label: label.clone(),
+                    stem: stem.clone(),
+                    strategy,
+                    adaptive: false,
+                    auto: false,
+                });
                 if args.adaptive {
                     rows.push(Technique {
                         label: format!("{label} adaptive"),

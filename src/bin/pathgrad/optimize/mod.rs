@@ -408,9 +408,9 @@ fn start(args: &OptimizeArgs) -> Result<Session> {
         Strategy::Bsdf if args.sampling.strategy == "auto" => Some(args.sampling.diff_param.clone().unwrap_or(first)),
         Strategy::Bsdf => None,
         Strategy::Diff { target, .. } => Some(scene.params.entry(target).name.clone()),
-        Strategy::Hero { heroes, .. } => Some(
-            heroes.targets().iter().map(|t| scene.params.entry(*t).name.as_str()).collect::<Vec<_>>().join(","),
-        ),
+        Strategy::Hero { heroes, .. } => {
+            Some(heroes.targets().iter().map(|t| scene.params.entry(*t).name.as_str()).collect::<Vec<_>>().join(","))
+        }
     };
     let target = args.target.as_deref().map(absolute).transpose()?;
     let target_hash = target.as_deref().map(content_hash).transpose()?;

@@ -167,8 +167,8 @@ pub(super) fn resume(args: &OptimizeArgs, dir: &Path, given: &BTreeSet<String>) 
             path.display()
         );
     }
-    let run = with_hero(run, &config, state.hero.as_ref())
-        .with_context(|| format!("{}: hero state", path.display()))?;
+    let run =
+        with_hero(run, &config, state.hero.as_ref()).with_context(|| format!("{}: hero state", path.display()))?;
     history.rewrite(&csv)?;
     Ok(Session {
         _lock: lock,
@@ -263,7 +263,9 @@ pub(super) fn check_unchanged(
         "hero_weights",
         "--hero-weights",
         args.sampling.hero_weights.clone(),
-        c.hero_weights.as_ref().map_or("adapted".into(), |w| w.iter().map(|x| x.to_string()).collect::<Vec<_>>().join(",")),
+        c.hero_weights
+            .as_ref()
+            .map_or("adapted".into(), |w| w.iter().map(|x| x.to_string()).collect::<Vec<_>>().join(",")),
     );
     if !conflicts.is_empty() {
         bail!(
