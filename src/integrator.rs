@@ -288,7 +288,8 @@ impl Strategy {
     /// let one = Strategy::hero(&scene, &["object.weight.value"], 0.5, None)?;
     /// assert_eq!(one, Strategy::from_name(&scene, "diff", 0.5, "object.weight.value")?);
     /// // A parameter without a differential sampler cannot be a hero.
-    /// assert!(Strategy::hero(&scene, &["object.weight.value", "light.radiance.value"], 0.5, None).is_err());
+    /// let err = Strategy::hero(&scene, &["object.weight.value", "base.reflectance.value"], 0.5, None).unwrap_err();
+    /// assert!(err.to_string().contains("base.reflectance.value"));
     /// # Ok::<(), pathgrad::Error>(())
     /// ```
     ///
