@@ -200,9 +200,9 @@ pub(super) fn with_hero(run: Optimization, config: &RunConfig, state: Option<&He
         None => pathgrad::optim::HeroAdaptation::new(&heroes),
         Some(s) => pathgrad::optim::HeroAdaptation { steps: s.steps, mean: s.mean.clone(), square: s.square.clone() },
     };
-    Ok(run.with_hero_adaptation(adaptation).map_err(|e| {
+    run.with_hero_adaptation(adaptation).map_err(|e| {
         anyhow::anyhow!("--diff-param {}: {e} (or give --hero-weights)", config.diff_param.as_deref().unwrap_or(""))
-    })?)
+    })
 }
 
 pub(super) fn values_of(table: &ParamTable, ids: &[ParamId]) -> BTreeMap<String, Vec<f64>> {
