@@ -12,6 +12,9 @@
 // scalars, v1 and the chosen vertex's term (§5.7). After each update β, w1, w2 and the previous
 // vertex's sum are divided by w1 + w2 (§5.6), so a vertex starts with w1 + w2 = 1. With no capable
 // vertex DIFF is BSDF sampling with the balance heuristic (power placements: the power heuristic).
+// With several targets (F_HERO, §5.8) each path draws a hero target at its camera vertex and only
+// vertices capable for it may become the differential vertex; w1 and the per-target w2 sums cover
+// every target weighted by its probability, so the mixture is over all heroes' placements.
 //
 // The loop is written as one step per vertex on a `PathState` (path_begin, path_step), so the
 // kernel's scheduler (shaders/kernel.glsl) can start a lane's next path the moment its current one
