@@ -399,3 +399,37 @@ fn hero_strategy_is_unbiased_for_every_parameter() {
         "a bias of {INJECTED} of the mean is below {T_LIMIT} standard errors (no power): {weak:?}"
     );
 }
+
+/// The command line refuses, by name, a hero set with a parameter that has no differential
+/// sampler, power-heuristic placements with several targets, `--hero-weights` without several
+/// targets or of the wrong count, and `auto` with several targets.
+#[test]
+fn hero_flags_are_checked_by_name() {
+    let scene = format!("{}/tests/data/scenes/hero_spheres.xml", env!("CARGO_MANIFEST_DIR"));
+    let base = ["grad", &scene, "--cpu", "--image-gradient", LEFT, "--width", "8", "--height", "8", "--spp", "1"];
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("g.exr");
+    let refused = |extra: &[&str], expected: &str| {
+        let o = crate::cli::pathgrad().args(base).args(["-o", out.to_str().unwrap()]).args(extra).output().unwrap();
+        let stderr = String::from_utf8_lossy(&o.stderr);
+        assert!(!o.status.success() && stderr.contains(expected), "{extra:?}: {stderr}");
+    };
+    let set = format!("{LEFT},{RIGHT}");
+    refused(
+        &["--strategy", "diff", "--diff-param", &format!("{LEFT},left.bsdf.specular_reflectance.value")],
+        "left.bsdf.specular_reflectance.value: has no differential sampler",
+    );
+    refused(
+        &["--strategy", "diff", "--diff-param", &set, "--placement-mis", "power"],
+        "--placement-mis power is not built",
+    );
+    refused(&["--strategy", "diff", "--diff-param", LEFT, "--hero-weights", "1,2"], "--hero-weights 1,2 applies only");
+    refused(&["--strategy", "diff", "--diff-param", &set, "--hero-weights", "1,2,3"], "3 weights for 2 targets");
+    refused(&["--strategy", "auto", "--diff-param", &set], "--strategy auto takes one --diff-param");
+    let o = crate::cli::pathgrad()
+        .args(base)
+        .args(["-o", out.to_str().unwrap(), "--strategy", "diff", "--diff-param", &set, "--hero-weights", "1,3"])
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+}
