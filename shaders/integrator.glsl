@@ -12,6 +12,9 @@
 // scalars, v1 and the chosen vertex's term (§5.7). After each update β, w1, w2 and the previous
 // vertex's sum are divided by w1 + w2 (§5.6), so a vertex starts with w1 + w2 = 1. With no capable
 // vertex DIFF is BSDF sampling with the balance heuristic (power placements: the power heuristic).
+// With several targets (F_HERO, §5.8) each path draws a hero target at its camera vertex and only
+// vertices capable for it may become the differential vertex; w1 and the per-target w2 sums cover
+// every target weighted by its probability, so the mixture is over all heroes' placements.
 //
 // The loop is written as one step per vertex on a `PathState` (path_begin, path_step), so the
 // kernel's scheduler (shaders/kernel.glsl) can start a lane's next path the moment its current one
@@ -51,6 +54,19 @@ bool material_capable(uint m) {
     return p >= globals.diff_begin && p < globals.diff_end;
 }
 
+// Several targets (F_HERO, ALGORITHMS.md §5.8): the index of the hero-set target whose parameter
+// values hold material `m`'s roughness or blend weight, or MAX_HEROES if none does.
+uint material_hero(uint m) {
+    uint tag = materials[m].tag;
+    uint p = (tag == MAT_ROUGH_CONDUCTOR || tag == MAT_ROUGH_DIELECTRIC || tag == MAT_ROUGH_PLASTIC) ? materials[m].p_alpha
+        : (tag == MAT_BLEND ? materials[m].p_weight : NO_PARAM);
+    uvec2 r[MAX_HEROES] = uvec2[MAX_HEROES](globals.hero_range0, globals.hero_range1, globals.hero_range2, globals.hero_range3);
+    for (uint k = 0u; k < globals.hero_count; k++) {
+        if (p >= r[k].x && p < r[k].y) return k;
+    }
+    return MAX_HEROES;
+}
+
 // The differential strategy's running state (ALGORITHMS.md §5.2, §5.7): constant per path,
 // whatever its length. After each update everything is rescaled so that w1 + w2 = 1 (§5.6).
 struct Mixture {
@@ -62,10 +78,56 @@ struct Mixture {
     bool dx_taken;     // the differential vertex has been chosen
     float prev_sum;    // w1 + w2 at the previous vertex before its update, in this vertex's units
     float prev_sq;     // v1 + w2² at the previous vertex before its update, in this vertex's units
+    // Several targets (F_HERO, §5.8): w1 sums the terms of every target weighted by its
+    // probability p_k; hero_w2[k] = p_k (1 − q)^(vertices capable for k) and w2 = Σ_k hero_w2[k].
+    uint hero;         // the path's hero: index of its target
+    vec4 hero_w2;
 };
 
 Mixture mixture_new(bool power) {
-    return Mixture(power, 0.0, 1.0, 0.0, 0.0, false, 1.0, 1.0);
+    return Mixture(power, 0.0, 1.0, 0.0, 0.0, false, 1.0, 1.0, 0u, vec4(0.0));
+}
+
+// Several targets: the path's hero, drawn with probabilities hero_p (camera vertex, DIM_HERO),
+// and the sums' start, w2 = Σ_k p_k.
+void mixture_pick_hero(inout Mixture m, float u) {
+    vec4 p = vec4(globals.hero_p0, globals.hero_p1, globals.hero_p2, globals.hero_p3);
+    m.hero = globals.hero_count - 1u;
+    float cdf = 0.0;
+    for (uint k = 0u; k + 1u < globals.hero_count; k++) {
+        cdf += p[k];
+        if (u < cdf) { m.hero = k; break; }
+    }
+    m.hero_w2 = p;
+    m.w2 = ((p.x + p.y) + p.z) + p.w;
+}
+
+// Several targets: next-event estimation's weight at a vertex capable for target `k` (MAX_HEROES:
+// none) before its update (§5.8).
+float mixture_nee_weight_hero(Mixture m, uint k, float q, float pdf_f, float pdf_d, float p_e, bool delta) {
+    if (delta) return 1.0 / (m.w1 + m.w2);
+    float a = k < MAX_HEROES ? m.hero_w2[k] : 0.0;
+    float qa = k < MAX_HEROES ? q * a : 0.0;
+    return 1.0 / (m.w1 + m.w2 + (m.w1 * pdf_f + qa * pdf_d + (a - qa) * pdf_f + (m.w2 - a) * pdf_f) / p_e);
+}
+
+// Several targets: the update after a direction was sampled at a vertex capable for target `k`
+// (MAX_HEROES: none), as mixture_update.
+float mixture_update_hero(inout Mixture m, uint k, float q, float pdf_f, float pdf_d) {
+    m.prev_sum = m.w1 + m.w2;
+    if (k >= MAX_HEROES) return 1.0;
+    float a = m.hero_w2[k];
+    m.w1 += q * a * pdf_d / pdf_f;
+    m.hero_w2[k] = a * (1.0 - q);
+    vec4 h = m.hero_w2;
+    m.w2 = ((h.x + h.y) + h.z) + h.w;
+    float sum = m.w1 + m.w2;
+    if (!(sum > 0.0)) return 0.0;
+    m.w1 /= sum;
+    m.w2 /= sum;
+    m.hero_w2 /= sum;
+    m.prev_sum /= sum;
+    return sum;
 }
 
 // The placement factor of the technique that produced the path so far: the chosen vertex's term,
@@ -210,6 +272,8 @@ PathState path_begin(uint view, uint pixel, uint sample_index, bool adjoint, vec
     st.vertex = 1u;
     st.prev_pdf_f = 0.0;
     st.mix = mixture_new(HAS(F_DIFF) && globals.strategy == STRATEGY_DIFF && globals.diff_placement == PLACEMENT_POWER);
+    if (HAS(F_HERO) && globals.strategy == STRATEGY_DIFF && globals.hero_count > 0u)
+        mixture_pick_hero(st.mix, draw_block(cam.key1, pixel, sample_index, 0u, DIM_HERO / 4u)[DIM_HERO % 4u]);
     st.prev_nee = false;
     st.adjoint = adjoint;
     return st;
@@ -236,6 +300,7 @@ bool path_step(inout PathState st) {
     // The strategy is also read at run time, so a kernel with the differential strategy can render a
     // gradient step's pass 1, which uses plain BSDF sampling (kernel.glsl, PRIMAL_ON_REVERSE).
     bool diff = HAS(F_DIFF) && globals.strategy == STRATEGY_DIFF;
+    bool hero = diff && HAS(F_HERO) && globals.hero_count > 0u;
     bool nee = HAS(F_NEE);
     uint vertex = st.vertex;
     st.vertex = vertex + 1u;
@@ -255,6 +320,7 @@ bool path_step(inout PathState st) {
     ShadingFrame frame;
     bool shade = false;       // a surface vertex below the maximum depth
     bool capable = false;
+    uint hero_here = MAX_HEROES;  // several targets: the one this vertex is capable for
     EmitterSample es;
     vec3 nee_wo = vec3(0.0, 0.0, 1.0);
     vec3 nee_f = vec3(0.0);
@@ -441,6 +507,10 @@ bool path_step(inout PathState st) {
                 gt.uv = s.uv;
 
                 capable = diff && material_capable(s.material);
+                if (hero) {
+                    hero_here = material_hero(s.material);
+                    capable = hero_here < MAX_HEROES;
+                }
 
                 // ---- emitter sampling: the sample and its unoccluded terms; the shadow ray is pass 1's ----
                 // A BSDF of delta lobes only gets no next-event estimation: no emitter sample meets them.
@@ -485,14 +555,16 @@ bool path_step(inout PathState st) {
                         if (nee_pdf > 0.0 && (max_component(nee_f) > 0.0 || (adjoint && upper))) {
                             if (HAS(F_LIGHTS) && es.delta) {
                                 // No BSDF sample reaches a light without area: NEE alone finds it.
-                                nee_w = diff ? mixture_nee_weight(st.mix, 0.0, 0.0, 0.0, 0.0, true) : 1.0;
+                                nee_w = hero ? mixture_nee_weight_hero(st.mix, MAX_HEROES, 0.0, 0.0, 0.0, 0.0, true)
+                                      : diff ? mixture_nee_weight(st.mix, 0.0, 0.0, 0.0, 0.0, true) : 1.0;
                             } else if (!diff) {
                                 nee_w = mis_power(nee_pdf, pdf_f);
                             } else {
                                 // Appendix B: the NEE direction as produced by BSDF or differential sampling here.
                                 float q_here = capable ? globals.diff_q : 0.0;
                                 float pdf_d = capable ? bsdf_pdf_diff(bsdf, wi, nee_wo) : pdf_f;
-                                nee_w = mixture_nee_weight(st.mix, q_here, pdf_f, pdf_d, nee_pdf, false);
+                                nee_w = hero ? mixture_nee_weight_hero(st.mix, hero_here, globals.diff_q, pdf_f, pdf_d, nee_pdf, false)
+                                             : mixture_nee_weight(st.mix, q_here, pdf_f, pdf_d, nee_pdf, false);
                             }
                             if (HAS(F_MEDIA)) nee_w_tr = st.adj * st.throughput * nee_w * nee_f * es.radiance / nee_pdf;
                             shadow_ray = make_ray(origin, wl);
@@ -556,7 +628,8 @@ bool path_step(inout PathState st) {
         // without masks keep no division).
         float u_lobe = HAS(F_MASK) ? u_bs[DIM_LOBE % 4u] / mask_opacity : u_bs[DIM_LOBE % 4u];
         vec2 u_dir = vec2(u_bs[DIM_DIRECTION % 4u], u_bs[DIM_DIRECTION % 4u + 1u]);
-        bool use_dx = capable && !st.mix.dx_taken && u_bs[DIM_TECHNIQUE % 4u] < globals.diff_q;
+        // Several targets: only the path's hero samples its derivative.
+        bool use_dx = capable && (!hero || hero_here == st.mix.hero) && !st.mix.dx_taken && u_bs[DIM_TECHNIQUE % 4u] < globals.diff_q;
         BsdfSample bs;
         float pdf_f;
         float pdf_d = 0.0;
@@ -578,7 +651,8 @@ bool path_step(inout PathState st) {
             st.prev_pdf_f = pdf_f;
             // An emitter found through a delta lobe counts whole: NEE could not have sampled it.
             st.prev_nee = nee && !bs.delta;
-            float sum = mixture_update(st.mix, capable, use_dx, globals.diff_q, pdf_f, pdf_d);
+            float sum = hero ? mixture_update_hero(st.mix, hero_here, globals.diff_q, pdf_f, pdf_d)
+                             : mixture_update(st.mix, capable, use_dx, globals.diff_q, pdf_f, pdf_d);
             if (!(sum > 0.0)) ended = true; else st.throughput /= sum;
             st.mix.dx_taken = st.mix.dx_taken || use_dx;
 

@@ -2,7 +2,7 @@
 
 pub use crate::contract::PlacementMis;
 use crate::contract::{
-    Globals, LENS_ORTHOGRAPHIC, LENS_PINHOLE, LENS_THIN, NO_PARAM, STRATEGY_BSDF, STRATEGY_DIFF, ViewCamera,
+    Globals, LENS_ORTHOGRAPHIC, LENS_PINHOLE, LENS_THIN, MAX_HEROES, NO_PARAM, STRATEGY_BSDF, STRATEGY_DIFF, ViewCamera,
 };
 use crate::error::{Error, Result};
 use crate::params::ParamId;
@@ -123,6 +123,97 @@ pub enum Strategy {
         /// How the placements of the differential vertex are weighted against each other.
         placement: PlacementMis,
     },
+    /// Differential path sampling by several parameters, one *hero* per path (ALGORITHMS.md §5.8):
+    /// each path draws its hero k with probability p_k (camera vertex, dimension `DIM_HERO`) and
+    /// runs [`Strategy::Diff`]'s sampler for k, at the vertices whose roughness or blend weight is
+    /// k; every contribution is divided by the mixture density over all heroes and placements,
+    /// Σ_k p_k (w₁ᵏ + w₂ᵏ), so every parameter's gradient stays unbiased. Placements are weighted by
+    /// the balance heuristic.
+    Hero {
+        /// The targets and their probabilities.
+        heroes: HeroSet,
+        /// Probability of the differential technique at a vertex capable for the path's hero.
+        q: f32,
+    },
+}
+
+/// The targets of [`Strategy::Hero`] — 2 to `MAX_HEROES` distinct parameters with a differential
+/// sampler — and the probability p_k with which a path takes each as its hero (they sum to 1).
+///
+/// ```
+/// use pathgrad::integrator::HeroSet;
+/// use pathgrad::params::ParamId;
+/// let set = HeroSet::new(&[ParamId(0), ParamId(3)], Some(&[1.0, 3.0]))?;
+/// assert_eq!(set.targets(), &[ParamId(0), ParamId(3)]);
+/// assert_eq!(set.weights(), &[0.25, 0.75]);
+/// assert!(HeroSet::new(&[ParamId(0), ParamId(0)], None).is_err());
+/// # Ok::<(), pathgrad::Error>(())
+/// ```
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct HeroSet {
+    targets: [ParamId; MAX_HEROES as usize],
+    weights: [f32; MAX_HEROES as usize],
+    len: u8,
+}
+
+impl HeroSet {
+    /// The hero set of `targets` with probabilities proportional to `weights` (each finite and
+    /// positive), or uniform (`None`).
+    ///
+    /// # Errors
+    /// [`Error::InvalidArgument`] naming `HeroSet::targets` for fewer than 2 or more than
+    /// `MAX_HEROES` targets or a repeated one, `HeroSet::weights` for a count that differs from the
+    /// targets' or a weight that is not finite and positive.
+    pub fn new(targets: &[ParamId], weights: Option<&[f32]>) -> Result<HeroSet> {
+        let bad =
+            |parameter: &str, message: String| Err(Error::InvalidArgument { parameter: parameter.into(), message });
+        if targets.len() < 2 || targets.len() > MAX_HEROES as usize {
+            return bad(
+                "HeroSet::targets",
+                format!("{} targets: a hero set has 2 to {MAX_HEROES} (one target is Strategy::Diff)", targets.len()),
+            );
+        }
+        if targets.iter().enumerate().any(|(i, t)| targets[..i].contains(t)) {
+            return bad("HeroSet::targets", "a target appears twice".into());
+        }
+        let mut set =
+            HeroSet { targets: [ParamId(0); MAX_HEROES as usize], weights: [0.0; MAX_HEROES as usize], len: 0 };
+        set.targets[..targets.len()].copy_from_slice(targets);
+        set.len = targets.len() as u8;
+        let uniform = vec![1.0; targets.len()];
+        set.with_weights(weights.unwrap_or(&uniform))
+    }
+
+    /// The same targets with probabilities proportional to `weights`.
+    ///
+    /// # Errors
+    /// [`Error::InvalidArgument`] naming `HeroSet::weights` for a count that differs from the
+    /// targets' or a weight that is not finite and positive.
+    pub fn with_weights(mut self, weights: &[f32]) -> Result<HeroSet> {
+        let n = self.len as usize;
+        let bad = |message: String| Err(Error::InvalidArgument { parameter: "HeroSet::weights".into(), message });
+        if weights.len() != n {
+            return bad(format!("{} weights for {n} targets", weights.len()));
+        }
+        if let Some(w) = weights.iter().find(|w| !(w.is_finite() && **w > 0.0)) {
+            return bad(format!("{w} is not a finite positive weight (every target keeps its sampler)"));
+        }
+        let total: f64 = weights.iter().map(|&w| f64::from(w)).sum();
+        for (p, &w) in self.weights.iter_mut().zip(weights) {
+            *p = (f64::from(w) / total) as f32;
+        }
+        Ok(self)
+    }
+
+    /// The targets, in the order given.
+    pub fn targets(&self) -> &[ParamId] {
+        &self.targets[..self.len as usize]
+    }
+
+    /// Each target's probability of being a path's hero (normalised to sum 1).
+    pub fn weights(&self) -> &[f32] {
+        &self.weights[..self.len as usize]
+    }
 }
 
 impl PlacementMis {
@@ -176,87 +267,7 @@ impl Strategy {
                         message: format!("{q} is not in [0, 1]"),
                     });
                 }
-                let target = scene.params.find(target).ok_or_else(|| Error::InvalidArgument {
-                    parameter: target.to_string(),
-                    message: "no such parameter to drive the differential sampler (see `pathgrad params SCENE`)".into(),
-                })?;
-                use crate::scene::Material;
-                let uncovered = scene.materials.iter().find_map(|m| match m {
-                    Material::RoughConductor { alpha, alpha_v, .. }
-                        if alpha != alpha_v && (*alpha == target || *alpha_v == target) =>
-                    {
-                        Some("an anisotropic rough conductor's roughness")
-                    }
-                    _ => None,
-                });
-                // A normal-mapped material's lobes live in the perturbed frame, whose wrapper the
-                // differential sampler's densities do not include.
-                let uses = |id: crate::scene::MaterialId| match scene.materials.get(id.0 as usize) {
-                    Some(Material::RoughConductor { alpha, alpha_v, .. }) => *alpha == target || *alpha_v == target,
-                    Some(Material::RoughDielectric { alpha, .. } | Material::RoughPlastic { alpha, .. }) => {
-                        *alpha == target
-                    }
-                    Some(Material::Blend { weight, .. }) => *weight == target,
-                    _ => false,
-                };
-                let mapped = scene.materials.iter().any(|m| match m {
-                    Material::NormalMap { nested, .. } | Material::BumpMap { nested, .. } => {
-                        uses(*nested)
-                            || matches!(scene.materials.get(nested.0 as usize), Some(Material::Blend { children, .. })
-                                if children.iter().any(|c| uses(*c)))
-                    }
-                    _ => false,
-                });
-                let uncovered = uncovered.or(mapped.then_some("a normal-mapped material's roughness or blend weight"));
-                // A mask draws its pass-through before the technique choice; the strategy's mixture
-                // densities are not derived for it, so neither its opacity nor what it wraps is a target.
-                fn reaches(
-                    scene: &Scene,
-                    id: crate::scene::MaterialId,
-                    uses: &dyn Fn(crate::scene::MaterialId) -> bool,
-                ) -> bool {
-                    uses(id)
-                        || match scene.materials.get(id.0 as usize) {
-                            Some(
-                                Material::TwoSided(c)
-                                | Material::NormalMap { nested: c, .. }
-                                | Material::BumpMap { nested: c, .. },
-                            ) => reaches(scene, *c, uses),
-                            Some(Material::Blend { children, .. }) => children.iter().any(|c| uses(*c)),
-                            _ => false,
-                        }
-                }
-                let masked = scene.materials.iter().any(|m| match m {
-                    Material::Mask { nested, opacity } => *opacity == target || reaches(scene, *nested, &uses),
-                    _ => false,
-                });
-                let uncovered = uncovered.or(masked.then_some("a mask's opacity or a masked material's parameter"));
-                // A blend holding a smooth conductor samples a delta lobe, which the mixture's
-                // densities do not include.
-                let smooth = |c: &crate::scene::MaterialId| {
-                    matches!(scene.materials.get(c.0 as usize), Some(Material::Smooth { .. }))
-                };
-                let delta_blend = scene.materials.iter().any(|m| match m {
-                    Material::Blend { weight, children } => {
-                        children.iter().any(smooth) && (*weight == target || children.iter().any(|c| uses(*c)))
-                    }
-                    _ => false,
-                });
-                let uncovered =
-                    uncovered.or(delta_blend.then_some("a parameter of a blend holding a smooth conductor"));
-                // A texture's texels each act on part of the surface: the sampler's one scalar
-                // target per material does not describe them.
-                let uncovered = uncovered.or(scene.scalar_texture(target).map(|_| "a texture's texels"));
-                if let Some(whose) = uncovered {
-                    return Err(Error::InvalidArgument {
-                        parameter: scene.params.entry(target).name.clone(),
-                        message: format!(
-                            "is {whose}, which the differential sampler does not cover (it samples the \
-                             derivative of a rough conductor's, dielectric's or plastic's lobe or a blend's weight, \
-                             without a normal map or a mask): use the bsdf strategy"
-                        ),
-                    });
-                }
+                let target = diff_target(scene, target)?;
                 Ok(Strategy::Diff { target, q, placement: PlacementMis::Balance })
             }
             other => Err(Error::InvalidArgument {
@@ -264,6 +275,57 @@ impl Strategy {
                 message: format!("unknown strategy '{other}' (expected bsdf or diff)"),
             }),
         }
+    }
+
+    /// Differential path sampling by the parameters named `targets` (ALGORITHMS.md §5.8): one
+    /// target is [`Strategy::Diff`] (today's estimator, bit for bit; `weights` must then be `None`
+    /// or one weight), several are [`Strategy::Hero`] with probabilities proportional to
+    /// `weights` (uniform for `None`).
+    ///
+    /// ```
+    /// use pathgrad::integrator::Strategy;
+    /// let scene = pathgrad::scene::builtin::load("blend")?;
+    /// let one = Strategy::hero(&scene, &["object.weight.value"], 0.5, None)?;
+    /// assert_eq!(one, Strategy::from_name(&scene, "diff", 0.5, "object.weight.value")?);
+    /// // A parameter without a differential sampler cannot be a hero.
+    /// let err = Strategy::hero(&scene, &["object.weight.value", "base.reflectance.value"], 0.5, None).unwrap_err();
+    /// assert!(err.to_string().contains("base.reflectance.value"));
+    /// # Ok::<(), pathgrad::Error>(())
+    /// ```
+    ///
+    /// # Errors
+    /// As [`Strategy::from_name`] for each target; [`Error::InvalidArgument`] naming a target of a
+    /// hero set that no material has a differential sampler for, and as [`HeroSet::new`].
+    pub fn hero(scene: &Scene, targets: &[&str], q: f32, weights: Option<&[f32]>) -> Result<Strategy> {
+        if let [one] = targets {
+            if weights.is_some_and(|w| w.len() != 1) {
+                return Err(Error::InvalidArgument {
+                    parameter: "HeroSet::weights".into(),
+                    message: format!("{} weights for 1 target", weights.map_or(0, <[f32]>::len)),
+                });
+            }
+            return Strategy::from_name(scene, "diff", q, one);
+        }
+        if !(0.0..=1.0).contains(&q) {
+            return Err(Error::InvalidArgument {
+                parameter: "Strategy::Diff::q".into(),
+                message: format!("{q} is not in [0, 1]"),
+            });
+        }
+        let mut ids = Vec::with_capacity(targets.len());
+        for name in targets {
+            let id = diff_target(scene, name)?;
+            if !Strategy::has_differential_sampler(scene, id) {
+                return Err(Error::InvalidArgument {
+                    parameter: (*name).to_string(),
+                    message: "has no differential sampler (it is no rough conductor's, dielectric's or plastic's \
+                              roughness and no blend's weight), so it cannot be one of several heroes"
+                        .into(),
+                });
+            }
+            ids.push(id);
+        }
+        Ok(Strategy::Hero { heroes: HeroSet::new(&ids, weights)?, q })
     }
 
     /// The same strategy with its placements weighted by `placement` (`bsdf` has none: unchanged).
@@ -278,7 +340,9 @@ impl Strategy {
     pub fn with_placement(self, placement: PlacementMis) -> Strategy {
         match self {
             Strategy::Diff { target, q, .. } => Strategy::Diff { target, q, placement },
-            Strategy::Bsdf => Strategy::Bsdf,
+            // A hero set's placements are weighted by the balance heuristic only
+            // (`RenderOptions::validate` refuses nothing here: the CLI refuses `power` by name).
+            other => other,
         }
     }
 
@@ -286,7 +350,7 @@ impl Strategy {
     pub fn name(&self) -> &'static str {
         match self {
             Strategy::Bsdf => "bsdf",
-            Strategy::Diff { .. } => "diff",
+            Strategy::Diff { .. } | Strategy::Hero { .. } => "diff",
         }
     }
 
@@ -308,6 +372,82 @@ impl Strategy {
             _ => false,
         })
     }
+}
+
+/// The parameter named `target` if a differential sampler may be driven by it.
+fn diff_target(scene: &Scene, target: &str) -> Result<ParamId> {
+    let target = scene.params.find(target).ok_or_else(|| Error::InvalidArgument {
+        parameter: target.to_string(),
+        message: "no such parameter to drive the differential sampler (see `pathgrad params SCENE`)".into(),
+    })?;
+    use crate::scene::Material;
+    let uncovered = scene.materials.iter().find_map(|m| match m {
+        Material::RoughConductor { alpha, alpha_v, .. }
+            if alpha != alpha_v && (*alpha == target || *alpha_v == target) =>
+        {
+            Some("an anisotropic rough conductor's roughness")
+        }
+        _ => None,
+    });
+    // A normal-mapped material's lobes live in the perturbed frame, whose wrapper the
+    // differential sampler's densities do not include.
+    let uses = |id: crate::scene::MaterialId| match scene.materials.get(id.0 as usize) {
+        Some(Material::RoughConductor { alpha, alpha_v, .. }) => *alpha == target || *alpha_v == target,
+        Some(Material::RoughDielectric { alpha, .. } | Material::RoughPlastic { alpha, .. }) => *alpha == target,
+        Some(Material::Blend { weight, .. }) => *weight == target,
+        _ => false,
+    };
+    let mapped = scene.materials.iter().any(|m| match m {
+        Material::NormalMap { nested, .. } | Material::BumpMap { nested, .. } => {
+            uses(*nested)
+                || matches!(scene.materials.get(nested.0 as usize), Some(Material::Blend { children, .. })
+                    if children.iter().any(|c| uses(*c)))
+        }
+        _ => false,
+    });
+    let uncovered = uncovered.or(mapped.then_some("a normal-mapped material's roughness or blend weight"));
+    // A mask draws its pass-through before the technique choice; the strategy's mixture
+    // densities are not derived for it, so neither its opacity nor what it wraps is a target.
+    fn reaches(scene: &Scene, id: crate::scene::MaterialId, uses: &dyn Fn(crate::scene::MaterialId) -> bool) -> bool {
+        uses(id)
+            || match scene.materials.get(id.0 as usize) {
+                Some(
+                    Material::TwoSided(c) | Material::NormalMap { nested: c, .. } | Material::BumpMap { nested: c, .. },
+                ) => reaches(scene, *c, uses),
+                Some(Material::Blend { children, .. }) => children.iter().any(|c| uses(*c)),
+                _ => false,
+            }
+    }
+    let masked = scene.materials.iter().any(|m| match m {
+        Material::Mask { nested, opacity } => *opacity == target || reaches(scene, *nested, &uses),
+        _ => false,
+    });
+    let uncovered = uncovered.or(masked.then_some("a mask's opacity or a masked material's parameter"));
+    // A blend holding a smooth conductor samples a delta lobe, which the mixture's densities do
+    // not include.
+    let smooth =
+        |c: &crate::scene::MaterialId| matches!(scene.materials.get(c.0 as usize), Some(Material::Smooth { .. }));
+    let delta_blend = scene.materials.iter().any(|m| match m {
+        Material::Blend { weight, children } => {
+            children.iter().any(smooth) && (*weight == target || children.iter().any(|c| uses(*c)))
+        }
+        _ => false,
+    });
+    let uncovered = uncovered.or(delta_blend.then_some("a parameter of a blend holding a smooth conductor"));
+    // A texture's texels each act on part of the surface: the sampler's one scalar
+    // target per material does not describe them.
+    let uncovered = uncovered.or(scene.scalar_texture(target).map(|_| "a texture's texels"));
+    if let Some(whose) = uncovered {
+        return Err(Error::InvalidArgument {
+            parameter: scene.params.entry(target).name.clone(),
+            message: format!(
+                "is {whose}, which the differential sampler does not cover (it samples the \
+                 derivative of a rough conductor's, dielectric's or plastic's lobe or a blend's weight, \
+                 without a normal map or a mask): use the bsdf strategy"
+            ),
+        });
+    }
+    Ok(target)
 }
 
 /// Checks the samples per pixel of pass 1 (the loss image of a gradient step).
@@ -440,7 +580,7 @@ impl RenderOptions {
             }
             _ => {}
         }
-        if let Strategy::Diff { q, .. } = self.strategy
+        if let Strategy::Diff { q, .. } | Strategy::Hero { q, .. } = self.strategy
             && !(0.0..=1.0).contains(&q)
         {
             return bad("Strategy::Diff::q", "must be in [0, 1]");
@@ -546,6 +686,21 @@ impl RenderOptions {
                 let e = scene.params.entry(target);
                 (STRATEGY_DIFF, q, e.offset, e.offset + e.len, placement)
             }
+            // No vertex is capable by `diff_begin .. diff_end`: the hero ranges say which are.
+            Strategy::Hero { q, .. } => (STRATEGY_DIFF, q, 0, 0, PlacementMis::Balance),
+        };
+        let mut hero_p = [0.0f32; MAX_HEROES as usize];
+        let mut hero_range = [glam::UVec2::ZERO; MAX_HEROES as usize];
+        let hero_count = match self.strategy {
+            Strategy::Hero { heroes, .. } => {
+                for (k, (&t, &p)) in heroes.targets().iter().zip(heroes.weights()).enumerate() {
+                    let e = scene.params.entry(t);
+                    hero_p[k] = p;
+                    hero_range[k] = glam::UVec2::new(e.offset, e.offset + e.len);
+                }
+                heroes.targets().len() as u32
+            }
+            _ => 0,
         };
         let key = self.key(pass);
         let (env_select_prob, light_select_prob) = emitter_selection(scene, flat);
@@ -576,6 +731,15 @@ impl RenderOptions {
             diff_begin,
             diff_end,
             diff_placement: diff_placement.value(),
+            hero_count,
+            hero_p0: hero_p[0],
+            hero_p1: hero_p[1],
+            hero_p2: hero_p[2],
+            hero_p3: hero_p[3],
+            hero_range0: hero_range[0],
+            hero_range1: hero_range[1],
+            hero_range2: hero_range[2],
+            hero_range3: hero_range[3],
             node_count: flat.bvh.nodes.len() as u32,
             primal_only: 0,
             addr_nodes: glam::UVec2::ZERO,

@@ -21,10 +21,12 @@
 mod adam;
 pub mod control_variates;
 pub mod gradient_reuse;
+pub mod hero;
 
 pub use adam::{Adam, AdamOptions, AdamState, BETA1, BETA2, DEFAULT_LEARNING_RATE, EPSILON};
 pub use control_variates::{ControlVariateOptions, ControlVariateState, RunningEstimate};
 pub use gradient_reuse::GradientReuse;
+pub use hero::HeroAdaptation;
 
 use crate::adaptive::{AdaptiveEstimator, AdaptiveOptions, PixelSampling};
 use crate::backend::{Backend, check_views};
@@ -186,6 +188,8 @@ pub struct Optimization {
     /// The state the last [`Optimization::gradient_views`] computed for iteration `.0`, with
     /// reuse.
     pending_reuse: Option<(u64, RunningEstimate)>,
+    /// The hero strategy's adapted probabilities (with [`Optimization::with_hero_adaptation`]).
+    hero: Option<HeroAdaptation>,
 }
 
 /// The control variates' state between iterations: the running estimate and its statistics, and
@@ -231,7 +235,45 @@ impl Optimization {
             pending: None,
             reuse: GradientReuse::default(),
             pending_reuse: None,
+            hero: None,
         })
+    }
+
+    /// The same run with its hero probabilities adapted to each target's gradient variance
+    /// (ALGORITHMS.md §5.8, [`HeroAdaptation`]), continuing from `state` (a fresh run:
+    /// [`HeroAdaptation::new`]). The next iteration's probabilities are `state`'s; every
+    /// [`Optimization::apply`] observes the step's gradients and sets those of the one after.
+    ///
+    /// # Errors
+    /// [`Error::InvalidArgument`] naming `Optimization::with_hero_adaptation` if the run's strategy
+    /// is not [`Strategy::Hero`] or a hero target is not optimised (its gradient is not
+    /// computed), and as [`HeroAdaptation::check`].
+    pub fn with_hero_adaptation(mut self, state: HeroAdaptation) -> Result<Optimization> {
+        let crate::integrator::Strategy::Hero { heroes, q } = self.options.render.strategy else {
+            return Err(Error::InvalidArgument {
+                parameter: "Optimization::with_hero_adaptation".into(),
+                message: "the run's strategy has no hero set (Strategy::Hero)".into(),
+            });
+        };
+        if let Some(t) = heroes.targets().iter().find(|t| !self.adam.params().contains(t)) {
+            return Err(Error::InvalidArgument {
+                parameter: "Optimization::with_hero_adaptation".into(),
+                message: format!(
+                    "hero target {} is not optimised, so its gradient variance is unknown (fix its weight instead)",
+                    self.params.entry(*t).name
+                ),
+            });
+        }
+        state.check(&heroes)?;
+        let heroes = heroes.with_weights(&state.weights())?;
+        self.options.render.strategy = crate::integrator::Strategy::Hero { heroes, q };
+        self.hero = Some(state);
+        Ok(self)
+    }
+
+    /// The hero probabilities' running state, with [`Optimization::with_hero_adaptation`].
+    pub fn hero_adaptation(&self) -> Option<&HeroAdaptation> {
+        self.hero.as_ref()
     }
 
     /// The same run continuing from the control variates' state `control` (as saved from
@@ -538,6 +580,13 @@ impl Optimization {
         if let Some(state) = reused {
             self.reuse = GradientReuse { state: Some(state), previous: before };
             self.pending_reuse = None;
+        }
+        if let (Some(state), crate::integrator::Strategy::Hero { heroes, q }) =
+            (&mut self.hero, self.options.render.strategy)
+        {
+            state.observe(&heroes, &self.params, gradients);
+            let heroes = heroes.with_weights(&state.weights())?;
+            self.options.render.strategy = crate::integrator::Strategy::Hero { heroes, q };
         }
         self.iteration += 1;
         let mut norm2 = 0.0;

@@ -135,6 +135,11 @@ contract_constants! {
     /// Surface or medium vertex, block 2: the environment map's cell for next-event estimation,
     /// alias-table column and coin (dims 10 and 11).
     DIM_ENV_CELL = 10;
+    /// Camera vertex, block 1: the hero parameter of the differential strategy with several
+    /// targets (dim 4; ALGORITHMS.md §5.8).
+    DIM_HERO = 4;
+    /// Most targets of the differential strategy's hero set (`Globals::hero_count`).
+    MAX_HEROES = 4;
 
 
     /// Specialisation constant id of `FEATURES` (`shaders/lib/features.glsl`).
@@ -193,6 +198,9 @@ contract_constants! {
     /// offset: its other bits are the index of a textured light or projector, whose intensity,
     /// texels and scale the term reaches.
     LIGHT_SLOT = 0x4000_0000;
+    /// Feature bit: the differential strategy with several targets, one hero per path
+    /// (`Globals::hero_count` > 0, ALGORITHMS.md §5.8).
+    F_HERO = 1 << 31;
     /// A `Material::p_alpha`, `p_alpha_v`, (blend) `p_weight` or `p_opacity` with this bit set is not a
     /// parameter offset: its other bits are the offset in the tables array of a one-channel
     /// texture's descriptor (`TEXTURE_DESC_LEN` words: texel offset, width, height, `TEX_*` mode,

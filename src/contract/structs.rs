@@ -72,6 +72,26 @@ contract_structs! {
         /// Differential strategy: `PLACEMENT_BALANCE` or `PLACEMENT_POWER`, the weighting of its
         /// placements (ALGORITHMS.md §5.7).
         diff_placement: u32,
+        /// Differential strategy with several targets (ALGORITHMS.md §5.8): their number, 2 to
+        /// `MAX_HEROES`; 0 for one target (`diff_begin .. diff_end`). Target k has the parameter
+        /// values `hero_range{k}` (begin, end) and is the path's hero with probability `hero_p{k}`.
+        hero_count: u32,
+        /// Hero set: probability of target 0.
+        hero_p0: f32,
+        /// Hero set: probability of target 1.
+        hero_p1: f32,
+        /// Hero set: probability of target 2 (0 if absent).
+        hero_p2: f32,
+        /// Hero set: probability of target 3 (0 if absent).
+        hero_p3: f32,
+        /// Hero set: parameter values of target 0 (begin, one past the end).
+        hero_range0: UVec2,
+        /// Hero set: parameter values of target 1.
+        hero_range1: UVec2,
+        /// Hero set: parameter values of target 2 (empty if absent).
+        hero_range2: UVec2,
+        /// Hero set: parameter values of target 3 (empty if absent).
+        hero_range3: UVec2,
         /// Number of BVH nodes.
         node_count: u32,
         /// Reverse-mode kernels over pixels: 1 adds each path's radiance to the accumulation

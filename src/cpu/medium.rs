@@ -34,7 +34,12 @@ pub(crate) fn refuse_diff_with_media(
     flat: &FlatScene,
     options: &crate::integrator::RenderOptions,
 ) -> crate::Result<()> {
-    if has_media(flat) && matches!(options.strategy, crate::integrator::Strategy::Diff { .. }) {
+    if has_media(flat)
+        && matches!(
+            options.strategy,
+            crate::integrator::Strategy::Diff { .. } | crate::integrator::Strategy::Hero { .. }
+        )
+    {
         return Err(crate::Error::InvalidArgument {
             parameter: "Strategy::Diff".into(),
             message: "differential path sampling is not built for scenes with participating media or null \

@@ -8,10 +8,10 @@ use crate::bsdf::specular::is_smooth;
 use crate::bsdf::{bsdf_eval, bsdf_pdf, bsdf_sample};
 use crate::bvh::{Ray, closest_hit, occluded};
 use crate::contract::{
-    DIM_DIFF_SIGN, DIM_DIRECTION, DIM_EMITTER_POS, DIM_EMITTER_SELECT, DIM_ENV_CELL, DIM_LOBE, DIM_PIXEL_JITTER,
-    DIM_ROULETTE, DIM_TECHNIQUE, Globals, LENS_ORTHOGRAPHIC, LENS_THIN, LIGHT_SLOT, MAT_BLEND, MAT_NULL,
-    MAT_ROUGH_CONDUCTOR, MAT_ROUGH_DIELECTRIC, MAT_ROUGH_PLASTIC, MAX_NULL_CROSSINGS, NO_EMITTER, NO_MEDIUM, NO_PARAM,
-    PLACEMENT_POWER, STRATEGY_DIFF, ViewCamera,
+    DIM_DIFF_SIGN, DIM_DIRECTION, DIM_EMITTER_POS, DIM_EMITTER_SELECT, DIM_ENV_CELL, DIM_HERO, DIM_LOBE,
+    DIM_PIXEL_JITTER, DIM_ROULETTE, DIM_TECHNIQUE, Globals, LENS_ORTHOGRAPHIC, LENS_THIN, LIGHT_SLOT, MAT_BLEND,
+    MAT_NULL, MAT_ROUGH_CONDUCTOR, MAT_ROUGH_DIELECTRIC, MAT_ROUGH_PLASTIC, MAX_HEROES, MAX_NULL_CROSSINGS, NO_EMITTER,
+    NO_MEDIUM, NO_PARAM, PLACEMENT_POWER, STRATEGY_DIFF, ViewCamera,
 };
 use crate::cpu::emitter::{
     EmitterSample, emitter_pdf_solid_angle, env_backward, env_radiance, environment_pdf, light_backward, sample_emitter,
@@ -95,6 +95,19 @@ fn material_capable(flat: &FlatScene, globals: &Globals, m: u32) -> bool {
     p >= globals.diff_begin && p < globals.diff_end
 }
 
+/// Several targets (ALGORITHMS.md §5.8): the index of the hero-set target whose parameter values
+/// hold material `m`'s roughness or blend weight, or `MAX_HEROES` if none does.
+fn material_hero(flat: &FlatScene, globals: &Globals, m: u32) -> u32 {
+    let mat = &flat.materials[m as usize];
+    let p = match mat.tag {
+        MAT_ROUGH_CONDUCTOR | MAT_ROUGH_DIELECTRIC | MAT_ROUGH_PLASTIC => mat.p_alpha,
+        MAT_BLEND => mat.p_weight,
+        _ => NO_PARAM,
+    };
+    let r = [globals.hero_range0, globals.hero_range1, globals.hero_range2, globals.hero_range3];
+    (0..globals.hero_count).find(|&k| p >= r[k as usize].x && p < r[k as usize].y).unwrap_or(MAX_HEROES)
+}
+
 /// MIS weight of radiance reached by BSDF sampling from the previous vertex, whose direction had
 /// density `pdf_f` there and would have had density `pdf_e` under NEE (ALGORITHMS.md §3.1, §5.3,
 /// §5.7).
@@ -131,11 +144,81 @@ struct Mixture {
     prev_sum: f32,
     /// v₁ + w₂² at the previous vertex before its update, in the current vertex's units.
     prev_sq: f32,
+    /// Several targets (§5.8): the path's hero, the index of its target. w₁ then sums the terms
+    /// of every target weighted by its probability p_k, and w₂ = Σ_k `hero_w2[k]`.
+    hero: u32,
+    /// Several targets: p_k (1 − q)^(vertices capable for k so far), rescaled as w₁ and w₂.
+    hero_w2: [f32; MAX_HEROES as usize],
 }
 
 impl Mixture {
     fn new(power: bool) -> Mixture {
-        Mixture { power, w1: 0.0, w2: 1.0, v1: 0.0, chosen: 0.0, dx_taken: false, prev_sum: 1.0, prev_sq: 1.0 }
+        Mixture {
+            power,
+            w1: 0.0,
+            w2: 1.0,
+            v1: 0.0,
+            chosen: 0.0,
+            dx_taken: false,
+            prev_sum: 1.0,
+            prev_sq: 1.0,
+            hero: 0,
+            hero_w2: [0.0; MAX_HEROES as usize],
+        }
+    }
+
+    /// Several targets: the path's hero, drawn with probabilities `hero_p` from `u` (camera vertex,
+    /// `DIM_HERO`), and the sums' start, w₂ = Σ_k p_k.
+    fn pick_hero(&mut self, globals: &Globals, u: f32) {
+        let p = [globals.hero_p0, globals.hero_p1, globals.hero_p2, globals.hero_p3];
+        self.hero = globals.hero_count - 1;
+        let mut cdf = 0.0f32;
+        for k in 0..globals.hero_count.saturating_sub(1) {
+            cdf += p[k as usize];
+            if u < cdf {
+                self.hero = k;
+                break;
+            }
+        }
+        self.hero_w2 = p;
+        self.w2 = ((p[0] + p[1]) + p[2]) + p[3];
+    }
+
+    /// Several targets: next-event estimation's weight at a vertex capable for target `k`
+    /// (`MAX_HEROES`: none) before its update (§5.8; `None`: a light without area).
+    fn nee_weight_hero(&self, k: u32, q: f32, pdf_f: f32, pdf_d: f32, p_e: Option<f32>) -> f32 {
+        let (w1, w2) = (self.w1, self.w2);
+        let Some(p_e) = p_e else {
+            return 1.0 / (w1 + w2);
+        };
+        let a = if k < MAX_HEROES { self.hero_w2[k as usize] } else { 0.0 };
+        let qa = if k < MAX_HEROES { q * a } else { 0.0 };
+        1.0 / (w1 + w2 + (w1 * pdf_f + qa * pdf_d + (a - qa) * pdf_f + (w2 - a) * pdf_f) / p_e)
+    }
+
+    /// Several targets: the update after a direction was sampled at a vertex capable for target
+    /// `k` (`MAX_HEROES`: none), as [`Mixture::update`].
+    fn update_hero(&mut self, k: u32, q: f32, pdf_f: f32, pdf_d: f32) -> Option<f32> {
+        self.prev_sum = self.w1 + self.w2;
+        if k >= MAX_HEROES {
+            return Some(1.0);
+        }
+        let a = self.hero_w2[k as usize];
+        self.w1 += q * a * pdf_d / pdf_f;
+        self.hero_w2[k as usize] = a * (1.0 - q);
+        let h = self.hero_w2;
+        self.w2 = ((h[0] + h[1]) + h[2]) + h[3];
+        let sum = self.w1 + self.w2;
+        if !(sum > 0.0) {
+            return None;
+        }
+        self.w1 /= sum;
+        self.w2 /= sum;
+        for h in &mut self.hero_w2 {
+            *h /= sum;
+        }
+        self.prev_sum /= sum;
+        Some(sum)
     }
 
     /// The placement factor of the technique that produced the path so far: the chosen vertex's
@@ -305,6 +388,10 @@ pub fn trace_path<const ADJOINT: bool>(
     let mut prev_pdf_f = 0.0f32; // density with which the previous vertex sampled ray.dir
     let mut prev_nee = false; // whether NEE at the previous vertex could have found this emitter
     let mut mix = Mixture::new(diff && globals.diff_placement == PLACEMENT_POWER); // §5.2, §5.7
+    let hero = diff && globals.hero_count > 0; // several targets, §5.8
+    if hero {
+        mix.pick_hero(globals, draw_block(key, pixel, sample, 0, DIM_HERO / 4)[(DIM_HERO % 4) as usize]);
+    }
     let media = medium::has_media(flat);
     let mut current = NO_MEDIUM; // the medium the path is in (cameras are in vacuum)
     for vertex in 1..=globals.max_depth {
@@ -496,7 +583,9 @@ pub fn trace_path<const ADJOINT: bool>(
         }
         let wi = frame.to_local(wi_world);
 
-        let capable = diff && material_capable(flat, globals, s.material);
+        // Several targets: the one this vertex is capable for (MAX_HEROES: none).
+        let hero_here = if hero { material_hero(flat, globals, s.material) } else { MAX_HEROES };
+        let capable = if hero { hero_here < MAX_HEROES } else { diff && material_capable(flat, globals, s.material) };
 
         // ---- emitter sampling ----
         let u_em = draw_block(key, pixel, sample, vertex, DIM_EMITTER_SELECT / 4);
@@ -554,14 +643,24 @@ pub fn trace_path<const ADJOINT: bool>(
                 let pdf_f = bsdf_pdf(&bsdf, wi, wo);
                 let w_n = if es.delta {
                     // No BSDF sample reaches a light without area: NEE alone finds it.
-                    if diff { mix.nee_weight(0.0, 0.0, 0.0, None) } else { 1.0 }
+                    if hero {
+                        mix.nee_weight_hero(MAX_HEROES, 0.0, 0.0, 0.0, None)
+                    } else if diff {
+                        mix.nee_weight(0.0, 0.0, 0.0, None)
+                    } else {
+                        1.0
+                    }
                 } else if !diff {
                     mis_power(p_e, pdf_f)
                 } else {
                     // Appendix B: the NEE direction as produced by BSDF or differential sampling here.
                     let q_here = if capable { globals.diff_q } else { 0.0 };
                     let pdf_d = if capable { bsdf_pdf_diff(&bsdf, wi, wo) } else { pdf_f };
-                    mix.nee_weight(q_here, pdf_f, pdf_d, Some(p_e))
+                    if hero {
+                        mix.nee_weight_hero(hero_here, globals.diff_q, pdf_f, pdf_d, Some(p_e))
+                    } else {
+                        mix.nee_weight(q_here, pdf_f, pdf_d, Some(p_e))
+                    }
                 };
                 radiance += sign * (throughput * tr * w_n * f * es.radiance / p_e);
                 if ADJOINT && media {
@@ -585,7 +684,11 @@ pub fn trace_path<const ADJOINT: bool>(
         // A mask chose its nested BSDF with u_lobe < opacity: rescaled to [0, 1) for it.
         let u_lobe = u_bs[(DIM_LOBE % 4) as usize] / mask_opacity;
         let u_dir = Vec2::new(u_bs[dir], u_bs[dir + 1]);
-        let use_dx = capable && !mix.dx_taken && u_bs[(DIM_TECHNIQUE % 4) as usize] < globals.diff_q;
+        // Several targets: only the path's hero samples its derivative.
+        let use_dx = capable
+            && (!hero || hero_here == mix.hero)
+            && !mix.dx_taken
+            && u_bs[(DIM_TECHNIQUE % 4) as usize] < globals.diff_q;
         let (bs, pdf_f, pdf_d) = if use_dx {
             let u_sign = draw_block(key, pixel, sample, vertex, DIM_DIFF_SIGN / 4)[(DIM_DIFF_SIGN % 4) as usize];
             let bs = bsdf_sample_diff(&bsdf, wi, u_sign, u_lobe, u_dir);
@@ -612,7 +715,12 @@ pub fn trace_path<const ADJOINT: bool>(
         prev_pdf_f = pdf_f;
         // An emitter found through a delta lobe counts whole: NEE could not have sampled it.
         prev_nee = nee && !bs.delta;
-        let Some(sum) = mix.update(capable, use_dx, globals.diff_q, pdf_f, pdf_d) else {
+        let updated = if hero {
+            mix.update_hero(hero_here, globals.diff_q, pdf_f, pdf_d)
+        } else {
+            mix.update(capable, use_dx, globals.diff_q, pdf_f, pdf_d)
+        };
+        let Some(sum) = updated else {
             break;
         };
         throughput /= sum;
@@ -634,4 +742,69 @@ pub fn trace_path<const ADJOINT: bool>(
         ray = Ray::new(offset_origin(s.p, s.ng, wo_world), wo_world);
     }
     radiance
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The hero strategy's incremental sums (ALGORITHMS.md §5.8) against brute force: over random
+    /// paths whose vertices are capable for target 0, 1 or neither, with random density ratios,
+    /// probabilities p and q, the rescaled W₁ + W₂ times the product of the rescale factors equals
+    /// Σ_k p_k (w₁ᵏ + w₂ᵏ) — the sum of every technique's density, each target's sums computed
+    /// alone by §5.2 — and next-event estimation's weight at the last vertex is 1 over
+    /// Σ_k p_k [w₁ᵏ + w₂ᵏ + (w₁ᵏ p_f + q_jᵏ w₂ᵏ p_∂f + (1 − q_jᵏ) w₂ᵏ p_f)/p_e], in the same units.
+    #[test]
+    fn hero_mixture_equals_the_sum_over_heroes_and_placements() {
+        let mut state = 0x2545_f491_4f6c_dd1du64;
+        let mut uniform = move || {
+            state ^= state << 13;
+            state ^= state >> 7;
+            state ^= state << 17;
+            ((state >> 40) as f64 + 0.5) / (1u64 << 24) as f64
+        };
+        for _ in 0..200 {
+            let p0 = 0.05 + 0.9 * uniform();
+            let q = (0.05 + 0.9 * uniform()) as f32;
+            let globals =
+                Globals { hero_count: 2, hero_p0: p0 as f32, hero_p1: (1.0 - p0) as f32, ..Globals::default() };
+            let p = [f64::from(globals.hero_p0), f64::from(globals.hero_p1)];
+            let mut mix = Mixture::new(false);
+            mix.pick_hero(&globals, uniform() as f32);
+            let mut scale = 1.0f64;
+            let mut w = [(0.0f64, 1.0f64); 2];
+            let vertices = 1 + (uniform() * 6.0) as usize;
+            for _ in 0..vertices {
+                let kind = (uniform() * 3.0) as u32;
+                let k = if kind < 2 { kind } else { MAX_HEROES };
+                let r = (0.01 + 20.0 * uniform().powi(3)) as f32;
+                let pdf_f = (0.1 + uniform()) as f32;
+                let sum = mix.update_hero(k, q, pdf_f, r * pdf_f).unwrap();
+                scale *= f64::from(sum);
+                if k < MAX_HEROES {
+                    let (w1, w2) = &mut w[k as usize];
+                    *w1 += f64::from(q) * *w2 * f64::from(r);
+                    *w2 *= 1.0 - f64::from(q);
+                }
+            }
+            let brute: f64 = (0..2).map(|k| p[k] * (w[k].0 + w[k].1)).sum();
+            let incremental = f64::from(mix.w1 + mix.w2) * scale;
+            assert!((incremental - brute).abs() <= 1e-5 * brute, "{incremental} vs {brute}");
+            // Next-event estimation at one more vertex, capable for target `k` (or neither).
+            let kind = (uniform() * 3.0) as u32;
+            let k = if kind < 2 { kind } else { MAX_HEROES };
+            let (pdf_f, pdf_d, p_e) =
+                ((0.1 + uniform()) as f32, (0.1 + 3.0 * uniform()) as f32, (0.1 + uniform()) as f32);
+            let (f, d, e) = (f64::from(pdf_f), f64::from(pdf_d), f64::from(p_e));
+            let brute_d: f64 = (0..2)
+                .map(|j| {
+                    let qj = if k == j as u32 { f64::from(q) } else { 0.0 };
+                    let (w1, w2) = w[j];
+                    p[j] * (w1 + w2 + (w1 * f + qj * w2 * d + (1.0 - qj) * w2 * f) / e)
+                })
+                .sum();
+            let weight = f64::from(mix.nee_weight_hero(k, q, pdf_f, pdf_d, Some(p_e))) / scale;
+            assert!((weight * brute_d - 1.0).abs() <= 1e-5, "NEE weight {weight} vs 1/{brute_d}");
+        }
+    }
 }

@@ -259,7 +259,7 @@ impl Renderer {
         };
         let features = variant::request_features(self.scene_features, options, self.grad_kinds(options));
         let primal = variant::request_features(self.scene_features, pass1, ParamKinds::NONE);
-        (features & !(G_ANY | F_DIFF) == primal).then_some(Variant { kind, features })
+        (features & !(G_ANY | F_DIFF | F_HERO) == primal).then_some(Variant { kind, features })
     }
 
     /// Runs the reverse-mode kernel of `mode` — `kinds[0]` with float atomics, `kinds[1]` in fixed

@@ -176,15 +176,17 @@ pub fn request_features(scene: u32, options: &RenderOptions, kinds: ParamKinds) 
     if options.nee && scene & (F_EMITTERS | F_ENV | F_LIGHTS) != 0 {
         f |= F_NEE;
     }
-    if matches!(options.strategy, Strategy::Diff { .. }) {
-        f |= F_DIFF;
+    match options.strategy {
+        Strategy::Diff { .. } => f |= F_DIFF,
+        Strategy::Hero { .. } => f |= F_DIFF | F_HERO,
+        Strategy::Bsdf => {}
     }
     f | kinds.bits()
 }
 
 /// A short human-readable name of a variant, for logs: `nee env diffuse conductor[beckmann] ∂alpha`.
 pub fn describe(features: u32) -> String {
-    const NAMES: [(u32, &str); 30] = [
+    const NAMES: [(u32, &str); 31] = [
         (F_NEE, "nee"),
         (F_ENV, "env"),
         (F_EMITTERS, "emitters"),
@@ -208,6 +210,7 @@ pub fn describe(features: u32) -> String {
         (F_PARAM_TEXTURE, "scalar-texture"),
         (F_MASK, "mask"),
         (F_LIGHT_TEXTURE, "light-texture"),
+        (F_HERO, "hero"),
         (G_COLOR, "∂color"),
         (G_TEXTURE, "∂texture"),
         (G_ALPHA, "∂alpha"),

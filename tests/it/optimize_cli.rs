@@ -500,3 +500,89 @@ fn strategy_auto_pilots_once_and_resume_reuses_its_choice() {
     assert_eq!(resumed["strategy"], pilot["picked"]);
     assert_eq!(resumed["iterations"], 3);
 }
+
+/// The hero strategy in `optimize` (two roughnesses, weights adapted to each one's gradient
+/// variance, ALGORITHMS.md §5.8): three iterations, then `--resume` to six, give the six-in-one-go
+/// run's rows bit for bit (fixed-point gradients): the running variances travel in
+/// `state.json`, and the adapted weights leave uniform. A state file without them is refused, and so
+/// is a hero set with a target that is not optimised (its variance is unknown).
+#[test]
+fn hero_weights_adapt_and_resume_bit_for_bit() {
+    let dir = tempfile::tempdir().unwrap();
+    let (whole, split) = (dir.path().join("whole"), dir.path().join("split"));
+    let scene = format!("{}/tests/data/scenes/hero_spheres.xml", env!("CARGO_MANIFEST_DIR"));
+    let (left, right) = ("left.bsdf.alpha.value", "right.bsdf.alpha.value");
+    let args = [
+        "optimize",
+        &scene,
+        "--deterministic",
+        "--target-set",
+        "left.bsdf.alpha.value=0.1",
+        "--target-set",
+        "right.bsdf.alpha.value=0.2",
+        "--param",
+        left,
+        "--param",
+        right,
+        "--strategy",
+        "diff",
+        "--diff-param",
+        "left.bsdf.alpha.value,right.bsdf.alpha.value",
+        "--width",
+        "16",
+        "--height",
+        "16",
+        "--spp-primal",
+        "2",
+        "--spp-grad",
+        "2",
+        "--spp",
+        "2",
+        "--lr",
+        "0.02",
+    ];
+    ok(&run(&args, &["--iters", "6", "-o", whole.to_str().unwrap()]));
+    ok(&run(&args, &["--iters", "3", "-o", split.to_str().unwrap()]));
+    let state = json(&split.join("state.json"));
+    assert_eq!(state["hero"]["steps"], 3, "{state}");
+    ok(&run(&["optimize", "--resume", split.to_str().unwrap(), "--iters", "6"], &[]));
+    let ((_, resumed), (_, straight)) = (rows(&split), rows(&whole));
+    assert_eq!(resumed.len(), 6);
+    for (a, b) in resumed.iter().zip(&straight) {
+        assert_eq!((&a[0], &a[2..]), (&b[0], &b[2..]), "everything but the wall time agrees bit for bit");
+    }
+    let state = json(&whole.join("state.json"));
+    let hero = &state["hero"];
+    assert_eq!(hero["steps"], 6);
+    // The weights these moments give are not uniform (each keeps at least 0.125).
+    let variance = |k: usize| {
+        let c = 1.0 - 0.9f64.powi(6);
+        let (m, s) = (hero["mean"][k].as_f64().unwrap() / c, hero["square"][k].as_f64().unwrap() / c);
+        (s - m * m).max(0.0)
+    };
+    let p0 = 0.125 + 0.75 * variance(0) / (variance(0) + variance(1));
+    assert!((p0 - 0.5).abs() > 0.01 && (0.125..=0.875).contains(&p0), "p0 = {p0}");
+    // A state.json whose hero state is missing is refused.
+    let mut broken = json(&split.join("state.json"));
+    broken.as_object_mut().unwrap().remove("hero");
+    std::fs::write(split.join("state.json"), broken.to_string()).unwrap();
+    let o = run(&["optimize", "--resume", split.to_str().unwrap(), "--iters", "7"], &[]);
+    let stderr = String::from_utf8_lossy(&o.stderr);
+    assert!(!o.status.success() && stderr.contains("no `hero` state"), "{stderr}");
+    // A hero that is not optimised: refused by name.
+    let o = run(
+        &args[..9],
+        &[
+            "--strategy",
+            "diff",
+            "--diff-param",
+            "left.bsdf.alpha.value,floor.bsdf.weight.value",
+            "--iters",
+            "1",
+            "-o",
+            dir.path().join("x").to_str().unwrap(),
+        ],
+    );
+    let stderr = String::from_utf8_lossy(&o.stderr);
+    assert!(!o.status.success() && stderr.contains("floor.bsdf.weight.value is not optimised"), "{stderr}");
+}

@@ -238,7 +238,7 @@ fn the_pilot_measures_every_candidate_and_the_same_seed_picks_the_same_strategy(
         .candidates
         .iter()
         .map(|c| match c.strategy {
-            Strategy::Diff { q, .. } => Some(q),
+            Strategy::Diff { q, .. } | Strategy::Hero { q, .. } => Some(q),
             Strategy::Bsdf => None,
         })
         .collect();

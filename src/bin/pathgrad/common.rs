@@ -202,15 +202,32 @@ pub(crate) struct StrategyArgs {
     #[arg(long)]
     pub(crate) no_nee: bool,
     /// The parameter whose derivative drives `diff`'s sampler (default: the first parameter the
-    /// command differentiates).
-    #[arg(long, value_name = "NAME")]
+    /// command differentiates). Several, comma-separated (`A,B`, at most 4, each a roughness or
+    /// blend weight): each path draws one of them as its hero and samples its derivative
+    /// (ALGORITHMS.md §5.8).
+    #[arg(long, value_name = "NAME[,NAME…]")]
     pub(crate) diff_param: Option<String>,
+    /// With several `--diff-param`s: the probability of each being a path's hero, comma-separated
+    /// in the same order (normalised to sum 1) [default: uniform; `optimize`: adapted to each
+    /// parameter's gradient variance].
+    #[arg(long, value_name = "W,W…")]
+    pub(crate) hero_weights: Option<String>,
 }
 
 impl StrategyArgs {
     /// `--q`, or its default.
     pub(crate) fn q(&self) -> f32 {
         self.q.unwrap_or(pathgrad::integrator::DEFAULT_DIFF_Q)
+    }
+
+    /// `--hero-weights` as numbers, if given.
+    pub(crate) fn hero_weights(&self) -> Result<Option<Vec<f32>>> {
+        let Some(w) = &self.hero_weights else { return Ok(None) };
+        let parsed: std::result::Result<Vec<f32>, _> = w.split(',').map(|x| x.trim().parse::<f32>()).collect();
+        match parsed {
+            Ok(v) => Ok(Some(v)),
+            Err(e) => bail!("--hero-weights {w}: {e} (expected numbers, comma-separated)"),
+        }
     }
 
     /// `--placement-mis`, or the balance heuristic.
@@ -236,6 +253,9 @@ impl StrategyArgs {
         let Some(target) = self.diff_param.as_deref().or(default_target) else {
             bail!("--strategy auto needs a parameter to pilot on: give --diff-param NAME");
         };
+        if target.contains(',') {
+            bail!("--strategy auto pilots on one --diff-param, not several ({target}): use --strategy diff");
+        }
         let choice = pathgrad::variance::choose_strategy(
             backend,
             opts,
@@ -283,6 +303,30 @@ impl StrategyArgs {
         }
         let placement = self.placement()?;
         let target = self.diff_param.as_deref().or(default_target);
+        if let Some(w) = &self.hero_weights
+            && !(self.strategy == "diff" && self.diff_param.as_deref().is_some_and(|t| t.contains(',')))
+        {
+            bail!("--hero-weights {w} applies only to --strategy diff with several --diff-param NAME,NAME");
+        }
+        if self.strategy != "bsdf"
+            && let Some(names) = target.filter(|t| t.contains(','))
+        {
+            if self.strategy != "diff" {
+                bail!(
+                    "--strategy {} takes one --diff-param, not several ({names}): use --strategy diff",
+                    self.strategy
+                );
+            }
+            if placement == pathgrad::integrator::PlacementMis::Power {
+                bail!("--placement-mis power is not built for several --diff-param ({names}): use balance");
+            }
+            let names: Vec<&str> = names.split(',').map(str::trim).collect();
+            let weights = self.hero_weights()?;
+            opts.strategy = Strategy::hero(scene, &names, self.q(), weights.as_deref())
+                .with_context(|| format!("invalid --diff-param {}", names.join(",")))?;
+            opts.validate()?;
+            return Ok(());
+        }
         opts.strategy = match (self.strategy.as_str(), target) {
             ("diff", None) => bail!("--strategy diff needs --diff-param NAME (the parameter that drives the sampler)"),
             // The pilot (`choose`) sets the strategy once the device is open; its target is checked here.
@@ -308,6 +352,10 @@ pub(crate) fn strategy_label(strategy: &pathgrad::integrator::Strategy) -> Strin
         Strategy::Bsdf => "bsdf".into(),
         Strategy::Diff { q, placement: PlacementMis::Balance, .. } => format!("diff q={q}"),
         Strategy::Diff { q, placement: PlacementMis::Power, .. } => format!("diff q={q} power"),
+        Strategy::Hero { q, heroes } => {
+            let p: Vec<String> = heroes.weights().iter().map(|p| format!("{p:.3}")).collect();
+            format!("diff q={q} heroes p={}", p.join(","))
+        }
     }
 }
 
@@ -326,6 +374,13 @@ pub(crate) fn strategy_json(
             "technique": strategy_label(strategy), "strategy": "diff", "q": q, "placement_mis": placement.name(),
             "diff_param": scene.params.entry(*target).name,
         }),
+        Strategy::Hero { heroes, q } => {
+            let names: Vec<&str> = heroes.targets().iter().map(|t| scene.params.entry(*t).name.as_str()).collect();
+            serde_json::json!({
+                "technique": strategy_label(strategy), "strategy": "diff", "q": q, "placement_mis": "balance",
+                "diff_param": names.join(","), "hero_weights": heroes.weights(),
+            })
+        }
     }
 }
 

@@ -33,6 +33,8 @@ pub(crate) struct VarianceArgs {
     /// Strategies to compare, comma-separated: bsdf, diff, auto (default: bsdf and diff; bsdf alone
     /// in a scene with participating media or null boundaries, where diff is not built). `auto` is
     /// the strategy `--strategy auto` picks from its pilot (run once, its cost reported apart).
+    /// With several --diff-param: `diff` samples by all of them, one hero per path (weights
+    /// --hero-weights), `diff:NAME` by NAME alone, `diff@W/W/…` by all with hero weights W.
     #[arg(long, value_delimiter = ',')]
     strategy: Option<Vec<String>>,
     /// Probabilities of `diff`'s differential vertex, comma-separated (one row each: a q sweep).
@@ -45,9 +47,14 @@ pub(crate) struct VarianceArgs {
     /// Turn next-event estimation off for every strategy.
     #[arg(long)]
     no_nee: bool,
-    /// The parameter whose derivative drives `diff`'s sampler (default: --param).
-    #[arg(long, value_name = "NAME")]
+    /// The parameter whose derivative drives `diff`'s sampler (default: --param); several,
+    /// comma-separated, for the hero strategy (ALGORITHMS.md §5.8).
+    #[arg(long, value_name = "NAME[,NAME…]")]
     diff_param: Option<String>,
+    /// With several --diff-param: each one's probability of being a path's hero, comma-separated
+    /// (default: uniform).
+    #[arg(long, value_name = "W,W…")]
+    hero_weights: Option<String>,
     /// Independent estimates per strategy (seeds --seed, --seed + 1, …).
     #[arg(long, default_value_t = 100)]
     runs: u32,
@@ -109,6 +116,59 @@ fn techniques(args: &VarianceArgs, scene: &pathgrad::scene::Scene) -> Result<(Ve
         args.placement_mis.iter().map(|p| PlacementMis::from_name(p)).collect::<pathgrad::Result<Vec<_>>>()?;
     let Some(&first_placement) = placements.first() else { bail!("--placement-mis lists no weighting") };
     for name in args.strategy.as_ref().unwrap_or(&default) {
+        let parse_weights = |w: &str, sep: char| -> Result<Vec<f32>> {
+            w.split(sep)
+                .map(|x| x.trim().parse::<f32>().with_context(|| format!("invalid hero weights '{w}'")))
+                .collect()
+        };
+        // The hero strategy's variants: `diff` over several targets, `diff:NAME`, `diff@W/W`.
+        let heroes: Vec<&str> = target.split(',').map(str::trim).collect();
+        let hero_row = if let Some(one) = name.strip_prefix("diff:") {
+            Some((vec![one], None, format!(" [{one}]"), format!("-{one}")))
+        } else if let Some(w) = name.strip_prefix("diff@") {
+            let w = parse_weights(w, '/')?;
+            let tag = w.iter().map(|x| format!("{x}")).collect::<Vec<_>>().join("-");
+            Some((heroes.clone(), Some(w), String::new(), format!("-p{tag}")))
+        } else if name == "diff" && heroes.len() > 1 {
+            let w = args.hero_weights.as_deref().map(|w| parse_weights(w, ',')).transpose()?;
+            Some((heroes.clone(), w, String::new(), String::new()))
+        } else {
+            None
+        };
+        if let Some((targets, weights, label_tag, stem_tag)) = hero_row {
+            if placements != [PlacementMis::Balance] {
+                bail!("--placement-mis power is not built for the hero strategy ({name}): use balance");
+            }
+            for &q in &args.q {
+                let strategy = Strategy::hero(scene, &targets, q, weights.as_deref())
+                    .with_context(|| format!("invalid --strategy {name}"))?;
+                let label = format!("{}{label_tag}", strategy_label(&strategy));
+                let stem = format!("diff-q{q}{stem_tag}");
+                if rows.iter().any(|r: &Technique| r.stem == stem) {
+                    bail!("--strategy/--q list '{label}' twice");
+                }
+                rows.push(Technique {
+                    label: label.clone(),
+                    stem: stem.clone(),
+                    strategy,
+                    adaptive: false,
+                    auto: false,
+                });
+                if args.adaptive {
+                    rows.push(Technique {
+                        label: format!("{label} adaptive"),
+                        stem: format!("{stem}-adaptive"),
+                        strategy,
+                        adaptive: true,
+                        auto: false,
+                    });
+                }
+            }
+            continue;
+        }
+        if name != "bsdf" && heroes.len() > 1 {
+            bail!("--strategy {name} takes one --diff-param (several: diff, diff:NAME or diff@W/W)");
+        }
         let diff = name == "diff";
         let qs: &[f32] = if diff { &args.q } else { &[0.0] };
         let weightings: &[PlacementMis] = if diff { &placements } else { &[PlacementMis::Balance] };
@@ -129,6 +189,8 @@ fn techniques(args: &VarianceArgs, scene: &pathgrad::scene::Scene) -> Result<(Ve
                 Strategy::Diff { q, placement: PlacementMis::Power, .. } => {
                     (format!("diff q={q} power"), format!("diff-q{q}-power"))
                 }
+                // Hero rows are made above; a label all the same.
+                Strategy::Hero { .. } => (strategy_label(&strategy), format!("diff-q{q}-hero")),
             };
             for adaptive in [false, true] {
                 if adaptive && !args.adaptive {
@@ -360,8 +422,9 @@ pub(crate) fn run(args: &VarianceArgs) -> Result<()> {
             let mut item = serde_json::json!({
                 "technique": row.label,
                 "strategy": row.strategy.name(),
-                "q": match row.strategy { Strategy::Diff { q, .. } => Some(q), Strategy::Bsdf => None },
-                "placement_mis": match row.strategy { Strategy::Diff { placement, .. } => Some(placement.name()), Strategy::Bsdf => None },
+                "q": match row.strategy { Strategy::Diff { q, .. } | Strategy::Hero { q, .. } => Some(q), Strategy::Bsdf => None },
+                "placement_mis": match row.strategy { Strategy::Diff { placement, .. } => Some(placement.name()), Strategy::Hero { .. } => Some("balance"), Strategy::Bsdf => None },
+                "hero_weights": match row.strategy { Strategy::Hero { heroes, .. } => Some(heroes.weights().to_vec()), _ => None },
                 "auto": row.auto,
                 "adaptive": row.adaptive,
                 "variance": m.variance,

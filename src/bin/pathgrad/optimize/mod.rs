@@ -202,6 +202,10 @@ struct RunConfig {
     /// `--placement-mis`: how `diff` weights its placements.
     #[serde(default = "balance")]
     placement_mis: String,
+    /// `--hero-weights` with several `--diff-param`s: fixed hero probabilities; `None` adapts
+    /// them to each target's gradient variance (ALGORITHMS.md §5.8).
+    #[serde(default)]
+    hero_weights: Option<Vec<f32>>,
     /// `--strategy auto`: what the pilot in preparation picked, stored so that `--resume` reuses it.
     #[serde(default)]
     pilot: Option<PilotChoice>,
@@ -265,6 +269,18 @@ struct State {
     adam_steps: Vec<u64>,
     /// Why the run stopped last: `completed`, `time budget`, `interrupted`, or an error.
     stopped: String,
+    /// The hero probabilities' running state (several `--diff-param`s without
+    /// `--hero-weights`).
+    #[serde(default)]
+    hero: Option<HeroState>,
+}
+
+/// [`pathgrad::optim::HeroAdaptation`] in `state.json` (f64s round-trip exactly).
+#[derive(Serialize, Deserialize, Debug, Clone, PartialEq)]
+struct HeroState {
+    steps: u64,
+    mean: Vec<f64>,
+    square: Vec<f64>,
 }
 
 /// A run ready to iterate: renderer, target, the optimisation and where it writes.
@@ -392,6 +408,9 @@ fn start(args: &OptimizeArgs) -> Result<Session> {
         Strategy::Bsdf if args.sampling.strategy == "auto" => Some(args.sampling.diff_param.clone().unwrap_or(first)),
         Strategy::Bsdf => None,
         Strategy::Diff { target, .. } => Some(scene.params.entry(target).name.clone()),
+        Strategy::Hero { heroes, .. } => {
+            Some(heroes.targets().iter().map(|t| scene.params.entry(*t).name.as_str()).collect::<Vec<_>>().join(","))
+        }
     };
     let target = args.target.as_deref().map(absolute).transpose()?;
     let target_hash = target.as_deref().map(content_hash).transpose()?;
@@ -429,6 +448,7 @@ fn start(args: &OptimizeArgs) -> Result<Session> {
         nee: opts.nee,
         diff_param,
         placement_mis: args.sampling.placement()?.name().to_string(),
+        hero_weights: args.sampling.hero_weights()?,
         pilot: None,
         allow_outside_folder: args.flags.allow_outside_folder,
         sensor: args.flags.sensor.clone(),
@@ -442,6 +462,7 @@ fn start(args: &OptimizeArgs) -> Result<Session> {
     let prepared = prepare(&mut config, &scene, &ids, &args.flags, args.json)?;
     let history = History::new(&scene.params, &ids, prepared.truth.is_some());
     let run = with_smoothness(Optimization::resume(initial_table, adam, 0, prepared.options)?, &scene, &ids, &config)?;
+    let run = with_hero(run, &config, None)?;
     fs::create_dir_all(&dir).with_context(|| format!("creating -o {}", dir.display()))?;
     // Checked again under the lock: another run may have started in DIR since the first check.
     let lock = lock_dir(&dir, "-o")?;

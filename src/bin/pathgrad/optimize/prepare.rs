@@ -48,8 +48,15 @@ pub(super) fn iteration_options(scene: &Scene, config: &RunConfig) -> Result<Ite
         None if config.strategy == "auto" => ("bsdf", config.q),
         None => (config.strategy.as_str(), config.q),
     };
-    let strategy = Strategy::from_name(scene, name, q, config.diff_param.as_deref().unwrap_or(""))?
-        .with_placement(PlacementMis::from_name(&config.placement_mis)?);
+    let strategy = match config.diff_param.as_deref() {
+        // Several targets: the hero strategy (its adapted weights are set by `with_hero`).
+        Some(names) if name == "diff" && names.contains(',') => {
+            let names: Vec<&str> = names.split(',').collect();
+            Strategy::hero(scene, &names, q, config.hero_weights.as_deref())?
+        }
+        target => Strategy::from_name(scene, name, q, target.unwrap_or(""))?
+            .with_placement(PlacementMis::from_name(&config.placement_mis)?),
+    };
     if config.spp_grad == 0 {
         bail!("invalid --spp-grad: must be at least 1");
     }
@@ -173,13 +180,29 @@ fn pilot(
         choice.warm_up_seconds
     );
     let q = match choice.strategy {
-        Strategy::Diff { q, .. } => q,
+        Strategy::Diff { q, .. } | Strategy::Hero { q, .. } => q,
         Strategy::Bsdf => config.q,
     };
     let report = crate::common::pilot_json(scene, &param, &choice, measure.is_some());
     config.pilot = Some(PilotChoice { strategy: choice.strategy.name().to_string(), q, report });
     options.render.strategy = iteration_options(scene, config)?.render.strategy;
     Ok(())
+}
+
+/// `run` with its hero probabilities adapted (several `--diff-param`s without `--hero-weights`),
+/// from `state` (`None`: a fresh run), else `run` as it is.
+pub(super) fn with_hero(run: Optimization, config: &RunConfig, state: Option<&HeroState>) -> Result<Optimization> {
+    let Strategy::Hero { heroes, .. } = run.options().render.strategy else { return Ok(run) };
+    if config.hero_weights.is_some() {
+        return Ok(run);
+    }
+    let adaptation = match state {
+        None => pathgrad::optim::HeroAdaptation::new(&heroes),
+        Some(s) => pathgrad::optim::HeroAdaptation { steps: s.steps, mean: s.mean.clone(), square: s.square.clone() },
+    };
+    run.with_hero_adaptation(adaptation).map_err(|e| {
+        anyhow::anyhow!("--diff-param {}: {e} (or give --hero-weights)", config.diff_param.as_deref().unwrap_or(""))
+    })
 }
 
 pub(super) fn values_of(table: &ParamTable, ids: &[ParamId]) -> BTreeMap<String, Vec<f64>> {

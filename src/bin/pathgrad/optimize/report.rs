@@ -90,6 +90,11 @@ pub(super) fn write_state(s: &Session, stopped: &str) -> Result<()> {
         adam_v: adam.v.clone(),
         adam_steps: adam.steps.clone(),
         stopped: stopped.to_string(),
+        hero: s.run.hero_adaptation().map(|h| HeroState {
+            steps: h.steps,
+            mean: h.mean.clone(),
+            square: h.square.clone(),
+        }),
     };
     // The control variates' estimate first: state.json then never points past it.
     super::control::write(&s.dir, &s.run, &s.ids)?;

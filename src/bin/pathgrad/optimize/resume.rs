@@ -157,6 +157,18 @@ pub(super) fn resume(args: &OptimizeArgs, dir: &Path, given: &BTreeSet<String>) 
     )?;
     let run = if config.control_variates { super::control::read(dir, run, &table, &ids)? } else { run };
     let run = if config.reuse { super::control::read_reuse(dir, run, &table, &ids)? } else { run };
+    if state.hero.is_none()
+        && state.iteration > 0
+        && config.hero_weights.is_none()
+        && matches!(run.options().render.strategy, pathgrad::integrator::Strategy::Hero { .. })
+    {
+        bail!(
+            "{}: the run adapts its hero weights but the file has no `hero` state to continue them from",
+            path.display()
+        );
+    }
+    let run =
+        with_hero(run, &config, state.hero.as_ref()).with_context(|| format!("{}: hero state", path.display()))?;
     history.rewrite(&csv)?;
     Ok(Session {
         _lock: lock,
@@ -247,6 +259,14 @@ pub(super) fn check_unchanged(
     check("no_nee", "--no-nee", Some(text(&args.sampling.no_nee)), text(&!c.nee));
     check("diff_param", "--diff-param", args.sampling.diff_param.clone(), c.diff_param.clone().unwrap_or_default());
     check("placement_mis", "--placement-mis", args.sampling.placement_mis.clone(), c.placement_mis.clone());
+    check(
+        "hero_weights",
+        "--hero-weights",
+        args.sampling.hero_weights.clone(),
+        c.hero_weights
+            .as_ref()
+            .map_or("adapted".into(), |w| w.iter().map(|x| x.to_string()).collect::<Vec<_>>().join(",")),
+    );
     if !conflicts.is_empty() {
         bail!(
             "--resume: {} conflict with the run in {} (leave them out to continue it as it was)",
