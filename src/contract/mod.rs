@@ -60,7 +60,7 @@ mod tests {
         assert_eq!(size_of::<EmitterTri>(), 16 + 36);
         assert_eq!(size_of::<AliasEntry>(), 8);
         assert_eq!(size_of::<EnvCell>(), 12);
-        assert_eq!(size_of::<DeltaLight>(), 2 * 4 + 2 * 12 + 4 * 4);
+        assert_eq!(size_of::<DeltaLight>(), 11 * 4 + 5 * 12 + 8);
         assert_eq!(size_of::<KernelPush>(), 16);
         assert_eq!(size_of::<AliasProbePush>(), 16);
     }
