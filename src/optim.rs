@@ -246,7 +246,7 @@ impl Optimization {
     ///
     /// # Errors
     /// [`Error::InvalidArgument`] naming `Optimization::with_hero_adaptation` if the run's strategy
-    /// is not [`Strategy::Hero`] or a hero target is not optimised (its gradient is not
+    /// is not [`crate::integrator::Strategy::Hero`] or a hero target is not optimised (its gradient is not
     /// computed), and as [`HeroAdaptation::check`].
     pub fn with_hero_adaptation(mut self, state: HeroAdaptation) -> Result<Optimization> {
         let crate::integrator::Strategy::Hero { heroes, q } = self.options.render.strategy else {
