@@ -432,13 +432,7 @@ mod tests {
     /// Deterministic pseudo-random triangles: a soup of `n` small triangles in a unit cube,
     /// some of them degenerate.
     fn soup(n: u32) -> Vec<[Vec3; 3]> {
-        let mut state = 0x9e37_79b9u32;
-        let mut next = || {
-            state ^= state << 13;
-            state ^= state >> 17;
-            state ^= state << 5;
-            state as f32 / u32::MAX as f32
-        };
+        let mut next = super::super::node2::xorshift(0x9e37_79b9);
         (0..n)
             .map(|k| {
                 let c = Vec3::new(next(), next(), next());

@@ -42,6 +42,18 @@ impl Node2 {
 
 /// obvhs's binary tree for `nodes` (identity primitive mapping), for the tests that compare with
 /// obvhs's code.
+/// The BVH tests' deterministic uniforms in [0, 1]: Marsaglia's 32-bit xorshift from `seed`.
+#[cfg(test)]
+pub(super) fn xorshift(seed: u32) -> impl FnMut() -> f32 {
+    let mut state = seed;
+    move || {
+        state ^= state << 13;
+        state ^= state >> 17;
+        state ^= state << 5;
+        state as f32 / u32::MAX as f32
+    }
+}
+
 #[cfg(test)]
 pub(super) fn widen(nodes: &[Node2]) -> obvhs::bvh2::Bvh2 {
     use obvhs::bvh2::{Bvh2, node::Bvh2Node};

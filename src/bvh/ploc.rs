@@ -235,13 +235,7 @@ mod tests {
         // A soup with duplicate centres (equal Morton codes) and degenerate triangles, a grid
         // (ties in cost), and a large soup split into many parallel chunks.
         let soup = |n: u32, scale: f32| -> Vec<[Vec3; 3]> {
-            let mut state = 0x2545_f491u32;
-            let mut next = move || {
-                state ^= state << 13;
-                state ^= state >> 17;
-                state ^= state << 5;
-                state as f32 / u32::MAX as f32
-            };
+            let mut next = super::super::node2::xorshift(0x2545_f491);
             (0..n)
                 .map(|k| {
                     let c = Vec3::new(next(), next(), next()) * scale;

@@ -205,13 +205,7 @@ mod tests {
     /// Triangles of `n` random sizes and places: candidates of equal half area, which this module
     /// orders differently from obvhs's radix sort, are unlikely.
     fn soup(n: u32) -> Vec<[Vec3; 3]> {
-        let mut state = 0x1234_5679u32;
-        let mut next = move || {
-            state ^= state << 13;
-            state ^= state >> 17;
-            state ^= state << 5;
-            state as f32 / u32::MAX as f32
-        };
+        let mut next = super::super::node2::xorshift(0x1234_5679);
         (0..n)
             .map(|_| {
                 let c = Vec3::new(next(), next(), next()) * 10.0;
