@@ -50,6 +50,7 @@
 
 pub mod adaptive;
 pub mod alias;
+pub mod attached;
 pub mod backend;
 pub mod bsdf;
 pub mod bvh;

@@ -1,0 +1,404 @@
+//! Attached derivatives (PRB supplemental §1–2, ALGORITHMS.md §9): the ray-state Jacobians of
+//! smooth vertices, their regularisation, and the row vectors the attached estimator carries.
+//!
+//! A ray's state is r = (o, d), its origin and direction (six numbers). With every uniform fixed,
+//! a vertex maps the ray that reaches it to the ray that leaves it, r′ = F(r), and its Jacobian
+//! A = ∂r′/∂r is a [`Jac6`]. The attached estimator needs, at each vertex v, the derivative of
+//! the radiance that follows v by the ray leaving v; it gets it as PRB does:
+//!
+//! - the primal pass sums Γ = Σ_k h_k·J̃_k, the derivative of the sample's (adjoint-weighted)
+//!   radiance by the camera ray, where J̃_k = Ã_{k−1}⋯Ã_1 and Ã = A + Y·I with Y a zero-mean
+//!   random scalar per vertex (stream `Jacobian`, so the replay draws the same Y);
+//! - the replay starts from Φ₁ = Γ and at each vertex sets Φ_{v+1} = (Φ_v − h_v)·Ã_v⁻¹, the
+//!   derivative of what follows v by the ray leaving v, unbiased whatever Y is (supplemental §2:
+//!   the inverses undo exactly the noisy factors the primal pass multiplied).
+//!
+//! h_k is vertex k's own row: δL·β_k·∂c_k/∂r_k (what vertex k emits) plus δL·(∂ ln w_k/∂r_k ⊙
+//! L_after) (its sample weight w_k times everything after it). The primal pass cannot know
+//! L_after, so it carries S = Σ_{j<k} ∂ ln w_j/∂r_j·J̃_j per channel and adds δL·β_k·c_k ⊙ S_k at
+//! each contribution instead: the same sum, ordered by contribution.
+//!
+//! Geometry is fixed: the hit point moves only along its triangle's plane, and no term for a
+//! visibility change is built (a moving direction that crosses an edge is not differentiated).
+
+use glam::{Mat3, Vec3};
+
+/// A row vector over the ray state: ∂(something)/∂o and ∂(something)/∂d.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct Row6 {
+    /// By the origin.
+    pub o: Vec3,
+    /// By the direction.
+    pub d: Vec3,
+}
+
+impl Row6 {
+    /// Zero.
+    pub const ZERO: Row6 = Row6 { o: Vec3::ZERO, d: Vec3::ZERO };
+
+    /// A row over the direction only.
+    pub fn direction(d: Vec3) -> Row6 {
+        Row6 { o: Vec3::ZERO, d }
+    }
+
+    /// This row times `j`: the same derivative by the ray *before* the map `j`.
+    pub fn mul(self, j: &Jac6) -> Row6 {
+        Row6 {
+            o: j.oo.transpose() * self.o + j.dob.transpose() * self.d,
+            d: j.od.transpose() * self.o + j.dd.transpose() * self.d,
+        }
+    }
+
+    /// The directional derivative along the ray perturbation (δo, δd).
+    pub fn dot(self, o: Vec3, d: Vec3) -> f32 {
+        self.o.dot(o) + self.d.dot(d)
+    }
+
+    /// `self + s·other`.
+    pub fn add_scaled(self, other: Row6, s: f32) -> Row6 {
+        Row6 { o: self.o + s * other.o, d: self.d + s * other.d }
+    }
+
+    /// Whether every entry is finite.
+    pub fn is_finite(self) -> bool {
+        self.o.is_finite() && self.d.is_finite()
+    }
+
+    /// The largest magnitude of an entry.
+    pub fn max_abs(self) -> f32 {
+        self.o.abs().max_element().max(self.d.abs().max_element())
+    }
+}
+
+/// A 6×6 Jacobian between ray states in 3×3 blocks: δo′ = oo·δo + od·δd, δd′ = dob·δo + dd·δd.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Jac6 {
+    /// ∂o′/∂o.
+    pub oo: Mat3,
+    /// ∂o′/∂d.
+    pub od: Mat3,
+    /// ∂d′/∂o.
+    pub dob: Mat3,
+    /// ∂d′/∂d.
+    pub dd: Mat3,
+}
+
+impl Jac6 {
+    /// The identity.
+    pub const IDENTITY: Jac6 = Jac6 { oo: Mat3::IDENTITY, od: Mat3::ZERO, dob: Mat3::ZERO, dd: Mat3::IDENTITY };
+
+    /// `self ∘ inner`: the map `inner` then `self`.
+    pub fn mul(&self, inner: &Jac6) -> Jac6 {
+        Jac6 {
+            oo: self.oo * inner.oo + self.od * inner.dob,
+            od: self.oo * inner.od + self.od * inner.dd,
+            dob: self.dob * inner.oo + self.dd * inner.dob,
+            dd: self.dob * inner.od + self.dd * inner.dd,
+        }
+    }
+
+    /// `self + y·I`: the regularised factor Ã of the supplemental's §2.
+    pub fn plus_identity(&self, y: f32) -> Jac6 {
+        let yi = Mat3::from_diagonal(Vec3::splat(y));
+        Jac6 { oo: self.oo + yi, od: self.od, dob: self.dob, dd: self.dd + yi }
+    }
+
+    /// The row x with x·self = b (block elimination on the transposed system: the origin block
+    /// first, then its Schur complement), or `None` where a block is singular or the result is
+    /// not finite.
+    pub fn solve_row(&self, b: Row6) -> Option<Row6> {
+        let (a, bb, c, d) = (self.oo.transpose(), self.dob.transpose(), self.od.transpose(), self.dd.transpose());
+        if a.determinant() == 0.0 {
+            return None;
+        }
+        let a_inv = a.inverse();
+        let s = d - c * a_inv * bb;
+        if s.determinant() == 0.0 {
+            return None;
+        }
+        let x_d = s.inverse() * (b.d - c * (a_inv * b.o));
+        let x_o = a_inv * (b.o - bb * x_d);
+        let x = Row6 { o: x_o, d: x_d };
+        x.is_finite().then_some(x)
+    }
+}
+
+/// The regularisation scalar Y of one vertex from its uniforms: magnitude uniform in
+/// [amplitude/2, amplitude], sign from `u_sign` — zero mean, and |Y| bounded away from 0 so that
+/// a vertex whose own Jacobian is singular (a plane's hit point, a unit direction) keeps
+/// Ã = A + Y·I invertible with condition bounded by 2/amplitude in those directions.
+pub fn regularisation(amplitude: f32, u_sign: f32, u_size: f32) -> f32 {
+    let size = amplitude * (0.5 + 0.5 * u_size);
+    if u_sign < 0.5 { -size } else { size }
+}
+
+/// Where a ray meets a triangle, as the Jacobians need it.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct HitGeometry {
+    /// Distance along the (unit) direction.
+    pub t: f32,
+    /// The incoming direction.
+    pub d: Vec3,
+    /// The triangle's geometric normal (the plane the hit point moves in).
+    pub ng: Vec3,
+    /// The shading normal the BSDF used (flipped where a two-sided material is seen from behind).
+    pub n: Vec3,
+    /// ∂n/∂x along the triangle (zero for a flat-shaded one).
+    pub dn_dx: Mat3,
+}
+
+impl HitGeometry {
+    /// P = I − d·ngᵀ/(d·ng): ∂x/∂o (and ∂x/∂d = t·P) for a hit point x = o + t·d on a plane.
+    pub fn projection(&self) -> Mat3 {
+        let denom = self.d.dot(self.ng);
+        Mat3::IDENTITY - outer(self.d, self.ng / denom)
+    }
+
+    /// ∂cos θi/∂r with cos θi = −d·n: the incoming cosine's row over the ray that reaches the hit.
+    pub fn cos_row(&self) -> Row6 {
+        let p = self.projection();
+        // δcos = −(n·δd + d·N·δx), δx = P·δo + t·P·δd.
+        let w = p.transpose() * (self.dn_dx.transpose() * self.d);
+        Row6 { o: -w, d: -(self.n + self.t * w) }
+    }
+
+    /// The vertex's Jacobian A = ∂(x, d′)/∂(o, d) for an outgoing direction d′ = T(d, n) whose
+    /// derivatives are `t_d` = ∂T/∂d and `t_n` = ∂T/∂n.
+    pub fn jacobian(&self, t_d: Mat3, t_n: Mat3) -> Jac6 {
+        let p = self.projection();
+        let np = t_n * self.dn_dx * p;
+        Jac6 { oo: p, od: self.t * p, dob: np, dd: t_d + self.t * np }
+    }
+}
+
+/// u·vᵀ.
+pub fn outer(u: Vec3, v: Vec3) -> Mat3 {
+    Mat3::from_cols(u * v.x, u * v.y, u * v.z)
+}
+
+/// ∂n/∂x of the normalised interpolation of vertex normals `normals` over the triangle
+/// `v` (along its plane), at the unnormalised interpolated normal `n_raw`.
+pub fn normal_derivative(v: [Vec3; 3], normals: [Vec3; 3], n_raw: Vec3) -> Mat3 {
+    let (e0, e1) = (v[1] - v[0], v[2] - v[0]);
+    let (g00, g01, g11) = (e0.dot(e0), e0.dot(e1), e1.dot(e1));
+    let det = g00 * g11 - g01 * g01;
+    let len = n_raw.length();
+    if det == 0.0 || len == 0.0 {
+        return Mat3::ZERO;
+    }
+    // The barycentrics' gradients along the plane (the dual basis of e0, e1).
+    let grad_b1 = (g11 * e0 - g01 * e1) / det;
+    let grad_b2 = (g00 * e1 - g01 * e0) / det;
+    let raw = outer(normals[1] - normals[0], grad_b1) + outer(normals[2] - normals[0], grad_b2);
+    let n = n_raw / len;
+    (Mat3::IDENTITY - outer(n, n)) * raw / len
+}
+
+/// ∂/∂d and ∂/∂n of the mirror direction d′ = d − 2(d·n)n.
+pub fn reflect_jacobians(d: Vec3, n: Vec3) -> (Mat3, Mat3) {
+    let t_d = Mat3::IDENTITY - 2.0 * outer(n, n);
+    let t_n = -2.0 * (outer(n, d) + Mat3::from_diagonal(Vec3::splat(d.dot(n))));
+    (t_d, t_n)
+}
+
+/// The direction refracted from incoming direction `d` at normal `n` (cos θi = −d·n, either
+/// side) with index ratio η_ti (`eta_ti`), and its derivatives ∂/∂d, ∂/∂n and ∂/∂η_ti:
+/// d′ = η_ti·d + (cos θt + η_ti·cos θi)·n with cos θt = −sign(cos θi)·√(1 − η_ti²(1 − cos² θi)).
+/// `None` under total internal reflection.
+pub fn refract_jacobians(d: Vec3, n: Vec3, eta_ti: f32) -> Option<(Vec3, Mat3, Mat3, Vec3)> {
+    let c = -d.dot(n);
+    let root2 = 1.0 - eta_ti * eta_ti * (1.0 - c * c);
+    if !(root2 > 0.0) {
+        return None;
+    }
+    let root = root2.sqrt();
+    let sign = if c >= 0.0 { 1.0 } else { -1.0 };
+    let cos_t = -sign * root;
+    let dct_dc = -sign * eta_ti * eta_ti * c / root;
+    let dct_deta = sign * eta_ti * (1.0 - c * c) / root;
+    let out = eta_ti * d + (cos_t + eta_ti * c) * n;
+    // ∂c/∂d = −n, ∂c/∂n = −d.
+    let k = dct_dc + eta_ti;
+    let t_d = eta_ti * Mat3::IDENTITY - k * outer(n, n);
+    let t_n = (cos_t + eta_ti * c) * Mat3::IDENTITY - k * outer(n, d);
+    let t_eta = d + (dct_deta + c) * n;
+    Some((out, t_d, t_n, t_eta))
+}
+
+/// Mitsuba's dielectric Fresnel reflectance ([`crate::bsdf::rough_plastic::fresnel_dielectric`])
+/// and its derivatives by cos θi and by η (inside over outside): (F, ∂F/∂cos θi, ∂F/∂η), zero
+/// derivatives under total internal reflection and at η = 1.
+pub fn fresnel_dielectric_grad(cos_i: f32, eta: f32) -> (f32, f32, f32) {
+    let (r, _, _) = crate::bsdf::rough_plastic::fresnel_dielectric(cos_i, eta);
+    let outside = cos_i >= 0.0;
+    // e = η_it; de/dη.
+    let (e, de_deta) = if outside { (eta, 1.0) } else { (1.0 / eta, -1.0 / (eta * eta)) };
+    let c = cos_i.abs();
+    let ct2 = 1.0 - (1.0 - c * c) / (e * e);
+    if eta == 1.0 || c == 0.0 || !(ct2 > 0.0) {
+        return (r, 0.0, 0.0);
+    }
+    let ct = ct2.sqrt();
+    let dct_dc = c / (e * e * ct);
+    let dct_de = (1.0 - c * c) / (e * e * e * ct);
+    // a_s = (c − e·ct)/(c + e·ct), a_p = (ct − e·c)/(ct + e·c).
+    let quotient = |n: f32, d: f32, dn: f32, dd: f32| (n / d, (dn * d - n * dd) / (d * d));
+    let (a_s, das_dc) = quotient(c - e * ct, c + e * ct, 1.0 - e * dct_dc, 1.0 + e * dct_dc);
+    let (_, das_de) = quotient(c - e * ct, c + e * ct, -ct - e * dct_de, ct + e * dct_de);
+    let (a_p, dap_dc) = quotient(ct - e * c, ct + e * c, dct_dc - e, dct_dc + e);
+    let (_, dap_de) = quotient(ct - e * c, ct + e * c, dct_de - c, dct_de + c);
+    let dr_dc = a_s * das_dc + a_p * dap_dc;
+    let dr_de = a_s * das_de + a_p * dap_de;
+    let sign = if outside { 1.0 } else { -1.0 };
+    (r, sign * dr_dc, dr_de * de_deta)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn fd_vec(f: impl Fn(f32) -> Vec3, h: f32) -> Vec3 {
+        (f(h) - f(-h)) / (2.0 * h)
+    }
+
+    #[test]
+    fn fresnel_derivatives_match_finite_differences() {
+        use crate::bsdf::rough_plastic::fresnel_dielectric;
+        for &eta in &[1.5f32, 1.33, 0.7] {
+            for &c in &[0.9f32, 0.5, 0.2, -0.95, -0.8, -0.5] {
+                let (f, dc, de) = fresnel_dielectric_grad(c, eta);
+                if f >= 1.0 {
+                    continue;
+                }
+                let h = 1e-3;
+                let fd_c = (fresnel_dielectric(c + h, eta).0 - fresnel_dielectric(c - h, eta).0) / (2.0 * h);
+                let fd_e = (fresnel_dielectric(c, eta + h).0 - fresnel_dielectric(c, eta - h).0) / (2.0 * h);
+                assert!((fd_c - dc).abs() < 2e-3 * (1.0 + dc.abs()), "η {eta} cos {c}: ∂F/∂cos {dc} vs {fd_c}");
+                assert!((fd_e - de).abs() < 2e-3 * (1.0 + de.abs()), "η {eta} cos {c}: ∂F/∂η {de} vs {fd_e}");
+            }
+        }
+    }
+
+    #[test]
+    fn refraction_derivatives_match_finite_differences() {
+        let n = Vec3::new(0.1, 0.2, 0.97).normalize();
+        for &(d, eta_ti) in &[
+            (Vec3::new(0.3, -0.2, -0.9).normalize(), 1.0 / 1.5),
+            (Vec3::new(-0.2, 0.4, 0.9).normalize(), 1.5),
+            (Vec3::new(0.5, 0.1, -0.8).normalize(), 1.0 / 1.33),
+        ] {
+            let (out, t_d, t_n, t_eta) = refract_jacobians(d, n, eta_ti).unwrap();
+            // Snell: unit length, tangential part scaled by η_ti.
+            assert!((out.length() - 1.0).abs() < 1e-5);
+            let h = 1e-3;
+            for axis in [Vec3::X, Vec3::Y, Vec3::Z] {
+                let fd_d = fd_vec(|s| refract_jacobians(d + s * axis, n, eta_ti).unwrap().0, h);
+                let fd_n = fd_vec(|s| refract_jacobians(d, n + s * axis, eta_ti).unwrap().0, h);
+                assert!((fd_d - t_d * axis).abs().max_element() < 2e-3, "{fd_d} vs {}", t_d * axis);
+                assert!((fd_n - t_n * axis).abs().max_element() < 2e-3, "{fd_n} vs {}", t_n * axis);
+            }
+            let fd_e = fd_vec(|s| refract_jacobians(d, n, eta_ti + s).unwrap().0, h);
+            assert!((fd_e - t_eta).abs().max_element() < 2e-3, "{fd_e} vs {t_eta}");
+            let (r_d, r_n) = reflect_jacobians(d, n);
+            let mirror = |d: Vec3, n: Vec3| d - 2.0 * d.dot(n) * n;
+            for axis in [Vec3::X, Vec3::Y, Vec3::Z] {
+                let fd_d = fd_vec(|s| mirror(d + s * axis, n), h);
+                let fd_n = fd_vec(|s| mirror(d, n + s * axis), h);
+                assert!((fd_d - r_d * axis).abs().max_element() < 1e-3);
+                assert!((fd_n - r_n * axis).abs().max_element() < 1e-3);
+            }
+        }
+    }
+
+    /// The vertex Jacobian of a curved (interpolated-normal) triangle against moving the
+    /// incoming ray and recomputing the hit, the normal and the refracted direction.
+    #[test]
+    fn vertex_jacobian_matches_finite_differences() {
+        let v = [Vec3::new(-1.0, -1.0, 0.0), Vec3::new(1.0, -1.0, 0.2), Vec3::new(0.0, 1.0, -0.1)];
+        let normals = [Vec3::new(-0.3, -0.2, 1.0).normalize(), Vec3::new(0.3, -0.1, 1.0).normalize(), Vec3::Z];
+        let ng = (v[1] - v[0]).cross(v[2] - v[0]).normalize();
+        let eta_ti = 1.0 / 1.5;
+        // The refracted ray leaving the hit of ray (o, d).
+        let trace = |o: Vec3, d: Vec3| -> (Vec3, Vec3) {
+            let t = (v[0] - o).dot(ng) / d.dot(ng);
+            let x = o + t * d;
+            // Barycentrics of x.
+            let (e0, e1, p) = (v[1] - v[0], v[2] - v[0], x - v[0]);
+            let (g00, g01, g11) = (e0.dot(e0), e0.dot(e1), e1.dot(e1));
+            let det = g00 * g11 - g01 * g01;
+            let (p0, p1) = (p.dot(e0), p.dot(e1));
+            let b1 = (g11 * p0 - g01 * p1) / det;
+            let b2 = (g00 * p1 - g01 * p0) / det;
+            let n = ((1.0 - b1 - b2) * normals[0] + b1 * normals[1] + b2 * normals[2]).normalize();
+            (x, refract_jacobians(d, n, eta_ti).unwrap().0)
+        };
+        let o = Vec3::new(0.1, 0.2, 2.0);
+        let d = Vec3::new(0.05, -0.1, -1.0).normalize();
+        let t = (v[0] - o).dot(ng) / d.dot(ng);
+        let x = o + t * d;
+        let (e0, e1, p) = (v[1] - v[0], v[2] - v[0], x - v[0]);
+        let (g00, g01, g11) = (e0.dot(e0), e0.dot(e1), e1.dot(e1));
+        let det = g00 * g11 - g01 * g01;
+        let b1 = (g11 * p.dot(e0) - g01 * p.dot(e1)) / det;
+        let b2 = (g00 * p.dot(e1) - g01 * p.dot(e0)) / det;
+        let n_raw = (1.0 - b1 - b2) * normals[0] + b1 * normals[1] + b2 * normals[2];
+        let n = n_raw.normalize();
+        let geometry = HitGeometry { t, d, ng, n, dn_dx: normal_derivative(v, normals, n_raw) };
+        let (_, t_d, t_n, _) = refract_jacobians(d, n, eta_ti).unwrap();
+        let a = geometry.jacobian(t_d, t_n);
+        let h = 1e-3;
+        for axis in [Vec3::X, Vec3::Y, Vec3::Z] {
+            let plus = trace(o + h * axis, d);
+            let minus = trace(o - h * axis, d);
+            let (fx, fd) = ((plus.0 - minus.0) / (2.0 * h), (plus.1 - minus.1) / (2.0 * h));
+            assert!((fx - a.oo * axis).abs().max_element() < 2e-3, "∂x/∂o {fx} vs {}", a.oo * axis);
+            assert!((fd - a.dob * axis).abs().max_element() < 2e-3, "∂d′/∂o {fd} vs {}", a.dob * axis);
+            let plus = trace(o, d + h * axis);
+            let minus = trace(o, d - h * axis);
+            let (fx, fd) = ((plus.0 - minus.0) / (2.0 * h), (plus.1 - minus.1) / (2.0 * h));
+            assert!((fx - a.od * axis).abs().max_element() < 4e-3, "∂x/∂d {fx} vs {}", a.od * axis);
+            assert!((fd - a.dd * axis).abs().max_element() < 4e-3, "∂d′/∂d {fd} vs {}", a.dd * axis);
+        }
+        // The incoming cosine's row.
+        let cos_at = |o: Vec3, d: Vec3| {
+            let t = (v[0] - o).dot(ng) / d.dot(ng);
+            let x = o + t * d;
+            let (p0, p1) = ((x - v[0]).dot(e0), (x - v[0]).dot(e1));
+            let b1 = (g11 * p0 - g01 * p1) / det;
+            let b2 = (g00 * p1 - g01 * p0) / det;
+            -d.dot(((1.0 - b1 - b2) * normals[0] + b1 * normals[1] + b2 * normals[2]).normalize())
+        };
+        let row = geometry.cos_row();
+        for axis in [Vec3::X, Vec3::Y, Vec3::Z] {
+            let fo = (cos_at(o + h * axis, d) - cos_at(o - h * axis, d)) / (2.0 * h);
+            let fdd = (cos_at(o, d + h * axis) - cos_at(o, d - h * axis)) / (2.0 * h);
+            assert!((fo - row.o.dot(axis)).abs() < 2e-3, "{fo} vs {}", row.o.dot(axis));
+            assert!((fdd - row.d.dot(axis)).abs() < 2e-3, "{fdd} vs {}", row.d.dot(axis));
+        }
+    }
+
+    /// Row solves undo row products exactly enough: x·(A + Y·I) then solve gives x back, for a
+    /// singular A (a plane's projection) and |Y| ≥ amplitude/2.
+    #[test]
+    fn regularised_solve_inverts_the_product() {
+        let g = HitGeometry {
+            t: 2.0,
+            d: Vec3::new(0.1, 0.0, -1.0).normalize(),
+            ng: Vec3::Z,
+            n: Vec3::Z,
+            dn_dx: Mat3::ZERO,
+        };
+        let (t_d, t_n) = reflect_jacobians(g.d, g.n);
+        let a = g.jacobian(t_d, t_n);
+        // Singular as it stands: the hit point ignores moves along d.
+        assert!(a.oo.determinant().abs() < 1e-6);
+        for y in [-0.5f32, -0.25, 0.25, 0.5] {
+            let reg = a.plus_identity(y);
+            let x = Row6 { o: Vec3::new(0.3, -1.0, 2.0), d: Vec3::new(-0.7, 0.1, 0.4) };
+            let back = reg.solve_row(x.mul(&reg)).unwrap();
+            assert!((back.o - x.o).abs().max_element() < 1e-4 && (back.d - x.d).abs().max_element() < 1e-4);
+        }
+        assert_eq!(regularisation(0.5, 0.2, 0.0), -0.25);
+        assert_eq!(regularisation(0.5, 0.7, 1.0), 0.5);
+    }
+}
