@@ -23,6 +23,62 @@
 
 use glam::{Mat3, Vec3};
 
+use crate::contract::{MAT_DIELECTRIC, MAT_THIN_DIELECTRIC, NO_PARAM};
+use crate::integrator::{RenderOptions, Sampling};
+use crate::scene::flat::FlatScene;
+
+/// Refuses attached sampling (`options.sampling`) where its vertex Jacobians are not built: every
+/// material must be a smooth `dielectric` or `thindielectric` (no normal map, no mask), without
+/// media; light comes from the environment or from emitters the paths hit. `forward` refuses it
+/// for forward-mode image gradients, which carry per-channel derivatives the adjoint-weighted
+/// attached sums do not.
+///
+/// # Errors
+/// [`crate::Error::InvalidArgument`] naming `Sampling::Attached` and what the scene or request has.
+pub fn refuse_unsupported(flat: &FlatScene, options: &RenderOptions, forward: bool) -> crate::Result<()> {
+    if options.sampling == Sampling::Detached {
+        return Ok(());
+    }
+    let refuse = |what: String| {
+        Err(crate::Error::InvalidArgument {
+            parameter: "Sampling::Attached".into(),
+            message: format!(
+                "{what}: attached derivatives are built for scenes of smooth `dielectric` and `thindielectric` \
+                 surfaces lit by the environment or by emitters the paths hit, in reverse mode (use detached \
+                 sampling)"
+            ),
+        })
+    };
+    if forward {
+        return refuse("a forward-mode image gradient was asked for".into());
+    }
+    let names = [
+        "diffuse",
+        "roughconductor",
+        "blendbsdf",
+        "null (a medium boundary)",
+        "roughplastic",
+        "conductor",
+        "dielectric",
+        "thindielectric",
+        "plastic",
+        "roughdielectric",
+    ];
+    for m in &flat.materials {
+        if m.tag != MAT_DIELECTRIC && m.tag != MAT_THIN_DIELECTRIC {
+            let name = names.get(m.tag as usize).copied().unwrap_or("another BSDF");
+            return refuse(format!("the scene has a `{name}` material"));
+        }
+        if m.nmap_width > 0 || m.p_opacity != NO_PARAM {
+            return refuse("the scene has a normal-mapped, bump-mapped or masked material".into());
+        }
+    }
+    if !flat.media.is_empty() {
+        return refuse("the scene has participating media".into());
+    }
+    Ok(())
+}
+
 /// A row vector over the ray state: ∂(something)/∂o and ∂(something)/∂d.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct Row6 {
@@ -42,7 +98,7 @@ impl Row6 {
     }
 
     /// This row times `j`: the same derivative by the ray *before* the map `j`.
-    pub fn mul(self, j: &Jac6) -> Row6 {
+    pub fn through(self, j: &Jac6) -> Row6 {
         Row6 {
             o: j.oo.transpose() * self.o + j.dob.transpose() * self.d,
             d: j.od.transpose() * self.o + j.dd.transpose() * self.d,
@@ -88,13 +144,27 @@ impl Jac6 {
     pub const IDENTITY: Jac6 = Jac6 { oo: Mat3::IDENTITY, od: Mat3::ZERO, dob: Mat3::ZERO, dd: Mat3::IDENTITY };
 
     /// `self ∘ inner`: the map `inner` then `self`.
-    pub fn mul(&self, inner: &Jac6) -> Jac6 {
+    pub fn compose(&self, inner: &Jac6) -> Jac6 {
         Jac6 {
             oo: self.oo * inner.oo + self.od * inner.dob,
             od: self.oo * inner.od + self.od * inner.dd,
             dob: self.dob * inner.oo + self.dd * inner.dob,
             dd: self.dob * inner.od + self.dd * inner.dd,
         }
+    }
+
+    /// The completion that makes a vertex's Jacobian invertible without changing what it does to
+    /// a ray moved along its manifold: A maps perturbations of the incoming ray with δo ⊥
+    /// `prev_normal` (the plane the ray leaves; the camera ray's own direction for the first) and
+    /// δd ⊥ `d` onto those of the outgoing ray (δx ⊥ `ng`, δd′ ⊥ `d_out`), and is singular in
+    /// the other two directions (the origin along the ray, the direction's length). Adding
+    /// (ng, 0)⊗(prev_normal, 0) + (0, d_out)⊗(0, d) maps those two onto the two the vertex cannot
+    /// reach and is zero on the manifold, so products of completed factors act on manifold
+    /// perturbations exactly as the factors do, and their inverses exist wherever the ray does
+    /// not leave its previous surface at a grazing angle (ALGORITHMS.md §9's regularisation
+    /// without noise: the attached estimator stays exact and adds no variance).
+    pub fn completed(&self, prev_normal: Vec3, d: Vec3, ng: Vec3, d_out: Vec3) -> Jac6 {
+        Jac6 { oo: self.oo + outer(ng, prev_normal), od: self.od, dob: self.dob, dd: self.dd + outer(d_out, d) }
     }
 
     /// `self + y·I`: the regularised factor Ã of the supplemental's §2.
@@ -253,6 +323,79 @@ pub fn fresnel_dielectric_grad(cos_i: f32, eta: f32) -> (f32, f32, f32) {
     (r, sign * dr_dc, dr_de * de_deta)
 }
 
+/// What a smooth vertex's sampled lobe contributes to the attached estimator, in world space:
+/// the outgoing direction's derivatives by the incoming direction, the normal and η, and the
+/// derivatives of the log of the lobe's weight by cos θi and by η (per image channel).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct SmoothLobe {
+    /// ∂d′/∂d.
+    pub t_d: Mat3,
+    /// ∂d′/∂n.
+    pub t_n: Mat3,
+    /// ∂d′/∂η (zero for a mirror and for a thin sheet's straight transmission).
+    pub t_eta: Vec3,
+    /// ∂ ln w/∂cos θi, w the weight value/pdf of the lobe with its choice probability attached.
+    pub dlnw_dcos: Vec3,
+    /// ∂ ln w/∂η.
+    pub dlnw_deta: Vec3,
+}
+
+/// The attached derivatives of a smooth `dielectric` (`thin` false) or `thindielectric` lobe
+/// sampled from incoming direction `d` at shading normal `n` with index ratio `eta` (inside over
+/// outside): reflected or (`transmitted`) refracted. The lobe's choice probability (F, or 1 − F)
+/// is attached in the weight's numerator, as PRB's detached weights are, so ∂ ln w carries
+/// ∂ ln F (or ∂ ln(1 − F)); a refracted lobe's radiance factor η_ti² adds 2·∂ ln η_ti/∂η.
+/// `None` where the lobe cannot have been sampled (zero probability, total internal reflection).
+pub fn smooth_lobe(thin: bool, d: Vec3, n: Vec3, eta: f32, transmitted: bool) -> Option<SmoothLobe> {
+    let cos_i = -d.dot(n);
+    if thin {
+        // R′ = 2R/(1 + R) of R = F(|cos θi|).
+        let sign = if cos_i >= 0.0 { 1.0 } else { -1.0 };
+        let (r, dr_dc, dr_deta) = fresnel_dielectric_grad(cos_i.abs(), eta);
+        let r2 = 2.0 * r / (1.0 + r);
+        let g = 2.0 / ((1.0 + r) * (1.0 + r));
+        let (p, sgn) = if transmitted { (1.0 - r2, -1.0) } else { (r2, 1.0) };
+        if !(p > 0.0) {
+            return None;
+        }
+        let (t_d, t_n) = if transmitted { (Mat3::IDENTITY, Mat3::ZERO) } else { reflect_jacobians(d, n) };
+        return Some(SmoothLobe {
+            t_d,
+            t_n,
+            t_eta: Vec3::ZERO,
+            dlnw_dcos: Vec3::splat(sgn * g * dr_dc * sign / p),
+            dlnw_deta: Vec3::splat(sgn * g * dr_deta / p),
+        });
+    }
+    let (f, df_dc, df_deta) = fresnel_dielectric_grad(cos_i, eta);
+    if !transmitted {
+        if !(f > 0.0) {
+            return None;
+        }
+        let (t_d, t_n) = reflect_jacobians(d, n);
+        return Some(SmoothLobe {
+            t_d,
+            t_n,
+            t_eta: Vec3::ZERO,
+            dlnw_dcos: Vec3::splat(df_dc / f),
+            dlnw_deta: Vec3::splat(df_deta / f),
+        });
+    }
+    if !(f < 1.0) {
+        return None;
+    }
+    let outside = cos_i >= 0.0;
+    let (eta_ti, deta_ti) = if outside { (1.0 / eta, -1.0 / (eta * eta)) } else { (eta, 1.0) };
+    let (_, t_d, t_n, t_eta_ti) = refract_jacobians(d, n, eta_ti)?;
+    Some(SmoothLobe {
+        t_d,
+        t_n,
+        t_eta: t_eta_ti * deta_ti,
+        dlnw_dcos: Vec3::splat(-df_dc / (1.0 - f)),
+        dlnw_deta: Vec3::splat(-df_deta / (1.0 - f) + 2.0 * deta_ti / eta_ti),
+    })
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -395,10 +538,60 @@ mod tests {
         for y in [-0.5f32, -0.25, 0.25, 0.5] {
             let reg = a.plus_identity(y);
             let x = Row6 { o: Vec3::new(0.3, -1.0, 2.0), d: Vec3::new(-0.7, 0.1, 0.4) };
-            let back = reg.solve_row(x.mul(&reg)).unwrap();
+            let back = reg.solve_row(x.through(&reg)).unwrap();
             assert!((back.o - x.o).abs().max_element() < 1e-4 && (back.d - x.d).abs().max_element() < 1e-4);
         }
         assert_eq!(regularisation(0.5, 0.2, 0.0), -0.25);
         assert_eq!(regularisation(0.5, 0.7, 1.0), 0.5);
+    }
+
+    /// The lobe's direction derivative by η and its log-weight derivatives against finite
+    /// differences of `SmoothLeaf::sample` (the same lobe, u_lobe 0 or 1) in a local frame.
+    #[test]
+    fn smooth_lobe_matches_the_sampler() {
+        use crate::bsdf::specular::{SmoothKind, SmoothLeaf};
+        let leaf = |kind, eta: f32| SmoothLeaf {
+            kind,
+            reflectance: Vec3::ONE,
+            transmittance: Vec3::ONE,
+            eta: Vec3::new(eta, 0.0, 0.0),
+            k: Vec3::ZERO,
+        };
+        let n = Vec3::Z;
+        for (kind, thin) in [(SmoothKind::Dielectric, false), (SmoothKind::ThinDielectric, true)] {
+            for wi in [Vec3::new(0.5, 0.2, 0.84), Vec3::new(-0.3, 0.1, -0.95), Vec3::new(0.1, -0.6, 0.79)] {
+                let wi = wi.normalize();
+                let d = -wi;
+                for (u, transmitted) in [(0.0, false), (0.999_999, true)] {
+                    let eta = 1.5;
+                    let Some(lobe) = smooth_lobe(thin, d, n, eta, transmitted) else { continue };
+                    let h = 1e-3;
+                    let at = |e: f32, wi: Vec3| leaf(kind, e).sample(wi, u).unwrap();
+                    // ln of the weight with the choice probability attached: ln(value) (pdf
+                    // detached) — value = weight × probability in `SmoothLeaf::sample`.
+                    let lnv = |b: crate::bsdf::BsdfSample| b.value.x.ln();
+                    let fd_eta = (lnv(at(eta + h, wi)) - lnv(at(eta - h, wi))) / (2.0 * h);
+                    assert!(
+                        (fd_eta - lobe.dlnw_deta.x).abs() < 3e-3,
+                        "{kind:?} {wi} {transmitted}: ∂lnw/∂η {} vs {fd_eta}",
+                        lobe.dlnw_deta.x
+                    );
+                    let dir_eta = (at(eta + h, wi).wo - at(eta - h, wi).wo) / (2.0 * h);
+                    assert!((dir_eta - lobe.t_eta).abs().max_element() < 3e-3, "∂d′/∂η {} vs {dir_eta}", lobe.t_eta);
+                    // cos θi moved by tilting wi toward the normal.
+                    let tilt = |c: f32| {
+                        let t = Vec3::new(wi.x, wi.y, 0.0);
+                        let sin = (1.0 - c * c).sqrt();
+                        (t.normalize() * sin + Vec3::new(0.0, 0.0, c)).normalize()
+                    };
+                    let fd_cos = (lnv(at(eta, tilt(wi.z + h))) - lnv(at(eta, tilt(wi.z - h)))) / (2.0 * h);
+                    assert!(
+                        (fd_cos - lobe.dlnw_dcos.x).abs() < 3e-3,
+                        "{kind:?} {wi}: ∂lnw/∂cos {} vs {fd_cos}",
+                        lobe.dlnw_dcos.x
+                    );
+                }
+            }
+        }
     }
 }

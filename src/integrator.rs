@@ -37,6 +37,62 @@ pub const DEFAULT_RR_DEPTH: u32 = 5;
 /// (ALGORITHMS.md §5.1; the paper's and its code's default).
 pub const DEFAULT_DIFF_Q: f32 = 0.5;
 
+/// The default amplitude of the noise attached sampling adds to its ray Jacobians
+/// ([`Sampling::Attached::noise`]): none, the exact completion alone (`crate::attached`).
+pub const DEFAULT_JACOBIAN_NOISE: f32 = 0.0;
+
+/// How the sampled directions relate to the parameters (issue 34; PRB supplemental §1–2).
+///
+/// Detached sampling (Mitsuba's `prb`, the default) holds every sampled direction fixed while
+/// differentiating: a parameter that acts only through the directions it produces — a
+/// dielectric's index of refraction — has no derivative. Attached sampling lets the directions
+/// move with the parameters and adds the derivative of the radiance that follows each vertex by
+/// the direction leaving it, recovered from the derivative by the camera ray through the
+/// product of the vertices' ray Jacobians (ALGORITHMS.md §9, `crate::attached`).
+///
+/// ```
+/// use pathgrad::integrator::{RenderOptions, Sampling, Strategy};
+/// let scene = pathgrad::scene::builtin::load("cornell-box")?;
+/// let opts = RenderOptions { sampling: Sampling::attached(), ..RenderOptions::for_scene(&scene) };
+/// assert!(opts.validate().is_ok());
+/// // Only with plain BSDF sampling.
+/// let scene = pathgrad::scene::builtin::load("blend")?;
+/// let diff = Strategy::from_name(&scene, "diff", 0.5, "object.weight.value")?;
+/// assert!(RenderOptions { strategy: diff, ..opts }.validate().is_err());
+/// # Ok::<(), pathgrad::Error>(())
+/// ```
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub enum Sampling {
+    /// Directions held fixed (the detached derivative).
+    #[default]
+    Detached,
+    /// Directions move with the parameters (the attached derivative).
+    Attached {
+        /// The amplitude a of the noise Y·I added to each vertex's completed ray Jacobian (PRB
+        /// supplemental §2): |Y| uniform in [a/2, a], sign random; in [0, 1), 0 for none. Zero-mean
+        /// noise keeps the estimate unbiased and adds variance; the smooth vertices attached
+        /// sampling supports need none (BENCHMARKS.md "Attached derivatives").
+        noise: f32,
+    },
+}
+
+impl Sampling {
+    /// Attached sampling with the default regularisation ([`DEFAULT_JACOBIAN_NOISE`]).
+    pub fn attached() -> Sampling {
+        Sampling::Attached { noise: DEFAULT_JACOBIAN_NOISE }
+    }
+
+    /// Whether directions are attached.
+    pub fn is_attached(&self) -> bool {
+        matches!(self, Sampling::Attached { .. })
+    }
+
+    /// `detached` or `attached`.
+    pub fn name(&self) -> &'static str {
+        if self.is_attached() { "attached" } else { "detached" }
+    }
+}
+
 /// Kinds of parameters, as a set: which gradients a reverse-mode pass computes
 /// ([`RenderOptions::differentiate`]). A kernel is compiled with the derivative code of these
 /// kinds only (issue "Fast kernels"), so asking for fewer makes gradient passes cheaper.
@@ -534,6 +590,8 @@ pub struct RenderOptions {
     /// default); the gradients of other parameters come back as 0. Forward-mode image gradients
     /// differentiate their one parameter whatever this says.
     pub differentiate: ParamKinds,
+    /// Detached (default) or attached sampling of directions in reverse-mode gradient passes.
+    pub sampling: Sampling,
 }
 
 impl RenderOptions {
@@ -549,6 +607,7 @@ impl RenderOptions {
             nee: true,
             strategy: Strategy::Bsdf,
             differentiate: ParamKinds::ALL,
+            sampling: Sampling::Detached,
         }
     }
 
@@ -584,6 +643,20 @@ impl RenderOptions {
             && !(0.0..=1.0).contains(&q)
         {
             return bad("Strategy::Diff::q", "must be in [0, 1]");
+        }
+        if let Sampling::Attached { noise } = self.sampling {
+            if !(0.0..1.0).contains(&noise) {
+                return bad("Sampling::Attached::noise", "must be in [0, 1)");
+            }
+            if self.strategy != Strategy::Bsdf {
+                return bad(
+                    "Sampling::Attached",
+                    &format!(
+                        "attached sampling is built for the bsdf strategy only (this request uses {})",
+                        self.strategy.name()
+                    ),
+                );
+            }
         }
         Ok(())
     }
@@ -731,6 +804,11 @@ impl RenderOptions {
             diff_begin,
             diff_end,
             diff_placement: diff_placement.value(),
+            attached: u32::from(self.sampling.is_attached()),
+            jac_noise: match self.sampling {
+                Sampling::Attached { noise } => noise,
+                Sampling::Detached => 0.0,
+            },
             hero_count,
             hero_p0: hero_p[0],
             hero_p1: hero_p[1],

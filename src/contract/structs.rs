@@ -72,6 +72,11 @@ contract_structs! {
         /// Differential strategy: `PLACEMENT_BALANCE` or `PLACEMENT_POWER`, the weighting of its
         /// placements (ALGORITHMS.md §5.7).
         diff_placement: u32,
+        /// 1 for attached sampling (issue 34, `Sampling::Attached`), 0 for detached.
+        attached: u32,
+        /// Attached sampling: the amplitude a of the noise added to each completed ray Jacobian
+        /// (PRB supplemental §2), |Y| uniform in [a/2, a] with a random sign; 0 for none.
+        jac_noise: f32,
         /// Differential strategy with several targets (ALGORITHMS.md §5.8): their number, 2 to
         /// `MAX_HEROES`; 0 for one target (`diff_begin .. diff_end`). Target k has the parameter
         /// values `hero_range{k}` (begin, end) and is the path's hero with probability `hero_p{k}`.
@@ -344,7 +349,7 @@ contract_structs! {
         /// `p_alpha`.
         p_alpha_v: u32,
         /// Parameter offset of the blend weight (blend), or `SCALAR_TEXTURE` with its texture's
-        /// descriptor when textured.
+        /// descriptor when textured; of a smooth dielectric's η (`NO_PARAM`: `eta.x` holds it).
         p_weight: u32,
         /// Real part of the conductor's complex index of refraction (RGB). Rough plastic: (η =
         /// int_ior/ext_ior, the coating's sampling weight w, 1 if `nonlinear` else 0).

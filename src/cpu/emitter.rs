@@ -131,6 +131,22 @@ pub fn env_radiance(flat: &FlatScene, globals: &Globals, dir: Vec3) -> Vec3 {
     }
 }
 
+/// The environment's radiance toward `dir` differentiated by the direction, channel by channel
+/// (row c of the result is ∂L_c/∂d): zero for a constant environment.
+pub fn env_radiance_gradient(flat: &FlatScene, globals: &Globals, dir: Vec3) -> Mat3 {
+    match env_map(globals) {
+        None => Mat3::ZERO,
+        Some(map) => {
+            let (texels, _, grads) = map.footprint_gradient(dir);
+            // Σ_k texel_k (a column of channels) ⊗ ∇w_k, transposed into rows by channel.
+            let sum = (0..4).fold(Mat3::ZERO, |acc, k| {
+                acc + crate::attached::outer(param_color(flat, globals.env_param + 3 * texels[k]), grads[k])
+            });
+            map.scale * sum
+        }
+    }
+}
+
 /// Adds `g` times the derivative of the environment's radiance toward `dir` by its parameter
 /// values (one RGB value, or the four texels of the map's lookup) to `sink`.
 pub fn env_backward(globals: &Globals, dir: Vec3, g: Vec3, sink: &mut GradSink<'_>) {

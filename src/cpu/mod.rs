@@ -16,6 +16,7 @@ use glam::Vec3;
 use rayon::prelude::*;
 
 use crate::adaptive::{PixelSampling, select_pixel};
+use crate::attached::Row6;
 use crate::contract::{Globals, ViewCamera};
 use crate::cpu::path::GradSink;
 use crate::rng::{PassTag, RngKey};
@@ -194,6 +195,7 @@ fn render_flat(scene: &Scene, flat: &FlatScene, options: &RenderOptions, view: &
                     Vec3::ZERO,
                     Vec3::ZERO,
                     &mut GradSink::None,
+                    &mut Row6::default(),
                 );
             }
             (sum / options.spp as f32).to_array()
@@ -221,6 +223,7 @@ fn backward_flat(
     adjoint: &Image,
 ) -> Result<Vec<f64>> {
     medium::refuse_diff_with_media(flat, options)?;
+    crate::attached::refuse_unsupported(flat, options, false)?;
     check_size(adjoint, options, "adjoint image")?;
     let globals = options.globals(scene, flat, PassTag::Gradient);
     let camera = options.view_camera(view, PassTag::Gradient);
@@ -266,6 +269,7 @@ fn backward_adaptive_flat(
     sampling: &PixelSampling,
 ) -> Result<Vec<f64>> {
     medium::refuse_diff_with_media(flat, options)?;
+    crate::attached::refuse_unsupported(flat, options, false)?;
     let stacked = options.stacked(views.len())?;
     let delta = sampling.sample_adjoint(&stacked, adjoint)?;
     let samples = sampling.sample_count(&stacked)?;
@@ -309,10 +313,21 @@ fn replay_sample(
     grads: &mut [f64],
     drifted: &std::sync::atomic::AtomicUsize,
 ) {
-    let total =
-        path::trace_path::<false>(flat, globals, camera, pixel, sample, Vec3::ZERO, Vec3::ZERO, &mut GradSink::None);
+    // Attached sampling: the primal pass weights Γ by δL, and the replay starts from it.
+    let mut gamma = Row6::ZERO;
+    let total = path::trace_path::<false>(
+        flat,
+        globals,
+        camera,
+        pixel,
+        sample,
+        adj,
+        Vec3::ZERO,
+        &mut GradSink::None,
+        &mut gamma,
+    );
     let mut sink = GradSink::Backward(grads);
-    let left = path::trace_path::<true>(flat, globals, camera, pixel, sample, adj, total, &mut sink);
+    let left = path::trace_path::<true>(flat, globals, camera, pixel, sample, adj, total, &mut sink, &mut gamma);
     if !path::replay_returned_to_zero(total, left) {
         drifted.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
     }
@@ -330,6 +345,7 @@ pub fn image_gradient(scene: &Scene, options: &RenderOptions, name: &str) -> Res
 
 fn image_gradient_flat(scene: &Scene, flat: &FlatScene, options: &RenderOptions, name: &str) -> Result<Image> {
     medium::refuse_diff_with_media(flat, options)?;
+    crate::attached::refuse_unsupported(flat, options, true)?;
     let id = scene.params.find(name).ok_or_else(|| crate::Error::InvalidArgument {
         parameter: name.to_string(),
         message: "no such parameter".into(),
@@ -354,10 +370,21 @@ fn image_gradient_flat(scene: &Scene, flat: &FlatScene, options: &RenderOptions,
                     Vec3::ZERO,
                     Vec3::ZERO,
                     &mut GradSink::None,
+                    &mut Row6::default(),
                 );
                 let mut sink =
                     GradSink::Forward { begin: entry.offset, end: entry.offset + entry.len, derivative: Vec3::ZERO };
-                let left = path::trace_path::<true>(flat, &globals, &camera, p, s, Vec3::ONE, total, &mut sink);
+                let left = path::trace_path::<true>(
+                    flat,
+                    &globals,
+                    &camera,
+                    p,
+                    s,
+                    Vec3::ONE,
+                    total,
+                    &mut sink,
+                    &mut Row6::default(),
+                );
                 if !path::replay_returned_to_zero(total, left) {
                     drifted.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
                 }

@@ -3,7 +3,10 @@
 
 use glam::{Vec2, Vec3};
 
+use crate::attached::{HitGeometry, Jac6, Row6, regularisation, smooth_lobe};
+use crate::bsdf::Leaf;
 use crate::bsdf::differential::{bsdf_pdf_diff, bsdf_sample_diff};
+use crate::bsdf::specular::SmoothKind;
 use crate::bsdf::specular::is_smooth;
 use crate::bsdf::{bsdf_eval, bsdf_pdf, bsdf_sample};
 use crate::bvh::{Ray, closest_hit, occluded};
@@ -14,12 +17,14 @@ use crate::contract::{
     NO_MEDIUM, NO_PARAM, PLACEMENT_POWER, STRATEGY_DIFF, ViewCamera,
 };
 use crate::cpu::emitter::{
-    EmitterSample, emitter_pdf_solid_angle, env_backward, env_radiance, environment_pdf, light_backward, sample_emitter,
+    EmitterSample, emitter_pdf_solid_angle, env_backward, env_radiance, env_radiance_gradient, environment_pdf,
+    light_backward, sample_emitter,
 };
 use crate::cpu::medium;
 use crate::cpu::surface::{
     SHADOW_EPSILON, bsdf_backward, mask_opacity_at, material_anisotropic, material_normal_mapped, mis_power,
-    normal_map_frame, offset_origin, opacity_backward, param_color, resolve_bsdf, safe_div, surface_at, tangent_frame,
+    normal_map_frame, offset_origin, opacity_backward, param_color, resolve_bsdf, safe_div, shading_normal_gradient,
+    surface_at, tangent_frame,
 };
 use crate::rng::{RngKey, Stream, uniform4};
 use crate::sampling::Frame;
@@ -357,6 +362,11 @@ fn emitter_backward(flat: &FlatScene, globals: &Globals, es: &EmitterSample, g: 
 /// `ADJOINT = false`), or — replaying from `radiance_total` with adjoint radiance `adj_radiance`
 /// (δL) and scattering the GRAD terms into `sink` — what is left of it at the end, 0 up to
 /// rounding (adjoint, ALGORITHMS.md §3.3).
+///
+/// With attached sampling (`Globals::jac_noise` > 0, `crate::attached`) the primal pass also
+/// needs δL (`adj_radiance`) and writes Γ, the adjoint-weighted derivative of the path's radiance
+/// by the camera ray, into `gamma`; the replay starts from that Γ and leaves its residual there
+/// (0 up to rounding, like the radiance).
 // The arguments are those of `path_begin` in the kernels, one for one.
 #[allow(clippy::too_many_arguments)]
 pub fn trace_path<const ADJOINT: bool>(
@@ -368,6 +378,7 @@ pub fn trace_path<const ADJOINT: bool>(
     adj_radiance: Vec3,
     radiance_total: Vec3,
     sink: &mut GradSink<'_>,
+    gamma: &mut Row6,
 ) -> Vec3 {
     // ---- camera ray ----
     let key = RngKey([globals.key0, view.key1]);
@@ -394,6 +405,14 @@ pub fn trace_path<const ADJOINT: bool>(
     }
     let media = medium::has_media(flat);
     let mut current = NO_MEDIUM; // the medium the path is in (cameras are in vacuum)
+    // Attached sampling (crate::attached): the primal pass's J̃ (camera ray → this vertex's
+    // incoming ray), S per channel (Σ ∂ln w·J̃ so far) and Γ; the replay's Φ.
+    let attached = globals.attached != 0;
+    // The plane the current ray leaves (the camera ray's: the one across its own direction).
+    let mut prev_normal = ray.dir;
+    let mut jac = Jac6::IDENTITY;
+    let mut log_rows = [Row6::ZERO; 3];
+    let mut phi = if ADJOINT { *gamma } else { Row6::ZERO };
     for vertex in 1..=globals.max_depth {
         // ---- intersection: through null boundaries and null collisions to the next event ----
         let mut travelled = 0.0f32; // from the last vertex to `ray.origin`, across null boundaries
@@ -432,9 +451,20 @@ pub fn trace_path<const ADJOINT: bool>(
                 // ---- environment hit ----
                 if globals.env_param != NO_PARAM {
                     let w_b = hit_weight(diff, prev_nee, prev_pdf_f, environment_pdf(flat, globals, ray.dir), &mix);
-                    radiance += sign * (throughput * w_b * env_radiance(flat, globals, ray.dir));
+                    let le = env_radiance(flat, globals, ray.dir);
+                    radiance += sign * (throughput * w_b * le);
                     if ADJOINT {
                         env_backward(globals, ray.dir, adj_radiance * throughput * w_b, sink);
+                    }
+                    if attached {
+                        // The environment's own row: δL·β·∂L_e/∂d.
+                        let weight = adj_radiance * throughput * w_b;
+                        let own = Row6::direction(env_radiance_gradient(flat, globals, ray.dir).transpose() * weight);
+                        if ADJOINT {
+                            phi = phi.add_scaled(own, -1.0);
+                        } else {
+                            phi = add_contribution(phi, own.through(&jac), weight * le, &log_rows);
+                        }
                     }
                 }
                 break;
@@ -532,6 +562,11 @@ pub fn trace_path<const ADJOINT: bool>(
             radiance += sign * (throughput * w_b * param_color(flat, p_radiance));
             if ADJOINT {
                 sink.add_rgb(p_radiance, adj_radiance * throughput * w_b);
+            }
+            if attached && !ADJOINT {
+                // Constant radiance: only the weights of the vertices before depend on the ray.
+                let c = adj_radiance * throughput * w_b * param_color(flat, p_radiance);
+                phi = add_contribution(phi, Row6::ZERO, c, &log_rows);
             }
         }
         // ---- mask: the nested BSDF with probability `opacity`, else straight through ----
@@ -735,13 +770,64 @@ pub fn trace_path<const ADJOINT: bool>(
             let adj = adj_radiance * safe_div(radiance, bs.value);
             bsdf_backward(flat, s.material, s.uv, &bsdf, wi, bs.wo, bs.delta, adj, sink);
         }
+        if attached && let Leaf::Smooth(leaf) = &bsdf.leaves[0] {
+            let geometry = HitGeometry {
+                t: hit.t,
+                d: ray.dir,
+                ng: s.ng,
+                n: frame.n,
+                dn_dx: shading_normal_gradient(flat, &hit) * if mirrored { -1.0 } else { 1.0 },
+            };
+            let thin = leaf.kind == SmoothKind::ThinDielectric;
+            let transmitted = wi.z * bs.wo.z < 0.0;
+            if let Some(lobe) = smooth_lobe(thin, ray.dir, frame.n, leaf.eta.x, transmitted) {
+                let mut a =
+                    geometry.jacobian(lobe.t_d, lobe.t_n).completed(prev_normal, ray.dir, s.ng, frame.to_world(bs.wo));
+                if globals.jac_noise > 0.0 {
+                    let u = uniform4(key, pixel, sample, vertex, Stream::Jacobian, 0, 0);
+                    a = a.plus_identity(regularisation(globals.jac_noise, u[0], u[1]));
+                }
+                let cos_row = geometry.cos_row();
+                if ADJOINT {
+                    // h_v = δL·(∂ln w/∂r ⊙ L_after); Φ_{v+1} = (Φ_v − h_v)·Ã⁻¹; η's two terms.
+                    let after = adj_radiance * radiance;
+                    let next = a.solve_row(phi.add_scaled(cos_row, -after.dot(lobe.dlnw_dcos)));
+                    let p_eta = flat.materials[s.material as usize].p_weight;
+                    let direction = next.map_or(0.0, |n| n.d.dot(lobe.t_eta));
+                    if p_eta != NO_PARAM {
+                        sink.add(p_eta, Vec3::new(after.dot(lobe.dlnw_deta) + direction, 0.0, 0.0));
+                    }
+                    phi = next.unwrap_or(Row6::ZERO);
+                } else {
+                    let row = cos_row.through(&jac);
+                    for (c, log_row) in log_rows.iter_mut().enumerate() {
+                        *log_row = log_row.add_scaled(row, lobe.dlnw_dcos[c]);
+                    }
+                    jac = a.compose(&jac);
+                }
+            }
+        }
 
         let wo_world = frame.to_world(bs.wo);
+        prev_normal = s.ng;
         // A direction through a dielectric boundary enters or leaves its shape's medium.
         current = medium::medium_crossed(interior, s.ng, wo_world, current);
         ray = Ray::new(offset_origin(s.p, s.ng, wo_world), wo_world);
     }
+    if attached {
+        *gamma = phi;
+    }
     radiance
+}
+
+/// Γ plus one contribution's row: `own` (its derivative by the camera ray) and `c` (δL ⊙ β ⊙ the
+/// contribution) times the log-weight rows of the vertices before it.
+fn add_contribution(gamma: Row6, own: Row6, c: Vec3, log_rows: &[Row6; 3]) -> Row6 {
+    let mut g = Row6 { o: gamma.o + own.o, d: gamma.d + own.d };
+    for (ch, row) in log_rows.iter().enumerate() {
+        g = g.add_scaled(*row, c[ch]);
+    }
+    g
 }
 
 #[cfg(test)]

@@ -77,6 +77,22 @@ pub fn surface_at(flat: &FlatScene, hit: &Hit) -> Surface {
     Surface { p, ng, ns, uv, material: m.material, emitter, dpdu, dpdv }
 }
 
+/// ∂n/∂x of the unflipped shading normal of [`surface_at`] along the hit's triangle: zero for a
+/// flat-shaded mesh (attached derivatives, [`crate::attached::normal_derivative`]).
+pub fn shading_normal_gradient(flat: &FlatScene, hit: &Hit) -> glam::Mat3 {
+    let tri = &flat.bvh.tris[hit.slot as usize];
+    let id = flat.bvh.prim_ids[hit.slot as usize];
+    let tv = &flat.tri_vertices[id as usize];
+    let m = &flat.meshes[tv.mesh as usize];
+    if m.normal_base == NO_ARRAY {
+        return glam::Mat3::ZERO;
+    }
+    let normals = [tv.i0, tv.i1, tv.i2].map(|i| flat.normals[(m.normal_base + i) as usize]);
+    let b0 = 1.0 - hit.b1 - hit.b2;
+    let raw = b0 * normals[0] + hit.b1 * normals[1] + hit.b2 * normals[2];
+    crate::attached::normal_derivative([tri.v0, tri.v1, tri.v2], normals, raw)
+}
+
 /// Whether material `id` is (or blends) an anisotropic rough conductor, whose shading frame
 /// must follow the surface ([`tangent_frame`]).
 pub fn material_anisotropic(flat: &FlatScene, id: u32) -> bool {
@@ -393,7 +409,12 @@ fn leaf_from_material(flat: &FlatScene, m: &Material, uv: glam::Vec2) -> Leaf {
                 (_, NO_PARAM) => m.k,
                 (_, p) => param_rgb(params, p),
             },
-            eta: m.eta,
+            // A dielectric's η: its parameter (p_weight) or the constant.
+            eta: if m.tag != MAT_CONDUCTOR && m.p_weight != NO_PARAM {
+                Vec3::new(params[m.p_weight as usize], 0.0, 0.0)
+            } else {
+                m.eta
+            },
             k: m.k,
         }),
         _ => Leaf::Diffuse { albedo: color },

@@ -493,7 +493,7 @@ fn flatten_material(scene: &Scene, m: &Material) -> GpuMaterial {
                 ..albedo_fields(scene, diffuse)
             }
         }
-        Material::Smooth { kind, reflectance, transmittance, eta, k } => {
+        Material::Smooth { kind, reflectance, transmittance, eta, k, eta_param } => {
             // Each colour a parameter (p_color, p_alpha) or a constant (uv_row0; k for a
             // dielectric's transmittance, whose k is free).
             let ((p_color, r), (p_alpha, t)) = (split_colour(scene, reflectance), split_colour(scene, transmittance));
@@ -505,6 +505,8 @@ fn flatten_material(scene: &Scene, m: &Material) -> GpuMaterial {
                 },
                 p_color,
                 p_alpha,
+                // A dielectric's η parameter (its value overrides eta.x).
+                p_weight: eta_param.map_or(NO_PARAM, offset),
                 uv_row0: r,
                 eta,
                 k: if kind == SmoothKind::Conductor { k } else { t },

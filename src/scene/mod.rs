@@ -251,6 +251,10 @@ pub enum Material {
         eta: Vec3,
         /// Conductor: the imaginary part.
         k: Vec3,
+        /// Dielectrics: η = int_ior / ext_ior as a parameter (Mitsuba's `eta`), whose value
+        /// overrides `eta.x`; it acts only through the directions it refracts into, so only
+        /// attached derivatives ([`crate::integrator::Sampling::Attached`]) differentiate it.
+        eta_param: Option<ParamId>,
     },
     /// `(1 − w)·child0 + w·child1` of two leaf materials (ALGORITHMS.md §4.3).
     Blend {
@@ -545,6 +549,8 @@ pub mod bounds {
     pub const WEIGHT: (f32, f32) = (0.0, 1.0);
     /// Emitted radiance.
     pub const RADIANCE: (f32, f32) = (0.0, f32::INFINITY);
+    /// A dielectric's relative index of refraction η = int_ior / ext_ior.
+    pub const IOR: (f32, f32) = (0.1, 10.0);
 }
 
 impl Scene {

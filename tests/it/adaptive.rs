@@ -98,9 +98,29 @@ fn per_sample_sums(
     for k in 0..sampling.sample_count(opts).unwrap() {
         let p = select_pixel(sampling.table(), key, k);
         let adj = Vec3::from_slice(&delta.as_slice()[3 * p as usize..3 * p as usize + 3]);
-        let total = trace_path::<false>(&flat, &globals, &camera, p, k, Vec3::ZERO, Vec3::ZERO, &mut GradSink::None);
+        let total = trace_path::<false>(
+            &flat,
+            &globals,
+            &camera,
+            p,
+            k,
+            Vec3::ZERO,
+            Vec3::ZERO,
+            &mut GradSink::None,
+            &mut Default::default(),
+        );
         let mut term = vec![0.0f64; n];
-        trace_path::<true>(&flat, &globals, &camera, p, k, adj, total, &mut GradSink::Backward(&mut term));
+        trace_path::<true>(
+            &flat,
+            &globals,
+            &camera,
+            p,
+            k,
+            adj,
+            total,
+            &mut GradSink::Backward(&mut term),
+            &mut Default::default(),
+        );
         for i in 0..n {
             sum[i] += term[i];
             abs[i] += term[i].abs();

@@ -5,6 +5,7 @@ mod host;
 mod support;
 
 mod adaptive;
+mod attached;
 mod batch;
 mod bvh_embree;
 mod cli;

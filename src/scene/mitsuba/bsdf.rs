@@ -403,7 +403,13 @@ impl<'a> Loader<'a> {
         } else {
             self.specular_colour(p, name, "specular_transmittance", false)?
         };
-        Ok(self.scene.add_material(Material::Smooth { kind, reflectance, transmittance, eta, k }))
+        // Mitsuba's `eta` (int_ior / ext_ior) of both dielectrics, a parameter pathgrad
+        // differentiates only with attached sampling.
+        let eta_param = match conductor {
+            true => None,
+            false => Some(self.scene.params.add(&format!("{name}.eta"), &[eta.x], bounds::IOR)?),
+        };
+        Ok(self.scene.add_material(Material::Smooth { kind, reflectance, transmittance, eta, k, eta_param }))
     }
 
     /// Refuses a texture as `specular_reflectance` or `specular_transmittance` by name.
