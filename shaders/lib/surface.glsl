@@ -337,6 +337,8 @@ Leaf leaf_from_material(Material m, vec2 uv) {
         l.color = (HAS(F_TEXTURE) && m.tex_width > 0u) ? texture_lookup(m, uv) : param_rgb(m.p_color);
     }
     l.eta = m.eta;
+    // A smooth dielectric's η: its parameter (p_weight) or the constant.
+    if (delta && m.tag != MAT_CONDUCTOR && m.p_weight != NO_PARAM) l.eta.x = params[m.p_weight];
     // A dielectric's transmittance parameter: p_alpha (smooth) or p_weight (rough).
     uint p_trans = rough_glass ? m.p_weight : (delta && m.tag != MAT_CONDUCTOR ? m.p_alpha : NO_PARAM);
     l.k = p_trans != NO_PARAM ? param_rgb(p_trans) : m.k;
