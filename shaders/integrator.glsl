@@ -44,6 +44,16 @@
 #include "lib/differential.glsl"
 #include "lib/medium.glsl"
 
+// Attached sampling (issue 34, src/attached.rs): the kernels that define ATTACHED 1 also carry,
+// per path, the primal pass's Jacobian J̃ from the camera ray, the log-weight rows S per channel
+// and Γ (the replay: Φ) — constant memory whatever the path's length and the spp.
+#ifndef ATTACHED
+#define ATTACHED 0
+#endif
+#if ATTACHED
+#include "lib/attached.glsl"
+#endif
+
 
 // Whether the differential strategy may place its differential vertex on material `m`: its
 // roughness (rough conductor, dielectric or plastic) or weight (blend) is the target parameter.
@@ -230,7 +240,26 @@ struct PathState {
     Mixture mix;       // the differential strategy's running sums (ALGORITHMS.md §5.2, §5.7)
     bool prev_nee;     // whether NEE at the previous vertex could have found this emitter
     bool adjoint;      // this is the replay of the path (adjoint mode)
+#if ATTACHED
+    Jac6 jac;          // J̃: the camera ray's perturbation → this ray's (primal)
+    Row6 log_r;        // S per channel: Σ ∂ln w·J̃ over the vertices so far (primal)
+    Row6 log_g;
+    Row6 log_b;
+    Row6 gamma;        // Γ (primal), Φ (replay): the derivative by the camera ray / by this ray
+    vec3 prev_normal;  // the plane this ray leaves (the camera ray: its own direction)
+#endif
 };
+
+#if ATTACHED
+// Γ plus one contribution: `own` (its derivative by the camera ray) and c (δL ⊙ β ⊙ the
+// contribution) times the log-weight rows of the vertices before it.
+void attached_contribution(inout PathState st, Row6 own, vec3 c) {
+    st.gamma = row_add_scaled(st.gamma, own, 1.0);
+    st.gamma = row_add_scaled(st.gamma, st.log_r, c.x);
+    st.gamma = row_add_scaled(st.gamma, st.log_g, c.y);
+    st.gamma = row_add_scaled(st.gamma, st.log_b, c.z);
+}
+#endif
 
 // The camera ray of `pixel` of view `view` for sample `sample_index`: a primal path, or (adjoint)
 // its replay from the path's radiance `radiance_total` with adjoint radiance `adj_radiance`.
@@ -276,6 +305,14 @@ PathState path_begin(uint view, uint pixel, uint sample_index, bool adjoint, vec
         mixture_pick_hero(st.mix, draw_block(cam.key1, pixel, sample_index, 0u, DIM_HERO / 4u)[DIM_HERO % 4u]);
     st.prev_nee = false;
     st.adjoint = adjoint;
+#if ATTACHED
+    st.jac = jac_identity();
+    st.log_r = ROW6_ZERO;
+    st.log_g = ROW6_ZERO;
+    st.log_b = ROW6_ZERO;
+    st.gamma = ROW6_ZERO;   // the replay's Φ is set by the scheduler (kernel.glsl)
+    st.prev_normal = st.ray.dir;
+#endif
     return st;
 }
 
@@ -448,7 +485,17 @@ bool path_step(inout PathState st) {
             // ---- environment hit ----
             if (HAS(F_ENV) && globals.env_param != NO_PARAM) {
                 float w_b = hit_weight(diff, st.prev_nee, st.prev_pdf_f, environment_pdf(st.ray.dir), st.mix);
-                st.radiance += sign * (st.throughput * w_b * env_radiance(st.ray.dir));
+                vec3 le = env_radiance(st.ray.dir);
+                st.radiance += sign * (st.throughput * w_b * le);
+#if ATTACHED
+                {
+                    // The environment's own row: δL·β·∂L_e/∂d.
+                    vec3 weight = st.adj * st.throughput * w_b;
+                    Row6 own = Row6(vec3(0.0), transpose(env_radiance_gradient(st.ray.dir)) * weight);
+                    if (adjoint) st.gamma = row_add_scaled(st.gamma, own, -1.0);
+                    else attached_contribution(st, row_through(own, st.jac), weight * le);
+                }
+#endif
                 if (HAS(G_ENV)) {
                     gt.hit_param = globals.env_param;
                     gt.hit = st.adj * st.throughput * w_b;
@@ -467,6 +514,10 @@ bool path_step(inout PathState st) {
                 uint p_radiance = emitters[s.emitter].p_radiance;
                 st.radiance += sign * (st.throughput * w_b * param_rgb(p_radiance));
                 if (HAS(G_EMISSION)) { gt.hit_param = p_radiance; gt.hit = st.adj * st.throughput * w_b; }
+#if ATTACHED
+                // Constant radiance: only the weights of the vertices before depend on the ray.
+                if (!adjoint) attached_contribution(st, ROW6_ZERO, st.adj * st.throughput * w_b * param_rgb(p_radiance));
+#endif
             }
             // ---- mask: the nested BSDF with probability `opacity`, else straight through ----
             // Mitsuba's `mask` samples its null transmission as a delta lobe that counts as a
@@ -664,6 +715,43 @@ bool path_step(inout PathState st) {
                 grad_adj[1] = st.adj * safe_div(st.radiance, bs.value);
                 grad_delta = bs.delta;
                 vec3 wo_world = to_world(frame, bs.wo);
+#if ATTACHED
+                {
+                    Material am = materials[s.material];
+                    bool mirrored = HAS(F_TWO_SIDED) && am.two_sided != 0u && dot(s.ns, -st.ray.dir) < 0.0;
+                    HitGeometry geometry = HitGeometry(hit.t, st.ray.dir, s.ng, frame.n,
+                                                       shading_normal_gradient(hit) * (mirrored ? -1.0 : 1.0));
+                    SmoothLobe lobe;
+                    if (smooth_lobe(am.tag == MAT_THIN_DIELECTRIC, st.ray.dir, frame.n, bsdf.leaf0.eta.x,
+                                    wi.z * bs.wo.z < 0.0, lobe)) {
+                        Jac6 a = jac_completed(hit_jacobian(geometry, lobe.t_d, lobe.t_n), st.prev_normal, st.ray.dir,
+                                               s.ng, wo_world);
+                        if (globals.jac_noise > 0.0) {
+                            vec4 u = uniform4(uvec2(globals.key0, st.key1), st.pixel, st.sample_index, vertex,
+                                              STREAM_JACOBIAN, 0u, 0u);
+                            a = jac_plus_identity(a, jac_regularisation(globals.jac_noise, u.x, u.y));
+                        }
+                        Row6 cos_row = hit_cos_row(geometry);
+                        if (adjoint) {
+                            // h = δL·(∂ln w/∂r ⊙ L_after); Φ′ = (Φ − h)·Ã⁻¹; η's two terms.
+                            vec3 after = st.adj * st.radiance;
+                            Row6 next;
+                            bool solved = jac_solve_row(a, row_add_scaled(st.gamma, cos_row, -dot(after, vec3(lobe.dlnw_dcos))), next);
+                            float direction = solved ? dot(next.d, lobe.t_eta) : 0.0;
+                            if (am.p_weight != NO_PARAM)
+                                param_grad(am.p_weight, vec3(dot(after, vec3(lobe.dlnw_deta)) + direction, 0.0, 0.0));
+                            st.gamma = next;
+                        } else {
+                            Row6 row = row_through(cos_row, st.jac);
+                            st.log_r = row_add_scaled(st.log_r, row, lobe.dlnw_dcos);
+                            st.log_g = row_add_scaled(st.log_g, row, lobe.dlnw_dcos);
+                            st.log_b = row_add_scaled(st.log_b, row, lobe.dlnw_dcos);
+                            st.jac = jac_compose(a, st.jac);
+                        }
+                    }
+                    st.prev_normal = s.ng;
+                }
+#endif
                 // A direction through a dielectric boundary enters or leaves its shape's medium.
                 if (HAS(F_MEDIA)) st.medium = medium_crossed(s.interior, s.ng, wo_world, st.medium);
                 st.ray = make_ray(offset_origin(s.p, s.ng, wo_world), wo_world);

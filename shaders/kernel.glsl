@@ -87,6 +87,9 @@ void main() {
     bool in_flight = false;
     vec3 sum = vec3(0.0);     // the item's radiance (primal) or derivative (forward), in sample order
     vec3 total = vec3(0.0);   // the primal radiance of the path being replayed (adjoint kernels)
+#if ATTACHED
+    Row6 total_gamma = ROW6_ZERO;   // the primal path's Γ, where its replay starts (attached kernels)
+#endif
     // Every path starts at the top of an iteration, from these: one inlined path_begin (its camera
     // loads and random numbers) serves a new item, its next sample and a replay alike.
     bool begin = false;
@@ -116,7 +119,18 @@ void main() {
             in_flight = true;
         }
         if (begin) {
+#if ATTACHED
+            // The primal pass weights Γ by δL: it reads the pixel's adjoint radiance too.
+            uint at_begin = 3u * (begin_view * globals.width * globals.height + begin_pixel);
+            // (A gradient step's pass 1 on this kernel binds no adjoint image: δL is not read there.)
+            vec3 adj_begin = begin_adjoint ? begin_adj
+                : (globals.primal_only != 0u ? vec3(0.0)
+                   : vec3(adjoint_image[at_begin], adjoint_image[at_begin + 1u], adjoint_image[at_begin + 2u]) * globals.adjoint_scale);
+            st = path_begin(begin_view, begin_pixel, sample_index, begin_adjoint, adj_begin, total);
+            if (begin_adjoint) st.gamma = total_gamma;
+#else
             st = path_begin(begin_view, begin_pixel, sample_index, begin_adjoint, begin_adjoint ? begin_adj : vec3(0.0), total);
+#endif
             begin = false;
         }
         if (!path_step(st)) continue;
@@ -126,6 +140,9 @@ void main() {
 #if ADJOINT_KERNEL
         if (!st.adjoint && !(PRIMAL_ON_REVERSE != 0 && globals.primal_only != 0u)) {
             total = st.radiance;
+#if ATTACHED
+            total_gamma = st.gamma;
+#endif
             begin_adj = vec3(adjoint_image[at], adjoint_image[at + 1u], adjoint_image[at + 2u]) * globals.adjoint_scale;
             begin_adjoint = true;
             begin_view = view;

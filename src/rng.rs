@@ -74,7 +74,7 @@ pub enum Stream {
     /// Ratio-tracking steps of NEE.
     RatioTracking = crate::contract::STREAM_RATIO_TRACKING,
     /// Attached-derivative regularisation noise.
-    Jacobian = 3,
+    Jacobian = crate::contract::STREAM_JACOBIAN,
     /// Pixel selection (adaptive sampling, ALGORITHMS.md §6).
     Pixel = crate::contract::STREAM_PIXEL,
 }

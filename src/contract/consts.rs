@@ -112,6 +112,8 @@ contract_constants! {
     STREAM_DELTA_TRACKING = 1;
     /// Stream of ratio-tracking steps of shadow rays, per vertex.
     STREAM_RATIO_TRACKING = 2;
+    /// Stream of attached sampling's Jacobian noise, per vertex (block 0: sign and magnitude).
+    STREAM_JACOBIAN = 3;
     /// Stream of adaptive pixel selection (ALGORITHMS.md §2.3, §6): counter (0, k), vertex 0, block 0.
     STREAM_PIXEL = 4;
     /// Pass tag of the adaptive pixel-selection key: `key1 = (iteration << 8) | PASS_PIXEL_SELECT`.

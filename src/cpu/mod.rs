@@ -269,7 +269,7 @@ fn backward_adaptive_flat(
     sampling: &PixelSampling,
 ) -> Result<Vec<f64>> {
     medium::refuse_diff_with_media(flat, options)?;
-    crate::attached::refuse_unsupported(flat, options, false)?;
+    crate::attached::refuse_adaptive(options)?;
     let stacked = options.stacked(views.len())?;
     let delta = sampling.sample_adjoint(&stacked, adjoint)?;
     let samples = sampling.sample_count(&stacked)?;

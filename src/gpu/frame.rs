@@ -245,6 +245,12 @@ impl Renderer {
         let view = [View::current(self.scene())];
         let primal_request = self.request(options, &view, PassTag::Primal, whole)?;
         let backward_request = self.request(options, &view, PassTag::Gradient, whole)?;
+        if options.sampling.is_attached() {
+            return Err(Error::InvalidArgument {
+                parameter: "Sampling::Attached".into(),
+                message: "a frame's gradient (the engine front door) is detached only".into(),
+            });
+        }
         if mode == GradMode::Deterministic && !self.context().info().int64_atomics {
             return Err(Error::InvalidArgument {
                 parameter: "GradMode::Deterministic".into(),

@@ -26,6 +26,8 @@ pub(crate) enum KernelKind {
     AdjointAdaptive,
     AdjointAdaptiveFixed,
     ImageGradient,
+    /// The float reverse-mode kernel with attached sampling (issue 34).
+    AdjointAttached,
 }
 
 impl KernelKind {
@@ -42,6 +44,7 @@ impl KernelKind {
                 ("adjoint_adaptive_fixed", &[BINDING_ADJOINT, BINDING_GRADS_FIXED, BINDING_ALIAS])
             }
             KernelKind::ImageGradient => ("image_gradient", &[BINDING_ADJOINT, BINDING_ACCUM]),
+            KernelKind::AdjointAttached => ("adjoint_attached", &[BINDING_ADJOINT, BINDING_GRADS, BINDING_ACCUM]),
         }
     }
 

@@ -253,6 +253,7 @@ impl Renderer {
         mode: GradMode,
     ) -> Option<Variant> {
         let kind = match mode {
+            GradMode::Float if options.sampling.is_attached() => KernelKind::AdjointAttached,
             GradMode::Float => KernelKind::Adjoint,
             GradMode::Deterministic if self.ctx.info().int64_atomics => KernelKind::AdjointFixed,
             GradMode::Deterministic => return None,
@@ -448,17 +449,23 @@ impl Backend for Renderer {
     ) -> Result<Gradients> {
         let request = self.request(options, views, PassTag::Gradient, Work::Pixels { begin: 0, end: options.spp })?;
         check_views(views, adjoints, options, "adjoint image")?;
+        crate::attached::refuse_unsupported(&self.flat, options, false)?;
+        let kinds = if options.sampling.is_attached() {
+            if mode == GradMode::Deterministic {
+                return Err(Error::InvalidArgument {
+                    parameter: "GradMode::Deterministic".into(),
+                    message: "attached sampling has a float kernel only (use GradMode::Float)".into(),
+                });
+            }
+            [KernelKind::AdjointAttached; 2]
+        } else {
+            [KernelKind::Adjoint, KernelKind::AdjointFixed]
+        };
         let _span = tracing::info_span!("adjoint", spp = options.spp, ?mode, views = views.len()).entered();
         let adjoint_buf = Buffer::storage_with(&self.ctx, "adjoint image", Image::stack(adjoints)?.as_slice())?;
         // Declared by the kernel for pass 1 (`primal_only`); a replay never touches it.
         let unused_accum = Buffer::storage(&self.ctx, "accumulation image (unused by the replay)", 16)?;
-        self.reverse(
-            [KernelKind::Adjoint, KernelKind::AdjointFixed],
-            &request,
-            &adjoint_buf,
-            &[(BINDING_ACCUM, &unused_accum)],
-            mode,
-        )
+        self.reverse(kinds, &request, &adjoint_buf, &[(BINDING_ACCUM, &unused_accum)], mode)
     }
 
     /// Reverse-mode gradient with loss-aware adaptive pixel sampling (ALGORITHMS.md §6) over
@@ -481,6 +488,7 @@ impl Backend for Renderer {
         mode: GradMode,
     ) -> Result<Gradients> {
         check_views(views, adjoints, options, "adjoint image")?;
+        crate::attached::refuse_adaptive(options)?;
         let stacked = options.stacked(views.len())?;
         let count = u64::from(sampling.sample_count(&stacked)?);
         let mut request = self.request(options, views, PassTag::Gradient, Work::Samples { count })?;
@@ -523,6 +531,7 @@ impl Backend for Renderer {
             message: "no such parameter (see `pathgrad params SCENE`)".into(),
         })?;
         let entry = self.scene.params.entry(id).clone();
+        crate::attached::refuse_unsupported(&self.flat, options, true)?;
         let _span = tracing::info_span!("image_gradient", param = name).entered();
         request.globals.forward_begin = entry.offset;
         request.globals.forward_end = entry.offset + entry.len;
@@ -566,6 +575,7 @@ impl Backend for Renderer {
             features: variant::request_features(self.scene_features, &pass1, ParamKinds::NONE),
         }];
         let kind = match (adaptive, mode) {
+            (false, GradMode::Float) if options.sampling.is_attached() => Some(KernelKind::AdjointAttached),
             (false, GradMode::Float) => Some(KernelKind::Adjoint),
             (true, GradMode::Float) => Some(KernelKind::AdjointAdaptive),
             // Without 64-bit atomics the gradient pass refuses the mode, by name, when it runs.

@@ -1,0 +1,231 @@
+// Attached derivatives (issue 34, ALGORITHMS.md §9): ray-state Jacobians of smooth vertices, their
+// completion, and the row vectors the attached estimator carries. Twin: src/attached.rs (the
+// derivation is there). A ray's state is (o, d); a Jac6 maps a perturbation of the ray reaching a
+// vertex to one of the ray leaving it, δo′ = oo·δo + od·δd, δd′ = dob·δo + dd·δd; a Row6 is a
+// derivative by a ray state.
+#ifndef PATHGRAD_ATTACHED_GLSL
+#define PATHGRAD_ATTACHED_GLSL
+
+struct Row6 { vec3 o; vec3 d; };
+struct Jac6 { mat3 oo; mat3 od; mat3 dob; mat3 dd; };
+
+const Row6 ROW6_ZERO = Row6(vec3(0.0), vec3(0.0));
+
+Jac6 jac_identity() {
+    return Jac6(mat3(1.0), mat3(0.0), mat3(0.0), mat3(1.0));
+}
+
+// The row `r` times `j`: the same derivative by the ray before the map `j`.
+Row6 row_through(Row6 r, Jac6 j) {
+    return Row6(transpose(j.oo) * r.o + transpose(j.dob) * r.d, transpose(j.od) * r.o + transpose(j.dd) * r.d);
+}
+
+Row6 row_add_scaled(Row6 a, Row6 b, float s) {
+    return Row6(a.o + s * b.o, a.d + s * b.d);
+}
+
+// `outer ∘ inner`.
+Jac6 jac_compose(Jac6 outer_map, Jac6 inner) {
+    return Jac6(outer_map.oo * inner.oo + outer_map.od * inner.dob, outer_map.oo * inner.od + outer_map.od * inner.dd,
+                outer_map.dob * inner.oo + outer_map.dd * inner.dob, outer_map.dob * inner.od + outer_map.dd * inner.dd);
+}
+
+// The completion (ng, 0)⊗(prev_normal, 0) + (0, d_out)⊗(0, d): zero on the manifold of rays the
+// vertex maps, invertible off it (Jac6::completed).
+Jac6 jac_completed(Jac6 a, vec3 prev_normal, vec3 d, vec3 ng, vec3 d_out) {
+    return Jac6(a.oo + outerProduct(ng, prev_normal), a.od, a.dob, a.dd + outerProduct(d_out, d));
+}
+
+Jac6 jac_plus_identity(Jac6 a, float y) {
+    return Jac6(a.oo + mat3(y), a.od, a.dob, a.dd + mat3(y));
+}
+
+// The row x with x·a = b (block elimination on the transposed system); false where a block is
+// singular or the result is not finite.
+bool jac_solve_row(Jac6 a, Row6 b, out Row6 x) {
+    mat3 ta = transpose(a.oo);
+    mat3 tb = transpose(a.dob);
+    mat3 tc = transpose(a.od);
+    mat3 td = transpose(a.dd);
+    x = ROW6_ZERO;
+    if (determinant(ta) == 0.0) return false;
+    mat3 a_inv = inverse(ta);
+    mat3 s = td - tc * a_inv * tb;
+    if (determinant(s) == 0.0) return false;
+    vec3 xd = inverse(s) * (b.d - tc * (a_inv * b.o));
+    vec3 xo = a_inv * (b.o - tb * xd);
+    bool finite = !any(isnan(xo)) && !any(isinf(xo)) && !any(isnan(xd)) && !any(isinf(xd));
+    if (finite) x = Row6(xo, xd);
+    return finite;
+}
+
+// The regularisation scalar Y: magnitude uniform in [a/2, a], sign from u_sign.
+float jac_regularisation(float amplitude, float u_sign, float u_size) {
+    float size = amplitude * (0.5 + 0.5 * u_size);
+    return u_sign < 0.5 ? -size : size;
+}
+
+// Where a ray meets a triangle: distance t, incoming direction d, the plane's normal ng, the
+// shading normal n the BSDF used and ∂n/∂x along the plane.
+struct HitGeometry { float t; vec3 d; vec3 ng; vec3 n; mat3 dn_dx; };
+
+mat3 hit_projection(HitGeometry g) {
+    return mat3(1.0) - outerProduct(g.d, g.ng / dot(g.d, g.ng));
+}
+
+// ∂cos θi/∂r with cos θi = −d·n.
+Row6 hit_cos_row(HitGeometry g) {
+    vec3 w = transpose(hit_projection(g)) * (transpose(g.dn_dx) * g.d);
+    return Row6(-w, -(g.n + g.t * w));
+}
+
+// The vertex's Jacobian for an outgoing direction T(d, n) with ∂T/∂d = t_d, ∂T/∂n = t_n.
+Jac6 hit_jacobian(HitGeometry g, mat3 t_d, mat3 t_n) {
+    mat3 p = hit_projection(g);
+    mat3 np = t_n * g.dn_dx * p;
+    return Jac6(p, g.t * p, np, t_d + g.t * np);
+}
+
+// ∂n/∂x of the normalised interpolation of vertex normals over the triangle v0 v1 v2.
+mat3 normal_derivative(vec3 v0, vec3 v1, vec3 v2, vec3 n0, vec3 n1, vec3 n2, vec3 n_raw) {
+    vec3 e0 = v1 - v0;
+    vec3 e1 = v2 - v0;
+    float g00 = dot(e0, e0);
+    float g01 = dot(e0, e1);
+    float g11 = dot(e1, e1);
+    float det = g00 * g11 - g01 * g01;
+    float len = length(n_raw);
+    if (det == 0.0 || len == 0.0) return mat3(0.0);
+    vec3 grad_b1 = (g11 * e0 - g01 * e1) / det;
+    vec3 grad_b2 = (g00 * e1 - g01 * e0) / det;
+    mat3 raw = outerProduct(n1 - n0, grad_b1) + outerProduct(n2 - n0, grad_b2);
+    vec3 n = n_raw / len;
+    return (mat3(1.0) - outerProduct(n, n)) * raw / len;
+}
+
+// ∂n/∂x of the unflipped shading normal of surface_at(hit): zero for a mesh without normals.
+mat3 shading_normal_gradient(Hit hit) {
+    TriPositions tri = load_tri(hit.slot);
+    TriVertexWordArray a = TriVertexWordArray(globals.addr_tri_vertices);
+    uint id = prim_ids[hit.slot];
+    uvec2 w0 = unpackUint2x32(a.v[id].w0);
+    uvec2 w1 = unpackUint2x32(a.v[id].w1);
+    MeshShading m = MeshShadingArray(globals.addr_meshes).v[w1.y];
+    if (m.normal_base == NO_ARRAY) return mat3(0.0);
+    Vec3Array normals = Vec3Array(globals.addr_normals);
+    vec3 n0 = normals.v[m.normal_base + w0.x];
+    vec3 n1 = normals.v[m.normal_base + w0.y];
+    vec3 n2 = normals.v[m.normal_base + w1.x];
+    float b0 = 1.0 - hit.b1 - hit.b2;
+    return normal_derivative(tri.v0, tri.v1, tri.v2, n0, n1, n2, b0 * n0 + hit.b1 * n1 + hit.b2 * n2);
+}
+
+// The environment's radiance toward `dir` differentiated by the direction: row c of the result
+// (GLSL: the transpose's column c) is ∂L_c/∂d; zero for a constant (EnvMap::footprint_gradient).
+mat3 env_radiance_gradient(vec3 dir) {
+    if (!HAS(F_ENV_MAP)) return mat3(0.0);
+    vec3 l = vec3(dot(globals.env_rot0, dir), dot(globals.env_rot1, dir), dot(globals.env_rot2, dir));
+    float rho2 = l.x * l.x + l.z * l.z;
+    if (!(rho2 > 0.0)) return mat3(0.0);
+    float rho = sqrt(rho2);
+    vec3 grad_u = vec3(-l.z, 0.0, l.x) / (rho2 * 2.0 * PI);
+    vec3 grad_v = vec3(l.y * l.x / rho, -rho, l.y * l.z / rho) / ((rho2 + l.y * l.y) * PI);
+    vec2 f;
+    env_cell_at(dir, f);
+    mat3 to_world = mat3(globals.env_rot0, globals.env_rot1, globals.env_rot2);
+    vec3 gx = to_world * grad_u * float(globals.env_width);
+    vec3 gy = to_world * grad_v * float(globals.env_height - 1u);
+    vec3 grads[4] = vec3[4](-(1.0 - f.y) * gx - (1.0 - f.x) * gy, (1.0 - f.y) * gx - f.x * gy,
+                            -f.y * gx + (1.0 - f.x) * gy, f.y * gx + f.x * gy);
+    uint texel[4];
+    float weight[4];
+    env_footprint(dir, texel, weight);
+    mat3 sum = mat3(0.0);
+    for (uint k = 0u; k < 4u; k++) sum += outerProduct(param_rgb(texel[k]), grads[k]);
+    return globals.env_scale * sum;
+}
+
+// The dielectric Fresnel reflectance and its derivatives by cos θi and η: (F, ∂F/∂cos, ∂F/∂η).
+vec3 fresnel_dielectric_grad(float cos_i, float eta) {
+    float r = fresnel_dielectric(cos_i, eta);
+    bool outside = cos_i >= 0.0;
+    float e = outside ? eta : 1.0 / eta;
+    float de_deta = outside ? 1.0 : -1.0 / (eta * eta);
+    float c = abs(cos_i);
+    float ct2 = 1.0 - (1.0 - c * c) / (e * e);
+    if (eta == 1.0 || c == 0.0 || !(ct2 > 0.0)) return vec3(r, 0.0, 0.0);
+    float ct = sqrt(ct2);
+    float dct_dc = c / (e * e * ct);
+    float dct_de = (1.0 - c * c) / (e * e * e * ct);
+    float ns = c - e * ct, ds = c + e * ct;
+    float a_s = ns / ds;
+    float das_dc = ((1.0 - e * dct_dc) * ds - ns * (1.0 + e * dct_dc)) / (ds * ds);
+    float das_de = ((-ct - e * dct_de) * ds - ns * (ct + e * dct_de)) / (ds * ds);
+    float np = ct - e * c, dp = ct + e * c;
+    float a_p = np / dp;
+    float dap_dc = ((dct_dc - e) * dp - np * (dct_dc + e)) / (dp * dp);
+    float dap_de = ((dct_de - c) * dp - np * (dct_de + c)) / (dp * dp);
+    float dr_dc = a_s * das_dc + a_p * dap_dc;
+    float dr_de = a_s * das_de + a_p * dap_de;
+    return vec3(r, (outside ? 1.0 : -1.0) * dr_dc, dr_de * de_deta);
+}
+
+// What a smooth lobe contributes (attached::SmoothLobe): ∂d′/∂d, ∂d′/∂n, ∂d′/∂η and the
+// derivatives of its log-weight by cos θi and by η (grey for dielectrics).
+struct SmoothLobe { mat3 t_d; mat3 t_n; vec3 t_eta; float dlnw_dcos; float dlnw_deta; };
+
+void reflect_jacobians(vec3 d, vec3 n, out mat3 t_d, out mat3 t_n) {
+    t_d = mat3(1.0) - 2.0 * outerProduct(n, n);
+    t_n = -2.0 * (outerProduct(n, d) + mat3(dot(d, n)));
+}
+
+// The smooth `dielectric` (thin false) or `thindielectric` lobe's derivatives; false where the
+// lobe cannot have been sampled.
+bool smooth_lobe(bool thin, vec3 d, vec3 n, float eta, bool transmitted, out SmoothLobe lobe) {
+    float cos_i = -dot(d, n);
+    lobe = SmoothLobe(mat3(1.0), mat3(0.0), vec3(0.0), 0.0, 0.0);
+    if (thin) {
+        float sign_c = cos_i >= 0.0 ? 1.0 : -1.0;
+        vec3 fr = fresnel_dielectric_grad(abs(cos_i), eta);
+        float r2 = 2.0 * fr.x / (1.0 + fr.x);
+        float g = 2.0 / ((1.0 + fr.x) * (1.0 + fr.x));
+        float p = transmitted ? 1.0 - r2 : r2;
+        float sgn = transmitted ? -1.0 : 1.0;
+        if (!(p > 0.0)) return false;
+        if (!transmitted) reflect_jacobians(d, n, lobe.t_d, lobe.t_n);
+        lobe.dlnw_dcos = sgn * g * fr.y * sign_c / p;
+        lobe.dlnw_deta = sgn * g * fr.z / p;
+        return true;
+    }
+    vec3 fr = fresnel_dielectric_grad(cos_i, eta);
+    float f = fr.x;
+    if (!transmitted) {
+        if (!(f > 0.0)) return false;
+        reflect_jacobians(d, n, lobe.t_d, lobe.t_n);
+        lobe.dlnw_dcos = fr.y / f;
+        lobe.dlnw_deta = fr.z / f;
+        return true;
+    }
+    if (!(f < 1.0)) return false;
+    bool outside = cos_i >= 0.0;
+    float eta_ti = outside ? 1.0 / eta : eta;
+    float deta_ti = outside ? -1.0 / (eta * eta) : 1.0;
+    // d′ = η_ti·d + (cos θt + η_ti·cos θi)·n.
+    float c = cos_i;
+    float root2 = 1.0 - eta_ti * eta_ti * (1.0 - c * c);
+    if (!(root2 > 0.0)) return false;
+    float root = sqrt(root2);
+    float sign_c = c >= 0.0 ? 1.0 : -1.0;
+    float cos_t = -sign_c * root;
+    float dct_dc = -sign_c * eta_ti * eta_ti * c / root;
+    float dct_deta = sign_c * eta_ti * (1.0 - c * c) / root;
+    float k = dct_dc + eta_ti;
+    lobe.t_d = eta_ti * mat3(1.0) - k * outerProduct(n, n);
+    lobe.t_n = (cos_t + eta_ti * c) * mat3(1.0) - k * outerProduct(n, d);
+    lobe.t_eta = (d + (dct_deta + c) * n) * deta_ti;
+    lobe.dlnw_dcos = -fr.y / (1.0 - f);
+    lobe.dlnw_deta = -fr.z / (1.0 - f) + 2.0 * deta_ti / eta_ti;
+    return true;
+}
+
+#endif
