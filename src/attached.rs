@@ -202,6 +202,19 @@ pub fn regularisation(amplitude: f32, u_sign: f32, u_size: f32) -> f32 {
     if u_sign < 0.5 { -size } else { size }
 }
 
+/// The parameters only attached sampling differentiates: the `eta` of every smooth `dielectric`
+/// and `thindielectric` (detached gradients of them are 0).
+pub fn attached_only_params(scene: &crate::scene::Scene) -> Vec<crate::params::ParamId> {
+    scene
+        .materials
+        .iter()
+        .filter_map(|m| match m {
+            crate::scene::Material::Smooth { eta_param, .. } => *eta_param,
+            _ => None,
+        })
+        .collect()
+}
+
 /// Refuses attached sampling with adaptive pixel sampling, whose kernels carry no attached sums.
 ///
 /// # Errors

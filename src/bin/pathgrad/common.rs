@@ -212,12 +212,33 @@ pub(crate) struct StrategyArgs {
     /// parameter's gradient variance].
     #[arg(long, value_name = "W,W…")]
     pub(crate) hero_weights: Option<String>,
+    /// How sampled directions relate to the parameters in gradient passes: `detached` (held
+    /// fixed, Mitsuba's prb) or `attached` (they move with the parameters: the index of
+    /// refraction of smooth dielectrics becomes differentiable; scenes of smooth dielectrics
+    /// only, docs/gradients.md "Attached derivatives").
+    #[arg(long, value_name = "detached|attached", default_value = "detached")]
+    pub(crate) sampling: String,
+    /// With `--sampling attached`: the amplitude of the zero-mean noise added to each ray
+    /// Jacobian (PRB supplemental §2), in [0, 1) [default: 0, none].
+    #[arg(long, value_name = "A")]
+    pub(crate) jacobian_noise: Option<f32>,
 }
 
 impl StrategyArgs {
     /// `--q`, or its default.
     pub(crate) fn q(&self) -> f32 {
         self.q.unwrap_or(pathgrad::integrator::DEFAULT_DIFF_Q)
+    }
+
+    /// `--sampling` and `--jacobian-noise` as the library's [`pathgrad::integrator::Sampling`].
+    pub(crate) fn directions(&self) -> Result<pathgrad::integrator::Sampling> {
+        use pathgrad::integrator::{DEFAULT_JACOBIAN_NOISE, Sampling};
+        match (self.sampling.as_str(), self.jacobian_noise) {
+            ("detached", None) => Ok(Sampling::Detached),
+            ("detached", Some(a)) => bail!("--jacobian-noise {a} applies only to --sampling attached"),
+            ("attached", a) => Ok(Sampling::Attached { noise: a.unwrap_or(DEFAULT_JACOBIAN_NOISE) }),
+            (other, _) => bail!("invalid --sampling {other}: expected detached or attached"),
+        }
     }
 
     /// `--hero-weights` as numbers, if given.
@@ -288,6 +309,7 @@ impl StrategyArgs {
     ) -> Result<()> {
         use pathgrad::integrator::Strategy;
         opts.nee = !self.no_nee;
+        opts.sampling = self.directions()?;
         if self.strategy != "diff"
             && let Some(q) = self.q
         {
@@ -343,6 +365,31 @@ impl StrategyArgs {
         opts.validate()?;
         Ok(())
     }
+}
+
+/// The parameters `patterns` select (as [`pathgrad::params::ParamTable::select`]), for gradient
+/// passes sampled as `sampling`: with detached sampling a smooth dielectric's index of
+/// refraction has no derivative, so naming it is an error and a wildcard leaves it out.
+pub(crate) fn select_differentiated(
+    scene: &pathgrad::scene::Scene,
+    patterns: &[&str],
+    sampling: pathgrad::integrator::Sampling,
+) -> Result<Vec<pathgrad::params::ParamId>> {
+    let chosen = scene.params.select(patterns)?;
+    if sampling.is_attached() {
+        return Ok(chosen);
+    }
+    let iors = pathgrad::attached::attached_only_params(scene);
+    for &id in &chosen {
+        let name = &scene.params.entry(id).name;
+        if iors.contains(&id) && patterns.contains(&name.as_str()) {
+            bail!(
+                "{name} is a smooth dielectric's index of refraction: it acts only through the directions it \
+                 refracts into, which detached sampling holds fixed; differentiate it with --sampling attached"
+            );
+        }
+    }
+    Ok(chosen.into_iter().filter(|id| !iors.contains(id)).collect())
 }
 
 /// `bsdf`, or `diff q=Q` (with `power` placements: `diff q=Q power`).

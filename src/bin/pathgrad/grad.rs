@@ -90,7 +90,7 @@ pub(crate) fn grad(args: &GradArgs) -> Result<()> {
     let loss: pathgrad::loss::Loss = args.loss.parse()?;
     let patterns: Vec<&str> =
         if args.params.is_empty() { vec!["*"] } else { args.params.iter().map(String::as_str).collect() };
-    let chosen = scene.params.select(&patterns).context("--param")?;
+    let chosen = crate::common::select_differentiated(&scene, &patterns, opts.sampling).context("--param")?;
     if let Some(name) = &args.image_gradient {
         scene.params.select(&[name.as_str()]).context("--image-gradient")?;
     }

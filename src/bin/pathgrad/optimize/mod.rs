@@ -206,6 +206,12 @@ struct RunConfig {
     /// them to each target's gradient variance (ALGORITHMS.md §5.8).
     #[serde(default)]
     hero_weights: Option<Vec<f32>>,
+    /// `--sampling`: `detached` or `attached`.
+    #[serde(default = "detached")]
+    sampling: String,
+    /// `--jacobian-noise` with attached sampling.
+    #[serde(default)]
+    jacobian_noise: Option<f32>,
     /// `--strategy auto`: what the pilot in preparation picked, stored so that `--resume` reuses it.
     #[serde(default)]
     pilot: Option<PilotChoice>,
@@ -230,6 +236,10 @@ fn default_beta1() -> f64 {
 
 fn balance() -> String {
     "balance".into()
+}
+
+fn detached() -> String {
+    "detached".into()
 }
 
 /// The strategy `--strategy auto`'s pilot picked (`bsdf` or `diff` at `q`) and its report (the
@@ -389,7 +399,8 @@ fn start(args: &OptimizeArgs) -> Result<Session> {
         }
     }
     let pattern_refs: Vec<&str> = patterns.iter().map(String::as_str).collect();
-    let ids = scene.params.select(&pattern_refs).context("--param")?;
+    let ids = crate::common::select_differentiated(&scene, &pattern_refs, args.sampling.directions()?)
+        .context("--param")?;
     let initial_table = with_values(&scene.params, &inits, "--param").context("--param")?;
     let mut opts = options(&scene, &args.flags)?;
     let mut views = Vec::new();
@@ -449,6 +460,8 @@ fn start(args: &OptimizeArgs) -> Result<Session> {
         diff_param,
         placement_mis: args.sampling.placement()?.name().to_string(),
         hero_weights: args.sampling.hero_weights()?,
+        sampling: args.sampling.sampling.clone(),
+        jacobian_noise: args.sampling.jacobian_noise,
         pilot: None,
         allow_outside_folder: args.flags.allow_outside_folder,
         sensor: args.flags.sensor.clone(),

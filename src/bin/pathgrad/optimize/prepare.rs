@@ -76,6 +76,11 @@ pub(super) fn iteration_options(scene: &Scene, config: &RunConfig) -> Result<Ite
         seed: config.seed,
         nee: config.nee,
         strategy,
+        sampling: match config.sampling.as_str() {
+            "detached" => pathgrad::integrator::Sampling::Detached,
+            "attached" => pathgrad::integrator::Sampling::Attached { noise: config.jacobian_noise.unwrap_or(0.0) },
+            other => bail!("invalid sampling {other} in the run's configuration"),
+        },
         ..RenderOptions::for_scene(scene)
     };
     let options = IterationOptions {

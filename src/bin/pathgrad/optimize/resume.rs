@@ -259,6 +259,13 @@ pub(super) fn check_unchanged(
     check("no_nee", "--no-nee", Some(text(&args.sampling.no_nee)), text(&!c.nee));
     check("diff_param", "--diff-param", args.sampling.diff_param.clone(), c.diff_param.clone().unwrap_or_default());
     check("placement_mis", "--placement-mis", args.sampling.placement_mis.clone(), c.placement_mis.clone());
+    check("sampling", "--sampling", Some(args.sampling.sampling.clone()), c.sampling.clone());
+    check(
+        "jacobian_noise",
+        "--jacobian-noise",
+        args.sampling.jacobian_noise.map(|a| text(&a)),
+        c.jacobian_noise.map_or("0".into(), |a| text(&a)),
+    );
     check(
         "hero_weights",
         "--hero-weights",
