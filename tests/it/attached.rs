@@ -58,6 +58,40 @@ fn ior_matches_finite_differences_on_the_cpu() {
     }
 }
 
+/// The same on the device: the attached kernel's gradient against central differences of the
+/// device's renders.
+#[test]
+fn ior_matches_finite_differences_on_the_device() {
+    use pathgrad::backend::Backend;
+    use pathgrad::gpu::Renderer;
+    use pathgrad::gpu::renderer::GradMode;
+    let gpu = crate::support::TestGpu::new();
+    for name in ["attached_sphere", "attached_slab", "attached_pane"] {
+        let scene = scenes::data_scene(name);
+        let opts = RenderOptions { width: 32, height: 32, spp: 4, ..RenderOptions::for_scene(&scene) };
+        let a = weights(opts.width, opts.height);
+        let mut renderer = Renderer::new(&gpu.ctx, &scene).unwrap();
+        let value = scene.params.get(scene.params.find("glass.bsdf.eta").unwrap())[0];
+        let h = 0.01 * value;
+        let (mut fd, mut prb) = (Vec::new(), Vec::new());
+        for seed in 0..24 {
+            let o = RenderOptions { seed, ..opts };
+            let mut at = |v: f32| {
+                let mut table = scene.params.clone();
+                table.set("glass.bsdf.eta", &[v]).unwrap();
+                renderer.set_params(&table).unwrap();
+                objective(&renderer.render(&o).unwrap(), &a)
+            };
+            fd.push((at(value + h) - at(value - h)) / (2.0 * f64::from(h)));
+            renderer.set_params(&scene.params).unwrap();
+            let g =
+                renderer.backward(&RenderOptions { sampling: Sampling::attached(), ..o }, &a, GradMode::Float).unwrap();
+            prb.push(f64::from(g.get("glass.bsdf.eta").unwrap()[0]));
+        }
+        crate::support::assert_fd_matches(&format!("{} glass.bsdf.eta (device, attached)", scene.source), &fd, &prb);
+    }
+}
+
 /// The device's attached kernel against the CPU reference, sample for sample (the same keys): the
 /// η gradient of every scene, and the other parameters' (detached terms) unchanged by attaching.
 #[test]
@@ -85,4 +119,76 @@ fn the_device_equals_the_cpu_reference() {
         println!("{name}: η gradient GPU {gv} CPU {cv}");
         assert!((f64::from(gv) - cv).abs() <= 1e-3 * cv.abs(), "{name}: GPU {gv} vs CPU {cv}");
     }
+}
+
+/// `optimize` with attached sampling recovers the index of refraction of a glass sphere (1.5,
+/// Mitsuba's bk7 over air) from 1.3, a parameter detached sampling refuses by name.
+#[test]
+fn optimize_recovers_the_ior_of_a_glass_sphere() {
+    let out = tempfile::tempdir().unwrap();
+    let dir = out.path().join("run");
+    let scene = format!("{}/tests/data/scenes/attached_sphere.xml", env!("CARGO_MANIFEST_DIR"));
+    let args =
+        ["--param", "glass.bsdf.eta=1.3", "--target-set", "glass.bsdf.eta=1.5", "--width", "32", "--height", "32"];
+    let run = crate::cli::pathgrad()
+        .args(["optimize", &scene])
+        .args(args)
+        .args(["--sampling", "attached", "--iters", "80", "--lr", "0.01", "-o"])
+        .arg(&dir)
+        .output()
+        .unwrap();
+    assert!(run.status.success(), "{}", String::from_utf8_lossy(&run.stderr));
+    let params: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.join("params.json")).unwrap()).unwrap();
+    let eta = params["glass.bsdf.eta"][0].as_f64().unwrap();
+    // The target's η is 1.5 / 1.000277 (air); 80 steps of 0.01 from 1.3 end within 0.01 of it.
+    assert!((eta - 1.4996).abs() < 0.01, "recovered η {eta}");
+    let detached = crate::cli::pathgrad()
+        .args(["optimize", &scene])
+        .args(args)
+        .args(["--iters", "2", "-o"])
+        .arg(out.path().join("detached"))
+        .output()
+        .unwrap();
+    assert!(!detached.status.success());
+    assert!(String::from_utf8_lossy(&detached.stderr).contains("differentiate it with --sampling attached"));
+}
+
+/// Attached sampling is refused, by name, where its Jacobians are not built: a diffuse
+/// material, adaptive pixel sampling, forward-mode image gradients, deterministic mode.
+#[test]
+fn attached_sampling_refuses_what_it_does_not_cover() {
+    use pathgrad::backend::Backend;
+    use pathgrad::gpu::Renderer;
+    use pathgrad::gpu::renderer::GradMode;
+    let gpu = crate::support::TestGpu::new();
+    let cornell = pathgrad::scene::builtin::load("cornell-box").unwrap();
+    let opts = RenderOptions {
+        width: 8,
+        height: 8,
+        spp: 1,
+        sampling: Sampling::attached(),
+        ..RenderOptions::for_scene(&cornell)
+    };
+    let a = weights(8, 8);
+    let err = pathgrad::cpu::backward(&cornell, &opts, &a).unwrap_err().to_string();
+    assert!(err.contains("Sampling::Attached") && err.contains("`diffuse` material"), "{err}");
+    let mut renderer = Renderer::new(&gpu.ctx, &cornell).unwrap();
+    let err = renderer.backward(&opts, &a, GradMode::Float).unwrap_err().to_string();
+    assert!(err.contains("`diffuse` material"), "{err}");
+    let sphere = scenes::data_scene("attached_sphere");
+    let opts = RenderOptions {
+        width: 8,
+        height: 8,
+        spp: 1,
+        sampling: Sampling::attached(),
+        ..RenderOptions::for_scene(&sphere)
+    };
+    let mut renderer = Renderer::new(&gpu.ctx, &sphere).unwrap();
+    let err = renderer.backward(&opts, &a, GradMode::Deterministic).unwrap_err().to_string();
+    assert!(err.contains("float kernel only"), "{err}");
+    let err = renderer.image_gradient(&opts, "glass.bsdf.eta").unwrap_err().to_string();
+    assert!(err.contains("forward-mode"), "{err}");
+    let err = pathgrad::cpu::image_gradient(&sphere, &opts, "glass.bsdf.eta").unwrap_err().to_string();
+    assert!(err.contains("forward-mode"), "{err}");
 }
