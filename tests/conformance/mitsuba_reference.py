@@ -156,6 +156,11 @@ MATRIX = {
                                      "ball.bsdf.bsdf_0.reflectance.value": None},
                                  delta_blend=True, warnings=["'blendbsdf' with a smooth 'conductor'"],
                                  spp=4096, seeds=32),
+    # Attached sampling (issue 34): a dielectric's η, which Mitsuba does not differentiate
+    # (NonDifferentiable), against Mitsuba's central differences; pathgrad's attached reverse-mode
+    # derivative of each channel's image mean (`sampling`: compared as image means only).
+    "attached_ior_sphere": dict(features=["dielectric eta, attached sampling", "envmap", "tessellated sphere"],
+                                grads=["glass.bsdf.eta"], sampling="attached", spp=1024, seeds=32),
     "bsdf_twosided_diffuse": dict(features=["twosided", "diffuse", "back faces"], grads=["sided.bsdf.brdf_0.reflectance.value"]),
     "bsdf_twosided_roughconductor": dict(features=["twosided", "roughconductor", "shared bsdf ref"], grads=["metal.brdf_0.alpha.value"]),
     "bsdf_blend_twosided_leaves": dict(features=["blendbsdf of twosided leaves"], grads=["panel.bsdf.weight.value"]),
@@ -785,6 +790,8 @@ def annotations(name):
     out = dict(POWER.get(name, {}))
     if "warnings" in MATRIX.get(name, {}):
         out["warnings"] = MATRIX[name]["warnings"]
+    if "sampling" in MATRIX.get(name, {}):
+        out["sampling"] = MATRIX[name]["sampling"]
     if name in PENDING:
         out["pending"] = PENDING[name]
     return out

@@ -497,7 +497,9 @@ fn conformance_matrix_agrees_with_mitsuba() {
             let (np, nm) = (f64::from(SEEDS), r.json["seeds"].as_f64().unwrap());
             // Sized from Mitsuba's variance; where pathgrad's is larger, sized again from its own
             // (se ∝ 1/√spp, with a margin), up to the budget's top.
-            let mut spp = spp_for_power(r, &theirs, gradient, alpha);
+            // Attached gradients are sized from pathgrad's own variance (the reference's is that
+            // of Mitsuba's finite differences, far larger): from 16 spp up.
+            let mut spp = if gradient && r.attached() { 16 } else { spp_for_power(r, &theirs, gradient, alpha) };
             let mut mine = render_stats(&mut renderer, &scene, key.as_deref(), spp, r);
             loop {
                 let short = (0..3)
