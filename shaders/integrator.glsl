@@ -722,8 +722,11 @@ bool path_step(inout PathState st) {
                     HitGeometry geometry = HitGeometry(hit.t, st.ray.dir, s.ng, frame.n,
                                                        shading_normal_gradient(hit) * (mirrored ? -1.0 : 1.0));
                     SmoothLobe lobe;
-                    if (smooth_lobe(am.tag == MAT_THIN_DIELECTRIC, st.ray.dir, frame.n, bsdf.leaf0.eta.x,
-                                    wi.z * bs.wo.z < 0.0, lobe)) {
+                    bool lobe_ok = am.tag == MAT_CONDUCTOR
+                        ? conductor_lobe(st.ray.dir, frame.n, bsdf.leaf0.eta, bsdf.leaf0.k, lobe)
+                        : smooth_lobe(am.tag == MAT_THIN_DIELECTRIC, st.ray.dir, frame.n, bsdf.leaf0.eta.x,
+                                      wi.z * bs.wo.z < 0.0, lobe);
+                    if (lobe_ok) {
                         Jac6 a = jac_completed(hit_jacobian(geometry, lobe.t_d, lobe.t_n), st.prev_normal, st.ray.dir,
                                                s.ng, wo_world);
                         if (globals.jac_noise > 0.0) {
@@ -736,16 +739,16 @@ bool path_step(inout PathState st) {
                             // h = δL·(∂ln w/∂r ⊙ L_after); Φ′ = (Φ − h)·Ã⁻¹; η's two terms.
                             vec3 after = st.adj * st.radiance;
                             Row6 next;
-                            bool solved = jac_solve_row(a, row_add_scaled(st.gamma, cos_row, -dot(after, vec3(lobe.dlnw_dcos))), next);
+                            bool solved = jac_solve_row(a, row_add_scaled(st.gamma, cos_row, -dot(after, lobe.dlnw_dcos)), next);
                             float direction = solved ? dot(next.d, lobe.t_eta) : 0.0;
-                            if (am.p_weight != NO_PARAM)
+                            if (am.tag != MAT_CONDUCTOR && am.p_weight != NO_PARAM)
                                 param_grad(am.p_weight, vec3(dot(after, vec3(lobe.dlnw_deta)) + direction, 0.0, 0.0));
                             st.gamma = next;
                         } else {
                             Row6 row = row_through(cos_row, st.jac);
-                            st.log_r = row_add_scaled(st.log_r, row, lobe.dlnw_dcos);
-                            st.log_g = row_add_scaled(st.log_g, row, lobe.dlnw_dcos);
-                            st.log_b = row_add_scaled(st.log_b, row, lobe.dlnw_dcos);
+                            st.log_r = row_add_scaled(st.log_r, row, lobe.dlnw_dcos.x);
+                            st.log_g = row_add_scaled(st.log_g, row, lobe.dlnw_dcos.y);
+                            st.log_b = row_add_scaled(st.log_b, row, lobe.dlnw_dcos.z);
                             st.jac = jac_compose(a, st.jac);
                         }
                     }

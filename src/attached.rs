@@ -23,12 +23,12 @@
 
 use glam::{Mat3, Vec3};
 
-use crate::contract::{MAT_DIELECTRIC, MAT_THIN_DIELECTRIC, NO_PARAM};
+use crate::contract::{MAT_CONDUCTOR, MAT_DIELECTRIC, MAT_THIN_DIELECTRIC, NO_PARAM};
 use crate::integrator::{RenderOptions, Sampling};
 use crate::scene::flat::FlatScene;
 
 /// Refuses attached sampling (`options.sampling`) where its vertex Jacobians are not built: every
-/// material must be a smooth `dielectric` or `thindielectric` (no normal map, no mask), without
+/// material must be a smooth `dielectric`, `thindielectric` or `conductor` (no normal map, no mask), without
 /// media; light comes from the environment or from emitters the paths hit. `forward` refuses it
 /// for forward-mode image gradients, which carry per-channel derivatives the adjoint-weighted
 /// attached sums do not.
@@ -43,9 +43,9 @@ pub fn refuse_unsupported(flat: &FlatScene, options: &RenderOptions, forward: bo
         Err(crate::Error::InvalidArgument {
             parameter: "Sampling::Attached".into(),
             message: format!(
-                "{what}: attached derivatives are built for scenes of smooth `dielectric` and `thindielectric` \
-                 surfaces lit by the environment or by emitters the paths hit, in reverse mode (use detached \
-                 sampling)"
+                "{what}: attached derivatives are built for scenes of smooth `dielectric`, `thindielectric` and \
+                 `conductor` surfaces lit by the environment or by emitters the paths hit, in reverse mode (use \
+                 detached sampling)"
             ),
         })
     };
@@ -65,7 +65,7 @@ pub fn refuse_unsupported(flat: &FlatScene, options: &RenderOptions, forward: bo
         "roughdielectric",
     ];
     for m in &flat.materials {
-        if m.tag != MAT_DIELECTRIC && m.tag != MAT_THIN_DIELECTRIC {
+        if !matches!(m.tag, MAT_DIELECTRIC | MAT_THIN_DIELECTRIC | MAT_CONDUCTOR) {
             let name = names.get(m.tag as usize).copied().unwrap_or("another BSDF");
             return refuse(format!("the scene has a `{name}` material"));
         }
@@ -367,6 +367,49 @@ pub struct SmoothLobe {
     pub dlnw_deta: Vec3,
 }
 
+/// Mitsuba's conductor Fresnel reflectance ([`crate::bsdf::rough_conductor::fresnel_conductor`])
+/// and its derivative by cos θi, per channel.
+pub fn fresnel_conductor_grad(c: f32, eta: Vec3, k: Vec3) -> (Vec3, Vec3) {
+    let f = crate::bsdf::rough_conductor::fresnel_conductor(c, eta, k);
+    let mut df = Vec3::ZERO;
+    for ch in 0..3 {
+        let (e, kk) = (eta[ch], k[ch]);
+        let (c2, s2) = (c * c, 1.0 - c * c);
+        let s4 = s2 * s2;
+        let (ds2, ds4) = (-2.0 * c, -4.0 * c * s2);
+        let t1 = e * e - kk * kk - s2;
+        let dt1 = -ds2;
+        let q = (t1 * t1 + 4.0 * e * e * kk * kk).sqrt();
+        let dq = if q > 0.0 { t1 * dt1 / q } else { 0.0 };
+        let a = ((q + t1) * 0.5).max(0.0).sqrt();
+        let da = if a > 0.0 { (dq + dt1) / (4.0 * a) } else { 0.0 };
+        let (n, d) = (q + c2 - 2.0 * c * a, q + c2 + 2.0 * c * a);
+        let (dn, dd) = (dq + 2.0 * c - 2.0 * a - 2.0 * c * da, dq + 2.0 * c + 2.0 * a + 2.0 * c * da);
+        let rs = n / d;
+        let drs = (dn * d - n * dd) / (d * d);
+        let cross = a * s2 + c * da * s2 + c * a * ds2;
+        let (m, e2) = (q * c2 + s4 - 2.0 * c * a * s2, q * c2 + s4 + 2.0 * c * a * s2);
+        let (dm, de2) = (dq * c2 + 2.0 * q * c + ds4 - 2.0 * cross, dq * c2 + 2.0 * q * c + ds4 + 2.0 * cross);
+        let r = m / e2;
+        let dr = (dm * e2 - m * de2) / (e2 * e2);
+        df[ch] = 0.5 * (drs + drs * r + rs * dr);
+    }
+    (f, df)
+}
+
+/// The attached derivatives of a smooth `conductor`'s mirror lobe sampled from incoming
+/// direction `d` at normal `n`: its weight is F_conductor(cos θi)·s, whose log's derivative by
+/// cos θi is per channel; its direction depends on no parameter.
+pub fn conductor_lobe(d: Vec3, n: Vec3, eta: Vec3, k: Vec3) -> Option<SmoothLobe> {
+    let cos_i = -d.dot(n);
+    let (f, df) = fresnel_conductor_grad(cos_i, eta, k);
+    if !(cos_i > 0.0) || !(f.min_element() > 0.0) {
+        return None;
+    }
+    let (t_d, t_n) = reflect_jacobians(d, n);
+    Some(SmoothLobe { t_d, t_n, t_eta: Vec3::ZERO, dlnw_dcos: df / f, dlnw_deta: Vec3::ZERO })
+}
+
 /// The attached derivatives of a smooth `dielectric` (`thin` false) or `thindielectric` lobe
 /// sampled from incoming direction `d` at shading normal `n` with index ratio `eta` (inside over
 /// outside): reflected or (`transmitted`) refracted. The lobe's choice probability (F, or 1 − F)
@@ -445,6 +488,19 @@ mod tests {
                 let fd_e = (fresnel_dielectric(c, eta + h).0 - fresnel_dielectric(c, eta - h).0) / (2.0 * h);
                 assert!((fd_c - dc).abs() < 2e-3 * (1.0 + dc.abs()), "η {eta} cos {c}: ∂F/∂cos {dc} vs {fd_c}");
                 assert!((fd_e - de).abs() < 2e-3 * (1.0 + de.abs()), "η {eta} cos {c}: ∂F/∂η {de} vs {fd_e}");
+            }
+        }
+    }
+
+    #[test]
+    fn conductor_fresnel_derivative_matches_finite_differences() {
+        use crate::bsdf::rough_conductor::fresnel_conductor;
+        for (eta, k) in [(Vec3::new(0.2, 0.9, 1.1), Vec3::new(3.9, 2.4, 2.2)), (Vec3::new(1.5, 0.5, 2.5), Vec3::ZERO)] {
+            for c in [0.95f32, 0.6, 0.3, 0.1] {
+                let (_, df) = fresnel_conductor_grad(c, eta, k);
+                let h = 1e-3;
+                let fd = (fresnel_conductor(c + h, eta, k) - fresnel_conductor(c - h, eta, k)) / (2.0 * h);
+                assert!((fd - df).abs().max_element() < 2e-3 * (1.0 + df.abs().max_element()), "cos {c}: {df} vs {fd}");
             }
         }
     }

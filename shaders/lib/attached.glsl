@@ -172,7 +172,7 @@ vec3 fresnel_dielectric_grad(float cos_i, float eta) {
 
 // What a smooth lobe contributes (attached::SmoothLobe): ∂d′/∂d, ∂d′/∂n, ∂d′/∂η and the
 // derivatives of its log-weight by cos θi and by η (grey for dielectrics).
-struct SmoothLobe { mat3 t_d; mat3 t_n; vec3 t_eta; float dlnw_dcos; float dlnw_deta; };
+struct SmoothLobe { mat3 t_d; mat3 t_n; vec3 t_eta; vec3 dlnw_dcos; float dlnw_deta; };
 
 void reflect_jacobians(vec3 d, vec3 n, out mat3 t_d, out mat3 t_n) {
     t_d = mat3(1.0) - 2.0 * outerProduct(n, n);
@@ -183,7 +183,7 @@ void reflect_jacobians(vec3 d, vec3 n, out mat3 t_d, out mat3 t_n) {
 // lobe cannot have been sampled.
 bool smooth_lobe(bool thin, vec3 d, vec3 n, float eta, bool transmitted, out SmoothLobe lobe) {
     float cos_i = -dot(d, n);
-    lobe = SmoothLobe(mat3(1.0), mat3(0.0), vec3(0.0), 0.0, 0.0);
+    lobe = SmoothLobe(mat3(1.0), mat3(0.0), vec3(0.0), vec3(0.0), 0.0);
     if (thin) {
         float sign_c = cos_i >= 0.0 ? 1.0 : -1.0;
         vec3 fr = fresnel_dielectric_grad(abs(cos_i), eta);
@@ -193,7 +193,7 @@ bool smooth_lobe(bool thin, vec3 d, vec3 n, float eta, bool transmitted, out Smo
         float sgn = transmitted ? -1.0 : 1.0;
         if (!(p > 0.0)) return false;
         if (!transmitted) reflect_jacobians(d, n, lobe.t_d, lobe.t_n);
-        lobe.dlnw_dcos = sgn * g * fr.y * sign_c / p;
+        lobe.dlnw_dcos = vec3(sgn * g * fr.y * sign_c / p);
         lobe.dlnw_deta = sgn * g * fr.z / p;
         return true;
     }
@@ -202,7 +202,7 @@ bool smooth_lobe(bool thin, vec3 d, vec3 n, float eta, bool transmitted, out Smo
     if (!transmitted) {
         if (!(f > 0.0)) return false;
         reflect_jacobians(d, n, lobe.t_d, lobe.t_n);
-        lobe.dlnw_dcos = fr.y / f;
+        lobe.dlnw_dcos = vec3(fr.y / f);
         lobe.dlnw_deta = fr.z / f;
         return true;
     }
@@ -223,8 +223,54 @@ bool smooth_lobe(bool thin, vec3 d, vec3 n, float eta, bool transmitted, out Smo
     lobe.t_d = eta_ti * mat3(1.0) - k * outerProduct(n, n);
     lobe.t_n = (cos_t + eta_ti * c) * mat3(1.0) - k * outerProduct(n, d);
     lobe.t_eta = (d + (dct_deta + c) * n) * deta_ti;
-    lobe.dlnw_dcos = -fr.y / (1.0 - f);
+    lobe.dlnw_dcos = vec3(-fr.y / (1.0 - f));
     lobe.dlnw_deta = -fr.z / (1.0 - f) + 2.0 * deta_ti / eta_ti;
+    return true;
+}
+
+// The conductor Fresnel reflectance's derivative by cos θi, per channel (fresnel_conductor_grad).
+vec3 fresnel_conductor_dcos(float c, vec3 eta, vec3 k) {
+    vec3 df;
+    for (uint ch = 0u; ch < 3u; ch++) {
+        float e = eta[ch];
+        float kk = k[ch];
+        float c2 = c * c;
+        float s2 = 1.0 - c2;
+        float s4 = s2 * s2;
+        float ds2 = -2.0 * c;
+        float ds4 = -4.0 * c * s2;
+        float t1 = e * e - kk * kk - s2;
+        float dt1 = -ds2;
+        float q = sqrt(t1 * t1 + 4.0 * e * e * kk * kk);
+        float dq = q > 0.0 ? t1 * dt1 / q : 0.0;
+        float a = sqrt(max((q + t1) * 0.5, 0.0));
+        float da = a > 0.0 ? (dq + dt1) / (4.0 * a) : 0.0;
+        float n = q + c2 - 2.0 * c * a;
+        float d = q + c2 + 2.0 * c * a;
+        float dn = dq + 2.0 * c - 2.0 * a - 2.0 * c * da;
+        float dd = dq + 2.0 * c + 2.0 * a + 2.0 * c * da;
+        float rs = n / d;
+        float drs = (dn * d - n * dd) / (d * d);
+        float cross_term = a * s2 + c * da * s2 + c * a * ds2;
+        float m = q * c2 + s4 - 2.0 * c * a * s2;
+        float e2 = q * c2 + s4 + 2.0 * c * a * s2;
+        float dm = dq * c2 + 2.0 * q * c + ds4 - 2.0 * cross_term;
+        float de2 = dq * c2 + 2.0 * q * c + ds4 + 2.0 * cross_term;
+        float r = m / e2;
+        float dr = (dm * e2 - m * de2) / (e2 * e2);
+        df[ch] = 0.5 * (drs + drs * r + rs * dr);
+    }
+    return df;
+}
+
+// A smooth conductor's mirror lobe (conductor_lobe): false below the surface or where F is 0.
+bool conductor_lobe(vec3 d, vec3 n, vec3 eta, vec3 k, out SmoothLobe lobe) {
+    float cos_i = -dot(d, n);
+    lobe = SmoothLobe(mat3(1.0), mat3(0.0), vec3(0.0), vec3(0.0), 0.0);
+    vec3 f = fresnel_conductor(cos_i, eta, k);
+    if (!(cos_i > 0.0) || !(min(f.x, min(f.y, f.z)) > 0.0)) return false;
+    reflect_jacobians(d, n, lobe.t_d, lobe.t_n);
+    lobe.dlnw_dcos = fresnel_conductor_dcos(cos_i, eta, k) / f;
     return true;
 }
 

@@ -3,7 +3,7 @@
 
 use glam::{Vec2, Vec3};
 
-use crate::attached::{HitGeometry, Jac6, Row6, regularisation, smooth_lobe};
+use crate::attached::{HitGeometry, Jac6, Row6, conductor_lobe, regularisation, smooth_lobe};
 use crate::bsdf::Leaf;
 use crate::bsdf::differential::{bsdf_pdf_diff, bsdf_sample_diff};
 use crate::bsdf::specular::SmoothKind;
@@ -13,8 +13,8 @@ use crate::bvh::{Ray, closest_hit, occluded};
 use crate::contract::{
     DIM_DIFF_SIGN, DIM_DIRECTION, DIM_EMITTER_POS, DIM_EMITTER_SELECT, DIM_ENV_CELL, DIM_HERO, DIM_LOBE,
     DIM_PIXEL_JITTER, DIM_ROULETTE, DIM_TECHNIQUE, Globals, LENS_ORTHOGRAPHIC, LENS_THIN, LIGHT_SLOT, MAT_BLEND,
-    MAT_NULL, MAT_ROUGH_CONDUCTOR, MAT_ROUGH_DIELECTRIC, MAT_ROUGH_PLASTIC, MAX_HEROES, MAX_NULL_CROSSINGS, NO_EMITTER,
-    NO_MEDIUM, NO_PARAM, PLACEMENT_POWER, STRATEGY_DIFF, ViewCamera,
+    MAT_CONDUCTOR, MAT_NULL, MAT_ROUGH_CONDUCTOR, MAT_ROUGH_DIELECTRIC, MAT_ROUGH_PLASTIC, MAX_HEROES,
+    MAX_NULL_CROSSINGS, NO_EMITTER, NO_MEDIUM, NO_PARAM, PLACEMENT_POWER, STRATEGY_DIFF, ViewCamera,
 };
 use crate::cpu::emitter::{
     EmitterSample, emitter_pdf_solid_angle, env_backward, env_radiance, env_radiance_gradient, environment_pdf,
@@ -780,7 +780,11 @@ pub fn trace_path<const ADJOINT: bool>(
             };
             let thin = leaf.kind == SmoothKind::ThinDielectric;
             let transmitted = wi.z * bs.wo.z < 0.0;
-            if let Some(lobe) = smooth_lobe(thin, ray.dir, frame.n, leaf.eta.x, transmitted) {
+            let lobe = match leaf.kind {
+                SmoothKind::Conductor => conductor_lobe(ray.dir, frame.n, leaf.eta, leaf.k),
+                _ => smooth_lobe(thin, ray.dir, frame.n, leaf.eta.x, transmitted),
+            };
+            if let Some(lobe) = lobe {
                 let mut a =
                     geometry.jacobian(lobe.t_d, lobe.t_n).completed(prev_normal, ray.dir, s.ng, frame.to_world(bs.wo));
                 if globals.jac_noise > 0.0 {
@@ -792,7 +796,8 @@ pub fn trace_path<const ADJOINT: bool>(
                     // h_v = δL·(∂ln w/∂r ⊙ L_after); Φ_{v+1} = (Φ_v − h_v)·Ã⁻¹; η's two terms.
                     let after = adj_radiance * radiance;
                     let next = a.solve_row(phi.add_scaled(cos_row, -after.dot(lobe.dlnw_dcos)));
-                    let p_eta = flat.materials[s.material as usize].p_weight;
+                    let m = &flat.materials[s.material as usize];
+                    let p_eta = if m.tag == MAT_CONDUCTOR { NO_PARAM } else { m.p_weight };
                     let direction = next.map_or(0.0, |n| n.d.dot(lobe.t_eta));
                     if p_eta != NO_PARAM {
                         sink.add(p_eta, Vec3::new(after.dot(lobe.dlnw_deta) + direction, 0.0, 0.0));

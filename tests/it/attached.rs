@@ -48,10 +48,11 @@ fn check_cpu(scene: &Scene, name: &str, seeds: u32, opts: RenderOptions) {
 }
 
 /// The index of refraction of a glass sphere, a glass slab and a thin pane, each alone in front
-/// of a smooth environment map (no visibility edge moves), against finite differences.
+/// of a smooth environment map (no visibility edge moves), and of a glass sphere beside a gold
+/// mirror ball (a conductor's Fresnel weight in the Jacobians), against finite differences.
 #[test]
 fn ior_matches_finite_differences_on_the_cpu() {
-    for name in ["attached_sphere", "attached_slab", "attached_pane"] {
+    for name in ["attached_sphere", "attached_slab", "attached_pane", "attached_mirror"] {
         let scene = scenes::data_scene(name);
         let opts = RenderOptions { width: 24, height: 24, spp: 4, ..RenderOptions::for_scene(&scene) };
         check_cpu(&scene, "glass.bsdf.eta", 16, opts);
@@ -100,7 +101,7 @@ fn the_device_equals_the_cpu_reference() {
     use pathgrad::gpu::Renderer;
     use pathgrad::gpu::renderer::GradMode;
     let gpu = crate::support::TestGpu::new();
-    for name in ["attached_sphere", "attached_slab", "attached_pane"] {
+    for name in ["attached_sphere", "attached_slab", "attached_pane", "attached_mirror"] {
         let scene = scenes::data_scene(name);
         let opts = RenderOptions {
             width: 32,
@@ -203,7 +204,7 @@ fn the_replay_returns_gamma_to_zero() {
     use pathgrad::cpu::path::{GradSink, trace_path};
     use pathgrad::rng::PassTag;
     use pathgrad::scene::flat::FlatScene;
-    for name in ["attached_sphere", "attached_slab", "attached_pane"] {
+    for name in ["attached_sphere", "attached_slab", "attached_pane", "attached_mirror"] {
         let scene = scenes::data_scene(name);
         let opts = RenderOptions {
             width: 24,

@@ -399,8 +399,8 @@ fn start(args: &OptimizeArgs) -> Result<Session> {
         }
     }
     let pattern_refs: Vec<&str> = patterns.iter().map(String::as_str).collect();
-    let ids = crate::common::select_differentiated(&scene, &pattern_refs, args.sampling.directions()?)
-        .context("--param")?;
+    let ids =
+        crate::common::select_differentiated(&scene, &pattern_refs, args.sampling.directions()?).context("--param")?;
     let initial_table = with_values(&scene.params, &inits, "--param").context("--param")?;
     let mut opts = options(&scene, &args.flags)?;
     let mut views = Vec::new();
