@@ -119,12 +119,13 @@ fn build_impl(count: usize, triangle: &(impl Fn(u32) -> [Vec3; 3] + Sync), alway
         let empty = BvhNode { exp_imask: 127 | 127 << 8 | 127 << 16, ..BvhNode::default() };
         return Ok(Bvh { nodes: vec![empty], tris: Vec::new(), prim_ids: Vec::new(), depth: 1 });
     }
-    let (bvh2, ploc_depth, build_time) = binary_tree(count, triangle, always_shape);
+    let (bvh2, ploc_depth, mut steps) = binary_tree(count, triangle, always_shape);
     // obvhs's `bvh2_to_cwbvh` with a decision table of 1 byte per (node, slot) instead of 8.
     let (cw_nodes, prim_ids) = convert::bvh2_to_cwbvh(&bvh2, BVH_LEAF_MAX);
     drop(bvh2);
     let nodes: Vec<BvhNode> = cw_nodes.iter().map(|n| bytemuck::cast(*n)).collect();
     drop(cw_nodes);
+    steps.lap("convert");
     let tris = prim_ids
         .par_iter()
         .map(|&id| {
@@ -133,45 +134,76 @@ fn build_impl(count: usize, triangle: &(impl Fn(u32) -> [Vec3; 3] + Sync), alway
         })
         .collect();
     let depth = cw_depth(&nodes);
+    steps.lap("positions");
     let bvh = Bvh { nodes, tris, prim_ids, depth };
     tracing::debug!(
         triangles = count,
         nodes = bvh.nodes.len(),
         depth = bvh.depth,
         ploc_depth,
-        ?build_time,
+        steps = %steps,
         "BVH built"
     );
     Ok(bvh)
 }
 
+/// The seconds of each step of a BVH build, for the debug log (`pathgrad -vv`).
+struct Steps {
+    last: Instant,
+    laps: Vec<(&'static str, f64)>,
+}
+
+impl Steps {
+    fn new() -> Steps {
+        Steps { last: Instant::now(), laps: Vec::new() }
+    }
+
+    /// Ends step `name` now.
+    fn lap(&mut self, name: &'static str) {
+        let now = Instant::now();
+        self.laps.push((name, (now - self.last).as_secs_f64()));
+        self.last = now;
+    }
+}
+
+impl std::fmt::Display for Steps {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        for (i, (name, seconds)) in self.laps.iter().enumerate() {
+            write!(f, "{}{name} {seconds:.3} s", if i == 0 { "" } else { ", " })?;
+        }
+        Ok(())
+    }
+}
+
 /// The binary tree of one-triangle leaves that [`build_impl`] converts, with PLOC's depth and
-/// the build's time (`count` > 0).
+/// the seconds of the steps so far (`count` > 0).
 fn binary_tree(
     count: usize,
     triangle: &(impl Fn(u32) -> [Vec3; 3] + Sync),
     always_shape: bool,
-) -> (Vec<Node2>, u32, std::time::Duration) {
+) -> (Vec<Node2>, u32, Steps) {
     // The steps of obvhs's `build_bvh2_from_tris` for one-triangle leaves (the tree is the same),
     // without its debug-build validation, which panics on trees the reinsertion made deeper than
     // its own stack estimate (a fan-triangulated 1000-gon: depth 273 against 252). PLOC and
     // reinsertion are ours (`ploc`, `reinsert`: obvhs's, on 32-byte nodes and in smaller working
     // arrays), so neither a slice of obvhs `Triangle`s (48 bytes a triangle) nor obvhs's 48-byte
     // nodes are ever made (issue 38).
-    let start = Instant::now();
+    let mut steps = Steps::new();
     let params = BvhBuildParams::medium_build();
     debug_assert!(matches!(params.ploc_search_distance, PlocSearchDistance::Medium));
     debug_assert!(matches!(params.sort_precision, SortPrecision::U64));
     // obvhs's PLOC (`PlocSearchDistance::Medium` is its search distance 14), in less memory.
     let mut nodes = ploc::build(count, triangle, params.search_depth_threshold);
+    steps.lap("ploc");
     let mut parents = reinsert::parents(&nodes);
     reinsert::run(&mut nodes, &mut parents, params.reinsertion_batch_ratio);
+    steps.lap("reinsertion");
     // obvhs's leaf collapse comes between the two passes; with leaves of one triangle it leaves
     // the tree as it is.
     let ratio = params.reinsertion_batch_ratio * params.post_collapse_reinsertion_batch_ratio_multiplier;
     reinsert::run(&mut nodes, &mut parents, ratio);
     drop(parents);
-    let build_time = start.elapsed();
+    steps.lap("reinsertion 2");
     let ploc_depth = bvh2_height(&nodes);
     // A tree with one-triangle leaves is converted as PLOC left it, its subtrees too deep for the
     // stack rebuilt in place (`depth`): the rewrite below would give the same tree (same nodes,
@@ -201,14 +233,32 @@ fn binary_tree(
         shaper.place(0, 0, 1);
         shaper.nodes
     };
-    (bvh2, ploc_depth, build_time)
+    steps.lap("depth");
+    (bvh2, ploc_depth, steps)
 }
 
 /// Inner nodes on the longest path down from the root of the binary tree `nodes` (0 for a lone
-/// leaf), as [`heights`] counts them, without recursion.
+/// leaf), as [`heights`] counts them: the subtrees below binary depth 10 on rayon's threads.
 fn bvh2_height(nodes: &[Node2]) -> u32 {
+    fn from(nodes: &[Node2], index: u32, depth: u32) -> u32 {
+        let n = &nodes[index as usize];
+        if n.prim_count != 0 {
+            0
+        } else if depth < 10 {
+            let (a, b) =
+                rayon::join(|| from(nodes, n.first_index, depth + 1), || from(nodes, n.first_index + 1, depth + 1));
+            1 + a.max(b)
+        } else {
+            subtree_height(nodes, index)
+        }
+    }
+    from(nodes, 0, 0)
+}
+
+/// [`bvh2_height`] of the subtree at node `root`, without recursion.
+fn subtree_height(nodes: &[Node2], root: u32) -> u32 {
     let mut deepest = 0;
-    let mut stack = vec![(0u32, 0u32)];
+    let mut stack = vec![(root, 0u32)];
     while let Some((i, d)) = stack.pop() {
         let n = &nodes[i as usize];
         if n.prim_count == 0 {
@@ -621,6 +671,38 @@ mod tests {
             let rewritten = build_impl(tris.len(), &get, true).unwrap();
             assert_eq!(direct, rewritten);
             assert_leaves_cover(&direct, tris.len());
+        }
+    }
+
+    #[test]
+    fn the_tree_is_the_same_on_any_number_of_threads() {
+        // A bumpy 250 x 200 grid (100 000 triangles: PLOC's chunks and the conversion's splits
+        // depend on the thread count; many equal half areas) and a soup of 30 000.
+        let height = |x: u32, y: u32| ((x * 7 + y * 13) % 11) as f32 * 0.05;
+        let p = |x: u32, y: u32| Vec3::new(x as f32 * 0.1, height(x, y), y as f32 * 0.1);
+        let grid: Vec<[Vec3; 3]> = (0..250 * 200)
+            .flat_map(|k| {
+                let (x, y) = (k % 250, k / 250);
+                [[p(x, y), p(x + 1, y), p(x + 1, y + 1)], [p(x, y), p(x + 1, y + 1), p(x, y + 1)]]
+            })
+            .collect();
+        let mut next = node2::xorshift(0x1357_9bdf);
+        let soup: Vec<[Vec3; 3]> = (0..30_000)
+            .map(|_| {
+                let c = Vec3::new(next(), next(), next()) * 10.0;
+                [c, c + Vec3::new(next(), 0.1, next()) * 0.2, c + Vec3::new(0.1, next(), next()) * 0.2]
+            })
+            .collect();
+        for tris in [grid, soup] {
+            let on = |threads: usize| {
+                let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap();
+                pool.install(|| build(&tris).unwrap())
+            };
+            let one = on(1);
+            assert_leaves_cover(&one, tris.len());
+            for threads in [2, 3, 8] {
+                assert!(on(threads) == one, "{} triangles: {threads} threads build another tree", tris.len());
+            }
         }
     }
 }

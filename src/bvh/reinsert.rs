@@ -46,25 +46,21 @@ pub(super) fn run(nodes: &mut [Node2], parents: &mut [u32], batch_size_ratio: f3
     let mut candidates: Vec<(u32, f32)> = Vec::with_capacity(cap);
     let mut reinsertions: Vec<Reinsertion> = Vec::with_capacity(cap);
     let mut touched = vec![false; nodes.len()];
+    let mut marked: Vec<usize> = Vec::new();
     for n in (1..32).step_by(2) {
         let ratio = 1.0 / n as f32;
         let batch_size = (((nodes.len() as f32 * batch_size_ratio) * ratio) as usize).max(1);
         let node_count = nodes.len().min(batch_size + 1);
-        // The first `2 node_count` nodes (the root left out) by half area, largest first.
-        candidates.clear();
-        candidates.extend(
-            nodes.iter().take(node_count * 2).enumerate().skip(1).map(|(i, n)| (i as u32, half_area(n.min, n.max))),
-        );
-        candidates.par_sort_by(|a, b| b.1.total_cmp(&a.1));
         let count = node_count - 1;
-        touched.fill(false);
+        largest_first(nodes, node_count, &mut candidates);
         reinsertions.resize(count, Reinsertion::default());
         let tree: &[Node2] = nodes;
         let up: &[u32] = parents;
-        reinsertions
-            .par_iter_mut()
-            .enumerate()
-            .for_each(|(i, r)| *r = find_reinsertion(tree, up, candidates[i].0 as usize));
+        // Each rayon job keeps one search stack for all its candidates.
+        reinsertions.par_iter_mut().enumerate().for_each_init(
+            || Vec::with_capacity(64),
+            |stack, (i, r)| *r = find_reinsertion(tree, up, candidates[i].0 as usize, stack),
+        );
         reinsertions.par_sort_unstable_by(|a, b| b.area_diff.partial_cmp(&a.area_diff).unwrap());
         for r in &reinsertions {
             if r.area_diff <= 0.0 {
@@ -78,9 +74,33 @@ pub(super) fn run(nodes: &mut [Node2], parents: &mut [u32], batch_size_ratio: f3
             for c in conflicts {
                 touched[c] = true;
             }
+            marked.extend(conflicts);
             reinsert_node(nodes, parents, from, to);
         }
+        // Unmarked for the next batch (cheaper than clearing every node's flag).
+        for c in marked.drain(..) {
+            touched[c] = false;
+        }
     }
+}
+
+/// Into `candidates`, the `node_count - 1` of the first `2 node_count` nodes (the root left
+/// out) with the largest half areas, largest first, ties in node order — the head of a stable
+/// sort of all `2 node_count - 1` by half area, which is what the search reads. Node order
+/// breaks the ties, so the order is total, and a selection followed by an unstable sort of the
+/// selected gives the same sequence in half the sorting.
+fn largest_first(nodes: &[Node2], node_count: usize, candidates: &mut Vec<(u32, f32)>) {
+    let take = nodes.len().min(node_count * 2);
+    candidates.clear();
+    candidates
+        .par_extend(nodes[..take].par_iter().enumerate().skip(1).map(|(i, n)| (i as u32, half_area(n.min, n.max))));
+    let count = node_count - 1;
+    let order = |a: &(u32, f32), b: &(u32, f32)| b.1.total_cmp(&a.1).then(a.0.cmp(&b.0));
+    if count < candidates.len() {
+        candidates.select_nth_unstable_by(count, order);
+    }
+    candidates[..count].par_sort_unstable_by(order);
+    candidates.truncate(count);
 }
 
 /// Each node's parent (the root's is 0), as obvhs's `Bvh2::compute_parents`.
@@ -96,8 +116,9 @@ pub(super) fn parents(nodes: &[Node2]) -> Vec<u32> {
 }
 
 /// The best place to move node `node_id` to, as obvhs's `find_reinsertion` (see its comment for
-/// how the area decrease is summed along the path to the root).
-fn find_reinsertion(nodes: &[Node2], parents: &[u32], node_id: usize) -> Reinsertion {
+/// how the area decrease is summed along the path to the root); `stack` is scratch space (empty
+/// on return).
+fn find_reinsertion(nodes: &[Node2], parents: &[u32], node_id: usize, stack: &mut Vec<(f32, u32)>) -> Reinsertion {
     debug_assert_ne!(node_id, 0);
     let mut best = Reinsertion { from: node_id as u32, to: 0, area_diff: 0.0 };
     let node = nodes[node_id];
@@ -107,7 +128,7 @@ fn find_reinsertion(nodes: &[Node2], parents: &[u32], node_id: usize) -> Reinser
     let mut sibling_id = sibling(node_id);
     let (mut pivot_min, mut pivot_max) = (nodes[sibling_id].min, nodes[sibling_id].max);
     let mut pivot_id = parent_id;
-    let mut stack: Vec<(f32, u32)> = Vec::with_capacity(64);
+    stack.clear();
     loop {
         stack.push((area_diff, sibling_id as u32));
         while let Some((top_area_diff, top_sibling_id)) = stack.pop() {
@@ -213,6 +234,34 @@ mod tests {
                 [c, c + Vec3::new(next(), next(), 0.1) * s, c + Vec3::new(0.2, next(), next()) * s]
             })
             .collect()
+    }
+
+    #[test]
+    fn candidates_are_the_head_of_a_stable_sort() {
+        // Half areas of few distinct values (many ties, as on a regular grid) and of many.
+        let mut next = super::super::node2::xorshift(0x2468_ace1);
+        for (len, levels) in [(3, 2.0), (41, 3.0), (1000, 4.0), (5000, 1e6)] {
+            let nodes: Vec<Node2> = (0..len)
+                .map(|_| {
+                    let size = (next() * levels).floor() + 1.0;
+                    Node2 { min: Vec3::ZERO, max: Vec3::new(size, 1.0, 1.0), ..Node2::default() }
+                })
+                .collect();
+            for node_count in [2, 3, len / 7 + 2, len / 2, len] {
+                let mut stable: Vec<(u32, f32)> = nodes
+                    .iter()
+                    .take(node_count * 2)
+                    .enumerate()
+                    .skip(1)
+                    .map(|(i, n)| (i as u32, half_area(n.min, n.max)))
+                    .collect();
+                stable.sort_by(|a, b| b.1.total_cmp(&a.1));
+                stable.truncate(node_count - 1);
+                let mut ours = Vec::new();
+                largest_first(&nodes, node_count, &mut ours);
+                assert_eq!(ours, stable, "{len} nodes, {node_count}");
+            }
+        }
     }
 
     #[test]

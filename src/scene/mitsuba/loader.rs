@@ -5,6 +5,7 @@ use std::collections::HashMap;
 use std::path::{Path, PathBuf};
 
 use glam::Vec3;
+use rayon::prelude::*;
 use roxmltree::NodeId;
 
 use super::xml::{El, Props, Xml, is_identifier};
@@ -368,7 +369,7 @@ impl<'a> Loader<'a> {
             let tan_y = 1.5 * (0.5 * c.fov_y_degrees.to_radians()).tan();
             let tan_x = tan_y * c.width as f32 / c.height as f32;
             let clips_something = self.scene.meshes.iter().any(|m| {
-                m.indices.iter().any(|t| {
+                m.indices.par_iter().any(|t| {
                     let v = t.map(|i| m.positions[i as usize] - c.position);
                     let range = |axis: Vec3| {
                         let d = v.map(|p| p.dot(axis));
