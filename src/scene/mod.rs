@@ -711,27 +711,7 @@ impl Scene {
         radiance: Option<Vec3>,
     ) -> Result<()> {
         let mut geometry = geometry;
-        let before = geometry.indices.len();
-        let mut overflowed = 0;
-        geometry.indices.retain(|t| {
-            let p = t.map(|i| geometry.positions.get(i as usize).copied().unwrap_or(Vec3::NAN));
-            let area = shapes::triangle_area(p[0], p[1], p[2]);
-            if area.is_infinite() && p.iter().all(|v| v.is_finite()) {
-                overflowed += 1;
-            }
-            area.is_finite() && area > 0.0
-        });
-        let dropped = before - geometry.indices.len();
-        if overflowed > 0 {
-            self.warn(format!(
-                "mesh '{name}': dropped {overflowed} triangle(s) of {before} whose area overflows 32-bit floats \
-                 (coordinates too large; scale the mesh down)"
-            ));
-            self.overflowed_triangles += overflowed;
-        }
-        if dropped > overflowed {
-            self.warn(format!("mesh '{name}': dropped {} degenerate triangle(s) of {before}", dropped - overflowed));
-        }
+        self.prune_triangles(name, &mut geometry);
         let emitter = match radiance {
             Some(r) => {
                 Some(self.params.add(&format!("{name}.emitter.radiance.value"), &r.to_array(), bounds::RADIANCE)?)
@@ -749,6 +729,36 @@ impl Scene {
             interior: None,
         });
         Ok(())
+    }
+
+    /// Drops `geometry`'s degenerate (zero-area or non-finite) triangles, with their rows of the
+    /// per-face attributes, warning with a count; [`Scene::add_mesh`] does this, and a loader
+    /// that reads per-face attributes before adding the mesh does it first (then nothing is left
+    /// to drop).
+    pub fn prune_triangles(&mut self, name: &str, geometry: &mut shapes::Geometry) {
+        let before = geometry.indices.len();
+        let mut overflowed = 0;
+        let positions = std::mem::take(&mut geometry.positions);
+        geometry.retain_triangles(|t| {
+            let p = t.map(|i| positions.get(i as usize).copied().unwrap_or(Vec3::NAN));
+            let area = shapes::triangle_area(p[0], p[1], p[2]);
+            if area.is_infinite() && p.iter().all(|v| v.is_finite()) {
+                overflowed += 1;
+            }
+            area.is_finite() && area > 0.0
+        });
+        geometry.positions = positions;
+        let dropped = before - geometry.indices.len();
+        if overflowed > 0 {
+            self.warn(format!(
+                "mesh '{name}': dropped {overflowed} triangle(s) of {before} whose area overflows 32-bit floats \
+                 (coordinates too large; scale the mesh down)"
+            ));
+            self.overflowed_triangles += overflowed;
+        }
+        if dropped > overflowed {
+            self.warn(format!("mesh '{name}': dropped {} degenerate triangle(s) of {before}", dropped - overflowed));
+        }
     }
 
     /// Adds a bitmap texture whose texels become the parameter `name`.

@@ -83,7 +83,7 @@ pub fn unit_sphere(rings: u32, segments: u32) -> Geometry {
             }
         }
     }
-    Geometry { normals: Some(positions.clone()), positions, uvs: Some(uvs), indices }
+    Geometry { normals: Some(positions.clone()), positions, uvs: Some(uvs), indices, ..Default::default() }
 }
 
 /// Mitsuba's unit cylinder: the open tube of radius 1 about z from z = 0 to z = 1, outward normals
@@ -103,7 +103,7 @@ pub fn unit_cylinder(segments: u32) -> Geometry {
         }
     }
     let indices = (0..segments).flat_map(|j| [[2 * j, 2 * j + 2, 2 * j + 3], [2 * j, 2 * j + 3, 2 * j + 1]]).collect();
-    Geometry { positions, normals: Some(normals), uvs: Some(uvs), indices }
+    Geometry { positions, normals: Some(normals), uvs: Some(uvs), indices, ..Default::default() }
 }
 
 /// Mitsuba's unit disk in z = 0 facing +z, as a fan of `segments` triangles; `u` is the radius
@@ -117,7 +117,7 @@ pub fn unit_disk(segments: u32) -> Geometry {
         uvs.push(Vec2::new(1.0, j as f32 / segments as f32));
     }
     let indices = (1..=segments).map(|j| [0, j, j + 1]).collect();
-    Geometry { normals: Some(vec![Vec3::Z; positions.len()]), positions, uvs: Some(uvs), indices }
+    Geometry { normals: Some(vec![Vec3::Z; positions.len()]), positions, uvs: Some(uvs), indices, ..Default::default() }
 }
 
 /// Mitsuba's `rectangle` ([−1, 1]² in z = 0, facing +z) under `m`. For `det m > 0` this is
