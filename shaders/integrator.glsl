@@ -476,8 +476,8 @@ bool path_step(inout PathState st) {
             bool passes = false;
             if (HAS(F_MASK) && vertex < globals.max_depth && materials[s.material].p_opacity != NO_PARAM) {
                 gt.mask = materials[s.material].p_opacity;
-                gt.uv = s.uv;
-                mask_opacity = mask_opacity_at(gt.mask, s.uv);
+                gt.at = tex_at(s);
+                mask_opacity = mask_opacity_at(gt.mask, gt.at);
                 passes = !(draw_block(st.key1, st.pixel, st.sample_index, vertex, DIM_LOBE / 4u)[DIM_LOBE % 4u] < mask_opacity);
                 if (adjoint) gt.opacity = st.adj * st.radiance * (passes ? -1.0 / (1.0 - mask_opacity) : 1.0 / mask_opacity);
             }
@@ -494,7 +494,7 @@ bool path_step(inout PathState st) {
                 }
             } else {
                 shade = true;
-                bsdf = resolve_bsdf(s.material, s.uv);
+                bsdf = resolve_bsdf(s.material, tex_at(s));
                 // A two-sided material seen from the back shades with the flipped normal.
                 bool mirrored = HAS(F_TWO_SIDED) && materials[s.material].two_sided != 0u && dot(s.ns, wi_world) < 0.0;
                 vec3 ns = mirrored ? -s.ns : s.ns;
@@ -504,7 +504,7 @@ bool path_step(inout PathState st) {
                 if (mapped) frame = normal_map_frame(materials[s.material], s, frame, mirrored, wi_world, bsdf);
                 wi = to_local(frame, wi_world);
                 gt.material = s.material;
-                gt.uv = s.uv;
+                gt.at = tex_at(s);
 
                 capable = diff && material_capable(s.material);
                 if (hero) {

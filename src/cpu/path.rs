@@ -542,12 +542,12 @@ pub fn trace_path<const ADJOINT: bool>(
         let p_opacity = flat.materials[s.material as usize].p_opacity;
         let mut mask_opacity = 1.0f32; // a masked surface's opacity (1: no mask)
         if vertex < globals.max_depth && p_opacity != NO_PARAM {
-            mask_opacity = mask_opacity_at(flat, p_opacity, s.uv);
+            mask_opacity = mask_opacity_at(flat, p_opacity, s.tex_at());
             let u_mask = draw_block(key, pixel, sample, vertex, DIM_LOBE / 4)[(DIM_LOBE % 4) as usize];
             let passes = !(u_mask < mask_opacity);
             if ADJOINT {
                 let g = adj_radiance * radiance * if passes { -1.0 / (1.0 - mask_opacity) } else { 1.0 / mask_opacity };
-                opacity_backward(flat, p_opacity, s.uv, g, sink);
+                opacity_backward(flat, p_opacity, s.tex_at(), g, sink);
             }
             if passes {
                 // An emitter found through the pass counts whole: NEE could not have sampled it.
@@ -565,7 +565,7 @@ pub fn trace_path<const ADJOINT: bool>(
             break;
         }
 
-        let mut bsdf = resolve_bsdf(flat, s.material, s.uv);
+        let mut bsdf = resolve_bsdf(flat, s.material, s.tex_at());
         // A two-sided material seen from the back shades with the flipped normal.
         let mirrored = flat.materials[s.material as usize].two_sided != 0 && s.ns.dot(wi_world) < 0.0;
         let ns = if mirrored { -s.ns } else { s.ns };
@@ -672,7 +672,7 @@ pub fn trace_path<const ADJOINT: bool>(
                 }
                 if ADJOINT {
                     let adj = adj_radiance * throughput * tr * w_n * es.radiance / p_e;
-                    bsdf_backward(flat, s.material, s.uv, &bsdf, wi, wo, false, adj, sink);
+                    bsdf_backward(flat, s.material, s.tex_at(), &bsdf, wi, wo, false, adj, sink);
                     emitter_backward(flat, globals, &es, adj_radiance * throughput * tr * w_n * f / p_e, sink);
                 }
             }
@@ -733,7 +733,7 @@ pub fn trace_path<const ADJOINT: bool>(
         // The path continues: everything later in `radiance` carries the factor f̂(wi, wo).
         if ADJOINT {
             let adj = adj_radiance * safe_div(radiance, bs.value);
-            bsdf_backward(flat, s.material, s.uv, &bsdf, wi, bs.wo, bs.delta, adj, sink);
+            bsdf_backward(flat, s.material, s.tex_at(), &bsdf, wi, bs.wo, bs.delta, adj, sink);
         }
 
         let wo_world = frame.to_world(bs.wo);

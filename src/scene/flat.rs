@@ -14,8 +14,8 @@ use crate::contract::{
     FIELD_GRID_REPEAT, FieldDesc, LIGHT_DIRECTIONAL, LIGHT_POINT, LIGHT_PROJECTOR, LIGHT_SPOT, MAT_BLEND,
     MAT_CONDUCTOR, MAT_DIELECTRIC, MAT_DIFFUSE, MAT_NULL, MAT_PLASTIC, MAT_ROUGH_CONDUCTOR, MAT_ROUGH_DIELECTRIC,
     MAT_ROUGH_PLASTIC, MAT_THIN_DIELECTRIC, Material as GpuMaterial, MediumDesc, MeshShading, NMAP_BUMP, NO_ARRAY,
-    NO_EMITTER, NO_MEDIUM, NO_PARAM, PHASE_HG, PHASE_ISOTROPIC, SCALAR_TEXTURE, TEX_CHECKER, TEX_NEAREST,
-    TEX_WRAP_CLAMP, TEX_WRAP_MIRROR, TriVertices,
+    NO_EMITTER, NO_MEDIUM, NO_PARAM, PHASE_HG, PHASE_ISOTROPIC, SCALAR_TEXTURE, TEX_ATTR_FACE, TEX_ATTR_VERTEX,
+    TEX_CHECKER, TEX_NEAREST, TEX_WRAP_CLAMP, TEX_WRAP_MIRROR, TriVertices,
 };
 use crate::error::Result;
 use crate::params::ParamId;
@@ -424,6 +424,13 @@ fn albedo_fields(scene: &Scene, albedo: Albedo) -> GpuMaterial {
             uv_row1: to_uv[1],
             ..Default::default()
         },
+        Albedo::Attribute { values, source } => GpuMaterial {
+            p_color: offset(values),
+            tex_width: 1,
+            tex_height: 1,
+            tex_mode: attribute_mode(source),
+            ..Default::default()
+        },
         Albedo::Bitmap(t) => {
             let t = &scene.textures[t.0 as usize];
             GpuMaterial {
@@ -442,7 +449,9 @@ fn albedo_fields(scene: &Scene, albedo: Albedo) -> GpuMaterial {
 /// The mean of a colour over its channels and (textured) texels: Mitsuba's `Texture::mean`.
 fn albedo_mean(scene: &Scene, albedo: Albedo) -> f32 {
     let values = match albedo {
-        Albedo::Rgb(id) | Albedo::Checker { colors: id, .. } => scene.params.get(id),
+        Albedo::Rgb(id) | Albedo::Checker { colors: id, .. } | Albedo::Attribute { values: id, .. } => {
+            scene.params.get(id)
+        }
         Albedo::Bitmap(t) => scene.params.get(scene.textures[t.0 as usize].texels),
     };
     (values.iter().map(|&v| f64::from(v)).sum::<f64>() / values.len().max(1) as f64) as f32
@@ -592,7 +601,11 @@ fn scalar_texture_tables(scene: &Scene, materials: &mut [GpuMaterial], tables: &
             None => {
                 let t = &scene.scalar_textures[index as usize];
                 let at = tables.len() as u32;
-                let mode = if t.checker { TEX_CHECKER } else { texture_mode(t.nearest, t.wrap) };
+                let mode = match t.attribute {
+                    Some(source) => attribute_mode(source),
+                    None if t.checker => TEX_CHECKER,
+                    None => texture_mode(t.nearest, t.wrap),
+                };
                 let words = [scene.params.entry(t.texels).offset, t.width, t.height, mode];
                 tables.extend(words.map(f32::from_bits));
                 tables.extend(t.to_uv[0].to_array());
@@ -615,6 +628,11 @@ fn scalar_texture_tables(scene: &Scene, materials: &mut [GpuMaterial], tables: &
         }
         place(&mut m.p_opacity, tables);
     }
+}
+
+/// `Material::tex_mode` of a mesh attribute: per vertex or per triangle.
+fn attribute_mode(source: crate::scene::AttributeSource) -> u32 {
+    if source.per_vertex { TEX_ATTR_VERTEX } else { TEX_ATTR_FACE }
 }
 
 /// `Material::tex_mode`'s filter and wrap bits.

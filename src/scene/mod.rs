@@ -172,6 +172,26 @@ pub enum Albedo {
         /// `u' = dot(to_uv[0], (u, v, 1))`, `v' = dot(to_uv[1], (u, v, 1))`.
         to_uv: [Vec3; 2],
     },
+    /// Mitsuba's `mesh_attribute`: an RGB attribute of the mesh (3 values a triangle or a
+    /// vertex, one parameter) read at the hit.
+    Attribute {
+        /// The attribute's values.
+        values: ParamId,
+        /// Whose triangles or vertices they follow.
+        source: AttributeSource,
+    },
+}
+
+/// What a mesh attribute texture (Mitsuba's `mesh_attribute`) reads: its values are one row per
+/// triangle (`per_vertex` false: the hit triangle's row) or per vertex (the hit triangle's three
+/// rows interpolated by the hit's barycentric coordinates) of mesh `mesh`, the one mesh whose
+/// material reads it.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct AttributeSource {
+    /// Index in [`Scene::meshes`] of the mesh the values belong to.
+    pub mesh: u32,
+    /// One row per vertex (else per triangle).
+    pub per_vertex: bool,
 }
 
 /// A surface material. Differentiable values are parameters; the rest are constants.
@@ -731,6 +751,30 @@ impl Scene {
         Ok(())
     }
 
+    /// Points the mesh attributes' [`AttributeSource::mesh`] at their meshes' new places after the
+    /// meshes were reordered (mesh `old` is now `new_index[old]`).
+    pub fn renumber_attribute_meshes(&mut self, new_index: &[usize]) {
+        let renumber = |s: &mut AttributeSource| s.mesh = new_index[s.mesh as usize] as u32;
+        for m in &mut self.materials {
+            match m {
+                Material::Diffuse { albedo: a }
+                | Material::RoughConductor { specular: a, .. }
+                | Material::RoughPlastic { diffuse: a, .. }
+                | Material::SmoothPlastic { diffuse: a, .. } => {
+                    if let Albedo::Attribute { source, .. } = a {
+                        renumber(source);
+                    }
+                }
+                _ => {}
+            }
+        }
+        for t in &mut self.scalar_textures {
+            if let Some(source) = &mut t.attribute {
+                renumber(source);
+            }
+        }
+    }
+
     /// Drops `geometry`'s degenerate (zero-area or non-finite) triangles, with their rows of the
     /// per-face attributes, warning with a count; [`Scene::add_mesh`] does this, and a loader
     /// that reads per-face attributes before adding the mesh does it first (then nothing is left
@@ -996,6 +1040,38 @@ impl Scene {
                         "a mask's opacity is neither 1 value nor a texture".into(),
                     ));
                 }
+            }
+        }
+        let attribute_len = |values: ParamId, source: AttributeSource, dim: usize, what: &str| -> Result<()> {
+            let len = self.params.entry(values).len as usize;
+            let expected = self
+                .meshes
+                .get(source.mesh as usize)
+                .map(|m| dim * if source.per_vertex { m.positions.len() } else { m.indices.len() });
+            if expected != Some(len) {
+                return Err(err(
+                    format!("{what} '{}'", self.params.entry(values).name),
+                    format!("a mesh attribute of {len} values that does not match mesh {}", source.mesh),
+                ));
+            }
+            Ok(())
+        };
+        for m in &self.materials {
+            let albedos = match *m {
+                Material::Diffuse { albedo } => vec![albedo],
+                Material::RoughConductor { specular, .. } => vec![specular],
+                Material::RoughPlastic { diffuse, .. } | Material::SmoothPlastic { diffuse, .. } => vec![diffuse],
+                _ => Vec::new(),
+            };
+            for a in albedos {
+                if let Albedo::Attribute { values, source } = a {
+                    attribute_len(values, source, 3, "colour")?;
+                }
+            }
+        }
+        for t in &self.scalar_textures {
+            if let Some(source) = t.attribute {
+                attribute_len(t.texels, source, 1, "scalar texture")?;
             }
         }
         for m in &self.meshes {

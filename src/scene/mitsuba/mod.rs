@@ -100,6 +100,7 @@ mod bsdf;
 mod include;
 mod loader;
 mod media;
+mod mesh_attribute;
 pub mod plugins;
 mod scalar_texture;
 mod sensor;

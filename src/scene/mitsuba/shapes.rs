@@ -11,6 +11,7 @@ use std::f32::consts::{PI, TAU};
 use glam::{Mat4, Vec2, Vec3, Vec4};
 
 use super::loader::{Loader, MeshFormat};
+use super::mesh_attribute::AttributeShape;
 use super::xml::{El, Props};
 use crate::error::Result;
 use crate::scene::shapes::{Geometry, cuboid, merge, quad, triangle_area};
@@ -324,11 +325,24 @@ impl<'a> Loader<'a> {
             }
         }
         self.finish(&p)?;
+        let overflowed_before = self.scene.overflowed_triangles;
+        // A BSDF may read the mesh's attributes (`mesh_attribute`): per-face ones follow the
+        // triangles the mesh keeps.
+        if !geometry.attributes.is_empty() {
+            self.scene.prune_triangles(&name, &mut geometry);
+        }
+        self.attribute_shape = Some(AttributeShape {
+            name: name.clone(),
+            mesh: self.scene.meshes.len() as u32,
+            attributes: std::mem::take(&mut geometry.attributes),
+        });
         let material = match bsdfs[..] {
-            [] => self.default_bsdf(node, &name, !emitters.is_empty())?,
-            [b] => self.bsdf(b, format!("{name}.bsdf"), 1)?,
-            [_, second, ..] => return Err(self.x.err(second, "a shape takes one BSDF")),
+            [] => self.default_bsdf(node, &name, !emitters.is_empty()),
+            [b] => self.bsdf(b, format!("{name}.bsdf"), 1),
+            [_, second, ..] => Err(self.x.err(second, "a shape takes one BSDF")),
         };
+        self.attribute_shape = None;
+        let material = material?;
         let emitter = match emitters[..] {
             [] => None,
             [e] => Some(self.area_emitter(e, &name)?),
@@ -340,7 +354,6 @@ impl<'a> Loader<'a> {
             Some(m) => Some(self.medium(m, format!("{name}.interior_medium"))?),
             None => None,
         };
-        let overflowed_before = self.scene.overflowed_triangles;
         self.scene.add_mesh(&name, geometry, material, None).map_err(|e| self.located(node, e))?;
         if let Some(mesh) = self.scene.meshes.last_mut() {
             mesh.interior = interior;
