@@ -76,6 +76,12 @@ MATRIX = {
                                            "blendbsdf weight checkerboard of floats"],
                                  grads=["ball.bsdf.weight.data", "floor.bsdf.weight.color0.value",
                                         "floor.bsdf.weight.color1.value"]),
+    # Mitsuba's mesh_attribute (issue 31): PLY attributes per vertex (interpolated) and per face,
+    # as a diffuse colour and a blend weight; each is its mesh's parameter SHAPE.NAME.
+    "texture_mesh_attribute": dict(features=["mesh_attribute vertex_color (PLY color_0..2) on diffuse",
+                                             "mesh_attribute face_color (PLY red green blue) in twosided",
+                                             "mesh_attribute face_weight on blendbsdf weight, top-level + ref"],
+                                   grads=["ball.vertex_color", "gem.face_color", "orb.face_weight"]),
     "texture_specular_reflectance": dict(features=["roughconductor specular_reflectance bitmap (sRGB)",
                                                    "roughconductor specular_reflectance checkerboard of colours"],
                                          grads=["floor.bsdf.specular_reflectance.data",

@@ -119,6 +119,8 @@ mod tests_include;
 #[cfg(test)]
 mod tests_media;
 #[cfg(test)]
+mod tests_mesh_attributes;
+#[cfg(test)]
 mod tests_names;
 #[cfg(test)]
 mod tests_normal_maps;
