@@ -465,8 +465,8 @@ bool path_step(inout PathState st) {
             if (HAS(F_EMITTERS) && s.emitter != NO_EMITTER && cos_emit > 0.0) {
                 float w_b = hit_weight(diff, st.prev_nee, st.prev_pdf_f, emitter_pdf_solid_angle(travelled + hit.t, cos_emit), st.mix);
                 uint p_radiance = emitters[s.emitter].p_radiance;
-                st.radiance += sign * (st.throughput * w_b * param_rgb(p_radiance));
-                if (HAS(G_EMISSION)) { gt.hit_param = p_radiance; gt.hit = st.adj * st.throughput * w_b; }
+                st.radiance += sign * (st.throughput * w_b * area_radiance(p_radiance, s.uv));
+                if (HAS(G_EMISSION)) { gt.hit_param = p_radiance; gt.hit = st.adj * st.throughput * w_b; gt.hit_uv = s.uv; }
             }
             // ---- mask: the nested BSDF with probability `opacity`, else straight through ----
             // Mitsuba's `mask` samples its null transmission as a delta lobe that counts as a
@@ -589,6 +589,7 @@ bool path_step(inout PathState st) {
                     gt.nee_param = es.param;
                     gt.nee = st.adj * st.throughput * tr * nee_w * nee_phase * es.factor / nee_pdf;
                     gt.env_dir = (HAS(F_LIGHT_TEXTURE) && es.delta) ? es.normal : es.point;
+                    gt.nee_uv = es.uv;
                 }
             }
         }
@@ -619,6 +620,7 @@ bool path_step(inout PathState st) {
                 gt.nee_param = es.param;
                 gt.nee = st.adj * st.throughput * tr * nee_w * nee_f * es.factor / nee_pdf;
                 gt.env_dir = (HAS(F_LIGHT_TEXTURE) && es.delta) ? es.normal : es.point;
+                gt.nee_uv = es.uv;
             }
         }
 

@@ -199,6 +199,45 @@ void attribute_footprint(uint offset, uint dim, uint mode, TexAt at, out uint te
 
 bool attribute_mode(uint mode) { return (mode & (TEX_ATTR_FACE | TEX_ATTR_VERTEX)) != 0u; }
 
+// ---- textured area emitters (an EmitterTri's p_radiance with SCALAR_TEXTURE set: the offset of
+// its RGB texture's descriptor in the tables array; twin: area_footprint and friends of
+// src/cpu/emitter.rs) ----
+bool area_textured(uint p) { return p != NO_PARAM && (p & SCALAR_TEXTURE) != 0u; }
+
+// The texels (RGB at offset..offset+2) and weights of textured area radiance `p` at uv (its
+// `to_uv` applied).
+void area_footprint(uint p, vec2 uv, out uint texel[4], out float weight[4]) {
+    uint d = p & ~SCALAR_TEXTURE;
+    vec3 q = vec3(uv, 1.0);
+    vec3 row0 = vec3(coating_table(d + 4u), coating_table(d + 5u), coating_table(d + 6u));
+    vec3 row1 = vec3(coating_table(d + 7u), coating_table(d + 8u), coating_table(d + 9u));
+    uint word[4] = uint[4](floatBitsToUint(coating_table(d)), floatBitsToUint(coating_table(d + 1u)),
+                           floatBitsToUint(coating_table(d + 2u)), floatBitsToUint(coating_table(d + 3u)));
+    texture_footprint(word[0], word[1], word[2], word[3], vec2(dot(row0, q), dot(row1, q)), texel, weight);
+}
+
+// An area emitter's radiance at the texture coordinates uv of its point: its RGB parameter, or
+// its texture there.
+vec3 area_radiance(uint p, vec2 uv) {
+    if (!area_textured(p)) return param_rgb(p);
+    uint texel[4];
+    float weight[4];
+    area_footprint(p, uv, texel, weight);
+    return param_rgb(texel[0]) * weight[0] + param_rgb(texel[1]) * weight[1] + param_rgb(texel[2]) * weight[2]
+        + param_rgb(texel[3]) * weight[3];
+}
+
+// The texture coordinates at barycentrics b = (b1, b2) of triangle `tri` (0 on a mesh without).
+vec2 triangle_uv(uint tri, vec2 b) {
+    TriVertexWordArray a = TriVertexWordArray(globals.addr_tri_vertices);
+    uvec2 w0 = unpackUint2x32(a.v[tri].w0);        // i0, i1
+    uvec2 w1 = unpackUint2x32(a.v[tri].w1);        // i2, mesh
+    MeshShading m = MeshShadingArray(globals.addr_meshes).v[w1.y];
+    if (m.uv_base == NO_ARRAY) return vec2(0.0);
+    Vec2Array uvs = Vec2Array(globals.addr_uvs);
+    return (1.0 - b.x - b.y) * uvs.v[m.uv_base + w0.x] + b.x * uvs.v[m.uv_base + w0.y] + b.y * uvs.v[m.uv_base + w1.x];
+}
+
 // A textured light's or projector's intensity (or 1) × texture at uv (or 1) × scale (or 1)
 // (declared in emitter.glsl; twin: light_tint in src/cpu/emitter.rs).
 vec3 light_texture(DeltaLight l, vec2 uv) {
@@ -420,6 +459,8 @@ struct GradTerms {
     vec3 hit;
     uint nee_param;   // RGB parameter of the emitter NEE reached, or NO_PARAM
     vec3 nee;
+    vec2 hit_uv;      // the texture coordinates of a textured area emitter's terms (hit, NEE)
+    vec2 nee_uv;
     vec3 env_dir;     // the direction of the environment's term (hit or NEE: a step has at most one)
     uint mask;        // a mask's opacity slot (read at `at`), or NO_PARAM
     vec3 opacity;     // its derivative term
@@ -428,7 +469,7 @@ struct GradTerms {
 GradTerms no_grad_terms() {
     LeafGrad none = LeafGrad(vec3(0.0), vec3(0.0), vec3(0.0), vec3(0.0));
     return GradTerms(NO_PARAM, TexAt(vec2(0.0), vec2(0.0), 0u), BsdfGrad(none, none, vec3(0.0)), NO_PARAM, vec3(0.0), NO_PARAM, vec3(0.0),
-                     vec3(0.0, 0.0, 1.0), NO_PARAM, vec3(0.0));
+                     vec2(0.0), vec2(0.0), vec3(0.0, 0.0, 1.0), NO_PARAM, vec3(0.0));
 }
 
 // Most (offset, per-channel value) entries one vertex can produce: an RGB emitter, four RGB texels
@@ -528,9 +569,17 @@ void push_light(DeltaLight l, vec3 g, vec3 x) {
 
 // An emitter's radiance term: one RGB value, or the four texels of the environment map around
 // `env_dir` weighted as its lookup weighs them, or a textured light's or projector's values
-// (`LIGHT_SLOT` | its index, `env_dir` the shading point).
-void push_emitter(uint offset, vec3 g, vec3 env_dir) {
-    if (HAS(F_LIGHT_TEXTURE) && offset != NO_PARAM && (offset & LIGHT_SLOT) != 0u) {
+// (`LIGHT_SLOT` | its index, `env_dir` the shading point), or a textured area emitter's texels at
+// `uv`, added at once (as push_light's).
+void push_emitter(uint offset, vec3 g, vec3 env_dir, vec2 uv) {
+    if (HAS(F_EMITTERS) && area_textured(offset)) {
+        uint texel[4];
+        float weight[4];
+        area_footprint(offset, uv, texel, weight);
+        for (uint k = 0u; k < 4u; k++) {
+            if (weight[k] != 0.0) param_grad_rgb(texel[k], g * weight[k]);
+        }
+    } else if (HAS(F_LIGHT_TEXTURE) && offset != NO_PARAM && (offset & LIGHT_SLOT) != 0u) {
         push_light(lights[offset & ~LIGHT_SLOT], g, env_dir);
     } else if (HAS(F_ENV_MAP) && offset == globals.env_param) {
         uint texel[4];
@@ -547,8 +596,8 @@ void push_emitter(uint offset, vec3 g, vec3 env_dir) {
 // Scatters every term of `t` through one param_grad site.
 void scatter_terms(GradTerms t) {
     grad_count = 0u;
-    if ((HAS(G_EMISSION) || HAS(G_ENV)) && t.hit_param != NO_PARAM) push_emitter(t.hit_param, t.hit, t.env_dir);
-    if ((HAS(G_EMISSION) || HAS(G_ENV)) && t.nee_param != NO_PARAM) push_emitter(t.nee_param, t.nee, t.env_dir);
+    if ((HAS(G_EMISSION) || HAS(G_ENV)) && t.hit_param != NO_PARAM) push_emitter(t.hit_param, t.hit, t.env_dir, t.hit_uv);
+    if ((HAS(G_EMISSION) || HAS(G_ENV)) && t.nee_param != NO_PARAM) push_emitter(t.nee_param, t.nee, t.env_dir, t.nee_uv);
     if ((HAS(G_COLOR) || HAS(G_TEXTURE) || HAS(G_ALPHA) || HAS(G_WEIGHT)) && t.material != NO_PARAM) {
         Material m = materials[t.material];
         if (HAS(F_BLEND) && m.tag == MAT_BLEND) {

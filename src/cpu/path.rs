@@ -14,12 +14,13 @@ use crate::contract::{
     NO_MEDIUM, NO_PARAM, PLACEMENT_POWER, STRATEGY_DIFF, ViewCamera,
 };
 use crate::cpu::emitter::{
-    EmitterSample, emitter_pdf_solid_angle, env_backward, env_radiance, environment_pdf, light_backward, sample_emitter,
+    EmitterSample, area_backward, area_radiance, emitter_pdf_solid_angle, env_backward, env_radiance, environment_pdf,
+    light_backward, sample_emitter,
 };
 use crate::cpu::medium;
 use crate::cpu::surface::{
     SHADOW_EPSILON, bsdf_backward, mask_opacity_at, material_anisotropic, material_normal_mapped, mis_power,
-    normal_map_frame, offset_origin, opacity_backward, param_color, resolve_bsdf, safe_div, surface_at, tangent_frame,
+    normal_map_frame, offset_origin, opacity_backward, resolve_bsdf, safe_div, surface_at, tangent_frame,
 };
 use crate::rng::{RngKey, Stream, uniform4};
 use crate::sampling::Frame;
@@ -349,7 +350,7 @@ fn emitter_backward(flat: &FlatScene, globals: &Globals, es: &EmitterSample, g: 
     } else if es.delta && es.param & LIGHT_SLOT != 0 {
         light_backward(flat, &flat.lights[(es.param & !LIGHT_SLOT) as usize], es.from, g * es.factor, sink)
     } else {
-        sink.add_rgb(es.param, g * es.factor)
+        area_backward(flat, es.param, es.uv, g * es.factor, sink)
     }
 }
 
@@ -529,9 +530,9 @@ pub fn trace_path<const ADJOINT: bool>(
             let w_b =
                 hit_weight(diff, prev_nee, prev_pdf_f, emitter_pdf_solid_angle(globals, distance, cos_emit), &mix);
             let p_radiance = flat.emitters[s.emitter as usize].p_radiance;
-            radiance += sign * (throughput * w_b * param_color(flat, p_radiance));
+            radiance += sign * (throughput * w_b * area_radiance(flat, p_radiance, s.uv));
             if ADJOINT {
-                sink.add_rgb(p_radiance, adj_radiance * throughput * w_b);
+                area_backward(flat, p_radiance, s.uv, adj_radiance * throughput * w_b, sink);
             }
         }
         // ---- mask: the nested BSDF with probability `opacity`, else straight through ----

@@ -186,6 +186,7 @@ impl FlatScene {
         let mut tables = coating_tables(&mut materials, scene.params.values());
         normal_map_tables(scene, &mut materials, &mut tables);
         scalar_texture_tables(scene, &mut materials, &mut tables);
+        area_texture_tables(scene, &mut emitters, &mut tables);
         let (media, fields, majorants) = flatten_media(scene);
         let env_cells = env_cells(scene)?;
         let lights = scene.lights.iter().map(|l| flatten_light(scene, l)).collect();
@@ -424,9 +425,10 @@ fn albedo_fields(scene: &Scene, albedo: Albedo) -> GpuMaterial {
             uv_row1: to_uv[1],
             ..Default::default()
         },
+        // tex_width × tex_height is the number of rows (the kernels read neither).
         Albedo::Attribute { values, source } => GpuMaterial {
             p_color: offset(values),
-            tex_width: 1,
+            tex_width: scene.params.entry(values).len / 3,
             tex_height: 1,
             tex_mode: attribute_mode(source),
             ..Default::default()
@@ -627,6 +629,35 @@ fn scalar_texture_tables(scene: &Scene, materials: &mut [GpuMaterial], tables: &
             _ => {}
         }
         place(&mut m.p_opacity, tables);
+    }
+}
+
+/// Appends the descriptor of every textured area emitter's radiance (`TEXTURE_DESC_LEN` words as
+/// `SCALAR_TEXTURE` states, the texels RGB) to `tables` and points its triangles'
+/// `p_radiance` at it, `SCALAR_TEXTURE` or-ed with its offset there.
+fn area_texture_tables(scene: &Scene, emitters: &mut [EmitterTri], tables: &mut Vec<f32>) {
+    let mut placed: Vec<(u32, u32)> = Vec::new();
+    for e in emitters.iter_mut() {
+        let Some(t) = scene.textures.iter().position(|t| scene.params.entry(t.texels).offset == e.p_radiance) else {
+            continue;
+        };
+        if !scene.meshes.iter().any(|m| m.emitter_texture.is_some_and(|id| id.0 as usize == t)) {
+            continue;
+        }
+        let at = match placed.iter().find(|(i, _)| *i == t as u32) {
+            Some(&(_, at)) => at,
+            None => {
+                let tex = &scene.textures[t];
+                let at = tables.len() as u32;
+                let words = [e.p_radiance, tex.width, tex.height, texture_mode(tex.nearest, tex.wrap)];
+                tables.extend(words.map(f32::from_bits));
+                tables.extend(tex.to_uv[0].to_array());
+                tables.extend(tex.to_uv[1].to_array());
+                placed.push((t as u32, at));
+                at
+            }
+        };
+        e.p_radiance = SCALAR_TEXTURE | at;
     }
 }
 

@@ -349,8 +349,12 @@ pub struct Mesh {
     pub indices: Vec<[u32; 3]>,
     /// The material.
     pub material: MaterialId,
-    /// RGB radiance parameter if the mesh is an area emitter.
+    /// RGB radiance parameter if the mesh is an area emitter (the texels of `emitter_texture`
+    /// where it has one).
     pub emitter: Option<ParamId>,
+    /// A textured area emitter's radiance (Mitsuba's `area` with a `bitmap` `radiance`), looked
+    /// up at the hit's texture coordinates.
+    pub emitter_texture: Option<TextureId>,
     /// The medium inside the mesh (a closed surface), if any.
     pub interior: Option<medium::MediumId>,
 }
@@ -746,6 +750,7 @@ impl Scene {
             indices: geometry.indices,
             material,
             emitter,
+            emitter_texture: None,
             interior: None,
         });
         Ok(())
@@ -1107,6 +1112,16 @@ impl Scene {
                 if area <= 0.0 {
                     return Err(err(at(), "is an emitter with zero area".into()));
                 }
+            }
+            match (m.emitter, m.emitter_texture) {
+                (Some(p), None) if self.params.entry(p).len != 3 => {
+                    return Err(err(at(), "its radiance is not one RGB value".into()));
+                }
+                (Some(p), Some(t)) if self.textures.get(t.0 as usize).is_none_or(|t| t.texels != p) => {
+                    return Err(err(at(), "its radiance texture does not exist or is not its radiance".into()));
+                }
+                (None, Some(_)) => return Err(err(at(), "a radiance texture without an emitter".into())),
+                _ => {}
             }
         }
         let c = &self.camera;

@@ -29,7 +29,7 @@ pub struct ScalarTexture {
     pub to_uv: [Vec3; 2],
     /// Mitsuba's `mesh_attribute`: the texels are a one-value attribute of a mesh, read at the
     /// hit triangle (or interpolated between its vertices) instead of at texture coordinates
-    /// (`width` and `height` are then 1 and unused).
+    /// (`width` is then the number of values, `height` 1; lookups read neither).
     pub attribute: Option<super::AttributeSource>,
 }
 

@@ -282,12 +282,12 @@ fn attribute_specs(kind: &str, names: &[String]) -> Vec<AttrSpec> {
     // The run being read: prefix, postfix category, its properties.
     let mut run: Option<(String, usize, Vec<String>)> = None;
     let flush = |run: &mut Option<(String, usize, Vec<String>)>, out: &mut Vec<AttrSpec>, seen: &mut Vec<String>| {
-        if let Some((prefix, category, columns)) = run.take() {
-            if columns.len() == 1 || columns.len() == 3 {
-                let suffix = if category == 1 { "_color" } else { "" };
-                out.push(AttrSpec { name: format!("{kind}_{prefix}{suffix}"), columns });
-                seen.push(prefix);
-            }
+        if let Some((prefix, category, columns)) = run.take()
+            && (columns.len() == 1 || columns.len() == 3)
+        {
+            let suffix = if category == 1 { "_color" } else { "" };
+            out.push(AttrSpec { name: format!("{kind}_{prefix}{suffix}"), columns });
+            seen.push(prefix);
         }
     };
     let mut skip_prefix: Option<String> = None;

@@ -973,12 +973,13 @@ impl<'a> Loader<'a> {
         Ok(())
     }
 
-    /// The texture `node` of a light (`kind`: a spot's `texture`, a projector's `irradiance`): a
+    /// The texture `node` of a light (`kind`: a spot's `texture`, a projector's `irradiance`, an
+    /// area emitter's `radiance`): a
     /// `bitmap` without `to_uv`, its texels (any value ≥ 0) the parameter `NAME.data`.
     ///
     /// # Errors
     /// Another plugin, a `to_uv`, a negative texel, and what [`Loader::bitmap`] refuses.
-    fn light_texture(&mut self, node: El<'a>, name: String, kind: &str) -> Result<crate::scene::TextureId> {
+    pub(super) fn light_texture(&mut self, node: El<'a>, name: String, kind: &str) -> Result<crate::scene::TextureId> {
         let target = self.deref(node)?;
         if !target.has_tag_name("texture") {
             return Err(self.x.err(node, format!("refers to a <{}>, expected a <texture>", target.tag_name().name())));

@@ -175,7 +175,12 @@ pub const PLUGINS: &[Plugin] = &[
         "`intensity`, `cutoff_angle`, `beam_width`, `texture` (`bitmap`), `to_world`",
         "next-event estimation only; texels are parameter `.texture.data`",
     ),
-    p(Emitter, "area", "`radiance`", "inside a <shape> (or referred to by one)"),
+    p(
+        Emitter,
+        "area",
+        "`radiance` (rgb, spectrum or `bitmap` without `to_uv`)",
+        "inside a <shape> (or referred to by one); a bitmap's texels are parameter `….radiance.data`, read at the point's texture coordinates; sampled by area (Mitsuba samples a textured one by its texture: the same expectation)",
+    ),
     p(Shape, "cube", "`to_world`, `flip_normals`", ""),
     p(Shape, "cylinder", "`p0`, `p1`, `radius`, `to_world`, `flip_normals`", "tessellated"),
     p(Shape, "disk", "`to_world`, `flip_normals`", "tessellated"),

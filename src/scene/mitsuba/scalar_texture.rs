@@ -59,9 +59,11 @@ impl<'a> Loader<'a> {
                 if let Some(t) = self.scene.scalar_texture(texels) {
                     return Ok(t.texels);
                 }
+                // width × height is the number of values (the kernels read neither).
+                let values = self.scene.params.entry(texels).len;
                 self.scene.scalar_textures.push(ScalarTexture {
                     texels,
-                    width: 1,
+                    width: values,
                     height: 1,
                     nearest: true,
                     wrap: crate::scene::Wrap::Repeat,

@@ -148,6 +148,13 @@ pub fn cube(m: &Mat4) -> Geometry {
     }
 }
 
+/// An area emitter's radiance: one RGB value, or a bitmap's texels looked up at the hit's texture
+/// coordinates.
+enum AreaRadiance {
+    Constant(Vec3),
+    Texture(crate::scene::TextureId),
+}
+
 /// Translation and the three axes of an affine `m`.
 fn columns(m: &Mat4) -> (Vec3, Vec3, Vec3, Vec3) {
     (m.w_axis.truncate(), m.x_axis.truncate(), m.y_axis.truncate(), m.z_axis.truncate())
@@ -376,13 +383,16 @@ impl<'a> Loader<'a> {
             if !(total > 0.0) {
                 return Err(self.x.err(e, format!("area emitter on shape '{name}' of zero area")));
             }
-            let id = self
-                .scene
-                .params
-                .add(&param, &radiance.to_array(), bounds::RADIANCE)
-                .map_err(|err| self.located(e, err))?;
+            let (id, texture) = match radiance {
+                AreaRadiance::Constant(radiance) => {
+                    let id = self.scene.params.add(&param, &radiance.to_array(), bounds::RADIANCE);
+                    (id.map_err(|err| self.located(e, err))?, None)
+                }
+                AreaRadiance::Texture(t) => (self.scene.textures[t.0 as usize].texels, Some(t)),
+            };
             if let Some(mesh) = self.scene.meshes.last_mut() {
                 mesh.emitter = Some(id);
+                mesh.emitter_texture = texture;
             }
         }
         Ok(())
@@ -396,20 +406,26 @@ impl<'a> Loader<'a> {
     }
 
     /// Reads a shape's `<emitter type="area">`: its element, parameter name and radiance.
-    fn area_emitter(&mut self, node: El<'a>, shape: &str) -> Result<(El<'a>, String, Vec3)> {
+    fn area_emitter(&mut self, node: El<'a>, shape: &str) -> Result<(El<'a>, String, AreaRadiance)> {
         let p = Props::parse(&self.x, node)?;
         if p.kind != "area" {
             return Err(self.x.err(node, format!("unsupported plugin '{}' (supported on shapes: area)", p.kind)));
         }
-        let radiance = self.radiance_in(&p, "radiance", Vec3::ONE, bounds::RADIANCE)?;
         // Mitsuba names an emitter nested in a shape after the shape, whatever its own id; one
         // declared at scene level (and referred to) by its id.
         let top_level = node.parent().is_some_and(|n| n.parent().is_some_and(|d| d.is_root()));
-        let param = match self.x.attr(node, "id")? {
-            Some(id) if top_level => format!("{id}.radiance.value"),
-            _ => format!("{shape}.emitter.radiance.value"),
+        let prefix = match self.x.attr(node, "id")? {
+            Some(id) if top_level => format!("{id}.radiance"),
+            _ => format!("{shape}.emitter.radiance"),
         };
+        if let Some(t) = p.object("radiance") {
+            self.finish(&p)?;
+            // A textured radiance: Mitsuba's key `….radiance.data`.
+            let texture = self.light_texture(t, prefix, "area")?;
+            return Ok((node, String::new(), AreaRadiance::Texture(texture)));
+        }
+        let radiance = self.radiance_in(&p, "radiance", Vec3::ONE, bounds::RADIANCE)?;
         self.finish(&p)?;
-        Ok((node, param, radiance))
+        Ok((node, format!("{prefix}.value"), AreaRadiance::Constant(radiance)))
     }
 }
