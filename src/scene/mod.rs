@@ -758,7 +758,7 @@ impl Scene {
 
     /// Points the mesh attributes' [`AttributeSource::mesh`] at their meshes' new places after the
     /// meshes were reordered (mesh `old` is now `new_index[old]`).
-    pub fn renumber_attribute_meshes(&mut self, new_index: &[usize]) {
+    pub(crate) fn renumber_attribute_meshes(&mut self, new_index: &[usize]) {
         let renumber = |s: &mut AttributeSource| s.mesh = new_index[s.mesh as usize] as u32;
         for m in &mut self.materials {
             match m {
@@ -784,7 +784,7 @@ impl Scene {
     /// per-face attributes, warning with a count; [`Scene::add_mesh`] does this, and a loader
     /// that reads per-face attributes before adding the mesh does it first (then nothing is left
     /// to drop).
-    pub fn prune_triangles(&mut self, name: &str, geometry: &mut shapes::Geometry) {
+    pub(crate) fn prune_triangles(&mut self, name: &str, geometry: &mut shapes::Geometry) {
         let before = geometry.indices.len();
         let mut overflowed = 0;
         let positions = std::mem::take(&mut geometry.positions);

@@ -34,6 +34,17 @@ pub struct MeshAttribute {
 
 impl Geometry {
     /// Keeps the triangles for which `keep` holds, with their rows of the per-face attributes.
+    ///
+    /// ```
+    /// use pathgrad::scene::shapes::{MeshAttribute, quad};
+    /// use glam::Vec3;
+    ///
+    /// let mut g = quad(Vec3::ZERO, Vec3::X, Vec3::Y);
+    /// g.attributes.push(MeshAttribute { name: "face_weight".into(), per_vertex: false, dim: 1, values: vec![0.25, 0.75] });
+    /// g.retain_triangles(|t| t[2] == 3);
+    /// assert_eq!(g.indices, [[0, 2, 3]]);
+    /// assert_eq!(g.attribute("face_weight").unwrap().values, [0.75]);
+    /// ```
     pub fn retain_triangles(&mut self, mut keep: impl FnMut(&[u32; 3]) -> bool) {
         let kept: Vec<bool> = self.indices.iter().map(&mut keep).collect();
         if kept.iter().all(|&k| k) {

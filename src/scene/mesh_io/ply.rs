@@ -32,7 +32,7 @@ const PLY_FACE_LISTS: [&str; 2] = ["vertex_indices", "vertex_index"];
 /// coordinates (`u v`, `s t`, `texture_u texture_v` or `texture_s texture_t`, as they are), and the
 /// `face` element's `vertex_indices` (or `vertex_index`) lists of 3 or more indices, fan-triangulated.
 /// The vertices' and faces' other scalar properties become [`MeshAttribute`]s under Mitsuba's
-/// names ([`attribute_specs`]): `r g b` (or `red green blue`) as `vertex_color`/`face_color`, and
+/// names (`attribute_specs`): `r g b` (or `red green blue`) as `vertex_color`/`face_color`, and
 /// runs of `PREFIX_x y z`, `PREFIX_r g b`, `PREFIX_0 1 2` or `PREFIX_1 2 3` (1 or 3 of them) as
 /// `vertex_PREFIX`/`face_PREFIX` (`PREFIX_color` for the `r g b` run); a polygon's face values are
 /// repeated for each of its triangles. Other elements and properties are ignored.
