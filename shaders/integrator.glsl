@@ -512,11 +512,12 @@ bool path_step(inout PathState st) {
             if (HAS(F_EMITTERS) && s.emitter != NO_EMITTER && cos_emit > 0.0) {
                 float w_b = hit_weight(diff, st.prev_nee, st.prev_pdf_f, emitter_pdf_solid_angle(travelled + hit.t, cos_emit), st.mix);
                 uint p_radiance = emitters[s.emitter].p_radiance;
-                st.radiance += sign * (st.throughput * w_b * param_rgb(p_radiance));
-                if (HAS(G_EMISSION)) { gt.hit_param = p_radiance; gt.hit = st.adj * st.throughput * w_b; }
+                st.radiance += sign * (st.throughput * w_b * area_radiance(p_radiance, s.uv));
+                if (HAS(G_EMISSION)) { gt.hit_param = p_radiance; gt.hit = st.adj * st.throughput * w_b; gt.hit_uv = s.uv; }
 #if ATTACHED
-                // Constant radiance: only the weights of the vertices before depend on the ray.
-                if (!adjoint) attached_contribution(st, ROW6_ZERO, st.adj * st.throughput * w_b * param_rgb(p_radiance));
+                // Constant radiance (attached sampling refuses textured emitters): only the weights
+                // of the vertices before depend on the ray.
+                if (!adjoint) attached_contribution(st, ROW6_ZERO, st.adj * st.throughput * w_b * area_radiance(p_radiance, s.uv));
 #endif
             }
             // ---- mask: the nested BSDF with probability `opacity`, else straight through ----
@@ -527,8 +528,8 @@ bool path_step(inout PathState st) {
             bool passes = false;
             if (HAS(F_MASK) && vertex < globals.max_depth && materials[s.material].p_opacity != NO_PARAM) {
                 gt.mask = materials[s.material].p_opacity;
-                gt.uv = s.uv;
-                mask_opacity = mask_opacity_at(gt.mask, s.uv);
+                gt.at = tex_at(s);
+                mask_opacity = mask_opacity_at(gt.mask, gt.at);
                 passes = !(draw_block(st.key1, st.pixel, st.sample_index, vertex, DIM_LOBE / 4u)[DIM_LOBE % 4u] < mask_opacity);
                 if (adjoint) gt.opacity = st.adj * st.radiance * (passes ? -1.0 / (1.0 - mask_opacity) : 1.0 / mask_opacity);
             }
@@ -545,7 +546,7 @@ bool path_step(inout PathState st) {
                 }
             } else {
                 shade = true;
-                bsdf = resolve_bsdf(s.material, s.uv);
+                bsdf = resolve_bsdf(s.material, tex_at(s));
                 // A two-sided material seen from the back shades with the flipped normal.
                 bool mirrored = HAS(F_TWO_SIDED) && materials[s.material].two_sided != 0u && dot(s.ns, wi_world) < 0.0;
                 vec3 ns = mirrored ? -s.ns : s.ns;
@@ -555,7 +556,7 @@ bool path_step(inout PathState st) {
                 if (mapped) frame = normal_map_frame(materials[s.material], s, frame, mirrored, wi_world, bsdf);
                 wi = to_local(frame, wi_world);
                 gt.material = s.material;
-                gt.uv = s.uv;
+                gt.at = tex_at(s);
 
                 capable = diff && material_capable(s.material);
                 if (hero) {
@@ -640,6 +641,7 @@ bool path_step(inout PathState st) {
                     gt.nee_param = es.param;
                     gt.nee = st.adj * st.throughput * tr * nee_w * nee_phase * es.factor / nee_pdf;
                     gt.env_dir = (HAS(F_LIGHT_TEXTURE) && es.delta) ? es.normal : es.point;
+                    gt.nee_uv = es.uv;
                 }
             }
         }
@@ -670,6 +672,7 @@ bool path_step(inout PathState st) {
                 gt.nee_param = es.param;
                 gt.nee = st.adj * st.throughput * tr * nee_w * nee_f * es.factor / nee_pdf;
                 gt.env_dir = (HAS(F_LIGHT_TEXTURE) && es.delta) ? es.normal : es.point;
+                gt.nee_uv = es.uv;
             }
         }
 

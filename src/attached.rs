@@ -76,6 +76,9 @@ pub fn refuse_unsupported(flat: &FlatScene, options: &RenderOptions, forward: bo
     if !flat.media.is_empty() {
         return refuse("the scene has participating media".into());
     }
+    if flat.emitters.iter().any(|e| crate::cpu::emitter::area_textured(e.p_radiance)) {
+        return refuse("the scene has a textured area emitter".into());
+    }
     Ok(())
 }
 

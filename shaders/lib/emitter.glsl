@@ -110,6 +110,7 @@ vec3 env_sample(vec2 u_cell, vec2 u_pos) {
 struct EmitterSample {
     vec3 point; vec3 normal; vec3 radiance; uint param; bool environment; bool valid;
     bool delta; bool distant; float factor; float pdf;
+    vec2 uv;    // a textured area emitter's texture coordinates at `point`
 };
 
 // A spot's falloff toward unit direction `d` from its position (Mitsuba's falloff_curve).
@@ -143,13 +144,20 @@ vec2 light_lookup(DeltaLight l, vec3 x, out float factor) {
 // texture lookup.
 vec3 light_tint(DeltaLight l, vec2 uv);
 
+// A textured area emitter's radiance at its texture coordinates uv, and the texture coordinates
+// of a point of a triangle; defined in surface.glsl, beside the texture lookup.
+bool area_textured(uint p);
+vec3 area_radiance(uint p, vec2 uv);
+vec2 triangle_uv(uint tri, vec2 b);
+
 // With probability env_select_prob (u_select below it) a direction toward the environment
 // (env_sample); with light_select_prob one of the lights without area, each equally likely, as
 // seen from shading point x; otherwise an emissive triangle with probability proportional to its
 // area, then a uniform point on it (u_pos). The area density is the rest of the probability over
 // the total emissive area.
 EmitterSample sample_emitter(float u_select, vec2 u_pos, vec2 u_cell, vec3 x) {
-    EmitterSample s = EmitterSample(vec3(0.0), vec3(0.0), vec3(0.0), NO_PARAM, false, false, false, false, 1.0, 0.0);
+    EmitterSample s = EmitterSample(vec3(0.0), vec3(0.0), vec3(0.0), NO_PARAM, false, false, false, false, 1.0, 0.0,
+                                    vec2(0.0));
     if (HAS(F_ENV) && u_select < globals.env_select_prob) {
         s.point = env_sample(u_cell, u_pos);
         s.radiance = env_radiance(s.point);
@@ -209,7 +217,10 @@ EmitterSample sample_emitter(float u_select, vec2 u_pos, vec2 u_cell, vec3 x) {
     vec2 b = sample_uniform_triangle(u_pos);
     s.point = (1.0 - b.x - b.y) * e.v0 + b.x * e.v1 + b.y * e.v2;
     s.normal = normalize(cross(e.v1 - e.v0, e.v2 - e.v0));
-    s.radiance = param_rgb(e.p_radiance);
+    // A textured emitter is sampled by area too (Mitsuba samples its texture): the same
+    // expectation, its radiance read at the point's texture coordinates.
+    if (area_textured(e.p_radiance)) s.uv = triangle_uv(e.tri, b);
+    s.radiance = area_radiance(e.p_radiance, s.uv);
     s.param = e.p_radiance;
     s.valid = true;
     return s;

@@ -13,7 +13,14 @@
 // dpdu: ∂p/∂u of the triangle from its texture coordinates (kernels with anisotropic BSDFs or
 // normal maps; 0 where the coordinates are degenerate).
 // dpdv: ∂p/∂v likewise (kernels with normal or bump maps).
-struct Surface { vec3 p; vec3 ng; vec3 ns; vec2 uv; uint material; uint emitter; uint interior; vec3 dpdu; vec3 dpdv; };
+struct Surface { vec3 p; vec3 ng; vec3 ns; vec2 uv; uint material; uint emitter; uint interior; vec3 dpdu; vec3 dpdv; vec2 bary; uint tri; };
+
+// Where a material's textures are read: the hit's texture coordinates, and for a mesh attribute
+// its triangle (index in the tri_vertices array) and barycentric coordinates (b1, b2) (twin:
+// TexAt of src/cpu/surface.rs).
+struct TexAt { vec2 uv; vec2 bary; uint tri; };
+
+TexAt tex_at(Surface s) { return TexAt(s.uv, s.bary, s.tri); }
 
 // A triangle's vertex indices and mesh (TriVertices, 16 bytes) read as two 64-bit words, like
 // the traversal's nodes and triangles (bvh.glsl): on lavapipe each word read is one gather
@@ -74,6 +81,8 @@ Surface surface_at(Hit hit) {
     s.interior = m.interior;
     s.dpdu = vec3(0.0);
     s.dpdv = vec3(0.0);
+    s.bary = vec2(hit.b1, hit.b2);
+    s.tri = id;
     if (HAS(F_ANISOTROPIC) || HAS(F_NORMAL_MAP)) {
         vec2 d0 = uv1 - uv0;
         vec2 d1 = uv2 - uv0;
@@ -170,6 +179,65 @@ void texture_footprint(uint offset, uint width, uint height, uint mode, vec2 uv,
     weight[3] = fx * fy;
 }
 
+// The rows a mesh attribute (`TEX_ATTR_FACE` or `TEX_ATTR_VERTEX` in `mode`) reads at `at`: the
+// hit triangle's row with weight 1, or its three vertices' rows weighted by the barycentric
+// coordinates (Mitsuba's `interpolate_attribute`); rows of `dim` values from `offset`. Shared by
+// the lookup and its gradient (twin: attribute_footprint of src/cpu/surface.rs).
+void attribute_footprint(uint offset, uint dim, uint mode, TexAt at, out uint texel[4], out float weight[4]) {
+    TriVertexWordArray a = TriVertexWordArray(globals.addr_tri_vertices);
+    uvec2 w0 = unpackUint2x32(a.v[at.tri].w0);        // i0, i1
+    uvec2 w1 = unpackUint2x32(a.v[at.tri].w1);        // i2, mesh
+    if ((mode & TEX_ATTR_FACE) != 0u) {
+        uint t = offset + dim * (at.tri - MeshShadingArray(globals.addr_meshes).v[w1.y].first_tri);
+        texel = uint[4](t, t, t, t);
+        weight = float[4](1.0, 0.0, 0.0, 0.0);
+        return;
+    }
+    texel = uint[4](offset + dim * w0.x, offset + dim * w0.y, offset + dim * w1.x, offset);
+    weight = float[4](1.0 - at.bary.x - at.bary.y, at.bary.x, at.bary.y, 0.0);
+}
+
+bool attribute_mode(uint mode) { return (mode & (TEX_ATTR_FACE | TEX_ATTR_VERTEX)) != 0u; }
+
+// ---- textured area emitters (an EmitterTri's p_radiance with SCALAR_TEXTURE set: the offset of
+// its RGB texture's descriptor in the tables array; twin: area_footprint and friends of
+// src/cpu/emitter.rs) ----
+bool area_textured(uint p) { return p != NO_PARAM && (p & SCALAR_TEXTURE) != 0u; }
+
+// The texels (RGB at offset..offset+2) and weights of textured area radiance `p` at uv (its
+// `to_uv` applied).
+void area_footprint(uint p, vec2 uv, out uint texel[4], out float weight[4]) {
+    uint d = p & ~SCALAR_TEXTURE;
+    vec3 q = vec3(uv, 1.0);
+    vec3 row0 = vec3(coating_table(d + 4u), coating_table(d + 5u), coating_table(d + 6u));
+    vec3 row1 = vec3(coating_table(d + 7u), coating_table(d + 8u), coating_table(d + 9u));
+    uint word[4] = uint[4](floatBitsToUint(coating_table(d)), floatBitsToUint(coating_table(d + 1u)),
+                           floatBitsToUint(coating_table(d + 2u)), floatBitsToUint(coating_table(d + 3u)));
+    texture_footprint(word[0], word[1], word[2], word[3], vec2(dot(row0, q), dot(row1, q)), texel, weight);
+}
+
+// An area emitter's radiance at the texture coordinates uv of its point: its RGB parameter, or
+// its texture there.
+vec3 area_radiance(uint p, vec2 uv) {
+    if (!area_textured(p)) return param_rgb(p);
+    uint texel[4];
+    float weight[4];
+    area_footprint(p, uv, texel, weight);
+    return param_rgb(texel[0]) * weight[0] + param_rgb(texel[1]) * weight[1] + param_rgb(texel[2]) * weight[2]
+        + param_rgb(texel[3]) * weight[3];
+}
+
+// The texture coordinates at barycentrics b = (b1, b2) of triangle `tri` (0 on a mesh without).
+vec2 triangle_uv(uint tri, vec2 b) {
+    TriVertexWordArray a = TriVertexWordArray(globals.addr_tri_vertices);
+    uvec2 w0 = unpackUint2x32(a.v[tri].w0);        // i0, i1
+    uvec2 w1 = unpackUint2x32(a.v[tri].w1);        // i2, mesh
+    MeshShading m = MeshShadingArray(globals.addr_meshes).v[w1.y];
+    if (m.uv_base == NO_ARRAY) return vec2(0.0);
+    Vec2Array uvs = Vec2Array(globals.addr_uvs);
+    return (1.0 - b.x - b.y) * uvs.v[m.uv_base + w0.x] + b.x * uvs.v[m.uv_base + w0.y] + b.y * uvs.v[m.uv_base + w1.x];
+}
+
 // A textured light's or projector's intensity (or 1) × texture at uv (or 1) × scale (or 1)
 // (declared in emitter.glsl; twin: light_tint in src/cpu/emitter.rs).
 vec3 light_texture(DeltaLight l, vec2 uv) {
@@ -264,11 +332,20 @@ vec2 texture_uv(Material m, vec2 uv) {
     return vec2(dot(m.uv_row0, p), dot(m.uv_row1, p));
 }
 
-// A textured material's colour at the hit's texture coordinates uv.
-vec3 texture_lookup(Material m, vec2 uv) {
+// The texels (or mesh attribute rows) a textured material's colour reads at `at`.
+void material_footprint(Material m, TexAt at, out uint texel[4], out float weight[4]) {
+    if (attribute_mode(m.tex_mode)) {
+        attribute_footprint(m.p_color, 3u, m.tex_mode, at, texel, weight);
+    } else {
+        texture_footprint(m.p_color, m.tex_width, m.tex_height, m.tex_mode, texture_uv(m, at.uv), texel, weight);
+    }
+}
+
+// A textured material's colour at `at`.
+vec3 texture_lookup(Material m, TexAt at) {
     uint texel[4];
     float weight[4];
-    texture_footprint(m.p_color, m.tex_width, m.tex_height, m.tex_mode, texture_uv(m, uv), texel, weight);
+    material_footprint(m, at, texel, weight);
     return param_rgb(texel[0]) * weight[0] + param_rgb(texel[1]) * weight[1] + param_rgb(texel[2]) * weight[2]
         + param_rgb(texel[3]) * weight[3];
 }
@@ -281,42 +358,47 @@ bool scalar_textured(uint slot) { return HAS(F_PARAM_TEXTURE) && slot != NO_PARA
 uint texture_desc_word(uint d, uint i) { return floatBitsToUint(coating_table(d + i)); }
 
 // The texels' parameter offsets and weights of the lookup of scalar texture `slot` at the hit's
-// texture coordinates uv (its `to_uv` applied; one value a texel).
-void scalar_footprint(uint slot, vec2 uv, out uint texel[4], out float weight[4]) {
+// texture coordinates (its `to_uv` applied; one value a texel), or its mesh attribute's rows.
+void scalar_footprint(uint slot, TexAt at, out uint texel[4], out float weight[4]) {
     uint d = slot & ~SCALAR_TEXTURE;
-    vec3 p = vec3(uv, 1.0);
+    uint mode = texture_desc_word(d, 3u);
+    if (attribute_mode(mode)) {
+        attribute_footprint(texture_desc_word(d, 0u), 1u, mode, at, texel, weight);
+        return;
+    }
+    vec3 p = vec3(at.uv, 1.0);
     vec3 row0 = vec3(coating_table(d + 4u), coating_table(d + 5u), coating_table(d + 6u));
     vec3 row1 = vec3(coating_table(d + 7u), coating_table(d + 8u), coating_table(d + 9u));
     vec2 t = vec2(dot(row0, p), dot(row1, p));
-    texture_footprint(0u, texture_desc_word(d, 1u), texture_desc_word(d, 2u), texture_desc_word(d, 3u), t, texel, weight);
+    texture_footprint(0u, texture_desc_word(d, 1u), texture_desc_word(d, 2u), mode, t, texel, weight);
     uint offset = texture_desc_word(d, 0u);
     // texture_footprint's offsets step 3 a texel (RGB); these texels hold one value.
     for (uint k = 0u; k < 4u; k++) texel[k] = offset + texel[k] / 3u;
 }
 
-// The value of scalar texture `slot` at uv.
-float scalar_lookup(uint slot, vec2 uv) {
+// The value of scalar texture `slot` at `at`.
+float scalar_lookup(uint slot, TexAt at) {
     uint texel[4];
     float weight[4];
-    scalar_footprint(slot, uv, texel, weight);
+    scalar_footprint(slot, at, texel, weight);
     return params[texel[0]] * weight[0] + params[texel[1]] * weight[1] + params[texel[2]] * weight[2]
         + params[texel[3]] * weight[3];
 }
 
-// A blend weight: its parameter, or its texture at uv.
-float scalar_value(uint slot, vec2 uv) { return scalar_textured(slot) ? scalar_lookup(slot, uv) : params[slot]; }
+// A blend weight: its parameter, or its texture at `at`.
+float scalar_value(uint slot, TexAt at) { return scalar_textured(slot) ? scalar_lookup(slot, at) : params[slot]; }
 
-// A mask's opacity at uv: its parameter or texture, clipped to [0, 1] as Mitsuba clips it (twin:
+// A mask's opacity at `at`: its parameter or texture, clipped to [0, 1] as Mitsuba clips it (twin:
 // mask_opacity_at of src/cpu/surface.rs).
-float mask_opacity_at(uint slot, vec2 uv) { return clamp(scalar_value(slot, uv), 0.0, 1.0); }
+float mask_opacity_at(uint slot, TexAt at) { return clamp(scalar_value(slot, at), 0.0, 1.0); }
 
-// A roughness: its parameter, or its texture at uv clamped to ALPHA_TEXTURE_FLOOR as Mitsuba's
+// A roughness: its parameter, or its texture at `at` clamped to ALPHA_TEXTURE_FLOOR as Mitsuba's
 // microfacet distribution clamps it.
-float alpha_value(uint slot, vec2 uv) {
-    return scalar_textured(slot) ? max(scalar_lookup(slot, uv), ALPHA_TEXTURE_FLOOR) : params[slot];
+float alpha_value(uint slot, TexAt at) {
+    return scalar_textured(slot) ? max(scalar_lookup(slot, at), ALPHA_TEXTURE_FLOOR) : params[slot];
 }
 
-Leaf leaf_from_material(Material m, vec2 uv) {
+Leaf leaf_from_material(Material m, TexAt at) {
     Leaf l;
     bool plastic = is_plastic(m.tag);
     bool conductor = is_conductor(m.tag);
@@ -325,16 +407,16 @@ Leaf leaf_from_material(Material m, vec2 uv) {
     l.kind = (delta || is_smooth_plastic(m.tag) || rough_glass) ? m.tag
         : (plastic ? LEAF_ROUGH_PLASTIC : (conductor ? LEAF_ROUGH_CONDUCTOR : LEAF_DIFFUSE));
     l.distribution = m.distribution;
-    l.alpha = (conductor || plastic || rough_glass) ? alpha_value(m.p_alpha, uv) : 0.0;
+    l.alpha = (conductor || plastic || rough_glass) ? alpha_value(m.p_alpha, at) : 0.0;
     // Kernels without anisotropic BSDFs read no second roughness (α_v = α).
-    l.alpha_v = (HAS(F_ANISOTROPIC) && conductor) ? alpha_value(m.p_alpha_v, uv) : l.alpha;
+    l.alpha_v = (HAS(F_ANISOTROPIC) && conductor) ? alpha_value(m.p_alpha_v, at) : l.alpha;
     l.table = m.table;
     if (delta || rough_glass) {
         // Each colour a parameter, or (NO_PARAM) a constant: the reflectance in uv_row0, a
         // dielectric's transmittance in k.
         l.color = m.p_color != NO_PARAM ? param_rgb(m.p_color) : m.uv_row0;
     } else {
-        l.color = (HAS(F_TEXTURE) && m.tex_width > 0u) ? texture_lookup(m, uv) : param_rgb(m.p_color);
+        l.color = (HAS(F_TEXTURE) && m.tex_width > 0u) ? texture_lookup(m, at) : param_rgb(m.p_color);
     }
     l.eta = m.eta;
     // A smooth dielectric's η: its parameter (p_weight) or the constant.
@@ -345,17 +427,17 @@ Leaf leaf_from_material(Material m, vec2 uv) {
     return l;
 }
 
-// The BSDF of a material with its current parameter values at texture coordinates uv.
-Bsdf resolve_bsdf(uint material_id, vec2 uv) {
+// The BSDF of a material with its current parameter values at `at`.
+Bsdf resolve_bsdf(uint material_id, TexAt at) {
     Material m = materials[material_id];
     Bsdf b;
     if (HAS(F_BLEND) && m.tag == MAT_BLEND) {
-        b.leaf0 = leaf_from_material(materials[m.child0], uv);
-        b.leaf1 = leaf_from_material(materials[m.child1], uv);
-        b.weight = scalar_value(m.p_weight, uv);
+        b.leaf0 = leaf_from_material(materials[m.child0], at);
+        b.leaf1 = leaf_from_material(materials[m.child1], at);
+        b.weight = scalar_value(m.p_weight, at);
         b.blend = true;
     } else {
-        b.leaf0 = leaf_from_material(m, uv);
+        b.leaf0 = leaf_from_material(m, at);
         b.leaf1 = b.leaf0;
         b.weight = 0.0;
         b.blend = false;
@@ -373,21 +455,23 @@ Bsdf resolve_bsdf(uint material_id, vec2 uv) {
 // radiance of the emitter the step hit (or the environment) and of the emitter NEE reached.
 struct GradTerms {
     uint material;    // NO_PARAM: no BSDF term
-    vec2 uv;
+    TexAt at;
     BsdfGrad bsdf;
     uint hit_param;   // RGB parameter of the emitter or environment hit, or NO_PARAM
     vec3 hit;
     uint nee_param;   // RGB parameter of the emitter NEE reached, or NO_PARAM
     vec3 nee;
+    vec2 hit_uv;      // the texture coordinates of a textured area emitter's terms (hit, NEE)
+    vec2 nee_uv;
     vec3 env_dir;     // the direction of the environment's term (hit or NEE: a step has at most one)
-    uint mask;        // a mask's opacity slot (at uv), or NO_PARAM
+    uint mask;        // a mask's opacity slot (read at `at`), or NO_PARAM
     vec3 opacity;     // its derivative term
 };
 
 GradTerms no_grad_terms() {
     LeafGrad none = LeafGrad(vec3(0.0), vec3(0.0), vec3(0.0), vec3(0.0));
-    return GradTerms(NO_PARAM, vec2(0.0), BsdfGrad(none, none, vec3(0.0)), NO_PARAM, vec3(0.0), NO_PARAM, vec3(0.0),
-                     vec3(0.0, 0.0, 1.0), NO_PARAM, vec3(0.0));
+    return GradTerms(NO_PARAM, TexAt(vec2(0.0), vec2(0.0), 0u), BsdfGrad(none, none, vec3(0.0)), NO_PARAM, vec3(0.0), NO_PARAM, vec3(0.0),
+                     vec2(0.0), vec2(0.0), vec3(0.0, 0.0, 1.0), NO_PARAM, vec3(0.0));
 }
 
 // Most (offset, per-channel value) entries one vertex can produce: an RGB emitter, four RGB texels
@@ -417,21 +501,21 @@ void push_rgb(uint offset, vec3 g) {
 // A scalar slot's derivative g (per image channel): its parameter's entry, or for a texture the
 // footprint's texels, added at once (not entries: up to 12 of them a vertex would outgrow
 // GRAD_ENTRIES); a roughness clamped to ALPHA_TEXTURE_FLOOR has none.
-void push_scalar(uint slot, vec2 uv, vec3 g, bool roughness) {
+void push_scalar(uint slot, TexAt at, vec3 g, bool roughness) {
     if (!scalar_textured(slot)) {
         push_entry(slot, g);
         return;
     }
     uint texel[4];
     float weight[4];
-    scalar_footprint(slot, uv, texel, weight);
-    if (roughness && scalar_lookup(slot, uv) < ALPHA_TEXTURE_FLOOR) return;
+    scalar_footprint(slot, at, texel, weight);
+    if (roughness && scalar_lookup(slot, at) < ALPHA_TEXTURE_FLOOR) return;
     for (uint k = 0u; k < 4u; k++) {
         if (weight[k] != 0.0) param_grad(texel[k], g * weight[k]);
     }
 }
 
-void push_leaf(Material m, vec2 uv, LeafGrad g) {
+void push_leaf(Material m, TexAt at, LeafGrad g) {
     bool rough_glass = is_rough_dielectric(m.tag);
     if (is_delta(m.tag) || rough_glass) {
         // The reflectance and the transmittance (p_alpha of a smooth leaf, p_weight of a rough
@@ -439,15 +523,15 @@ void push_leaf(Material m, vec2 uv, LeafGrad g) {
         uint p_trans = rough_glass ? m.p_weight : m.p_alpha;
         if (HAS(G_COLOR) && m.p_color != NO_PARAM) push_rgb(m.p_color, g.color);
         if (HAS(G_COLOR) && m.tag != MAT_CONDUCTOR && p_trans != NO_PARAM) push_rgb(p_trans, g.trans);
-        if (HAS(G_ALPHA) && rough_glass) push_scalar(m.p_alpha, uv, g.alpha, true);
+        if (HAS(G_ALPHA) && rough_glass) push_scalar(m.p_alpha, at, g.alpha, true);
         return;
     }
     if (HAS(F_TEXTURE) && m.tex_width > 0u) {
         if (HAS(G_TEXTURE)) {
             uint texel[4];
             float weight[4];
-            texture_footprint(m.p_color, m.tex_width, m.tex_height, m.tex_mode, texture_uv(m, uv), texel, weight);
-            // A nearest or checkerboard lookup reads one texel: no pushes of zero for the rest.
+            material_footprint(m, at, texel, weight);
+            // A nearest, checkerboard or per-face lookup reads one texel: no pushes of zero for the rest.
             for (uint k = 0u; k < 4u; k++) {
                 if (weight[k] != 0.0) push_rgb(texel[k], g.color * weight[k]);
             }
@@ -456,11 +540,11 @@ void push_leaf(Material m, vec2 uv, LeafGrad g) {
         push_rgb(m.p_color, g.color);
     }
     if (HAS(G_ALPHA) && is_conductor(m.tag) && m.p_alpha_v != m.p_alpha) {
-        push_scalar(m.p_alpha, uv, g.alpha, true);
-        push_scalar(m.p_alpha_v, uv, g.alpha_v, true);
+        push_scalar(m.p_alpha, at, g.alpha, true);
+        push_scalar(m.p_alpha_v, at, g.alpha_v, true);
     } else if (HAS(G_ALPHA) && (is_conductor(m.tag) || is_plastic(m.tag))) {
         // Isotropic: α_u and α_v are one parameter.
-        push_scalar(m.p_alpha, uv, g.alpha + g.alpha_v, true);
+        push_scalar(m.p_alpha, at, g.alpha + g.alpha_v, true);
     }
 }
 
@@ -487,9 +571,17 @@ void push_light(DeltaLight l, vec3 g, vec3 x) {
 
 // An emitter's radiance term: one RGB value, or the four texels of the environment map around
 // `env_dir` weighted as its lookup weighs them, or a textured light's or projector's values
-// (`LIGHT_SLOT` | its index, `env_dir` the shading point).
-void push_emitter(uint offset, vec3 g, vec3 env_dir) {
-    if (HAS(F_LIGHT_TEXTURE) && offset != NO_PARAM && (offset & LIGHT_SLOT) != 0u) {
+// (`LIGHT_SLOT` | its index, `env_dir` the shading point), or a textured area emitter's texels at
+// `uv`, added at once (as push_light's).
+void push_emitter(uint offset, vec3 g, vec3 env_dir, vec2 uv) {
+    if (HAS(F_EMITTERS) && area_textured(offset)) {
+        uint texel[4];
+        float weight[4];
+        area_footprint(offset, uv, texel, weight);
+        for (uint k = 0u; k < 4u; k++) {
+            if (weight[k] != 0.0) param_grad_rgb(texel[k], g * weight[k]);
+        }
+    } else if (HAS(F_LIGHT_TEXTURE) && offset != NO_PARAM && (offset & LIGHT_SLOT) != 0u) {
         push_light(lights[offset & ~LIGHT_SLOT], g, env_dir);
     } else if (HAS(F_ENV_MAP) && offset == globals.env_param) {
         uint texel[4];
@@ -506,19 +598,19 @@ void push_emitter(uint offset, vec3 g, vec3 env_dir) {
 // Scatters every term of `t` through one param_grad site.
 void scatter_terms(GradTerms t) {
     grad_count = 0u;
-    if ((HAS(G_EMISSION) || HAS(G_ENV)) && t.hit_param != NO_PARAM) push_emitter(t.hit_param, t.hit, t.env_dir);
-    if ((HAS(G_EMISSION) || HAS(G_ENV)) && t.nee_param != NO_PARAM) push_emitter(t.nee_param, t.nee, t.env_dir);
+    if ((HAS(G_EMISSION) || HAS(G_ENV)) && t.hit_param != NO_PARAM) push_emitter(t.hit_param, t.hit, t.env_dir, t.hit_uv);
+    if ((HAS(G_EMISSION) || HAS(G_ENV)) && t.nee_param != NO_PARAM) push_emitter(t.nee_param, t.nee, t.env_dir, t.nee_uv);
     if ((HAS(G_COLOR) || HAS(G_TEXTURE) || HAS(G_ALPHA) || HAS(G_WEIGHT)) && t.material != NO_PARAM) {
         Material m = materials[t.material];
         if (HAS(F_BLEND) && m.tag == MAT_BLEND) {
-            push_leaf(materials[m.child0], t.uv, t.bsdf.leaf0);
-            push_leaf(materials[m.child1], t.uv, t.bsdf.leaf1);
-            if (HAS(G_WEIGHT)) push_scalar(m.p_weight, t.uv, t.bsdf.weight, false);
+            push_leaf(materials[m.child0], t.at, t.bsdf.leaf0);
+            push_leaf(materials[m.child1], t.at, t.bsdf.leaf1);
+            if (HAS(G_WEIGHT)) push_scalar(m.p_weight, t.at, t.bsdf.weight, false);
         } else {
-            push_leaf(m, t.uv, t.bsdf.leaf0);
+            push_leaf(m, t.at, t.bsdf.leaf0);
         }
     }
-    if (HAS(F_MASK) && HAS(G_WEIGHT) && t.mask != NO_PARAM) push_scalar(t.mask, t.uv, t.opacity, false);
+    if (HAS(F_MASK) && HAS(G_WEIGHT) && t.mask != NO_PARAM) push_scalar(t.mask, t.at, t.opacity, false);
     [[dont_unroll]] for (uint i = 0u; i < grad_count; i++) param_grad(grad_offset[i], grad_value[i]);
 }
 

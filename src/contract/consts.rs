@@ -60,6 +60,12 @@ contract_constants! {
     /// `Material::tex_mode`: Mitsuba's checkerboard, a 2×1 texture whose first texel is read
     /// where the coordinates' fractional parts lie on the same side of 1/2, else its second.
     TEX_CHECKER = 8;
+    /// `Material::tex_mode` (and a scalar texture's mode word): Mitsuba's `mesh_attribute` of
+    /// one row per triangle, read at the hit triangle's index in its mesh (row of `dim` values).
+    TEX_ATTR_FACE = 32;
+    /// `Material::tex_mode` (and a scalar texture's mode word): Mitsuba's `mesh_attribute` of
+    /// one row per vertex, the hit triangle's three rows weighted by its barycentric coordinates.
+    TEX_ATTR_VERTEX = 64;
     /// `Material::nmap_mode`: the map is a bump map (heights, one value a texel), not a normal
     /// map (RGB).
     NMAP_BUMP = 16;

@@ -3,7 +3,10 @@
 
 use glam::{Mat3, Vec2, Vec3};
 
-use crate::contract::{DeltaLight, Globals, LIGHT_DIRECTIONAL, LIGHT_PROJECTOR, LIGHT_SLOT, LIGHT_SPOT, NO_PARAM};
+use crate::contract::{
+    DeltaLight, Globals, LIGHT_DIRECTIONAL, LIGHT_PROJECTOR, LIGHT_SLOT, LIGHT_SPOT, NO_PARAM, SCALAR_TEXTURE,
+    TEXTURE_DESC_LEN,
+};
 use crate::cpu::path::GradSink;
 use crate::cpu::surface::{param_color, texture_footprint};
 use crate::sampling::{UNIFORM_SPHERE_PDF, sample_uniform_sphere, sample_uniform_triangle};
@@ -35,6 +38,59 @@ pub struct EmitterSample {
     pub pdf: f32,
     /// A light without area: the shading point it was sampled from (its texture lookup).
     pub from: Vec3,
+    /// A textured area emitter: the texture coordinates of `point`.
+    pub uv: Vec2,
+}
+
+/// Whether an area emitter's `p_radiance` is a texture's descriptor (`SCALAR_TEXTURE`).
+pub fn area_textured(p: u32) -> bool {
+    p != NO_PARAM && p & SCALAR_TEXTURE != 0
+}
+
+/// The texels (RGB at offset..offset+2) and weights of textured area radiance `p` at `uv` (its
+/// `to_uv` applied; twin: `area_footprint` of shaders/lib/surface.glsl).
+pub fn area_footprint(flat: &FlatScene, p: u32, uv: Vec2) -> ([u32; 4], [f32; 4]) {
+    let d = (p & !SCALAR_TEXTURE) as usize;
+    let desc = &flat.tables[d..d + TEXTURE_DESC_LEN as usize];
+    let q = Vec3::new(uv.x, uv.y, 1.0);
+    let t = Vec2::new(Vec3::new(desc[4], desc[5], desc[6]).dot(q), Vec3::new(desc[7], desc[8], desc[9]).dot(q));
+    texture_footprint(desc[0].to_bits(), desc[1].to_bits(), desc[2].to_bits(), desc[3].to_bits(), t)
+}
+
+/// An area emitter's radiance at the texture coordinates `uv` of its point: its RGB parameter, or
+/// its texture there.
+pub fn area_radiance(flat: &FlatScene, p: u32, uv: Vec2) -> Vec3 {
+    if !area_textured(p) {
+        return param_color(flat, p);
+    }
+    let (texel, weight) = area_footprint(flat, p, uv);
+    texel.into_iter().zip(weight).map(|(t, w)| param_color(flat, t) * w).sum()
+}
+
+/// Adds `g` times the derivative of area radiance `p` at `uv` to `sink`: its RGB parameter's,
+/// or its texels' weighted as the lookup weighs them.
+pub fn area_backward(flat: &FlatScene, p: u32, uv: Vec2, g: Vec3, sink: &mut GradSink<'_>) {
+    if !area_textured(p) {
+        sink.add_rgb(p, g);
+        return;
+    }
+    let (texel, weight) = area_footprint(flat, p, uv);
+    for (t, w) in texel.into_iter().zip(weight) {
+        if w != 0.0 {
+            sink.add_rgb(t, g * w);
+        }
+    }
+}
+
+/// The texture coordinates at barycentrics `b` = (b1, b2) of triangle `tri` (0 on a mesh without).
+pub fn triangle_uv(flat: &FlatScene, tri: u32, b: Vec2) -> Vec2 {
+    let tv = &flat.tri_vertices[tri as usize];
+    let m = &flat.meshes[tv.mesh as usize];
+    if m.uv_base == crate::contract::NO_ARRAY {
+        return Vec2::ZERO;
+    }
+    let uv = |i: u32| flat.uvs[(m.uv_base + i) as usize];
+    (1.0 - b.x - b.y) * uv(tv.i0) + b.x * uv(tv.i1) + b.y * uv(tv.i2)
 }
 
 /// A spot's falloff toward unit direction `d` from its position (Mitsuba's `falloff_curve`).
@@ -194,6 +250,7 @@ pub fn sample_emitter(
         factor: 1.0,
         pdf: 0.0,
         from: x,
+        uv: Vec2::ZERO,
     };
     if u_select < globals.env_select_prob {
         let dir = env_sample(flat, globals, u_cell, u_pos);
@@ -260,7 +317,17 @@ pub fn sample_emitter(
     let b = sample_uniform_triangle(u_pos);
     let point = (1.0 - b.x - b.y) * e.v0 + b.x * e.v1 + b.y * e.v2;
     let normal = (e.v1 - e.v0).cross(e.v2 - e.v0).normalize();
-    Some(EmitterSample { point, normal, radiance: param_color(flat, e.p_radiance), param: e.p_radiance, ..none })
+    // A textured emitter is sampled by area too (Mitsuba samples its texture): the same
+    // expectation, its radiance read at the point's texture coordinates.
+    let uv = if area_textured(e.p_radiance) { triangle_uv(flat, e.tri, b) } else { Vec2::ZERO };
+    Some(EmitterSample {
+        point,
+        normal,
+        radiance: area_radiance(flat, e.p_radiance, uv),
+        param: e.p_radiance,
+        uv,
+        ..none
+    })
 }
 
 /// Solid-angle density of reaching an emitter point at `dist` whose normal makes cosine

@@ -17,14 +17,14 @@ use crate::contract::{
     MAX_NULL_CROSSINGS, NO_EMITTER, NO_MEDIUM, NO_PARAM, PLACEMENT_POWER, STRATEGY_DIFF, ViewCamera,
 };
 use crate::cpu::emitter::{
-    EmitterSample, emitter_pdf_solid_angle, env_backward, env_radiance, env_radiance_gradient, environment_pdf,
-    light_backward, sample_emitter,
+    EmitterSample, area_backward, area_radiance, emitter_pdf_solid_angle, env_backward, env_radiance,
+    env_radiance_gradient, environment_pdf, light_backward, sample_emitter,
 };
 use crate::cpu::medium;
 use crate::cpu::surface::{
     SHADOW_EPSILON, bsdf_backward, mask_opacity_at, material_anisotropic, material_normal_mapped, mis_power,
-    normal_map_frame, offset_origin, opacity_backward, param_color, resolve_bsdf, safe_div, shading_normal_gradient,
-    surface_at, tangent_frame,
+    normal_map_frame, offset_origin, opacity_backward, resolve_bsdf, safe_div, shading_normal_gradient, surface_at,
+    tangent_frame,
 };
 use crate::rng::{RngKey, Stream, uniform4};
 use crate::sampling::Frame;
@@ -354,7 +354,7 @@ fn emitter_backward(flat: &FlatScene, globals: &Globals, es: &EmitterSample, g: 
     } else if es.delta && es.param & LIGHT_SLOT != 0 {
         light_backward(flat, &flat.lights[(es.param & !LIGHT_SLOT) as usize], es.from, g * es.factor, sink)
     } else {
-        sink.add_rgb(es.param, g * es.factor)
+        area_backward(flat, es.param, es.uv, g * es.factor, sink)
     }
 }
 
@@ -559,13 +559,14 @@ pub fn trace_path<const ADJOINT: bool>(
             let w_b =
                 hit_weight(diff, prev_nee, prev_pdf_f, emitter_pdf_solid_angle(globals, distance, cos_emit), &mix);
             let p_radiance = flat.emitters[s.emitter as usize].p_radiance;
-            radiance += sign * (throughput * w_b * param_color(flat, p_radiance));
+            radiance += sign * (throughput * w_b * area_radiance(flat, p_radiance, s.uv));
             if ADJOINT {
-                sink.add_rgb(p_radiance, adj_radiance * throughput * w_b);
+                area_backward(flat, p_radiance, s.uv, adj_radiance * throughput * w_b, sink);
             }
             if attached && !ADJOINT {
-                // Constant radiance: only the weights of the vertices before depend on the ray.
-                let c = adj_radiance * throughput * w_b * param_color(flat, p_radiance);
+                // Constant radiance (attached sampling refuses textured emitters): only the
+                // weights of the vertices before depend on the ray.
+                let c = adj_radiance * throughput * w_b * area_radiance(flat, p_radiance, s.uv);
                 phi = add_contribution(phi, Row6::ZERO, c, &log_rows);
             }
         }
@@ -577,12 +578,12 @@ pub fn trace_path<const ADJOINT: bool>(
         let p_opacity = flat.materials[s.material as usize].p_opacity;
         let mut mask_opacity = 1.0f32; // a masked surface's opacity (1: no mask)
         if vertex < globals.max_depth && p_opacity != NO_PARAM {
-            mask_opacity = mask_opacity_at(flat, p_opacity, s.uv);
+            mask_opacity = mask_opacity_at(flat, p_opacity, s.tex_at());
             let u_mask = draw_block(key, pixel, sample, vertex, DIM_LOBE / 4)[(DIM_LOBE % 4) as usize];
             let passes = !(u_mask < mask_opacity);
             if ADJOINT {
                 let g = adj_radiance * radiance * if passes { -1.0 / (1.0 - mask_opacity) } else { 1.0 / mask_opacity };
-                opacity_backward(flat, p_opacity, s.uv, g, sink);
+                opacity_backward(flat, p_opacity, s.tex_at(), g, sink);
             }
             if passes {
                 // An emitter found through the pass counts whole: NEE could not have sampled it.
@@ -600,7 +601,7 @@ pub fn trace_path<const ADJOINT: bool>(
             break;
         }
 
-        let mut bsdf = resolve_bsdf(flat, s.material, s.uv);
+        let mut bsdf = resolve_bsdf(flat, s.material, s.tex_at());
         // A two-sided material seen from the back shades with the flipped normal.
         let mirrored = flat.materials[s.material as usize].two_sided != 0 && s.ns.dot(wi_world) < 0.0;
         let ns = if mirrored { -s.ns } else { s.ns };
@@ -707,7 +708,7 @@ pub fn trace_path<const ADJOINT: bool>(
                 }
                 if ADJOINT {
                     let adj = adj_radiance * throughput * tr * w_n * es.radiance / p_e;
-                    bsdf_backward(flat, s.material, s.uv, &bsdf, wi, wo, false, adj, sink);
+                    bsdf_backward(flat, s.material, s.tex_at(), &bsdf, wi, wo, false, adj, sink);
                     emitter_backward(flat, globals, &es, adj_radiance * throughput * tr * w_n * f / p_e, sink);
                 }
             }
@@ -768,7 +769,7 @@ pub fn trace_path<const ADJOINT: bool>(
         // The path continues: everything later in `radiance` carries the factor f̂(wi, wo).
         if ADJOINT {
             let adj = adj_radiance * safe_div(radiance, bs.value);
-            bsdf_backward(flat, s.material, s.uv, &bsdf, wi, bs.wo, bs.delta, adj, sink);
+            bsdf_backward(flat, s.material, s.tex_at(), &bsdf, wi, bs.wo, bs.delta, adj, sink);
         }
         if attached && let Leaf::Smooth(leaf) = &bsdf.leaves[0] {
             let geometry = HitGeometry {

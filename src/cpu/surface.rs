@@ -12,7 +12,8 @@ use crate::contract::ALPHA_TEXTURE_FLOOR;
 use crate::contract::{
     COATING_TABLE_LEN, MAT_BLEND, MAT_CONDUCTOR, MAT_DIELECTRIC, MAT_PLASTIC, MAT_ROUGH_CONDUCTOR,
     MAT_ROUGH_DIELECTRIC, MAT_ROUGH_PLASTIC, MAT_THIN_DIELECTRIC, Material, NMAP_BUMP, NO_ARRAY, NO_EMITTER, NO_PARAM,
-    SCALAR_TEXTURE, TEX_CHECKER, TEX_NEAREST, TEX_WRAP_CLAMP, TEX_WRAP_MIRROR, TEXTURE_DESC_LEN,
+    SCALAR_TEXTURE, TEX_ATTR_FACE, TEX_ATTR_VERTEX, TEX_CHECKER, TEX_NEAREST, TEX_WRAP_CLAMP, TEX_WRAP_MIRROR,
+    TEXTURE_DESC_LEN,
 };
 use crate::cpu::path::GradSink;
 use crate::scene::flat::FlatScene;
@@ -38,6 +39,30 @@ pub struct Surface {
     pub dpdu: Vec3,
     /// ∂p/∂v of the triangle from its texture coordinates (0 where they are degenerate).
     pub dpdv: Vec3,
+    /// The hit's barycentric coordinates (b1, b2).
+    pub bary: glam::Vec2,
+    /// The hit triangle's index in [`FlatScene::tri_vertices`].
+    pub tri: u32,
+}
+
+/// Where a material's textures are read: the hit's texture coordinates, and for a mesh attribute
+/// its triangle (index in [`FlatScene::tri_vertices`]) and barycentric coordinates (b1, b2)
+/// (twin: `TexAt` of shaders/lib/surface.glsl).
+#[derive(Clone, Copy, Debug)]
+pub struct TexAt {
+    /// Texture coordinates.
+    pub uv: glam::Vec2,
+    /// Barycentric coordinates (b1, b2) in the triangle.
+    pub bary: glam::Vec2,
+    /// The triangle.
+    pub tri: u32,
+}
+
+impl Surface {
+    /// Where this hit's material reads its textures.
+    pub fn tex_at(&self) -> TexAt {
+        TexAt { uv: self.uv, bary: self.bary, tri: self.tri }
+    }
 }
 
 /// Resolves `hit`: the mesh's vertex normals (its face normal where it has none) and texture
@@ -74,7 +99,7 @@ pub fn surface_at(flat: &FlatScene, hit: &Hit) -> Surface {
     let (e0, e1) = (tri.v1 - tri.v0, tri.v2 - tri.v0);
     let dpdu = if det != 0.0 { (d1.y * e0 - d0.y * e1) / det } else { Vec3::ZERO };
     let dpdv = if det != 0.0 { (d0.x * e1 - d1.x * e0) / det } else { Vec3::ZERO };
-    Surface { p, ng, ns, uv, material: m.material, emitter, dpdu, dpdv }
+    Surface { p, ng, ns, uv, material: m.material, emitter, dpdu, dpdv, bary: glam::Vec2::new(hit.b1, hit.b2), tri: id }
 }
 
 /// ∂n/∂x of the unflipped shading normal of [`surface_at`] along the hit's triangle: zero for a
@@ -262,15 +287,46 @@ pub fn texture_footprint(offset: u32, width: u32, height: u32, mode: u32, uv: gl
     )
 }
 
+/// The rows a mesh attribute (`TEX_ATTR_FACE` or `TEX_ATTR_VERTEX` in `mode`) reads at `at`: the
+/// hit triangle's row with weight 1, or its three vertices' rows weighted by the barycentric
+/// coordinates (Mitsuba's `interpolate_attribute`); rows of `dim` values from `offset`. Shared by
+/// the lookup and its gradient (twin of the GLSL's).
+pub fn attribute_footprint(flat: &FlatScene, offset: u32, dim: u32, mode: u32, at: TexAt) -> ([u32; 4], [f32; 4]) {
+    let tv = &flat.tri_vertices[at.tri as usize];
+    if mode & TEX_ATTR_FACE != 0 {
+        let t = offset + dim * (at.tri - flat.meshes[tv.mesh as usize].first_tri);
+        return ([t; 4], [1.0, 0.0, 0.0, 0.0]);
+    }
+    (
+        [offset + dim * tv.i0, offset + dim * tv.i1, offset + dim * tv.i2, offset],
+        [1.0 - at.bary.x - at.bary.y, at.bary.x, at.bary.y, 0.0],
+    )
+}
+
+/// Whether a texture mode is a mesh attribute's.
+fn attribute_mode(mode: u32) -> bool {
+    mode & (TEX_ATTR_FACE | TEX_ATTR_VERTEX) != 0
+}
+
+/// The texels (or mesh attribute rows) a textured material's colour reads at `at`.
+pub fn material_footprint(flat: &FlatScene, m: &Material, at: TexAt) -> ([u32; 4], [f32; 4]) {
+    if attribute_mode(m.tex_mode) {
+        attribute_footprint(flat, m.p_color, 3, m.tex_mode, at)
+    } else {
+        texture_footprint(m.p_color, m.tex_width, m.tex_height, m.tex_mode, texture_uv(m, at.uv))
+    }
+}
+
 /// A textured material's texture coordinates: the hit's `uv` through its `to_uv` rows.
 pub fn texture_uv(m: &Material, uv: glam::Vec2) -> glam::Vec2 {
     let p = Vec3::new(uv.x, uv.y, 1.0);
     glam::Vec2::new(m.uv_row0.dot(p), m.uv_row1.dot(p))
 }
 
-/// A textured material's colour at the hit's texture coordinates `uv`.
-pub fn texture_lookup(params: &[f32], m: &Material, uv: glam::Vec2) -> Vec3 {
-    let (texel, weight) = texture_footprint(m.p_color, m.tex_width, m.tex_height, m.tex_mode, texture_uv(m, uv));
+/// A textured material's colour at `at`.
+pub fn texture_lookup(flat: &FlatScene, m: &Material, at: TexAt) -> Vec3 {
+    let params = &flat.params[..];
+    let (texel, weight) = material_footprint(flat, m, at);
     param_rgb(params, texel[0]) * weight[0]
         + param_rgb(params, texel[1]) * weight[1]
         + param_rgb(params, texel[2]) * weight[2]
@@ -282,37 +338,42 @@ fn scalar_textured(slot: u32) -> bool {
     slot != NO_PARAM && slot & SCALAR_TEXTURE != 0
 }
 
-/// The texels' parameter offsets and weights of the lookup of scalar texture `slot` at the hit's
-/// texture coordinates `uv` (its `to_uv` applied; one value a texel; twin of the GLSL's).
-pub fn scalar_footprint(flat: &FlatScene, slot: u32, uv: glam::Vec2) -> ([u32; 4], [f32; 4]) {
+/// The texels' parameter offsets and weights of the lookup of scalar texture `slot` at `at`: at
+/// its texture coordinates (its `to_uv` applied; one value a texel), or its mesh attribute's rows
+/// (twin of the GLSL's).
+pub fn scalar_footprint(flat: &FlatScene, slot: u32, at: TexAt) -> ([u32; 4], [f32; 4]) {
     let d = (slot & !SCALAR_TEXTURE) as usize;
     let desc = &flat.tables[d..d + TEXTURE_DESC_LEN as usize];
-    let p = Vec3::new(uv.x, uv.y, 1.0);
+    let mode = desc[3].to_bits();
+    if attribute_mode(mode) {
+        return attribute_footprint(flat, desc[0].to_bits(), 1, mode, at);
+    }
+    let p = Vec3::new(at.uv.x, at.uv.y, 1.0);
     let t = glam::Vec2::new(Vec3::new(desc[4], desc[5], desc[6]).dot(p), Vec3::new(desc[7], desc[8], desc[9]).dot(p));
-    let (texel, weight) = texture_footprint(0, desc[1].to_bits(), desc[2].to_bits(), desc[3].to_bits(), t);
+    let (texel, weight) = texture_footprint(0, desc[1].to_bits(), desc[2].to_bits(), mode, t);
     // texture_footprint's offsets step 3 a texel (RGB); these texels hold one value.
     (texel.map(|k| desc[0].to_bits() + k / 3), weight)
 }
 
-/// The value of scalar texture `slot` at `uv`.
-fn scalar_lookup(flat: &FlatScene, slot: u32, uv: glam::Vec2) -> f32 {
-    let (texel, weight) = scalar_footprint(flat, slot, uv);
+/// The value of scalar texture `slot` at `at`.
+fn scalar_lookup(flat: &FlatScene, slot: u32, at: TexAt) -> f32 {
+    let (texel, weight) = scalar_footprint(flat, slot, at);
     flat.params[texel[0] as usize] * weight[0]
         + flat.params[texel[1] as usize] * weight[1]
         + flat.params[texel[2] as usize] * weight[2]
         + flat.params[texel[3] as usize] * weight[3]
 }
 
-/// A blend weight: its parameter, or its texture at `uv`.
-fn scalar_value(flat: &FlatScene, slot: u32, uv: glam::Vec2) -> f32 {
-    if scalar_textured(slot) { scalar_lookup(flat, slot, uv) } else { flat.params[slot as usize] }
+/// A blend weight: its parameter, or its texture at `at`.
+fn scalar_value(flat: &FlatScene, slot: u32, at: TexAt) -> f32 {
+    if scalar_textured(slot) { scalar_lookup(flat, slot, at) } else { flat.params[slot as usize] }
 }
 
-/// A roughness: its parameter, or its texture at `uv` clamped to [`ALPHA_TEXTURE_FLOOR`] as
+/// A roughness: its parameter, or its texture at `at` clamped to [`ALPHA_TEXTURE_FLOOR`] as
 /// Mitsuba's microfacet distribution clamps it.
-fn alpha_value(flat: &FlatScene, slot: u32, uv: glam::Vec2) -> f32 {
+fn alpha_value(flat: &FlatScene, slot: u32, at: TexAt) -> f32 {
     if scalar_textured(slot) {
-        scalar_lookup(flat, slot, uv).max(ALPHA_TEXTURE_FLOOR)
+        scalar_lookup(flat, slot, at).max(ALPHA_TEXTURE_FLOOR)
     } else {
         flat.params[slot as usize]
     }
@@ -321,13 +382,13 @@ fn alpha_value(flat: &FlatScene, slot: u32, uv: glam::Vec2) -> f32 {
 /// A scalar slot's derivative `g` (per image channel): its parameter's, or for a texture the
 /// footprint's texels weighted as the lookup weighs them; a roughness clamped to
 /// [`ALPHA_TEXTURE_FLOOR`] has none (twin: `push_scalar` of `shaders/lib/surface.glsl`).
-fn scalar_backward(flat: &FlatScene, slot: u32, uv: glam::Vec2, g: Vec3, roughness: bool, sink: &mut GradSink<'_>) {
+fn scalar_backward(flat: &FlatScene, slot: u32, at: TexAt, g: Vec3, roughness: bool, sink: &mut GradSink<'_>) {
     if !scalar_textured(slot) {
         sink.add(slot, g);
         return;
     }
-    let (texel, weight) = scalar_footprint(flat, slot, uv);
-    if roughness && scalar_lookup(flat, slot, uv) < ALPHA_TEXTURE_FLOOR {
+    let (texel, weight) = scalar_footprint(flat, slot, at);
+    if roughness && scalar_lookup(flat, slot, at) < ALPHA_TEXTURE_FLOOR {
         return;
     }
     for (t, w) in texel.into_iter().zip(weight) {
@@ -337,21 +398,21 @@ fn scalar_backward(flat: &FlatScene, slot: u32, uv: glam::Vec2, g: Vec3, roughne
     }
 }
 
-/// A mask's opacity at `uv`: its parameter or texture, clipped to [0, 1] as Mitsuba clips it
+/// A mask's opacity at `at`: its parameter or texture, clipped to [0, 1] as Mitsuba clips it
 /// (twin: `mask_opacity_at` of shaders/lib/surface.glsl).
-pub fn mask_opacity_at(flat: &FlatScene, slot: u32, uv: glam::Vec2) -> f32 {
-    scalar_value(flat, slot, uv).clamp(0.0, 1.0)
+pub fn mask_opacity_at(flat: &FlatScene, slot: u32, at: TexAt) -> f32 {
+    scalar_value(flat, slot, at).clamp(0.0, 1.0)
 }
 
-/// Adds `g` (per image channel) times the derivative of a mask's opacity at `uv` to `sink`.
-pub fn opacity_backward(flat: &FlatScene, slot: u32, uv: glam::Vec2, g: Vec3, sink: &mut GradSink<'_>) {
-    scalar_backward(flat, slot, uv, g, false, sink);
+/// Adds `g` (per image channel) times the derivative of a mask's opacity at `at` to `sink`.
+pub fn opacity_backward(flat: &FlatScene, slot: u32, at: TexAt, g: Vec3, sink: &mut GradSink<'_>) {
+    scalar_backward(flat, slot, at, g, false, sink);
 }
 
-fn leaf_from_material(flat: &FlatScene, m: &Material, uv: glam::Vec2) -> Leaf {
+fn leaf_from_material(flat: &FlatScene, m: &Material, at: TexAt) -> Leaf {
     let params = &flat.params[..];
     let color = if m.tex_width > 0 {
-        texture_lookup(params, m, uv)
+        texture_lookup(flat, m, at)
     } else if m.p_color == NO_PARAM {
         Vec3::ZERO // a smooth leaf's constant colour: read below
     } else {
@@ -362,16 +423,16 @@ fn leaf_from_material(flat: &FlatScene, m: &Material, uv: glam::Vec2) -> Leaf {
     match m.tag {
         MAT_ROUGH_CONDUCTOR => Leaf::RoughConductor {
             distribution,
-            alpha: alpha_value(flat, m.p_alpha, uv),
-            alpha_v: alpha_value(flat, m.p_alpha_v, uv),
+            alpha: alpha_value(flat, m.p_alpha, at),
+            alpha_v: alpha_value(flat, m.p_alpha_v, at),
             specular: color,
             eta: m.eta,
             k: m.k,
         },
         MAT_ROUGH_PLASTIC => {
-            let at = m.table as usize;
+            let t = m.table as usize;
             let mut table = [0.0; COATING_TABLE_LEN as usize];
-            table.copy_from_slice(&flat.tables[at..at + COATING_TABLE_LEN as usize]);
+            table.copy_from_slice(&flat.tables[t..t + COATING_TABLE_LEN as usize]);
             Leaf::RoughPlastic(PlasticLeaf {
                 distribution,
                 alpha: params[m.p_alpha as usize],
@@ -385,7 +446,7 @@ fn leaf_from_material(flat: &FlatScene, m: &Material, uv: glam::Vec2) -> Leaf {
         }
         MAT_ROUGH_DIELECTRIC => Leaf::RoughDielectric(RoughDielectricLeaf {
             distribution,
-            alpha: alpha_value(flat, m.p_alpha, uv),
+            alpha: alpha_value(flat, m.p_alpha, at),
             reflectance: if m.p_color == NO_PARAM { m.uv_row0 } else { param_rgb(params, m.p_color) },
             transmittance: if m.p_weight == NO_PARAM { m.k } else { param_rgb(params, m.p_weight) },
             eta: m.eta.x,
@@ -421,23 +482,23 @@ fn leaf_from_material(flat: &FlatScene, m: &Material, uv: glam::Vec2) -> Leaf {
     }
 }
 
-/// The BSDF of material `id` with the current parameter values at texture coordinates `uv`.
-pub fn resolve_bsdf(flat: &FlatScene, id: u32, uv: glam::Vec2) -> Bsdf {
+/// The BSDF of material `id` with the current parameter values at `at`.
+pub fn resolve_bsdf(flat: &FlatScene, id: u32, at: TexAt) -> Bsdf {
     let m = &flat.materials[id as usize];
     if m.tag == MAT_BLEND {
-        let a = leaf_from_material(flat, &flat.materials[m.child0 as usize], uv);
-        let b = leaf_from_material(flat, &flat.materials[m.child1 as usize], uv);
-        Bsdf { leaves: [a, b], weight: scalar_value(flat, m.p_weight, uv), blend: true, perturbed: None }
+        let a = leaf_from_material(flat, &flat.materials[m.child0 as usize], at);
+        let b = leaf_from_material(flat, &flat.materials[m.child1 as usize], at);
+        Bsdf { leaves: [a, b], weight: scalar_value(flat, m.p_weight, at), blend: true, perturbed: None }
     } else {
-        let a = leaf_from_material(flat, m, uv);
+        let a = leaf_from_material(flat, m, at);
         Bsdf { leaves: [a, a], weight: 0.0, blend: false, perturbed: None }
     }
 }
 
 /// Scatters ∂/∂(texels) of a lookup: per-channel gradient `g` split by the footprint's weights
 /// (a nearest or checkerboard lookup reads one texel: nothing is added for the rest).
-pub fn texture_backward(m: &Material, uv: glam::Vec2, g: Vec3, sink: &mut GradSink<'_>) {
-    let (texel, weight) = texture_footprint(m.p_color, m.tex_width, m.tex_height, m.tex_mode, texture_uv(m, uv));
+pub fn texture_backward(flat: &FlatScene, m: &Material, at: TexAt, g: Vec3, sink: &mut GradSink<'_>) {
+    let (texel, weight) = material_footprint(flat, m, at);
     for (t, w) in texel.into_iter().zip(weight) {
         if w != 0.0 {
             sink.add_rgb(t, g * w);
@@ -445,7 +506,7 @@ pub fn texture_backward(m: &Material, uv: glam::Vec2, g: Vec3, sink: &mut GradSi
     }
 }
 
-fn leaf_backward(flat: &FlatScene, m: &Material, uv: glam::Vec2, g: &LeafGrad, sink: &mut GradSink<'_>) {
+fn leaf_backward(flat: &FlatScene, m: &Material, at: TexAt, g: &LeafGrad, sink: &mut GradSink<'_>) {
     if is_smooth_tag(m.tag) || m.tag == MAT_ROUGH_DIELECTRIC {
         // A dielectric's reflectance and transmittance (a smooth leaf's transmittance parameter
         // sits in p_alpha, a rough one's in p_weight); a constant has no parameter.
@@ -456,21 +517,21 @@ fn leaf_backward(flat: &FlatScene, m: &Material, uv: glam::Vec2, g: &LeafGrad, s
             }
         }
         if m.tag == MAT_ROUGH_DIELECTRIC {
-            scalar_backward(flat, m.p_alpha, uv, g.alpha, true, sink);
+            scalar_backward(flat, m.p_alpha, at, g.alpha, true, sink);
         }
         return;
     }
     if m.tex_width > 0 {
-        texture_backward(m, uv, g.color, sink);
+        texture_backward(flat, m, at, g.color, sink);
     } else {
         sink.add_rgb(m.p_color, g.color);
     }
     if m.tag == MAT_ROUGH_CONDUCTOR && m.p_alpha_v != m.p_alpha {
-        scalar_backward(flat, m.p_alpha, uv, g.alpha, true, sink);
-        scalar_backward(flat, m.p_alpha_v, uv, g.alpha_v, true, sink);
+        scalar_backward(flat, m.p_alpha, at, g.alpha, true, sink);
+        scalar_backward(flat, m.p_alpha_v, at, g.alpha_v, true, sink);
     } else if m.tag == MAT_ROUGH_CONDUCTOR || m.tag == MAT_ROUGH_PLASTIC {
         // Isotropic: α_u and α_v are one parameter.
-        scalar_backward(flat, m.p_alpha, uv, g.alpha + g.alpha_v, true, sink);
+        scalar_backward(flat, m.p_alpha, at, g.alpha + g.alpha_v, true, sink);
     }
 }
 
@@ -485,7 +546,7 @@ fn is_smooth_tag(tag: u32) -> bool {
 pub fn bsdf_backward(
     flat: &FlatScene,
     material: u32,
-    uv: glam::Vec2,
+    at: TexAt,
     bsdf: &Bsdf,
     wi: Vec3,
     wo: Vec3,
@@ -496,11 +557,11 @@ pub fn bsdf_backward(
     let g = bsdf_sample_grad(bsdf, wi, wo, delta, adj);
     let m = &flat.materials[material as usize];
     if m.tag == MAT_BLEND {
-        leaf_backward(flat, &flat.materials[m.child0 as usize], uv, &g.leaves[0], sink);
-        leaf_backward(flat, &flat.materials[m.child1 as usize], uv, &g.leaves[1], sink);
-        scalar_backward(flat, m.p_weight, uv, g.weight, false, sink);
+        leaf_backward(flat, &flat.materials[m.child0 as usize], at, &g.leaves[0], sink);
+        leaf_backward(flat, &flat.materials[m.child1 as usize], at, &g.leaves[1], sink);
+        scalar_backward(flat, m.p_weight, at, g.weight, false, sink);
     } else {
-        leaf_backward(flat, m, uv, &g.leaves[0], sink);
+        leaf_backward(flat, m, at, &g.leaves[0], sink);
     }
 }
 

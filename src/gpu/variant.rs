@@ -142,7 +142,12 @@ pub fn param_kinds(flat: &FlatScene, env: (u32, u32), begin: u32, end: u32) -> P
     let light = |l: &crate::contract::DeltaLight| {
         overlaps(l.p_intensity, 3) || overlaps(l.p_scale, 1) || overlaps(l.tex, 3 * l.tex_width * l.tex_height)
     };
-    if flat.emitters.iter().any(|e| overlaps(e.p_radiance, 3)) || flat.lights.iter().any(light) {
+    // An area emitter's RGB radiance, or its texture's RGB texels (`SCALAR_TEXTURE`).
+    let emitter = |e: &crate::contract::EmitterTri| {
+        let (offset, texels) = scalar_slot_range(flat, e.p_radiance);
+        overlaps(offset, 3 * texels)
+    };
+    if flat.emitters.iter().any(emitter) || flat.lights.iter().any(light) {
         k = k.union(ParamKinds::EMISSION);
     }
     if overlaps(env.0, env.1) {

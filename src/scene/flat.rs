@@ -14,8 +14,8 @@ use crate::contract::{
     FIELD_GRID_REPEAT, FieldDesc, LIGHT_DIRECTIONAL, LIGHT_POINT, LIGHT_PROJECTOR, LIGHT_SPOT, MAT_BLEND,
     MAT_CONDUCTOR, MAT_DIELECTRIC, MAT_DIFFUSE, MAT_NULL, MAT_PLASTIC, MAT_ROUGH_CONDUCTOR, MAT_ROUGH_DIELECTRIC,
     MAT_ROUGH_PLASTIC, MAT_THIN_DIELECTRIC, Material as GpuMaterial, MediumDesc, MeshShading, NMAP_BUMP, NO_ARRAY,
-    NO_EMITTER, NO_MEDIUM, NO_PARAM, PHASE_HG, PHASE_ISOTROPIC, SCALAR_TEXTURE, TEX_CHECKER, TEX_NEAREST,
-    TEX_WRAP_CLAMP, TEX_WRAP_MIRROR, TriVertices,
+    NO_EMITTER, NO_MEDIUM, NO_PARAM, PHASE_HG, PHASE_ISOTROPIC, SCALAR_TEXTURE, TEX_ATTR_FACE, TEX_ATTR_VERTEX,
+    TEX_CHECKER, TEX_NEAREST, TEX_WRAP_CLAMP, TEX_WRAP_MIRROR, TriVertices,
 };
 use crate::error::Result;
 use crate::params::ParamId;
@@ -186,6 +186,7 @@ impl FlatScene {
         let mut tables = coating_tables(&mut materials, scene.params.values());
         normal_map_tables(scene, &mut materials, &mut tables);
         scalar_texture_tables(scene, &mut materials, &mut tables);
+        area_texture_tables(scene, &mut emitters, &mut tables);
         let (media, fields, majorants) = flatten_media(scene);
         let env_cells = env_cells(scene)?;
         let lights = scene.lights.iter().map(|l| flatten_light(scene, l)).collect();
@@ -424,6 +425,14 @@ fn albedo_fields(scene: &Scene, albedo: Albedo) -> GpuMaterial {
             uv_row1: to_uv[1],
             ..Default::default()
         },
+        // tex_width × tex_height is the number of rows (the kernels read neither).
+        Albedo::Attribute { values, source } => GpuMaterial {
+            p_color: offset(values),
+            tex_width: scene.params.entry(values).len / 3,
+            tex_height: 1,
+            tex_mode: attribute_mode(source),
+            ..Default::default()
+        },
         Albedo::Bitmap(t) => {
             let t = &scene.textures[t.0 as usize];
             GpuMaterial {
@@ -442,7 +451,9 @@ fn albedo_fields(scene: &Scene, albedo: Albedo) -> GpuMaterial {
 /// The mean of a colour over its channels and (textured) texels: Mitsuba's `Texture::mean`.
 fn albedo_mean(scene: &Scene, albedo: Albedo) -> f32 {
     let values = match albedo {
-        Albedo::Rgb(id) | Albedo::Checker { colors: id, .. } => scene.params.get(id),
+        Albedo::Rgb(id) | Albedo::Checker { colors: id, .. } | Albedo::Attribute { values: id, .. } => {
+            scene.params.get(id)
+        }
         Albedo::Bitmap(t) => scene.params.get(scene.textures[t.0 as usize].texels),
     };
     (values.iter().map(|&v| f64::from(v)).sum::<f64>() / values.len().max(1) as f64) as f32
@@ -594,7 +605,11 @@ fn scalar_texture_tables(scene: &Scene, materials: &mut [GpuMaterial], tables: &
             None => {
                 let t = &scene.scalar_textures[index as usize];
                 let at = tables.len() as u32;
-                let mode = if t.checker { TEX_CHECKER } else { texture_mode(t.nearest, t.wrap) };
+                let mode = match t.attribute {
+                    Some(source) => attribute_mode(source),
+                    None if t.checker => TEX_CHECKER,
+                    None => texture_mode(t.nearest, t.wrap),
+                };
                 let words = [scene.params.entry(t.texels).offset, t.width, t.height, mode];
                 tables.extend(words.map(f32::from_bits));
                 tables.extend(t.to_uv[0].to_array());
@@ -617,6 +632,40 @@ fn scalar_texture_tables(scene: &Scene, materials: &mut [GpuMaterial], tables: &
         }
         place(&mut m.p_opacity, tables);
     }
+}
+
+/// Appends the descriptor of every textured area emitter's radiance (`TEXTURE_DESC_LEN` words as
+/// `SCALAR_TEXTURE` states, the texels RGB) to `tables` and points its triangles'
+/// `p_radiance` at it, `SCALAR_TEXTURE` or-ed with its offset there.
+fn area_texture_tables(scene: &Scene, emitters: &mut [EmitterTri], tables: &mut Vec<f32>) {
+    let mut placed: Vec<(u32, u32)> = Vec::new();
+    for e in emitters.iter_mut() {
+        let Some(t) = scene.textures.iter().position(|t| scene.params.entry(t.texels).offset == e.p_radiance) else {
+            continue;
+        };
+        if !scene.meshes.iter().any(|m| m.emitter_texture.is_some_and(|id| id.0 as usize == t)) {
+            continue;
+        }
+        let at = match placed.iter().find(|(i, _)| *i == t as u32) {
+            Some(&(_, at)) => at,
+            None => {
+                let tex = &scene.textures[t];
+                let at = tables.len() as u32;
+                let words = [e.p_radiance, tex.width, tex.height, texture_mode(tex.nearest, tex.wrap)];
+                tables.extend(words.map(f32::from_bits));
+                tables.extend(tex.to_uv[0].to_array());
+                tables.extend(tex.to_uv[1].to_array());
+                placed.push((t as u32, at));
+                at
+            }
+        };
+        e.p_radiance = SCALAR_TEXTURE | at;
+    }
+}
+
+/// `Material::tex_mode` of a mesh attribute: per vertex or per triangle.
+fn attribute_mode(source: crate::scene::AttributeSource) -> u32 {
+    if source.per_vertex { TEX_ATTR_VERTEX } else { TEX_ATTR_FACE }
 }
 
 /// `Material::tex_mode`'s filter and wrap bits.

@@ -172,6 +172,26 @@ pub enum Albedo {
         /// `u' = dot(to_uv[0], (u, v, 1))`, `v' = dot(to_uv[1], (u, v, 1))`.
         to_uv: [Vec3; 2],
     },
+    /// Mitsuba's `mesh_attribute`: an RGB attribute of the mesh (3 values a triangle or a
+    /// vertex, one parameter) read at the hit.
+    Attribute {
+        /// The attribute's values.
+        values: ParamId,
+        /// Whose triangles or vertices they follow.
+        source: AttributeSource,
+    },
+}
+
+/// What a mesh attribute texture (Mitsuba's `mesh_attribute`) reads: its values are one row per
+/// triangle (`per_vertex` false: the hit triangle's row) or per vertex (the hit triangle's three
+/// rows interpolated by the hit's barycentric coordinates) of mesh `mesh`, the one mesh whose
+/// material reads it.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct AttributeSource {
+    /// Index in [`Scene::meshes`] of the mesh the values belong to.
+    pub mesh: u32,
+    /// One row per vertex (else per triangle).
+    pub per_vertex: bool,
 }
 
 /// A surface material. Differentiable values are parameters; the rest are constants.
@@ -333,8 +353,12 @@ pub struct Mesh {
     pub indices: Vec<[u32; 3]>,
     /// The material.
     pub material: MaterialId,
-    /// RGB radiance parameter if the mesh is an area emitter.
+    /// RGB radiance parameter if the mesh is an area emitter (the texels of `emitter_texture`
+    /// where it has one).
     pub emitter: Option<ParamId>,
+    /// A textured area emitter's radiance (Mitsuba's `area` with a `bitmap` `radiance`), looked
+    /// up at the hit's texture coordinates.
+    pub emitter_texture: Option<TextureId>,
     /// The medium inside the mesh (a closed surface), if any.
     pub interior: Option<medium::MediumId>,
 }
@@ -717,27 +741,7 @@ impl Scene {
         radiance: Option<Vec3>,
     ) -> Result<()> {
         let mut geometry = geometry;
-        let before = geometry.indices.len();
-        let mut overflowed = 0;
-        geometry.indices.retain(|t| {
-            let p = t.map(|i| geometry.positions.get(i as usize).copied().unwrap_or(Vec3::NAN));
-            let area = shapes::triangle_area(p[0], p[1], p[2]);
-            if area.is_infinite() && p.iter().all(|v| v.is_finite()) {
-                overflowed += 1;
-            }
-            area.is_finite() && area > 0.0
-        });
-        let dropped = before - geometry.indices.len();
-        if overflowed > 0 {
-            self.warn(format!(
-                "mesh '{name}': dropped {overflowed} triangle(s) of {before} whose area overflows 32-bit floats \
-                 (coordinates too large; scale the mesh down)"
-            ));
-            self.overflowed_triangles += overflowed;
-        }
-        if dropped > overflowed {
-            self.warn(format!("mesh '{name}': dropped {} degenerate triangle(s) of {before}", dropped - overflowed));
-        }
+        self.prune_triangles(name, &mut geometry);
         let emitter = match radiance {
             Some(r) => {
                 Some(self.params.add(&format!("{name}.emitter.radiance.value"), &r.to_array(), bounds::RADIANCE)?)
@@ -752,9 +756,64 @@ impl Scene {
             indices: geometry.indices,
             material,
             emitter,
+            emitter_texture: None,
             interior: None,
         });
         Ok(())
+    }
+
+    /// Points the mesh attributes' [`AttributeSource::mesh`] at their meshes' new places after the
+    /// meshes were reordered (mesh `old` is now `new_index[old]`).
+    pub(crate) fn renumber_attribute_meshes(&mut self, new_index: &[usize]) {
+        let renumber = |s: &mut AttributeSource| s.mesh = new_index[s.mesh as usize] as u32;
+        for m in &mut self.materials {
+            match m {
+                Material::Diffuse { albedo: a }
+                | Material::RoughConductor { specular: a, .. }
+                | Material::RoughPlastic { diffuse: a, .. }
+                | Material::SmoothPlastic { diffuse: a, .. } => {
+                    if let Albedo::Attribute { source, .. } = a {
+                        renumber(source);
+                    }
+                }
+                _ => {}
+            }
+        }
+        for t in &mut self.scalar_textures {
+            if let Some(source) = &mut t.attribute {
+                renumber(source);
+            }
+        }
+    }
+
+    /// Drops `geometry`'s degenerate (zero-area or non-finite) triangles, with their rows of the
+    /// per-face attributes, warning with a count; [`Scene::add_mesh`] does this, and a loader
+    /// that reads per-face attributes before adding the mesh does it first (then nothing is left
+    /// to drop).
+    pub(crate) fn prune_triangles(&mut self, name: &str, geometry: &mut shapes::Geometry) {
+        let before = geometry.indices.len();
+        let mut overflowed = 0;
+        let positions = std::mem::take(&mut geometry.positions);
+        geometry.retain_triangles(|t| {
+            let p = t.map(|i| positions.get(i as usize).copied().unwrap_or(Vec3::NAN));
+            let area = shapes::triangle_area(p[0], p[1], p[2]);
+            if area.is_infinite() && p.iter().all(|v| v.is_finite()) {
+                overflowed += 1;
+            }
+            area.is_finite() && area > 0.0
+        });
+        geometry.positions = positions;
+        let dropped = before - geometry.indices.len();
+        if overflowed > 0 {
+            self.warn(format!(
+                "mesh '{name}': dropped {overflowed} triangle(s) of {before} whose area overflows 32-bit floats \
+                 (coordinates too large; scale the mesh down)"
+            ));
+            self.overflowed_triangles += overflowed;
+        }
+        if dropped > overflowed {
+            self.warn(format!("mesh '{name}': dropped {} degenerate triangle(s) of {before}", dropped - overflowed));
+        }
     }
 
     /// Adds a bitmap texture whose texels become the parameter `name`.
@@ -994,6 +1053,38 @@ impl Scene {
                 }
             }
         }
+        let attribute_len = |values: ParamId, source: AttributeSource, dim: usize, what: &str| -> Result<()> {
+            let len = self.params.entry(values).len as usize;
+            let expected = self
+                .meshes
+                .get(source.mesh as usize)
+                .map(|m| dim * if source.per_vertex { m.positions.len() } else { m.indices.len() });
+            if expected != Some(len) {
+                return Err(err(
+                    format!("{what} '{}'", self.params.entry(values).name),
+                    format!("a mesh attribute of {len} values that does not match mesh {}", source.mesh),
+                ));
+            }
+            Ok(())
+        };
+        for m in &self.materials {
+            let albedos = match *m {
+                Material::Diffuse { albedo } => vec![albedo],
+                Material::RoughConductor { specular, .. } => vec![specular],
+                Material::RoughPlastic { diffuse, .. } | Material::SmoothPlastic { diffuse, .. } => vec![diffuse],
+                _ => Vec::new(),
+            };
+            for a in albedos {
+                if let Albedo::Attribute { values, source } = a {
+                    attribute_len(values, source, 3, "colour")?;
+                }
+            }
+        }
+        for t in &self.scalar_textures {
+            if let Some(source) = t.attribute {
+                attribute_len(t.texels, source, 1, "scalar texture")?;
+            }
+        }
         for m in &self.meshes {
             let n = m.positions.len();
             let at = || format!("mesh '{}'", m.name);
@@ -1027,6 +1118,16 @@ impl Scene {
                 if area <= 0.0 {
                     return Err(err(at(), "is an emitter with zero area".into()));
                 }
+            }
+            match (m.emitter, m.emitter_texture) {
+                (Some(p), None) if self.params.entry(p).len != 3 => {
+                    return Err(err(at(), "its radiance is not one RGB value".into()));
+                }
+                (Some(p), Some(t)) if self.textures.get(t.0 as usize).is_none_or(|t| t.texels != p) => {
+                    return Err(err(at(), "its radiance texture does not exist or is not its radiance".into()));
+                }
+                (None, Some(_)) => return Err(err(at(), "a radiance texture without an emitter".into())),
+                _ => {}
             }
         }
         let c = &self.camera;

@@ -1,4 +1,4 @@
-//! Textures on scalar parameters (roughness, blend weight): one-channel texels that are one parameter.
+//! Textures on scalar parameters (roughness, blend weight): one-channel texels (or a mesh attribute) that are one parameter.
 
 use glam::Vec3;
 
@@ -27,6 +27,10 @@ pub struct ScalarTexture {
     pub checker: bool,
     /// `u' = dot(to_uv[0], (u, v, 1))`, `v' = dot(to_uv[1], (u, v, 1))`.
     pub to_uv: [Vec3; 2],
+    /// Mitsuba's `mesh_attribute`: the texels are a one-value attribute of a mesh, read at the
+    /// hit triangle (or interpolated between its vertices) instead of at texture coordinates
+    /// (`width` is then the number of values, `height` 1; lookups read neither).
+    pub attribute: Option<super::AttributeSource>,
 }
 
 impl super::Scene {

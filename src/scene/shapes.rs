@@ -13,6 +13,59 @@ pub struct Geometry {
     pub uvs: Option<Vec<Vec2>>,
     /// Triangles, counter-clockwise seen from the side the normals point to.
     pub indices: Vec<[u32; 3]>,
+    /// Per-vertex and per-face attributes read from the file (a PLY's other properties), under
+    /// Mitsuba's names (`vertex_color`, `face_weight`, …).
+    pub attributes: Vec<MeshAttribute>,
+}
+
+/// One attribute of a mesh (Mitsuba's mesh attributes): `dim` values per vertex (`vertex_…`) or
+/// per triangle (`face_…`; a polygon's values repeated for each of its fan's triangles).
+#[derive(Clone, Debug, PartialEq)]
+pub struct MeshAttribute {
+    /// Mitsuba's name: `vertex_` or `face_` then the property's prefix (`vertex_color`).
+    pub name: String,
+    /// Values per vertex (true) or per triangle (false).
+    pub per_vertex: bool,
+    /// Values per vertex or triangle (1 or 3; 4 for an RGBA colour).
+    pub dim: u32,
+    /// The values, `dim` a vertex or triangle, in their order.
+    pub values: Vec<f32>,
+}
+
+impl Geometry {
+    /// Keeps the triangles for which `keep` holds, with their rows of the per-face attributes.
+    ///
+    /// ```
+    /// use pathgrad::scene::shapes::{MeshAttribute, quad};
+    /// use glam::Vec3;
+    ///
+    /// let mut g = quad(Vec3::ZERO, Vec3::X, Vec3::Y);
+    /// g.attributes.push(MeshAttribute { name: "face_weight".into(), per_vertex: false, dim: 1, values: vec![0.25, 0.75] });
+    /// g.retain_triangles(|t| t[2] == 3);
+    /// assert_eq!(g.indices, [[0, 2, 3]]);
+    /// assert_eq!(g.attribute("face_weight").unwrap().values, [0.75]);
+    /// ```
+    pub fn retain_triangles(&mut self, mut keep: impl FnMut(&[u32; 3]) -> bool) {
+        let kept: Vec<bool> = self.indices.iter().map(&mut keep).collect();
+        if kept.iter().all(|&k| k) {
+            return;
+        }
+        let mut at = 0;
+        self.indices.retain(|_| {
+            at += 1;
+            kept[at - 1]
+        });
+        for a in self.attributes.iter_mut().filter(|a| !a.per_vertex) {
+            let dim = a.dim as usize;
+            a.values =
+                a.values.chunks(dim).zip(&kept).filter(|(_, k)| **k).flat_map(|(row, _)| row.iter().copied()).collect();
+        }
+    }
+
+    /// The attribute named `name`, if the mesh has it.
+    pub fn attribute(&self, name: &str) -> Option<&MeshAttribute> {
+        self.attributes.iter().find(|a| a.name == name)
+    }
 }
 
 impl Geometry {
@@ -81,6 +134,7 @@ pub fn quad(center: Vec3, u: Vec3, v: Vec3) -> Geometry {
         normals: Some(vec![n; 4]),
         uvs: Some(vec![Vec2::new(0.0, 0.0), Vec2::new(1.0, 0.0), Vec2::new(1.0, 1.0), Vec2::new(0.0, 1.0)]),
         indices: vec![[0, 1, 2], [0, 2, 3]],
+        attributes: Vec::new(),
     }
 }
 

@@ -117,6 +117,31 @@ def write_ply_quad_uv_binary(path):
     path.write_bytes(head.encode() + body)
 
 
+def write_ply_attributes(path):
+    """Icosphere (1 subdivision) as binary little-endian PLY with vertex normals and Mitsuba mesh
+    attributes: `color_0 color_1 color_2` per vertex (`vertex_color`, a smooth function of the
+    position), `red green blue` and `weight_0` per face (`face_color`, `face_weight`, patterns of
+    the face index); every value in [0.1, 0.9]."""
+    v, faces = icosphere(1)
+    head = "\n".join(["ply", "format binary_little_endian 1.0",
+                      "comment icosphere, 1 subdivision, vertex normals, mesh attributes",
+                      f"element vertex {len(v)}", "property float x", "property float y", "property float z",
+                      "property float nx", "property float ny", "property float nz",
+                      "property float color_0", "property float color_1", "property float color_2",
+                      f"element face {len(faces)}", "property list uchar int vertex_indices",
+                      "property float red", "property float green", "property float blue",
+                      "property float weight_0", "end_header"]) + "\n"
+    body = b""
+    for p in v:
+        color = 0.5 + 0.4 * np.array([p[0], p[1] * p[2], -p[2]])
+        body += struct.pack("<9f", *p, *p, *color)
+    for i, f in enumerate(faces):
+        color = [0.1 + 0.8 * ((i * 37) % 10) / 9, 0.1 + 0.8 * ((i * 11) % 7) / 6, 0.1 + 0.8 * ((i * 5) % 4) / 3]
+        weight = 0.1 + 0.8 * ((i * 7) % 5) / 4
+        body += struct.pack("<B3i4f", 3, *f, *color, weight)
+    path.write_bytes(head.encode() + body)
+
+
 def pedestal():
     """A low-poly stand-in for mitsuba-data's 575 KB `sphere_base.obj` (a pedestal, not a sphere):
     a closed solid of revolution about y through the original's profile, 24 segments; vertices and
@@ -404,6 +429,7 @@ def main():
     write_obj_quad_uv_wide(DATA / "quad_uv_wide.obj")
     write_ply_icosahedron_ascii(DATA / "icosahedron_ascii.ply")
     write_ply_quad_uv_binary(DATA / "quad_uv_binary.ply")
+    write_ply_attributes(DATA / "icosphere_attributes.ply")
     write_obj_pedestal(DATA / "pedestal.obj")
     write_obj_cube_centered(DATA / "unit_cube_centered.obj")
     write_obj_background(DATA / "background.obj")

@@ -48,6 +48,8 @@ fn gpu_equals_cpu_per_path_on_every_builtin_and_test_scene() {
         "bsdf_mask",
         "texture_mask_opacity",
         "bsdf_blend_conductor",
+        "texture_mesh_attribute",
+        "emitter_area_texture",
     ] {
         scenes.push(crate::support::scenes::conformance(name));
     }

@@ -281,6 +281,30 @@ fn issue_31_mask_opacity_matches_finite_differences() {
     );
 }
 
+/// Mesh attributes (issue 31: Mitsuba's `mesh_attribute`), per vertex as a colour and per face as a
+/// colour and a blend weight: GPU and CPU image gradients per path, and each against central
+/// finite differences.
+#[test]
+fn issue_31_mesh_attributes_gpu_equal_cpu_and_match_finite_differences() {
+    let gpu = TestGpu::new();
+    let params = ["ball.vertex_color", "gem.face_color", "orb.face_weight"];
+    image_gradients_agree(&gpu, vec![(scenes::conformance("texture_mesh_attribute"), params.to_vec())]);
+    check_finite_differences(
+        &gpu,
+        params.iter().map(|&p| (scenes::conformance("texture_mesh_attribute"), p)).collect(),
+    );
+}
+
+/// A textured area emitter's texels (issue 31): GPU and CPU image gradients per path, and against
+/// central finite differences.
+#[test]
+fn issue_31_textured_area_emitter_gpu_equal_cpu_and_match_finite_differences() {
+    let gpu = TestGpu::new();
+    let scene = scenes::conformance("emitter_area_texture");
+    image_gradients_agree(&gpu, vec![(scene.clone(), vec!["panel.emitter.radiance.data", "ball.bsdf.alpha.value"])]);
+    check_finite_differences(&gpu, vec![(scene, "panel.emitter.radiance.data")]);
+}
+
 /// The textured lights' intensity, texels, scale and constant irradiance (issue 31) against
 /// central finite differences.
 #[test]

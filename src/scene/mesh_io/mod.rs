@@ -133,6 +133,74 @@ mod tests {
         assert_eq!(obj.indices, ascii.indices);
     }
 
+    /// Mitsuba's mesh attributes: the vertices' and faces' other properties grouped under its
+    /// names, the same from ASCII and binary payloads; a quad's face values repeat for its two
+    /// triangles; runs that fit no naming scheme are left out.
+    #[test]
+    fn ply_attributes_take_mitsubas_names() {
+        let header = |format: &str| {
+            format!(
+                "ply\nformat {format} 1.0\nelement vertex 4\nproperty float x\nproperty float y\nproperty float z\n\
+                 property float red\nproperty float green\nproperty float blue\nproperty float temp_0\n\
+                 property float odd_x\nproperty float odd_y\nelement face 2\nproperty list uchar int vertex_indices\n\
+                 property float color_0\nproperty float color_1\nproperty float color_2\nproperty float weight_0\n\
+                 property float dir_r\nproperty float dir_g\nproperty float dir_b\nend_header\n"
+            )
+        };
+        let vertices: [[f32; 9]; 4] = [
+            [0.0, 0.0, 0.0, 0.1, 0.2, 0.3, 5.0, 1.0, 1.0],
+            [1.0, 0.0, 0.0, 0.4, 0.5, 0.6, 6.0, 1.0, 1.0],
+            [1.0, 1.0, 0.0, 0.7, 0.8, 0.9, 7.0, 1.0, 1.0],
+            [0.0, 1.0, 0.0, 1.0, 0.0, 0.5, 8.0, 1.0, 1.0],
+        ];
+        let faces: [(&[i32], [f32; 7]); 2] = [
+            (&[0, 1, 2, 3], [0.25, 0.5, 0.75, 0.125, 1.0, 2.0, 3.0]),
+            (&[0, 2, 1], [1.0, 0.0, 0.5, 0.875, 4.0, 5.0, 6.0]),
+        ];
+        let mut ascii = header("ascii");
+        for v in &vertices {
+            ascii += &format!("{}\n", v.map(|x| x.to_string()).join(" "));
+        }
+        for (list, values) in &faces {
+            let list: Vec<String> = list.iter().map(|i| i.to_string()).collect();
+            ascii += &format!("{} {} {}\n", list.len(), list.join(" "), values.map(|x| x.to_string()).join(" "));
+        }
+        let mut binary = header("binary_little_endian").into_bytes();
+        for v in &vertices {
+            v.iter().for_each(|x| binary.extend(x.to_le_bytes()));
+        }
+        for (list, values) in &faces {
+            binary.push(list.len() as u8);
+            list.iter().for_each(|i| binary.extend(i.to_le_bytes()));
+            values.iter().for_each(|x| binary.extend(x.to_le_bytes()));
+        }
+        let dir = tempfile::tempdir().unwrap();
+        let (a, b) = (dir.path().join("a.ply"), dir.path().join("b.ply"));
+        std::fs::write(&a, ascii).unwrap();
+        std::fs::write(&b, binary).unwrap();
+        let g = load_ply(&a).unwrap();
+        assert_eq!(g, load_ply(&b).unwrap());
+        let names: Vec<&str> = g.attributes.iter().map(|a| a.name.as_str()).collect();
+        // `odd_x odd_y` is a run of 2: Mitsuba ignores it.
+        assert_eq!(names, ["vertex_color", "vertex_temp", "face_color", "face_weight", "face_dir_color"]);
+        let color = g.attribute("vertex_color").unwrap();
+        assert!(color.per_vertex && color.dim == 3);
+        assert_eq!(color.values[3..6], [0.4, 0.5, 0.6]);
+        assert_eq!(g.attribute("vertex_temp").unwrap().values, [5.0, 6.0, 7.0, 8.0]);
+        // The quad fans into two triangles, each with the quad's values.
+        assert_eq!(g.indices.len(), 3);
+        let weight = g.attribute("face_weight").unwrap();
+        assert!(!weight.per_vertex && weight.dim == 1);
+        assert_eq!(weight.values, [0.125, 0.125, 0.875]);
+        assert_eq!(g.attribute("face_color").unwrap().values[6..9], [1.0, 0.0, 0.5]);
+        // Dropping a triangle drops its rows.
+        let mut pruned = g.clone();
+        pruned.retain_triangles(|t| t[2] != 3);
+        assert_eq!(pruned.indices, [[0, 1, 2], [0, 2, 1]]);
+        assert_eq!(pruned.attribute("face_weight").unwrap().values, [0.125, 0.875]);
+        assert_eq!(pruned.attribute("vertex_temp").unwrap().values.len(), 4);
+    }
+
     /// The binary decoder (issue 38) reads every scalar type in both byte orders, skips the
     /// properties and lists it does not use, and refuses a negative list length.
     #[test]

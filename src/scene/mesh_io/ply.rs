@@ -18,7 +18,7 @@ use crate::error::{Error, Result};
 const STREAM_BYTES: usize = 1 << 20;
 /// Vertices decoded at once (in parallel) when every vertex property is a scalar.
 const VERTEX_BATCH: usize = 1 << 16;
-use crate::scene::shapes::Geometry;
+use crate::scene::shapes::{Geometry, MeshAttribute};
 
 /// The vertex properties that may hold texture coordinates, in order of preference.
 const PLY_UV_NAMES: [(&str, &str); 4] =
@@ -31,7 +31,11 @@ const PLY_FACE_LISTS: [&str; 2] = ["vertex_indices", "vertex_index"];
 /// Reads the `vertex` element's `x y z` (any numeric type), optional `nx ny nz`, optional texture
 /// coordinates (`u v`, `s t`, `texture_u texture_v` or `texture_s texture_t`, as they are), and the
 /// `face` element's `vertex_indices` (or `vertex_index`) lists of 3 or more indices, fan-triangulated.
-/// Other elements and properties are ignored.
+/// The vertices' and faces' other scalar properties become [`MeshAttribute`]s under Mitsuba's
+/// names (`attribute_specs`): `r g b` (or `red green blue`) as `vertex_color`/`face_color`, and
+/// runs of `PREFIX_x y z`, `PREFIX_r g b`, `PREFIX_0 1 2` or `PREFIX_1 2 3` (1 or 3 of them) as
+/// `vertex_PREFIX`/`face_PREFIX` (`PREFIX_color` for the `r g b` run); a polygon's face values are
+/// repeated for each of its triangles. Other elements and properties are ignored.
 ///
 /// # Errors
 /// [`Error::Io`](crate::Error::Io) if the file cannot be read; [`Error::Scene`](crate::Error::Scene) naming the file (and the line for the
@@ -100,7 +104,9 @@ fn parse_ascii(path: &Path, bytes: &[u8]) -> Result<Geometry> {
     let first_line = bytes[..bytes.len() - payload.len()].iter().filter(|&&b| b == b'\n').count() + 1;
     check_ascii_sizes(path, &header.elements, payload)?;
     let wanted = wanted_properties(path, &header.elements)?;
-    let Wanted { has_normals, uv_names, list_name } = wanted;
+    let mut vertex_rows = AttrRows::new(&wanted.vertex_attrs);
+    let mut face_rows = AttrRows::new(&wanted.face_attrs);
+    let Wanted { has_normals, uv_names, list_name, .. } = wanted;
     let data = parser.read_payload(&mut reader, &header).map_err(|e| {
         let (line, message) = ply_message(&e);
         scene_error(path, line, message)
@@ -141,6 +147,10 @@ fn parse_ascii(path: &Path, bytes: &[u8]) -> Result<Geometry> {
         if let Some((u, v)) = uv_names {
             uvs.push(Vec2::new(get(e, i, u)?, get(e, i, v)?));
         }
+        for k in 0..vertex_rows.row.len() {
+            vertex_rows.row[k] = get(e, i, &vertex_rows.columns[k])?;
+        }
+        vertex_rows.push(1);
     }
     let n = g.positions.len();
     for (i, e) in faces.iter().enumerate() {
@@ -157,13 +167,71 @@ fn parse_ascii(path: &Path, bytes: &[u8]) -> Result<Geometry> {
         for k in 1..list.len() - 1 {
             g.indices.push([list[0] as u32, list[k] as u32, list[k + 1] as u32]);
         }
+        for k in 0..face_rows.row.len() {
+            let value = e.get(&face_rows.columns[k]).and_then(number).map(|v| v as f32);
+            face_rows.row[k] = match value {
+                Some(v) if v.is_finite() => v,
+                _ => {
+                    let message = format!("'{}' is missing or not finite", face_rows.columns[k]);
+                    return Err(element_error("face", i, message));
+                }
+            };
+        }
+        face_rows.push(list.len() - 2);
     }
     if g.indices.is_empty() {
         return Err(scene_error(path, None, "has no faces"));
     }
     g.normals = has_normals.then_some(normals);
     g.uvs = uv_names.map(|_| uvs);
+    g.attributes = vertex_rows.finish(true);
+    g.attributes.extend(face_rows.finish(false));
     Ok(g)
+}
+
+/// The values of an element's attributes as they are read: one row of every attribute's
+/// properties at a time, appended per vertex or per triangle.
+struct AttrRows {
+    specs: Vec<AttrSpec>,
+    /// The properties of the row, the attributes' columns one after the other.
+    columns: Vec<String>,
+    /// The row being read.
+    row: Vec<f32>,
+    /// The values so far, one vector per attribute.
+    values: Vec<Vec<f32>>,
+}
+
+impl AttrRows {
+    fn new(specs: &[AttrSpec]) -> AttrRows {
+        let columns: Vec<String> = specs.iter().flat_map(|s| s.columns.iter().cloned()).collect();
+        AttrRows {
+            specs: specs.to_vec(),
+            row: vec![0.0; columns.len()],
+            columns,
+            values: vec![Vec::new(); specs.len()],
+        }
+    }
+
+    /// Appends the row `times` times (a vertex once, a face once per triangle).
+    fn push(&mut self, times: usize) {
+        let mut at = 0;
+        for (spec, values) in self.specs.iter().zip(&mut self.values) {
+            let n = spec.columns.len();
+            for _ in 0..times {
+                values.extend_from_slice(&self.row[at..at + n]);
+            }
+            at += n;
+        }
+    }
+
+    /// The finished attributes.
+    fn finish(self, per_vertex: bool) -> Vec<MeshAttribute> {
+        self.specs
+            .into_iter()
+            .zip(self.values)
+            .map(|(s, values)| MeshAttribute { name: s.name, per_vertex, dim: s.columns.len() as u32, values })
+            .collect()
+    }
 }
 
 /// The vertex and face properties the loader reads, checked against the header.
@@ -174,6 +242,94 @@ struct Wanted {
     uv_names: Option<(&'static str, &'static str)>,
     /// The face's index list.
     list_name: &'static str,
+    /// The vertices' attributes.
+    vertex_attrs: Vec<AttrSpec>,
+    /// The faces' attributes.
+    face_attrs: Vec<AttrSpec>,
+}
+
+/// One mesh attribute of a PLY element: its Mitsuba name and the properties it reads, in order.
+#[derive(Clone, Debug, PartialEq)]
+struct AttrSpec {
+    name: String,
+    columns: Vec<String>,
+}
+
+/// Mitsuba's grouping of an element's other scalar properties (`names`, in header order, less
+/// the ones it reads itself) into mesh attributes named `KIND_…` (`kind` is `vertex` or `face`;
+/// Mitsuba 3.9.1's `find_other_fields` of src/shapes/ply.h): `r g b` (or `red green blue`, each
+/// with an optional alpha) make `KIND_color`; then consecutive properties `PREFIX_P` whose
+/// postfixes P run through one of `x y z w`, `r g b a`, `0 1 2 3` or `1 2 3 4` make
+/// `KIND_PREFIX` (`KIND_PREFIX_color` for `r g b a`) when there are 1 or 3 of them. Properties
+/// that fit no run are ignored, as Mitsuba ignores them (with a warning).
+fn attribute_specs(kind: &str, names: &[String]) -> Vec<AttrSpec> {
+    const POSTFIXES: [&[u8; 4]; 4] = [b"xr01", b"yg12", b"zb23", b"wa34"];
+    let has = |n: &str| names.iter().any(|m| m == n);
+    let mut out = Vec::new();
+    let mut reserved: Vec<&str> = vec!["r", "g", "b", "a"];
+    for colour in [["r", "g", "b", "a"], ["red", "green", "blue", "alpha"]] {
+        if colour[..3].iter().all(|n| has(n)) {
+            let mut columns: Vec<String> = colour[..3].iter().map(|n| n.to_string()).collect();
+            if has(colour[3]) {
+                columns.push(colour[3].to_string());
+            }
+            out.push(AttrSpec { name: format!("{kind}_color"), columns });
+            reserved.extend(colour);
+            break;
+        }
+    }
+    let mut seen: Vec<String> = Vec::new();
+    // The run being read: prefix, postfix category, its properties.
+    let mut run: Option<(String, usize, Vec<String>)> = None;
+    let flush = |run: &mut Option<(String, usize, Vec<String>)>, out: &mut Vec<AttrSpec>, seen: &mut Vec<String>| {
+        if let Some((prefix, category, columns)) = run.take()
+            && (columns.len() == 1 || columns.len() == 3)
+        {
+            let suffix = if category == 1 { "_color" } else { "" };
+            out.push(AttrSpec { name: format!("{kind}_{prefix}{suffix}"), columns });
+            seen.push(prefix);
+        }
+    };
+    let mut skip_prefix: Option<String> = None;
+    for name in names.iter().filter(|n| !reserved.contains(&n.as_str())) {
+        let Some((prefix, postfix)) = name.rsplit_once('_') else {
+            flush(&mut run, &mut out, &mut seen);
+            continue;
+        };
+        if postfix.len() != 1 {
+            flush(&mut run, &mut out, &mut seen);
+            continue;
+        }
+        if skip_prefix.as_deref() == Some(prefix) {
+            continue;
+        }
+        skip_prefix = None;
+        if run.as_ref().is_some_and(|r| r.0 != prefix) {
+            flush(&mut run, &mut out, &mut seen);
+        }
+        let c = postfix.as_bytes()[0];
+        match &mut run {
+            None => {
+                if seen.iter().any(|p| p == prefix) {
+                    skip_prefix = Some(prefix.to_string());
+                    continue;
+                }
+                if let Some(category) = POSTFIXES[0].iter().position(|&p| p == c) {
+                    run = Some((prefix.to_string(), category, vec![name.clone()]));
+                }
+            }
+            Some((_, category, columns)) => {
+                if columns.len() < 4 && POSTFIXES[columns.len()][*category] == c {
+                    columns.push(name.clone());
+                } else {
+                    run = None;
+                    skip_prefix = Some(prefix.to_string());
+                }
+            }
+        }
+    }
+    flush(&mut run, &mut out, &mut seen);
+    out
 }
 
 /// Checks that `elements` has a `vertex` element with scalar `x y z` (and whole groups of normals
@@ -205,7 +361,20 @@ fn wanted_properties(path: &Path, elements: &ply_rs_bw::ply::KeyMap<ElementDef>)
         }
         PropertyType::List(..) => {}
     }
-    Ok(Wanted { has_normals, uv_names, list_name })
+    let scalars = |def: &ElementDef, skip: &[&str]| -> Vec<String> {
+        def.properties
+            .values()
+            .filter(|p| matches!(p.data_type, PropertyType::Scalar(_)) && !skip.contains(&p.name.as_str()))
+            .map(|p| p.name.clone())
+            .collect()
+    };
+    let mut vertex_skip = vec!["x", "y", "z", "nx", "ny", "nz", "u", "v"];
+    if let Some((u, v)) = uv_names {
+        vertex_skip.extend([u, v]);
+    }
+    let vertex_attrs = attribute_specs("vertex", &scalars(vertex_def, &vertex_skip));
+    let face_attrs = attribute_specs("face", &scalars(face_def, &[]));
+    Ok(Wanted { has_normals, uv_names, list_name, vertex_attrs, face_attrs })
 }
 
 /// What the binary decoder does with one property of an element.
@@ -218,6 +387,8 @@ enum Action {
     Indices(ScalarType, ScalarType),
     /// Another list, skipped.
     SkipList(ScalarType, ScalarType),
+    /// A scalar read into slot `.1` of the element's attribute row ([`AttrRows`]).
+    Attr(ScalarType, usize),
 }
 
 /// The scalar of type `t` in `b` (its size) as f64 (exact for every PLY type but double, which
@@ -347,7 +518,9 @@ fn decode_record(record: &[u8], actions: &[Action], big: bool) -> [f32; 8] {
                 at += size;
             }
             Action::Skip(t) => at += scalar_size(t) as usize,
-            Action::Indices(..) | Action::SkipList(..) => unreachable!("a fixed-size record has no lists"),
+            Action::Indices(..) | Action::SkipList(..) | Action::Attr(..) => {
+                unreachable!("a fixed-size record has no lists or attributes")
+            }
         }
     }
     values
@@ -380,13 +553,20 @@ fn decode_binary<R: Read>(
     let big_endian = input.big_endian;
     let mut values = [0.0f32; 8];
     let mut list: Vec<i64> = Vec::new();
+    let mut vertex_rows = AttrRows::new(&wanted.vertex_attrs);
+    let mut face_rows = AttrRows::new(&wanted.face_attrs);
     for (name, def) in elements {
         let (is_vertex, is_face) = (name == "vertex", name == "face");
+        let rows = if is_vertex { &mut vertex_rows } else { &mut face_rows };
+        let attr_slot = |p: &str| if is_vertex || is_face { rows.columns.iter().position(|c| c == p) } else { None };
         let actions: Vec<Action> = def
             .properties
             .values()
             .map(|p| match (&p.data_type, names.iter().position(|n| *n == p.name)) {
                 (PropertyType::Scalar(t), Some(slot)) if is_vertex => Action::Keep(t.clone(), slot),
+                (PropertyType::Scalar(t), _) if attr_slot(&p.name).is_some() => {
+                    Action::Attr(t.clone(), attr_slot(&p.name).expect("checked"))
+                }
                 (PropertyType::Scalar(t), _) => Action::Skip(t.clone()),
                 (PropertyType::List(c, t), _) if is_face && p.name == wanted.list_name => {
                     Action::Indices(c.clone(), t.clone())
@@ -411,7 +591,7 @@ fn decode_binary<R: Read>(
                 .iter()
                 .map(|a| match a {
                     Action::Keep(t, _) | Action::Skip(t) => scalar_size(t) as usize,
-                    Action::Indices(..) | Action::SkipList(..) => 0,
+                    Action::Indices(..) | Action::SkipList(..) | Action::Attr(..) => 0,
                 })
                 .sum();
             let mut done = 0;
@@ -439,6 +619,14 @@ fn decode_binary<R: Read>(
                     Action::Skip(t) => {
                         input.skip(scalar_size(t) as usize).ok_or_else(|| ended(i))?;
                     }
+                    Action::Attr(t, slot) => {
+                        let v = input.scalar(t).ok_or_else(|| ended(i))? as f32;
+                        if !v.is_finite() {
+                            let message = format!("'{prop}' is not finite (NaN or infinity, or too large for f32)");
+                            return Err(element_error(i, message));
+                        }
+                        rows.row[*slot] = v;
+                    }
                     Action::Indices(c, t) | Action::SkipList(c, t) => {
                         let n = input.scalar(c).ok_or_else(|| ended(i))?;
                         if !(n >= 0.0 && n.fract() == 0.0) {
@@ -460,6 +648,7 @@ fn decode_binary<R: Read>(
             if is_vertex {
                 push_vertex(&values, &names, wanted, &mut g.positions, &mut normals, &mut uvs)
                     .map_err(|m| element_error(i, m))?;
+                rows.push(1);
             } else if is_face {
                 if list.len() < 3 {
                     return Err(element_error(i, format!("has {} vertices; a face needs at least 3", list.len())));
@@ -473,6 +662,7 @@ fn decode_binary<R: Read>(
                 for k in 1..list.len() - 1 {
                     g.indices.push([list[0] as u32, list[k] as u32, list[k + 1] as u32]);
                 }
+                rows.push(list.len() - 2);
             }
         }
     }
@@ -481,6 +671,8 @@ fn decode_binary<R: Read>(
     }
     g.normals = wanted.has_normals.then_some(normals);
     g.uvs = wanted.uv_names.map(|_| uvs);
+    g.attributes = vertex_rows.finish(true);
+    g.attributes.extend(face_rows.finish(false));
     Ok(g)
 }
 

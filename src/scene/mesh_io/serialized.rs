@@ -178,6 +178,7 @@ fn read_mesh(stream: &[u8], version: u16) -> std::result::Result<SerializedMesh,
         normals: normals.filter(|_| !face_normals).map(|n| vec3s(&n)),
         uvs: uvs.map(|t| t.chunks_exact(2).map(|c| Vec2::new(c[0], c[1])).collect()),
         indices: indices.chunks_exact(3).map(|t| [t[0], t[1], t[2]]).collect(),
+        attributes: Vec::new(),
     };
     Ok(SerializedMesh { geometry, name, face_normals })
 }

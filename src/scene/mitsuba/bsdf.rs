@@ -73,6 +73,19 @@ impl<'a> Loader<'a> {
             return Err(self.x.err(node, format!("refers to a <{}>, expected a <bsdf>", target.tag_name().name())));
         }
         if let Some(&m) = self.materials.get(&target.id()) {
+            let mesh = self.attribute_shape.as_ref().map(|s| s.mesh);
+            if let Some(&owner) = self.attribute_owners.get(&target.id())
+                && Some(owner) != mesh
+            {
+                return Err(self.x.err(
+                    node,
+                    format!(
+                        "this BSDF reads the mesh attributes of shape '{}' and cannot be shared with another shape \
+                         (give each shape its own BSDF)",
+                        self.scene.meshes.get(owner as usize).map_or("?", |m| m.name.as_str())
+                    ),
+                ));
+            }
             return Ok(m);
         }
         if self.in_progress.contains(&target.id()) {
@@ -83,10 +96,16 @@ impl<'a> Loader<'a> {
         }
         let name = self.name_of(target, name)?;
         self.in_progress.push(target.id());
+        let reads = self.attribute_reads;
         let built = self.bsdf_body(target, &name, depth);
         self.in_progress.pop();
         let m = built?;
         self.materials.insert(target.id(), m);
+        if self.attribute_reads > reads
+            && let Some(shape) = &self.attribute_shape
+        {
+            self.attribute_owners.insert(target.id(), shape.mesh);
+        }
         Ok(m)
     }
 
@@ -556,6 +575,11 @@ impl<'a> Loader<'a> {
             let albedo = self.checkerboard(&p, &name)?;
             self.textures.insert(target.id(), albedo);
             return Ok(albedo);
+        }
+        if p.kind == "mesh_attribute" {
+            // Not cached: each shape reads its own attribute.
+            let (values, source) = self.mesh_attribute(&p, 3, bounds::REFLECTANCE)?;
+            return Ok(Albedo::Attribute { values, source });
         }
         if p.kind != "bitmap" {
             return Err(self

@@ -118,6 +118,9 @@ pub(super) fn load_text_with(text: &str, file: &Path, options: &LoadOptions, mes
         volpath_integrator: None,
         ptracer_integrator: None,
         instancing: None,
+        attribute_shape: None,
+        attribute_reads: 0,
+        attribute_owners: HashMap::new(),
     };
     loader.run(doc.root_element(), &options.defines)?;
     loader.scene.validate()?;
@@ -187,6 +190,12 @@ pub(super) struct Loader<'a> {
     /// While an `instance` builds its group's shapes: its `to_world` and the name (Mitsuba's key
     /// `GROUP.CHILD`) of the shape being built.
     pub instancing: Option<(glam::Mat4, String)>,
+    /// The mesh shape whose BSDF is being built, for its `mesh_attribute` textures.
+    pub attribute_shape: Option<super::mesh_attribute::AttributeShape>,
+    /// `mesh_attribute` textures read so far (a BSDF that read one is built per shape).
+    pub attribute_reads: usize,
+    /// The BSDFs that read a mesh attribute, by element: the mesh whose attributes they read.
+    pub attribute_owners: HashMap<NodeId, u32>,
 }
 
 impl<'a> Loader<'a> {
@@ -269,6 +278,8 @@ impl<'a> Loader<'a> {
             }
             match c.tag_name().name() {
                 "default" | "sensor" | "integrator" => {}
+                // Built by each shape that refers to it, from that shape's attributes.
+                "bsdf" | "texture" if self.reads_mesh_attribute(c) => {}
                 "bsdf" => {
                     let name = self.top_name(c)?;
                     self.bsdf(c, name, 0)?;
@@ -494,6 +505,7 @@ impl<'a> Loader<'a> {
         let mut meshes: Vec<Option<crate::scene::Mesh>> =
             std::mem::take(&mut self.scene.meshes).into_iter().map(Some).collect();
         self.scene.meshes = order.iter().map(|&old| meshes[old].take().expect("each mesh is moved once")).collect();
+        self.scene.renumber_attribute_meshes(&new_index);
         for (m, _) in &mut self.medium_shapes {
             *m = new_index[*m];
         }
@@ -962,12 +974,13 @@ impl<'a> Loader<'a> {
         Ok(())
     }
 
-    /// The texture `node` of a light (`kind`: a spot's `texture`, a projector's `irradiance`): a
+    /// The texture `node` of a light (`kind`: a spot's `texture`, a projector's `irradiance`, an
+    /// area emitter's `radiance`): a
     /// `bitmap` without `to_uv`, its texels (any value ≥ 0) the parameter `NAME.data`.
     ///
     /// # Errors
     /// Another plugin, a `to_uv`, a negative texel, and what [`Loader::bitmap`] refuses.
-    fn light_texture(&mut self, node: El<'a>, name: String, kind: &str) -> Result<crate::scene::TextureId> {
+    pub(super) fn light_texture(&mut self, node: El<'a>, name: String, kind: &str) -> Result<crate::scene::TextureId> {
         let target = self.deref(node)?;
         if !target.has_tag_name("texture") {
             return Err(self.x.err(node, format!("refers to a <{}>, expected a <texture>", target.tag_name().name())));

@@ -14,10 +14,13 @@
 //!   `radius`; tessellated like the sphere) with `to_world`, `flip_normals`
 //!   and (meshes) `face_normals` (a mesh file without normals is shaded with Mitsuba's
 //!   angle-weighted vertex normals, computed in world space, unless `face_normals` is set); one `<bsdf>`/`<ref>` each (default: diffuse 0.5, as Mitsuba) and
-//!   optionally `<emitter type="area">` with `radiance`.
+//!   optionally `<emitter type="area">` with `radiance` (a colour, or a `bitmap` whose texels
+//!   are `….radiance.data`, read at the point's texture coordinates; sampled by area).
 //! - BSDFs `diffuse` (`reflectance`: colour, `<texture type="bitmap">` (`raw`, `filter_type`
-//!   bilinear/nearest, `wrap_mode` repeat/mirror/clamp) or
-//!   `<texture type="checkerboard">` with colour `color0`/`color1` and `to_uv`), `roughconductor`,
+//!   bilinear/nearest, `wrap_mode` repeat/mirror/clamp),
+//!   `<texture type="checkerboard">` with colour `color0`/`color1` and `to_uv`, or
+//!   `<texture type="mesh_attribute">`: a PLY attribute of the shape, per face or per vertex,
+//!   module `mesh_attribute`, also on float properties), `roughconductor`,
 //!   `blendbsdf`, `twosided`; `<emitter type="constant">` at scene level (the environment).
 //! - `<sensor type="perspective">` with `fov`/`focal_length`, `fov_axis`, `to_world`, a
 //!   `<film type="hdrfilm">` (`width`, `height`, an `rfilter`) and a `<sampler type="independent">` (`sample_count` →
@@ -100,6 +103,7 @@ mod bsdf;
 mod include;
 mod loader;
 mod media;
+mod mesh_attribute;
 pub mod plugins;
 mod scalar_texture;
 mod sensor;
@@ -117,6 +121,8 @@ mod tests_errors;
 mod tests_include;
 #[cfg(test)]
 mod tests_media;
+#[cfg(test)]
+mod tests_mesh_attributes;
 #[cfg(test)]
 mod tests_names;
 #[cfg(test)]

@@ -114,7 +114,7 @@ pub const PLUGINS: &[Plugin] = &[
         "`int_ior`/`ext_ior` (numbers or Mitsuba's names), `specular_reflectance`, `specular_transmittance`",
         "smooth; not inside blendbsdf or twosided",
     ),
-    p(Bsdf, "diffuse", "`reflectance` (rgb, spectrum, bitmap or checkerboard)", ""),
+    p(Bsdf, "diffuse", "`reflectance` (rgb, spectrum, bitmap, checkerboard or mesh_attribute)", ""),
     p(
         Bsdf,
         "mask",
@@ -175,7 +175,12 @@ pub const PLUGINS: &[Plugin] = &[
         "`intensity`, `cutoff_angle`, `beam_width`, `texture` (`bitmap`), `to_world`",
         "next-event estimation only; texels are parameter `.texture.data`",
     ),
-    p(Emitter, "area", "`radiance`", "inside a <shape> (or referred to by one)"),
+    p(
+        Emitter,
+        "area",
+        "`radiance` (rgb, spectrum or `bitmap` without `to_uv`)",
+        "inside a <shape> (or referred to by one); a bitmap's texels are parameter `….radiance.data`, read at the point's texture coordinates; sampled by area (Mitsuba samples a textured one by its texture: the same expectation)",
+    ),
     p(Shape, "cube", "`to_world`, `flip_normals`", ""),
     p(Shape, "cylinder", "`p0`, `p1`, `radius`, `to_world`, `flip_normals`", "tessellated"),
     p(Shape, "disk", "`to_world`, `flip_normals`", "tessellated"),
@@ -197,6 +202,12 @@ pub const PLUGINS: &[Plugin] = &[
         "checkerboard",
         "`color0`, `color1`, `to_uv`",
         "colours on a colour property, `<float>`s on a float property (roughness, blend weight), where `color1` is read where `color0` would be on a colour property, as Mitsuba 3.9.1 does",
+    ),
+    p(
+        Texture,
+        "mesh_attribute",
+        "`name` (`vertex_…` or `face_…`), `scale` (1 only)",
+        "in the BSDF of a `ply` shape whose file has the attribute (Mitsuba's PLY naming); the values are parameter `SHAPE.NAME` (per vertex: interpolated by barycentrics), an RGB attribute on a colour property, a one-value one on a float property; a BSDF that reads one belongs to its one shape",
     ),
     p(Medium, "homogeneous", "`sigma_t`, `albedo`, `scale`, a phase", "inside a null or dielectric boundary"),
     p(

@@ -53,6 +53,26 @@ impl<'a> Loader<'a> {
         let name = self.name_of(target, name)?;
         let p = Props::parse(&self.x, target)?;
         let texture = match p.kind.as_str() {
+            "mesh_attribute" => {
+                // Not cached: each shape reads its own attribute.
+                let (texels, source) = self.mesh_attribute(&p, 1, range)?;
+                if let Some(t) = self.scene.scalar_texture(texels) {
+                    return Ok(t.texels);
+                }
+                // width × height is the number of values (the kernels read neither).
+                let values = self.scene.params.entry(texels).len;
+                self.scene.scalar_textures.push(ScalarTexture {
+                    texels,
+                    width: values,
+                    height: 1,
+                    nearest: true,
+                    wrap: crate::scene::Wrap::Repeat,
+                    checker: false,
+                    to_uv: [glam::Vec3::X, glam::Vec3::Y],
+                    attribute: Some(source),
+                });
+                return Ok(texels);
+            }
             "checkerboard" => {
                 let color0 = self.float_in(&p, "color0", Some(0.4), range)?;
                 let color1 = self.float_in(&p, "color1", Some(0.2), range)?;
@@ -76,6 +96,7 @@ impl<'a> Loader<'a> {
                     wrap: crate::scene::Wrap::Repeat,
                     checker: true,
                     to_uv,
+                    attribute: None,
                 }
             }
             "bitmap" => {
@@ -124,13 +145,14 @@ impl<'a> Loader<'a> {
                     wrap: bitmap.wrap,
                     checker: false,
                     to_uv,
+                    attribute: None,
                 }
             }
             other => {
                 return Err(self.x.err(
                     target,
                     format!(
-                        "unsupported plugin '{other}' on a float property (supported: bitmap, checkerboard; all \
+                        "unsupported plugin '{other}' on a float property (supported: bitmap, checkerboard, mesh_attribute; all \
                          textures: {})",
                         names(Category::Texture)
                     ),

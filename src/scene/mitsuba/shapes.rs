@@ -11,6 +11,7 @@ use std::f32::consts::{PI, TAU};
 use glam::{Mat4, Vec2, Vec3, Vec4};
 
 use super::loader::{Loader, MeshFormat};
+use super::mesh_attribute::AttributeShape;
 use super::xml::{El, Props};
 use crate::error::Result;
 use crate::scene::shapes::{Geometry, cuboid, merge, quad, triangle_area};
@@ -83,7 +84,7 @@ pub fn unit_sphere(rings: u32, segments: u32) -> Geometry {
             }
         }
     }
-    Geometry { normals: Some(positions.clone()), positions, uvs: Some(uvs), indices }
+    Geometry { normals: Some(positions.clone()), positions, uvs: Some(uvs), indices, ..Default::default() }
 }
 
 /// Mitsuba's unit cylinder: the open tube of radius 1 about z from z = 0 to z = 1, outward normals
@@ -103,7 +104,7 @@ pub fn unit_cylinder(segments: u32) -> Geometry {
         }
     }
     let indices = (0..segments).flat_map(|j| [[2 * j, 2 * j + 2, 2 * j + 3], [2 * j, 2 * j + 3, 2 * j + 1]]).collect();
-    Geometry { positions, normals: Some(normals), uvs: Some(uvs), indices }
+    Geometry { positions, normals: Some(normals), uvs: Some(uvs), indices, ..Default::default() }
 }
 
 /// Mitsuba's unit disk in z = 0 facing +z, as a fan of `segments` triangles; `u` is the radius
@@ -117,7 +118,7 @@ pub fn unit_disk(segments: u32) -> Geometry {
         uvs.push(Vec2::new(1.0, j as f32 / segments as f32));
     }
     let indices = (1..=segments).map(|j| [0, j, j + 1]).collect();
-    Geometry { normals: Some(vec![Vec3::Z; positions.len()]), positions, uvs: Some(uvs), indices }
+    Geometry { normals: Some(vec![Vec3::Z; positions.len()]), positions, uvs: Some(uvs), indices, ..Default::default() }
 }
 
 /// Mitsuba's `rectangle` ([−1, 1]² in z = 0, facing +z) under `m`. For `det m > 0` this is
@@ -145,6 +146,13 @@ pub fn cube(m: &Mat4) -> Geometry {
     } else {
         cuboid(Vec3::ZERO, Vec3::ONE).transformed(m)
     }
+}
+
+/// An area emitter's radiance: one RGB value, or a bitmap's texels looked up at the hit's texture
+/// coordinates.
+enum AreaRadiance {
+    Constant(Vec3),
+    Texture(crate::scene::TextureId),
 }
 
 /// Translation and the three axes of an affine `m`.
@@ -324,11 +332,24 @@ impl<'a> Loader<'a> {
             }
         }
         self.finish(&p)?;
+        let overflowed_before = self.scene.overflowed_triangles;
+        // A BSDF may read the mesh's attributes (`mesh_attribute`): per-face ones follow the
+        // triangles the mesh keeps.
+        if !geometry.attributes.is_empty() {
+            self.scene.prune_triangles(&name, &mut geometry);
+        }
+        self.attribute_shape = Some(AttributeShape {
+            name: name.clone(),
+            mesh: self.scene.meshes.len() as u32,
+            attributes: std::mem::take(&mut geometry.attributes),
+        });
         let material = match bsdfs[..] {
-            [] => self.default_bsdf(node, &name, !emitters.is_empty())?,
-            [b] => self.bsdf(b, format!("{name}.bsdf"), 1)?,
-            [_, second, ..] => return Err(self.x.err(second, "a shape takes one BSDF")),
+            [] => self.default_bsdf(node, &name, !emitters.is_empty()),
+            [b] => self.bsdf(b, format!("{name}.bsdf"), 1),
+            [_, second, ..] => Err(self.x.err(second, "a shape takes one BSDF")),
         };
+        self.attribute_shape = None;
+        let material = material?;
         let emitter = match emitters[..] {
             [] => None,
             [e] => Some(self.area_emitter(e, &name)?),
@@ -340,7 +361,6 @@ impl<'a> Loader<'a> {
             Some(m) => Some(self.medium(m, format!("{name}.interior_medium"))?),
             None => None,
         };
-        let overflowed_before = self.scene.overflowed_triangles;
         self.scene.add_mesh(&name, geometry, material, None).map_err(|e| self.located(node, e))?;
         if let Some(mesh) = self.scene.meshes.last_mut() {
             mesh.interior = interior;
@@ -363,13 +383,16 @@ impl<'a> Loader<'a> {
             if !(total > 0.0) {
                 return Err(self.x.err(e, format!("area emitter on shape '{name}' of zero area")));
             }
-            let id = self
-                .scene
-                .params
-                .add(&param, &radiance.to_array(), bounds::RADIANCE)
-                .map_err(|err| self.located(e, err))?;
+            let (id, texture) = match radiance {
+                AreaRadiance::Constant(radiance) => {
+                    let id = self.scene.params.add(&param, &radiance.to_array(), bounds::RADIANCE);
+                    (id.map_err(|err| self.located(e, err))?, None)
+                }
+                AreaRadiance::Texture(t) => (self.scene.textures[t.0 as usize].texels, Some(t)),
+            };
             if let Some(mesh) = self.scene.meshes.last_mut() {
                 mesh.emitter = Some(id);
+                mesh.emitter_texture = texture;
             }
         }
         Ok(())
@@ -383,20 +406,26 @@ impl<'a> Loader<'a> {
     }
 
     /// Reads a shape's `<emitter type="area">`: its element, parameter name and radiance.
-    fn area_emitter(&mut self, node: El<'a>, shape: &str) -> Result<(El<'a>, String, Vec3)> {
+    fn area_emitter(&mut self, node: El<'a>, shape: &str) -> Result<(El<'a>, String, AreaRadiance)> {
         let p = Props::parse(&self.x, node)?;
         if p.kind != "area" {
             return Err(self.x.err(node, format!("unsupported plugin '{}' (supported on shapes: area)", p.kind)));
         }
-        let radiance = self.radiance_in(&p, "radiance", Vec3::ONE, bounds::RADIANCE)?;
         // Mitsuba names an emitter nested in a shape after the shape, whatever its own id; one
         // declared at scene level (and referred to) by its id.
         let top_level = node.parent().is_some_and(|n| n.parent().is_some_and(|d| d.is_root()));
-        let param = match self.x.attr(node, "id")? {
-            Some(id) if top_level => format!("{id}.radiance.value"),
-            _ => format!("{shape}.emitter.radiance.value"),
+        let prefix = match self.x.attr(node, "id")? {
+            Some(id) if top_level => format!("{id}.radiance"),
+            _ => format!("{shape}.emitter.radiance"),
         };
+        if let Some(t) = p.object("radiance") {
+            self.finish(&p)?;
+            // A textured radiance: Mitsuba's key `….radiance.data`.
+            let texture = self.light_texture(t, prefix, "area")?;
+            return Ok((node, String::new(), AreaRadiance::Texture(texture)));
+        }
+        let radiance = self.radiance_in(&p, "radiance", Vec3::ONE, bounds::RADIANCE)?;
         self.finish(&p)?;
-        Ok((node, param, radiance))
+        Ok((node, format!("{prefix}.value"), AreaRadiance::Constant(radiance)))
     }
 }

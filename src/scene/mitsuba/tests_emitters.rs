@@ -262,3 +262,24 @@ fn a_bmp_texture_is_srgb_decoded() {
         assert!((a - b).abs() < 1e-6, "{texels:?} vs {expected:?}");
     }
 }
+
+/// An area emitter whose radiance is a bitmap (issue 31): its texels are the parameter
+/// `SHAPE.emitter.radiance.data` (Mitsuba's key), and its triangles point the kernels at the
+/// texture's descriptor.
+#[test]
+fn issue_31_a_textured_area_emitter_reads_its_bitmap() {
+    let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/conformance/scenes/emitter_area_texture.xml");
+    let s = crate::scene::load_with(path.to_str().unwrap(), &LoadOptions::default()).unwrap_or_else(|e| panic!("{e}"));
+    let texels = s.params.find("panel.emitter.radiance.data").expect("the texels' parameter");
+    assert_eq!(s.params.entry(texels).len, 8 * 8 * 3);
+    let panel = s.meshes.iter().find(|m| m.name == "panel").unwrap();
+    assert_eq!(panel.emitter, Some(texels));
+    assert!(panel.emitter_texture.is_some());
+    let flat = crate::scene::flat::FlatScene::new(&s).unwrap();
+    assert!(!flat.emitters.is_empty());
+    for e in &flat.emitters {
+        assert!(crate::cpu::emitter::area_textured(e.p_radiance));
+        let d = (e.p_radiance & !crate::contract::SCALAR_TEXTURE) as usize;
+        assert_eq!(flat.tables[d].to_bits(), s.params.entry(texels).offset);
+    }
+}

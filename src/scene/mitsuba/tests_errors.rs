@@ -262,6 +262,10 @@ fn element_and_property_errors() {
             "<rgb name=\"radiance\">: 'radiance' must lie in [0, ∞), got [-1, -1, -1]",
         ),
         (
+            r#"<shape type="cube"><emitter type="area"><texture type="checkerboard" name="radiance"/></emitter></shape>"#,
+            "<texture name=\"radiance\">: the texture of a 'area' must be a 'bitmap' (pathgrad reads no other here), got 'checkerboard'",
+        ),
+        (
             r#"<shape type="sphere"><float name="radius" value="-1"/></shape>"#,
             "<float name=\"radius\">: 'radius' must be positive, got -1",
         ),
@@ -398,7 +402,10 @@ fn element_and_property_errors() {
             r#"<bsdf type="twosided"><bsdf type="twosided"><bsdf type="diffuse"/></bsdf></bsdf>"#,
             "<bsdf>: a 'twosided' BSDF cannot wrap another twosided one",
         ),
-        (r#"<texture type="wood"/>"#, "<texture>: unsupported plugin 'wood' (supported: bitmap, checkerboard)"),
+        (
+            r#"<texture type="wood"/>"#,
+            "<texture>: unsupported plugin 'wood' (supported: bitmap, checkerboard, mesh_attribute)",
+        ),
         (r#"<texture type="bitmap"/>"#, "<texture>: 'bitmap' needs the property 'filename'"),
         (r#"<emitter type="area"/>"#, "<emitter>: an 'area' emitter must be nested in a <shape>"),
         (

@@ -105,8 +105,8 @@ fn issue_31_textures_on_scalar_properties_refuse_what_pathgrad_does_not_read_by_
             "'color0' must lie in [0, 1], got 1.5",
         ),
         (
-            r#"<bsdf type="blendbsdf"><texture type="mesh_attribute" name="weight"/><bsdf type="diffuse"/><bsdf type="diffuse"/></bsdf>"#,
-            "unsupported plugin 'mesh_attribute' on a float property",
+            r#"<bsdf type="blendbsdf"><texture type="mesh_attribute" name="weight"><string name="name" value="face_weight"/></texture><bsdf type="diffuse"/><bsdf type="diffuse"/></bsdf>"#,
+            "has no mesh attribute 'face_weight' (its attributes: none)",
         ),
     ];
     for (bsdf, expect) in cases {

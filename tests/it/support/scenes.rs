@@ -148,7 +148,8 @@ pub fn deep_meshes() -> Scene {
     let fan = |base: u32, up: bool| -> Vec<[u32; 3]> {
         (1..N - 1).map(|i| if up { [base, base + i, base + i + 1] } else { [base, base + i + 1, base + i] }).collect()
     };
-    let polygon = Geometry { positions: ring(2.0, -0.5), normals: None, uvs: None, indices: fan(0, true) };
+    let polygon =
+        Geometry { positions: ring(2.0, -0.5), normals: None, uvs: None, indices: fan(0, true), ..Default::default() };
     s.add_mesh("polygon", polygon, grey, None).unwrap();
     let mut positions = ring(0.5, -0.5);
     positions.extend(ring(0.5, 0.5));
@@ -159,7 +160,8 @@ pub fn deep_meshes() -> Scene {
         indices.push([i, j, N + j]);
         indices.push([i, N + j, N + i]);
     }
-    s.add_mesh("cylinder", Geometry { positions, normals: None, uvs: None, indices }, grey, None).unwrap();
+    s.add_mesh("cylinder", Geometry { positions, normals: None, uvs: None, indices, ..Default::default() }, grey, None)
+        .unwrap();
     s.add_mesh("light", quad(Vec3::new(0.0, 2.0, 0.0), Vec3::X * 0.5, -Vec3::Z * 0.5), black, Some(Vec3::splat(8.0)))
         .unwrap();
     s
