@@ -137,7 +137,7 @@ impl ParamTable {
             if chosen.len() == before && !self.entries.iter().any(|e| glob_match(pattern, &e.name)) {
                 // Mitsuba exposes indices of refraction; pathgrad does not (yet).
                 let last = pattern.rsplit('.').find(|p| *p != "value").unwrap_or("");
-                let ior = if matches!(last, "eta" | "int_ior" | "ext_ior") {
+                let ior = if matches!(last, "eta" | "int_ior" | "ext_ior" | "specular") {
                     ": pathgrad exposes no index of refraction as a parameter (a dielectric's acts through \
                      the directions it refracts into, which detached derivatives hold fixed; attached \
                      derivatives are a later issue)"

@@ -86,8 +86,8 @@ Surface surface_at(Hit hit) {
     return s;
 }
 
-// Whether material `id` is (or blends) an anisotropic rough conductor, whose shading frame must
-// follow the surface (twin: material_anisotropic of src/cpu/surface.rs).
+// Whether material `id` is (or blends) an anisotropic rough conductor, or is principled (its
+// `anisotropic` a parameter; never blended), whose shading frame must follow the surface (twin: material_anisotropic of src/cpu/surface.rs).
 bool material_anisotropic(uint id) {
     Material m = materials[id];
     if (HAS(F_BLEND) && m.tag == MAT_BLEND) {
@@ -96,7 +96,7 @@ bool material_anisotropic(uint id) {
         return (a.tag == MAT_ROUGH_CONDUCTOR && a.p_alpha_v != a.p_alpha)
             || (b.tag == MAT_ROUGH_CONDUCTOR && b.p_alpha_v != b.p_alpha);
     }
-    return m.tag == MAT_ROUGH_CONDUCTOR && m.p_alpha_v != m.p_alpha;
+    return (m.tag == MAT_ROUGH_CONDUCTOR && m.p_alpha_v != m.p_alpha) || is_principled(m.tag);
 }
 
 // Mitsuba's shading frame for anisotropic BSDFs: x along ∂p/∂u made orthogonal to ns (where the
@@ -322,12 +322,22 @@ Leaf leaf_from_material(Material m, vec2 uv) {
     bool conductor = is_conductor(m.tag);
     bool delta = is_delta(m.tag);
     bool rough_glass = is_rough_dielectric(m.tag);
-    l.kind = (delta || is_smooth_plastic(m.tag) || rough_glass) ? m.tag
+    bool principled = is_principled(m.tag);
+    l.kind = (delta || is_smooth_plastic(m.tag) || rough_glass || principled) ? m.tag
         : (plastic ? LEAF_ROUGH_PLASTIC : (conductor ? LEAF_ROUGH_CONDUCTOR : LEAF_DIFFUSE));
     l.distribution = m.distribution;
     l.alpha = (conductor || plastic || rough_glass) ? alpha_value(m.p_alpha, uv) : 0.0;
     // Kernels without anisotropic BSDFs read no second roughness (α_v = α).
     l.alpha_v = (HAS(F_ANISOTROPIC) && conductor) ? alpha_value(m.p_alpha_v, uv) : l.alpha;
+    l.pr0 = vec4(0.0);
+    l.pr1 = vec4(0.0);
+    if (principled) {
+        // Mitsuba floors α = roughness², not a textured roughness; the eight scalars follow table.
+        l.alpha = scalar_value(m.p_alpha, uv);
+        l.alpha_v = params[m.p_alpha_v];
+        l.pr0 = vec4(params[m.table], params[m.table + 1u], params[m.table + 2u], params[m.table + 3u]);
+        l.pr1 = vec4(params[m.table + 4u], params[m.table + 5u], params[m.table + 6u], params[m.table + 7u]);
+    }
     l.table = m.table;
     if (delta || rough_glass) {
         // Each colour a parameter, or (NO_PARAM) a constant: the reflectance in uv_row0, a
@@ -390,7 +400,9 @@ GradTerms no_grad_terms() {
 
 // Most (offset, per-channel value) entries one vertex can produce: an RGB emitter, four RGB texels
 // of an environment map (NEE), two leaves of four RGB texels and a roughness each, a blend weight,
-// a mask's opacity (a step that hits the environment ends there: it has no other term).
+// a mask's opacity (a step that hits the environment ends there: it has no other term). A
+// principled leaf (never blended) produces at most 22: 12 for its texels' channels, anisotropic
+// and eight scalars, and its roughness (a texture's texels go at once).
 #define GRAD_ENTRIES 43
 
 // The entries of the vertex being scattered. Globals, not parameters: GLSL passes arrays by
@@ -429,7 +441,46 @@ void push_scalar(uint slot, vec2 uv, vec3 g, bool roughness) {
     }
 }
 
+// A principled leaf's derivatives (pr_terms of bsdf.glsl): base colour channel k (a texel's,
+// weighted by the lookup) reaches every image channel; the roughness may be a texture; the eight
+// scalars follow m.table (twin: principled_backward of src/cpu/surface.rs).
+void push_principled(Material m, vec2 uv) {
+    if (HAS(F_TEXTURE) && m.tex_width > 0u) {
+        if (HAS(G_TEXTURE)) {
+            uint texel[4];
+            float weight[4];
+            texture_footprint(m.p_color, m.tex_width, m.tex_height, m.tex_mode, texture_uv(m, uv), texel, weight);
+            for (uint k = 0u; k < 4u; k++) {
+                if (weight[k] == 0.0) continue;
+                push_entry(texel[k], pr_terms.base[0] * weight[k]);
+                push_entry(texel[k] + 1u, pr_terms.base[1] * weight[k]);
+                push_entry(texel[k] + 2u, pr_terms.base[2] * weight[k]);
+            }
+        }
+    } else if (HAS(G_COLOR)) {
+        push_entry(m.p_color, pr_terms.base[0]);
+        push_entry(m.p_color + 1u, pr_terms.base[1]);
+        push_entry(m.p_color + 2u, pr_terms.base[2]);
+    }
+    if (HAS(G_ALPHA)) push_scalar(m.p_alpha, uv, pr_terms.roughness, false);
+    if (HAS(G_WEIGHT)) {
+        push_entry(m.p_alpha_v, pr_terms.anisotropic);
+        push_entry(m.table, pr_terms.metallic);
+        push_entry(m.table + 1u, pr_terms.spec_tint);
+        push_entry(m.table + 2u, pr_terms.spec_trans);
+        push_entry(m.table + 3u, pr_terms.sheen);
+        push_entry(m.table + 4u, pr_terms.sheen_tint);
+        push_entry(m.table + 5u, pr_terms.clearcoat);
+        push_entry(m.table + 6u, pr_terms.clearcoat_gloss);
+        push_entry(m.table + 7u, pr_terms.flatness);
+    }
+}
+
 void push_leaf(Material m, vec2 uv, LeafGrad g) {
+    if (is_principled(m.tag)) {
+        push_principled(m, uv);
+        return;
+    }
     bool rough_glass = is_rough_dielectric(m.tag);
     if (is_delta(m.tag) || rough_glass) {
         // The reflectance and the transmittance (p_alpha of a smooth leaf, p_weight of a rough

@@ -12,10 +12,10 @@ use crate::bvh::{self, Bvh};
 use crate::contract::{
     COATING_TABLE_LEN, DIST_GGX, DeltaLight, EmitterTri, EnvCell, FIELD_CONSTANT, FIELD_GRID, FIELD_GRID_MIRROR,
     FIELD_GRID_REPEAT, FieldDesc, LIGHT_DIRECTIONAL, LIGHT_POINT, LIGHT_PROJECTOR, LIGHT_SPOT, MAT_BLEND,
-    MAT_CONDUCTOR, MAT_DIELECTRIC, MAT_DIFFUSE, MAT_NULL, MAT_PLASTIC, MAT_ROUGH_CONDUCTOR, MAT_ROUGH_DIELECTRIC,
-    MAT_ROUGH_PLASTIC, MAT_THIN_DIELECTRIC, Material as GpuMaterial, MediumDesc, MeshShading, NMAP_BUMP, NO_ARRAY,
-    NO_EMITTER, NO_MEDIUM, NO_PARAM, PHASE_HG, PHASE_ISOTROPIC, SCALAR_TEXTURE, TEX_CHECKER, TEX_NEAREST,
-    TEX_WRAP_CLAMP, TEX_WRAP_MIRROR, TriVertices,
+    MAT_CONDUCTOR, MAT_DIELECTRIC, MAT_DIFFUSE, MAT_NULL, MAT_PLASTIC, MAT_PRINCIPLED, MAT_ROUGH_CONDUCTOR,
+    MAT_ROUGH_DIELECTRIC, MAT_ROUGH_PLASTIC, MAT_THIN_DIELECTRIC, Material as GpuMaterial, MediumDesc, MeshShading,
+    NMAP_BUMP, NO_ARRAY, NO_EMITTER, NO_MEDIUM, NO_PARAM, PHASE_HG, PHASE_ISOTROPIC, SCALAR_TEXTURE, TEX_CHECKER,
+    TEX_NEAREST, TEX_WRAP_CLAMP, TEX_WRAP_MIRROR, TriVertices,
 };
 use crate::error::Result;
 use crate::params::ParamId;
@@ -527,6 +527,16 @@ fn flatten_material(scene: &Scene, m: &Material) -> GpuMaterial {
                 ..Default::default()
             }
         }
+        Material::Principled { base_color, roughness, anisotropic, scalars, eta, rates } => GpuMaterial {
+            tag: MAT_PRINCIPLED,
+            distribution: DIST_GGX,
+            p_alpha: scalar_slot(scene, roughness),
+            p_alpha_v: offset(anisotropic),
+            table: offset(scalars),
+            eta: Vec3::new(eta, 0.0, 0.0),
+            k: rates,
+            ..albedo_fields(scene, base_color)
+        },
         Material::Blend { weight, children } => GpuMaterial {
             tag: MAT_BLEND,
             child0: children[0].0,
@@ -609,7 +619,7 @@ fn scalar_texture_tables(scene: &Scene, materials: &mut [GpuMaterial], tables: &
                 place(&mut m.p_alpha, tables);
                 place(&mut m.p_alpha_v, tables);
             }
-            MAT_ROUGH_DIELECTRIC => place(&mut m.p_alpha, tables),
+            MAT_ROUGH_DIELECTRIC | MAT_PRINCIPLED => place(&mut m.p_alpha, tables),
             MAT_BLEND => place(&mut m.p_weight, tables),
             _ => {}
         }
