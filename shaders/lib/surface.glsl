@@ -316,6 +316,11 @@ float alpha_value(uint slot, vec2 uv) {
     return scalar_textured(slot) ? max(scalar_lookup(slot, uv), ALPHA_TEXTURE_FLOOR) : params[slot];
 }
 
+// Scalar slot i (PRINCIPLED_SCALARS) of principled material m: word i of its record in the tables
+// array (twin: principled_slot of src/cpu/surface.rs), and its value at uv.
+uint principled_slot(Material m, uint i) { return floatBitsToUint(coating_table(m.table + i)); }
+float principled_scalar(Material m, uint i, vec2 uv) { return scalar_value(principled_slot(m, i), uv); }
+
 Leaf leaf_from_material(Material m, vec2 uv) {
     Leaf l;
     bool plastic = is_plastic(m.tag);
@@ -332,11 +337,14 @@ Leaf leaf_from_material(Material m, vec2 uv) {
     l.pr0 = vec4(0.0);
     l.pr1 = vec4(0.0);
     if (principled) {
-        // Mitsuba floors α = roughness², not a textured roughness; the eight scalars follow table.
+        // Mitsuba floors α = roughness², not a textured roughness; the eight scalars' slots are
+        // the record at m.table.
         l.alpha = scalar_value(m.p_alpha, uv);
-        l.alpha_v = params[m.p_alpha_v];
-        l.pr0 = vec4(params[m.table], params[m.table + 1u], params[m.table + 2u], params[m.table + 3u]);
-        l.pr1 = vec4(params[m.table + 4u], params[m.table + 5u], params[m.table + 6u], params[m.table + 7u]);
+        l.alpha_v = scalar_value(m.p_alpha_v, uv);
+        l.pr0 = vec4(principled_scalar(m, 0u, uv), principled_scalar(m, 1u, uv), principled_scalar(m, 2u, uv),
+                     principled_scalar(m, 3u, uv));
+        l.pr1 = vec4(principled_scalar(m, 4u, uv), principled_scalar(m, 5u, uv), principled_scalar(m, 6u, uv),
+                     principled_scalar(m, 7u, uv));
     }
     l.table = m.table;
     if (delta || rough_glass) {
@@ -442,8 +450,8 @@ void push_scalar(uint slot, vec2 uv, vec3 g, bool roughness) {
 }
 
 // A principled leaf's derivatives (pr_terms of bsdf.glsl): base colour channel k (a texel's,
-// weighted by the lookup) reaches every image channel; the roughness may be a texture; the eight
-// scalars follow m.table (twin: principled_backward of src/cpu/surface.rs).
+// weighted by the lookup) reaches every image channel; every scalar may be a texture; the eight
+// scalars' slots are the record at m.table (twin: principled_backward of src/cpu/surface.rs).
 void push_principled(Material m, vec2 uv) {
     if (HAS(F_TEXTURE) && m.tex_width > 0u) {
         if (HAS(G_TEXTURE)) {
@@ -464,15 +472,15 @@ void push_principled(Material m, vec2 uv) {
     }
     if (HAS(G_ALPHA)) push_scalar(m.p_alpha, uv, pr_terms.roughness, false);
     if (HAS(G_WEIGHT)) {
-        push_entry(m.p_alpha_v, pr_terms.anisotropic);
-        push_entry(m.table, pr_terms.metallic);
-        push_entry(m.table + 1u, pr_terms.spec_tint);
-        push_entry(m.table + 2u, pr_terms.spec_trans);
-        push_entry(m.table + 3u, pr_terms.sheen);
-        push_entry(m.table + 4u, pr_terms.sheen_tint);
-        push_entry(m.table + 5u, pr_terms.clearcoat);
-        push_entry(m.table + 6u, pr_terms.clearcoat_gloss);
-        push_entry(m.table + 7u, pr_terms.flatness);
+        push_scalar(m.p_alpha_v, uv, pr_terms.anisotropic, false);
+        push_scalar(principled_slot(m, 0u), uv, pr_terms.metallic, false);
+        push_scalar(principled_slot(m, 1u), uv, pr_terms.spec_tint, false);
+        push_scalar(principled_slot(m, 2u), uv, pr_terms.spec_trans, false);
+        push_scalar(principled_slot(m, 3u), uv, pr_terms.sheen, false);
+        push_scalar(principled_slot(m, 4u), uv, pr_terms.sheen_tint, false);
+        push_scalar(principled_slot(m, 5u), uv, pr_terms.clearcoat, false);
+        push_scalar(principled_slot(m, 6u), uv, pr_terms.clearcoat_gloss, false);
+        push_scalar(principled_slot(m, 7u), uv, pr_terms.flatness, false);
     }
 }
 

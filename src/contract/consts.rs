@@ -196,8 +196,9 @@ contract_constants! {
     F_LIGHT_TEXTURE = 1 << 29;
     /// Feature bit: principled leaves (Mitsuba's `principled`, `shaders/lib/principled.glsl`).
     F_PRINCIPLED = 1 << 30;
-    /// Parameter values of a principled material's scalars from `Material::table` on: metallic,
-    /// spec_tint, spec_trans, sheen, sheen_tint, clearcoat, clearcoat_gloss, flatness.
+    /// Words of a principled material's record in the tables array (at `Material::table`): the
+    /// scalar slots (a parameter offset, or `SCALAR_TEXTURE` with a texture's descriptor) of
+    /// metallic, spec_tint, spec_trans, sheen, sheen_tint, clearcoat, clearcoat_gloss, flatness.
     PRINCIPLED_SCALARS = 8;
     /// An `EmitterSample::param` (a gradient term's emitter) with this bit set is not a parameter
     /// offset: its other bits are the index of a textured light or projector, whose intensity,

@@ -65,9 +65,9 @@ contract_enums! {
         /// Rough dielectric interface (reflects and refracts through microfacets).
         RoughDielectric = MAT_ROUGH_DIELECTRIC = 9,
         /// Mitsuba's `principled` (Burley's Disney BSDF): base colour in `p_color`, roughness in
-        /// `p_alpha`, anisotropic in `p_alpha_v`, its other eight scalars the consecutive
-        /// parameter values from `table` on (`PRINCIPLED_SCALARS`), η in `eta.x`, its three
-        /// sampling rates in `k`.
+        /// `p_alpha`, anisotropic in `p_alpha_v` (scalar slots: a parameter or `SCALAR_TEXTURE`),
+        /// its other eight scalars' slots the `PRINCIPLED_SCALARS` words of the tables array from
+        /// `table` on, η in `eta.x`, its three sampling rates in `k`.
         Principled = MAT_PRINCIPLED = 10,
     }
 

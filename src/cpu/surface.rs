@@ -377,12 +377,12 @@ fn leaf_from_material(flat: &FlatScene, m: &Material, uv: glam::Vec2) -> Leaf {
             eta: m.eta.x,
         }),
         MAT_PRINCIPLED => {
-            let s = |i: u32| params[(m.table + i) as usize];
+            let s = |i: u32| scalar_value(flat, principled_slot(flat, m, i), uv);
             Leaf::Principled(PrincipledLeaf {
                 base_color: color,
                 // Mitsuba floors α = roughness², not the texture's roughness.
                 roughness: scalar_value(flat, m.p_alpha, uv),
-                anisotropic: params[m.p_alpha_v as usize],
+                anisotropic: scalar_value(flat, m.p_alpha_v, uv),
                 metallic: s(0),
                 spec_tint: s(1),
                 spec_trans: s(2),
@@ -480,7 +480,7 @@ fn leaf_backward(flat: &FlatScene, m: &Material, uv: glam::Vec2, g: &LeafGrad, s
 
 /// A principled leaf's derivatives `g` (adj-weighted, per image channel) to its parameters: base
 /// colour channel k (a texel's, weighted by the lookup) reaches every image channel, the roughness
-/// may be a texture, the eight scalars follow `Material::table` (twin: `push_principled` of
+/// and every scalar may be a texture, the eight scalars' slots are `Material::table`'s record (twin: `push_principled` of
 /// `shaders/lib/surface.glsl`).
 fn principled_backward(
     flat: &FlatScene,
@@ -504,10 +504,15 @@ fn principled_backward(
         }
     }
     scalar_backward(flat, m.p_alpha, uv, g.roughness, false, sink);
-    sink.add(m.p_alpha_v, g.anisotropic);
+    scalar_backward(flat, m.p_alpha_v, uv, g.anisotropic, false, sink);
     for (i, gi) in g.scalars().into_iter().enumerate() {
-        sink.add(m.table + i as u32, gi);
+        scalar_backward(flat, principled_slot(flat, m, i as u32), uv, gi, false, sink);
     }
+}
+
+/// Scalar slot `i` (`PRINCIPLED_SCALARS`) of principled material `m`: word `i` of its record.
+fn principled_slot(flat: &FlatScene, m: &Material, i: u32) -> u32 {
+    flat.tables[(m.table + i) as usize].to_bits()
 }
 
 /// Whether material tag `tag` is a smooth (delta) BSDF's.

@@ -41,7 +41,12 @@ pub fn scene_features(flat: &FlatScene, env_param: u32) -> u32 {
         let textured = |slot: u32| slot != NO_PARAM && slot & SCALAR_TEXTURE != 0;
         let scalar_textured = match m.tag {
             MAT_ROUGH_CONDUCTOR => textured(m.p_alpha) || textured(m.p_alpha_v),
-            MAT_ROUGH_DIELECTRIC | MAT_PRINCIPLED => textured(m.p_alpha),
+            MAT_ROUGH_DIELECTRIC => textured(m.p_alpha),
+            MAT_PRINCIPLED => {
+                textured(m.p_alpha)
+                    || textured(m.p_alpha_v)
+                    || (0..PRINCIPLED_SCALARS).any(|i| textured(flat.tables[(m.table + i) as usize].to_bits()))
+            }
             MAT_BLEND => textured(m.p_weight),
             _ => false,
         } || textured(m.p_opacity);
@@ -140,7 +145,8 @@ pub fn param_kinds(flat: &FlatScene, env: (u32, u32), begin: u32, end: u32) -> P
                     k = k.union(ParamKinds::ALPHA);
                 }
                 // Anisotropic and the eight other scalars count as weights (of lobes).
-                if overlaps(m.p_alpha_v, 1) || overlaps(m.table, PRINCIPLED_SCALARS) {
+                let record = |i: u32| flat.tables[(m.table + i) as usize].to_bits();
+                if overlaps_slot(m.p_alpha_v) || (0..PRINCIPLED_SCALARS).any(|i| overlaps_slot(record(i))) {
                     k = k.union(ParamKinds::WEIGHT);
                 }
             }

@@ -233,12 +233,11 @@ pub enum Material {
         base_color: Albedo,
         /// `roughness`, 1 value or a texture's texels ([`Scene::scalar_texture`]).
         roughness: ParamId,
-        /// `anisotropic`, 1 value.
+        /// `anisotropic`, as `roughness`.
         anisotropic: ParamId,
-        /// The first of eight one-value parameters defined one after another (consecutive
-        /// values): metallic, spec_tint, spec_trans, sheen, sheen_tint, clearcoat,
-        /// clearcoat_gloss, flatness.
-        scalars: ParamId,
+        /// metallic, spec_tint, spec_trans, sheen, sheen_tint, clearcoat, clearcoat_gloss,
+        /// flatness, each as `roughness`.
+        scalars: [ParamId; 8],
         /// Relative index of refraction η (`eta`, or from `specular`), a constant.
         eta: f32,
         /// The sampling rates (main specular, clearcoat, diffuse reflectance), constants.

@@ -61,7 +61,7 @@ fn gpu_equals_cpu_per_path_on_every_builtin_and_test_scene() {
 #[test]
 fn issue_31_principled_gpu_equals_cpu_per_path() {
     let gpu = TestGpu::new();
-    for name in ["bsdf_principled", "bsdf_principled_textured"] {
+    for name in ["bsdf_principled", "bsdf_principled_textured", "bsdf_principled_textured_scalars"] {
         primal_agrees_per_path(&gpu, &crate::support::scenes::conformance(name));
     }
 }

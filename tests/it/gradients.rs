@@ -100,8 +100,9 @@ fn cases() -> Vec<(Scene, Vec<&'static str>)> {
     ]
 }
 
-/// The principled material's parameters (issue 31): every one of its scalars, its base colour
-/// (constant and texels) and its roughness (constant and a checkerboard's).
+/// The principled material's parameters (issue 31): every one of its scalars (constant, and five
+/// as checkerboards' colours), its base colour (constant and texels) and its roughness (constant
+/// and a checkerboard's).
 fn principled_cases() -> Vec<(Scene, Vec<&'static str>)> {
     vec![
         (
@@ -124,6 +125,16 @@ fn principled_cases() -> Vec<(Scene, Vec<&'static str>)> {
         (
             scenes::conformance("bsdf_principled_textured"),
             vec!["ball.bsdf.base_color.data", "pane.bsdf.roughness.color0.value", "pane.bsdf.roughness.color1.value"],
+        ),
+        (
+            scenes::conformance("bsdf_principled_textured_scalars"),
+            vec![
+                "ball.bsdf.metallic.color0.value",
+                "ball.bsdf.clearcoat.color1.value",
+                "ball.bsdf.sheen.color1.value",
+                "pane.bsdf.spec_trans.color0.value",
+                "pane.bsdf.anisotropic.color1.value",
+            ],
         ),
     ]
 }

@@ -497,25 +497,28 @@ impl<'a> Loader<'a> {
 
     /// Mitsuba 3.9.1's `principled`: `base_color` (0.5; a colour, parameter
     /// `NAME.base_color.value`, or a `bitmap`/`checkerboard`: `.data`, `.color0/.color1.value`),
-    /// `roughness` (0.5; a parameter or a one-channel texture), `anisotropic`, `metallic`,
-    /// `spec_tint`, `spec_trans`, `sheen`, `sheen_tint`, `clearcoat`, `clearcoat_gloss`, `flatness`
-    /// (0; parameters `NAME.KEY.value`, numbers in [0, 1]), `eta` or `specular` (0.5; not both, as
+    /// `roughness` (0.5), `anisotropic`, `metallic`, `spec_tint`, `spec_trans`, `sheen`,
+    /// `sheen_tint`, `clearcoat`, `clearcoat_gloss`, `flatness` (0) — each a number in [0, 1]
+    /// (parameter `NAME.KEY.value`) or a one-channel texture ([`Loader::scalar_property`]) —,
+    /// `eta` or `specular` (0.5; not both, as
     /// Mitsuba; constants: η moves refracted directions, whose derivative is not built) and the
     /// three sampling rates. Mitsuba's substitutions where `spec_trans` is given and nonzero: η = 1
     /// becomes 1.001, `specular` = 0 becomes 10⁻³; η = 2/(1 − √(0.08·specular)) − 1.
     fn principled(&mut self, p: &Props<'a>, name: &str, depth: usize) -> Result<MaterialId> {
         const SCALARS: [&str; 8] =
             ["metallic", "spec_tint", "spec_trans", "sheen", "sheen_tint", "clearcoat", "clearcoat_gloss", "flatness"];
-        for key in SCALARS.iter().chain(&["anisotropic", "eta", "specular"]) {
+        for key in ["eta", "specular"] {
             if let Some(t) = p.object(key) {
-                return Err(self.x.err(
-                    t,
-                    format!("a textured '{key}' of 'principled' is not supported (a number is; 'base_color' and 'roughness' take textures)"),
-                ));
+                return Err(self
+                    .x
+                    .err(t, format!("a textured '{key}' of 'principled' is not supported (Mitsuba's is a number)")));
             }
         }
         // Mitsuba's get_flag: a lobe exists where its property is given and not the number 0.
         let flagged = |p: &Props<'a>, key: &str| -> Result<bool> {
+            if p.object(key).is_some() {
+                return Ok(true);
+            }
             Ok(match p.float(&self.x, key)? {
                 Some((v, _)) => v != 0.0,
                 None => p.has(key),
@@ -555,25 +558,18 @@ impl<'a> Loader<'a> {
         };
         let roughness = self.scalar_property(p, name, "roughness", Some(0.5), bounds::WEIGHT, (0.0, 1.0))?;
         let anisotropic = self.scalar_property(p, name, "anisotropic", Some(0.0), bounds::WEIGHT, (0.0, 1.0))?;
-        // The eight scalars one after another: the kernels read them from one offset.
-        let mut scalars = Vec::with_capacity(SCALARS.len());
-        for key in SCALARS {
-            scalars.push(self.scalar_property(p, name, key, Some(0.0), bounds::WEIGHT, (0.0, 1.0))?);
+        let mut scalars = [crate::params::ParamId(0); SCALARS.len()];
+        for (slot, key) in scalars.iter_mut().zip(SCALARS) {
+            *slot = self.scalar_property(p, name, key, Some(0.0), bounds::WEIGHT, (0.0, 1.0))?;
         }
-        Ok(self.scene.add_material(Material::Principled {
-            base_color,
-            roughness,
-            anisotropic,
-            scalars: scalars[0],
-            eta,
-            rates,
-        }))
+        Ok(self.scene.add_material(Material::Principled { base_color, roughness, anisotropic, scalars, eta, rates }))
     }
 
-    /// Whether material `id` is a principled BSDF whose `spec_trans` is not 0 (it transmits).
+    /// Whether material `id` is a principled BSDF whose `spec_trans` is not 0 somewhere (it
+    /// transmits).
     fn principled_transmits(&self, id: MaterialId) -> bool {
         matches!(self.material(id), Some(Material::Principled { scalars, .. })
-            if self.scene.params.get(crate::params::ParamId(scalars.0 + 2))[0] != 0.0)
+            if self.scene.params.get(scalars[2]).iter().any(|v| *v != 0.0))
     }
 
     /// A specular colour `key` (1 by default): the parameter `NAME.KEY.value` where the file gives
@@ -750,7 +746,9 @@ impl<'a> Loader<'a> {
         let nested = self.map_nested(p, name, depth, "bumpmap")?;
         let anisotropic = |id: MaterialId| match self.material(id) {
             Some(Material::RoughConductor { alpha, alpha_v, .. }) => alpha != alpha_v,
-            Some(Material::Principled { anisotropic, .. }) => self.scene.params.get(anisotropic)[0] != 0.0,
+            Some(Material::Principled { anisotropic, .. }) => {
+                self.scene.params.get(anisotropic).iter().any(|v| *v != 0.0)
+            }
             _ => false,
         };
         let children = match self.material(nested) {

@@ -912,10 +912,9 @@ fn principled_takes_mitsubas_properties_names_and_substitutions() {
     assert_eq!(e1, 1.001);
     assert_eq!(e2, crate::bsdf::principled::eta_from_specular(1e-3));
     assert_eq!(e3, 1.0);
-    // The eight scalars are consecutive values from metallic on (Material::table).
-    let offset = |n: &str| s.params.entry(s.params.find(n).unwrap()).offset;
-    assert_eq!(s.params.entry(s1).offset, offset("b.bsdf.metallic.value"));
-    assert_eq!(offset("b.bsdf.flatness.value"), offset("b.bsdf.metallic.value") + 7);
+    // The eight scalars in Material::table's record order.
+    assert_eq!(s1[0], s.params.find("b.bsdf.metallic.value").unwrap());
+    assert_eq!(s1[7], s.params.find("b.bsdf.flatness.value").unwrap());
     assert_eq!(param(&s, "a.bsdf.base_color.value"), [0.5, 0.5, 0.5]);
     assert_eq!(param(&s, "a.bsdf.roughness.value"), [0.5]);
     assert_eq!(param(&s, "b.bsdf.spec_trans.value"), [0.4]);
@@ -928,8 +927,8 @@ fn principled_takes_mitsubas_properties_names_and_substitutions() {
             "either 'eta' or 'specular', not both",
         ),
         (
-            r#"<bsdf type="principled"><texture name="metallic" type="bitmap"><string name="filename" value="x.png"/></texture></bsdf>"#,
-            "a textured 'metallic' of 'principled' is not supported",
+            r#"<bsdf type="principled"><texture name="eta" type="bitmap"><string name="filename" value="x.png"/></texture></bsdf>"#,
+            "a textured 'eta' of 'principled' is not supported",
         ),
         (
             r#"<bsdf type="twosided"><bsdf type="principled"><float name="spec_trans" value="0.2"/></bsdf></bsdf>"#,
@@ -947,6 +946,14 @@ fn principled_takes_mitsubas_properties_names_and_substitutions() {
     }
     // A two-sided principled BSDF that does not transmit is Mitsuba's too.
     load_ok(r#"<shape type="cube"><bsdf type="twosided"><bsdf type="principled"/></bsdf></shape>"#);
+    // Every scalar takes a one-channel texture, named as Mitsuba's traverse names it.
+    let t = load_ok(
+        r#"<shape type="cube" id="t"><bsdf type="principled"><texture name="metallic" type="checkerboard">
+             <float name="color0" value="0.7"/><float name="color1" value="0.1"/></texture>
+             <texture name="anisotropic" type="checkerboard"/></bsdf></shape>"#,
+    );
+    assert_eq!(param(&t, "t.bsdf.metallic.color0.value"), [0.7]);
+    assert_eq!(param(&t, "t.bsdf.anisotropic.color1.value"), [0.2]);
 }
 
 #[test]
