@@ -14,8 +14,8 @@ void main() {
     if (i >= case_count) return;
     BsdfProbeCase c = cases[i];
     Bsdf b;
-    b.leaf0 = Leaf(c.kind0, c.dist0, c.alpha0, c.color0, c.eta0, c.k0, 0u, c.alpha_v0);
-    b.leaf1 = Leaf(c.kind1, c.dist1, c.alpha1, c.color1, c.eta1, c.k1, 0u, c.alpha_v1);
+    b.leaf0 = Leaf(c.kind0, c.dist0, c.alpha0, c.color0, c.eta0, c.k0, 0u, c.alpha_v0, vec4(0.0), vec4(0.0));
+    b.leaf1 = Leaf(c.kind1, c.dist1, c.alpha1, c.color1, c.eta1, c.k1, 0u, c.alpha_v1, vec4(0.0), vec4(0.0));
     b.weight = c.weight;
     b.blend = c.blend != 0u;
     b.mapped = false;

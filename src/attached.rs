@@ -63,6 +63,7 @@ pub fn refuse_unsupported(flat: &FlatScene, options: &RenderOptions, forward: bo
         "thindielectric",
         "plastic",
         "roughdielectric",
+        "principled",
     ];
     for m in &flat.materials {
         if !matches!(m.tag, MAT_DIELECTRIC | MAT_THIN_DIELECTRIC | MAT_CONDUCTOR) {

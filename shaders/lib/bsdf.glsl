@@ -13,8 +13,11 @@
 // A rough plastic keeps (η, coating sampling weight, nonlinear) in `eta`, its specular
 // reflectance in `k` and its coating table's offset in `table` (Material's layout).
 // A rough conductor's roughness is (alpha, alpha_v) (α_u along the frame's x, α_v along y); other
-// leaves read alpha only.
-struct Leaf { uint kind; uint distribution; float alpha; vec3 color; vec3 eta; vec3 k; uint table; float alpha_v; };
+// leaves read alpha only. A principled leaf: base colour in color, roughness in alpha, anisotropic
+// in alpha_v, η in eta.x, sampling rates in k, (metallic, spec_tint, spec_trans, sheen) in pr0 and
+// (sheen_tint, clearcoat, clearcoat_gloss, flatness) in pr1.
+struct Leaf { uint kind; uint distribution; float alpha; vec3 color; vec3 eta; vec3 k; uint table; float alpha_v;
+              vec4 pr0; vec4 pr1; };
 // A normal map's wrapper (`mapped`; twin: Perturbed of src/bsdf/mod.rs): the local frame is the
 // perturbed one; base_n is the unperturbed normal in it, nmap_alpha2 the shadow terminator's α².
 struct Bsdf { Leaf leaf0; Leaf leaf1; float weight; bool blend; bool mapped; vec3 base_n; float nmap_alpha2; };
@@ -32,7 +35,7 @@ bool is_beckmann(uint distribution) {
 }
 
 // The leaf kinds' feature bits; a kind test folds to a constant when the kernel has no other kind.
-#define LEAF_KIND_BITS (F_DIFFUSE | F_CONDUCTOR | F_PLASTIC | F_DELTA | F_SMOOTH_PLASTIC | F_ROUGH_DIELECTRIC)
+#define LEAF_KIND_BITS (F_DIFFUSE | F_CONDUCTOR | F_PLASTIC | F_DELTA | F_SMOOTH_PLASTIC | F_ROUGH_DIELECTRIC | F_PRINCIPLED)
 bool only_kind(uint bit) { return (FEATURES & uint(LEAF_KIND_BITS)) == uint(bit); }
 
 // Whether leaf `kind` is a rough plastic.
@@ -55,16 +58,21 @@ bool is_rough_dielectric(uint kind) {
     return HAS(F_ROUGH_DIELECTRIC) && (only_kind(F_ROUGH_DIELECTRIC) || kind == LEAF_ROUGH_DIELECTRIC);
 }
 
+// Whether leaf `kind` is principled.
+bool is_principled(uint kind) {
+    return HAS(F_PRINCIPLED) && (only_kind(F_PRINCIPLED) || kind == LEAF_PRINCIPLED);
+}
+
 // Whether leaf `kind` is Lambertian.
 bool is_diffuse(uint kind) {
-    return (FEATURES & uint(F_CONDUCTOR | F_PLASTIC | F_DELTA | F_SMOOTH_PLASTIC | F_ROUGH_DIELECTRIC)) == 0u
+    return (FEATURES & uint(F_CONDUCTOR | F_PLASTIC | F_DELTA | F_SMOOTH_PLASTIC | F_ROUGH_DIELECTRIC | F_PRINCIPLED)) == 0u
         || (HAS(F_DIFFUSE) && kind == LEAF_DIFFUSE);
 }
 
 // Whether leaf `kind` is a rough conductor.
 bool is_conductor(uint kind) {
     return !is_plastic(kind) && !is_delta(kind) && !is_smooth_plastic(kind) && !is_rough_dielectric(kind)
-        && !is_diffuse(kind);
+        && !is_principled(kind) && !is_diffuse(kind);
 }
 
 // ---- Lambertian (ALGORITHMS.md §4.1) ----
@@ -77,6 +85,55 @@ float diffuse_pdf(vec3 wi, vec3 wo) {
 
 #include "microfacet.glsl"
 #include "dielectric.glsl"
+#include "principled.glsl"
+
+// A principled leaf's values as principled.glsl takes them.
+Principled principled_of(Leaf l) {
+    return Principled(l.color, l.alpha, l.alpha_v, l.pr0.x, l.pr0.z, l.eta.x, l.pr0.y, l.pr0.w, l.pr1.x, l.pr1.y,
+                      l.pr1.z, l.pr1.w, l.k);
+}
+
+// The adj-weighted derivatives of the principled leaf of the vertex being replayed, summed over
+// its gradient terms (NEE and the sampled direction); leaf_eval_grad adds to it, scatter_terms
+// reads it. A global, as a principled leaf's 13 derivatives would triple LeafGrad for every
+// kernel; a blend holds no principled leaf (the loader refuses it), so one leaf's suffice.
+PrincipledGrad pr_terms;
+
+void pr_terms_reset() {
+    pr_terms.base[0] = vec3(0.0);
+    pr_terms.base[1] = vec3(0.0);
+    pr_terms.base[2] = vec3(0.0);
+    pr_terms.roughness = vec3(0.0);
+    pr_terms.anisotropic = vec3(0.0);
+    pr_terms.metallic = vec3(0.0);
+    pr_terms.spec_trans = vec3(0.0);
+    pr_terms.spec_tint = vec3(0.0);
+    pr_terms.sheen = vec3(0.0);
+    pr_terms.sheen_tint = vec3(0.0);
+    pr_terms.clearcoat = vec3(0.0);
+    pr_terms.clearcoat_gloss = vec3(0.0);
+    pr_terms.flatness = vec3(0.0);
+}
+
+// Adds adj × ∂f̂(wi, wo) of principled leaf l to pr_terms (twin: Leaf::Principled of
+// leaf_eval_grad).
+void principled_add_grad(Leaf l, vec3 wi, vec3 wo, vec3 adj) {
+    PrincipledGrad g;
+    principled_eval_grad(principled_of(l), wi, wo, g);
+    pr_terms.base[0] += adj * g.base[0];
+    pr_terms.base[1] += adj * g.base[1];
+    pr_terms.base[2] += adj * g.base[2];
+    pr_terms.roughness += adj * g.roughness;
+    pr_terms.anisotropic += adj * g.anisotropic;
+    pr_terms.metallic += adj * g.metallic;
+    pr_terms.spec_trans += adj * g.spec_trans;
+    pr_terms.spec_tint += adj * g.spec_tint;
+    pr_terms.sheen += adj * g.sheen;
+    pr_terms.sheen_tint += adj * g.sheen_tint;
+    pr_terms.clearcoat += adj * g.clearcoat;
+    pr_terms.clearcoat_gloss += adj * g.clearcoat_gloss;
+    pr_terms.flatness += adj * g.flatness;
+}
 
 // ---- leaves ----
 vec3 leaf_eval_pdf(Leaf l, vec3 wi, vec3 wo, out float pdf) {
@@ -87,6 +144,11 @@ vec3 leaf_eval_pdf(Leaf l, vec3 wi, vec3 wo, out float pdf) {
     }
     if (is_plastic(l.kind)) return plastic_eval_pdf(l, wi, wo, pdf);
     if (is_rough_dielectric(l.kind)) return rdielectric_eval_pdf(l, wi, wo, pdf);
+    if (is_principled(l.kind)) {
+        Principled p = principled_of(l);
+        pdf = principled_pdf(p, wi, wo);
+        return principled_eval(p, wi, wo);
+    }
     if (is_diffuse(l.kind)) {
         pdf = diffuse_pdf(wi, wo);
         return diffuse_eval(l.color, wi, wo);
@@ -109,6 +171,7 @@ bool leaf_sample(Leaf l, vec3 wi, float u_lobe, vec2 u, out vec3 wo) {
     if (is_delta(l.kind) || is_smooth_plastic(l.kind)) return false;
     if (is_plastic(l.kind)) return plastic_sample(l, wi, u_lobe, u, wo);
     if (is_rough_dielectric(l.kind)) return rdielectric_sample(l, wi, u_lobe, u, wo);
+    if (is_principled(l.kind)) return principled_sample(principled_of(l), wi, u_lobe, u, wo);
     if (is_diffuse(l.kind)) {
         wo = vec3(0.0);
         if (wi.z <= 0.0) return false;
@@ -149,6 +212,10 @@ LeafGrad leaf_eval_grad(Leaf l, vec3 wi, vec3 wo, vec3 adj) {
     if (is_smooth_plastic(l.kind)) return splastic_eval_grad(l, wi, wo, adj);
     if (is_plastic(l.kind)) return plastic_eval_grad(l, wi, wo, adj);
     if (is_rough_dielectric(l.kind)) return rdielectric_eval_grad(l, wi, wo, adj);
+    if (is_principled(l.kind)) {
+        principled_add_grad(l, wi, wo, adj);
+        return LeafGrad(vec3(0.0), vec3(0.0), vec3(0.0), vec3(0.0));
+    }
     if (is_diffuse(l.kind)) return LeafGrad(adj * diffuse_eval(vec3(1.0), wi, wo), vec3(0.0), vec3(0.0), vec3(0.0));
     vec3 f;
     float scalar;

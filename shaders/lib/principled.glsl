@@ -1,7 +1,7 @@
 // Mitsuba 3.9.1's principled BSDF (twin of src/bsdf/principled.rs, whose module documentation
 // gives the lobes, the sampler and the density): value with its derivatives by every parameter,
-// density and sampler. Not yet a material of the render kernels: shaders/principled_probe.comp
-// compares it with the CPU's. Include after bsdf.glsl (microfacet.glsl, fresnel_dielectric).
+// density and sampler; bsdf.glsl includes it after microfacet.glsl and dielectric.glsl and
+// dispatches principled leaves to it; shaders/principled_probe.comp compares it with the CPU's.
 #ifndef PATHGRAD_PRINCIPLED_GLSL
 #define PATHGRAD_PRINCIPLED_GLSL
 

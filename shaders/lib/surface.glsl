@@ -95,8 +95,8 @@ Surface surface_at(Hit hit) {
     return s;
 }
 
-// Whether material `id` is (or blends) an anisotropic rough conductor, whose shading frame must
-// follow the surface (twin: material_anisotropic of src/cpu/surface.rs).
+// Whether material `id` is (or blends) an anisotropic rough conductor, or is principled (its
+// `anisotropic` a parameter; never blended), whose shading frame must follow the surface (twin: material_anisotropic of src/cpu/surface.rs).
 bool material_anisotropic(uint id) {
     Material m = materials[id];
     if (HAS(F_BLEND) && m.tag == MAT_BLEND) {
@@ -105,7 +105,7 @@ bool material_anisotropic(uint id) {
         return (a.tag == MAT_ROUGH_CONDUCTOR && a.p_alpha_v != a.p_alpha)
             || (b.tag == MAT_ROUGH_CONDUCTOR && b.p_alpha_v != b.p_alpha);
     }
-    return m.tag == MAT_ROUGH_CONDUCTOR && m.p_alpha_v != m.p_alpha;
+    return (m.tag == MAT_ROUGH_CONDUCTOR && m.p_alpha_v != m.p_alpha) || is_principled(m.tag);
 }
 
 // Mitsuba's shading frame for anisotropic BSDFs: x along ∂p/∂u made orthogonal to ns (where the
@@ -398,18 +398,36 @@ float alpha_value(uint slot, TexAt at) {
     return scalar_textured(slot) ? max(scalar_lookup(slot, at), ALPHA_TEXTURE_FLOOR) : params[slot];
 }
 
+// Scalar slot i (PRINCIPLED_SCALARS) of principled material m: word i of its record in the tables
+// array (twin: principled_slot of src/cpu/surface.rs), and its value at uv.
+uint principled_slot(Material m, uint i) { return floatBitsToUint(coating_table(m.table + i)); }
+float principled_scalar(Material m, uint i, TexAt at) { return scalar_value(principled_slot(m, i), at); }
+
 Leaf leaf_from_material(Material m, TexAt at) {
     Leaf l;
     bool plastic = is_plastic(m.tag);
     bool conductor = is_conductor(m.tag);
     bool delta = is_delta(m.tag);
     bool rough_glass = is_rough_dielectric(m.tag);
-    l.kind = (delta || is_smooth_plastic(m.tag) || rough_glass) ? m.tag
+    bool principled = is_principled(m.tag);
+    l.kind = (delta || is_smooth_plastic(m.tag) || rough_glass || principled) ? m.tag
         : (plastic ? LEAF_ROUGH_PLASTIC : (conductor ? LEAF_ROUGH_CONDUCTOR : LEAF_DIFFUSE));
     l.distribution = m.distribution;
     l.alpha = (conductor || plastic || rough_glass) ? alpha_value(m.p_alpha, at) : 0.0;
     // Kernels without anisotropic BSDFs read no second roughness (α_v = α).
     l.alpha_v = (HAS(F_ANISOTROPIC) && conductor) ? alpha_value(m.p_alpha_v, at) : l.alpha;
+    l.pr0 = vec4(0.0);
+    l.pr1 = vec4(0.0);
+    if (principled) {
+        // Mitsuba floors α = roughness², not a textured roughness; the eight scalars' slots are
+        // the record at m.table.
+        l.alpha = scalar_value(m.p_alpha, at);
+        l.alpha_v = scalar_value(m.p_alpha_v, at);
+        l.pr0 = vec4(principled_scalar(m, 0u, at), principled_scalar(m, 1u, at), principled_scalar(m, 2u, at),
+                     principled_scalar(m, 3u, at));
+        l.pr1 = vec4(principled_scalar(m, 4u, at), principled_scalar(m, 5u, at), principled_scalar(m, 6u, at),
+                     principled_scalar(m, 7u, at));
+    }
     l.table = m.table;
     if (delta || rough_glass) {
         // Each colour a parameter, or (NO_PARAM) a constant: the reflectance in uv_row0, a
@@ -476,7 +494,9 @@ GradTerms no_grad_terms() {
 
 // Most (offset, per-channel value) entries one vertex can produce: an RGB emitter, four RGB texels
 // of an environment map (NEE), two leaves of four RGB texels and a roughness each, a blend weight,
-// a mask's opacity (a step that hits the environment ends there: it has no other term).
+// a mask's opacity (a step that hits the environment ends there: it has no other term). A
+// principled leaf (never blended) produces at most 22: 12 for its texels' channels, anisotropic
+// and eight scalars, and its roughness (a texture's texels go at once).
 #define GRAD_ENTRIES 43
 
 // The entries of the vertex being scattered. Globals, not parameters: GLSL passes arrays by
@@ -515,7 +535,46 @@ void push_scalar(uint slot, TexAt at, vec3 g, bool roughness) {
     }
 }
 
+// A principled leaf's derivatives (pr_terms of bsdf.glsl): base colour channel k (a texel's,
+// weighted by the lookup) reaches every image channel; every scalar may be a texture; the eight
+// scalars' slots are the record at m.table (twin: principled_backward of src/cpu/surface.rs).
+void push_principled(Material m, TexAt at) {
+    if (HAS(F_TEXTURE) && m.tex_width > 0u) {
+        if (HAS(G_TEXTURE)) {
+            uint texel[4];
+            float weight[4];
+            material_footprint(m, at, texel, weight);
+            for (uint k = 0u; k < 4u; k++) {
+                if (weight[k] == 0.0) continue;
+                push_entry(texel[k], pr_terms.base[0] * weight[k]);
+                push_entry(texel[k] + 1u, pr_terms.base[1] * weight[k]);
+                push_entry(texel[k] + 2u, pr_terms.base[2] * weight[k]);
+            }
+        }
+    } else if (HAS(G_COLOR)) {
+        push_entry(m.p_color, pr_terms.base[0]);
+        push_entry(m.p_color + 1u, pr_terms.base[1]);
+        push_entry(m.p_color + 2u, pr_terms.base[2]);
+    }
+    if (HAS(G_ALPHA)) push_scalar(m.p_alpha, at, pr_terms.roughness, false);
+    if (HAS(G_WEIGHT)) {
+        push_scalar(m.p_alpha_v, at, pr_terms.anisotropic, false);
+        push_scalar(principled_slot(m, 0u), at, pr_terms.metallic, false);
+        push_scalar(principled_slot(m, 1u), at, pr_terms.spec_tint, false);
+        push_scalar(principled_slot(m, 2u), at, pr_terms.spec_trans, false);
+        push_scalar(principled_slot(m, 3u), at, pr_terms.sheen, false);
+        push_scalar(principled_slot(m, 4u), at, pr_terms.sheen_tint, false);
+        push_scalar(principled_slot(m, 5u), at, pr_terms.clearcoat, false);
+        push_scalar(principled_slot(m, 6u), at, pr_terms.clearcoat_gloss, false);
+        push_scalar(principled_slot(m, 7u), at, pr_terms.flatness, false);
+    }
+}
+
 void push_leaf(Material m, TexAt at, LeafGrad g) {
+    if (is_principled(m.tag)) {
+        push_principled(m, at);
+        return;
+    }
     bool rough_glass = is_rough_dielectric(m.tag);
     if (is_delta(m.tag) || rough_glass) {
         // The reflectance and the transmittance (p_alpha of a smooth leaf, p_weight of a rough

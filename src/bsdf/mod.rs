@@ -57,6 +57,8 @@ pub enum Leaf {
     Smooth(specular::SmoothLeaf),
     /// Smooth plastic: a delta coating over a Lambertian base ([`plastic`]).
     SmoothPlastic(plastic::SmoothPlasticLeaf),
+    /// Mitsuba's principled BSDF ([`principled`]).
+    Principled(principled::PrincipledLeaf),
 }
 
 /// A resolved BSDF: one leaf, or the blend `(1 − w)·leaves[0] + w·leaves[1]`, perhaps in a
@@ -136,6 +138,9 @@ pub struct LeafGrad {
     /// With respect to colour channel c of the transmittance (dielectrics: transmitted
     /// directions), as `color` is for the reflectance.
     pub trans: Vec3,
+    /// A principled leaf's derivatives by each of its parameters, adj-weighted per image channel
+    /// (its base colour's channels reach every image channel: `color` is unused).
+    pub principled: principled::PrincipledGrad,
 }
 
 /// The gradient of Σ_c adj_c · f̂_c with respect to every differentiable value of a BSDF.
@@ -160,7 +165,7 @@ pub fn leaf_eval_grad(leaf: &Leaf, wi: Vec3, wo: Vec3, adj: Vec3) -> LeafGrad {
                 color: adj * f * scalar,
                 alpha: adj * f * specular * dscalar.x,
                 alpha_v: adj * f * specular * dscalar.y,
-                trans: Vec3::ZERO,
+                ..LeafGrad::default()
             }
         }
         Leaf::RoughPlastic(p) => {
@@ -177,6 +182,7 @@ pub fn leaf_eval_grad(leaf: &Leaf, wi: Vec3, wo: Vec3, adj: Vec3) -> LeafGrad {
             LeafGrad { color: adj * g.color, trans: adj * g.trans, ..LeafGrad::default() }
         }
         Leaf::SmoothPlastic(p) => LeafGrad { color: adj * p.eval_grad(wi, wo).color, ..LeafGrad::default() },
+        Leaf::Principled(p) => LeafGrad { principled: p.eval_grad(wi, wo).1.weighted(adj), ..LeafGrad::default() },
     }
 }
 
@@ -241,6 +247,7 @@ pub fn leaf_eval(leaf: &Leaf, wi: Vec3, wo: Vec3) -> Vec3 {
         Leaf::RoughDielectric(d) => d.eval(wi, wo),
         Leaf::Smooth(_) => Vec3::ZERO,
         Leaf::SmoothPlastic(p) => p.eval(wi, wo),
+        Leaf::Principled(p) => p.eval(wi, wo),
     }
 }
 
@@ -255,6 +262,7 @@ pub fn leaf_pdf(leaf: &Leaf, wi: Vec3, wo: Vec3) -> f32 {
         Leaf::RoughDielectric(d) => d.pdf(wi, wo),
         Leaf::Smooth(_) => 0.0,
         Leaf::SmoothPlastic(p) => p.pdf(wi, wo),
+        Leaf::Principled(p) => p.pdf(wi, wo),
     }
 }
 
@@ -268,6 +276,7 @@ pub fn leaf_sample(leaf: &Leaf, wi: Vec3, u_lobe: f32, u: Vec2) -> Option<Vec3> 
         }
         Leaf::RoughPlastic(p) => p.sample(wi, u_lobe, u),
         Leaf::RoughDielectric(d) => d.sample(wi, u_lobe, u),
+        Leaf::Principled(p) => p.sample(wi, u_lobe, u),
         // A leaf with a delta lobe samples itself whole: bsdf_sample takes its sample.
         Leaf::Smooth(_) | Leaf::SmoothPlastic(_) => None,
     }

@@ -1,8 +1,8 @@
 //! Mitsuba 3.9.1's `principled` BSDF (Burley's Disney BSDF as `src/bsdfs/principled.cpp` and
 //! `principledhelpers.h` define it): value, sampler, density and detached derivatives of the value
 //! by every parameter. Its GLSL twin is `shaders/lib/principled.glsl` (compared by
-//! `tests/it/twins.rs` through `shaders/principled_probe.comp`); neither is yet a material of the
-//! scene loader or of the render kernels, which refuse `principled` by name.
+//! `tests/it/twins.rs` through `shaders/principled_probe.comp`); the loader's `principled`
+//! material (`crate::scene::Material::Principled`) resolves to it in both back ends.
 //!
 //! Lobes, with brdf = (1 − metallic)(1 − spec_trans), bsdf = (1 − metallic)·spec_trans, the GGX
 //! distribution at (α_x, α_y) = max(0.001, r²/a, r²·a), a = √(1 − 0.9·anisotropic), the dielectric
@@ -141,6 +141,40 @@ pub struct PrincipledGrad {
     pub clearcoat_gloss: Vec3,
     /// ∂f̂/∂flatness.
     pub flatness: Vec3,
+}
+
+impl PrincipledGrad {
+    /// Every derivative multiplied (per image channel) by `adj`.
+    pub fn weighted(&self, adj: Vec3) -> PrincipledGrad {
+        PrincipledGrad {
+            base_color: self.base_color.map(|c| c * adj),
+            roughness: self.roughness * adj,
+            anisotropic: self.anisotropic * adj,
+            metallic: self.metallic * adj,
+            spec_trans: self.spec_trans * adj,
+            spec_tint: self.spec_tint * adj,
+            sheen: self.sheen * adj,
+            sheen_tint: self.sheen_tint * adj,
+            clearcoat: self.clearcoat * adj,
+            clearcoat_gloss: self.clearcoat_gloss * adj,
+            flatness: self.flatness * adj,
+        }
+    }
+
+    /// The derivatives of the eight scalars in `Material::table`'s order (`PRINCIPLED_SCALARS`):
+    /// metallic, spec_tint, spec_trans, sheen, sheen_tint, clearcoat, clearcoat_gloss, flatness.
+    pub fn scalars(&self) -> [Vec3; 8] {
+        [
+            self.metallic,
+            self.spec_tint,
+            self.spec_trans,
+            self.sheen,
+            self.sheen_tint,
+            self.clearcoat,
+            self.clearcoat_gloss,
+            self.flatness,
+        ]
+    }
 }
 
 /// Schlick's weight (1 − c)⁵, c clipped to [0, 1] as Mitsuba's `schlick_weight`.

@@ -288,9 +288,12 @@ fn derivatives_match_finite_differences() {
                             Leaf::RoughPlastic(p) => p.diffuse[c],
                             Leaf::Smooth(s) => s.reflectance[c],
                             Leaf::SmoothPlastic(p) => p.diffuse[c],
+                            Leaf::Principled(p) => p.base_color[c],
                         };
                         cases.push((
-                            g.leaves[leaf].color[c] + g.leaves[leaf].trans[c],
+                            g.leaves[leaf].color[c]
+                                + g.leaves[leaf].trans[c]
+                                + g.leaves[leaf].principled.base_color[c].dot(Vec3::ONE),
                             Box::new(move |v| {
                                 let mut x = base;
                                 match &mut x.leaves[leaf] {
@@ -301,6 +304,7 @@ fn derivatives_match_finite_differences() {
                                     Leaf::RoughPlastic(p) => p.diffuse[c] = v,
                                     Leaf::Smooth(s) => s.reflectance[c] = v,
                                     Leaf::SmoothPlastic(p) => p.diffuse[c] = v,
+                                    Leaf::Principled(p) => p.base_color[c] = v,
                                 }
                                 x
                             }),

@@ -202,6 +202,12 @@ contract_constants! {
     /// Feature bit: lights without area that read a texture (a textured `spot`) or that are
     /// projectors (`DeltaLight::tex`, `p_scale`, `uv_scale` and the frame rows).
     F_LIGHT_TEXTURE = 1 << 29;
+    /// Feature bit: principled leaves (Mitsuba's `principled`, `shaders/lib/principled.glsl`).
+    F_PRINCIPLED = 1 << 30;
+    /// Words of a principled material's record in the tables array (at `Material::table`): the
+    /// scalar slots (a parameter offset, or `SCALAR_TEXTURE` with a texture's descriptor) of
+    /// metallic, spec_tint, spec_trans, sheen, sheen_tint, clearcoat, clearcoat_gloss, flatness.
+    PRINCIPLED_SCALARS = 8;
     /// An `EmitterSample::param` (a gradient term's emitter) with this bit set is not a parameter
     /// offset: its other bits are the index of a textured light or projector, whose intensity,
     /// texels and scale the term reaches.

@@ -64,6 +64,11 @@ contract_enums! {
         Plastic = MAT_PLASTIC = 8,
         /// Rough dielectric interface (reflects and refracts through microfacets).
         RoughDielectric = MAT_ROUGH_DIELECTRIC = 9,
+        /// Mitsuba's `principled` (Burley's Disney BSDF): base colour in `p_color`, roughness in
+        /// `p_alpha`, anisotropic in `p_alpha_v` (scalar slots: a parameter or `SCALAR_TEXTURE`),
+        /// its other eight scalars' slots the `PRINCIPLED_SCALARS` words of the tables array from
+        /// `table` on, η in `eta.x`, its three sampling rates in `k`.
+        Principled = MAT_PRINCIPLED = 10,
     }
 
     /// What `ViewCamera::lens` holds.
@@ -127,6 +132,8 @@ contract_enums! {
         Plastic = LEAF_PLASTIC = 8,
         /// Rough dielectric.
         RoughDielectric = LEAF_ROUGH_DIELECTRIC = 9,
+        /// Principled.
+        Principled = LEAF_PRINCIPLED = 10,
     }
 
     /// Microfacet distribution.

@@ -3,6 +3,7 @@
 use glam::Vec3;
 
 use crate::bsdf::plastic::SmoothPlasticLeaf;
+use crate::bsdf::principled::PrincipledLeaf;
 use crate::bsdf::rough_dielectric::RoughDielectricLeaf;
 use crate::bsdf::rough_plastic::PlasticLeaf;
 use crate::bsdf::specular::{SmoothKind, SmoothLeaf};
@@ -10,7 +11,7 @@ use crate::bsdf::{Bsdf, Distribution, Leaf, LeafGrad, bsdf_sample_grad};
 use crate::bvh::Hit;
 use crate::contract::ALPHA_TEXTURE_FLOOR;
 use crate::contract::{
-    COATING_TABLE_LEN, MAT_BLEND, MAT_CONDUCTOR, MAT_DIELECTRIC, MAT_PLASTIC, MAT_ROUGH_CONDUCTOR,
+    COATING_TABLE_LEN, MAT_BLEND, MAT_CONDUCTOR, MAT_DIELECTRIC, MAT_PLASTIC, MAT_PRINCIPLED, MAT_ROUGH_CONDUCTOR,
     MAT_ROUGH_DIELECTRIC, MAT_ROUGH_PLASTIC, MAT_THIN_DIELECTRIC, Material, NMAP_BUMP, NO_ARRAY, NO_EMITTER, NO_PARAM,
     SCALAR_TEXTURE, TEX_ATTR_FACE, TEX_ATTR_VERTEX, TEX_CHECKER, TEX_NEAREST, TEX_WRAP_CLAMP, TEX_WRAP_MIRROR,
     TEXTURE_DESC_LEN,
@@ -118,10 +119,11 @@ pub fn shading_normal_gradient(flat: &FlatScene, hit: &Hit) -> glam::Mat3 {
     crate::attached::normal_derivative([tri.v0, tri.v1, tri.v2], normals, raw)
 }
 
-/// Whether material `id` is (or blends) an anisotropic rough conductor, whose shading frame
-/// must follow the surface ([`tangent_frame`]).
+/// Whether material `id` is (or blends) an anisotropic rough conductor or is principled (whose
+/// `anisotropic` is a parameter), whose shading frame must follow the surface ([`tangent_frame`]).
 pub fn material_anisotropic(flat: &FlatScene, id: u32) -> bool {
-    let anisotropic = |m: &Material| m.tag == MAT_ROUGH_CONDUCTOR && m.p_alpha_v != m.p_alpha;
+    let anisotropic =
+        |m: &Material| (m.tag == MAT_ROUGH_CONDUCTOR && m.p_alpha_v != m.p_alpha) || m.tag == MAT_PRINCIPLED;
     let m = &flat.materials[id as usize];
     if m.tag == MAT_BLEND {
         anisotropic(&flat.materials[m.child0 as usize]) || anisotropic(&flat.materials[m.child1 as usize])
@@ -451,6 +453,25 @@ fn leaf_from_material(flat: &FlatScene, m: &Material, at: TexAt) -> Leaf {
             transmittance: if m.p_weight == NO_PARAM { m.k } else { param_rgb(params, m.p_weight) },
             eta: m.eta.x,
         }),
+        MAT_PRINCIPLED => {
+            let s = |i: u32| scalar_value(flat, principled_slot(flat, m, i), at);
+            Leaf::Principled(PrincipledLeaf {
+                base_color: color,
+                // Mitsuba floors α = roughness², not the texture's roughness.
+                roughness: scalar_value(flat, m.p_alpha, at),
+                anisotropic: scalar_value(flat, m.p_alpha_v, at),
+                metallic: s(0),
+                spec_tint: s(1),
+                spec_trans: s(2),
+                sheen: s(3),
+                sheen_tint: s(4),
+                clearcoat: s(5),
+                clearcoat_gloss: s(6),
+                flatness: s(7),
+                eta: m.eta.x,
+                rates: m.k,
+            })
+        }
         MAT_PLASTIC => Leaf::SmoothPlastic(SmoothPlasticLeaf {
             diffuse: color,
             specular: m.k,
@@ -507,6 +528,10 @@ pub fn texture_backward(flat: &FlatScene, m: &Material, at: TexAt, g: Vec3, sink
 }
 
 fn leaf_backward(flat: &FlatScene, m: &Material, at: TexAt, g: &LeafGrad, sink: &mut GradSink<'_>) {
+    if m.tag == MAT_PRINCIPLED {
+        principled_backward(flat, m, at, &g.principled, sink);
+        return;
+    }
     if is_smooth_tag(m.tag) || m.tag == MAT_ROUGH_DIELECTRIC {
         // A dielectric's reflectance and transmittance (a smooth leaf's transmittance parameter
         // sits in p_alpha, a rough one's in p_weight); a constant has no parameter.
@@ -533,6 +558,43 @@ fn leaf_backward(flat: &FlatScene, m: &Material, at: TexAt, g: &LeafGrad, sink: 
         // Isotropic: α_u and α_v are one parameter.
         scalar_backward(flat, m.p_alpha, at, g.alpha + g.alpha_v, true, sink);
     }
+}
+
+/// A principled leaf's derivatives `g` (adj-weighted, per image channel) to its parameters: base
+/// colour channel k (a texel's, weighted by the lookup) reaches every image channel, the roughness
+/// and every scalar may be a texture, the eight scalars' slots are `Material::table`'s record (twin: `push_principled` of
+/// `shaders/lib/surface.glsl`).
+fn principled_backward(
+    flat: &FlatScene,
+    m: &Material,
+    at: TexAt,
+    g: &crate::bsdf::principled::PrincipledGrad,
+    sink: &mut GradSink<'_>,
+) {
+    if m.tex_width > 0 {
+        let (texel, weight) = material_footprint(flat, m, at);
+        for (t, w) in texel.into_iter().zip(weight) {
+            if w != 0.0 {
+                for (k, gk) in g.base_color.iter().enumerate() {
+                    sink.add(t + k as u32, *gk * w);
+                }
+            }
+        }
+    } else {
+        for (k, gk) in g.base_color.iter().enumerate() {
+            sink.add(m.p_color + k as u32, *gk);
+        }
+    }
+    scalar_backward(flat, m.p_alpha, at, g.roughness, false, sink);
+    scalar_backward(flat, m.p_alpha_v, at, g.anisotropic, false, sink);
+    for (i, gi) in g.scalars().into_iter().enumerate() {
+        scalar_backward(flat, principled_slot(flat, m, i as u32), at, gi, false, sink);
+    }
+}
+
+/// Scalar slot `i` (`PRINCIPLED_SCALARS`) of principled material `m`: word `i` of its record.
+fn principled_slot(flat: &FlatScene, m: &Material, i: u32) -> u32 {
+    flat.tables[(m.table + i) as usize].to_bits()
 }
 
 /// Whether material tag `tag` is a smooth (delta) BSDF's.

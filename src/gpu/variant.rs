@@ -24,6 +24,9 @@ pub fn scene_features(flat: &FlatScene, env_param: u32) -> u32 {
                 F_ROUGH_DIELECTRIC | if m.distribution == DIST_BECKMANN { F_BECKMANN } else { F_GGX }
             }
             MAT_NULL => F_MEDIA,
+            // Principled lobes are GGX; its shading frame follows ∂p/∂u (anisotropic is a
+            // parameter, which may leave 0).
+            MAT_PRINCIPLED => F_PRINCIPLED | F_GGX | F_ANISOTROPIC,
             _ => F_BLEND,
         };
         if m.tex_width > 0 {
@@ -39,6 +42,11 @@ pub fn scene_features(flat: &FlatScene, env_param: u32) -> u32 {
         let scalar_textured = match m.tag {
             MAT_ROUGH_CONDUCTOR => textured(m.p_alpha) || textured(m.p_alpha_v),
             MAT_ROUGH_DIELECTRIC => textured(m.p_alpha),
+            MAT_PRINCIPLED => {
+                textured(m.p_alpha)
+                    || textured(m.p_alpha_v)
+                    || (0..PRINCIPLED_SCALARS).any(|i| textured(flat.tables[(m.table + i) as usize].to_bits()))
+            }
             MAT_BLEND => textured(m.p_weight),
             _ => false,
         } || textured(m.p_opacity);
@@ -128,6 +136,20 @@ pub fn param_kinds(flat: &FlatScene, env: (u32, u32), begin: u32, end: u32) -> P
                     k = k.union(ParamKinds::ALPHA);
                 }
             }
+            MAT_PRINCIPLED => {
+                let texels = if m.tex_width > 0 { m.tex_width * m.tex_height } else { 1 };
+                if overlaps(m.p_color, 3 * texels) {
+                    k = k.union(if m.tex_width > 0 { ParamKinds::TEXTURE } else { ParamKinds::COLOR });
+                }
+                if overlaps_slot(m.p_alpha) {
+                    k = k.union(ParamKinds::ALPHA);
+                }
+                // Anisotropic and the eight other scalars count as weights (of lobes).
+                let record = |i: u32| flat.tables[(m.table + i) as usize].to_bits();
+                if overlaps_slot(m.p_alpha_v) || (0..PRINCIPLED_SCALARS).any(|i| overlaps_slot(record(i))) {
+                    k = k.union(ParamKinds::WEIGHT);
+                }
+            }
             _ => {
                 if overlaps_slot(m.p_weight) {
                     k = k.union(ParamKinds::WEIGHT);
@@ -191,7 +213,7 @@ pub fn request_features(scene: u32, options: &RenderOptions, kinds: ParamKinds) 
 
 /// A short human-readable name of a variant, for logs: `nee env diffuse conductor[beckmann] ∂alpha`.
 pub fn describe(features: u32) -> String {
-    const NAMES: [(u32, &str); 31] = [
+    const NAMES: [(u32, &str); 32] = [
         (F_NEE, "nee"),
         (F_ENV, "env"),
         (F_EMITTERS, "emitters"),
@@ -215,6 +237,7 @@ pub fn describe(features: u32) -> String {
         (F_PARAM_TEXTURE, "scalar-texture"),
         (F_MASK, "mask"),
         (F_LIGHT_TEXTURE, "light-texture"),
+        (F_PRINCIPLED, "principled"),
         (F_HERO, "hero"),
         (G_COLOR, "∂color"),
         (G_TEXTURE, "∂texture"),

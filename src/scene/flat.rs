@@ -12,10 +12,10 @@ use crate::bvh::{self, Bvh};
 use crate::contract::{
     COATING_TABLE_LEN, DIST_GGX, DeltaLight, EmitterTri, EnvCell, FIELD_CONSTANT, FIELD_GRID, FIELD_GRID_MIRROR,
     FIELD_GRID_REPEAT, FieldDesc, LIGHT_DIRECTIONAL, LIGHT_POINT, LIGHT_PROJECTOR, LIGHT_SPOT, MAT_BLEND,
-    MAT_CONDUCTOR, MAT_DIELECTRIC, MAT_DIFFUSE, MAT_NULL, MAT_PLASTIC, MAT_ROUGH_CONDUCTOR, MAT_ROUGH_DIELECTRIC,
-    MAT_ROUGH_PLASTIC, MAT_THIN_DIELECTRIC, Material as GpuMaterial, MediumDesc, MeshShading, NMAP_BUMP, NO_ARRAY,
-    NO_EMITTER, NO_MEDIUM, NO_PARAM, PHASE_HG, PHASE_ISOTROPIC, SCALAR_TEXTURE, TEX_ATTR_FACE, TEX_ATTR_VERTEX,
-    TEX_CHECKER, TEX_NEAREST, TEX_WRAP_CLAMP, TEX_WRAP_MIRROR, TriVertices,
+    MAT_CONDUCTOR, MAT_DIELECTRIC, MAT_DIFFUSE, MAT_NULL, MAT_PLASTIC, MAT_PRINCIPLED, MAT_ROUGH_CONDUCTOR,
+    MAT_ROUGH_DIELECTRIC, MAT_ROUGH_PLASTIC, MAT_THIN_DIELECTRIC, Material as GpuMaterial, MediumDesc, MeshShading,
+    NMAP_BUMP, NO_ARRAY, NO_EMITTER, NO_MEDIUM, NO_PARAM, PHASE_HG, PHASE_ISOTROPIC, SCALAR_TEXTURE, TEX_ATTR_FACE,
+    TEX_ATTR_VERTEX, TEX_CHECKER, TEX_NEAREST, TEX_WRAP_CLAMP, TEX_WRAP_MIRROR, TriVertices,
 };
 use crate::error::Result;
 use crate::params::ParamId;
@@ -540,6 +540,17 @@ fn flatten_material(scene: &Scene, m: &Material) -> GpuMaterial {
                 ..Default::default()
             }
         }
+        Material::Principled { base_color, roughness, anisotropic, eta, rates, .. } => GpuMaterial {
+            tag: MAT_PRINCIPLED,
+            distribution: DIST_GGX,
+            p_alpha: scalar_slot(scene, roughness),
+            p_alpha_v: scalar_slot(scene, anisotropic),
+            // The material's index until `scalar_texture_tables` places its record.
+            table: scene.materials.iter().position(|x| std::ptr::eq(x, m)).expect("a material of the scene") as u32,
+            eta: Vec3::new(eta, 0.0, 0.0),
+            k: rates,
+            ..albedo_fields(scene, base_color)
+        },
         Material::Blend { weight, children } => GpuMaterial {
             tag: MAT_BLEND,
             child0: children[0].0,
@@ -592,7 +603,8 @@ fn scalar_slot(scene: &Scene, id: ParamId) -> u32 {
 }
 
 /// Appends the descriptor of every scalar texture that `materials` use to `tables` (once per
-/// texture; `TEXTURE_DESC_LEN` words as `SCALAR_TEXTURE` states) and points their slots at them.
+/// texture; `TEXTURE_DESC_LEN` words as `SCALAR_TEXTURE` states) and points their slots at them;
+/// appends each principled material's record of scalar slots (`PRINCIPLED_SCALARS`).
 fn scalar_texture_tables(scene: &Scene, materials: &mut [GpuMaterial], tables: &mut Vec<f32>) {
     let mut placed: Vec<(u32, u32)> = Vec::new();
     let mut place = |slot: &mut u32, tables: &mut Vec<f32>| {
@@ -627,6 +639,20 @@ fn scalar_texture_tables(scene: &Scene, materials: &mut [GpuMaterial], tables: &
                 place(&mut m.p_alpha_v, tables);
             }
             MAT_ROUGH_DIELECTRIC => place(&mut m.p_alpha, tables),
+            MAT_PRINCIPLED => {
+                place(&mut m.p_alpha, tables);
+                place(&mut m.p_alpha_v, tables);
+                // The record of its eight scalar slots (`PRINCIPLED_SCALARS`).
+                let Material::Principled { scalars, .. } = &scene.materials[m.table as usize] else {
+                    unreachable!("a principled material's table holds its index until here")
+                };
+                let mut words = scalars.map(|id| scalar_slot(scene, id));
+                for w in &mut words {
+                    place(w, tables);
+                }
+                m.table = tables.len() as u32;
+                tables.extend(words.map(f32::from_bits));
+            }
             MAT_BLEND => place(&mut m.p_weight, tables),
             _ => {}
         }

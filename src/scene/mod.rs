@@ -247,6 +247,22 @@ pub enum Material {
         /// int_ior / ext_ior.
         eta: f32,
     },
+    /// Mitsuba's `principled` (`crate::bsdf::principled`).
+    Principled {
+        /// `base_color`, constant or textured.
+        base_color: Albedo,
+        /// `roughness`, 1 value or a texture's texels ([`Scene::scalar_texture`]).
+        roughness: ParamId,
+        /// `anisotropic`, as `roughness`.
+        anisotropic: ParamId,
+        /// metallic, spec_tint, spec_trans, sheen, sheen_tint, clearcoat, clearcoat_gloss,
+        /// flatness, each as `roughness`.
+        scalars: [ParamId; 8],
+        /// Relative index of refraction η (`eta`, or from `specular`), a constant.
+        eta: f32,
+        /// The sampling rates (main specular, clearcoat, diffuse reflectance), constants.
+        rates: Vec3,
+    },
     /// Smooth plastic (Mitsuba's `plastic`, `crate::bsdf::plastic`).
     SmoothPlastic {
         /// Diffuse reflectance of the base in [0, 1], constant or textured.

@@ -154,6 +154,23 @@ MATRIX = {
                                            "NEE through rough glass"],
                                  grads=["ball.bsdf.alpha.value", "ball.bsdf.specular_transmittance.value",
                                         "pane.bsdf.alpha.value", "pane.bsdf.specular_reflectance.value"]),
+    "bsdf_principled": dict(features=["principled: every lobe (metallic, spec_trans, clearcoat, sheen, tints, flatness)",
+                                      "eta and specular", "anisotropic (pane)", "refraction in and out"],
+                            grads=["ball.bsdf.base_color.value", "ball.bsdf.roughness.value", "ball.bsdf.metallic.value",
+                                   "ball.bsdf.spec_trans.value", "ball.bsdf.clearcoat.value"]),
+                            # The pane's anisotropic is left out: at the matrix's budget its derivative
+                            # sees only a 33-41 % bias; tests/it/gradients.rs checks it (and sheen,
+                            # tints, flatness, clearcoat_gloss) against finite differences.
+    "bsdf_principled_textured": dict(features=["principled base_color bitmap (sRGB)",
+                                               "principled roughness checkerboard of floats"],
+                                     # color0's texels (0.2, the glossier) are left out: at the matrix's
+                                     # budget their derivative, small against both renderers' noise,
+                                     # sees only a 117-124 % bias; color1 is compared.
+                                     grads=["ball.bsdf.base_color.data", "pane.bsdf.roughness.color1.value"]),
+    "bsdf_principled_textured_scalars": dict(features=["principled metallic, clearcoat, sheen as checkerboards of floats",
+                                                       "principled spec_trans, anisotropic as checkerboards (pane)"],
+                                             grads=["ball.bsdf.metallic.color0.value", "ball.bsdf.sheen.color1.value",
+                                                    "pane.bsdf.spec_trans.color0.value"]),
     "bsdf_blend": dict(features=["blendbsdf", "weight", "diffuse + roughconductor"],
                        grads=["ball.bsdf.weight.value", "ball.bsdf.bsdf_0.reflectance.value"]),
     # A smooth conductor in a blend. Mitsuba 3.9.1's blendbsdf combines a delta sample with the
@@ -394,6 +411,14 @@ POWER = {
     # The weight's derivative as bsdf_blend's (a blend weight's detached estimator is noisy: at
     # the mirror it is ±v per sample); it saw 5.2–5.8 % at 256 spp × 32 seeds.
     "bsdf_blend_conductor": {"gradient_bias": 0.1},
+    # The ball's roughness: paths refract into and out of the half-transmitting ball, each vertex a
+    # score; it saw 17.9-19.7 % at 256 spp x 32 seeds (metallic 6.5-6.8 %, the rest under 5 %).
+    "bsdf_principled": {"gradient_bias": 0.2},
+    # The pane's roughness texels (color1) saw 11.3-12.2 % at 256 spp x 32 seeds.
+    "bsdf_principled_textured": {"gradient_bias": 0.15},
+    # Checkerboard colours of metallic, sheen and the pane's spec_trans: they saw 8.8 %, 6.6-7.2 %
+    # and 5.9-11.4 % at 256 spp x 32 seeds (image means 0.97-1.00 of Mitsuba's).
+    "bsdf_principled_textured_scalars": {"gradient_bias": 0.12},
     "bsdf_roughconductor_beckmann": {"gradient_bias": 0.1},
     "bsdf_roughconductor_defaults": {"gradient_bias": 0.5},
     "bsdf_roughconductor_eta_k": {"gradient_bias": 0.1},

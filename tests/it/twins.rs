@@ -68,6 +68,8 @@ fn probe_case(
         // The probes read no coating tables: rough plastics are compared path by path on scenes
         // (cpu_vs_gpu, gradients).
         Leaf::RoughPlastic(_) => panic!("the BSDF probes have no rough plastics"),
+        // A principled leaf has its own probe (principled_probe.comp, principled_gpu_equals_cpu).
+        Leaf::Principled(_) => panic!("the BSDF probe has no principled leaves"),
         Leaf::RoughDielectric(d) => (
             pathgrad::contract::LEAF_ROUGH_DIELECTRIC,
             d.distribution as u32,

@@ -126,6 +126,7 @@ impl<'a> Loader<'a> {
             "roughplastic" => self.rough_plastic(&p, name, depth)?,
             "plastic" => self.smooth_plastic(&p, name, depth)?,
             "roughdielectric" => self.rough_dielectric(&p, name)?,
+            "principled" => self.principled(&p, name, depth)?,
             "conductor" => self.smooth(&p, name, SmoothKind::Conductor)?,
             "dielectric" => self.smooth(&p, name, SmoothKind::Dielectric)?,
             "thindielectric" => self.smooth(&p, name, SmoothKind::ThinDielectric)?,
@@ -226,7 +227,8 @@ impl<'a> Loader<'a> {
                     inner = nested;
                 }
                 let transmits = matches!(self.material(inner), Some(Material::Smooth { kind, .. }) if kind != SmoothKind::Conductor)
-                    || matches!(self.material(inner), Some(Material::RoughDielectric { .. }));
+                    || matches!(self.material(inner), Some(Material::RoughDielectric { .. }))
+                    || self.principled_transmits(inner);
                 if transmits {
                     return Err(self.x.err(
                         child,
@@ -518,6 +520,83 @@ impl<'a> Loader<'a> {
         Ok(self.scene.add_material(Material::RoughDielectric { distribution, alpha, reflectance, transmittance, eta }))
     }
 
+    /// Mitsuba 3.9.1's `principled`: `base_color` (0.5; a colour, parameter
+    /// `NAME.base_color.value`, or a `bitmap`/`checkerboard`: `.data`, `.color0/.color1.value`),
+    /// `roughness` (0.5), `anisotropic`, `metallic`, `spec_tint`, `spec_trans`, `sheen`,
+    /// `sheen_tint`, `clearcoat`, `clearcoat_gloss`, `flatness` (0) — each a number in [0, 1]
+    /// (parameter `NAME.KEY.value`) or a one-channel texture ([`Loader::scalar_property`]) —,
+    /// `eta` or `specular` (0.5; not both, as
+    /// Mitsuba; constants: η moves refracted directions, whose derivative is not built) and the
+    /// three sampling rates. Mitsuba's substitutions where `spec_trans` is given and nonzero: η = 1
+    /// becomes 1.001, `specular` = 0 becomes 10⁻³; η = 2/(1 − √(0.08·specular)) − 1.
+    fn principled(&mut self, p: &Props<'a>, name: &str, depth: usize) -> Result<MaterialId> {
+        const SCALARS: [&str; 8] =
+            ["metallic", "spec_tint", "spec_trans", "sheen", "sheen_tint", "clearcoat", "clearcoat_gloss", "flatness"];
+        for key in ["eta", "specular"] {
+            if let Some(t) = p.object(key) {
+                return Err(self
+                    .x
+                    .err(t, format!("a textured '{key}' of 'principled' is not supported (Mitsuba's is a number)")));
+            }
+        }
+        // Mitsuba's get_flag: a lobe exists where its property is given and not the number 0.
+        let flagged = |p: &Props<'a>, key: &str| -> Result<bool> {
+            if p.object(key).is_some() {
+                return Ok(true);
+            }
+            Ok(match p.float(&self.x, key)? {
+                Some((v, _)) => v != 0.0,
+                None => p.has(key),
+            })
+        };
+        let spec_trans_flag = flagged(p, "spec_trans")?;
+        let eta = match (p.has("eta"), p.has("specular")) {
+            (true, true) => {
+                return Err(self.x.err(
+                    p.node,
+                    "'principled' takes either 'eta' or 'specular', not both (Mitsuba refuses both: they determine each other)",
+                ));
+            }
+            (true, false) => {
+                let eta = self.float_in(p, "eta", None, (f32::MIN_POSITIVE, f32::MAX))?;
+                if spec_trans_flag && eta == 1.0 { 1.001 } else { eta }
+            }
+            (false, _) => {
+                let specular = self.float_in(p, "specular", Some(0.5), (0.0, 1.0))?;
+                let specular = if spec_trans_flag && specular == 0.0 { 1e-3 } else { specular };
+                crate::bsdf::principled::eta_from_specular(specular)
+            }
+        };
+        let rate = |key: &str| self.float_in(p, key, Some(1.0), (0.0, f32::MAX));
+        let rates = Vec3::new(
+            rate("main_specular_sampling_rate")?,
+            rate("clearcoat_sampling_rate")?,
+            rate("diffuse_reflectance_sampling_rate")?,
+        );
+        let base_color = match p.object("base_color") {
+            Some(t) => self.texture(t, format!("{name}.base_color"), depth + 1)?,
+            None => {
+                let c = self.color_in(p, "base_color", Vec3::splat(0.5), bounds::REFLECTANCE)?;
+                let id = self.scene.params.add(&format!("{name}.base_color.value"), &c.to_array(), bounds::REFLECTANCE);
+                Albedo::Rgb(id.map_err(|e| self.located(p.node, e))?)
+            }
+        };
+        let roughness = self.scalar_property(p, name, "roughness", Some(0.5), bounds::WEIGHT, (0.0, 1.0))?;
+        let anisotropic = self.scalar_property(p, name, "anisotropic", Some(0.0), bounds::WEIGHT, (0.0, 1.0))?;
+        let mut scalars = [crate::params::ParamId(0); SCALARS.len()];
+        for (slot, key) in scalars.iter_mut().zip(SCALARS) {
+            *slot = self.scalar_property(p, name, key, Some(0.0), bounds::WEIGHT, (0.0, 1.0))?;
+        }
+        Ok(self.scene.add_material(Material::Principled { base_color, roughness, anisotropic, scalars, eta, rates }))
+    }
+
+    /// Whether material `id` is a principled BSDF whose `spec_trans` is not 0 somewhere (it
+    /// transmits).
+    fn principled_transmits(&self, id: MaterialId) -> bool {
+        matches!(self.material(id), Some(Material::Principled { scalars, .. })
+            if self.scene.params.get(scalars[2]).iter().any(|v| *v != 0.0))
+    }
+
     /// A specular colour `key` (1 by default): the parameter `NAME.KEY.value` where the file gives
     /// it or `always`, else a constant (Mitsuba's dielectrics traverse only the colours given).
     fn specular_colour(&mut self, p: &Props<'a>, name: &str, key: &str, always: bool) -> Result<SmoothColour> {
@@ -695,7 +774,13 @@ impl<'a> Loader<'a> {
             .collect();
         let map = NormalMapTexture { texels: heights, ..map };
         let nested = self.map_nested(p, name, depth, "bumpmap")?;
-        let anisotropic = |id: MaterialId| matches!(self.material(id), Some(Material::RoughConductor { alpha, alpha_v, .. }) if alpha != alpha_v);
+        let anisotropic = |id: MaterialId| match self.material(id) {
+            Some(Material::RoughConductor { alpha, alpha_v, .. }) => alpha != alpha_v,
+            Some(Material::Principled { anisotropic, .. }) => {
+                self.scene.params.get(anisotropic).iter().any(|v| *v != 0.0)
+            }
+            _ => false,
+        };
         let children = match self.material(nested) {
             Some(Material::Blend { children, .. }) => children.to_vec(),
             _ => vec![nested],

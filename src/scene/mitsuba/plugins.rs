@@ -136,6 +136,12 @@ pub const PLUGINS: &[Plugin] = &[
     ),
     p(
         Bsdf,
+        "principled",
+        "`base_color` (rgb, spectrum, bitmap or checkerboard), `roughness`, `anisotropic`, `metallic`, `spec_tint`, `spec_trans`, `sheen`, `sheen_tint`, `clearcoat`, `clearcoat_gloss`, `flatness` (parameters or one-channel textures), `eta` or `specular`, the three `*_sampling_rate`s",
+        "Mitsuba 3.9.1's lobes and sampler; `eta`/`specular` constants (not parameters); shading frame along ∂p/∂u; not inside blendbsdf; inside twosided only without `spec_trans`",
+    ),
+    p(
+        Bsdf,
         "roughconductor",
         "`distribution`, `alpha` or `alpha_u`/`alpha_v` (parameters or one-channel textures), `specular_reflectance` (rgb, spectrum, bitmap or checkerboard), `material` or `eta`/`k`, `sample_visible`",
         "anisotropic: shading frame along ∂p/∂u",

@@ -886,6 +886,77 @@ fn rough_dielectric_takes_mitsubas_properties_and_names() {
 }
 
 #[test]
+fn principled_takes_mitsubas_properties_names_and_substitutions() {
+    let s = load_ok(
+        r#"<shape type="cube" id="a"><bsdf type="principled"/></shape>
+           <shape type="cube" id="b"><bsdf type="principled"><float name="eta" value="1"/>
+             <float name="spec_trans" value="0.4"/><float name="metallic" value="0.2"/>
+             <float name="clearcoat_sampling_rate" value="0.5"/></bsdf></shape>
+           <shape type="cube" id="c"><bsdf type="principled"><float name="specular" value="0"/>
+             <float name="spec_trans" value="0.1"/></bsdf></shape>
+           <shape type="cube" id="d"><bsdf type="principled"><float name="specular" value="0"/></bsdf></shape>"#,
+    );
+    let found: Vec<_> = s
+        .materials
+        .iter()
+        .filter_map(|m| match m {
+            Material::Principled { eta, rates, scalars, .. } => Some((*eta, *rates, *scalars)),
+            _ => None,
+        })
+        .collect();
+    let [(e0, r0, _), (e1, r1, s1), (e2, _, _), (e3, _, _)] = found[..] else { panic!("{found:?}") };
+    // Mitsuba's defaults: specular 0.5 (η ≈ 1.5), rates 1; η = 1 becomes 1.001 and specular 0
+    // becomes 10⁻³ where spec_trans is given and not 0, and stay otherwise.
+    assert!((e0 - 1.5).abs() < 0.01, "{e0}");
+    assert_eq!((r0, r1), (Vec3::ONE, Vec3::new(1.0, 0.5, 1.0)));
+    assert_eq!(e1, 1.001);
+    assert_eq!(e2, crate::bsdf::principled::eta_from_specular(1e-3));
+    assert_eq!(e3, 1.0);
+    // The eight scalars in Material::table's record order.
+    assert_eq!(s1[0], s.params.find("b.bsdf.metallic.value").unwrap());
+    assert_eq!(s1[7], s.params.find("b.bsdf.flatness.value").unwrap());
+    assert_eq!(param(&s, "a.bsdf.base_color.value"), [0.5, 0.5, 0.5]);
+    assert_eq!(param(&s, "a.bsdf.roughness.value"), [0.5]);
+    assert_eq!(param(&s, "b.bsdf.spec_trans.value"), [0.4]);
+    assert!(s.params.find("b.bsdf.eta").is_none(), "η is a constant, not a parameter");
+    let e = s.params.select(&["b.bsdf.eta"]).unwrap_err().to_string();
+    assert!(e.contains("principled BSDFs'") && e.contains("are not parameters"), "{e}");
+    for (body, message) in [
+        (
+            r#"<bsdf type="principled"><float name="eta" value="1.4"/><float name="specular" value="0.3"/></bsdf>"#,
+            "either 'eta' or 'specular', not both",
+        ),
+        (
+            r#"<bsdf type="principled"><texture name="eta" type="bitmap"><string name="filename" value="x.png"/></texture></bsdf>"#,
+            "a textured 'eta' of 'principled' is not supported",
+        ),
+        (
+            r#"<bsdf type="twosided"><bsdf type="principled"><float name="spec_trans" value="0.2"/></bsdf></bsdf>"#,
+            "cannot wrap one that transmits light",
+        ),
+        (
+            r#"<bsdf type="blendbsdf"><float name="weight" value="0.5"/><bsdf type="principled"/><bsdf type="diffuse"/></bsdf>"#,
+            "'blendbsdf' children must",
+        ),
+        (r#"<bsdf type="principled"><float name="sheen" value="1.5"/></bsdf>"#, "'sheen' must lie in [0, 1]"),
+        (r#"<bsdf type="principledthin"/>"#, "unsupported plugin 'principledthin'"),
+    ] {
+        let e = load(&format!(r#"<shape type="cube">{body}</shape>"#)).unwrap_err().to_string();
+        assert!(e.contains(message), "{body}: {e}");
+    }
+    // A two-sided principled BSDF that does not transmit is Mitsuba's too.
+    load_ok(r#"<shape type="cube"><bsdf type="twosided"><bsdf type="principled"/></bsdf></shape>"#);
+    // Every scalar takes a one-channel texture, named as Mitsuba's traverse names it.
+    let t = load_ok(
+        r#"<shape type="cube" id="t"><bsdf type="principled"><texture name="metallic" type="checkerboard">
+             <float name="color0" value="0.7"/><float name="color1" value="0.1"/></texture>
+             <texture name="anisotropic" type="checkerboard"/></bsdf></shape>"#,
+    );
+    assert_eq!(param(&t, "t.bsdf.metallic.color0.value"), [0.7]);
+    assert_eq!(param(&t, "t.bsdf.anisotropic.color1.value"), [0.2]);
+}
+
+#[test]
 fn thinlens_and_orthographic_sensors_take_mitsubas_properties() {
     use crate::scene::Lens;
     let film = r#"<film type="hdrfilm"><integer name="width" value="40"/><integer name="height" value="20"/></film>"#;
