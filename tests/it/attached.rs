@@ -21,6 +21,11 @@ fn weights(width: u32, height: u32) -> Image {
     Image::from_rgb(width, height, data).unwrap()
 }
 
+/// `scene`'s options at `size`² and `spp`, with attached sampling (default noise).
+fn attached(scene: &Scene, size: u32, spp: u32) -> RenderOptions {
+    RenderOptions { width: size, height: size, spp, sampling: Sampling::attached(), ..RenderOptions::for_scene(scene) }
+}
+
 fn objective(img: &Image, a: &Image) -> f64 {
     img.as_slice().iter().zip(a.as_slice()).map(|(i, w)| f64::from(*i) * f64::from(*w)).sum()
 }
@@ -94,7 +99,7 @@ fn ior_matches_finite_differences_on_the_device() {
 }
 
 /// The device's attached kernel against the CPU reference, sample for sample (the same keys): the
-/// η gradient of every scene, and the other parameters' (detached terms) unchanged by attaching.
+/// η gradient of every scene.
 #[test]
 fn the_device_equals_the_cpu_reference() {
     use pathgrad::backend::Backend;
@@ -103,14 +108,7 @@ fn the_device_equals_the_cpu_reference() {
     let gpu = crate::support::TestGpu::new();
     for name in ["attached_sphere", "attached_slab", "attached_pane", "attached_mirror"] {
         let scene = scenes::data_scene(name);
-        let opts = RenderOptions {
-            width: 32,
-            height: 32,
-            spp: 2,
-            seed: 5,
-            sampling: Sampling::attached(),
-            ..RenderOptions::for_scene(&scene)
-        };
+        let opts = RenderOptions { seed: 5, ..attached(&scene, 32, 2) };
         let a = weights(opts.width, opts.height);
         let mut renderer = Renderer::new(&gpu.ctx, &scene).unwrap();
         let g = renderer.backward(&opts, &a, GradMode::Float).unwrap();
@@ -164,13 +162,7 @@ fn attached_sampling_refuses_what_it_does_not_cover() {
     use pathgrad::gpu::renderer::GradMode;
     let gpu = crate::support::TestGpu::new();
     let cornell = pathgrad::scene::builtin::load("cornell-box").unwrap();
-    let opts = RenderOptions {
-        width: 8,
-        height: 8,
-        spp: 1,
-        sampling: Sampling::attached(),
-        ..RenderOptions::for_scene(&cornell)
-    };
+    let opts = attached(&cornell, 8, 1);
     let a = weights(8, 8);
     let err = pathgrad::cpu::backward(&cornell, &opts, &a).unwrap_err().to_string();
     assert!(err.contains("Sampling::Attached") && err.contains("`diffuse` material"), "{err}");
@@ -178,13 +170,7 @@ fn attached_sampling_refuses_what_it_does_not_cover() {
     let err = renderer.backward(&opts, &a, GradMode::Float).unwrap_err().to_string();
     assert!(err.contains("`diffuse` material"), "{err}");
     let sphere = scenes::data_scene("attached_sphere");
-    let opts = RenderOptions {
-        width: 8,
-        height: 8,
-        spp: 1,
-        sampling: Sampling::attached(),
-        ..RenderOptions::for_scene(&sphere)
-    };
+    let opts = attached(&sphere, 8, 1);
     let mut renderer = Renderer::new(&gpu.ctx, &sphere).unwrap();
     let err = renderer.backward(&opts, &a, GradMode::Deterministic).unwrap_err().to_string();
     assert!(err.contains("float kernel only"), "{err}");
@@ -195,7 +181,7 @@ fn attached_sampling_refuses_what_it_does_not_cover() {
 }
 
 /// The replay returns Φ to zero as it returns the radiance to zero (ALGORITHMS.md §9 test (d)):
-/// after the last vertex every term of Γ has been removed, on every path of the three scenes,
+/// after the last vertex every term of Γ has been removed, on every path of the four scenes,
 /// up to rounding amplified by the completed Jacobians' inverses (10⁻³ of Γ's largest entry).
 #[test]
 fn the_replay_returns_gamma_to_zero() {
@@ -206,13 +192,7 @@ fn the_replay_returns_gamma_to_zero() {
     use pathgrad::scene::flat::FlatScene;
     for name in ["attached_sphere", "attached_slab", "attached_pane", "attached_mirror"] {
         let scene = scenes::data_scene(name);
-        let opts = RenderOptions {
-            width: 24,
-            height: 24,
-            spp: 2,
-            sampling: Sampling::attached(),
-            ..RenderOptions::for_scene(&scene)
-        };
+        let opts = attached(&scene, 24, 2);
         let flat = FlatScene::new(&scene).unwrap();
         let globals = opts.globals(&scene, &flat, PassTag::Gradient);
         let camera = opts.view_camera(&pathgrad::integrator::View::current(&scene), PassTag::Gradient);
