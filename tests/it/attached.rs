@@ -118,6 +118,16 @@ fn the_device_equals_the_cpu_reference() {
         println!("{name}: η gradient GPU {gv} CPU {cv}");
         assert!((f64::from(gv) - cv).abs() <= 1e-3 * cv.abs(), "{name}: GPU {gv} vs CPU {cv}");
     }
+    // The Jacobian noise (stream `Jacobian`, block 0 of each vertex) is drawn alike on both.
+    let scene = scenes::data_scene("attached_sphere");
+    let opts = RenderOptions { seed: 5, sampling: Sampling::Attached { noise: 0.2 }, ..attached(&scene, 32, 2) };
+    let a = weights(32, 32);
+    let g = Renderer::new(&gpu.ctx, &scene).unwrap().backward(&opts, &a, GradMode::Float).unwrap();
+    let c = pathgrad::cpu::backward(&scene, &opts, &a).unwrap();
+    let e = scene.params.entry(scene.params.find("glass.bsdf.eta").unwrap()).clone();
+    let (gv, cv) = (g.get("glass.bsdf.eta").unwrap()[0], c[e.offset as usize]);
+    println!("attached_sphere, noise 0.2: η gradient GPU {gv} CPU {cv}");
+    assert!((f64::from(gv) - cv).abs() <= 1e-3 * cv.abs(), "noise 0.2: GPU {gv} vs CPU {cv}");
 }
 
 /// `optimize` with attached sampling recovers the index of refraction of a glass sphere (1.5,
