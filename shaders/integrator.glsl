@@ -687,6 +687,19 @@ bool path_step(inout PathState st) {
         BsdfSample bs;
         float pdf_f;
         float pdf_d = 0.0;
+#if ATTACHED
+        // Attached sampling at a rough conductor: its own sampler (RoughLobe, src/attached.rs).
+        bool rough_attached = HAS(F_CONDUCTOR) && !bsdf.blend && is_conductor(bsdf.leaf0.kind);
+        RoughLobe rlobe;
+        if (rough_attached) {
+            bool rough_ok = rough_conductor_lobe(st.ray.dir, frame.n, bsdf.leaf0.alpha,
+                                                 is_beckmann(bsdf.leaf0.distribution), u_dir, bsdf.leaf0.eta,
+                                                 bsdf.leaf0.k, rlobe);
+            bs = BsdfSample(to_local(frame, rlobe.wo), rlobe.pdf, rlobe.weight * bsdf.leaf0.color * rlobe.pdf,
+                            rough_ok, false);
+            pdf_f = bs.pdf;
+        } else
+#endif
         if (use_dx) {
             float u_sign = draw_block(st.key1, st.pixel, st.sample_index, vertex, DIM_DIFF_SIGN / 4u)[DIM_DIFF_SIGN % 4u];
             bs = bsdf_sample_diff(bsdf, wi, u_sign, u_lobe, u_dir);
@@ -724,11 +737,45 @@ bool path_step(inout PathState st) {
                     bool mirrored = HAS(F_TWO_SIDED) && am.two_sided != 0u && dot(s.ns, -st.ray.dir) < 0.0;
                     HitGeometry geometry = HitGeometry(hit.t, st.ray.dir, s.ng, frame.n,
                                                        shading_normal_gradient(hit) * (mirrored ? -1.0 : 1.0));
+                    if (rough_attached) {
+                        Jac6 a = jac_completed(hit_jacobian(geometry, rlobe.t_d, rlobe.t_n), st.prev_normal,
+                                               st.ray.dir, s.ng, rlobe.wo);
+                        if (globals.jac_noise > 0.0) {
+                            vec4 u = uniform4(uvec2(globals.key0, st.key1), st.pixel, st.sample_index, vertex,
+                                              STREAM_JACOBIAN, 0u, 0u);
+                            a = jac_plus_identity(a, jac_regularisation(globals.jac_noise, u.x, u.y));
+                        }
+                        // ∂ln w/∂r per channel = a row shared by the channels + (F′/F)_c · ∂c/∂r.
+                        Row6 shared_row = hit_row(geometry, rlobe.dlnw_dd, rlobe.dlnw_dn);
+                        Row6 c_row = hit_row(geometry, rlobe.dc_dd, rlobe.dc_dn);
+                        if (adjoint) {
+                            // h = δL·(∂ln w/∂r ⊙ L_after); Φ′ = (Φ − h)·Ã⁻¹; α's two terms.
+                            vec3 after = st.adj * st.radiance;
+                            float total = after.x + after.y + after.z;
+                            float by_f = dot(after, rlobe.dlnf_dc);
+                            Row6 next;
+                            bool solved = jac_solve_row(
+                                a, row_add_scaled(row_add_scaled(st.gamma, shared_row, -total), c_row, -by_f), next);
+                            float direction = solved ? dot(next.d, rlobe.t_alpha) : 0.0;
+                            if (am.p_alpha != NO_PARAM)
+                                param_grad(am.p_alpha, vec3(total * rlobe.dlnw_dalpha + by_f * rlobe.dc_dalpha
+                                                            + direction, 0.0, 0.0));
+                            st.gamma = solved ? next : ROW6_ZERO;
+                        } else {
+                            Row6 shared_j = row_through(shared_row, st.jac);
+                            Row6 c_j = row_through(c_row, st.jac);
+                            st.log_r = row_add_scaled(row_add_scaled(st.log_r, shared_j, 1.0), c_j, rlobe.dlnf_dc.x);
+                            st.log_g = row_add_scaled(row_add_scaled(st.log_g, shared_j, 1.0), c_j, rlobe.dlnf_dc.y);
+                            st.log_b = row_add_scaled(row_add_scaled(st.log_b, shared_j, 1.0), c_j, rlobe.dlnf_dc.z);
+                            st.jac = jac_compose(a, st.jac);
+                        }
+                    }
                     SmoothLobe lobe;
-                    bool lobe_ok = am.tag == MAT_CONDUCTOR
-                        ? conductor_lobe(st.ray.dir, frame.n, bsdf.leaf0.eta, bsdf.leaf0.k, lobe)
-                        : smooth_lobe(am.tag == MAT_THIN_DIELECTRIC, st.ray.dir, frame.n, bsdf.leaf0.eta.x,
-                                      wi.z * bs.wo.z < 0.0, lobe);
+                    bool lobe_ok = !rough_attached
+                        && (am.tag == MAT_CONDUCTOR
+                            ? conductor_lobe(st.ray.dir, frame.n, bsdf.leaf0.eta, bsdf.leaf0.k, lobe)
+                            : smooth_lobe(am.tag == MAT_THIN_DIELECTRIC, st.ray.dir, frame.n, bsdf.leaf0.eta.x,
+                                          wi.z * bs.wo.z < 0.0, lobe));
                     if (lobe_ok) {
                         Jac6 a = jac_completed(hit_jacobian(geometry, lobe.t_d, lobe.t_n), st.prev_normal, st.ray.dir,
                                                s.ng, wo_world);
@@ -772,9 +819,12 @@ bool path_step(inout PathState st) {
                 if (grad_adj[k] == vec3(0.0)) continue;
                 BsdfGrad g = bsdf_sample_grad(bsdf, wi, grad_wo[k], k == 1u && grad_delta, grad_adj[k]);
                 gt.bsdf.leaf0.color += g.leaf0.color;
-                gt.bsdf.leaf0.alpha += g.leaf0.alpha;
                 gt.bsdf.leaf0.trans += g.leaf0.trans;
+#if !ATTACHED
+                // (Attached kernels differentiate a rough conductor's roughness in its lobe.)
+                gt.bsdf.leaf0.alpha += g.leaf0.alpha;
                 gt.bsdf.leaf0.alpha_v += g.leaf0.alpha_v;
+#endif
                 gt.bsdf.leaf1.color += g.leaf1.color;
                 gt.bsdf.leaf1.alpha += g.leaf1.alpha;
                 gt.bsdf.leaf1.trans += g.leaf1.trans;
