@@ -398,6 +398,39 @@ float alpha_value(uint slot, TexAt at) {
     return scalar_textured(slot) ? max(scalar_lookup(slot, at), ALPHA_TEXTURE_FLOOR) : params[slot];
 }
 
+// ---- colour textures (a smooth BSDF's or rough dielectric's reflectance or transmittance with
+// SCALAR_TEXTURE set: the offset of its RGB texture's descriptor in the tables array; twin:
+// colour_footprint and friends of src/cpu/surface.rs) ----
+bool colour_textured(uint slot) { return HAS(F_TEXTURE) && slot != NO_PARAM && (slot & SCALAR_TEXTURE) != 0u; }
+
+// The texels (RGB at each offset) and weights of the lookup of colour texture `slot` at `at`: at
+// its texture coordinates through its `to_uv`, or its mesh attribute's rows.
+void colour_footprint(uint slot, TexAt at, out uint texel[4], out float weight[4]) {
+    uint d = slot & ~SCALAR_TEXTURE;
+    uint mode = texture_desc_word(d, 3u);
+    if (attribute_mode(mode)) {
+        attribute_footprint(texture_desc_word(d, 0u), 3u, mode, at, texel, weight);
+        return;
+    }
+    vec3 p = vec3(at.uv, 1.0);
+    vec3 row0 = vec3(coating_table(d + 4u), coating_table(d + 5u), coating_table(d + 6u));
+    vec3 row1 = vec3(coating_table(d + 7u), coating_table(d + 8u), coating_table(d + 9u));
+    texture_footprint(texture_desc_word(d, 0u), texture_desc_word(d, 1u), texture_desc_word(d, 2u), mode,
+                      vec2(dot(row0, p), dot(row1, p)), texel, weight);
+}
+
+// A smooth BSDF's or rough dielectric's colour slot at `at`: its RGB parameter, its texture's
+// lookup, or (NO_PARAM) `constant`.
+vec3 colour_value(uint slot, TexAt at, vec3 constant) {
+    if (slot == NO_PARAM) return constant;
+    if (!colour_textured(slot)) return param_rgb(slot);
+    uint texel[4];
+    float weight[4];
+    colour_footprint(slot, at, texel, weight);
+    return param_rgb(texel[0]) * weight[0] + param_rgb(texel[1]) * weight[1] + param_rgb(texel[2]) * weight[2]
+        + param_rgb(texel[3]) * weight[3];
+}
+
 // Scalar slot i (PRINCIPLED_SCALARS) of principled material m: word i of its record in the tables
 // array (twin: principled_slot of src/cpu/surface.rs), and its value at uv.
 uint principled_slot(Material m, uint i) { return floatBitsToUint(coating_table(m.table + i)); }
@@ -430,9 +463,9 @@ Leaf leaf_from_material(Material m, TexAt at) {
     }
     l.table = m.table;
     if (delta || rough_glass) {
-        // Each colour a parameter, or (NO_PARAM) a constant: the reflectance in uv_row0, a
-        // dielectric's transmittance in k.
-        l.color = m.p_color != NO_PARAM ? param_rgb(m.p_color) : m.uv_row0;
+        // Each colour a parameter, a texture or (NO_PARAM) a constant: the reflectance in uv_row0,
+        // a dielectric's transmittance in k.
+        l.color = colour_value(m.p_color, at, m.uv_row0);
     } else {
         l.color = (HAS(F_TEXTURE) && m.tex_width > 0u) ? texture_lookup(m, at) : param_rgb(m.p_color);
     }
@@ -441,7 +474,7 @@ Leaf leaf_from_material(Material m, TexAt at) {
     if (delta && m.tag != MAT_CONDUCTOR && m.p_weight != NO_PARAM) l.eta.x = params[m.p_weight];
     // A dielectric's transmittance parameter: p_alpha (smooth) or p_weight (rough).
     uint p_trans = rough_glass ? m.p_weight : (delta && m.tag != MAT_CONDUCTOR ? m.p_alpha : NO_PARAM);
-    l.k = p_trans != NO_PARAM ? param_rgb(p_trans) : m.k;
+    l.k = colour_value(p_trans, at, m.k);
     return l;
 }
 
@@ -535,6 +568,24 @@ void push_scalar(uint slot, TexAt at, vec3 g, bool roughness) {
     }
 }
 
+// A smooth BSDF's or rough dielectric's colour slot's derivative g (per image channel): its RGB
+// parameter's entries (G_COLOR), or its texture's texels weighted as the lookup weighs them,
+// added at once as push_scalar's (G_TEXTURE); a constant has none.
+void push_colour(uint slot, TexAt at, vec3 g) {
+    if (slot == NO_PARAM) return;
+    if (!colour_textured(slot)) {
+        if (HAS(G_COLOR)) push_rgb(slot, g);
+        return;
+    }
+    if (!HAS(G_TEXTURE)) return;
+    uint texel[4];
+    float weight[4];
+    colour_footprint(slot, at, texel, weight);
+    for (uint k = 0u; k < 4u; k++) {
+        if (weight[k] != 0.0) param_grad_rgb(texel[k], g * weight[k]);
+    }
+}
+
 // A principled leaf's derivatives (pr_terms of bsdf.glsl): base colour channel k (a texel's,
 // weighted by the lookup) reaches every image channel; every scalar may be a texture; the eight
 // scalars' slots are the record at m.table (twin: principled_backward of src/cpu/surface.rs).
@@ -580,8 +631,8 @@ void push_leaf(Material m, TexAt at, LeafGrad g) {
         // The reflectance and the transmittance (p_alpha of a smooth leaf, p_weight of a rough
         // one); a constant has no parameter.
         uint p_trans = rough_glass ? m.p_weight : m.p_alpha;
-        if (HAS(G_COLOR) && m.p_color != NO_PARAM) push_rgb(m.p_color, g.color);
-        if (HAS(G_COLOR) && m.tag != MAT_CONDUCTOR && p_trans != NO_PARAM) push_rgb(p_trans, g.trans);
+        push_colour(m.p_color, at, g.color);
+        if (m.tag != MAT_CONDUCTOR) push_colour(p_trans, at, g.trans);
         if (HAS(G_ALPHA) && rough_glass) push_scalar(m.p_alpha, at, g.alpha, true);
         return;
     }

@@ -17,6 +17,7 @@ use crate::contract::{
     TEXTURE_DESC_LEN,
 };
 use crate::cpu::path::GradSink;
+use crate::gpu::variant::colour_textured;
 use crate::scene::flat::FlatScene;
 
 pub use crate::contract::{RAY_OFFSET, SHADOW_EPSILON};
@@ -335,6 +336,54 @@ pub fn texture_lookup(flat: &FlatScene, m: &Material, at: TexAt) -> Vec3 {
         + param_rgb(params, texel[3]) * weight[3]
 }
 
+/// The texels (RGB at each offset) and weights of the lookup of colour texture `slot` (a smooth
+/// BSDF's or rough dielectric's colour with `SCALAR_TEXTURE` set: its descriptor in the tables)
+/// at `at`: its texture coordinates through its `to_uv`, or its mesh attribute's rows (twin:
+/// `colour_footprint` of shaders/lib/surface.glsl).
+pub fn colour_footprint(flat: &FlatScene, slot: u32, at: TexAt) -> ([u32; 4], [f32; 4]) {
+    let d = (slot & !SCALAR_TEXTURE) as usize;
+    let desc = &flat.tables[d..d + TEXTURE_DESC_LEN as usize];
+    let mode = desc[3].to_bits();
+    if attribute_mode(mode) {
+        return attribute_footprint(flat, desc[0].to_bits(), 3, mode, at);
+    }
+    let p = Vec3::new(at.uv.x, at.uv.y, 1.0);
+    let t = glam::Vec2::new(Vec3::new(desc[4], desc[5], desc[6]).dot(p), Vec3::new(desc[7], desc[8], desc[9]).dot(p));
+    texture_footprint(desc[0].to_bits(), desc[1].to_bits(), desc[2].to_bits(), mode, t)
+}
+
+/// A smooth BSDF's or rough dielectric's colour slot at `at`: its RGB parameter, its texture's
+/// lookup, or (`NO_PARAM`) `constant`.
+fn colour_value(flat: &FlatScene, slot: u32, at: TexAt, constant: Vec3) -> Vec3 {
+    if slot == NO_PARAM {
+        return constant;
+    }
+    if !colour_textured(slot) {
+        return param_rgb(&flat.params, slot);
+    }
+    let (texel, weight) = colour_footprint(flat, slot, at);
+    texel.into_iter().zip(weight).map(|(t, w)| param_rgb(&flat.params, t) * w).sum()
+}
+
+/// Adds `g` (per image channel) times the derivative of colour slot `slot` at `at` to `sink`: its
+/// RGB parameter's, its texels' weighted as the lookup weighs them, nothing for a constant (twin:
+/// `push_colour` of shaders/lib/surface.glsl).
+fn colour_backward(flat: &FlatScene, slot: u32, at: TexAt, g: Vec3, sink: &mut GradSink<'_>) {
+    if slot == NO_PARAM {
+        return;
+    }
+    if !colour_textured(slot) {
+        sink.add_rgb(slot, g);
+        return;
+    }
+    let (texel, weight) = colour_footprint(flat, slot, at);
+    for (t, w) in texel.into_iter().zip(weight) {
+        if w != 0.0 {
+            sink.add_rgb(t, g * w);
+        }
+    }
+}
+
 /// Whether a scalar slot (roughness, blend weight) holds a texture (`SCALAR_TEXTURE`).
 fn scalar_textured(slot: u32) -> bool {
     slot != NO_PARAM && slot & SCALAR_TEXTURE != 0
@@ -415,8 +464,8 @@ fn leaf_from_material(flat: &FlatScene, m: &Material, at: TexAt) -> Leaf {
     let params = &flat.params[..];
     let color = if m.tex_width > 0 {
         texture_lookup(flat, m, at)
-    } else if m.p_color == NO_PARAM {
-        Vec3::ZERO // a smooth leaf's constant colour: read below
+    } else if m.p_color == NO_PARAM || colour_textured(m.p_color) {
+        Vec3::ZERO // a smooth leaf's or rough dielectric's colour: read below
     } else {
         param_rgb(params, m.p_color)
     };
@@ -449,8 +498,8 @@ fn leaf_from_material(flat: &FlatScene, m: &Material, at: TexAt) -> Leaf {
         MAT_ROUGH_DIELECTRIC => Leaf::RoughDielectric(RoughDielectricLeaf {
             distribution,
             alpha: alpha_value(flat, m.p_alpha, at),
-            reflectance: if m.p_color == NO_PARAM { m.uv_row0 } else { param_rgb(params, m.p_color) },
-            transmittance: if m.p_weight == NO_PARAM { m.k } else { param_rgb(params, m.p_weight) },
+            reflectance: colour_value(flat, m.p_color, at, m.uv_row0),
+            transmittance: colour_value(flat, m.p_weight, at, m.k),
             eta: m.eta.x,
         }),
         MAT_PRINCIPLED => {
@@ -485,11 +534,10 @@ fn leaf_from_material(flat: &FlatScene, m: &Material, at: TexAt) -> Leaf {
                 MAT_DIELECTRIC => SmoothKind::Dielectric,
                 _ => SmoothKind::ThinDielectric,
             },
-            reflectance: if m.p_color == NO_PARAM { m.uv_row0 } else { param_rgb(params, m.p_color) },
-            transmittance: match (m.tag, m.p_alpha) {
-                (MAT_CONDUCTOR, _) => Vec3::ZERO,
-                (_, NO_PARAM) => m.k,
-                (_, p) => param_rgb(params, p),
+            reflectance: colour_value(flat, m.p_color, at, m.uv_row0),
+            transmittance: match m.tag {
+                MAT_CONDUCTOR => Vec3::ZERO,
+                _ => colour_value(flat, m.p_alpha, at, m.k),
             },
             // A dielectric's η: its parameter (p_weight) or the constant.
             eta: if m.tag != MAT_CONDUCTOR && m.p_weight != NO_PARAM {
@@ -536,10 +584,9 @@ fn leaf_backward(flat: &FlatScene, m: &Material, at: TexAt, g: &LeafGrad, sink: 
         // A dielectric's reflectance and transmittance (a smooth leaf's transmittance parameter
         // sits in p_alpha, a rough one's in p_weight); a constant has no parameter.
         let p_trans = if m.tag == MAT_ROUGH_DIELECTRIC { m.p_weight } else { m.p_alpha };
-        for (p, g) in [(m.p_color, g.color), (p_trans, g.trans)] {
-            if p != NO_PARAM {
-                sink.add_rgb(p, g);
-            }
+        colour_backward(flat, m.p_color, at, g.color, sink);
+        if m.tag != MAT_CONDUCTOR {
+            colour_backward(flat, p_trans, at, g.trans, sink);
         }
         if m.tag == MAT_ROUGH_DIELECTRIC {
             scalar_backward(flat, m.p_alpha, at, g.alpha, true, sink);

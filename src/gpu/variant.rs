@@ -39,7 +39,7 @@ pub fn scene_features(flat: &FlatScene, env_param: u32) -> u64 {
             MAT_PRINCIPLED => F_PRINCIPLED | F_GGX | F_ANISOTROPIC,
             _ => F_BLEND,
         };
-        if m.tex_width > 0 {
+        if m.tex_width > 0 || specular_colour_slots(m).into_iter().any(colour_textured) {
             f |= F_TEXTURE;
         }
         if m.tag == MAT_ROUGH_CONDUCTOR && m.p_alpha_v != m.p_alpha {
@@ -121,18 +121,16 @@ pub fn param_kinds(flat: &FlatScene, env: (u32, u32), begin: u32, end: u32) -> P
     let mut k = ParamKinds::NONE;
     for m in &flat.materials {
         match m.tag {
-            MAT_CONDUCTOR | MAT_DIELECTRIC | MAT_THIN_DIELECTRIC => {
-                // Reflectance and (dielectrics) transmittance, each a parameter or NO_PARAM.
-                if overlaps(m.p_color, 3) || (m.tag != MAT_CONDUCTOR && overlaps(m.p_alpha, 3)) {
-                    k = k.union(ParamKinds::COLOR);
+            MAT_CONDUCTOR | MAT_DIELECTRIC | MAT_THIN_DIELECTRIC | MAT_ROUGH_DIELECTRIC => {
+                // Reflectance and (dielectrics) transmittance, each a parameter, a colour
+                // texture's texels (`SCALAR_TEXTURE`) or NO_PARAM.
+                for slot in specular_colour_slots(m) {
+                    let (offset, texels) = scalar_slot_range(flat, slot);
+                    if overlaps(offset, 3 * texels) {
+                        k = k.union(if colour_textured(slot) { ParamKinds::TEXTURE } else { ParamKinds::COLOR });
+                    }
                 }
-            }
-            MAT_ROUGH_DIELECTRIC => {
-                // Reflectance (p_color) and transmittance (p_weight), each a parameter or NO_PARAM.
-                if overlaps(m.p_color, 3) || overlaps(m.p_weight, 3) {
-                    k = k.union(ParamKinds::COLOR);
-                }
-                if overlaps_slot(m.p_alpha) {
+                if m.tag == MAT_ROUGH_DIELECTRIC && overlaps_slot(m.p_alpha) {
                     k = k.union(ParamKinds::ALPHA);
                 }
             }
@@ -193,6 +191,23 @@ pub fn param_kinds(flat: &FlatScene, env: (u32, u32), begin: u32, end: u32) -> P
         k = k.union(ParamKinds::MEDIUM);
     }
     k
+}
+
+/// The colour slots of a smooth BSDF or rough dielectric `m` (none for another material): the
+/// reflectance (`p_color`) and a dielectric's transmittance (`p_alpha` smooth, `p_weight` rough),
+/// each a parameter offset, `NO_PARAM` (a constant) or a colour texture (`SCALAR_TEXTURE`).
+pub fn specular_colour_slots(m: &crate::contract::Material) -> Vec<u32> {
+    match m.tag {
+        MAT_CONDUCTOR => vec![m.p_color],
+        MAT_DIELECTRIC | MAT_THIN_DIELECTRIC => vec![m.p_color, m.p_alpha],
+        MAT_ROUGH_DIELECTRIC => vec![m.p_color, m.p_weight],
+        _ => Vec::new(),
+    }
+}
+
+/// Whether a colour slot of [`specular_colour_slots`] holds a texture (`SCALAR_TEXTURE`).
+pub fn colour_textured(slot: u32) -> bool {
+    slot != NO_PARAM && slot & SCALAR_TEXTURE != 0
 }
 
 /// The parameter values a scalar slot of a `Material` reads, as (offset, count): one value, or a

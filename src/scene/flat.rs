@@ -15,7 +15,7 @@ use crate::contract::{
     MAT_CONDUCTOR, MAT_DIELECTRIC, MAT_DIFFUSE, MAT_NULL, MAT_PLASTIC, MAT_PRINCIPLED, MAT_ROUGH_CONDUCTOR,
     MAT_ROUGH_DIELECTRIC, MAT_ROUGH_PLASTIC, MAT_THIN_DIELECTRIC, Material as GpuMaterial, MediumDesc, MeshShading,
     NMAP_BUMP, NO_ARRAY, NO_EMITTER, NO_MEDIUM, NO_PARAM, PHASE_HG, PHASE_ISOTROPIC, SCALAR_TEXTURE, TEX_ATTR_FACE,
-    TEX_ATTR_VERTEX, TEX_CHECKER, TEX_NEAREST, TEX_WRAP_CLAMP, TEX_WRAP_MIRROR, TriVertices,
+    TEX_ATTR_VERTEX, TEX_CHECKER, TEX_NEAREST, TEX_WRAP_CLAMP, TEX_WRAP_MIRROR, TEXTURE_DESC_LEN, TriVertices,
 };
 use crate::error::Result;
 use crate::params::ParamId;
@@ -186,6 +186,7 @@ impl FlatScene {
         let mut tables = coating_tables(&mut materials, scene.params.values());
         normal_map_tables(scene, &mut materials, &mut tables);
         scalar_texture_tables(scene, &mut materials, &mut tables);
+        colour_texture_tables(scene, &mut materials, &mut tables);
         area_texture_tables(scene, &mut emitters, &mut tables);
         let (media, fields, majorants) = flatten_media(scene);
         let env_cells = env_cells(scene)?;
@@ -459,11 +460,65 @@ fn albedo_mean(scene: &Scene, albedo: Albedo) -> f32 {
     (values.iter().map(|&v| f64::from(v)).sum::<f64>() / values.len().max(1) as f64) as f32
 }
 
-/// A dielectric's or conductor's colour as (parameter offset, 0) or (`NO_PARAM`, the constant).
+/// A dielectric's or conductor's colour as (parameter offset, 0), (`NO_PARAM`, the constant), or
+/// for a texture (`SCALAR_TEXTURE`, 0) until [`colour_texture_tables`] places its descriptor.
 fn split_colour(scene: &Scene, c: SmoothColour) -> (u32, Vec3) {
     match c {
         SmoothColour::Param(id) => (scene.params.entry(id).offset, Vec3::ZERO),
         SmoothColour::Constant(v) => (NO_PARAM, v),
+        SmoothColour::Texture(_) => (SCALAR_TEXTURE, Vec3::ZERO),
+    }
+}
+
+/// The descriptor (`TEXTURE_DESC_LEN` words as `SCALAR_TEXTURE` states, RGB texels) of colour
+/// texture `albedo`: a bitmap's, a checkerboard's (2 × 1 texels, `TEX_CHECKER`) or a mesh
+/// attribute's (its rows × 1, an attribute mode).
+fn colour_descriptor(scene: &Scene, albedo: Albedo) -> [f32; TEXTURE_DESC_LEN as usize] {
+    let m = albedo_fields(scene, albedo);
+    let words = [m.p_color, m.tex_width, m.tex_height, m.tex_mode].map(f32::from_bits);
+    let mut d = [0.0; TEXTURE_DESC_LEN as usize];
+    d[..4].copy_from_slice(&words);
+    d[4..7].copy_from_slice(&m.uv_row0.to_array());
+    d[7..].copy_from_slice(&m.uv_row1.to_array());
+    d
+}
+
+/// Appends the descriptor of every textured specular colour ([`SmoothColour::Texture`] of a
+/// smooth BSDF or rough dielectric) to `tables` (once per texture) and points its slot at it,
+/// `SCALAR_TEXTURE` or-ed with its offset there: the reflectance's `p_color`, the
+/// transmittance's `p_alpha` (smooth) or `p_weight` (rough). `materials` are `scene`'s, flattened.
+fn colour_texture_tables(scene: &Scene, materials: &mut [GpuMaterial], tables: &mut Vec<f32>) {
+    let mut placed: Vec<(Albedo, u32)> = Vec::new();
+    let mut place = |albedo: Albedo, tables: &mut Vec<f32>| match placed.iter().find(|(a, _)| *a == albedo) {
+        Some(&(_, at)) => SCALAR_TEXTURE | at,
+        None => {
+            let at = tables.len() as u32;
+            tables.extend(colour_descriptor(scene, albedo));
+            placed.push((albedo, at));
+            SCALAR_TEXTURE | at
+        }
+    };
+    for (m, flat) in scene.materials.iter().zip(materials.iter_mut()) {
+        // The leaf a wrapper flattens into (as `flatten_material`).
+        let mut leaf = m;
+        while let Material::TwoSided(c)
+        | Material::Mask { nested: c, .. }
+        | Material::NormalMap { nested: c, .. }
+        | Material::BumpMap { nested: c, .. } = *leaf
+        {
+            leaf = &scene.materials[c.0 as usize];
+        }
+        let (reflectance, transmittance, rough) = match *leaf {
+            Material::Smooth { reflectance, transmittance, .. } => (reflectance, transmittance, false),
+            Material::RoughDielectric { reflectance, transmittance, .. } => (reflectance, transmittance, true),
+            _ => continue,
+        };
+        if let SmoothColour::Texture(a) = reflectance {
+            flat.p_color = place(a, tables);
+        }
+        if let SmoothColour::Texture(a) = transmittance {
+            *(if rough { &mut flat.p_weight } else { &mut flat.p_alpha }) = place(a, tables);
+        }
     }
 }
 

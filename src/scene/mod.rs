@@ -112,14 +112,17 @@ pub enum LightShape {
     },
 }
 
-/// A smooth BSDF's reflectance or transmittance: a parameter, or (as Mitsuba, where the file does
-/// not give it) a constant.
+/// A smooth BSDF's or rough dielectric's reflectance or transmittance: a parameter, a texture, or
+/// (as Mitsuba, where the file does not give it) a constant.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub enum SmoothColour {
     /// The RGB parameter.
     Param(ParamId),
     /// A fixed colour.
     Constant(Vec3),
+    /// A colour texture (a bitmap, checkerboard or mesh attribute; never [`Albedo::Rgb`]), looked
+    /// up at the hit as a diffuse reflectance's is.
+    Texture(Albedo),
 }
 
 /// How a bitmap's texel indices, or a grid volume's voxel indices, outside the image or grid wrap

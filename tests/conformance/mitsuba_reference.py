@@ -149,6 +149,16 @@ MATRIX = {
                         grads=["ball.bsdf.specular_transmittance.value", "marker.bsdf.specular_reflectance.value"],
                         fd={"ball.bsdf.specular_transmittance.value": None,
                             "marker.bsdf.specular_reflectance.value": None}),
+    # Textured specular colours (issue 31): the delta lobes' texels by differences, as bsdf_smooth's
+    # colours; the rough pane's by Mitsuba's forward mode.
+    "bsdf_smooth_textured": dict(features=["dielectric specular_transmittance bitmap (sRGB)",
+                                           "conductor specular_reflectance checkerboard",
+                                           "roughdielectric specular_transmittance checkerboard"],
+                                 grads=["ball.bsdf.specular_transmittance.data",
+                                        "marker.bsdf.specular_reflectance.color1.value",
+                                        "pane.bsdf.specular_transmittance.color0.value"],
+                                 fd={"ball.bsdf.specular_transmittance.data": None,
+                                     "marker.bsdf.specular_reflectance.color1.value": None}),
     "bsdf_roughdielectric": dict(features=["roughdielectric (beckmann, ggx)", "int_ior by name and number",
                                            "specular_reflectance / specular_transmittance", "refraction in and out",
                                            "NEE through rough glass"],

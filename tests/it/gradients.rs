@@ -376,6 +376,21 @@ fn issue_31_mesh_attributes_gpu_equal_cpu_and_match_finite_differences() {
     );
 }
 
+/// Textured specular colours (issue 31): a dielectric's transmittance bitmap, a smooth
+/// conductor's reflectance checkerboard and a rough dielectric's transmittance checkerboard — GPU
+/// and CPU image gradients per path, and each against central finite differences.
+#[test]
+fn issue_31_textured_specular_colours_gpu_equal_cpu_and_match_finite_differences() {
+    let gpu = TestGpu::new();
+    let params = [
+        "ball.bsdf.specular_transmittance.data",
+        "marker.bsdf.specular_reflectance.color1.value",
+        "pane.bsdf.specular_transmittance.color0.value",
+    ];
+    image_gradients_agree(&gpu, vec![(scenes::conformance("bsdf_smooth_textured"), params.to_vec())]);
+    check_finite_differences(&gpu, params.iter().map(|&p| (scenes::conformance("bsdf_smooth_textured"), p)).collect());
+}
+
 /// A textured area emitter's texels (issue 31): GPU and CPU image gradients per path, and against
 /// central finite differences.
 #[test]

@@ -125,11 +125,11 @@ impl<'a> Loader<'a> {
             "roughconductor" => self.rough_conductor(&p, name)?,
             "roughplastic" => self.rough_plastic(&p, name, depth)?,
             "plastic" => self.smooth_plastic(&p, name, depth)?,
-            "roughdielectric" => self.rough_dielectric(&p, name)?,
+            "roughdielectric" => self.rough_dielectric(&p, name, depth)?,
             "principled" => self.principled(&p, name, depth)?,
-            "conductor" => self.smooth(&p, name, SmoothKind::Conductor)?,
-            "dielectric" => self.smooth(&p, name, SmoothKind::Dielectric)?,
-            "thindielectric" => self.smooth(&p, name, SmoothKind::ThinDielectric)?,
+            "conductor" => self.smooth(&p, name, SmoothKind::Conductor, depth)?,
+            "dielectric" => self.smooth(&p, name, SmoothKind::Dielectric, depth)?,
+            "thindielectric" => self.smooth(&p, name, SmoothKind::ThinDielectric, depth)?,
             "null" => {
                 self.finish(&p)?;
                 self.scene.add_material(Material::Null)
@@ -412,17 +412,17 @@ impl<'a> Loader<'a> {
     /// `dielectric` and `thindielectric` (`int_ior` bk7, `ext_ior` air, `specular_reflectance`,
     /// `specular_transmittance`). Parameters as Mitsuba's: `NAME.specular_reflectance.value`
     /// always for a conductor, and for the dielectrics each colour only when the file gives it
-    /// (a constant otherwise).
-    fn smooth(&mut self, p: &Props<'a>, name: &str, kind: SmoothKind) -> Result<MaterialId> {
-        self.refuse_textured_specular(p)?;
+    /// (a constant otherwise); a textured colour's texels are `NAME.KEY.data`
+    /// ([`Loader::specular_colour`]).
+    fn smooth(&mut self, p: &Props<'a>, name: &str, kind: SmoothKind, depth: usize) -> Result<MaterialId> {
         let conductor = kind == SmoothKind::Conductor;
         let (eta, k) =
             if conductor { self.conductor_ior(p)? } else { (Vec3::new(self.dielectric_eta(p)?, 0.0, 0.0), Vec3::ZERO) };
-        let reflectance = self.specular_colour(p, name, "specular_reflectance", conductor)?;
+        let reflectance = self.specular_colour(p, name, "specular_reflectance", conductor, depth)?;
         let transmittance = if conductor {
             SmoothColour::Constant(Vec3::ZERO)
         } else {
-            self.specular_colour(p, name, "specular_transmittance", false)?
+            self.specular_colour(p, name, "specular_transmittance", false, depth)?
         };
         // Mitsuba's `eta` (int_ior / ext_ior) of both dielectrics, a parameter pathgrad
         // differentiates only with attached sampling.
@@ -431,18 +431,6 @@ impl<'a> Loader<'a> {
             false => Some(self.scene.params.add(&format!("{name}.eta"), &[eta.x], bounds::IOR)?),
         };
         Ok(self.scene.add_material(Material::Smooth { kind, reflectance, transmittance, eta, k, eta_param }))
-    }
-
-    /// Refuses a texture as `specular_reflectance` or `specular_transmittance` by name.
-    fn refuse_textured_specular(&self, p: &Props<'a>) -> Result<()> {
-        for slot in ["specular_reflectance", "specular_transmittance"] {
-            if let Some(t) = p.object(slot) {
-                return Err(self
-                    .x
-                    .err(t, format!("a textured '{slot}' of '{}' is not supported (a colour is)", p.kind)));
-            }
-        }
-        Ok(())
     }
 
     /// A dielectric's η = `int_ior` (bk7) / `ext_ior` (air), which must differ.
@@ -508,15 +496,14 @@ impl<'a> Loader<'a> {
 
     /// Mitsuba's `roughdielectric`: `distribution` (Beckmann), isotropic `alpha` (0.1, parameter
     /// `NAME.alpha.value`), `int_ior` (bk7) and `ext_ior` (air), and `specular_reflectance` /
-    /// `specular_transmittance` (1; a parameter `NAME.KEY.value` only where the file gives it, as
-    /// Mitsuba's traversal).
-    fn rough_dielectric(&mut self, p: &Props<'a>, name: &str) -> Result<MaterialId> {
-        self.refuse_textured_specular(p)?;
+    /// `specular_transmittance` (1; a parameter `NAME.KEY.value`, or a texture's `NAME.KEY.data`,
+    /// only where the file gives it, as Mitsuba's traversal).
+    fn rough_dielectric(&mut self, p: &Props<'a>, name: &str, depth: usize) -> Result<MaterialId> {
         let distribution = self.distribution(p)?;
         let (alpha, _) = self.microfacet_alpha(p, name, false)?;
         let eta = self.dielectric_eta(p)?;
-        let reflectance = self.specular_colour(p, name, "specular_reflectance", false)?;
-        let transmittance = self.specular_colour(p, name, "specular_transmittance", false)?;
+        let reflectance = self.specular_colour(p, name, "specular_reflectance", false, depth)?;
+        let transmittance = self.specular_colour(p, name, "specular_transmittance", false, depth)?;
         Ok(self.scene.add_material(Material::RoughDielectric { distribution, alpha, reflectance, transmittance, eta }))
     }
 
@@ -597,9 +584,21 @@ impl<'a> Loader<'a> {
             if self.scene.params.get(scalars[2]).iter().any(|v| *v != 0.0))
     }
 
-    /// A specular colour `key` (1 by default): the parameter `NAME.KEY.value` where the file gives
-    /// it or `always`, else a constant (Mitsuba's dielectrics traverse only the colours given).
-    fn specular_colour(&mut self, p: &Props<'a>, name: &str, key: &str, always: bool) -> Result<SmoothColour> {
+    /// A specular colour `key` (1 by default): a texture ([`Loader::texture`]: a bitmap's texels
+    /// `NAME.KEY.data`, a checkerboard's `NAME.KEY.color0/color1.value`, a mesh attribute), the
+    /// parameter `NAME.KEY.value` where the file gives a colour or `always`, else a constant
+    /// (Mitsuba's dielectrics traverse only the colours given).
+    fn specular_colour(
+        &mut self,
+        p: &Props<'a>,
+        name: &str,
+        key: &str,
+        always: bool,
+        depth: usize,
+    ) -> Result<SmoothColour> {
+        if let Some(t) = p.object(key) {
+            return Ok(SmoothColour::Texture(self.texture(t, format!("{name}.{key}"), depth + 1)?));
+        }
         let value = self.color_in(p, key, Vec3::ONE, bounds::REFLECTANCE)?;
         if !(always || p.has(key)) {
             return Ok(SmoothColour::Constant(value));

@@ -44,7 +44,7 @@
 //!   first path that reaches it, `PARENT.SLOT`: a shape's `bsdf`, `emitter` and
 //!   `interior_medium`, a blend's `bsdf_0`/`bsdf_1`, a twosided's `brdf_0`, a mask's (or normal
 //!   or bump map's) `nested_bsdf` and a mask's `opacity` texture, a diffuse BSDF's
-//!   `reflectance` texture, a medium's `sigma_t`, `albedo` and `phase_function`; an object
+//!   `reflectance` texture (and so a specular colour's texture), a medium's `sigma_t`, `albedo` and `phase_function`; an object
 //!   reached again keeps its first name. So a nested object's own `id` plays no part (a blend
 //!   nested in shape `ball` is `ball.bsdf` whatever its id), and a scene-level object is named by
 //!   its id only if the walk of the scene reaches it before any shape or other object that refers
@@ -54,7 +54,8 @@
 //!   is `SHAPE.bsdf`. pathgrad builds the scene in that order (and keeps its meshes in document
 //!   order). The keys end in `.reflectance.value`, `.reflectance.data` (a bitmap's texels),
 //!   `.alpha.value` (`.alpha_u.value` when the file gives `alpha_u`/`alpha_v`),
-//!   `.specular_reflectance.value`, `.weight.value`, `.radiance.value` (`SHAPE.emitter.…` or the
+//!   `.specular_reflectance.value` (`.specular_reflectance.data` or `.color0.value` textured; so
+//!   `specular_transmittance`), `.weight.value`, `.radiance.value` (`SHAPE.emitter.…` or the
 //!   environment's), and for media `.sigma_t.value.value`/`.sigma_t.data`, the same for
 //!   `albedo`, `.scale` and `.phase_function.g` (see [`crate::scene::medium`]).
 //! - **Where Mitsuba's names cannot be matched**, pathgrad keeps its own, and says so here:

@@ -105,13 +105,13 @@ pub const PLUGINS: &[Plugin] = &[
     p(
         Bsdf,
         "conductor",
-        "`specular_reflectance`, `material` or `eta`/`k`",
-        "smooth: sampled only; gradient of the reflectance through the sampled weight",
+        "`specular_reflectance` (rgb, spectrum, bitmap, checkerboard or mesh_attribute), `material` or `eta`/`k`",
+        "smooth: sampled only; gradient of the reflectance (or its texels) through the sampled weight",
     ),
     p(
         Bsdf,
         "dielectric",
-        "`int_ior`/`ext_ior` (numbers or Mitsuba's names), `specular_reflectance`, `specular_transmittance`",
+        "`int_ior`/`ext_ior` (numbers or Mitsuba's names), `specular_reflectance`, `specular_transmittance` (each rgb, spectrum, bitmap, checkerboard or mesh_attribute)",
         "smooth; not inside blendbsdf or twosided",
     ),
     p(Bsdf, "diffuse", "`reflectance` (rgb, spectrum, bitmap, checkerboard or mesh_attribute)", ""),
@@ -149,7 +149,7 @@ pub const PLUGINS: &[Plugin] = &[
     p(
         Bsdf,
         "roughdielectric",
-        "`distribution`, `alpha` (parameter or one-channel texture), `int_ior`/`ext_ior`, `specular_reflectance`, `specular_transmittance`, `sample_visible`",
+        "`distribution`, `alpha` (parameter or one-channel texture), `int_ior`/`ext_ior`, `specular_reflectance`, `specular_transmittance` (each rgb, spectrum, bitmap, checkerboard or mesh_attribute), `sample_visible`",
         "isotropic; not inside blendbsdf or twosided",
     ),
     p(
@@ -158,7 +158,12 @@ pub const PLUGINS: &[Plugin] = &[
         "`distribution`, `alpha` (parameter `.alpha`, a number as Mitsuba's), `diffuse_reflectance` (texturable), `specular_reflectance`, `int_ior`/`ext_ior`, `nonlinear`, `sample_visible`",
         "",
     ),
-    p(Bsdf, "thindielectric", "`int_ior`/`ext_ior`, `specular_reflectance`, `specular_transmittance`", "smooth"),
+    p(
+        Bsdf,
+        "thindielectric",
+        "`int_ior`/`ext_ior`, `specular_reflectance`, `specular_transmittance` (each rgb, spectrum, bitmap, checkerboard or mesh_attribute)",
+        "smooth",
+    ),
     p(Bsdf, "twosided", "one nested BSDF", "not around a transmitting BSDF (as Mitsuba)"),
     p(Emitter, "constant", "`radiance`", "the environment"),
     p(Emitter, "directional", "`irradiance`, `direction` or `to_world`", "next-event estimation only"),

@@ -875,10 +875,6 @@ fn rough_dielectric_takes_mitsubas_properties_and_names() {
             r#"<bsdf type="roughdielectric"><float name="alpha_u" value="0.1"/><float name="alpha_v" value="0.2"/></bsdf>"#,
             "anisotropic",
         ),
-        (
-            r#"<bsdf type="roughdielectric"><texture name="specular_transmittance" type="bitmap"><string name="filename" value="x.png"/></texture></bsdf>"#,
-            "textured 'specular_transmittance'",
-        ),
     ] {
         let e = load(&format!(r#"<shape type="cube">{body}</shape>"#)).unwrap_err().to_string();
         assert!(e.contains(message), "{body}: {e}");

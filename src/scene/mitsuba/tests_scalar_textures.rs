@@ -82,6 +82,64 @@ fn issue_31_a_roughconductors_specular_reflectance_takes_a_colour_texture() {
 }
 
 #[test]
+fn issue_31_smooth_bsdfs_and_rough_dielectrics_take_textured_specular_colours_named_as_mitsuba() {
+    use crate::scene::{Albedo, SmoothColour};
+    let s = load_with_images(
+        r#"<shape type="cube" id="a"><bsdf type="conductor"><texture type="bitmap" name="specular_reflectance"><string name="filename" value="rgb.png"/></texture></bsdf></shape>
+           <shape type="cube" id="b"><bsdf type="dielectric"><texture type="checkerboard" name="specular_transmittance"/><rgb name="specular_reflectance" value="0.5"/></bsdf></shape>
+           <shape type="cube" id="c"><bsdf type="thindielectric"><texture type="checkerboard" name="specular_reflectance"/></bsdf></shape>
+           <shape type="cube" id="d"><bsdf type="roughdielectric"><texture type="bitmap" name="specular_transmittance"><string name="filename" value="rgb.png"/></texture>
+               <texture type="checkerboard" name="specular_reflectance"/></bsdf></shape>"#,
+    )
+    .unwrap();
+    let colours = |i: usize| match s.materials[s.meshes[i].material.0 as usize] {
+        Material::Smooth { reflectance, transmittance, .. }
+        | Material::RoughDielectric { reflectance, transmittance, .. } => (reflectance, transmittance),
+        ref other => panic!("not a smooth BSDF or rough dielectric: {other:?}"),
+    };
+    assert!(matches!(colours(0).0, SmoothColour::Texture(Albedo::Bitmap(_))));
+    assert!(matches!(colours(1), (SmoothColour::Param(_), SmoothColour::Texture(Albedo::Checker { .. }))));
+    assert!(matches!(colours(2), (SmoothColour::Texture(Albedo::Checker { .. }), SmoothColour::Constant(_))));
+    assert!(matches!(
+        colours(3),
+        (SmoothColour::Texture(Albedo::Checker { .. }), SmoothColour::Texture(Albedo::Bitmap(_)))
+    ));
+    for name in [
+        "a.bsdf.specular_reflectance.data",
+        "b.bsdf.specular_reflectance.value",
+        "b.bsdf.specular_transmittance.color0.value",
+        "b.bsdf.specular_transmittance.color1.value",
+        "c.bsdf.specular_reflectance.color0.value",
+        "d.bsdf.specular_transmittance.data",
+        "d.bsdf.specular_reflectance.color1.value",
+    ] {
+        assert!(s.params.find(name).is_some(), "{name} missing");
+    }
+    // Bad textures on a specular colour are refused by name, with the file and line.
+    for (bsdf, expect) in [
+        (
+            r#"<bsdf type="dielectric"><texture type="volume" name="specular_transmittance"/></bsdf>"#,
+            "unsupported plugin 'volume'",
+        ),
+        (
+            r#"<bsdf type="conductor"><texture type="checkerboard" name="specular_reflectance"><rgb name="color1" value="1.5"/></texture></bsdf>"#,
+            "'color1' must lie in [0, 1]",
+        ),
+        (
+            r#"<bsdf type="roughdielectric"><texture type="bitmap" name="specular_reflectance"><string name="filename" value="missing.png"/></texture></bsdf>"#,
+            "missing.png",
+        ),
+    ] {
+        let err = load_with_images(&format!(r#"<shape type="cube">{bsdf}</shape>"#)).unwrap_err().to_string();
+        assert!(err.contains(expect), "{bsdf}: {err}");
+        assert!(err.contains("s.xml:"), "the message names the file and line: {err}");
+    }
+    // No `.value` where a texture stands: Mitsuba's traversal names the texture's parameters.
+    assert!(s.params.find("a.bsdf.specular_reflectance.value").is_none());
+    assert_eq!(s.params.get(s.params.find("a.bsdf.specular_reflectance.data").unwrap()).len(), 3, "1×1 RGB");
+}
+
+#[test]
 fn issue_31_textures_on_scalar_properties_refuse_what_pathgrad_does_not_read_by_name() {
     let cases = [
         (
