@@ -146,6 +146,18 @@ impl ParamTable {
                     ": a normal or bump map's texels are not parameters in pathgrad (they move the shading \
                      frame, whose derivative is not built; Mitsuba's `normalmap.data`, `nested_texture.data`); \
                      the nested BSDF's parameters (`….nested_bsdf.…`) are"
+                } else if matches!(
+                    last,
+                    "control_points"
+                        | "segment_indices"
+                        | "control_point_count"
+                        | "vertex_positions"
+                        | "vertex_normals"
+                        | "vertex_texcoords"
+                        | "faces"
+                ) {
+                    ": geometry is fixed in pathgrad (Mitsuba's curve control points and mesh vertices are \
+                     parameters there, not here); materials' and emitters' values are"
                 } else {
                     ""
                 };
@@ -385,5 +397,10 @@ mod tests {
         t.add("c.alpha.value", &[0.1], (0.0, 1.0)).unwrap();
         assert_eq!(t.select(&["*.alpha.value"]).unwrap(), vec![ParamId(0), ParamId(2)]);
         assert!(t.select(&["nope*"]).unwrap_err().to_string().contains("matches no parameter"));
+        // Mitsuba's geometry keys are refused by name.
+        for key in ["curve.control_points", "mesh.vertex_positions"] {
+            let e = t.select(&[key]).unwrap_err().to_string();
+            assert!(e.contains(key) && e.contains("geometry is fixed in pathgrad"), "{e}");
+        }
     }
 }

@@ -274,6 +274,9 @@ MATRIX = {
     "shape_cylinder": dict(features=["cylinder", "p0/p1/radius", "to_world", "uv (bitmap)"],
                            grads=["pipe.bsdf.reflectance.data", "post.bsdf.reflectance.value"]),
     "shape_sphere": dict(features=["sphere", "center/radius", "to_world"], grads=["ball.bsdf.alpha.value"]),
+    "shape_linearcurve": dict(features=["linearcurve (tessellated)", "two curves a file", "varying radius (tangent cones)",
+                                        "to_world moves points, not radii", "uv (bitmap)"],
+                              grads=["rope.bsdf.reflectance.data", "wire.bsdf.reflectance.value"]),
     "shape_flip_normals": dict(features=["flip_normals", "rectangle", "area light"], grads=["light.emitter.radiance.value"]),
     "shape_flip_normals_obj": dict(features=["flip_normals", "obj"], grads=["mesh.bsdf.reflectance.value"]),
     # ---- sensor

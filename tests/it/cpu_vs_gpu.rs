@@ -165,3 +165,11 @@ fn both_schedules_give_the_same_bits() {
         assert_eq!(x, y, "{what}");
     }
 }
+
+/// Linear curves (issue 31), tessellated into cones and joint spheres, as
+/// [`gpu_equals_cpu_per_path_on_every_builtin_and_test_scene`] compares the rest.
+#[test]
+fn issue_31_linearcurve_gpu_equals_cpu_per_path() {
+    let gpu = TestGpu::new();
+    primal_agrees_per_path(&gpu, &crate::support::scenes::conformance("shape_linearcurve"));
+}

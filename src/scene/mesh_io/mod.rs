@@ -1,4 +1,4 @@
-//! Triangle meshes from Wavefront OBJ (`tobj`), PLY (`ply-rs-bw` for the header and ASCII payloads) and Mitsuba `.serialized` files, as [`Geometry`](crate::scene::shapes::Geometry).
+//! Triangle meshes from Wavefront OBJ (`tobj`), PLY (`ply-rs-bw` for the header and ASCII payloads) and Mitsuba `.serialized` files, as [`Geometry`](crate::scene::shapes::Geometry); Mitsuba's curve files as control points ([`load_curves`]).
 //!
 //! Both loaders merge everything the file holds into one [`Geometry`](crate::scene::shapes::Geometry): every OBJ object and group,
 //! every PLY face. Polygons are fan-triangulated. OBJ materials (`mtllib`, `usemtl`) are ignored —
@@ -30,10 +30,12 @@ use std::path::Path;
 
 use crate::error::{Error, Result};
 
+mod curves;
 mod obj;
 mod ply;
 mod serialized;
 
+pub use curves::load_curves;
 pub use obj::load_obj;
 pub use ply::load_ply;
 pub use serialized::{SerializedMesh, load_serialized};

@@ -85,7 +85,9 @@
 //!   [`MAX_CHORD_ERROR_PX`] = 0.02 pixels of the true surface at the film's resolution, with
 //!   between [`MIN_SEGMENTS`] and [`MAX_SEGMENTS`] segments around (the Cornell box's sphere at
 //!   256² gets 174 × 87); that keeps silhouette bias at a third of a 64-spp render's noise on an
-//!   edge pixel (derivation at `shapes::segments_for`).
+//!   edge pixel (derivation at `shapes::segments_for`). A `linearcurve` becomes its cones and
+//!   joint spheres (Embree's round linear curve, which Mitsuba renders in every variant) with
+//!   Mitsuba's UV; see `curves.rs`. Its control points are not parameters (geometry is fixed).
 //! - **Depth**: `max_depth = -1` (and a scene without `<integrator>`, Mitsuba's default) becomes
 //!   [`crate::integrator::UNBOUNDED_DEPTH_CAP`], which the renderer treats as unbounded. `rr_depth`
 //!   other than 5 and `hide_emitters` are warned about and ignored.
@@ -101,6 +103,7 @@
 //!   pathgrad blends two leaf BSDFs.
 
 mod bsdf;
+mod curves;
 mod include;
 mod loader;
 mod media;

@@ -195,6 +195,12 @@ pub const PLUGINS: &[Plugin] = &[
     p(Shape, "cube", "`to_world`, `flip_normals`", ""),
     p(Shape, "cylinder", "`p0`, `p1`, `radius`, `to_world`, `flip_normals`", "tessellated"),
     p(Shape, "disk", "`to_world`, `flip_normals`", "tessellated"),
+    p(
+        Shape,
+        "linearcurve",
+        "`filename` (Mitsuba's text format: `x y z radius` a line, curves split by blank lines), `to_world` (moves positions, not radii)",
+        "tessellated to 0.02 px (cones and joint spheres, Mitsuba's UV); no area emitters",
+    ),
     p(Shape, "obj", "`filename`, `to_world`, `face_normals`, `flip_normals`", ""),
     p(Shape, "ply", "`filename`, `to_world`, `face_normals`, `flip_normals`", ""),
     p(Shape, "rectangle", "`to_world`, `flip_normals`", ""),

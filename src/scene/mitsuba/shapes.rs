@@ -292,6 +292,28 @@ impl<'a> Loader<'a> {
                 let n = segments_for(&self.scene.camera, c, lx, 2.0);
                 unit_sphere(n / 2, n).transformed(&m)
             }
+            "linearcurve" => {
+                let (file, file_node) = p
+                    .string(&self.x, "filename")?
+                    .ok_or_else(|| self.x.err(node, "'linearcurve' needs the property 'filename'"))?;
+                let path = self.scene_file(&file).map_err(|m| self.x.err(file_node, m))?;
+                if !path.is_file() {
+                    return Err(self
+                        .x
+                        .err(file_node, format!("curve file '{file}' not found (looked for {})", path.display())));
+                }
+                let mut curves = crate::scene::mesh_io::load_curves(&path, 2).map_err(|e| self.located(node, e))?;
+                // Positions move with to_world, radii do not (Mitsuba's rule).
+                for c in curves.iter_mut().flatten() {
+                    *c = to_world.transform_point3(c.truncate()).extend(c.w);
+                }
+                for name in ["flip_normals", "exterior", "interior"] {
+                    if let Some(n) = p.node_of(name) {
+                        return Err(self.x.err(n, format!("'{name}' is not supported on curves")));
+                    }
+                }
+                super::curves::linear_curves(&curves, &self.scene.camera)
+            }
             other => {
                 return Err(self
                     .x
@@ -350,6 +372,10 @@ impl<'a> Loader<'a> {
         };
         self.attribute_shape = None;
         let material = material?;
+        if let (true, Some(e)) = (p.kind.ends_with("curve"), emitters.first()) {
+            // Mitsuba cannot sample a point on a curve either (no `sample_position`).
+            return Err(self.x.err(*e, "area emitters on curves are not supported"));
+        }
         let emitter = match emitters[..] {
             [] => None,
             [e] => Some(self.area_emitter(e, &name)?),

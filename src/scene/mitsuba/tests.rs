@@ -1114,3 +1114,51 @@ fn volpath_depth_through_thin_dielectrics_is_warned() {
     assert!(!warned(r#"<integrator type="path"><integer name="max_depth" value="6"/></integrator>"#));
     assert!(!warned(r#"<integrator type="volpath"/>"#));
 }
+
+#[test]
+fn linear_curves_load_with_points_moved_and_radii_kept() {
+    let dir = tempfile::tempdir().unwrap();
+    std::fs::write(dir.path().join("c.txt"), "0 0 0 0.1\n1 0 0 0.1\n").unwrap();
+    let xml = wrap(
+        r#"<shape type="linearcurve" id="c"><string name="filename" value="c.txt"/>
+           <transform name="to_world"><scale x="2"/><translate z="3"/></transform></shape>"#,
+    );
+    let s = load_text(&xml, &dir.path().join("scene.xml"), &[], obj_for_tests).unwrap();
+    let m = &s.meshes[0];
+    // Every vertex lies on the cylinder about (0, 0, 3)–(2, 0, 3) or on a sphere at either end,
+    // all of radius 0.1 (not 0.2).
+    for p in &m.positions {
+        let on = |d: f32| (d - 0.1).abs() < 1e-5;
+        let (a, b) = (Vec3::new(0.0, 0.0, 3.0), Vec3::new(2.0, 0.0, 3.0));
+        let axis = (*p - Vec3::new(p.x, 0.0, 3.0)).length();
+        assert!(on((*p - a).length()) || on((*p - b).length()) || on(axis), "{p} is off the curve");
+    }
+    assert!(m.positions.iter().any(|p| p.x > 2.09) && m.positions.iter().any(|p| p.x < -0.09));
+    assert!(m.uvs.is_some() && m.normals.is_some());
+    assert!(s.params.find("c.bsdf.reflectance.value").is_some());
+}
+
+#[test]
+fn curve_files_and_misuse_give_located_errors() {
+    let dir = tempfile::tempdir().unwrap();
+    std::fs::write(dir.path().join("bad.txt"), "0 0 0 0.1\n1 0 0 oops\n").unwrap();
+    std::fs::write(dir.path().join("ok.txt"), "0 0 0 0.1\n1 0 0 0.1\n").unwrap();
+    let run = |body: &str| {
+        let xml = wrap(body);
+        load_text(&xml, &dir.path().join("scene.xml"), &[], obj_for_tests).unwrap_err().to_string()
+    };
+    let e = run(r#"<shape type="linearcurve"><string name="filename" value="bad.txt"/></shape>"#);
+    assert!(e.contains("<shape") && e.contains("bad.txt:2: 'oops' is not a finite number"), "{e}");
+    let e = run(r#"<shape type="linearcurve"><string name="filename" value="gone.txt"/></shape>"#);
+    assert!(e.contains("curve file 'gone.txt' not found"), "{e}");
+    let e = run(r#"<shape type="linearcurve"/>"#);
+    assert!(e.contains("'linearcurve' needs the property 'filename'"), "{e}");
+    let e = run(
+        r#"<shape type="linearcurve"><string name="filename" value="ok.txt"/><emitter type="area"><rgb name="radiance" value="1"/></emitter></shape>"#,
+    );
+    assert!(e.contains("<emitter") && e.contains("area emitters on curves are not supported"), "{e}");
+    let e = run(
+        r#"<shape type="linearcurve"><string name="filename" value="ok.txt"/><boolean name="flip_normals" value="true"/></shape>"#,
+    );
+    assert!(e.contains("'flip_normals' is not supported on curves"), "{e}");
+}
