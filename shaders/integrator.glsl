@@ -12,7 +12,7 @@
 // scalars, v1 and the chosen vertex's term (§5.7). After each update β, w1, w2 and the previous
 // vertex's sum are divided by w1 + w2 (§5.6), so a vertex starts with w1 + w2 = 1. With no capable
 // vertex DIFF is BSDF sampling with the balance heuristic (power placements: the power heuristic).
-// With several targets (F_HERO, §5.8) each path draws a hero target at its camera vertex and only
+// With several targets (F2_HERO, §5.8) each path draws a hero target at its camera vertex and only
 // vertices capable for it may become the differential vertex; w1 and the per-target w2 sums cover
 // every target weighted by its probability, so the mixture is over all heroes' placements.
 //
@@ -64,7 +64,7 @@ bool material_capable(uint m) {
     return p >= globals.diff_begin && p < globals.diff_end;
 }
 
-// Several targets (F_HERO, ALGORITHMS.md §5.8): the index of the hero-set target whose parameter
+// Several targets (F2_HERO, ALGORITHMS.md §5.8): the index of the hero-set target whose parameter
 // values hold parameter p, or MAX_HEROES if none does.
 uint param_hero(uint p) {
     uvec2 r[MAX_HEROES] = uvec2[MAX_HEROES](globals.hero_range0, globals.hero_range1, globals.hero_range2, globals.hero_range3);
@@ -104,7 +104,7 @@ struct Mixture {
     bool dx_taken;     // the differential vertex has been chosen
     float prev_sum;    // w1 + w2 at the previous vertex before its update, in this vertex's units
     float prev_sq;     // v1 + w2² at the previous vertex before its update, in this vertex's units
-    // Several targets (F_HERO, §5.8): w1 sums the terms of every target weighted by its
+    // Several targets (F2_HERO, §5.8): w1 sums the terms of every target weighted by its
     // probability p_k; hero_w2[k] = p_k (1 − q)^(vertices capable for k) and w2 = Σ_k hero_w2[k].
     uint hero;         // the path's hero: index of its target
     vec4 hero_w2;
@@ -317,7 +317,7 @@ PathState path_begin(uint view, uint pixel, uint sample_index, bool adjoint, vec
     st.vertex = 1u;
     st.prev_pdf_f = 0.0;
     st.mix = mixture_new(HAS(F_DIFF) && globals.strategy == STRATEGY_DIFF && globals.diff_placement == PLACEMENT_POWER);
-    if (HAS(F_HERO) && globals.strategy == STRATEGY_DIFF && globals.hero_count > 0u)
+    if (HAS2(F2_HERO) && globals.strategy == STRATEGY_DIFF && globals.hero_count > 0u)
         mixture_pick_hero(st.mix, draw_block(cam.key1, pixel, sample_index, 0u, DIM_HERO / 4u)[DIM_HERO % 4u]);
     st.prev_nee = false;
     st.adjoint = adjoint;
@@ -353,7 +353,7 @@ bool path_step(inout PathState st) {
     // The strategy is also read at run time, so a kernel with the differential strategy can render a
     // gradient step's pass 1, which uses plain BSDF sampling (kernel.glsl, PRIMAL_ON_REVERSE).
     bool diff = HAS(F_DIFF) && globals.strategy == STRATEGY_DIFF;
-    bool hero = diff && HAS(F_HERO) && globals.hero_count > 0u;
+    bool hero = diff && HAS2(F2_HERO) && globals.hero_count > 0u;
     bool nee = HAS(F_NEE);
     uint vertex = st.vertex;
     st.vertex = vertex + 1u;
