@@ -65,16 +65,32 @@ bool material_capable(uint m) {
 }
 
 // Several targets (F2_HERO, ALGORITHMS.md §5.8): the index of the hero-set target whose parameter
-// values hold material `m`'s roughness or blend weight, or MAX_HEROES if none does.
-uint material_hero(uint m) {
-    uint tag = materials[m].tag;
-    uint p = (tag == MAT_ROUGH_CONDUCTOR || tag == MAT_ROUGH_DIELECTRIC || tag == MAT_ROUGH_PLASTIC) ? materials[m].p_alpha
-        : (tag == MAT_BLEND ? materials[m].p_weight : NO_PARAM);
+// values hold parameter p, or MAX_HEROES if none does.
+uint param_hero(uint p) {
     uvec2 r[MAX_HEROES] = uvec2[MAX_HEROES](globals.hero_range0, globals.hero_range1, globals.hero_range2, globals.hero_range3);
     for (uint k = 0u; k < globals.hero_count; k++) {
         if (p >= r[k].x && p < r[k].y) return k;
     }
     return MAX_HEROES;
+}
+
+// Several targets: the target material `m`'s roughness or blend weight belongs to, or MAX_HEROES.
+uint material_hero(uint m) {
+    uint tag = materials[m].tag;
+    uint p = (tag == MAT_ROUGH_CONDUCTOR || tag == MAT_ROUGH_DIELECTRIC || tag == MAT_ROUGH_PLASTIC) ? materials[m].p_alpha
+        : (tag == MAT_BLEND ? materials[m].p_weight : NO_PARAM);
+    return param_hero(p);
+}
+
+// Whether the differential strategy may place its differential vertex in medium `m`: its
+// Henyey-Greenstein g is the target parameter (ALGORITHMS.md §8.4).
+bool medium_capable(uint m) {
+    return media[m].phase == PHASE_HG && media[m].p_g >= globals.diff_begin && media[m].p_g < globals.diff_end;
+}
+
+// Several targets: the target medium `m`'s g belongs to, or MAX_HEROES.
+uint medium_hero(uint m) {
+    return media[m].phase == PHASE_HG ? param_hero(media[m].p_g) : MAX_HEROES;
 }
 
 // The differential strategy's running state (ALGORITHMS.md §5.2, §5.7): constant per path,
@@ -450,6 +466,12 @@ bool path_step(inout PathState st) {
                 ended = true;
             } else {
                 scatter = true;
+                // The differential strategy may place its vertex here if g is its target (§8.4).
+                capable = diff && medium_capable(st.medium);
+                if (hero) {
+                    hero_here = medium_hero(st.medium);
+                    capable = hero_here < MAX_HEROES;
+                }
                 if (nee) {
                     vec4 u_em = draw_block(st.key1, st.pixel, st.sample_index, vertex, DIM_EMITTER_SELECT / 4u);
                     es = sample_emitter(u_em[DIM_EMITTER_SELECT % 4u], vec2(u_em[DIM_EMITTER_POS % 4u], u_em[DIM_EMITTER_POS % 4u + 1u]), env_cell_uniforms(st.key1, st.pixel, st.sample_index, vertex), x_medium);
@@ -473,7 +495,18 @@ bool path_step(inout PathState st) {
                         nee_phase = phase_eval(st.medium, st.ray.dir, wl);
                         if (nee_pdf > 0.0 && nee_phase > 0.0) {
                             // No phase sample reaches a light without area: NEE alone finds it.
-                            nee_w = (HAS(F_LIGHTS) && es.delta) ? 1.0 : mis_power(nee_pdf, nee_phase);
+                            if (!diff) {
+                                nee_w = (HAS(F_LIGHTS) && es.delta) ? 1.0 : mis_power(nee_pdf, nee_phase);
+                            } else if (HAS(F_LIGHTS) && es.delta) {
+                                nee_w = hero ? mixture_nee_weight_hero(st.mix, MAX_HEROES, 0.0, 0.0, 0.0, 0.0, true)
+                                             : mixture_nee_weight(st.mix, 0.0, 0.0, 0.0, 0.0, true);
+                            } else {
+                                // Appendix B with the phase function as the vertex's BSDF (§8.4).
+                                float pdf_d = capable ? phase_pdf_diff(st.medium, st.ray.dir, wl) : nee_phase;
+                                float q_here = capable ? globals.diff_q : 0.0;
+                                nee_w = hero ? mixture_nee_weight_hero(st.mix, hero_here, globals.diff_q, nee_phase, pdf_d, nee_pdf, false)
+                                             : mixture_nee_weight(st.mix, q_here, nee_phase, pdf_d, nee_pdf, false);
+                            }
                             nee_w_tr = st.adj * st.throughput * nee_w * nee_phase * es.radiance / nee_pdf;
                             shadow_ray = make_ray(x_medium, wl);
                             shadow_query = true;
@@ -646,7 +679,16 @@ bool path_step(inout PathState st) {
             }
         }
         vec4 u_ph = draw_block(st.key1, st.pixel, st.sample_index, vertex, DIM_LOBE / 4u);
-        vec3 wo = phase_sample(m, d, vec2(u_ph[DIM_DIRECTION % 4u], u_ph[DIM_DIRECTION % 4u + 1u]));
+        vec2 u_dir = vec2(u_ph[DIM_DIRECTION % 4u], u_ph[DIM_DIRECTION % 4u + 1u]);
+        // Several targets: only the path's hero samples its derivative.
+        bool use_dx = capable && (!hero || hero_here == st.mix.hero) && !st.mix.dx_taken && u_ph[DIM_TECHNIQUE % 4u] < globals.diff_q;
+        vec3 wo;
+        if (use_dx) {
+            float u_sign = draw_block(st.key1, st.pixel, st.sample_index, vertex, DIM_DIFF_SIGN / 4u)[DIM_DIFF_SIGN % 4u];
+            wo = phase_sample_diff(m, d, u_sign, u_ph[DIM_LOBE % 4u], u_dir);
+        } else {
+            wo = phase_sample(m, d, u_dir);
+        }
         float pdf = phase_eval(m, d, wo);
         if (!(pdf > 0.0)) {
             ended = true;
@@ -656,9 +698,18 @@ bool path_step(inout PathState st) {
             if (adjoint) phase_grad(m, d, wo, st.adj * st.radiance / pdf);
             st.prev_pdf_f = pdf;
             st.prev_nee = nee;
-            st.mix.prev_sum = 1.0;
-            st.mix.prev_sq = mixture_squares(st.mix);
-            if (!path_survives(st, vertex)) ended = true; else st.ray = make_ray(x_medium, wo);
+            if (diff) {
+                // The phase function's value is its density: β is unchanged before the division.
+                float pdf_d = capable ? phase_pdf_diff(m, d, wo) : 0.0;
+                float sum = hero ? mixture_update_hero(st.mix, hero_here, globals.diff_q, pdf, pdf_d)
+                                 : mixture_update(st.mix, capable, use_dx, globals.diff_q, pdf, pdf_d);
+                if (!(sum > 0.0)) ended = true; else st.throughput /= sum;
+                st.mix.dx_taken = st.mix.dx_taken || use_dx;
+            } else {
+                st.mix.prev_sum = 1.0;
+                st.mix.prev_sq = mixture_squares(st.mix);
+            }
+            if (ended || !path_survives(st, vertex)) ended = true; else st.ray = make_ray(x_medium, wo);
         }
     }
 

@@ -167,7 +167,8 @@ pub enum Strategy {
     #[default]
     Bsdf,
     /// Differential path sampling (Su & Gkioulekas): at each vertex whose material's roughness or
-    /// blend weight *is* `target`, until one is chosen, sample the derivative of the BSDF by
+    /// blend weight, or whose medium's phase-function g, *is* `target`, until one is chosen, sample
+    /// the derivative of the BSDF (or phase function) by
     /// `target` with probability `q`; every contribution is divided by the mixture density of all
     /// placements (running sums w₁, w₂; Appendix-B weights for next-event estimation), or, with
     /// [`PlacementMis::Power`], weighted by the power heuristic over the placements (ALGORITHMS.md §5.7).
@@ -411,7 +412,8 @@ impl Strategy {
     }
 
     /// Whether some material has a differential sampler for `target`: it is the roughness of a
-    /// rough conductor, dielectric or plastic, or the weight of a blend. If not, `diff` samples like `bsdf` (with
+    /// rough conductor, dielectric or plastic, the weight of a blend, or (some medium) the g of a
+    /// Henyey–Greenstein phase function (ALGORITHMS.md §8.4). If not, `diff` samples like `bsdf` (with
     /// balance-heuristic MIS) and brings no variance reduction.
     pub fn has_differential_sampler(scene: &Scene, target: ParamId) -> bool {
         use crate::scene::Material;
@@ -426,7 +428,7 @@ impl Strategy {
                         .any(|c| matches!(scene.materials.get(c.0 as usize), Some(Material::Smooth { .. })))
             }
             _ => false,
-        })
+        }) || scene.media.iter().any(|m| m.phase == crate::scene::medium::Phase::HenyeyGreenstein { g: target })
     }
 }
 
@@ -498,8 +500,8 @@ fn diff_target(scene: &Scene, target: &str) -> Result<ParamId> {
             parameter: scene.params.entry(target).name.clone(),
             message: format!(
                 "is {whose}, which the differential sampler does not cover (it samples the \
-                 derivative of a rough conductor's, dielectric's or plastic's lobe or a blend's weight, \
-                 without a normal map or a mask): use the bsdf strategy"
+                 derivative of a rough conductor's, dielectric's or plastic's lobe, a blend's weight or a \
+                 medium's Henyey-Greenstein g, without a normal map or a mask): use the bsdf strategy"
             ),
         });
     }

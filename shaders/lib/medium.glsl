@@ -101,6 +101,78 @@ vec3 phase_sample(uint m, vec3 d, vec2 u) {
     return to_world(shading_frame(d), vec3(sn * cos(phi), sn * sin(phi), c));
 }
 
+// The phase function's differential sampler (ALGORITHMS.md §8.4; twin of src/cpu/medium.rs, same
+// names and operation order). |g| below HG_DIFF_SMALL_G takes ∂p/∂g's limit 3 cos θ/(4π).
+#define HG_DIFF_SMALL_G 1e-6
+
+// ∂p/∂g at cos θ = mu: ((g² + 3)μ + g³ − 5g) / (4π Δ^{5/2}), Δ = 1 + g² − 2gμ.
+float hg_dg(float g, float mu) {
+    float delta = 1.0 + g * g - 2.0 * g * mu;
+    return ((g * g + 3.0) * mu + g * g * g - 5.0 * g) / (4.0 * PI * delta * delta * sqrt(max(delta, 0.0)));
+}
+
+// The signed parts in s = Δ^{-1/2} for a = |g| > 0: (s0, s0 − 1, L−, L+).
+vec4 hg_parts(float a) {
+    float c = 1.0 - a * a;
+    float s0 = sqrt((3.0 + a * a) / (3.0 * c * c));
+    float s0m1 = a * a * (7.0 - 3.0 * a * a) / (3.0 * c * c) / (s0 + 1.0);
+    return vec4(s0, s0m1, s0m1 + a / (1.0 + a), a / (1.0 - a) - s0m1);
+}
+
+// The mass M(g) of each signed part of ∂p/∂g.
+float hg_dg_mass(float g) {
+    float a = abs(g);
+    if (a < HG_DIFF_SMALL_G) return 0.75;
+    vec4 p = hg_parts(a);
+    float c = 1.0 - a * a;
+    float k = p.x + 1.0 / (1.0 + a);
+    float l = p.z;
+    return 3.0 * c * c / (4.0 * a * a) * (k * l * l / 2.0 + l * l * l / 6.0);
+}
+
+// cos θ drawn from one signed part of ∂p/∂g (u_comp: the component, u: its inverse CDF).
+float hg_diff_sample_cos(float g, bool positive, float u_comp, float u) {
+    float a = abs(g);
+    bool up = positive == (g >= 0.0);
+    float mu;
+    if (a < HG_DIFF_SMALL_G) {
+        mu = sqrt(u) * (up ? 1.0 : -1.0);
+    } else {
+        vec4 p = hg_parts(a);
+        float sm1;
+        if (up) {
+            float l = p.w;
+            float wa = p.x * l * l;
+            float wb = l * l * l / 3.0;
+            sm1 = p.y + (u_comp * (wa + wb) < wa ? l * sqrt(u) : l * pow(u, 1.0 / 3.0));
+        } else {
+            float l = p.z;
+            float k = p.x + 1.0 / (1.0 + a);
+            float wa = k * l * l / 2.0;
+            float wb = l * l * l / 6.0;
+            float beta22 = 0.5 - sin(asin(clamp(1.0 - 2.0 * u, -1.0, 1.0)) / 3.0);
+            sm1 = p.y - (u_comp * (wa + wb) < wa ? l * sqrt(u) : l * beta22);
+        }
+        float s = sm1 + 1.0;
+        mu = clamp((sm1 * (s + 1.0) + a * a * s * s) / (2.0 * a * s * s), -1.0, 1.0);
+    }
+    return g >= 0.0 ? mu : -mu;
+}
+
+// Direction density of the phase function's differential technique: |∂p/∂g| / (2M(g)).
+float phase_pdf_diff(uint m, vec3 d, vec3 wo) {
+    float g = medium_g(m);
+    return abs(hg_dg(g, dot(d, wo))) / (2.0 * hg_dg_mass(g));
+}
+
+// The differential technique: the positive part if u_sign < 0.5, else the negative one, around d.
+vec3 phase_sample_diff(uint m, vec3 d, float u_sign, float u_comp, vec2 u) {
+    float c = hg_diff_sample_cos(medium_g(m), u_sign < 0.5, u_comp, u.x);
+    float sn = sqrt(max(1.0 - c * c, 0.0));
+    float phi = 2.0 * PI * u.y;
+    return to_world(shading_frame(d), vec3(sn * cos(phi), sn * sin(phi), c));
+}
+
 // GRAD of the medium's fields at x (ALGORITHMS.md §8): weight `w_sigma` per channel through the
 // extinction scale · sigma_t(x) (its scale and its voxels; `field_sigma` is sigma_t(x), which the
 // caller has looked up), `w_albedo` through the albedo's voxels.

@@ -25,31 +25,6 @@ use crate::sampling::Frame;
 use crate::scene::Wrap;
 use crate::scene::flat::FlatScene;
 
-/// Differential path sampling places its vertex among surface vertices only: in a scene with
-/// media its mixture weights would be wrong, so it is refused there.
-///
-/// # Errors
-/// [`crate::Error::InvalidArgument`] naming `Strategy::Diff`.
-pub(crate) fn refuse_diff_with_media(
-    flat: &FlatScene,
-    options: &crate::integrator::RenderOptions,
-) -> crate::Result<()> {
-    if has_media(flat)
-        && matches!(
-            options.strategy,
-            crate::integrator::Strategy::Diff { .. } | crate::integrator::Strategy::Hero { .. }
-        )
-    {
-        return Err(crate::Error::InvalidArgument {
-            parameter: "Strategy::Diff".into(),
-            message: "differential path sampling is not built for scenes with participating media or null \
-                      boundaries (use the BSDF strategy)"
-                .into(),
-        });
-    }
-    Ok(())
-}
-
 /// Whether the scene needs the media code of the path loop (a medium or a null boundary).
 pub fn has_media(flat: &FlatScene) -> bool {
     !flat.media.is_empty() || flat.materials.iter().any(|m| m.tag == MAT_NULL)
@@ -114,6 +89,105 @@ pub fn phase_sample(flat: &FlatScene, m: &MediumDesc, d: Vec3, u: [f32; 2]) -> V
         let s = (1.0 - g * g) / (1.0 - g + 2.0 * g * u[0]);
         ((1.0 + g * g - s * s) / (2.0 * g)).clamp(-1.0, 1.0)
     };
+    let sin = (1.0 - cos * cos).max(0.0).sqrt();
+    let phi = 2.0 * std::f32::consts::PI * u[1];
+    Frame::from_normal(d).to_world(Vec3::new(sin * phi.cos(), sin * phi.sin(), cos))
+}
+
+/// |g| below which ∂p/∂g is taken at its g → 0 limit, 3 cos θ/(4π) (the closed forms divide by g²).
+const HG_DIFF_SMALL_G: f32 = 1e-6;
+
+/// ∂p/∂g of Henyey–Greenstein at cos θ = `mu`: ((g² + 3)μ + g³ − 5g) / (4π Δ^{5/2}), Δ = 1 + g² −
+/// 2gμ (ALGORITHMS.md §8.4). Negative for μ < μ₀ = g(5 − g²)/(g² + 3), positive above.
+pub fn hg_dg(g: f32, mu: f32) -> f32 {
+    let delta = 1.0 + g * g - 2.0 * g * mu;
+    ((g * g + 3.0) * mu + g * g * g - 5.0 * g) / (4.0 * std::f32::consts::PI * delta * delta * delta.max(0.0).sqrt())
+}
+
+/// The signed parts of ∂p/∂g for a = |g| > 0 in s = Δ^{-1/2} (in which HG itself is uniform): s₀ −
+/// 1 (the sign change, s₀² = (3 + a²)/(3(1 − a²)²)), the negative part's length L⁻ = s₀ − 1/(1 + a)
+/// and the positive part's L⁺ = 1/(1 − a) − s₀, written without cancellation for small a.
+struct HgParts {
+    s0: f32,
+    s0m1: f32,
+    len_neg: f32,
+    len_pos: f32,
+}
+
+fn hg_parts(a: f32) -> HgParts {
+    let c = 1.0 - a * a;
+    let s0 = ((3.0 + a * a) / (3.0 * c * c)).sqrt();
+    let s0m1 = a * a * (7.0 - 3.0 * a * a) / (3.0 * c * c) / (s0 + 1.0);
+    HgParts { s0, s0m1, len_neg: s0m1 + a / (1.0 + a), len_pos: a / (1.0 - a) - s0m1 }
+}
+
+/// The mass of each signed part of ∂p/∂g, M(g) = ∫max(0, ±∂p/∂g) dω (the parts cancel):
+/// 3(1 − a²)²/(4a²) · ((s₀ + s_min)L⁻²/2 + L⁻³/6), a = |g|; 3/4 at g = 0.
+pub fn hg_dg_mass(g: f32) -> f32 {
+    let a = g.abs();
+    if a < HG_DIFF_SMALL_G {
+        return 0.75;
+    }
+    let p = hg_parts(a);
+    let c = 1.0 - a * a;
+    let k = p.s0 + 1.0 / (1.0 + a);
+    let l = p.len_neg;
+    3.0 * c * c / (4.0 * a * a) * (k * l * l / 2.0 + l * l * l / 6.0)
+}
+
+/// cos θ drawn from one signed part of ∂p/∂g (`positive`: where it is > 0), with `u_comp` choosing
+/// a component of the part's polynomial density in s and `u` inverting its CDF (ALGORITHMS.md
+/// §8.4): in y = |s − s₀| the negative part is ∝ y·(s₀ + s_min) + y(L⁻ − y) (linear, Beta(2,2)), the
+/// positive part ∝ 2s₀·y + y² (linear, quadratic). g < 0 mirrors g > 0: ∂p/∂g(μ; g) = −∂p/∂a(−μ; a).
+pub fn hg_diff_sample_cos(g: f32, positive: bool, u_comp: f32, u: f32) -> f32 {
+    let a = g.abs();
+    let up = positive == (g >= 0.0); // the part of ∂p/∂a to sample
+    let mu = if a < HG_DIFF_SMALL_G {
+        u.sqrt() * if up { 1.0 } else { -1.0 }
+    } else {
+        let p = hg_parts(a);
+        let sm1 = if up {
+            let l = p.len_pos;
+            let (wa, wb) = (p.s0 * l * l, l * l * l / 3.0);
+            p.s0m1 + if u_comp * (wa + wb) < wa { l * u.sqrt() } else { l * u.powf(1.0 / 3.0) }
+        } else {
+            let l = p.len_neg;
+            let k = p.s0 + 1.0 / (1.0 + a);
+            let (wa, wb) = (k * l * l / 2.0, l * l * l / 6.0);
+            let beta22 = 0.5 - ((1.0 - 2.0 * u).clamp(-1.0, 1.0).asin() / 3.0).sin();
+            p.s0m1 - if u_comp * (wa + wb) < wa { l * u.sqrt() } else { l * beta22 }
+        };
+        // μ = (1 + a² − s⁻²)/(2a) = ((s − 1)(s + 1) + a²s²)/(2a s²).
+        let s = sm1 + 1.0;
+        ((sm1 * (s + 1.0) + a * a * s * s) / (2.0 * a * s * s)).clamp(-1.0, 1.0)
+    };
+    if g >= 0.0 { mu } else { -mu }
+}
+
+/// Whether the differential strategy may place its differential vertex in medium `m`: an HG
+/// phase function whose g lies in the target's parameter values.
+pub fn medium_capable(m: &MediumDesc, begin: u32, end: u32) -> bool {
+    m.phase == PHASE_HG && m.p_g >= begin && m.p_g < end
+}
+
+/// Direction density of the differential technique of `m`'s phase function (a fair coin between
+/// the signed parts of ∂p/∂g): |∂p/∂g| / (2M(g)), around `d` at `wo`.
+pub fn phase_pdf_diff(flat: &FlatScene, m: &MediumDesc, d: Vec3, wo: Vec3) -> f32 {
+    let g = hg_g(flat, m);
+    hg_dg(g, d.dot(wo)).abs() / (2.0 * hg_dg_mass(g))
+}
+
+/// Direction density of one signed part's sampler: |∂p/∂g| / M(g) where its sign is the part's.
+pub fn phase_pdf_diff_part(g: f32, positive: bool, mu: f32) -> f32 {
+    let v = hg_dg(g, mu);
+    if (v > 0.0) == positive && v != 0.0 { v.abs() / hg_dg_mass(g) } else { 0.0 }
+}
+
+/// The differential technique of `m`'s phase function: the positive part of ∂p/∂g if `u_sign <
+/// 0.5`, else the negative one ([`hg_diff_sample_cos`] with `u_comp` and `u[0]`), φ = 2π u[1],
+/// around `d` as [`phase_sample`]; its density is [`phase_pdf_diff`].
+pub fn phase_sample_diff(flat: &FlatScene, m: &MediumDesc, d: Vec3, u_sign: f32, u_comp: f32, u: [f32; 2]) -> Vec3 {
+    let cos = hg_diff_sample_cos(hg_g(flat, m), u_sign < 0.5, u_comp, u[0]);
     let sin = (1.0 - cos * cos).max(0.0).sqrt();
     let phi = 2.0 * std::f32::consts::PI * u[1];
     Frame::from_normal(d).to_world(Vec3::new(sin * phi.cos(), sin * phi.sin(), cos))
@@ -470,3 +544,7 @@ pub fn phase_grad(flat: &FlatScene, m: &MediumDesc, d: Vec3, wo: Vec3, w: Vec3, 
         / (4.0 * std::f32::consts::PI * denom * denom * denom.max(0.0).sqrt());
     sink.add(m.p_g, w * dfdg);
 }
+
+#[cfg(test)]
+#[path = "medium_tests.rs"]
+mod tests;

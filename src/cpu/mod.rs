@@ -177,7 +177,6 @@ pub fn render(scene: &Scene, options: &RenderOptions) -> Result<Image> {
 }
 
 fn render_flat(scene: &Scene, flat: &FlatScene, options: &RenderOptions, view: &View, pass: PassTag) -> Result<Image> {
-    medium::refuse_diff_with_media(flat, options)?;
     let globals = options.globals(scene, flat, pass);
     let camera = options.view_camera(view, pass);
     let pixels = (options.width * options.height) as usize;
@@ -222,7 +221,6 @@ fn backward_flat(
     view: &View,
     adjoint: &Image,
 ) -> Result<Vec<f64>> {
-    medium::refuse_diff_with_media(flat, options)?;
     crate::attached::refuse_unsupported(flat, options, false)?;
     check_size(adjoint, options, "adjoint image")?;
     let globals = options.globals(scene, flat, PassTag::Gradient);
@@ -268,7 +266,6 @@ fn backward_adaptive_flat(
     adjoint: &Image,
     sampling: &PixelSampling,
 ) -> Result<Vec<f64>> {
-    medium::refuse_diff_with_media(flat, options)?;
     crate::attached::refuse_adaptive(options)?;
     let stacked = options.stacked(views.len())?;
     let delta = sampling.sample_adjoint(&stacked, adjoint)?;
@@ -344,7 +341,6 @@ pub fn image_gradient(scene: &Scene, options: &RenderOptions, name: &str) -> Res
 }
 
 fn image_gradient_flat(scene: &Scene, flat: &FlatScene, options: &RenderOptions, name: &str) -> Result<Image> {
-    medium::refuse_diff_with_media(flat, options)?;
     crate::attached::refuse_unsupported(flat, options, true)?;
     let id = scene.params.find(name).ok_or_else(|| crate::Error::InvalidArgument {
         parameter: name.to_string(),

@@ -111,8 +111,20 @@ fn material_hero(flat: &FlatScene, globals: &Globals, m: u32) -> u32 {
         MAT_BLEND => mat.p_weight,
         _ => NO_PARAM,
     };
+    param_hero(globals, p)
+}
+
+/// Several targets: the index of the hero-set target whose parameter values hold parameter `p`,
+/// or `MAX_HEROES` if none does.
+fn param_hero(globals: &Globals, p: u32) -> u32 {
     let r = [globals.hero_range0, globals.hero_range1, globals.hero_range2, globals.hero_range3];
     (0..globals.hero_count).find(|&k| p >= r[k as usize].x && p < r[k as usize].y).unwrap_or(MAX_HEROES)
+}
+
+/// Several targets: the target medium `m`'s phase function is capable for (its HG g), or
+/// `MAX_HEROES`.
+fn medium_hero(globals: &Globals, m: &crate::contract::MediumDesc) -> u32 {
+    if m.phase == crate::contract::PHASE_HG { param_hero(globals, m.p_g) } else { MAX_HEROES }
 }
 
 /// MIS weight of radiance reached by BSDF sampling from the previous vertex, whose direction had
@@ -477,6 +489,13 @@ pub fn trace_path<const ADJOINT: bool>(
                 }
                 let m = &flat.media[current as usize];
                 let d = ray.dir;
+                // The differential strategy may place its vertex here if g is its target (§8.4).
+                let hero_here = if hero { medium_hero(globals, m) } else { MAX_HEROES };
+                let capable = if hero {
+                    hero_here < MAX_HEROES
+                } else {
+                    diff && medium::medium_capable(m, globals.diff_begin, globals.diff_end)
+                };
                 // ---- emitter sampling from the medium ----
                 let u_em = draw_block(key, pixel, sample, vertex, DIM_EMITTER_SELECT / 4);
                 let pos = (DIM_EMITTER_POS % 4) as usize;
@@ -509,7 +528,24 @@ pub fn trace_path<const ADJOINT: bool>(
                         let counters = (pixel, sample, vertex);
                         let tr = medium::shadow_transmittance(flat, key, current, segment, counters, None);
                         // No phase sample reaches a light without area: NEE alone finds it.
-                        let w_n = if es.delta { 1.0 } else { mis_power(p_e, f) };
+                        let w_n = if !diff {
+                            if es.delta { 1.0 } else { mis_power(p_e, f) }
+                        } else if es.delta {
+                            if hero {
+                                mix.nee_weight_hero(MAX_HEROES, 0.0, 0.0, 0.0, None)
+                            } else {
+                                mix.nee_weight(0.0, 0.0, 0.0, None)
+                            }
+                        } else {
+                            // Appendix B with the phase function as the vertex's BSDF (§8.4).
+                            let pdf_d = if capable { medium::phase_pdf_diff(flat, m, d, wl) } else { f };
+                            if hero {
+                                mix.nee_weight_hero(hero_here, globals.diff_q, f, pdf_d, Some(p_e))
+                            } else {
+                                let q_here = if capable { globals.diff_q } else { 0.0 };
+                                mix.nee_weight(q_here, f, pdf_d, Some(p_e))
+                            }
+                        };
                         let contribution = throughput * tr * w_n * f * es.radiance / p_e;
                         radiance += sign * contribution;
                         if ADJOINT && max_component(tr) > 0.0 {
@@ -527,10 +563,22 @@ pub fn trace_path<const ADJOINT: bool>(
                         }
                     }
                 }
-                // ---- phase sampling ----
+                // ---- phase or differential sampling ----
                 let u_bs = draw_block(key, pixel, sample, vertex, DIM_LOBE / 4);
                 let dir = (DIM_DIRECTION % 4) as usize;
-                let wo = medium::phase_sample(flat, m, d, [u_bs[dir], u_bs[dir + 1]]);
+                // Several targets: only the path's hero samples its derivative.
+                let use_dx = capable
+                    && (!hero || hero_here == mix.hero)
+                    && !mix.dx_taken
+                    && u_bs[(DIM_TECHNIQUE % 4) as usize] < globals.diff_q;
+                let wo = if use_dx {
+                    let u_sign =
+                        draw_block(key, pixel, sample, vertex, DIM_DIFF_SIGN / 4)[(DIM_DIFF_SIGN % 4) as usize];
+                    let u_comp = u_bs[(DIM_LOBE % 4) as usize];
+                    medium::phase_sample_diff(flat, m, d, u_sign, u_comp, [u_bs[dir], u_bs[dir + 1]])
+                } else {
+                    medium::phase_sample(flat, m, d, [u_bs[dir], u_bs[dir + 1]])
+                };
                 let pdf = medium::phase_eval(flat, m, d, wo);
                 if !(pdf > 0.0) {
                     break;
@@ -542,8 +590,23 @@ pub fn trace_path<const ADJOINT: bool>(
                 }
                 prev_pdf_f = pdf;
                 prev_nee = nee;
-                mix.prev_sum = 1.0;
-                mix.prev_sq = mix.squares();
+                if diff {
+                    // The phase function's value is its density: β is unchanged before the division.
+                    let pdf_d = if capable { medium::phase_pdf_diff(flat, m, d, wo) } else { 0.0 };
+                    let updated = if hero {
+                        mix.update_hero(hero_here, globals.diff_q, pdf, pdf_d)
+                    } else {
+                        mix.update(capable, use_dx, globals.diff_q, pdf, pdf_d)
+                    };
+                    let Some(sum) = updated else {
+                        break;
+                    };
+                    throughput /= sum;
+                    mix.dx_taken = mix.dx_taken || use_dx;
+                } else {
+                    mix.prev_sum = 1.0;
+                    mix.prev_sq = mix.squares();
+                }
                 if !path_survives(globals, key, (pixel, sample, vertex), &mut throughput) {
                     break;
                 }

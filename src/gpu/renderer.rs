@@ -316,7 +316,6 @@ impl Renderer {
         pass: PassTag,
         work: Work,
     ) -> Result<Request> {
-        crate::cpu::medium::refuse_diff_with_media(&self.flat, options)?;
         Request::new(&self.scene, &self.flat, options, views, pass, work, self.one_path_per_lane)
     }
 

@@ -472,7 +472,7 @@ pub(crate) fn warn_without_sampler(scene: &pathgrad::scene::Scene, strategy: pat
         && !Strategy::has_differential_sampler(scene, target)
     {
         tracing::warn!(
-            "{} is neither a roughness nor a blend weight: --strategy diff samples like bsdf (balance heuristic)",
+            "{} is neither a roughness, a blend weight nor a medium's g: --strategy diff samples like bsdf (balance heuristic)",
             scene.params.entry(target).name
         );
     }

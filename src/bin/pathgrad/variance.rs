@@ -8,7 +8,6 @@ use anyhow::{Context as _, Result, bail};
 use clap::Args;
 use pathgrad::adaptive::AdaptiveEstimator;
 use pathgrad::integrator::{DEFAULT_DIFF_Q, PlacementMis, RenderOptions, Strategy};
-use pathgrad::scene::Material;
 use pathgrad::variance::{self, LossGradientSetup, PilotBudget};
 
 use crate::common::{
@@ -30,8 +29,7 @@ pub(crate) struct VarianceArgs {
     /// --diff-param says otherwise.
     #[arg(long, value_name = "NAME")]
     param: String,
-    /// Strategies to compare, comma-separated: bsdf, diff, auto (default: bsdf and diff; bsdf alone
-    /// in a scene with participating media or null boundaries, where diff is not built). `auto` is
+    /// Strategies to compare, comma-separated: bsdf, diff, auto (default: bsdf and diff). `auto` is
     /// the strategy `--strategy auto` picks from its pilot (run once, its cost reported apart).
     /// With several --diff-param: `diff` samples by all of them, one hero per path (weights
     /// --hero-weights), `diff:NAME` by NAME alone, `diff@W/W/…` by all with hero weights W.
@@ -103,15 +101,7 @@ fn techniques(args: &VarianceArgs, scene: &pathgrad::scene::Scene) -> Result<(Ve
     let target = args.diff_param.as_deref().unwrap_or(&args.param);
     let mut rows = Vec::new();
     let mut auto_placement = PlacementMis::Balance;
-    let media = !scene.media.is_empty() || scene.materials.iter().any(|m| matches!(m, Material::Null));
-    let default = if media {
-        tracing::info!(
-            "the scene has participating media or null boundaries: comparing bsdf alone (diff is not built for media)"
-        );
-        vec!["bsdf".to_string()]
-    } else {
-        vec!["bsdf".to_string(), "diff".to_string()]
-    };
+    let default = vec!["bsdf".to_string(), "diff".to_string()];
     let placements =
         args.placement_mis.iter().map(|p| PlacementMis::from_name(p)).collect::<pathgrad::Result<Vec<_>>>()?;
     let Some(&first_placement) = placements.first() else { bail!("--placement-mis lists no weighting") };
