@@ -255,6 +255,19 @@ fn attached_sampling_refuses_what_it_does_not_cover() {
     let aniso = pathgrad::scene::load(path.to_str().unwrap(), &[]).unwrap();
     let err = pathgrad::cpu::backward(&aniso, &attached(&aniso, 8, 1), &a).unwrap_err().to_string();
     assert!(err.contains("anisotropic or texture-roughened `roughconductor`"), "{err}");
+    // The differential strategy samples its vertex by ∂f/∂α: not an attached sampler.
+    let rough = scenes::data_scene("attached_rough");
+    let id = rough.params.find("ball.bsdf.alpha.value").unwrap();
+    let strategy = pathgrad::integrator::Strategy::Diff {
+        target: id,
+        q: 0.5,
+        placement: pathgrad::integrator::PlacementMis::Balance,
+    };
+    let diff = RenderOptions { strategy, ..attached(&rough, 8, 1) };
+    let err = pathgrad::cpu::backward(&rough, &diff, &a).unwrap_err().to_string();
+    assert!(err.contains("bsdf strategy only"), "{err}");
+    let err = Renderer::new(&gpu.ctx, &rough).unwrap().backward(&diff, &a, GradMode::Float).unwrap_err().to_string();
+    assert!(err.contains("bsdf strategy only"), "{err}");
 }
 
 /// The replay returns Φ to zero as it returns the radiance to zero (ALGORITHMS.md §9 test (d)):
