@@ -1,4 +1,4 @@
-// Specialises a SPIR-V kernel to one value of a specialisation constant and optimises what is left,
+// Specialises a SPIR-V kernel to values of its specialisation constants and optimises what is left,
 // through Debian's SPIRV-Tools (spirv-tools, static libraries): the driver then parses and
 // optimises only the code the value keeps. Called from src/gpu/specialise.rs.
 #include <spirv-tools/libspirv.hpp>
@@ -10,14 +10,16 @@
 #include <unordered_map>
 #include <vector>
 
-extern "C" int pathgrad_specialise_spirv(const uint32_t* words, size_t count, uint32_t spec_id, uint32_t value,
-                                         uint32_t** out, size_t* out_count) {
+// `n` constants: `spec_ids[i]` takes `values[i]` (an id the module lacks is ignored).
+extern "C" int pathgrad_specialise_spirv(const uint32_t* words, size_t count, const uint32_t* spec_ids,
+                                         const uint32_t* values, size_t n, uint32_t** out, size_t* out_count) {
     try {
         spvtools::Optimizer optimizer(SPV_ENV_VULKAN_1_2);
         optimizer.SetMessageConsumer([](spv_message_level_t, const char*, const spv_position_t&, const char*) {});
-        std::unordered_map<uint32_t, std::vector<uint32_t>> values{{spec_id, {value}}};
+        std::unordered_map<uint32_t, std::vector<uint32_t>> defaults;
+        for (size_t i = 0; i < n; ++i) defaults[spec_ids[i]] = {values[i]};
         optimizer.RegisterPass(spvtools::CreateStripDebugInfoPass());
-        optimizer.RegisterPass(spvtools::CreateSetSpecConstantDefaultValuePass(values));
+        optimizer.RegisterPass(spvtools::CreateSetSpecConstantDefaultValuePass(defaults));
         optimizer.RegisterPass(spvtools::CreateFreezeSpecConstantValuePass());
         // First what the value switches off is cut away — its tests folded, their dead branches and
         // code removed — so the pipeline below works on a module a fifth the size: on the adjoint

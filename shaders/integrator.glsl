@@ -12,7 +12,7 @@
 // scalars, v1 and the chosen vertex's term (§5.7). After each update β, w1, w2 and the previous
 // vertex's sum are divided by w1 + w2 (§5.6), so a vertex starts with w1 + w2 = 1. With no capable
 // vertex DIFF is BSDF sampling with the balance heuristic (power placements: the power heuristic).
-// With several targets (F_HERO, §5.8) each path draws a hero target at its camera vertex and only
+// With several targets (F2_HERO, §5.8) each path draws a hero target at its camera vertex and only
 // vertices capable for it may become the differential vertex; w1 and the per-target w2 sums cover
 // every target weighted by its probability, so the mixture is over all heroes' placements.
 //
@@ -64,7 +64,7 @@ bool material_capable(uint m) {
     return p >= globals.diff_begin && p < globals.diff_end;
 }
 
-// Several targets (F_HERO, ALGORITHMS.md §5.8): the index of the hero-set target whose parameter
+// Several targets (F2_HERO, ALGORITHMS.md §5.8): the index of the hero-set target whose parameter
 // values hold material `m`'s roughness or blend weight, or MAX_HEROES if none does.
 uint material_hero(uint m) {
     uint tag = materials[m].tag;
@@ -88,7 +88,7 @@ struct Mixture {
     bool dx_taken;     // the differential vertex has been chosen
     float prev_sum;    // w1 + w2 at the previous vertex before its update, in this vertex's units
     float prev_sq;     // v1 + w2² at the previous vertex before its update, in this vertex's units
-    // Several targets (F_HERO, §5.8): w1 sums the terms of every target weighted by its
+    // Several targets (F2_HERO, §5.8): w1 sums the terms of every target weighted by its
     // probability p_k; hero_w2[k] = p_k (1 − q)^(vertices capable for k) and w2 = Σ_k hero_w2[k].
     uint hero;         // the path's hero: index of its target
     vec4 hero_w2;
@@ -301,7 +301,7 @@ PathState path_begin(uint view, uint pixel, uint sample_index, bool adjoint, vec
     st.vertex = 1u;
     st.prev_pdf_f = 0.0;
     st.mix = mixture_new(HAS(F_DIFF) && globals.strategy == STRATEGY_DIFF && globals.diff_placement == PLACEMENT_POWER);
-    if (HAS(F_HERO) && globals.strategy == STRATEGY_DIFF && globals.hero_count > 0u)
+    if (HAS2(F2_HERO) && globals.strategy == STRATEGY_DIFF && globals.hero_count > 0u)
         mixture_pick_hero(st.mix, draw_block(cam.key1, pixel, sample_index, 0u, DIM_HERO / 4u)[DIM_HERO % 4u]);
     st.prev_nee = false;
     st.adjoint = adjoint;
@@ -337,7 +337,7 @@ bool path_step(inout PathState st) {
     // The strategy is also read at run time, so a kernel with the differential strategy can render a
     // gradient step's pass 1, which uses plain BSDF sampling (kernel.glsl, PRIMAL_ON_REVERSE).
     bool diff = HAS(F_DIFF) && globals.strategy == STRATEGY_DIFF;
-    bool hero = diff && HAS(F_HERO) && globals.hero_count > 0u;
+    bool hero = diff && HAS2(F2_HERO) && globals.hero_count > 0u;
     bool nee = HAS(F_NEE);
     uint vertex = st.vertex;
     st.vertex = vertex + 1u;
@@ -687,6 +687,19 @@ bool path_step(inout PathState st) {
         BsdfSample bs;
         float pdf_f;
         float pdf_d = 0.0;
+#if ATTACHED
+        // Attached sampling at a rough conductor: its own sampler (RoughLobe, src/attached.rs).
+        bool rough_attached = HAS(F_CONDUCTOR) && !bsdf.blend && is_conductor(bsdf.leaf0.kind);
+        RoughLobe rlobe;
+        if (rough_attached) {
+            bool rough_ok = rough_conductor_lobe(st.ray.dir, frame.n, bsdf.leaf0.alpha,
+                                                 is_beckmann(bsdf.leaf0.distribution), u_dir, bsdf.leaf0.eta,
+                                                 bsdf.leaf0.k, rlobe);
+            bs = BsdfSample(to_local(frame, rlobe.wo), rlobe.pdf, rlobe.weight * bsdf.leaf0.color * rlobe.pdf,
+                            rough_ok, false);
+            pdf_f = bs.pdf;
+        } else
+#endif
         if (use_dx) {
             float u_sign = draw_block(st.key1, st.pixel, st.sample_index, vertex, DIM_DIFF_SIGN / 4u)[DIM_DIFF_SIGN % 4u];
             bs = bsdf_sample_diff(bsdf, wi, u_sign, u_lobe, u_dir);
@@ -724,11 +737,45 @@ bool path_step(inout PathState st) {
                     bool mirrored = HAS(F_TWO_SIDED) && am.two_sided != 0u && dot(s.ns, -st.ray.dir) < 0.0;
                     HitGeometry geometry = HitGeometry(hit.t, st.ray.dir, s.ng, frame.n,
                                                        shading_normal_gradient(hit) * (mirrored ? -1.0 : 1.0));
+                    if (rough_attached) {
+                        Jac6 a = jac_completed(hit_jacobian(geometry, rlobe.t_d, rlobe.t_n), st.prev_normal,
+                                               st.ray.dir, s.ng, rlobe.wo);
+                        if (globals.jac_noise > 0.0) {
+                            vec4 u = uniform4(uvec2(globals.key0, st.key1), st.pixel, st.sample_index, vertex,
+                                              STREAM_JACOBIAN, 0u, 0u);
+                            a = jac_plus_identity(a, jac_regularisation(globals.jac_noise, u.x, u.y));
+                        }
+                        // ∂ln w/∂r per channel = a row shared by the channels + (F′/F)_c · ∂c/∂r.
+                        Row6 shared_row = hit_row(geometry, rlobe.dlnw_dd, rlobe.dlnw_dn);
+                        Row6 c_row = hit_row(geometry, rlobe.dc_dd, rlobe.dc_dn);
+                        if (adjoint) {
+                            // h = δL·(∂ln w/∂r ⊙ L_after); Φ′ = (Φ − h)·Ã⁻¹; α's two terms.
+                            vec3 after = st.adj * st.radiance;
+                            float total = after.x + after.y + after.z;
+                            float by_f = dot(after, rlobe.dlnf_dc);
+                            Row6 next;
+                            bool solved = jac_solve_row(
+                                a, row_add_scaled(row_add_scaled(st.gamma, shared_row, -total), c_row, -by_f), next);
+                            float direction = solved ? dot(next.d, rlobe.t_alpha) : 0.0;
+                            if (am.p_alpha != NO_PARAM)
+                                param_grad(am.p_alpha, vec3(total * rlobe.dlnw_dalpha + by_f * rlobe.dc_dalpha
+                                                            + direction, 0.0, 0.0));
+                            st.gamma = solved ? next : ROW6_ZERO;
+                        } else {
+                            Row6 shared_j = row_through(shared_row, st.jac);
+                            Row6 c_j = row_through(c_row, st.jac);
+                            st.log_r = row_add_scaled(row_add_scaled(st.log_r, shared_j, 1.0), c_j, rlobe.dlnf_dc.x);
+                            st.log_g = row_add_scaled(row_add_scaled(st.log_g, shared_j, 1.0), c_j, rlobe.dlnf_dc.y);
+                            st.log_b = row_add_scaled(row_add_scaled(st.log_b, shared_j, 1.0), c_j, rlobe.dlnf_dc.z);
+                            st.jac = jac_compose(a, st.jac);
+                        }
+                    }
                     SmoothLobe lobe;
-                    bool lobe_ok = am.tag == MAT_CONDUCTOR
-                        ? conductor_lobe(st.ray.dir, frame.n, bsdf.leaf0.eta, bsdf.leaf0.k, lobe)
-                        : smooth_lobe(am.tag == MAT_THIN_DIELECTRIC, st.ray.dir, frame.n, bsdf.leaf0.eta.x,
-                                      wi.z * bs.wo.z < 0.0, lobe);
+                    bool lobe_ok = !rough_attached
+                        && (am.tag == MAT_CONDUCTOR
+                            ? conductor_lobe(st.ray.dir, frame.n, bsdf.leaf0.eta, bsdf.leaf0.k, lobe)
+                            : smooth_lobe(am.tag == MAT_THIN_DIELECTRIC, st.ray.dir, frame.n, bsdf.leaf0.eta.x,
+                                          wi.z * bs.wo.z < 0.0, lobe));
                     if (lobe_ok) {
                         Jac6 a = jac_completed(hit_jacobian(geometry, lobe.t_d, lobe.t_n), st.prev_normal, st.ray.dir,
                                                s.ng, wo_world);
@@ -772,9 +819,12 @@ bool path_step(inout PathState st) {
                 if (grad_adj[k] == vec3(0.0)) continue;
                 BsdfGrad g = bsdf_sample_grad(bsdf, wi, grad_wo[k], k == 1u && grad_delta, grad_adj[k]);
                 gt.bsdf.leaf0.color += g.leaf0.color;
-                gt.bsdf.leaf0.alpha += g.leaf0.alpha;
                 gt.bsdf.leaf0.trans += g.leaf0.trans;
+#if !ATTACHED
+                // (Attached kernels differentiate a rough conductor's roughness in its lobe.)
+                gt.bsdf.leaf0.alpha += g.leaf0.alpha;
                 gt.bsdf.leaf0.alpha_v += g.leaf0.alpha_v;
+#endif
                 gt.bsdf.leaf1.color += g.leaf1.color;
                 gt.bsdf.leaf1.alpha += g.leaf1.alpha;
                 gt.bsdf.leaf1.trans += g.leaf1.trans;

@@ -23,12 +23,15 @@
 
 use glam::{Mat3, Vec3};
 
-use crate::contract::{MAT_CONDUCTOR, MAT_DIELECTRIC, MAT_THIN_DIELECTRIC, NO_PARAM};
+use crate::contract::{
+    MAT_CONDUCTOR, MAT_DIELECTRIC, MAT_ROUGH_CONDUCTOR, MAT_THIN_DIELECTRIC, NO_PARAM, SCALAR_TEXTURE,
+};
 use crate::integrator::{RenderOptions, Sampling};
 use crate::scene::flat::FlatScene;
 
 /// Refuses attached sampling (`options.sampling`) where its vertex Jacobians are not built: every
-/// material must be a smooth `dielectric`, `thindielectric` or `conductor` (no normal map, no mask), without
+/// material must be a smooth `dielectric`, `thindielectric` or `conductor` or an isotropic
+/// `roughconductor` with untextured roughness (no normal map, no mask), without
 /// media; light comes from the environment or from emitters the paths hit. `forward` refuses it
 /// for forward-mode image gradients, which carry per-channel derivatives the adjoint-weighted
 /// attached sums do not.
@@ -44,8 +47,8 @@ pub fn refuse_unsupported(flat: &FlatScene, options: &RenderOptions, forward: bo
             parameter: "Sampling::Attached".into(),
             message: format!(
                 "{what}: attached derivatives are built for scenes of smooth `dielectric`, `thindielectric` and \
-                 `conductor` surfaces lit by the environment or by emitters the paths hit, in reverse mode (use \
-                 detached sampling)"
+                 `conductor` surfaces and isotropic `roughconductor`s lit by the environment or by emitters the \
+                 paths hit, in reverse mode (use detached sampling)"
             ),
         })
     };
@@ -66,9 +69,12 @@ pub fn refuse_unsupported(flat: &FlatScene, options: &RenderOptions, forward: bo
         "principled",
     ];
     for m in &flat.materials {
-        if !matches!(m.tag, MAT_DIELECTRIC | MAT_THIN_DIELECTRIC | MAT_CONDUCTOR) {
+        if !matches!(m.tag, MAT_DIELECTRIC | MAT_THIN_DIELECTRIC | MAT_CONDUCTOR | MAT_ROUGH_CONDUCTOR) {
             let name = names.get(m.tag as usize).copied().unwrap_or("another BSDF");
             return refuse(format!("the scene has a `{name}` material"));
+        }
+        if m.tag == MAT_ROUGH_CONDUCTOR && (m.p_alpha != m.p_alpha_v || m.p_alpha & SCALAR_TEXTURE != 0) {
+            return refuse("the scene has an anisotropic or texture-roughened `roughconductor`".into());
         }
         if m.nmap_width > 0 || m.p_opacity != NO_PARAM {
             return refuse("the scene has a normal-mapped, bump-mapped or masked material".into());
@@ -470,12 +476,280 @@ pub fn smooth_lobe(thin: bool, d: Vec3, n: Vec3, eta: f32, transmitted: bool) ->
     })
 }
 
+/// Duff et al.'s orthonormal basis (t, b) around the unit normal `n` and their derivatives by
+/// n's three components, (∂t/∂n, ∂b/∂n): the frame a rough vertex samples its microfacet normal
+/// in under attached sampling (the frame moves with n, so the sample does too).
+pub fn basis_jacobians(n: Vec3) -> (Vec3, Vec3, Mat3, Mat3) {
+    let s = if n.z >= 0.0 { 1.0 } else { -1.0 };
+    let a = -1.0 / (s + n.z);
+    let b = n.x * n.y * a;
+    let t = Vec3::new(1.0 + s * n.x * n.x * a, s * b, -s * n.x);
+    let bv = Vec3::new(b, s + n.y * n.y * a, -n.y);
+    // ∂a/∂n = (0, 0, a²); ∂b/∂n = (y·a, x·a, x·y·a²). Rows are the gradients of the components.
+    let db = Vec3::new(n.y * a, n.x * a, n.x * n.y * a * a);
+    let t_n =
+        Mat3::from_cols(Vec3::new(2.0 * s * n.x * a, 0.0, s * n.x * n.x * a * a), s * db, Vec3::new(-s, 0.0, 0.0))
+            .transpose();
+    let b_n =
+        Mat3::from_cols(db, Vec3::new(0.0, 2.0 * n.y * a, n.y * n.y * a * a), Vec3::new(0.0, -1.0, 0.0)).transpose();
+    (t, bv, t_n, b_n)
+}
+
+/// The slope length factor g(u) of sampling D(h)·cos θh: tan θh = α·g(u) — GGX
+/// g = √(u/(1 − u)), Beckmann g = √(−ln(1 − u)).
+fn slope_factor(beckmann: bool, u: f32) -> f32 {
+    let u = u.min(1.0 - 1e-7);
+    if beckmann { (-(1.0 - u).ln()).max(0.0).sqrt() } else { (u / (1.0 - u)).sqrt() }
+}
+
+/// ln G1 and its derivative by s² = α² tan² θ (Smith, isotropic; as
+/// [`crate::bsdf::rough_conductor::microfacet_g1`]).
+fn ln_g1(beckmann: bool, s2: f32) -> (f32, f32) {
+    if !(s2 > 0.0) {
+        return (0.0, 0.0);
+    }
+    if beckmann {
+        // G1 = 1/(1 + Λ(a)), a = 1/s: dΛ/da = −e^{−a²}/(2a²√π), da/ds² = −a/(2s²).
+        let sqrt_pi = std::f32::consts::PI.sqrt();
+        let a = 1.0 / s2.sqrt();
+        let lambda = 0.5 * (crate::sampling::erf_approx(a) - 1.0) + (-a * a).exp() / (2.0 * a * sqrt_pi);
+        let g1 = 1.0 / (1.0 + lambda);
+        (g1.ln(), -g1 * (-a * a).exp() / (4.0 * a * s2 * sqrt_pi))
+    } else {
+        let root = (1.0 + s2).sqrt();
+        ((2.0 / (1.0 + root)).ln(), -1.0 / (2.0 * root * (1.0 + root)))
+    }
+}
+
+/// What a rough conductor's vertex contributes to the attached estimator: its microfacet normal is
+/// sampled from D(h)·cos θh (not from the visible normals: this sampler's normal depends on the
+/// incoming direction only through the frame, so its Jacobians stay short) in the frame of
+/// [`basis_jacobians`], and the outgoing direction is the mirror of d about it. The weight is
+/// w = F(c)·G1(cos θi)·G1(cos θo)·c/(cos θi·cos θh), c = −d·h (D cancels); rows of ln w are
+/// split into a part common to the channels and F′/F (per channel) times the rows of c.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct RoughLobe {
+    /// The outgoing direction (world space).
+    pub wo: Vec3,
+    /// The weight w per channel, without the specular reflectance.
+    pub weight: Vec3,
+    /// The density of `wo` (solid angle): D(h)·cos θh/(4c).
+    pub pdf: f32,
+    /// ∂d′/∂d.
+    pub t_d: Mat3,
+    /// ∂d′/∂n.
+    pub t_n: Mat3,
+    /// ∂d′/∂α.
+    pub t_alpha: Vec3,
+    /// ∂ ln w/∂d, ∂ ln w/∂n and ∂ ln w/∂α without the Fresnel factor's part.
+    pub dlnw_dd: Vec3,
+    /// See `dlnw_dd`.
+    pub dlnw_dn: Vec3,
+    /// See `dlnw_dd`.
+    pub dlnw_dalpha: f32,
+    /// ∂c/∂d, ∂c/∂n and ∂c/∂α.
+    pub dc_dd: Vec3,
+    /// See `dc_dd`.
+    pub dc_dn: Vec3,
+    /// See `dc_dd`.
+    pub dc_dalpha: f32,
+    /// F′(c)/F(c) per channel.
+    pub dlnf_dc: Vec3,
+}
+
+/// The attached rough-conductor lobe from incoming direction `d` at shading normal `n` (the side
+/// the ray arrives on), roughness `alpha` (GGX, or Beckmann with `beckmann`), uniforms `u` and the
+/// conductor's complex index (`eta`, `k`); `None` where the sample leaves below the surface or
+/// weighs nothing.
+pub fn rough_conductor_lobe(
+    d: Vec3,
+    n: Vec3,
+    alpha: f32,
+    beckmann: bool,
+    u: [f32; 2],
+    eta: Vec3,
+    k: Vec3,
+) -> Option<RoughLobe> {
+    let ci = -d.dot(n);
+    if !(ci > 0.0) || !(alpha > 0.0) {
+        return None;
+    }
+    let (t, b, t_n, b_n) = basis_jacobians(n);
+    let g = slope_factor(beckmann, u[0]);
+    let phi = 2.0 * std::f32::consts::PI * u[1];
+    let (sin_p, cos_p) = phi.sin_cos();
+    let m = Vec3::new(alpha * g * cos_p, alpha * g * sin_p, 1.0);
+    let len = m.length();
+    let hl = m / len;
+    let dm = Vec3::new(g * cos_p, g * sin_p, 0.0);
+    let dhl = (dm - hl * hl.dot(dm)) / len;
+    let h = hl.x * t + hl.y * b + hl.z * n;
+    let hn = hl.x * t_n + hl.y * b_n + Mat3::from_diagonal(Vec3::splat(hl.z));
+    let h_alpha = dhl.x * t + dhl.y * b + dhl.z * n;
+    let c = -d.dot(h);
+    let wo = d + 2.0 * c * h;
+    let co = wo.dot(n);
+    if !(c > 0.0) || !(co > 0.0) {
+        return None;
+    }
+    let (f, df) = fresnel_conductor_grad(c, eta, k);
+    if !(f.min_element() > 0.0) {
+        return None;
+    }
+    let tan2 = |cos: f32| (1.0 - cos * cos).max(0.0) / (cos * cos);
+    let (lg_i, dg_i) = ln_g1(beckmann, alpha * alpha * tan2(ci));
+    let (lg_o, dg_o) = ln_g1(beckmann, alpha * alpha * tan2(co));
+    // ∂ ln G1/∂cos = ∂ ln G1/∂s² · α²·(−2/cos³); ∂ ln G1/∂α = ∂ ln G1/∂s² · 2α tan².
+    let (gi_c, go_c) = (dg_i * alpha * alpha * -2.0 / (ci * ci * ci), dg_o * alpha * alpha * -2.0 / (co * co * co));
+    let g_alpha = dg_i * 2.0 * alpha * tan2(ci) + dg_o * 2.0 * alpha * tan2(co);
+    let hz = hl.z;
+    let weight = f * ((lg_i + lg_o).exp() * c / (ci * hz));
+    // c = −d·h: dc = −h·δd − d·δh; δh = Hn·δn + h_α·δα.
+    let dc_dd = -h;
+    let dc_dn = -(hn.transpose() * d);
+    let dc_dalpha = -d.dot(h_alpha);
+    // wo = d + 2c·h.
+    let t_d = Mat3::IDENTITY - 2.0 * outer(h, h);
+    let t_n = 2.0 * outer(h, dc_dn) + 2.0 * c * hn;
+    let t_alpha = 2.0 * dc_dalpha * h + 2.0 * c * h_alpha;
+    // cos θi = −d·n; cos θo = wo·n.
+    let (ci_d, ci_n) = (-n, -d);
+    let (co_d, co_n, co_alpha) = (t_d.transpose() * n, t_n.transpose() * n + wo, n.dot(t_alpha));
+    let dhz_dalpha = dhl.z;
+    let dlnw_dd = dc_dd / c + gi_c * ci_d + go_c * co_d - ci_d / ci;
+    let dlnw_dn = dc_dn / c + gi_c * ci_n + go_c * co_n - ci_n / ci;
+    let dlnw_dalpha = dc_dalpha / c + go_c * co_alpha + g_alpha - dhz_dalpha / hz;
+    let d_pdf = match beckmann {
+        true => crate::contract::Distribution::Beckmann,
+        false => crate::contract::Distribution::Ggx,
+    };
+    let pdf = crate::bsdf::rough_conductor::microfacet_d(d_pdf, alpha, hl) * hz / (4.0 * c);
+    Some(RoughLobe {
+        wo,
+        weight,
+        pdf,
+        t_d,
+        t_n,
+        t_alpha,
+        dlnw_dd,
+        dlnw_dn,
+        dlnw_dalpha,
+        dc_dd,
+        dc_dn,
+        dc_dalpha,
+        dlnf_dc: df / f,
+    })
+}
+
+impl HitGeometry {
+    /// The row over the incoming ray of a quantity whose derivatives by the incoming direction
+    /// and by the shading normal are `by_d` and `by_n` (the normal moves with the hit point).
+    pub fn row(&self, by_d: Vec3, by_n: Vec3) -> Row6 {
+        let w = self.projection().transpose() * (self.dn_dx.transpose() * by_n);
+        Row6 { o: w, d: by_d + self.t * w }
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
 
     fn fd_vec(f: impl Fn(f32) -> Vec3, h: f32) -> Vec3 {
         (f(h) - f(-h)) / (2.0 * h)
+    }
+
+    /// Every derivative the rough lobe reports against central differences of the lobe itself
+    /// (its direction and ln of its weight, Fresnel included per channel), by d, n and α, for both
+    /// distributions; the basis's Jacobians likewise.
+    #[test]
+    fn rough_lobe_derivatives_match_finite_differences() {
+        let (eta, k) = (Vec3::new(0.2, 0.9, 1.1), Vec3::new(3.9, 2.4, 2.2));
+        let n0 = Vec3::new(0.15, -0.25, 0.95).normalize();
+        let d0 = Vec3::new(0.35, 0.2, -0.9).normalize();
+        let mut checked = 0;
+        for beckmann in [false, true] {
+            for &alpha in &[0.05f32, 0.3] {
+                for &u in &[[0.3f32, 0.2], [0.7, 0.6], [0.5, 0.9]] {
+                    let Some(l) = rough_conductor_lobe(d0, n0, alpha, beckmann, u, eta, k) else { continue };
+                    let lnw = |d: Vec3, n: Vec3, a: f32| {
+                        rough_conductor_lobe(d, n, a, beckmann, u, eta, k).map(|x| x.weight.x.ln())
+                    };
+                    let wo =
+                        |d: Vec3, n: Vec3, a: f32| rough_conductor_lobe(d, n, a, beckmann, u, eta, k).map(|x| x.wo);
+                    let h = 2e-3f32;
+                    let tol = |x: f32| 2e-2 * (1.0 + x.abs());
+                    let total = |dd: Vec3, dn: Vec3| {
+                        dd.dot(l.dlnw_dd + l.dlnf_dc.x * l.dc_dd) + dn.dot(l.dlnw_dn + l.dlnf_dc.x * l.dc_dn)
+                    };
+                    for axis in [Vec3::X, Vec3::Y, Vec3::Z] {
+                        let (Some(p), Some(m)) = (lnw(d0 + h * axis, n0, alpha), lnw(d0 - h * axis, n0, alpha)) else {
+                            continue;
+                        };
+                        let fd = (p - m) / (2.0 * h);
+                        assert!(
+                            (fd - total(axis, Vec3::ZERO)).abs() < tol(fd),
+                            "∂ln w/∂d: {fd} vs {}",
+                            total(axis, Vec3::ZERO)
+                        );
+                        let (Some(p), Some(m)) = (lnw(d0, n0 + h * axis, alpha), lnw(d0, n0 - h * axis, alpha)) else {
+                            continue;
+                        };
+                        let fd = (p - m) / (2.0 * h);
+                        assert!(
+                            (fd - total(Vec3::ZERO, axis)).abs() < tol(fd),
+                            "∂ln w/∂n: {fd} vs {}",
+                            total(Vec3::ZERO, axis)
+                        );
+                        let fd_d =
+                            (wo(d0 + h * axis, n0, alpha).unwrap() - wo(d0 - h * axis, n0, alpha).unwrap()) / (2.0 * h);
+                        assert!((fd_d - l.t_d * axis).abs().max_element() < 2e-2, "∂d′/∂d: {fd_d} vs {}", l.t_d * axis);
+                        let fd_n =
+                            (wo(d0, n0 + h * axis, alpha).unwrap() - wo(d0, n0 - h * axis, alpha).unwrap()) / (2.0 * h);
+                        assert!((fd_n - l.t_n * axis).abs().max_element() < 2e-2, "∂d′/∂n: {fd_n} vs {}", l.t_n * axis);
+                    }
+                    let ha = 1e-3 * alpha;
+                    let fd = (lnw(d0, n0, alpha + ha).unwrap() - lnw(d0, n0, alpha - ha).unwrap()) / (2.0 * ha);
+                    let ours = l.dlnw_dalpha + l.dlnf_dc.x * l.dc_dalpha;
+                    assert!((fd - ours).abs() < tol(fd), "∂ln w/∂α ({beckmann}, α {alpha}): {fd} vs {ours}");
+                    let fd = (wo(d0, n0, alpha + ha).unwrap() - wo(d0, n0, alpha - ha).unwrap()) / (2.0 * ha);
+                    assert!(
+                        (fd - l.t_alpha).abs().max_element() < 2e-2 * (1.0 + fd.length()),
+                        "∂d′/∂α: {fd} vs {}",
+                        l.t_alpha
+                    );
+                    checked += 1;
+                }
+            }
+        }
+        assert!(checked >= 8, "{checked} lobes checked");
+        let (t, b, t_n, b_n) = basis_jacobians(n0);
+        assert!(t.dot(b).abs() < 1e-6 && t.dot(n0).abs() < 1e-6 && b.dot(n0).abs() < 1e-6);
+        for axis in [Vec3::X, Vec3::Y, Vec3::Z] {
+            let h = 1e-3;
+            let (tp, bp, _, _) = basis_jacobians(n0 + h * axis);
+            let (tm, bm, _, _) = basis_jacobians(n0 - h * axis);
+            assert!(((tp - tm) / (2.0 * h) - t_n * axis).abs().max_element() < 1e-3);
+            assert!(((bp - bm) / (2.0 * h) - b_n * axis).abs().max_element() < 1e-3);
+        }
+    }
+
+    /// The rough lobe's sampler draws D(h)·cos θh: its weight times its density is the BSDF's
+    /// value times cos θo (Mitsuba's rough conductor, [`crate::bsdf::rough_conductor`]).
+    #[test]
+    fn rough_lobe_weight_is_value_over_density() {
+        use crate::bsdf::rough_conductor::microfacet_eval;
+        use crate::contract::Distribution;
+        let (eta, k) = (Vec3::new(0.2, 0.9, 1.1), Vec3::new(3.9, 2.4, 2.2));
+        let n = Vec3::Z;
+        let d = Vec3::new(0.4, 0.1, -0.8).normalize();
+        for (beckmann, dist) in [(false, Distribution::Ggx), (true, Distribution::Beckmann)] {
+            for u in [[0.2f32, 0.3], [0.6, 0.1], [0.9, 0.8]] {
+                let Some(l) = rough_conductor_lobe(d, n, 0.2, beckmann, u, eta, k) else { continue };
+                let value = microfacet_eval(dist, glam::Vec2::splat(0.2), Vec3::ONE, eta, k, -d, l.wo);
+                let ours = l.weight * l.pdf;
+                assert!((ours - value).abs().max_element() < 1e-4 * (1.0 + value.max_element()), "{ours} vs {value}");
+            }
+        }
     }
 
     #[test]

@@ -798,7 +798,9 @@ impl RenderOptions {
             fixed_scale: FIXED_POINT_SCALE,
             forward_begin: 0,
             forward_end: 0,
-            nee: u32::from(self.nee),
+            // Attached sampling samples by the BSDF alone: a light sample's direction would move
+            // with the vertex, and those terms are not built (crate::attached).
+            nee: u32::from(self.nee && !self.sampling.is_attached()),
             strategy,
             diff_q,
             diff_begin,

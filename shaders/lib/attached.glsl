@@ -274,4 +274,96 @@ bool conductor_lobe(vec3 d, vec3 n, vec3 eta, vec3 k, out SmoothLobe lobe) {
     return true;
 }
 
+// Duff et al.'s basis (t, b) around n and ∂t/∂n, ∂b/∂n (basis_jacobians).
+void basis_jacobians(vec3 n, out vec3 t, out vec3 b, out mat3 t_n, out mat3 b_n) {
+    float s = n.z >= 0.0 ? 1.0 : -1.0;
+    float a = -1.0 / (s + n.z);
+    float bb = n.x * n.y * a;
+    t = vec3(1.0 + s * n.x * n.x * a, s * bb, -s * n.x);
+    b = vec3(bb, s + n.y * n.y * a, -n.y);
+    vec3 db = vec3(n.y * a, n.x * a, n.x * n.y * a * a);
+    t_n = transpose(mat3(vec3(2.0 * s * n.x * a, 0.0, s * n.x * n.x * a * a), s * db, vec3(-s, 0.0, 0.0)));
+    b_n = transpose(mat3(db, vec3(0.0, 2.0 * n.y * a, n.y * n.y * a * a), vec3(0.0, -1.0, 0.0)));
+}
+
+// ln G1 and its derivative by s² = α² tan² θ (ln_g1).
+vec2 attached_ln_g1(bool beckmann, float s2) {
+    if (!(s2 > 0.0)) return vec2(0.0);
+    if (beckmann) {
+        float a = 1.0 / sqrt(s2);
+        float lambda = 0.5 * (erf_approx(a) - 1.0) + exp(-a * a) / (2.0 * a * sqrt(PI));
+        float g1 = 1.0 / (1.0 + lambda);
+        return vec2(log(g1), -g1 * exp(-a * a) / (4.0 * a * s2 * sqrt(PI)));
+    }
+    float root = sqrt(1.0 + s2);
+    return vec2(log(2.0 / (1.0 + root)), -1.0 / (2.0 * root * (1.0 + root)));
+}
+
+// A rough conductor's attached lobe (RoughLobe of src/attached.rs).
+struct RoughLobe {
+    vec3 wo; vec3 weight; float pdf; mat3 t_d; mat3 t_n; vec3 t_alpha;
+    vec3 dlnw_dd; vec3 dlnw_dn; float dlnw_dalpha; vec3 dc_dd; vec3 dc_dn; float dc_dalpha; vec3 dlnf_dc;
+};
+
+float attached_tan2(float c) { return max(1.0 - c * c, 0.0) / (c * c); }
+
+// rough_conductor_lobe: false where the sample leaves below the surface or weighs nothing.
+bool rough_conductor_lobe(vec3 d, vec3 n, float alpha, bool beckmann, vec2 u, vec3 eta, vec3 k, out RoughLobe l) {
+    l = RoughLobe(vec3(0.0), vec3(0.0), 0.0, mat3(1.0), mat3(0.0), vec3(0.0), vec3(0.0), vec3(0.0), 0.0,
+                  vec3(0.0), vec3(0.0), 0.0, vec3(0.0));
+    float ci = -dot(d, n);
+    if (!(ci > 0.0) || !(alpha > 0.0)) return false;
+    vec3 t, b;
+    mat3 t_n, b_n;
+    basis_jacobians(n, t, b, t_n, b_n);
+    float uu = min(u.x, 1.0 - 1e-7);
+    float g = beckmann ? sqrt(max(-log(1.0 - uu), 0.0)) : sqrt(uu / (1.0 - uu));
+    float phi = 2.0 * PI * u.y;
+    float sin_p = sin(phi);
+    float cos_p = cos(phi);
+    vec3 m = vec3(alpha * g * cos_p, alpha * g * sin_p, 1.0);
+    float len = length(m);
+    vec3 hl = m / len;
+    vec3 dm = vec3(g * cos_p, g * sin_p, 0.0);
+    vec3 dhl = (dm - hl * dot(hl, dm)) / len;
+    vec3 h = hl.x * t + hl.y * b + hl.z * n;
+    mat3 hn = hl.x * t_n + hl.y * b_n + mat3(hl.z);
+    vec3 h_alpha = dhl.x * t + dhl.y * b + dhl.z * n;
+    float c = -dot(d, h);
+    vec3 wo = d + 2.0 * c * h;
+    float co = dot(wo, n);
+    if (!(c > 0.0) || !(co > 0.0)) return false;
+    vec3 f = fresnel_conductor(c, eta, k);
+    if (!(min(f.x, min(f.y, f.z)) > 0.0)) return false;
+    vec2 gi = attached_ln_g1(beckmann, alpha * alpha * attached_tan2(ci));
+    vec2 go = attached_ln_g1(beckmann, alpha * alpha * attached_tan2(co));
+    float gi_c = gi.y * alpha * alpha * -2.0 / (ci * ci * ci);
+    float go_c = go.y * alpha * alpha * -2.0 / (co * co * co);
+    float g_alpha = gi.y * 2.0 * alpha * attached_tan2(ci) + go.y * 2.0 * alpha * attached_tan2(co);
+    float hz = hl.z;
+    l.wo = wo;
+    l.weight = f * (exp(gi.x + go.x) * c / (ci * hz));
+    l.dc_dd = -h;
+    l.dc_dn = -(transpose(hn) * d);
+    l.dc_dalpha = -dot(d, h_alpha);
+    l.t_d = mat3(1.0) - 2.0 * outerProduct(h, h);
+    l.t_n = 2.0 * outerProduct(h, l.dc_dn) + 2.0 * c * hn;
+    l.t_alpha = 2.0 * l.dc_dalpha * h + 2.0 * c * h_alpha;
+    vec3 co_d = transpose(l.t_d) * n;
+    vec3 co_n = transpose(l.t_n) * n + wo;
+    float co_alpha = dot(n, l.t_alpha);
+    l.dlnw_dd = l.dc_dd / c + gi_c * -n + go_c * co_d + n / ci;
+    l.dlnw_dn = l.dc_dn / c + gi_c * -d + go_c * co_n + d / ci;
+    l.dlnw_dalpha = l.dc_dalpha / c + go_c * co_alpha + g_alpha - dhl.z / hz;
+    l.pdf = microfacet_d(beckmann ? DIST_BECKMANN : DIST_GGX, alpha, hl) * hz / (4.0 * c);
+    l.dlnf_dc = fresnel_conductor_dcos(c, eta, k) / f;
+    return true;
+}
+
+// The row over the incoming ray of a quantity with derivatives by_d (direction) and by_n (normal).
+Row6 hit_row(HitGeometry g, vec3 by_d, vec3 by_n) {
+    vec3 w = transpose(hit_projection(g)) * (transpose(g.dn_dx) * by_n);
+    return Row6(w, by_d + g.t * w);
+}
+
 #endif

@@ -152,6 +152,13 @@ contract_constants! {
 
     /// Specialisation constant id of `FEATURES` (`shaders/lib/features.glsl`).
     SPEC_FEATURES = 0;
+    /// Specialisation constant id of `FEATURES2`, the second feature word: its bits are the
+    /// `F2_*` constants (tested with `HAS2` in GLSL; on the host they are the high 32 bits of a
+    /// variant's features, [`crate::gpu::variant::word2`]).
+    SPEC_FEATURES2 = 1;
+    /// Second-word feature bit: the differential strategy with several targets, one hero per path
+    /// (`Globals::hero_count` > 0, ALGORITHMS.md §5.8).
+    F2_HERO = 1 << 0;
     /// Feature bit: next-event estimation.
     F_NEE = 1 << 0;
     /// Feature bit: a constant environment emitter.
@@ -212,9 +219,6 @@ contract_constants! {
     /// offset: its other bits are the index of a textured light or projector, whose intensity,
     /// texels and scale the term reaches.
     LIGHT_SLOT = 0x4000_0000;
-    /// Feature bit: the differential strategy with several targets, one hero per path
-    /// (`Globals::hero_count` > 0, ALGORITHMS.md §5.8).
-    F_HERO = 1 << 31;
     /// A `Material::p_alpha`, `p_alpha_v`, (blend) `p_weight` or `p_opacity` with this bit set is not a
     /// parameter offset: its other bits are the offset in the tables array of a one-channel
     /// texture's descriptor (`TEXTURE_DESC_LEN` words: texel offset, width, height, `TEX_*` mode,

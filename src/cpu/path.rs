@@ -3,17 +3,19 @@
 
 use glam::{Vec2, Vec3};
 
-use crate::attached::{HitGeometry, Jac6, Row6, conductor_lobe, regularisation, smooth_lobe};
+use crate::attached::{
+    HitGeometry, Jac6, RoughLobe, Row6, conductor_lobe, regularisation, rough_conductor_lobe, smooth_lobe,
+};
 use crate::bsdf::Leaf;
 use crate::bsdf::differential::{bsdf_pdf_diff, bsdf_sample_diff};
 use crate::bsdf::specular::SmoothKind;
 use crate::bsdf::specular::is_smooth;
-use crate::bsdf::{bsdf_eval, bsdf_pdf, bsdf_sample};
+use crate::bsdf::{Bsdf, BsdfSample, bsdf_eval, bsdf_pdf, bsdf_sample};
 use crate::bvh::{Ray, closest_hit, occluded};
 use crate::contract::{
     DIM_DIFF_SIGN, DIM_DIRECTION, DIM_EMITTER_POS, DIM_EMITTER_SELECT, DIM_ENV_CELL, DIM_HERO, DIM_LOBE,
-    DIM_PIXEL_JITTER, DIM_ROULETTE, DIM_TECHNIQUE, Globals, LENS_ORTHOGRAPHIC, LENS_THIN, LIGHT_SLOT, MAT_BLEND,
-    MAT_CONDUCTOR, MAT_NULL, MAT_ROUGH_CONDUCTOR, MAT_ROUGH_DIELECTRIC, MAT_ROUGH_PLASTIC, MAX_HEROES,
+    DIM_PIXEL_JITTER, DIM_ROULETTE, DIM_TECHNIQUE, Distribution, Globals, LENS_ORTHOGRAPHIC, LENS_THIN, LIGHT_SLOT,
+    MAT_BLEND, MAT_CONDUCTOR, MAT_NULL, MAT_ROUGH_CONDUCTOR, MAT_ROUGH_DIELECTRIC, MAT_ROUGH_PLASTIC, MAX_HEROES,
     MAX_NULL_CROSSINGS, NO_EMITTER, NO_MEDIUM, NO_PARAM, PLACEMENT_POWER, STRATEGY_DIFF, ViewCamera,
 };
 use crate::cpu::emitter::{
@@ -22,9 +24,9 @@ use crate::cpu::emitter::{
 };
 use crate::cpu::medium;
 use crate::cpu::surface::{
-    SHADOW_EPSILON, bsdf_backward, mask_opacity_at, material_anisotropic, material_normal_mapped, mis_power,
-    normal_map_frame, offset_origin, opacity_backward, resolve_bsdf, safe_div, shading_normal_gradient, surface_at,
-    tangent_frame,
+    SHADOW_EPSILON, bsdf_backward, bsdf_backward_but_alpha, mask_opacity_at, material_anisotropic,
+    material_normal_mapped, mis_power, normal_map_frame, offset_origin, opacity_backward, resolve_bsdf, safe_div,
+    shading_normal_gradient, surface_at, tangent_frame,
 };
 use crate::rng::{RngKey, Stream, uniform4};
 use crate::sampling::Frame;
@@ -725,12 +727,27 @@ pub fn trace_path<const ADJOINT: bool>(
             && (!hero || hero_here == mix.hero)
             && !mix.dx_taken
             && u_bs[(DIM_TECHNIQUE % 4) as usize] < globals.diff_q;
+        let mut rough_lobe = None; // attached sampling's rough-conductor lobe
         let (bs, pdf_f, pdf_d) = if use_dx {
             let u_sign = draw_block(key, pixel, sample, vertex, DIM_DIFF_SIGN / 4)[(DIM_DIFF_SIGN % 4) as usize];
             let bs = bsdf_sample_diff(&bsdf, wi, u_sign, u_lobe, u_dir);
             let pdf_f = bs.as_ref().map_or(0.0, |b| bsdf_pdf(&bsdf, wi, b.wo));
             let pdf_d = bs.as_ref().map_or(0.0, |b| b.pdf);
             (bs, pdf_f, pdf_d)
+        } else if let Some((lobe, specular)) =
+            attached.then(|| rough_attached(&bsdf, ray.dir, frame.n, u_dir)).flatten()
+        {
+            // Attached sampling at a rough conductor: its own sampler (crate::attached::RoughLobe).
+            let value = lobe.as_ref().map(|l| l.weight * specular * l.pdf);
+            let bs = lobe.as_ref().zip(value).map(|(l, value)| BsdfSample {
+                wo: frame.to_local(l.wo),
+                pdf: l.pdf,
+                value,
+                delta: false,
+            });
+            rough_lobe = lobe;
+            let pdf_f = bs.as_ref().map_or(0.0, |b| b.pdf);
+            (bs, pdf_f, 0.0)
         } else {
             let bs = bsdf_sample(&bsdf, wi, u_lobe, u_dir);
             let pdf_f = bs.as_ref().map_or(0.0, |b| b.pdf);
@@ -769,7 +786,50 @@ pub fn trace_path<const ADJOINT: bool>(
         // The path continues: everything later in `radiance` carries the factor f̂(wi, wo).
         if ADJOINT {
             let adj = adj_radiance * safe_div(radiance, bs.value);
-            bsdf_backward(flat, s.material, s.tex_at(), &bsdf, wi, bs.wo, bs.delta, adj, sink);
+            if rough_lobe.is_some() {
+                // The roughness's derivative is the attached lobe's own (below).
+                bsdf_backward_but_alpha(flat, s.material, s.tex_at(), &bsdf, wi, bs.wo, adj, sink);
+            } else {
+                bsdf_backward(flat, s.material, s.tex_at(), &bsdf, wi, bs.wo, bs.delta, adj, sink);
+            }
+        }
+        if let Some(lobe) = rough_lobe {
+            let geometry = HitGeometry {
+                t: hit.t,
+                d: ray.dir,
+                ng: s.ng,
+                n: frame.n,
+                dn_dx: shading_normal_gradient(flat, &hit) * if mirrored { -1.0 } else { 1.0 },
+            };
+            let mut a = geometry.jacobian(lobe.t_d, lobe.t_n).completed(prev_normal, ray.dir, s.ng, lobe.wo);
+            if globals.jac_noise > 0.0 {
+                let u = uniform4(key, pixel, sample, vertex, Stream::Jacobian, 0, 0);
+                a = a.plus_identity(regularisation(globals.jac_noise, u[0], u[1]));
+            }
+            // ∂ln w/∂r per channel = common + (F′/F)_c · ∂c/∂r.
+            let common = geometry.row(lobe.dlnw_dd, lobe.dlnw_dn);
+            let c_row = geometry.row(lobe.dc_dd, lobe.dc_dn);
+            if ADJOINT {
+                let after = adj_radiance * radiance;
+                // h = δL·(∂ln w/∂r ⊙ L_after); Φ′ = (Φ − h)·Ã⁻¹; α's two terms.
+                let next = a.solve_row(
+                    phi.add_scaled(common, -(after.x + after.y + after.z)).add_scaled(c_row, -after.dot(lobe.dlnf_dc)),
+                );
+                let direction = next.map_or(0.0, |n| n.d.dot(lobe.t_alpha));
+                let by_alpha =
+                    (after.x + after.y + after.z) * lobe.dlnw_dalpha + after.dot(lobe.dlnf_dc) * lobe.dc_dalpha;
+                let m = &flat.materials[s.material as usize];
+                if m.p_alpha != NO_PARAM {
+                    sink.add(m.p_alpha, Vec3::new(by_alpha + direction, 0.0, 0.0));
+                }
+                phi = next.unwrap_or(Row6::ZERO);
+            } else {
+                let (common, c_row) = (common.through(&jac), c_row.through(&jac));
+                for (c, log_row) in log_rows.iter_mut().enumerate() {
+                    *log_row = log_row.add_scaled(common, 1.0).add_scaled(c_row, lobe.dlnf_dc[c]);
+                }
+                jac = a.compose(&jac);
+            }
         }
         if attached && let Leaf::Smooth(leaf) = &bsdf.leaves[0] {
             let geometry = HitGeometry {
@@ -824,6 +884,22 @@ pub fn trace_path<const ADJOINT: bool>(
         *gamma = phi;
     }
     radiance
+}
+
+/// Attached sampling's rough-conductor vertex: `Some` (the lobe, or `None` where its sample is
+/// invalid, and the specular reflectance) where `bsdf` is one isotropic rough conductor, sampled
+/// from incoming direction `d` at shading normal `n` with uniforms `u`.
+fn rough_attached(bsdf: &Bsdf, d: Vec3, n: Vec3, u: Vec2) -> Option<(Option<RoughLobe>, Vec3)> {
+    if bsdf.blend || bsdf.perturbed.is_some() {
+        return None;
+    }
+    match bsdf.leaves[0] {
+        Leaf::RoughConductor { distribution, alpha, alpha_v, specular, eta, k } if alpha == alpha_v => {
+            let beckmann = distribution == Distribution::Beckmann;
+            Some((rough_conductor_lobe(d, n, alpha, beckmann, [u.x, u.y], eta, k), specular))
+        }
+        _ => None,
+    }
 }
 
 /// Γ plus one contribution's row: `own` (its derivative by the camera ray) and `c` (δL ⊙ β ⊙ the

@@ -627,6 +627,26 @@ pub fn bsdf_backward(
     }
 }
 
+/// [`bsdf_backward`] of a sampled (non-delta) direction without the roughness's derivatives: a
+/// rough conductor under attached sampling, whose lobe differentiates its roughness itself
+/// (`crate::attached::RoughLobe`).
+#[allow(clippy::too_many_arguments)]
+pub fn bsdf_backward_but_alpha(
+    flat: &FlatScene,
+    material: u32,
+    at: TexAt,
+    bsdf: &Bsdf,
+    wi: Vec3,
+    wo: Vec3,
+    adj: Vec3,
+    sink: &mut GradSink<'_>,
+) {
+    let mut g = bsdf_sample_grad(bsdf, wi, wo, false, adj);
+    g.leaves[0].alpha = Vec3::ZERO;
+    g.leaves[0].alpha_v = Vec3::ZERO;
+    leaf_backward(flat, &flat.materials[material as usize], at, &g.leaves[0], sink);
+}
+
 /// Per-channel a / b with 0 where b is 0 (ALGORITHMS.md §3.3: 1/f̂ replaced by 0 when f̂ = 0).
 pub fn safe_div(a: Vec3, b: Vec3) -> Vec3 {
     let d = |x: f32, y: f32| if y != 0.0 { x / y } else { 0.0 };

@@ -58,11 +58,12 @@ impl KernelKind {
 /// holds the scene arrays' device addresses), the status word and the work counter.
 pub(crate) const SCENE_BINDINGS: [u32; 3] = [BINDING_GLOBALS, BINDING_STATUS, BINDING_WORK];
 
-/// A kernel variant: which kernel, and the value of its `FEATURES` specialisation constant.
+/// A kernel variant: which kernel, and the values of its feature specialisation constants
+/// (`FEATURES` in the low 32 bits, `FEATURES2` in the high: [`variant`]).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
 pub(crate) struct Variant {
     pub kind: KernelKind,
-    pub features: u32,
+    pub features: u64,
 }
 
 /// What a compile observer is told (see [`Renderer::set_compile_observer`](super::Renderer::set_compile_observer)).

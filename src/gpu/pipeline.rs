@@ -41,7 +41,8 @@ impl Kernel {
 
     /// Builds the kernel compiled from `shaders/{name}.comp` with descriptors of the given types
     /// at `bindings` of set 0, `push_size` bytes of push constants and, if given, `features` as
-    /// the value of its `FEATURES` specialisation constant (`shaders/lib/features.glsl`), applied on
+    /// the values of its `FEATURES` (low 32 bits) and `FEATURES2` (high 32 bits) specialisation
+    /// constants (`shaders/lib/features.glsl`), applied on
     /// the host where it can be (`crate::gpu::specialise`: the module shrinks to what the value
     /// keeps before the driver sees it) and by the driver otherwise.
     ///
@@ -52,7 +53,7 @@ impl Kernel {
         name: &'static str,
         bindings: &[(u32, vk::DescriptorType)],
         push_size: u32,
-        features: Option<u32>,
+        features: Option<u64>,
     ) -> Result<Kernel> {
         let bytes = shaders::spirv(name).ok_or_else(|| Error::InvalidArgument {
             parameter: "kernel".into(),
@@ -63,8 +64,7 @@ impl Kernel {
             message: format!("{name}: bad SPIR-V: {e}"),
         })?;
         // A specialised module carries its value frozen in: the driver is given no constant then.
-        let host =
-            features.and_then(|f| specialise::specialised_module(name, &words, crate::contract::SPEC_FEATURES, f));
+        let host = features.and_then(|f| specialise::specialised_module(name, &words, f));
         let host_specialised = host.is_some();
         if let Some(specialised) = host {
             words = specialised;
@@ -110,10 +110,15 @@ impl Kernel {
             let module = device
                 .create_shader_module(&vk::ShaderModuleCreateInfo::default().code(&words), None)
                 .vk("vkCreateShaderModule")?;
-            let feature_bytes = features.unwrap_or(0).to_ne_bytes();
-            let entries =
-                [vk::SpecializationMapEntry::default().constant_id(crate::contract::SPEC_FEATURES).offset(0).size(4)];
-            let spec = vk::SpecializationInfo::default().map_entries(&entries).data(&feature_bytes);
+            // Two words: `FEATURES` (the low 32 bits) then `FEATURES2`.
+            let f = features.unwrap_or(0);
+            let words2 = [f as u32, (f >> 32) as u32];
+            let feature_bytes: &[u8] = bytemuck::cast_slice(&words2);
+            let entries = [
+                vk::SpecializationMapEntry::default().constant_id(crate::contract::SPEC_FEATURES).offset(0).size(4),
+                vk::SpecializationMapEntry::default().constant_id(crate::contract::SPEC_FEATURES2).offset(4).size(4),
+            ];
+            let spec = vk::SpecializationInfo::default().map_entries(&entries).data(feature_bytes);
             let mut stage = vk::PipelineShaderStageCreateInfo::default()
                 .stage(vk::ShaderStageFlags::COMPUTE)
                 .module(module)

@@ -64,7 +64,7 @@ pub struct Renderer {
     /// The environment's parameter values (offset, count), or `(NO_PARAM, 0)`.
     env: (u32, u32),
     /// Feature bits of what the scene contains.
-    pub(crate) scene_features: u32,
+    pub(crate) scene_features: u64,
     /// The parameter kinds the scene has (what refers to its parameters never changes).
     scene_kinds: ParamKinds,
     pub(crate) kernels: KernelCache,
@@ -260,7 +260,8 @@ impl Renderer {
         };
         let features = variant::request_features(self.scene_features, options, self.grad_kinds(options));
         let primal = variant::request_features(self.scene_features, pass1, ParamKinds::NONE);
-        (features & !(G_ANY | F_DIFF | F_HERO) == primal).then_some(Variant { kind, features })
+        (features & !(u64::from(G_ANY | F_DIFF) | variant::word2(F2_HERO)) == primal)
+            .then_some(Variant { kind, features })
     }
 
     /// Runs the reverse-mode kernel of `mode` — `kinds[0]` with float atomics, `kinds[1]` in fixed

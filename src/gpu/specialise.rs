@@ -11,6 +11,7 @@
 //! both). `PATHGRAD_SPECIALISE=0` leaves the specialisation to the driver. The cache holds at
 //! most 64 MB; past that the entries used longest ago are removed.
 
+use crate::contract::{SPEC_FEATURES, SPEC_FEATURES2};
 use std::path::{Path, PathBuf};
 use std::time::{Instant, SystemTime};
 
@@ -18,8 +19,9 @@ unsafe extern "C" {
     fn pathgrad_specialise_spirv(
         words: *const u32,
         count: usize,
-        spec_id: u32,
-        value: u32,
+        spec_ids: *const u32,
+        values: *const u32,
+        n: usize,
         out: *mut *mut u32,
         out_count: *mut usize,
     ) -> std::ffi::c_int;
@@ -35,15 +37,26 @@ pub fn enabled() -> bool {
     std::env::var("PATHGRAD_SPECIALISE").map_or(true, |v| v != "0")
 }
 
-/// `words` with specialisation constant `spec_id` set to `value`, frozen, and the module optimised
-/// and stripped of debug information; `None` if the optimizer refuses the module.
-pub fn specialise(words: &[u32], spec_id: u32, value: u32) -> Option<Vec<u32>> {
+/// `words` with its feature words set to `features` (the low 32 bits are `FEATURES`, the high 32
+/// `FEATURES2`: [`crate::gpu::variant`]), frozen, and the module optimised and stripped of debug
+/// information; `None` if the optimizer refuses the module.
+pub fn specialise(words: &[u32], features: u64) -> Option<Vec<u32>> {
+    let ids = [SPEC_FEATURES, SPEC_FEATURES2];
+    let values = [features as u32, (features >> 32) as u32];
     let mut out: *mut u32 = std::ptr::null_mut();
     let mut count = 0usize;
     // SAFETY: `words` is valid for `words.len()` reads; on success the shim hands over a malloc'd
     // array of `count` words, copied here and freed by its own `free`.
     unsafe {
-        let status = pathgrad_specialise_spirv(words.as_ptr(), words.len(), spec_id, value, &mut out, &mut count);
+        let status = pathgrad_specialise_spirv(
+            words.as_ptr(),
+            words.len(),
+            ids.as_ptr(),
+            values.as_ptr(),
+            ids.len(),
+            &mut out,
+            &mut count,
+        );
         if status != 0 || out.is_null() {
             return None;
         }
@@ -113,10 +126,10 @@ fn specialiser_identity() -> Vec<u8> {
     [include_bytes!("../../native/specialise.cpp").as_slice(), tools.to_bytes()].concat()
 }
 
-/// The cache key: a hash of the module, the value and the specialiser (content-addressed, so a
+/// The cache key: a hash of the module, the features and the specialiser (content-addressed, so a
 /// new build's modules or pass list never meet an old build's entries).
-fn key(words: &[u32], spec_id: u32, value: u32) -> u64 {
-    fnv(&[bytemuck::cast_slice(words), &spec_id.to_le_bytes(), &value.to_le_bytes(), &specialiser_identity()])
+fn key(words: &[u32], features: u64) -> u64 {
+    fnv(&[bytemuck::cast_slice(words), &features.to_le_bytes(), &specialiser_identity()])
 }
 
 /// A cache file's bytes: the module, then the hash of its bytes (a damaged file is not used).
@@ -137,13 +150,13 @@ fn from_cache_bytes(bytes: &[u8]) -> Option<Vec<u32>> {
     (words[0] == SPIRV_MAGIC).then_some(words)
 }
 
-/// `words` specialised to `value` (see [`specialise`]), from the disk cache when it has them;
+/// `words` specialised to `features` (see [`specialise`]), from the disk cache when it has them;
 /// `None` when host specialisation is off or fails (the driver then specialises).
-pub fn specialised_module(name: &str, words: &[u32], spec_id: u32, value: u32) -> Option<Vec<u32>> {
+pub fn specialised_module(name: &str, words: &[u32], features: u64) -> Option<Vec<u32>> {
     if !enabled() {
         return None;
     }
-    let file = cache_dir().map(|d| d.join(format!("{name}-{value:08x}-{:016x}.spv", key(words, spec_id, value))));
+    let file = cache_dir().map(|d| d.join(format!("{name}-{features:016x}-{:016x}.spv", key(words, features))));
     if let Some((file, words)) = file.as_ref().and_then(|f| Some((f, from_cache_bytes(&std::fs::read(f).ok()?)?))) {
         // A use keeps an entry young: pruning removes the entries used longest ago.
         let _ = std::fs::File::options().write(true).open(file).and_then(|f| f.set_modified(SystemTime::now()));
@@ -151,7 +164,7 @@ pub fn specialised_module(name: &str, words: &[u32], spec_id: u32, value: u32) -
         return Some(words);
     }
     let start = Instant::now();
-    let Some(result) = specialise(words, spec_id, value) else {
+    let Some(result) = specialise(words, features) else {
         tracing::warn!(kernel = name, "the SPIR-V optimizer refused the kernel; the driver specialises it");
         return None;
     };
@@ -196,20 +209,33 @@ mod tests {
     fn specialising_shrinks_the_module_and_is_deterministic() {
         use crate::contract::*;
         let words = adjoint_words();
-        let few = F_NEE | F_EMITTERS | F_DIFFUSE | G_COLOR;
-        let a = specialise(&words, SPEC_FEATURES, few).expect("specialised");
-        let b = specialise(&words, SPEC_FEATURES, few).expect("specialised");
-        let all = specialise(&words, SPEC_FEATURES, u32::MAX).expect("specialised");
+        let few = u64::from(F_NEE | F_EMITTERS | F_DIFFUSE | G_COLOR);
+        let a = specialise(&words, few).expect("specialised");
+        let b = specialise(&words, few).expect("specialised");
+        let all = specialise(&words, u64::MAX).expect("specialised");
         assert_eq!(a, b);
         assert_eq!(a[0], SPIRV_MAGIC);
         assert!(a.len() * 3 < words.len(), "{} of {} words", a.len(), words.len());
         assert!(a.len() < all.len(), "{} vs {} words", a.len(), all.len());
     }
 
+    /// The second feature word reaches the module too: the hero strategy (a bit of `FEATURES2`)
+    /// switched off leaves a smaller module than switched on, all else equal.
+    #[test]
+    fn the_second_feature_word_is_specialised() {
+        use crate::contract::*;
+        use crate::gpu::variant::word2;
+        let words = adjoint_words();
+        let diff = u64::from(F_NEE | F_EMITTERS | F_CONDUCTOR | F_GGX | F_DIFF | G_ALPHA);
+        let without = specialise(&words, diff).expect("specialised");
+        let with = specialise(&words, diff | word2(F2_HERO)).expect("specialised");
+        assert!(without.len() < with.len(), "{} vs {} words", without.len(), with.len());
+    }
+
     #[test]
     fn a_broken_module_is_refused() {
-        assert_eq!(specialise(&[SPIRV_MAGIC, 0x0001_0500, 0, 7], 0, 1), None);
-        assert_eq!(specialise(&[1, 2, 3], 0, 1), None);
+        assert_eq!(specialise(&[SPIRV_MAGIC, 0x0001_0500, 0, 7], 1), None);
+        assert_eq!(specialise(&[1, 2, 3], 1), None);
     }
 
     /// A cache file reads back as its module; a cut or altered one is refused.
@@ -248,8 +274,9 @@ mod tests {
     #[test]
     fn the_key_depends_on_the_module_and_the_value() {
         let words = [SPIRV_MAGIC, 1, 2, 3];
-        assert_ne!(key(&words, 0, 1), key(&words, 0, 2));
-        assert_ne!(key(&words, 0, 1), key(&[SPIRV_MAGIC, 1, 2, 4], 0, 1));
-        assert_eq!(key(&words, 0, 1), key(&words, 0, 1));
+        assert_ne!(key(&words, 1), key(&words, 2));
+        assert_ne!(key(&words, 1), key(&words, 1 | crate::gpu::variant::word2(1)), "the second word counts");
+        assert_ne!(key(&words, 1), key(&[SPIRV_MAGIC, 1, 2, 4], 1));
+        assert_eq!(key(&words, 1), key(&words, 1));
     }
 }

@@ -1,18 +1,28 @@
-//! Kernel variants: the value of the `FEATURES` specialisation constant for a request on a scene.
+//! Kernel variants: the values of the feature specialisation constants for a request on a scene.
 //!
 //! A kernel contains only what its request and scene use (issue "Fast kernels"): the material
 //! kinds and distributions present, textures, two-sided materials, emitters and the environment,
 //! next-event estimation, the strategy, and which parameter kinds are differentiated. Each bit is
 //! an `F_*`/`G_*` constant of [`crate::contract`], read by `shaders/lib/features.glsl`.
+//!
+//! A variant's features are one `u64`: the low 32 bits are the `FEATURES` word (`F_*`, `G_*`),
+//! the high 32 bits the `FEATURES2` word (`F2_*`, placed by [`word2`]).
 
 use crate::contract::*;
 use crate::integrator::{ParamKinds, RenderOptions, Strategy};
 use crate::scene::flat::FlatScene;
 
+/// A second-word bit (`F2_*`) in a variant's 64-bit features.
+pub const fn word2(bit: u32) -> u64 {
+    (bit as u64) << 32
+}
+
 /// The feature bits of what `flat` contains; `env_param` is the environment's parameter offset or
 /// `NO_PARAM`.
-pub fn scene_features(flat: &FlatScene, env_param: u32) -> u32 {
+pub fn scene_features(flat: &FlatScene, env_param: u32) -> u64 {
     let mut f = 0;
+    // Bits of the second word (`F2_*`).
+    let f2 = 0;
     for m in &flat.materials {
         f |= match m.tag {
             MAT_DIFFUSE => F_DIFFUSE,
@@ -78,7 +88,7 @@ pub fn scene_features(flat: &FlatScene, env_param: u32) -> u32 {
     if !flat.media.is_empty() {
         f |= F_MEDIA;
     }
-    f
+    u64::from(f) | word2(f2)
 }
 
 /// The environment's parameter values of `scene` as (offset, count): one RGB value, or every
@@ -198,54 +208,54 @@ pub fn scalar_slot_range(flat: &FlatScene, slot: u32) -> (u32, u32) {
 
 /// The feature bits of a pass with `options` on a scene with `scene` bits, differentiating
 /// `kinds` (empty for the primal kernel).
-pub fn request_features(scene: u32, options: &RenderOptions, kinds: ParamKinds) -> u32 {
+pub fn request_features(scene: u64, options: &RenderOptions, kinds: ParamKinds) -> u64 {
     let mut f = scene;
-    if options.nee && scene & (F_EMITTERS | F_ENV | F_LIGHTS) != 0 {
-        f |= F_NEE;
+    if options.nee && !options.sampling.is_attached() && scene & u64::from(F_EMITTERS | F_ENV | F_LIGHTS) != 0 {
+        f |= u64::from(F_NEE);
     }
     match options.strategy {
-        Strategy::Diff { .. } => f |= F_DIFF,
-        Strategy::Hero { .. } => f |= F_DIFF | F_HERO,
+        Strategy::Diff { .. } => f |= u64::from(F_DIFF),
+        Strategy::Hero { .. } => f |= u64::from(F_DIFF) | word2(F2_HERO),
         Strategy::Bsdf => {}
     }
-    f | kinds.bits()
+    f | u64::from(kinds.bits())
 }
 
 /// A short human-readable name of a variant, for logs: `nee env diffuse conductor[beckmann] ∂alpha`.
-pub fn describe(features: u32) -> String {
-    const NAMES: [(u32, &str); 32] = [
-        (F_NEE, "nee"),
-        (F_ENV, "env"),
-        (F_EMITTERS, "emitters"),
-        (F_DIFF, "diff"),
-        (F_DIFFUSE, "diffuse"),
-        (F_CONDUCTOR, "conductor"),
-        (F_BECKMANN, "beckmann"),
-        (F_GGX, "ggx"),
-        (F_BLEND, "blend"),
-        (F_TEXTURE, "texture"),
-        (F_TWO_SIDED, "two-sided"),
-        (F_MEDIA, "media"),
-        (F_ENV_MAP, "env-map"),
-        (F_LIGHTS, "lights"),
-        (F_PLASTIC, "plastic"),
-        (F_DELTA, "smooth"),
-        (F_SMOOTH_PLASTIC, "smooth-plastic"),
-        (F_ROUGH_DIELECTRIC, "rough-dielectric"),
-        (F_ANISOTROPIC, "anisotropic"),
-        (F_NORMAL_MAP, "normal-map"),
-        (F_PARAM_TEXTURE, "scalar-texture"),
-        (F_MASK, "mask"),
-        (F_LIGHT_TEXTURE, "light-texture"),
-        (F_PRINCIPLED, "principled"),
-        (F_HERO, "hero"),
-        (G_COLOR, "∂color"),
-        (G_TEXTURE, "∂texture"),
-        (G_ALPHA, "∂alpha"),
-        (G_WEIGHT, "∂weight"),
-        (G_EMISSION, "∂emission"),
-        (G_ENV, "∂env"),
-        (G_MEDIUM, "∂medium"),
+pub fn describe(features: u64) -> String {
+    const NAMES: [(u64, &str); 32] = [
+        (F_NEE as u64, "nee"),
+        (F_ENV as u64, "env"),
+        (F_EMITTERS as u64, "emitters"),
+        (F_DIFF as u64, "diff"),
+        (F_DIFFUSE as u64, "diffuse"),
+        (F_CONDUCTOR as u64, "conductor"),
+        (F_BECKMANN as u64, "beckmann"),
+        (F_GGX as u64, "ggx"),
+        (F_BLEND as u64, "blend"),
+        (F_TEXTURE as u64, "texture"),
+        (F_TWO_SIDED as u64, "two-sided"),
+        (F_MEDIA as u64, "media"),
+        (F_ENV_MAP as u64, "env-map"),
+        (F_LIGHTS as u64, "lights"),
+        (F_PLASTIC as u64, "plastic"),
+        (F_DELTA as u64, "smooth"),
+        (F_SMOOTH_PLASTIC as u64, "smooth-plastic"),
+        (F_ROUGH_DIELECTRIC as u64, "rough-dielectric"),
+        (F_ANISOTROPIC as u64, "anisotropic"),
+        (F_NORMAL_MAP as u64, "normal-map"),
+        (F_PARAM_TEXTURE as u64, "scalar-texture"),
+        (F_MASK as u64, "mask"),
+        (F_LIGHT_TEXTURE as u64, "light-texture"),
+        (F_PRINCIPLED as u64, "principled"),
+        (word2(F2_HERO), "hero"),
+        (G_COLOR as u64, "∂color"),
+        (G_TEXTURE as u64, "∂texture"),
+        (G_ALPHA as u64, "∂alpha"),
+        (G_WEIGHT as u64, "∂weight"),
+        (G_EMISSION as u64, "∂emission"),
+        (G_ENV as u64, "∂env"),
+        (G_MEDIUM as u64, "∂medium"),
     ];
     let parts: Vec<&str> = NAMES.iter().filter(|(bit, _)| features & bit != 0).map(|(_, n)| *n).collect();
     parts.join(" ")
