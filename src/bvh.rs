@@ -83,7 +83,8 @@ struct TmpNode {
 }
 
 /// Builds a BVH over `triangles`: obvhs's PLOC build and reinsertion (`medium_build`'s, in less
-/// memory: `ploc`, `reinsert`) into a binary tree of one-triangle leaves, its depth bounded, converted (obvhs's conversion
+/// memory: `ploc`, `reinsert`; the second reinsertion pass only up to `SECOND_REINSERTION_MAX`
+/// triangles) into a binary tree of one-triangle leaves, its depth bounded, converted (obvhs's conversion
 /// with a smaller decision table, `convert`) into compressed 8-wide nodes with leaves of up to
 /// [`BVH_LEAF_MAX`] triangles and children ordered for the ray octant. Any valid
 /// mesh builds: subtrees deeper than the traversal stack allows (a fan-triangulated 1000-gon
@@ -175,6 +176,19 @@ impl std::fmt::Display for Steps {
     }
 }
 
+/// Triangles up to which the build runs obvhs's second reinsertion pass (at twice the first's
+/// batch ratio). Above, the first pass alone: the second lowers the binary tree's summed half
+/// area by under 1 % (6.86 → 6.79 at 200 k triangles, 7.60 → 7.54 at 2 M) and takes about twice
+/// the first's time, which grows faster than the triangles (its searches miss the caches of a
+/// large tree): at 2 M triangles it took a quarter of the BVH build, at 20 M 35–40 % (BENCHMARKS.md,
+/// issue 38, eighth step).
+const SECOND_REINSERTION_MAX: usize = 1 << 20;
+
+/// How many of obvhs's two reinsertion passes a build over `count` triangles runs.
+fn reinsertion_passes(count: usize) -> u32 {
+    if count <= SECOND_REINSERTION_MAX { 2 } else { 1 }
+}
+
 /// The binary tree of one-triangle leaves that [`build_impl`] converts, with PLOC's depth and
 /// the seconds of the steps so far (`count` > 0).
 fn binary_tree(
@@ -196,14 +210,19 @@ fn binary_tree(
     let mut nodes = ploc::build(count, triangle, params.search_depth_threshold);
     steps.lap("ploc");
     let mut parents = reinsert::parents(&nodes);
-    reinsert::run(&mut nodes, &mut parents, params.reinsertion_batch_ratio);
+    let passes = reinsertion_passes(count);
+    if passes >= 1 {
+        reinsert::run(&mut nodes, &mut parents, params.reinsertion_batch_ratio);
+    }
     steps.lap("reinsertion");
     // obvhs's leaf collapse comes between the two passes; with leaves of one triangle it leaves
     // the tree as it is.
-    let ratio = params.reinsertion_batch_ratio * params.post_collapse_reinsertion_batch_ratio_multiplier;
-    reinsert::run(&mut nodes, &mut parents, ratio);
+    if passes >= 2 {
+        let ratio = params.reinsertion_batch_ratio * params.post_collapse_reinsertion_batch_ratio_multiplier;
+        reinsert::run(&mut nodes, &mut parents, ratio);
+        steps.lap("reinsertion 2");
+    }
     drop(parents);
-    steps.lap("reinsertion 2");
     let ploc_depth = bvh2_height(&nodes);
     // A tree with one-triangle leaves is converted as PLOC left it, its subtrees too deep for the
     // stack rebuilt in place (`depth`): the rewrite below would give the same tree (same nodes,

@@ -10,7 +10,9 @@
 //! become resident only as merges fill them (from its end), and the cluster array is shrunk to
 //! what each pass leaves: the two are never both whole (at 20 M triangles, 1.2 GiB and 0.6 GiB).
 //! The output tree is in `node2`'s 32-byte nodes (obvhs's are 48: at 20 M triangles 1.2 GiB
-//! instead of 1.8), the same boxes and indices. `tests::builds_obvhs_tree` compares both.
+//! instead of 1.8), the same boxes and indices. obvhs's serial merge runs on rayon's threads
+//! (`merge_pass`: window by window, each chunk placed by a count of its clusters and merges), the
+//! same tree on any thread count. `tests::builds_obvhs_tree` compares both.
 
 use bytemuck::{Pod, Zeroable};
 use glam::Vec3;
@@ -25,6 +27,11 @@ pub(super) const SEARCH_DISTANCE: usize = 14;
 /// The clusters of a pass the merge keeps copies of: more than `SEARCH_DISTANCE`.
 const RECENT: usize = 16;
 const _: () = assert!(RECENT > SEARCH_DISTANCE);
+
+/// Clusters the parallel merge makes at a time into its buffer (8 MiB of 32-byte clusters).
+const MERGE_WINDOW: usize = 1 << 18;
+/// The least clusters a rayon job of the merge takes.
+const MIN_MERGE_CHUNK: usize = 4096;
 
 /// A cluster: its box and where it is (a triangle id for a leaf, its first child's index in the
 /// output tree for an inner node).
@@ -70,6 +77,16 @@ pub(super) fn build(
     triangle: &(impl Fn(u32) -> [Vec3; 3] + Sync),
     search_depth_threshold: usize,
 ) -> Vec<Node2> {
+    build_with(count, triangle, search_depth_threshold, MERGE_WINDOW)
+}
+
+/// [`build`], merging `window` clusters at a time (the tests try small windows).
+fn build_with(
+    count: usize,
+    triangle: &(impl Fn(u32) -> [Vec3; 3] + Sync),
+    search_depth_threshold: usize,
+    window: usize,
+) -> Vec<Node2> {
     assert!(count > 0 && count < u32::MAX as usize / 2);
     let leaves: Vec<Cluster> = (0..count as u32)
         .into_par_iter()
@@ -91,37 +108,10 @@ pub(super) fn build(
     let mut insert_index = nodes.len();
     let mut depth = 0usize;
     let mut n = count;
+    let mut window_buffer = Vec::new();
     while n > 1 {
         find_partners(&clusters[..n], &mut merge[..n], depth < search_depth_threshold);
-        // obvhs's sequential merge: a pair merges where both chose each other, the parent taking
-        // the later one's place; the output tree is filled from its end. The next pass's
-        // clusters are written over this pass's in place (obvhs has a second array): step
-        // `index` writes at most at `index` after reading it, and its partner, at most
-        // `SEARCH_DISTANCE` before it, is read from the copies of the last steps' clusters.
-        let merge = &merge[..n];
-        let mut recent = [Cluster::default(); RECENT];
-        let mut kept = 0;
-        for index in 0..n {
-            let cluster = clusters[index];
-            recent[index % RECENT] = cluster;
-            let best = (index as i64 + merge[index] as i64) as usize;
-            if best as i64 + merge[best] as i64 != index as i64 {
-                clusters[kept] = cluster;
-                kept += 1;
-                continue;
-            }
-            if best > index {
-                continue;
-            }
-            let (left, right) = (cluster, recent[best % RECENT]);
-            insert_index -= 2;
-            nodes[insert_index] = left.node();
-            nodes[insert_index + 1] = right.node();
-            let (min, max) = left.union(&right);
-            clusters[kept] = Cluster { min, leaf: 0, max, index: insert_index as u32 };
-            kept += 1;
-        }
-        n = kept;
+        n = merge_pass(&mut clusters, &merge[..n], &mut nodes, &mut insert_index, window, &mut window_buffer);
         depth += 1;
         // The clusters merged away are freed (a large array is its own mapping, which `realloc`
         // shrinks in place).
@@ -130,8 +120,124 @@ pub(super) fn build(
     }
     debug_assert_eq!(insert_index, 1);
     nodes[0] = clusters[0].node();
-    drop((clusters, merge));
+    drop((clusters, merge, window_buffer));
     nodes
+}
+
+/// What one step of obvhs's sequential merge does with cluster `index` (of partners `merge`).
+#[derive(Clone, Copy, PartialEq)]
+enum Step {
+    /// It is kept for the next pass.
+    Keep,
+    /// It merges with the earlier cluster `best`; their parent is kept.
+    Merge(usize),
+    /// It merges with a later cluster, which makes the parent.
+    Skip,
+}
+
+fn step(merge: &[i8], index: usize) -> Step {
+    let best = (index as i64 + merge[index] as i64) as usize;
+    if best as i64 + merge[best] as i64 != index as i64 {
+        Step::Keep
+    } else if best > index {
+        Step::Skip
+    } else {
+        Step::Merge(best)
+    }
+}
+
+/// One pass of obvhs's sequential merge over `clusters[..merge.len()]`, on rayon's threads with
+/// the same result: a pair merges where both chose each other, the parent taking the later one's
+/// place among the next pass's clusters; the output tree is filled from its end (below
+/// `insert_index`, which is moved down). The next pass's clusters (their count is returned) are
+/// written over this pass's: window by window of `window` clusters, each window's kept clusters
+/// made in parallel into `buffer` (a window's chunks know where their clusters and nodes go from a
+/// count of each chunk's), then copied down to where the kept ones so far end, which is never
+/// past the window's end. A partner (at most `SEARCH_DISTANCE` earlier) in the window before is
+/// read from a copy of that window's last clusters, made before the copy down.
+fn merge_pass(
+    clusters: &mut [Cluster],
+    merge: &[i8],
+    nodes: &mut [Node2],
+    insert_index: &mut usize,
+    window: usize,
+    buffer: &mut Vec<Cluster>,
+) -> usize {
+    let n = merge.len();
+    let chunk = window.div_ceil(rayon::current_num_threads() * 4).clamp(MIN_MERGE_CHUNK.min(window), window);
+    let mut previous = [Cluster::default(); RECENT];
+    let mut kept = 0;
+    for start in (0..n).step_by(window) {
+        let end = (start + window).min(n);
+        let current = &clusters[start..end];
+        let earlier = |i: usize| if i >= start { current[i - start] } else { previous[i + RECENT - start] };
+        // Per chunk: clusters kept and merges.
+        let counts: Vec<(usize, usize)> = (0..(end - start).div_ceil(chunk))
+            .into_par_iter()
+            .map(|c| {
+                let from = start + c * chunk;
+                (from..(from + chunk).min(end)).fold((0, 0), |(k, m), i| match step(merge, i) {
+                    Step::Keep => (k + 1, m),
+                    Step::Merge(_) => (k + 1, m + 1),
+                    Step::Skip => (k, m),
+                })
+            })
+            .collect();
+        let window_kept: usize = counts.iter().map(|c| c.0).sum();
+        let window_merges: usize = counts.iter().map(|c| c.1).sum();
+        buffer.clear();
+        buffer.resize(window_kept, Cluster::default());
+        // Each chunk's place in the buffer and in the output tree (chunks in order fill the tree
+        // downwards).
+        let mut jobs = Vec::with_capacity(counts.len());
+        let (mut out_rest, mut node_rest) =
+            (&mut buffer[..], &mut nodes[*insert_index - 2 * window_merges..*insert_index]);
+        let node_base = *insert_index - 2 * window_merges;
+        for (c, &(k, m)) in counts.iter().enumerate() {
+            let (out, rest) = std::mem::take(&mut out_rest).split_at_mut(k);
+            out_rest = rest;
+            let split = node_rest.len() - 2 * m;
+            let (rest, node_out) = std::mem::take(&mut node_rest).split_at_mut(split);
+            node_rest = rest;
+            let from = start + c * chunk;
+            jobs.push((from..(from + chunk).min(end), out, node_out, node_base + split));
+        }
+        jobs.into_par_iter().for_each(|(range, out, node_out, node_first)| {
+            let (mut k, mut top) = (0, node_out.len());
+            for index in range {
+                match step(merge, index) {
+                    Step::Keep => {
+                        out[k] = current[index - start];
+                        k += 1;
+                    }
+                    Step::Skip => {}
+                    Step::Merge(best) => {
+                        let (left, right) = (current[index - start], earlier(best));
+                        top -= 2;
+                        node_out[top] = left.node();
+                        node_out[top + 1] = right.node();
+                        let (min, max) = left.union(&right);
+                        out[k] = Cluster { min, leaf: 0, max, index: (node_first + top) as u32 };
+                        k += 1;
+                    }
+                }
+            }
+        });
+        *insert_index -= 2 * window_merges;
+        // The last `RECENT` clusters before the next window (some in earlier windows if this
+        // one is shorter), read before the copy down overwrites them.
+        let mut last = [Cluster::default(); RECENT];
+        for (j, p) in last.iter_mut().enumerate() {
+            if end + j >= RECENT {
+                let i = end + j - RECENT;
+                *p = if i >= start { clusters[i] } else { previous[i + RECENT - start] };
+            }
+        }
+        previous = last;
+        clusters[kept..kept + window_kept].copy_from_slice(buffer);
+        kept += window_kept;
+    }
+    kept
 }
 
 /// The leaves in the order of their centres' 63-bit Morton codes in the box `lo`–`hi` (obvhs's
@@ -251,14 +357,23 @@ mod tests {
                 [Vec3::new(x, y, 0.0), Vec3::new(x + 1.0, y, 0.0), Vec3::new(x, y + 1.0, 0.0)]
             })
             .collect();
+        // The merge's windows: the default (one window and many chunks at 60 000 triangles), a
+        // window of one chunk and a part (many windows), and windows shorter than the partner
+        // search's reach.
         for tris in [soup(1, 1.0), soup(2, 1.0), soup(29, 1.0), soup(3000, 1.0), grid, soup(60_000, 100.0)] {
             for threshold in [0, 3] {
-                let ours = widen(&build(tris.len(), &|id| tris[id as usize], threshold));
                 let theirs = obvhs_tree(&tris, threshold);
                 let n = tris.len();
-                let bytes = |b: &Bvh2| bytemuck::cast_slice::<Bvh2Node, u8>(&b.nodes).to_vec();
-                assert!(bytes(&ours) == bytes(&theirs), "nodes differ at {n} triangles, threshold {threshold}");
-                assert_eq!(ours.primitive_indices, theirs.primitive_indices);
+                for window in [MERGE_WINDOW, MIN_MERGE_CHUNK + 900, 7] {
+                    if window < 100 && n > 10_000 {
+                        continue;
+                    }
+                    let ours = widen(&build_with(n, &|id| tris[id as usize], threshold, window));
+                    let bytes = |b: &Bvh2| bytemuck::cast_slice::<Bvh2Node, u8>(&b.nodes).to_vec();
+                    let at = format!("{n} triangles, threshold {threshold}, window {window}");
+                    assert!(bytes(&ours) == bytes(&theirs), "nodes differ at {at}");
+                    assert_eq!(ours.primitive_indices, theirs.primitive_indices, "{at}");
+                }
             }
         }
     }
