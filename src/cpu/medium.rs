@@ -184,7 +184,7 @@ pub fn phase_pdf_diff_part(g: f32, positive: bool, mu: f32) -> f32 {
 }
 
 /// The differential technique of `m`'s phase function: the positive part of ∂p/∂g if `u_sign <
-/// 0.5`, else the negative one ([`hg_diff_sample_cos`] with `u_comp` and `u[0]`), φ = 2π u[1],
+/// 0.5`, else the negative one ([`hg_diff_sample_cos`] with `u_comp` and `u[0]`), φ = 2π `u[1]`,
 /// around `d` as [`phase_sample`]; its density is [`phase_pdf_diff`].
 pub fn phase_sample_diff(flat: &FlatScene, m: &MediumDesc, d: Vec3, u_sign: f32, u_comp: f32, u: [f32; 2]) -> Vec3 {
     let cos = hg_diff_sample_cos(hg_g(flat, m), u_sign < 0.5, u_comp, u[0]);
