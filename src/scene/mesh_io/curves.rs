@@ -25,7 +25,7 @@ use crate::error::Result;
 /// assert_eq!(curves.len(), 2);
 /// assert_eq!(curves[1].len(), 3);
 /// assert_eq!(curves[1][1].w, 0.3);
-/// # Ok::<(), pathgrad::Error>(())
+/// # Ok::<(), Box<dyn std::error::Error>>(())
 /// ```
 ///
 /// # Errors
