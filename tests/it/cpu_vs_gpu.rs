@@ -173,3 +173,10 @@ fn issue_31_linearcurve_gpu_equals_cpu_per_path() {
     let gpu = TestGpu::new();
     primal_agrees_per_path(&gpu, &crate::support::scenes::conformance("shape_linearcurve"));
 }
+
+/// B-spline curves (issue 31), tessellated into rings along each segment.
+#[test]
+fn issue_31_bsplinecurve_gpu_equals_cpu_per_path() {
+    let gpu = TestGpu::new();
+    primal_agrees_per_path(&gpu, &crate::support::scenes::conformance("shape_bsplinecurve"));
+}

@@ -1,5 +1,6 @@
-//! `linearcurve`: Mitsuba's round linear curves (Embree's `ROUND_LINEAR_CURVE`) tessellated into
-//! triangles to [`MAX_CHORD_ERROR_PX`](super::shapes::MAX_CHORD_ERROR_PX), with Mitsuba's UV.
+//! `linearcurve` and `bsplinecurve`: Mitsuba's round linear and cubic B-spline curves (Embree's
+//! `ROUND_LINEAR_CURVE`, `ROUND_BSPLINE_CURVE`) tessellated into triangles to
+//! [`MAX_CHORD_ERROR_PX`](super::shapes::MAX_CHORD_ERROR_PX), with Mitsuba's UV.
 //!
 //! The surface, as Embree defines it (`kernels/geometry/roundline_intersector.h`) and Mitsuba
 //! renders it in every variant: each segment from `p0`/`r0` to `p1`/`r1` is the cone that touches
@@ -21,7 +22,7 @@ use std::f32::consts::TAU;
 
 use glam::{Mat4, Vec2, Vec3, Vec4};
 
-use super::shapes::{segments_for, unit_sphere};
+use super::shapes::{MAX_CHORD_ERROR_PX, MAX_SEGMENTS, MIN_SEGMENTS, pixel_size, segments_for, unit_sphere};
 use crate::scene::Camera;
 use crate::scene::shapes::{Geometry, merge};
 
@@ -114,6 +115,162 @@ pub fn linear_curves(curves: &[Vec<Vec4>], camera: &Camera) -> Geometry {
     merge(&parts)
 }
 
+/// One segment of a uniform cubic B-spline: control points `(x, y, z, radius)`.
+#[derive(Clone, Copy)]
+struct Spline([Vec4; 4]);
+
+/// A point of a B-spline segment: the axis `c`, its first and second derivatives, the radius and
+/// its derivative, all at the segment's parameter `t ∈ [0, 1]`.
+struct SplinePoint {
+    c: Vec3,
+    dc: Vec3,
+    ddc: Vec3,
+    r: f32,
+    dr: f32,
+}
+
+impl Spline {
+    fn at(&self, t: f32) -> SplinePoint {
+        let (t2, t3) = (t * t, t * t * t);
+        let b = [
+            (1.0 - 3.0 * t + 3.0 * t2 - t3) / 6.0,
+            (4.0 - 6.0 * t2 + 3.0 * t3) / 6.0,
+            (1.0 + 3.0 * t + 3.0 * t2 - 3.0 * t3) / 6.0,
+            t3 / 6.0,
+        ];
+        let db = [(-1.0 + 2.0 * t - t2) / 2.0, (-4.0 * t + 3.0 * t2) / 2.0, (1.0 + 2.0 * t - 3.0 * t2) / 2.0, t2 / 2.0];
+        let ddb = [1.0 - t, 3.0 * t - 2.0, 1.0 - 3.0 * t, t];
+        let sum = |w: [f32; 4]| self.0.iter().zip(w).fold(Vec4::ZERO, |acc, (p, w)| acc + *p * w);
+        let (p, dp, ddp) = (sum(b), sum(db), sum(ddb));
+        SplinePoint { c: p.truncate(), dc: dp.truncate(), ddc: ddp.truncate(), r: p.w, dr: dp.w }
+    }
+
+    /// The surface point at `t` and angle `phi` about the tangent (Mitsuba's frame), with the
+    /// unit normal of the surface Embree intersects: the circle of radius `r(t)` in the plane
+    /// normal to the tangent. With `R = r·e` the radial vector, Mitsuba's normal
+    /// `(|c′|² − R·c″)·R − r·r′·c′` (`bsplinecurve.cpp`) is taken divided by `r`, so it stays
+    /// defined where the radius is 0.
+    fn surface(&self, t: f32, phi: f32) -> (Vec3, Vec3) {
+        let s = self.at(t);
+        let (u_rad, u_rot) = local_frame(s.dc.normalize_or(Vec3::X));
+        let e = phi.cos() * u_rad + phi.sin() * u_rot;
+        let normal = ((s.dc.length_squared() - s.r * e.dot(s.ddc)) * e - s.dr * s.dc).normalize_or(e);
+        (s.c + s.r * e, normal)
+    }
+}
+
+/// The largest distance, in pixels, between a B-spline segment's surface and its tessellation
+/// into `steps` × `around` cells, measured at the middle of every cell's diagonal (the point of a
+/// triangle farthest from a smooth surface, to second order in the steps).
+fn spline_error_px(spline: &Spline, steps: u32, around: u32, camera: &Camera) -> f32 {
+    let mut worst = 0.0f32;
+    for i in 0..steps {
+        let (t0, t1) = (i as f32 / steps as f32, (i + 1) as f32 / steps as f32);
+        let mid = spline.at(0.5 * (t0 + t1));
+        let pixel = pixel_size(camera, mid.c, mid.r.max(0.0) + (spline.at(t0).c - mid.c).length());
+        if !(pixel > 0.0) {
+            return f32::INFINITY;
+        }
+        for j in 0..around {
+            let (f0, f1) = (TAU * j as f32 / around as f32, TAU * (j + 1) as f32 / around as f32);
+            let chord = 0.5 * (spline.surface(t0, f0).0 + spline.surface(t1, f1).0);
+            let true_point = spline.surface(0.5 * (t0 + t1), 0.5 * (f0 + f1)).0;
+            worst = worst.max((true_point - chord).length() / pixel);
+        }
+    }
+    worst
+}
+
+/// Steps about a B-spline segment's axis: [`segments_for`]'s count for its largest radius with
+/// half the error budget at the cells' diagonals (`cell = 4`), seen from the nearest point of the
+/// ball that holds the segment (its control points' centroid, out to the farthest control point
+/// plus the largest radius: a B-spline lies in its control points' convex hull).
+fn spline_around(spline: &Spline, camera: &Camera) -> u32 {
+    let radius = spline.0.iter().map(|p| p.w).fold(0.0f32, f32::max);
+    let center = spline.0.iter().map(|p| p.truncate()).sum::<Vec3>() / 4.0;
+    let reach = spline.0.iter().map(|p| (p.truncate() - center).length()).fold(0.0f32, f32::max);
+    let pixel = pixel_size(camera, center, reach + radius);
+    let delta = (8.0 * MAX_CHORD_ERROR_PX * pixel / (4.0 * radius)).sqrt();
+    let n = if delta.is_finite() && delta > 0.0 { (TAU / delta).ceil() } else { MAX_SEGMENTS as f32 };
+    let n = (n as u32).clamp(MIN_SEGMENTS, MAX_SEGMENTS);
+    n + n % 2
+}
+
+/// Steps along a B-spline segment whose tessellation (with `around` steps about the axis) stays
+/// within [`MAX_CHORD_ERROR_PX`]: the error of a step falls as its square, so each try scales the
+/// count by the square root of the measured excess until the measurement is within the bound.
+fn spline_steps(spline: &Spline, around: u32, camera: &Camera) -> u32 {
+    let mut steps = 2u32;
+    for _ in 0..12 {
+        let error = spline_error_px(spline, steps, around, camera);
+        if error <= MAX_CHORD_ERROR_PX || steps >= MAX_SEGMENTS {
+            break;
+        }
+        let scale = if error.is_finite() { 1.1 * (error / MAX_CHORD_ERROR_PX).sqrt() } else { 4.0 };
+        steps = ((steps as f32 * scale).ceil() as u32).max(steps + 1).min(MAX_SEGMENTS);
+    }
+    steps
+}
+
+/// The triangle mesh of `curves` as Mitsuba's `bsplinecurve` (control points `(x, y, z, radius)`
+/// in world space: Mitsuba transforms positions by `to_world` and leaves radii as they are).
+///
+/// Every run of four consecutive control points is a segment of a uniform cubic B-spline of
+/// positions and radii; the surface is what Embree's round B-spline intersector solves for, the
+/// circle of radius `r(t)` normal to the tangent at every `t` (measured against Mitsuba 3.9.1:
+/// its hit points lie on those circles to 2·10⁻⁷, not on the swept sphere's envelope), with
+/// Mitsuba's normal and UV (`u` the angle about the tangent over 2π in Mitsuba's frame, `v =
+/// (t + segment)/segments` over all segments of the file). The ends are open, as in Mitsuba.
+/// A curve gets one count of steps about its axis (rings then match where its segments meet),
+/// the largest [`spline_around`] of its segments; each segment then
+/// gets as many steps along it as [`spline_steps`] measures. Segments of radius 0 throughout are
+/// left out (they have no area).
+pub fn bspline_curves(curves: &[Vec<Vec4>], camera: &Camera) -> Geometry {
+    let total: usize = curves.iter().map(|c| c.len() - 3).sum();
+    let mut parts = Vec::new();
+    let mut segment = 0usize;
+    for curve in curves {
+        let splines: Vec<Spline> = curve.windows(4).map(|w| Spline([w[0], w[1], w[2], w[3]])).collect();
+        let around = splines.iter().map(|s| spline_around(s, camera)).max().unwrap_or(MIN_SEGMENTS);
+        for spline in &splines {
+            let (k, total) = (segment as f32, total as f32);
+            segment += 1;
+            if spline.0.iter().all(|p| p.w == 0.0) {
+                continue;
+            }
+            let steps = spline_steps(spline, around, camera);
+            let mut positions = Vec::new();
+            let mut normals = Vec::new();
+            let mut uvs = Vec::new();
+            for i in 0..=steps {
+                let t = i as f32 / steps as f32;
+                for j in 0..=around {
+                    let (p, n) = spline.surface(t, TAU * j as f32 / around as f32);
+                    positions.push(p);
+                    normals.push(n);
+                    uvs.push(Vec2::new(j as f32 / around as f32, (t + k) / total));
+                }
+            }
+            let row = around + 1;
+            // A ring of radius 0 is one point: the triangles with an edge on it have no area.
+            let point: Vec<bool> = (0..=steps).map(|i| spline.at(i as f32 / steps as f32).r <= 0.0).collect();
+            let point = &point;
+            let indices = (0..steps)
+                .flat_map(|i| {
+                    (0..around).flat_map(move |j| {
+                        let (a, b) = (i * row + j, (i + 1) * row + j);
+                        let below = (!point[i as usize]).then_some([a, a + 1, b + 1]);
+                        let above = (!point[i as usize + 1]).then_some([a, b + 1, b]);
+                        below.into_iter().chain(above)
+                    })
+                })
+                .collect();
+            parts.push(Geometry { positions, normals: Some(normals), uvs: Some(uvs), indices, ..Default::default() });
+        }
+    }
+    merge(&parts)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -190,5 +347,94 @@ mod tests {
     fn zero_radius_parts_are_left_out() {
         let curves = vec![vec![Vec4::new(0.0, 0.0, 0.0, 0.0), Vec4::new(1.0, 0.0, 0.0, 0.0)]];
         assert!(linear_curves(&curves, &camera()).indices.is_empty());
+    }
+
+    /// A curve whose radius varies fast: 0.05 → 0.6 → 0.05 over about one unit.
+    fn wavy() -> Vec<Vec<Vec4>> {
+        let p = |x: f32, y: f32, r: f32| Vec4::new(x, y, 0.0, r);
+        vec![vec![p(-1.5, 0.0, 0.05), p(-0.5, 0.3, 0.6), p(0.5, -0.2, 0.05), p(1.5, 0.4, 0.6), p(2.5, 0.0, 0.05)]]
+    }
+
+    #[test]
+    fn bspline_vertices_lie_on_circles_normal_to_the_tangent_with_mitsubas_uv_and_normal() {
+        let curves = wavy();
+        let g = bspline_curves(&curves, &camera());
+        let splines: Vec<Spline> = curves[0].windows(4).map(|w| Spline([w[0], w[1], w[2], w[3]])).collect();
+        for ((p, n), uv) in g.positions.iter().zip(g.normals.as_ref().unwrap()).zip(g.uvs.as_ref().unwrap()) {
+            let v = uv.y * 2.0;
+            let k = (v.floor() as usize).min(1);
+            let s = splines[k].at(v - k as f32);
+            let radial = *p - s.c;
+            // On the circle of radius r(t) in the plane normal to c'(t) (Embree's surface).
+            assert!((radial.length() - s.r).abs() < 1e-4, "{} {}", radial.length(), s.r);
+            assert!(radial.dot(s.dc.normalize()).abs() < 1e-4);
+            assert!((mitsuba_u(s.dc.normalize(), s.c, *p) - uv.x).abs() < 1e-3 || (uv.x - 1.0).abs() < 1e-6);
+            // Mitsuba's normal: (|c'|² − R·c'')·R − r·r'·c', normalised.
+            let mitsuba = ((s.dc.length_squared() - radial.dot(s.ddc)) * radial - s.r * s.dr * s.dc).normalize();
+            assert!((mitsuba - *n).length() < 1e-3, "{mitsuba} {n}");
+        }
+        // v runs 0 → 1 over the file's two segments.
+        let vs = g.uvs.as_ref().unwrap().iter().map(|uv| uv.y);
+        assert_eq!(vs.clone().fold(f32::INFINITY, f32::min), 0.0);
+        assert_eq!(vs.fold(0.0f32, f32::max), 1.0);
+    }
+
+    #[test]
+    fn bspline_tips_of_radius_0_leave_no_degenerate_triangles() {
+        let p = |x: f32, r: f32| Vec4::new(x, 0.2 * x * x, 0.0, r);
+        let curves =
+            vec![vec![p(-1.0, 0.0), p(-0.6, 0.0), p(-0.3, 0.0), p(0.0, 0.3), p(0.3, 0.0), p(0.6, 0.0), p(1.0, 0.0)]];
+        let g = bspline_curves(&curves, &camera());
+        assert!(!g.indices.is_empty());
+        for t in &g.indices {
+            let [a, b, c] = t.map(|i| g.positions[i as usize]);
+            assert!((b - a).cross(c - a).length() > 0.0, "triangle {t:?} has no area");
+        }
+    }
+
+    #[test]
+    fn bspline_tessellation_stays_within_the_pixel_budget_and_faces_outwards() {
+        let curves = wavy();
+        let camera = camera();
+        let g = bspline_curves(&curves, &camera);
+        let normals = g.normals.as_ref().unwrap();
+        for t in &g.indices {
+            let [a, b, c] = t.map(|i| g.positions[i as usize]);
+            let face = (b - a).cross(c - a);
+            if face.length() > 1e-9 {
+                let shading = normals[t[0] as usize] + normals[t[1] as usize] + normals[t[2] as usize];
+                assert!(face.dot(shading) > 0.0, "triangle {t:?} faces inwards");
+            }
+        }
+        // Measured independently on a finer grid of points inside the cells (not only the
+        // diagonals' middles the step count was chosen by): within the budget, with 10 % for
+        // the second-order estimate.
+        for w in curves[0].windows(4) {
+            let spline = Spline([w[0], w[1], w[2], w[3]]);
+            let around = spline_around(&spline, &camera);
+            let steps = spline_steps(&spline, around, &camera);
+            assert!(spline_error_px(&spline, steps, around, &camera) <= MAX_CHORD_ERROR_PX);
+            let mut worst = 0.0f32;
+            for i in 0..steps {
+                for j in 0..around {
+                    for (a, b) in [(0.25, 0.5), (0.5, 0.25), (0.75, 0.5), (0.5, 0.75)] {
+                        let (t, f) = ((i as f32 + a) / steps as f32, (j as f32 + b) / around as f32);
+                        let corner = |di: u32, dj: u32| {
+                            spline.surface((i + di) as f32 / steps as f32, TAU * (j + dj) as f32 / around as f32).0
+                        };
+                        // The point (a, b) of the cell on its triangles: below or above the diagonal.
+                        let flat = if b <= a {
+                            corner(0, 0) + (corner(1, 1) - corner(0, 0)) * b + (corner(1, 0) - corner(0, 0)) * (a - b)
+                        } else {
+                            corner(0, 0) + (corner(1, 1) - corner(0, 0)) * a + (corner(0, 1) - corner(0, 0)) * (b - a)
+                        };
+                        let truth = spline.surface(t, TAU * f).0;
+                        let pixel = pixel_size(&camera, truth, 0.0);
+                        worst = worst.max((truth - flat).length() / pixel);
+                    }
+                }
+            }
+            assert!(worst < 1.1 * MAX_CHORD_ERROR_PX, "{worst} px");
+        }
     }
 }

@@ -87,7 +87,10 @@
 //!   256² gets 174 × 87); that keeps silhouette bias at a third of a 64-spp render's noise on an
 //!   edge pixel (derivation at `shapes::segments_for`). A `linearcurve` becomes its cones and
 //!   joint spheres (Embree's round linear curve, which Mitsuba renders in every variant) with
-//!   Mitsuba's UV; see `curves.rs`. Its control points are not parameters (geometry is fixed).
+//!   Mitsuba's UV; see `curves.rs`. A `bsplinecurve` becomes rings of the circles normal to its
+//!   tangent that Embree intersects, stepped along each segment until the measured error is in
+//!   the budget, with Mitsuba's normals and UV (open ends: a warning, as Mitsuba culls the inner
+//!   wall). Control points are not parameters (geometry is fixed).
 //! - **Depth**: `max_depth = -1` (and a scene without `<integrator>`, Mitsuba's default) becomes
 //!   [`crate::integrator::UNBOUNDED_DEPTH_CAP`], which the renderer treats as unbounded. `rr_depth`
 //!   other than 5 and `hide_emitters` are warned about and ignored.

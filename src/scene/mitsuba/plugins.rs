@@ -192,6 +192,12 @@ pub const PLUGINS: &[Plugin] = &[
         "`radiance` (rgb, spectrum or `bitmap` without `to_uv`)",
         "inside a <shape> (or referred to by one); a bitmap's texels are parameter `….radiance.data`, read at the point's texture coordinates; sampled by area (Mitsuba samples a textured one by its texture: the same expectation)",
     ),
+    p(
+        Shape,
+        "bsplinecurve",
+        "`filename` (Mitsuba's text format, at least 4 control points a curve), `to_world` (moves positions, not radii)",
+        "tessellated to 0.02 px (Embree's circles normal to the tangent, Mitsuba's normals and UV, open ends); no area emitters",
+    ),
     p(Shape, "cube", "`to_world`, `flip_normals`", ""),
     p(Shape, "cylinder", "`p0`, `p1`, `radius`, `to_world`, `flip_normals`", "tessellated"),
     p(Shape, "disk", "`to_world`, `flip_normals`", "tessellated"),

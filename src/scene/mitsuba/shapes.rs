@@ -40,9 +40,20 @@ pub const MAX_SEGMENTS: u32 = 1024;
 /// by k. An orthographic camera's pixel is `2·half_height/h` wide at any distance, which takes the
 /// place of `d·θpx`.
 pub fn segments_for(camera: &Camera, center: Vec3, radius: f32, cell: f32) -> u32 {
+    let pixel_size = pixel_size(camera, center, radius);
+    let delta = (8.0 * MAX_CHORD_ERROR_PX * pixel_size / (cell * radius)).sqrt();
+    let n = if delta.is_finite() && delta > 0.0 { (TAU / delta).ceil() } else { MAX_SEGMENTS as f32 };
+    let n = (n as u32).clamp(MIN_SEGMENTS, MAX_SEGMENTS);
+    n + n % 2
+}
+
+/// The smallest world-space size of one of `camera`'s pixels anywhere within `radius` of
+/// `center` (see [`segments_for`]): `d·θpx` with `d = |center − eye| − radius`, or an orthographic
+/// camera's pixel width. Not positive where the ball holds the eye.
+pub fn pixel_size(camera: &Camera, center: Vec3, radius: f32) -> f32 {
     // The whole film's size (the image may be a crop of it).
     let (width, height) = camera.film_size(camera.width, camera.height);
-    let pixel_size = match camera.lens {
+    match camera.lens {
         crate::scene::Lens::Orthographic { half_height, stretch, .. } => 2.0 * half_height * stretch.min(1.0) / height,
         _ => {
             let tan_y = (camera.fov_y_degrees.to_radians() * 0.5).tan();
@@ -50,11 +61,7 @@ pub fn segments_for(camera: &Camera, center: Vec3, radius: f32, cell: f32) -> u3
             let pixel_angle = 2.0 * tan_y / height / (1.0 + tan_x * tan_x + tan_y * tan_y);
             ((center - camera.position).length() - radius) * pixel_angle
         }
-    };
-    let delta = (8.0 * MAX_CHORD_ERROR_PX * pixel_size / (cell * radius)).sqrt();
-    let n = if delta.is_finite() && delta > 0.0 { (TAU / delta).ceil() } else { MAX_SEGMENTS as f32 };
-    let n = (n as u32).clamp(MIN_SEGMENTS, MAX_SEGMENTS);
-    n + n % 2
+    }
 }
 
 /// The unit sphere with Mitsuba's parametrisation: pole on +z, `u = φ/2π` from +x towards +y,
@@ -292,17 +299,19 @@ impl<'a> Loader<'a> {
                 let n = segments_for(&self.scene.camera, c, lx, 2.0);
                 unit_sphere(n / 2, n).transformed(&m)
             }
-            "linearcurve" => {
+            kind @ ("linearcurve" | "bsplinecurve") => {
                 let (file, file_node) = p
                     .string(&self.x, "filename")?
-                    .ok_or_else(|| self.x.err(node, "'linearcurve' needs the property 'filename'"))?;
+                    .ok_or_else(|| self.x.err(node, format!("'{kind}' needs the property 'filename'")))?;
                 let path = self.scene_file(&file).map_err(|m| self.x.err(file_node, m))?;
                 if !path.is_file() {
                     return Err(self
                         .x
                         .err(file_node, format!("curve file '{file}' not found (looked for {})", path.display())));
                 }
-                let mut curves = crate::scene::mesh_io::load_curves(&path, 2).map_err(|e| self.located(node, e))?;
+                let min_points = if kind == "linearcurve" { 2 } else { 4 };
+                let mut curves =
+                    crate::scene::mesh_io::load_curves(&path, min_points).map_err(|e| self.located(node, e))?;
                 // Positions move with to_world, radii do not (Mitsuba's rule).
                 for c in curves.iter_mut().flatten() {
                     *c = to_world.transform_point3(c.truncate()).extend(c.w);
@@ -312,7 +321,25 @@ impl<'a> Loader<'a> {
                         return Err(self.x.err(n, format!("'{name}' is not supported on curves")));
                     }
                 }
-                super::curves::linear_curves(&curves, &self.scene.camera)
+                if kind == "linearcurve" {
+                    super::curves::linear_curves(&curves, &self.scene.camera)
+                } else {
+                    // A spline's end radius is its control points' (r0 + 4·r1 + r2)/6.
+                    let end = |a: Vec4, b: Vec4, c: Vec4| (a.w + 4.0 * b.w + c.w) / 6.0;
+                    if curves.iter().any(|c| {
+                        let n = c.len();
+                        end(c[0], c[1], c[2]) > 0.0 || end(c[n - 3], c[n - 2], c[n - 1]) > 0.0
+                    }) {
+                        let w = self.x.warning(
+                            node,
+                            "a 'bsplinecurve' with open ends (an end radius > 0): Mitsuba culls curves' back \
+                             faces, so a ray into an open end sees what lies beyond the tube; pathgrad's \
+                             tessellated tube shows its inner wall there",
+                        );
+                        self.scene.warn(w);
+                    }
+                    super::curves::bspline_curves(&curves, &self.scene.camera)
+                }
             }
             other => {
                 return Err(self

@@ -1162,3 +1162,44 @@ fn curve_files_and_misuse_give_located_errors() {
     );
     assert!(e.contains("'flip_normals' is not supported on curves"), "{e}");
 }
+
+#[test]
+fn bspline_curves_load_with_points_moved_radii_kept_and_short_curves_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    // Collinear control points: the spline's axis is the x axis from x = 1 to 2, radius 0.1.
+    std::fs::write(dir.path().join("c.txt"), "0 0 0 0.1\n1 0 0 0.1\n2 0 0 0.1\n3 0 0 0.1\n").unwrap();
+    std::fs::write(
+        dir.path().join("short.txt"),
+        "0 0 0 0.1\n1 0 0 0.1\n2 0 0 0.1\n3 0 0 0.1\n\n0 0 0 1\n1 0 0 1\n2 0 0 1\n",
+    )
+    .unwrap();
+    let xml = wrap(
+        r#"<shape type="bsplinecurve" id="c"><string name="filename" value="c.txt"/>
+           <transform name="to_world"><scale x="2"/><translate z="3"/></transform></shape>"#,
+    );
+    let s = load_text(&xml, &dir.path().join("scene.xml"), &[], obj_for_tests).unwrap();
+    let m = &s.meshes[0];
+    // Every vertex lies on the open cylinder about (2, 0, 3)–(4, 0, 3) of radius 0.1 (not 0.2).
+    for p in &m.positions {
+        assert!(((*p - Vec3::new(p.x, 0.0, 3.0)).length() - 0.1).abs() < 1e-5, "{p} is off the curve");
+        assert!(p.x > 2.0 - 1e-5 && p.x < 4.0 + 1e-5, "{p} is past the curve's ends");
+    }
+    assert!(m.uvs.is_some() && m.normals.is_some());
+    assert!(s.warnings.iter().any(|w| w.contains("open ends")), "{:?}", s.warnings);
+    let run = |body: &str| {
+        let xml = wrap(body);
+        load_text(&xml, &dir.path().join("scene.xml"), &[], obj_for_tests).unwrap_err().to_string()
+    };
+    let e = run(r#"<shape type="bsplinecurve"><string name="filename" value="short.txt"/></shape>"#);
+    assert!(e.contains("short.txt:6") && e.contains("at least 4 control points, this one has 3"), "{e}");
+    let e = run(r#"<shape type="bsplinecurve"/>"#);
+    assert!(e.contains("'bsplinecurve' needs the property 'filename'"), "{e}");
+    let e = run(
+        r#"<shape type="bsplinecurve"><string name="filename" value="c.txt"/><emitter type="area"><rgb name="radiance" value="1"/></emitter></shape>"#,
+    );
+    assert!(e.contains("area emitters on curves are not supported"), "{e}");
+    let e = run(
+        r#"<shape type="bsplinecurve"><string name="filename" value="c.txt"/><boolean name="flip_normals" value="true"/></shape>"#,
+    );
+    assert!(e.contains("'flip_normals' is not supported on curves"), "{e}");
+}

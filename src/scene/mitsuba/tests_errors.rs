@@ -242,7 +242,7 @@ fn element_and_property_errors() {
         (r#"<shape/>"#, "<shape>: missing attribute 'type'"),
         (
             r#"<shape type="hair"/>"#,
-            "<shape>: unsupported plugin 'hair' (supported: cube, cylinder, disk, linearcurve, obj, ply, rectangle, serialized, sphere, shapegroup, instance)",
+            "<shape>: unsupported plugin 'hair' (supported: bsplinecurve, cube, cylinder, disk, linearcurve, obj, ply, rectangle, serialized, sphere, shapegroup, instance)",
         ),
         (r#"<shape type="obj"/>"#, "<shape>: 'obj' needs the property 'filename'"),
         (
