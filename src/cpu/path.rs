@@ -269,6 +269,29 @@ impl Mixture {
         }
     }
 
+    /// [`Mixture::update_hero`] (with several targets, `hero`; `hero_here` the vertex's) or
+    /// [`Mixture::update`], then marks the differential vertex as taken if this one is it: the
+    /// factor the throughput must be divided by, or `None` if the sums vanished.
+    #[allow(clippy::too_many_arguments)]
+    fn advance(
+        &mut self,
+        hero: bool,
+        hero_here: u32,
+        capable: bool,
+        use_dx: bool,
+        q: f32,
+        pdf_f: f32,
+        pdf_d: f32,
+    ) -> Option<f32> {
+        let sum = if hero {
+            self.update_hero(hero_here, q, pdf_f, pdf_d)
+        } else {
+            self.update(capable, use_dx, q, pdf_f, pdf_d)
+        }?;
+        self.dx_taken = self.dx_taken || use_dx;
+        Some(sum)
+    }
+
     /// The update after a direction was sampled at a vertex (`capable`: the vertex may be the
     /// differential one; `use_dx`: it is) with densities `pdf_f`, `pdf_d`: returns the factor
     /// w₁ + w₂ by which the throughput must be divided (1 at a vertex that is not capable), or
@@ -593,16 +616,10 @@ pub fn trace_path<const ADJOINT: bool>(
                 if diff {
                     // The phase function's value is its density: β is unchanged before the division.
                     let pdf_d = if capable { medium::phase_pdf_diff(flat, m, d, wo) } else { 0.0 };
-                    let updated = if hero {
-                        mix.update_hero(hero_here, globals.diff_q, pdf, pdf_d)
-                    } else {
-                        mix.update(capable, use_dx, globals.diff_q, pdf, pdf_d)
-                    };
-                    let Some(sum) = updated else {
+                    let Some(sum) = mix.advance(hero, hero_here, capable, use_dx, globals.diff_q, pdf, pdf_d) else {
                         break;
                     };
                     throughput /= sum;
-                    mix.dx_taken = mix.dx_taken || use_dx;
                 } else {
                     mix.prev_sum = 1.0;
                     mix.prev_sq = mix.squares();
@@ -831,16 +848,10 @@ pub fn trace_path<const ADJOINT: bool>(
         prev_pdf_f = pdf_f;
         // An emitter found through a delta lobe counts whole: NEE could not have sampled it.
         prev_nee = nee && !bs.delta;
-        let updated = if hero {
-            mix.update_hero(hero_here, globals.diff_q, pdf_f, pdf_d)
-        } else {
-            mix.update(capable, use_dx, globals.diff_q, pdf_f, pdf_d)
-        };
-        let Some(sum) = updated else {
+        let Some(sum) = mix.advance(hero, hero_here, capable, use_dx, globals.diff_q, pdf_f, pdf_d) else {
             break;
         };
         throughput /= sum;
-        mix.dx_taken = mix.dx_taken || use_dx;
 
         // ---- Russian roulette ----
         if !path_survives(globals, key, (pixel, sample, vertex), &mut throughput) {
