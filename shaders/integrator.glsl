@@ -267,6 +267,20 @@ struct PathState {
 };
 
 #if ATTACHED
+// A vertex's completed Jacobian for an outgoing direction d_out with ∂/∂d = t_d, ∂/∂n = t_n,
+// regularised, with Jacobian noise, from the vertex's STREAM_JACOBIAN block (vertex_jacobian in
+// src/cpu/path.rs).
+Jac6 attached_vertex_jacobian(PathState st, HitGeometry g, mat3 t_d, mat3 t_n, vec3 ng, vec3 d_out, uint vertex) {
+    Jac6 a = jac_completed(hit_jacobian(g, t_d, t_n), st.prev_normal, st.ray.dir, ng, d_out);
+    if (globals.jac_noise > 0.0) {
+        vec4 u = uniform4(uvec2(globals.key0, st.key1), st.pixel, st.sample_index, vertex, STREAM_JACOBIAN, 0u, 0u);
+        a = jac_plus_identity(a, jac_regularisation(globals.jac_noise, u.x, u.y));
+    }
+    return a;
+}
+#endif
+
+#if ATTACHED
 // Γ plus one contribution: `own` (its derivative by the camera ray) and c (δL ⊙ β ⊙ the
 // contribution) times the log-weight rows of the vertices before it.
 void attached_contribution(inout PathState st, Row6 own, vec3 c) {
@@ -789,13 +803,7 @@ bool path_step(inout PathState st) {
                     HitGeometry geometry = HitGeometry(hit.t, st.ray.dir, s.ng, frame.n,
                                                        shading_normal_gradient(hit) * (mirrored ? -1.0 : 1.0));
                     if (rough_attached) {
-                        Jac6 a = jac_completed(hit_jacobian(geometry, rlobe.t_d, rlobe.t_n), st.prev_normal,
-                                               st.ray.dir, s.ng, rlobe.wo);
-                        if (globals.jac_noise > 0.0) {
-                            vec4 u = uniform4(uvec2(globals.key0, st.key1), st.pixel, st.sample_index, vertex,
-                                              STREAM_JACOBIAN, 0u, 0u);
-                            a = jac_plus_identity(a, jac_regularisation(globals.jac_noise, u.x, u.y));
-                        }
+                        Jac6 a = attached_vertex_jacobian(st, geometry, rlobe.t_d, rlobe.t_n, s.ng, rlobe.wo, vertex);
                         // ∂ln w/∂r per channel = a row shared by the channels + (F′/F)_c · ∂c/∂r.
                         Row6 shared_row = hit_row(geometry, rlobe.dlnw_dd, rlobe.dlnw_dn);
                         Row6 c_row = hit_row(geometry, rlobe.dc_dd, rlobe.dc_dn);
@@ -828,13 +836,7 @@ bool path_step(inout PathState st) {
                             : smooth_lobe(am.tag == MAT_THIN_DIELECTRIC, st.ray.dir, frame.n, bsdf.leaf0.eta.x,
                                           wi.z * bs.wo.z < 0.0, lobe));
                     if (lobe_ok) {
-                        Jac6 a = jac_completed(hit_jacobian(geometry, lobe.t_d, lobe.t_n), st.prev_normal, st.ray.dir,
-                                               s.ng, wo_world);
-                        if (globals.jac_noise > 0.0) {
-                            vec4 u = uniform4(uvec2(globals.key0, st.key1), st.pixel, st.sample_index, vertex,
-                                              STREAM_JACOBIAN, 0u, 0u);
-                            a = jac_plus_identity(a, jac_regularisation(globals.jac_noise, u.x, u.y));
-                        }
+                        Jac6 a = attached_vertex_jacobian(st, geometry, lobe.t_d, lobe.t_n, s.ng, wo_world, vertex);
                         Row6 cos_row = hit_cos_row(geometry);
                         if (adjoint) {
                             // h = δL·(∂ln w/∂r ⊙ L_after); Φ′ = (Φ − h)·Ã⁻¹; η's two terms.

@@ -867,19 +867,27 @@ pub fn trace_path<const ADJOINT: bool>(
                 bsdf_backward(flat, s.material, s.tex_at(), &bsdf, wi, bs.wo, bs.delta, adj, sink);
             }
         }
-        if let Some(lobe) = rough_lobe {
-            let geometry = HitGeometry {
-                t: hit.t,
-                d: ray.dir,
-                ng: s.ng,
-                n: frame.n,
-                dn_dx: shading_normal_gradient(flat, &hit) * if mirrored { -1.0 } else { 1.0 },
-            };
-            let mut a = geometry.jacobian(lobe.t_d, lobe.t_n).completed(prev_normal, ray.dir, s.ng, lobe.wo);
+        // Attached sampling: where the ray meets this vertex, and the vertex's completed Jacobian
+        // for an outgoing direction d′ with ∂d′/∂d = t_d, ∂d′/∂n = t_n — regularised, with Jacobian
+        // noise, from the vertex's `Jacobian` stream.
+        let geometry = attached.then(|| HitGeometry {
+            t: hit.t,
+            d: ray.dir,
+            ng: s.ng,
+            n: frame.n,
+            dn_dx: shading_normal_gradient(flat, &hit) * if mirrored { -1.0 } else { 1.0 },
+        });
+        let vertex_jacobian = |g: &HitGeometry, t_d, t_n, d_out| {
+            let a = g.jacobian(t_d, t_n).completed(prev_normal, ray.dir, s.ng, d_out);
             if globals.jac_noise > 0.0 {
                 let u = uniform4(key, pixel, sample, vertex, Stream::Jacobian, 0, 0);
-                a = a.plus_identity(regularisation(globals.jac_noise, u[0], u[1]));
+                a.plus_identity(regularisation(globals.jac_noise, u[0], u[1]))
+            } else {
+                a
             }
+        };
+        if let (Some(lobe), Some(geometry)) = (rough_lobe, &geometry) {
+            let a = vertex_jacobian(geometry, lobe.t_d, lobe.t_n, lobe.wo);
             // ∂ln w/∂r per channel = common + (F′/F)_c · ∂c/∂r.
             let common = geometry.row(lobe.dlnw_dd, lobe.dlnw_dn);
             let c_row = geometry.row(lobe.dc_dd, lobe.dc_dn);
@@ -905,14 +913,7 @@ pub fn trace_path<const ADJOINT: bool>(
                 jac = a.compose(&jac);
             }
         }
-        if attached && let Leaf::Smooth(leaf) = &bsdf.leaves[0] {
-            let geometry = HitGeometry {
-                t: hit.t,
-                d: ray.dir,
-                ng: s.ng,
-                n: frame.n,
-                dn_dx: shading_normal_gradient(flat, &hit) * if mirrored { -1.0 } else { 1.0 },
-            };
+        if let (Some(geometry), Leaf::Smooth(leaf)) = (&geometry, &bsdf.leaves[0]) {
             let thin = leaf.kind == SmoothKind::ThinDielectric;
             let transmitted = wi.z * bs.wo.z < 0.0;
             let lobe = match leaf.kind {
@@ -920,12 +921,7 @@ pub fn trace_path<const ADJOINT: bool>(
                 _ => smooth_lobe(thin, ray.dir, frame.n, leaf.eta.x, transmitted),
             };
             if let Some(lobe) = lobe {
-                let mut a =
-                    geometry.jacobian(lobe.t_d, lobe.t_n).completed(prev_normal, ray.dir, s.ng, frame.to_world(bs.wo));
-                if globals.jac_noise > 0.0 {
-                    let u = uniform4(key, pixel, sample, vertex, Stream::Jacobian, 0, 0);
-                    a = a.plus_identity(regularisation(globals.jac_noise, u[0], u[1]));
-                }
+                let a = vertex_jacobian(geometry, lobe.t_d, lobe.t_n, frame.to_world(bs.wo));
                 let cos_row = geometry.cos_row();
                 if ADJOINT {
                     // h_v = δL·(∂ln w/∂r ⊙ L_after); Φ_{v+1} = (Φ_v − h_v)·Ã⁻¹; η's two terms.
