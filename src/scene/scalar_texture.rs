@@ -58,7 +58,11 @@ impl super::Scene {
         if width == 0 || height == 0 || texels.len() != width as usize * height as usize {
             return Err(Error::Scene {
                 location: format!("texture {name}"),
-                message: format!("{width}×{height} needs {} texels, got {}", width as usize * height as usize, texels.len()),
+                message: format!(
+                    "{width}×{height} needs {} texels, got {}",
+                    width as usize * height as usize,
+                    texels.len()
+                ),
             });
         }
         let id = self.params.add(name, texels, range)?;

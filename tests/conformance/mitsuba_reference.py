@@ -141,6 +141,14 @@ MATRIX = {
                                    "int_ior by name and number", "specular_reflectance", "delta coating + NEE on the base"],
                          grads=["ball.bsdf.diffuse_reflectance.value", "floor.bsdf.diffuse_reflectance.data"],
                          fd={"ball.bsdf.diffuse_reflectance.value": None, "floor.bsdf.diffuse_reflectance.data": None}),
+    # A plastic's specular colour as a parameter and a texture (issue 31); the smooth plastic's acts
+    # through its delta coating only, which Mitsuba's prb does not differentiate (see bsdf_plastic):
+    # compared with its finite differences, at a large step (the colour acts linearly).
+    "bsdf_plastic_specular": dict(features=["roughplastic specular_reflectance bitmap", "roughplastic specular_reflectance rgb",
+                                            "plastic specular_reflectance checkerboard"],
+                                  grads=["floor.bsdf.specular_reflectance.data", "marker.bsdf.specular_reflectance.value",
+                                         "ball.bsdf.specular_reflectance.color0.value"],
+                                  fd={"ball.bsdf.specular_reflectance.color0.value": 0.25}),
     # Mitsuba's prb differentiates a vertex by re-evaluating its BSDF, which is 0 for a delta
     # lobe: its own gradients of these colours are 0. They are compared with its finite
     # differences (each colour acts linearly, so they are exact up to noise).

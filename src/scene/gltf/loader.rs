@@ -299,7 +299,8 @@ impl Loader<'_> {
                 Some(Emission::Texture { width, height, ref texels }) => {
                     // Each mesh's radiance is its own parameter, as a constant one is.
                     let param = format!("{name}.emitter.radiance.data");
-                    let texture = self.scene.add_texture_in(&param, width, height, texels, crate::scene::bounds::RADIANCE)?;
+                    let texture =
+                        self.scene.add_texture_in(&param, width, height, texels, crate::scene::bounds::RADIANCE)?;
                     self.scene.add_mesh(&name, geometry.transformed(world), material.id, None)?;
                     let mesh = self.scene.meshes.last_mut().expect("add_mesh pushed a mesh");
                     mesh.emitter = Some(self.scene.textures[texture.0 as usize].texels);

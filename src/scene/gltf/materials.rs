@@ -182,7 +182,8 @@ impl Loader<'_> {
                 None => base,
                 Some((bw, bh, texels)) if (*bw, *bh) == (w, h) => Vec3::from_slice(&texels[3 * i..3 * i + 3]),
                 Some((bw, bh, texels)) => {
-                    let (u, v) = (((i % w as usize) as f32 + 0.5) / w as f32, ((i / w as usize) as f32 + 0.5) / h as f32);
+                    let (u, v) =
+                        (((i % w as usize) as f32 + 0.5) / w as f32, ((i / w as usize) as f32 + 0.5) / h as f32);
                     bilinear_repeat(texels, *bw, *bh, u, v)
                 }
             };
@@ -208,9 +209,11 @@ impl Loader<'_> {
                 None => self.scene.add_diffuse(&format!("{name}.bsdf_0"), base)?,
             };
             let alpha = alpha_slot(&mut self.scene, &format!("{name}.bsdf_1"))?;
-            let specular = self.scene.add_texture(&format!("{name}.bsdf_1.specular_reflectance.data"), w, h, &specular)?;
+            let specular =
+                self.scene.add_texture(&format!("{name}.bsdf_1.specular_reflectance.data"), w, h, &specular)?;
             let lobe = conductor(&mut self.scene, alpha, Albedo::Bitmap(specular));
-            let weight = self.scene.add_scalar_texture(&format!("{name}.weight.data"), w, h, &weights, bounds::WEIGHT)?;
+            let weight =
+                self.scene.add_scalar_texture(&format!("{name}.weight.data"), w, h, &weights, bounds::WEIGHT)?;
             self.scene.add_material(Material::Blend { weight, children: [diffuse, lobe] })
         } else if metallic >= 1.0 {
             let alpha = alpha_slot(&mut self.scene, &name)?;
@@ -284,12 +287,7 @@ impl Loader<'_> {
             }
             _ => (radiance.max_element() > 0.0).then_some(Emission::Constant(radiance)),
         };
-        let mapped = MappedMaterial {
-            id,
-            emission,
-            tex_coord,
-            normal_mapped: normal_map.is_some(),
-        };
+        let mapped = MappedMaterial { id, emission, tex_coord, normal_mapped: normal_map.is_some() };
         self.materials[slot] = Some(mapped.clone());
         Ok(mapped)
     }

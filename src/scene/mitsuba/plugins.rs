@@ -131,7 +131,7 @@ pub const PLUGINS: &[Plugin] = &[
     p(
         Bsdf,
         "plastic",
-        "`diffuse_reflectance` (texturable), `specular_reflectance` (constant), `int_ior`/`ext_ior`, `nonlinear`",
+        "`diffuse_reflectance` (texturable), `specular_reflectance` (rgb, spectrum, bitmap, checkerboard or mesh_attribute; differentiable through the coating's delta lobe, which Mitsuba's `prb` gives no gradient), `int_ior`/`ext_ior`, `nonlinear`",
         "",
     ),
     p(
@@ -155,7 +155,7 @@ pub const PLUGINS: &[Plugin] = &[
     p(
         Bsdf,
         "roughplastic",
-        "`distribution`, `alpha` (parameter `.alpha`, a number as Mitsuba's), `diffuse_reflectance` (texturable), `specular_reflectance`, `int_ior`/`ext_ior`, `nonlinear`, `sample_visible`",
+        "`distribution`, `alpha` (parameter `.alpha`, a number as Mitsuba's), `diffuse_reflectance` (texturable), `specular_reflectance` (rgb, spectrum, bitmap, checkerboard or mesh_attribute), `int_ior`/`ext_ior`, `nonlinear`, `sample_visible`",
         "",
     ),
     p(
