@@ -288,6 +288,9 @@ MATRIX = {
     "shape_bsplinecurve": dict(features=["bsplinecurve (tessellated)", "two curves a file", "fast-varying radius (circles normal to the tangent)", "closed (radius 0) ends",
                                          "to_world moves points, not radii", "uv (bitmap)"],
                                grads=["rope.bsdf.reflectance.data", "wire.bsdf.reflectance.value"]),
+    "shape_sdfgrid": dict(features=["sdfgrid (tessellated)", "normals smooth and analytic", "in a shapegroup under a rotating instance",
+                                    "non-uniform to_world"],
+                          grads=["group.smooth.bsdf.reflectance.value", "analytic.bsdf.reflectance.value"]),
     "shape_flip_normals": dict(features=["flip_normals", "rectangle", "area light"], grads=["light.emitter.radiance.value"]),
     "shape_flip_normals_obj": dict(features=["flip_normals", "obj"], grads=["mesh.bsdf.reflectance.value"]),
     # ---- sensor

@@ -210,6 +210,12 @@ pub const PLUGINS: &[Plugin] = &[
     p(Shape, "obj", "`filename`, `to_world`, `face_normals`, `flip_normals`", ""),
     p(Shape, "ply", "`filename`, `to_world`, `face_normals`, `flip_normals`", ""),
     p(Shape, "rectangle", "`to_world`, `flip_normals`", ""),
+    p(
+        Shape,
+        "sdfgrid",
+        "`filename` (a one-channel `.vol` grid), `normals` (`smooth` or `analytic`), `to_world`",
+        "the zero set of the trilinear interpolant, tessellated to 0.02 px with Mitsuba's normals; no UV (0, 0), no area emitters; `grid` and `to_world` are not parameters",
+    ),
     p(Shape, "serialized", "`filename`, `shape_index`, `to_world`, `face_normals`, `flip_normals`", ""),
     p(Shape, "sphere", "`center`, `radius`, `to_world` (a similarity), `flip_normals`", "tessellated to 0.02 px"),
     p(Shape, "shapegroup", "nested shapes", "built by its instances"),
