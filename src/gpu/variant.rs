@@ -22,8 +22,11 @@ pub const fn word2(bit: u32) -> u64 {
 pub fn scene_features(flat: &FlatScene, env_param: u32) -> u64 {
     let mut f = 0;
     // Bits of the second word (`F2_*`).
-    let f2 = 0;
+    let mut f2 = 0;
     for m in &flat.materials {
+        if m.tex_mode & TEX_VOLUME != 0 {
+            f2 |= F2_VOLUME_TEXTURE;
+        }
         f |= match m.tag {
             MAT_DIFFUSE => F_DIFFUSE,
             MAT_ROUGH_CONDUCTOR => F_CONDUCTOR | if m.distribution == DIST_BECKMANN { F_BECKMANN } else { F_GGX },
@@ -130,6 +133,10 @@ pub fn param_kinds(flat: &FlatScene, env: (u32, u32), begin: u32, end: u32) -> P
         }
         k
     };
+    let field = |f: u32| {
+        let d = &flat.fields[f as usize];
+        overlaps(d.offset, d.channels * if d.kind == FIELD_CONSTANT { 1 } else { d.res_x * d.res_y * d.res_z })
+    };
     let mut k = ParamKinds::NONE;
     for m in &flat.materials {
         k = k.union(specular_kinds(m));
@@ -137,6 +144,12 @@ pub fn param_kinds(flat: &FlatScene, env: (u32, u32), begin: u32, end: u32) -> P
             MAT_CONDUCTOR | MAT_DIELECTRIC | MAT_THIN_DIELECTRIC | MAT_ROUGH_DIELECTRIC => {
                 if m.tag == MAT_ROUGH_DIELECTRIC && overlaps_slot(m.p_alpha) {
                     k = k.union(ParamKinds::ALPHA);
+                }
+            }
+            // A `volume` texture's p_color is its field's index.
+            MAT_DIFFUSE if m.tex_mode & TEX_VOLUME != 0 => {
+                if field(m.p_color) {
+                    k = k.union(ParamKinds::TEXTURE);
                 }
             }
             MAT_DIFFUSE | MAT_ROUGH_CONDUCTOR | MAT_ROUGH_PLASTIC | MAT_PLASTIC => {
@@ -188,10 +201,6 @@ pub fn param_kinds(flat: &FlatScene, env: (u32, u32), begin: u32, end: u32) -> P
     if overlaps(env.0, env.1) {
         k = k.union(ParamKinds::ENVIRONMENT);
     }
-    let field = |f: u32| {
-        let d = &flat.fields[f as usize];
-        overlaps(d.offset, d.channels * if d.kind == FIELD_CONSTANT { 1 } else { d.res_x * d.res_y * d.res_z })
-    };
     if flat.media.iter().any(|m| overlaps(m.p_scale, 1) || overlaps(m.p_g, 1) || field(m.sigma_t) || field(m.albedo)) {
         k = k.union(ParamKinds::MEDIUM);
     }
@@ -245,7 +254,7 @@ pub fn request_features(scene: u64, options: &RenderOptions, kinds: ParamKinds) 
 
 /// A short human-readable name of a variant, for logs: `nee env diffuse conductor[beckmann] ∂alpha`.
 pub fn describe(features: u64) -> String {
-    const NAMES: [(u64, &str); 32] = [
+    const NAMES: [(u64, &str); 33] = [
         (F_NEE as u64, "nee"),
         (F_ENV as u64, "env"),
         (F_EMITTERS as u64, "emitters"),
@@ -271,6 +280,7 @@ pub fn describe(features: u64) -> String {
         (F_LIGHT_TEXTURE as u64, "light-texture"),
         (F_PRINCIPLED as u64, "principled"),
         (word2(F2_HERO), "hero"),
+        (word2(F2_VOLUME_TEXTURE), "volume-texture"),
         (G_COLOR as u64, "∂color"),
         (G_TEXTURE as u64, "∂texture"),
         (G_ALPHA as u64, "∂alpha"),

@@ -15,7 +15,8 @@ use crate::contract::{
     MAT_CONDUCTOR, MAT_DIELECTRIC, MAT_DIFFUSE, MAT_NULL, MAT_PLASTIC, MAT_PRINCIPLED, MAT_ROUGH_CONDUCTOR,
     MAT_ROUGH_DIELECTRIC, MAT_ROUGH_PLASTIC, MAT_THIN_DIELECTRIC, Material as GpuMaterial, MediumDesc, MeshShading,
     NMAP_BUMP, NO_ARRAY, NO_EMITTER, NO_MEDIUM, NO_PARAM, PHASE_HG, PHASE_ISOTROPIC, SCALAR_TEXTURE, TEX_ATTR_FACE,
-    TEX_ATTR_VERTEX, TEX_CHECKER, TEX_NEAREST, TEX_WRAP_CLAMP, TEX_WRAP_MIRROR, TEXTURE_DESC_LEN, TriVertices,
+    TEX_ATTR_VERTEX, TEX_CHECKER, TEX_NEAREST, TEX_VOLUME, TEX_WRAP_CLAMP, TEX_WRAP_MIRROR, TEXTURE_DESC_LEN,
+    TriVertices,
 };
 use crate::error::Result;
 use crate::params::ParamId;
@@ -434,6 +435,14 @@ fn albedo_fields(scene: &Scene, albedo: Albedo) -> GpuMaterial {
             tex_mode: attribute_mode(source),
             ..Default::default()
         },
+        // p_color is the field's index: after the media's two each (flatten_media).
+        Albedo::Volume(v) => GpuMaterial {
+            p_color: 2 * scene.media.len() as u32 + v,
+            tex_width: 1,
+            tex_height: 1,
+            tex_mode: TEX_VOLUME,
+            ..Default::default()
+        },
         Albedo::Bitmap(t) => {
             let t = &scene.textures[t.0 as usize];
             GpuMaterial {
@@ -456,6 +465,9 @@ fn albedo_mean(scene: &Scene, albedo: Albedo) -> f32 {
             scene.params.get(id)
         }
         Albedo::Bitmap(t) => scene.params.get(scene.textures[t.0 as usize].texels),
+        Albedo::Volume(v) => match scene.volume_textures[v as usize] {
+            Field::Constant { value, .. } | Field::Grid { values: value, .. } => scene.params.get(value),
+        },
     };
     (values.iter().map(|&v| f64::from(v)).sum::<f64>() / values.len().max(1) as f64) as f32
 }
@@ -819,7 +831,8 @@ fn coating_tables(materials: &mut [GpuMaterial], params: &[f32]) -> Vec<f32> {
     tables
 }
 
-/// The media, their fields (two per medium, extinction then albedo) and their majorant grids.
+/// The media, their fields (two per medium, extinction then albedo, then the surfaces' `volume`
+/// textures, [`Scene::volume_textures`]) and their majorant grids.
 fn flatten_media(scene: &Scene) -> (Vec<MediumDesc>, Vec<FieldDesc>, Vec<f32>) {
     let offset = |id| scene.params.entry(id).offset;
     let field = |f: &Field| match f {
@@ -884,5 +897,6 @@ fn flatten_media(scene: &Scene) -> (Vec<MediumDesc>, Vec<FieldDesc>, Vec<f32>) {
             }
         })
         .collect();
+    fields.extend(scene.volume_textures.iter().map(field));
     (media, fields, majorants)
 }

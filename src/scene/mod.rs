@@ -183,6 +183,9 @@ pub enum Albedo {
         /// Whose triangles or vertices they follow.
         source: AttributeSource,
     },
+    /// Mitsuba's `volume` texture: field `.0` of [`Scene::volume_textures`] (a constant or a
+    /// voxel grid) looked up at the hit's world-space point.
+    Volume(u32),
 }
 
 /// What a mesh attribute texture (Mitsuba's `mesh_attribute`) reads: its values are one row per
@@ -560,6 +563,8 @@ pub struct Scene {
     pub scalar_textures: Vec<ScalarTexture>,
     /// Participating media, each inside the meshes whose `interior` it is.
     pub media: Vec<medium::Medium>,
+    /// The fields of `volume` textures on surfaces ([`Albedo::Volume`]), in world space.
+    pub volume_textures: Vec<medium::Field>,
     /// The environment's radiance seen by rays that leave the scene, if any: one RGB value
     /// (constant), or the texels of `env_map`.
     pub environment: Option<ParamId>,
@@ -661,6 +666,7 @@ impl Scene {
             normal_maps: Vec::new(),
             scalar_textures: Vec::new(),
             media: Vec::new(),
+            volume_textures: Vec::new(),
             environment: None,
             env_map: None,
             lights: Vec::new(),
@@ -1088,6 +1094,19 @@ impl Scene {
             Ok(())
         };
         for m in &self.materials {
+            let volume = |a: Albedo| matches!(a, Albedo::Volume(_));
+            let colour = |c: SmoothColour| matches!(c, SmoothColour::Texture(a) if volume(a));
+            let refused = match *m {
+                Material::Principled { base_color, .. } => volume(base_color),
+                Material::Smooth { reflectance, transmittance, .. }
+                | Material::RoughDielectric { reflectance, transmittance, .. } => {
+                    colour(reflectance) || colour(transmittance)
+                }
+                _ => false,
+            };
+            if refused {
+                return Err(err("a material".into(), "a volume texture is only read as a diffuse reflectance".into()));
+            }
             let albedos = match *m {
                 Material::Diffuse { albedo } => vec![albedo],
                 Material::RoughConductor { specular, .. } => vec![specular],
@@ -1097,6 +1116,15 @@ impl Scene {
             for a in albedos {
                 if let Albedo::Attribute { values, source } = a {
                     attribute_len(values, source, 3, "colour")?;
+                }
+                // The kernels read a `volume` texture as a diffuse reflectance only.
+                if let Albedo::Volume(v) = a
+                    && (!matches!(m, Material::Diffuse { .. }) || v as usize >= self.volume_textures.len())
+                {
+                    return Err(err(
+                        format!("volume texture {v}"),
+                        "a volume texture is only read as a diffuse reflectance, and must exist".into(),
+                    ));
                 }
             }
         }

@@ -386,6 +386,13 @@ def albedo_grid():
     return np.stack([0.3 + 0.65 * x, 0.3 + 0.65 * y, 0.95 - 0.65 * z], axis=-1)
 
 
+def grey_albedo_grid():
+    """8^3 grey reflectance in [0.2, 0.8]: the blob rescaled (a `volume` texture's grid, away from
+    0 and 1 so finite differences of every voxel stay reflectances)."""
+    b = blob_grid()
+    return 0.2 + 0.6 * (b - b.min()) / (b.max() - b.min())
+
+
 def sigma_rgb_grid():
     """8^3 RGB extinction: the blob, scaled differently per channel."""
     b = blob_grid()
@@ -456,6 +463,7 @@ def main():
     write_vol(DATA / "albedo_rgb.vol", albedo_grid())
     write_vol(DATA / "sigma_t_rgb.vol", sigma_rgb_grid())
     write_vol(DATA / "sdf_torus.vol", sdf_grid())
+    write_vol(DATA / "grey_albedo.vol", grey_albedo_grid())
     sig, alb = mitsuba_grids()
     write_vol(DATA / "mitsuba_sigmat.vol", sig)
     write_vol(DATA / "mitsuba_albedo.vol", alb)

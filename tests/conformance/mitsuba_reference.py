@@ -82,6 +82,11 @@ MATRIX = {
                                              "mesh_attribute face_color (PLY red green blue) in twosided",
                                              "mesh_attribute face_weight on blendbsdf weight, top-level + ref"],
                                    grads=["ball.vertex_color", "gem.face_color", "orb.face_weight"]),
+    # Mitsuba's `volume` texture on a diffuse reflectance (issue 31): grids looked up at the
+    # world-space hit, trilinear, clamped (ball) and tiled (marker); the voxels' derivatives.
+    "texture_volume": dict(features=["volume texture (gridvolume RGB, clamp) as diffuse reflectance",
+                                     "volume texture (gridvolume grey, wrap_mode repeat) on a cube"],
+                           grads=["ball.bsdf.reflectance.volume.data", "marker.bsdf.reflectance.volume.data"]),
     # A textured area emitter (issue 31): Mitsuba samples its points by the texture, pathgrad by
     # area; the images and the texels' derivatives agree in expectation. (The ball's α, tried as a
     # second gradient, sees only a 6-8 % bias at the budget: left out, the texels are the point.)

@@ -342,7 +342,10 @@ impl<'a> Loader<'a> {
         }
         let nonlinear = p.boolean(&self.x, "nonlinear", false)?;
         let diffuse = match p.object("diffuse_reflectance") {
-            Some(t) => self.texture(t, format!("{name}.diffuse_reflectance"), depth + 1)?,
+            Some(t) => {
+                let a = self.texture(t, format!("{name}.diffuse_reflectance"), depth + 1)?;
+                self.refuse_volume(a, t, "diffuse_reflectance", &p.kind)?
+            }
             None => {
                 let rho = self.color_in(p, "diffuse_reflectance", Vec3::splat(0.5), bounds::REFLECTANCE)?;
                 let id = self.scene.params.add(
@@ -557,7 +560,10 @@ impl<'a> Loader<'a> {
             rate("diffuse_reflectance_sampling_rate")?,
         );
         let base_color = match p.object("base_color") {
-            Some(t) => self.texture(t, format!("{name}.base_color"), depth + 1)?,
+            Some(t) => {
+                let a = self.texture(t, format!("{name}.base_color"), depth + 1)?;
+                self.refuse_volume(a, t, "base_color", &p.kind)?
+            }
             None => {
                 let c = self.color_in(p, "base_color", Vec3::splat(0.5), bounds::REFLECTANCE)?;
                 let id = self.scene.params.add(&format!("{name}.base_color.value"), &c.to_array(), bounds::REFLECTANCE);
@@ -593,7 +599,8 @@ impl<'a> Loader<'a> {
         depth: usize,
     ) -> Result<SmoothColour> {
         if let Some(t) = p.object(key) {
-            return Ok(SmoothColour::Texture(self.texture(t, format!("{name}.{key}"), depth + 1)?));
+            let a = self.texture(t, format!("{name}.{key}"), depth + 1)?;
+            return Ok(SmoothColour::Texture(self.refuse_volume(a, t, key, &p.kind)?));
         }
         let value = self.color_in(p, key, Vec3::ONE, bounds::REFLECTANCE)?;
         if !(always || p.has(key)) {
@@ -611,7 +618,10 @@ impl<'a> Loader<'a> {
         let distribution = self.distribution(p)?;
         let (alpha, alpha_v) = self.microfacet_alpha(p, name, true)?;
         let specular = match p.object("specular_reflectance") {
-            Some(t) => self.texture(t, format!("{name}.specular_reflectance"), 1)?,
+            Some(t) => {
+                let a = self.texture(t, format!("{name}.specular_reflectance"), 1)?;
+                self.refuse_volume(a, t, "specular_reflectance", &p.kind)?
+            }
             None => {
                 let specular = self.color_in(p, "specular_reflectance", Vec3::ONE, bounds::REFLECTANCE)?;
                 let specular = self.scene.params.add(
@@ -650,6 +660,11 @@ impl<'a> Loader<'a> {
             self.textures.insert(target.id(), albedo);
             return Ok(albedo);
         }
+        if p.kind == "volume" {
+            let albedo = self.volume_texture(&p, &name)?;
+            self.textures.insert(target.id(), albedo);
+            return Ok(albedo);
+        }
         if p.kind == "mesh_attribute" {
             // Not cached: each shape reads its own attribute.
             let (values, source) = self.mesh_attribute(&p, 3, bounds::REFLECTANCE)?;
@@ -671,6 +686,18 @@ impl<'a> Loader<'a> {
         self.finish(&p)?;
         self.textures.insert(target.id(), Albedo::Bitmap(t));
         Ok(Albedo::Bitmap(t))
+    }
+
+    /// `a`, unless it is a `volume` texture, which the kernels read as a diffuse `reflectance`
+    /// only: on `slot` of a `kind` BSDF it is refused, located at `node`.
+    fn refuse_volume(&self, a: Albedo, node: El<'a>, slot: &str, kind: &str) -> Result<Albedo> {
+        if matches!(a, Albedo::Volume(_)) {
+            return Err(self.x.err(
+                node,
+                format!("a 'volume' texture is supported as the 'reflectance' of a 'diffuse' only (not as '{slot}' of '{kind}')"),
+            ));
+        }
+        Ok(a)
     }
 
     /// A texture's `to_uv` as rows 0 and 1 of the 4×4 matrix, columns x, y and the translation:

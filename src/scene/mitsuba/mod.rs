@@ -20,7 +20,9 @@
 //!   bilinear/nearest, `wrap_mode` repeat/mirror/clamp),
 //!   `<texture type="checkerboard">` with colour `color0`/`color1` and `to_uv`, or
 //!   `<texture type="mesh_attribute">`: a PLY attribute of the shape, per face or per vertex,
-//!   module `mesh_attribute`, also on float properties), `roughconductor`,
+//!   module `mesh_attribute`, also on float properties), or `<texture type="volume">` (a
+//!   `gridvolume`/`constvolume` looked up at the world-space point, values `….volume.data`;
+//!   diffuse reflectance only)), `roughconductor`,
 //!   `blendbsdf`, `twosided`; `<emitter type="constant">` at scene level (the environment).
 //! - `<sensor type="perspective">` with `fov`/`focal_length`, `fov_axis`, `to_world`, a
 //!   `<film type="hdrfilm">` (`width`, `height`, an `rfilter`) and a `<sampler type="independent">` (`sample_count` →
@@ -142,6 +144,8 @@ mod tests_normal_maps;
 mod tests_plugins;
 #[cfg(test)]
 mod tests_scalar_textures;
+#[cfg(test)]
+mod tests_volume_texture;
 
 use std::path::Path;
 

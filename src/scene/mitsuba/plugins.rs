@@ -114,7 +114,7 @@ pub const PLUGINS: &[Plugin] = &[
         "`int_ior`/`ext_ior` (numbers or Mitsuba's names), `specular_reflectance`, `specular_transmittance` (each rgb, spectrum, bitmap, checkerboard or mesh_attribute)",
         "smooth; not inside blendbsdf or twosided",
     ),
-    p(Bsdf, "diffuse", "`reflectance` (rgb, spectrum, bitmap, checkerboard or mesh_attribute)", ""),
+    p(Bsdf, "diffuse", "`reflectance` (rgb, spectrum, bitmap, checkerboard, mesh_attribute or volume)", ""),
     p(
         Bsdf,
         "mask",
@@ -237,6 +237,12 @@ pub const PLUGINS: &[Plugin] = &[
         "mesh_attribute",
         "`name` (`vertex_…` or `face_…`), `scale` (1 only)",
         "in the BSDF of a `ply` shape whose file has the attribute (Mitsuba's PLY naming); the values are parameter `SHAPE.NAME` (per vertex: interpolated by barycentrics), an RGB attribute on a colour property, a one-value one on a float property; a BSDF that reads one belongs to its one shape",
+    ),
+    p(
+        Texture,
+        "volume",
+        "`volume` (a `gridvolume`, `constvolume`, `<float>` or `<rgb>`)",
+        "as the `reflectance` of a `diffuse` only, looked up at the world-space surface point; a grid's values are parameter `.volume.data`",
     ),
     p(Medium, "homogeneous", "`sigma_t`, `albedo`, `scale`, a phase", "inside a null or dielectric boundary"),
     p(

@@ -404,7 +404,7 @@ fn element_and_property_errors() {
         ),
         (
             r#"<texture type="wood"/>"#,
-            "<texture>: unsupported plugin 'wood' (supported: bitmap, checkerboard, mesh_attribute)",
+            "<texture>: unsupported plugin 'wood' (supported: bitmap, checkerboard, mesh_attribute, volume)",
         ),
         (r#"<texture type="bitmap"/>"#, "<texture>: 'bitmap' needs the property 'filename'"),
         (r#"<emitter type="area"/>"#, "<emitter>: an 'area' emitter must be nested in a <shape>"),
