@@ -472,8 +472,10 @@ Leaf leaf_from_material(Material m, TexAt at) {
     l.eta = m.eta;
     // A smooth dielectric's η: its parameter (p_weight) or the constant.
     if (delta && m.tag != MAT_CONDUCTOR && m.p_weight != NO_PARAM) l.eta.x = params[m.p_weight];
-    // A dielectric's transmittance parameter: p_alpha (smooth) or p_weight (rough).
-    uint p_trans = rough_glass ? m.p_weight : (delta && m.tag != MAT_CONDUCTOR ? m.p_alpha : NO_PARAM);
+    // A dielectric's transmittance parameter: p_alpha (smooth) or p_weight (rough); a plastic's
+    // specular colour: p_weight.
+    bool coated = plastic || is_smooth_plastic(m.tag);
+    uint p_trans = (rough_glass || coated) ? m.p_weight : (delta && m.tag != MAT_CONDUCTOR ? m.p_alpha : NO_PARAM);
     l.k = colour_value(p_trans, at, m.k);
     return l;
 }
@@ -649,6 +651,8 @@ void push_leaf(Material m, TexAt at, LeafGrad g) {
     } else if (HAS(G_COLOR)) {
         push_rgb(m.p_color, g.color);
     }
+    // A plastic's specular colour (p_weight: a parameter, a texture or a constant).
+    if (is_plastic(m.tag) || is_smooth_plastic(m.tag)) push_colour(m.p_weight, at, g.trans);
     if (HAS(G_ALPHA) && is_conductor(m.tag) && m.p_alpha_v != m.p_alpha) {
         push_scalar(m.p_alpha, at, g.alpha, true);
         push_scalar(m.p_alpha_v, at, g.alpha_v, true);

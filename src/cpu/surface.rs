@@ -488,7 +488,7 @@ fn leaf_from_material(flat: &FlatScene, m: &Material, at: TexAt) -> Leaf {
                 distribution,
                 alpha: params[m.p_alpha as usize],
                 diffuse: color,
-                specular: m.k,
+                specular: colour_value(flat, m.p_weight, at, m.k),
                 eta: m.eta.x,
                 specular_weight: m.eta.y,
                 nonlinear: m.eta.z != 0.0,
@@ -523,7 +523,7 @@ fn leaf_from_material(flat: &FlatScene, m: &Material, at: TexAt) -> Leaf {
         }
         MAT_PLASTIC => Leaf::SmoothPlastic(SmoothPlasticLeaf {
             diffuse: color,
-            specular: m.k,
+            specular: colour_value(flat, m.p_weight, at, m.k),
             eta: m.eta.x,
             specular_weight: m.eta.y,
             nonlinear: m.eta.z != 0.0,
@@ -597,6 +597,10 @@ fn leaf_backward(flat: &FlatScene, m: &Material, at: TexAt, g: &LeafGrad, sink: 
         texture_backward(flat, m, at, g.color, sink);
     } else {
         sink.add_rgb(m.p_color, g.color);
+    }
+    if m.tag == MAT_ROUGH_PLASTIC || m.tag == MAT_PLASTIC {
+        // The coating's specular colour (a parameter, a texture or a constant in p_weight).
+        colour_backward(flat, m.p_weight, at, g.trans, sink);
     }
     if m.tag == MAT_ROUGH_CONDUCTOR && m.p_alpha_v != m.p_alpha {
         scalar_backward(flat, m.p_alpha, at, g.alpha, true, sink);

@@ -118,18 +118,23 @@ pub fn param_kinds(flat: &FlatScene, env: (u32, u32), begin: u32, end: u32) -> P
         let (offset, len) = scalar_slot_range(flat, slot);
         overlaps(offset, len)
     };
+    // Reflectance, (dielectrics) transmittance and (plastics) specular reflectance, each a
+    // parameter, a colour texture's texels (`SCALAR_TEXTURE`) or NO_PARAM.
+    let specular_kinds = |m: &crate::contract::Material| {
+        let mut k = ParamKinds::NONE;
+        for slot in specular_colour_slots(m) {
+            let (offset, texels) = scalar_slot_range(flat, slot);
+            if overlaps(offset, 3 * texels) {
+                k = k.union(if colour_textured(slot) { ParamKinds::TEXTURE } else { ParamKinds::COLOR });
+            }
+        }
+        k
+    };
     let mut k = ParamKinds::NONE;
     for m in &flat.materials {
+        k = k.union(specular_kinds(m));
         match m.tag {
             MAT_CONDUCTOR | MAT_DIELECTRIC | MAT_THIN_DIELECTRIC | MAT_ROUGH_DIELECTRIC => {
-                // Reflectance and (dielectrics) transmittance, each a parameter, a colour
-                // texture's texels (`SCALAR_TEXTURE`) or NO_PARAM.
-                for slot in specular_colour_slots(m) {
-                    let (offset, texels) = scalar_slot_range(flat, slot);
-                    if overlaps(offset, 3 * texels) {
-                        k = k.union(if colour_textured(slot) { ParamKinds::TEXTURE } else { ParamKinds::COLOR });
-                    }
-                }
                 if m.tag == MAT_ROUGH_DIELECTRIC && overlaps_slot(m.p_alpha) {
                     k = k.union(ParamKinds::ALPHA);
                 }
@@ -193,14 +198,16 @@ pub fn param_kinds(flat: &FlatScene, env: (u32, u32), begin: u32, end: u32) -> P
     k
 }
 
-/// The colour slots of a smooth BSDF or rough dielectric `m` (none for another material): the
-/// reflectance (`p_color`) and a dielectric's transmittance (`p_alpha` smooth, `p_weight` rough),
-/// each a parameter offset, `NO_PARAM` (a constant) or a colour texture (`SCALAR_TEXTURE`).
+/// The colour slots of a smooth BSDF, rough dielectric or plastic `m` (none for another
+/// material): the reflectance (`p_color`) and a dielectric's transmittance (`p_alpha` smooth,
+/// `p_weight` rough), a plastic's specular reflectance (`p_weight`), each a parameter offset,
+/// `NO_PARAM` (a constant) or a colour texture (`SCALAR_TEXTURE`).
 pub fn specular_colour_slots(m: &crate::contract::Material) -> Vec<u32> {
     match m.tag {
         MAT_CONDUCTOR => vec![m.p_color],
         MAT_DIELECTRIC | MAT_THIN_DIELECTRIC => vec![m.p_color, m.p_alpha],
         MAT_ROUGH_DIELECTRIC => vec![m.p_color, m.p_weight],
+        MAT_ROUGH_PLASTIC | MAT_PLASTIC => vec![m.p_weight],
         _ => Vec::new(),
     }
 }

@@ -460,6 +460,15 @@ fn albedo_mean(scene: &Scene, albedo: Albedo) -> f32 {
     (values.iter().map(|&v| f64::from(v)).sum::<f64>() / values.len().max(1) as f64) as f32
 }
 
+/// The mean of a specular colour over its channels (and texels): Mitsuba's `Texture::mean`.
+fn colour_mean(scene: &Scene, c: SmoothColour) -> f32 {
+    match c {
+        SmoothColour::Param(id) => albedo_mean(scene, Albedo::Rgb(id)),
+        SmoothColour::Constant(v) => v.element_sum() / 3.0,
+        SmoothColour::Texture(a) => albedo_mean(scene, a),
+    }
+}
+
 /// A dielectric's or conductor's colour as (parameter offset, 0), (`NO_PARAM`, the constant), or
 /// for a texture (`SCALAR_TEXTURE`, 0) until [`colour_texture_tables`] places its descriptor.
 fn split_colour(scene: &Scene, c: SmoothColour) -> (u32, Vec3) {
@@ -486,7 +495,8 @@ fn colour_descriptor(scene: &Scene, albedo: Albedo) -> [f32; TEXTURE_DESC_LEN as
 /// Appends the descriptor of every textured specular colour ([`SmoothColour::Texture`] of a
 /// smooth BSDF or rough dielectric) to `tables` (once per texture) and points its slot at it,
 /// `SCALAR_TEXTURE` or-ed with its offset there: the reflectance's `p_color`, the
-/// transmittance's `p_alpha` (smooth) or `p_weight` (rough). `materials` are `scene`'s, flattened.
+/// transmittance's `p_alpha` (smooth) or `p_weight` (rough), a plastic's specular colour's
+/// `p_weight`. `materials` are `scene`'s, flattened.
 fn colour_texture_tables(scene: &Scene, materials: &mut [GpuMaterial], tables: &mut Vec<f32>) {
     let mut placed: Vec<(Albedo, u32)> = Vec::new();
     let mut place = |albedo: Albedo, tables: &mut Vec<f32>| match placed.iter().find(|(a, _)| *a == albedo) {
@@ -511,6 +521,10 @@ fn colour_texture_tables(scene: &Scene, materials: &mut [GpuMaterial], tables: &
         let (reflectance, transmittance, rough) = match *leaf {
             Material::Smooth { reflectance, transmittance, .. } => (reflectance, transmittance, false),
             Material::RoughDielectric { reflectance, transmittance, .. } => (reflectance, transmittance, true),
+            // A plastic's specular colour sits where a rough dielectric's transmittance does.
+            Material::RoughPlastic { specular, .. } | Material::SmoothPlastic { specular, .. } => {
+                (SmoothColour::Constant(Vec3::ZERO), specular, true)
+            }
             _ => continue,
         };
         if let SmoothColour::Texture(a) = reflectance {
@@ -539,23 +553,28 @@ fn flatten_material(scene: &Scene, m: &Material) -> GpuMaterial {
             ..albedo_fields(scene, specular)
         },
         Material::RoughPlastic { distribution, alpha, diffuse, specular, eta, nonlinear } => {
-            // Mitsuba's sampling weight of the coating from the mean reflectances.
-            let (d_mean, s_mean) = (albedo_mean(scene, diffuse), (specular.x + specular.y + specular.z) / 3.0);
+            // Mitsuba's sampling weight of the coating from the mean reflectances; the specular
+            // colour a parameter or texture (p_weight) or a constant (k).
+            let (d_mean, s_mean) = (albedo_mean(scene, diffuse), colour_mean(scene, specular));
+            let (p_weight, k) = split_colour(scene, specular);
             GpuMaterial {
                 tag: MAT_ROUGH_PLASTIC,
                 distribution: distribution as u32,
                 p_alpha: offset(alpha),
+                p_weight,
                 eta: Vec3::new(eta, s_mean / (d_mean + s_mean), f32::from(u8::from(nonlinear))),
-                k: specular,
+                k,
                 ..albedo_fields(scene, diffuse)
             }
         }
         Material::SmoothPlastic { diffuse, specular, eta, nonlinear } => {
-            let (d_mean, s_mean) = (albedo_mean(scene, diffuse), (specular.x + specular.y + specular.z) / 3.0);
+            let (d_mean, s_mean) = (albedo_mean(scene, diffuse), colour_mean(scene, specular));
+            let (p_weight, k) = split_colour(scene, specular);
             GpuMaterial {
                 tag: MAT_PLASTIC,
+                p_weight,
                 eta: Vec3::new(eta, s_mean / (d_mean + s_mean), f32::from(u8::from(nonlinear))),
-                k: specular,
+                k,
                 ..albedo_fields(scene, diffuse)
             }
         }

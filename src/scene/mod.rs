@@ -230,8 +230,9 @@ pub enum Material {
         alpha: ParamId,
         /// Diffuse reflectance of the base in [0, 1], constant or textured.
         diffuse: Albedo,
-        /// Specular reflectance of the coating (a constant, not a parameter).
-        specular: Vec3,
+        /// Specular reflectance of the coating: a parameter where the file gives it (Mitsuba
+        /// traverses it only then), a texture, or the constant 1.
+        specular: SmoothColour,
         /// int_ior / ext_ior.
         eta: f32,
         /// Mitsuba's `nonlinear`: the base's internal scattering darkens and saturates its colour.
@@ -270,8 +271,8 @@ pub enum Material {
     SmoothPlastic {
         /// Diffuse reflectance of the base in [0, 1], constant or textured.
         diffuse: Albedo,
-        /// Specular reflectance of the coating (a constant, not a parameter).
-        specular: Vec3,
+        /// Specular reflectance of the coating, as a rough plastic's.
+        specular: SmoothColour,
         /// int_ior / ext_ior.
         eta: f32,
         /// Mitsuba's `nonlinear`.

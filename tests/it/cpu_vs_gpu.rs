@@ -180,3 +180,11 @@ fn issue_31_bsplinecurve_gpu_equals_cpu_per_path() {
     let gpu = TestGpu::new();
     primal_agrees_per_path(&gpu, &crate::support::scenes::conformance("shape_bsplinecurve"));
 }
+
+/// SDF grids (issue 31), tessellated into the zero set of the trilinear interpolant with
+/// Mitsuba's smooth and analytic normals.
+#[test]
+fn issue_31_sdfgrid_gpu_equals_cpu_per_path() {
+    let gpu = TestGpu::new();
+    primal_agrees_per_path(&gpu, &crate::support::scenes::conformance("shape_sdfgrid"));
+}

@@ -331,15 +331,11 @@ impl<'a> Loader<'a> {
     }
 
     /// A plastic's `diffuse_reflectance` (texturable, 0.5: `NAME.diffuse_reflectance.value` or
-    /// `.data`), constant `specular_reflectance` (1) and `int_ior`/`ext_ior` (polypropylene in
-    /// air) as η, and `nonlinear`.
-    fn plastic_common(&mut self, p: &Props<'a>, name: &str, depth: usize) -> Result<(Albedo, Vec3, f32, bool)> {
-        if let Some(t) = p.object("specular_reflectance") {
-            return Err(self
-                .x
-                .err(t, format!("a textured 'specular_reflectance' of '{}' is not supported (a colour is)", p.kind)));
-        }
-        let specular = self.color_in(p, "specular_reflectance", Vec3::ONE, bounds::REFLECTANCE)?;
+    /// `.data`), `specular_reflectance` (texturable, 1: `NAME.specular_reflectance.value` or
+    /// `.data` where the file gives it, as Mitsuba traverses it; [`Loader::specular_colour`]) and
+    /// `int_ior`/`ext_ior` (polypropylene in air) as η, and `nonlinear`.
+    fn plastic_common(&mut self, p: &Props<'a>, name: &str, depth: usize) -> Result<(Albedo, SmoothColour, f32, bool)> {
+        let specular = self.specular_colour(p, name, "specular_reflectance", false, depth)?;
         let (int_ior, ext_ior) = (self.ior(p, "int_ior", "polypropylene")?, self.ior(p, "ext_ior", "air")?);
         if int_ior == ext_ior {
             return Err(self.x.err(p.node, "'int_ior' and 'ext_ior' must differ"));
@@ -367,7 +363,7 @@ impl<'a> Loader<'a> {
     }
 
     /// Mitsuba's `roughplastic`: `distribution` (Beckmann), isotropic `alpha` (0.1), texturable
-    /// `diffuse_reflectance` (0.5), `specular_reflectance` (1, a constant), `int_ior`
+    /// `diffuse_reflectance` (0.5) and `specular_reflectance` (1), `int_ior`
     /// (polypropylene) and `ext_ior` (air), `nonlinear`. Parameters `NAME.alpha` (Mitsuba's key:
     /// its α is a number, not a texture) and `NAME.diffuse_reflectance.value` (or `.data`).
     fn rough_plastic(&mut self, p: &Props<'a>, name: &str, depth: usize) -> Result<MaterialId> {

@@ -90,7 +90,10 @@
 //!   Mitsuba's UV; see `curves.rs`. A `bsplinecurve` becomes rings of the circles normal to its
 //!   tangent that Embree intersects, stepped along each segment until the measured error is in
 //!   the budget, with Mitsuba's normals and UV (open ends: a warning, as Mitsuba culls the inner
-//!   wall). Control points are not parameters (geometry is fixed).
+//!   wall). Control points are not parameters (geometry is fixed). An `sdfgrid` (a `.vol` file of
+//!   signed distances) becomes the zero set of its trilinear interpolant, cut per voxel into
+//!   cells fine enough for the same budget, with Mitsuba's `smooth` or `analytic` normals at the
+//!   vertices; see `sdfgrid.rs`. Its `grid` and `to_world` are not parameters.
 //! - **Depth**: `max_depth = -1` (and a scene without `<integrator>`, Mitsuba's default) becomes
 //!   [`crate::integrator::UNBOUNDED_DEPTH_CAP`], which the renderer treats as unbounded. `rr_depth`
 //!   other than 5 and `hide_emitters` are warned about and ignored.
@@ -113,6 +116,7 @@ mod media;
 mod mesh_attribute;
 pub mod plugins;
 mod scalar_texture;
+mod sdfgrid;
 mod sensor;
 mod shapes;
 mod spectrum;

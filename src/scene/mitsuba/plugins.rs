@@ -131,7 +131,7 @@ pub const PLUGINS: &[Plugin] = &[
     p(
         Bsdf,
         "plastic",
-        "`diffuse_reflectance` (texturable), `specular_reflectance` (constant), `int_ior`/`ext_ior`, `nonlinear`",
+        "`diffuse_reflectance` (texturable), `specular_reflectance` (rgb, spectrum, bitmap, checkerboard or mesh_attribute; differentiable through the coating's delta lobe, which Mitsuba's `prb` gives no gradient), `int_ior`/`ext_ior`, `nonlinear`",
         "",
     ),
     p(
@@ -155,7 +155,7 @@ pub const PLUGINS: &[Plugin] = &[
     p(
         Bsdf,
         "roughplastic",
-        "`distribution`, `alpha` (parameter `.alpha`, a number as Mitsuba's), `diffuse_reflectance` (texturable), `specular_reflectance`, `int_ior`/`ext_ior`, `nonlinear`, `sample_visible`",
+        "`distribution`, `alpha` (parameter `.alpha`, a number as Mitsuba's), `diffuse_reflectance` (texturable), `specular_reflectance` (rgb, spectrum, bitmap, checkerboard or mesh_attribute), `int_ior`/`ext_ior`, `nonlinear`, `sample_visible`",
         "",
     ),
     p(
@@ -210,6 +210,12 @@ pub const PLUGINS: &[Plugin] = &[
     p(Shape, "obj", "`filename`, `to_world`, `face_normals`, `flip_normals`", ""),
     p(Shape, "ply", "`filename`, `to_world`, `face_normals`, `flip_normals`", ""),
     p(Shape, "rectangle", "`to_world`, `flip_normals`", ""),
+    p(
+        Shape,
+        "sdfgrid",
+        "`filename` (a one-channel `.vol` grid), `normals` (`smooth` or `analytic`), `to_world`",
+        "the zero set of the trilinear interpolant, tessellated to 0.02 px with Mitsuba's normals; no UV (0, 0), no area emitters; `grid` and `to_world` are not parameters",
+    ),
     p(Shape, "serialized", "`filename`, `shape_index`, `to_world`, `face_normals`, `flip_normals`", ""),
     p(Shape, "sphere", "`center`, `radius`, `to_world` (a similarity), `flip_normals`", "tessellated to 0.02 px"),
     p(Shape, "shapegroup", "nested shapes", "built by its instances"),
