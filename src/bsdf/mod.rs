@@ -12,6 +12,7 @@ pub mod differential;
 pub mod diffuse;
 pub mod plastic;
 pub mod principled;
+pub mod principled_thin;
 pub mod rough_conductor;
 pub mod rough_dielectric;
 pub mod rough_plastic;

@@ -178,7 +178,7 @@ impl PrincipledGrad {
 }
 
 /// Schlick's weight (1 − c)⁵, c clipped to [0, 1] as Mitsuba's `schlick_weight`.
-fn schlick_weight(c: f32) -> f32 {
+pub(super) fn schlick_weight(c: f32) -> f32 {
     let m = (1.0 - c).clamp(0.0, 1.0);
     m * m * m * m * m
 }
@@ -186,7 +186,7 @@ fn schlick_weight(c: f32) -> f32 {
 /// The weight w of Mitsuba's `calc_schlick(R0, cos, η) = R0 + (1 − R0)·w`: Schlick's weight of
 /// |cos| where the incident side is the denser one's outside (η_it > 1), else of the refracted
 /// cosine.
-fn calc_schlick_weight(cos_i: f32, eta: f32) -> f32 {
+pub(super) fn calc_schlick_weight(cos_i: f32, eta: f32) -> f32 {
     let outside = cos_i >= 0.0;
     let (eta_it, eta_ti) = if outside { (eta, 1.0 / eta) } else { (1.0 / eta, eta) };
     let cos_t = (1.0 - (1.0 - cos_i * cos_i) * eta_ti * eta_ti).max(0.0).sqrt();
@@ -243,7 +243,7 @@ fn smith_ggx1(v: Vec3, h: Vec3, alpha: f32) -> f32 {
 
 /// (∂D/∂α_x, ∂D/∂α_y) of GGX, split between the two even where α_x = α_y (the derivative by
 /// `anisotropic` needs the parts): with S = h_x²/α_x² + h_y²/α_y² + h_z², ∂ ln D/∂α_x = 4h_x²/(α_x³ S) − 1/α_x.
-fn ggx_d_dalpha(alpha: Vec2, h: Vec3) -> Vec2 {
+pub(super) fn ggx_d_dalpha(alpha: Vec2, h: Vec3) -> Vec2 {
     let d = microfacet_d_aniso(Distribution::Ggx, alpha, h);
     if d == 0.0 {
         return Vec2::ZERO;
@@ -258,7 +258,7 @@ fn ggx_d_dalpha(alpha: Vec2, h: Vec3) -> Vec2 {
 
 /// (∂G1/∂α_x, ∂G1/∂α_y) of GGX's Smith masking, split as [`ggx_d_dalpha`]: ∂G1/∂s² · 2α_x v_x²/v_z²,
 /// s² = (α_x² v_x² + α_y² v_y²)/v_z².
-fn ggx_g1_dalpha(alpha: Vec2, v: Vec3, h: Vec3) -> Vec2 {
+pub(super) fn ggx_g1_dalpha(alpha: Vec2, v: Vec3, h: Vec3) -> Vec2 {
     if v.dot(h) * v.z <= 0.0 || v.x * v.x + v.y * v.y == 0.0 {
         return Vec2::ZERO;
     }
@@ -270,13 +270,13 @@ fn ggx_g1_dalpha(alpha: Vec2, v: Vec3, h: Vec3) -> Vec2 {
 }
 
 /// `v` with the sign of `s` (Mitsuba's `mulsign`; `s` is never 0 here).
-fn mulsign(v: Vec3, s: f32) -> Vec3 {
+pub(super) fn mulsign(v: Vec3, s: f32) -> Vec3 {
     if s.is_sign_negative() { -v } else { v }
 }
 
 /// Mitsuba's `mac_mic_compatibility`: both directions see m (turned to wi's side) from the sides
 /// their lobe needs.
-fn compatible(m: Vec3, wi: Vec3, wo: Vec3, cos_i: f32, reflection: bool) -> bool {
+pub(super) fn compatible(m: Vec3, wi: Vec3, wo: Vec3, cos_i: f32, reflection: bool) -> bool {
     let m = mulsign(m, cos_i);
     wi.dot(m) > 0.0 && if reflection { wo.dot(m) > 0.0 } else { wo.dot(-m) > 0.0 }
 }
