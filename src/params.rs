@@ -155,9 +155,12 @@ impl ParamTable {
                         | "vertex_normals"
                         | "vertex_texcoords"
                         | "faces"
+                        | "grid"
+                        | "to_world"
                 ) {
-                    ": geometry is fixed in pathgrad (Mitsuba's curve control points and mesh vertices are \
-                     parameters there, not here); materials' and emitters' values are"
+                    ": geometry is fixed in pathgrad (Mitsuba's curve control points, mesh vertices, SDF \
+                     grids and shapes' to_world are parameters there, not here); materials' and emitters' \
+                     values are"
                 } else {
                     ""
                 };
@@ -398,7 +401,7 @@ mod tests {
         assert_eq!(t.select(&["*.alpha.value"]).unwrap(), vec![ParamId(0), ParamId(2)]);
         assert!(t.select(&["nope*"]).unwrap_err().to_string().contains("matches no parameter"));
         // Mitsuba's geometry keys are refused by name.
-        for key in ["curve.control_points", "mesh.vertex_positions"] {
+        for key in ["curve.control_points", "mesh.vertex_positions", "sdf.grid", "sdf.to_world"] {
             let e = t.select(&[key]).unwrap_err().to_string();
             assert!(e.contains(key) && e.contains("geometry is fixed in pathgrad"), "{e}");
         }

@@ -24,8 +24,8 @@ struct Bsdf { Leaf leaf0; Leaf leaf1; float weight; bool blend; bool mapped; vec
 // A delta lobe's sample (`delta`) has its choice probability as `pdf` and its weight × pdf as
 // `value` (src/bsdf/specular.rs).
 struct BsdfSample { vec3 wo; float pdf; vec3 value; bool valid; bool delta; };
-// ∂ by the colour (albedo or reflectance), the roughness and a dielectric's transmittance, per
-// image channel.
+// ∂ by the colour (albedo or reflectance), the roughness and a dielectric's transmittance (a
+// plastic's specular reflectance), per image channel.
 struct LeafGrad { vec3 color; vec3 alpha; vec3 trans; vec3 alpha_v; };
 struct BsdfGrad { LeafGrad leaf0; LeafGrad leaf1; vec3 weight; };
 
@@ -183,7 +183,7 @@ bool leaf_sample(Leaf l, vec3 wi, float u_lobe, vec2 u, out vec3 wo) {
 
 // ---- parameter derivatives, kept per image channel (twin of bsdf_eval_grad in src/bsdf/mod.rs) ----
 
-// ∂f̂/∂ρ and ∂f̂/∂α of a rough plastic (twin of PlasticLeaf::eval_grad).
+// ∂f̂/∂ρ, ∂f̂/∂α and ∂f̂/∂s (in `trans`) of a rough plastic (twin of PlasticLeaf::eval_grad).
 LeafGrad plastic_eval_grad(Leaf l, vec3 wi, vec3 wo, vec3 adj) {
     if (wi.z <= 0.0 || wo.z <= 0.0) return LeafGrad(vec3(0.0), vec3(0.0), vec3(0.0), vec3(0.0));
     vec3 h = normalize(wi + wo);
@@ -204,7 +204,7 @@ LeafGrad plastic_eval_grad(Leaf l, vec3 wi, vec3 wo, vec3 adj) {
     vec3 d_diffuse = (nonlinear ? n * n : n) * (k * t_i * t_o);
     vec3 d_alpha = l.k * (f * dscalar) + l.color * n * (k * (dt_i * t_o + t_i * dt_o))
         + l.color * n * n * rbar * (dinternal * k * t_i * t_o);
-    return LeafGrad(adj * d_diffuse, adj * d_alpha, vec3(0.0), vec3(0.0));
+    return LeafGrad(adj * d_diffuse, adj * d_alpha, adj * (f * scalar), vec3(0.0));
 }
 
 LeafGrad leaf_eval_grad(Leaf l, vec3 wi, vec3 wo, vec3 adj) {

@@ -290,9 +290,11 @@ BsdfSample splastic_sample(Leaf l, vec3 wi, float u_lobe, vec2 u) {
     return s;
 }
 
-// ∂f̂/∂ρ per channel, times adj: the base's, or 0 toward the mirror direction (the coating's sample).
+// ∂f̂/∂ρ per channel, times adj: the base's; toward the mirror direction (the coating's sample)
+// the value's derivative by the specular colour instead, in `trans` (twin: SmoothPlasticLeaf::eval_grad).
 LeafGrad splastic_eval_grad(Leaf l, vec3 wi, vec3 wo, vec3 adj) {
-    if (wi.z <= 0.0 || wo.z <= 0.0 || wo == vec3(-wi.x, -wi.y, wi.z)) return LeafGrad(vec3(0.0), vec3(0.0), vec3(0.0), vec3(0.0));
+    if (wi.z <= 0.0 || wo.z <= 0.0) return LeafGrad(vec3(0.0), vec3(0.0), vec3(0.0), vec3(0.0));
+    if (wo == vec3(-wi.x, -wi.y, wi.z)) return LeafGrad(vec3(0.0), vec3(0.0), adj * fresnel_dielectric(wi.z, l.eta.x), vec3(0.0));
     vec3 n = splastic_renormalisation(l);
     return LeafGrad(adj * (l.eta.z != 0.0 ? n * n : n) * splastic_base(l, fresnel_dielectric(wi.z, l.eta.x), wo), vec3(0.0), vec3(0.0), vec3(0.0));
 }

@@ -15,12 +15,12 @@
 // dpdv: ∂p/∂v likewise (kernels with normal or bump maps).
 struct Surface { vec3 p; vec3 ng; vec3 ns; vec2 uv; uint material; uint emitter; uint interior; vec3 dpdu; vec3 dpdv; vec2 bary; uint tri; };
 
-// Where a material's textures are read: the hit's texture coordinates, and for a mesh attribute
-// its triangle (index in the tri_vertices array) and barycentric coordinates (b1, b2) (twin:
-// TexAt of src/cpu/surface.rs).
-struct TexAt { vec2 uv; vec2 bary; uint tri; };
+// Where a material's textures are read: the hit's texture coordinates, for a mesh attribute
+// its triangle (index in the tri_vertices array) and barycentric coordinates (b1, b2), and for a
+// volume texture the world-space point (twin: TexAt of src/cpu/surface.rs).
+struct TexAt { vec2 uv; vec2 bary; uint tri; vec3 p; };
 
-TexAt tex_at(Surface s) { return TexAt(s.uv, s.bary, s.tri); }
+TexAt tex_at(Surface s) { return TexAt(s.uv, s.bary, s.tri, s.p); }
 
 // A triangle's vertex indices and mesh (TriVertices, 16 bytes) read as two 64-bit words, like
 // the traversal's nodes and triangles (bvh.glsl): on lavapipe each word read is one gather
@@ -142,6 +142,8 @@ int wrap_texel(int i, int n, uint mode) {
     }
     return euclid_mod(i, n);
 }
+
+#include "field.glsl"
 
 // The four texels a lookup at uv reads (row 0 is v = 0): their parameter offsets (RGB at
 // offset..offset+2) and weights — bilinear, or the nearest texel with weight 1 (`TEX_NEAREST`),
@@ -341,8 +343,13 @@ void material_footprint(Material m, TexAt at, out uint texel[4], out float weigh
     }
 }
 
+// Whether a textured material's colour is Mitsuba's `volume` texture: a field (p_color is its
+// index in the fields array) looked up at the world-space point.
+bool volume_textured(Material m) { return HAS2(F2_VOLUME_TEXTURE) && (m.tex_mode & TEX_VOLUME) != 0u; }
+
 // A textured material's colour at `at`.
 vec3 texture_lookup(Material m, TexAt at) {
+    if (volume_textured(m)) return field_rgb(m.p_color, at.p);
     uint texel[4];
     float weight[4];
     material_footprint(m, at, texel, weight);
@@ -472,8 +479,10 @@ Leaf leaf_from_material(Material m, TexAt at) {
     l.eta = m.eta;
     // A smooth dielectric's η: its parameter (p_weight) or the constant.
     if (delta && m.tag != MAT_CONDUCTOR && m.p_weight != NO_PARAM) l.eta.x = params[m.p_weight];
-    // A dielectric's transmittance parameter: p_alpha (smooth) or p_weight (rough).
-    uint p_trans = rough_glass ? m.p_weight : (delta && m.tag != MAT_CONDUCTOR ? m.p_alpha : NO_PARAM);
+    // A dielectric's transmittance parameter: p_alpha (smooth) or p_weight (rough); a plastic's
+    // specular colour: p_weight.
+    bool coated = plastic || is_smooth_plastic(m.tag);
+    uint p_trans = (rough_glass || coated) ? m.p_weight : (delta && m.tag != MAT_CONDUCTOR ? m.p_alpha : NO_PARAM);
     l.k = colour_value(p_trans, at, m.k);
     return l;
 }
@@ -521,7 +530,7 @@ struct GradTerms {
 
 GradTerms no_grad_terms() {
     LeafGrad none = LeafGrad(vec3(0.0), vec3(0.0), vec3(0.0), vec3(0.0));
-    return GradTerms(NO_PARAM, TexAt(vec2(0.0), vec2(0.0), 0u), BsdfGrad(none, none, vec3(0.0)), NO_PARAM, vec3(0.0), NO_PARAM, vec3(0.0),
+    return GradTerms(NO_PARAM, TexAt(vec2(0.0), vec2(0.0), 0u, vec3(0.0)), BsdfGrad(none, none, vec3(0.0)), NO_PARAM, vec3(0.0), NO_PARAM, vec3(0.0),
                      vec2(0.0), vec2(0.0), vec3(0.0, 0.0, 1.0), NO_PARAM, vec3(0.0));
 }
 
@@ -637,7 +646,9 @@ void push_leaf(Material m, TexAt at, LeafGrad g) {
         return;
     }
     if (HAS(F_TEXTURE) && m.tex_width > 0u) {
-        if (HAS(G_TEXTURE)) {
+        if (HAS(G_TEXTURE) && volume_textured(m)) {
+            field_grad(m.p_color, at.p, g.color);
+        } else if (HAS(G_TEXTURE)) {
             uint texel[4];
             float weight[4];
             material_footprint(m, at, texel, weight);
@@ -649,6 +660,8 @@ void push_leaf(Material m, TexAt at, LeafGrad g) {
     } else if (HAS(G_COLOR)) {
         push_rgb(m.p_color, g.color);
     }
+    // A plastic's specular colour (p_weight: a parameter, a texture or a constant).
+    if (is_plastic(m.tag) || is_smooth_plastic(m.tag)) push_colour(m.p_weight, at, g.trans);
     if (HAS(G_ALPHA) && is_conductor(m.tag) && m.p_alpha_v != m.p_alpha) {
         push_scalar(m.p_alpha, at, g.alpha, true);
         push_scalar(m.p_alpha_v, at, g.alpha_v, true);

@@ -170,8 +170,8 @@ pub fn leaf_eval_grad(leaf: &Leaf, wi: Vec3, wo: Vec3, adj: Vec3) -> LeafGrad {
             }
         }
         Leaf::RoughPlastic(p) => {
-            let (color, alpha) = p.eval_grad(wi, wo);
-            LeafGrad { color: adj * color, alpha: adj * alpha, ..LeafGrad::default() }
+            let (color, alpha, specular) = p.eval_grad(wi, wo);
+            LeafGrad { color: adj * color, alpha: adj * alpha, trans: adj * specular, ..LeafGrad::default() }
         }
         Leaf::RoughDielectric(d) => {
             let (colour, transmits, alpha) = d.eval_grad(wi, wo);
@@ -182,7 +182,10 @@ pub fn leaf_eval_grad(leaf: &Leaf, wi: Vec3, wo: Vec3, adj: Vec3) -> LeafGrad {
             let g = s.value_grad(wi, wo);
             LeafGrad { color: adj * g.color, trans: adj * g.trans, ..LeafGrad::default() }
         }
-        Leaf::SmoothPlastic(p) => LeafGrad { color: adj * p.eval_grad(wi, wo).color, ..LeafGrad::default() },
+        Leaf::SmoothPlastic(p) => {
+            let g = p.eval_grad(wi, wo);
+            LeafGrad { color: adj * g.color, trans: adj * g.trans, ..LeafGrad::default() }
+        }
         Leaf::Principled(p) => LeafGrad { principled: p.eval_grad(wi, wo).1.weighted(adj), ..LeafGrad::default() },
     }
 }

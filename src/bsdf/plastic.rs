@@ -113,11 +113,15 @@ impl SmoothPlasticLeaf {
         (pdf > 0.0).then(|| BsdfSample { wo, pdf, value: self.eval(wi, wo), delta: false })
     }
 
-    /// ∂f̂/∂ρ per channel at `wo`: the base's, or 0 toward the mirror direction (the coating's
-    /// sample, whose weight does not depend on ρ).
+    /// ∂f̂/∂ρ per channel at `wo` (in `color`): the base's; toward the mirror direction (the
+    /// coating's sample, whose value s·F(cos θi) does not depend on ρ) the value's derivative by
+    /// the specular colour s instead (in `trans`).
     pub fn eval_grad(&self, wi: Vec3, wo: Vec3) -> LeafGrad {
-        if wi.z <= 0.0 || wo.z <= 0.0 || wo == reflect(wi) {
+        if wi.z <= 0.0 || wo.z <= 0.0 {
             return LeafGrad::default();
+        }
+        if wo == reflect(wi) {
+            return LeafGrad { trans: Vec3::splat(fresnel_dielectric(wi.z, self.eta).0), ..LeafGrad::default() };
         }
         let n = self.renormalisation();
         let base = self.base_factor(fresnel_dielectric(wi.z, self.eta).0, wo);
@@ -154,8 +158,8 @@ mod tests {
     }
 
     /// Base samples report the base's density and value; coating samples are mirror deltas with
-    /// weight F·s over their probability; the whole albedo stays below 1; ∂f̂/∂ρ matches finite
-    /// differences of the base's value.
+    /// weight F·s over their probability, whose derivative by s is F; the whole albedo stays below
+    /// 1; ∂f̂/∂ρ matches finite differences of the base's value.
     #[test]
     fn samples_weights_and_derivatives() {
         use crate::rng::{PassTag, RngKey, Stream, uniform4};
@@ -170,6 +174,10 @@ mod tests {
                     assert_eq!(s.wo, reflect(wi));
                     let f = fresnel_dielectric(wi.z, l.eta).0;
                     assert!((s.value - l.specular * f).abs().max_element() < 1e-6);
+                    // The coating sample's value is linear in the specular colour: its derivative
+                    // F is what eval_grad reports there (and nothing for ρ).
+                    let g = l.eval_grad(wi, s.wo);
+                    assert_eq!((g.trans, g.color), (Vec3::splat(f), Vec3::ZERO));
                 } else {
                     assert_eq!((s.pdf, s.value), (l.pdf(wi, s.wo), l.eval(wi, s.wo)));
                 }

@@ -264,14 +264,14 @@ impl PlasticLeaf {
         }
     }
 
-    /// ∂f̂/∂ρ per channel and ∂f̂/∂α.
-    pub fn eval_grad(&self, wi: Vec3, wo: Vec3) -> (Vec3, Vec3) {
+    /// ∂f̂/∂ρ per channel, ∂f̂/∂α and ∂f̂/∂s per channel (s the specular reflectance).
+    pub fn eval_grad(&self, wi: Vec3, wo: Vec3) -> (Vec3, Vec3, Vec3) {
         if wi.z <= 0.0 || wo.z <= 0.0 {
-            return (Vec3::ZERO, Vec3::ZERO);
+            return (Vec3::ZERO, Vec3::ZERO, Vec3::ZERO);
         }
         let h = (wi + wo).normalize();
         let (f, _, _) = fresnel_dielectric(wi.dot(h), self.eta);
-        let (_, dscalar) = microfacet_eval_scalar_parts(self.distribution, Vec2::splat(self.alpha), wi, wo, h);
+        let (scalar, dscalar) = microfacet_eval_scalar_parts(self.distribution, Vec2::splat(self.alpha), wi, wo, h);
         let (t_i, t_o) = (table_lerp(&self.table, 0, wi.z), table_lerp(&self.table, 0, wo.z));
         let (dt_i, dt_o) =
             (table_lerp(&self.table, COATING_RES as usize, wi.z), table_lerp(&self.table, COATING_RES as usize, wo.z));
@@ -286,7 +286,7 @@ impl PlasticLeaf {
         let d_alpha = self.specular * (f * dscalar.element_sum())
             + self.diffuse * n * (k * (dt_i * t_o + t_i * dt_o))
             + self.diffuse * n * n * rbar * (dinternal * k * t_i * t_o);
-        (d_diffuse, d_alpha)
+        (d_diffuse, d_alpha, Vec3::splat(f * scalar))
     }
 }
 

@@ -290,9 +290,11 @@ fn derivatives_match_finite_differences() {
                             Leaf::SmoothPlastic(p) => p.diffuse[c],
                             Leaf::Principled(p) => p.base_color[c],
                         };
+                        // A plastic's `trans` is its specular colour's derivative (checked below).
+                        let coated = matches!(base.leaves[leaf], Leaf::RoughPlastic(_) | Leaf::SmoothPlastic(_));
                         cases.push((
                             g.leaves[leaf].color[c]
-                                + g.leaves[leaf].trans[c]
+                                + if coated { 0.0 } else { g.leaves[leaf].trans[c] }
                                 + g.leaves[leaf].principled.base_color[c].dot(Vec3::ONE),
                             Box::new(move |v| {
                                 let mut x = base;
@@ -311,6 +313,24 @@ fn derivatives_match_finite_differences() {
                             value,
                             1e-3,
                         ));
+                    }
+                    // A rough plastic's specular colour, channel by channel.
+                    if let Leaf::RoughPlastic(p) = b.leaves[leaf] {
+                        for c in 0..3 {
+                            let base = *b;
+                            cases.push((
+                                g.leaves[leaf].trans[c],
+                                Box::new(move |v| {
+                                    let mut x = base;
+                                    if let Leaf::RoughPlastic(q) = &mut x.leaves[leaf] {
+                                        q.specular[c] = v;
+                                    }
+                                    x
+                                }),
+                                p.specular[c],
+                                1e-3,
+                            ));
+                        }
                     }
                     // A plastic's α moves its coating table too: rebuilt for each value (costly,
                     // so for the first samples only).

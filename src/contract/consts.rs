@@ -66,6 +66,9 @@ contract_constants! {
     /// `Material::tex_mode` (and a scalar texture's mode word): Mitsuba's `mesh_attribute` of
     /// one row per vertex, the hit triangle's three rows weighted by its barycentric coordinates.
     TEX_ATTR_VERTEX = 64;
+    /// `Material::tex_mode`: Mitsuba's `volume` texture, a field (`Material::p_color` is its
+    /// index in the fields array, `Globals::addr_fields`) looked up at the hit's world-space point.
+    TEX_VOLUME = 128;
     /// `Material::nmap_mode`: the map is a bump map (heights, one value a texel), not a normal
     /// map (RGB).
     NMAP_BUMP = 16;
@@ -159,6 +162,9 @@ contract_constants! {
     /// Second-word feature bit: the differential strategy with several targets, one hero per path
     /// (`Globals::hero_count` > 0, ALGORITHMS.md §5.8).
     F2_HERO = 1 << 0;
+    /// Second-word feature bit: a material's colour is a `volume` texture (`TEX_VOLUME`), read
+    /// through the fields' lookup of `shaders/lib/field.glsl`.
+    F2_VOLUME_TEXTURE = 1 << 2;
     /// Feature bit: next-event estimation.
     F_NEE = 1 << 0;
     /// Feature bit: a constant environment emitter.

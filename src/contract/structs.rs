@@ -349,13 +349,15 @@ contract_structs! {
         /// `p_alpha`.
         p_alpha_v: u32,
         /// Parameter offset of the blend weight (blend), or `SCALAR_TEXTURE` with its texture's
-        /// descriptor when textured; of a smooth dielectric's η (`NO_PARAM`: `eta.x` holds it).
+        /// descriptor when textured; of a smooth dielectric's η (`NO_PARAM`: `eta.x` holds it); a
+        /// plastic's specular colour slot (a parameter, `SCALAR_TEXTURE` with its descriptor, or
+        /// `NO_PARAM`: `k` holds it).
         p_weight: u32,
         /// Real part of the conductor's complex index of refraction (RGB). Rough plastic: (η =
         /// int_ior/ext_ior, the coating's sampling weight w, 1 if `nonlinear` else 0).
         eta: Vec3,
-        /// Imaginary part of the conductor's complex index of refraction (RGB). Rough plastic: its
-        /// specular reflectance.
+        /// Imaginary part of the conductor's complex index of refraction (RGB). Plastics: their
+        /// specular reflectance when it is a constant.
         k: Vec3,
         /// Textured: row 0 of the texture-coordinate transform, u' = dot(uv_row0, (u, v, 1))
         /// (Mitsuba's `to_uv`; (1, 0, 0) for none).

@@ -52,18 +52,20 @@ fn grid_wrap(f: &FieldDesc) -> Wrap {
     }
 }
 
-fn rgb(flat: &FlatScene, f: &FieldDesc, p: Vec3) -> Vec3 {
+/// Field `f` at world point `p` per channel (a grey field's one value in all three; twin:
+/// `field_rgb` of shaders/lib/field.glsl).
+pub(crate) fn field_rgb(flat: &FlatScene, f: &FieldDesc, p: Vec3) -> Vec3 {
     Vec3::new(field_at(flat, f, p, 0), field_at(flat, f, p, 1), field_at(flat, f, p, 2))
 }
 
 /// The extinction `scale · sigma_t(p)` per channel.
 pub fn medium_extinction(flat: &FlatScene, m: &MediumDesc, p: Vec3) -> Vec3 {
-    flat.params[m.p_scale as usize] * rgb(flat, &flat.fields[m.sigma_t as usize], p)
+    flat.params[m.p_scale as usize] * field_rgb(flat, &flat.fields[m.sigma_t as usize], p)
 }
 
 /// The albedo per channel.
 pub fn albedo(flat: &FlatScene, m: &MediumDesc, p: Vec3) -> Vec3 {
-    rgb(flat, &flat.fields[m.albedo as usize], p)
+    field_rgb(flat, &flat.fields[m.albedo as usize], p)
 }
 
 /// Henyey–Greenstein's g of `m` (0 for an isotropic medium).
@@ -498,7 +500,7 @@ fn trilinear(f: &FieldDesc, local: Vec3) -> [(u32, f32); 8] {
 
 /// GRAD of field `f` at `p` with weight `w` per image channel: each value's derivative
 /// (channel c of an RGB field reaches image channel c only; a grey field reaches all three).
-fn field_grad(f: &FieldDesc, p: Vec3, w: Vec3, sink: &mut GradSink<'_>) {
+pub(crate) fn field_grad(f: &FieldDesc, p: Vec3, w: Vec3, sink: &mut GradSink<'_>) {
     let add = |sink: &mut GradSink<'_>, base: u32, scale: f32| {
         if f.channels == 1 {
             sink.add(base, w * scale);
@@ -522,7 +524,7 @@ fn field_grad(f: &FieldDesc, p: Vec3, w: Vec3, sink: &mut GradSink<'_>) {
 /// the field's values).
 pub fn extinction_grad(flat: &FlatScene, m: &MediumDesc, p: Vec3, w: Vec3, sink: &mut GradSink<'_>) {
     let field = &flat.fields[m.sigma_t as usize];
-    sink.add(m.p_scale, w * rgb(flat, field, p));
+    sink.add(m.p_scale, w * field_rgb(flat, field, p));
     field_grad(field, p, w * flat.params[m.p_scale as usize], sink);
 }
 

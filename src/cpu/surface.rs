@@ -13,8 +13,8 @@ use crate::contract::ALPHA_TEXTURE_FLOOR;
 use crate::contract::{
     COATING_TABLE_LEN, MAT_BLEND, MAT_CONDUCTOR, MAT_DIELECTRIC, MAT_PLASTIC, MAT_PRINCIPLED, MAT_ROUGH_CONDUCTOR,
     MAT_ROUGH_DIELECTRIC, MAT_ROUGH_PLASTIC, MAT_THIN_DIELECTRIC, Material, NMAP_BUMP, NO_ARRAY, NO_EMITTER, NO_PARAM,
-    SCALAR_TEXTURE, TEX_ATTR_FACE, TEX_ATTR_VERTEX, TEX_CHECKER, TEX_NEAREST, TEX_WRAP_CLAMP, TEX_WRAP_MIRROR,
-    TEXTURE_DESC_LEN,
+    SCALAR_TEXTURE, TEX_ATTR_FACE, TEX_ATTR_VERTEX, TEX_CHECKER, TEX_NEAREST, TEX_VOLUME, TEX_WRAP_CLAMP,
+    TEX_WRAP_MIRROR, TEXTURE_DESC_LEN,
 };
 use crate::cpu::path::GradSink;
 use crate::gpu::variant::colour_textured;
@@ -47,9 +47,9 @@ pub struct Surface {
     pub tri: u32,
 }
 
-/// Where a material's textures are read: the hit's texture coordinates, and for a mesh attribute
-/// its triangle (index in [`FlatScene::tri_vertices`]) and barycentric coordinates (b1, b2)
-/// (twin: `TexAt` of shaders/lib/surface.glsl).
+/// Where a material's textures are read: the hit's texture coordinates, for a mesh attribute its
+/// triangle (index in [`FlatScene::tri_vertices`]) and barycentric coordinates (b1, b2), and for
+/// a `volume` texture the world-space point (twin: `TexAt` of shaders/lib/surface.glsl).
 #[derive(Clone, Copy, Debug)]
 pub struct TexAt {
     /// Texture coordinates.
@@ -58,12 +58,14 @@ pub struct TexAt {
     pub bary: glam::Vec2,
     /// The triangle.
     pub tri: u32,
+    /// The world-space point.
+    pub p: Vec3,
 }
 
 impl Surface {
     /// Where this hit's material reads its textures.
     pub fn tex_at(&self) -> TexAt {
-        TexAt { uv: self.uv, bary: self.bary, tri: self.tri }
+        TexAt { uv: self.uv, bary: self.bary, tri: self.tri, p: self.p }
     }
 }
 
@@ -326,8 +328,17 @@ pub fn texture_uv(m: &Material, uv: glam::Vec2) -> glam::Vec2 {
     glam::Vec2::new(m.uv_row0.dot(p), m.uv_row1.dot(p))
 }
 
+/// Whether a textured material's colour is Mitsuba's `volume` texture: a field (`p_color` is its
+/// index in [`FlatScene::fields`]) looked up at the world-space point.
+fn volume_textured(m: &Material) -> bool {
+    m.tex_mode & TEX_VOLUME != 0
+}
+
 /// A textured material's colour at `at`.
 pub fn texture_lookup(flat: &FlatScene, m: &Material, at: TexAt) -> Vec3 {
+    if volume_textured(m) {
+        return crate::cpu::medium::field_rgb(flat, &flat.fields[m.p_color as usize], at.p);
+    }
     let params = &flat.params[..];
     let (texel, weight) = material_footprint(flat, m, at);
     param_rgb(params, texel[0]) * weight[0]
@@ -488,7 +499,7 @@ fn leaf_from_material(flat: &FlatScene, m: &Material, at: TexAt) -> Leaf {
                 distribution,
                 alpha: params[m.p_alpha as usize],
                 diffuse: color,
-                specular: m.k,
+                specular: colour_value(flat, m.p_weight, at, m.k),
                 eta: m.eta.x,
                 specular_weight: m.eta.y,
                 nonlinear: m.eta.z != 0.0,
@@ -523,7 +534,7 @@ fn leaf_from_material(flat: &FlatScene, m: &Material, at: TexAt) -> Leaf {
         }
         MAT_PLASTIC => Leaf::SmoothPlastic(SmoothPlasticLeaf {
             diffuse: color,
-            specular: m.k,
+            specular: colour_value(flat, m.p_weight, at, m.k),
             eta: m.eta.x,
             specular_weight: m.eta.y,
             nonlinear: m.eta.z != 0.0,
@@ -567,6 +578,10 @@ pub fn resolve_bsdf(flat: &FlatScene, id: u32, at: TexAt) -> Bsdf {
 /// Scatters ∂/∂(texels) of a lookup: per-channel gradient `g` split by the footprint's weights
 /// (a nearest or checkerboard lookup reads one texel: nothing is added for the rest).
 pub fn texture_backward(flat: &FlatScene, m: &Material, at: TexAt, g: Vec3, sink: &mut GradSink<'_>) {
+    if volume_textured(m) {
+        crate::cpu::medium::field_grad(&flat.fields[m.p_color as usize], at.p, g, sink);
+        return;
+    }
     let (texel, weight) = material_footprint(flat, m, at);
     for (t, w) in texel.into_iter().zip(weight) {
         if w != 0.0 {
@@ -597,6 +612,10 @@ fn leaf_backward(flat: &FlatScene, m: &Material, at: TexAt, g: &LeafGrad, sink: 
         texture_backward(flat, m, at, g.color, sink);
     } else {
         sink.add_rgb(m.p_color, g.color);
+    }
+    if m.tag == MAT_ROUGH_PLASTIC || m.tag == MAT_PLASTIC {
+        // The coating's specular colour (a parameter, a texture or a constant in p_weight).
+        colour_backward(flat, m.p_weight, at, g.trans, sink);
     }
     if m.tag == MAT_ROUGH_CONDUCTOR && m.p_alpha_v != m.p_alpha {
         scalar_backward(flat, m.p_alpha, at, g.alpha, true, sink);

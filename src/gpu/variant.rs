@@ -22,8 +22,11 @@ pub const fn word2(bit: u32) -> u64 {
 pub fn scene_features(flat: &FlatScene, env_param: u32) -> u64 {
     let mut f = 0;
     // Bits of the second word (`F2_*`).
-    let f2 = 0;
+    let mut f2 = 0;
     for m in &flat.materials {
+        if m.tex_mode & TEX_VOLUME != 0 {
+            f2 |= F2_VOLUME_TEXTURE;
+        }
         f |= match m.tag {
             MAT_DIFFUSE => F_DIFFUSE,
             MAT_ROUGH_CONDUCTOR => F_CONDUCTOR | if m.distribution == DIST_BECKMANN { F_BECKMANN } else { F_GGX },
@@ -118,20 +121,35 @@ pub fn param_kinds(flat: &FlatScene, env: (u32, u32), begin: u32, end: u32) -> P
         let (offset, len) = scalar_slot_range(flat, slot);
         overlaps(offset, len)
     };
+    // Reflectance, (dielectrics) transmittance and (plastics) specular reflectance, each a
+    // parameter, a colour texture's texels (`SCALAR_TEXTURE`) or NO_PARAM.
+    let specular_kinds = |m: &crate::contract::Material| {
+        let mut k = ParamKinds::NONE;
+        for slot in specular_colour_slots(m) {
+            let (offset, texels) = scalar_slot_range(flat, slot);
+            if overlaps(offset, 3 * texels) {
+                k = k.union(if colour_textured(slot) { ParamKinds::TEXTURE } else { ParamKinds::COLOR });
+            }
+        }
+        k
+    };
+    let field = |f: u32| {
+        let d = &flat.fields[f as usize];
+        overlaps(d.offset, d.channels * if d.kind == FIELD_CONSTANT { 1 } else { d.res_x * d.res_y * d.res_z })
+    };
     let mut k = ParamKinds::NONE;
     for m in &flat.materials {
+        k = k.union(specular_kinds(m));
         match m.tag {
             MAT_CONDUCTOR | MAT_DIELECTRIC | MAT_THIN_DIELECTRIC | MAT_ROUGH_DIELECTRIC => {
-                // Reflectance and (dielectrics) transmittance, each a parameter, a colour
-                // texture's texels (`SCALAR_TEXTURE`) or NO_PARAM.
-                for slot in specular_colour_slots(m) {
-                    let (offset, texels) = scalar_slot_range(flat, slot);
-                    if overlaps(offset, 3 * texels) {
-                        k = k.union(if colour_textured(slot) { ParamKinds::TEXTURE } else { ParamKinds::COLOR });
-                    }
-                }
                 if m.tag == MAT_ROUGH_DIELECTRIC && overlaps_slot(m.p_alpha) {
                     k = k.union(ParamKinds::ALPHA);
+                }
+            }
+            // A `volume` texture's p_color is its field's index.
+            MAT_DIFFUSE if m.tex_mode & TEX_VOLUME != 0 => {
+                if field(m.p_color) {
+                    k = k.union(ParamKinds::TEXTURE);
                 }
             }
             MAT_DIFFUSE | MAT_ROUGH_CONDUCTOR | MAT_ROUGH_PLASTIC | MAT_PLASTIC => {
@@ -183,24 +201,22 @@ pub fn param_kinds(flat: &FlatScene, env: (u32, u32), begin: u32, end: u32) -> P
     if overlaps(env.0, env.1) {
         k = k.union(ParamKinds::ENVIRONMENT);
     }
-    let field = |f: u32| {
-        let d = &flat.fields[f as usize];
-        overlaps(d.offset, d.channels * if d.kind == FIELD_CONSTANT { 1 } else { d.res_x * d.res_y * d.res_z })
-    };
     if flat.media.iter().any(|m| overlaps(m.p_scale, 1) || overlaps(m.p_g, 1) || field(m.sigma_t) || field(m.albedo)) {
         k = k.union(ParamKinds::MEDIUM);
     }
     k
 }
 
-/// The colour slots of a smooth BSDF or rough dielectric `m` (none for another material): the
-/// reflectance (`p_color`) and a dielectric's transmittance (`p_alpha` smooth, `p_weight` rough),
-/// each a parameter offset, `NO_PARAM` (a constant) or a colour texture (`SCALAR_TEXTURE`).
+/// The colour slots of a smooth BSDF, rough dielectric or plastic `m` (none for another
+/// material): the reflectance (`p_color`) and a dielectric's transmittance (`p_alpha` smooth,
+/// `p_weight` rough), a plastic's specular reflectance (`p_weight`), each a parameter offset,
+/// `NO_PARAM` (a constant) or a colour texture (`SCALAR_TEXTURE`).
 pub fn specular_colour_slots(m: &crate::contract::Material) -> Vec<u32> {
     match m.tag {
         MAT_CONDUCTOR => vec![m.p_color],
         MAT_DIELECTRIC | MAT_THIN_DIELECTRIC => vec![m.p_color, m.p_alpha],
         MAT_ROUGH_DIELECTRIC => vec![m.p_color, m.p_weight],
+        MAT_ROUGH_PLASTIC | MAT_PLASTIC => vec![m.p_weight],
         _ => Vec::new(),
     }
 }
@@ -238,7 +254,7 @@ pub fn request_features(scene: u64, options: &RenderOptions, kinds: ParamKinds) 
 
 /// A short human-readable name of a variant, for logs: `nee env diffuse conductor[beckmann] ∂alpha`.
 pub fn describe(features: u64) -> String {
-    const NAMES: [(u64, &str); 32] = [
+    const NAMES: [(u64, &str); 33] = [
         (F_NEE as u64, "nee"),
         (F_ENV as u64, "env"),
         (F_EMITTERS as u64, "emitters"),
@@ -264,6 +280,7 @@ pub fn describe(features: u64) -> String {
         (F_LIGHT_TEXTURE as u64, "light-texture"),
         (F_PRINCIPLED as u64, "principled"),
         (word2(F2_HERO), "hero"),
+        (word2(F2_VOLUME_TEXTURE), "volume-texture"),
         (G_COLOR as u64, "∂color"),
         (G_TEXTURE as u64, "∂texture"),
         (G_ALPHA as u64, "∂alpha"),

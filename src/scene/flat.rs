@@ -15,7 +15,8 @@ use crate::contract::{
     MAT_CONDUCTOR, MAT_DIELECTRIC, MAT_DIFFUSE, MAT_NULL, MAT_PLASTIC, MAT_PRINCIPLED, MAT_ROUGH_CONDUCTOR,
     MAT_ROUGH_DIELECTRIC, MAT_ROUGH_PLASTIC, MAT_THIN_DIELECTRIC, Material as GpuMaterial, MediumDesc, MeshShading,
     NMAP_BUMP, NO_ARRAY, NO_EMITTER, NO_MEDIUM, NO_PARAM, PHASE_HG, PHASE_ISOTROPIC, SCALAR_TEXTURE, TEX_ATTR_FACE,
-    TEX_ATTR_VERTEX, TEX_CHECKER, TEX_NEAREST, TEX_WRAP_CLAMP, TEX_WRAP_MIRROR, TEXTURE_DESC_LEN, TriVertices,
+    TEX_ATTR_VERTEX, TEX_CHECKER, TEX_NEAREST, TEX_VOLUME, TEX_WRAP_CLAMP, TEX_WRAP_MIRROR, TEXTURE_DESC_LEN,
+    TriVertices,
 };
 use crate::error::Result;
 use crate::params::ParamId;
@@ -434,6 +435,14 @@ fn albedo_fields(scene: &Scene, albedo: Albedo) -> GpuMaterial {
             tex_mode: attribute_mode(source),
             ..Default::default()
         },
+        // p_color is the field's index: after the media's two each (flatten_media).
+        Albedo::Volume(v) => GpuMaterial {
+            p_color: 2 * scene.media.len() as u32 + v,
+            tex_width: 1,
+            tex_height: 1,
+            tex_mode: TEX_VOLUME,
+            ..Default::default()
+        },
         Albedo::Bitmap(t) => {
             let t = &scene.textures[t.0 as usize];
             GpuMaterial {
@@ -456,8 +465,20 @@ fn albedo_mean(scene: &Scene, albedo: Albedo) -> f32 {
             scene.params.get(id)
         }
         Albedo::Bitmap(t) => scene.params.get(scene.textures[t.0 as usize].texels),
+        Albedo::Volume(v) => match scene.volume_textures[v as usize] {
+            Field::Constant { value, .. } | Field::Grid { values: value, .. } => scene.params.get(value),
+        },
     };
     (values.iter().map(|&v| f64::from(v)).sum::<f64>() / values.len().max(1) as f64) as f32
+}
+
+/// The mean of a specular colour over its channels (and texels): Mitsuba's `Texture::mean`.
+fn colour_mean(scene: &Scene, c: SmoothColour) -> f32 {
+    match c {
+        SmoothColour::Param(id) => albedo_mean(scene, Albedo::Rgb(id)),
+        SmoothColour::Constant(v) => v.element_sum() / 3.0,
+        SmoothColour::Texture(a) => albedo_mean(scene, a),
+    }
 }
 
 /// A dielectric's or conductor's colour as (parameter offset, 0), (`NO_PARAM`, the constant), or
@@ -486,7 +507,8 @@ fn colour_descriptor(scene: &Scene, albedo: Albedo) -> [f32; TEXTURE_DESC_LEN as
 /// Appends the descriptor of every textured specular colour ([`SmoothColour::Texture`] of a
 /// smooth BSDF or rough dielectric) to `tables` (once per texture) and points its slot at it,
 /// `SCALAR_TEXTURE` or-ed with its offset there: the reflectance's `p_color`, the
-/// transmittance's `p_alpha` (smooth) or `p_weight` (rough). `materials` are `scene`'s, flattened.
+/// transmittance's `p_alpha` (smooth) or `p_weight` (rough), a plastic's specular colour's
+/// `p_weight`. `materials` are `scene`'s, flattened.
 fn colour_texture_tables(scene: &Scene, materials: &mut [GpuMaterial], tables: &mut Vec<f32>) {
     let mut placed: Vec<(Albedo, u32)> = Vec::new();
     let mut place = |albedo: Albedo, tables: &mut Vec<f32>| match placed.iter().find(|(a, _)| *a == albedo) {
@@ -511,6 +533,10 @@ fn colour_texture_tables(scene: &Scene, materials: &mut [GpuMaterial], tables: &
         let (reflectance, transmittance, rough) = match *leaf {
             Material::Smooth { reflectance, transmittance, .. } => (reflectance, transmittance, false),
             Material::RoughDielectric { reflectance, transmittance, .. } => (reflectance, transmittance, true),
+            // A plastic's specular colour sits where a rough dielectric's transmittance does.
+            Material::RoughPlastic { specular, .. } | Material::SmoothPlastic { specular, .. } => {
+                (SmoothColour::Constant(Vec3::ZERO), specular, true)
+            }
             _ => continue,
         };
         if let SmoothColour::Texture(a) = reflectance {
@@ -539,23 +565,28 @@ fn flatten_material(scene: &Scene, m: &Material) -> GpuMaterial {
             ..albedo_fields(scene, specular)
         },
         Material::RoughPlastic { distribution, alpha, diffuse, specular, eta, nonlinear } => {
-            // Mitsuba's sampling weight of the coating from the mean reflectances.
-            let (d_mean, s_mean) = (albedo_mean(scene, diffuse), (specular.x + specular.y + specular.z) / 3.0);
+            // Mitsuba's sampling weight of the coating from the mean reflectances; the specular
+            // colour a parameter or texture (p_weight) or a constant (k).
+            let (d_mean, s_mean) = (albedo_mean(scene, diffuse), colour_mean(scene, specular));
+            let (p_weight, k) = split_colour(scene, specular);
             GpuMaterial {
                 tag: MAT_ROUGH_PLASTIC,
                 distribution: distribution as u32,
                 p_alpha: offset(alpha),
+                p_weight,
                 eta: Vec3::new(eta, s_mean / (d_mean + s_mean), f32::from(u8::from(nonlinear))),
-                k: specular,
+                k,
                 ..albedo_fields(scene, diffuse)
             }
         }
         Material::SmoothPlastic { diffuse, specular, eta, nonlinear } => {
-            let (d_mean, s_mean) = (albedo_mean(scene, diffuse), (specular.x + specular.y + specular.z) / 3.0);
+            let (d_mean, s_mean) = (albedo_mean(scene, diffuse), colour_mean(scene, specular));
+            let (p_weight, k) = split_colour(scene, specular);
             GpuMaterial {
                 tag: MAT_PLASTIC,
+                p_weight,
                 eta: Vec3::new(eta, s_mean / (d_mean + s_mean), f32::from(u8::from(nonlinear))),
-                k: specular,
+                k,
                 ..albedo_fields(scene, diffuse)
             }
         }
@@ -800,7 +831,8 @@ fn coating_tables(materials: &mut [GpuMaterial], params: &[f32]) -> Vec<f32> {
     tables
 }
 
-/// The media, their fields (two per medium, extinction then albedo) and their majorant grids.
+/// The media, their fields (two per medium, extinction then albedo, then the surfaces' `volume`
+/// textures, [`Scene::volume_textures`]) and their majorant grids.
 fn flatten_media(scene: &Scene) -> (Vec<MediumDesc>, Vec<FieldDesc>, Vec<f32>) {
     let offset = |id| scene.params.entry(id).offset;
     let field = |f: &Field| match f {
@@ -865,5 +897,6 @@ fn flatten_media(scene: &Scene) -> (Vec<MediumDesc>, Vec<FieldDesc>, Vec<f32>) {
             }
         })
         .collect();
+    fields.extend(scene.volume_textures.iter().map(field));
     (media, fields, majorants)
 }

@@ -183,6 +183,9 @@ pub enum Albedo {
         /// Whose triangles or vertices they follow.
         source: AttributeSource,
     },
+    /// Mitsuba's `volume` texture: field `.0` of [`Scene::volume_textures`] (a constant or a
+    /// voxel grid) looked up at the hit's world-space point.
+    Volume(u32),
 }
 
 /// What a mesh attribute texture (Mitsuba's `mesh_attribute`) reads: its values are one row per
@@ -230,8 +233,9 @@ pub enum Material {
         alpha: ParamId,
         /// Diffuse reflectance of the base in [0, 1], constant or textured.
         diffuse: Albedo,
-        /// Specular reflectance of the coating (a constant, not a parameter).
-        specular: Vec3,
+        /// Specular reflectance of the coating: a parameter where the file gives it (Mitsuba
+        /// traverses it only then), a texture, or the constant 1.
+        specular: SmoothColour,
         /// int_ior / ext_ior.
         eta: f32,
         /// Mitsuba's `nonlinear`: the base's internal scattering darkens and saturates its colour.
@@ -270,8 +274,8 @@ pub enum Material {
     SmoothPlastic {
         /// Diffuse reflectance of the base in [0, 1], constant or textured.
         diffuse: Albedo,
-        /// Specular reflectance of the coating (a constant, not a parameter).
-        specular: Vec3,
+        /// Specular reflectance of the coating, as a rough plastic's.
+        specular: SmoothColour,
         /// int_ior / ext_ior.
         eta: f32,
         /// Mitsuba's `nonlinear`.
@@ -559,6 +563,8 @@ pub struct Scene {
     pub scalar_textures: Vec<ScalarTexture>,
     /// Participating media, each inside the meshes whose `interior` it is.
     pub media: Vec<medium::Medium>,
+    /// The fields of `volume` textures on surfaces ([`Albedo::Volume`]), in world space.
+    pub volume_textures: Vec<medium::Field>,
     /// The environment's radiance seen by rays that leave the scene, if any: one RGB value
     /// (constant), or the texels of `env_map`.
     pub environment: Option<ParamId>,
@@ -660,6 +666,7 @@ impl Scene {
             normal_maps: Vec::new(),
             scalar_textures: Vec::new(),
             media: Vec::new(),
+            volume_textures: Vec::new(),
             environment: None,
             env_map: None,
             lights: Vec::new(),
@@ -1087,6 +1094,19 @@ impl Scene {
             Ok(())
         };
         for m in &self.materials {
+            let volume = |a: Albedo| matches!(a, Albedo::Volume(_));
+            let colour = |c: SmoothColour| matches!(c, SmoothColour::Texture(a) if volume(a));
+            let refused = match *m {
+                Material::Principled { base_color, .. } => volume(base_color),
+                Material::Smooth { reflectance, transmittance, .. }
+                | Material::RoughDielectric { reflectance, transmittance, .. } => {
+                    colour(reflectance) || colour(transmittance)
+                }
+                _ => false,
+            };
+            if refused {
+                return Err(err("a material".into(), "a volume texture is only read as a diffuse reflectance".into()));
+            }
             let albedos = match *m {
                 Material::Diffuse { albedo } => vec![albedo],
                 Material::RoughConductor { specular, .. } => vec![specular],
@@ -1096,6 +1116,15 @@ impl Scene {
             for a in albedos {
                 if let Albedo::Attribute { values, source } = a {
                     attribute_len(values, source, 3, "colour")?;
+                }
+                // The kernels read a `volume` texture as a diffuse reflectance only.
+                if let Albedo::Volume(v) = a
+                    && (!matches!(m, Material::Diffuse { .. }) || v as usize >= self.volume_textures.len())
+                {
+                    return Err(err(
+                        format!("volume texture {v}"),
+                        "a volume texture is only read as a diffuse reflectance, and must exist".into(),
+                    ));
                 }
             }
         }

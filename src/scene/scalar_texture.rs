@@ -3,6 +3,7 @@
 use glam::Vec3;
 
 use super::Wrap;
+use crate::error::{Error, Result};
 use crate::params::ParamId;
 
 /// A one-channel texture on a scalar slot (Mitsuba's `bitmap` or `checkerboard` given as a
@@ -37,5 +38,44 @@ impl super::Scene {
     /// The scalar texture whose texels are parameter `id`, if `id` is one.
     pub fn scalar_texture(&self, id: ParamId) -> Option<&ScalarTexture> {
         self.scalar_textures.iter().find(|t| t.texels == id)
+    }
+
+    /// Adds a one-channel texture (bilinear, repeating, texture coordinates as they are) whose
+    /// `width × height` texels, row 0 at v = 0, become the parameter `name` within `range`; a
+    /// material's scalar slot (roughness, blend weight) refers to the returned parameter.
+    ///
+    /// # Errors
+    /// [`Error::Scene`] naming the texture if the texel count is not `width × height`; as
+    /// [`crate::params::ParamTable::add`] for the values.
+    pub fn add_scalar_texture(
+        &mut self,
+        name: &str,
+        width: u32,
+        height: u32,
+        texels: &[f32],
+        range: (f32, f32),
+    ) -> Result<ParamId> {
+        if width == 0 || height == 0 || texels.len() != width as usize * height as usize {
+            return Err(Error::Scene {
+                location: format!("texture {name}"),
+                message: format!(
+                    "{width}×{height} needs {} texels, got {}",
+                    width as usize * height as usize,
+                    texels.len()
+                ),
+            });
+        }
+        let id = self.params.add(name, texels, range)?;
+        self.scalar_textures.push(ScalarTexture {
+            texels: id,
+            width,
+            height,
+            nearest: false,
+            wrap: Wrap::Repeat,
+            checker: false,
+            to_uv: [Vec3::X, Vec3::Y],
+            attribute: None,
+        });
+        Ok(id)
     }
 }

@@ -12,7 +12,8 @@
 //!
 //! The Mitsuba loader reads `gridvolume` files with [`Grid::read`] (`scene/mitsuba/media.rs`); the
 //! scene's media (`scene/medium.rs`) and the CPU reference (`cpu/medium.rs`) look values up with
-//! [`lookup`], whose GLSL twin is the kernels' `field_rgb` (`shaders/lib/medium.glsl`).
+//! [`lookup`], whose GLSL twin is the kernels' `field_rgb` (`shaders/lib/field.glsl`); so do
+//! surfaces' `volume` textures.
 
 use std::path::Path;
 

@@ -11,7 +11,10 @@ camera rules in Python, independently of pathgrad's Rust loader, and writes:
                               area emitters for emissive materials, integrator `prb`
     OUT/NAME/*.ply            the meshes (binary, world space, with normals/uv as present)
     OUT/NAME/*.exr            base-colour textures, linear and multiplied by baseColorFactor; normal
-                              textures as stored, their scale folded in (inside a normalmap)
+                              textures as stored, their scale folded in (inside a normalmap); the
+                              textures a metallic-roughness texture becomes (α, blend weight,
+                              specular colour per texel) and emissive textures times their
+                              factor and strength
 
 and returns the map from each parameter pathgrad exposes to the key Mitsuba's `mi.traverse`
 gives the same quantity, which the reference JSON stores (`pathgrad_keys`). Mitsuba renders the
@@ -170,6 +173,27 @@ def rgb(v):
     return ", ".join(f"{float(x):.9g}" for x in v)
 
 
+def bitmap(name, file):
+    """A raw (linear) bitmap texture on property `name`."""
+    return (f'<texture type="bitmap" name="{name}"><string name="filename" value="{file}"/>'
+            f'<boolean name="raw" value="true"/></texture>')
+
+
+def resample(texels, width, height):
+    """RGB `texels` (rows, columns, 3) looked up bilinearly, repeating, at the centres of a
+    `width` × `height` grid: pathgrad's texture filter (src/cpu/surface.rs `texture_footprint`)."""
+    h, w, _ = texels.shape
+    x = (np.arange(width) + 0.5) / width * w - 0.5
+    y = (np.arange(height) + 0.5) / height * h - 0.5
+    x0, y0 = np.floor(x).astype(int), np.floor(y).astype(int)
+    fx, fy = (x - x0)[None, :, None], (y - y0)[:, None, None]
+    x1, y1 = (x0 + 1) % w, (y0 + 1) % h
+    x0, y0 = x0 % w, y0 % h
+    top = texels[y0][:, x0] * (1 - fx) + texels[y0][:, x1] * fx
+    bottom = texels[y1][:, x0] * (1 - fx) + texels[y1][:, x1] * fx
+    return top * (1 - fy) + bottom * fy
+
+
 class Converter:
     def __init__(self, gltf, out_dir, name, width):
         self.g, self.doc = gltf, gltf.doc
@@ -208,49 +232,95 @@ class Converter:
             texels[..., :2] = ((2.0 * texels[..., :2] - 1.0) * info.get("scale", 1.0) + 1.0) * 0.5
             normal_map = self.write_texture(name, texels, "normal")
             prefix += ".nested_bsdf"
-        texture, mean, tex_coord = None, base, None
-        if "baseColorTexture" in pbr:
-            info = pbr["baseColorTexture"]
-            source = self.doc["textures"][info["index"]]["source"]
-            texels = np.clip(srgb_to_linear(self.g.image_rgb(source)) * base, 0.0, 1.0)
-            mean = texels.reshape(-1, 3).mean(axis=0)
-            assert metallic == 0.0, "a textured metallic material is approximated by pathgrad (warned); not converted"
-            texture = self.write_texture(name, texels)
-            tex_coord = info.get("texCoord", 0)
-        if "normalTexture" in m:
-            set_ = m["normalTexture"].get("texCoord", 0)
+        texture, base_texels, mean, tex_coord = None, None, base, None
+
+        def same_set(info):
+            nonlocal tex_coord
+            set_ = info.get("texCoord", 0)
             assert tex_coord in (None, set_), "pathgrad refuses two texture coordinate sets"
             tex_coord = set_
 
-        def conductor(specular):
-            return (f'<bsdf type="roughconductor"><string name="distribution" value="ggx"/>'
-                    f'<float name="alpha" value="{alpha:.9g}"/><rgb name="specular_reflectance" value="{rgb(specular)}"/></bsdf>')
+        if "baseColorTexture" in pbr:
+            info = pbr["baseColorTexture"]
+            source = self.doc["textures"][info["index"]]["source"]
+            base_texels = np.clip(srgb_to_linear(self.g.image_rgb(source)) * base, 0.0, 1.0)
+            mean = base_texels.reshape(-1, 3).mean(axis=0)
+            same_set(info)
+        # The metallic-roughness texture: roughness in G, metallic in B, stored values times the factors.
+        rough_texels = metal_texels = None
+        if "metallicRoughnessTexture" in pbr:
+            info = pbr["metallicRoughnessTexture"]
+            stored = self.g.image_rgb(self.doc["textures"][info["index"]]["source"])
+            rough_texels = np.clip(stored[..., 1] * roughness, 0.0, 1.0)
+            metal_texels = np.clip(stored[..., 2] * metallic, 0.0, 1.0)
+            same_set(info)
+        strength = m.get("extensions", {}).get("KHR_materials_emissive_strength", {}).get("emissiveStrength", 1.0)
+        radiance = np.array(m.get("emissiveFactor", [0, 0, 0]), np.float64) * strength
+        if radiance.max() > 0 and "emissiveTexture" in m:
+            info = m["emissiveTexture"]
+            stored = self.g.image_rgb(self.doc["textures"][info["index"]]["source"])
+            radiance = self.write_texture(name, srgb_to_linear(stored) * radiance, "emission")
+            same_set(info)
+        elif "emissiveTexture" in m:
+            same_set(m["emissiveTexture"])
+        if "normalTexture" in m:
+            same_set(m["normalTexture"])
+        textured_metal = metal_texels is not None and metallic > 0.0 and not transmits
 
-        if metallic >= 1.0:
-            xml = conductor(mean)
-            self.keys[f"{name}.alpha.value"] = f"{prefix}.alpha.value"
+        def alpha_xml(key, pathgrad):
+            """The roughness: α = max(r², 10⁻³), a texture of the metallic-roughness texels or one value."""
+            if rough_texels is None:
+                self.keys[f"{pathgrad}.alpha.value"] = f"{key}.alpha.value"
+                return f'<float name="alpha" value="{alpha:.9g}"/>'
+            file = self.write_texture(pathgrad, np.maximum(rough_texels ** 2, ALPHA_MIN), "alpha")
+            self.keys[f"{pathgrad}.alpha.data"] = f"{key}.alpha.data"
+            return bitmap("alpha", file)
+
+        def conductor(specular, key, pathgrad):
+            colour = (bitmap("specular_reflectance", specular) if isinstance(specular, str)
+                      else f'<rgb name="specular_reflectance" value="{rgb(specular)}"/>')
+            return (f'<bsdf type="roughconductor"><string name="distribution" value="ggx"/>'
+                    f'{alpha_xml(key, pathgrad)}{colour}</bsdf>')
+
+        def diffuse_xml():
+            if base_texels is None:
+                self.keys[f"{name}.bsdf_0.reflectance.value"] = f"{prefix}.bsdf_0.reflectance.value"
+                return f'<bsdf type="diffuse"><rgb name="reflectance" value="{rgb(base)}"/></bsdf>'
+            self.keys[f"{name}.base_color.data"] = f"{prefix}.bsdf_0.reflectance.data"
+            return f'<bsdf type="diffuse">{bitmap("reflectance", self.write_texture(name, base_texels))}</bsdf>'
+
+        if textured_metal:
+            # Per metallic-roughness texel: w = F0 + (1 − F0)·m, s = (m·b + F0·(1 − m))/w, b the base
+            # colour there (resampled bilinearly at the texel centres when the sizes differ).
+            h, w_ = metal_texels.shape
+            colour = base if base_texels is None else resample(base_texels, w_, h)
+            m_ = metal_texels[..., None]
+            weight = f0 + (1.0 - f0) * m_
+            specular = np.minimum((m_ * colour + f0 * (1.0 - m_)) / weight, 1.0)
+            weight_file = self.write_texture(name, weight[..., 0], "weight")
+            specular_file = self.write_texture(name, specular, "specular")
+            self.keys[f"{name}.weight.data"] = f"{prefix}.weight.data"
+            self.keys[f"{name}.bsdf_1.specular_reflectance.data"] = f"{prefix}.bsdf_1.specular_reflectance.data"
+            xml = (f'<bsdf type="blendbsdf">{bitmap("weight", weight_file)}\n            {diffuse_xml()}\n'
+                   f'            {conductor(specular_file, prefix + ".bsdf_1", name + ".bsdf_1")}\n        </bsdf>')
+        elif metallic >= 1.0:
+            assert base_texels is None, "a textured metallic material is approximated by pathgrad (warned); not converted"
+            xml = conductor(mean, prefix, name)
             self.keys[f"{name}.specular_reflectance.value"] = f"{prefix}.specular_reflectance.value"
         elif transmits:
+            assert base_texels is None, "a textured transmitting material is approximated by pathgrad (warned)"
             # A rough dielectric (transmission taken as 1, metallic as 0), tinted by the mean colour.
             xml = (f'<bsdf type="roughdielectric"><string name="distribution" value="ggx"/>'
-                   f'<float name="alpha" value="{alpha:.9g}"/><float name="int_ior" value="{ior:.9g}"/>'
+                   f'{alpha_xml(prefix, name)}<float name="int_ior" value="{ior:.9g}"/>'
                    f'<float name="ext_ior" value="1"/><rgb name="specular_transmittance" value="{rgb(mean)}"/></bsdf>')
-            self.keys[f"{name}.alpha.value"] = f"{prefix}.alpha.value"
             self.keys[f"{name}.specular_transmittance.value"] = f"{prefix}.specular_transmittance.value"
         else:
+            assert base_texels is None or metallic == 0.0, "a textured metallic material is approximated (warned)"
             w = f0 + (1.0 - f0) * metallic
             specular = np.minimum((metallic * mean + f0 * (1.0 - metallic)) / w, 1.0)
-            if texture:
-                diffuse = (f'<bsdf type="diffuse"><texture type="bitmap" name="reflectance">'
-                           f'<string name="filename" value="{texture}"/><boolean name="raw" value="true"/></texture></bsdf>')
-                self.keys[f"{name}.base_color.data"] = f"{prefix}.bsdf_0.reflectance.data"
-            else:
-                diffuse = f'<bsdf type="diffuse"><rgb name="reflectance" value="{rgb(base)}"/></bsdf>'
-                self.keys[f"{name}.bsdf_0.reflectance.value"] = f"{prefix}.bsdf_0.reflectance.value"
-            xml = (f'<bsdf type="blendbsdf"><float name="weight" value="{w:.9g}"/>\n            {diffuse}\n'
-                   f'            {conductor(specular)}\n        </bsdf>')
+            xml = (f'<bsdf type="blendbsdf"><float name="weight" value="{w:.9g}"/>\n            {diffuse_xml()}\n'
+                   f'            {conductor(specular, prefix + ".bsdf_1", name + ".bsdf_1")}\n        </bsdf>')
             self.keys[f"{name}.weight.value"] = f"{prefix}.weight.value"
-            self.keys[f"{name}.bsdf_1.alpha.value"] = f"{prefix}.bsdf_1.alpha.value"
             self.keys[f"{name}.bsdf_1.specular_reflectance.value"] = f"{prefix}.bsdf_1.specular_reflectance.value"
         if normal_map:
             xml = (f'<bsdf type="normalmap">\n        <texture type="bitmap" name="normalmap">'
@@ -259,17 +329,17 @@ class Converter:
         if double_sided:
             xml = f'<bsdf type="twosided">\n        {xml}\n    </bsdf>'
         xml = xml.replace("<bsdf type=", f'<bsdf id="{name}" type=', 1)
-        strength = m.get("extensions", {}).get("KHR_materials_emissive_strength", {}).get("emissiveStrength", 1.0)
-        radiance = np.array(m.get("emissiveFactor", [0, 0, 0]), np.float64) * strength
-        entry = (name, xml, radiance if radiance.max() > 0 else None, tex_coord)
+        entry = (name, xml, radiance if isinstance(radiance, str) or radiance.max() > 0 else None, tex_coord)
         self.materials[index] = entry
         return entry
 
     def write_texture(self, name, texels, kind="base_color"):
+        """An EXR of linear texels (RGB, or one channel for a 2-D array) beside the scene."""
         import mitsuba as mi
         self.assets.mkdir(parents=True, exist_ok=True)
         file = self.assets / f"{name}_{kind}.exr"
-        mi.Bitmap(texels.astype(np.float32), mi.Bitmap.PixelFormat.RGB).write(str(file))
+        fmt = mi.Bitmap.PixelFormat.Y if texels.ndim == 2 else mi.Bitmap.PixelFormat.RGB
+        mi.Bitmap(np.ascontiguousarray(texels, dtype=np.float32), fmt).write(str(file))
         return f"{self.name}/{file.name}"
 
     # ---- nodes ----
@@ -377,7 +447,10 @@ class Converter:
             if normals is None:
                 shape += '        <boolean name="face_normals" value="true"/>\n'
             shape += f'        <ref id="{material}"/>\n'
-            if radiance is not None:
+            if isinstance(radiance, str):
+                shape += f'        <emitter type="area">{bitmap("radiance", radiance)}</emitter>\n'
+                self.keys[f"{name}.emitter.radiance.data"] = f"{name}__shape.emitter.radiance.data"
+            elif radiance is not None:
                 shape += f'        <emitter type="area"><rgb name="radiance" value="{rgb(radiance)}"/></emitter>\n'
                 self.keys[f"{name}.emitter.radiance.value"] = f"{name}__shape.emitter.radiance.value"
             self.shapes.append(shape + "    </shape>")

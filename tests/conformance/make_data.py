@@ -386,10 +386,29 @@ def albedo_grid():
     return np.stack([0.3 + 0.65 * x, 0.3 + 0.65 * y, 0.95 - 0.65 * z], axis=-1)
 
 
+def grey_albedo_grid():
+    """8^3 grey reflectance in [0.2, 0.8]: the blob rescaled (a `volume` texture's grid, away from
+    0 and 1 so finite differences of every voxel stay reflectances)."""
+    b = blob_grid()
+    return 0.2 + 0.6 * (b - b.min()) / (b.max() - b.min())
+
+
 def sigma_rgb_grid():
     """8^3 RGB extinction: the blob, scaled differently per channel."""
     b = blob_grid()
     return np.stack([b, 0.6 * b, 0.25 + 0.3 * b], axis=-1)
+
+
+def sdf_grid():
+    """10^3 signed distances on the grid's nodes (i/9): a torus (radii 0.27, 0.11, axis y) and a
+    sphere (radius 0.16) through its hole, united; coarse, so the voxels' trilinear patches and
+    the two normal modes show."""
+    c = np.arange(10) / 9.0
+    z, y, x = np.meshgrid(c, c, c, indexing="ij")
+    q = np.sqrt((x - 0.5) ** 2 + (z - 0.5) ** 2) - 0.27
+    torus = np.sqrt(q ** 2 + (y - 0.5) ** 2) - 0.11
+    sphere = np.sqrt((x - 0.5) ** 2 + (y - 0.62) ** 2 + (z - 0.5) ** 2) - 0.16
+    return np.minimum(torus, sphere)
 
 
 def mitsuba_sigmat(x, y, z):
@@ -443,6 +462,8 @@ def main():
     write_vol(DATA / "blob.vol", blob_grid())
     write_vol(DATA / "albedo_rgb.vol", albedo_grid())
     write_vol(DATA / "sigma_t_rgb.vol", sigma_rgb_grid())
+    write_vol(DATA / "sdf_torus.vol", sdf_grid())
+    write_vol(DATA / "grey_albedo.vol", grey_albedo_grid())
     sig, alb = mitsuba_grids()
     write_vol(DATA / "mitsuba_sigmat.vol", sig)
     write_vol(DATA / "mitsuba_albedo.vol", alb)

@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""Writes scenes/gltf_src/features.gltf, lights.gltf and normalmap.gltf: small glTF 2.0 scenes exercising the parts
+"""Writes scenes/gltf_src/features.gltf, lights.gltf, normalmap.gltf and textures.gltf: small glTF 2.0 scenes exercising the parts
 of the glTF loader that the showcase (scenes/gltf/showcase.gltf) does not, for the conformance
 matrix.
 
@@ -7,6 +7,12 @@ lights.gltf: a floor lit only by KHR_lights_punctual lights — a point light, a
 and outer cone angles) and a directional light, each on a rotated node — with a frosted-glass ball
 (KHR_materials_transmission 1, KHR_materials_ior 1.45, tinted) and a plastic box whose ior (1.7)
 sets its specular share.
+
+textures.gltf: metallic-roughness and emissive textures — a tiled floor whose metallic-roughness
+texture has the base colour's size (metal and dielectric tiles, roughness ramping along u), a
+panel whose 4 x 4 metallic-roughness texture is smaller than its 8 x 8 base colour (resampled,
+warned), a frosted ball (KHR_materials_transmission) with a roughness texture, a matte box
+(metallic 0) with one, and a lamp whose emissive texture is scaled by emissiveStrength.
 
 Deterministic, numpy and the standard library only:  python3 tests/conformance/make_gltf.py
 
@@ -175,6 +181,7 @@ def main():
     print(f"wrote {OUT / 'features.gltf'}")
     lights()
     normal_maps()
+    textures()
 
 
 def lights():
@@ -308,6 +315,97 @@ def normal_maps():
     }
     (OUT / "normalmap.gltf").write_text(json.dumps(doc, indent=1) + "\n")
     print(f"wrote {OUT / 'normalmap.gltf'}")
+
+
+def metal_rough_texture(size, roughness, metallic):
+    """size x size metallic-roughness texels (R unused, G roughness, B metallic) from two
+    functions of the texel (x, y)."""
+    img = np.zeros((size, size, 3), np.uint8)
+    for y in range(size):
+        for x in range(size):
+            img[y, x] = (17, round(255 * roughness(x, y)), round(255 * metallic(x, y)))
+    return img
+
+
+def textures():
+    """textures.gltf: metallic-roughness and emissive textures (see the module's docstring)."""
+    b = Builder()
+    p, n, t = quad()
+    uv = np.stack([p[:, 0] + 0.5, p[:, 2] + 0.5], axis=1)
+    floor = {"POSITION": b.positions(p * [5, 1, 5]), "NORMAL": b.vec3(n), "TEXCOORD_0": b.vec2(uv * 2.0)}
+    panel = {"POSITION": b.positions(p), "NORMAL": b.vec3(n), "TEXCOORD_0": b.vec2(uv)}
+    indices = b.add(np.asarray(t.reshape(-1), "<u2"), 5123, "SCALAR", 34963)
+    verts, faces = icosphere(2)
+    verts = np.array(verts)
+    # the ball's texture coordinates: longitude and latitude
+    ball_uv = np.stack([np.arctan2(verts[:, 2], verts[:, 0]) / (2 * np.pi) + 0.5,
+                        np.arccos(np.clip(verts[:, 1], -1, 1)) / np.pi], axis=1)
+    ball = {"POSITION": b.positions(verts), "NORMAL": b.vec3(verts), "TEXCOORD_0": b.vec2(ball_uv * [3, 2])}
+    ball_indices = b.add(np.asarray(np.array(faces).reshape(-1), "<u2"), 5123, "SCALAR", 34963)
+    box = {"POSITION": b.positions(cube_soup() * [0.7, 0.7, 0.7]),
+           "TEXCOORD_0": b.vec2(np.tile([[0, 0], [1, 0], [1, 1]], (12, 1)))}
+    lamp = {"POSITION": b.positions(p), "NORMAL": b.vec3(n), "TEXCOORD_0": b.vec2(uv)}
+    base = png_bytes(checker_texture((235, 225, 200), (30, 130, 140), (210, 40, 30)))
+    tiles_mr = png_bytes(metal_rough_texture(8, lambda x, y: 0.15 + 0.1 * x, lambda x, y: 0.9 * ((x // 2 + y // 2) % 2)))
+    worn_mr = png_bytes(metal_rough_texture(4, lambda x, y: 0.3 + 0.15 * y, lambda x, y: 0.25 * x + 0.1))
+    frost_mr = png_bytes(metal_rough_texture(4, lambda x, y: 0.2 + 0.2 * ((x + y) % 3), lambda x, y: 0.0))
+    glow = np.zeros((4, 4, 3), np.uint8)
+    for y in range(4):
+        for x in range(4):
+            glow[y, x] = (255, 200, 120) if (x + y) % 2 == 0 else (120, 180, 255)
+    glow = png_bytes(glow)
+    image = lambda png: {"uri": "data:image/png;base64," + base64.b64encode(png).decode()}
+    doc = {
+        "asset": {"version": "2.0", "generator": "pathgrad tests/conformance/make_gltf.py"},
+        "extensionsUsed": ["KHR_materials_emissive_strength", "KHR_materials_transmission"],
+        "scene": 0,
+        "scenes": [{"nodes": [0, 1, 2, 3, 4, 5]}],
+        "nodes": [
+            {"name": "camera", "camera": 0, "translation": [0.0, 2.2, 4.4],
+             "rotation": [-0.2164396, 0.0, 0.0, 0.9762960]},
+            {"name": "floor", "mesh": 0},
+            # a 1.6 x 1.6 panel tilted 70 degrees about x, towards the camera
+            {"name": "panel", "mesh": 1, "translation": [0.9, 0.8, -0.4], "scale": [1.6, 1.6, 1.6],
+             "rotation": [0.5735764, 0.0, 0.0, 0.8191520]},
+            {"name": "ball", "mesh": 2, "translation": [-1.0, 0.6, 0.3], "scale": [0.6, 0.6, 0.6]},
+            {"name": "box", "mesh": 3, "translation": [0.2, 0.35, 1.1], "rotation": [0.0, 0.3826834, 0.0, 0.9238795]},
+            # the lamp quad turned over (180 degrees about x): it faces -y
+            {"name": "lamp", "mesh": 4, "translation": [0.0, 3.0, 0.5], "scale": [2.0, 1.0, 1.5],
+             "rotation": [1.0, 0.0, 0.0, 0.0]},
+        ],
+        "cameras": [{"type": "perspective", "perspective": {"yfov": 0.9, "aspectRatio": 1.25, "znear": 0.05}}],
+        "meshes": [
+            {"name": "floor", "primitives": [{"attributes": floor, "indices": indices, "material": 0}]},
+            {"name": "panel", "primitives": [{"attributes": panel, "indices": indices, "material": 1}]},
+            {"name": "ball", "primitives": [{"attributes": ball, "indices": ball_indices, "material": 2}]},
+            {"name": "box", "primitives": [{"attributes": box, "material": 3}]},
+            {"name": "lamp", "primitives": [{"attributes": lamp, "indices": indices, "material": 4}]},
+        ],
+        "materials": [
+            {"name": "tiles", "pbrMetallicRoughness": {
+                "baseColorTexture": {"index": 0}, "metallicRoughnessTexture": {"index": 1},
+                "metallicFactor": 1.0, "roughnessFactor": 1.0}},
+            {"name": "worn", "pbrMetallicRoughness": {
+                "baseColorTexture": {"index": 0}, "metallicRoughnessTexture": {"index": 2},
+                "baseColorFactor": [0.9, 0.8, 0.7, 1.0], "metallicFactor": 0.8, "roughnessFactor": 0.6}},
+            {"name": "frosted", "extensions": {"KHR_materials_transmission": {"transmissionFactor": 1.0}},
+             "pbrMetallicRoughness": {"baseColorFactor": [0.9, 0.95, 1.0, 1.0], "metallicFactor": 0.0,
+                                      "metallicRoughnessTexture": {"index": 3}, "roughnessFactor": 0.8}},
+            {"name": "matte", "pbrMetallicRoughness": {"baseColorFactor": [0.3, 0.5, 0.3, 1.0], "metallicFactor": 0.0,
+                                                       "metallicRoughnessTexture": {"index": 1}}},
+            {"name": "lamp", "emissiveFactor": [1.0, 1.0, 1.0], "emissiveTexture": {"index": 4},
+             "extensions": {"KHR_materials_emissive_strength": {"emissiveStrength": 8.0}},
+             "pbrMetallicRoughness": {"baseColorFactor": [0.0, 0.0, 0.0, 1.0], "metallicFactor": 0.0}},
+        ],
+        "textures": [{"source": i} for i in range(5)],
+        "images": [image(base), image(tiles_mr), image(worn_mr), image(frost_mr), image(glow)],
+        "accessors": b.accessors,
+        "bufferViews": b.views,
+        "buffers": [{"byteLength": len(b.data),
+                     "uri": "data:application/octet-stream;base64," + base64.b64encode(bytes(b.data)).decode()}],
+    }
+    (OUT / "textures.gltf").write_text(json.dumps(doc, indent=1) + "\n")
+    print(f"wrote {OUT / 'textures.gltf'}")
 
 
 if __name__ == "__main__":

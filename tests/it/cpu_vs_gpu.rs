@@ -58,15 +58,19 @@ fn gpu_equals_cpu_per_path_on_every_builtin_and_test_scene() {
     }
 }
 
-/// The principled material (issue 31), constant and textured, and textured specular colours
-/// (`bsdf_smooth_textured`), as
+/// The principled material (issue 31), constant and textured, textured specular colours
+/// (`bsdf_smooth_textured`) and `volume` textures (`texture_volume`), as
 /// [`gpu_equals_cpu_per_path_on_every_builtin_and_test_scene`] compares the rest.
 #[test]
 fn issue_31_principled_gpu_equals_cpu_per_path() {
     let gpu = TestGpu::new();
-    for name in
-        ["bsdf_principled", "bsdf_principled_textured", "bsdf_principled_textured_scalars", "bsdf_smooth_textured"]
-    {
+    for name in [
+        "bsdf_principled",
+        "bsdf_principled_textured",
+        "bsdf_principled_textured_scalars",
+        "bsdf_smooth_textured",
+        "texture_volume",
+    ] {
         primal_agrees_per_path(&gpu, &crate::support::scenes::conformance(name));
     }
 }
@@ -179,4 +183,12 @@ fn issue_31_linearcurve_gpu_equals_cpu_per_path() {
 fn issue_31_bsplinecurve_gpu_equals_cpu_per_path() {
     let gpu = TestGpu::new();
     primal_agrees_per_path(&gpu, &crate::support::scenes::conformance("shape_bsplinecurve"));
+}
+
+/// SDF grids (issue 31), tessellated into the zero set of the trilinear interpolant with
+/// Mitsuba's smooth and analytic normals.
+#[test]
+fn issue_31_sdfgrid_gpu_equals_cpu_per_path() {
+    let gpu = TestGpu::new();
+    primal_agrees_per_path(&gpu, &crate::support::scenes::conformance("shape_sdfgrid"));
 }

@@ -391,6 +391,32 @@ fn issue_31_textured_specular_colours_gpu_equal_cpu_and_match_finite_differences
     check_finite_differences(&gpu, params.iter().map(|&p| (scenes::conformance("bsdf_smooth_textured"), p)).collect());
 }
 
+/// A plastic's specular colour as a parameter and a texture (issue 31): a rough plastic's bitmap
+/// and rgb colour, a smooth plastic's checkerboard (through its delta coating): GPU and CPU image
+/// gradients per path, and against central finite differences.
+#[test]
+fn issue_31_plastic_specular_colours_gpu_equal_cpu_and_match_finite_differences() {
+    let gpu = TestGpu::new();
+    let params = [
+        "floor.bsdf.specular_reflectance.data",
+        "marker.bsdf.specular_reflectance.value",
+        "ball.bsdf.specular_reflectance.color0.value",
+    ];
+    image_gradients_agree(&gpu, vec![(scenes::conformance("bsdf_plastic_specular"), params.to_vec())]);
+    check_finite_differences(&gpu, params.iter().map(|&p| (scenes::conformance("bsdf_plastic_specular"), p)).collect());
+}
+
+/// `volume` textures on diffuse reflectances (issue 31): an RGB grid clamped and a grey grid
+/// tiled, looked up at the world-space hit — GPU and CPU image gradients per path, and each
+/// against central finite differences.
+#[test]
+fn issue_31_volume_textures_gpu_equal_cpu_and_match_finite_differences() {
+    let gpu = TestGpu::new();
+    let params = ["ball.bsdf.reflectance.volume.data", "marker.bsdf.reflectance.volume.data"];
+    image_gradients_agree(&gpu, vec![(scenes::conformance("texture_volume"), params.to_vec())]);
+    check_finite_differences(&gpu, params.iter().map(|&p| (scenes::conformance("texture_volume"), p)).collect());
+}
+
 /// A textured area emitter's texels (issue 31): GPU and CPU image gradients per path, and against
 /// central finite differences.
 #[test]

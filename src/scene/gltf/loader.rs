@@ -291,7 +291,22 @@ impl Loader<'_> {
             } else {
                 self.node_names[node].clone()
             };
-            self.scene.add_mesh(&name, geometry.transformed(world), material.id, material.radiance)?;
+            match material.emission {
+                None => self.scene.add_mesh(&name, geometry.transformed(world), material.id, None)?,
+                Some(Emission::Constant(radiance)) => {
+                    self.scene.add_mesh(&name, geometry.transformed(world), material.id, Some(radiance))?;
+                }
+                Some(Emission::Texture { width, height, ref texels }) => {
+                    // Each mesh's radiance is its own parameter, as a constant one is.
+                    let param = format!("{name}.emitter.radiance.data");
+                    let texture =
+                        self.scene.add_texture_in(&param, width, height, texels, crate::scene::bounds::RADIANCE)?;
+                    self.scene.add_mesh(&name, geometry.transformed(world), material.id, None)?;
+                    let mesh = self.scene.meshes.last_mut().expect("add_mesh pushed a mesh");
+                    mesh.emitter = Some(self.scene.textures[texture.0 as usize].texels);
+                    mesh.emitter_texture = Some(texture);
+                }
+            }
         }
         Ok(())
     }

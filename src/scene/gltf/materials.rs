@@ -6,7 +6,8 @@ use json::validation::Checked;
 
 use crate::bsdf::Distribution;
 use crate::error::Result;
-use crate::scene::{Albedo, Material, bounds};
+use crate::params::ParamId;
+use crate::scene::{Albedo, Material, Scene, SmoothColour, bounds};
 
 use super::*;
 
@@ -54,14 +55,8 @@ impl Loader<'_> {
         if transmission.is_some_and(|t| t.transmission_texture.is_some()) {
             ignored.push("transmissionTexture");
         }
-        if pbr.metallic_roughness_texture.is_some() {
-            ignored.push("metallicRoughnessTexture");
-        }
         if m.occlusion_texture.is_some() {
-            ignored.push("occlusionTexture");
-        }
-        if m.emissive_texture.is_some() {
-            ignored.push("emissiveTexture");
+            ignored.push("occlusionTexture (the path tracer computes occlusion itself)");
         }
         if !matches!(m.alpha_mode, Checked::Valid(json::material::AlphaMode::Opaque)) {
             ignored.push("alphaMode (rendered as OPAQUE)");
@@ -72,42 +67,60 @@ impl Loader<'_> {
 
         let base = Vec3::new(factor[0], factor[1], factor[2]);
         let alpha = (roughness * roughness).max(bounds::ALPHA.0);
+        // Every texture of a material reads one set of texture coordinates: the first one's.
+        let mut tex_coord: Option<(u32, &str)> = None;
+        let mut same_set = |this: &Self, what: &'static str, set: u32| match tex_coord {
+            Some((first, by)) if first != set => Err(this.error(
+                &at,
+                format!(
+                    "{what} reads TEXCOORD_{set} but {by} TEXCOORD_{first}: pathgrad reads one set of texture \
+                     coordinates a primitive"
+                ),
+            )),
+            _ => {
+                tex_coord = Some((set, what));
+                Ok(())
+            }
+        };
         // The base-colour texture, linear and multiplied by the factor.
-        let mut texture = None;
+        let mut base_texels = None;
         let mut mean = base;
-        let mut tex_coord = None;
         if let Some(info) = &pbr.base_color_texture {
+            same_set(self, "baseColorTexture", info.tex_coord)?;
             let image = root.textures[info.index.value()].source.value();
             let (w, h, texels) = self.image_texels(image, base)?;
             let sum = texels.chunks_exact(3).fold(Vec3::ZERO, |s, t| s + Vec3::new(t[0], t[1], t[2]));
             mean = sum / (w as f32 * h as f32);
-            if metallic > 0.0 || transmits {
-                self.scene.warn(format!(
-                    "{at} ('{name}'): the base-colour texture tints only the diffuse part; the metallic and \
-                     transmitting parts use its mean colour {mean}"
-                ));
-            }
-            if metallic < 1.0 && !transmits {
-                texture = Some(self.scene.add_texture(&format!("{name}.base_color.data"), w, h, &texels)?);
-            }
-            tex_coord = Some(info.tex_coord);
+            base_texels = Some((w, h, texels));
+        }
+        // The metallic-roughness texture: roughness in G, metallic in B (stored values, no
+        // transfer function), each times its factor.
+        let mut metal_rough = None;
+        if let Some(info) = &pbr.metallic_roughness_texture {
+            same_set(self, "metallicRoughnessTexture", info.tex_coord)?;
+            let image = root.textures[info.index.value()].source.value();
+            let (w, h, texels) = self.image_texels_linear(image)?;
+            let (rough, metal): (Vec<f32>, Vec<f32>) = texels
+                .chunks_exact(3)
+                .map(|t| ((t[1] * roughness).clamp(0.0, 1.0), (t[2] * metallic).clamp(0.0, 1.0)))
+                .unzip();
+            metal_rough = Some((w, h, rough, metal));
+        }
+        // The emissive texture, sRGB decoded (times the factor and strength below).
+        let mut emissive = None;
+        if let Some(info) = &m.emissive_texture {
+            same_set(self, "emissiveTexture", info.tex_coord)?;
+            let image = root.textures[info.index.value()].source.value();
+            let (w, h, mut texels) = self.image_texels_linear(image)?;
+            texels.iter_mut().for_each(|c| *c = srgb_to_linear(*c));
+            emissive = Some((w, h, texels));
         }
         // The normal texture, its `scale` folded into the texels: n = (2·rgb − 1)·(s, s, 1),
         // stored as (n + 1)/2 (the kernels normalise the mapped normal).
         let normal_map = match &m.normal_texture {
             None => None,
             Some(info) => {
-                if let Some(set) = tex_coord.filter(|&set| set != info.tex_coord) {
-                    return Err(self.error(
-                        &at,
-                        format!(
-                            "normalTexture reads TEXCOORD_{} but baseColorTexture TEXCOORD_{set}: pathgrad reads one \
-                             set of texture coordinates a primitive",
-                            info.tex_coord
-                        ),
-                    ));
-                }
-                tex_coord = Some(info.tex_coord);
+                same_set(self, "normalTexture", info.tex_coord)?;
                 let scale = info.scale;
                 if !scale.is_finite() {
                     return Err(self.error(&at, format!("normalTexture scale {scale} must be finite")));
@@ -130,8 +143,86 @@ impl Loader<'_> {
                 Some(self.scene.normal_maps.len() as u32 - 1)
             }
         };
-        let id = if metallic >= 1.0 {
-            self.scene.add_rough_conductor(&name, Distribution::Ggx, alpha, mean, Vec3::ZERO, Vec3::ONE)?
+        let tex_coord = tex_coord.map(|(set, _)| set);
+
+        // α = max(r², 10⁻³) per texel of a roughness texture, else one value.
+        let alpha_slot = |scene: &mut Scene, prefix: &str| -> Result<ParamId> {
+            match &metal_rough {
+                Some((w, h, rough, _)) => {
+                    let texels: Vec<f32> = rough.iter().map(|r| (r * r).max(bounds::ALPHA.0)).collect();
+                    scene.add_scalar_texture(&format!("{prefix}.alpha.data"), *w, *h, &texels, bounds::ALPHA)
+                }
+                None => scene.params.add(&format!("{prefix}.alpha.value"), &[alpha], bounds::ALPHA),
+            }
+        };
+        let conductor = |scene: &mut Scene, alpha: ParamId, specular: Albedo| {
+            let (eta, k) = (Vec3::ZERO, Vec3::ONE);
+            scene.add_material(Material::RoughConductor {
+                distribution: Distribution::Ggx,
+                alpha,
+                alpha_v: alpha,
+                specular,
+                eta,
+                k,
+            })
+        };
+        let textured_metal = metal_rough.is_some() && metallic > 0.0 && !transmits;
+        if base_texels.is_some() && (metallic > 0.0 || transmits) && !textured_metal {
+            self.scene.warn(format!(
+                "{at} ('{name}'): the base-colour texture tints only the diffuse part; the metallic and transmitting \
+                 parts use its mean colour {mean}"
+            ));
+        }
+        let id = if textured_metal {
+            // Per texel of the metallic-roughness texture: w = F0 + (1 − F0)·m and
+            // s = (m·b + F0·(1 − m))/w, b the base colour there.
+            let (w, h, _, metal) = metal_rough.as_ref().expect("textured_metal");
+            let (w, h) = (*w, *h);
+            let colour_at = |i: usize| match &base_texels {
+                None => base,
+                Some((bw, bh, texels)) if (*bw, *bh) == (w, h) => Vec3::from_slice(&texels[3 * i..3 * i + 3]),
+                Some((bw, bh, texels)) => {
+                    let (u, v) =
+                        (((i % w as usize) as f32 + 0.5) / w as f32, ((i / w as usize) as f32 + 0.5) / h as f32);
+                    bilinear_repeat(texels, *bw, *bh, u, v)
+                }
+            };
+            if base_texels.as_ref().is_some_and(|(bw, bh, _)| (*bw, *bh) != (w, h)) {
+                self.scene.warn(format!(
+                    "{at} ('{name}'): the base-colour and metallic-roughness textures differ in size: the metallic \
+                     part's colour is the base colour resampled at the metallic-roughness texels"
+                ));
+            }
+            let mut weights = Vec::with_capacity(metal.len());
+            let mut specular = Vec::with_capacity(3 * metal.len());
+            for (i, &m) in metal.iter().enumerate() {
+                let wt = f0 + (1.0 - f0) * m;
+                weights.push(wt);
+                let s = ((m * colour_at(i) + Vec3::splat(f0 * (1.0 - m))) / wt).min(Vec3::ONE);
+                specular.extend_from_slice(&s.to_array());
+            }
+            let diffuse = match &base_texels {
+                Some((bw, bh, texels)) => {
+                    let t = self.scene.add_texture(&format!("{name}.base_color.data"), *bw, *bh, texels)?;
+                    self.scene.add_material(Material::Diffuse { albedo: Albedo::Bitmap(t) })
+                }
+                None => self.scene.add_diffuse(&format!("{name}.bsdf_0"), base)?,
+            };
+            let alpha = alpha_slot(&mut self.scene, &format!("{name}.bsdf_1"))?;
+            let specular =
+                self.scene.add_texture(&format!("{name}.bsdf_1.specular_reflectance.data"), w, h, &specular)?;
+            let lobe = conductor(&mut self.scene, alpha, Albedo::Bitmap(specular));
+            let weight =
+                self.scene.add_scalar_texture(&format!("{name}.weight.data"), w, h, &weights, bounds::WEIGHT)?;
+            self.scene.add_material(Material::Blend { weight, children: [diffuse, lobe] })
+        } else if metallic >= 1.0 {
+            let alpha = alpha_slot(&mut self.scene, &name)?;
+            let specular = self.scene.params.add(
+                &format!("{name}.specular_reflectance.value"),
+                &mean.to_array(),
+                bounds::REFLECTANCE,
+            )?;
+            conductor(&mut self.scene, alpha, Albedo::Rgb(specular))
         } else if transmits {
             if transmission_factor < 1.0 || metallic > 0.0 {
                 self.scene.warn(format!(
@@ -139,22 +230,36 @@ impl Loader<'_> {
                      a rough dielectric alone (transmission 1, metallic 0): its diffuse and metallic shares are dropped"
                 ));
             }
-            self.scene.add_rough_dielectric(&name, alpha, mean, ior)?
+            let alpha = alpha_slot(&mut self.scene, &name)?;
+            let transmittance = self.scene.params.add(
+                &format!("{name}.specular_transmittance.value"),
+                &mean.to_array(),
+                bounds::REFLECTANCE,
+            )?;
+            self.scene.add_material(Material::RoughDielectric {
+                distribution: Distribution::Ggx,
+                alpha,
+                reflectance: SmoothColour::Constant(Vec3::ONE),
+                transmittance: SmoothColour::Param(transmittance),
+                eta: ior,
+            })
         } else {
             let weight = f0 + (1.0 - f0) * metallic;
             let specular = ((metallic * mean + Vec3::splat(f0 * (1.0 - metallic))) / weight).min(Vec3::ONE);
-            let diffuse = match texture {
-                Some(t) => self.scene.add_material(Material::Diffuse { albedo: Albedo::Bitmap(t) }),
+            let diffuse = match &base_texels {
+                Some((w, h, texels)) => {
+                    let t = self.scene.add_texture(&format!("{name}.base_color.data"), *w, *h, texels)?;
+                    self.scene.add_material(Material::Diffuse { albedo: Albedo::Bitmap(t) })
+                }
                 None => self.scene.add_diffuse(&format!("{name}.bsdf_0"), base)?,
             };
-            let lobe = self.scene.add_rough_conductor(
-                &format!("{name}.bsdf_1"),
-                Distribution::Ggx,
-                alpha,
-                specular,
-                Vec3::ZERO,
-                Vec3::ONE,
+            let alpha = alpha_slot(&mut self.scene, &format!("{name}.bsdf_1"))?;
+            let specular = self.scene.params.add(
+                &format!("{name}.bsdf_1.specular_reflectance.value"),
+                &specular.to_array(),
+                bounds::REFLECTANCE,
             )?;
+            let lobe = conductor(&mut self.scene, alpha, Albedo::Rgb(specular));
             self.scene.add_blend(&name, weight, [diffuse, lobe])?
         };
         let id = match normal_map {
@@ -173,12 +278,16 @@ impl Loader<'_> {
                 format!("emitted radiance {radiance} (emissiveFactor × emissiveStrength) must be finite and ≥ 0"),
             ));
         }
-        let mapped = MappedMaterial {
-            id,
-            radiance: (radiance.max_element() > 0.0).then_some(radiance),
-            tex_coord,
-            normal_mapped: normal_map.is_some(),
+        // An emissive texture's texels times the factor and strength (each mesh gets its own
+        // parameter: `add_primitive`).
+        let emission = match emissive {
+            Some((w, h, texels)) if radiance.max_element() > 0.0 => {
+                let texels = texels.chunks_exact(3).flat_map(|t| (Vec3::from_slice(t) * radiance).to_array()).collect();
+                Some(Emission::Texture { width: w, height: h, texels })
+            }
+            _ => (radiance.max_element() > 0.0).then_some(Emission::Constant(radiance)),
         };
+        let mapped = MappedMaterial { id, emission, tex_coord, normal_mapped: normal_map.is_some() };
         self.materials[slot] = Some(mapped.clone());
         Ok(mapped)
     }
@@ -210,4 +319,11 @@ impl Loader<'_> {
         let rgb = decoded.to_rgb32f();
         Ok((rgb.width(), rgb.height(), rgb.into_raw()))
     }
+}
+
+/// The bilinear lookup, repeating, of RGB `texels` (`width × height`, row 0 at v = 0) at `(u, v)`,
+/// as the kernels filter a texture.
+fn bilinear_repeat(texels: &[f32], width: u32, height: u32, u: f32, v: f32) -> Vec3 {
+    let (offset, weight) = crate::cpu::surface::texture_footprint(0, width, height, 0, glam::Vec2::new(u, v));
+    offset.iter().zip(weight).map(|(&o, w)| Vec3::from_slice(&texels[o as usize..o as usize + 3]) * w).sum()
 }

@@ -43,8 +43,10 @@
 //! | m = 1 | rough conductor, GGX, α = max(r², 10⁻³), specular reflectance b, η = 0, k = 1 (F ≡ 1) | `M.alpha.value`, `M.specular_reflectance.value` |
 //! | m < 1 | blend (1 − w)·diffuse(b) + w·conductor, w = 0.04 + 0.96·m; the conductor is GGX with α = max(r², 10⁻³), η = 0, k = 1, specular reflectance s = (m·b + 0.04·(1 − m)) / w (white 1 for m = 0) | `M.weight.value`, `M.bsdf_0.reflectance.value`, `M.bsdf_1.alpha.value`, `M.bsdf_1.specular_reflectance.value` |
 //! | base-colour texture | the diffuse albedo is the texture (sRGB bytes linearised, times `baseColorFactor`); the conductor uses the texture's mean colour (warned when m > 0) | `M.base_color.data` (texels, replaces `M.bsdf_0.reflectance.value`) |
+//! | metallic-roughness texture | roughness r = G × `roughnessFactor` and metallic m = B × `metallicFactor` per texel (stored values, no sRGB transfer): the conductor's (or dielectric's) α = max(r², 10⁻³) becomes a texture of the same size (bilinear α, where glTF interpolates r: they differ inside a texel where r varies); with `metallicFactor` > 0 (and no transmission) the material is always the blend, its weight w = F0 + (1 − F0)·m and the conductor's specular reflectance s = (m·b + F0·(1 − m))/w textures of that size, b the base colour at each texel (the base-colour texture's texel, or its bilinear lookup at the texel's centre when the two textures differ in size — warned) | `M.bsdf_1.alpha.data` (`M.alpha.data` for a conductor or dielectric alone), `M.weight.data`, `M.bsdf_1.specular_reflectance.data` |
 //! | normal texture | a normal map (Mitsuba's `normalmap`) around the material: the texel's RGB (stored values, no sRGB transfer) mapped to (2·rgb − 1)·(scale, scale, 1) is the shading normal in the frame (t, n × t, n), t = ∂p/∂u of the triangle orthogonalised against the shading normal n — the frame glTF prescribes without a `TANGENT` attribute, up to MikkTSpace's per-vertex smoothing; a `TANGENT` attribute is ignored with a warning; the texels are constants | — |
 //! | `emissiveFactor` × `KHR_materials_emissive_strength` | area emitter on each mesh using the material (front faces), linear radiance | `<mesh>.emitter.radiance.value` |
+//! | emissive texture | the emitter's radiance is the texture (sRGB decoded) times `emissiveFactor` × `KHR_materials_emissive_strength`, each mesh its own texels (sampled as Mitsuba's textured `area`) | `<mesh>.emitter.radiance.data` |
 //! | `KHR_materials_ior` η (1.5) | F0 = ((η − 1)/(η + 1))² replaces 0.04 above (w = F0 + (1 − F0)·m, s = (m·b + F0·(1 − m))/w) | — |
 //! | `KHR_materials_transmission` t > 0, m < 1 | rough dielectric, GGX α = max(r², 10⁻³), η, transmittance b (its mean with a texture), reflectance 1; rendered as t = 1, m = 0 (warned when not so); never two-sided | `M.alpha.value`, `M.specular_transmittance.value` |
 //! | `doubleSided: true` | the material wrapped in `TwoSided` (names unchanged) | — |
@@ -53,10 +55,11 @@
 //! For m = 0 the blend is 0.96·diffuse(b) + 0.04·GGX — exactly glTF's dielectric with its Fresnel
 //! held at F0 = 0.04; for 0 < m < 1 it is glTF's mix of the two at normal incidence, with the
 //! dielectric's and the metal's GGX lobes (same α) merged into one conductor. Ignored, with a
-//! warning: `metallicRoughnessTexture`, `occlusionTexture`, `emissiveTexture`,
+//! warning: `occlusionTexture` (a path tracer computes occlusion itself),
 //! `transmissionTexture`, alpha modes other than `OPAQUE`, and extensions other than
 //! `KHR_materials_emissive_strength`, `KHR_materials_ior`, `KHR_materials_transmission` and
 //! `KHR_lights_punctual`.
+//! Every texture of a material must read the same `TEXCOORD_n` set (else an error naming both).
 //! Texture samplers are ignored: pathgrad filters bilinearly with repeat wrapping. glTF texture
 //! coordinates put v = 0 at the image's top row, which is pathgrad's row 0: no flip.
 //!
@@ -297,12 +300,21 @@ fn fresh_name(taken: &HashSet<String>, candidate: String) -> String {
 #[derive(Clone, Debug)]
 struct MappedMaterial {
     id: MaterialId,
-    /// Emitted radiance (linear RGB), if any component is positive.
-    radiance: Option<Vec3>,
-    /// The `TEXCOORD_n` set the base-colour and normal textures read, if the material is textured.
+    /// Emitted radiance, if any component is positive.
+    emission: Option<Emission>,
+    /// The `TEXCOORD_n` set the material's textures read, if it is textured.
     tex_coord: Option<u32>,
     /// Whether a normal texture perturbs the shading frame.
     normal_mapped: bool,
+}
+
+/// A material's emitted radiance (linear RGB).
+#[derive(Clone, Debug)]
+enum Emission {
+    /// `emissiveFactor × emissiveStrength`.
+    Constant(Vec3),
+    /// The emissive texture's texels times `emissiveFactor × emissiveStrength`.
+    Texture { width: u32, height: u32, texels: Vec<f32> },
 }
 
 struct Loader<'a> {

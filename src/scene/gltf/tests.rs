@@ -450,3 +450,73 @@ fn normal_textures_become_normal_maps() {
     let e = write(&doc).unwrap_err().to_string();
     assert!(e.contains("normalTexture reads TEXCOORD_0 but baseColorTexture TEXCOORD_1"), "{e}");
 }
+
+/// A metallic-roughness texture puts α = max(r², 10⁻³) (r from G times roughnessFactor) on the
+/// conductor's roughness per texel and, with metallicFactor > 0, the blend weight
+/// w = F0 + (1 − F0)·m (m from B times metallicFactor) and the specular colour
+/// s = (m·b + F0·(1 − m))/w per texel, b the base colour there — resampled bilinearly when the
+/// two textures differ in size, with a warning; an emissive texture is each emitting mesh's own
+/// radiance parameter, sRGB decoded and times emissiveFactor × emissiveStrength.
+#[test]
+fn metallic_roughness_and_emissive_textures() {
+    let s = load(Path::new("tests/conformance/scenes/gltf_src/textures.gltf")).unwrap();
+    s.validate().unwrap();
+    let stored = |v: u8| f32::from(v) / 255.0;
+    // tiles: 8 × 8 textures of one size; texel (x, y) has roughness 0.15 + 0.1·x and metallic
+    // 0.9·((x/2 + y/2) mod 2) (make_gltf.py `metal_rough_texture`).
+    let alpha = param(&s, "tiles.bsdf_1.alpha.data");
+    let weight = param(&s, "tiles.weight.data");
+    let specular = param(&s, "tiles.bsdf_1.specular_reflectance.data");
+    let base = param(&s, "tiles.base_color.data");
+    for (i, (&a, &w)) in alpha.iter().zip(&weight).enumerate() {
+        let (x, y) = (i % 8, i / 8);
+        let r = stored((255.0 * (0.15 + 0.1 * x as f32)).round() as u8);
+        assert!((a - (r * r).max(1e-3)).abs() < 1e-6, "alpha at {i}: {a} vs r = {r}");
+        let m = stored((255.0 * 0.9 * ((x / 2 + y / 2) % 2) as f32).round() as u8);
+        assert!((w - (0.04 + 0.96 * m)).abs() < 1e-6, "weight at {i}: {w}");
+        for c in 0..3 {
+            let expect = ((m * base[3 * i + c] + 0.04 * (1.0 - m)) / w).min(1.0);
+            assert!((specular[3 * i + c] - expect).abs() < 1e-6, "specular at {i}.{c}");
+        }
+    }
+    // worn: a 4 × 4 metallic-roughness texture over an 8 × 8 base colour: its texel (0, 0) sits
+    // at uv (1/8, 1/8), between base texels 0, 1, 8 and 9 with weight 1/4 each.
+    assert!(s.warnings.iter().any(|w| w.contains("'worn'") && w.contains("differ in size")), "{:?}", s.warnings);
+    let (w, spec, base) = (
+        param(&s, "worn.weight.data"),
+        param(&s, "worn.bsdf_1.specular_reflectance.data"),
+        param(&s, "worn.base_color.data"),
+    );
+    let m = stored((255.0f32 * 0.1).round() as u8) * 0.8;
+    assert!((w[0] - (0.04 + 0.96 * m)).abs() < 1e-6);
+    for c in 0..3 {
+        let b = [0, 1, 8, 9].iter().map(|t| base[3 * t + c]).sum::<f32>() / 4.0;
+        assert!((spec[c] - (m * b + 0.04 * (1.0 - m)) / w[0]).abs() < 1e-5, "worn specular {c}");
+    }
+    // The transmitting ball's roughness and the matte box's are textures; the box's weight is not.
+    assert_eq!(param(&s, "frosted.alpha.data").len(), 16);
+    assert_eq!(param(&s, "matte.bsdf_1.alpha.data").len(), 64);
+    assert_close(&param(&s, "matte.weight.value"), &[0.04]);
+    // The lamp: texel (0, 0) is sRGB (255, 200, 120) × 8.
+    let lamp = s.meshes.iter().find(|m| m.name == "lamp").unwrap();
+    let radiance = param(&s, "lamp.emitter.radiance.data");
+    assert_eq!(lamp.emitter, s.params.find("lamp.emitter.radiance.data"));
+    assert!(lamp.emitter_texture.is_some());
+    let expect = [255u8, 200, 120].map(|v| srgb_to_linear(stored(v)) * 8.0);
+    assert_close(&radiance[..3], &expect);
+    assert!(!s.warnings.iter().any(|w| w.contains("ignored")), "{:?}", s.warnings);
+}
+
+/// Every texture of a material reads one set of texture coordinates.
+#[test]
+fn a_metallic_roughness_texture_on_another_uv_set_is_refused() {
+    let path = Path::new("tests/conformance/scenes/gltf_src/textures.gltf");
+    let mut doc: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(path).unwrap()).unwrap();
+    doc["materials"][0]["pbrMetallicRoughness"]["metallicRoughnessTexture"]["texCoord"] = serde_json::json!(1);
+    let dir = tempfile::tempdir().unwrap();
+    let p = dir.path().join("t.gltf");
+    std::fs::write(&p, doc.to_string()).unwrap();
+    let e = load(&p).unwrap_err().to_string();
+    assert!(e.contains("materials[0]"), "{e}");
+    assert!(e.contains("metallicRoughnessTexture reads TEXCOORD_1 but baseColorTexture TEXCOORD_0"), "{e}");
+}

@@ -331,22 +331,21 @@ impl<'a> Loader<'a> {
     }
 
     /// A plastic's `diffuse_reflectance` (texturable, 0.5: `NAME.diffuse_reflectance.value` or
-    /// `.data`), constant `specular_reflectance` (1) and `int_ior`/`ext_ior` (polypropylene in
-    /// air) as η, and `nonlinear`.
-    fn plastic_common(&mut self, p: &Props<'a>, name: &str, depth: usize) -> Result<(Albedo, Vec3, f32, bool)> {
-        if let Some(t) = p.object("specular_reflectance") {
-            return Err(self
-                .x
-                .err(t, format!("a textured 'specular_reflectance' of '{}' is not supported (a colour is)", p.kind)));
-        }
-        let specular = self.color_in(p, "specular_reflectance", Vec3::ONE, bounds::REFLECTANCE)?;
+    /// `.data`), `specular_reflectance` (texturable, 1: `NAME.specular_reflectance.value` or
+    /// `.data` where the file gives it, as Mitsuba traverses it; [`Loader::specular_colour`]) and
+    /// `int_ior`/`ext_ior` (polypropylene in air) as η, and `nonlinear`.
+    fn plastic_common(&mut self, p: &Props<'a>, name: &str, depth: usize) -> Result<(Albedo, SmoothColour, f32, bool)> {
+        let specular = self.specular_colour(p, name, "specular_reflectance", false, depth)?;
         let (int_ior, ext_ior) = (self.ior(p, "int_ior", "polypropylene")?, self.ior(p, "ext_ior", "air")?);
         if int_ior == ext_ior {
             return Err(self.x.err(p.node, "'int_ior' and 'ext_ior' must differ"));
         }
         let nonlinear = p.boolean(&self.x, "nonlinear", false)?;
         let diffuse = match p.object("diffuse_reflectance") {
-            Some(t) => self.texture(t, format!("{name}.diffuse_reflectance"), depth + 1)?,
+            Some(t) => {
+                let a = self.texture(t, format!("{name}.diffuse_reflectance"), depth + 1)?;
+                self.refuse_volume(a, t, "diffuse_reflectance", &p.kind)?
+            }
             None => {
                 let rho = self.color_in(p, "diffuse_reflectance", Vec3::splat(0.5), bounds::REFLECTANCE)?;
                 let id = self.scene.params.add(
@@ -367,7 +366,7 @@ impl<'a> Loader<'a> {
     }
 
     /// Mitsuba's `roughplastic`: `distribution` (Beckmann), isotropic `alpha` (0.1), texturable
-    /// `diffuse_reflectance` (0.5), `specular_reflectance` (1, a constant), `int_ior`
+    /// `diffuse_reflectance` (0.5) and `specular_reflectance` (1), `int_ior`
     /// (polypropylene) and `ext_ior` (air), `nonlinear`. Parameters `NAME.alpha` (Mitsuba's key:
     /// its α is a number, not a texture) and `NAME.diffuse_reflectance.value` (or `.data`).
     fn rough_plastic(&mut self, p: &Props<'a>, name: &str, depth: usize) -> Result<MaterialId> {
@@ -561,7 +560,10 @@ impl<'a> Loader<'a> {
             rate("diffuse_reflectance_sampling_rate")?,
         );
         let base_color = match p.object("base_color") {
-            Some(t) => self.texture(t, format!("{name}.base_color"), depth + 1)?,
+            Some(t) => {
+                let a = self.texture(t, format!("{name}.base_color"), depth + 1)?;
+                self.refuse_volume(a, t, "base_color", &p.kind)?
+            }
             None => {
                 let c = self.color_in(p, "base_color", Vec3::splat(0.5), bounds::REFLECTANCE)?;
                 let id = self.scene.params.add(&format!("{name}.base_color.value"), &c.to_array(), bounds::REFLECTANCE);
@@ -597,7 +599,8 @@ impl<'a> Loader<'a> {
         depth: usize,
     ) -> Result<SmoothColour> {
         if let Some(t) = p.object(key) {
-            return Ok(SmoothColour::Texture(self.texture(t, format!("{name}.{key}"), depth + 1)?));
+            let a = self.texture(t, format!("{name}.{key}"), depth + 1)?;
+            return Ok(SmoothColour::Texture(self.refuse_volume(a, t, key, &p.kind)?));
         }
         let value = self.color_in(p, key, Vec3::ONE, bounds::REFLECTANCE)?;
         if !(always || p.has(key)) {
@@ -615,7 +618,10 @@ impl<'a> Loader<'a> {
         let distribution = self.distribution(p)?;
         let (alpha, alpha_v) = self.microfacet_alpha(p, name, true)?;
         let specular = match p.object("specular_reflectance") {
-            Some(t) => self.texture(t, format!("{name}.specular_reflectance"), 1)?,
+            Some(t) => {
+                let a = self.texture(t, format!("{name}.specular_reflectance"), 1)?;
+                self.refuse_volume(a, t, "specular_reflectance", &p.kind)?
+            }
             None => {
                 let specular = self.color_in(p, "specular_reflectance", Vec3::ONE, bounds::REFLECTANCE)?;
                 let specular = self.scene.params.add(
@@ -654,6 +660,11 @@ impl<'a> Loader<'a> {
             self.textures.insert(target.id(), albedo);
             return Ok(albedo);
         }
+        if p.kind == "volume" {
+            let albedo = self.volume_texture(&p, &name)?;
+            self.textures.insert(target.id(), albedo);
+            return Ok(albedo);
+        }
         if p.kind == "mesh_attribute" {
             // Not cached: each shape reads its own attribute.
             let (values, source) = self.mesh_attribute(&p, 3, bounds::REFLECTANCE)?;
@@ -675,6 +686,18 @@ impl<'a> Loader<'a> {
         self.finish(&p)?;
         self.textures.insert(target.id(), Albedo::Bitmap(t));
         Ok(Albedo::Bitmap(t))
+    }
+
+    /// `a`, unless it is a `volume` texture, which the kernels read as a diffuse `reflectance`
+    /// only: on `slot` of a `kind` BSDF it is refused, located at `node`.
+    fn refuse_volume(&self, a: Albedo, node: El<'a>, slot: &str, kind: &str) -> Result<Albedo> {
+        if matches!(a, Albedo::Volume(_)) {
+            return Err(self.x.err(
+                node,
+                format!("a 'volume' texture is supported as the 'reflectance' of a 'diffuse' only (not as '{slot}' of '{kind}')"),
+            ));
+        }
+        Ok(a)
     }
 
     /// A texture's `to_uv` as rows 0 and 1 of the 4×4 matrix, columns x, y and the translation:

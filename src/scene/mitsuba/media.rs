@@ -8,9 +8,9 @@ use glam::{DVec3, Mat4, Vec3};
 use super::loader::Loader;
 use super::xml::{El, Props};
 use crate::error::Result;
-use crate::scene::Wrap;
 use crate::scene::medium::{Field, Medium, MediumId, Phase, bounds, unit_cube_bounds};
 use crate::scene::volume::Grid;
+use crate::scene::{Albedo, Wrap};
 
 impl<'a> Loader<'a> {
     /// The medium `node` is or refers to, built on first use; `name` (the parameter prefix,
@@ -134,6 +134,24 @@ impl<'a> Loader<'a> {
                 .x
                 .err(volume, format!("unsupported plugin '{other}' (supported volumes: {})", names(Category::Volume)))),
         }
+    }
+
+    /// Mitsuba's `volume` texture `p` named `name`: its `volume` (a `<float>` or `<rgb>`, a
+    /// `constvolume` or a `gridvolume`, values in [0, 1]) looked up at the world-space surface
+    /// point, a field of [`crate::scene::Scene::volume_textures`]; its values are the parameter
+    /// `NAME.volume.data` (a grid) or `NAME.volume.value.value` (a constant), as Mitsuba 3.9.1
+    /// names them.
+    ///
+    /// # Errors
+    /// No `volume` (Mitsuba has no default), or as a medium's field.
+    pub(super) fn volume_texture(&mut self, p: &Props<'a>, name: &str) -> Result<Albedo> {
+        if !p.has("volume") && p.object("volume").is_none() {
+            return Err(self.x.err(p.node, "a 'volume' texture needs its 'volume' (a <volume>, <float> or <rgb>)"));
+        }
+        let (field, _) = self.field(p, "volume", name, 0.75, crate::scene::bounds::REFLECTANCE)?;
+        self.finish(p)?;
+        self.scene.volume_textures.push(field);
+        Ok(Albedo::Volume(self.scene.volume_textures.len() as u32 - 1))
     }
 
     /// A `<phase>`: `isotropic`, or `hg` with `g` (parameter `MEDIUM.phase_function.g`).

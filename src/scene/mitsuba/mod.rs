@@ -20,7 +20,9 @@
 //!   bilinear/nearest, `wrap_mode` repeat/mirror/clamp),
 //!   `<texture type="checkerboard">` with colour `color0`/`color1` and `to_uv`, or
 //!   `<texture type="mesh_attribute">`: a PLY attribute of the shape, per face or per vertex,
-//!   module `mesh_attribute`, also on float properties), `roughconductor`,
+//!   module `mesh_attribute`, also on float properties), or `<texture type="volume">` (a
+//!   `gridvolume`/`constvolume` looked up at the world-space point, values `….volume.data`;
+//!   diffuse reflectance only)), `roughconductor`,
 //!   `blendbsdf`, `twosided`; `<emitter type="constant">` at scene level (the environment).
 //! - `<sensor type="perspective">` with `fov`/`focal_length`, `fov_axis`, `to_world`, a
 //!   `<film type="hdrfilm">` (`width`, `height`, an `rfilter`) and a `<sampler type="independent">` (`sample_count` →
@@ -90,7 +92,10 @@
 //!   Mitsuba's UV; see `curves.rs`. A `bsplinecurve` becomes rings of the circles normal to its
 //!   tangent that Embree intersects, stepped along each segment until the measured error is in
 //!   the budget, with Mitsuba's normals and UV (open ends: a warning, as Mitsuba culls the inner
-//!   wall). Control points are not parameters (geometry is fixed).
+//!   wall). Control points are not parameters (geometry is fixed). An `sdfgrid` (a `.vol` file of
+//!   signed distances) becomes the zero set of its trilinear interpolant, cut per voxel into
+//!   cells fine enough for the same budget, with Mitsuba's `smooth` or `analytic` normals at the
+//!   vertices; see `sdfgrid.rs`. Its `grid` and `to_world` are not parameters.
 //! - **Depth**: `max_depth = -1` (and a scene without `<integrator>`, Mitsuba's default) becomes
 //!   [`crate::integrator::UNBOUNDED_DEPTH_CAP`], which the renderer treats as unbounded. `rr_depth`
 //!   other than 5 and `hide_emitters` are warned about and ignored.
@@ -113,6 +118,7 @@ mod media;
 mod mesh_attribute;
 pub mod plugins;
 mod scalar_texture;
+mod sdfgrid;
 mod sensor;
 mod shapes;
 mod spectrum;
@@ -138,6 +144,8 @@ mod tests_normal_maps;
 mod tests_plugins;
 #[cfg(test)]
 mod tests_scalar_textures;
+#[cfg(test)]
+mod tests_volume_texture;
 
 use std::path::Path;
 

@@ -114,7 +114,7 @@ pub const PLUGINS: &[Plugin] = &[
         "`int_ior`/`ext_ior` (numbers or Mitsuba's names), `specular_reflectance`, `specular_transmittance` (each rgb, spectrum, bitmap, checkerboard or mesh_attribute)",
         "smooth; not inside blendbsdf or twosided",
     ),
-    p(Bsdf, "diffuse", "`reflectance` (rgb, spectrum, bitmap, checkerboard or mesh_attribute)", ""),
+    p(Bsdf, "diffuse", "`reflectance` (rgb, spectrum, bitmap, checkerboard, mesh_attribute or volume)", ""),
     p(
         Bsdf,
         "mask",
@@ -131,7 +131,7 @@ pub const PLUGINS: &[Plugin] = &[
     p(
         Bsdf,
         "plastic",
-        "`diffuse_reflectance` (texturable), `specular_reflectance` (constant), `int_ior`/`ext_ior`, `nonlinear`",
+        "`diffuse_reflectance` (texturable), `specular_reflectance` (rgb, spectrum, bitmap, checkerboard or mesh_attribute; differentiable through the coating's delta lobe, which Mitsuba's `prb` gives no gradient), `int_ior`/`ext_ior`, `nonlinear`",
         "",
     ),
     p(
@@ -155,7 +155,7 @@ pub const PLUGINS: &[Plugin] = &[
     p(
         Bsdf,
         "roughplastic",
-        "`distribution`, `alpha` (parameter `.alpha`, a number as Mitsuba's), `diffuse_reflectance` (texturable), `specular_reflectance`, `int_ior`/`ext_ior`, `nonlinear`, `sample_visible`",
+        "`distribution`, `alpha` (parameter `.alpha`, a number as Mitsuba's), `diffuse_reflectance` (texturable), `specular_reflectance` (rgb, spectrum, bitmap, checkerboard or mesh_attribute), `int_ior`/`ext_ior`, `nonlinear`, `sample_visible`",
         "",
     ),
     p(
@@ -210,6 +210,12 @@ pub const PLUGINS: &[Plugin] = &[
     p(Shape, "obj", "`filename`, `to_world`, `face_normals`, `flip_normals`", ""),
     p(Shape, "ply", "`filename`, `to_world`, `face_normals`, `flip_normals`", ""),
     p(Shape, "rectangle", "`to_world`, `flip_normals`", ""),
+    p(
+        Shape,
+        "sdfgrid",
+        "`filename` (a one-channel `.vol` grid), `normals` (`smooth` or `analytic`), `to_world`",
+        "the zero set of the trilinear interpolant, tessellated to 0.02 px with Mitsuba's normals; no UV (0, 0), no area emitters; `grid` and `to_world` are not parameters",
+    ),
     p(Shape, "serialized", "`filename`, `shape_index`, `to_world`, `face_normals`, `flip_normals`", ""),
     p(Shape, "sphere", "`center`, `radius`, `to_world` (a similarity), `flip_normals`", "tessellated to 0.02 px"),
     p(Shape, "shapegroup", "nested shapes", "built by its instances"),
@@ -231,6 +237,12 @@ pub const PLUGINS: &[Plugin] = &[
         "mesh_attribute",
         "`name` (`vertex_…` or `face_…`), `scale` (1 only)",
         "in the BSDF of a `ply` shape whose file has the attribute (Mitsuba's PLY naming); the values are parameter `SHAPE.NAME` (per vertex: interpolated by barycentrics), an RGB attribute on a colour property, a one-value one on a float property; a BSDF that reads one belongs to its one shape",
+    ),
+    p(
+        Texture,
+        "volume",
+        "`volume` (a `gridvolume`, `constvolume`, `<float>` or `<rgb>`)",
+        "as the `reflectance` of a `diffuse` only, looked up at the world-space surface point; a grid's values are parameter `.volume.data`",
     ),
     p(Medium, "homogeneous", "`sigma_t`, `albedo`, `scale`, a phase", "inside a null or dielectric boundary"),
     p(

@@ -341,6 +341,48 @@ impl<'a> Loader<'a> {
                     super::curves::bspline_curves(&curves, &self.scene.camera)
                 }
             }
+            "sdfgrid" => {
+                let (file, file_node) = p
+                    .string(&self.x, "filename")?
+                    .ok_or_else(|| self.x.err(node, "'sdfgrid' needs the property 'filename' (a .vol grid)"))?;
+                let path = self.scene_file(&file).map_err(|m| self.x.err(file_node, m))?;
+                if !path.is_file() {
+                    return Err(self
+                        .x
+                        .err(file_node, format!("SDF grid file '{file}' not found (looked for {})", path.display())));
+                }
+                let grid = crate::scene::volume::Grid::read(&path).map_err(|e| self.located(file_node, e))?;
+                let sdf = super::sdfgrid::Sdf::new(&grid)
+                    .map_err(|m| self.x.err(file_node, format!("SDF grid '{file}': {m}")))?;
+                let normals = match p.string(&self.x, "normals")? {
+                    None => super::sdfgrid::Normals::Smooth,
+                    Some((s, _)) if s == "smooth" => super::sdfgrid::Normals::Smooth,
+                    Some((s, _)) if s == "analytic" => super::sdfgrid::Normals::Analytic,
+                    Some((s, n)) => {
+                        return Err(self.x.err(n, format!("'normals' must be 'analytic' or 'smooth', got '{s}'")));
+                    }
+                };
+                for name in ["flip_normals", "grid"] {
+                    if let Some(n) = p.node_of(name) {
+                        let why = if name == "grid" {
+                            "inline grids are Python/C++ only in Mitsuba too"
+                        } else {
+                            "Mitsuba's sdfgrid ignores it"
+                        };
+                        return Err(self.x.err(n, format!("'{name}' is not supported on an sdfgrid ({why})")));
+                    }
+                }
+                if let Some((_, n)) = transform.filter(|(t, _)| super::sdfgrid::rotates(&t.matrix)) {
+                    let w = self.x.warning(
+                        n,
+                        "an 'sdfgrid' whose to_world rotates or mirrors: Mitsuba misplaces its voxels' bounding \
+                         boxes then (and says to use an instance), so its image has holes; pathgrad renders \
+                         the whole surface",
+                    );
+                    self.scene.warn(w);
+                }
+                super::sdfgrid::sdf_mesh(&sdf, normals, &to_world, &self.scene.camera).0
+            }
             other => {
                 return Err(self
                     .x
@@ -402,6 +444,10 @@ impl<'a> Loader<'a> {
         if let (true, Some(e)) = (p.kind.ends_with("curve"), emitters.first()) {
             // Mitsuba cannot sample a point on a curve either (no `sample_position`).
             return Err(self.x.err(*e, "area emitters on curves are not supported"));
+        }
+        if let (true, Some(e)) = (p.kind == "sdfgrid", emitters.first()) {
+            // Mitsuba's sdfgrid has no area and samples no position either.
+            return Err(self.x.err(*e, "area emitters on an sdfgrid are not supported (Mitsuba's cannot emit)"));
         }
         let emitter = match emitters[..] {
             [] => None,

@@ -736,12 +736,16 @@ fn roughplastic_takes_mitsubas_properties_and_names() {
     else {
         panic!("{plastics:?}")
     };
-    // Mitsuba's defaults: Beckmann, polypropylene in air, linear, white specular.
-    assert_eq!((d0, n0, s0), (Distribution::Beckmann, false, Vec3::ONE));
+    // Mitsuba's defaults: Beckmann, polypropylene in air, linear, white specular (a constant:
+    // Mitsuba traverses the specular reflectance only where the file gives it).
+    assert_eq!((d0, n0, s0), (Distribution::Beckmann, false, SmoothColour::Constant(Vec3::ONE)));
     assert!((e0 - 1.49 / 1.000_277).abs() < 1e-6);
-    assert_eq!((d1, n1, s1), (Distribution::Ggx, true, Vec3::splat(0.5)));
-    assert!((e1 - 2.419 / 1.2).abs() < 1e-6);
     let get = |n: &str| scene.params.get(scene.params.find(n).unwrap_or_else(|| panic!("{n}"))).to_vec();
+    assert_eq!((d1, n1), (Distribution::Ggx, true));
+    assert_eq!(s1, SmoothColour::Param(scene.params.find("b.bsdf.specular_reflectance.value").unwrap()));
+    assert_eq!(get("b.bsdf.specular_reflectance.value"), [0.5; 3]);
+    assert!(scene.params.find("a.bsdf.specular_reflectance.value").is_none());
+    assert!((e1 - 2.419 / 1.2).abs() < 1e-6);
     assert_eq!(get("a.bsdf.alpha"), [0.1]);
     assert_eq!(get("a.bsdf.diffuse_reflectance.value"), [0.5; 3]);
     assert_eq!(get("b.bsdf.alpha"), [0.25]);
@@ -758,7 +762,8 @@ fn bad_roughplastics_are_refused_by_name() {
         (r#"<float name="ext_ior" value="-1"/>"#, "'ext_ior' must be a positive number, got -1"),
         (
             r#"<texture type="bitmap" name="specular_reflectance"><string name="filename" value="x.png"/></texture>"#,
-            "a textured 'specular_reflectance' of 'roughplastic' is not supported",
+            // A textured coating colour is accepted; its file must exist.
+            "image file 'x.png' not found",
         ),
         (r#"<string name="distribution" value="phong"/>"#, "unsupported distribution 'phong'"),
     ];

@@ -242,7 +242,7 @@ fn element_and_property_errors() {
         (r#"<shape/>"#, "<shape>: missing attribute 'type'"),
         (
             r#"<shape type="hair"/>"#,
-            "<shape>: unsupported plugin 'hair' (supported: bsplinecurve, cube, cylinder, disk, linearcurve, obj, ply, rectangle, serialized, sphere, shapegroup, instance)",
+            "<shape>: unsupported plugin 'hair' (supported: bsplinecurve, cube, cylinder, disk, linearcurve, obj, ply, rectangle, sdfgrid, serialized, sphere, shapegroup, instance)",
         ),
         (r#"<shape type="obj"/>"#, "<shape>: 'obj' needs the property 'filename'"),
         (
@@ -404,7 +404,7 @@ fn element_and_property_errors() {
         ),
         (
             r#"<texture type="wood"/>"#,
-            "<texture>: unsupported plugin 'wood' (supported: bitmap, checkerboard, mesh_attribute)",
+            "<texture>: unsupported plugin 'wood' (supported: bitmap, checkerboard, mesh_attribute, volume)",
         ),
         (r#"<texture type="bitmap"/>"#, "<texture>: 'bitmap' needs the property 'filename'"),
         (r#"<emitter type="area"/>"#, "<emitter>: an 'area' emitter must be nested in a <shape>"),
@@ -658,4 +658,68 @@ fn truncated_and_mutated_scenes_fail_cleanly() {
             }
         }
     }
+}
+
+#[test]
+fn sdfgrid_errors_name_the_file_and_the_parameter() {
+    use crate::scene::volume::Grid;
+    let dir = tempfile::tempdir().unwrap();
+    let write = |name: &str, res: glam::UVec3, channels: u32, value: &dyn Fn(u32) -> f32| {
+        let n = res.x * res.y * res.z * channels;
+        let grid = Grid::new(res, channels, (0..n).map(value).collect()).unwrap();
+        std::fs::write(dir.path().join(name), grid.to_bytes()).unwrap();
+    };
+    // A surface between the grid's first and second x-planes.
+    write("good.vol", glam::UVec3::splat(3), 1, &|i| if i % 3 == 0 { -1.0 } else { 1.0 });
+    write("rgb.vol", glam::UVec3::splat(2), 3, &|_| -1.0);
+    write("empty.vol", glam::UVec3::splat(2), 1, &|_| 2.0);
+    write("flat.vol", glam::UVec3::new(2, 2, 1), 1, &|i| i as f32 - 1.5);
+    std::fs::write(dir.path().join("short.vol"), b"VOL\x03").unwrap();
+    let file = dir.path().join("s.xml");
+    let load = |inner: &str| {
+        let body = format!(r#"<emitter type="constant"/><shape type="sdfgrid">{inner}</shape>"#);
+        load_text(&wrap(&body), &file, &[], obj_for_tests)
+    };
+    let message = |inner: &str| match load(inner) {
+        Ok(_) => panic!("{inner} loaded"),
+        Err(e) => e.to_string().split_once(": ").map(|(_, m)| m.to_string()).unwrap(),
+    };
+    let f = |name: &str| format!(r#"<string name="filename" value="{name}"/>"#);
+    let ok = load(&f("good.vol")).unwrap();
+    assert_eq!(ok.warnings, Vec::<String>::new());
+    assert!(!ok.meshes[0].indices.is_empty());
+    assert_eq!(message(""), "<shape>: 'sdfgrid' needs the property 'filename' (a .vol grid)".to_string());
+    assert!(message(&f("gone.vol")).starts_with("<string name=\"filename\">: SDF grid file 'gone.vol' not found"));
+    assert_eq!(
+        message(&f("rgb.vol")),
+        "<string name=\"filename\">: SDF grid 'rgb.vol': 3 channels (an SDF grid has 1)"
+    );
+    assert_eq!(
+        message(&f("empty.vol")),
+        "<string name=\"filename\">: SDF grid 'empty.vol': no voxel's corners change sign: the surface is empty"
+    );
+    assert_eq!(
+        message(&f("flat.vol")),
+        "<string name=\"filename\">: SDF grid 'flat.vol': resolution 2×2×1: an SDF grid needs at least 2 values on \
+         each axis"
+    );
+    let short = message(&f("short.vol"));
+    assert!(short.contains("short.vol") && short.contains("too short for a .vol header"), "{short}");
+    assert_eq!(
+        message(&format!(r#"{}<string name="normals" value="flat"/>"#, f("good.vol"))),
+        "<string name=\"normals\">: 'normals' must be 'analytic' or 'smooth', got 'flat'"
+    );
+    assert_eq!(
+        message(&format!(r#"{}<boolean name="flip_normals" value="true"/>"#, f("good.vol"))),
+        "<boolean name=\"flip_normals\">: 'flip_normals' is not supported on an sdfgrid (Mitsuba's sdfgrid ignores it)"
+    );
+    assert_eq!(
+        message(&format!(r#"{}<emitter type="area"><rgb name="radiance" value="1"/></emitter>"#, f("good.vol"))),
+        "<emitter>: area emitters on an sdfgrid are not supported (Mitsuba's cannot emit)"
+    );
+    // A rotating to_world loads with Mitsuba's warning about it.
+    let turned =
+        load(&format!(r#"{}<transform name="to_world"><rotate y="1" angle="30"/></transform>"#, f("good.vol")));
+    let warnings = turned.unwrap().warnings;
+    assert!(warnings.len() == 1 && warnings[0].contains("whose to_world rotates or mirrors"), "{warnings:?}");
 }
