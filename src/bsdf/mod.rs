@@ -10,6 +10,7 @@
 pub mod blend;
 pub mod differential;
 pub mod diffuse;
+pub mod hair;
 pub mod plastic;
 pub mod principled;
 pub mod principled_thin;
