@@ -863,16 +863,7 @@ impl Scene {
         texels: &[f32],
         range: (f32, f32),
     ) -> Result<TextureId> {
-        if width == 0 || height == 0 || texels.len() != width as usize * height as usize * 3 {
-            return Err(Error::Scene {
-                location: format!("texture {name}"),
-                message: format!(
-                    "{width}×{height} RGB needs {} texels, got {}",
-                    width as usize * height as usize * 3,
-                    texels.len()
-                ),
-            });
-        }
+        check_texel_count(name, width, height, 3, texels.len())?;
         let texels = self.params.add(name, texels, range)?;
         self.textures.push(Texture {
             width,
@@ -1202,4 +1193,20 @@ impl Scene {
         }
         Ok(())
     }
+}
+
+/// That a `width × height` texture of `channels` values a texel has `len` values.
+///
+/// # Errors
+/// [`Error::Scene`] naming texture `name` otherwise (or for an empty size).
+pub(crate) fn check_texel_count(name: &str, width: u32, height: u32, channels: usize, len: usize) -> Result<()> {
+    let need = width as usize * height as usize * channels;
+    if width == 0 || height == 0 || len != need {
+        let kind = if channels == 3 { " RGB" } else { "" };
+        return Err(Error::Scene {
+            location: format!("texture {name}"),
+            message: format!("{width}×{height}{kind} needs {need} texels, got {len}"),
+        });
+    }
+    Ok(())
 }

@@ -3,7 +3,7 @@
 use glam::Vec3;
 
 use super::Wrap;
-use crate::error::{Error, Result};
+use crate::error::Result;
 use crate::params::ParamId;
 
 /// A one-channel texture on a scalar slot (Mitsuba's `bitmap` or `checkerboard` given as a
@@ -55,16 +55,7 @@ impl super::Scene {
         texels: &[f32],
         range: (f32, f32),
     ) -> Result<ParamId> {
-        if width == 0 || height == 0 || texels.len() != width as usize * height as usize {
-            return Err(Error::Scene {
-                location: format!("texture {name}"),
-                message: format!(
-                    "{width}×{height} needs {} texels, got {}",
-                    width as usize * height as usize,
-                    texels.len()
-                ),
-            });
-        }
+        super::check_texel_count(name, width, height, 1, texels.len())?;
         let id = self.params.add(name, texels, range)?;
         self.scalar_textures.push(ScalarTexture {
             texels: id,
