@@ -180,6 +180,11 @@ fn circ(x: f32) -> f32 {
     (1.0 - x * x).max(0.0).sqrt()
 }
 
+/// ln 2 as Mitsuba 3.9.1's `square_to_rough_fiber_pdf` writes it (truncated to 0.6931): kept so that
+/// the lobe's values are Mitsuba's (`f32::consts::LN_2` would move them by 5·10⁻⁵ relative).
+#[allow(clippy::approx_constant)]
+const MITSUBA_LN_2: f32 = 0.6931;
+
 /// The longitudinal lobe M(θi, θo)/(2π) of variance v (Mitsuba's `square_to_rough_fiber_pdf`
 /// with κ = 1/v) from sin θi and sin θo, and the derivatives of its logarithm by v and by sin θi.
 fn longitudinal(sin_i: f32, sin_o: f32, v: f32) -> (f32, f32, f32) {
@@ -189,7 +194,7 @@ fn longitudinal(sin_i: f32, sin_o: f32, v: f32) -> (f32, f32, f32) {
     let s = sin_i * sin_o * kappa;
     let (value, dlog_dkappa, dlog_i0) = if kappa > 10.0 {
         let (li0, dli0) = log_i0(c);
-        let value = (-s + li0 - kappa + 0.6931 + (0.5 * kappa).ln()).exp() / TAU;
+        let value = (-s + li0 - kappa + MITSUBA_LN_2 + (0.5 * kappa).ln()).exp() / TAU;
         (value, -sin_i * sin_o + cos_i * cos_o * dli0 - 1.0 + 1.0 / kappa, dli0)
     } else {
         let (i, di) = i0(c);
