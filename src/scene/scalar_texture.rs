@@ -45,7 +45,7 @@ impl super::Scene {
     /// material's scalar slot (roughness, blend weight) refers to the returned parameter.
     ///
     /// # Errors
-    /// [`Error::Scene`] naming the texture if the texel count is not `width × height`; as
+    /// [`crate::error::Error::Scene`] naming the texture if the texel count is not `width × height`; as
     /// [`crate::params::ParamTable::add`] for the values.
     pub fn add_scalar_texture(
         &mut self,
