@@ -513,3 +513,30 @@ fn a_blend_with_a_smooth_conductor_weighs_its_delta_sample_by_the_blend() {
     let f0 = diffuse::diffuse_eval(albedo, wi, wo);
     assert!((g.weight - adj * -f0).abs().max_element() < 1e-6, "{} vs {}", g.weight, adj * -f0);
 }
+
+/// Directions of a fixed pseudo-random set over the whole sphere (the principled, thin principled
+/// and hair tests' direction pairs).
+pub(crate) fn sphere_directions(n: usize, seed: u32) -> Vec<Vec3> {
+    use crate::rng::{PassTag, RngKey, Stream, uniform4};
+    (0..n)
+        .map(|i| {
+            let u = uniform4(RngKey::new(seed, 0, PassTag::Test), i as u32, 0, 1, Stream::Main, 1, 0);
+            let z = 2.0 * u[0] - 1.0;
+            let r = (1.0 - z * z).max(0.0).sqrt();
+            let phi = 2.0 * std::f32::consts::PI * u[1];
+            Vec3::new(r * phi.cos(), r * phi.sin(), z)
+        })
+        .collect()
+}
+
+/// A JSON array of 3-element arrays (a Mitsuba probe's directions) as vectors.
+pub(crate) fn json_vec3s(v: &serde_json::Value) -> Vec<Vec3> {
+    v.as_array()
+        .unwrap()
+        .iter()
+        .map(|p| {
+            let a: Vec<f32> = p.as_array().unwrap().iter().map(|x| x.as_f64().unwrap() as f32).collect();
+            Vec3::new(a[0], a[1], a[2])
+        })
+        .collect()
+}

@@ -6,6 +6,7 @@
 use glam::{Vec2, Vec3};
 
 use super::*;
+use crate::bsdf::tests::json_vec3s;
 use crate::rng::{PassTag, RngKey, Stream, uniform4};
 use crate::stats::{Chi2Config, chi2_directions, dump_table, sidak};
 
@@ -59,23 +60,12 @@ pub(crate) fn cases() -> Vec<(String, HairLeaf)> {
         .collect()
 }
 
-fn vecs(v: &serde_json::Value) -> Vec<Vec3> {
-    v.as_array()
-        .unwrap()
-        .iter()
-        .map(|p| {
-            let a: Vec<f32> = p.as_array().unwrap().iter().map(|x| x.as_f64().unwrap() as f32).collect();
-            Vec3::new(a[0], a[1], a[2])
-        })
-        .collect()
-}
-
 /// Values, densities and the derivatives by every parameter against Mitsuba 3.9.1's hair at 256
 /// direction pairs (a quarter near the specular cone) for five parameter sets.
 #[test]
 fn hair_matches_mitsuba() {
     let data = json();
-    let (wis, wos) = (vecs(&data["pairs"]["wi"]), vecs(&data["pairs"]["wo"]));
+    let (wis, wos) = (json_vec3s(&data["pairs"]["wi"]), json_vec3s(&data["pairs"]["wo"]));
     let channels = |v: &serde_json::Value, i: usize| {
         Vec3::new(v[0][i].as_f64().unwrap() as f32, v[1][i].as_f64().unwrap() as f32, v[2][i].as_f64().unwrap() as f32)
     };
@@ -297,7 +287,7 @@ fn hair_albedo_matches_mitsubas_integral() {
         let name = case["name"].as_str().unwrap();
         let (leaf, _) = leaf_from_props(&case["props"]);
         for (j, a) in case["albedo"].as_array().unwrap().iter().enumerate() {
-            let wi = vecs(&serde_json::json!([a["wi"]]))[0];
+            let wi = json_vec3s(&serde_json::json!([a["wi"]]))[0];
             let n = 1 << 20;
             let (mut sum, mut sum2) = ([0.0f64; 3], [0.0f64; 3]);
             for i in 0..n {

@@ -5,6 +5,7 @@
 use glam::{Vec2, Vec3};
 
 use super::*;
+use crate::bsdf::tests::{json_vec3s, sphere_directions};
 use crate::rng::{PassTag, RngKey, Stream, uniform4};
 use crate::stats::{Chi2Config, chi2_directions, dump_table, sidak};
 
@@ -148,19 +149,6 @@ fn chi2_principled_sees_a_five_percent_density_error() {
     assert!(!r.passed(significance()), "p = {:.3e}: a 5 % error in transmission went unseen", r.p_value);
 }
 
-/// Directions of a fixed pseudo-random set over the whole sphere.
-fn directions(n: usize, seed: u32) -> Vec<Vec3> {
-    (0..n)
-        .map(|i| {
-            let u = uniform4(RngKey::new(seed, 0, PassTag::Test), i as u32, 0, 1, Stream::Main, 1, 0);
-            let z = 2.0 * u[0] - 1.0;
-            let r = (1.0 - z * z).max(0.0).sqrt();
-            let phi = 2.0 * PI * u[1];
-            Vec3::new(r * phi.cos(), r * phi.sin(), z)
-        })
-        .collect()
-}
-
 /// A scalar parameter with a derivative: its name, reader, writer and field of the gradient.
 type ScalarParam =
     (&'static str, fn(&PrincipledLeaf) -> f32, fn(&mut PrincipledLeaf, f32), fn(&PrincipledGrad) -> Vec3);
@@ -191,7 +179,7 @@ fn close(analytic: f32, fd: f32, value: f32) -> bool {
 fn principled_derivatives_match_finite_differences() {
     let (mut checked, mut nonzero) = (0, 0);
     for (name, leaf) in cases() {
-        let dirs = directions(300, 7);
+        let dirs = sphere_directions(300, 7);
         for pair in dirs.chunks(2) {
             let (wi, wo) = (pair[0], pair[1]);
             let (value, g) = leaf.eval_grad(wi, wo);
@@ -248,7 +236,7 @@ fn principled_derivatives_match_finite_differences() {
 #[test]
 fn principled_reflection_is_reciprocal_and_transmission_is_not() {
     for (name, leaf) in cases() {
-        let dirs = directions(200, 11);
+        let dirs = sphere_directions(200, 11);
         for pair in dirs.chunks(2) {
             let (wi, wo) = (pair[0], Vec3::new(pair[1].x, pair[1].y, pair[1].z.abs()));
             let wi = Vec3::new(wi.x, wi.y, wi.z.abs());
@@ -339,17 +327,7 @@ fn leaf_from_props(props: &serde_json::Value) -> PrincipledLeaf {
 fn principled_matches_mitsuba() {
     let data: serde_json::Value =
         serde_json::from_str(include_str!("../../../tests/data/principled/mitsuba_bsdf.json")).unwrap();
-    let vecs = |v: &serde_json::Value| -> Vec<Vec3> {
-        v.as_array()
-            .unwrap()
-            .iter()
-            .map(|p| {
-                let a: Vec<f32> = p.as_array().unwrap().iter().map(|x| x.as_f64().unwrap() as f32).collect();
-                Vec3::new(a[0], a[1], a[2])
-            })
-            .collect()
-    };
-    let (wis, wos) = (vecs(&data["pairs"]["wi"]), vecs(&data["pairs"]["wo"]));
+    let (wis, wos) = (json_vec3s(&data["pairs"]["wi"]), json_vec3s(&data["pairs"]["wo"]));
     let channels = |v: &serde_json::Value, i: usize| {
         Vec3::new(v[0][i].as_f64().unwrap() as f32, v[1][i].as_f64().unwrap() as f32, v[2][i].as_f64().unwrap() as f32)
     };

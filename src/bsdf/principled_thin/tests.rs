@@ -2,11 +2,10 @@
 //! 5 % sensitivity, derivatives against finite differences, its two-sidedness, white furnaces, and
 //! values, densities, derivatives and albedo against Mitsuba 3.9.1's own.
 
-use std::f32::consts::PI;
-
 use glam::{Vec2, Vec3};
 
 use super::*;
+use crate::bsdf::tests::{json_vec3s, sphere_directions};
 use crate::rng::{PassTag, RngKey, Stream, uniform4};
 use crate::stats::{Chi2Config, chi2_directions, dump_table, sidak};
 
@@ -147,19 +146,6 @@ fn chi2_principled_thin_sees_a_five_percent_density_error() {
     assert!(!r.passed(significance()), "p = {:.3e}: a 5 % error in transmission went unseen", r.p_value);
 }
 
-/// Directions of a fixed pseudo-random set over the whole sphere.
-fn directions(n: usize, seed: u32) -> Vec<Vec3> {
-    (0..n)
-        .map(|i| {
-            let u = uniform4(RngKey::new(seed, 0, PassTag::Test), i as u32, 0, 1, Stream::Main, 1, 0);
-            let z = 2.0 * u[0] - 1.0;
-            let r = (1.0 - z * z).max(0.0).sqrt();
-            let phi = 2.0 * PI * u[1];
-            Vec3::new(r * phi.cos(), r * phi.sin(), z)
-        })
-        .collect()
-}
-
 /// A scalar parameter with a derivative: its name, reader, writer and field of the gradient.
 type ScalarParam =
     (&'static str, fn(&PrincipledThinLeaf) -> f32, fn(&mut PrincipledThinLeaf, f32), fn(&PrincipledThinGrad) -> Vec3);
@@ -189,7 +175,7 @@ fn close(analytic: f32, fd: f32, value: f32) -> bool {
 fn principled_thin_derivatives_match_finite_differences() {
     let (mut checked, mut nonzero) = (0, 0);
     for (name, leaf) in cases() {
-        let dirs = directions(400, 7);
+        let dirs = sphere_directions(400, 7);
         for pair in dirs.chunks(2) {
             let (wi, wo) = (pair[0], pair[1]);
             let (value, g) = leaf.eval_grad(wi, wo);
@@ -245,7 +231,7 @@ fn principled_thin_derivatives_match_finite_differences() {
 #[test]
 fn principled_thin_is_two_sided() {
     for (name, leaf) in cases() {
-        let dirs = directions(200, 11);
+        let dirs = sphere_directions(200, 11);
         for pair in dirs.chunks(2) {
             let (wi, wo) = (pair[0], pair[1]);
             assert_eq!(leaf.eval(wi, wo), leaf.eval(-wi, -wo), "{name}: {wi} {wo}");
@@ -336,17 +322,7 @@ fn mitsuba_data() -> serde_json::Value {
 #[test]
 fn principled_thin_matches_mitsuba() {
     let data = mitsuba_data();
-    let vecs = |v: &serde_json::Value| -> Vec<Vec3> {
-        v.as_array()
-            .unwrap()
-            .iter()
-            .map(|p| {
-                let a: Vec<f32> = p.as_array().unwrap().iter().map(|x| x.as_f64().unwrap() as f32).collect();
-                Vec3::new(a[0], a[1], a[2])
-            })
-            .collect()
-    };
-    let (wis, wos) = (vecs(&data["pairs"]["wi"]), vecs(&data["pairs"]["wo"]));
+    let (wis, wos) = (json_vec3s(&data["pairs"]["wi"]), json_vec3s(&data["pairs"]["wo"]));
     let channels = |v: &serde_json::Value, i: usize| {
         Vec3::new(v[0][i].as_f64().unwrap() as f32, v[1][i].as_f64().unwrap() as f32, v[2][i].as_f64().unwrap() as f32)
     };
