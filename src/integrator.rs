@@ -313,7 +313,7 @@ impl Strategy {
     /// # Errors
     /// [`Error::InvalidArgument`] naming `Strategy::from_name`, `Strategy::Diff::q` or the target for an unknown strategy,
     /// a q outside [0, 1], an unknown parameter, or a parameter no differential sampler covers (an
-    /// anisotropic conductor's roughness, a normal-mapped material's).
+    /// anisotropic conductor's or dielectric's roughness, a normal-mapped material's).
     pub fn from_name(scene: &Scene, name: &str, q: f32, target: &str) -> Result<Strategy> {
         match name {
             "bsdf" => Ok(Strategy::Bsdf),
@@ -418,9 +418,11 @@ impl Strategy {
     pub fn has_differential_sampler(scene: &Scene, target: ParamId) -> bool {
         use crate::scene::Material;
         scene.materials.iter().any(|m| match m {
-            // The differential sampler is isotropic: an anisotropic conductor has none.
-            Material::RoughConductor { alpha, alpha_v, .. } => *alpha == target && alpha_v == alpha,
-            Material::RoughDielectric { alpha, .. } | Material::RoughPlastic { alpha, .. } => *alpha == target,
+            // The differential sampler is isotropic: an anisotropic conductor or dielectric has none.
+            Material::RoughConductor { alpha, alpha_v, .. } | Material::RoughDielectric { alpha, alpha_v, .. } => {
+                *alpha == target && alpha_v == alpha
+            }
+            Material::RoughPlastic { alpha, .. } => *alpha == target,
             Material::Blend { weight, children } => {
                 *weight == target
                     && !children
@@ -445,13 +447,20 @@ fn diff_target(scene: &Scene, target: &str) -> Result<ParamId> {
         {
             Some("an anisotropic rough conductor's roughness")
         }
+        Material::RoughDielectric { alpha, alpha_v, .. }
+            if alpha != alpha_v && (*alpha == target || *alpha_v == target) =>
+        {
+            Some("an anisotropic rough dielectric's roughness")
+        }
         _ => None,
     });
     // A normal-mapped material's lobes live in the perturbed frame, whose wrapper the
     // differential sampler's densities do not include.
     let uses = |id: crate::scene::MaterialId| match scene.materials.get(id.0 as usize) {
-        Some(Material::RoughConductor { alpha, alpha_v, .. }) => *alpha == target || *alpha_v == target,
-        Some(Material::RoughDielectric { alpha, .. } | Material::RoughPlastic { alpha, .. }) => *alpha == target,
+        Some(Material::RoughConductor { alpha, alpha_v, .. } | Material::RoughDielectric { alpha, alpha_v, .. }) => {
+            *alpha == target || *alpha_v == target
+        }
+        Some(Material::RoughPlastic { alpha, .. }) => *alpha == target,
         Some(Material::Blend { weight, .. }) => *weight == target,
         _ => false,
     };

@@ -79,7 +79,7 @@ bool plastic_sample(Leaf l, vec3 wi, float u_lobe, vec2 u, out vec3 wo) {
 }
 
 // ---- rough dielectric (src/bsdf/rough_dielectric.rs states the model): color = reflectance,
-// k = transmittance, eta.x = η ----
+// k = transmittance, eta.x = η, (alpha, alpha_v) = (α_u, α_v) ----
 
 // The half vector m of (wi, wo) (upper hemisphere), whether the pair reflects (refl), and η for wi's
 // side; false where the BSDF is 0 (grazing wi, or a direction seeing m from its other side).
@@ -115,14 +115,15 @@ vec3 rdielectric_eval_pdf(Leaf l, vec3 wi, vec3 wo, out float pdf) {
     float eta;
     if (!rdielectric_pair(l, wi, wo, m, refl, eta)) return vec3(0.0);
     vec3 up = wi.z > 0.0 ? wi : -wi;
-    float d = microfacet_d(l.distribution, l.alpha, m);
-    float gi = microfacet_g1(l.distribution, l.alpha, wi, m);
+    vec2 a = vec2(l.alpha, l.alpha_v);
+    float d = microfacet_d(l.distribution, a, m);
+    float gi = microfacet_g1(l.distribution, a, wi, m);
     float f = fresnel_dielectric(dot(wi, m), l.eta.x);
     float jacobian = rdielectric_jacobian(refl, eta, wi, wo, m);
     // G1 of the mirrored wi equals G1 of wi (it depends on tan²θ and the side test only).
     pdf = d * gi * max(dot(up, m), 0.0) / up.z * (refl ? f : 1.0 - f) * jacobian;
     if (d == 0.0) return vec3(0.0);
-    float dg = d * gi * microfacet_g1(l.distribution, l.alpha, wo, m);
+    float dg = d * gi * microfacet_g1(l.distribution, a, wo, m);
     return (refl ? l.color : l.k) * (dg * rdielectric_unit(refl, eta, f, wi, wo, m));
 }
 
@@ -149,29 +150,33 @@ bool rdielectric_sample(Leaf l, vec3 wi, float u_lobe, vec2 u, out vec3 wo) {
     if (wi.z == 0.0) return false;
     vec3 up = wi.z > 0.0 ? wi : -wi;
     vec3 m;
-    if (!microfacet_visible_normal(l.distribution, vec2(l.alpha), up, u, m)) return false;
+    if (!microfacet_visible_normal(l.distribution, vec2(l.alpha, l.alpha_v), up, u, m)) return false;
     return rdielectric_scatter(l, wi, m, u_lobe, wo);
 }
 
-// ∂f̂/∂(lobe colour) (in color, or in trans for a transmitted pair) and ∂f̂/∂α, times adj.
+// ∂f̂/∂(lobe colour) (in color, or in trans for a transmitted pair), ∂f̂/∂α_u (alpha) and
+// ∂f̂/∂α_v (alpha_v; an isotropic leaf's ∂f̂/∂α is their sum), times adj.
 LeafGrad rdielectric_eval_grad(Leaf l, vec3 wi, vec3 wo, vec3 adj) {
     LeafGrad g = LeafGrad(vec3(0.0), vec3(0.0), vec3(0.0), vec3(0.0));
     vec3 m;
     bool refl;
     float eta;
     if (!rdielectric_pair(l, wi, wo, m, refl, eta)) return g;
-    float d = microfacet_d(l.distribution, l.alpha, m);
+    vec2 a = vec2(l.alpha, l.alpha_v);
+    float d = microfacet_d(l.distribution, a, m);
     if (d == 0.0) return g;
     float gi, go;
     vec2 dgi, dgo;
-    microfacet_g1_and_dalpha(l.distribution, vec2(l.alpha), wi, m, gi, dgi);
-    microfacet_g1_and_dalpha(l.distribution, vec2(l.alpha), wo, m, go, dgo);
-    vec2 dd = microfacet_d_dalpha_of(l.distribution, vec2(l.alpha), m, d);
-    float ddg = (dd.x + dd.y) * gi * go + d * ((dgi.x + dgi.y) * go + gi * (dgo.x + dgo.y));
+    microfacet_g1_and_dalpha(l.distribution, a, wi, m, gi, dgi);
+    microfacet_g1_and_dalpha(l.distribution, a, wo, m, go, dgo);
+    vec2 dd = microfacet_d_dalpha_of(l.distribution, a, m, d);
+    vec2 ddg = dd * (gi * go) + d * (dgi * go + gi * dgo);
     float unit = rdielectric_unit(refl, eta, fresnel_dielectric(dot(wi, m), l.eta.x), wi, wo, m);
     vec3 dcolour = adj * (d * gi * go * unit);
     if (refl) g.color = dcolour; else g.trans = dcolour;
-    g.alpha = adj * (refl ? l.color : l.k) * (ddg * unit);
+    vec3 colour = adj * (refl ? l.color : l.k);
+    g.alpha = colour * (ddg.x * unit);
+    g.alpha_v = colour * (ddg.y * unit);
     return g;
 }
 

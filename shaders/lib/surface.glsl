@@ -95,7 +95,8 @@ Surface surface_at(Hit hit) {
     return s;
 }
 
-// Whether material `id` is (or blends) an anisotropic rough conductor, or is principled (its
+// Whether material `id` is (or blends) an anisotropic rough conductor, is an anisotropic rough
+// dielectric (never blended), or is principled (its
 // `anisotropic` a parameter; never blended), whose shading frame must follow the surface (twin: material_anisotropic of src/cpu/surface.rs).
 bool material_anisotropic(uint id) {
     Material m = materials[id];
@@ -105,7 +106,8 @@ bool material_anisotropic(uint id) {
         return (a.tag == MAT_ROUGH_CONDUCTOR && a.p_alpha_v != a.p_alpha)
             || (b.tag == MAT_ROUGH_CONDUCTOR && b.p_alpha_v != b.p_alpha);
     }
-    return (m.tag == MAT_ROUGH_CONDUCTOR && m.p_alpha_v != m.p_alpha) || is_principled(m.tag);
+    return ((m.tag == MAT_ROUGH_CONDUCTOR || m.tag == MAT_ROUGH_DIELECTRIC) && m.p_alpha_v != m.p_alpha)
+        || is_principled(m.tag);
 }
 
 // Mitsuba's shading frame for anisotropic BSDFs: x along ∂p/∂u made orthogonal to ns (where the
@@ -455,7 +457,7 @@ Leaf leaf_from_material(Material m, TexAt at) {
     l.distribution = m.distribution;
     l.alpha = (conductor || plastic || rough_glass) ? alpha_value(m.p_alpha, at) : 0.0;
     // Kernels without anisotropic BSDFs read no second roughness (α_v = α).
-    l.alpha_v = (HAS(F_ANISOTROPIC) && conductor) ? alpha_value(m.p_alpha_v, at) : l.alpha;
+    l.alpha_v = (HAS(F_ANISOTROPIC) && (conductor || rough_glass)) ? alpha_value(m.p_alpha_v, at) : l.alpha;
     l.pr0 = vec4(0.0);
     l.pr1 = vec4(0.0);
     if (principled) {
@@ -642,7 +644,13 @@ void push_leaf(Material m, TexAt at, LeafGrad g) {
         uint p_trans = rough_glass ? m.p_weight : m.p_alpha;
         push_colour(m.p_color, at, g.color);
         if (m.tag != MAT_CONDUCTOR) push_colour(p_trans, at, g.trans);
-        if (HAS(G_ALPHA) && rough_glass) push_scalar(m.p_alpha, at, g.alpha, true);
+        if (HAS(G_ALPHA) && rough_glass && m.p_alpha_v != m.p_alpha) {
+            push_scalar(m.p_alpha, at, g.alpha, true);
+            push_scalar(m.p_alpha_v, at, g.alpha_v, true);
+        } else if (HAS(G_ALPHA) && rough_glass) {
+            // Isotropic: α_u and α_v are one parameter.
+            push_scalar(m.p_alpha, at, g.alpha + g.alpha_v, true);
+        }
         return;
     }
     if (HAS(F_TEXTURE) && m.tex_width > 0u) {

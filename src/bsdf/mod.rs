@@ -132,10 +132,12 @@ pub struct LeafGrad {
     /// With respect to colour channel c (albedo or specular reflectance): only image channel c
     /// depends on it, so component c is the whole derivative.
     pub color: Vec3,
-    /// With respect to the roughness α (α_u of an anisotropic conductor), per image channel.
+    /// With respect to the roughness α (α_u of an anisotropic conductor or dielectric), per image
+    /// channel.
     pub alpha: Vec3,
-    /// With respect to an anisotropic conductor's α_v, per image channel (0 for other leaves; an
-    /// isotropic conductor's total α-derivative is `alpha + alpha_v`).
+    /// With respect to an anisotropic conductor's or dielectric's α_v, per image channel (0 for
+    /// other leaves; an isotropic conductor's or dielectric's total α-derivative is
+    /// `alpha + alpha_v`).
     pub alpha_v: Vec3,
     /// With respect to colour channel c of the transmittance (dielectrics: transmitted
     /// directions), as `color` is for the reflectance.
@@ -177,7 +179,7 @@ pub fn leaf_eval_grad(leaf: &Leaf, wi: Vec3, wo: Vec3, adj: Vec3) -> LeafGrad {
         Leaf::RoughDielectric(d) => {
             let (colour, transmits, alpha) = d.eval_grad(wi, wo);
             let (color, trans) = if transmits { (Vec3::ZERO, adj * colour) } else { (adj * colour, Vec3::ZERO) };
-            LeafGrad { color, alpha: adj * alpha, trans, ..LeafGrad::default() }
+            LeafGrad { color, alpha: adj * alpha[0], alpha_v: adj * alpha[1], trans, ..LeafGrad::default() }
         }
         Leaf::Smooth(s) => {
             let g = s.value_grad(wi, wo);

@@ -18,14 +18,17 @@
 //! D_vis(m) · (F or 1 − F) · |∂m/∂wo| at the half vector of (wi, wo), which [`RoughDielectricLeaf::pdf`]
 //! gives. Mitsuba weighs such a sample 0; the expectation is the same.
 //!
-//! Parameters: α (the gradient by α holds the D·G derivative), the specular reflectance (of
-//! reflected directions) and transmittance (of transmitted ones); η gets no gradient (it moves
-//! the directions: attached derivatives).
+//! The distribution may be anisotropic (α_u along the shading frame's x, α_v along y, as
+//! Mitsuba's `alpha_u`/`alpha_v`); every term above reads both.
+//!
+//! Parameters: α_u and α_v (the gradient by each holds the D·G derivative), the specular
+//! reflectance (of reflected directions) and transmittance (of transmitted ones); η gets no
+//! gradient (it moves the directions: attached derivatives).
 
 use glam::{Vec2, Vec3};
 
 use super::rough_conductor::{
-    Distribution, microfacet_d, microfacet_d_dalpha_aniso, microfacet_g1, microfacet_g1_dalpha_aniso,
+    Distribution, microfacet_d_aniso, microfacet_d_dalpha_aniso, microfacet_g1_aniso, microfacet_g1_dalpha_aniso,
     microfacet_visible_normal,
 };
 use super::rough_plastic::fresnel_dielectric;
@@ -39,6 +42,7 @@ use super::rough_plastic::fresnel_dielectric;
 /// let glass = RoughDielectricLeaf {
 ///     distribution: Distribution::Ggx,
 ///     alpha: 0.1,
+///     alpha_v: 0.1,
 ///     reflectance: Vec3::ONE,
 ///     transmittance: Vec3::ONE,
 ///     eta: 1.5,
@@ -52,8 +56,10 @@ use super::rough_plastic::fresnel_dielectric;
 pub struct RoughDielectricLeaf {
     /// Microfacet distribution.
     pub distribution: Distribution,
-    /// Roughness α.
+    /// Roughness α (α_u, along the shading frame's x).
     pub alpha: f32,
+    /// Roughness α_v along the shading frame's y: `alpha` when isotropic.
+    pub alpha_v: f32,
     /// RGB specular reflectance (multiplies reflected light).
     pub reflectance: Vec3,
     /// RGB specular transmittance (multiplies transmitted light).
@@ -108,13 +114,19 @@ impl RoughDielectricLeaf {
         }
     }
 
+    /// (α_u, α_v).
+    fn alphas(&self) -> Vec2 {
+        Vec2::new(self.alpha, self.alpha_v)
+    }
+
     /// D·G at m.
     fn dg(&self, wi: Vec3, wo: Vec3, m: Vec3) -> f32 {
-        let d = microfacet_d(self.distribution, self.alpha, m);
+        let a = self.alphas();
+        let d = microfacet_d_aniso(self.distribution, a, m);
         if d == 0.0 {
             return 0.0;
         }
-        d * microfacet_g1(self.distribution, self.alpha, wi, m) * microfacet_g1(self.distribution, self.alpha, wo, m)
+        d * microfacet_g1_aniso(self.distribution, a, wi, m) * microfacet_g1_aniso(self.distribution, a, wo, m)
     }
 
     /// f̂(wi, wo).
@@ -139,9 +151,10 @@ impl RoughDielectricLeaf {
     pub fn pdf(&self, wi: Vec3, wo: Vec3) -> f32 {
         // The normals visible from wi's side.
         let up = if wi.z > 0.0 { wi } else { -wi };
+        let a = self.alphas();
         self.pdf_through(wi, wo, |m| {
-            let d = microfacet_d(self.distribution, self.alpha, m);
-            d * microfacet_g1(self.distribution, self.alpha, up, m) * up.dot(m).max(0.0) / up.z
+            let d = microfacet_d_aniso(self.distribution, a, m);
+            d * microfacet_g1_aniso(self.distribution, a, up, m) * up.dot(m).max(0.0) / up.z
         })
     }
 
@@ -153,7 +166,7 @@ impl RoughDielectricLeaf {
             return None;
         }
         let up = if wi.z > 0.0 { wi } else { -wi };
-        let m = microfacet_visible_normal(self.distribution, Vec2::splat(self.alpha), up, u)?;
+        let m = microfacet_visible_normal(self.distribution, self.alphas(), up, u)?;
         self.scatter(wi, m, u_lobe)
     }
 
@@ -170,23 +183,23 @@ impl RoughDielectricLeaf {
     }
 
     /// ∂f̂/∂(lobe colour) per channel, whether (wi, wo) transmits (the colour is then the
-    /// transmittance), and ∂f̂/∂α per channel.
-    pub fn eval_grad(&self, wi: Vec3, wo: Vec3) -> (Vec3, bool, Vec3) {
-        let Some(p) = self.pair(wi, wo) else { return (Vec3::ZERO, wi.z * wo.z < 0.0, Vec3::ZERO) };
-        let (dist, alpha, m) = (self.distribution, self.alpha, p.m);
-        let d = microfacet_d(dist, alpha, m);
+    /// transmittance), and ∂f̂/∂α_u and ∂f̂/∂α_v per channel (an isotropic leaf's ∂f̂/∂α is their
+    /// sum).
+    pub fn eval_grad(&self, wi: Vec3, wo: Vec3) -> (Vec3, bool, [Vec3; 2]) {
+        let none = [Vec3::ZERO; 2];
+        let Some(p) = self.pair(wi, wo) else { return (Vec3::ZERO, wi.z * wo.z < 0.0, none) };
+        let (dist, a, m) = (self.distribution, self.alphas(), p.m);
+        let d = microfacet_d_aniso(dist, a, m);
         if d == 0.0 {
-            return (Vec3::ZERO, !p.reflect, Vec3::ZERO);
+            return (Vec3::ZERO, !p.reflect, none);
         }
-        let (gi, go) = (microfacet_g1(dist, alpha, wi, m), microfacet_g1(dist, alpha, wo, m));
-        // The α_u and α_v parts summed, as the kernels compute them.
-        let a = Vec2::splat(alpha);
-        let dgi = microfacet_g1_dalpha_aniso(dist, a, wi, m).element_sum();
-        let dgo = microfacet_g1_dalpha_aniso(dist, a, wo, m).element_sum();
-        let ddg = microfacet_d_dalpha_aniso(dist, a, m).element_sum() * gi * go + d * (dgi * go + gi * dgo);
+        let (gi, go) = (microfacet_g1_aniso(dist, a, wi, m), microfacet_g1_aniso(dist, a, wo, m));
+        let dgi = microfacet_g1_dalpha_aniso(dist, a, wi, m);
+        let dgo = microfacet_g1_dalpha_aniso(dist, a, wo, m);
+        let ddg = microfacet_d_dalpha_aniso(dist, a, m) * (gi * go) + d * (dgi * go + gi * dgo);
         let unit = Self::unit_over_dg(&p, fresnel_dielectric(wi.dot(m), self.eta).0, wi, wo);
         let colour = if p.reflect { self.reflectance } else { self.transmittance };
-        (Vec3::splat(d * gi * go * unit), !p.reflect, colour * (ddg * unit))
+        (Vec3::splat(d * gi * go * unit), !p.reflect, [colour * (ddg.x * unit), colour * (ddg.y * unit)])
     }
 }
 
@@ -198,6 +211,7 @@ mod tests {
         RoughDielectricLeaf {
             distribution,
             alpha,
+            alpha_v: alpha,
             reflectance: Vec3::new(0.9, 0.8, 0.7),
             transmittance: Vec3::new(0.6, 0.5, 0.4),
             eta: 1.5,
@@ -229,11 +243,17 @@ mod tests {
         }
     }
 
-    /// ∂f̂/∂(colour) and ∂f̂/∂α against central differences, on both lobes and both sides.
+    /// A derivative and the leaf at its parameter moved by a step.
+    type Move = (Vec3, Box<dyn Fn(f32) -> RoughDielectricLeaf>);
+
+    /// ∂f̂/∂(colour), ∂f̂/∂α_u and ∂f̂/∂α_v against central differences, on both lobes and both
+    /// sides, isotropic (α_u and α_v moved together) and anisotropic.
     #[test]
     fn gradients_match_finite_differences() {
-        for distribution in [Distribution::Beckmann, Distribution::Ggx] {
-            let g = glass(distribution, 0.3);
+        let cases =
+            [(Distribution::Beckmann, 0.3, 0.3), (Distribution::Ggx, 0.3, 0.3), (Distribution::Ggx, 0.15, 0.45)];
+        for (distribution, alpha_u, alpha_v) in cases {
+            let g = RoughDielectricLeaf { alpha_v, ..glass(distribution, alpha_u) };
             let mut checked = 0;
             for wi in [Vec3::new(0.6, 0.0, 0.8), Vec3::new(0.3, 0.4, -(0.75f32).sqrt())] {
                 for k in 0..64 {
@@ -245,10 +265,24 @@ mod tests {
                     let colour = if transmits { g.transmittance } else { g.reflectance };
                     assert!((dcolour * colour - f).abs().max_element() <= 1e-5 * f.max_element().max(1e-6));
                     let h = 1e-3;
-                    let at = |a: f32| RoughDielectricLeaf { alpha: a, ..g }.eval(wi, wo);
-                    let fd = (at(g.alpha + h) - at(g.alpha - h)) / (2.0 * h);
-                    let tol = 3e-3 * fd.abs().max(dalpha.abs()).max_element().max(f.max_element());
-                    assert!((fd - dalpha).abs().max_element() <= tol, "{wi} {wo}: fd {fd} vs {dalpha}");
+                    let isotropic = g.alpha == g.alpha_v;
+                    // (the derivative, the leaf at a moved α): α_u and α_v together when isotropic.
+                    let moves: Vec<Move> = if isotropic {
+                        vec![(
+                            dalpha[0] + dalpha[1],
+                            Box::new(move |e| RoughDielectricLeaf { alpha: g.alpha + e, alpha_v: g.alpha + e, ..g }),
+                        )]
+                    } else {
+                        vec![
+                            (dalpha[0], Box::new(move |e| RoughDielectricLeaf { alpha: g.alpha + e, ..g })),
+                            (dalpha[1], Box::new(move |e| RoughDielectricLeaf { alpha_v: g.alpha_v + e, ..g })),
+                        ]
+                    };
+                    for (analytic, at) in moves {
+                        let fd = (at(h).eval(wi, wo) - at(-h).eval(wi, wo)) / (2.0 * h);
+                        let tol = 3e-3 * fd.abs().max(analytic.abs()).max_element().max(f.max_element());
+                        assert!((fd - analytic).abs().max_element() <= tol, "{wi} {wo}: fd {fd} vs {analytic}");
+                    }
                     checked += 1;
                 }
             }
@@ -264,18 +298,20 @@ mod tests {
     fn generalised_reciprocity() {
         let g = glass(Distribution::Beckmann, 0.25);
         let g = RoughDielectricLeaf { reflectance: Vec3::ONE, transmittance: Vec3::ONE, ..g };
-        let mut checked = 0;
-        for wi in [Vec3::new(0.6, 0.0, 0.8), Vec3::new(0.2, -0.5, -(0.71f32).sqrt())] {
-            for k in 0..200 {
-                let u = Vec2::new(((k * 37) % 200) as f32 / 200.0 + 1e-3, (k as f32 + 0.5) / 200.0);
-                let Some(wo) = g.sample(wi, (k % 2) as f32, u) else { continue };
-                let index = |v: Vec3| if v.z > 0.0 { 1.0 } else { g.eta };
-                let ab = g.eval(wi, wo).x / wo.z.abs() * index(wo).powi(2);
-                let ba = g.eval(wo, wi).x / wi.z.abs() * index(wi).powi(2);
-                assert!((ab - ba).abs() <= 1e-3 * ab.abs().max(ba.abs()).max(1e-6), "{wi} {wo}: {ab} vs {ba}");
-                checked += 1;
+        for g in [g, RoughDielectricLeaf { alpha_v: 0.08, ..g }] {
+            let mut checked = 0;
+            for wi in [Vec3::new(0.6, 0.0, 0.8), Vec3::new(0.2, -0.5, -(0.71f32).sqrt())] {
+                for k in 0..200 {
+                    let u = Vec2::new(((k * 37) % 200) as f32 / 200.0 + 1e-3, (k as f32 + 0.5) / 200.0);
+                    let Some(wo) = g.sample(wi, (k % 2) as f32, u) else { continue };
+                    let index = |v: Vec3| if v.z > 0.0 { 1.0 } else { g.eta };
+                    let ab = g.eval(wi, wo).x / wo.z.abs() * index(wo).powi(2);
+                    let ba = g.eval(wo, wi).x / wi.z.abs() * index(wi).powi(2);
+                    assert!((ab - ba).abs() <= 1e-3 * ab.abs().max(ba.abs()).max(1e-6), "{wi} {wo}: {ab} vs {ba}");
+                    checked += 1;
+                }
             }
+            assert!(checked > 300, "{:?}: {checked}", g.alpha_v);
         }
-        assert!(checked > 300, "{checked}");
     }
 }

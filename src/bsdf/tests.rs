@@ -42,6 +42,7 @@ pub(crate) fn glass(distribution: Distribution, alpha: f32) -> Leaf {
     Leaf::RoughDielectric(rough_dielectric::RoughDielectricLeaf {
         distribution,
         alpha,
+        alpha_v: alpha,
         reflectance: Vec3::new(0.9, 0.8, 0.7),
         transmittance: Vec3::new(0.6, 0.5, 0.4),
         eta: 1.5046 / 1.000_277,
@@ -164,6 +165,28 @@ fn chi2_rough_dielectrics() {
     }
 }
 
+/// Anisotropic rough dielectrics (α_u along the frame's x, α_v along y), both lobes, from
+/// outside and inside, at an azimuth between the axes.
+#[test]
+fn chi2_anisotropic_rough_dielectrics() {
+    let mut test = 200;
+    for (distribution, au, av) in [(Distribution::Ggx, 0.4, 0.1), (Distribution::Beckmann, 0.05, 0.3)] {
+        let b = Bsdf::leaf(anisotropic_glass(distribution, au, av));
+        for cos_i in [0.9, 0.3, -0.9, -0.5] {
+            test += 1;
+            check_chi2(&format!("dielectric-{distribution:?}-{au}x{av}-cos{cos_i}"), test, &b, incident(cos_i));
+        }
+    }
+}
+
+/// A rough dielectric (η of bk7 in air) with α_u along the frame's x and α_v along y.
+fn anisotropic_glass(distribution: Distribution, alpha_u: f32, alpha_v: f32) -> Leaf {
+    match glass(distribution, alpha_u) {
+        Leaf::RoughDielectric(d) => Leaf::RoughDielectric(rough_dielectric::RoughDielectricLeaf { alpha_v, ..d }),
+        _ => unreachable!("glass is a rough dielectric"),
+    }
+}
+
 fn all_bsdfs() -> Vec<Bsdf> {
     let mut v = vec![Bsdf::leaf(Leaf::Diffuse { albedo: Vec3::new(0.2, 0.5, 0.9) })];
     for d in [Distribution::Beckmann, Distribution::Ggx] {
@@ -189,6 +212,7 @@ fn all_bsdfs() -> Vec<Bsdf> {
     v.push(Bsdf::leaf(anisotropic(Distribution::Ggx, 0.5, 0.05)));
     v.push(Bsdf::leaf(glass(Distribution::Beckmann, 0.2)));
     v.push(Bsdf::leaf(glass(Distribution::Ggx, 0.05)));
+    v.push(Bsdf::leaf(anisotropic_glass(Distribution::Ggx, 0.3, 0.07)));
     v
 }
 
@@ -351,19 +375,39 @@ fn derivatives_match_finite_differences() {
                         ));
                     }
                     if let Leaf::RoughDielectric(d) = b.leaves[leaf] {
+                        // Isotropic: α moves α_u and α_v together; anisotropic: each its own.
                         let base = *b;
+                        let isotropic = d.alpha == d.alpha_v;
+                        let gl = g.leaves[leaf];
                         cases.push((
-                            g.leaves[leaf].alpha.dot(Vec3::ONE),
+                            (gl.alpha + if isotropic { gl.alpha_v } else { Vec3::ZERO }).dot(Vec3::ONE),
                             Box::new(move |v| {
                                 let mut x = base;
                                 if let Leaf::RoughDielectric(d) = &mut x.leaves[leaf] {
                                     d.alpha = v;
+                                    if isotropic {
+                                        d.alpha_v = v;
+                                    }
                                 }
                                 x
                             }),
                             d.alpha,
                             1e-3,
                         ));
+                        if !isotropic {
+                            cases.push((
+                                gl.alpha_v.dot(Vec3::ONE),
+                                Box::new(move |v| {
+                                    let mut x = base;
+                                    if let Leaf::RoughDielectric(d) = &mut x.leaves[leaf] {
+                                        d.alpha_v = v;
+                                    }
+                                    x
+                                }),
+                                d.alpha_v,
+                                1e-3,
+                            ));
+                        }
                     }
                     // An anisotropic conductor's α_v (an isotropic one's α moves both below).
                     if let Leaf::RoughConductor { alpha, alpha_v, .. } = b.leaves[leaf]

@@ -122,11 +122,13 @@ pub fn shading_normal_gradient(flat: &FlatScene, hit: &Hit) -> glam::Mat3 {
     crate::attached::normal_derivative([tri.v0, tri.v1, tri.v2], normals, raw)
 }
 
-/// Whether material `id` is (or blends) an anisotropic rough conductor or is principled (whose
+/// Whether material `id` is (or blends) an anisotropic rough conductor or dielectric, or is principled (whose
 /// `anisotropic` is a parameter), whose shading frame must follow the surface ([`tangent_frame`]).
 pub fn material_anisotropic(flat: &FlatScene, id: u32) -> bool {
-    let anisotropic =
-        |m: &Material| (m.tag == MAT_ROUGH_CONDUCTOR && m.p_alpha_v != m.p_alpha) || m.tag == MAT_PRINCIPLED;
+    let anisotropic = |m: &Material| {
+        (matches!(m.tag, MAT_ROUGH_CONDUCTOR | MAT_ROUGH_DIELECTRIC) && m.p_alpha_v != m.p_alpha)
+            || m.tag == MAT_PRINCIPLED
+    };
     let m = &flat.materials[id as usize];
     if m.tag == MAT_BLEND {
         anisotropic(&flat.materials[m.child0 as usize]) || anisotropic(&flat.materials[m.child1 as usize])
@@ -509,6 +511,7 @@ fn leaf_from_material(flat: &FlatScene, m: &Material, at: TexAt) -> Leaf {
         MAT_ROUGH_DIELECTRIC => Leaf::RoughDielectric(RoughDielectricLeaf {
             distribution,
             alpha: alpha_value(flat, m.p_alpha, at),
+            alpha_v: alpha_value(flat, m.p_alpha_v, at),
             reflectance: colour_value(flat, m.p_color, at, m.uv_row0),
             transmittance: colour_value(flat, m.p_weight, at, m.k),
             eta: m.eta.x,
@@ -603,8 +606,12 @@ fn leaf_backward(flat: &FlatScene, m: &Material, at: TexAt, g: &LeafGrad, sink: 
         if m.tag != MAT_CONDUCTOR {
             colour_backward(flat, p_trans, at, g.trans, sink);
         }
-        if m.tag == MAT_ROUGH_DIELECTRIC {
+        if m.tag == MAT_ROUGH_DIELECTRIC && m.p_alpha_v != m.p_alpha {
             scalar_backward(flat, m.p_alpha, at, g.alpha, true, sink);
+            scalar_backward(flat, m.p_alpha_v, at, g.alpha_v, true, sink);
+        } else if m.tag == MAT_ROUGH_DIELECTRIC {
+            // Isotropic: α_u and α_v are one parameter.
+            scalar_backward(flat, m.p_alpha, at, g.alpha + g.alpha_v, true, sink);
         }
         return;
     }

@@ -45,7 +45,7 @@ pub fn scene_features(flat: &FlatScene, env_param: u32) -> u64 {
         if m.tex_width > 0 || specular_colour_slots(m).into_iter().any(colour_textured) {
             f |= F_TEXTURE;
         }
-        if m.tag == MAT_ROUGH_CONDUCTOR && m.p_alpha_v != m.p_alpha {
+        if (m.tag == MAT_ROUGH_CONDUCTOR || m.tag == MAT_ROUGH_DIELECTRIC) && m.p_alpha_v != m.p_alpha {
             f |= F_ANISOTROPIC;
         }
         if m.nmap_width > 0 {
@@ -53,8 +53,7 @@ pub fn scene_features(flat: &FlatScene, env_param: u32) -> u64 {
         }
         let textured = |slot: u32| slot != NO_PARAM && slot & SCALAR_TEXTURE != 0;
         let scalar_textured = match m.tag {
-            MAT_ROUGH_CONDUCTOR => textured(m.p_alpha) || textured(m.p_alpha_v),
-            MAT_ROUGH_DIELECTRIC => textured(m.p_alpha),
+            MAT_ROUGH_CONDUCTOR | MAT_ROUGH_DIELECTRIC => textured(m.p_alpha) || textured(m.p_alpha_v),
             MAT_PRINCIPLED => {
                 textured(m.p_alpha)
                     || textured(m.p_alpha_v)
@@ -142,7 +141,7 @@ pub fn param_kinds(flat: &FlatScene, env: (u32, u32), begin: u32, end: u32) -> P
         k = k.union(specular_kinds(m));
         match m.tag {
             MAT_CONDUCTOR | MAT_DIELECTRIC | MAT_THIN_DIELECTRIC | MAT_ROUGH_DIELECTRIC => {
-                if m.tag == MAT_ROUGH_DIELECTRIC && overlaps_slot(m.p_alpha) {
+                if m.tag == MAT_ROUGH_DIELECTRIC && (overlaps_slot(m.p_alpha) || overlaps_slot(m.p_alpha_v)) {
                     k = k.union(ParamKinds::ALPHA);
                 }
             }

@@ -610,7 +610,7 @@ fn flatten_material(scene: &Scene, m: &Material) -> GpuMaterial {
                 ..Default::default()
             }
         }
-        Material::RoughDielectric { distribution, alpha, reflectance, transmittance, eta } => {
+        Material::RoughDielectric { distribution, alpha, alpha_v, reflectance, transmittance, eta } => {
             // The reflectance a parameter (p_color) or a constant (uv_row0), the transmittance a
             // parameter (p_weight, free in a leaf) or a constant (k).
             let ((p_color, r), (p_weight, t)) = (split_colour(scene, reflectance), split_colour(scene, transmittance));
@@ -619,6 +619,7 @@ fn flatten_material(scene: &Scene, m: &Material) -> GpuMaterial {
                 distribution: distribution as u32,
                 p_color,
                 p_alpha: scalar_slot(scene, alpha),
+                p_alpha_v: scalar_slot(scene, alpha_v),
                 p_weight,
                 uv_row0: r,
                 eta: Vec3::new(eta, 0.0, 0.0),
@@ -720,11 +721,10 @@ fn scalar_texture_tables(scene: &Scene, materials: &mut [GpuMaterial], tables: &
     };
     for m in materials.iter_mut() {
         match m.tag {
-            MAT_ROUGH_CONDUCTOR => {
+            MAT_ROUGH_CONDUCTOR | MAT_ROUGH_DIELECTRIC => {
                 place(&mut m.p_alpha, tables);
                 place(&mut m.p_alpha_v, tables);
             }
-            MAT_ROUGH_DIELECTRIC => place(&mut m.p_alpha, tables),
             MAT_PRINCIPLED => {
                 place(&mut m.p_alpha, tables);
                 place(&mut m.p_alpha_v, tables);

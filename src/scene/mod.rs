@@ -241,12 +241,17 @@ pub enum Material {
         /// Mitsuba's `nonlinear`: the base's internal scattering darkens and saturates its colour.
         nonlinear: bool,
     },
-    /// Rough dielectric (Mitsuba's `roughdielectric`, `crate::bsdf::rough_dielectric`).
+    /// Rough dielectric (Mitsuba's `roughdielectric`, `crate::bsdf::rough_dielectric`),
+    /// isotropic or anisotropic.
     RoughDielectric {
         /// Microfacet distribution.
         distribution: Distribution,
-        /// Roughness alpha, 1 value or a texture's texels ([`Scene::scalar_texture`]).
+        /// Roughness alpha (α_u along the shading frame's x), 1 value or a texture's texels
+        /// ([`Scene::scalar_texture`]).
         alpha: ParamId,
+        /// Roughness α_v along the shading frame's y: `alpha` itself when isotropic; 1 value or a
+        /// texture's texels.
+        alpha_v: ParamId,
         /// RGB specular reflectance.
         reflectance: SmoothColour,
         /// RGB specular transmittance.
@@ -738,6 +743,7 @@ impl Scene {
         Ok(self.add_material(Material::RoughDielectric {
             distribution: Distribution::Ggx,
             alpha,
+            alpha_v: alpha,
             reflectance: SmoothColour::Constant(Vec3::ONE),
             transmittance: SmoothColour::Param(transmittance),
             eta,

@@ -39,6 +39,7 @@ fn gpu_equals_cpu_per_path_on_every_builtin_and_test_scene() {
         "sensor_orthographic",
         "sensor_thinlens",
         "bsdf_roughconductor_anisotropic",
+        "bsdf_roughdielectric_anisotropic",
         "shape_instance",
         "bsdf_normalmap",
         "bsdf_bumpmap",

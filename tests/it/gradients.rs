@@ -53,6 +53,10 @@ fn cases() -> Vec<(Scene, Vec<&'static str>)> {
             vec!["ball.bsdf.alpha_u.value", "ball.bsdf.alpha_v.value", "floor.bsdf.alpha_v.value"],
         ),
         (
+            scenes::conformance("bsdf_roughdielectric_anisotropic"),
+            vec!["floor.bsdf.alpha_u.value", "floor.bsdf.alpha_v.value", "ball.bsdf.alpha_v.value"],
+        ),
+        (
             scenes::conformance("bsdf_roughdielectric"),
             vec![
                 "ball.bsdf.alpha.value",

@@ -77,7 +77,7 @@ fn probe_case(
             d.reflectance,
             Vec3::new(d.eta, 0.0, 0.0),
             d.transmittance,
-            d.alpha,
+            d.alpha_v,
         ),
         Leaf::SmoothPlastic(p) => (
             pathgrad::contract::LEAF_PLASTIC,
@@ -126,10 +126,20 @@ fn probe_case(
 
 /// The rough dielectric both probes test (tinted reflectance and transmittance, η = 1.5).
 fn probe_rough_dielectric(distribution: pathgrad::bsdf::Distribution, alpha: f32) -> pathgrad::bsdf::Bsdf {
+    probe_anisotropic_dielectric(distribution, alpha, alpha)
+}
+
+/// The same with α_u along the frame's x and α_v along y.
+fn probe_anisotropic_dielectric(
+    distribution: pathgrad::bsdf::Distribution,
+    alpha: f32,
+    alpha_v: f32,
+) -> pathgrad::bsdf::Bsdf {
     use pathgrad::bsdf::{Bsdf, Leaf};
     Bsdf::leaf(Leaf::RoughDielectric(pathgrad::bsdf::rough_dielectric::RoughDielectricLeaf {
         distribution,
         alpha,
+        alpha_v,
         reflectance: glam::Vec3::new(0.9, 0.8, 0.7),
         transmittance: glam::Vec3::new(0.6, 0.5, 0.4),
         eta: 1.5,
@@ -223,6 +233,7 @@ fn bsdf_gpu_equals_cpu() {
         for alpha in [0.02, 0.3, 0.8] {
             bsdfs.push(probe_rough_dielectric(distribution, alpha));
         }
+        bsdfs.push(probe_anisotropic_dielectric(distribution, 0.4, 0.06));
     }
     let mut cases = Vec::new();
     let mut owners = Vec::new();

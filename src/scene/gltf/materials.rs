@@ -239,6 +239,7 @@ impl Loader<'_> {
             self.scene.add_material(Material::RoughDielectric {
                 distribution: Distribution::Ggx,
                 alpha,
+                alpha_v: alpha,
                 reflectance: SmoothColour::Constant(Vec3::ONE),
                 transmittance: SmoothColour::Param(transmittance),
                 eta: ior,

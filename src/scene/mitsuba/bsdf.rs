@@ -442,16 +442,15 @@ impl<'a> Loader<'a> {
     }
 
     /// A microfacet BSDF's roughness as the parameters Mitsuba names: `alpha` (0.1), or both
-    /// `alpha_u` and `alpha_v` (Mitsuba requires both), each its own parameter where `anisotropic`
-    /// BSDFs are allowed, else one `alpha_u` that `alpha_v` must equal. Each may be a texture
-    /// ([`Loader::scalar_property`]: texels in [0, 1], clamped to Mitsuba's floor of 10⁻⁴ when
-    /// looked up). `sample_visible` is read: pathgrad samples visible normals, and `false` would
-    /// change only the noise. Returns (α_u, α_v): the same parameter when isotropic.
+    /// `alpha_u` and `alpha_v` (Mitsuba requires both), each its own parameter (Mitsuba's
+    /// traversal names them apart whenever the file gives both, equal or not). Each may be a
+    /// texture ([`Loader::scalar_property`]: texels in [0, 1], clamped to Mitsuba's floor of 10⁻⁴
+    /// when looked up). `sample_visible` is read: pathgrad samples visible normals, and `false`
+    /// would change only the noise. Returns (α_u, α_v): the same parameter when isotropic.
     fn microfacet_alpha(
         &mut self,
         p: &Props<'a>,
         name: &str,
-        anisotropic_allowed: bool,
     ) -> Result<(crate::params::ParamId, crate::params::ParamId)> {
         let anisotropic = p.has("alpha_u") || p.has("alpha_v");
         p.boolean(&self.x, "sample_visible", true)?;
@@ -466,31 +465,9 @@ impl<'a> Loader<'a> {
         if !(p.has("alpha_u") && p.has("alpha_v")) {
             return Err(self.x.err(p.node, "give both 'alpha_u' and 'alpha_v' (Mitsuba requires both)"));
         }
-        if anisotropic_allowed {
-            let u = self.scalar_property(p, name, "alpha_u", None, bounds::ALPHA, texels)?;
-            let v = self.scalar_property(p, name, "alpha_v", None, bounds::ALPHA, texels)?;
-            return Ok((u, v));
-        }
-        if let Some(t) = p.object("alpha_u").or_else(|| p.object("alpha_v")) {
-            return Err(self.x.err(
-                t,
-                format!("a textured 'alpha_u'/'alpha_v' of '{}' is not supported (a textured 'alpha' is)", p.kind),
-            ));
-        }
-        let u = self.float_in(p, "alpha_u", None, bounds::ALPHA)?;
-        let v = self.float_in(p, "alpha_v", None, bounds::ALPHA)?;
-        if u != v {
-            return Err(self.x.err(
-                p.node,
-                format!(
-                    "anisotropic roughness ({u} ≠ {v}) of '{}' is not supported (of 'roughconductor' it is)",
-                    p.kind
-                ),
-            ));
-        }
-        let id = self.scene.params.add(&format!("{name}.alpha_u.value"), &[u], bounds::ALPHA);
-        let id = id.map_err(|e| self.located(p.node, e))?;
-        Ok((id, id))
+        let u = self.scalar_property(p, name, "alpha_u", None, bounds::ALPHA, texels)?;
+        let v = self.scalar_property(p, name, "alpha_v", None, bounds::ALPHA, texels)?;
+        Ok((u, v))
     }
 
     /// Mitsuba's `roughdielectric`: `distribution` (Beckmann), isotropic `alpha` (0.1, parameter
@@ -499,11 +476,18 @@ impl<'a> Loader<'a> {
     /// only where the file gives it, as Mitsuba's traversal).
     fn rough_dielectric(&mut self, p: &Props<'a>, name: &str, depth: usize) -> Result<MaterialId> {
         let distribution = self.distribution(p)?;
-        let (alpha, _) = self.microfacet_alpha(p, name, false)?;
+        let (alpha, alpha_v) = self.microfacet_alpha(p, name)?;
         let eta = self.dielectric_eta(p)?;
         let reflectance = self.specular_colour(p, name, "specular_reflectance", false, depth)?;
         let transmittance = self.specular_colour(p, name, "specular_transmittance", false, depth)?;
-        Ok(self.scene.add_material(Material::RoughDielectric { distribution, alpha, reflectance, transmittance, eta }))
+        Ok(self.scene.add_material(Material::RoughDielectric {
+            distribution,
+            alpha,
+            alpha_v,
+            reflectance,
+            transmittance,
+            eta,
+        }))
     }
 
     /// Mitsuba 3.9.1's `principled`: `base_color` (0.5; a colour, parameter
@@ -616,7 +600,7 @@ impl<'a> Loader<'a> {
     /// is), `material` or `eta`/`k`.
     fn rough_conductor(&mut self, p: &Props<'a>, name: &str) -> Result<MaterialId> {
         let distribution = self.distribution(p)?;
-        let (alpha, alpha_v) = self.microfacet_alpha(p, name, true)?;
+        let (alpha, alpha_v) = self.microfacet_alpha(p, name)?;
         let specular = match p.object("specular_reflectance") {
             Some(t) => {
                 let a = self.texture(t, format!("{name}.specular_reflectance"), 1)?;
@@ -797,7 +781,9 @@ impl<'a> Loader<'a> {
         let map = NormalMapTexture { texels: heights, ..map };
         let nested = self.map_nested(p, name, depth, "bumpmap")?;
         let anisotropic = |id: MaterialId| match self.material(id) {
-            Some(Material::RoughConductor { alpha, alpha_v, .. }) => alpha != alpha_v,
+            Some(
+                Material::RoughConductor { alpha, alpha_v, .. } | Material::RoughDielectric { alpha, alpha_v, .. },
+            ) => alpha != alpha_v,
             Some(Material::Principled { anisotropic, .. }) => {
                 self.scene.params.get(anisotropic).iter().any(|v| *v != 0.0)
             }

@@ -149,8 +149,8 @@ pub const PLUGINS: &[Plugin] = &[
     p(
         Bsdf,
         "roughdielectric",
-        "`distribution`, `alpha` (parameter or one-channel texture), `int_ior`/`ext_ior`, `specular_reflectance`, `specular_transmittance` (each rgb, spectrum, bitmap, checkerboard or mesh_attribute), `sample_visible`",
-        "isotropic; not inside blendbsdf or twosided",
+        "`distribution`, `alpha` or `alpha_u`/`alpha_v` (parameters or one-channel textures), `int_ior`/`ext_ior`, `specular_reflectance`, `specular_transmittance` (each rgb, spectrum, bitmap, checkerboard or mesh_attribute), `sample_visible`",
+        "anisotropic: shading frame along ∂p/∂u; not inside blendbsdf or twosided",
     ),
     p(
         Bsdf,

@@ -872,13 +872,13 @@ fn rough_dielectric_takes_mitsubas_properties_and_names() {
     );
     assert!(matches!(t1, SmoothColour::Param(_)));
     assert_eq!(param(&s, "a.bsdf.alpha.value"), [0.1]);
-    assert_eq!(param(&s, "b.bsdf.alpha_u.value"), [0.3]);
+    assert_eq!((param(&s, "b.bsdf.alpha_u.value"), param(&s, "b.bsdf.alpha_v.value")), (vec![0.3], vec![0.3]));
     assert_eq!(param(&s, "b.bsdf.specular_transmittance.value"), [0.5, 0.6, 0.7]);
     for (body, message) in [
         (r#"<bsdf type="twosided"><bsdf type="roughdielectric"/></bsdf>"#, "cannot wrap one that transmits light"),
         (
-            r#"<bsdf type="roughdielectric"><float name="alpha_u" value="0.1"/><float name="alpha_v" value="0.2"/></bsdf>"#,
-            "anisotropic",
+            r#"<bsdf type="roughdielectric"><float name="alpha_u" value="0.1"/><float name="alpha" value="0.2"/></bsdf>"#,
+            "give either 'alpha' or 'alpha_u'/'alpha_v', not both",
         ),
     ] {
         let e = load(&format!(r#"<shape type="cube">{body}</shape>"#)).unwrap_err().to_string();
@@ -1019,22 +1019,40 @@ fn a_cropped_film_is_the_image_size_and_a_window_of_the_film() {
 }
 
 #[test]
-fn anisotropic_roughness_is_two_parameters_of_a_conductor_only() {
+fn anisotropic_roughness_is_two_parameters_of_a_conductor_or_dielectric() {
     let s = load_ok(
         r#"<shape type="cube" id="a"><bsdf type="roughconductor"><float name="alpha_u" value="0.1"/><float name="alpha_v" value="0.3"/></bsdf></shape>
-           <shape type="cube" id="b"><bsdf type="roughconductor"><float name="alpha" value="0.2"/></bsdf></shape>"#,
+           <shape type="cube" id="b"><bsdf type="roughconductor"><float name="alpha" value="0.2"/></bsdf></shape>
+           <shape type="cube" id="c"><bsdf type="roughdielectric"><float name="alpha_u" value="0.05"/><float name="alpha_v" value="0.05"/></bsdf></shape>
+           <shape type="cube" id="d"><bsdf type="roughdielectric"><float name="alpha" value="0.2"/></bsdf></shape>"#,
     );
     assert_eq!((param(&s, "a.bsdf.alpha_u.value"), param(&s, "a.bsdf.alpha_v.value")), (vec![0.1], vec![0.3]));
     let Material::RoughConductor { alpha, alpha_v, .. } = s.materials[1] else { panic!("{:?}", s.materials[1]) };
     assert_eq!(alpha, alpha_v, "isotropic: one parameter");
+    // Mitsuba names α_u and α_v apart whenever the file gives both, equal or not.
+    assert_eq!((param(&s, "c.bsdf.alpha_u.value"), param(&s, "c.bsdf.alpha_v.value")), (vec![0.05], vec![0.05]));
+    let Material::RoughDielectric { alpha, alpha_v, .. } = s.materials[2] else { panic!("{:?}", s.materials[2]) };
+    assert_ne!(alpha, alpha_v, "given apart: two parameters");
+    let Material::RoughDielectric { alpha, alpha_v, .. } = s.materials[3] else { panic!("{:?}", s.materials[3]) };
+    assert_eq!(alpha, alpha_v, "isotropic: one parameter");
+    // The differential sampler is isotropic: it refuses an anisotropic roughness by name.
+    let strategy = |target: &str| crate::integrator::Strategy::from_name(&s, "diff", 0.5, target);
+    for (target, what) in [
+        ("a.bsdf.alpha_v.value", "an anisotropic rough conductor's roughness"),
+        ("c.bsdf.alpha_u.value", "an anisotropic rough dielectric's roughness"),
+    ] {
+        let err = strategy(target).unwrap_err().to_string();
+        assert!(err.contains(what), "{target}: {err}");
+    }
+    assert!(strategy("d.bsdf.alpha.value").is_ok());
     for (bsdf, message) in [
         (
             r#"<bsdf type="roughconductor"><float name="alpha_u" value="0.1"/></bsdf>"#,
             "give both 'alpha_u' and 'alpha_v'",
         ),
         (
-            r#"<bsdf type="roughdielectric"><float name="alpha_u" value="0.1"/><float name="alpha_v" value="0.2"/></bsdf>"#,
-            "anisotropic roughness (0.1 ≠ 0.2) of 'roughdielectric' is not supported",
+            r#"<bsdf type="roughplastic"><float name="alpha_u" value="0.1"/><float name="alpha_v" value="0.2"/></bsdf>"#,
+            "'roughplastic' has no anisotropic roughness",
         ),
     ] {
         let e = load(&format!(r#"<shape type="cube">{bsdf}</shape>"#)).unwrap_err().to_string();

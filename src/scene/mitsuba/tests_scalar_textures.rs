@@ -151,10 +151,6 @@ fn issue_31_textures_on_scalar_properties_refuse_what_pathgrad_does_not_read_by_
             "a textured 'alpha' of 'roughplastic' is not supported",
         ),
         (
-            r#"<bsdf type="roughdielectric"><texture type="checkerboard" name="alpha_u"/><texture type="checkerboard" name="alpha_v"/></bsdf>"#,
-            "a textured 'alpha_u'/'alpha_v' of 'roughdielectric' is not supported",
-        ),
-        (
             r#"<bsdf type="roughconductor"><texture type="checkerboard" name="alpha"><rgb name="color0" value="0.1, 0.2, 0.3"/></texture></bsdf>"#,
             "property 'color0' of 'checkerboard' must be a <float>",
         ),
