@@ -251,7 +251,8 @@ struct PathState {
     uint pixel;        // row-major pixel index within the view
     uint medium;       // the medium the path is in, or NO_MEDIUM (cameras are in vacuum)
     uint sample_index;
-    uint vertex;       // index of the vertex the next step finds, from 1
+    uint vertex;       // index of the vertex the next step finds, from 1 (the random numbers' key)
+    uint depth;        // counted interactions before it (Mitsuba's depth, which max_depth caps)
     float prev_pdf_f;  // density with which the previous vertex sampled ray.dir
     Mixture mix;       // the differential strategy's running sums (ALGORITHMS.md §5.2, §5.7)
     bool prev_nee;     // whether NEE at the previous vertex could have found this emitter
@@ -329,6 +330,7 @@ PathState path_begin(uint view, uint pixel, uint sample_index, bool adjoint, vec
     st.medium = NO_MEDIUM;
     st.sample_index = sample_index;
     st.vertex = 1u;
+    st.depth = 0u;
     st.prev_pdf_f = 0.0;
     st.mix = mixture_new(HAS(F_DIFF) && globals.strategy == STRATEGY_DIFF && globals.diff_placement == PLACEMENT_POWER);
     if (HAS2(F2_HERO) && globals.strategy == STRATEGY_DIFF && globals.hero_count > 0u)
@@ -346,11 +348,12 @@ PathState path_begin(uint view, uint pixel, uint sample_index, bool adjoint, vec
     return st;
 }
 
-// Russian roulette at vertex `vertex` — from vertex − 1 ≥ rr_depth (ALGORITHMS.md §3.1, written
-// without the subtraction), surviving with p = min(max β, 0.95) and β divided by it — then the end
-// of a path whose throughput is zero. True if the path goes on. Surface and medium vertices share it.
+// Russian roulette at vertex `vertex` — from depth ≥ rr_depth, the depth being the counted
+// interactions before it (ALGORITHMS.md §3.1; vertex − 1 unless null events go uncounted),
+// surviving with p = min(max β, 0.95) and β divided by it — then the end of a path whose throughput
+// is zero. True if the path goes on. Surface and medium vertices share it.
 bool path_survives(inout PathState st, uint vertex) {
-    if (vertex > globals.rr_depth) {
+    if (st.depth >= globals.rr_depth) {
         float u_rr = draw_block(st.key1, st.pixel, st.sample_index, vertex, DIM_ROULETTE / 4u)[DIM_ROULETTE % 4u];
         float p_rr = min(max_component(st.throughput), 0.95);
         if (!(u_rr < p_rr)) return false;
@@ -371,6 +374,19 @@ bool path_step(inout PathState st) {
     bool nee = HAS(F_NEE);
     uint vertex = st.vertex;
     st.vertex = vertex + 1u;
+    // Depth counting (Globals::path_flags): st.depth, the counted interactions before this vertex,
+    // is what max_depth caps; the random numbers stay keyed by `vertex`. Every interaction counts
+    // (path, prb) unless null events go uncounted (volpath): a thindielectric's straight-through
+    // transmission or a mask's pass-through. st.depth advances at the end of the step.
+    bool null_free = (globals.path_flags & PATH_NULL_UNCOUNTED) != 0u;
+    // No counted interaction may follow this vertex: it only gathers what it hits.
+    bool last = st.depth + 1u >= globals.max_depth || vertex >= MAX_PATH_VERTICES;
+    // An uncounted (null) event may still follow it.
+    bool null_ok = null_free && vertex < MAX_PATH_VERTICES;
+    // hide_emitters: before the first counted interaction, rays pass through emitting shapes and
+    // the environment adds nothing.
+    bool hidden = (globals.path_flags & PATH_HIDE_EMITTERS) != 0u && st.depth == 0u;
+    bool counted = true;      // whether this vertex is a bounce
     GradTerms gt = no_grad_terms();
     // BSDF derivative terms of this vertex: (direction, adjoint weight) of NEE and of the sample.
     vec3 grad_wo[2] = vec3[2](vec3(0.0, 0.0, 1.0), vec3(0.0, 0.0, 1.0));
@@ -430,6 +446,7 @@ bool path_step(inout PathState st) {
             vec3 gw = shadow ? nee_w_tr * tr : st.adj * st.radiance;
             vec3 transmitted = vec3(1.0);
             uint step = 0u;      // tracking steps of this ray
+            bool crossed_null = false;   // path counting: an emitter behind a null boundary is seen
             event = EVENT_LOST;
             [[dont_unroll]] for (uint crossings = 0u; crossings <= MAX_NULL_CROSSINGS; crossings++) {
                 hit = bvh_closest_hit(ray, 0.0, remaining);
@@ -442,8 +459,10 @@ bool path_step(inout PathState st) {
                 }
                 if (!hit.valid) { event = EVENT_ESCAPE; break; }
                 Surface sn = surface_at(hit);
-                if (materials[sn.material].tag != MAT_NULL) { event = EVENT_SURFACE; break; }
-                m = medium_crossed(sn.interior, sn.ng, ray.dir, m);
+                bool skip = !shadow && hidden && (null_free || !crossed_null) && sn.emitter != NO_EMITTER;
+                if (materials[sn.material].tag != MAT_NULL && !skip) { event = EVENT_SURFACE; break; }
+                // (A hidden emitter's shape is passed as Mitsuba passes it: no medium changes.)
+                if (!skip) { m = medium_crossed(sn.interior, sn.ng, ray.dir, m); crossed_null = true; }
                 vec3 o = offset_origin(sn.p, sn.ng, ray.dir);
                 if (!shadow) travelled += hit.t;
                 ray = make_ray(o, ray.dir);
@@ -464,19 +483,32 @@ bool path_step(inout PathState st) {
             st.ray = ray;
         } else {
             bool shadow = pass != 0u;
-            Hit h = bvh_traverse(shadow ? shadow_ray : st.ray, 0.0, shadow ? shadow_tmax : FLOAT_MAX, shadow);
+            Ray ray = shadow ? shadow_ray : st.ray;
+            Hit h;
+            bool lost = false;
+            // hide_emitters: the path's ray passes through emitting shapes (one traversal site).
+            [[dont_unroll]] for (uint crossings = 0u; crossings <= MAX_NULL_CROSSINGS; crossings++) {
+                h = bvh_traverse(ray, 0.0, shadow ? shadow_tmax : FLOAT_MAX, shadow);
+                if (shadow || !hidden || !h.valid) break;
+                Surface se = surface_at(h);
+                if (se.emitter == NO_EMITTER) break;
+                lost = crossings == MAX_NULL_CROSSINGS;
+                travelled += h.t;
+                ray = make_ray(offset_origin(se.p, se.ng, ray.dir), ray.dir);
+            }
             if (shadow) {
                 if (!h.valid) tr = vec3(1.0);
                 break;
             }
             hit = h;
-            event = hit.valid ? EVENT_SURFACE : EVENT_ESCAPE;
+            st.ray = ray;
+            event = lost ? EVENT_LOST : (hit.valid ? EVENT_SURFACE : EVENT_ESCAPE);
         }
         if (event == EVENT_LOST) {
             ended = true;
         } else if (HAS(F_MEDIA) && event == EVENT_MEDIUM) {
             // ---- a real collision in the medium: NEE through media, phase sampling, roulette ----
-            if (vertex >= globals.max_depth || !(max_component(st.throughput) > 0.0)) {
+            if (last || !(max_component(st.throughput) > 0.0)) {
                 ended = true;
             } else {
                 scatter = true;
@@ -530,7 +562,7 @@ bool path_step(inout PathState st) {
             }
         } else if (event == EVENT_ESCAPE) {
             // ---- environment hit ----
-            if (HAS(F_ENV) && globals.env_param != NO_PARAM) {
+            if (HAS(F_ENV) && globals.env_param != NO_PARAM && !hidden) {
                 float w_b = hit_weight(diff, st.prev_nee, st.prev_pdf_f, environment_pdf(st.ray.dir), st.mix);
                 vec3 le = env_radiance(st.ray.dir);
                 st.radiance += sign * (st.throughput * w_b * le);
@@ -569,20 +601,23 @@ bool path_step(inout PathState st) {
             }
             // ---- mask: the nested BSDF with probability `opacity`, else straight through ----
             // Mitsuba's `mask` samples its null transmission as a delta lobe that counts as a
-            // bounce (its `path` and `prb`); the choice is drawn first (u_lobe, rescaled for the
-            // nested BSDF as Mitsuba rescales it). In the replay the attached weight opacity or
-            // 1 − opacity over its detached value gives the opacity its derivative.
+            // bounce in its `path` and `prb` and not in its volpath family (null_free); the choice
+            // is drawn first (u_lobe, rescaled for the nested BSDF as Mitsuba rescales it). In the
+            // replay the attached weight opacity or 1 − opacity over its detached value gives the
+            // opacity its derivative.
             bool passes = false;
-            if (HAS(F_MASK) && vertex < globals.max_depth && materials[s.material].p_opacity != NO_PARAM) {
+            if (HAS(F_MASK) && (!last || null_ok) && materials[s.material].p_opacity != NO_PARAM) {
                 gt.mask = materials[s.material].p_opacity;
                 gt.at = tex_at(s);
                 mask_opacity = mask_opacity_at(gt.mask, gt.at);
                 passes = !(draw_block(st.key1, st.pixel, st.sample_index, vertex, DIM_LOBE / 4u)[DIM_LOBE % 4u] < mask_opacity);
                 if (adjoint) gt.opacity = st.adj * st.radiance * (passes ? -1.0 / (1.0 - mask_opacity) : 1.0 / mask_opacity);
             }
-            if (vertex >= globals.max_depth) {
-                ended = true;
-            } else if (passes) {
+            // At the last depth a thindielectric still samples under volpath counting: its
+            // straight-through transmission is no bounce (its reflection ends the path below).
+            bool thin = materials[s.material].tag == MAT_THIN_DIELECTRIC;
+            if (passes) {
+                counted = !null_free;
                 // An emitter found through the pass counts whole: NEE could not have sampled it.
                 st.prev_nee = false;
                 if (!path_survives(st, vertex)) {
@@ -591,6 +626,8 @@ bool path_step(inout PathState st) {
                     if (HAS(F_MEDIA)) st.medium = medium_crossed(s.interior, s.ng, st.ray.dir, st.medium);
                     st.ray = make_ray(offset_origin(s.p, s.ng, st.ray.dir), st.ray.dir);
                 }
+            } else if (last && !(null_ok && thin)) {
+                ended = true;
             } else {
                 shade = true;
                 bsdf = resolve_bsdf(s.material, tex_at(s));
@@ -787,6 +824,10 @@ bool path_step(inout PathState st) {
                              : mixture_update(st.mix, capable, use_dx, globals.diff_q, pdf_f, pdf_d);
             if (!(sum > 0.0)) ended = true; else st.throughput /= sum;
             st.mix.dx_taken = st.mix.dx_taken || use_dx;
+            // A thindielectric's straight-through transmission: Mitsuba's null lobe.
+            bool null_lobe = null_free && materials[s.material].tag == MAT_THIN_DIELECTRIC && wi.z * bs.wo.z < 0.0;
+            counted = !null_lobe;
+            if (last && !null_lobe) ended = true;
 
             // ---- Russian roulette ----
             if (!ended && !path_survives(st, vertex)) ended = true;
@@ -889,6 +930,7 @@ bool path_step(inout PathState st) {
         }
         scatter_terms(gt);
     }
+    if (counted) st.depth += 1u;
     return ended;
 }
 

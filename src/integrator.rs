@@ -2,7 +2,8 @@
 
 pub use crate::contract::PlacementMis;
 use crate::contract::{
-    Globals, LENS_ORTHOGRAPHIC, LENS_PINHOLE, LENS_THIN, MAX_HEROES, NO_PARAM, STRATEGY_BSDF, STRATEGY_DIFF, ViewCamera,
+    Globals, LENS_ORTHOGRAPHIC, LENS_PINHOLE, LENS_THIN, MAX_HEROES, NO_PARAM, PATH_HIDE_EMITTERS, PATH_NULL_UNCOUNTED,
+    STRATEGY_BSDF, STRATEGY_DIFF, ViewCamera,
 };
 use crate::error::{Error, Result};
 use crate::params::ParamId;
@@ -795,6 +796,8 @@ impl RenderOptions {
             key1: key.0[1],
             max_depth: self.max_depth.unwrap_or(UNBOUNDED_DEPTH_CAP).min(UNBOUNDED_DEPTH_CAP),
             rr_depth: self.rr_depth.unwrap_or(u32::MAX),
+            path_flags: if scene.null_uncounted { PATH_NULL_UNCOUNTED } else { 0 }
+                | if scene.hide_emitters { PATH_HIDE_EMITTERS } else { 0 },
             emitter_count: flat.emitters.len() as u32,
             emitter_total_area: flat.emitter_total_area,
             view_count: 1,

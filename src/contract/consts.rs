@@ -87,6 +87,16 @@ contract_constants! {
     FILTER_BISECTIONS = 24;
     /// Most null-BSDF boundaries one path segment (or shadow ray) passes before it is cut off.
     MAX_NULL_CROSSINGS = 64;
+    /// `Globals::path_flags` bit: Mitsuba's `volpath` family's depth counting, in which a
+    /// null-flagged BSDF sample (a `thindielectric`'s straight-through transmission, a `mask`'s
+    /// pass-through) is not a bounce; without it every interaction counts (`path`, `prb`).
+    PATH_NULL_UNCOUNTED = 1 << 0;
+    /// `Globals::path_flags` bit: Mitsuba's `hide_emitters` — before the first counted
+    /// interaction, rays pass through emitting shapes and the environment adds nothing.
+    PATH_HIDE_EMITTERS = 1 << 1;
+    /// Most vertices one path has (its random numbers' vertex index), whatever its counting:
+    /// the cap on paths of uncounted null events (`PATH_NULL_UNCOUNTED`).
+    MAX_PATH_VERTICES = 1024;
     /// Most tentative collisions one free flight or shadow segment takes before it is cut off
     /// (it then carries nothing): far beyond any majorant × length a scene has.
     MAX_TRACKING_STEPS = 32768;

@@ -18,10 +18,13 @@ contract_structs! {
         /// Philox key word 1 of the pass in stream 0 (`pass_tag`): the key of adaptive pixel
         /// selection; paths use their view's `ViewCamera::key1`.
         key1: u32,
-        /// Maximum number of surface interactions; `u32::MAX` is unbounded.
+        /// Maximum number of counted interactions (`path_flags`); `u32::MAX` is unbounded.
         max_depth: u32,
-        /// Russian roulette starts once `vertex - 1 >= rr_depth`; `u32::MAX` disables it.
+        /// Russian roulette starts once `depth >= rr_depth` (depth: the counted interactions
+        /// before the vertex, `vertex - 1` unless null events go uncounted); `u32::MAX` disables it.
         rr_depth: u32,
+        /// `PATH_NULL_UNCOUNTED` (Mitsuba's volpath counting) and `PATH_HIDE_EMITTERS` bits.
+        path_flags: u32,
         /// Number of emissive triangles.
         emitter_count: u32,
         /// Total area of the emissive triangles (area-proportional emitter sampling).

@@ -15,8 +15,9 @@ use crate::bvh::{Ray, closest_hit, occluded};
 use crate::contract::{
     DIM_DIFF_SIGN, DIM_DIRECTION, DIM_EMITTER_POS, DIM_EMITTER_SELECT, DIM_ENV_CELL, DIM_HERO, DIM_LOBE,
     DIM_PIXEL_JITTER, DIM_ROULETTE, DIM_TECHNIQUE, Distribution, Globals, LENS_ORTHOGRAPHIC, LENS_THIN, LIGHT_SLOT,
-    MAT_BLEND, MAT_CONDUCTOR, MAT_NULL, MAT_ROUGH_CONDUCTOR, MAT_ROUGH_DIELECTRIC, MAT_ROUGH_PLASTIC, MAX_HEROES,
-    MAX_NULL_CROSSINGS, NO_EMITTER, NO_MEDIUM, NO_PARAM, PLACEMENT_POWER, STRATEGY_DIFF, ViewCamera,
+    MAT_BLEND, MAT_CONDUCTOR, MAT_NULL, MAT_ROUGH_CONDUCTOR, MAT_ROUGH_DIELECTRIC, MAT_ROUGH_PLASTIC,
+    MAT_THIN_DIELECTRIC, MAX_HEROES, MAX_NULL_CROSSINGS, MAX_PATH_VERTICES, NO_EMITTER, NO_MEDIUM, NO_PARAM,
+    PATH_HIDE_EMITTERS, PATH_NULL_UNCOUNTED, PLACEMENT_POWER, STRATEGY_DIFF, ViewCamera,
 };
 use crate::cpu::emitter::{
     EmitterSample, area_backward, area_radiance, emitter_pdf_solid_angle, env_backward, env_radiance,
@@ -36,16 +37,18 @@ fn draw_block(key: RngKey, pixel: u32, sample: u32, vertex: u32, block: u32) -> 
     uniform4(key, pixel, sample, vertex, Stream::Main, block, 0)
 }
 
-/// Russian roulette at `vertex` — from vertex − 1 ≥ rr_depth (ALGORITHMS.md §3.1, written without
-/// the subtraction), surviving with p = min(max β, 0.95) and β divided by it — then the end of a
-/// path whose throughput is zero. True if the path goes on (twin of `path_survives` in the kernels).
+/// Russian roulette at `vertex`, whose counted interactions before it are `depth` (vertex − 1
+/// unless null events go uncounted) — from depth ≥ rr_depth (ALGORITHMS.md §3.1), surviving with
+/// p = min(max β, 0.95) and β divided by it — then the end of a path whose throughput is zero.
+/// True if the path goes on (twin of `path_survives` in the kernels).
 fn path_survives(
     globals: &Globals,
     key: RngKey,
     (pixel, sample, vertex): (u32, u32, u32),
+    depth: u32,
     throughput: &mut Vec3,
 ) -> bool {
-    if vertex > globals.rr_depth {
+    if depth >= globals.rr_depth {
         let u_rr = draw_block(key, pixel, sample, vertex, DIM_ROULETTE / 4)[(DIM_ROULETTE % 4) as usize];
         let p_rr = max_component(*throughput).min(0.95);
         if !(u_rr < p_rr) {
@@ -450,11 +453,26 @@ pub fn trace_path<const ADJOINT: bool>(
     let mut jac = Jac6::IDENTITY;
     let mut log_rows = [Row6::ZERO; 3];
     let mut phi = if ADJOINT { *gamma } else { Row6::ZERO };
-    for vertex in 1..=globals.max_depth {
+    // Depth counting (`Globals::path_flags`): `depth` is the number of counted interactions before
+    // the vertex (Mitsuba's `depth`), which max_depth caps; the random numbers stay keyed by
+    // `vertex`. Every interaction counts (path, prb) unless null events go uncounted (volpath):
+    // a thindielectric's straight-through transmission or a mask's pass-through.
+    let null_free = globals.path_flags & PATH_NULL_UNCOUNTED != 0;
+    let hide = globals.path_flags & PATH_HIDE_EMITTERS != 0;
+    let mut depth = 0u32;
+    for vertex in 1..=MAX_PATH_VERTICES {
+        // No counted interaction may follow this vertex: it only gathers what it hits.
+        let last = depth + 1 >= globals.max_depth || vertex >= MAX_PATH_VERTICES;
+        // An uncounted (null) event may still follow it.
+        let null_ok = null_free && vertex < MAX_PATH_VERTICES;
+        // hide_emitters: before the first counted interaction, rays pass through emitting shapes
+        // and the environment adds nothing.
+        let hidden = hide && depth == 0;
         // ---- intersection: through null boundaries and null collisions to the next event ----
         let mut travelled = 0.0f32; // from the last vertex to `ray.origin`, across null boundaries
         let mut step = 0u32; // delta-tracking steps of this vertex
         let mut crossings = 0u32;
+        let mut crossed_null = false; // path counting: an emitter behind a null boundary is seen
         let event = loop {
             let hit = closest_hit(&flat.bvh, &ray, 0.0, f32::MAX);
             if media && current != NO_MEDIUM {
@@ -470,15 +488,21 @@ pub fn trace_path<const ADJOINT: bool>(
             }
             let Some(hit) = hit else { break Event::Escape };
             let s = surface_at(flat, &hit);
-            if !(media && flat.materials[s.material as usize].tag == MAT_NULL) {
+            let skip = hidden && (null_free || !crossed_null) && s.emitter != NO_EMITTER;
+            let null = media && flat.materials[s.material as usize].tag == MAT_NULL;
+            if !(null || skip) {
                 break Event::Surface(hit, s);
             }
             crossings += 1;
             if crossings > MAX_NULL_CROSSINGS {
                 break Event::Lost;
             }
-            let interior = flat.mesh_of(hit.slot).interior;
-            current = medium::medium_crossed(interior, s.ng, ray.dir, current);
+            if !skip {
+                // (A hidden emitter's shape is passed as Mitsuba passes it: no medium changes.)
+                let interior = flat.mesh_of(hit.slot).interior;
+                current = medium::medium_crossed(interior, s.ng, ray.dir, current);
+                crossed_null = true;
+            }
             travelled += hit.t;
             ray = Ray::new(offset_origin(s.p, s.ng, ray.dir), ray.dir);
         };
@@ -486,7 +510,7 @@ pub fn trace_path<const ADJOINT: bool>(
             Event::Lost => break,
             Event::Escape => {
                 // ---- environment hit ----
-                if globals.env_param != NO_PARAM {
+                if globals.env_param != NO_PARAM && !hidden {
                     let w_b = hit_weight(diff, prev_nee, prev_pdf_f, environment_pdf(flat, globals, ray.dir), &mix);
                     let le = env_radiance(flat, globals, ray.dir);
                     radiance += sign * (throughput * w_b * le);
@@ -507,7 +531,7 @@ pub fn trace_path<const ADJOINT: bool>(
                 break;
             }
             Event::Medium(x) => {
-                if vertex >= globals.max_depth || !(max_component(throughput) > 0.0) {
+                if last || !(max_component(throughput) > 0.0) {
                     break;
                 }
                 let m = &flat.media[current as usize];
@@ -624,10 +648,11 @@ pub fn trace_path<const ADJOINT: bool>(
                     mix.prev_sum = 1.0;
                     mix.prev_sq = mix.squares();
                 }
-                if !path_survives(globals, key, (pixel, sample, vertex), &mut throughput) {
+                if !path_survives(globals, key, (pixel, sample, vertex), depth, &mut throughput) {
                     break;
                 }
                 ray = Ray::new(x, wo);
+                depth += 1;
                 continue;
             }
             Event::Surface(hit, s) => (hit, s),
@@ -654,12 +679,13 @@ pub fn trace_path<const ADJOINT: bool>(
         }
         // ---- mask: the nested BSDF with probability `opacity`, else straight through ----
         // Mitsuba's `mask` samples its null transmission as a delta lobe that counts as a bounce
-        // (its `path` and `prb`); the choice is drawn first (u_lobe, rescaled for the nested BSDF
-        // as Mitsuba rescales it). In the replay the attached weight opacity or 1 − opacity over
-        // its detached value gives the opacity its derivative.
+        // in its `path` and `prb` and not in its volpath family (null_free); the choice is drawn
+        // first (u_lobe, rescaled for the nested BSDF as Mitsuba rescales it). In the replay the
+        // attached weight opacity or 1 − opacity over its detached value gives the opacity its
+        // derivative.
         let p_opacity = flat.materials[s.material as usize].p_opacity;
         let mut mask_opacity = 1.0f32; // a masked surface's opacity (1: no mask)
-        if vertex < globals.max_depth && p_opacity != NO_PARAM {
+        if (!last || null_ok) && p_opacity != NO_PARAM {
             mask_opacity = mask_opacity_at(flat, p_opacity, s.tex_at());
             let u_mask = draw_block(key, pixel, sample, vertex, DIM_LOBE / 4)[(DIM_LOBE % 4) as usize];
             let passes = !(u_mask < mask_opacity);
@@ -670,16 +696,20 @@ pub fn trace_path<const ADJOINT: bool>(
             if passes {
                 // An emitter found through the pass counts whole: NEE could not have sampled it.
                 prev_nee = false;
-                if !path_survives(globals, key, (pixel, sample, vertex), &mut throughput) {
+                if !path_survives(globals, key, (pixel, sample, vertex), depth, &mut throughput) {
                     break;
                 }
                 let interior = flat.mesh_of(hit.slot).interior;
                 current = medium::medium_crossed(interior, s.ng, ray.dir, current);
                 ray = Ray::new(offset_origin(s.p, s.ng, ray.dir), ray.dir);
+                depth += u32::from(!null_free);
                 continue;
             }
         }
-        if vertex >= globals.max_depth {
+        // At the last depth a thindielectric still samples under volpath counting: its
+        // straight-through transmission is no bounce (its reflection ends the path below).
+        let thin = flat.materials[s.material as usize].tag == MAT_THIN_DIELECTRIC;
+        if last && !(null_ok && thin) {
             break;
         }
 
@@ -852,9 +882,14 @@ pub fn trace_path<const ADJOINT: bool>(
             break;
         };
         throughput /= sum;
+        // A thindielectric's straight-through transmission: Mitsuba's null lobe.
+        let null_lobe = null_free && thin && wi.z * bs.wo.z < 0.0;
+        if last && !null_lobe {
+            break;
+        }
 
         // ---- Russian roulette ----
-        if !path_survives(globals, key, (pixel, sample, vertex), &mut throughput) {
+        if !path_survives(globals, key, (pixel, sample, vertex), depth, &mut throughput) {
             break;
         }
         // The path continues: everything later in `radiance` carries the factor f̂(wi, wo).
@@ -949,6 +984,7 @@ pub fn trace_path<const ADJOINT: bool>(
         // A direction through a dielectric boundary enters or leaves its shape's medium.
         current = medium::medium_crossed(interior, s.ng, wo_world, current);
         ray = Ray::new(offset_origin(s.p, s.ng, wo_world), wo_world);
+        depth += u32::from(!null_lobe);
     }
     if attached {
         *gamma = phi;

@@ -581,6 +581,15 @@ pub struct Scene {
     pub params: ParamTable,
     /// Default maximum path depth (surface interactions) for this scene.
     pub max_depth: u32,
+    /// Whether null-flagged BSDF samples — a `thindielectric`'s straight-through transmission, a
+    /// `mask`'s pass-through — are left out of the depth that `max_depth` caps, as Mitsuba's
+    /// `volpath`, `volpathmis` and `prbvolpath` count (false: every interaction counts, as in
+    /// `path` and `prb`). Random numbers stay keyed by the vertex index either way.
+    pub null_uncounted: bool,
+    /// Mitsuba's `hide_emitters`: before the path's first counted interaction its rays pass
+    /// through emitting shapes and the environment adds nothing (emitters stay visible in
+    /// reflections and to next-event estimation).
+    pub hide_emitters: bool,
     /// Default samples per pixel, when the scene file names one (Mitsuba's `sample_count`).
     pub default_spp: Option<u32>,
     /// Warnings found while loading (unknown properties, dropped triangles, …), also logged.
@@ -677,6 +686,8 @@ impl Scene {
             lights: Vec::new(),
             params: ParamTable::default(),
             max_depth: 6,
+            null_uncounted: false,
+            hide_emitters: false,
             default_spp: None,
             warnings: Vec::new(),
             overflowed_triangles: 0,

@@ -76,6 +76,22 @@ fn issue_31_principled_gpu_equals_cpu_per_path() {
     }
 }
 
+/// Depth counting (Mitsuba's volpath family: a thindielectric's transmission and a mask's
+/// pass-through are no bounce) and `hide_emitters` (issue 31), in their conformance scenes and
+/// with the other counting (path), as the rest are compared.
+#[test]
+fn issue_31_depth_counting_and_hide_emitters_gpu_equals_cpu_per_path() {
+    let gpu = TestGpu::new();
+    for name in ["integrator_volpath_thin_depth", "integrator_hide_emitters"] {
+        let mut scene = crate::support::scenes::conformance(name);
+        assert!(scene.null_uncounted, "{name}: a volpath-family scene");
+        primal_agrees_per_path(&gpu, &scene);
+        scene.null_uncounted = false;
+        scene.source = format!("{name} counted as path");
+        primal_agrees_per_path(&gpu, &scene);
+    }
+}
+
 /// One path per pixel of `scene` on the GPU and the CPU reference: within [`REL_TOL`] and
 /// [`ABS_TOL`], all but [`MISMATCH_BUDGET`] of them.
 fn primal_agrees_per_path(gpu: &TestGpu, scene: &pathgrad::scene::Scene) {

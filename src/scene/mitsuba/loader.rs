@@ -335,10 +335,8 @@ impl<'a> Loader<'a> {
             self.scene.warn(w);
         }
         self.direct_delta_warning();
-        self.thin_dielectric_depth_warning();
         let integrator = children.iter().find(|c| c.has_tag_name("integrator")).copied().unwrap_or(root);
         self.null_outside_volpath_warning(integrator);
-        self.refuse_masks_under_volpath()?;
         self.ptracer_checks()?;
         self.refuse_sensors_in_media(&sensors)?;
         self.refuse_overlapping_media()?;
@@ -630,32 +628,6 @@ impl<'a> Loader<'a> {
         self.scene.warn(w);
     }
 
-    /// Mitsuba's `volpath` family flags a `thindielectric`'s straight-through transmission as a
-    /// null event and does not count it as a bounce; pathgrad counts it (as Mitsuba's `path` and
-    /// `prb` do). Under a finite `max_depth` the two then end paths through thin dielectrics at
-    /// different depths, so the images differ (measured: 6 % darker at max_depth 6 on
-    /// `tests/scenes/participating_media/test_homo_area_light_volpath.xml`, the same at 64); it
-    /// says so.
-    fn thin_dielectric_depth_warning(&mut self) {
-        let Some(node) = self.volpath_integrator else { return };
-        let thin = self.scene.materials.iter().any(|m| {
-            matches!(m, crate::scene::Material::Smooth { kind: crate::bsdf::specular::SmoothKind::ThinDielectric, .. })
-        });
-        if !thin || self.scene.max_depth >= crate::integrator::UNBOUNDED_DEPTH_CAP {
-            return;
-        }
-        let w = self.x.warning(
-            node,
-            format!(
-                "max_depth {}: Mitsuba's volpath integrators do not count a thindielectric's transmission as a bounce; \
-                 pathgrad does, so paths through thin dielectrics end sooner and the image is darker than Mitsuba's \
-                 (raise max_depth, or use path or prb, to render the same image)",
-                self.scene.max_depth
-            ),
-        );
-        self.scene.warn(w);
-    }
-
     /// A `null` BSDF is an index-matched boundary in pathgrad: crossing it is no bounce and shadow
     /// rays pass it — what Mitsuba's `volpath` family does. Mitsuba's `path` and `prb` (also its
     /// default integrator) instead count the crossing as a bounce and stop shadow rays at the
@@ -676,31 +648,6 @@ impl<'a> Loader<'a> {
              brighter there than Mitsuba's path render (use volpath or prbvolpath to compare)",
         );
         self.scene.warn(w);
-    }
-
-    /// Mitsuba's `volpath` family treats a `mask`'s pass-through as a null event: it is not a
-    /// bounce, and shadow rays pass masks with weight 1 − opacity. pathgrad renders a mask as
-    /// Mitsuba's `path` and `prb` do (a bounce; shadow rays stop at it), which has the same
-    /// expectation only when no path is cut short by `max_depth`: a volpath-family integrator
-    /// with a finite `max_depth` in a scene with a mask is refused by name.
-    ///
-    /// # Errors
-    /// That combination.
-    fn refuse_masks_under_volpath(&self) -> Result<()> {
-        let Some(node) = self.volpath_integrator else { return Ok(()) };
-        let masked = self.scene.materials.iter().any(|m| matches!(m, crate::scene::Material::Mask { .. }));
-        if !masked || self.scene.max_depth >= crate::integrator::UNBOUNDED_DEPTH_CAP {
-            return Ok(());
-        }
-        Err(self.x.err(
-            node,
-            format!(
-                "max_depth {} with a 'mask' BSDF: Mitsuba's volpath integrators do not count a mask's pass-through \
-                 as a bounce and let shadow rays through masks; pathgrad renders masks as Mitsuba's path and prb \
-                 do, which gives the same image only with max_depth -1 (use path or prb, or max_depth -1)",
-                self.scene.max_depth
-            ),
-        ))
     }
 
     /// Mitsuba's `ptracer` traces light paths and connects each vertex to the camera, so it

@@ -97,8 +97,10 @@
 //!   cells fine enough for the same budget, with Mitsuba's `smooth` or `analytic` normals at the
 //!   vertices; see `sdfgrid.rs`. Its `grid` and `to_world` are not parameters.
 //! - **Depth**: `max_depth = -1` (and a scene without `<integrator>`, Mitsuba's default) becomes
-//!   [`crate::integrator::UNBOUNDED_DEPTH_CAP`], which the renderer treats as unbounded. `rr_depth`
-//!   other than 5 and `hide_emitters` are warned about and ignored.
+//!   [`crate::integrator::UNBOUNDED_DEPTH_CAP`], which the renderer treats as unbounded. The
+//!   volpath family counts depth as Mitsuba's does ([`crate::scene::Scene::null_uncounted`]: a
+//!   thindielectric's transmission or a mask's pass-through is no bounce); `hide_emitters` becomes
+//!   [`crate::scene::Scene::hide_emitters`]. `rr_depth` other than 5 is warned about and ignored.
 //! - **Filters and samplers**: the film's `rfilter` is `box`, `tent` (`radius`) or `gaussian`
 //!   (`stddev`; Mitsuba's default, also when the film names none), rendered exactly
 //!   ([`crate::scene::PixelFilter`]: each sample's position is drawn from the filter around the

@@ -484,7 +484,7 @@ impl<'a> Loader<'a> {
                 "'direct' integrator: rendered as a path tracer of max_depth 2 (the same image, other noise)",
             );
             self.scene.warn(w);
-            self.warn_hide_emitters(&p, node)?;
+            self.hide_emitters(&p)?;
             return self.finish(&p);
         }
         if matches!(p.kind.as_str(), "direct_projective" | "prb_projective") {
@@ -499,11 +499,14 @@ impl<'a> Loader<'a> {
             );
             self.scene.warn(w);
             p.integer(&self.x, "max_depth")?;
-            self.warn_hide_emitters(&p, node)?;
+            self.hide_emitters(&p)?;
             return self.finish(&p);
         }
         if matches!(p.kind.as_str(), "volpath" | "volpathmis" | "prbvolpath") {
             self.volpath_integrator = Some(node);
+            // Their depth counts no null-flagged BSDF sample (a thindielectric's transmission, a
+            // mask's pass-through): Mitsuba's volpath.cpp, volpathmis.cpp, prbvolpath.py.
+            self.scene.null_uncounted = true;
         }
         if p.kind == "ptracer" {
             p.integer(&self.x, "samples_per_pass")?;
@@ -560,7 +563,7 @@ impl<'a> Loader<'a> {
             );
             self.scene.warn(w);
         }
-        self.warn_hide_emitters(&p, node)?;
+        self.hide_emitters(&p)?;
         self.finish(&p)
     }
 
@@ -580,14 +583,14 @@ impl<'a> Loader<'a> {
         Ok(())
     }
 
-    /// An integrator's `hide_emitters` set to true: pathgrad shows emitters, and says so.
-    fn warn_hide_emitters(&mut self, p: &Props<'a>, node: El<'a>) -> Result<()> {
-        if p.boolean(&self.x, "hide_emitters", false)? {
-            let n = p.node_of("hide_emitters").unwrap_or(node);
-            let w =
-                self.x.warning(n, format!("property 'hide_emitters' of '{}' ignored: pathgrad shows emitters", p.kind));
-            self.scene.warn(w);
-        }
+    /// An integrator's `hide_emitters` into [`crate::scene::Scene::hide_emitters`]: as in every
+    /// Mitsuba integrator pathgrad accepts, the camera's rays pass through emitting shapes and
+    /// the environment adds nothing until the path's first counted interaction.
+    ///
+    /// # Errors
+    /// A value that is not a boolean.
+    fn hide_emitters(&mut self, p: &Props<'a>) -> Result<()> {
+        self.scene.hide_emitters = p.boolean(&self.x, "hide_emitters", false)?;
         Ok(())
     }
 }

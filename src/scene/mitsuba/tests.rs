@@ -1119,23 +1119,37 @@ fn the_differential_strategy_covers_rough_dielectrics_and_plastics() {
     assert!(err.contains("brushed.bsdf.alpha_u.value") && err.contains("anisotropic"), "{err}");
 }
 
-/// A volpath-family integrator with a finite max_depth and a thindielectric says that Mitsuba
-/// counts depth differently there; path and an unbounded depth do not.
+/// The volpath family counts depth as Mitsuba's volpath does (no null-flagged BSDF sample is a
+/// bounce) without a warning; path, prb and direct count every interaction. `hide_emitters` is
+/// read by every integrator.
 #[test]
-fn volpath_depth_through_thin_dielectrics_is_warned() {
+fn volpath_counts_no_null_events_and_hide_emitters_is_read() {
     let scene = |integrator: &str| {
-        format!(
+        let xml = format!(
             r#"<scene version="3.0.0">{integrator}<sensor type="perspective"/><shape type="cube"><bsdf type="thindielectric"/></shape><shape type="sphere"><emitter type="area"/></shape></scene>"#
-        )
+        );
+        load_text(&xml, Path::new("s.xml"), &[], obj_for_tests).unwrap()
     };
-    let warned = |integrator: &str| {
-        let s = load_text(&scene(integrator), Path::new("s.xml"), &[], obj_for_tests).unwrap();
-        s.warnings.iter().any(|w| w.contains("do not count a thindielectric's transmission"))
-    };
-    assert!(warned(r#"<integrator type="volpath"><integer name="max_depth" value="6"/></integrator>"#));
-    assert!(warned(r#"<integrator type="prbvolpath"><integer name="max_depth" value="3"/></integrator>"#));
-    assert!(!warned(r#"<integrator type="path"><integer name="max_depth" value="6"/></integrator>"#));
-    assert!(!warned(r#"<integrator type="volpath"/>"#));
+    for (integrator, uncounted) in [
+        (r#"<integrator type="volpath"><integer name="max_depth" value="6"/></integrator>"#, true),
+        (r#"<integrator type="volpathmis"><integer name="max_depth" value="6"/></integrator>"#, true),
+        (r#"<integrator type="prbvolpath"><integer name="max_depth" value="3"/></integrator>"#, true),
+        (r#"<integrator type="path"><integer name="max_depth" value="6"/></integrator>"#, false),
+        (r#"<integrator type="prb"/>"#, false),
+        ("", false),
+    ] {
+        let s = scene(integrator);
+        assert_eq!(s.null_uncounted, uncounted, "{integrator}");
+        assert!(!s.warnings.iter().any(|w| w.contains("thindielectric")), "{integrator}: {:?}", s.warnings);
+        assert!(!s.hide_emitters);
+    }
+    for integrator in ["path", "prb", "volpath", "prbvolpath", "direct", "ptracer"] {
+        let s = scene(&format!(
+            r#"<integrator type="{integrator}"><boolean name="hide_emitters" value="true"/></integrator>"#
+        ));
+        assert!(s.hide_emitters, "{integrator}");
+        assert!(!s.warnings.iter().any(|w| w.contains("hide_emitters")), "{integrator}: {:?}", s.warnings);
+    }
 }
 
 #[test]

@@ -570,7 +570,6 @@ fn ignored_settings_are_warned_about() {
             "4:124: property 'seed' of 'independent' ignored: pathgrad takes the seed from the render options",
             "3:28: property 'near_clip' of 'perspective' ignored: pathgrad's camera does not clip",
             "2:25: property 'rr_depth' of 'path' ignored: pathgrad starts Russian roulette at depth 5",
-            "2:61: property 'hide_emitters' of 'path' ignored: pathgrad shows emitters",
             "5:122: property 'format' = 'uint8' of 'bitmap' ignored: pathgrad uses 'variant'",
             "1:1: the scene has no emitters: it renders black unless lit by an environment (LoadOptions::environment)",
         ]
