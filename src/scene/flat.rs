@@ -747,31 +747,26 @@ fn scalar_texture_tables(scene: &Scene, materials: &mut [GpuMaterial], tables: &
 }
 
 /// Appends the descriptor of every textured area emitter's radiance (`TEXTURE_DESC_LEN` words as
-/// `SCALAR_TEXTURE` states, the texels RGB) to `tables` and points its triangles'
-/// `p_radiance` at it, `SCALAR_TEXTURE` or-ed with its offset there.
+/// `SCALAR_TEXTURE` states, the texels RGB: a bitmap's, or a checkerboard's two colours with
+/// `TEX_CHECKER`) to `tables` and points its triangles' `p_radiance` at it, `SCALAR_TEXTURE`
+/// or-ed with its offset there.
 fn area_texture_tables(scene: &Scene, emitters: &mut [EmitterTri], tables: &mut Vec<f32>) {
+    // (radiance offset, descriptor offset) of each textured emitter's radiance, placed once.
     let mut placed: Vec<(u32, u32)> = Vec::new();
-    for e in emitters.iter_mut() {
-        let Some(t) = scene.textures.iter().position(|t| scene.params.entry(t.texels).offset == e.p_radiance) else {
+    for m in &scene.meshes {
+        let (Some(radiance), Some(albedo)) = (m.emitter, m.emitter_texture) else {
             continue;
         };
-        if !scene.meshes.iter().any(|m| m.emitter_texture.is_some_and(|id| id.0 as usize == t)) {
-            continue;
+        let offset = scene.params.entry(radiance).offset;
+        if placed.iter().all(|(o, _)| *o != offset) {
+            placed.push((offset, tables.len() as u32));
+            tables.extend(colour_descriptor(scene, albedo));
         }
-        let at = match placed.iter().find(|(i, _)| *i == t as u32) {
-            Some(&(_, at)) => at,
-            None => {
-                let tex = &scene.textures[t];
-                let at = tables.len() as u32;
-                let words = [e.p_radiance, tex.width, tex.height, texture_mode(tex.nearest, tex.wrap)];
-                tables.extend(words.map(f32::from_bits));
-                tables.extend(tex.to_uv[0].to_array());
-                tables.extend(tex.to_uv[1].to_array());
-                placed.push((t as u32, at));
-                at
-            }
-        };
-        e.p_radiance = SCALAR_TEXTURE | at;
+    }
+    for e in emitters.iter_mut() {
+        if let Some(&(_, at)) = placed.iter().find(|(o, _)| *o == e.p_radiance) {
+            e.p_radiance = SCALAR_TEXTURE | at;
+        }
     }
 }
 

@@ -381,12 +381,13 @@ pub struct Mesh {
     pub indices: Vec<[u32; 3]>,
     /// The material.
     pub material: MaterialId,
-    /// RGB radiance parameter if the mesh is an area emitter (the texels of `emitter_texture`
-    /// where it has one).
+    /// RGB radiance parameter if the mesh is an area emitter (where it has an `emitter_texture`,
+    /// a bitmap's texels or a checkerboard's `colors`).
     pub emitter: Option<ParamId>,
-    /// A textured area emitter's radiance (Mitsuba's `area` with a `bitmap` `radiance`), looked
-    /// up at the hit's texture coordinates.
-    pub emitter_texture: Option<TextureId>,
+    /// A textured area emitter's radiance (Mitsuba's `area` with a `bitmap` or `checkerboard`
+    /// `radiance`: [`Albedo::Bitmap`] or [`Albedo::Checker`], no other), looked up at the hit's
+    /// texture coordinates.
+    pub emitter_texture: Option<Albedo>,
     /// The medium inside the mesh (a closed surface), if any.
     pub interior: Option<medium::MediumId>,
 }
@@ -1179,8 +1180,20 @@ impl Scene {
                 (Some(p), None) if self.params.entry(p).len != 3 => {
                     return Err(err(at(), "its radiance is not one RGB value".into()));
                 }
-                (Some(p), Some(t)) if self.textures.get(t.0 as usize).is_none_or(|t| t.texels != p) => {
+                (Some(p), Some(Albedo::Bitmap(t))) if self.textures.get(t.0 as usize).is_none_or(|t| t.texels != p) => {
                     return Err(err(at(), "its radiance texture does not exist or is not its radiance".into()));
+                }
+                (Some(p), Some(Albedo::Checker { colors, .. }))
+                    if colors != p
+                        || self.params.entries().get(p.0 as usize + 1).is_none_or(|next| {
+                            let first = self.params.entry(p);
+                            first.len != 3 || next.len != 3 || next.offset != first.offset + 3
+                        }) =>
+                {
+                    return Err(err(at(), "its radiance checkerboard's two colours are not its radiance".into()));
+                }
+                (Some(_), Some(Albedo::Rgb(_) | Albedo::Attribute { .. } | Albedo::Volume(_))) => {
+                    return Err(err(at(), "its radiance texture is neither a bitmap nor a checkerboard".into()));
                 }
                 (None, Some(_)) => return Err(err(at(), "a radiance texture without an emitter".into())),
                 _ => {}

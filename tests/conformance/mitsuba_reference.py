@@ -93,6 +93,13 @@ MATRIX = {
     "emitter_area_texture": dict(features=["area emitter radiance bitmap (sRGB, format variant)",
                                            "NEE and hits read the texture; sampled by area"],
                                  grads=["panel.emitter.radiance.data"]),
+    # Issue 31: a bitmap radiance under `to_uv` (nearest) and a checkerboard radiance (its two
+    # colours the parameters); Mitsuba samples both in texture space, pathgrad by area.
+    "emitter_area_texture_uv": dict(features=["area emitter radiance bitmap with to_uv (nearest, repeat)",
+                                              "area emitter radiance checkerboard with to_uv",
+                                              "sampled by area"],
+                                    grads=["panel.emitter.radiance.data", "strip.emitter.radiance.color0.value",
+                                           "strip.emitter.radiance.color1.value"]),
     "texture_specular_reflectance": dict(features=["roughconductor specular_reflectance bitmap (sRGB)",
                                                    "roughconductor specular_reflectance checkerboard of colours"],
                                          grads=["floor.bsdf.specular_reflectance.data",

@@ -51,6 +51,7 @@ fn gpu_equals_cpu_per_path_on_every_builtin_and_test_scene() {
         "bsdf_blend_conductor",
         "texture_mesh_attribute",
         "emitter_area_texture",
+        "emitter_area_texture_uv",
     ] {
         scenes.push(crate::support::scenes::conformance(name));
     }

@@ -431,6 +431,18 @@ fn issue_31_textured_area_emitter_gpu_equal_cpu_and_match_finite_differences() {
     check_finite_differences(&gpu, vec![(scene, "panel.emitter.radiance.data")]);
 }
 
+/// An area emitter's bitmap under `to_uv` and its checkerboard radiance (issue 31): GPU and CPU
+/// image gradients per path, and the texels and both colours against central finite differences.
+#[test]
+fn issue_31_to_uv_and_checkerboard_area_radiance_gpu_equal_cpu_and_match_finite_differences() {
+    let gpu = TestGpu::new();
+    let scene = scenes::conformance("emitter_area_texture_uv");
+    let params =
+        ["panel.emitter.radiance.data", "strip.emitter.radiance.color0.value", "strip.emitter.radiance.color1.value"];
+    image_gradients_agree(&gpu, vec![(scene.clone(), params.to_vec())]);
+    check_finite_differences(&gpu, params.iter().map(|&p| (scene.clone(), p)).collect());
+}
+
 /// The textured lights' intensity, texels, scale and constant irradiance (issue 31) against
 /// central finite differences.
 #[test]

@@ -304,7 +304,7 @@ impl Loader<'_> {
                     self.scene.add_mesh(&name, geometry.transformed(world), material.id, None)?;
                     let mesh = self.scene.meshes.last_mut().expect("add_mesh pushed a mesh");
                     mesh.emitter = Some(self.scene.textures[texture.0 as usize].texels);
-                    mesh.emitter_texture = Some(texture);
+                    mesh.emitter_texture = Some(crate::scene::Albedo::Bitmap(texture));
                 }
             }
         }

@@ -640,7 +640,7 @@ impl<'a> Loader<'a> {
         let name = self.name_of(target, name)?;
         let p = Props::parse(&self.x, target)?;
         if p.kind == "checkerboard" {
-            let albedo = self.checkerboard(&p, &name)?;
+            let albedo = self.checkerboard(&p, &name, bounds::REFLECTANCE)?;
             self.textures.insert(target.id(), albedo);
             return Ok(albedo);
         }
@@ -935,10 +935,12 @@ impl<'a> Loader<'a> {
         Ok(self.scene.add_material(Material::NormalMap { nested, map }))
     }
 
-    /// Mitsuba's `checkerboard` (`color0` 0.4 and `color1` 0.2 by default, each a colour — a
-    /// texture there is refused by name — and `to_uv`): parameters `NAME.color0.value` and
-    /// `NAME.color1.value`, added one after the other (the kernels read them as two texels).
-    fn checkerboard(&mut self, p: &Props<'a>, name: &str) -> Result<Albedo> {
+    /// Mitsuba's `checkerboard` (`color0` 0.4 and `color1` 0.2 by default, each a colour in
+    /// [0, 1] as Mitsuba demands of them even in an emitter — a texture there is refused by name
+    /// — and `to_uv`): parameters `NAME.color0.value` and `NAME.color1.value` bounded by `range`
+    /// (an emitter's: [`bounds::RADIANCE`]), added one after the other (the kernels read them as
+    /// two texels).
+    pub(super) fn checkerboard(&mut self, p: &Props<'a>, name: &str, range: (f32, f32)) -> Result<Albedo> {
         for slot in ["color0", "color1"] {
             if let Some(t) = p.object(slot) {
                 return Err(self
@@ -950,9 +952,9 @@ impl<'a> Loader<'a> {
         let color1 = self.color_in(p, "color1", Vec3::splat(0.2), bounds::REFLECTANCE)?;
         let to_uv = self.to_uv(p)?;
         self.finish(p)?;
-        let first = self.scene.params.add(&format!("{name}.color0.value"), &color0.to_array(), bounds::REFLECTANCE);
+        let first = self.scene.params.add(&format!("{name}.color0.value"), &color0.to_array(), range);
         let first = first.map_err(|e| self.located(p.node, e))?;
-        let second = self.scene.params.add(&format!("{name}.color1.value"), &color1.to_array(), bounds::REFLECTANCE);
+        let second = self.scene.params.add(&format!("{name}.color1.value"), &color1.to_array(), range);
         let second = second.map_err(|e| self.located(p.node, e))?;
         debug_assert_eq!(self.scene.params.entry(second).offset, self.scene.params.entry(first).offset + 3);
         Ok(Albedo::Checker { colors: first, to_uv })

@@ -921,8 +921,7 @@ impl<'a> Loader<'a> {
         Ok(())
     }
 
-    /// The texture `node` of a light (`kind`: a spot's `texture`, a projector's `irradiance`, an
-    /// area emitter's `radiance`): a
+    /// The texture `node` of a light (`kind`: a spot's `texture`, a projector's `irradiance`): a
     /// `bitmap` without `to_uv`, its texels (any value ≥ 0) the parameter `NAME.data`.
     ///
     /// # Errors
@@ -934,19 +933,69 @@ impl<'a> Loader<'a> {
         }
         let name = self.name_of(target, name)?;
         let p = Props::parse(&self.x, target)?;
+        let (t, p) = self.light_bitmap(target, p, &name, kind)?;
+        if let Some((_, n)) = p.transform(&self.x, "to_uv")? {
+            return Err(self.x.err(n, format!("'to_uv' of the texture of a '{kind}' is not supported")));
+        }
+        self.finish(&p)?;
+        Ok(t)
+    }
+
+    /// The texture `node` of an area emitter's `radiance` and the parameter its mesh's `emitter`
+    /// names: a `bitmap` (with `to_uv`), its texels (any value ≥ 0) the parameter `NAME.data`,
+    /// or a `checkerboard`, parameters `NAME.color0.value` (that one) and `NAME.color1.value`
+    /// ([`Loader::checkerboard`]).
+    ///
+    /// # Errors
+    /// Another plugin, a negative texel, what [`Loader::bitmap`] and [`Loader::checkerboard`]
+    /// refuse.
+    pub(super) fn area_texture(
+        &mut self,
+        node: El<'a>,
+        name: String,
+    ) -> Result<(crate::params::ParamId, crate::scene::Albedo)> {
+        let target = self.deref(node)?;
+        if !target.has_tag_name("texture") {
+            return Err(self.x.err(node, format!("refers to a <{}>, expected a <texture>", target.tag_name().name())));
+        }
+        let name = self.name_of(target, name)?;
+        let p = Props::parse(&self.x, target)?;
+        if p.kind == "checkerboard" {
+            let checker = self.checkerboard(&p, &name, bounds::RADIANCE)?;
+            let crate::scene::Albedo::Checker { colors, .. } = checker else {
+                return Err(self.x.err(target, "a checkerboard read as another texture (a pathgrad bug)"));
+            };
+            return Ok((colors, checker));
+        }
+        let (t, p) = self.light_bitmap(target, p, &name, "area")?;
+        let to_uv = self.to_uv(&p)?;
+        let texture = &mut self.scene.textures[t.0 as usize];
+        texture.to_uv = to_uv;
+        let texels = texture.texels;
+        self.finish(&p)?;
+        Ok((texels, crate::scene::Albedo::Bitmap(t)))
+    }
+
+    /// The `bitmap` `p` (element `target`, named `name`) of a light of `kind` as a texture of
+    /// texels ≥ 0, parameter `NAME.data`; `p` returned to be finished by the caller.
+    fn light_bitmap(
+        &mut self,
+        target: El<'a>,
+        p: Props<'a>,
+        name: &str,
+        kind: &str,
+    ) -> Result<(crate::scene::TextureId, Props<'a>)> {
         if p.kind != "bitmap" {
+            let also = if kind == "area" { " or 'checkerboard'" } else { "" };
             return Err(self.x.err(
                 target,
                 format!(
-                    "the texture of a '{kind}' must be a 'bitmap' (pathgrad reads no other here), got '{}'",
+                    "the texture of a '{kind}' must be a 'bitmap'{also} (pathgrad reads no other here), got '{}'",
                     p.kind
                 ),
             ));
         }
         let bitmap = self.bitmap(&p, target, "")?;
-        if let Some((_, n)) = p.transform(&self.x, "to_uv")? {
-            return Err(self.x.err(n, format!("'to_uv' of the texture of a '{kind}' is not supported")));
-        }
         if let Some(i) = bitmap.texels.iter().position(|v| *v < 0.0) {
             let texel = i / 3;
             return Err(self.x.err(
@@ -965,8 +1014,7 @@ impl<'a> Loader<'a> {
             .map_err(|e| self.located(target, e))?;
         let texture = &mut self.scene.textures[t.0 as usize];
         (texture.nearest, texture.wrap) = (bitmap.nearest, bitmap.wrap);
-        self.finish(&p)?;
-        Ok(t)
+        Ok((t, p))
     }
 
     /// Mitsuba's `envmap`: a latitude-longitude image (EXR, HDR, or PNG and other 8-bit formats,

@@ -14,8 +14,10 @@
 //!   `radius`; tessellated like the sphere) with `to_world`, `flip_normals`
 //!   and (meshes) `face_normals` (a mesh file without normals is shaded with Mitsuba's
 //!   angle-weighted vertex normals, computed in world space, unless `face_normals` is set); one `<bsdf>`/`<ref>` each (default: diffuse 0.5, as Mitsuba) and
-//!   optionally `<emitter type="area">` with `radiance` (a colour, or a `bitmap` whose texels
-//!   are `….radiance.data`, read at the point's texture coordinates; sampled by area).
+//!   optionally `<emitter type="area">` with `radiance` (a colour, a `bitmap` whose texels
+//!   are `….radiance.data`, or a `checkerboard` whose colours are `….radiance.color0.value` and
+//!   `….radiance.color1.value`, either with `to_uv`, read at the point's texture coordinates;
+//!   sampled by area).
 //! - BSDFs `diffuse` (`reflectance`: colour, `<texture type="bitmap">` (`raw`, `filter_type`
 //!   bilinear/nearest, `wrap_mode` repeat/mirror/clamp),
 //!   `<texture type="checkerboard">` with colour `color0`/`color1` and `to_uv`, or

@@ -189,8 +189,8 @@ pub const PLUGINS: &[Plugin] = &[
     p(
         Emitter,
         "area",
-        "`radiance` (rgb, spectrum or `bitmap` without `to_uv`)",
-        "inside a <shape> (or referred to by one); a bitmap's texels are parameter `….radiance.data`, read at the point's texture coordinates; sampled by area (Mitsuba samples a textured one by its texture: the same expectation)",
+        "`radiance` (rgb, spectrum, `bitmap` with `to_uv`, or `checkerboard` of colours in [0, 1] with `to_uv`)",
+        "inside a <shape> (or referred to by one); a bitmap's texels are parameter `….radiance.data`, a checkerboard's colours `….radiance.color0.value` and `….radiance.color1.value`, read at the point's texture coordinates; sampled by area (Mitsuba samples a textured one in its texture's uv space, a bitmap by its texels ignoring `to_uv`, a checkerboard uniformly: the same expectation)",
     ),
     p(
         Shape,

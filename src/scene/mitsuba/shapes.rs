@@ -155,11 +155,11 @@ pub fn cube(m: &Mat4) -> Geometry {
     }
 }
 
-/// An area emitter's radiance: one RGB value, or a bitmap's texels looked up at the hit's texture
-/// coordinates.
+/// An area emitter's radiance: one RGB value, or a texture (a bitmap's texels or a
+/// checkerboard's colours, that parameter) looked up at the hit's texture coordinates.
 enum AreaRadiance {
     Constant(Vec3),
-    Texture(crate::scene::TextureId),
+    Texture(crate::params::ParamId, crate::scene::Albedo),
 }
 
 /// Translation and the three axes of an affine `m`.
@@ -487,7 +487,7 @@ impl<'a> Loader<'a> {
                     let id = self.scene.params.add(&param, &radiance.to_array(), bounds::RADIANCE);
                     (id.map_err(|err| self.located(e, err))?, None)
                 }
-                AreaRadiance::Texture(t) => (self.scene.textures[t.0 as usize].texels, Some(t)),
+                AreaRadiance::Texture(id, texture) => (id, Some(texture)),
             };
             if let Some(mesh) = self.scene.meshes.last_mut() {
                 mesh.emitter = Some(id);
@@ -519,9 +519,10 @@ impl<'a> Loader<'a> {
         };
         if let Some(t) = p.object("radiance") {
             self.finish(&p)?;
-            // A textured radiance: Mitsuba's key `….radiance.data`.
-            let texture = self.light_texture(t, prefix, "area")?;
-            return Ok((node, String::new(), AreaRadiance::Texture(texture)));
+            // A textured radiance: Mitsuba's keys `….radiance.data` (a bitmap) or
+            // `….radiance.color0.value` and `….color1.value` (a checkerboard).
+            let (id, texture) = self.area_texture(t, prefix)?;
+            return Ok((node, String::new(), AreaRadiance::Texture(id, texture)));
         }
         let radiance = self.radiance_in(&p, "radiance", Vec3::ONE, bounds::RADIANCE)?;
         self.finish(&p)?;

@@ -283,3 +283,51 @@ fn issue_31_a_textured_area_emitter_reads_its_bitmap() {
         assert_eq!(flat.tables[d].to_bits(), s.params.entry(texels).offset);
     }
 }
+
+/// An area emitter's bitmap radiance under `to_uv` and a checkerboard radiance (issue 31): the
+/// parameters take Mitsuba's keys, the descriptors carry `to_uv`'s rows (and `TEX_CHECKER`), and
+/// the CPU lookup reads the colour Mitsuba's checkerboard shows there.
+#[test]
+fn issue_31_area_radiance_takes_to_uv_and_a_checkerboard() {
+    let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/conformance/scenes/emitter_area_texture_uv.xml");
+    let s = crate::scene::load_with(path.to_str().unwrap(), &LoadOptions::default()).unwrap_or_else(|e| panic!("{e}"));
+    assert!(s.warnings.is_empty(), "{:?}", s.warnings);
+    let texels = s.params.find("panel.emitter.radiance.data").expect("the panel's texels");
+    assert_eq!(s.params.entry(texels).len, 6 * 4 * 3);
+    let color0 = s.params.find("strip.emitter.radiance.color0.value").expect("color0");
+    let color1 = s.params.find("strip.emitter.radiance.color1.value").expect("color1");
+    assert_eq!(s.params.get(color0), &[0.9, 0.6, 0.3]);
+    assert_eq!(s.params.entry(color1).offset, s.params.entry(color0).offset + 3);
+    let mesh = |name: &str| s.meshes.iter().find(|m| m.name == name).unwrap();
+    let Some(crate::scene::Albedo::Bitmap(t)) = mesh("panel").emitter_texture else { panic!("a bitmap radiance") };
+    let t = &s.textures[t.0 as usize];
+    assert!(t.nearest);
+    assert_eq!(t.to_uv, [Vec3::new(1.5, 0.0, 0.25), Vec3::new(0.0, 2.0, 0.1)]);
+    assert_eq!(mesh("strip").emitter, Some(color0));
+    assert!(
+        matches!(mesh("strip").emitter_texture, Some(crate::scene::Albedo::Checker { colors, .. }) if colors == color0)
+    );
+
+    let flat = crate::scene::flat::FlatScene::new(&s).unwrap();
+    let (offset0, offset_texels) = (s.params.entry(color0).offset, s.params.entry(texels).offset);
+    let mut seen = [false; 2];
+    for e in &flat.emitters {
+        assert!(crate::cpu::emitter::area_textured(e.p_radiance));
+        let d = (e.p_radiance & !crate::contract::SCALAR_TEXTURE) as usize;
+        let word = |i: usize| flat.tables[d + i].to_bits();
+        if word(0) == offset0 {
+            seen[0] = true;
+            assert_eq!((word(1), word(2), word(3)), (2, 1, crate::contract::TEX_CHECKER));
+            // uv (0.05, 0.05) maps to (0.154, 0.162): color0; (0.2, 0.05) to (0.717, 0.367): color1.
+            let at = |u: f32, v: f32| crate::cpu::emitter::area_radiance(&flat, e.p_radiance, glam::Vec2::new(u, v));
+            assert!((at(0.05, 0.05) - Vec3::new(0.9, 0.6, 0.3)).abs().max_element() < 1e-6);
+            assert!((at(0.2, 0.05) - Vec3::new(0.2, 0.4, 0.8)).abs().max_element() < 1e-6);
+        } else {
+            seen[1] = true;
+            assert_eq!((word(0), word(1), word(2)), (offset_texels, 6, 4));
+            let row0 = [4, 5, 6].map(|i| flat.tables[d + i]);
+            assert_eq!(row0, [1.5, 0.0, 0.25]);
+        }
+    }
+    assert_eq!(seen, [true, true]);
+}

@@ -262,8 +262,18 @@ fn element_and_property_errors() {
             "<rgb name=\"radiance\">: 'radiance' must lie in [0, ∞), got [-1, -1, -1]",
         ),
         (
-            r#"<shape type="cube"><emitter type="area"><texture type="checkerboard" name="radiance"/></emitter></shape>"#,
-            "<texture name=\"radiance\">: the texture of a 'area' must be a 'bitmap' (pathgrad reads no other here), got 'checkerboard'",
+            r#"<shape type="cube"><emitter type="area"><texture type="volume" name="radiance"/></emitter></shape>"#,
+            "<texture name=\"radiance\">: the texture of a 'area' must be a 'bitmap' or 'checkerboard' (pathgrad reads no other here), got 'volume'",
+        ),
+        (
+            r#"<shape type="cube"><emitter type="area"><texture type="checkerboard" name="radiance">
+                <rgb name="color1" value="2, 1, 1"/></texture></emitter></shape>"#,
+            "<rgb name=\"color1\">: 'color1' must lie in [0, 1], got [2, 1, 1]",
+        ),
+        (
+            r#"<shape type="cube"><emitter type="area"><texture type="checkerboard" name="radiance">
+                <texture type="bitmap" name="color0"/></texture></emitter></shape>"#,
+            "<texture name=\"color0\">: a textured 'color0' of a checkerboard is not supported (a colour is)",
         ),
         (
             r#"<shape type="sphere"><float name="radius" value="-1"/></shape>"#,
