@@ -70,6 +70,8 @@ fn probe_case(
         Leaf::RoughPlastic(_) => panic!("the BSDF probes have no rough plastics"),
         // A principled leaf has its own probe (principled_probe.comp, principled_gpu_equals_cpu).
         Leaf::Principled(_) => panic!("the BSDF probe has no principled leaves"),
+        // So has a thin one (principled_thin_probe.comp, principled_thin_gpu_equals_cpu).
+        Leaf::PrincipledThin(_) => panic!("the BSDF probe has no thin principled leaves"),
         Leaf::RoughDielectric(d) => (
             pathgrad::contract::LEAF_ROUGH_DIELECTRIC,
             d.distribution as u32,
