@@ -908,7 +908,7 @@ bool path_step(inout PathState st) {
     if (adjoint) {
         // GRAD(f̂(wi, wo), adj) of NEE and of the sampled direction: one evaluation site, one sum.
         if ((HAS(G_COLOR) || HAS(G_TEXTURE) || HAS(G_ALPHA) || HAS(G_WEIGHT)) && gt.material != NO_PARAM) {
-            if (HAS(F_PRINCIPLED)) pr_terms_reset();
+            if (HAS(F_PRINCIPLED) || HAS2(F2_PRINCIPLED_THIN)) pr_terms_reset();
             [[dont_unroll]] for (uint k = 0u; k < 2u; k++) {
                 if (grad_adj[k] == vec3(0.0)) continue;
                 BsdfGrad g = bsdf_sample_grad(bsdf, wi, grad_wo[k], k == 1u && grad_delta, grad_adj[k]);

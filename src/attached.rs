@@ -67,6 +67,7 @@ pub fn refuse_unsupported(flat: &FlatScene, options: &RenderOptions, forward: bo
         "plastic",
         "roughdielectric",
         "principled",
+        "principledthin",
     ];
     for m in &flat.materials {
         if !matches!(m.tag, MAT_DIELECTRIC | MAT_THIN_DIELECTRIC | MAT_CONDUCTOR | MAT_ROUGH_CONDUCTOR) {

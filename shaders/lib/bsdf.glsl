@@ -36,7 +36,9 @@ bool is_beckmann(uint distribution) {
 
 // The leaf kinds' feature bits; a kind test folds to a constant when the kernel has no other kind.
 #define LEAF_KIND_BITS (F_DIFFUSE | F_CONDUCTOR | F_PLASTIC | F_DELTA | F_SMOOTH_PLASTIC | F_ROUGH_DIELECTRIC | F_PRINCIPLED)
-bool only_kind(uint bit) { return (FEATURES & uint(LEAF_KIND_BITS)) == uint(bit); }
+// A thin principled leaf's bit is in the second word (F2_PRINCIPLED_THIN): a kernel without it
+// folds these tests as before.
+bool only_kind(uint bit) { return (FEATURES & uint(LEAF_KIND_BITS)) == uint(bit) && !HAS2(F2_PRINCIPLED_THIN); }
 
 // Whether leaf `kind` is a rough plastic.
 bool is_plastic(uint kind) {
@@ -63,16 +65,22 @@ bool is_principled(uint kind) {
     return HAS(F_PRINCIPLED) && (only_kind(F_PRINCIPLED) || kind == LEAF_PRINCIPLED);
 }
 
+// Whether leaf `kind` is thin principled.
+bool is_principled_thin(uint kind) {
+    return HAS2(F2_PRINCIPLED_THIN) && ((FEATURES & uint(LEAF_KIND_BITS)) == 0u || kind == LEAF_PRINCIPLED_THIN);
+}
+
 // Whether leaf `kind` is Lambertian.
 bool is_diffuse(uint kind) {
-    return (FEATURES & uint(F_CONDUCTOR | F_PLASTIC | F_DELTA | F_SMOOTH_PLASTIC | F_ROUGH_DIELECTRIC | F_PRINCIPLED)) == 0u
+    return ((FEATURES & uint(F_CONDUCTOR | F_PLASTIC | F_DELTA | F_SMOOTH_PLASTIC | F_ROUGH_DIELECTRIC | F_PRINCIPLED)) == 0u
+            && !HAS2(F2_PRINCIPLED_THIN))
         || (HAS(F_DIFFUSE) && kind == LEAF_DIFFUSE);
 }
 
 // Whether leaf `kind` is a rough conductor.
 bool is_conductor(uint kind) {
     return !is_plastic(kind) && !is_delta(kind) && !is_smooth_plastic(kind) && !is_rough_dielectric(kind)
-        && !is_principled(kind) && !is_diffuse(kind);
+        && !is_principled(kind) && !is_principled_thin(kind) && !is_diffuse(kind);
 }
 
 // ---- Lambertian (ALGORITHMS.md §4.1) ----
@@ -86,6 +94,7 @@ float diffuse_pdf(vec3 wi, vec3 wo) {
 #include "microfacet.glsl"
 #include "dielectric.glsl"
 #include "principled.glsl"
+#include "principled_thin.glsl"
 
 // A principled leaf's values as principled.glsl takes them.
 Principled principled_of(Leaf l) {
@@ -135,6 +144,32 @@ void principled_add_grad(Leaf l, vec3 wi, vec3 wo, vec3 adj) {
     pr_terms.flatness += adj * g.flatness;
 }
 
+// A thin principled leaf's values as principled_thin.glsl takes them: the record's words
+// (MAT_PRINCIPLED_THIN) put diff_trans in pr0.x and η in pr1.y; the fourth sampling rate is eta.x.
+PrincipledThin principled_thin_of(Leaf l) {
+    return PrincipledThin(l.color, l.alpha, l.alpha_v, l.pr0.z, l.pr1.y, l.pr0.y, l.pr0.w, l.pr1.x, l.pr1.w, l.pr0.x,
+                          vec4(l.k, l.eta.x));
+}
+
+// Adds adj × ∂f̂(wi, wo) of thin principled leaf l to pr_terms, each derivative in the field of
+// its record word (diff_trans as metallic, η as clearcoat; twin: by_record_slot).
+void principled_thin_add_grad(Leaf l, vec3 wi, vec3 wo, vec3 adj) {
+    PrincipledThinGrad g;
+    principled_thin_eval_grad(principled_thin_of(l), wi, wo, g);
+    pr_terms.base[0] += adj * g.base[0];
+    pr_terms.base[1] += adj * g.base[1];
+    pr_terms.base[2] += adj * g.base[2];
+    pr_terms.roughness += adj * g.roughness;
+    pr_terms.anisotropic += adj * g.anisotropic;
+    pr_terms.metallic += adj * g.diff_trans;
+    pr_terms.spec_trans += adj * g.spec_trans;
+    pr_terms.spec_tint += adj * g.spec_tint;
+    pr_terms.sheen += adj * g.sheen;
+    pr_terms.sheen_tint += adj * g.sheen_tint;
+    pr_terms.clearcoat += adj * g.eta;
+    pr_terms.flatness += adj * g.flatness;
+}
+
 // ---- leaves ----
 vec3 leaf_eval_pdf(Leaf l, vec3 wi, vec3 wo, out float pdf) {
     if (is_smooth_plastic(l.kind)) return splastic_eval_pdf(l, wi, wo, pdf);
@@ -148,6 +183,12 @@ vec3 leaf_eval_pdf(Leaf l, vec3 wi, vec3 wo, out float pdf) {
         Principled p = principled_of(l);
         pdf = principled_pdf(p, wi, wo);
         return principled_eval(p, wi, wo);
+    }
+    if (is_principled_thin(l.kind)) {
+        PrincipledThin p = principled_thin_of(l);
+        pdf = principled_thin_pdf(p, wi, wo);
+        PrincipledThinGrad g;
+        return principled_thin_eval_grad(p, wi, wo, g);
     }
     if (is_diffuse(l.kind)) {
         pdf = diffuse_pdf(wi, wo);
@@ -172,6 +213,7 @@ bool leaf_sample(Leaf l, vec3 wi, float u_lobe, vec2 u, out vec3 wo) {
     if (is_plastic(l.kind)) return plastic_sample(l, wi, u_lobe, u, wo);
     if (is_rough_dielectric(l.kind)) return rdielectric_sample(l, wi, u_lobe, u, wo);
     if (is_principled(l.kind)) return principled_sample(principled_of(l), wi, u_lobe, u, wo);
+    if (is_principled_thin(l.kind)) return principled_thin_sample(principled_thin_of(l), wi, u_lobe, u, wo);
     if (is_diffuse(l.kind)) {
         wo = vec3(0.0);
         if (wi.z <= 0.0) return false;
@@ -214,6 +256,10 @@ LeafGrad leaf_eval_grad(Leaf l, vec3 wi, vec3 wo, vec3 adj) {
     if (is_rough_dielectric(l.kind)) return rdielectric_eval_grad(l, wi, wo, adj);
     if (is_principled(l.kind)) {
         principled_add_grad(l, wi, wo, adj);
+        return LeafGrad(vec3(0.0), vec3(0.0), vec3(0.0), vec3(0.0));
+    }
+    if (is_principled_thin(l.kind)) {
+        principled_thin_add_grad(l, wi, wo, adj);
         return LeafGrad(vec3(0.0), vec3(0.0), vec3(0.0), vec3(0.0));
     }
     if (is_diffuse(l.kind)) return LeafGrad(adj * diffuse_eval(vec3(1.0), wi, wo), vec3(0.0), vec3(0.0), vec3(0.0));

@@ -107,7 +107,7 @@ bool material_anisotropic(uint id) {
             || (b.tag == MAT_ROUGH_CONDUCTOR && b.p_alpha_v != b.p_alpha);
     }
     return ((m.tag == MAT_ROUGH_CONDUCTOR || m.tag == MAT_ROUGH_DIELECTRIC) && m.p_alpha_v != m.p_alpha)
-        || is_principled(m.tag);
+        || is_principled(m.tag) || is_principled_thin(m.tag);
 }
 
 // Mitsuba's shading frame for anisotropic BSDFs: x along ∂p/∂u made orthogonal to ns (where the
@@ -451,7 +451,8 @@ Leaf leaf_from_material(Material m, TexAt at) {
     bool conductor = is_conductor(m.tag);
     bool delta = is_delta(m.tag);
     bool rough_glass = is_rough_dielectric(m.tag);
-    bool principled = is_principled(m.tag);
+    // A thin principled material has principled's layout (MAT_PRINCIPLED_THIN).
+    bool principled = is_principled(m.tag) || is_principled_thin(m.tag);
     l.kind = (delta || is_smooth_plastic(m.tag) || rough_glass || principled) ? m.tag
         : (plastic ? LEAF_ROUGH_PLASTIC : (conductor ? LEAF_ROUGH_CONDUCTOR : LEAF_DIFFUSE));
     l.distribution = m.distribution;
@@ -633,7 +634,7 @@ void push_principled(Material m, TexAt at) {
 }
 
 void push_leaf(Material m, TexAt at, LeafGrad g) {
-    if (is_principled(m.tag)) {
+    if (is_principled(m.tag) || is_principled_thin(m.tag)) {
         push_principled(m, at);
         return;
     }

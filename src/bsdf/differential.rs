@@ -282,9 +282,11 @@ pub fn bsdf_pdf_diff(b: &Bsdf, wi: Vec3, wo: Vec3) -> f32 {
         Leaf::RoughConductor { distribution, alpha, .. } => diff_pdf(distribution, alpha, wi, wo),
         Leaf::RoughDielectric(ref d) => diff_pdf_dielectric(d, wi, wo),
         Leaf::RoughPlastic(ref p) => diff_pdf_plastic(p, wi, wo),
-        Leaf::Diffuse { .. } | Leaf::Smooth(_) | Leaf::SmoothPlastic(_) | Leaf::Principled(_) => {
-            leaf_pdf(&b.leaves[0], wi, wo)
-        }
+        Leaf::Diffuse { .. }
+        | Leaf::Smooth(_)
+        | Leaf::SmoothPlastic(_)
+        | Leaf::Principled(_)
+        | Leaf::PrincipledThin(_) => leaf_pdf(&b.leaves[0], wi, wo),
     }
 }
 
@@ -306,9 +308,11 @@ pub fn bsdf_sample_diff(b: &Bsdf, wi: Vec3, u_sign: f32, u_lobe: f32, u: Vec2) -
             }
             Leaf::RoughDielectric(ref d) => sample_diff_dielectric(d, wi, u_sign < 0.5, u_lobe, u)?,
             Leaf::RoughPlastic(ref p) => sample_diff_plastic(p, wi, u_sign < 0.5, u_lobe, u)?,
-            Leaf::Diffuse { .. } | Leaf::Smooth(_) | Leaf::SmoothPlastic(_) | Leaf::Principled(_) => {
-                leaf_sample(&b.leaves[0], wi, u_lobe, u)?
-            }
+            Leaf::Diffuse { .. }
+            | Leaf::Smooth(_)
+            | Leaf::SmoothPlastic(_)
+            | Leaf::Principled(_)
+            | Leaf::PrincipledThin(_) => leaf_sample(&b.leaves[0], wi, u_lobe, u)?,
         }
     };
     let pdf = bsdf_pdf_diff(b, wi, wo);

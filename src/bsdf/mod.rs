@@ -61,6 +61,8 @@ pub enum Leaf {
     SmoothPlastic(plastic::SmoothPlasticLeaf),
     /// Mitsuba's principled BSDF ([`principled`]).
     Principled(principled::PrincipledLeaf),
+    /// Mitsuba's thin principled BSDF ([`principled_thin`]).
+    PrincipledThin(principled_thin::PrincipledThinLeaf),
 }
 
 /// A resolved BSDF: one leaf, or the blend `(1 − w)·leaves[0] + w·leaves[1]`, perhaps in a
@@ -190,6 +192,9 @@ pub fn leaf_eval_grad(leaf: &Leaf, wi: Vec3, wo: Vec3, adj: Vec3) -> LeafGrad {
             LeafGrad { color: adj * g.color, trans: adj * g.trans, ..LeafGrad::default() }
         }
         Leaf::Principled(p) => LeafGrad { principled: p.eval_grad(wi, wo).1.weighted(adj), ..LeafGrad::default() },
+        Leaf::PrincipledThin(p) => {
+            LeafGrad { principled: p.eval_grad(wi, wo).1.weighted(adj).by_record_slot(), ..LeafGrad::default() }
+        }
     }
 }
 
@@ -255,6 +260,7 @@ pub fn leaf_eval(leaf: &Leaf, wi: Vec3, wo: Vec3) -> Vec3 {
         Leaf::Smooth(_) => Vec3::ZERO,
         Leaf::SmoothPlastic(p) => p.eval(wi, wo),
         Leaf::Principled(p) => p.eval(wi, wo),
+        Leaf::PrincipledThin(p) => p.eval(wi, wo),
     }
 }
 
@@ -270,6 +276,7 @@ pub fn leaf_pdf(leaf: &Leaf, wi: Vec3, wo: Vec3) -> f32 {
         Leaf::Smooth(_) => 0.0,
         Leaf::SmoothPlastic(p) => p.pdf(wi, wo),
         Leaf::Principled(p) => p.pdf(wi, wo),
+        Leaf::PrincipledThin(p) => p.pdf(wi, wo),
     }
 }
 
@@ -284,6 +291,7 @@ pub fn leaf_sample(leaf: &Leaf, wi: Vec3, u_lobe: f32, u: Vec2) -> Option<Vec3> 
         Leaf::RoughPlastic(p) => p.sample(wi, u_lobe, u),
         Leaf::RoughDielectric(d) => d.sample(wi, u_lobe, u),
         Leaf::Principled(p) => p.sample(wi, u_lobe, u),
+        Leaf::PrincipledThin(p) => p.sample(wi, u_lobe, u),
         // A leaf with a delta lobe samples itself whole: bsdf_sample takes its sample.
         Leaf::Smooth(_) | Leaf::SmoothPlastic(_) => None,
     }

@@ -1,7 +1,9 @@
 //! Mitsuba 3.9.1's `principledthin` BSDF (Burley's thin-surface Disney BSDF as
 //! `src/bsdfs/principledthin.cpp` and `principlehelpers.h` define it): value, sampler, density and
-//! detached derivatives of the value by every parameter, η included. CPU only so far: no GLSL twin
-//! and no scene material yet (the loader still refuses `principledthin`).
+//! detached derivatives of the value by every parameter, η included. Its GLSL twin is
+//! `shaders/lib/principled_thin.glsl` (compared in `tests/it/twins.rs` through
+//! `shaders/principled_thin_probe.comp`); the loader's `principledthin` material
+//! (`crate::scene::Material::PrincipledThin`) resolves to it in both back ends.
 //!
 //! A thin sheet has no inside: Mitsuba turns wi to the upper side (wo with it) and evaluates there.
 //! With wo_r = wo with |z|, the half vector h = normalize(wi + wo_r) serves reflection and
@@ -146,6 +148,36 @@ impl PrincipledThinGrad {
             sheen_tint: self.sheen_tint * adj,
             flatness: self.flatness * adj,
             diff_trans: self.diff_trans * adj,
+        }
+    }
+}
+
+impl PrincipledThinGrad {
+    /// The derivatives in principled's [`super::principled::PrincipledGrad`], each in the field
+    /// whose word of the material record (`PRINCIPLED_SCALARS`) holds its parameter's slot in a
+    /// thin material (`MAT_PRINCIPLED_THIN`): diff_trans as metallic, eta as clearcoat,
+    /// clearcoat_gloss (eta's slot again) 0 — so both BSDFs scatter through one function.
+    ///
+    /// ```
+    /// use glam::Vec3;
+    /// use pathgrad::bsdf::principled_thin::PrincipledThinGrad;
+    /// let g = PrincipledThinGrad { diff_trans: Vec3::X, eta: Vec3::Y, ..PrincipledThinGrad::default() };
+    /// let r = g.by_record_slot();
+    /// assert_eq!((r.metallic, r.clearcoat, r.clearcoat_gloss), (Vec3::X, Vec3::Y, Vec3::ZERO));
+    /// ```
+    pub fn by_record_slot(&self) -> super::principled::PrincipledGrad {
+        super::principled::PrincipledGrad {
+            base_color: self.base_color,
+            roughness: self.roughness,
+            anisotropic: self.anisotropic,
+            metallic: self.diff_trans,
+            spec_trans: self.spec_trans,
+            spec_tint: self.spec_tint,
+            sheen: self.sheen,
+            sheen_tint: self.sheen_tint,
+            clearcoat: self.eta,
+            clearcoat_gloss: Vec3::ZERO,
+            flatness: self.flatness,
         }
     }
 }

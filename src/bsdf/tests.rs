@@ -313,6 +313,7 @@ fn derivatives_match_finite_differences() {
                             Leaf::Smooth(s) => s.reflectance[c],
                             Leaf::SmoothPlastic(p) => p.diffuse[c],
                             Leaf::Principled(p) => p.base_color[c],
+                            Leaf::PrincipledThin(p) => p.base_color[c],
                         };
                         // A plastic's `trans` is its specular colour's derivative (checked below).
                         let coated = matches!(base.leaves[leaf], Leaf::RoughPlastic(_) | Leaf::SmoothPlastic(_));
@@ -331,6 +332,7 @@ fn derivatives_match_finite_differences() {
                                     Leaf::Smooth(s) => s.reflectance[c] = v,
                                     Leaf::SmoothPlastic(p) => p.diffuse[c] = v,
                                     Leaf::Principled(p) => p.base_color[c] = v,
+                                    Leaf::PrincipledThin(p) => p.base_color[c] = v,
                                 }
                                 x
                             }),

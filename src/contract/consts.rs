@@ -172,6 +172,10 @@ contract_constants! {
     /// Second-word feature bit: the differential strategy with several targets, one hero per path
     /// (`Globals::hero_count` > 0, ALGORITHMS.md §5.8).
     F2_HERO = 1 << 0;
+    /// Second-word feature bit: thin principled leaves (Mitsuba's `principledthin`,
+    /// `shaders/lib/principled_thin.glsl`), which share principled's material record and
+    /// gradient gathering.
+    F2_PRINCIPLED_THIN = 1 << 1;
     /// Second-word feature bit: a material's colour is a `volume` texture (`TEX_VOLUME`), read
     /// through the fields' lookup of `shaders/lib/field.glsl`.
     F2_VOLUME_TEXTURE = 1 << 2;

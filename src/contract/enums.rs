@@ -69,6 +69,13 @@ contract_enums! {
         /// its other eight scalars' slots the `PRINCIPLED_SCALARS` words of the tables array from
         /// `table` on, η in `eta.x`, its three sampling rates in `k`.
         Principled = MAT_PRINCIPLED = 10,
+        /// Mitsuba's `principledthin`, in principled's layout: base colour in `p_color`, roughness
+        /// in `p_alpha`, anisotropic in `p_alpha_v`, the record at `table` holding the slots of
+        /// (diff_trans, spec_tint, spec_trans, sheen, sheen_tint, eta, eta again, flatness) — the
+        /// words of principled's (metallic, …, clearcoat, clearcoat_gloss, …) —, the sampling
+        /// rates of specular reflection, specular transmission and diffuse reflection in `k` and
+        /// of diffuse transmission in `eta.x`.
+        PrincipledThin = MAT_PRINCIPLED_THIN = 11,
     }
 
     /// What `ViewCamera::lens` holds.
@@ -134,6 +141,8 @@ contract_enums! {
         RoughDielectric = LEAF_ROUGH_DIELECTRIC = 9,
         /// Principled.
         Principled = LEAF_PRINCIPLED = 10,
+        /// Thin principled.
+        PrincipledThin = LEAF_PRINCIPLED_THIN = 11,
     }
 
     /// Microfacet distribution.

@@ -611,6 +611,78 @@ contract_structs! {
         /// ∂f̂/∂flatness.
         d_flatness: Vec3,
     }
+
+    /// Test probe input: one thin principled BSDF query (`shaders/principled_thin_probe.comp`).
+    struct PrincipledThinProbeCase {
+        /// `base_color`.
+        base_color: Vec3,
+        /// `roughness`.
+        roughness: f32,
+        /// `anisotropic`.
+        anisotropic: f32,
+        /// `spec_trans`.
+        spec_trans: f32,
+        /// `eta`.
+        eta: f32,
+        /// `spec_tint`.
+        spec_tint: f32,
+        /// `sheen`.
+        sheen: f32,
+        /// `sheen_tint`.
+        sheen_tint: f32,
+        /// `flatness`.
+        flatness: f32,
+        /// `diff_trans` (0..2).
+        diff_trans: f32,
+        /// Sampling rates of the specular reflection and transmission.
+        rates_specular: Vec2,
+        /// Sampling rates of the diffuse reflection and transmission.
+        rates_diffuse: Vec2,
+        /// Incident direction (local).
+        wi: Vec3,
+        /// Lobe uniform.
+        u_lobe: f32,
+        /// Direction uniforms.
+        u: Vec2,
+        /// A fixed direction at which the value, its derivatives and the density are queried.
+        wo_eval: Vec3,
+    }
+
+    /// Test probe output for one `PrincipledThinProbeCase`.
+    struct PrincipledThinProbeResult {
+        /// Sampled direction.
+        wo: Vec3,
+        /// 1 if the sample is valid.
+        valid: u32,
+        /// The value at `wo_eval`.
+        eval: Vec3,
+        /// The density at `wo_eval`.
+        pdf: f32,
+        /// ∂f̂/∂(base colour channel 0) at `wo_eval`, per image channel.
+        d_base0: Vec3,
+        /// ∂f̂/∂(base colour channel 1).
+        d_base1: Vec3,
+        /// ∂f̂/∂(base colour channel 2).
+        d_base2: Vec3,
+        /// ∂f̂/∂roughness.
+        d_roughness: Vec3,
+        /// ∂f̂/∂anisotropic.
+        d_anisotropic: Vec3,
+        /// ∂f̂/∂spec_trans.
+        d_spec_trans: Vec3,
+        /// ∂f̂/∂eta.
+        d_eta: Vec3,
+        /// ∂f̂/∂spec_tint.
+        d_spec_tint: Vec3,
+        /// ∂f̂/∂sheen.
+        d_sheen: Vec3,
+        /// ∂f̂/∂sheen_tint.
+        d_sheen_tint: Vec3,
+        /// ∂f̂/∂flatness.
+        d_flatness: Vec3,
+        /// ∂f̂/∂diff_trans.
+        d_diff_trans: Vec3,
+    }
 }
 
 contract_push_blocks! {

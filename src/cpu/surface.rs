@@ -4,6 +4,7 @@ use glam::Vec3;
 
 use crate::bsdf::plastic::SmoothPlasticLeaf;
 use crate::bsdf::principled::PrincipledLeaf;
+use crate::bsdf::principled_thin::PrincipledThinLeaf;
 use crate::bsdf::rough_dielectric::RoughDielectricLeaf;
 use crate::bsdf::rough_plastic::PlasticLeaf;
 use crate::bsdf::specular::{SmoothKind, SmoothLeaf};
@@ -11,10 +12,10 @@ use crate::bsdf::{Bsdf, Distribution, Leaf, LeafGrad, bsdf_sample_grad};
 use crate::bvh::Hit;
 use crate::contract::ALPHA_TEXTURE_FLOOR;
 use crate::contract::{
-    COATING_TABLE_LEN, MAT_BLEND, MAT_CONDUCTOR, MAT_DIELECTRIC, MAT_PLASTIC, MAT_PRINCIPLED, MAT_ROUGH_CONDUCTOR,
-    MAT_ROUGH_DIELECTRIC, MAT_ROUGH_PLASTIC, MAT_THIN_DIELECTRIC, Material, NMAP_BUMP, NO_ARRAY, NO_EMITTER, NO_PARAM,
-    SCALAR_TEXTURE, TEX_ATTR_FACE, TEX_ATTR_VERTEX, TEX_CHECKER, TEX_NEAREST, TEX_VOLUME, TEX_WRAP_CLAMP,
-    TEX_WRAP_MIRROR, TEXTURE_DESC_LEN,
+    COATING_TABLE_LEN, MAT_BLEND, MAT_CONDUCTOR, MAT_DIELECTRIC, MAT_PLASTIC, MAT_PRINCIPLED, MAT_PRINCIPLED_THIN,
+    MAT_ROUGH_CONDUCTOR, MAT_ROUGH_DIELECTRIC, MAT_ROUGH_PLASTIC, MAT_THIN_DIELECTRIC, Material, NMAP_BUMP, NO_ARRAY,
+    NO_EMITTER, NO_PARAM, SCALAR_TEXTURE, TEX_ATTR_FACE, TEX_ATTR_VERTEX, TEX_CHECKER, TEX_NEAREST, TEX_VOLUME,
+    TEX_WRAP_CLAMP, TEX_WRAP_MIRROR, TEXTURE_DESC_LEN,
 };
 use crate::cpu::path::GradSink;
 use crate::gpu::variant::colour_textured;
@@ -122,12 +123,14 @@ pub fn shading_normal_gradient(flat: &FlatScene, hit: &Hit) -> glam::Mat3 {
     crate::attached::normal_derivative([tri.v0, tri.v1, tri.v2], normals, raw)
 }
 
-/// Whether material `id` is (or blends) an anisotropic rough conductor or dielectric, or is principled (whose
-/// `anisotropic` is a parameter), whose shading frame must follow the surface ([`tangent_frame`]).
+/// Whether material `id` is (or blends) an anisotropic rough conductor or dielectric, or is
+/// principled, thin or not (whose `anisotropic` is a parameter), whose shading frame must follow
+/// the surface ([`tangent_frame`]).
 pub fn material_anisotropic(flat: &FlatScene, id: u32) -> bool {
     let anisotropic = |m: &Material| {
         (matches!(m.tag, MAT_ROUGH_CONDUCTOR | MAT_ROUGH_DIELECTRIC) && m.p_alpha_v != m.p_alpha)
             || m.tag == MAT_PRINCIPLED
+            || m.tag == MAT_PRINCIPLED_THIN
     };
     let m = &flat.materials[id as usize];
     if m.tag == MAT_BLEND {
@@ -535,6 +538,23 @@ fn leaf_from_material(flat: &FlatScene, m: &Material, at: TexAt) -> Leaf {
                 rates: m.k,
             })
         }
+        MAT_PRINCIPLED_THIN => {
+            // The record's words as MAT_PRINCIPLED_THIN lays them out (word 6 repeats eta's).
+            let s = |i: u32| scalar_value(flat, principled_slot(flat, m, i), at);
+            Leaf::PrincipledThin(PrincipledThinLeaf {
+                base_color: color,
+                roughness: scalar_value(flat, m.p_alpha, at),
+                anisotropic: scalar_value(flat, m.p_alpha_v, at),
+                diff_trans: s(0),
+                spec_tint: s(1),
+                spec_trans: s(2),
+                sheen: s(3),
+                sheen_tint: s(4),
+                eta: s(5),
+                flatness: s(7),
+                rates: [m.k.x, m.k.y, m.k.z, m.eta.x],
+            })
+        }
         MAT_PLASTIC => Leaf::SmoothPlastic(SmoothPlasticLeaf {
             diffuse: color,
             specular: colour_value(flat, m.p_weight, at, m.k),
@@ -594,7 +614,8 @@ pub fn texture_backward(flat: &FlatScene, m: &Material, at: TexAt, g: Vec3, sink
 }
 
 fn leaf_backward(flat: &FlatScene, m: &Material, at: TexAt, g: &LeafGrad, sink: &mut GradSink<'_>) {
-    if m.tag == MAT_PRINCIPLED {
+    if m.tag == MAT_PRINCIPLED || m.tag == MAT_PRINCIPLED_THIN {
+        // A thin leaf's derivatives sit in the fields of its record's words (by_record_slot).
         principled_backward(flat, m, at, &g.principled, sink);
         return;
     }

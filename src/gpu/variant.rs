@@ -40,6 +40,11 @@ pub fn scene_features(flat: &FlatScene, env_param: u32) -> u64 {
             // Principled lobes are GGX; its shading frame follows ∂p/∂u (anisotropic is a
             // parameter, which may leave 0).
             MAT_PRINCIPLED => F_PRINCIPLED | F_GGX | F_ANISOTROPIC,
+            // A thin principled leaf (F2_PRINCIPLED_THIN), likewise.
+            MAT_PRINCIPLED_THIN => {
+                f2 |= F2_PRINCIPLED_THIN;
+                F_GGX | F_ANISOTROPIC
+            }
             _ => F_BLEND,
         };
         if m.tex_width > 0 || specular_colour_slots(m).into_iter().any(colour_textured) {
@@ -54,7 +59,7 @@ pub fn scene_features(flat: &FlatScene, env_param: u32) -> u64 {
         let textured = |slot: u32| slot != NO_PARAM && slot & SCALAR_TEXTURE != 0;
         let scalar_textured = match m.tag {
             MAT_ROUGH_CONDUCTOR | MAT_ROUGH_DIELECTRIC => textured(m.p_alpha) || textured(m.p_alpha_v),
-            MAT_PRINCIPLED => {
+            MAT_PRINCIPLED | MAT_PRINCIPLED_THIN => {
                 textured(m.p_alpha)
                     || textured(m.p_alpha_v)
                     || (0..PRINCIPLED_SCALARS).any(|i| textured(flat.tables[(m.table + i) as usize].to_bits()))
@@ -161,7 +166,7 @@ pub fn param_kinds(flat: &FlatScene, env: (u32, u32), begin: u32, end: u32) -> P
                     k = k.union(ParamKinds::ALPHA);
                 }
             }
-            MAT_PRINCIPLED => {
+            MAT_PRINCIPLED | MAT_PRINCIPLED_THIN => {
                 let texels = if m.tex_width > 0 { m.tex_width * m.tex_height } else { 1 };
                 if overlaps(m.p_color, 3 * texels) {
                     k = k.union(if m.tex_width > 0 { ParamKinds::TEXTURE } else { ParamKinds::COLOR });
@@ -253,7 +258,7 @@ pub fn request_features(scene: u64, options: &RenderOptions, kinds: ParamKinds) 
 
 /// A short human-readable name of a variant, for logs: `nee env diffuse conductor[beckmann] ∂alpha`.
 pub fn describe(features: u64) -> String {
-    const NAMES: [(u64, &str); 33] = [
+    const NAMES: [(u64, &str); 34] = [
         (F_NEE as u64, "nee"),
         (F_ENV as u64, "env"),
         (F_EMITTERS as u64, "emitters"),
@@ -279,6 +284,7 @@ pub fn describe(features: u64) -> String {
         (F_LIGHT_TEXTURE as u64, "light-texture"),
         (F_PRINCIPLED as u64, "principled"),
         (word2(F2_HERO), "hero"),
+        (word2(F2_PRINCIPLED_THIN), "principledthin"),
         (word2(F2_VOLUME_TEXTURE), "volume-texture"),
         (G_COLOR as u64, "∂color"),
         (G_TEXTURE as u64, "∂texture"),

@@ -12,11 +12,11 @@ use crate::bvh::{self, Bvh};
 use crate::contract::{
     COATING_TABLE_LEN, DIST_GGX, DeltaLight, EmitterTri, EnvCell, FIELD_CONSTANT, FIELD_GRID, FIELD_GRID_MIRROR,
     FIELD_GRID_REPEAT, FieldDesc, LIGHT_DIRECTIONAL, LIGHT_POINT, LIGHT_PROJECTOR, LIGHT_SPOT, MAT_BLEND,
-    MAT_CONDUCTOR, MAT_DIELECTRIC, MAT_DIFFUSE, MAT_NULL, MAT_PLASTIC, MAT_PRINCIPLED, MAT_ROUGH_CONDUCTOR,
-    MAT_ROUGH_DIELECTRIC, MAT_ROUGH_PLASTIC, MAT_THIN_DIELECTRIC, Material as GpuMaterial, MediumDesc, MeshShading,
-    NMAP_BUMP, NO_ARRAY, NO_EMITTER, NO_MEDIUM, NO_PARAM, PHASE_HG, PHASE_ISOTROPIC, SCALAR_TEXTURE, TEX_ATTR_FACE,
-    TEX_ATTR_VERTEX, TEX_CHECKER, TEX_NEAREST, TEX_VOLUME, TEX_WRAP_CLAMP, TEX_WRAP_MIRROR, TEXTURE_DESC_LEN,
-    TriVertices,
+    MAT_CONDUCTOR, MAT_DIELECTRIC, MAT_DIFFUSE, MAT_NULL, MAT_PLASTIC, MAT_PRINCIPLED, MAT_PRINCIPLED_THIN,
+    MAT_ROUGH_CONDUCTOR, MAT_ROUGH_DIELECTRIC, MAT_ROUGH_PLASTIC, MAT_THIN_DIELECTRIC, Material as GpuMaterial,
+    MediumDesc, MeshShading, NMAP_BUMP, NO_ARRAY, NO_EMITTER, NO_MEDIUM, NO_PARAM, PHASE_HG, PHASE_ISOTROPIC,
+    SCALAR_TEXTURE, TEX_ATTR_FACE, TEX_ATTR_VERTEX, TEX_CHECKER, TEX_NEAREST, TEX_VOLUME, TEX_WRAP_CLAMP,
+    TEX_WRAP_MIRROR, TEXTURE_DESC_LEN, TriVertices,
 };
 use crate::error::Result;
 use crate::params::ParamId;
@@ -638,6 +638,17 @@ fn flatten_material(scene: &Scene, m: &Material) -> GpuMaterial {
             k: rates,
             ..albedo_fields(scene, base_color)
         },
+        Material::PrincipledThin { base_color, roughness, anisotropic, rates, .. } => GpuMaterial {
+            tag: MAT_PRINCIPLED_THIN,
+            distribution: DIST_GGX,
+            p_alpha: scalar_slot(scene, roughness),
+            p_alpha_v: scalar_slot(scene, anisotropic),
+            // The material's index until `scalar_texture_tables` places its record.
+            table: scene.materials.iter().position(|x| std::ptr::eq(x, m)).expect("a material of the scene") as u32,
+            eta: Vec3::new(rates[3], 0.0, 0.0),
+            k: Vec3::new(rates[0], rates[1], rates[2]),
+            ..albedo_fields(scene, base_color)
+        },
         Material::Blend { weight, children } => GpuMaterial {
             tag: MAT_BLEND,
             child0: children[0].0,
@@ -725,12 +736,18 @@ fn scalar_texture_tables(scene: &Scene, materials: &mut [GpuMaterial], tables: &
                 place(&mut m.p_alpha, tables);
                 place(&mut m.p_alpha_v, tables);
             }
-            MAT_PRINCIPLED => {
+            MAT_PRINCIPLED | MAT_PRINCIPLED_THIN => {
                 place(&mut m.p_alpha, tables);
                 place(&mut m.p_alpha_v, tables);
-                // The record of its eight scalar slots (`PRINCIPLED_SCALARS`).
-                let Material::Principled { scalars, .. } = &scene.materials[m.table as usize] else {
-                    unreachable!("a principled material's table holds its index until here")
+                // The record of its eight scalar slots (`PRINCIPLED_SCALARS`); a thin one's in
+                // the words of principled's that play their part (MAT_PRINCIPLED_THIN's layout).
+                let scalars = match &scene.materials[m.table as usize] {
+                    Material::Principled { scalars, .. } => *scalars,
+                    Material::PrincipledThin { scalars, .. } => {
+                        let [spec_trans, spec_tint, sheen, sheen_tint, flatness, diff_trans, eta] = *scalars;
+                        [diff_trans, spec_tint, spec_trans, sheen, sheen_tint, eta, eta, flatness]
+                    }
+                    _ => unreachable!("a principled material's table holds its index until here"),
                 };
                 let mut words = scalars.map(|id| scalar_slot(scene, id));
                 for w in &mut words {

@@ -275,6 +275,21 @@ pub enum Material {
         /// The sampling rates (main specular, clearcoat, diffuse reflectance), constants.
         rates: Vec3,
     },
+    /// Mitsuba's `principledthin` (`crate::bsdf::principled_thin`).
+    PrincipledThin {
+        /// `base_color`, constant or textured.
+        base_color: Albedo,
+        /// `roughness`, 1 value or a texture's texels ([`Scene::scalar_texture`]).
+        roughness: ParamId,
+        /// `anisotropic`, as `roughness`.
+        anisotropic: ParamId,
+        /// spec_trans, spec_tint, sheen, sheen_tint, flatness, diff_trans (0..2) and eta, each as
+        /// `roughness`.
+        scalars: [ParamId; 7],
+        /// The sampling rates (specular reflectance, specular transmittance, diffuse reflectance,
+        /// diffuse transmittance), constants.
+        rates: [f32; 4],
+    },
     /// Smooth plastic (Mitsuba's `plastic`, `crate::bsdf::plastic`).
     SmoothPlastic {
         /// Diffuse reflectance of the base in [0, 1], constant or textured.
@@ -1106,7 +1121,9 @@ impl Scene {
             let volume = |a: Albedo| matches!(a, Albedo::Volume(_));
             let colour = |c: SmoothColour| matches!(c, SmoothColour::Texture(a) if volume(a));
             let refused = match *m {
-                Material::Principled { base_color, .. } => volume(base_color),
+                Material::Principled { base_color, .. } | Material::PrincipledThin { base_color, .. } => {
+                    volume(base_color)
+                }
                 Material::Smooth { reflectance, transmittance, .. }
                 | Material::RoughDielectric { reflectance, transmittance, .. } => {
                     colour(reflectance) || colour(transmittance)

@@ -93,6 +93,15 @@ fn issue_31_depth_counting_and_hide_emitters_gpu_equals_cpu_per_path() {
     }
 }
 
+/// The thin principled material (issue 31): every lobe with constants (the conformance row) and
+/// every kind of texture it takes (`tests/data/scenes/principledthin_textured.xml`).
+#[test]
+fn issue_31_principledthin_gpu_equals_cpu_per_path() {
+    let gpu = TestGpu::new();
+    primal_agrees_per_path(&gpu, &crate::support::scenes::conformance("bsdf_principledthin"));
+    primal_agrees_per_path(&gpu, &crate::support::scenes::data_scene("principledthin_textured"));
+}
+
 /// One path per pixel of `scene` on the GPU and the CPU reference: within [`REL_TOL`] and
 /// [`ABS_TOL`], all but [`MISMATCH_BUDGET`] of them.
 fn primal_agrees_per_path(gpu: &TestGpu, scene: &pathgrad::scene::Scene) {

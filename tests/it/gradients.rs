@@ -159,6 +159,69 @@ fn issue_31_principled_gradients_gpu_equal_cpu_per_path() {
     image_gradients_agree(&gpu, cases);
 }
 
+/// The thin principled material's image gradients (issue 31): every parameter, constant and as
+/// checkerboards' colours, GPU against CPU per path; and its replays return to zero.
+#[test]
+fn issue_31_principledthin_gradients_gpu_equal_cpu_per_path() {
+    let gpu = TestGpu::new();
+    let cases = vec![
+        (
+            scenes::conformance("bsdf_principledthin"),
+            vec![
+                "ball.bsdf.base_color.value",
+                "ball.bsdf.roughness.value",
+                "ball.bsdf.spec_trans.value",
+                "ball.bsdf.diff_trans.value",
+                "ball.bsdf.eta.value",
+                "ball.bsdf.spec_tint.value",
+                "ball.bsdf.sheen.value",
+                "ball.bsdf.sheen_tint.value",
+                "ball.bsdf.flatness.value",
+                "pane.bsdf.anisotropic.value",
+                "pane.bsdf.spec_trans.value",
+            ],
+        ),
+        (
+            scenes::data_scene("principledthin_textured"),
+            vec![
+                "ball.bsdf.base_color.color1.value",
+                "ball.bsdf.spec_trans.color0.value",
+                "ball.bsdf.diff_trans.color1.value",
+                "ball.bsdf.sheen.color1.value",
+                "ball.bsdf.eta.color0.value",
+                "pane.bsdf.anisotropic.color1.value",
+                "pane.bsdf.roughness.color0.value",
+            ],
+        ),
+    ];
+    for (scene, _) in &cases {
+        let opts = RenderOptions { width: 48, height: 48, spp: 2, seed: 1, ..RenderOptions::for_scene(scene) };
+        let adjoint = adjoint_pattern(opts.width, opts.height);
+        let mut renderer = Renderer::new(&gpu.ctx, scene).unwrap();
+        renderer.backward(&opts, &adjoint, GradMode::Float).unwrap_or_else(|e| panic!("{}: {e}", scene.source));
+        pathgrad::cpu::backward(scene, &opts, &adjoint).unwrap_or_else(|e| panic!("{}: {e}", scene.source));
+    }
+    image_gradients_agree(&gpu, cases);
+}
+
+/// The thin principled parameters the conformance matrix does not compare with Mitsuba (sheen,
+/// tints, flatness, the pane's spec_trans) against central finite differences.
+#[test]
+fn issue_31_principledthin_matches_finite_differences() {
+    let gpu = TestGpu::new();
+    let s = scenes::conformance("bsdf_principledthin");
+    check_finite_differences(
+        &gpu,
+        vec![
+            (s.clone(), "ball.bsdf.sheen.value"),
+            (s.clone(), "ball.bsdf.sheen_tint.value"),
+            (s.clone(), "ball.bsdf.spec_tint.value"),
+            (s.clone(), "ball.bsdf.flatness.value"),
+            (s, "pane.bsdf.spec_trans.value"),
+        ],
+    );
+}
+
 /// The principled parameters that the conformance matrix does not compare with Mitsuba (the
 /// ball's sheen, tints, flatness and clearcoat gloss) and its roughness, constant and textured,
 /// against central finite differences as [`gradients_match_finite_differences`] checks the rest.

@@ -70,6 +70,8 @@ fn probe_case(
         Leaf::RoughPlastic(_) => panic!("the BSDF probes have no rough plastics"),
         // A principled leaf has its own probe (principled_probe.comp, principled_gpu_equals_cpu).
         Leaf::Principled(_) => panic!("the BSDF probe has no principled leaves"),
+        // So has a thin one (principled_thin_probe.comp, principled_thin_gpu_equals_cpu).
+        Leaf::PrincipledThin(_) => panic!("the BSDF probe has no thin principled leaves"),
         Leaf::RoughDielectric(d) => (
             pathgrad::contract::LEAF_ROUGH_DIELECTRIC,
             d.distribution as u32,
@@ -705,6 +707,176 @@ fn principled_gpu_equals_cpu() {
         mismatches[..mismatches.len().min(20)].join("\n")
     );
     assert!(valid > cases.len() / 3 && nonzero_grads > cases.len());
+    assert!(worst_dir < 1e-3, "sampled directions differ by {worst_dir}");
+    assert!(validity_flips <= cases.len() / 1000, "{validity_flips} samples valid on one side only");
+}
+
+/// `shaders/lib/principled_thin.glsl` against `src/bsdf/principled_thin.rs` (which the chi-square,
+/// finite-difference and Mitsuba tests pin): sampled directions, values, every derivative and
+/// densities of five parameter sets (every lobe, anisotropy, η below 1, sampling rates) from seven
+/// incidences on both sides of the sheet.
+#[test]
+fn principled_thin_gpu_equals_cpu() {
+    use glam::{Vec2, Vec3};
+    use pathgrad::bsdf::principled_thin::PrincipledThinLeaf;
+    use pathgrad::contract::{PrincipledThinProbeCase, PrincipledThinProbeResult};
+    use pathgrad::rng::{PassTag, RngKey, Stream, uniform4};
+
+    let gpu = TestGpu::new();
+    let leaves = [
+        PrincipledThinLeaf::default(),
+        PrincipledThinLeaf {
+            base_color: Vec3::new(0.8, 0.4, 0.2),
+            roughness: 0.4,
+            spec_trans: 0.4,
+            eta: 1.4,
+            spec_tint: 0.5,
+            sheen: 0.6,
+            sheen_tint: 0.4,
+            flatness: 0.3,
+            diff_trans: 0.7,
+            ..PrincipledThinLeaf::default()
+        },
+        PrincipledThinLeaf {
+            base_color: Vec3::new(0.7, 0.1, 0.1),
+            roughness: 0.15,
+            spec_tint: 0.1,
+            anisotropic: 0.5,
+            spec_trans: 0.8,
+            diff_trans: 0.3,
+            eta: 1.33,
+            ..PrincipledThinLeaf::default()
+        },
+        PrincipledThinLeaf {
+            base_color: Vec3::new(0.9, 0.95, 1.0),
+            roughness: 0.05,
+            spec_trans: 1.0,
+            eta: 1.2,
+            ..PrincipledThinLeaf::default()
+        },
+        PrincipledThinLeaf {
+            base_color: Vec3::new(0.3, 0.6, 0.9),
+            roughness: 0.9,
+            spec_trans: 0.3,
+            spec_tint: 0.7,
+            eta: 0.8,
+            sheen: 1.0,
+            anisotropic: 0.4,
+            diff_trans: 1.5,
+            rates: [0.5, 2.0, 1.5, 0.7],
+            ..PrincipledThinLeaf::default()
+        },
+    ];
+    let mut cases = Vec::new();
+    let mut owners = Vec::new();
+    for (li, l) in leaves.iter().enumerate() {
+        for (wi_index, cos_i) in [1.0f32, 0.7, 0.2, 0.05, 0.01, -0.3, -0.9].into_iter().enumerate() {
+            let sin_i = (1.0 - cos_i * cos_i).sqrt();
+            let wi = Vec3::new(sin_i * 0.6, -sin_i * 0.8, cos_i);
+            for j in 0..400u32 {
+                let u =
+                    uniform4(RngKey::new(750 + li as u32, wi_index as u32, PassTag::Test), j, 0, 1, Stream::Main, 1, 0);
+                let (u_lobe, uv) = (u[0], Vec2::new(u[1], u[2]));
+                // Half the queries at the sampled direction, half at one over the whole sphere.
+                let wo_eval = match l.sample(wi, u_lobe, uv) {
+                    Some(wo) if j % 2 == 0 => wo,
+                    _ => {
+                        let z = 2.0 * u[3] - 1.0;
+                        let r = (1.0 - z * z).max(0.0).sqrt();
+                        let phi = 6.283_185_5 * u[1];
+                        Vec3::new(r * phi.cos(), r * phi.sin(), z)
+                    }
+                };
+                cases.push(PrincipledThinProbeCase {
+                    base_color: l.base_color,
+                    roughness: l.roughness,
+                    anisotropic: l.anisotropic,
+                    spec_trans: l.spec_trans,
+                    eta: l.eta,
+                    spec_tint: l.spec_tint,
+                    sheen: l.sheen,
+                    sheen_tint: l.sheen_tint,
+                    flatness: l.flatness,
+                    diff_trans: l.diff_trans,
+                    rates_specular: Vec2::new(l.rates[0], l.rates[1]),
+                    rates_diffuse: Vec2::new(l.rates[2], l.rates[3]),
+                    wi,
+                    u_lobe,
+                    u: uv,
+                    wo_eval,
+                });
+                owners.push(li);
+            }
+        }
+    }
+    let input = Buffer::storage_with(&gpu.ctx, "probe input", &cases).unwrap();
+    let size = (cases.len() * size_of::<PrincipledThinProbeResult>()) as u64;
+    let output = Buffer::storage(&gpu.ctx, "probe output", size).unwrap();
+    let k = Kernel::new(&gpu.ctx, "principled_thin_probe", &[BINDING_PROBE_IN, BINDING_PROBE_OUT], 4).unwrap();
+    let group = k.bind(&[(BINDING_PROBE_IN, &input), (BINDING_PROBE_OUT, &output)]).unwrap();
+    let n = cases.len() as u32;
+    gpu.ctx
+        .submit_and_wait("principled_thin_probe", |cmd| {
+            k.record(cmd, &group, bytemuck::bytes_of(&CasePush { case_count: n }), groups_for(n))
+        })
+        .unwrap();
+    let got: Vec<PrincipledThinProbeResult> = output.download(cases.len()).unwrap();
+
+    // GLSL's sqrt/division round differently by a few ulps; a value is compared with a floor at 1e-5
+    // of its case's largest magnitude (derivatives of near-cancelling terms).
+    let close = |a: f32, b: f32, scale: f32| (a - b).abs() <= 1e-4 * a.abs().max(b.abs()) + 1e-5 * scale + 1e-30;
+    let (mut validity_flips, mut worst_dir, mut valid, mut nonzero_grads) = (0, 0.0f32, 0, 0);
+    let mut mismatches = Vec::new();
+    for ((c, g), &li) in cases.iter().zip(&got).zip(&owners) {
+        let l = &leaves[li];
+        let (value, grad) = l.eval_grad(c.wi, c.wo_eval);
+        let pairs = [
+            ("value", value, g.eval),
+            ("d base0", grad.base_color[0], g.d_base0),
+            ("d base1", grad.base_color[1], g.d_base1),
+            ("d base2", grad.base_color[2], g.d_base2),
+            ("d roughness", grad.roughness, g.d_roughness),
+            ("d anisotropic", grad.anisotropic, g.d_anisotropic),
+            ("d spec_trans", grad.spec_trans, g.d_spec_trans),
+            ("d eta", grad.eta, g.d_eta),
+            ("d spec_tint", grad.spec_tint, g.d_spec_tint),
+            ("d sheen", grad.sheen, g.d_sheen),
+            ("d sheen_tint", grad.sheen_tint, g.d_sheen_tint),
+            ("d flatness", grad.flatness, g.d_flatness),
+            ("d diff_trans", grad.diff_trans, g.d_diff_trans),
+        ];
+        let scale = pairs.iter().fold(0.0f32, |s, (_, a, _)| s.max(a.abs().max_element()));
+        for (what, cpu, gpu_v) in pairs {
+            nonzero_grads += usize::from(what != "value" && cpu != Vec3::ZERO);
+            if !(0..3).all(|ch| close(cpu[ch], gpu_v[ch], scale)) {
+                mismatches.push(format!("leaf {li} wi {} wo {}: {what} CPU {cpu} GPU {gpu_v}", c.wi, c.wo_eval));
+            }
+        }
+        let pdf = l.pdf(c.wi, c.wo_eval);
+        if !close(pdf, g.pdf, pdf) {
+            mismatches.push(format!("leaf {li} wi {} wo {}: pdf CPU {pdf} GPU {}", c.wi, c.wo_eval, g.pdf));
+        }
+        match l.sample(c.wi, c.u_lobe, c.u) {
+            Some(wo) if g.valid == 1 => {
+                valid += 1;
+                worst_dir = worst_dir.max((wo - g.wo).length());
+            }
+            None if g.valid == 0 => {}
+            _ => validity_flips += 1,
+        }
+    }
+    eprintln!(
+        "principledthin probe: {} cases, {valid} valid samples, worst direction difference {worst_dir:.2e}, {validity_flips} validity flips, {nonzero_grads} non-zero derivative vectors, {} mismatches",
+        cases.len(),
+        mismatches.len()
+    );
+    assert!(
+        mismatches.is_empty(),
+        "{} mismatches:\n{}",
+        mismatches.len(),
+        mismatches[..mismatches.len().min(20)].join("\n")
+    );
+    assert!(valid > cases.len() / 2 && nonzero_grads > cases.len());
     assert!(worst_dir < 1e-3, "sampled directions differ by {worst_dir}");
     assert!(validity_flips <= cases.len() / 1000, "{validity_flips} samples valid on one side only");
 }

@@ -127,6 +127,7 @@ impl<'a> Loader<'a> {
             "plastic" => self.smooth_plastic(&p, name, depth)?,
             "roughdielectric" => self.rough_dielectric(&p, name, depth)?,
             "principled" => self.principled(&p, name, depth)?,
+            "principledthin" => self.principled_thin(&p, name, depth)?,
             "conductor" => self.smooth(&p, name, SmoothKind::Conductor, depth)?,
             "dielectric" => self.smooth(&p, name, SmoothKind::Dielectric, depth)?,
             "thindielectric" => self.smooth(&p, name, SmoothKind::ThinDielectric, depth)?,
@@ -228,7 +229,8 @@ impl<'a> Loader<'a> {
                 }
                 let transmits = matches!(self.material(inner), Some(Material::Smooth { kind, .. }) if kind != SmoothKind::Conductor)
                     || matches!(self.material(inner), Some(Material::RoughDielectric { .. }))
-                    || self.principled_transmits(inner);
+                    || self.principled_transmits(inner)
+                    || matches!(self.material(inner), Some(Material::PrincipledThin { .. }));
                 if transmits {
                     return Err(self.x.err(
                         child,
@@ -563,6 +565,51 @@ impl<'a> Loader<'a> {
         Ok(self.scene.add_material(Material::Principled { base_color, roughness, anisotropic, scalars, eta, rates }))
     }
 
+    /// Mitsuba 3.9.1's `principledthin`: `base_color` (0.5; a colour, parameter
+    /// `NAME.base_color.value`, or a `bitmap`/`checkerboard`), `roughness` (0.5), `anisotropic`,
+    /// `spec_trans`, `spec_tint`, `sheen`, `sheen_tint`, `flatness` (0; each in [0, 1]),
+    /// `diff_trans` (0; in [0, 2]) and `eta` (1.5) — each a number (parameter `NAME.KEY.value`,
+    /// differentiable as Mitsuba's traverse marks them all) or a one-channel texture
+    /// ([`Loader::scalar_property`]) — and the four sampling rates (1; constants, as Mitsuba's are
+    /// not differentiable). η bends nothing on a thin sheet: it weighs the Fresnel term and scales
+    /// the transmission's roughness, so its derivative is a detached one like the others'.
+    fn principled_thin(&mut self, p: &Props<'a>, name: &str, depth: usize) -> Result<MaterialId> {
+        const SCALARS: [(&str, (f32, f32)); 6] = [
+            ("spec_trans", bounds::WEIGHT),
+            ("spec_tint", bounds::WEIGHT),
+            ("sheen", bounds::WEIGHT),
+            ("sheen_tint", bounds::WEIGHT),
+            ("flatness", bounds::WEIGHT),
+            ("diff_trans", (0.0, 2.0)),
+        ];
+        let rate = |key: &str| self.float_in(p, key, Some(1.0), (0.0, f32::MAX));
+        let rates = [
+            rate("specular_reflectance_sampling_rate")?,
+            rate("specular_transmittance_sampling_rate")?,
+            rate("diffuse_reflectance_sampling_rate")?,
+            rate("diffuse_transmittance_sampling_rate")?,
+        ];
+        let base_color = match p.object("base_color") {
+            Some(t) => {
+                let a = self.texture(t, format!("{name}.base_color"), depth + 1)?;
+                self.refuse_volume(a, t, "base_color", &p.kind)?
+            }
+            None => {
+                let c = self.color_in(p, "base_color", Vec3::splat(0.5), bounds::REFLECTANCE)?;
+                let id = self.scene.params.add(&format!("{name}.base_color.value"), &c.to_array(), bounds::REFLECTANCE);
+                Albedo::Rgb(id.map_err(|e| self.located(p.node, e))?)
+            }
+        };
+        let roughness = self.scalar_property(p, name, "roughness", Some(0.5), bounds::WEIGHT, (0.0, 1.0))?;
+        let anisotropic = self.scalar_property(p, name, "anisotropic", Some(0.0), bounds::WEIGHT, (0.0, 1.0))?;
+        let mut scalars = [crate::params::ParamId(0); 7];
+        for (slot, (key, range)) in scalars.iter_mut().zip(SCALARS) {
+            *slot = self.scalar_property(p, name, key, Some(0.0), range, range)?;
+        }
+        scalars[6] = self.scalar_property(p, name, "eta", Some(1.5), bounds::IOR, bounds::IOR)?;
+        Ok(self.scene.add_material(Material::PrincipledThin { base_color, roughness, anisotropic, scalars, rates }))
+    }
+
     /// Whether material `id` is a principled BSDF whose `spec_trans` is not 0 somewhere (it
     /// transmits).
     fn principled_transmits(&self, id: MaterialId) -> bool {
@@ -784,7 +831,7 @@ impl<'a> Loader<'a> {
             Some(
                 Material::RoughConductor { alpha, alpha_v, .. } | Material::RoughDielectric { alpha, alpha_v, .. },
             ) => alpha != alpha_v,
-            Some(Material::Principled { anisotropic, .. }) => {
+            Some(Material::Principled { anisotropic, .. } | Material::PrincipledThin { anisotropic, .. }) => {
                 self.scene.params.get(anisotropic).iter().any(|v| *v != 0.0)
             }
             _ => false,

@@ -142,6 +142,12 @@ pub const PLUGINS: &[Plugin] = &[
     ),
     p(
         Bsdf,
+        "principledthin",
+        "`base_color` (rgb, spectrum, bitmap or checkerboard), `roughness`, `anisotropic`, `spec_trans`, `spec_tint`, `sheen`, `sheen_tint`, `flatness`, `diff_trans` (0 to 2), `eta` (parameters or one-channel textures; `eta` differentiable: it bends nothing), the four `*_sampling_rate`s",
+        "Mitsuba 3.9.1's lobes and sampler; shading frame along ∂p/∂u; not inside blendbsdf or twosided (Mitsuba's twosided refuses it too)",
+    ),
+    p(
+        Bsdf,
         "roughconductor",
         "`distribution`, `alpha` or `alpha_u`/`alpha_v` (parameters or one-channel textures), `specular_reflectance` (rgb, spectrum, bitmap or checkerboard), `material` or `eta`/`k`, `sample_visible`",
         "anisotropic: shading frame along ∂p/∂u",

@@ -940,7 +940,6 @@ fn principled_takes_mitsubas_properties_names_and_substitutions() {
             "'blendbsdf' children must",
         ),
         (r#"<bsdf type="principled"><float name="sheen" value="1.5"/></bsdf>"#, "'sheen' must lie in [0, 1]"),
-        (r#"<bsdf type="principledthin"/>"#, "unsupported plugin 'principledthin'"),
     ] {
         let e = load(&format!(r#"<shape type="cube">{body}</shape>"#)).unwrap_err().to_string();
         assert!(e.contains(message), "{body}: {e}");
@@ -955,6 +954,58 @@ fn principled_takes_mitsubas_properties_names_and_substitutions() {
     );
     assert_eq!(param(&t, "t.bsdf.metallic.color0.value"), [0.7]);
     assert_eq!(param(&t, "t.bsdf.anisotropic.color1.value"), [0.2]);
+}
+
+#[test]
+fn principledthin_takes_mitsubas_parameters_defaults_and_textures() {
+    use crate::contract::{MAT_PRINCIPLED_THIN, NO_PARAM, SCALAR_TEXTURE};
+    // Mitsuba's defaults and traverse names, every one a parameter (Mitsuba's are differentiable).
+    let s = load_ok(r#"<shape type="cube" id="t"><bsdf type="principledthin"/></shape>"#);
+    assert_eq!(param(&s, "t.bsdf.base_color.value"), [0.5; 3]);
+    assert_eq!(param(&s, "t.bsdf.roughness.value"), [0.5]);
+    assert_eq!(param(&s, "t.bsdf.eta.value"), [1.5]);
+    for key in ["anisotropic", "spec_trans", "spec_tint", "sheen", "sheen_tint", "flatness", "diff_trans"] {
+        assert_eq!(param(&s, &format!("t.bsdf.{key}.value")), [0.0], "{key}");
+    }
+    let Material::PrincipledThin { rates, .. } = s.materials[s.meshes[0].material.0 as usize] else {
+        panic!("not a thin principled material: {:?}", s.materials)
+    };
+    assert_eq!(rates, [1.0; 4]);
+    // Given values, a textured scalar and the sampling rates; the flattened record puts each
+    // slot in its word (diff_trans, spec_tint, spec_trans, sheen, sheen_tint, eta, eta, flatness).
+    let s = load_ok(
+        r#"<shape type="cube" id="t"><bsdf type="principledthin">
+             <rgb name="base_color" value="0.1, 0.2, 0.3"/><float name="roughness" value="0.3"/>
+             <float name="spec_trans" value="0.4"/><float name="spec_tint" value="0.5"/>
+             <float name="sheen" value="0.6"/><float name="sheen_tint" value="0.7"/>
+             <float name="flatness" value="0.8"/><float name="diff_trans" value="1.7"/>
+             <float name="eta" value="1.33"/>
+             <texture name="anisotropic" type="checkerboard"><float name="color0" value="0.9"/></texture>
+             <float name="diffuse_transmittance_sampling_rate" value="2"/></bsdf></shape>"#,
+    );
+    assert_eq!(param(&s, "t.bsdf.anisotropic.color0.value"), [0.9]);
+    let flat = crate::scene::flat::FlatScene::new(&s).unwrap();
+    let m = flat.materials.iter().find(|m| m.tag == MAT_PRINCIPLED_THIN).unwrap();
+    assert!(m.p_alpha_v != NO_PARAM && m.p_alpha_v & SCALAR_TEXTURE != 0);
+    assert_eq!((m.k, m.eta.x), (Vec3::ONE, 2.0));
+    let word = |i: u32| flat.params[flat.tables[(m.table + i) as usize].to_bits() as usize];
+    assert_eq!([0, 1, 2, 3, 4, 5, 6, 7].map(word), [1.7, 0.5, 0.4, 0.6, 0.7, 1.33, 1.33, 0.8]);
+    for (body, message) in [
+        // Mitsuba's twosided refuses a BSDF with a transmission lobe; principledthin always has one.
+        (r#"<bsdf type="twosided"><bsdf type="principledthin"/></bsdf>"#, "cannot wrap one that transmits light"),
+        (
+            r#"<bsdf type="principledthin"><float name="diff_trans" value="2.5"/></bsdf>"#,
+            "'diff_trans' must lie in [0, 2]",
+        ),
+        (r#"<bsdf type="principledthin"><float name="sheen" value="1.5"/></bsdf>"#, "'sheen' must lie in [0, 1]"),
+        (
+            r#"<bsdf type="blendbsdf"><float name="weight" value="0.5"/><bsdf type="principledthin"/><bsdf type="diffuse"/></bsdf>"#,
+            "'blendbsdf' children must",
+        ),
+    ] {
+        let e = load(&format!(r#"<shape type="cube">{body}</shape>"#)).unwrap_err().to_string();
+        assert!(e.contains(message), "{body}: {e}");
+    }
 }
 
 #[test]
