@@ -31,7 +31,7 @@ fn fixtures_give_their_pinned_messages() {
         (
             "unsupported_plugin.xml",
             "5:5: <bsdf id=\"shiny\">: unsupported plugin 'pplastic' (supported: blendbsdf, bumpmap, conductor, dielectric, \
-             diffuse, mask, normalmap, null, plastic, principled, roughconductor, roughdielectric, roughplastic, thindielectric, twosided)"
+             diffuse, mask, normalmap, null, plastic, principled, principledthin, roughconductor, roughdielectric, roughplastic, thindielectric, twosided)"
                 .into(),
         ),
         ("bad_rgb.xml", "7:13: <rgb name=\"reflectance\">: value: expected a number, got 'x'".into()),
