@@ -528,10 +528,9 @@ fn nothing_restates_the_contract() {
 /// inside ones included.
 #[test]
 fn principled_gpu_equals_cpu() {
-    use glam::{Vec2, Vec3};
+    use glam::Vec3;
     use pathgrad::bsdf::principled::{PrincipledLeaf, eta_from_specular};
     use pathgrad::contract::{PrincipledProbeCase, PrincipledProbeResult};
-    use pathgrad::rng::{PassTag, RngKey, Stream, uniform4};
 
     let gpu = TestGpu::new();
     let base = Vec3::new(0.8, 0.4, 0.2);
@@ -577,49 +576,33 @@ fn principled_gpu_equals_cpu() {
             ..PrincipledLeaf::default()
         },
     ];
-    let mut cases = Vec::new();
-    let mut owners = Vec::new();
-    for (li, l) in leaves.iter().enumerate() {
-        for (wi_index, cos_i) in [1.0f32, 0.7, 0.2, 0.05, 0.01, -0.3, -0.9].into_iter().enumerate() {
-            let sin_i = (1.0 - cos_i * cos_i).sqrt();
-            let wi = Vec3::new(sin_i * 0.6, -sin_i * 0.8, cos_i);
-            for j in 0..400u32 {
-                let u =
-                    uniform4(RngKey::new(700 + li as u32, wi_index as u32, PassTag::Test), j, 0, 1, Stream::Main, 1, 0);
-                let (u_lobe, uv) = (u[0], Vec2::new(u[1], u[2]));
-                // Half the queries at the sampled direction, half at one over the whole sphere.
-                let wo_eval = match l.sample(wi, u_lobe, uv) {
-                    Some(wo) if j % 2 == 0 => wo,
-                    _ => {
-                        let z = 2.0 * u[3] - 1.0;
-                        let r = (1.0 - z * z).max(0.0).sqrt();
-                        let phi = 6.283_185_5 * u[1];
-                        Vec3::new(r * phi.cos(), r * phi.sin(), z)
-                    }
-                };
-                cases.push(PrincipledProbeCase {
-                    base_color: l.base_color,
-                    roughness: l.roughness,
-                    anisotropic: l.anisotropic,
-                    metallic: l.metallic,
-                    spec_trans: l.spec_trans,
-                    eta: l.eta,
-                    spec_tint: l.spec_tint,
-                    sheen: l.sheen,
-                    sheen_tint: l.sheen_tint,
-                    clearcoat: l.clearcoat,
-                    clearcoat_gloss: l.clearcoat_gloss,
-                    flatness: l.flatness,
-                    rates: l.rates,
-                    wi,
-                    u_lobe,
-                    u: uv,
-                    wo_eval,
-                });
-                owners.push(li);
+    let queries = principled_probe_queries(700, leaves.len(), |li, wi, u_lobe, uv| leaves[li].sample(wi, u_lobe, uv));
+    let owners: Vec<usize> = queries.iter().map(|q| q.0).collect();
+    let cases: Vec<PrincipledProbeCase> = queries
+        .iter()
+        .map(|&(li, wi, u_lobe, uv, wo_eval)| {
+            let l = &leaves[li];
+            PrincipledProbeCase {
+                base_color: l.base_color,
+                roughness: l.roughness,
+                anisotropic: l.anisotropic,
+                metallic: l.metallic,
+                spec_trans: l.spec_trans,
+                eta: l.eta,
+                spec_tint: l.spec_tint,
+                sheen: l.sheen,
+                sheen_tint: l.sheen_tint,
+                clearcoat: l.clearcoat,
+                clearcoat_gloss: l.clearcoat_gloss,
+                flatness: l.flatness,
+                rates: l.rates,
+                wi,
+                u_lobe,
+                u: uv,
+                wo_eval,
             }
-        }
-    }
+        })
+        .collect();
     let input = Buffer::storage_with(&gpu.ctx, "probe input", &cases).unwrap();
     let size = (cases.len() * size_of::<PrincipledProbeResult>()) as u64;
     let output = Buffer::storage(&gpu.ctx, "probe output", size).unwrap();
@@ -720,7 +703,6 @@ fn principled_thin_gpu_equals_cpu() {
     use glam::{Vec2, Vec3};
     use pathgrad::bsdf::principled_thin::PrincipledThinLeaf;
     use pathgrad::contract::{PrincipledThinProbeCase, PrincipledThinProbeResult};
-    use pathgrad::rng::{PassTag, RngKey, Stream, uniform4};
 
     let gpu = TestGpu::new();
     let leaves = [
@@ -767,48 +749,32 @@ fn principled_thin_gpu_equals_cpu() {
             ..PrincipledThinLeaf::default()
         },
     ];
-    let mut cases = Vec::new();
-    let mut owners = Vec::new();
-    for (li, l) in leaves.iter().enumerate() {
-        for (wi_index, cos_i) in [1.0f32, 0.7, 0.2, 0.05, 0.01, -0.3, -0.9].into_iter().enumerate() {
-            let sin_i = (1.0 - cos_i * cos_i).sqrt();
-            let wi = Vec3::new(sin_i * 0.6, -sin_i * 0.8, cos_i);
-            for j in 0..400u32 {
-                let u =
-                    uniform4(RngKey::new(750 + li as u32, wi_index as u32, PassTag::Test), j, 0, 1, Stream::Main, 1, 0);
-                let (u_lobe, uv) = (u[0], Vec2::new(u[1], u[2]));
-                // Half the queries at the sampled direction, half at one over the whole sphere.
-                let wo_eval = match l.sample(wi, u_lobe, uv) {
-                    Some(wo) if j % 2 == 0 => wo,
-                    _ => {
-                        let z = 2.0 * u[3] - 1.0;
-                        let r = (1.0 - z * z).max(0.0).sqrt();
-                        let phi = 6.283_185_5 * u[1];
-                        Vec3::new(r * phi.cos(), r * phi.sin(), z)
-                    }
-                };
-                cases.push(PrincipledThinProbeCase {
-                    base_color: l.base_color,
-                    roughness: l.roughness,
-                    anisotropic: l.anisotropic,
-                    spec_trans: l.spec_trans,
-                    eta: l.eta,
-                    spec_tint: l.spec_tint,
-                    sheen: l.sheen,
-                    sheen_tint: l.sheen_tint,
-                    flatness: l.flatness,
-                    diff_trans: l.diff_trans,
-                    rates_specular: Vec2::new(l.rates[0], l.rates[1]),
-                    rates_diffuse: Vec2::new(l.rates[2], l.rates[3]),
-                    wi,
-                    u_lobe,
-                    u: uv,
-                    wo_eval,
-                });
-                owners.push(li);
+    let queries = principled_probe_queries(750, leaves.len(), |li, wi, u_lobe, uv| leaves[li].sample(wi, u_lobe, uv));
+    let owners: Vec<usize> = queries.iter().map(|q| q.0).collect();
+    let cases: Vec<PrincipledThinProbeCase> = queries
+        .iter()
+        .map(|&(li, wi, u_lobe, uv, wo_eval)| {
+            let l = &leaves[li];
+            PrincipledThinProbeCase {
+                base_color: l.base_color,
+                roughness: l.roughness,
+                anisotropic: l.anisotropic,
+                spec_trans: l.spec_trans,
+                eta: l.eta,
+                spec_tint: l.spec_tint,
+                sheen: l.sheen,
+                sheen_tint: l.sheen_tint,
+                flatness: l.flatness,
+                diff_trans: l.diff_trans,
+                rates_specular: Vec2::new(l.rates[0], l.rates[1]),
+                rates_diffuse: Vec2::new(l.rates[2], l.rates[3]),
+                wi,
+                u_lobe,
+                u: uv,
+                wo_eval,
             }
-        }
-    }
+        })
+        .collect();
     let input = Buffer::storage_with(&gpu.ctx, "probe input", &cases).unwrap();
     let size = (cases.len() * size_of::<PrincipledThinProbeResult>()) as u64;
     let output = Buffer::storage(&gpu.ctx, "probe output", size).unwrap();
@@ -879,4 +845,46 @@ fn principled_thin_gpu_equals_cpu() {
     assert!(valid > cases.len() / 2 && nonzero_grads > cases.len());
     assert!(worst_dir < 1e-3, "sampled directions differ by {worst_dir}");
     assert!(validity_flips <= cases.len() / 1000, "{validity_flips} samples valid on one side only");
+}
+
+/// The principled probes' queries, in order: for each leaf and seven incidences (both sides), 400
+/// draws keyed by `key_base + leaf`, each (leaf, wi, u_lobe, u, wo_eval) with wo_eval half the time
+/// the leaf's sampled direction (`sample`), otherwise one over the whole sphere.
+fn principled_probe_queries(
+    key_base: u32,
+    leaves: usize,
+    sample: impl Fn(usize, glam::Vec3, f32, glam::Vec2) -> Option<glam::Vec3>,
+) -> Vec<(usize, glam::Vec3, f32, glam::Vec2, glam::Vec3)> {
+    use glam::{Vec2, Vec3};
+    use pathgrad::rng::{PassTag, RngKey, Stream, uniform4};
+    let mut queries = Vec::new();
+    for li in 0..leaves {
+        for (wi_index, cos_i) in [1.0f32, 0.7, 0.2, 0.05, 0.01, -0.3, -0.9].into_iter().enumerate() {
+            let sin_i = (1.0 - cos_i * cos_i).sqrt();
+            let wi = Vec3::new(sin_i * 0.6, -sin_i * 0.8, cos_i);
+            for j in 0..400u32 {
+                let u = uniform4(
+                    RngKey::new(key_base + li as u32, wi_index as u32, PassTag::Test),
+                    j,
+                    0,
+                    1,
+                    Stream::Main,
+                    1,
+                    0,
+                );
+                let (u_lobe, uv) = (u[0], Vec2::new(u[1], u[2]));
+                let wo_eval = match sample(li, wi, u_lobe, uv) {
+                    Some(wo) if j % 2 == 0 => wo,
+                    _ => {
+                        let z = 2.0 * u[3] - 1.0;
+                        let r = (1.0 - z * z).max(0.0).sqrt();
+                        let phi = 6.283_185_5 * u[1];
+                        Vec3::new(r * phi.cos(), r * phi.sin(), z)
+                    }
+                };
+                queries.push((li, wi, u_lobe, uv, wo_eval));
+            }
+        }
+    }
+    queries
 }
