@@ -545,6 +545,23 @@ impl<'a> Loader<'a> {
             rate("clearcoat_sampling_rate")?,
             rate("diffuse_reflectance_sampling_rate")?,
         );
+        let (base_color, roughness, anisotropic) = self.principled_base(p, name, depth)?;
+        let mut scalars = [crate::params::ParamId(0); SCALARS.len()];
+        for (slot, key) in scalars.iter_mut().zip(SCALARS) {
+            *slot = self.scalar_property(p, name, key, Some(0.0), bounds::WEIGHT, (0.0, 1.0))?;
+        }
+        Ok(self.scene.add_material(Material::Principled { base_color, roughness, anisotropic, scalars, eta, rates }))
+    }
+
+    /// What `principled` and `principledthin` read alike: `base_color` (0.5; a colour, parameter
+    /// `NAME.base_color.value`, or a texture other than `volume`), `roughness` (0.5) and
+    /// `anisotropic` (0), each in [0, 1] ([`Loader::scalar_property`]).
+    fn principled_base(
+        &mut self,
+        p: &Props<'a>,
+        name: &str,
+        depth: usize,
+    ) -> Result<(Albedo, crate::params::ParamId, crate::params::ParamId)> {
         let base_color = match p.object("base_color") {
             Some(t) => {
                 let a = self.texture(t, format!("{name}.base_color"), depth + 1)?;
@@ -558,11 +575,7 @@ impl<'a> Loader<'a> {
         };
         let roughness = self.scalar_property(p, name, "roughness", Some(0.5), bounds::WEIGHT, (0.0, 1.0))?;
         let anisotropic = self.scalar_property(p, name, "anisotropic", Some(0.0), bounds::WEIGHT, (0.0, 1.0))?;
-        let mut scalars = [crate::params::ParamId(0); SCALARS.len()];
-        for (slot, key) in scalars.iter_mut().zip(SCALARS) {
-            *slot = self.scalar_property(p, name, key, Some(0.0), bounds::WEIGHT, (0.0, 1.0))?;
-        }
-        Ok(self.scene.add_material(Material::Principled { base_color, roughness, anisotropic, scalars, eta, rates }))
+        Ok((base_color, roughness, anisotropic))
     }
 
     /// Mitsuba 3.9.1's `principledthin`: `base_color` (0.5; a colour, parameter
@@ -589,19 +602,7 @@ impl<'a> Loader<'a> {
             rate("diffuse_reflectance_sampling_rate")?,
             rate("diffuse_transmittance_sampling_rate")?,
         ];
-        let base_color = match p.object("base_color") {
-            Some(t) => {
-                let a = self.texture(t, format!("{name}.base_color"), depth + 1)?;
-                self.refuse_volume(a, t, "base_color", &p.kind)?
-            }
-            None => {
-                let c = self.color_in(p, "base_color", Vec3::splat(0.5), bounds::REFLECTANCE)?;
-                let id = self.scene.params.add(&format!("{name}.base_color.value"), &c.to_array(), bounds::REFLECTANCE);
-                Albedo::Rgb(id.map_err(|e| self.located(p.node, e))?)
-            }
-        };
-        let roughness = self.scalar_property(p, name, "roughness", Some(0.5), bounds::WEIGHT, (0.0, 1.0))?;
-        let anisotropic = self.scalar_property(p, name, "anisotropic", Some(0.0), bounds::WEIGHT, (0.0, 1.0))?;
+        let (base_color, roughness, anisotropic) = self.principled_base(p, name, depth)?;
         let mut scalars = [crate::params::ParamId(0); 7];
         for (slot, (key, range)) in scalars.iter_mut().zip(SCALARS) {
             *slot = self.scalar_property(p, name, key, Some(0.0), range, range)?;
