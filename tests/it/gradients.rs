@@ -149,14 +149,7 @@ fn principled_cases() -> Vec<(Scene, Vec<&'static str>)> {
 fn issue_31_principled_gradients_gpu_equal_cpu_per_path() {
     let gpu = TestGpu::new();
     let cases = principled_cases();
-    for (scene, _) in &cases {
-        let opts = RenderOptions { width: 48, height: 48, spp: 2, seed: 1, ..RenderOptions::for_scene(scene) };
-        let adjoint = adjoint_pattern(opts.width, opts.height);
-        let mut renderer = Renderer::new(&gpu.ctx, scene).unwrap();
-        renderer.backward(&opts, &adjoint, GradMode::Float).unwrap_or_else(|e| panic!("{}: {e}", scene.source));
-        pathgrad::cpu::backward(scene, &opts, &adjoint).unwrap_or_else(|e| panic!("{}: {e}", scene.source));
-    }
-    image_gradients_agree(&gpu, cases);
+    replays_return_and_agree(&gpu, cases);
 }
 
 /// The thin principled material's image gradients (issue 31): every parameter, constant and as
@@ -194,14 +187,7 @@ fn issue_31_principledthin_gradients_gpu_equal_cpu_per_path() {
             ],
         ),
     ];
-    for (scene, _) in &cases {
-        let opts = RenderOptions { width: 48, height: 48, spp: 2, seed: 1, ..RenderOptions::for_scene(scene) };
-        let adjoint = adjoint_pattern(opts.width, opts.height);
-        let mut renderer = Renderer::new(&gpu.ctx, scene).unwrap();
-        renderer.backward(&opts, &adjoint, GradMode::Float).unwrap_or_else(|e| panic!("{}: {e}", scene.source));
-        pathgrad::cpu::backward(scene, &opts, &adjoint).unwrap_or_else(|e| panic!("{}: {e}", scene.source));
-    }
-    image_gradients_agree(&gpu, cases);
+    replays_return_and_agree(&gpu, cases);
 }
 
 /// The thin principled parameters the conformance matrix does not compare with Mitsuba (sheen,
@@ -669,4 +655,17 @@ fn a_gradient_steps_pass_1_runs_on_its_gradient_kernel_and_renders_the_primal_im
             );
         }
     }
+}
+
+/// One backward pass of every scene of `cases` on the device and on the CPU reference (each
+/// replay must succeed: its sums return to zero), then [`image_gradients_agree`].
+fn replays_return_and_agree(gpu: &TestGpu, cases: Vec<(Scene, Vec<&'static str>)>) {
+    for (scene, _) in &cases {
+        let opts = RenderOptions { width: 48, height: 48, spp: 2, seed: 1, ..RenderOptions::for_scene(scene) };
+        let adjoint = adjoint_pattern(opts.width, opts.height);
+        let mut renderer = Renderer::new(&gpu.ctx, scene).unwrap();
+        renderer.backward(&opts, &adjoint, GradMode::Float).unwrap_or_else(|e| panic!("{}: {e}", scene.source));
+        pathgrad::cpu::backward(scene, &opts, &adjoint).unwrap_or_else(|e| panic!("{}: {e}", scene.source));
+    }
+    image_gradients_agree(gpu, cases);
 }
