@@ -378,14 +378,15 @@ bool path_step(inout PathState st) {
     // is what max_depth caps; the random numbers stay keyed by `vertex`. Every interaction counts
     // (path, prb) unless null events go uncounted (volpath): a thindielectric's straight-through
     // transmission or a mask's pass-through. st.depth advances at the end of the step.
-    bool null_free = (globals.path_flags & PATH_NULL_UNCOUNTED) != 0u;
+    // (Only a kernel with masks, thin dielectrics or media can meet a null event.)
+    bool null_free = (HAS(F_MASK) || HAS(F_DELTA) || HAS(F_MEDIA)) && (globals.path_flags & PATH_NULL_UNCOUNTED) != 0u;
     // No counted interaction may follow this vertex: it only gathers what it hits.
     bool last = st.depth + 1u >= globals.max_depth || vertex >= MAX_PATH_VERTICES;
     // An uncounted (null) event may still follow it.
     bool null_ok = null_free && vertex < MAX_PATH_VERTICES;
     // hide_emitters: before the first counted interaction, rays pass through emitting shapes and
-    // the environment adds nothing.
-    bool hidden = (globals.path_flags & PATH_HIDE_EMITTERS) != 0u && st.depth == 0u;
+    // the environment adds nothing. Only a kernel of such a scene (F2_HIDE_EMITTERS) carries it.
+    bool hidden = HAS2(F2_HIDE_EMITTERS) && (globals.path_flags & PATH_HIDE_EMITTERS) != 0u && st.depth == 0u;
     bool counted = true;      // whether this vertex is a bounce
     GradTerms gt = no_grad_terms();
     // BSDF derivative terms of this vertex: (direction, adjoint weight) of NEE and of the sample.
@@ -486,15 +487,19 @@ bool path_step(inout PathState st) {
             Ray ray = shadow ? shadow_ray : st.ray;
             Hit h;
             bool lost = false;
-            // hide_emitters: the path's ray passes through emitting shapes (one traversal site).
-            [[dont_unroll]] for (uint crossings = 0u; crossings <= MAX_NULL_CROSSINGS; crossings++) {
+            if (HAS2(F2_HIDE_EMITTERS)) {
+                // hide_emitters: the path's ray passes through emitting shapes (one traversal site).
+                [[dont_unroll]] for (uint crossings = 0u; crossings <= MAX_NULL_CROSSINGS; crossings++) {
+                    h = bvh_traverse(ray, 0.0, shadow ? shadow_tmax : FLOAT_MAX, shadow);
+                    if (shadow || !hidden || !h.valid) break;
+                    Surface se = surface_at(h);
+                    if (se.emitter == NO_EMITTER) break;
+                    lost = crossings == MAX_NULL_CROSSINGS;
+                    travelled += h.t;
+                    ray = make_ray(offset_origin(se.p, se.ng, ray.dir), ray.dir);
+                }
+            } else {
                 h = bvh_traverse(ray, 0.0, shadow ? shadow_tmax : FLOAT_MAX, shadow);
-                if (shadow || !hidden || !h.valid) break;
-                Surface se = surface_at(h);
-                if (se.emitter == NO_EMITTER) break;
-                lost = crossings == MAX_NULL_CROSSINGS;
-                travelled += h.t;
-                ray = make_ray(offset_origin(se.p, se.ng, ray.dir), ray.dir);
             }
             if (shadow) {
                 if (!h.valid) tr = vec3(1.0);

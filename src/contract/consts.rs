@@ -179,6 +179,10 @@ contract_constants! {
     /// Second-word feature bit: a material's colour is a `volume` texture (`TEX_VOLUME`), read
     /// through the fields' lookup of `shaders/lib/field.glsl`.
     F2_VOLUME_TEXTURE = 1 << 2;
+    /// Second-word feature bit: the scene hides its emitters from the camera (Mitsuba's
+    /// `hide_emitters`, `PATH_HIDE_EMITTERS`): the path's first ray passes through emitting
+    /// shapes. Every other kernel keeps the single traversal of a plain ray.
+    F2_HIDE_EMITTERS = 1 << 3;
     /// Feature bit: next-event estimation.
     F_NEE = 1 << 0;
     /// Feature bit: a constant environment emitter.

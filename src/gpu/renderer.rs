@@ -128,7 +128,9 @@ impl Renderer {
         let gpu = GpuScene::new(ctx, &scene, &mut flat)?;
         report.record("upload", start);
         let env = variant::env_range(&scene);
-        let scene_features = variant::scene_features(&flat, env.0);
+        // hide_emitters is the scene's, not its flat records': its kernels alone carry it.
+        let hide = if scene.hide_emitters { variant::word2(crate::contract::F2_HIDE_EMITTERS) } else { 0 };
+        let scene_features = variant::scene_features(&flat, env.0) | hide;
         let scene_kinds = variant::param_kinds(&flat, env, 0, flat.params.len() as u32);
         static NEXT_ID: std::sync::atomic::AtomicUsize = std::sync::atomic::AtomicUsize::new(0);
         Ok(Renderer {

@@ -258,7 +258,7 @@ pub fn request_features(scene: u64, options: &RenderOptions, kinds: ParamKinds) 
 
 /// A short human-readable name of a variant, for logs: `nee env diffuse conductor[beckmann] ∂alpha`.
 pub fn describe(features: u64) -> String {
-    const NAMES: [(u64, &str); 34] = [
+    const NAMES: [(u64, &str); 35] = [
         (F_NEE as u64, "nee"),
         (F_ENV as u64, "env"),
         (F_EMITTERS as u64, "emitters"),
@@ -286,6 +286,7 @@ pub fn describe(features: u64) -> String {
         (word2(F2_HERO), "hero"),
         (word2(F2_PRINCIPLED_THIN), "principledthin"),
         (word2(F2_VOLUME_TEXTURE), "volume-texture"),
+        (word2(F2_HIDE_EMITTERS), "hide-emitters"),
         (G_COLOR as u64, "∂color"),
         (G_TEXTURE as u64, "∂texture"),
         (G_ALPHA as u64, "∂alpha"),
