@@ -9,7 +9,10 @@ A tool for people (run by hand, nothing asserts on it). It writes, into OUT_DIR,
     gives such a mesh);
   * ``bumpy_N.xml``: a Mitsuba 3 scene that both pathgrad and Mitsuba 3 load: the sphere with a
     rough conductor (GGX, alpha 0.2) on a diffuse floor under a square area light, a 256 x 256
-    ``hdrfilm``, 16 spp and a ``path`` integrator of max depth 6.
+    ``hdrfilm``, 16 spp and a ``path`` integrator of max depth 6;
+  * with ``--obj``, also ``bumpy_N.obj`` (the same vertices, normals and triangles as Wavefront OBJ
+    text: ``v``, ``vn`` and ``f v//vn`` lines, floats printed so that they read back bit for bit)
+    and ``bumpy_N_obj.xml``, the scene with the OBJ in place of the PLY.
 
 The sphere has ``2 * C * (R - 1)`` triangles for ``R`` rings of ``C = 2 R`` vertices plus the two
 poles (fans at the poles, two triangles per quad between rings), so the count is N rounded to
@@ -17,6 +20,7 @@ that form; the script prints the exact count. Standard library and numpy only.
 
     python3 benches/big_mesh.py 2000000 /tmp/big
     pathgrad render /tmp/big/bumpy_2000000.xml -o /tmp/big/a.exr --json
+    python3 benches/big_mesh.py 2000000 /tmp/big --obj   # also bumpy_2000000{.obj,_obj.xml}
 """
 
 import argparse
@@ -89,6 +93,18 @@ def write_ply(path, positions, normals, faces):
     os.replace(tmp, path)
 
 
+def write_obj(path, positions, normals, faces):
+    """Writes the mesh as OBJ: '%.9g' prints a float32 so that it parses back to the same float."""
+    tmp = path + ".tmp"
+    with open(tmp, "w") as f:
+        f.write(f"# bumpy sphere: {len(positions)} vertices, {len(faces)} triangles (benches/big_mesh.py)\no bumpy\n")
+        np.savetxt(f, positions.astype(np.float64), fmt="v %.9g %.9g %.9g")
+        np.savetxt(f, normals.astype(np.float64), fmt="vn %.9g %.9g %.9g")
+        # Vertex k has normal k: each index is written twice, as v//vn.
+        np.savetxt(f, np.repeat(faces.astype(np.int64) + 1, 2, axis=1), fmt="f %d//%d %d//%d %d//%d")
+    os.replace(tmp, path)
+
+
 SCENE = """<?xml version="1.0" encoding="utf-8"?>
 <!-- Issue 38's scene, written by benches/big_mesh.py: a bumpy sphere of {count} triangles. -->
 <scene version="3.0.0">
@@ -116,8 +132,8 @@ SCENE = """<?xml version="1.0" encoding="utf-8"?>
     <bsdf type="diffuse" id="floor">
         <rgb name="reflectance" value="0.6, 0.6, 0.6"/>
     </bsdf>
-    <shape type="ply">
-        <string name="filename" value="{ply}"/>
+    <shape type="{kind}">
+        <string name="filename" value="{mesh}"/>
         <transform name="to_world">
             <translate y="0.05"/>
         </transform>
@@ -151,6 +167,7 @@ def main():
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("triangles", type=int, help="about how many triangles the sphere has")
     parser.add_argument("out_dir", help="folder for bumpy_N.ply and bumpy_N.xml")
+    parser.add_argument("--obj", action="store_true", help="also write bumpy_N.obj and bumpy_N_obj.xml")
     args = parser.parse_args()
     if args.triangles < 8:
         sys.exit("big_mesh.py: at least 8 triangles")
@@ -159,8 +176,13 @@ def main():
     name = f"bumpy_{args.triangles}"
     write_ply(os.path.join(args.out_dir, name + ".ply"), positions, normals, faces)
     with open(os.path.join(args.out_dir, name + ".xml"), "w") as f:
-        f.write(SCENE.format(count=len(faces), ply=name + ".ply"))
+        f.write(SCENE.format(count=len(faces), kind="ply", mesh=name + ".ply"))
     print(f"{args.out_dir}/{name}.xml: {len(faces)} triangles, {len(positions)} vertices")
+    if args.obj:
+        write_obj(os.path.join(args.out_dir, name + ".obj"), positions, normals, faces)
+        with open(os.path.join(args.out_dir, name + "_obj.xml"), "w") as f:
+            f.write(SCENE.format(count=len(faces), kind="obj", mesh=name + ".obj"))
+        print(f"{args.out_dir}/{name}_obj.xml: the same mesh as {name}.obj")
 
 
 if __name__ == "__main__":

@@ -1,4 +1,4 @@
-//! Triangle meshes from Wavefront OBJ (`tobj`), PLY (`ply-rs-bw` for the header and ASCII payloads) and Mitsuba `.serialized` files, as [`Geometry`](crate::scene::shapes::Geometry); Mitsuba's curve files as control points ([`load_curves`]).
+//! Triangle meshes from Wavefront OBJ (pathgrad's own parallel reader), PLY (`ply-rs-bw` for the header and ASCII payloads) and Mitsuba `.serialized` files, as [`Geometry`](crate::scene::shapes::Geometry); Mitsuba's curve files as control points ([`load_curves`]).
 //!
 //! Both loaders merge everything the file holds into one [`Geometry`](crate::scene::shapes::Geometry): every OBJ object and group,
 //! every PLY face. Polygons are fan-triangulated. OBJ materials (`mtllib`, `usemtl`) are ignored —
@@ -18,9 +18,8 @@
 //! name the element and its 0-based index instead). Degenerate triangles are not errors here:
 //! [`crate::scene::Scene::add_mesh`] drops them with a counted warning.
 //!
-//! **No panics.** OBJ files are checked statement by statement (`check_obj`) before `tobj` sees
-//! them, because `tobj` 4 overflows — a panic in debug builds — on relative face indices that
-//! point before the first element (e.g. `f 1/-5 …` with one `vt`). The PLY header's element counts
+//! **No panics.** The OBJ reader checks every index it resolves (a relative one that points before
+//! the first element, e.g. `f 1/-5 …` with one `vt`, is an error at its line). The PLY header's element counts
 //! are checked against the file size before the payload is read, so a tiny file cannot ask for
 //! billions of empty elements. Each third-party parse still runs under
 //! [`std::panic::catch_unwind`] as a backstop: a panic we did not foresee becomes an error naming
@@ -32,11 +31,16 @@ use crate::error::{Error, Result};
 
 mod curves;
 mod obj;
+#[cfg(any(test, feature = "obj-oracle"))]
+mod obj_tobj;
 mod ply;
 mod serialized;
 
 pub use curves::load_curves;
 pub use obj::load_obj;
+#[cfg(feature = "obj-oracle")]
+#[doc(hidden)]
+pub use obj_tobj::load_obj_tobj;
 pub use ply::load_ply;
 pub use serialized::{SerializedMesh, load_serialized};
 
@@ -352,7 +356,7 @@ mod tests {
                 "tests/data/mesh/mixed_uvs.obj:9: face vertex '4' lacks a texture coordinate index but earlier ones do \
                  (give every face vertex one, or none)",
             ),
-            // tobj 4 would overflow (panic in debug builds) on this relative index.
+            // tobj 4 overflowed (a panic in debug builds) on this relative index.
             (
                 "relative_underflow.obj",
                 "tests/data/mesh/relative_underflow.obj:5: texture coordinate index -5 is out of range \
