@@ -428,11 +428,18 @@ void colour_footprint(uint slot, TexAt at, out uint texel[4], out float weight[4
                       vec2(dot(row0, p), dot(row1, p)), texel, weight);
 }
 
+// Whether colour texture `slot` is Mitsuba's `volume` texture: its descriptor's word 0 the
+// field's index, looked up at the world-space point.
+bool colour_volume(uint slot) {
+    return HAS2(F2_VOLUME_TEXTURE) && (texture_desc_word(slot & ~SCALAR_TEXTURE, 3u) & TEX_VOLUME) != 0u;
+}
+
 // A smooth BSDF's or rough dielectric's colour slot at `at`: its RGB parameter, its texture's
 // lookup, or (NO_PARAM) `constant`.
 vec3 colour_value(uint slot, TexAt at, vec3 constant) {
     if (slot == NO_PARAM) return constant;
     if (!colour_textured(slot)) return param_rgb(slot);
+    if (colour_volume(slot)) return field_rgb(texture_desc_word(slot & ~SCALAR_TEXTURE, 0u), at.p);
     uint texel[4];
     float weight[4];
     colour_footprint(slot, at, texel, weight);
@@ -590,6 +597,10 @@ void push_colour(uint slot, TexAt at, vec3 g) {
         return;
     }
     if (!HAS(G_TEXTURE)) return;
+    if (colour_volume(slot)) {
+        field_grad(texture_desc_word(slot & ~SCALAR_TEXTURE, 0u), at.p, g);
+        return;
+    }
     uint texel[4];
     float weight[4];
     colour_footprint(slot, at, texel, weight);

@@ -18,7 +18,7 @@ use crate::contract::{
     TEX_WRAP_CLAMP, TEX_WRAP_MIRROR, TEXTURE_DESC_LEN,
 };
 use crate::cpu::path::GradSink;
-use crate::gpu::variant::colour_textured;
+use crate::gpu::variant::{colour_textured, colour_volume};
 use crate::scene::flat::FlatScene;
 
 pub use crate::contract::{RAY_OFFSET, SHADOW_EPSILON};
@@ -377,6 +377,9 @@ fn colour_value(flat: &FlatScene, slot: u32, at: TexAt, constant: Vec3) -> Vec3 
     if !colour_textured(slot) {
         return param_rgb(&flat.params, slot);
     }
+    if let Some(f) = colour_volume(flat, slot) {
+        return crate::cpu::medium::field_rgb(flat, &flat.fields[f as usize], at.p);
+    }
     let (texel, weight) = colour_footprint(flat, slot, at);
     texel.into_iter().zip(weight).map(|(t, w)| param_rgb(&flat.params, t) * w).sum()
 }
@@ -390,6 +393,10 @@ fn colour_backward(flat: &FlatScene, slot: u32, at: TexAt, g: Vec3, sink: &mut G
     }
     if !colour_textured(slot) {
         sink.add_rgb(slot, g);
+        return;
+    }
+    if let Some(f) = colour_volume(flat, slot) {
+        crate::cpu::medium::field_grad(&flat.fields[f as usize], at.p, g, sink);
         return;
     }
     let (texel, weight) = colour_footprint(flat, slot, at);

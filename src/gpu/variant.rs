@@ -24,7 +24,9 @@ pub fn scene_features(flat: &FlatScene, env_param: u32) -> u64 {
     // Bits of the second word (`F2_*`).
     let mut f2 = 0;
     for m in &flat.materials {
-        if m.tex_mode & TEX_VOLUME != 0 {
+        if m.tex_mode & TEX_VOLUME != 0
+            || specular_colour_slots(m).into_iter().any(|s| colour_volume(flat, s).is_some())
+        {
             f2 |= F2_VOLUME_TEXTURE;
         }
         f |= match m.tag {
@@ -127,19 +129,24 @@ pub fn param_kinds(flat: &FlatScene, env: (u32, u32), begin: u32, end: u32) -> P
     };
     // Reflectance, (dielectrics) transmittance and (plastics) specular reflectance, each a
     // parameter, a colour texture's texels (`SCALAR_TEXTURE`) or NO_PARAM.
+    let field = |f: u32| {
+        let d = &flat.fields[f as usize];
+        overlaps(d.offset, d.channels * if d.kind == FIELD_CONSTANT { 1 } else { d.res_x * d.res_y * d.res_z })
+    };
+    // A `volume` texture's slot names its field (`colour_volume`).
     let specular_kinds = |m: &crate::contract::Material| {
         let mut k = ParamKinds::NONE;
         for slot in specular_colour_slots(m) {
             let (offset, texels) = scalar_slot_range(flat, slot);
-            if overlaps(offset, 3 * texels) {
+            let read = match colour_volume(flat, slot) {
+                Some(f) => field(f),
+                None => overlaps(offset, 3 * texels),
+            };
+            if read {
                 k = k.union(if colour_textured(slot) { ParamKinds::TEXTURE } else { ParamKinds::COLOR });
             }
         }
         k
-    };
-    let field = |f: u32| {
-        let d = &flat.fields[f as usize];
-        overlaps(d.offset, d.channels * if d.kind == FIELD_CONSTANT { 1 } else { d.res_x * d.res_y * d.res_z })
     };
     let mut k = ParamKinds::NONE;
     for m in &flat.materials {
@@ -150,15 +157,12 @@ pub fn param_kinds(flat: &FlatScene, env: (u32, u32), begin: u32, end: u32) -> P
                     k = k.union(ParamKinds::ALPHA);
                 }
             }
-            // A `volume` texture's p_color is its field's index.
-            MAT_DIFFUSE if m.tex_mode & TEX_VOLUME != 0 => {
-                if field(m.p_color) {
-                    k = k.union(ParamKinds::TEXTURE);
-                }
-            }
             MAT_DIFFUSE | MAT_ROUGH_CONDUCTOR | MAT_ROUGH_PLASTIC | MAT_PLASTIC => {
                 let texels = if m.tex_width > 0 { m.tex_width * m.tex_height } else { 1 };
-                if overlaps(m.p_color, 3 * texels) {
+                // A `volume` texture's p_color is its field's index.
+                let read =
+                    if m.tex_mode & TEX_VOLUME != 0 { field(m.p_color) } else { overlaps(m.p_color, 3 * texels) };
+                if read {
                     k = k.union(if m.tex_width > 0 { ParamKinds::TEXTURE } else { ParamKinds::COLOR });
                 }
                 let alpha_v = m.tag == MAT_ROUGH_CONDUCTOR && overlaps_slot(m.p_alpha_v);
@@ -228,6 +232,17 @@ pub fn specular_colour_slots(m: &crate::contract::Material) -> Vec<u32> {
 /// Whether a colour slot of [`specular_colour_slots`] holds a texture (`SCALAR_TEXTURE`).
 pub fn colour_textured(slot: u32) -> bool {
     slot != NO_PARAM && slot & SCALAR_TEXTURE != 0
+}
+
+/// The field index of a colour slot of [`specular_colour_slots`] that holds a `volume` texture
+/// (its descriptor's mode has `TEX_VOLUME`, its word 0 is the field's index), looked up at the
+/// world-space point (twin: `colour_volume` of shaders/lib/surface.glsl).
+pub fn colour_volume(flat: &FlatScene, slot: u32) -> Option<u32> {
+    if !colour_textured(slot) {
+        return None;
+    }
+    let d = (slot & !SCALAR_TEXTURE) as usize;
+    (flat.tables[d + 3].to_bits() & TEX_VOLUME != 0).then(|| flat.tables[d].to_bits())
 }
 
 /// The parameter values a scalar slot of a `Material` reads, as (offset, count): one value, or a

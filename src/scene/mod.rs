@@ -1117,21 +1117,34 @@ impl Scene {
             }
             Ok(())
         };
+        // A `volume` texture is read as a diffuse's reflectance and a conductor's or rough
+        // conductor's specular reflectance only (what the conformance matrix compares with
+        // Mitsuba), and must exist.
+        const VOLUME_SLOTS: &str = "a volume texture is read only as a diffuse's reflectance and a conductor's or \
+                                    rough conductor's specular reflectance, and must exist";
         for m in &self.materials {
+            use crate::bsdf::specular::SmoothKind;
             let volume = |a: Albedo| matches!(a, Albedo::Volume(_));
             let colour = |c: SmoothColour| matches!(c, SmoothColour::Texture(a) if volume(a));
+            let missing = |c: SmoothColour| matches!(c, SmoothColour::Texture(Albedo::Volume(v)) if v as usize >= self.volume_textures.len());
             let refused = match *m {
                 Material::Principled { base_color, .. } | Material::PrincipledThin { base_color, .. } => {
                     volume(base_color)
                 }
-                Material::Smooth { reflectance, transmittance, .. }
-                | Material::RoughDielectric { reflectance, transmittance, .. } => {
+                Material::Smooth { kind, reflectance, transmittance, .. } => {
+                    (colour(reflectance) && kind != SmoothKind::Conductor)
+                        || colour(transmittance)
+                        || missing(reflectance)
+                        || missing(transmittance)
+                }
+                Material::RoughDielectric { reflectance, transmittance, .. } => {
                     colour(reflectance) || colour(transmittance)
                 }
+                Material::RoughPlastic { specular, .. } | Material::SmoothPlastic { specular, .. } => colour(specular),
                 _ => false,
             };
             if refused {
-                return Err(err("a material".into(), "a volume texture is only read as a diffuse reflectance".into()));
+                return Err(err("a material".into(), VOLUME_SLOTS.into()));
             }
             let albedos = match *m {
                 Material::Diffuse { albedo } => vec![albedo],
@@ -1143,14 +1156,11 @@ impl Scene {
                 if let Albedo::Attribute { values, source } = a {
                     attribute_len(values, source, 3, "colour")?;
                 }
-                // The kernels read a `volume` texture as a diffuse reflectance only.
                 if let Albedo::Volume(v) = a
-                    && (!matches!(m, Material::Diffuse { .. }) || v as usize >= self.volume_textures.len())
+                    && (!matches!(m, Material::Diffuse { .. } | Material::RoughConductor { .. })
+                        || v as usize >= self.volume_textures.len())
                 {
-                    return Err(err(
-                        format!("volume texture {v}"),
-                        "a volume texture is only read as a diffuse reflectance, and must exist".into(),
-                    ));
+                    return Err(err(format!("volume texture {v}"), VOLUME_SLOTS.into()));
                 }
             }
         }

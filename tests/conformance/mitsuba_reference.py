@@ -87,6 +87,15 @@ MATRIX = {
     "texture_volume": dict(features=["volume texture (gridvolume RGB, clamp) as diffuse reflectance",
                                      "volume texture (gridvolume grey, wrap_mode repeat) on a cube"],
                            grads=["ball.bsdf.reflectance.volume.data", "marker.bsdf.reflectance.volume.data"]),
+    # The same `volume` lookup on a conductor's colour (issue 31): a roughconductor's and a
+    # smooth conductor's specular_reflectance (the delta lobe's voxels by differences, as
+    # bsdf_smooth's colours).
+    "texture_volume_colours": dict(features=["volume texture as roughconductor specular_reflectance (RGB grid)",
+                                             "as conductor specular_reflectance (delta lobe)"],
+                                   grads=["ball.bsdf.specular_reflectance.volume.data",
+                                          "mirror.bsdf.specular_reflectance.volume.data"],
+                                   # Mitsuba's prb has no derivative through a delta lobe: differences.
+                                   fd={"mirror.bsdf.specular_reflectance.volume.data": None}),
     # A textured area emitter (issue 31): Mitsuba samples its points by the texture, pathgrad by
     # area; the images and the texels' derivatives agree in expectation. (The ball's α, tried as a
     # second gradient, sees only a 6-8 % bias at the budget: left out, the texels are the point.)

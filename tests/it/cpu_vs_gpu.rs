@@ -61,7 +61,7 @@ fn gpu_equals_cpu_per_path_on_every_builtin_and_test_scene() {
 }
 
 /// The principled material (issue 31), constant and textured, textured specular colours
-/// (`bsdf_smooth_textured`) and `volume` textures (`texture_volume`), as
+/// (`bsdf_smooth_textured`) and `volume` textures (`texture_volume`, `texture_volume_colours`), as
 /// [`gpu_equals_cpu_per_path_on_every_builtin_and_test_scene`] compares the rest.
 #[test]
 fn issue_31_principled_gpu_equals_cpu_per_path() {
@@ -72,6 +72,7 @@ fn issue_31_principled_gpu_equals_cpu_per_path() {
         "bsdf_principled_textured_scalars",
         "bsdf_smooth_textured",
         "texture_volume",
+        "texture_volume_colours",
     ] {
         primal_agrees_per_path(&gpu, &crate::support::scenes::conformance(name));
     }

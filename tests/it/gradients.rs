@@ -470,6 +470,17 @@ fn issue_31_volume_textures_gpu_equal_cpu_and_match_finite_differences() {
     check_finite_differences(&gpu, params.iter().map(|&p| (scenes::conformance("texture_volume"), p)).collect());
 }
 
+/// `volume` textures on a rough and a smooth conductor's specular reflectance (issue 31): GPU
+/// and CPU image gradients per path, and each against central finite differences.
+#[test]
+fn issue_31_volume_texture_colours_gpu_equal_cpu_and_match_finite_differences() {
+    let gpu = TestGpu::new();
+    let scene = scenes::conformance("texture_volume_colours");
+    let params = ["ball.bsdf.specular_reflectance.volume.data", "mirror.bsdf.specular_reflectance.volume.data"];
+    image_gradients_agree(&gpu, vec![(scene.clone(), params.to_vec())]);
+    check_finite_differences(&gpu, params.iter().map(|&p| (scene.clone(), p)).collect());
+}
+
 /// A textured area emitter's texels (issue 31): GPU and CPU image gradients per path, and against
 /// central finite differences.
 #[test]

@@ -619,7 +619,9 @@ impl<'a> Loader<'a> {
     }
 
     /// A specular colour `key` (1 by default): a texture ([`Loader::texture`]: a bitmap's texels
-    /// `NAME.KEY.data`, a checkerboard's `NAME.KEY.color0/color1.value`, a mesh attribute), the
+    /// `NAME.KEY.data`, a checkerboard's `NAME.KEY.color0/color1.value`, a mesh attribute, and on
+    /// a `conductor`'s reflectance a `volume` texture's `NAME.KEY.volume.data`;
+    /// [`Loader::refuse_volume`] elsewhere), the
     /// parameter `NAME.KEY.value` where the file gives a colour or `always`, else a constant
     /// (Mitsuba's dielectrics traverse only the colours given).
     fn specular_colour(
@@ -632,7 +634,10 @@ impl<'a> Loader<'a> {
     ) -> Result<SmoothColour> {
         if let Some(t) = p.object(key) {
             let a = self.texture(t, format!("{name}.{key}"), depth + 1)?;
-            return Ok(SmoothColour::Texture(self.refuse_volume(a, t, key, &p.kind)?));
+            // A `volume` texture only where the conformance matrix compares it with Mitsuba
+            // (`texture_volume_colours`); Mitsuba's plastics refuse it (they take a colour's mean).
+            let volume_ok = p.kind == "conductor";
+            return Ok(SmoothColour::Texture(if volume_ok { a } else { self.refuse_volume(a, t, key, &p.kind)? }));
         }
         let value = self.color_in(p, key, Vec3::ONE, bounds::REFLECTANCE)?;
         if !(always || p.has(key)) {
@@ -644,16 +649,13 @@ impl<'a> Loader<'a> {
 
     /// Mitsuba's `roughconductor`: `distribution`, the roughness of
     /// [`Loader::microfacet_alpha`], `specular_reflectance` (1; a colour, parameter
-    /// `NAME.specular_reflectance.value`, or a `bitmap`/`checkerboard` as a diffuse reflectance
-    /// is), `material` or `eta`/`k`.
+    /// `NAME.specular_reflectance.value`, or a `bitmap`/`checkerboard`/`volume` texture as a diffuse
+    /// reflectance is), `material` or `eta`/`k`.
     fn rough_conductor(&mut self, p: &Props<'a>, name: &str) -> Result<MaterialId> {
         let distribution = self.distribution(p)?;
         let (alpha, alpha_v) = self.microfacet_alpha(p, name)?;
         let specular = match p.object("specular_reflectance") {
-            Some(t) => {
-                let a = self.texture(t, format!("{name}.specular_reflectance"), 1)?;
-                self.refuse_volume(a, t, "specular_reflectance", &p.kind)?
-            }
+            Some(t) => self.texture(t, format!("{name}.specular_reflectance"), 1)?,
             None => {
                 let specular = self.color_in(p, "specular_reflectance", Vec3::ONE, bounds::REFLECTANCE)?;
                 let specular = self.scene.params.add(
@@ -720,13 +722,19 @@ impl<'a> Loader<'a> {
         Ok(Albedo::Bitmap(t))
     }
 
-    /// `a`, unless it is a `volume` texture, which the kernels read as a diffuse `reflectance`
-    /// only: on `slot` of a `kind` BSDF it is refused, located at `node`.
+    /// `a`, unless it is a `volume` texture, which pathgrad reads as a `diffuse`'s `reflectance`
+    /// and a `conductor`'s or `roughconductor`'s `specular_reflectance` only (the slots the
+    /// conformance matrix compares with Mitsuba;
+    /// Mitsuba 3.9.1 itself refuses it on a plastic, whose sampling weight takes a colour's mean,
+    /// which its `volume` texture does not implement): on `slot` of a `kind` BSDF it is refused,
+    /// located at `node`.
     fn refuse_volume(&self, a: Albedo, node: El<'a>, slot: &str, kind: &str) -> Result<Albedo> {
         if matches!(a, Albedo::Volume(_)) {
             return Err(self.x.err(
                 node,
-                format!("a 'volume' texture is supported as the 'reflectance' of a 'diffuse' only (not as '{slot}' of '{kind}')"),
+                format!(
+                    "a 'volume' texture is not supported as '{slot}' of '{kind}' (only as a diffuse's 'reflectance' and a conductor's or roughconductor's 'specular_reflectance')"
+                ),
             ));
         }
         Ok(a)

@@ -24,7 +24,7 @@
 //!   `<texture type="mesh_attribute">`: a PLY attribute of the shape, per face or per vertex,
 //!   module `mesh_attribute`, also on float properties), or `<texture type="volume">` (a
 //!   `gridvolume`/`constvolume` looked up at the world-space point, values `….volume.data`;
-//!   diffuse reflectance only)), `roughconductor`,
+//!   a diffuse's reflectance, a conductor's or roughconductor's specular_reflectance)), `roughconductor`,
 //!   `blendbsdf`, `twosided`; `<emitter type="constant">` at scene level (the environment).
 //! - `<sensor type="perspective">` with `fov`/`focal_length`, `fov_axis`, `to_world`, a
 //!   `<film type="hdrfilm">` (`width`, `height`, an `rfilter`) and a `<sampler type="independent">` (`sample_count` →

@@ -105,7 +105,7 @@ pub const PLUGINS: &[Plugin] = &[
     p(
         Bsdf,
         "conductor",
-        "`specular_reflectance` (rgb, spectrum, bitmap, checkerboard or mesh_attribute), `material` or `eta`/`k`",
+        "`specular_reflectance` (rgb, spectrum, bitmap, checkerboard, mesh_attribute or volume), `material` or `eta`/`k`",
         "smooth: sampled only; gradient of the reflectance (or its texels) through the sampled weight",
     ),
     p(
@@ -149,7 +149,7 @@ pub const PLUGINS: &[Plugin] = &[
     p(
         Bsdf,
         "roughconductor",
-        "`distribution`, `alpha` or `alpha_u`/`alpha_v` (parameters or one-channel textures), `specular_reflectance` (rgb, spectrum, bitmap or checkerboard), `material` or `eta`/`k`, `sample_visible`",
+        "`distribution`, `alpha` or `alpha_u`/`alpha_v` (parameters or one-channel textures), `specular_reflectance` (rgb, spectrum, bitmap, checkerboard or volume), `material` or `eta`/`k`, `sample_visible`",
         "anisotropic: shading frame along ∂p/∂u",
     ),
     p(
@@ -248,7 +248,7 @@ pub const PLUGINS: &[Plugin] = &[
         Texture,
         "volume",
         "`volume` (a `gridvolume`, `constvolume`, `<float>` or `<rgb>`)",
-        "as the `reflectance` of a `diffuse` only, looked up at the world-space surface point; a grid's values are parameter `.volume.data`",
+        "as a colour: a `diffuse`'s `reflectance`, a `conductor`'s or `roughconductor`'s `specular_reflectance` (not a plastic's colours, which Mitsuba refuses, nor yet any other colour or a scalar), looked up at the world-space surface point; a grid's values are parameter `.volume.data`",
     ),
     p(Medium, "homogeneous", "`sigma_t`, `albedo`, `scale`, a phase", "inside a null or dielectric boundary"),
     p(

@@ -118,8 +118,16 @@ fn issue_31_smooth_bsdfs_and_rough_dielectrics_take_textured_specular_colours_na
     // Bad textures on a specular colour are refused by name, with the file and line.
     for (bsdf, expect) in [
         (
-            r#"<bsdf type="dielectric"><texture type="volume" name="specular_transmittance"><rgb name="volume" value="0.5"/></texture></bsdf>"#,
-            "a 'volume' texture is supported as the 'reflectance' of a 'diffuse' only (not as 'specular_transmittance' of 'dielectric')",
+            r#"<bsdf type="principled"><texture type="volume" name="base_color"><rgb name="volume" value="0.5"/></texture></bsdf>"#,
+            "a 'volume' texture is not supported as 'base_color' of 'principled' (only as a diffuse's 'reflectance' and a conductor's or roughconductor's 'specular_reflectance')",
+        ),
+        (
+            r#"<bsdf type="roughplastic"><texture type="volume" name="specular_reflectance"><rgb name="volume" value="0.5"/></texture></bsdf>"#,
+            "a 'volume' texture is not supported as 'specular_reflectance' of 'roughplastic' (only as a diffuse's 'reflectance' and a conductor's or roughconductor's 'specular_reflectance')",
+        ),
+        (
+            r#"<bsdf type="plastic"><texture type="volume" name="diffuse_reflectance"><rgb name="volume" value="0.5"/></texture></bsdf>"#,
+            "a 'volume' texture is not supported as 'diffuse_reflectance' of 'plastic' (only as a diffuse's 'reflectance' and a conductor's or roughconductor's 'specular_reflectance')",
         ),
         (
             r#"<bsdf type="conductor"><texture type="checkerboard" name="specular_reflectance"><rgb name="color1" value="1.5"/></texture></bsdf>"#,

@@ -1,5 +1,6 @@
-//! Mitsuba's `volume` texture on a diffuse reflectance: what the loader binds (fields, names as
-//! Mitsuba 3.9.1's `traverse` gives them) and every refusal with its location.
+//! Mitsuba's `volume` texture on a diffuse reflectance and a conductor's specular reflectance:
+//! what the loader binds (fields, names as Mitsuba 3.9.1's `traverse` gives them) and every
+//! refusal with its location.
 
 use std::path::Path;
 
@@ -87,7 +88,7 @@ fn volume_texture_binds_a_field() {
 }
 
 /// Every refusal names the file, the line and what is wrong: no `volume`, a `volume` texture on
-/// a slot other than a diffuse reflectance, values outside [0, 1], a nearest filter, a missing
+/// a slot where pathgrad does not take it, values outside [0, 1], a nearest filter, a missing
 /// file, an unknown volume plugin.
 #[test]
 fn volume_texture_refusals_are_located() {
@@ -102,19 +103,32 @@ fn volume_texture_refusals_are_located() {
         ),
         (
             shape(&format!(r#"<bsdf type="plastic">{}</bsdf>"#, as_key("diffuse_reflectance"))),
-            "not as 'diffuse_reflectance' of 'plastic'".into(),
+            "not supported as 'diffuse_reflectance' of 'plastic'".into(),
         ),
         (
-            shape(&format!(r#"<bsdf type="roughconductor">{}</bsdf>"#, as_key("specular_reflectance"))),
-            "not as 'specular_reflectance' of 'roughconductor'".into(),
+            shape(&format!(r#"<bsdf type="roughplastic">{}</bsdf>"#, as_key("specular_reflectance"))),
+            "not supported as 'specular_reflectance' of 'roughplastic'".into(),
         ),
         (
             shape(&format!(r#"<bsdf type="principled">{}</bsdf>"#, as_key("base_color"))),
-            "not as 'base_color' of 'principled'".into(),
+            "not supported as 'base_color' of 'principled'".into(),
+        ),
+        // Slots the kernels could read but the conformance matrix does not compare.
+        (
+            shape(&format!(r#"<bsdf type="dielectric">{}</bsdf>"#, as_key("specular_reflectance"))),
+            "not supported as 'specular_reflectance' of 'dielectric'".into(),
         ),
         (
             shape(&format!(r#"<bsdf type="dielectric">{}</bsdf>"#, as_key("specular_transmittance"))),
-            "not as 'specular_transmittance' of 'dielectric'".into(),
+            "not supported as 'specular_transmittance' of 'dielectric'".into(),
+        ),
+        (
+            shape(&format!(r#"<bsdf type="thindielectric">{}</bsdf>"#, as_key("specular_transmittance"))),
+            "not supported as 'specular_transmittance' of 'thindielectric'".into(),
+        ),
+        (
+            shape(&format!(r#"<bsdf type="roughdielectric">{}</bsdf>"#, as_key("specular_transmittance"))),
+            "not supported as 'specular_transmittance' of 'roughdielectric'".into(),
         ),
         (
             shape(&format!(
@@ -153,4 +167,38 @@ fn volume_texture_refusals_are_located() {
         assert!(e.contains(&format!("{d}/test.xml:")) || e.contains(&d), "{body}: {e}");
         assert!(e.contains(&expected), "{body}: {e}");
     }
+}
+
+/// A `volume` texture on a rough or smooth conductor's specular reflectance (issue 31): the slot
+/// holds the field, its voxels are `SHAPE.bsdf.specular_reflectance.volume.data` (Mitsuba
+/// 3.9.1's key), the smooth conductor's flattened slot names the field through a `TEX_VOLUME`
+/// descriptor, and the scene asks for the kernels' volume-texture part.
+#[test]
+fn volume_texture_binds_a_conductor_colour() {
+    let dir = grids();
+    let colour = r#"<volume type="gridvolume" name="volume"><string name="filename" value="colour.vol"/></volume>"#;
+    let as_key = |key: &str| format!(r#"<texture type="volume" name="{key}">{colour}</texture>"#);
+    let body = format!(
+        r#"<shape type="sphere" id="a"><bsdf type="roughconductor">{}</bsdf></shape>
+           <shape type="sphere" id="c"><bsdf type="conductor">{}</bsdf></shape>"#,
+        as_key("specular_reflectance"),
+        as_key("specular_reflectance")
+    );
+    let s = load_in(dir.path(), &body).unwrap();
+    assert!(s.warnings.is_empty(), "{:?}", s.warnings);
+    for name in ["a.bsdf.specular_reflectance.volume.data", "c.bsdf.specular_reflectance.volume.data"] {
+        assert_eq!(s.params.entry(s.params.find(name).expect(name)).len, 72, "{name}");
+    }
+    assert_eq!(s.volume_textures.len(), 2);
+    let flat = crate::scene::flat::FlatScene::new(&s).unwrap();
+    let features = crate::gpu::variant::scene_features(&flat, crate::contract::NO_PARAM);
+    assert_ne!(features & crate::gpu::variant::word2(crate::contract::F2_VOLUME_TEXTURE), 0);
+    // The smooth conductor's reflectance names field 1 (after the rough conductor's; no media).
+    let slots: Vec<Option<u32>> = flat
+        .materials
+        .iter()
+        .flat_map(crate::gpu::variant::specular_colour_slots)
+        .map(|slot| crate::gpu::variant::colour_volume(&flat, slot))
+        .collect();
+    assert_eq!(slots, vec![Some(1)]);
 }
