@@ -70,6 +70,8 @@ pub mod rng;
 pub mod sampling;
 pub mod scene;
 pub mod stats;
+#[cfg(test)]
+mod testing;
 pub mod variance;
 
 pub use error::{Error, Result};

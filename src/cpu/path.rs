@@ -1030,13 +1030,8 @@ mod tests {
     /// Σ_k p_k [w₁ᵏ + w₂ᵏ + (w₁ᵏ p_f + q_jᵏ w₂ᵏ p_∂f + (1 − q_jᵏ) w₂ᵏ p_f)/p_e], in the same units.
     #[test]
     fn hero_mixture_equals_the_sum_over_heroes_and_placements() {
-        let mut state = 0x2545_f491_4f6c_dd1du64;
-        let mut uniform = move || {
-            state ^= state << 13;
-            state ^= state >> 7;
-            state ^= state << 17;
-            ((state >> 40) as f64 + 0.5) / (1u64 << 24) as f64
-        };
+        let mut next = crate::testing::xorshift64(0x2545_f491_4f6c_dd1d);
+        let mut uniform = move || ((next() >> 40) as f64 + 0.5) / (1u64 << 24) as f64;
         for _ in 0..200 {
             let p0 = 0.05 + 0.9 * uniform();
             let q = (0.05 + 0.9 * uniform()) as f32;

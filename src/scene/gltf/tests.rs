@@ -307,13 +307,7 @@ fn malformed_files_give_pinned_messages() {
 /// Random byte edits of the showcase never panic.
 #[test]
 fn mutated_files_never_panic() {
-    let mut state = 0x2545_f491_4f6c_dd1d_u64;
-    let mut next = move || {
-        state ^= state << 13;
-        state ^= state >> 7;
-        state ^= state << 17;
-        state
-    };
+    let mut next = crate::testing::xorshift64(0x2545_f491_4f6c_dd1d);
     let dir = tempfile::tempdir().unwrap();
     for name in ["showcase.gltf", "showcase.glb"] {
         let original = std::fs::read(Path::new("scenes/gltf").join(name)).unwrap();

@@ -416,13 +416,7 @@ mod tests {
     /// Random edits of the good fixtures never panic (a small in-tree stand-in for the fuzz targets).
     #[test]
     fn mutated_meshes_never_panic() {
-        let mut state = 0x9e37_79b9_7f4a_7c15_u64;
-        let mut next = move || {
-            state ^= state << 13;
-            state ^= state >> 7;
-            state ^= state << 17;
-            state
-        };
+        let mut next = crate::testing::xorshift64(0x9e37_79b9_7f4a_7c15);
         let dir = tempfile::tempdir().unwrap();
         for (name, loader) in [
             ("quad.obj", load_obj as fn(&Path) -> Result<Geometry>),

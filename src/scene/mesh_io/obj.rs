@@ -61,12 +61,17 @@ pub fn load_obj(path: &Path) -> Result<Geometry> {
 }
 
 fn read_obj(path: &Path) -> Result<Geometry> {
-    let bytes = read_file(path)?;
-    let text = std::str::from_utf8(&bytes).map_err(|e| {
-        let line = bytes[..e.valid_up_to()].iter().filter(|&&b| b == b'\n').count() + 1;
+    let text = read_text(path)?;
+    parse_obj(&text, chunk_count(text.len())).map_err(|(line, message)| scene_error(path, line, message))
+}
+
+/// The text of the OBJ file at `path`; an error at the line of its first byte that is not UTF-8.
+pub(super) fn read_text(path: &Path) -> Result<String> {
+    String::from_utf8(read_file(path)?).map_err(|e| {
+        let valid = e.utf8_error().valid_up_to();
+        let line = e.as_bytes()[..valid].iter().filter(|&&b| b == b'\n').count() + 1;
         scene_error(path, Some(line), "not UTF-8 text (is this an OBJ file?)")
-    })?;
-    parse_obj(text, chunk_count(text.len())).map_err(|(line, message)| scene_error(path, line, message))
+    })
 }
 
 /// How many chunks a text of `len` bytes is cut into: about one per MiB, at most eight per thread.
@@ -711,13 +716,7 @@ mod tests {
     /// is cut, the same geometry or the same error (a stand-in for a fuzz target, and no panics).
     #[test]
     fn mutated_meshes_parse_the_same_in_any_chunks() {
-        let mut state = 0x2545_f491_4f6c_dd1d_u64;
-        let mut next = move || {
-            state ^= state << 13;
-            state ^= state >> 7;
-            state ^= state << 17;
-            state
-        };
+        let mut next = crate::testing::xorshift64(0x2545_f491_4f6c_dd1d);
         let original = grids(2, 3).into_bytes();
         let (mut oks, mut errors) = (0, 0);
         for round in 0..300 {

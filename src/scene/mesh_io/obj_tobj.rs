@@ -6,7 +6,7 @@ use std::path::Path;
 
 use glam::{Vec2, Vec3};
 
-use super::{catch_panic, read_file, scene_error};
+use super::{catch_panic, scene_error};
 use crate::error::Result;
 use crate::scene::shapes::Geometry;
 
@@ -31,11 +31,8 @@ pub fn load_obj_tobj(path: &Path) -> Result<Geometry> {
 }
 
 fn read_obj(path: &Path) -> Result<Geometry> {
-    let bytes = read_file(path)?;
-    let text = std::str::from_utf8(&bytes).map_err(|e| {
-        let line = bytes[..e.valid_up_to()].iter().filter(|&&b| b == b'\n').count() + 1;
-        scene_error(path, Some(line), "not UTF-8 text (is this an OBJ file?)")
-    })?;
+    let text = super::obj::read_text(path)?;
+    let text = text.as_str();
     let counts = check_obj(text).map_err(|(line, message)| scene_error(path, Some(line), message))?;
     if counts.positions == 0 && counts.faces == 0 {
         return Err(scene_error(path, None, "not an OBJ mesh: it has no vertex ('v') or face ('f') statements"));
