@@ -328,14 +328,7 @@ fn not_an_index(word: &str, part: &str) -> String {
 /// A `v` statement's point: `x y z`, `x y z w` (`w` ignored, as Mitsuba does) or `x y z r g b`.
 fn vertex(words: std::str::SplitWhitespace) -> std::result::Result<Vec3, String> {
     let what = "vertex ('v')";
-    let (mut p, mut n) = ([0.0f32; 3], 0);
-    for word in words {
-        let value = word.parse::<f32>().map_err(|_| format!("{what}: '{word}' is not a number"))?;
-        if n < 3 {
-            p[n] = value;
-        }
-        n += 1;
-    }
+    let (p, n) = first_three(words, what)?;
     if !matches!(n, 3 | 4 | 6) {
         return Err(format!("{what} has {n} numbers; expected x y z, x y z w, or x y z r g b"));
     }
@@ -347,6 +340,18 @@ fn vertex(words: std::str::SplitWhitespace) -> std::result::Result<Vec3, String>
 
 /// The first `needed` (2 or 3) of a `vt` or `vn` statement's numbers, all of which must parse.
 fn numbers(words: std::str::SplitWhitespace, what: &str, needed: usize) -> std::result::Result<[f32; 3], String> {
+    let (v, n) = first_three(words, what)?;
+    if n < needed {
+        return Err(format!("{what} needs {needed} numbers, found {n}"));
+    }
+    if v[..needed].iter().any(|c| !c.is_finite()) {
+        return Err(format!("{what} is not finite (NaN or infinity)"));
+    }
+    Ok(v)
+}
+
+/// A statement's first three numbers (zero where fewer) and how many it has, all of which must parse.
+fn first_three(words: std::str::SplitWhitespace, what: &str) -> std::result::Result<([f32; 3], usize), String> {
     let (mut v, mut n) = ([0.0f32; 3], 0);
     for word in words {
         let value = word.parse::<f32>().map_err(|_| format!("{what}: '{word}' is not a number"))?;
@@ -355,13 +360,7 @@ fn numbers(words: std::str::SplitWhitespace, what: &str, needed: usize) -> std::
         }
         n += 1;
     }
-    if n < needed {
-        return Err(format!("{what} needs {needed} numbers, found {n}"));
-    }
-    if v[..needed].iter().any(|c| !c.is_finite()) {
-        return Err(format!("{what} is not finite (NaN or infinity)"));
-    }
-    Ok(v)
+    Ok((v, n))
 }
 
 /// Cuts `text` into at most `pieces` runs of whole lines (each but the last ends with `\n`).
