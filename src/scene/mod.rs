@@ -734,8 +734,9 @@ impl Scene {
         Ok(self.add_material(Material::Diffuse { albedo: Albedo::Rgb(albedo) }))
     }
 
-    /// Adds a rough conductor with parameters `{name}.alpha.value` and
-    /// `{name}.specular_reflectance.value`.
+    /// Adds a rough conductor with parameters `{name}.alpha.value`,
+    /// `{name}.specular_reflectance.value`, `{name}.eta.value` and `{name}.k.value` (Mitsuba's
+    /// keys of a `roughconductor`).
     ///
     /// # Errors
     /// As [`ParamTable::add`].
@@ -755,6 +756,7 @@ impl Scene {
             bounds::REFLECTANCE,
         )?;
         let specular = Albedo::Rgb(specular);
+        let eta_param = Some(self.add_conductor_ior(name, eta, k)?);
         Ok(self.add_material(Material::RoughConductor {
             distribution,
             alpha,
@@ -762,7 +764,7 @@ impl Scene {
             specular,
             eta,
             k,
-            eta_param: None,
+            eta_param,
         }))
     }
 
