@@ -401,6 +401,11 @@ mod tests {
         t.add("c.alpha.value", &[0.1], (0.0, 1.0)).unwrap();
         assert_eq!(t.select(&["*.alpha.value"]).unwrap(), vec![ParamId(0), ParamId(2)]);
         assert!(t.select(&["nope*"]).unwrap_err().to_string().contains("matches no parameter"));
+        // Indices of refraction: which BSDFs expose theirs, and under which names.
+        let e = t.select(&["ball.bsdf.k.value"]).unwrap_err().to_string();
+        assert!(e.contains("NAME.eta.value and NAME.k.value") && e.contains("both modes"), "{e}");
+        let e = t.select(&["glass.bsdf.int_ior"]).unwrap_err().to_string();
+        assert!(e.contains("as NAME.eta") && e.contains("--sampling attached"), "{e}");
         // Mitsuba's geometry keys are refused by name.
         for key in ["curve.control_points", "mesh.vertex_positions", "sdf.grid", "sdf.to_world"] {
             let e = t.select(&[key]).unwrap_err().to_string();
