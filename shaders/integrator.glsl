@@ -919,6 +919,8 @@ bool path_step(inout PathState st) {
                 BsdfGrad g = bsdf_sample_grad(bsdf, wi, grad_wo[k], k == 1u && grad_delta, grad_adj[k]);
                 gt.bsdf.leaf0.color += g.leaf0.color;
                 gt.bsdf.leaf0.trans += g.leaf0.trans;
+                gt.bsdf.leaf0.eta += g.leaf0.eta;
+                gt.bsdf.leaf0.k += g.leaf0.k;
 #if !ATTACHED
                 // (Attached kernels differentiate a rough conductor's roughness in its lobe.)
                 gt.bsdf.leaf0.alpha += g.leaf0.alpha;
@@ -928,6 +930,8 @@ bool path_step(inout PathState st) {
                 gt.bsdf.leaf1.alpha += g.leaf1.alpha;
                 gt.bsdf.leaf1.trans += g.leaf1.trans;
                 gt.bsdf.leaf1.alpha_v += g.leaf1.alpha_v;
+                gt.bsdf.leaf1.eta += g.leaf1.eta;
+                gt.bsdf.leaf1.k += g.leaf1.k;
                 gt.bsdf.weight += g.weight;
             }
         } else {

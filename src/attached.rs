@@ -220,7 +220,11 @@ pub fn attached_only_params(scene: &crate::scene::Scene) -> Vec<crate::params::P
         .materials
         .iter()
         .filter_map(|m| match m {
-            crate::scene::Material::Smooth { eta_param, .. } => *eta_param,
+            crate::scene::Material::Smooth { eta_param, kind, .. }
+                if *kind != crate::bsdf::specular::SmoothKind::Conductor =>
+            {
+                *eta_param
+            }
             _ => None,
         })
         .collect()

@@ -110,7 +110,7 @@ pub struct ParamKinds(u32);
 impl ParamKinds {
     /// No parameter.
     pub const NONE: ParamKinds = ParamKinds(0);
-    /// Constant colours: diffuse albedo, conductor specular reflectance.
+    /// Constant colours: diffuse albedo, conductor specular reflectance, a conductor's eta and k.
     pub const COLOR: ParamKinds = ParamKinds(crate::contract::G_COLOR);
     /// Texels of textured colours.
     pub const TEXTURE: ParamKinds = ParamKinds(crate::contract::G_TEXTURE);

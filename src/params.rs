@@ -137,11 +137,12 @@ impl ParamTable {
             if chosen.len() == before && !self.entries.iter().any(|e| glob_match(pattern, &e.name)) {
                 // Mitsuba exposes indices of refraction; pathgrad does not (yet).
                 let last = pattern.rsplit('.').find(|p| *p != "value").unwrap_or("");
-                let ior = if matches!(last, "eta" | "int_ior" | "ext_ior" | "specular") {
-                    ": only smooth `dielectric`s and `thindielectric`s expose their index of refraction, as \
-                     NAME.eta (it acts through the directions it refracts into: differentiable with attached \
-                     sampling, --sampling attached); rough dielectrics', plastics', principled BSDFs' and \
-                     conductors' are not parameters"
+                let ior = if matches!(last, "eta" | "k" | "int_ior" | "ext_ior" | "specular") {
+                    ": smooth `dielectric`s and `thindielectric`s expose their index of refraction as NAME.eta \
+                     (it acts through the directions it refracts into: differentiable with attached sampling, \
+                     --sampling attached), `conductor`s and `roughconductor`s their complex one as \
+                     NAME.eta.value and NAME.k.value (RGB; they act on the weight: differentiable in both \
+                     modes); rough dielectrics', plastics' and principled BSDFs' are not parameters"
                 } else if pattern.contains("normalmap") || pattern.contains("nested_texture") {
                     ": a normal or bump map's texels are not parameters in pathgrad (they move the shading \
                      frame, whose derivative is not built; Mitsuba's `normalmap.data`, `nested_texture.data`); \
@@ -400,6 +401,11 @@ mod tests {
         t.add("c.alpha.value", &[0.1], (0.0, 1.0)).unwrap();
         assert_eq!(t.select(&["*.alpha.value"]).unwrap(), vec![ParamId(0), ParamId(2)]);
         assert!(t.select(&["nope*"]).unwrap_err().to_string().contains("matches no parameter"));
+        // Indices of refraction: which BSDFs expose theirs, and under which names.
+        let e = t.select(&["ball.bsdf.k.value"]).unwrap_err().to_string();
+        assert!(e.contains("NAME.eta.value and NAME.k.value") && e.contains("both modes"), "{e}");
+        let e = t.select(&["glass.bsdf.int_ior"]).unwrap_err().to_string();
+        assert!(e.contains("as NAME.eta") && e.contains("--sampling attached"), "{e}");
         // Mitsuba's geometry keys are refused by name.
         for key in ["curve.control_points", "mesh.vertex_positions", "sdf.grid", "sdf.to_world"] {
             let e = t.select(&[key]).unwrap_err().to_string();

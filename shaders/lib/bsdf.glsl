@@ -26,7 +26,8 @@ struct Bsdf { Leaf leaf0; Leaf leaf1; float weight; bool blend; bool mapped; vec
 struct BsdfSample { vec3 wo; float pdf; vec3 value; bool valid; bool delta; };
 // ∂ by the colour (albedo or reflectance), the roughness and a dielectric's transmittance (a
 // plastic's specular reflectance), per image channel.
-struct LeafGrad { vec3 color; vec3 alpha; vec3 trans; vec3 alpha_v; };
+// eta, k: by channel c of a conductor's eta and k (component c the whole derivative, as color's).
+struct LeafGrad { vec3 color; vec3 alpha; vec3 trans; vec3 alpha_v; vec3 eta; vec3 k; };
 struct BsdfGrad { LeafGrad leaf0; LeafGrad leaf1; vec3 weight; };
 
 // Whether `distribution` is Beckmann, folded to a constant when the kernel has only one of the two.
@@ -227,7 +228,7 @@ bool leaf_sample(Leaf l, vec3 wi, float u_lobe, vec2 u, out vec3 wo) {
 
 // ∂f̂/∂ρ, ∂f̂/∂α and ∂f̂/∂s (in `trans`) of a rough plastic (twin of PlasticLeaf::eval_grad).
 LeafGrad plastic_eval_grad(Leaf l, vec3 wi, vec3 wo, vec3 adj) {
-    if (wi.z <= 0.0 || wo.z <= 0.0) return LeafGrad(vec3(0.0), vec3(0.0), vec3(0.0), vec3(0.0));
+    if (wi.z <= 0.0 || wo.z <= 0.0) return LeafGrad(vec3(0.0), vec3(0.0), vec3(0.0), vec3(0.0), vec3(0.0), vec3(0.0));
     vec3 h = normalize(wi + wo);
     float f = fresnel_dielectric(dot(wi, h), l.eta.x);
     float scalar;
@@ -246,7 +247,7 @@ LeafGrad plastic_eval_grad(Leaf l, vec3 wi, vec3 wo, vec3 adj) {
     vec3 d_diffuse = (nonlinear ? n * n : n) * (k * t_i * t_o);
     vec3 d_alpha = l.k * (f * dscalar) + l.color * n * (k * (dt_i * t_o + t_i * dt_o))
         + l.color * n * n * rbar * (dinternal * k * t_i * t_o);
-    return LeafGrad(adj * d_diffuse, adj * d_alpha, adj * (f * scalar), vec3(0.0));
+    return LeafGrad(adj * d_diffuse, adj * d_alpha, adj * (f * scalar), vec3(0.0), vec3(0.0), vec3(0.0));
 }
 
 LeafGrad leaf_eval_grad(Leaf l, vec3 wi, vec3 wo, vec3 adj) {
@@ -256,18 +257,22 @@ LeafGrad leaf_eval_grad(Leaf l, vec3 wi, vec3 wo, vec3 adj) {
     if (is_rough_dielectric(l.kind)) return rdielectric_eval_grad(l, wi, wo, adj);
     if (is_principled(l.kind)) {
         principled_add_grad(l, wi, wo, adj);
-        return LeafGrad(vec3(0.0), vec3(0.0), vec3(0.0), vec3(0.0));
+        return LeafGrad(vec3(0.0), vec3(0.0), vec3(0.0), vec3(0.0), vec3(0.0), vec3(0.0));
     }
     if (is_principled_thin(l.kind)) {
         principled_thin_add_grad(l, wi, wo, adj);
-        return LeafGrad(vec3(0.0), vec3(0.0), vec3(0.0), vec3(0.0));
+        return LeafGrad(vec3(0.0), vec3(0.0), vec3(0.0), vec3(0.0), vec3(0.0), vec3(0.0));
     }
-    if (is_diffuse(l.kind)) return LeafGrad(adj * diffuse_eval(vec3(1.0), wi, wo), vec3(0.0), vec3(0.0), vec3(0.0));
+    if (is_diffuse(l.kind)) return LeafGrad(adj * diffuse_eval(vec3(1.0), wi, wo), vec3(0.0), vec3(0.0), vec3(0.0), vec3(0.0), vec3(0.0));
     vec3 f;
     float scalar;
     vec2 dscalar;
     microfacet_eval_parts(l, wi, wo, f, scalar, dscalar);
-    return LeafGrad(adj * f * scalar, adj * f * l.color * dscalar.x, vec3(0.0), adj * f * l.color * dscalar.y);
+    // ∂F/∂eta, ∂F/∂k at the half vector's cosine (twin: leaf_eval_grad's rough conductor).
+    vec3 d_eta = vec3(0.0), d_k = vec3(0.0);
+    if (HAS(G_COLOR) && scalar != 0.0) fresnel_conductor_dior(dot(wi, normalize(wi + wo)), l.eta, l.k, d_eta, d_k);
+    return LeafGrad(adj * f * scalar, adj * f * l.color * dscalar.x, vec3(0.0), adj * f * l.color * dscalar.y,
+                    adj * l.color * d_eta * scalar, adj * l.color * d_k * scalar);
 }
 
 // ---- blend (ALGORITHMS.md §4.3) and the whole BSDF ----
@@ -326,7 +331,7 @@ float bsdf_pdf(Bsdf b, vec3 wi, vec3 wo) {
 
 // ∂(adj · f̂)/∂(every value of b) at (wi, wo); the weight's derivative is f̂1 − f̂0 inside (0, 1).
 BsdfGrad bsdf_eval_grad(Bsdf b, vec3 wi, vec3 wo, vec3 adj) {
-    LeafGrad none = LeafGrad(vec3(0.0), vec3(0.0), vec3(0.0), vec3(0.0));
+    LeafGrad none = LeafGrad(vec3(0.0), vec3(0.0), vec3(0.0), vec3(0.0), vec3(0.0), vec3(0.0));
     if (HAS(F_NORMAL_MAP) && b.mapped) adj *= perturbed_factor(b, wo);
     if (!HAS(F_BLEND) || !b.blend) return BsdfGrad(leaf_eval_grad(b.leaf0, wi, wo, adj), none, vec3(0.0));
     float w = blend_weight(b);
@@ -341,18 +346,20 @@ BsdfGrad bsdf_eval_grad(Bsdf b, vec3 wi, vec3 wo, vec3 adj) {
 // c (w for leaf1, 1 − w for leaf0), has the value c·v; the colours' derivatives are c·∂v, the
 // weight's ±v inside (0, 1) (twin: bsdf_delta_grad).
 BsdfGrad bsdf_delta_grad(Bsdf b, vec3 wi, vec3 wo, vec3 adj) {
-    LeafGrad none = LeafGrad(vec3(0.0), vec3(0.0), vec3(0.0), vec3(0.0));
+    LeafGrad none = LeafGrad(vec3(0.0), vec3(0.0), vec3(0.0), vec3(0.0), vec3(0.0), vec3(0.0));
     BsdfGrad g = BsdfGrad(none, none, vec3(0.0));
     float w = blend_weight(b);
     bool inside = b.weight > 0.0 && b.weight < 1.0;
     if (is_delta(b.leaf0.kind)) {
         LeafGrad unit = smooth_value_grad(b.leaf0, wi, wo, vec3(1.0));
-        g.leaf0 = LeafGrad(adj * (1.0 - w) * unit.color, vec3(0.0), adj * (1.0 - w) * unit.trans, vec3(0.0));
+        g.leaf0 = LeafGrad(adj * (1.0 - w) * unit.color, vec3(0.0), adj * (1.0 - w) * unit.trans, vec3(0.0),
+                           adj * (1.0 - w) * unit.eta, adj * (1.0 - w) * unit.k);
         if (inside) g.weight = -adj * (b.leaf0.color * unit.color + b.leaf0.k * unit.trans);
     }
     if (is_delta(b.leaf1.kind)) {
         LeafGrad unit = smooth_value_grad(b.leaf1, wi, wo, vec3(1.0));
-        g.leaf1 = LeafGrad(adj * w * unit.color, vec3(0.0), adj * w * unit.trans, vec3(0.0));
+        g.leaf1 = LeafGrad(adj * w * unit.color, vec3(0.0), adj * w * unit.trans, vec3(0.0), adj * w * unit.eta,
+                           adj * w * unit.k);
         if (inside) g.weight = adj * (b.leaf1.color * unit.color + b.leaf1.k * unit.trans);
     }
     return g;

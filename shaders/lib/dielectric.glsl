@@ -157,7 +157,7 @@ bool rdielectric_sample(Leaf l, vec3 wi, float u_lobe, vec2 u, out vec3 wo) {
 // ∂f̂/∂(lobe colour) (in color, or in trans for a transmitted pair), ∂f̂/∂α_u (alpha) and
 // ∂f̂/∂α_v (alpha_v; an isotropic leaf's ∂f̂/∂α is their sum), times adj.
 LeafGrad rdielectric_eval_grad(Leaf l, vec3 wi, vec3 wo, vec3 adj) {
-    LeafGrad g = LeafGrad(vec3(0.0), vec3(0.0), vec3(0.0), vec3(0.0));
+    LeafGrad g = LeafGrad(vec3(0.0), vec3(0.0), vec3(0.0), vec3(0.0), vec3(0.0), vec3(0.0));
     vec3 m;
     bool refl;
     float eta;
@@ -240,9 +240,16 @@ LeafGrad smooth_value_grad(Leaf l, vec3 wi, vec3 wo, vec3 adj) {
     float pdf;
     vec3 unit;
     bool t;
-    if (!smooth_lobe(l, wi, transmitted ? 1.0 : 0.0, w, pdf, unit, t)) return LeafGrad(vec3(0.0), vec3(0.0), vec3(0.0), vec3(0.0));
+    if (!smooth_lobe(l, wi, transmitted ? 1.0 : 0.0, w, pdf, unit, t)) return LeafGrad(vec3(0.0), vec3(0.0), vec3(0.0), vec3(0.0), vec3(0.0), vec3(0.0));
     vec3 g = adj * unit * pdf;
-    return transmitted ? LeafGrad(vec3(0.0), vec3(0.0), g, vec3(0.0)) : LeafGrad(g, vec3(0.0), vec3(0.0), vec3(0.0));
+    if (l.kind == LEAF_CONDUCTOR) {
+        // The weight F(cos θi)·reflectance by the Fresnel term's eta and k (pdf 1; twin:
+        // SmoothLeaf::value_grad).
+        vec3 d_eta = vec3(0.0), d_k = vec3(0.0);
+        if (HAS(G_COLOR)) fresnel_conductor_dior(wi.z, l.eta, l.k, d_eta, d_k);
+        return LeafGrad(g, vec3(0.0), vec3(0.0), vec3(0.0), adj * l.color * d_eta, adj * l.color * d_k);
+    }
+    return transmitted ? LeafGrad(vec3(0.0), vec3(0.0), g, vec3(0.0), vec3(0.0), vec3(0.0)) : LeafGrad(g, vec3(0.0), vec3(0.0), vec3(0.0), vec3(0.0), vec3(0.0));
 }
 
 // ---- smooth plastic (src/bsdf/plastic.rs): color = ρ, k = the coating's colour, eta = (η, w,
@@ -298,10 +305,10 @@ BsdfSample splastic_sample(Leaf l, vec3 wi, float u_lobe, vec2 u) {
 // ∂f̂/∂ρ per channel, times adj: the base's; toward the mirror direction (the coating's sample)
 // the value's derivative by the specular colour instead, in `trans` (twin: SmoothPlasticLeaf::eval_grad).
 LeafGrad splastic_eval_grad(Leaf l, vec3 wi, vec3 wo, vec3 adj) {
-    if (wi.z <= 0.0 || wo.z <= 0.0) return LeafGrad(vec3(0.0), vec3(0.0), vec3(0.0), vec3(0.0));
-    if (wo == vec3(-wi.x, -wi.y, wi.z)) return LeafGrad(vec3(0.0), vec3(0.0), adj * fresnel_dielectric(wi.z, l.eta.x), vec3(0.0));
+    if (wi.z <= 0.0 || wo.z <= 0.0) return LeafGrad(vec3(0.0), vec3(0.0), vec3(0.0), vec3(0.0), vec3(0.0), vec3(0.0));
+    if (wo == vec3(-wi.x, -wi.y, wi.z)) return LeafGrad(vec3(0.0), vec3(0.0), adj * fresnel_dielectric(wi.z, l.eta.x), vec3(0.0), vec3(0.0), vec3(0.0));
     vec3 n = splastic_renormalisation(l);
-    return LeafGrad(adj * (l.eta.z != 0.0 ? n * n : n) * splastic_base(l, fresnel_dielectric(wi.z, l.eta.x), wo), vec3(0.0), vec3(0.0), vec3(0.0));
+    return LeafGrad(adj * (l.eta.z != 0.0 ? n * n : n) * splastic_base(l, fresnel_dielectric(wi.z, l.eta.x), wo), vec3(0.0), vec3(0.0), vec3(0.0), vec3(0.0), vec3(0.0));
 }
 
 #endif

@@ -108,6 +108,51 @@ vec3 fresnel_conductor(float c, vec3 eta, vec3 k) {
     return (rs + rp) * 0.5;
 }
 
+// (∂F/∂eta, ∂F/∂k) of one channel of fresnel_conductor along (ee, kk) = (1, 0) or (0, 1)
+// (twin: fresnel_conductor_dior_channel of src/bsdf/rough_conductor.rs, the same expressions): where
+// t1 < 0, a = eta·k·√(2/(q − t1)), cancellation-free, so the derivative stays finite at eta = 0
+// and k = 0 (there the right derivative).
+float fresnel_conductor_dior_along(float c, float e, float k, float ee, float kk) {
+    float c2 = c * c;
+    float s2 = 1.0 - c2;
+    float s4 = s2 * s2;
+    float t1 = e * e - k * k - s2;
+    float q = sqrt(t1 * t1 + 4.0 * e * e * k * k);
+    float u = q - t1;
+    float root = t1 < 0.0 ? sqrt(2.0 / u) : 0.0;
+    float a = t1 < 0.0 ? e * k * root : sqrt(max((q + t1) * 0.5, 0.0));
+    float dt1 = 2.0 * e * ee - 2.0 * k * kk;
+    float dq = q > 0.0 ? (t1 * dt1 + 4.0 * e * k * (e * kk + k * ee)) / q : 0.0;
+    float da = 0.0;
+    if (t1 < 0.0) da = (ee * k + e * kk) * root - e * k * root / (2.0 * u) * (dq - dt1);
+    else if (a > 0.0) da = (dq + dt1) / (4.0 * a);
+    float n = q + c2 - 2.0 * c * a;
+    float d = q + c2 + 2.0 * c * a;
+    float dn = dq - 2.0 * c * da;
+    float dd = dq + 2.0 * c * da;
+    float rs = n / d;
+    float drs = (dn * d - n * dd) / (d * d);
+    float m = q * c2 + s4 - 2.0 * c * a * s2;
+    float m2 = q * c2 + s4 + 2.0 * c * a * s2;
+    float dm = dq * c2 - 2.0 * c * s2 * da;
+    float dm2 = dq * c2 + 2.0 * c * s2 * da;
+    float r = m / m2;
+    float dr = (dm * m2 - m * dm2) / (m2 * m2);
+    return 0.5 * (drs + drs * r + rs * dr);
+}
+
+// ∂F/∂eta and ∂F/∂k per channel of fresnel_conductor (twin: fresnel_conductor_dior).
+void fresnel_conductor_dior(float c, vec3 eta, vec3 k, out vec3 d_eta, out vec3 d_k) {
+    vec3 d[2];
+    // One inlined copy: the six (channel, direction) pairs in a loop.
+    [[dont_unroll]] for (int i = 0; i < 6; i++) {
+        int ch = i % 3;
+        d[i / 3][ch] = fresnel_conductor_dior_along(c, eta[ch], k[ch], i < 3 ? 1.0 : 0.0, i < 3 ? 0.0 : 1.0);
+    }
+    d_eta = d[0];
+    d_k = d[1];
+}
+
 // f̂ and the solid-angle density of wo, sharing D and G1(wi): one evaluation where the path needs
 // both (NEE's direction, a sampled direction). Twin: microfacet_eval and microfacet_pdf of
 // src/bsdf/rough_conductor.rs, the same values.

@@ -452,6 +452,11 @@ vec3 colour_value(uint slot, TexAt at, vec3 constant) {
 uint principled_slot(Material m, uint i) { return floatBitsToUint(coating_table(m.table + i)); }
 float principled_scalar(Material m, uint i, TexAt at) { return scalar_value(principled_slot(m, i), at); }
 
+// Whether conductor m's eta and k are parameters (p_weight: eta's offset, k's three after it).
+bool conductor_ior_param(Material m) {
+    return (m.tag == MAT_CONDUCTOR || m.tag == MAT_ROUGH_CONDUCTOR) && m.p_weight != NO_PARAM;
+}
+
 Leaf leaf_from_material(Material m, TexAt at) {
     Leaf l;
     bool plastic = is_plastic(m.tag);
@@ -494,6 +499,12 @@ Leaf leaf_from_material(Material m, TexAt at) {
     bool coated = plastic || is_smooth_plastic(m.tag);
     uint p_trans = (rough_glass || coated) ? m.p_weight : (delta && m.tag != MAT_CONDUCTOR ? m.p_alpha : NO_PARAM);
     l.k = colour_value(p_trans, at, m.k);
+    // A conductor's eta and k: its parameters (eta's at p_weight, k's the three values after it) or
+    // the constants (twin: conductor_ior of src/cpu/surface.rs).
+    if (conductor_ior_param(m)) {
+        l.eta = param_rgb(m.p_weight);
+        l.k = param_rgb(m.p_weight + 3u);
+    }
     return l;
 }
 
@@ -539,7 +550,7 @@ struct GradTerms {
 };
 
 GradTerms no_grad_terms() {
-    LeafGrad none = LeafGrad(vec3(0.0), vec3(0.0), vec3(0.0), vec3(0.0));
+    LeafGrad none = LeafGrad(vec3(0.0), vec3(0.0), vec3(0.0), vec3(0.0), vec3(0.0), vec3(0.0));
     return GradTerms(NO_PARAM, TexAt(vec2(0.0), vec2(0.0), 0u, vec3(0.0)), BsdfGrad(none, none, vec3(0.0)), NO_PARAM, vec3(0.0), NO_PARAM, vec3(0.0),
                      vec2(0.0), vec2(0.0), vec3(0.0, 0.0, 1.0), NO_PARAM, vec3(0.0));
 }
@@ -648,6 +659,12 @@ void push_leaf(Material m, TexAt at, LeafGrad g) {
     if (is_principled(m.tag) || is_principled_thin(m.tag)) {
         push_principled(m, at);
         return;
+    }
+    // A conductor's eta and k, added at once (as push_scalar's texels: six entries a leaf would
+    // outgrow GRAD_ENTRIES); twin: conductor_ior_backward.
+    if (HAS(G_COLOR) && conductor_ior_param(m)) {
+        param_grad_rgb(m.p_weight, g.eta);
+        param_grad_rgb(m.p_weight + 3u, g.k);
     }
     bool rough_glass = is_rough_dielectric(m.tag);
     if (is_delta(m.tag) || rough_glass) {

@@ -144,6 +144,11 @@ pub struct LeafGrad {
     /// With respect to colour channel c of the transmittance (dielectrics: transmitted
     /// directions), as `color` is for the reflectance.
     pub trans: Vec3,
+    /// With respect to channel c of a conductor's eta (the real part of its complex index of
+    /// refraction, in its Fresnel term), as `color` is: component c is the whole derivative.
+    pub eta: Vec3,
+    /// With respect to channel c of a conductor's k (the imaginary part), as `eta`.
+    pub k: Vec3,
     /// A principled leaf's derivatives by each of its parameters, adj-weighted per image channel
     /// (its base colour's channels reach every image channel: `color` is unused).
     pub principled: principled::PrincipledGrad,
@@ -167,10 +172,19 @@ pub fn leaf_eval_grad(leaf: &Leaf, wi: Vec3, wo: Vec3, adj: Vec3) -> LeafGrad {
         Leaf::RoughConductor { distribution, alpha, alpha_v, specular, eta, k } => {
             let a = Vec2::new(alpha, alpha_v);
             let (f, scalar, dscalar) = rough_conductor::microfacet_eval_parts(distribution, a, eta, k, wi, wo);
+            // ∂F/∂eta, ∂F/∂k at the half vector's cosine (F's other factors do not move).
+            let (d_eta, d_k) = if scalar != 0.0 {
+                let (_, d_eta, d_k) = rough_conductor::fresnel_conductor_dior(wi.dot((wi + wo).normalize()), eta, k);
+                (d_eta, d_k)
+            } else {
+                (Vec3::ZERO, Vec3::ZERO)
+            };
             LeafGrad {
                 color: adj * f * scalar,
                 alpha: adj * f * specular * dscalar.x,
                 alpha_v: adj * f * specular * dscalar.y,
+                eta: adj * specular * d_eta * scalar,
+                k: adj * specular * d_k * scalar,
                 ..LeafGrad::default()
             }
         }
@@ -185,7 +199,13 @@ pub fn leaf_eval_grad(leaf: &Leaf, wi: Vec3, wo: Vec3, adj: Vec3) -> LeafGrad {
         }
         Leaf::Smooth(s) => {
             let g = s.value_grad(wi, wo);
-            LeafGrad { color: adj * g.color, trans: adj * g.trans, ..LeafGrad::default() }
+            LeafGrad {
+                color: adj * g.color,
+                trans: adj * g.trans,
+                eta: adj * g.eta,
+                k: adj * g.k,
+                ..LeafGrad::default()
+            }
         }
         Leaf::SmoothPlastic(p) => {
             let g = p.eval_grad(wi, wo);
@@ -240,7 +260,13 @@ fn bsdf_delta_grad(b: &Bsdf, wi: Vec3, wo: Vec3, adj: Vec3) -> BsdfGrad {
     for (i, (leaf, c, sign)) in [(&b.leaves[0], 1.0 - w, -1.0), (&b.leaves[1], w, 1.0)].into_iter().enumerate() {
         let Leaf::Smooth(s) = leaf else { continue };
         let unit = s.value_grad(wi, wo);
-        g.leaves[i] = LeafGrad { color: adj * c * unit.color, trans: adj * c * unit.trans, ..LeafGrad::default() };
+        g.leaves[i] = LeafGrad {
+            color: adj * c * unit.color,
+            trans: adj * c * unit.trans,
+            eta: adj * c * unit.eta,
+            k: adj * c * unit.k,
+            ..LeafGrad::default()
+        };
         if b.weight > 0.0 && b.weight < 1.0 {
             g.weight = adj * sign * (s.reflectance * unit.color + s.transmittance * unit.trans);
         }

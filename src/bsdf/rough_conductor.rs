@@ -133,6 +133,56 @@ pub fn fresnel_conductor(c: f32, eta: Vec3, k: Vec3) -> Vec3 {
     (rs + rp) * 0.5
 }
 
+/// [`fresnel_conductor`] and its derivatives by eta and by k, per channel (channel c of F depends
+/// on channel c of eta and k only): (F, ∂F/∂eta, ∂F/∂k), Mitsuba's `fresnel_conductor` (the mean of
+/// the s and p reflectances) differentiated by hand. Where t₁ = eta² − k² − sin²θ < 0 the real part
+/// a of the complex cosine is taken in its cancellation-free form a = eta·k·√(2/(q − t₁)), so the
+/// derivatives stay finite at eta = 0 and at k = 0; at k = 0 with t₁ < 0 (eta < sin θ: F = 1, total
+/// reflection) F depends on |k|, and ∂F/∂k is the right derivative, k ≥ 0 being the domain.
+pub fn fresnel_conductor_dior(c: f32, eta: Vec3, k: Vec3) -> (Vec3, Vec3, Vec3) {
+    let (mut d_eta, mut d_k) = (Vec3::ZERO, Vec3::ZERO);
+    for ch in 0..3 {
+        let (de, dk) = fresnel_conductor_dior_channel(c, eta[ch], k[ch]);
+        d_eta[ch] = de;
+        d_k[ch] = dk;
+    }
+    (fresnel_conductor(c, eta, k), d_eta, d_k)
+}
+
+/// (∂F/∂eta, ∂F/∂k) of one channel of [`fresnel_conductor`] (see [`fresnel_conductor_dior`]).
+fn fresnel_conductor_dior_channel(c: f32, e: f32, k: f32) -> (f32, f32) {
+    let (c2, s2) = (c * c, 1.0 - c * c);
+    let s4 = s2 * s2;
+    let t1 = e * e - k * k - s2;
+    let q = (t1 * t1 + 4.0 * e * e * k * k).sqrt();
+    // a = √((q + t₁)/2), or where t₁ < 0 the same value as eta·k·√(2/u), u = q − t₁ > 0.
+    let u = q - t1;
+    let root = if t1 < 0.0 { (2.0 / u).sqrt() } else { 0.0 };
+    let a = if t1 < 0.0 { e * k * root } else { ((q + t1) * 0.5).max(0.0).sqrt() };
+    // One direction of differentiation: (∂e, ∂k) = (1, 0) or (0, 1).
+    let along = |ee: f32, kk: f32| {
+        let dt1 = 2.0 * e * ee - 2.0 * k * kk;
+        let dq = if q > 0.0 { (t1 * dt1 + 4.0 * e * k * (e * kk + k * ee)) / q } else { 0.0 };
+        let da = if t1 < 0.0 {
+            (ee * k + e * kk) * root - e * k * root / (2.0 * u) * (dq - dt1)
+        } else if a > 0.0 {
+            (dq + dt1) / (4.0 * a)
+        } else {
+            0.0
+        };
+        let (n, d) = (q + c2 - 2.0 * c * a, q + c2 + 2.0 * c * a);
+        let (dn, dd) = (dq - 2.0 * c * da, dq + 2.0 * c * da);
+        let rs = n / d;
+        let drs = (dn * d - n * dd) / (d * d);
+        let (m, m2) = (q * c2 + s4 - 2.0 * c * a * s2, q * c2 + s4 + 2.0 * c * a * s2);
+        let (dm, dm2) = (dq * c2 - 2.0 * c * s2 * da, dq * c2 + 2.0 * c * s2 * da);
+        let r = m / m2;
+        let dr = (dm * m2 - m * dm2) / (m2 * m2);
+        0.5 * (drs + drs * r + rs * dr)
+    };
+    (along(1.0, 0.0), along(0.0, 1.0))
+}
+
 /// f̂ = F D G1(wi) G1(wo) / (4 cos θi).
 pub fn microfacet_eval(
     distribution: Distribution,

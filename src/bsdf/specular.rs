@@ -19,7 +19,7 @@
 
 use glam::Vec3;
 
-use super::rough_conductor::fresnel_conductor;
+use super::rough_conductor::{fresnel_conductor, fresnel_conductor_dior};
 use super::rough_plastic::fresnel_dielectric;
 use super::{BsdfSample, LeafGrad};
 
@@ -119,13 +119,20 @@ impl SmoothLeaf {
         Some(BsdfSample { wo, pdf, value: unit * colour * pdf, delta: true })
     }
 
-    /// ∂value/∂(colour parameter) per channel of the sample toward `wo` (see the module docs).
+    /// ∂value/∂(colour parameter) per channel of the sample toward `wo` (see the module docs), and
+    /// a conductor's by its eta and k (`LeafGrad::eta`, `LeafGrad::k`).
     pub fn value_grad(&self, wi: Vec3, wo: Vec3) -> LeafGrad {
         let transmitted = wi.z * wo.z < 0.0;
         let Some((_, pdf, unit, _)) = self.lobe(wi, if transmitted { 1.0 } else { 0.0 }) else {
             return LeafGrad::default();
         };
         let (color, trans) = if transmitted { (Vec3::ZERO, unit * pdf) } else { (unit * pdf, Vec3::ZERO) };
+        if self.kind == SmoothKind::Conductor {
+            // The weight F(cos θi)·reflectance by the Fresnel term's eta and k (pdf 1).
+            let (_, d_eta, d_k) = fresnel_conductor_dior(wi.z, self.eta, self.k);
+            let (eta, k) = (self.reflectance * d_eta, self.reflectance * d_k);
+            return LeafGrad { color, trans, eta, k, ..LeafGrad::default() };
+        }
         LeafGrad { color, trans, ..LeafGrad::default() }
     }
 }

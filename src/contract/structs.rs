@@ -352,7 +352,9 @@ contract_structs! {
         /// `p_alpha`.
         p_alpha_v: u32,
         /// Parameter offset of the blend weight (blend), or `SCALAR_TEXTURE` with its texture's
-        /// descriptor when textured; of a smooth dielectric's η (`NO_PARAM`: `eta.x` holds it); a
+        /// descriptor when textured; of a smooth dielectric's η (`NO_PARAM`: `eta.x` holds it); of
+        /// a conductor's (smooth or rough) RGB eta, its RGB k the three values after it
+        /// (`NO_PARAM`: `eta` and `k` hold them); a
         /// plastic's specular colour slot (a parameter, `SCALAR_TEXTURE` with its descriptor, or
         /// `NO_PARAM`: `k` holds it).
         p_weight: u32,

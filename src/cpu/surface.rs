@@ -500,8 +500,8 @@ fn leaf_from_material(flat: &FlatScene, m: &Material, at: TexAt) -> Leaf {
             alpha: alpha_value(flat, m.p_alpha, at),
             alpha_v: alpha_value(flat, m.p_alpha_v, at),
             specular: color,
-            eta: m.eta,
-            k: m.k,
+            eta: conductor_ior(flat, m).0,
+            k: conductor_ior(flat, m).1,
         },
         MAT_ROUGH_PLASTIC => {
             let t = m.table as usize;
@@ -580,15 +580,26 @@ fn leaf_from_material(flat: &FlatScene, m: &Material, at: TexAt) -> Leaf {
                 MAT_CONDUCTOR => Vec3::ZERO,
                 _ => colour_value(flat, m.p_alpha, at, m.k),
             },
-            // A dielectric's η: its parameter (p_weight) or the constant.
+            // A dielectric's η: its parameter (p_weight) or the constant; a conductor's eta and k.
             eta: if m.tag != MAT_CONDUCTOR && m.p_weight != NO_PARAM {
                 Vec3::new(params[m.p_weight as usize], 0.0, 0.0)
             } else {
-                m.eta
+                conductor_ior(flat, m).0
             },
-            k: m.k,
+            k: conductor_ior(flat, m).1,
         }),
         _ => Leaf::Diffuse { albedo: color },
+    }
+}
+
+/// A conductor's (eta, k): its parameters (eta's at `p_weight`, k's the three values after it) or
+/// the constants (twin: `leaf_from_material` of `shaders/lib/surface.glsl`); the constants for
+/// another material.
+fn conductor_ior(flat: &FlatScene, m: &Material) -> (Vec3, Vec3) {
+    if matches!(m.tag, MAT_CONDUCTOR | MAT_ROUGH_CONDUCTOR) && m.p_weight != NO_PARAM {
+        (param_rgb(&flat.params, m.p_weight), param_rgb(&flat.params, m.p_weight + 3))
+    } else {
+        (m.eta, m.k)
     }
 }
 
@@ -634,6 +645,7 @@ fn leaf_backward(flat: &FlatScene, m: &Material, at: TexAt, g: &LeafGrad, sink: 
         if m.tag != MAT_CONDUCTOR {
             colour_backward(flat, p_trans, at, g.trans, sink);
         }
+        conductor_ior_backward(m, g, sink);
         if m.tag == MAT_ROUGH_DIELECTRIC && m.p_alpha_v != m.p_alpha {
             scalar_backward(flat, m.p_alpha, at, g.alpha, true, sink);
             scalar_backward(flat, m.p_alpha_v, at, g.alpha_v, true, sink);
@@ -652,12 +664,22 @@ fn leaf_backward(flat: &FlatScene, m: &Material, at: TexAt, g: &LeafGrad, sink: 
         // The coating's specular colour (a parameter, a texture or a constant in p_weight).
         colour_backward(flat, m.p_weight, at, g.trans, sink);
     }
+    conductor_ior_backward(m, g, sink);
     if m.tag == MAT_ROUGH_CONDUCTOR && m.p_alpha_v != m.p_alpha {
         scalar_backward(flat, m.p_alpha, at, g.alpha, true, sink);
         scalar_backward(flat, m.p_alpha_v, at, g.alpha_v, true, sink);
     } else if m.tag == MAT_ROUGH_CONDUCTOR || m.tag == MAT_ROUGH_PLASTIC {
         // Isotropic: α_u and α_v are one parameter.
         scalar_backward(flat, m.p_alpha, at, g.alpha + g.alpha_v, true, sink);
+    }
+}
+
+/// A conductor's eta and k derivatives (`LeafGrad::eta`, `LeafGrad::k`) to their parameters, where
+/// they are parameters (twin: `push_leaf` of `shaders/lib/surface.glsl`).
+fn conductor_ior_backward(m: &Material, g: &LeafGrad, sink: &mut GradSink<'_>) {
+    if matches!(m.tag, MAT_CONDUCTOR | MAT_ROUGH_CONDUCTOR) && m.p_weight != NO_PARAM {
+        sink.add_rgb(m.p_weight, g.eta);
+        sink.add_rgb(m.p_weight + 3, g.k);
     }
 }
 

@@ -151,6 +151,10 @@ pub fn param_kinds(flat: &FlatScene, env: (u32, u32), begin: u32, end: u32) -> P
     let mut k = ParamKinds::NONE;
     for m in &flat.materials {
         k = k.union(specular_kinds(m));
+        // A conductor's eta and k (p_weight, six values): constant colours of its weight.
+        if matches!(m.tag, MAT_CONDUCTOR | MAT_ROUGH_CONDUCTOR) && overlaps(m.p_weight, 6) {
+            k = k.union(ParamKinds::COLOR);
+        }
         match m.tag {
             MAT_CONDUCTOR | MAT_DIELECTRIC | MAT_THIN_DIELECTRIC | MAT_ROUGH_DIELECTRIC => {
                 if m.tag == MAT_ROUGH_DIELECTRIC && (overlaps_slot(m.p_alpha) || overlaps_slot(m.p_alpha_v)) {

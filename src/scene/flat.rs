@@ -555,11 +555,13 @@ fn flatten_material(scene: &Scene, m: &Material) -> GpuMaterial {
         Material::TwoSided(child) => {
             GpuMaterial { two_sided: 1, ..flatten_material(scene, &scene.materials[child.0 as usize]) }
         }
-        Material::RoughConductor { distribution, alpha, alpha_v, specular, eta, k } => GpuMaterial {
+        Material::RoughConductor { distribution, alpha, alpha_v, specular, eta, k, eta_param } => GpuMaterial {
             tag: MAT_ROUGH_CONDUCTOR,
             distribution: distribution as u32,
             p_alpha: scalar_slot(scene, alpha),
             p_alpha_v: scalar_slot(scene, alpha_v),
+            // eta's parameter, k's the three values after it (their values override eta and k).
+            p_weight: eta_param.map_or(NO_PARAM, offset),
             eta,
             k,
             ..albedo_fields(scene, specular)
@@ -602,7 +604,8 @@ fn flatten_material(scene: &Scene, m: &Material) -> GpuMaterial {
                 },
                 p_color,
                 p_alpha,
-                // A dielectric's η parameter (its value overrides eta.x).
+                // A dielectric's η parameter (its value overrides eta.x); a conductor's eta, k's
+                // the three values after it (overriding eta and k).
                 p_weight: eta_param.map_or(NO_PARAM, offset),
                 uv_row0: r,
                 eta,

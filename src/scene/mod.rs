@@ -224,6 +224,10 @@ pub enum Material {
         eta: Vec3,
         /// Imaginary part of the complex index of refraction (RGB); eta = 0, k = 1 gives F ≡ 1.
         k: Vec3,
+        /// eta and k as parameters (Mitsuba's `NAME.eta.value`, `NAME.k.value`, RGB, whose values
+        /// override `eta` and `k`): the id of eta's, which k's directly follows in the table
+        /// ([`Scene::add_conductor_ior`]); `None` keeps the constants.
+        eta_param: Option<ParamId>,
     },
     /// Rough plastic (Mitsuba's `roughplastic`, `crate::bsdf::rough_plastic`).
     RoughPlastic {
@@ -317,6 +321,8 @@ pub enum Material {
         /// Dielectrics: η = int_ior / ext_ior as a parameter (Mitsuba's `eta`), whose value
         /// overrides `eta.x`; it acts only through the directions it refracts into, so only
         /// attached derivatives ([`crate::integrator::Sampling::Attached`]) differentiate it.
+        /// Conductor: eta and k as parameters, as [`Material::RoughConductor`]'s `eta_param`
+        /// (they act on the weight only: detached and attached derivatives alike).
         eta_param: Option<ParamId>,
     },
     /// `(1 − w)·child0 + w·child1` of two leaf materials (ALGORITHMS.md §4.3).
@@ -630,6 +636,9 @@ pub mod bounds {
     pub const RADIANCE: (f32, f32) = (0.0, f32::INFINITY);
     /// A dielectric's relative index of refraction η = int_ior / ext_ior.
     pub const IOR: (f32, f32) = (0.1, 10.0);
+    /// A conductor's complex index of refraction eta + i·k, each channel of each part (Mitsuba's
+    /// `eta.value`, `k.value`).
+    pub const CONDUCTOR_IOR: (f32, f32) = (0.0, f32::INFINITY);
 }
 
 impl Scene {
@@ -725,8 +734,9 @@ impl Scene {
         Ok(self.add_material(Material::Diffuse { albedo: Albedo::Rgb(albedo) }))
     }
 
-    /// Adds a rough conductor with parameters `{name}.alpha.value` and
-    /// `{name}.specular_reflectance.value`.
+    /// Adds a rough conductor with parameters `{name}.alpha.value`,
+    /// `{name}.specular_reflectance.value`, `{name}.eta.value` and `{name}.k.value` (Mitsuba's
+    /// keys of a `roughconductor`).
     ///
     /// # Errors
     /// As [`ParamTable::add`].
@@ -746,7 +756,36 @@ impl Scene {
             bounds::REFLECTANCE,
         )?;
         let specular = Albedo::Rgb(specular);
-        Ok(self.add_material(Material::RoughConductor { distribution, alpha, alpha_v: alpha, specular, eta, k }))
+        let eta_param = Some(self.add_conductor_ior(name, eta, k)?);
+        Ok(self.add_material(Material::RoughConductor {
+            distribution,
+            alpha,
+            alpha_v: alpha,
+            specular,
+            eta,
+            k,
+            eta_param,
+        }))
+    }
+
+    /// Adds a conductor's complex index of refraction as two RGB parameters, `{name}.eta.value`
+    /// and, directly after it in the table, `{name}.k.value` (the layout `eta_param` of
+    /// [`Material::RoughConductor`] and [`Material::Smooth`] relies on); returns eta's id.
+    ///
+    /// ```
+    /// let mut scene = pathgrad::scene::builtin::load("cornell-box")?;
+    /// let eta = scene.add_conductor_ior("gold", glam::Vec3::splat(0.2), glam::Vec3::splat(3.0))?;
+    /// let k = scene.params.find("gold.k.value").unwrap();
+    /// assert_eq!(scene.params.entry(k).offset, scene.params.entry(eta).offset + 3);
+    /// # Ok::<(), pathgrad::Error>(())
+    /// ```
+    ///
+    /// # Errors
+    /// As [`ParamTable::add`].
+    pub fn add_conductor_ior(&mut self, name: &str, eta: Vec3, k: Vec3) -> Result<ParamId> {
+        let id = self.params.add(&format!("{name}.eta.value"), &eta.to_array(), bounds::CONDUCTOR_IOR)?;
+        self.params.add(&format!("{name}.k.value"), &k.to_array(), bounds::CONDUCTOR_IOR)?;
+        Ok(id)
     }
 
     /// Adds a GGX rough dielectric of relative index `eta` with parameters `{name}.alpha.value` and

@@ -125,6 +125,16 @@ MATRIX = {
     "bsdf_roughconductor_defaults": dict(features=["roughconductor", "defaults (beckmann, alpha 0.1, eta 0, k 1)"],
                                          grads=["ball.bsdf.alpha.value"]),
     "bsdf_roughconductor_eta_k": dict(features=["roughconductor", "ggx", "eta/k rgb"], grads=["ball.bsdf.alpha.value"]),
+    # A conductor's eta and k as parameters (issue 34 item 2): the rough ball's and bead's by
+    # Mitsuba's forward mode (its roughconductor differentiates the Fresnel term); the smooth
+    # cube's by its finite differences (prb re-evaluates a delta lobe's BSDF, 0: no gradient), at a
+    # step small against eta and k's curvature.
+    "bsdf_conductor_eta_k": dict(features=["roughconductor eta/k parameters (ggx, isotropic)",
+                                           "anisotropic beckmann eta/k", "conductor eta/k parameters (delta lobe)",
+                                           "eta < 1, small k"],
+                                 grads=["ball.bsdf.eta.value", "ball.bsdf.k.value", "bead.bsdf.k.value",
+                                        "marker.bsdf.eta.value", "marker.bsdf.k.value"],
+                                 fd={"marker.bsdf.eta.value": 0.02, "marker.bsdf.k.value": 0.02}),
     "bsdf_roughconductor_material": dict(features=["roughconductor", "material Au"], grads=["ball.bsdf.alpha.value"]),
     "bsdf_roughconductor_anisotropic": dict(features=["roughconductor alpha_u ≠ alpha_v", "beckmann and ggx",
                                                       "material preset", "sphere and rectangle frames"],

@@ -10,7 +10,7 @@ use crate::support::scenes;
 
 /// An adjoint image: a fixed smooth weighting of the pixels and channels, so the loss J = Σ A·I
 /// reacts to every pixel.
-fn weights(width: u32, height: u32) -> Image {
+pub(crate) fn weights(width: u32, height: u32) -> Image {
     let mut data = Vec::with_capacity((3 * width * height) as usize);
     for y in 0..height {
         for x in 0..width {
@@ -26,7 +26,7 @@ fn attached(scene: &Scene, size: u32, spp: u32) -> RenderOptions {
     RenderOptions { width: size, height: size, spp, sampling: Sampling::attached(), ..RenderOptions::for_scene(scene) }
 }
 
-fn objective(img: &Image, a: &Image) -> f64 {
+pub(crate) fn objective(img: &Image, a: &Image) -> f64 {
     img.as_slice().iter().zip(a.as_slice()).map(|(i, w)| f64::from(*i) * f64::from(*w)).sum()
 }
 

@@ -127,7 +127,15 @@ fn grad_prints_loss_and_gradients_as_json() {
     assert!(v["time_s"].as_f64().unwrap() > 0.0);
     assert_eq!(v["repeat_s"].as_array().unwrap().len(), 1, "--repeat 1: {v}");
     let g = v["gradients"].as_object().unwrap();
-    assert_eq!(g.keys().collect::<Vec<_>>(), ["sphere.bsdf.alpha.value", "sphere.bsdf.specular_reflectance.value"]);
+    assert_eq!(
+        g.keys().collect::<Vec<_>>(),
+        [
+            "sphere.bsdf.alpha.value",
+            "sphere.bsdf.eta.value",
+            "sphere.bsdf.k.value",
+            "sphere.bsdf.specular_reflectance.value"
+        ]
+    );
     assert_eq!(g["sphere.bsdf.specular_reflectance.value"].as_array().unwrap().len(), 3);
 }
 

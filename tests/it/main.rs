@@ -9,6 +9,7 @@ mod attached;
 mod batch;
 mod bvh_embree;
 mod cli;
+mod conductor_ior;
 mod conformance;
 mod cpu_vs_gpu;
 mod embed;

@@ -164,6 +164,7 @@ impl Loader<'_> {
                 specular,
                 eta,
                 k,
+                eta_param: None,
             })
         };
         let textured_metal = metal_rough.is_some() && metallic > 0.0 && !transmits;

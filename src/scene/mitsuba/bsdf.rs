@@ -426,9 +426,10 @@ impl<'a> Loader<'a> {
             self.specular_colour(p, name, "specular_transmittance", false, depth)?
         };
         // Mitsuba's `eta` (int_ior / ext_ior) of both dielectrics, a parameter pathgrad
-        // differentiates only with attached sampling.
+        // differentiates only with attached sampling; a conductor's eta and k (a preset's too),
+        // which act on the weight only.
         let eta_param = match conductor {
-            true => None,
+            true => Some(self.scene.add_conductor_ior(name, eta, k).map_err(|e| self.located(p.node, e))?),
             false => Some(self.scene.params.add(&format!("{name}.eta"), &[eta.x], bounds::IOR)?),
         };
         Ok(self.scene.add_material(Material::Smooth { kind, reflectance, transmittance, eta, k, eta_param }))
@@ -667,7 +668,10 @@ impl<'a> Loader<'a> {
             }
         };
         let (eta, k) = self.conductor_ior(p)?;
-        Ok(self.scene.add_material(Material::RoughConductor { distribution, alpha, alpha_v, specular, eta, k }))
+        // eta and k (a preset's too) as Mitsuba's `NAME.eta.value`, `NAME.k.value`.
+        let eta_param = Some(self.scene.add_conductor_ior(name, eta, k).map_err(|e| self.located(p.node, e))?);
+        let material = Material::RoughConductor { distribution, alpha, alpha_v, specular, eta, k, eta_param };
+        Ok(self.scene.add_material(material))
     }
 
     /// Builds (once) the texture `node` — a `<texture>` or a `<ref>` to one — named `name` unless

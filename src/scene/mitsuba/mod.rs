@@ -59,7 +59,8 @@
 //!   order). The keys end in `.reflectance.value`, `.reflectance.data` (a bitmap's texels),
 //!   `.alpha.value` (`.alpha_u.value` when the file gives `alpha_u`/`alpha_v`),
 //!   `.specular_reflectance.value` (`.specular_reflectance.data` or `.color0.value` textured; so
-//!   `specular_transmittance`), `.weight.value`, `.radiance.value` (`SHAPE.emitter.…` or the
+//!   `specular_transmittance`), a conductor's and rough conductor's `.eta.value` and `.k.value` (RGB,
+//!   a `material` preset's too), `.weight.value`, `.radiance.value` (`SHAPE.emitter.…` or the
 //!   environment's), and for media `.sigma_t.value.value`/`.sigma_t.data`, the same for
 //!   `albedo`, `.scale` and `.phase_function.g` (see [`crate::scene::medium`]).
 //! - **Where Mitsuba's names cannot be matched**, pathgrad keeps its own, and says so here:

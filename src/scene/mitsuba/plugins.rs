@@ -105,8 +105,8 @@ pub const PLUGINS: &[Plugin] = &[
     p(
         Bsdf,
         "conductor",
-        "`specular_reflectance` (rgb, spectrum, bitmap, checkerboard, mesh_attribute or volume), `material` or `eta`/`k`",
-        "smooth: sampled only; gradient of the reflectance (or its texels) through the sampled weight",
+        "`specular_reflectance` (rgb, spectrum, bitmap, checkerboard, mesh_attribute or volume), `material` or `eta`/`k` (parameters `.eta.value`, `.k.value`, RGB, a preset's too)",
+        "smooth: sampled only; gradient of the reflectance (or its texels) and of eta and k through the sampled weight",
     ),
     p(
         Bsdf,
@@ -149,7 +149,7 @@ pub const PLUGINS: &[Plugin] = &[
     p(
         Bsdf,
         "roughconductor",
-        "`distribution`, `alpha` or `alpha_u`/`alpha_v` (parameters or one-channel textures), `specular_reflectance` (rgb, spectrum, bitmap, checkerboard or volume), `material` or `eta`/`k`, `sample_visible`",
+        "`distribution`, `alpha` or `alpha_u`/`alpha_v` (parameters or one-channel textures), `specular_reflectance` (rgb, spectrum, bitmap, checkerboard or volume), `material` or `eta`/`k` (parameters `.eta.value`, `.k.value`, RGB, a preset's too), `sample_visible`",
         "anisotropic: shading frame along ∂p/∂u",
     ),
     p(

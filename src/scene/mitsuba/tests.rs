@@ -396,6 +396,9 @@ fn bsdf_names_follow_mitsuba() {
         [
             "metal.alpha.value",
             "metal.specular_reflectance.value",
+            // A conductor's complex index of refraction (Mitsuba's default eta 0, k 1) as Mitsuba's keys.
+            "metal.eta.value",
+            "metal.k.value",
             "mix.bsdf_0.reflectance.value",
             "mix.weight.value",
             // Meshes come after every other object, as in Mitsuba's default load.
@@ -438,6 +441,14 @@ fn rough_conductor_properties_and_presets() {
     assert_eq!((eta, k), bsdf::conductor("Au").unwrap());
     assert_eq!(s.params.get(alpha)[0], 0.2);
     assert_eq!(param(&s, "g.bsdf.specular_reflectance.value"), [0.9, 0.8, 0.7]);
+    // eta and k are parameters (issue 34), a preset's too, k's values directly after eta's.
+    assert_eq!(param(&s, "g.bsdf.eta.value"), [0.2, 0.9, 1.1]);
+    assert_eq!(param(&s, "g.bsdf.k.value"), [3.9, 2.4, 2.1]);
+    let (au_eta, au_k) = bsdf::conductor("Au").unwrap();
+    assert_eq!(param(&s, "au.bsdf.eta.value"), au_eta.to_array());
+    assert_eq!(param(&s, "au.bsdf.k.value"), au_k.to_array());
+    let offset = |n: &str| s.params.entry(s.params.find(n).unwrap()).offset;
+    assert_eq!(offset("au.bsdf.k.value"), offset("au.bsdf.eta.value") + 3);
     // Mitsuba's keys are the properties the file gives: alpha_u and alpha_v, two parameters.
     assert_eq!(param(&s, "au.bsdf.alpha_u.value"), [0.2]);
     assert_eq!(param(&s, "au.bsdf.alpha_v.value"), [0.2]);

@@ -8,7 +8,7 @@
 //! - every key of Mitsuba's of a kind pathgrad exposes ([`KINDS`]: it ends in one of those
 //!   suffixes) is one of pathgrad's names, but for [`MITSUBA_ONLY`]. Other keys are of kinds
 //!   pathgrad does not expose: geometry and `to_world`, sensors and films, `sampling_weight`s, a
-//!   conductor's `eta` and `k` (constants in pathgrad), a bitmap's `to_uv`.
+//!   bitmap's `to_uv`.
 //!
 //! Every kind is exercised by some scene.
 
@@ -17,7 +17,8 @@ use std::path::{Path, PathBuf};
 
 /// The endings of Mitsuba keys of the kinds pathgrad exposes: a diffuse `reflectance`, a bitmap's
 /// or a grid's `data`, a rough conductor's `alpha`, `alpha_u`, `alpha_v` and
-/// `specular_reflectance`, a blend's `weight`, an emitter's `radiance`, a medium's constant
+/// `specular_reflectance`, a conductor's `eta` and `k` (and a thin principled BSDF's `eta`), a
+/// blend's `weight`, an emitter's `radiance`, a medium's constant
 /// `sigma_t`/`albedo` (`.value.value`, a constvolume's value), `scale` and a phase's `g`.
 const KINDS: &[&str] = &[
     ".reflectance.value",
@@ -26,6 +27,8 @@ const KINDS: &[&str] = &[
     ".alpha_u.value",
     ".alpha_v.value",
     ".specular_reflectance.value",
+    ".eta.value",
+    ".k.value",
     ".weight.value",
     ".radiance.value",
     ".sigma_t.value.value",
