@@ -27,7 +27,7 @@ use node2::Node2;
 pub struct Bvh {
     /// Compressed 8-wide nodes; the root is node 0.
     pub nodes: Vec<BvhNode>,
-    /// Triangle positions in leaf order.
+    /// Triangle positions in leaf order (empty from [`build_tree_from`]).
     pub tris: Vec<TriPositions>,
     /// The original triangle id of each leaf slot.
     pub prim_ids: Vec<u32>,
@@ -55,6 +55,11 @@ impl Bvh {
             })
         })
     }
+}
+
+/// A leaf slot's record of a triangle's positions (what [`Bvh::tris`] holds).
+pub(crate) fn leaf_positions([v0, v1, v2]: [Vec3; 3]) -> TriPositions {
+    TriPositions { v0, v1, v2, ..TriPositions::default() }
 }
 
 /// Deepest binary tree the conversion is given: a compressed node consumes at least one of its
@@ -103,12 +108,29 @@ pub fn build(triangles: &[[Vec3; 3]]) -> Result<Bvh> {
 /// # Errors
 /// As [`build`].
 pub fn build_from(count: usize, triangle: impl Fn(u32) -> [Vec3; 3] + Sync) -> Result<Bvh> {
-    build_impl(count, &triangle, false)
+    build_impl(count, &triangle, false, true)
+}
+
+/// [`build_from`] without the leaf-order positions: [`Bvh::tris`] is left empty, for a caller
+/// that makes them from `prim_ids` where they are consumed (a renderer's upload writes them
+/// chunk by chunk: issue 38, at 2 M triangles the array is 76 MiB held beside its device copy).
+/// The nodes and `prim_ids` are [`build_from`]'s.
+///
+/// # Errors
+/// As [`build`].
+pub(crate) fn build_tree_from(count: usize, triangle: impl Fn(u32) -> [Vec3; 3] + Sync) -> Result<Bvh> {
+    build_impl(count, &triangle, false, false)
 }
 
 /// [`build_from`]; `always_shape` sends the PLOC tree through the depth-bounding rewrite even
-/// when it needs none (the tests compare both paths).
-fn build_impl(count: usize, triangle: &(impl Fn(u32) -> [Vec3; 3] + Sync), always_shape: bool) -> Result<Bvh> {
+/// when it needs none (the tests compare both paths); without `positions` the leaf-order
+/// positions are not made ([`build_tree_from`]).
+fn build_impl(
+    count: usize,
+    triangle: &(impl Fn(u32) -> [Vec3; 3] + Sync),
+    always_shape: bool,
+    positions: bool,
+) -> Result<Bvh> {
     if count >= MAX_TRIANGLES {
         return Err(Error::Scene {
             location: "BVH".into(),
@@ -127,13 +149,8 @@ fn build_impl(count: usize, triangle: &(impl Fn(u32) -> [Vec3; 3] + Sync), alway
     let nodes: Vec<BvhNode> = cw_nodes.iter().map(|n| bytemuck::cast(*n)).collect();
     drop(cw_nodes);
     steps.lap("convert");
-    let tris = prim_ids
-        .par_iter()
-        .map(|&id| {
-            let [v0, v1, v2] = triangle(id);
-            TriPositions { v0, v1, v2, ..TriPositions::default() }
-        })
-        .collect();
+    let tris =
+        if positions { prim_ids.par_iter().map(|&id| leaf_positions(triangle(id))).collect() } else { Vec::new() };
     let depth = cw_depth(&nodes);
     steps.lap("positions");
     let bvh = Bvh { nodes, tris, prim_ids, depth };
@@ -686,8 +703,8 @@ mod tests {
         let fan: Vec<[Vec3; 3]> = (1..999).map(|k| [ring(0), ring(k), ring(k + 1)]).collect();
         for tris in [grid, stack, fan] {
             let get = |id: u32| tris[id as usize];
-            let direct = build_impl(tris.len(), &get, false).unwrap();
-            let rewritten = build_impl(tris.len(), &get, true).unwrap();
+            let direct = build_impl(tris.len(), &get, false, true).unwrap();
+            let rewritten = build_impl(tris.len(), &get, true, true).unwrap();
             assert_eq!(direct, rewritten);
             assert_leaves_cover(&direct, tris.len());
         }

@@ -190,10 +190,10 @@ impl Renderer {
         &self.scene
     }
 
-    /// The flattened scene (what the CPU reference consumes too), without its per-triangle
-    /// arrays: the BVH's triangles and triangle ids and the shading data live on the device only,
-    /// so those three are empty here (the BVH's nodes, the materials, emitters, parameters and the
-    /// rest are kept).
+    /// The flattened scene (what the CPU reference consumes too), without its BVH and
+    /// per-triangle arrays: the BVH's nodes, triangles and triangle ids and the shading data live
+    /// on the device only, so those are empty here (the BVH's depth, the materials, emitters,
+    /// parameters and the rest are kept).
     pub fn flat(&self) -> &FlatScene {
         &self.flat
     }

@@ -2,15 +2,23 @@
 
 use std::sync::Arc;
 
-use crate::contract::Globals;
+use rayon::prelude::*;
+
+use crate::bvh;
+use crate::contract::{Globals, TriPositions};
 use crate::error::Result;
 use crate::gpu::buffer::Buffer;
 use crate::gpu::context::Context;
 use crate::scene::Scene;
-use crate::scene::flat::{FlatScene, normal_count, normals_iter, tri_vertices_iter, uv_count, uvs_iter};
+use crate::scene::flat::{
+    FlatScene, first_ids, normal_count, normals_iter, tri_vertices_iter, triangle_positions, uv_count, uvs_iter,
+};
 
 /// The scene's arrays on the device.
 pub(crate) struct GpuScene {
+    /// How many BVH nodes `nodes` holds (the kernels' traversal bound): the host's copy of them
+    /// is emptied by the upload.
+    pub node_count: u32,
     pub nodes: Buffer,
     pub tris: Buffer,
     pub prim_ids: Buffer,
@@ -45,18 +53,24 @@ pub(crate) struct GpuScene {
 
 impl GpuScene {
     /// Uploads `flat`, the flattened form of `scene`, emptying its per-triangle and per-vertex
-    /// arrays — the BVH's triangles and triangle ids, and the shading data (vertex indices,
-    /// normals, texture coordinates) if it has any — each as soon as it is on the device: from
-    /// then on they live there only (issue 38: on a CPU device the device copy is host memory
-    /// too). Without shading data (`FlatScene::for_device_reporting`) it is copied from `scene`'s
-    /// meshes chunk by chunk straight into the staging buffer, so no host copy of it exists.
+    /// arrays — the BVH's nodes, triangles and triangle ids, and the shading data (vertex
+    /// indices, normals, texture coordinates) if it has any — each as soon as it is on the
+    /// device: from then on they live there only (issue 38: on a CPU device the device copy is
+    /// host memory too). Without shading data and leaf-order positions
+    /// (`FlatScene::for_device_reporting`) they are copied from `scene`'s meshes chunk by chunk
+    /// straight into the staging buffer, so no host copy of them exists.
     pub(crate) fn new(ctx: &Arc<Context>, scene: &Scene, flat: &mut FlatScene) -> Result<GpuScene> {
         let _span = tracing::info_span!("upload").entered();
         // One statement each: a host array taken into a temporary of the struct expression below
         // would live until the whole expression ends, so all of them would outlive their uploads
         // (at 2 M triangles, 85 MB more at the upload's peak).
-        let nodes = Buffer::storage_with(ctx, "BVH nodes", &flat.bvh.nodes)?;
-        let tris = Buffer::storage_with(ctx, "triangles (leaf order)", &std::mem::take(&mut flat.bvh.tris))?;
+        let node_count = flat.bvh.nodes.len() as u32;
+        let nodes = Buffer::storage_with(ctx, "BVH nodes", &std::mem::take(&mut flat.bvh.nodes))?;
+        let tris = if flat.bvh.tris.is_empty() {
+            leaf_positions(ctx, scene, &flat.bvh.prim_ids)?
+        } else {
+            Buffer::storage_with(ctx, "triangles (leaf order)", &std::mem::take(&mut flat.bvh.tris))?
+        };
         let prim_ids = Buffer::storage_with(ctx, "triangle ids", &std::mem::take(&mut flat.bvh.prim_ids))?;
         let tri_vertices = if flat.tri_vertices.is_empty() {
             streamed(ctx, "triangle vertices", scene.triangle_count(), tri_vertices_iter(scene))?
@@ -74,6 +88,7 @@ impl GpuScene {
             Buffer::storage_with(ctx, "texture coordinates", &std::mem::take(&mut flat.uvs))?
         };
         Ok(GpuScene {
+            node_count,
             nodes,
             tris,
             prim_ids,
@@ -140,9 +155,29 @@ impl GpuScene {
             addr_lights: self.lights.device_address(),
             addr_tables: self.tables.device_address(),
             addr_majorants: self.majorants.device_address(),
+            node_count: self.node_count,
             ..*globals
         }
     }
+}
+
+/// The BVH's triangle positions in leaf order (`prim_ids`: the triangle id of each leaf slot),
+/// read from `scene`'s meshes into the reused staging buffer chunk by chunk on rayon's threads:
+/// the array never exists on the host (at 2 M triangles it is 76 MiB).
+fn leaf_positions(ctx: &Arc<Context>, scene: &Scene, prim_ids: &[u32]) -> Result<Buffer> {
+    let count = prim_ids.len();
+    let buffer = Buffer::storage(ctx, "triangles (leaf order)", (count * size_of::<TriPositions>()) as u64)?;
+    let firsts = first_ids(scene);
+    let mut done = 0;
+    buffer.upload_with(count, |chunk: &mut [TriPositions]| {
+        let ids = &prim_ids[done..done + chunk.len()];
+        chunk
+            .par_iter_mut()
+            .zip(ids)
+            .for_each(|(slot, &id)| *slot = bvh::leaf_positions(triangle_positions(scene, &firsts, id)));
+        done += chunk.len();
+    })?;
+    Ok(buffer)
 }
 
 /// A storage buffer of the `count` elements of `items`, written chunk by chunk into the reused

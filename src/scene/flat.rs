@@ -28,7 +28,8 @@ use crate::scene::{Albedo, Light, LightShape, Material, Scene, SmoothColour, Wra
 /// The GPU-layout arrays of one scene.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct FlatScene {
-    /// BVH nodes and leaf-ordered triangles.
+    /// BVH nodes and leaf-ordered triangles (the triangles empty from
+    /// [`FlatScene::for_device_reporting`]).
     pub bvh: Bvh,
     /// Each triangle's vertex indices and mesh, by original triangle id (16 bytes a triangle;
     /// empty from [`FlatScene::for_device_reporting`], whose upload makes them from the scene).
@@ -131,9 +132,10 @@ impl FlatScene {
     }
 
     /// [`FlatScene::new_reporting`] without the per-triangle and per-vertex shading data
-    /// (`tri_vertices`, `normals` and `uvs` are empty) and its phase: what a renderer needs,
-    /// since [`crate::gpu::Renderer::from_flat`] uploads them from the scene chunk by chunk, so
-    /// that no host copy of them exists (issue 38). The CPU reference needs
+    /// (`tri_vertices`, `normals` and `uvs` are empty) and its phase, and without the BVH's
+    /// leaf-order positions (`bvh.tris` is empty; `bvh.prim_ids` says whose they are): what a
+    /// renderer needs, since [`crate::gpu::Renderer::from_flat`] uploads them from the scene
+    /// chunk by chunk, so that no host copy of them exists (issue 38). The CPU reference needs
     /// [`FlatScene::new_reporting`]'s.
     ///
     /// # Errors
@@ -146,11 +148,9 @@ impl FlatScene {
         let start = Instant::now();
         scene.validate()?;
         let mut emitters = Vec::new();
-        // The first triangle id of every mesh: ids run through the meshes in order.
-        let mut firsts = Vec::with_capacity(scene.meshes.len());
+        let firsts = first_ids(scene);
         let mut id = 0u32;
         for mesh in &scene.meshes {
-            firsts.push(id);
             for t in &mesh.indices {
                 let p = t.map(|i| mesh.positions[i as usize]);
                 let area = triangle_area(p[0], p[1], p[2]);
@@ -195,14 +195,14 @@ impl FlatScene {
         report.record("flatten", start);
         let start = Instant::now();
         // Triangle `id`'s positions, read from its mesh: the BVH build needs no flattened copy.
-        let triangle = |id: u32| {
-            // The last mesh starting at or before `id`: an empty mesh shares its start with the
-            // next, so it is never the one found.
-            let m = firsts.partition_point(|&first| first <= id) - 1;
-            let mesh = &scene.meshes[m];
-            mesh.indices[(id - firsts[m]) as usize].map(|i| mesh.positions[i as usize])
+        let triangle = |id: u32| triangle_positions(scene, &firsts, id);
+        // Without shading data (a renderer's) the leaf-order positions are made by the upload
+        // too, from the scene and `prim_ids` (`GpuScene::new`): never whole on the host.
+        let bvh = if with_shading {
+            bvh::build_from(id as usize, triangle)?
+        } else {
+            bvh::build_tree_from(id as usize, triangle)?
         };
-        let bvh = bvh::build_from(id as usize, triangle)?;
         report.record("bvh", start);
         let (meshes, emitter_ids) = mesh_shading(scene, &emitters);
         // After the build, so that the BVH's intermediate forms and the shading data are never
@@ -306,6 +306,29 @@ pub(crate) fn tri_vertices_iter(scene: &Scene) -> impl Iterator<Item = TriVertic
         .iter()
         .zip(0u32..)
         .flat_map(|(mesh, m)| mesh.indices.iter().map(move |t| TriVertices { i0: t[0], i1: t[1], i2: t[2], mesh: m }))
+}
+
+/// The first triangle id of every mesh: ids run through the meshes in order.
+pub(crate) fn first_ids(scene: &Scene) -> Vec<u32> {
+    let mut id = 0u32;
+    scene
+        .meshes
+        .iter()
+        .map(|mesh| {
+            let first = id;
+            id += mesh.indices.len() as u32;
+            first
+        })
+        .collect()
+}
+
+/// Triangle `id`'s positions, read from its mesh (`firsts`: [`first_ids`]).
+pub(crate) fn triangle_positions(scene: &Scene, firsts: &[u32], id: u32) -> [Vec3; 3] {
+    // The last mesh starting at or before `id`: an empty mesh shares its start with the next, so
+    // it is never the one found.
+    let m = firsts.partition_point(|&first| first <= id) - 1;
+    let mesh = &scene.meshes[m];
+    mesh.indices[(id - firsts[m]) as usize].map(|i| mesh.positions[i as usize])
 }
 
 /// The vertex normals of the meshes that have them, mesh after mesh (`MeshShading::normal_base`).

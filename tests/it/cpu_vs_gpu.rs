@@ -103,6 +103,62 @@ fn issue_31_principledthin_gpu_equals_cpu_per_path() {
     primal_agrees_per_path(&gpu, &crate::support::scenes::data_scene("principledthin_textured"));
 }
 
+/// Issue 38: a renderer's flattened scene has the CPU reference's BVH without its leaf-order
+/// positions, which the upload writes from the meshes chunk by chunk. A bumpy grid of more
+/// triangles than one staging chunk holds, behind a light mesh (so its triangle ids do not start
+/// at 0), renders path by path as the CPU reference's copy of the positions does.
+#[test]
+fn issue_38_leaf_positions_made_by_the_upload_agree_across_chunks() {
+    use glam::Vec3;
+    use pathgrad::scene::flat::FlatScene;
+    use pathgrad::scene::shapes::{Geometry, quad};
+    use pathgrad::scene::{Camera, PixelFilter, Scene};
+    const N: u32 = 470;
+    let camera = Camera {
+        position: Vec3::new(0.0, 1.2, 2.2),
+        target: Vec3::ZERO,
+        up: Vec3::Y,
+        fov_y_degrees: 45.0,
+        width: 96,
+        height: 96,
+        filter: PixelFilter::Box,
+        lens: pathgrad::scene::Lens::Pinhole,
+        window: pathgrad::scene::FilmWindow::default(),
+    };
+    let mut s = Scene::new("test:issue-38-grid", camera);
+    let grey = s.add_diffuse("grey", Vec3::splat(0.6)).unwrap();
+    let black = s.add_diffuse("light", Vec3::ZERO).unwrap();
+    // Facing down (`u × v` = −y), above the grid.
+    s.add_mesh("light", quad(Vec3::new(0.0, 2.0, 0.0), Vec3::X * 0.5, Vec3::Z * 0.5), black, Some(Vec3::splat(8.0)))
+        .unwrap();
+    let positions = (0..=N)
+        .flat_map(|j| {
+            (0..=N).map(move |i| {
+                let (x, z) = (2.0 * i as f32 / N as f32 - 1.0, 2.0 * j as f32 / N as f32 - 1.0);
+                Vec3::new(x, 0.05 * (17.0 * x).sin() * (13.0 * z).cos(), z)
+            })
+        })
+        .collect();
+    let indices = (0..N)
+        .flat_map(|j| {
+            (0..N).flat_map(move |i| {
+                let v = j * (N + 1) + i;
+                [[v, v + N + 1, v + 1], [v + 1, v + N + 1, v + N + 2]]
+            })
+        })
+        .collect();
+    s.add_mesh("grid", Geometry { positions, normals: None, uvs: None, indices, ..Default::default() }, grey, None)
+        .unwrap();
+    let per_chunk = pathgrad::gpu::buffer::UPLOAD_CHUNK_BYTES / size_of::<pathgrad::contract::TriPositions>();
+    assert!(s.triangle_count() > per_chunk, "{} triangles fit one chunk of {per_chunk}", s.triangle_count());
+    let full = FlatScene::new(&s).unwrap();
+    let device = FlatScene::for_device_reporting(&s, &mut pathgrad::phases::PhaseReport::new()).unwrap();
+    assert!(device.bvh.tris.is_empty() && full.bvh.tris.len() == s.triangle_count());
+    assert_eq!((&device.bvh.nodes, &device.bvh.prim_ids), (&full.bvh.nodes, &full.bvh.prim_ids), "the same tree");
+    drop((full, device));
+    primal_agrees_per_path(&TestGpu::new(), &s);
+}
+
 /// One path per pixel of `scene` on the GPU and the CPU reference: within [`REL_TOL`] and
 /// [`ABS_TOL`], all but [`MISMATCH_BUDGET`] of them.
 fn primal_agrees_per_path(gpu: &TestGpu, scene: &pathgrad::scene::Scene) {
