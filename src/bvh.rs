@@ -27,7 +27,7 @@ use node2::Node2;
 pub struct Bvh {
     /// Compressed 8-wide nodes; the root is node 0.
     pub nodes: Vec<BvhNode>,
-    /// Triangle positions in leaf order (empty from [`build_tree_from`]).
+    /// Triangle positions in leaf order (empty where the tree was built without them, for a renderer: its upload writes them from the meshes).
     pub tris: Vec<TriPositions>,
     /// The original triangle id of each leaf slot.
     pub prim_ids: Vec<u32>,
