@@ -21,7 +21,11 @@
 //! Geometry is fixed: the hit point moves only along its triangle's plane, and no term for a
 //! visibility change is built (a moving direction that crosses an edge is not differentiated).
 
+pub mod rough_dielectric;
+
 use glam::{Mat3, Vec3};
+
+pub use rough_dielectric::{RoughDielectricLobe, rough_dielectric_lobe};
 
 use crate::contract::{
     MAT_CONDUCTOR, MAT_DIELECTRIC, MAT_ROUGH_CONDUCTOR, MAT_THIN_DIELECTRIC, NO_PARAM, SCALAR_TEXTURE,

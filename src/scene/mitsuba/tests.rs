@@ -1302,3 +1302,19 @@ fn bspline_curves_load_with_points_moved_radii_kept_and_short_curves_refused() {
     );
     assert!(e.contains("'flip_normals' is not supported on curves"), "{e}");
 }
+
+/// Attached sampling refuses a loaded `roughdielectric` by name (its lobe,
+/// `crate::attached::rough_dielectric_lobe`, is not in the path loops yet), and detached takes it.
+#[test]
+fn attached_sampling_refuses_a_rough_dielectric_by_name() {
+    use crate::integrator::{RenderOptions, Sampling};
+    let s = load_ok(
+        r#"<shape type="cube" id="g"><bsdf type="roughdielectric"><float name="alpha" value="0.2"/></bsdf></shape>"#,
+    );
+    let flat = crate::scene::flat::FlatScene::new(&s).unwrap();
+    let detached = RenderOptions::for_scene(&s);
+    assert!(crate::attached::refuse_unsupported(&flat, &detached, false).is_ok());
+    let attached = RenderOptions { sampling: Sampling::attached(), ..detached };
+    let e = crate::attached::refuse_unsupported(&flat, &attached, false).unwrap_err().to_string();
+    assert!(e.contains("Sampling::Attached") && e.contains("`roughdielectric` material"), "{e}");
+}
