@@ -31,6 +31,10 @@ extern "C" int pathgrad_specialise_spirv(const uint32_t* words, size_t count, co
         // is left. Primal renders were faster in two interleaved sets than after only constant
         // propagation and dead-code elimination (BENCHMARKS.md).
         optimizer.RegisterPerformancePasses();
+        // Ids renumbered from 1: the passes keep the whole kernel's ids (a bound of ~1.8 M for
+        // ~5 000 instructions), and lavapipe's SPIR-V reader allocates a value per id up to the
+        // bound, 144 bytes each (260 MB for the sphere's primal kernel; BENCHMARKS.md, issue 38).
+        optimizer.RegisterPass(spvtools::CreateCompactIdsPass());
         spvtools::OptimizerOptions options;
         options.set_run_validator(false);  // build.rs's modules are valid; the driver checks again
         std::vector<uint32_t> result;

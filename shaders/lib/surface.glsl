@@ -206,7 +206,8 @@ bool attribute_mode(uint mode) { return (mode & (TEX_ATTR_FACE | TEX_ATTR_VERTEX
 // ---- textured area emitters (an EmitterTri's p_radiance with SCALAR_TEXTURE set: the offset of
 // its RGB texture's descriptor in the tables array; twin: area_footprint and friends of
 // src/cpu/emitter.rs) ----
-bool area_textured(uint p) { return p != NO_PARAM && (p & SCALAR_TEXTURE) != 0u; }
+// Only kernels of scenes with a textured area emitter (F2_AREA_TEXTURE) carry the lookup below.
+bool area_textured(uint p) { return HAS2(F2_AREA_TEXTURE) && p != NO_PARAM && (p & SCALAR_TEXTURE) != 0u; }
 
 // The texels (RGB at offset..offset+2) and weights of textured area radiance `p` at uv (its
 // `to_uv` applied).

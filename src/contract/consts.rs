@@ -183,6 +183,10 @@ contract_constants! {
     /// `hide_emitters`, `PATH_HIDE_EMITTERS`): the path's first ray passes through emitting
     /// shapes. Every other kernel keeps the single traversal of a plain ray.
     F2_HIDE_EMITTERS = 1 << 3;
+    /// Second-word feature bit: an area emitter's radiance is a texture (its `p_radiance` has
+    /// `SCALAR_TEXTURE` set: a bitmap or checkerboard read at the point's texture coordinates).
+    /// Kernels of scenes without one carry no texture lookup for their emitters.
+    F2_AREA_TEXTURE = 1 << 4;
     /// Feature bit: next-event estimation.
     F_NEE = 1 << 0;
     /// Feature bit: a constant environment emitter.

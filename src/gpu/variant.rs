@@ -82,6 +82,9 @@ pub fn scene_features(flat: &FlatScene, env_param: u32) -> u64 {
     if !flat.emitters.is_empty() {
         f |= F_EMITTERS;
     }
+    if flat.emitters.iter().any(|e| crate::cpu::emitter::area_textured(e.p_radiance)) {
+        f2 |= F2_AREA_TEXTURE;
+    }
     if env_param != NO_PARAM {
         f |= F_ENV;
     }
@@ -277,7 +280,7 @@ pub fn request_features(scene: u64, options: &RenderOptions, kinds: ParamKinds) 
 
 /// A short human-readable name of a variant, for logs: `nee env diffuse conductor[beckmann] ∂alpha`.
 pub fn describe(features: u64) -> String {
-    const NAMES: [(u64, &str); 35] = [
+    const NAMES: [(u64, &str); 36] = [
         (F_NEE as u64, "nee"),
         (F_ENV as u64, "env"),
         (F_EMITTERS as u64, "emitters"),
@@ -306,6 +309,7 @@ pub fn describe(features: u64) -> String {
         (word2(F2_PRINCIPLED_THIN), "principledthin"),
         (word2(F2_VOLUME_TEXTURE), "volume-texture"),
         (word2(F2_HIDE_EMITTERS), "hide-emitters"),
+        (word2(F2_AREA_TEXTURE), "area-texture"),
         (G_COLOR as u64, "∂color"),
         (G_TEXTURE as u64, "∂texture"),
         (G_ALPHA as u64, "∂alpha"),

@@ -284,6 +284,26 @@ fn issue_31_a_textured_area_emitter_reads_its_bitmap() {
     }
 }
 
+/// Only the kernels of a scene with a textured area emitter carry the emitters' texture lookup
+/// (issue 38): the feature bit `F2_AREA_TEXTURE` is set for the bitmap-lit panel and clear for
+/// the sphere, whose area emitter has a plain RGB radiance.
+#[test]
+fn issue_38_only_a_textured_area_emitter_sets_its_feature_bit() {
+    let area_texture = crate::gpu::variant::word2(crate::contract::F2_AREA_TEXTURE);
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    for (file, textured) in
+        [("tests/conformance/scenes/emitter_area_texture.xml", true), ("benches/scenes/sphere/sphere.xml", false)]
+    {
+        let path = root.join(file);
+        let s =
+            crate::scene::load_with(path.to_str().unwrap(), &LoadOptions::default()).unwrap_or_else(|e| panic!("{e}"));
+        let flat = crate::scene::flat::FlatScene::new(&s).unwrap();
+        let features = crate::gpu::variant::scene_features(&flat, crate::contract::NO_PARAM);
+        assert_ne!(features & u64::from(crate::contract::F_EMITTERS), 0, "{file}");
+        assert_eq!(features & area_texture != 0, textured, "{file}");
+    }
+}
+
 /// An area emitter's bitmap radiance under `to_uv` and a checkerboard radiance (issue 31): the
 /// parameters take Mitsuba's keys, the descriptors carry `to_uv`'s rows (and `TEX_CHECKER`), and
 /// the CPU lookup reads the colour Mitsuba's checkerboard shows there.
