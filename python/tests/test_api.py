@@ -75,7 +75,9 @@ def test_backward_is_the_derivative_of_the_adjoint_weighted_image(cornell):
 
 def test_params_view(cornell):
     params = cornell.params
-    assert len(params) == 7 and ALPHA in params and "nope" not in params
+    # The seven of before, and since issue 34 the rough sphere's conductor eta and k.
+    assert len(params) == 9 and ALPHA in params and "nope" not in params
+    assert "sphere.bsdf.eta.value" in params and params.info("sphere.bsdf.k.value").shape == (3,)
     info = params.info(ALPHA)
     assert info.shape == (1,) and info.bounds == (0.001, 1.0)
     assert params.info("red.reflectance.value").shape == (3,)
