@@ -566,6 +566,54 @@ pub struct RoughLobe {
     pub dlnf_dc: Vec3,
 }
 
+/// An attached lobe's microfacet normal: `u` mapped through the α-scaled slope distribution
+/// (`slope_factor`) to a normal about `n`, with its derivatives by `n` and by α. Shared by
+/// [`rough_conductor_lobe`] and [`rough_dielectric_lobe`].
+pub(crate) struct MicroNormal {
+    /// The normal in world space.
+    pub h: Vec3,
+    /// The normal in `n`'s frame (z along `n`).
+    pub local: Vec3,
+    /// ∂`local`/∂α.
+    pub local_alpha: Vec3,
+    /// ∂h/∂n.
+    pub h_n: Mat3,
+    /// ∂h/∂α.
+    pub h_alpha: Vec3,
+}
+
+/// [`MicroNormal`] for the uniforms `u` about the unit normal `n`.
+pub(crate) fn micro_normal(n: Vec3, alpha: f32, beckmann: bool, u: [f32; 2]) -> MicroNormal {
+    let (t, b, t_n, b_n) = basis_jacobians(n);
+    let g = slope_factor(beckmann, u[0]);
+    let phi = 2.0 * std::f32::consts::PI * u[1];
+    let (sin_p, cos_p) = phi.sin_cos();
+    let m = Vec3::new(alpha * g * cos_p, alpha * g * sin_p, 1.0);
+    let len = m.length();
+    let hl = m / len;
+    let dm = Vec3::new(g * cos_p, g * sin_p, 0.0);
+    let dhl = (dm - hl * hl.dot(dm)) / len;
+    MicroNormal {
+        h: hl.x * t + hl.y * b + hl.z * n,
+        local: hl,
+        local_alpha: dhl,
+        h_n: hl.x * t_n + hl.y * b_n + Mat3::from_diagonal(Vec3::splat(hl.z)),
+        h_alpha: dhl.x * t + dhl.y * b + dhl.z * n,
+    }
+}
+
+/// ln(G1(θi)·G1(θo)), Smith's masking of both directions at roughness α, and its derivatives by
+/// cos θi, by cos θo and by α.
+pub(crate) fn ln_masking(beckmann: bool, alpha: f32, ci: f32, co: f32) -> (f32, f32, f32, f32) {
+    let tan2 = |cos: f32| (1.0 - cos * cos).max(0.0) / (cos * cos);
+    let (lg_i, dg_i) = ln_g1(beckmann, alpha * alpha * tan2(ci));
+    let (lg_o, dg_o) = ln_g1(beckmann, alpha * alpha * tan2(co));
+    // ∂ ln G1/∂cos = ∂ ln G1/∂s² · α²·(−2/cos³); ∂ ln G1/∂α = ∂ ln G1/∂s² · 2α tan².
+    let (gi_c, go_c) = (dg_i * alpha * alpha * -2.0 / (ci * ci * ci), dg_o * alpha * alpha * -2.0 / (co * co * co));
+    let g_alpha = dg_i * 2.0 * alpha * tan2(ci) + dg_o * 2.0 * alpha * tan2(co);
+    (lg_i + lg_o, gi_c, go_c, g_alpha)
+}
+
 /// The attached rough-conductor lobe from incoming direction `d` at shading normal `n` (the side
 /// the ray arrives on), roughness `alpha` (GGX, or Beckmann with `beckmann`), uniforms `u` and the
 /// conductor's complex index (`eta`, `k`); `None` where the sample leaves below the surface or
@@ -583,18 +631,7 @@ pub fn rough_conductor_lobe(
     if !(ci > 0.0) || !(alpha > 0.0) {
         return None;
     }
-    let (t, b, t_n, b_n) = basis_jacobians(n);
-    let g = slope_factor(beckmann, u[0]);
-    let phi = 2.0 * std::f32::consts::PI * u[1];
-    let (sin_p, cos_p) = phi.sin_cos();
-    let m = Vec3::new(alpha * g * cos_p, alpha * g * sin_p, 1.0);
-    let len = m.length();
-    let hl = m / len;
-    let dm = Vec3::new(g * cos_p, g * sin_p, 0.0);
-    let dhl = (dm - hl * hl.dot(dm)) / len;
-    let h = hl.x * t + hl.y * b + hl.z * n;
-    let hn = hl.x * t_n + hl.y * b_n + Mat3::from_diagonal(Vec3::splat(hl.z));
-    let h_alpha = dhl.x * t + dhl.y * b + dhl.z * n;
+    let MicroNormal { h, local: hl, local_alpha: dhl, h_n: hn, h_alpha } = micro_normal(n, alpha, beckmann, u);
     let c = -d.dot(h);
     let wo = d + 2.0 * c * h;
     let co = wo.dot(n);
@@ -605,14 +642,9 @@ pub fn rough_conductor_lobe(
     if !(f.min_element() > 0.0) {
         return None;
     }
-    let tan2 = |cos: f32| (1.0 - cos * cos).max(0.0) / (cos * cos);
-    let (lg_i, dg_i) = ln_g1(beckmann, alpha * alpha * tan2(ci));
-    let (lg_o, dg_o) = ln_g1(beckmann, alpha * alpha * tan2(co));
-    // ∂ ln G1/∂cos = ∂ ln G1/∂s² · α²·(−2/cos³); ∂ ln G1/∂α = ∂ ln G1/∂s² · 2α tan².
-    let (gi_c, go_c) = (dg_i * alpha * alpha * -2.0 / (ci * ci * ci), dg_o * alpha * alpha * -2.0 / (co * co * co));
-    let g_alpha = dg_i * 2.0 * alpha * tan2(ci) + dg_o * 2.0 * alpha * tan2(co);
+    let (ln_g, gi_c, go_c, g_alpha) = ln_masking(beckmann, alpha, ci, co);
     let hz = hl.z;
-    let weight = f * ((lg_i + lg_o).exp() * c / (ci * hz));
+    let weight = f * (ln_g.exp() * c / (ci * hz));
     // c = −d·h: dc = −h·δd − d·δh; δh = Hn·δn + h_α·δα.
     let dc_dd = -h;
     let dc_dn = -(hn.transpose() * d);

@@ -3,7 +3,7 @@
 
 use glam::{Mat3, Vec3};
 
-use super::{basis_jacobians, fresnel_dielectric_grad, ln_g1, outer, refract_jacobians, slope_factor};
+use super::{MicroNormal, fresnel_dielectric_grad, ln_masking, micro_normal, outer, refract_jacobians};
 
 /// What a rough dielectric's vertex contributes to the attached estimator. As
 /// [`super::RoughLobe`], the microfacet normal h is drawn from D(h)·cos θh in the frame of
@@ -70,18 +70,9 @@ pub fn rough_dielectric_lobe(
     if !(ci > 0.0) || !(alpha > 0.0) || !(eta > 0.0) {
         return None;
     }
-    let (t, b, t_ns, b_ns) = basis_jacobians(ns);
-    let g = slope_factor(beckmann, u[0]);
-    let (sin_p, cos_p) = (2.0 * std::f32::consts::PI * u[1]).sin_cos();
-    let m = Vec3::new(alpha * g * cos_p, alpha * g * sin_p, 1.0);
-    let len = m.length();
-    let hl = m / len;
-    let dm = Vec3::new(g * cos_p, g * sin_p, 0.0);
-    let dhl = (dm - hl * hl.dot(dm)) / len;
-    let h = hl.x * t + hl.y * b + hl.z * ns;
+    let MicroNormal { h, local: hl, local_alpha: dhl, h_n, h_alpha } = micro_normal(ns, alpha, beckmann, u);
     // ∂h/∂n = s·∂h/∂n′.
-    let hn = s * (hl.x * t_ns + hl.y * b_ns + Mat3::from_diagonal(Vec3::splat(hl.z)));
-    let h_alpha = dhl.x * t + dhl.y * b + dhl.z * ns;
+    let hn = s * h_n;
     let c = -d.dot(h);
     if !(c > 0.0) {
         return None;
@@ -108,15 +99,10 @@ pub fn rough_dielectric_lobe(
     if !(choice > 0.0) || !(co != 0.0) || (co < 0.0) != transmitted {
         return None;
     }
-    let tan2 = |cos: f32| (1.0 - cos * cos).max(0.0) / (cos * cos);
-    let (lg_i, dg_i) = ln_g1(beckmann, alpha * alpha * tan2(ci));
-    let (lg_o, dg_o) = ln_g1(beckmann, alpha * alpha * tan2(co));
-    // ∂ ln G1/∂cos = ∂ ln G1/∂s² · α²·(−2/cos³); ∂ ln G1/∂α = ∂ ln G1/∂s² · 2α tan².
-    let (gi_c, go_c) = (dg_i * alpha * alpha * -2.0 / (ci * ci * ci), dg_o * alpha * alpha * -2.0 / (co * co * co));
-    let g_alpha = dg_i * 2.0 * alpha * tan2(ci) + dg_o * 2.0 * alpha * tan2(co);
+    let (ln_g, gi_c, go_c, g_alpha) = ln_masking(beckmann, alpha, ci, co);
     let hz = hl.z;
     let radiance = if transmitted { eta_ti * eta_ti } else { 1.0 };
-    let weight = (lg_i + lg_o).exp() * c / (ci * hz) * radiance;
+    let weight = ln_g.exp() * c / (ci * hz) * radiance;
     // cos θi = −d·n′; cos θo = wo·n′ (∂n′/∂n = s).
     let (ci_d, ci_n) = (-ns, -s * d);
     let (co_d, co_n) = (t_d.transpose() * ns, t_n.transpose() * ns + s * wo);
