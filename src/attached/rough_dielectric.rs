@@ -7,7 +7,7 @@ use super::{MicroNormal, fresnel_dielectric_grad, ln_masking, micro_normal, oute
 
 /// What a rough dielectric's vertex contributes to the attached estimator. As
 /// [`super::RoughLobe`], the microfacet normal h is drawn from D(h)·cos θh in the frame of
-/// [`basis_jacobians`] around the normal turned to the side the ray arrives on, so it moves with
+/// [`super::basis_jacobians`] around the normal turned to the side the ray arrives on, so it moves with
 /// α and the normal and not with the incoming direction; the lobe is then chosen as the smooth
 /// dielectric's is (reflection with probability F(c), c = −d·h, else refraction through h), a
 /// discrete choice whose probability P (F or 1 − F) the estimator holds detached, so every row
