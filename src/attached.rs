@@ -691,6 +691,56 @@ impl HitGeometry {
     }
 }
 
+/// The parameters a gradient pass sampled as `sampling` differentiates, out of `chosen`.
+///
+/// Attached sampling differentiates every parameter. Detached sampling holds the sampled
+/// directions fixed, so a parameter that acts only through them ([`attached_only_params`]: a
+/// smooth dielectric's index of refraction) has no detached derivative: it is an error when the
+/// caller named it (`named`: the ids asked for one by one, not through a wildcard or "all"), and
+/// it is left out otherwise. The command line's `--param`, Python's `wrt` and the optimiser use it.
+///
+/// ```
+/// use pathgrad::integrator::Sampling;
+/// // A glass sphere before a textured sky.
+/// let scene = pathgrad::scene::load("tests/data/scenes/attached_sphere.xml", &[])?;
+/// let eta = scene.params.find("glass.bsdf.eta").unwrap();
+/// let all: Vec<_> = scene.params.select(&["*"])?;
+/// // All of them, detached: the index of refraction is left out.
+/// let detached = pathgrad::attached::differentiated(&scene, all.clone(), &[], Sampling::Detached)?;
+/// assert!(!detached.contains(&eta) && detached.len() + 1 == all.len());
+/// // Named, detached: an error that says what to do.
+/// let e = pathgrad::attached::differentiated(&scene, vec![eta], &[eta], Sampling::Detached).unwrap_err();
+/// assert!(e.to_string().contains("attached"));
+/// // Attached: everything chosen.
+/// assert_eq!(pathgrad::attached::differentiated(&scene, all.clone(), &[eta], Sampling::attached())?, all);
+/// # Ok::<(), pathgrad::Error>(())
+/// ```
+///
+/// # Errors
+/// [`crate::Error::InvalidArgument`] naming the parameter, when `named` holds one that detached
+/// sampling cannot differentiate.
+pub fn differentiated(
+    scene: &crate::scene::Scene,
+    chosen: Vec<crate::params::ParamId>,
+    named: &[crate::params::ParamId],
+    sampling: Sampling,
+) -> crate::Result<Vec<crate::params::ParamId>> {
+    if sampling.is_attached() {
+        return Ok(chosen);
+    }
+    let only = attached_only_params(scene);
+    if let Some(&id) = named.iter().find(|id| only.contains(id)) {
+        return Err(crate::Error::InvalidArgument {
+            parameter: scene.params.entry(id).name.clone(),
+            message: "a smooth dielectric's index of refraction acts only through the directions it refracts \
+                      into, which detached sampling holds fixed; differentiate it with --sampling attached \
+                      (Python: sampling=\"attached\"; the library: Sampling::Attached)"
+                .into(),
+        });
+    }
+    Ok(chosen.into_iter().filter(|id| !only.contains(id)).collect())
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

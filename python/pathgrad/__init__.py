@@ -286,6 +286,17 @@ def _settings(spp: Any, seed: Any, device: Any, max_depth: Any) -> Tuple[Optiona
     return _count(spp, "spp", 1, 1 << 20), _count(seed, "seed", 0), None if device is None else str(device), _depth(max_depth)
 
 
+def _sampling(sampling: Any, jacobian_noise: Any) -> Tuple[str, Optional[float]]:
+    """``sampling`` and ``jacobian_noise``, checked for type (the native side checks the values)."""
+    if not isinstance(sampling, str):
+        raise ArgumentError(f"invalid sampling: {sampling!r}, expected 'detached' or 'attached'")
+    if jacobian_noise is None:
+        return sampling, None
+    if isinstance(jacobian_noise, bool) or not isinstance(jacobian_noise, (int, float)):
+        raise ArgumentError(f"invalid jacobian_noise: {jacobian_noise!r}, expected a number in [0, 1)")
+    return sampling, float(jacobian_noise)
+
+
 def _set_params(scene: Scene, params: Optional[Mapping[str, Any]]) -> None:
     if params is None:
         return
@@ -368,6 +379,8 @@ def grad(
     device: Union[None, int, str] = None,
     max_depth: Optional[int] = None,
     deterministic: bool = False,
+    sampling: str = "detached",
+    jacobian_noise: Optional[float] = None,
 ) -> Dict[str, np.ndarray]:
     """Reverse-mode gradient by Path Replay Backpropagation: the derivative of
     ``sum(adjoint * render(scene))`` by every parameter in ``wrt`` (all by default).
@@ -376,6 +389,13 @@ def grad(
     ``sensors``. The gradient pass draws its own random numbers (independent of a render's with
     the same seed). Returns ``{name: array of the parameter's shape}``. ``deterministic``
     accumulates in 64-bit fixed point: bitwise identical results run to run.
+
+    ``sampling`` is ``"detached"`` (the sampled directions held fixed) or ``"attached"`` (they
+    move with the parameters, as ``pathgrad grad --sampling attached``): only attached sampling
+    differentiates a smooth dielectric's index of refraction, so detached sampling leaves it out
+    of "all" and refuses it in ``wrt``. ``jacobian_noise`` is attached sampling's regularisation
+    amplitude (``--jacobian-noise``; default none). See the guide's "Attached derivatives" for
+    the scenes attached sampling supports.
     """
     scene = _check_scene(scene)
     _set_params(scene, params)
@@ -388,6 +408,7 @@ def grad(
         _wrt(scene, wrt),
         *_settings(spp, seed, device, max_depth),
         bool(deterministic),
+        *_sampling(sampling, jacobian_noise),
     )
 
 
@@ -405,10 +426,13 @@ def loss_and_grad(
     device: Union[None, int, str] = None,
     max_depth: Optional[int] = None,
     deterministic: bool = False,
+    sampling: str = "detached",
+    jacobian_noise: Optional[float] = None,
 ) -> Tuple[float, Dict[str, np.ndarray]]:
     """A gradient step as ``pathgrad grad`` takes it: render, the loss against ``target``
     (``l1``, ``l2``, ``relmse`` or ``relmse_max``, averaged over pixels and sensors), and its
-    gradient in one fused pass. Returns ``(loss, {name: gradient})``."""
+    gradient in one fused pass. Returns ``(loss, {name: gradient})``. ``sampling`` and
+    ``jacobian_noise`` as :func:`grad`'s."""
     scene = _check_scene(scene)
     _set_params(scene, params)
     indices, many = _sensor_list(scene, sensor, sensors)
@@ -423,6 +447,7 @@ def loss_and_grad(
         _wrt(scene, wrt),
         *_settings(spp, seed, device, max_depth),
         bool(deterministic),
+        *_sampling(sampling, jacobian_noise),
     )
 
 

@@ -49,6 +49,8 @@ def backward(
     device: Optional[str] = None,
     max_depth: Optional[int] = None,
     deterministic: bool = False,
+    sampling: str = "detached",
+    jacobian_noise: Optional[float] = None,
 ) -> Dict[str, npt.NDArray[np.float32]]: ...
 def loss_and_gradient(
     scene: Scene,
@@ -61,6 +63,8 @@ def loss_and_gradient(
     device: Optional[str] = None,
     max_depth: Optional[int] = None,
     deterministic: bool = False,
+    sampling: str = "detached",
+    jacobian_noise: Optional[float] = None,
 ) -> Tuple[float, Dict[str, npt.NDArray[np.float32]]]: ...
 def image_gradient(
     scene: Scene,

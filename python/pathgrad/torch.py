@@ -79,6 +79,8 @@ class _Render(torch.autograd.Function):
             device=s["device"],
             max_depth=s["max_depth"],
             deterministic=s["deterministic"],
+            sampling=s["sampling"],
+            jacobian_noise=s["jacobian_noise"],
         )
         out = []
         for name, t, need in zip(ctx.names, tensors, needed):
@@ -98,6 +100,8 @@ def render(
     device: Union[None, int, str] = None,
     max_depth: Optional[int] = None,
     deterministic: bool = False,
+    sampling: str = "detached",
+    jacobian_noise: Optional[float] = None,
 ) -> torch.Tensor:
     """Renders ``scene`` with the parameters ``params`` (``{name: tensor}``, each of the
     parameter's shape; a scalar parameter also takes shape ``()``) as a differentiable tensor:
@@ -107,7 +111,9 @@ def render(
     ``spp`` is the forward render's samples per pixel (default: the scene's, else 16),
     ``spp_grad`` the adjoint pass's (default: ``spp``); ``seed`` keys both (they draw
     independent random numbers). The result lives on the first tensor's device. ``device`` is
-    pathgrad's device (see :func:`pathgrad.render`), not torch's.
+    pathgrad's device (see :func:`pathgrad.render`), not torch's. ``sampling`` and
+    ``jacobian_noise`` choose the adjoint pass's sampling as in :func:`pathgrad.grad`
+    (``"attached"`` to differentiate a glass object's index of refraction).
     """
     if not isinstance(params, Mapping) or not params:
         raise ArgumentError("invalid params: expected a non-empty mapping {name: tensor}")
@@ -132,5 +138,6 @@ def render(
         max_depth=_pg._depth(max_depth),
         deterministic=bool(deterministic),
     )
+    settings["sampling"], settings["jacobian_noise"] = _pg._sampling(sampling, jacobian_noise)
     return _Render.apply(scene, names, settings, *tensors)
 

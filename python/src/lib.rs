@@ -18,7 +18,7 @@ use pathgrad::backend::Backend;
 use pathgrad::gpu::renderer::GradMode;
 use pathgrad::gpu::{Context, ContextDesc, DeviceChoice, Renderer};
 use pathgrad::image::Image;
-use pathgrad::integrator::{RenderOptions, View};
+use pathgrad::integrator::{DEFAULT_JACOBIAN_NOISE, RenderOptions, Sampling, View};
 use pathgrad::loss::Loss;
 use pathgrad::params::{Gradients, ParamId};
 use pathgrad::rng::PassTag;
@@ -172,10 +172,13 @@ impl State {
         Ok(o)
     }
 
-    /// The parameters `wrt` names (all if `None`): their ids, and their names with shapes.
-    fn chosen(&self, wrt: Option<&[String]>) -> pathgrad::Result<(Vec<ParamId>, Shaped)> {
+    /// The parameters `wrt` names (all if `None`) that a gradient sampled as `sampling`
+    /// differentiates ([`pathgrad::attached::differentiated`]: detached sampling leaves a smooth
+    /// dielectric's index of refraction out of "all", and refuses it by name): their ids, and
+    /// their names with shapes.
+    fn chosen(&self, wrt: Option<&[String]>, sampling: Sampling) -> pathgrad::Result<(Vec<ParamId>, Shaped)> {
         let params = &self.scene.params;
-        let ids = match wrt {
+        let ids: Vec<ParamId> = match wrt {
             None => (0..params.entries().len() as u32).map(ParamId).collect(),
             Some(names) => names
                 .iter()
@@ -187,6 +190,8 @@ impl State {
                 })
                 .collect::<pathgrad::Result<Vec<_>>>()?,
         };
+        let named = if wrt.is_some() { ids.clone() } else { Vec::new() };
+        let ids = pathgrad::attached::differentiated(&self.scene, ids, &named, sampling)?;
         let names = ids.iter().map(|&id| (params.entry(id).name.clone(), self.scene.param_shape(id))).collect();
         Ok((ids, names))
     }
@@ -423,7 +428,7 @@ fn stacked(py: Python<'_>, images: Vec<Image>) -> PyResult<Bound<'_, PyAny>> {
 /// sensors' `(height, width, 3)` images one after another. Returns `{name: array}` for the
 /// parameters `wrt` (all if `None`).
 #[pyfunction]
-#[pyo3(signature = (scene, adjoint, sensors, wrt=None, spp=None, seed=0, device=None, max_depth=None, deterministic=false))]
+#[pyo3(signature = (scene, adjoint, sensors, wrt=None, spp=None, seed=0, device=None, max_depth=None, deterministic=false, sampling="detached", jacobian_noise=None))]
 #[allow(clippy::too_many_arguments)]
 fn backward<'py>(
     py: Python<'py>,
@@ -436,23 +441,39 @@ fn backward<'py>(
     device: Option<String>,
     max_depth: Option<i64>,
     deterministic: bool,
+    sampling: &str,
+    jacobian_noise: Option<f32>,
 ) -> PyResult<Bound<'py, PyDict>> {
     let adjoint = values_of(&adjoint);
     let device = Device::parse(device.as_deref());
     let mode = if deterministic { GradMode::Deterministic } else { GradMode::Float };
+    let sampling = sampling_of(sampling, jacobian_noise)?;
     let (gradients, names) = py
         .detach(|| -> pathgrad::Result<(Gradients, Shaped)> {
             let mut state = scene.lock();
             let mut options = state.options(spp, seed, max_depth)?;
             let views = state.views(&sensors)?;
             let adjoints = State::images(&options, views.len(), &adjoint, "adjoint")?;
-            let (ids, names) = state.chosen(wrt.as_deref())?;
+            options.sampling = sampling;
+            options.validate()?;
+            let (ids, names) = state.chosen(wrt.as_deref(), sampling)?;
             let backend = state.backend(&device)?;
             options.differentiate = backend.param_kinds(&ids);
             Ok((backend.backward_views(&options, &views, &adjoints, mode)?, names))
         })
         .map_err(to_py)?;
     gradient_dict(py, &gradients, names)
+}
+
+/// `sampling` (`detached` or `attached`) and `jacobian_noise` (attached only) as the library's
+/// [`Sampling`], as the program's `--sampling` and `--jacobian-noise`.
+fn sampling_of(sampling: &str, jacobian_noise: Option<f32>) -> PyResult<Sampling> {
+    match (sampling, jacobian_noise) {
+        ("detached", None) => Ok(Sampling::Detached),
+        ("detached", Some(a)) => Err(argument("jacobian_noise", format!("{a} applies only to sampling=\"attached\""))),
+        ("attached", a) => Ok(Sampling::Attached { noise: a.unwrap_or(DEFAULT_JACOBIAN_NOISE) }),
+        (other, _) => Err(argument("sampling", format!("'{other}': expected detached or attached"))),
+    }
 }
 
 /// `{name: array of its shape}` for `names` out of `gradients`.
@@ -470,7 +491,7 @@ fn gradient_dict<'py>(py: Python<'py>, gradients: &Gradients, names: Shaped) -> 
 /// image per sensor) is averaged over the sensors, and one gradient pass differentiates it.
 /// Returns `(loss, {name: array})` for the parameters `wrt` (all if `None`).
 #[pyfunction]
-#[pyo3(signature = (scene, targets, sensors, loss="relmse", wrt=None, spp=None, seed=0, device=None, max_depth=None, deterministic=false))]
+#[pyo3(signature = (scene, targets, sensors, loss="relmse", wrt=None, spp=None, seed=0, device=None, max_depth=None, deterministic=false, sampling="detached", jacobian_noise=None))]
 #[allow(clippy::too_many_arguments)]
 fn loss_and_gradient<'py>(
     py: Python<'py>,
@@ -484,6 +505,8 @@ fn loss_and_gradient<'py>(
     device: Option<String>,
     max_depth: Option<i64>,
     deterministic: bool,
+    sampling: &str,
+    jacobian_noise: Option<f32>,
 ) -> PyResult<(f64, Bound<'py, PyDict>)> {
     let loss = match loss {
         "l1" => Loss::L1,
@@ -495,13 +518,16 @@ fn loss_and_gradient<'py>(
     let targets = values_of(&targets);
     let device = Device::parse(device.as_deref());
     let mode = if deterministic { GradMode::Deterministic } else { GradMode::Float };
+    let sampling = sampling_of(sampling, jacobian_noise)?;
     let (value, gradients, names) = py
         .detach(|| -> pathgrad::Result<(f64, Gradients, Shaped)> {
             let mut state = scene.lock();
             let mut options = state.options(spp, seed, max_depth)?;
             let views = state.views(&sensors)?;
             let targets = State::images(&options, views.len(), &targets, "targets")?;
-            let (ids, names) = state.chosen(wrt.as_deref())?;
+            options.sampling = sampling;
+            options.validate()?;
+            let (ids, names) = state.chosen(wrt.as_deref(), sampling)?;
             let backend = state.backend(&device)?;
             options.differentiate = backend.param_kinds(&ids);
             let (value, gradients) =

@@ -73,6 +73,57 @@ def test_backward_is_the_derivative_of_the_adjoint_weighted_image(cornell):
     assert np.allclose(everything[ALPHA], a[ALPHA], rtol=1e-5)
 
 
+GLASS_ETA = "glass.bsdf.eta"
+
+
+@pytest.fixture
+def glass(repo):
+    return pg.load(repo / "tests/data/scenes/attached_sphere.xml", width=16, height=12)
+
+
+def test_attached_sampling_equals_the_program(glass, run_cli, tmp_path):
+    # A glass sphere's index of refraction, differentiable only by attached sampling: the same
+    # loss and gradient as `pathgrad grad --sampling attached`, bit for bit on the CPU reference,
+    # and on the device up to the order of its float additions.
+    own = glass.params[GLASS_ETA].copy()  # the scene's own value (Mitsuba's bk7), which the program loads
+    pg.write_image(tmp_path / "target.exr", pg.render(glass, {GLASS_ETA: 1.3}, spp=8, seed=100))
+    target = pg.read_image(tmp_path / "target.exr")
+    glass.params[GLASS_ETA] = own
+    for device, flags in [("cpu", ["--cpu"]), (None, [])]:
+        stdout = run_cli("grad", str(glass.source), "--width", "16", "--height", "12", "--spp", "4", "--seed", "3",
+                         "--target", str(tmp_path / "target.exr"), "--loss", "l2", "--json", "--sampling",
+                         "attached", "--param", GLASS_ETA, *flags)
+        report = json.loads(stdout)
+        loss, grads = pg.loss_and_grad(glass, target, loss="l2", spp=4, seed=3, wrt=GLASS_ETA, sampling="attached",
+                                       device=device)
+        theirs = np.asarray(report["gradients"][GLASS_ETA], dtype=np.float32)
+        assert grads[GLASS_ETA].shape == (1,) and grads[GLASS_ETA][0] != 0
+        if device == "cpu":
+            assert loss == report["loss"] and np.array_equal(grads[GLASS_ETA], theirs), (grads, theirs)
+        else:
+            assert np.allclose(grads[GLASS_ETA], theirs, rtol=1e-4), (grads, theirs)
+    # The noise amplitude reaches the estimator: another amplitude, another estimate.
+    noisy = pg.grad(glass, np.ones((12, 16, 3), np.float32), wrt=GLASS_ETA, spp=2, sampling="attached",
+                    jacobian_noise=0.2, device="cpu")
+    plain = pg.grad(glass, np.ones((12, 16, 3), np.float32), wrt=GLASS_ETA, spp=2, sampling="attached", device="cpu")
+    assert noisy[GLASS_ETA][0] != plain[GLASS_ETA][0]
+
+
+def test_detached_sampling_leaves_out_or_refuses_the_index_of_refraction(glass):
+    ones = np.ones((12, 16, 3), np.float32)
+    everything = pg.grad(glass, ones, spp=1, device="cpu")
+    assert GLASS_ETA not in everything and set(everything) == set(glass.params) - {GLASS_ETA}
+    assert GLASS_ETA in pg.grad(glass, ones, spp=1, device="cpu", sampling="attached")
+    with pytest.raises(pg.ArgumentError, match=r"glass\.bsdf\.eta.*sampling=\"attached\""):
+        pg.grad(glass, ones, wrt=GLASS_ETA, spp=1)
+    with pytest.raises(pg.ArgumentError, match="jacobian_noise.*applies only to"):
+        pg.grad(glass, ones, spp=1, jacobian_noise=0.1)
+    with pytest.raises(pg.ArgumentError, match=r"sampling: 'sideways': expected detached or attached"):
+        pg.loss_and_grad(glass, ones, spp=1, sampling="sideways")
+    with pytest.raises(pg.ArgumentError, match=r"noise.*\[0, 1\)"):
+        pg.grad(glass, ones, spp=1, sampling="attached", jacobian_noise=1.5)
+
+
 def test_params_view(cornell):
     params = cornell.params
     # The seven of before, and since issue 34 the rough sphere's conductor eta and k.

@@ -43,6 +43,21 @@ def test_forward_and_backward_equal_the_numpy_interface(cornell):
     assert np.array_equal(red.grad.numpy().astype(np.float32), expected[RED])
 
 
+def test_attached_sampling_reaches_the_adjoint_pass(repo):
+    # A glass sphere's index of refraction as a tensor: its gradient by attached sampling is
+    # the NumPy interface's, and detached sampling refuses it by name.
+    glass = pg.load(repo / "tests/data/scenes/attached_sphere.xml", width=12, height=12)
+    name = "glass.bsdf.eta"
+    eta = torch.tensor([1.4], requires_grad=True)
+    pgt.render(glass, {name: eta}, spp=2, seed=5, device="cpu", sampling="attached").sum().backward()
+    expected = pg.grad(glass, np.ones((12, 12, 3), np.float32), {name: 1.4}, wrt=name, spp=2, seed=5, device="cpu",
+                       sampling="attached")
+    assert eta.grad.numpy()[0] != 0 and np.array_equal(eta.grad.numpy(), expected[name])
+    detached = torch.tensor([1.4], requires_grad=True)
+    with pytest.raises(pg.ArgumentError, match="glass.bsdf.eta"):
+        pgt.render(glass, {name: detached}, spp=2, device="cpu").sum().backward()
+
+
 def test_gradients_only_where_needed_and_no_graph_under_no_grad(cornell):
     alpha = torch.tensor(0.3, requires_grad=True)  # shape () for a scalar parameter
     red = torch.tensor([0.6, 0.1, 0.1])  # no gradient wanted

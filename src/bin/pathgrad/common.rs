@@ -369,28 +369,18 @@ impl StrategyArgs {
 }
 
 /// The parameters `patterns` select (as [`pathgrad::params::ParamTable::select`]), for gradient
-/// passes sampled as `sampling`: with detached sampling a smooth dielectric's index of
-/// refraction has no derivative, so naming it is an error and a wildcard leaves it out.
+/// passes sampled as `sampling` ([`pathgrad::attached::differentiated`]: with detached sampling a
+/// smooth dielectric's index of refraction is an error when a pattern names it exactly, and a
+/// wildcard leaves it out).
 pub(crate) fn select_differentiated(
     scene: &pathgrad::scene::Scene,
     patterns: &[&str],
     sampling: pathgrad::integrator::Sampling,
 ) -> Result<Vec<pathgrad::params::ParamId>> {
     let chosen = scene.params.select(patterns)?;
-    if sampling.is_attached() {
-        return Ok(chosen);
-    }
-    let iors = pathgrad::attached::attached_only_params(scene);
-    for &id in &chosen {
-        let name = &scene.params.entry(id).name;
-        if iors.contains(&id) && patterns.contains(&name.as_str()) {
-            bail!(
-                "{name} is a smooth dielectric's index of refraction: it acts only through the directions it \
-                 refracts into, which detached sampling holds fixed; differentiate it with --sampling attached"
-            );
-        }
-    }
-    Ok(chosen.into_iter().filter(|id| !iors.contains(id)).collect())
+    let named: Vec<_> =
+        chosen.iter().copied().filter(|&id| patterns.contains(&scene.params.entry(id).name.as_str())).collect();
+    Ok(pathgrad::attached::differentiated(scene, chosen, &named, sampling)?)
 }
 
 /// `bsdf`, or `diff q=Q` (with `power` placements: `diff q=Q power`).
