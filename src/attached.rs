@@ -695,7 +695,7 @@ impl HitGeometry {
 ///
 /// Attached sampling differentiates every parameter. Detached sampling holds the sampled
 /// directions fixed, so a parameter that acts only through them ([`attached_only_params`]: a
-/// smooth dielectric's index of refraction) has no detached derivative: it is an error when the
+/// dielectric's index of refraction) has no detached derivative: it is an error when the
 /// caller named it (`named`: the ids asked for one by one, not through a wildcard or "all"), and
 /// it is left out otherwise. The command line's `--param`, Python's `wrt` and the optimiser use it.
 ///
@@ -732,9 +732,10 @@ pub fn differentiated(
     if let Some(&id) = named.iter().find(|id| only.contains(id)) {
         return Err(crate::Error::InvalidArgument {
             parameter: scene.params.entry(id).name.clone(),
-            message: "a smooth dielectric's index of refraction acts only through the directions it refracts \
-                      into, which detached sampling holds fixed; differentiate it with --sampling attached \
-                      (Python: sampling=\"attached\"; the library: Sampling::Attached)"
+            message: "a dielectric's index of refraction, which detached sampling does not differentiate (a \
+                      smooth dielectric's acts only through the directions it refracts into, which detached \
+                      sampling holds fixed); differentiate it with --sampling attached (Python: \
+                      sampling=\"attached\"; the library: Sampling::Attached)"
                 .into(),
         });
     }

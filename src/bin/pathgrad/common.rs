@@ -370,8 +370,8 @@ impl StrategyArgs {
 
 /// The parameters `patterns` select (as [`pathgrad::params::ParamTable::select`]), for gradient
 /// passes sampled as `sampling` ([`pathgrad::attached::differentiated`]: with detached sampling a
-/// smooth dielectric's index of refraction is an error when a pattern names it exactly, and a
-/// wildcard leaves it out).
+/// dielectric's index of refraction is an error when a pattern names it exactly, and a wildcard
+/// leaves it out).
 pub(crate) fn select_differentiated(
     scene: &pathgrad::scene::Scene,
     patterns: &[&str],
