@@ -22,7 +22,7 @@ pub(crate) fn weights(width: u32, height: u32) -> Image {
 }
 
 /// `scene`'s options at `size`² and `spp`, with attached sampling (default noise).
-fn attached(scene: &Scene, size: u32, spp: u32) -> RenderOptions {
+pub(crate) fn attached(scene: &Scene, size: u32, spp: u32) -> RenderOptions {
     RenderOptions { width: size, height: size, spp, sampling: Sampling::attached(), ..RenderOptions::for_scene(scene) }
 }
 
@@ -32,7 +32,7 @@ pub(crate) fn objective(img: &Image, a: &Image) -> f64 {
 
 /// The CPU reference's attached gradient of `name` against central differences of its renders
 /// with the same seeds: the Welch test over `seeds` with a power check.
-fn check_cpu(scene: &Scene, name: &str, seeds: u32, opts: RenderOptions) {
+pub(crate) fn check_cpu(scene: &Scene, name: &str, seeds: u32, opts: RenderOptions) {
     let a = weights(opts.width, opts.height);
     let id = scene.params.find(name).unwrap();
     let value = scene.params.get(id)[0];

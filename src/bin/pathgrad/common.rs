@@ -369,8 +369,8 @@ impl StrategyArgs {
 }
 
 /// The parameters `patterns` select (as [`pathgrad::params::ParamTable::select`]), for gradient
-/// passes sampled as `sampling`: with detached sampling a smooth dielectric's index of
-/// refraction has no derivative, so naming it is an error and a wildcard leaves it out.
+/// passes sampled as `sampling`: with detached sampling a dielectric's (smooth or rough) index
+/// of refraction has no derivative, so naming it is an error and a wildcard leaves it out.
 pub(crate) fn select_differentiated(
     scene: &pathgrad::scene::Scene,
     patterns: &[&str],
@@ -385,8 +385,9 @@ pub(crate) fn select_differentiated(
         let name = &scene.params.entry(id).name;
         if iors.contains(&id) && patterns.contains(&name.as_str()) {
             bail!(
-                "{name} is a smooth dielectric's index of refraction: it acts only through the directions it \
-                 refracts into, which detached sampling holds fixed; differentiate it with --sampling attached"
+                "{name} is a dielectric's index of refraction, which detached sampling does not differentiate \
+                 (a smooth dielectric's acts only through the directions it refracts into, which detached \
+                 sampling holds fixed); differentiate it with --sampling attached"
             );
         }
     }
