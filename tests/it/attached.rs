@@ -271,7 +271,7 @@ fn attached_sampling_refuses_what_it_does_not_cover() {
 }
 
 /// The replay returns Φ to zero as it returns the radiance to zero (ALGORITHMS.md §9 test (d)):
-/// after the last vertex every term of Γ has been removed, on every path of the four scenes,
+/// after the last vertex every term of Γ has been removed, on every path of the six scenes,
 /// up to rounding amplified by the completed Jacobians' inverses (10⁻³ of Γ's largest entry).
 #[test]
 fn the_replay_returns_gamma_to_zero() {
@@ -280,7 +280,14 @@ fn the_replay_returns_gamma_to_zero() {
     use pathgrad::cpu::path::{GradSink, trace_path};
     use pathgrad::rng::PassTag;
     use pathgrad::scene::flat::FlatScene;
-    for name in ["attached_sphere", "attached_slab", "attached_pane", "attached_mirror"] {
+    for name in [
+        "attached_sphere",
+        "attached_slab",
+        "attached_pane",
+        "attached_mirror",
+        "attached_rough_sphere",
+        "attached_rough_sphere_beckmann",
+    ] {
         let scene = scenes::data_scene(name);
         let opts = attached(&scene, 24, 2);
         let flat = FlatScene::new(&scene).unwrap();
