@@ -798,12 +798,24 @@ bool path_step(inout PathState st) {
         // Attached sampling at a rough conductor: its own sampler (RoughLobe, src/attached.rs).
         bool rough_attached = HAS(F_CONDUCTOR) && !bsdf.blend && is_conductor(bsdf.leaf0.kind);
         RoughLobe rlobe;
+        // At an isotropic rough dielectric: its own sampler too (RoughGlassLobe,
+        // src/attached/rough_dielectric.rs), whose density holds the lobe's choice.
+        bool glass_attached = HAS(F_ROUGH_DIELECTRIC) && !bsdf.blend && is_rough_dielectric(bsdf.leaf0.kind);
+        RoughGlassLobe globe;
         if (rough_attached) {
             bool rough_ok = rough_conductor_lobe(st.ray.dir, frame.n, bsdf.leaf0.alpha,
                                                  is_beckmann(bsdf.leaf0.distribution), u_dir, bsdf.leaf0.eta,
                                                  bsdf.leaf0.k, rlobe);
             bs = BsdfSample(to_local(frame, rlobe.wo), rlobe.pdf, rlobe.weight * bsdf.leaf0.color * rlobe.pdf,
                             rough_ok, false);
+            pdf_f = bs.pdf;
+        } else if (glass_attached) {
+            bool glass_ok = rough_dielectric_lobe(st.ray.dir, frame.n, bsdf.leaf0.alpha,
+                                                  is_beckmann(bsdf.leaf0.distribution), u_dir, u_lobe,
+                                                  bsdf.leaf0.eta.x, globe);
+            bs = BsdfSample(to_local(frame, globe.wo), globe.pdf,
+                            globe.weight * globe.pdf * (globe.transmitted ? bsdf.leaf0.k : bsdf.leaf0.color),
+                            glass_ok, false);
             pdf_f = bs.pdf;
         } else
 #endif
@@ -875,8 +887,34 @@ bool path_step(inout PathState st) {
                             st.jac = jac_compose(a, st.jac);
                         }
                     }
+                    if (glass_attached) {
+                        Jac6 a = attached_vertex_jacobian(st, geometry, globe.t_d, globe.t_n, s.ng, globe.wo, vertex);
+                        // ∂ln(w·P)/∂r, one row for the three channels.
+                        Row6 row = hit_row(geometry, globe.dlnw_dd, globe.dlnw_dn);
+                        if (adjoint) {
+                            // h = δL·(∂ln w/∂r ⊙ L_after); Φ′ = (Φ − h)·Ã⁻¹; α's and η's two terms each.
+                            vec3 after = st.adj * st.radiance;
+                            float total = after.x + after.y + after.z;
+                            Row6 next;
+                            bool solved = jac_solve_row(a, row_add_scaled(st.gamma, row, -total), next);
+                            float by_alpha = solved ? dot(next.d, globe.t_alpha) : 0.0;
+                            float by_eta = solved ? dot(next.d, globe.t_eta) : 0.0;
+                            if (am.p_alpha != NO_PARAM)
+                                param_grad(am.p_alpha, vec3(total * globe.dlnw_dalpha + by_alpha, 0.0, 0.0));
+                            // A rough dielectric's η parameter sits in `table` (src/scene/flat.rs).
+                            if (am.table != NO_PARAM)
+                                param_grad(am.table, vec3(total * globe.dlnw_deta + by_eta, 0.0, 0.0));
+                            st.gamma = solved ? next : ROW6_ZERO;
+                        } else {
+                            Row6 row_j = row_through(row, st.jac);
+                            st.log_r = row_add_scaled(st.log_r, row_j, 1.0);
+                            st.log_g = row_add_scaled(st.log_g, row_j, 1.0);
+                            st.log_b = row_add_scaled(st.log_b, row_j, 1.0);
+                            st.jac = jac_compose(a, st.jac);
+                        }
+                    }
                     SmoothLobe lobe;
-                    bool lobe_ok = !rough_attached
+                    bool lobe_ok = !rough_attached && !glass_attached
                         && (am.tag == MAT_CONDUCTOR
                             ? conductor_lobe(st.ray.dir, frame.n, bsdf.leaf0.eta, bsdf.leaf0.k, lobe)
                             : smooth_lobe(am.tag == MAT_THIN_DIELECTRIC, st.ray.dir, frame.n, bsdf.leaf0.eta.x,

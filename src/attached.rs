@@ -28,14 +28,15 @@ use glam::{Mat3, Vec3};
 pub use rough_dielectric::{RoughDielectricLobe, rough_dielectric_lobe};
 
 use crate::contract::{
-    MAT_CONDUCTOR, MAT_DIELECTRIC, MAT_ROUGH_CONDUCTOR, MAT_THIN_DIELECTRIC, NO_PARAM, SCALAR_TEXTURE,
+    MAT_CONDUCTOR, MAT_DIELECTRIC, MAT_ROUGH_CONDUCTOR, MAT_ROUGH_DIELECTRIC, MAT_THIN_DIELECTRIC, NO_PARAM,
+    SCALAR_TEXTURE,
 };
 use crate::integrator::{RenderOptions, Sampling};
 use crate::scene::flat::FlatScene;
 
 /// Refuses attached sampling (`options.sampling`) where its vertex Jacobians are not built: every
 /// material must be a smooth `dielectric`, `thindielectric` or `conductor` or an isotropic
-/// `roughconductor` with untextured roughness (no normal map, no mask), without
+/// `roughconductor` or `roughdielectric` with untextured roughness (no normal map, no mask), without
 /// media; light comes from the environment or from emitters the paths hit. `forward` refuses it
 /// for forward-mode image gradients, which carry per-channel derivatives the adjoint-weighted
 /// attached sums do not.
@@ -51,8 +52,9 @@ pub fn refuse_unsupported(flat: &FlatScene, options: &RenderOptions, forward: bo
             parameter: "Sampling::Attached".into(),
             message: format!(
                 "{what}: attached derivatives are built for scenes of smooth `dielectric`, `thindielectric` and \
-                 `conductor` surfaces and isotropic `roughconductor`s lit by the environment or by emitters the \
-                 paths hit, in reverse mode (use detached sampling)"
+                 `conductor` surfaces and isotropic `roughconductor`s and `roughdielectric`s with untextured \
+                 roughness lit by the environment or by emitters the paths hit, in reverse mode (use detached \
+                 sampling)"
             ),
         })
     };
@@ -74,12 +76,18 @@ pub fn refuse_unsupported(flat: &FlatScene, options: &RenderOptions, forward: bo
         "principledthin",
     ];
     for m in &flat.materials {
-        if !matches!(m.tag, MAT_DIELECTRIC | MAT_THIN_DIELECTRIC | MAT_CONDUCTOR | MAT_ROUGH_CONDUCTOR) {
+        if !matches!(
+            m.tag,
+            MAT_DIELECTRIC | MAT_THIN_DIELECTRIC | MAT_CONDUCTOR | MAT_ROUGH_CONDUCTOR | MAT_ROUGH_DIELECTRIC
+        ) {
             let name = names.get(m.tag as usize).copied().unwrap_or("another BSDF");
             return refuse(format!("the scene has a `{name}` material"));
         }
         if m.tag == MAT_ROUGH_CONDUCTOR && (m.p_alpha != m.p_alpha_v || m.p_alpha & SCALAR_TEXTURE != 0) {
             return refuse("the scene has an anisotropic or texture-roughened `roughconductor`".into());
+        }
+        if m.tag == MAT_ROUGH_DIELECTRIC && (m.p_alpha != m.p_alpha_v || m.p_alpha & SCALAR_TEXTURE != 0) {
+            return refuse("the scene has an anisotropic or texture-roughened `roughdielectric`".into());
         }
         if m.nmap_width > 0 || m.p_opacity != NO_PARAM {
             return refuse("the scene has a normal-mapped, bump-mapped or masked material".into());
@@ -218,7 +226,9 @@ pub fn regularisation(amplitude: f32, u_sign: f32, u_size: f32) -> f32 {
 }
 
 /// The parameters only attached sampling differentiates: the `eta` of every smooth `dielectric`
-/// and `thindielectric` (detached gradients of them are 0).
+/// and `thindielectric` and of every `roughdielectric` (detached gradients of them are 0: a
+/// smooth one's η acts only through its directions, and pathgrad's detached rough-dielectric
+/// derivatives leave η out).
 pub fn attached_only_params(scene: &crate::scene::Scene) -> Vec<crate::params::ParamId> {
     scene
         .materials
@@ -229,6 +239,7 @@ pub fn attached_only_params(scene: &crate::scene::Scene) -> Vec<crate::params::P
             {
                 *eta_param
             }
+            crate::scene::Material::RoughDielectric { eta_param, .. } => *eta_param,
             _ => None,
         })
         .collect()

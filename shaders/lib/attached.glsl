@@ -360,6 +360,130 @@ bool rough_conductor_lobe(vec3 d, vec3 n, float alpha, bool beckmann, vec2 u, ve
     return true;
 }
 
+// A rough dielectric's attached lobe (RoughDielectricLobe of src/attached/rough_dielectric.rs, where
+// it is derived): a microfacet normal drawn from D(h)·cos θh about the normal turned to the side the
+// ray arrives on, then reflection (u_lobe ≤ F) or refraction through it. Rows are of ln(w·P), P the
+// lobe's choice probability; `weight` leaves out the specular reflectance or transmittance.
+struct RoughGlassLobe {
+    vec3 wo; bool transmitted; float weight; float pdf; mat3 t_d; mat3 t_n; vec3 t_alpha; vec3 t_eta;
+    vec3 dlnw_dd; vec3 dlnw_dn; float dlnw_dalpha; float dlnw_deta;
+};
+
+// rough_dielectric_lobe (eta: inside over outside; n: the outward shading normal): false where the
+// sample leaves on the side its lobe does not serve, meets total internal reflection on the
+// refracted branch, or weighs nothing.
+bool rough_dielectric_lobe(vec3 d, vec3 n, float alpha, bool beckmann, vec2 u, float u_lobe, float eta,
+                           out RoughGlassLobe l) {
+    l = RoughGlassLobe(vec3(0.0), false, 0.0, 0.0, mat3(1.0), mat3(0.0), vec3(0.0), vec3(0.0), vec3(0.0),
+                       vec3(0.0), 0.0, 0.0);
+    // The normal turned to the incoming side: n′ = s·n.
+    float s = dot(d, n) <= 0.0 ? 1.0 : -1.0;
+    vec3 ns = s * n;
+    float ci = -dot(d, ns);
+    if (!(ci > 0.0) || !(alpha > 0.0) || !(eta > 0.0)) return false;
+    // The microfacet normal about n′ (micro_normal).
+    vec3 t, b;
+    mat3 t_n, b_n;
+    basis_jacobians(ns, t, b, t_n, b_n);
+    float uu = min(u.x, 1.0 - 1e-7);
+    float g = beckmann ? sqrt(max(-log(1.0 - uu), 0.0)) : sqrt(uu / (1.0 - uu));
+    float phi = 2.0 * PI * u.y;
+    float sin_p = sin(phi);
+    float cos_p = cos(phi);
+    vec3 m = vec3(alpha * g * cos_p, alpha * g * sin_p, 1.0);
+    float len = length(m);
+    vec3 hl = m / len;
+    vec3 dm = vec3(g * cos_p, g * sin_p, 0.0);
+    vec3 dhl = (dm - hl * dot(hl, dm)) / len;
+    vec3 h = hl.x * t + hl.y * b + hl.z * ns;
+    // ∂h/∂n = s·∂h/∂n′.
+    mat3 hn = s * (hl.x * t_n + hl.y * b_n + mat3(hl.z));
+    vec3 h_alpha = dhl.x * t + dhl.y * b + dhl.z * ns;
+    float c = -dot(d, h);
+    if (!(c > 0.0)) return false;
+    vec3 dc_dd = -h;
+    vec3 dc_dn = -(transpose(hn) * d);
+    float dc_dalpha = -dot(d, h_alpha);
+    // F at the microfacet with the side's sign, by c and by η.
+    vec3 fr = fresnel_dielectric_grad(s * c, eta);
+    float f = fr.x;
+    float df_dc = s * fr.y;
+    bool transmitted = u_lobe > f;
+    bool outside = s > 0.0;
+    float eta_ti = outside ? 1.0 / eta : eta;
+    float deta_ti = outside ? -1.0 / (eta * eta) : 1.0;
+    vec3 wo;
+    mat3 t_d;
+    mat3 t_nn;
+    vec3 t_alpha;
+    vec3 t_eta = vec3(0.0);
+    float choice;
+    float dlnp_df;
+    if (transmitted) {
+        // Refraction through h (refract_jacobians with cos θi = c > 0).
+        float root2 = 1.0 - eta_ti * eta_ti * (1.0 - c * c);
+        if (!(root2 > 0.0)) return false;
+        float root = sqrt(root2);
+        float cos_t = -root;
+        float dct_dc = -eta_ti * eta_ti * c / root;
+        float dct_deta = eta_ti * (1.0 - c * c) / root;
+        wo = eta_ti * d + (cos_t + eta_ti * c) * h;
+        float k = dct_dc + eta_ti;
+        t_d = eta_ti * mat3(1.0) - k * outerProduct(h, h);
+        mat3 r_h = (cos_t + eta_ti * c) * mat3(1.0) - k * outerProduct(h, d);
+        t_nn = r_h * hn;
+        t_alpha = r_h * h_alpha;
+        t_eta = (d + (dct_deta + c) * h) * deta_ti;
+        choice = 1.0 - f;
+        dlnp_df = -1.0 / (1.0 - f);
+    } else {
+        wo = d + 2.0 * c * h;
+        t_d = mat3(1.0) - 2.0 * outerProduct(h, h);
+        t_nn = 2.0 * outerProduct(h, dc_dn) + 2.0 * c * hn;
+        t_alpha = 2.0 * dc_dalpha * h + 2.0 * c * h_alpha;
+        choice = f;
+        dlnp_df = 1.0 / f;
+    }
+    float co = dot(wo, ns);
+    if (!(choice > 0.0) || !(co != 0.0) || (co < 0.0) != transmitted) return false;
+    vec2 gi = attached_ln_g1(beckmann, alpha * alpha * attached_tan2(ci));
+    vec2 go = attached_ln_g1(beckmann, alpha * alpha * attached_tan2(co));
+    float gi_c = gi.y * alpha * alpha * -2.0 / (ci * ci * ci);
+    float go_c = go.y * alpha * alpha * -2.0 / (co * co * co);
+    float g_alpha = gi.y * 2.0 * alpha * attached_tan2(ci) + go.y * 2.0 * alpha * attached_tan2(co);
+    float hz = hl.z;
+    float radiance = transmitted ? eta_ti * eta_ti : 1.0;
+    l.wo = wo;
+    l.transmitted = transmitted;
+    l.weight = exp(gi.x + go.x) * c / (ci * hz) * radiance;
+    l.t_d = t_d;
+    l.t_n = t_nn;
+    l.t_alpha = t_alpha;
+    l.t_eta = t_eta;
+    // cos θi = −d·n′; cos θo = wo·n′ (∂n′/∂n = s).
+    vec3 ci_d = -ns;
+    vec3 ci_n = -s * d;
+    vec3 co_d = transpose(t_d) * ns;
+    vec3 co_n = transpose(t_nn) * ns + s * wo;
+    float co_alpha = dot(ns, t_alpha);
+    float co_eta = dot(ns, t_eta);
+    l.dlnw_dd = dc_dd / c + gi_c * ci_d + go_c * co_d - ci_d / ci + dlnp_df * df_dc * dc_dd;
+    l.dlnw_dn = dc_dn / c + gi_c * ci_n + go_c * co_n - ci_n / ci + dlnp_df * df_dc * dc_dn;
+    l.dlnw_dalpha = dc_dalpha / c + go_c * co_alpha + g_alpha - dhl.z / hz + dlnp_df * df_dc * dc_dalpha;
+    float dradiance = transmitted ? 2.0 * deta_ti / eta_ti : 0.0;
+    l.dlnw_deta = go_c * co_eta + dlnp_df * fr.z + dradiance;
+    // |∂h/∂wo|: 1/(4c) reflected; η_rel²·|wo·h|/(c + η_rel·wo·h)² refracted (η_rel = 1/η_ti).
+    float jacobian = 1.0 / (4.0 * c);
+    if (transmitted) {
+        float eta_rel = 1.0 / eta_ti;
+        float om = dot(wo, h);
+        float den = c + eta_rel * om;
+        jacobian = eta_rel * eta_rel * abs(om) / (den * den);
+    }
+    l.pdf = microfacet_d(beckmann ? DIST_BECKMANN : DIST_GGX, alpha, hl) * hz * choice * jacobian;
+    return true;
+}
+
 // The row over the incoming ray of a quantity with derivatives by_d (direction) and by_n (normal).
 Row6 hit_row(HitGeometry g, vec3 by_d, vec3 by_n) {
     vec3 w = transpose(hit_projection(g)) * (transpose(g.dn_dx) * by_n);

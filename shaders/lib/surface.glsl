@@ -495,6 +495,8 @@ Leaf leaf_from_material(Material m, TexAt at) {
     l.eta = m.eta;
     // A smooth dielectric's η: its parameter (p_weight) or the constant.
     if (delta && m.tag != MAT_CONDUCTOR && m.p_weight != NO_PARAM) l.eta.x = params[m.p_weight];
+    // A rough dielectric's η: its parameter (table) or the constant.
+    if (rough_glass && m.table != NO_PARAM) l.eta.x = params[m.table];
     // A dielectric's transmittance parameter: p_alpha (smooth) or p_weight (rough); a plastic's
     // specular colour: p_weight.
     bool coated = plastic || is_smooth_plastic(m.tag);

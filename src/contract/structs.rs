@@ -370,7 +370,8 @@ contract_structs! {
         /// Textured: row 1, v' = dot(uv_row1, (u, v, 1)) ((0, 1, 0) for none).
         uv_row1: Vec3,
         /// Rough plastic: offset of its coating table in the tables array
-        /// (`COATING_TABLE_LEN` floats: T(μ), ∂T/∂α, Rᵢ, ∂Rᵢ/∂α).
+        /// (`COATING_TABLE_LEN` floats: T(μ), ∂T/∂α, Rᵢ, ∂Rᵢ/∂α). Rough dielectric: parameter
+        /// offset of its η (`NO_PARAM`: `eta.x` holds it).
         table: u32,
         /// Normal or bump map (Mitsuba's `normalmap`, `bumpmap` around this material): offset of
         /// its texels in the tables array (RGB for a normal map, one value for a bump map; row 0

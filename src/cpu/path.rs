@@ -4,7 +4,8 @@
 use glam::{Vec2, Vec3};
 
 use crate::attached::{
-    HitGeometry, Jac6, RoughLobe, Row6, conductor_lobe, regularisation, rough_conductor_lobe, smooth_lobe,
+    HitGeometry, Jac6, RoughDielectricLobe, RoughLobe, Row6, conductor_lobe, regularisation, rough_conductor_lobe,
+    rough_dielectric_lobe, smooth_lobe,
 };
 use crate::bsdf::Leaf;
 use crate::bsdf::differential::{bsdf_pdf_diff, bsdf_sample_diff};
@@ -838,6 +839,7 @@ pub fn trace_path<const ADJOINT: bool>(
             && !mix.dx_taken
             && u_bs[(DIM_TECHNIQUE % 4) as usize] < globals.diff_q;
         let mut rough_lobe = None; // attached sampling's rough-conductor lobe
+        let mut glass_lobe = None; // attached sampling's rough-dielectric lobe
         let (bs, pdf_f, pdf_d) = if use_dx {
             let u_sign = draw_block(key, pixel, sample, vertex, DIM_DIFF_SIGN / 4)[(DIM_DIFF_SIGN % 4) as usize];
             let bs = bsdf_sample_diff(&bsdf, wi, u_sign, u_lobe, u_dir);
@@ -856,6 +858,20 @@ pub fn trace_path<const ADJOINT: bool>(
                 delta: false,
             });
             rough_lobe = lobe;
+            let pdf_f = bs.as_ref().map_or(0.0, |b| b.pdf);
+            (bs, pdf_f, 0.0)
+        } else if let Some((lobe, reflectance, transmittance)) =
+            attached.then(|| rough_glass_attached(&bsdf, ray.dir, frame.n, u_dir, u_lobe)).flatten()
+        {
+            // Attached sampling at a rough dielectric: its own sampler
+            // (crate::attached::RoughDielectricLobe); its density holds the lobe's choice.
+            let bs = lobe.as_ref().map(|l| BsdfSample {
+                wo: frame.to_local(l.wo),
+                pdf: l.pdf,
+                value: l.weight * l.pdf * if l.transmitted { transmittance } else { reflectance },
+                delta: false,
+            });
+            glass_lobe = lobe;
             let pdf_f = bs.as_ref().map_or(0.0, |b| b.pdf);
             (bs, pdf_f, 0.0)
         } else {
@@ -895,7 +911,7 @@ pub fn trace_path<const ADJOINT: bool>(
         // The path continues: everything later in `radiance` carries the factor f̂(wi, wo).
         if ADJOINT {
             let adj = adj_radiance * safe_div(radiance, bs.value);
-            if rough_lobe.is_some() {
+            if rough_lobe.is_some() || glass_lobe.is_some() {
                 // The roughness's derivative is the attached lobe's own (below).
                 bsdf_backward_but_alpha(flat, s.material, s.tex_at(), &bsdf, wi, bs.wo, adj, sink);
             } else {
@@ -944,6 +960,33 @@ pub fn trace_path<const ADJOINT: bool>(
                 let (common, c_row) = (common.through(&jac), c_row.through(&jac));
                 for (c, log_row) in log_rows.iter_mut().enumerate() {
                     *log_row = log_row.add_scaled(common, 1.0).add_scaled(c_row, lobe.dlnf_dc[c]);
+                }
+                jac = a.compose(&jac);
+            }
+        }
+        if let (Some(lobe), Some(geometry)) = (glass_lobe, &geometry) {
+            let a = vertex_jacobian(geometry, lobe.t_d, lobe.t_n, lobe.wo);
+            // ∂ln(w·P)/∂r, one row for the three channels (the colours are constants of the lobe).
+            let row = geometry.row(lobe.dlnw_dd, lobe.dlnw_dn);
+            if ADJOINT {
+                let after = adj_radiance * radiance;
+                let total = after.x + after.y + after.z;
+                // h = δL·(∂ln w/∂r ⊙ L_after); Φ′ = (Φ − h)·Ã⁻¹; α's and η's two terms each.
+                let next = a.solve_row(phi.add_scaled(row, -total));
+                let along = |t: Vec3| next.map_or(0.0, |n| n.d.dot(t));
+                let m = &flat.materials[s.material as usize];
+                if m.p_alpha != NO_PARAM {
+                    sink.add(m.p_alpha, Vec3::new(total * lobe.dlnw_dalpha + along(lobe.t_alpha), 0.0, 0.0));
+                }
+                // A rough dielectric's η parameter sits in `table` (crate::scene::flat).
+                if m.table != NO_PARAM {
+                    sink.add(m.table, Vec3::new(total * lobe.dlnw_deta + along(lobe.t_eta), 0.0, 0.0));
+                }
+                phi = next.unwrap_or(Row6::ZERO);
+            } else {
+                let row = row.through(&jac);
+                for log_row in log_rows.iter_mut() {
+                    *log_row = log_row.add_scaled(row, 1.0);
                 }
                 jac = a.compose(&jac);
             }
@@ -1003,6 +1046,30 @@ fn rough_attached(bsdf: &Bsdf, d: Vec3, n: Vec3, u: Vec2) -> Option<(Option<Roug
         Leaf::RoughConductor { distribution, alpha, alpha_v, specular, eta, k } if alpha == alpha_v => {
             let beckmann = distribution == Distribution::Beckmann;
             Some((rough_conductor_lobe(d, n, alpha, beckmann, [u.x, u.y], eta, k), specular))
+        }
+        _ => None,
+    }
+}
+
+/// Attached sampling's rough-dielectric vertex: `Some` (the lobe, or `None` where its sample is
+/// invalid, and the specular reflectance and transmittance) where `bsdf` is one isotropic rough
+/// dielectric, sampled from incoming direction `d` at shading normal `n` with uniforms `u` (the
+/// microfacet normal) and `u_lobe` (reflection or refraction).
+fn rough_glass_attached(
+    bsdf: &Bsdf,
+    d: Vec3,
+    n: Vec3,
+    u: Vec2,
+    u_lobe: f32,
+) -> Option<(Option<RoughDielectricLobe>, Vec3, Vec3)> {
+    if bsdf.blend || bsdf.perturbed.is_some() {
+        return None;
+    }
+    match bsdf.leaves[0] {
+        Leaf::RoughDielectric(ref l) if l.alpha == l.alpha_v => {
+            let beckmann = l.distribution == Distribution::Beckmann;
+            let lobe = rough_dielectric_lobe(d, n, l.alpha, beckmann, [u.x, u.y], u_lobe, l.eta);
+            Some((lobe, l.reflectance, l.transmittance))
         }
         _ => None,
     }

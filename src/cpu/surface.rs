@@ -524,7 +524,8 @@ fn leaf_from_material(flat: &FlatScene, m: &Material, at: TexAt) -> Leaf {
             alpha_v: alpha_value(flat, m.p_alpha_v, at),
             reflectance: colour_value(flat, m.p_color, at, m.uv_row0),
             transmittance: colour_value(flat, m.p_weight, at, m.k),
-            eta: m.eta.x,
+            // η: its parameter (`table`) or the constant.
+            eta: if m.table != NO_PARAM { params[m.table as usize] } else { m.eta.x },
         }),
         MAT_PRINCIPLED => {
             let s = |i: u32| scalar_value(flat, principled_slot(flat, m, i), at);

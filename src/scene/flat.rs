@@ -636,9 +636,10 @@ fn flatten_material(scene: &Scene, m: &Material) -> GpuMaterial {
                 ..Default::default()
             }
         }
-        Material::RoughDielectric { distribution, alpha, alpha_v, reflectance, transmittance, eta } => {
+        Material::RoughDielectric { distribution, alpha, alpha_v, reflectance, transmittance, eta, eta_param } => {
             // The reflectance a parameter (p_color) or a constant (uv_row0), the transmittance a
-            // parameter (p_weight, free in a leaf) or a constant (k).
+            // parameter (p_weight, free in a leaf) or a constant (k); η's parameter in `table`
+            // (free in a rough dielectric; its value overrides eta.x).
             let ((p_color, r), (p_weight, t)) = (split_colour(scene, reflectance), split_colour(scene, transmittance));
             GpuMaterial {
                 tag: MAT_ROUGH_DIELECTRIC,
@@ -650,6 +651,7 @@ fn flatten_material(scene: &Scene, m: &Material) -> GpuMaterial {
                 uv_row0: r,
                 eta: Vec3::new(eta, 0.0, 0.0),
                 k: t,
+                table: eta_param.map_or(NO_PARAM, offset),
                 ..Default::default()
             }
         }

@@ -262,6 +262,10 @@ pub enum Material {
         transmittance: SmoothColour,
         /// int_ior / ext_ior.
         eta: f32,
+        /// η as a parameter (Mitsuba's `NAME.eta`), whose value overrides `eta`; as a smooth
+        /// dielectric's, only attached derivatives ([`crate::integrator::Sampling::Attached`])
+        /// differentiate it. `None` keeps the constant.
+        eta_param: Option<ParamId>,
     },
     /// Mitsuba's `principled` (`crate::bsdf::principled`).
     Principled {
@@ -813,6 +817,7 @@ impl Scene {
             reflectance: SmoothColour::Constant(Vec3::ONE),
             transmittance: SmoothColour::Param(transmittance),
             eta,
+            eta_param: None,
         }))
     }
 

@@ -22,7 +22,7 @@ pub(crate) fn weights(width: u32, height: u32) -> Image {
 }
 
 /// `scene`'s options at `size`² and `spp`, with attached sampling (default noise).
-fn attached(scene: &Scene, size: u32, spp: u32) -> RenderOptions {
+pub(crate) fn attached(scene: &Scene, size: u32, spp: u32) -> RenderOptions {
     RenderOptions { width: size, height: size, spp, sampling: Sampling::attached(), ..RenderOptions::for_scene(scene) }
 }
 
@@ -32,7 +32,7 @@ pub(crate) fn objective(img: &Image, a: &Image) -> f64 {
 
 /// The CPU reference's attached gradient of `name` against central differences of its renders
 /// with the same seeds: the Welch test over `seeds` with a power check.
-fn check_cpu(scene: &Scene, name: &str, seeds: u32, opts: RenderOptions) {
+pub(crate) fn check_cpu(scene: &Scene, name: &str, seeds: u32, opts: RenderOptions) {
     let a = weights(opts.width, opts.height);
     let id = scene.params.find(name).unwrap();
     let value = scene.params.get(id)[0];
@@ -271,7 +271,7 @@ fn attached_sampling_refuses_what_it_does_not_cover() {
 }
 
 /// The replay returns Φ to zero as it returns the radiance to zero (ALGORITHMS.md §9 test (d)):
-/// after the last vertex every term of Γ has been removed, on every path of the four scenes,
+/// after the last vertex every term of Γ has been removed, on every path of the six scenes,
 /// up to rounding amplified by the completed Jacobians' inverses (10⁻³ of Γ's largest entry).
 #[test]
 fn the_replay_returns_gamma_to_zero() {
@@ -280,7 +280,14 @@ fn the_replay_returns_gamma_to_zero() {
     use pathgrad::cpu::path::{GradSink, trace_path};
     use pathgrad::rng::PassTag;
     use pathgrad::scene::flat::FlatScene;
-    for name in ["attached_sphere", "attached_slab", "attached_pane", "attached_mirror"] {
+    for name in [
+        "attached_sphere",
+        "attached_slab",
+        "attached_pane",
+        "attached_mirror",
+        "attached_rough_sphere",
+        "attached_rough_sphere_beckmann",
+    ] {
         let scene = scenes::data_scene(name);
         let opts = attached(&scene, 24, 2);
         let flat = FlatScene::new(&scene).unwrap();

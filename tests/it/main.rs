@@ -6,6 +6,7 @@ mod support;
 
 mod adaptive;
 mod attached;
+mod attached_glass;
 mod batch;
 mod bvh_embree;
 mod cli;

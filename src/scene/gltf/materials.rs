@@ -244,6 +244,7 @@ impl Loader<'_> {
                 reflectance: SmoothColour::Constant(Vec3::ONE),
                 transmittance: SmoothColour::Param(transmittance),
                 eta: ior,
+                eta_param: None,
             })
         } else {
             let weight = f0 + (1.0 - f0) * metallic;

@@ -476,13 +476,16 @@ impl<'a> Loader<'a> {
     /// Mitsuba's `roughdielectric`: `distribution` (Beckmann), isotropic `alpha` (0.1, parameter
     /// `NAME.alpha.value`), `int_ior` (bk7) and `ext_ior` (air), and `specular_reflectance` /
     /// `specular_transmittance` (1; a parameter `NAME.KEY.value`, or a texture's `NAME.KEY.data`,
-    /// only where the file gives it, as Mitsuba's traversal).
+    /// only where the file gives it, as Mitsuba's traversal). η = int_ior/ext_ior is the
+    /// parameter `NAME.eta` (Mitsuba's key), as a smooth dielectric's: only attached sampling
+    /// differentiates it.
     fn rough_dielectric(&mut self, p: &Props<'a>, name: &str, depth: usize) -> Result<MaterialId> {
         let distribution = self.distribution(p)?;
         let (alpha, alpha_v) = self.microfacet_alpha(p, name)?;
         let eta = self.dielectric_eta(p)?;
         let reflectance = self.specular_colour(p, name, "specular_reflectance", false, depth)?;
         let transmittance = self.specular_colour(p, name, "specular_transmittance", false, depth)?;
+        let eta_param = Some(self.scene.params.add(&format!("{name}.eta"), &[eta], bounds::IOR)?);
         Ok(self.scene.add_material(Material::RoughDielectric {
             distribution,
             alpha,
@@ -490,6 +493,7 @@ impl<'a> Loader<'a> {
             reflectance,
             transmittance,
             eta,
+            eta_param,
         }))
     }
 

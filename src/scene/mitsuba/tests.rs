@@ -1303,18 +1303,32 @@ fn bspline_curves_load_with_points_moved_radii_kept_and_short_curves_refused() {
     assert!(e.contains("'flip_normals' is not supported on curves"), "{e}");
 }
 
-/// Attached sampling refuses a loaded `roughdielectric` by name (its lobe,
-/// `crate::attached::rough_dielectric_lobe`, is not in the path loops yet), and detached takes it.
+/// Attached sampling takes an isotropic, untextured `roughdielectric` and refuses an anisotropic
+/// or texture-roughened one by name; detached takes both. Its η is the parameter `NAME.eta`
+/// (Mitsuba's key), which the flattened material carries in `table`.
 #[test]
-fn attached_sampling_refuses_a_rough_dielectric_by_name() {
+fn attached_sampling_takes_an_isotropic_rough_dielectric() {
     use crate::integrator::{RenderOptions, Sampling};
-    let s = load_ok(
-        r#"<shape type="cube" id="g"><bsdf type="roughdielectric"><float name="alpha" value="0.2"/></bsdf></shape>"#,
+    let check = |bsdf: &str| {
+        let s = load_ok(&format!(r#"<shape type="cube" id="g"><bsdf type="roughdielectric">{bsdf}</bsdf></shape>"#));
+        let flat = crate::scene::flat::FlatScene::new(&s).unwrap();
+        let detached = RenderOptions::for_scene(&s);
+        assert!(crate::attached::refuse_unsupported(&flat, &detached, false).is_ok());
+        let attached = RenderOptions { sampling: Sampling::attached(), ..detached };
+        let verdict = crate::attached::refuse_unsupported(&flat, &attached, false).map_err(|e| e.to_string());
+        (s, flat, verdict)
+    };
+    let (s, flat, ok) = check(r#"<float name="alpha" value="0.2"/><float name="int_ior" value="1.33"/>"#);
+    assert!(ok.is_ok(), "{ok:?}");
+    let id = s.params.find("g.bsdf.eta").unwrap();
+    assert!((s.params.get(id)[0] - 1.33 / 1.000_277).abs() < 1e-6);
+    let glass = flat.materials.iter().find(|m| m.tag == crate::contract::MAT_ROUGH_DIELECTRIC).unwrap();
+    assert_eq!(glass.table, s.params.entry(id).offset);
+    assert_eq!(crate::attached::attached_only_params(&s), vec![id]);
+    let (_, _, e) = check(r#"<float name="alpha_u" value="0.1"/><float name="alpha_v" value="0.3"/>"#);
+    let e = e.unwrap_err();
+    assert!(
+        e.contains("Sampling::Attached") && e.contains("anisotropic or texture-roughened `roughdielectric`"),
+        "{e}"
     );
-    let flat = crate::scene::flat::FlatScene::new(&s).unwrap();
-    let detached = RenderOptions::for_scene(&s);
-    assert!(crate::attached::refuse_unsupported(&flat, &detached, false).is_ok());
-    let attached = RenderOptions { sampling: Sampling::attached(), ..detached };
-    let e = crate::attached::refuse_unsupported(&flat, &attached, false).unwrap_err().to_string();
-    assert!(e.contains("Sampling::Attached") && e.contains("`roughdielectric` material"), "{e}");
 }
