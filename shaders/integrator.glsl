@@ -55,13 +55,23 @@
 #endif
 
 
+// Whether the differential vertex on material `m` samples the derivative by α_v: `m` is a rough
+// conductor or dielectric whose α_v, a parameter apart from its α_u, is the target.
+bool material_target_v(uint m) {
+    uint tag = materials[m].tag;
+    uint pv = materials[m].p_alpha_v;
+    return HAS(F_ANISOTROPIC) && (tag == MAT_ROUGH_CONDUCTOR || tag == MAT_ROUGH_DIELECTRIC)
+        && pv != materials[m].p_alpha && pv >= globals.diff_begin && pv < globals.diff_end;
+}
+
 // Whether the differential strategy may place its differential vertex on material `m`: its
-// roughness (rough conductor, dielectric or plastic) or weight (blend) is the target parameter.
+// roughness (rough conductor, dielectric or plastic; an anisotropic one's α_u or α_v) or weight
+// (blend) is the target parameter.
 bool material_capable(uint m) {
     uint tag = materials[m].tag;
     uint p = (tag == MAT_ROUGH_CONDUCTOR || tag == MAT_ROUGH_DIELECTRIC || tag == MAT_ROUGH_PLASTIC) ? materials[m].p_alpha
         : (tag == MAT_BLEND ? materials[m].p_weight : NO_PARAM);
-    return p >= globals.diff_begin && p < globals.diff_end;
+    return (p >= globals.diff_begin && p < globals.diff_end) || material_target_v(m);
 }
 
 // Several targets (F2_HERO, ALGORITHMS.md §5.8): the index of the hero-set target whose parameter
@@ -404,6 +414,7 @@ bool path_step(inout PathState st) {
     ShadingFrame frame;
     bool shade = false;       // a surface vertex below the maximum depth
     bool capable = false;
+    bool target_v = false;    // an anisotropic roughness's target is α_v (a hero set holds none)
     uint hero_here = MAX_HEROES;  // several targets: the one this vertex is capable for
     EmitterSample es;
     vec3 nee_wo = vec3(0.0, 0.0, 1.0);
@@ -648,6 +659,7 @@ bool path_step(inout PathState st) {
                 gt.at = tex_at(s);
 
                 capable = diff && material_capable(s.material);
+                target_v = diff && !hero && material_target_v(s.material);
                 if (hero) {
                     hero_here = material_hero(s.material);
                     capable = hero_here < MAX_HEROES;
@@ -703,7 +715,7 @@ bool path_step(inout PathState st) {
                             } else {
                                 // Appendix B: the NEE direction as produced by BSDF or differential sampling here.
                                 float q_here = capable ? globals.diff_q : 0.0;
-                                float pdf_d = capable ? bsdf_pdf_diff(bsdf, wi, nee_wo) : pdf_f;
+                                float pdf_d = capable ? bsdf_pdf_diff(bsdf, target_v, wi, nee_wo) : pdf_f;
                                 nee_w = hero ? mixture_nee_weight_hero(st.mix, hero_here, globals.diff_q, pdf_f, pdf_d, nee_pdf, false)
                                              : mixture_nee_weight(st.mix, q_here, pdf_f, pdf_d, nee_pdf, false);
                             }
@@ -821,13 +833,13 @@ bool path_step(inout PathState st) {
 #endif
         if (use_dx) {
             float u_sign = draw_block(st.key1, st.pixel, st.sample_index, vertex, DIM_DIFF_SIGN / 4u)[DIM_DIFF_SIGN % 4u];
-            bs = bsdf_sample_diff(bsdf, wi, u_sign, u_lobe, u_dir);
+            bs = bsdf_sample_diff(bsdf, target_v, wi, u_sign, u_lobe, u_dir);
             pdf_d = bs.pdf;
             pdf_f = bs.valid ? bsdf_pdf(bsdf, wi, bs.wo) : 0.0;
         } else {
             bs = bsdf_sample(bsdf, wi, u_lobe, u_dir);
             pdf_f = bs.pdf;
-            if (capable && bs.valid) pdf_d = bsdf_pdf_diff(bsdf, wi, bs.wo);
+            if (capable && bs.valid) pdf_d = bsdf_pdf_diff(bsdf, target_v, wi, bs.wo);
         }
         // An invalid differential sample ends the path unmarked (ALGORITHMS.md §5.5 ruling 3).
         if (!bs.valid || !(pdf_f > 0.0)) {

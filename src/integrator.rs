@@ -381,6 +381,23 @@ impl Strategy {
                         .into(),
                 });
             }
+            // A hero vertex is capable for one target through its α: an anisotropic roughness's
+            // α_u and α_v would make one vertex capable for two.
+            use crate::scene::Material;
+            let anisotropic = scene.materials.iter().any(|m| match m {
+                Material::RoughConductor { alpha, alpha_v, .. } | Material::RoughDielectric { alpha, alpha_v, .. } => {
+                    alpha != alpha_v && (*alpha == id || *alpha_v == id)
+                }
+                _ => false,
+            });
+            if anisotropic {
+                return Err(Error::InvalidArgument {
+                    parameter: (*name).to_string(),
+                    message: "is an anisotropic rough conductor's or dielectric's roughness, which a set of several \
+                              heroes does not cover: give it alone (--diff-param)"
+                        .into(),
+                });
+            }
             ids.push(id);
         }
         Ok(Strategy::Hero { heroes: HeroSet::new(&ids, weights)?, q })
@@ -413,15 +430,15 @@ impl Strategy {
     }
 
     /// Whether some material has a differential sampler for `target`: it is the roughness of a
-    /// rough conductor, dielectric or plastic, the weight of a blend, or (some medium) the g of a
+    /// rough conductor, dielectric or plastic (an anisotropic conductor's or dielectric's α_u or
+    /// α_v), the weight of a blend, or (some medium) the g of a
     /// Henyey–Greenstein phase function (ALGORITHMS.md §8.4). If not, `diff` samples like `bsdf` (with
     /// balance-heuristic MIS) and brings no variance reduction.
     pub fn has_differential_sampler(scene: &Scene, target: ParamId) -> bool {
         use crate::scene::Material;
         scene.materials.iter().any(|m| match m {
-            // The differential sampler is isotropic: an anisotropic conductor or dielectric has none.
             Material::RoughConductor { alpha, alpha_v, .. } | Material::RoughDielectric { alpha, alpha_v, .. } => {
-                *alpha == target && alpha_v == alpha
+                *alpha == target || *alpha_v == target
             }
             Material::RoughPlastic { alpha, .. } => *alpha == target,
             Material::Blend { weight, children } => {
@@ -442,19 +459,6 @@ fn diff_target(scene: &Scene, target: &str) -> Result<ParamId> {
         message: "no such parameter to drive the differential sampler (see `pathgrad params SCENE`)".into(),
     })?;
     use crate::scene::Material;
-    let uncovered = scene.materials.iter().find_map(|m| match m {
-        Material::RoughConductor { alpha, alpha_v, .. }
-            if alpha != alpha_v && (*alpha == target || *alpha_v == target) =>
-        {
-            Some("an anisotropic rough conductor's roughness")
-        }
-        Material::RoughDielectric { alpha, alpha_v, .. }
-            if alpha != alpha_v && (*alpha == target || *alpha_v == target) =>
-        {
-            Some("an anisotropic rough dielectric's roughness")
-        }
-        _ => None,
-    });
     // A normal-mapped material's lobes live in the perturbed frame, whose wrapper the
     // differential sampler's densities do not include.
     let uses = |id: crate::scene::MaterialId| match scene.materials.get(id.0 as usize) {
@@ -473,7 +477,7 @@ fn diff_target(scene: &Scene, target: &str) -> Result<ParamId> {
         }
         _ => false,
     });
-    let uncovered = uncovered.or(mapped.then_some("a normal-mapped material's roughness or blend weight"));
+    let uncovered = mapped.then_some("a normal-mapped material's roughness or blend weight");
     // A mask draws its pass-through before the technique choice; the strategy's mixture
     // densities are not derived for it, so neither its opacity nor what it wraps is a target.
     fn reaches(scene: &Scene, id: crate::scene::MaterialId, uses: &dyn Fn(crate::scene::MaterialId) -> bool) -> bool {

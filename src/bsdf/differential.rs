@@ -7,6 +7,7 @@ use std::f32::consts::{E, PI};
 
 use glam::{Vec2, Vec3};
 
+use crate::bsdf::differential_aniso::{aniso_diff_pdf_mixed_h, aniso_diff_pdf_part_h, sample_aniso_diff_half};
 use crate::bsdf::rough_conductor::Distribution;
 use crate::bsdf::rough_dielectric::RoughDielectricLeaf;
 use crate::bsdf::rough_plastic::PlasticLeaf;
@@ -167,6 +168,46 @@ pub fn sample_diff_part(distribution: Distribution, alpha: f32, wi: Vec3, positi
     (wo.z > 0.0 && wih > 0.0).then_some(wo)
 }
 
+/// The negative part's piece uniform of an anisotropic sampler, from `u_sign` ∈ [½, 1) (the
+/// positive part, `u_sign` < ½, has one piece and ignores it).
+pub fn diff_piece(u_sign: f32) -> f32 {
+    (u_sign - 0.5) / 0.5
+}
+
+/// A half vector from one signed part of the roughness derivative of a leaf with roughness
+/// (α_u, α_v): the isotropic sampler when they are equal, else the anisotropic one targeting α_v
+/// (`target_v`) or α_u ([`crate::bsdf::differential_aniso`]); `u_piece` picks the anisotropic
+/// negative part's piece.
+pub fn sample_diff_half_leaf(
+    distribution: Distribution,
+    alpha: Vec2,
+    target_v: bool,
+    positive: bool,
+    u_piece: f32,
+    u: Vec2,
+) -> Option<Vec3> {
+    if alpha.x != alpha.y {
+        return sample_aniso_diff_half(distribution, alpha, target_v, positive, u_piece, u);
+    }
+    sample_diff_half(distribution, alpha.x, positive, u)
+}
+
+/// Half-vector density of one signed part of [`sample_diff_half_leaf`].
+pub fn diff_pdf_part_h_leaf(distribution: Distribution, alpha: Vec2, target_v: bool, h: Vec3, positive: bool) -> f32 {
+    if alpha.x != alpha.y {
+        return aniso_diff_pdf_part_h(distribution, alpha, target_v, h, positive);
+    }
+    diff_pdf_part_h(distribution, alpha.x, h, positive)
+}
+
+/// Half-vector density of the coin-mixed [`sample_diff_half_leaf`], ½p⁺ + ½p⁻.
+pub fn diff_pdf_mixed_h_leaf(distribution: Distribution, alpha: Vec2, target_v: bool, h: Vec3) -> f32 {
+    if alpha.x != alpha.y {
+        return aniso_diff_pdf_mixed_h(distribution, alpha, target_v, h);
+    }
+    diff_pdf_abs_h(distribution, alpha.x, h)
+}
+
 /// The half vector of (wi, wo) if the configuration is valid for a reflection density (cos θi,
 /// cos θo, wi·h, wo·h all > 0), with wo·h.
 fn reflection_half(wi: Vec3, wo: Vec3) -> Option<(Vec3, f32)> {
@@ -195,22 +236,55 @@ pub fn diff_pdf_part(distribution: Distribution, alpha: f32, positive: bool, wi:
     }
 }
 
+/// Rough conductor with roughness (α_u, α_v), isotropic or not: a direction reflected about a half
+/// vector from one signed part ([`sample_diff_half_leaf`]); `None` as [`sample_diff_part`].
+pub fn sample_diff_conductor(
+    distribution: Distribution,
+    alpha: Vec2,
+    target_v: bool,
+    wi: Vec3,
+    positive: bool,
+    u_piece: f32,
+    u: Vec2,
+) -> Option<Vec3> {
+    if wi.z <= 0.0 {
+        return None;
+    }
+    let h = sample_diff_half_leaf(distribution, alpha, target_v, positive, u_piece, u)?;
+    let wih = wi.dot(h);
+    let wo = 2.0 * wih * h - wi;
+    (wo.z > 0.0 && wih > 0.0).then_some(wo)
+}
+
+/// Direction density of [`sample_diff_conductor`]'s coin mixture, ½p⁺ + ½p⁻ through 1/(4 wo·h).
+pub fn diff_pdf_conductor(distribution: Distribution, alpha: Vec2, target_v: bool, wi: Vec3, wo: Vec3) -> f32 {
+    match reflection_half(wi, wo) {
+        Some((h, woh)) => diff_pdf_mixed_h_leaf(distribution, alpha, target_v, h) / (4.0 * woh),
+        None => 0.0,
+    }
+}
+
 /// Rough dielectric: a microfacet normal m drawn from one signed part of ∂α[D(m) cos θm] in the
 /// upper hemisphere (the hemisphere wi sees, mirrored when wi is below the surface), then
 /// reflection about m with probability F(wi·m) or refraction through it, as the primal sampler
 /// leaves through its visible normal (ALGORITHMS.md §4.2 carried to the dielectric's lobe
-/// choice); `None` for a normal wi does not see or a direction on the wrong side.
+/// choice); `None` for a normal wi does not see or a direction on the wrong side. An anisotropic
+/// leaf draws m from the derivative by α_v (`target_v`) or α_u, `u_piece` as
+/// [`sample_diff_half_leaf`].
 pub fn sample_diff_dielectric(
     leaf: &RoughDielectricLeaf,
+    target_v: bool,
     wi: Vec3,
     positive: bool,
+    u_piece: f32,
     u_lobe: f32,
     u: Vec2,
 ) -> Option<Vec3> {
     if wi.z == 0.0 {
         return None;
     }
-    let m = sample_diff_half(leaf.distribution, leaf.alpha, positive, u)?;
+    let alpha = Vec2::new(leaf.alpha, leaf.alpha_v);
+    let m = sample_diff_half_leaf(leaf.distribution, alpha, target_v, positive, u_piece, u)?;
     let up = if wi.z > 0.0 { wi } else { -wi };
     if up.dot(m) <= 0.0 {
         return None;
@@ -220,13 +294,15 @@ pub fn sample_diff_dielectric(
 
 /// Direction density of the rough dielectric's coin-mixed differential technique:
 /// p_abs(m) · (F or 1 − F) · |∂m/∂wo| = ½ of each signed part's.
-pub fn diff_pdf_dielectric(leaf: &RoughDielectricLeaf, wi: Vec3, wo: Vec3) -> f32 {
-    leaf.pdf_through(wi, wo, |m| diff_pdf_abs_h(leaf.distribution, leaf.alpha, m))
+pub fn diff_pdf_dielectric(leaf: &RoughDielectricLeaf, target_v: bool, wi: Vec3, wo: Vec3) -> f32 {
+    let alpha = Vec2::new(leaf.alpha, leaf.alpha_v);
+    leaf.pdf_through(wi, wo, |m| diff_pdf_mixed_h_leaf(leaf.distribution, alpha, target_v, m))
 }
 
 /// Direction density of one signed part's rough-dielectric sampler.
-pub fn diff_pdf_dielectric_part(leaf: &RoughDielectricLeaf, positive: bool, wi: Vec3, wo: Vec3) -> f32 {
-    leaf.pdf_through(wi, wo, |m| diff_pdf_part_h(leaf.distribution, leaf.alpha, m, positive))
+pub fn diff_pdf_dielectric_part(leaf: &RoughDielectricLeaf, target_v: bool, positive: bool, wi: Vec3, wo: Vec3) -> f32 {
+    let alpha = Vec2::new(leaf.alpha, leaf.alpha_v);
+    leaf.pdf_through(wi, wo, |m| diff_pdf_part_h_leaf(leaf.distribution, alpha, target_v, m, positive))
 }
 
 /// Rough plastic: with the coating's probability P(cos θi) of its primal sampler, a reflection
@@ -273,14 +349,17 @@ pub fn bsdf_diff_capable(b: &Bsdf) -> bool {
 
 /// Density of the differential technique: ½(p_f0 + p_f1) for a blend, the coin-mixed roughness
 /// density for a rough conductor, dielectric or plastic, and the primal density for the other
-/// leaves (ALGORITHMS.md §4.1).
-pub fn bsdf_pdf_diff(b: &Bsdf, wi: Vec3, wo: Vec3) -> f32 {
+/// leaves (ALGORITHMS.md §4.1). `target_v`: an anisotropic conductor's or dielectric's target is
+/// its α_v (else α_u; ignored by isotropic leaves).
+pub fn bsdf_pdf_diff(b: &Bsdf, target_v: bool, wi: Vec3, wo: Vec3) -> f32 {
     if b.blend {
         return 0.5 * (leaf_pdf(&b.leaves[0], wi, wo) + leaf_pdf(&b.leaves[1], wi, wo));
     }
     match b.leaves[0] {
-        Leaf::RoughConductor { distribution, alpha, .. } => diff_pdf(distribution, alpha, wi, wo),
-        Leaf::RoughDielectric(ref d) => diff_pdf_dielectric(d, wi, wo),
+        Leaf::RoughConductor { distribution, alpha, alpha_v, .. } => {
+            diff_pdf_conductor(distribution, Vec2::new(alpha, alpha_v), target_v, wi, wo)
+        }
+        Leaf::RoughDielectric(ref d) => diff_pdf_dielectric(d, target_v, wi, wo),
         Leaf::RoughPlastic(ref p) => diff_pdf_plastic(p, wi, wo),
         Leaf::Diffuse { .. }
         | Leaf::Smooth(_)
@@ -295,18 +374,28 @@ pub fn bsdf_pdf_diff(b: &Bsdf, wi: Vec3, wo: Vec3) -> f32 {
 /// the plastic samples its coating so with its coating probability, else its base). Blend: child
 /// 1 if `u_lobe ≤ ½`, else child 0, sampled with the child's primal sampler. Other leaves (not
 /// capable): their primal sampler. The value is the whole BSDF's f̂ and the pdf
-/// is [`bsdf_pdf_diff`] at the sampled direction; `None` for an invalid sample.
-pub fn bsdf_sample_diff(b: &Bsdf, wi: Vec3, u_sign: f32, u_lobe: f32, u: Vec2) -> Option<BsdfSample> {
+/// is [`bsdf_pdf_diff`] at the sampled direction; `None` for an invalid sample. An anisotropic
+/// conductor or dielectric samples the derivative by α_v (`target_v`) or α_u, its negative part's
+/// piece by [`diff_piece`]`(u_sign)`.
+pub fn bsdf_sample_diff(b: &Bsdf, target_v: bool, wi: Vec3, u_sign: f32, u_lobe: f32, u: Vec2) -> Option<BsdfSample> {
     let wo = if b.blend {
         let (leaf, u_lobe) =
             if u_lobe <= 0.5 { (&b.leaves[1], u_lobe / 0.5) } else { (&b.leaves[0], (u_lobe - 0.5) / 0.5) };
         leaf_sample(leaf, wi, u_lobe, u)?
     } else {
         match b.leaves[0] {
-            Leaf::RoughConductor { distribution, alpha, .. } => {
-                sample_diff_part(distribution, alpha, wi, u_sign < 0.5, u)?
+            Leaf::RoughConductor { distribution, alpha, alpha_v, .. } => sample_diff_conductor(
+                distribution,
+                Vec2::new(alpha, alpha_v),
+                target_v,
+                wi,
+                u_sign < 0.5,
+                diff_piece(u_sign),
+                u,
+            )?,
+            Leaf::RoughDielectric(ref d) => {
+                sample_diff_dielectric(d, target_v, wi, u_sign < 0.5, diff_piece(u_sign), u_lobe, u)?
             }
-            Leaf::RoughDielectric(ref d) => sample_diff_dielectric(d, wi, u_sign < 0.5, u_lobe, u)?,
             Leaf::RoughPlastic(ref p) => sample_diff_plastic(p, wi, u_sign < 0.5, u_lobe, u)?,
             Leaf::Diffuse { .. }
             | Leaf::Smooth(_)
@@ -315,7 +404,7 @@ pub fn bsdf_sample_diff(b: &Bsdf, wi: Vec3, u_sign: f32, u_lobe: f32, u: Vec2) -
             | Leaf::PrincipledThin(_) => leaf_sample(&b.leaves[0], wi, u_lobe, u)?,
         }
     };
-    let pdf = bsdf_pdf_diff(b, wi, wo);
+    let pdf = bsdf_pdf_diff(b, target_v, wi, wo);
     if !(pdf > 0.0) {
         return None;
     }

@@ -375,7 +375,7 @@ fn chi2_conductor(distribution: Distribution, first_test: u32) {
                     wi,
                     |i| {
                         let u = uniforms(test, i);
-                        bsdf_sample_diff(&b, wi, u[0], u[1], Vec2::new(u[2], u[3])).map(|s| s.wo)
+                        bsdf_sample_diff(&b, false, wi, u[0], u[1], Vec2::new(u[2], u[3])).map(|s| s.wo)
                     },
                     |h| f64::from(diff_pdf_abs_h(distribution, alpha, h)),
                 );
@@ -401,9 +401,9 @@ fn chi2_conductor(distribution: Distribution, first_test: u32) {
                 alpha,
                 |i| {
                     let u = uniforms(test, i);
-                    bsdf_sample_diff(&b, wi, u[0], u[1], Vec2::new(u[2], u[3])).map(|s| s.wo)
+                    bsdf_sample_diff(&b, false, wi, u[0], u[1], Vec2::new(u[2], u[3])).map(|s| s.wo)
                 },
-                |wo| f64::from(bsdf_pdf_diff(&b, wi, wo)),
+                |wo| f64::from(bsdf_pdf_diff(&b, false, wi, wo)),
             );
         }
     }
@@ -438,9 +438,9 @@ fn chi2_differential_dielectric() {
                     alpha,
                     |i| {
                         let u = uniforms(test, i);
-                        sample_diff_dielectric(&leaf, wi, positive, u[1], Vec2::new(u[2], u[3]))
+                        sample_diff_dielectric(&leaf, false, wi, positive, 0.0, u[1], Vec2::new(u[2], u[3]))
                     },
-                    |wo| f64::from(diff_pdf_dielectric_part(&leaf, positive, wi, wo)),
+                    |wo| f64::from(diff_pdf_dielectric_part(&leaf, false, positive, wi, wo)),
                 );
             }
             test += 1;
@@ -450,9 +450,9 @@ fn chi2_differential_dielectric() {
                 alpha,
                 |i| {
                     let u = uniforms(test, i);
-                    bsdf_sample_diff(&b, wi, u[0], u[1], Vec2::new(u[2], u[3])).map(|s| s.wo)
+                    bsdf_sample_diff(&b, false, wi, u[0], u[1], Vec2::new(u[2], u[3])).map(|s| s.wo)
                 },
-                |wo| f64::from(bsdf_pdf_diff(&b, wi, wo)),
+                |wo| f64::from(bsdf_pdf_diff(&b, false, wi, wo)),
             );
         }
     }
@@ -496,9 +496,9 @@ fn chi2_differential_plastic() {
                 alpha,
                 |i| {
                     let u = uniforms(test, i);
-                    bsdf_sample_diff(&b, wi, u[0], u[1], Vec2::new(u[2], u[3])).map(|s| s.wo)
+                    bsdf_sample_diff(&b, false, wi, u[0], u[1], Vec2::new(u[2], u[3])).map(|s| s.wo)
                 },
-                |wo| f64::from(bsdf_pdf_diff(&b, wi, wo)),
+                |wo| f64::from(bsdf_pdf_diff(&b, false, wi, wo)),
             );
         }
     }
@@ -514,9 +514,9 @@ fn chi2_differential_blend() {
             0.2,
             |i| {
                 let u = uniforms(800 + k as u32, i);
-                bsdf_sample_diff(&b, wi, u[0], u[1], Vec2::new(u[2], u[3])).map(|s| s.wo)
+                bsdf_sample_diff(&b, false, wi, u[0], u[1], Vec2::new(u[2], u[3])).map(|s| s.wo)
             },
-            |wo| f64::from(bsdf_pdf_diff(&b, wi, wo)),
+            |wo| f64::from(bsdf_pdf_diff(&b, false, wi, wo)),
         );
     }
 }
@@ -550,9 +550,9 @@ fn sample_diff_agrees_with_pdf_and_eval() {
             let wi = incident(cos_i);
             for i in 0..2000 {
                 let u = uniforms(900 + k as u32, i);
-                if let Some(s) = bsdf_sample_diff(b, wi, u[0], u[1], Vec2::new(u[2], u[3])) {
+                if let Some(s) = bsdf_sample_diff(b, false, wi, u[0], u[1], Vec2::new(u[2], u[3])) {
                     assert!(s.wo.is_finite() && (s.wo.length() - 1.0).abs() < 1e-4, "{b:?}: wo {:?}", s.wo);
-                    assert_eq!(s.pdf, bsdf_pdf_diff(b, wi, s.wo));
+                    assert_eq!(s.pdf, bsdf_pdf_diff(b, false, wi, s.wo));
                     assert_eq!(s.value, bsdf_eval(b, wi, s.wo));
                     assert!(s.pdf > 0.0 && s.pdf.is_finite() && s.value.is_finite());
                     if let Leaf::RoughConductor { distribution, alpha, .. } = b.leaves[0]
@@ -570,8 +570,8 @@ fn sample_diff_agrees_with_pdf_and_eval() {
                     }
                     if let Leaf::RoughDielectric(ref d) = b.leaves[0] {
                         let parts = 0.5
-                            * (diff_pdf_dielectric_part(d, true, wi, s.wo)
-                                + diff_pdf_dielectric_part(d, false, wi, s.wo));
+                            * (diff_pdf_dielectric_part(d, false, true, wi, s.wo)
+                                + diff_pdf_dielectric_part(d, false, false, wi, s.wo));
                         assert!((parts - s.pdf).abs() <= 1e-5 * s.pdf, "{b:?}: ½(p⁺ + p⁻) = {parts} vs {}", s.pdf);
                     }
                 }
@@ -611,8 +611,14 @@ fn edges_are_finite() {
                                     assert!(p.is_finite() && p >= 0.0, "{d:?} α {alpha} u_b {ub}: pdf {p}");
                                 }
                                 let b = conductor(d, alpha);
-                                let s =
-                                    bsdf_sample_diff(&b, wi, if positive { 0.0 } else { 1.0 }, 0.0, Vec2::new(ua, ub));
+                                let s = bsdf_sample_diff(
+                                    &b,
+                                    false,
+                                    wi,
+                                    if positive { 0.0 } else { 1.0 },
+                                    0.0,
+                                    Vec2::new(ua, ub),
+                                );
                                 if let Some(s) = s {
                                     assert!(s.pdf.is_finite() && s.value.is_finite());
                                 }

@@ -9,6 +9,7 @@
 
 pub mod blend;
 pub mod differential;
+pub mod differential_aniso;
 pub mod diffuse;
 pub mod hair;
 pub mod plastic;

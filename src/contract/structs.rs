@@ -507,7 +507,8 @@ contract_structs! {
         k1: Vec3,
         /// Blend weight.
         weight: f32,
-        /// 1 for a blend.
+        /// Bit 0: a blend. Bit 1 (the differential probe only): the target of an anisotropic
+        /// leaf's differential sampler is its α_v.
         blend: u32,
         /// Incident direction (local).
         wi: Vec3,

@@ -95,7 +95,8 @@ fn camera_ray(view: &ViewCamera, sx: f32, sy: f32, u_lens: Vec2) -> Ray {
 }
 
 /// Whether the differential strategy may place its differential vertex on material `m`: its
-/// roughness (rough conductor, dielectric or plastic) or weight (blend) is the target parameter.
+/// roughness (rough conductor, dielectric or plastic; an anisotropic one's α_u or α_v) or weight
+/// (blend) is the target parameter.
 fn material_capable(flat: &FlatScene, globals: &Globals, m: u32) -> bool {
     let mat = &flat.materials[m as usize];
     let p = match mat.tag {
@@ -103,7 +104,17 @@ fn material_capable(flat: &FlatScene, globals: &Globals, m: u32) -> bool {
         MAT_BLEND => mat.p_weight,
         _ => NO_PARAM,
     };
-    p >= globals.diff_begin && p < globals.diff_end
+    (p >= globals.diff_begin && p < globals.diff_end) || material_target_v(flat, globals, m)
+}
+
+/// Whether the differential vertex on material `m` samples the derivative by α_v: `m` is a rough
+/// conductor or dielectric whose α_v, a parameter apart from its α_u, is the target.
+fn material_target_v(flat: &FlatScene, globals: &Globals, m: u32) -> bool {
+    let mat = &flat.materials[m as usize];
+    matches!(mat.tag, MAT_ROUGH_CONDUCTOR | MAT_ROUGH_DIELECTRIC)
+        && mat.p_alpha_v != mat.p_alpha
+        && mat.p_alpha_v >= globals.diff_begin
+        && mat.p_alpha_v < globals.diff_end
 }
 
 /// Several targets (ALGORITHMS.md §5.8): the index of the hero-set target whose parameter values
@@ -735,6 +746,8 @@ pub fn trace_path<const ADJOINT: bool>(
         // Several targets: the one this vertex is capable for (MAX_HEROES: none).
         let hero_here = if hero { material_hero(flat, globals, s.material) } else { MAX_HEROES };
         let capable = if hero { hero_here < MAX_HEROES } else { diff && material_capable(flat, globals, s.material) };
+        // An anisotropic roughness's target axis (a hero set holds no anisotropic roughness).
+        let target_v = !hero && diff && material_target_v(flat, globals, s.material);
 
         // ---- emitter sampling ----
         let u_em = draw_block(key, pixel, sample, vertex, DIM_EMITTER_SELECT / 4);
@@ -804,7 +817,7 @@ pub fn trace_path<const ADJOINT: bool>(
                 } else {
                     // Appendix B: the NEE direction as produced by BSDF or differential sampling here.
                     let q_here = if capable { globals.diff_q } else { 0.0 };
-                    let pdf_d = if capable { bsdf_pdf_diff(&bsdf, wi, wo) } else { pdf_f };
+                    let pdf_d = if capable { bsdf_pdf_diff(&bsdf, target_v, wi, wo) } else { pdf_f };
                     if hero {
                         mix.nee_weight_hero(hero_here, globals.diff_q, pdf_f, pdf_d, Some(p_e))
                     } else {
@@ -842,7 +855,7 @@ pub fn trace_path<const ADJOINT: bool>(
         let mut glass_lobe = None; // attached sampling's rough-dielectric lobe
         let (bs, pdf_f, pdf_d) = if use_dx {
             let u_sign = draw_block(key, pixel, sample, vertex, DIM_DIFF_SIGN / 4)[(DIM_DIFF_SIGN % 4) as usize];
-            let bs = bsdf_sample_diff(&bsdf, wi, u_sign, u_lobe, u_dir);
+            let bs = bsdf_sample_diff(&bsdf, target_v, wi, u_sign, u_lobe, u_dir);
             let pdf_f = bs.as_ref().map_or(0.0, |b| bsdf_pdf(&bsdf, wi, b.wo));
             let pdf_d = bs.as_ref().map_or(0.0, |b| b.pdf);
             (bs, pdf_f, pdf_d)
@@ -878,7 +891,7 @@ pub fn trace_path<const ADJOINT: bool>(
             let bs = bsdf_sample(&bsdf, wi, u_lobe, u_dir);
             let pdf_f = bs.as_ref().map_or(0.0, |b| b.pdf);
             let pdf_d = match &bs {
-                Some(b) if capable => bsdf_pdf_diff(&bsdf, wi, b.wo),
+                Some(b) if capable => bsdf_pdf_diff(&bsdf, target_v, wi, b.wo),
                 _ => 0.0,
             };
             (bs, pdf_f, pdf_d)

@@ -347,7 +347,9 @@ fn loss_gpu_equals_host() {
 /// branches and the four inversions. The probe passes `u_lobe` as both `u_sign` and `u_lobe` (a
 /// dielectric reads both: its part and its reflect/refract choice are then correlated, which a
 /// probe may be). Rough plastics need their coating tables, which the probes do not upload: their
-/// differential sampler is compared path by path (`strategies`, the plastic panel).
+/// differential sampler is compared path by path (`strategies`, the plastic panel). Anisotropic
+/// conductors and dielectrics (α_u ≠ α_v, as strong as 0.05/0.5) are compared with either
+/// roughness as the target (bit 1 of the case's `blend`).
 #[test]
 fn diff_gpu_equals_cpu() {
     use glam::{Vec2, Vec3};
@@ -369,6 +371,17 @@ fn diff_gpu_equals_cpu() {
             }));
             bsdfs.push(probe_rough_dielectric(distribution, alpha));
         }
+        for (alpha, alpha_v) in [(0.05, 0.5), (0.3, 0.1), (0.8, 0.4)] {
+            bsdfs.push(Bsdf::leaf(Leaf::RoughConductor {
+                distribution,
+                alpha,
+                alpha_v,
+                specular: Vec3::new(0.9, 0.8, 0.7),
+                eta: Vec3::ZERO,
+                k: Vec3::ONE,
+            }));
+            bsdfs.push(probe_anisotropic_dielectric(distribution, alpha, alpha_v));
+        }
     }
     for weight in [0.1, 0.5, 0.9] {
         let coat = Leaf::RoughConductor {
@@ -388,21 +401,33 @@ fn diff_gpu_equals_cpu() {
     }
     let mut cases = Vec::new();
     let mut owners = Vec::new();
-    for (bi, b) in bsdfs.iter().enumerate() {
+    let anisotropic = |b: &Bsdf| match b.leaves[0] {
+        Leaf::RoughConductor { alpha, alpha_v, .. } => alpha != alpha_v,
+        Leaf::RoughDielectric(d) => d.alpha != d.alpha_v,
+        _ => false,
+    };
+    // (BSDF, target_v): an anisotropic BSDF with each target.
+    let targets: Vec<(usize, bool)> = (0..bsdfs.len())
+        .flat_map(|bi| if anisotropic(&bsdfs[bi]) { vec![(bi, false), (bi, true)] } else { vec![(bi, false)] })
+        .collect();
+    for (ti, &(bi, target_v)) in targets.iter().enumerate() {
+        let b = &bsdfs[bi];
         let inside: &[f32] = if matches!(b.leaves[0], Leaf::RoughDielectric(_)) { &[-0.7, -0.2] } else { &[] };
         for (wi_index, &cos_i) in [1.0f32, 0.7, 0.2, 0.05, 0.01].iter().chain(inside).enumerate() {
             let sin_i = (1.0 - cos_i * cos_i).sqrt();
             let wi = Vec3::new(sin_i * 0.6, -sin_i * 0.8, cos_i);
             for j in 0..200u32 {
-                let u = uniform4(RngKey::new(bi as u32, wi_index as u32, PassTag::Test), j, 0, 2, Stream::Main, 1, 0);
+                let u = uniform4(RngKey::new(ti as u32, wi_index as u32, PassTag::Test), j, 0, 2, Stream::Main, 1, 0);
                 let (u_lobe, uv) = (u[0], Vec2::new(u[1], u[2]));
-                let wo_eval = bsdf_sample_diff(b, wi, u_lobe, u_lobe, uv).map(|s| s.wo).unwrap_or(Vec3::new(
+                let wo_eval = bsdf_sample_diff(b, target_v, wi, u_lobe, u_lobe, uv).map(|s| s.wo).unwrap_or(Vec3::new(
                     0.3,
                     0.4,
                     0.866_025_4,
                 ));
-                cases.push(probe_case(b, wi, u_lobe, uv, wo_eval));
-                owners.push(bi);
+                let mut case = probe_case(b, wi, u_lobe, uv, wo_eval);
+                case.blend |= u32::from(target_v) << 1;
+                cases.push(case);
+                owners.push((bi, target_v));
             }
         }
     }
@@ -414,9 +439,9 @@ fn diff_gpu_equals_cpu() {
     let close3 = |a: Vec3, b: Vec3| (0..3).all(|c| close(a[c], b[c]));
     let close_x = |a: f32, b: f32| a == b || (a - b).abs() <= 1e-5 * (1.0 + a.abs().max(b.abs()));
     let (mut validity_flips, mut worst_dir) = (0, 0.0f32);
-    for ((c, g), &bi) in cases.iter().zip(&got).zip(&owners) {
+    for ((c, g), &(bi, target_v)) in cases.iter().zip(&got).zip(&owners) {
         let b = &bsdfs[bi];
-        let want = bsdf_pdf_diff(b, c.wi, c.wo_eval);
+        let want = bsdf_pdf_diff(b, target_v, c.wi, c.wo_eval);
         assert!(close(g.eval_pdf, want), "{b:?} wi {}: pdf_diff {} vs {want}", c.wi, g.eval_pdf);
         let e = std::f32::consts::E;
         let want_w = Vec3::new(
@@ -425,11 +450,11 @@ fn diff_gpu_equals_cpu() {
             diff_sample_x(if c.dist0 == 0 { Distribution::Beckmann } else { Distribution::Ggx }, c.u.x < 0.5, c.u.y),
         );
         assert!((0..3).all(|k| close_x(g.eval[k], want_w[k])), "u {} {}: W/x {} vs {want_w}", c.u_lobe, c.u, g.eval);
-        match (bsdf_sample_diff(b, c.wi, c.u_lobe, c.u_lobe, c.u), g.valid != 0) {
+        match (bsdf_sample_diff(b, target_v, c.wi, c.u_lobe, c.u_lobe, c.u), g.valid != 0) {
             (Some(s), true) => {
                 worst_dir = worst_dir.max((s.wo - g.wo).length());
                 assert!((s.wo - g.wo).length() < 1e-4, "{b:?} wi {}: wo {} vs {}", c.wi, s.wo, g.wo);
-                let want = bsdf_pdf_diff(b, c.wi, g.wo);
+                let want = bsdf_pdf_diff(b, target_v, c.wi, g.wo);
                 assert!(close(g.pdf, want), "{b:?}: sample pdf {} vs {want}", g.pdf);
                 let want = bsdf_eval(b, c.wi, g.wo);
                 assert!(close3(g.value, want), "{b:?}: sample value {} vs {want}", g.value);

@@ -1097,16 +1097,17 @@ fn anisotropic_roughness_is_two_parameters_of_a_conductor_or_dielectric() {
     assert_ne!(alpha, alpha_v, "given apart: two parameters");
     let Material::RoughDielectric { alpha, alpha_v, .. } = s.materials[3] else { panic!("{:?}", s.materials[3]) };
     assert_eq!(alpha, alpha_v, "isotropic: one parameter");
-    // The differential sampler is isotropic: it refuses an anisotropic roughness by name.
+    // The differential sampler covers either roughness of an anisotropic conductor or dielectric
+    // alone; a set of several heroes refuses them by name.
     let strategy = |target: &str| crate::integrator::Strategy::from_name(&s, "diff", 0.5, target);
-    for (target, what) in [
-        ("a.bsdf.alpha_v.value", "an anisotropic rough conductor's roughness"),
-        ("c.bsdf.alpha_u.value", "an anisotropic rough dielectric's roughness"),
-    ] {
-        let err = strategy(target).unwrap_err().to_string();
-        assert!(err.contains(what), "{target}: {err}");
+    for target in ["a.bsdf.alpha_u.value", "a.bsdf.alpha_v.value", "c.bsdf.alpha_u.value", "d.bsdf.alpha.value"] {
+        assert!(strategy(target).is_ok(), "{target}");
+        let id = s.params.find(target).unwrap();
+        assert!(crate::integrator::Strategy::has_differential_sampler(&s, id), "{target}");
     }
-    assert!(strategy("d.bsdf.alpha.value").is_ok());
+    let heroes = crate::integrator::Strategy::hero(&s, &["a.bsdf.alpha_v.value", "d.bsdf.alpha.value"], 0.5, None);
+    let err = heroes.unwrap_err().to_string();
+    assert!(err.contains("a.bsdf.alpha_v.value") && err.contains("anisotropic"), "{err}");
     for (bsdf, message) in [
         (
             r#"<bsdf type="roughconductor"><float name="alpha_u" value="0.1"/></bsdf>"#,
@@ -1162,8 +1163,8 @@ fn instances_flatten_their_group_with_shared_bsdfs_and_mitsubas_names() {
     }
 }
 
-/// `--strategy diff` covers rough dielectrics' and rough plastics' roughness (issue 31) and
-/// refuses an anisotropic conductor's by name.
+/// `--strategy diff` covers rough dielectrics' and rough plastics' roughness (issue 31) and either
+/// roughness of an anisotropic conductor (issue 33).
 #[test]
 fn the_differential_strategy_covers_rough_dielectrics_and_plastics() {
     use crate::integrator::Strategy;
@@ -1173,12 +1174,12 @@ fn the_differential_strategy_covers_rough_dielectrics_and_plastics() {
            <shape type="cube" id="brushed"><bsdf type="roughconductor"><float name="alpha_u" value="0.1"/><float name="alpha_v" value="0.3"/></bsdf></shape>"#,
     );
     // Mitsuba's roughplastic names its roughness `alpha`, without `.value`.
-    for name in ["glass.bsdf.alpha.value", "coat.bsdf.alpha"] {
+    for name in
+        ["glass.bsdf.alpha.value", "coat.bsdf.alpha", "brushed.bsdf.alpha_u.value", "brushed.bsdf.alpha_v.value"]
+    {
         assert!(matches!(Strategy::from_name(&s, "diff", 0.5, name).unwrap(), Strategy::Diff { .. }), "{name}");
         assert!(Strategy::has_differential_sampler(&s, s.params.find(name).unwrap()), "{name}");
     }
-    let err = Strategy::from_name(&s, "diff", 0.5, "brushed.bsdf.alpha_u.value").unwrap_err().to_string();
-    assert!(err.contains("brushed.bsdf.alpha_u.value") && err.contains("anisotropic"), "{err}");
 }
 
 /// The volpath family counts depth as Mitsuba's volpath does (no null-flagged BSDF sample is a
