@@ -307,12 +307,11 @@ struct RoughLobe {
 
 float attached_tan2(float c) { return max(1.0 - c * c, 0.0) / (c * c); }
 
-// rough_conductor_lobe: false where the sample leaves below the surface or weighs nothing.
-bool rough_conductor_lobe(vec3 d, vec3 n, float alpha, bool beckmann, vec2 u, vec3 eta, vec3 k, out RoughLobe l) {
-    l = RoughLobe(vec3(0.0), vec3(0.0), 0.0, mat3(1.0), mat3(0.0), vec3(0.0), vec3(0.0), vec3(0.0), 0.0,
-                  vec3(0.0), vec3(0.0), 0.0, vec3(0.0));
-    float ci = -dot(d, n);
-    if (!(ci > 0.0) || !(alpha > 0.0)) return false;
+// micro_normal of src/attached.rs: a microfacet normal h drawn from D(h)·cos θh (GGX, or Beckmann)
+// about the unit normal n, in the frame basis_jacobians builds from n; with ∂h/∂n (hn), ∂h/∂α, h's
+// local coordinates hl and ∂hl.z/∂α. The rough conductor's and the rough dielectric's lobes share it.
+void attached_micro_normal(vec3 n, float alpha, bool beckmann, vec2 u, out vec3 h, out mat3 hn, out vec3 h_alpha,
+                           out vec3 hl, out float dhl_z) {
     vec3 t, b;
     mat3 t_n, b_n;
     basis_jacobians(n, t, b, t_n, b_n);
@@ -323,12 +322,25 @@ bool rough_conductor_lobe(vec3 d, vec3 n, float alpha, bool beckmann, vec2 u, ve
     float cos_p = cos(phi);
     vec3 m = vec3(alpha * g * cos_p, alpha * g * sin_p, 1.0);
     float len = length(m);
-    vec3 hl = m / len;
+    hl = m / len;
     vec3 dm = vec3(g * cos_p, g * sin_p, 0.0);
     vec3 dhl = (dm - hl * dot(hl, dm)) / len;
-    vec3 h = hl.x * t + hl.y * b + hl.z * n;
-    mat3 hn = hl.x * t_n + hl.y * b_n + mat3(hl.z);
-    vec3 h_alpha = dhl.x * t + dhl.y * b + dhl.z * n;
+    h = hl.x * t + hl.y * b + hl.z * n;
+    hn = hl.x * t_n + hl.y * b_n + mat3(hl.z);
+    h_alpha = dhl.x * t + dhl.y * b + dhl.z * n;
+    dhl_z = dhl.z;
+}
+
+// rough_conductor_lobe: false where the sample leaves below the surface or weighs nothing.
+bool rough_conductor_lobe(vec3 d, vec3 n, float alpha, bool beckmann, vec2 u, vec3 eta, vec3 k, out RoughLobe l) {
+    l = RoughLobe(vec3(0.0), vec3(0.0), 0.0, mat3(1.0), mat3(0.0), vec3(0.0), vec3(0.0), vec3(0.0), 0.0,
+                  vec3(0.0), vec3(0.0), 0.0, vec3(0.0));
+    float ci = -dot(d, n);
+    if (!(ci > 0.0) || !(alpha > 0.0)) return false;
+    vec3 h, h_alpha, hl;
+    mat3 hn;
+    float dhl_z;
+    attached_micro_normal(n, alpha, beckmann, u, h, hn, h_alpha, hl, dhl_z);
     float c = -dot(d, h);
     vec3 wo = d + 2.0 * c * h;
     float co = dot(wo, n);
@@ -354,7 +366,7 @@ bool rough_conductor_lobe(vec3 d, vec3 n, float alpha, bool beckmann, vec2 u, ve
     float co_alpha = dot(n, l.t_alpha);
     l.dlnw_dd = l.dc_dd / c + gi_c * -n + go_c * co_d + n / ci;
     l.dlnw_dn = l.dc_dn / c + gi_c * -d + go_c * co_n + d / ci;
-    l.dlnw_dalpha = l.dc_dalpha / c + go_c * co_alpha + g_alpha - dhl.z / hz;
+    l.dlnw_dalpha = l.dc_dalpha / c + go_c * co_alpha + g_alpha - dhl_z / hz;
     l.pdf = microfacet_d(beckmann ? DIST_BECKMANN : DIST_GGX, alpha, hl) * hz / (4.0 * c);
     l.dlnf_dc = fresnel_conductor_dcos(c, eta, k) / f;
     return true;
@@ -382,23 +394,12 @@ bool rough_dielectric_lobe(vec3 d, vec3 n, float alpha, bool beckmann, vec2 u, f
     float ci = -dot(d, ns);
     if (!(ci > 0.0) || !(alpha > 0.0) || !(eta > 0.0)) return false;
     // The microfacet normal about n′ (micro_normal).
-    vec3 t, b;
-    mat3 t_n, b_n;
-    basis_jacobians(ns, t, b, t_n, b_n);
-    float uu = min(u.x, 1.0 - 1e-7);
-    float g = beckmann ? sqrt(max(-log(1.0 - uu), 0.0)) : sqrt(uu / (1.0 - uu));
-    float phi = 2.0 * PI * u.y;
-    float sin_p = sin(phi);
-    float cos_p = cos(phi);
-    vec3 m = vec3(alpha * g * cos_p, alpha * g * sin_p, 1.0);
-    float len = length(m);
-    vec3 hl = m / len;
-    vec3 dm = vec3(g * cos_p, g * sin_p, 0.0);
-    vec3 dhl = (dm - hl * dot(hl, dm)) / len;
-    vec3 h = hl.x * t + hl.y * b + hl.z * ns;
+    vec3 h, h_alpha, hl;
+    mat3 hn;
+    float dhl_z;
+    attached_micro_normal(ns, alpha, beckmann, u, h, hn, h_alpha, hl, dhl_z);
     // ∂h/∂n = s·∂h/∂n′.
-    mat3 hn = s * (hl.x * t_n + hl.y * b_n + mat3(hl.z));
-    vec3 h_alpha = dhl.x * t + dhl.y * b + dhl.z * ns;
+    hn = s * hn;
     float c = -dot(d, h);
     if (!(c > 0.0)) return false;
     vec3 dc_dd = -h;
@@ -469,7 +470,7 @@ bool rough_dielectric_lobe(vec3 d, vec3 n, float alpha, bool beckmann, vec2 u, f
     float co_eta = dot(ns, t_eta);
     l.dlnw_dd = dc_dd / c + gi_c * ci_d + go_c * co_d - ci_d / ci + dlnp_df * df_dc * dc_dd;
     l.dlnw_dn = dc_dn / c + gi_c * ci_n + go_c * co_n - ci_n / ci + dlnp_df * df_dc * dc_dn;
-    l.dlnw_dalpha = dc_dalpha / c + go_c * co_alpha + g_alpha - dhl.z / hz + dlnp_df * df_dc * dc_dalpha;
+    l.dlnw_dalpha = dc_dalpha / c + go_c * co_alpha + g_alpha - dhl_z / hz + dlnp_df * df_dc * dc_dalpha;
     float dradiance = transmitted ? 2.0 * deta_ti / eta_ti : 0.0;
     l.dlnw_deta = go_c * co_eta + dlnp_df * fr.z + dradiance;
     // |∂h/∂wo|: 1/(4c) reflected; η_rel²·|wo·h|/(c + η_rel·wo·h)² refracted (η_rel = 1/η_ti).

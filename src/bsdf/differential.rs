@@ -264,6 +264,21 @@ pub fn diff_pdf_conductor(distribution: Distribution, alpha: Vec2, target_v: boo
     }
 }
 
+/// Direction density of one signed part of [`sample_diff_conductor`], p±(h)/(4 wo·h).
+pub fn diff_pdf_conductor_part(
+    distribution: Distribution,
+    alpha: Vec2,
+    target_v: bool,
+    positive: bool,
+    wi: Vec3,
+    wo: Vec3,
+) -> f32 {
+    match reflection_half(wi, wo) {
+        Some((h, woh)) => diff_pdf_part_h_leaf(distribution, alpha, target_v, h, positive) / (4.0 * woh),
+        None => 0.0,
+    }
+}
+
 /// Rough dielectric: a microfacet normal m drawn from one signed part of ∂α[D(m) cos θm] in the
 /// upper hemisphere (the hemisphere wi sees, mirrored when wi is below the surface), then
 /// reflection about m with probability F(wi·m) or refraction through it, as the primal sampler

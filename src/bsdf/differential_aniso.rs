@@ -193,60 +193,6 @@ pub fn aniso_diff_pdf_mixed_h(distribution: Distribution, alpha: Vec2, target_v:
         + aniso_diff_pdf_part_h(distribution, alpha, target_v, h, false))
 }
 
-/// A direction reflected about a half vector from one signed part, or `None` if cos θo ≤ 0,
-/// wi·h ≤ 0, or cos θh < 1e-9.
-pub fn sample_aniso_diff_part(
-    distribution: Distribution,
-    alpha: Vec2,
-    target_v: bool,
-    wi: Vec3,
-    positive: bool,
-    u_piece: f32,
-    u: Vec2,
-) -> Option<Vec3> {
-    if wi.z <= 0.0 {
-        return None;
-    }
-    let h = sample_aniso_diff_half(distribution, alpha, target_v, positive, u_piece, u)?;
-    let wih = wi.dot(h);
-    let wo = 2.0 * wih * h - wi;
-    (wo.z > 0.0 && wih > 0.0).then_some(wo)
-}
-
-/// The half vector of (wi, wo) with wo·h if the reflection configuration is valid (cos θi, cos θo,
-/// wi·h, wo·h all > 0).
-fn reflection_half(wi: Vec3, wo: Vec3) -> Option<(Vec3, f32)> {
-    if wi.z <= 0.0 || wo.z <= 0.0 {
-        return None;
-    }
-    let h = (wi + wo).normalize();
-    let woh = wo.dot(h);
-    (wi.dot(h) > 0.0 && woh > 0.0).then_some((h, woh))
-}
-
-/// Direction density of one signed part's reflection sampler, p±(h)/(4 wo·h).
-pub fn aniso_diff_pdf_part(
-    distribution: Distribution,
-    alpha: Vec2,
-    target_v: bool,
-    positive: bool,
-    wi: Vec3,
-    wo: Vec3,
-) -> f32 {
-    match reflection_half(wi, wo) {
-        Some((h, woh)) => aniso_diff_pdf_part_h(distribution, alpha, target_v, h, positive) / (4.0 * woh),
-        None => 0.0,
-    }
-}
-
-/// Direction density of the coin-mixed technique, ½p⁺ + ½p⁻ through the reflection Jacobian.
-pub fn aniso_diff_pdf(distribution: Distribution, alpha: Vec2, target_v: bool, wi: Vec3, wo: Vec3) -> f32 {
-    match reflection_half(wi, wo) {
-        Some((h, woh)) => aniso_diff_pdf_mixed_h(distribution, alpha, target_v, h) / (4.0 * woh),
-        None => 0.0,
-    }
-}
-
 #[cfg(test)]
 #[path = "differential_aniso_tests.rs"]
 mod tests;

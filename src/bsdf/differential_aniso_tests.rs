@@ -8,6 +8,7 @@
 use glam::{Vec2, Vec3};
 
 use super::*;
+use crate::bsdf::differential::{diff_pdf_conductor, diff_pdf_conductor_part, sample_diff_conductor};
 use crate::bsdf::rough_conductor::microfacet_d_dalpha_aniso;
 use crate::rng::{PassTag, RngKey, Stream, uniform4};
 use crate::stats::{Chi2Config, chi2_directions, dump_table, sidak};
@@ -249,7 +250,7 @@ fn check_chi2_stretched(
 fn sample_mixed(d: Distribution, alpha: Vec2, target_v: bool, wi: Vec3, u: [f32; 4]) -> Option<Vec3> {
     let positive = u[0] < 0.5;
     let u_piece = if positive { 0.0 } else { (u[0] - 0.5) / 0.5 };
-    sample_aniso_diff_part(d, alpha, target_v, wi, positive, u_piece, Vec2::new(u[2], u[3]))
+    sample_diff_conductor(d, alpha, target_v, wi, positive, u_piece, Vec2::new(u[2], u[3]))
 }
 
 /// The half vector of [`sample_mixed`].
@@ -261,7 +262,7 @@ fn sample_mixed_half(d: Distribution, alpha: Vec2, target_v: bool, u: [f32; 4]) 
 
 /// Per case and target: each part's half vectors and the mixture's in stretched half-vector space
 /// (no reflection: the densities themselves over the whole hemisphere), then the mixture's
-/// reflected directions against [`aniso_diff_pdf`] (validity and the reflection Jacobian).
+/// reflected directions against [`diff_pdf_conductor`] (validity and the reflection Jacobian).
 fn chi2_aniso(distribution: Distribution, first_test: u32) {
     let mut test = first_test;
     for (au, av, cos_i) in CASES {
@@ -293,7 +294,7 @@ fn chi2_aniso(distribution: Distribution, first_test: u32) {
                 &format!("{tag}-cos{cos_i}-mixed"),
                 au.min(av) < 0.1,
                 |i| sample_mixed(distribution, alpha, target_v, wi, uniforms(test, i)),
-                |wo| f64::from(aniso_diff_pdf(distribution, alpha, target_v, wi, wo)),
+                |wo| f64::from(diff_pdf_conductor(distribution, alpha, target_v, wi, wo)),
             );
         }
     }
@@ -324,10 +325,10 @@ fn mixture_and_direction_densities_agree() {
                     let u = uniforms(1500, i);
                     let Some(wo) = sample_mixed(d, alpha, target_v, wi, u) else { continue };
                     assert!(wo.is_finite() && (wo.length() - 1.0).abs() < 1e-4 && wo.z > 0.0, "wo {wo}");
-                    let p = aniso_diff_pdf(d, alpha, target_v, wi, wo);
+                    let p = diff_pdf_conductor(d, alpha, target_v, wi, wo);
                     let parts = 0.5
-                        * (aniso_diff_pdf_part(d, alpha, target_v, true, wi, wo)
-                            + aniso_diff_pdf_part(d, alpha, target_v, false, wi, wo));
+                        * (diff_pdf_conductor_part(d, alpha, target_v, true, wi, wo)
+                            + diff_pdf_conductor_part(d, alpha, target_v, false, wi, wo));
                     assert!(p > 0.0 && p.is_finite() && (parts - p).abs() <= 1e-5 * p, "{p} vs ½(p⁺ + p⁻) {parts}");
                     let h = (wi + wo).normalize();
                     let through = aniso_diff_pdf_mixed_h(d, alpha, target_v, h) / (4.0 * wo.dot(h));
@@ -371,7 +372,7 @@ fn aniso_edges_are_finite() {
                         for &ua in &us {
                             for &ub in &us {
                                 for piece in [0.0, 0.9] {
-                                    let Some(wo) = sample_aniso_diff_part(
+                                    let Some(wo) = sample_diff_conductor(
                                         d,
                                         alpha,
                                         target_v,
@@ -383,7 +384,7 @@ fn aniso_edges_are_finite() {
                                         continue;
                                     };
                                     assert!(wo.is_finite() && wo.z > 0.0, "{d:?} α {alpha} u ({ua}, {ub}): wo {wo}");
-                                    let p = aniso_diff_pdf_part(d, alpha, target_v, positive, wi, wo);
+                                    let p = diff_pdf_conductor_part(d, alpha, target_v, positive, wi, wo);
                                     assert!(p.is_finite() && p >= 0.0, "{d:?} α {alpha} u ({ua}, {ub}): pdf {p}");
                                 }
                             }

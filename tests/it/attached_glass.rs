@@ -26,18 +26,7 @@ fn rough_glass_matches_finite_differences_on_the_cpu() {
 #[test]
 fn attached_and_detached_rough_glass_roughness_agree() {
     for name in ["attached_rough_sphere", "attached_rough_sphere_beckmann"] {
-        let scene = scenes::data_scene(name);
-        let opts = RenderOptions { width: 24, height: 24, spp: 4, ..RenderOptions::for_scene(&scene) };
-        let a = weights(opts.width, opts.height);
-        let offset = scene.params.entry(scene.params.find("glass.bsdf.alpha.value").unwrap()).offset as usize;
-        let (mut detached, mut attached_g) = (Vec::new(), Vec::new());
-        for seed in 0..16 {
-            let o = RenderOptions { seed, ..opts };
-            detached.push(pathgrad::cpu::backward(&scene, &o, &a).unwrap()[offset]);
-            let o = RenderOptions { sampling: Sampling::attached(), ..o };
-            attached_g.push(pathgrad::cpu::backward(&scene, &o, &a).unwrap()[offset]);
-        }
-        crate::support::assert_fd_matches(&format!("{name} roughness: detached vs attached"), &detached, &attached_g);
+        crate::attached::assert_attached_agrees_with_detached(name, "glass.bsdf.alpha.value");
     }
 }
 
