@@ -49,21 +49,26 @@ void microfacet_g1_and_dalpha(uint distribution, vec2 a, vec3 v, vec3 h, out flo
         return;
     }
     if (isotropic(a)) {
-        // The isotropic derivative whole, in x (callers sum the two).
+        // The isotropic derivative whole: in x where the kernel has no anisotropic material (the
+        // callers sum the two); else split as ∂s²/∂α_u : ∂s²/∂α_v = v_x² : v_y², as separate α_u
+        // and α_v parameters of equal value need.
         float alpha = a.x;
         float tan2 = tan2_theta(v);
         float s2 = alpha * alpha * tan2;
+        float whole;
         if (is_beckmann(distribution)) {
             float b = 1.0 / sqrt(s2);
             float e = exp(-b * b);
             float lambda = 0.5 * (erf_nonnegative(b, e) - 1.0) + e / (2.0 * b * sqrt(PI));
             g1 = 1.0 / (1.0 + lambda);
-            dg1 = vec2(-g1 * g1 * e / (2.0 * b * alpha * sqrt(PI)), 0.0);
-            return;
+            whole = -g1 * g1 * e / (2.0 * b * alpha * sqrt(PI));
+        } else {
+            float root = sqrt(1.0 + s2);
+            g1 = 2.0 / (1.0 + root);
+            whole = -2.0 * (alpha * tan2 / root) / ((1.0 + root) * (1.0 + root));
         }
-        float root = sqrt(1.0 + s2);
-        g1 = 2.0 / (1.0 + root);
-        dg1 = vec2(-2.0 * (alpha * tan2 / root) / ((1.0 + root) * (1.0 + root)), 0.0);
+        vec2 xy2 = v.xy * v.xy;
+        dg1 = HAS(F_ANISOTROPIC) ? xy2 * (whole / (xy2.x + xy2.y)) : vec2(whole, 0.0);
         return;
     }
     // precise: G1 must round the same whether or not a kernel also takes its derivative (which
@@ -170,10 +175,12 @@ vec3 microfacet_eval_pdf(Leaf l, vec3 wi, vec3 wo, out float pdf) {
 }
 
 // (∂D/∂α_u, ∂D/∂α_v) given d = D(h); 0 where the underflow guard zeroes D (twin:
-// microfacet_d_dalpha_aniso, which computes D itself).
+// microfacet_d_dalpha_aniso, which computes D itself; microfacet_d_dalpha the whole, in x).
 vec2 microfacet_d_dalpha_of(uint distribution, vec2 a, vec3 h, float d) {
     if (d == 0.0) return vec2(0.0);
-    if (isotropic(a)) {
+    // Whole in x only where no material is anisotropic: separate α_u and α_v parameters of equal
+    // value take the general split below.
+    if (!HAS(F_ANISOTROPIC)) {
         float t = (h.x * h.x + h.y * h.y) / (h.z * h.z);
         float a2 = a.x * a.x;
         if (is_beckmann(distribution)) return vec2(d * 2.0 * (t - a2) / (a2 * a.x), 0.0);

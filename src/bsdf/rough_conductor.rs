@@ -62,20 +62,12 @@ pub fn microfacet_d_aniso(distribution: Distribution, alpha: Vec2, h: Vec3) -> f
 
 /// (∂D/∂α_u, ∂D/∂α_v); 0 where the underflow guard zeroes D. With S = h_x²/α_u² + h_y²/α_v² +
 /// h_z²: Beckmann ∂ ln D/∂α_u = 2h_x²/(α_u³ h_z²) − 1/α_u, GGX 4h_x²/(α_u³ S) − 1/α_u (and so for v).
+/// The two parts are split at α_u = α_v too (their sum is [`microfacet_d_dalpha`]): a material whose
+/// α_u and α_v are separate parameters that happen to be equal gets each its own share.
 pub fn microfacet_d_dalpha_aniso(distribution: Distribution, alpha: Vec2, h: Vec3) -> Vec2 {
     let d = microfacet_d_aniso(distribution, alpha, h);
     if d == 0.0 {
         return Vec2::ZERO;
-    }
-    if alpha.x == alpha.y {
-        // The isotropic derivative whole, in x (the two parts sum to it).
-        let t = (h.x * h.x + h.y * h.y) / (h.z * h.z);
-        let (a, a2) = (alpha.x, alpha.x * alpha.x);
-        let whole = match distribution {
-            Distribution::Beckmann => d * 2.0 * (t - a2) / (a2 * a),
-            Distribution::Ggx => d * 2.0 * (t - a2) / (a * (a2 + t)),
-        };
-        return Vec2::new(whole, 0.0);
     }
     let (x2, y2, z2) = (h.x * h.x, h.y * h.y, h.z * h.z);
     let a3 = alpha * alpha * alpha;
@@ -205,9 +197,19 @@ pub fn microfacet_eval(
     fresnel_conductor(wi.dot(h), eta, k) * specular * (d * g / (4.0 * wi.z))
 }
 
-/// ∂D/∂α (ALGORITHMS.md §4.2); 0 where the underflow guard zeroes D.
+/// ∂D/∂α (ALGORITHMS.md §4.2) of isotropic roughness; 0 where the underflow guard zeroes D. In
+/// the form 2(t − α²)·… (t = tan²θ_h), whose sign changes exactly at t = α².
 pub fn microfacet_d_dalpha(distribution: Distribution, alpha: f32, h: Vec3) -> f32 {
-    microfacet_d_dalpha_aniso(distribution, Vec2::splat(alpha), h).x
+    let d = microfacet_d(distribution, alpha, h);
+    if d == 0.0 {
+        return 0.0;
+    }
+    let t = (h.x * h.x + h.y * h.y) / (h.z * h.z);
+    let a2 = alpha * alpha;
+    match distribution {
+        Distribution::Beckmann => d * 2.0 * (t - a2) / (a2 * alpha),
+        Distribution::Ggx => d * 2.0 * (t - a2) / (alpha * (a2 + t)),
+    }
 }
 
 /// (∂G1/∂α_u, ∂G1/∂α_v) of [`microfacet_g1_aniso`]: ∂G1/∂s² · ∂s²/∂α_u with ∂s²/∂α_u =
@@ -217,22 +219,11 @@ pub fn microfacet_g1_dalpha_aniso(distribution: Distribution, alpha: Vec2, v: Ve
         return Vec2::ZERO;
     }
     if alpha.x == alpha.y {
-        // The isotropic derivative whole, in x.
-        let (a, tan2) = (alpha.x, tan2_theta(v));
-        let s2 = a * a * tan2;
-        let whole = match distribution {
-            Distribution::Beckmann => {
-                // G1 = 1/(1 + Λ(b)), b = 1/(α tan θ): dΛ/db = −e^{−b²}/(2b²√π), db/dα = −b/α.
-                let b = 1.0 / s2.sqrt();
-                let g1 = microfacet_g1_aniso(distribution, alpha, v, h);
-                -g1 * g1 * (-b * b).exp() / (2.0 * b * a * PI.sqrt())
-            }
-            Distribution::Ggx => {
-                let root = (1.0 + s2).sqrt();
-                -2.0 * (a * tan2 / root) / ((1.0 + root) * (1.0 + root))
-            }
-        };
-        return Vec2::new(whole, 0.0);
+        // Equal values (of separate parameters, or one): the whole, split as ∂s²/∂α_u : ∂s²/∂α_v
+        // = v_x² : v_y².
+        let whole = microfacet_g1_dalpha(distribution, alpha.x, v, h);
+        let (x2, y2) = (v.x * v.x, v.y * v.y);
+        return Vec2::new(x2, y2) * (whole / (x2 + y2));
     }
     let s2 = g1_s2(alpha, v);
     let dg_ds2 = match distribution {
@@ -251,9 +242,26 @@ pub fn microfacet_g1_dalpha_aniso(distribution: Distribution, alpha: Vec2, v: Ve
     Vec2::new(dg_ds2 * 2.0 * alpha.x * v.x * v.x / z2, dg_ds2 * 2.0 * alpha.y * v.y * v.y / z2)
 }
 
-/// ∂G1/∂α of [`microfacet_g1`]; 0 where G1 is constant (masked, or at normal incidence).
+/// ∂G1/∂α of [`microfacet_g1`] (the sum of [`microfacet_g1_dalpha_aniso`]'s parts at α_u = α_v); 0
+/// where G1 is constant (masked, or at normal incidence).
 pub fn microfacet_g1_dalpha(distribution: Distribution, alpha: f32, v: Vec3, h: Vec3) -> f32 {
-    microfacet_g1_dalpha_aniso(distribution, Vec2::splat(alpha), v, h).x
+    if v.dot(h) * v.z <= 0.0 || tan2_theta(v) == 0.0 {
+        return 0.0;
+    }
+    let tan2 = tan2_theta(v);
+    let s2 = alpha * alpha * tan2;
+    match distribution {
+        Distribution::Beckmann => {
+            // G1 = 1/(1 + Λ(b)), b = 1/(α tan θ): dΛ/db = −e^{−b²}/(2b²√π), db/dα = −b/α.
+            let b = 1.0 / s2.sqrt();
+            let g1 = microfacet_g1(distribution, alpha, v, h);
+            -g1 * g1 * (-b * b).exp() / (2.0 * b * alpha * PI.sqrt())
+        }
+        Distribution::Ggx => {
+            let root = (1.0 + s2).sqrt();
+            -2.0 * (alpha * tan2 / root) / ((1.0 + root) * (1.0 + root))
+        }
+    }
 }
 
 /// The scalar D(h)·G1(wi, h)·G1(wo, h)/(4 cos θi) at half vector `h` and its derivatives by α_u and

@@ -432,79 +432,34 @@ fn derivatives_match_finite_differences() {
                             1e-2,
                         ));
                     }
-                    if let Leaf::RoughDielectric(d) = b.leaves[leaf] {
-                        // Isotropic: α moves α_u and α_v together; anisotropic: each its own.
-                        let base = *b;
-                        let isotropic = d.alpha == d.alpha_v;
+                    // α_u and α_v each alone, equal or not: separate parameters that hold the same
+                    // value each take their own share (an isotropic α's is the sum of the two).
+                    let rough = match b.leaves[leaf] {
+                        Leaf::RoughDielectric(d) => Some((d.alpha, d.alpha_v)),
+                        Leaf::RoughConductor { alpha, alpha_v, .. } => Some((alpha, alpha_v)),
+                        _ => None,
+                    };
+                    if let Some((alpha_u, alpha_v)) = rough {
                         let gl = g.leaves[leaf];
-                        cases.push((
-                            (gl.alpha + if isotropic { gl.alpha_v } else { Vec3::ZERO }).dot(Vec3::ONE),
-                            Box::new(move |v| {
-                                let mut x = base;
-                                if let Leaf::RoughDielectric(d) = &mut x.leaves[leaf] {
-                                    d.alpha = v;
-                                    if isotropic {
-                                        d.alpha_v = v;
-                                    }
-                                }
-                                x
-                            }),
-                            d.alpha,
-                            1e-3,
-                        ));
-                        if !isotropic {
+                        for (v_axis, analytic, value) in [(false, gl.alpha, alpha_u), (true, gl.alpha_v, alpha_v)] {
+                            let base = *b;
                             cases.push((
-                                gl.alpha_v.dot(Vec3::ONE),
+                                analytic.dot(Vec3::ONE),
                                 Box::new(move |v| {
                                     let mut x = base;
-                                    if let Leaf::RoughDielectric(d) = &mut x.leaves[leaf] {
-                                        d.alpha_v = v;
+                                    match &mut x.leaves[leaf] {
+                                        Leaf::RoughDielectric(d) if v_axis => d.alpha_v = v,
+                                        Leaf::RoughDielectric(d) => d.alpha = v,
+                                        Leaf::RoughConductor { alpha_v, .. } if v_axis => *alpha_v = v,
+                                        Leaf::RoughConductor { alpha, .. } => *alpha = v,
+                                        _ => unreachable!("a rough leaf"),
                                     }
                                     x
                                 }),
-                                d.alpha_v,
+                                value,
                                 1e-3,
                             ));
                         }
-                    }
-                    // An anisotropic conductor's α_v (an isotropic one's α moves both below).
-                    if let Leaf::RoughConductor { alpha, alpha_v, .. } = b.leaves[leaf]
-                        && alpha != alpha_v
-                    {
-                        let base = *b;
-                        cases.push((
-                            g.leaves[leaf].alpha_v.dot(Vec3::ONE),
-                            Box::new(move |v| {
-                                let mut x = base;
-                                if let Leaf::RoughConductor { alpha_v, .. } = &mut x.leaves[leaf] {
-                                    *alpha_v = v;
-                                }
-                                x
-                            }),
-                            alpha_v,
-                            1e-3,
-                        ));
-                    }
-                    if let Leaf::RoughConductor { alpha, alpha_v, .. } = b.leaves[leaf] {
-                        let base = *b;
-                        let isotropic = alpha == alpha_v;
-                        let analytic =
-                            g.leaves[leaf].alpha + if isotropic { g.leaves[leaf].alpha_v } else { Vec3::ZERO };
-                        cases.push((
-                            analytic.dot(Vec3::ONE),
-                            Box::new(move |v| {
-                                let mut x = base;
-                                if let Leaf::RoughConductor { alpha, alpha_v, .. } = &mut x.leaves[leaf] {
-                                    *alpha = v;
-                                    if isotropic {
-                                        *alpha_v = v;
-                                    }
-                                }
-                                x
-                            }),
-                            alpha,
-                            1e-3,
-                        ));
                     }
                 }
                 if b.blend {

@@ -415,6 +415,58 @@ fn issue_31_mask_opacity_matches_finite_differences() {
     );
 }
 
+/// Separate α_u and α_v parameters that hold the same value each take their own share of the
+/// roughness derivative. Both back ends once gave α_u the whole and α_v 0 there (each half right
+/// only in their sum, which an isotropic α takes): with common random numbers, the gradient at
+/// α_u = α_v must equal the one a hair's breadth away (α_v larger by 10⁻⁴ of itself), where the
+/// two take the anisotropic formulas — on the device and on the CPU reference, for the rough
+/// conductor and the rough dielectric.
+#[test]
+fn equal_alpha_u_and_alpha_v_each_take_their_share() {
+    let gpu = TestGpu::new();
+    for (name, object, value) in
+        [("bsdf_roughconductor_anisotropic", "ball", 0.25), ("bsdf_roughdielectric_anisotropic", "floor", 0.2)]
+    {
+        let names = ["alpha_u", "alpha_v"].map(|axis| format!("{object}.bsdf.{axis}.value"));
+        let at = |alpha_v: f32| {
+            let mut scene = scenes::conformance(name);
+            scene.params.set(&names[0], &[value]).unwrap();
+            scene.params.set(&names[1], &[alpha_v]).unwrap();
+            scene
+        };
+        let (equal, near) = (at(value), at(value * (1.0 + 1e-4)));
+        let opts = RenderOptions { width: 32, height: 32, spp: 8, seed: 3, ..RenderOptions::for_scene(&equal) };
+        let adjoint = adjoint_pattern(opts.width, opts.height);
+        let device = |scene: &Scene| -> Vec<f64> {
+            let mut renderer = Renderer::new(&gpu.ctx, scene).unwrap();
+            let g = renderer.backward(&opts, &adjoint, GradMode::Float).unwrap();
+            names.iter().map(|n| f64::from(g.get(n).unwrap()[0])).collect()
+        };
+        let cpu = |scene: &Scene| -> Vec<f64> {
+            let g = pathgrad::cpu::backward(scene, &opts, &adjoint).unwrap();
+            names
+                .iter()
+                .map(|n| f64::from(g[scene.params.entry(scene.params.find(n).unwrap()).offset as usize]))
+                .collect()
+        };
+        for (back_end, at_equal, beside) in
+            [("device", device(&equal), device(&near)), ("CPU", cpu(&equal), cpu(&near))]
+        {
+            let scale = beside.iter().fold(0.0f64, |m, g| m.max(g.abs()));
+            println!("{name} {back_end}: α_u, α_v at equality {at_equal:?}, beside {beside:?}");
+            assert!(at_equal[1].abs() > 0.1 * scale, "{name} {back_end}: α_v's share vanishes: {at_equal:?}");
+            for (k, axis) in names.iter().enumerate() {
+                assert!(
+                    (at_equal[k] - beside[k]).abs() <= 1e-3 * scale,
+                    "{name} {back_end} {axis}: {} at α_u = α_v, {} beside",
+                    at_equal[k],
+                    beside[k]
+                );
+            }
+        }
+    }
+}
+
 /// Mesh attributes (issue 31: Mitsuba's `mesh_attribute`), per vertex as a colour and per face as a
 /// colour and a blend weight: GPU and CPU image gradients per path, and each against central
 /// finite differences.
