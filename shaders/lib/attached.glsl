@@ -307,6 +307,17 @@ struct RoughLobe {
 
 float attached_tan2(float c) { return max(1.0 - c * c, 0.0) / (c * c); }
 
+// ln(G1(cos θi)·G1(cos θo)) at roughness α and its derivatives by cos θi, cos θo and α (ln_masking
+// of src/attached.rs): ∂ ln G1/∂cos = ∂ ln G1/∂s² · α²·(−2/cos³); ∂ ln G1/∂α = ∂ ln G1/∂s² · 2α tan².
+vec4 attached_ln_masking(bool beckmann, float alpha, float ci, float co) {
+    vec2 gi = attached_ln_g1(beckmann, alpha * alpha * attached_tan2(ci));
+    vec2 go = attached_ln_g1(beckmann, alpha * alpha * attached_tan2(co));
+    float gi_c = gi.y * alpha * alpha * -2.0 / (ci * ci * ci);
+    float go_c = go.y * alpha * alpha * -2.0 / (co * co * co);
+    float g_alpha = gi.y * 2.0 * alpha * attached_tan2(ci) + go.y * 2.0 * alpha * attached_tan2(co);
+    return vec4(gi.x + go.x, gi_c, go_c, g_alpha);
+}
+
 // micro_normal of src/attached.rs: a microfacet normal h drawn from D(h)·cos θh (GGX, or Beckmann)
 // about the unit normal n, in the frame basis_jacobians builds from n; with ∂h/∂n (hn), ∂h/∂α, h's
 // local coordinates hl and ∂hl.z/∂α. The rough conductor's and the rough dielectric's lobes share it.
@@ -347,14 +358,13 @@ bool rough_conductor_lobe(vec3 d, vec3 n, float alpha, bool beckmann, vec2 u, ve
     if (!(c > 0.0) || !(co > 0.0)) return false;
     vec3 f = fresnel_conductor(c, eta, k);
     if (!(min(f.x, min(f.y, f.z)) > 0.0)) return false;
-    vec2 gi = attached_ln_g1(beckmann, alpha * alpha * attached_tan2(ci));
-    vec2 go = attached_ln_g1(beckmann, alpha * alpha * attached_tan2(co));
-    float gi_c = gi.y * alpha * alpha * -2.0 / (ci * ci * ci);
-    float go_c = go.y * alpha * alpha * -2.0 / (co * co * co);
-    float g_alpha = gi.y * 2.0 * alpha * attached_tan2(ci) + go.y * 2.0 * alpha * attached_tan2(co);
+    vec4 masking = attached_ln_masking(beckmann, alpha, ci, co);
+    float gi_c = masking.y;
+    float go_c = masking.z;
+    float g_alpha = masking.w;
     float hz = hl.z;
     l.wo = wo;
-    l.weight = f * (exp(gi.x + go.x) * c / (ci * hz));
+    l.weight = f * (exp(masking.x) * c / (ci * hz));
     l.dc_dd = -h;
     l.dc_dn = -(transpose(hn) * d);
     l.dc_dalpha = -dot(d, h_alpha);
@@ -447,16 +457,15 @@ bool rough_dielectric_lobe(vec3 d, vec3 n, float alpha, bool beckmann, vec2 u, f
     }
     float co = dot(wo, ns);
     if (!(choice > 0.0) || !(co != 0.0) || (co < 0.0) != transmitted) return false;
-    vec2 gi = attached_ln_g1(beckmann, alpha * alpha * attached_tan2(ci));
-    vec2 go = attached_ln_g1(beckmann, alpha * alpha * attached_tan2(co));
-    float gi_c = gi.y * alpha * alpha * -2.0 / (ci * ci * ci);
-    float go_c = go.y * alpha * alpha * -2.0 / (co * co * co);
-    float g_alpha = gi.y * 2.0 * alpha * attached_tan2(ci) + go.y * 2.0 * alpha * attached_tan2(co);
+    vec4 masking = attached_ln_masking(beckmann, alpha, ci, co);
+    float gi_c = masking.y;
+    float go_c = masking.z;
+    float g_alpha = masking.w;
     float hz = hl.z;
     float radiance = transmitted ? eta_ti * eta_ti : 1.0;
     l.wo = wo;
     l.transmitted = transmitted;
-    l.weight = exp(gi.x + go.x) * c / (ci * hz) * radiance;
+    l.weight = exp(masking.x) * c / (ci * hz) * radiance;
     l.t_d = t_d;
     l.t_n = t_nn;
     l.t_alpha = t_alpha;
