@@ -67,6 +67,11 @@ pub trait Backend {
     /// Reverse-mode gradient of Σ_v ⟨A_v, I_v⟩ over `views`, where `adjoints[v]` is A_v
     /// (∂loss/∂pixel of view v's image): every view's paths in one pass, into one gradient.
     ///
+    /// Under detached sampling (`options.sampling`), the parameters that act only through the
+    /// sampled directions ([`crate::attached::attached_only_params`]: a dielectric's `eta`) get 0:
+    /// [`crate::attached::differentiated`] says which of a selection a sampling differentiates, and
+    /// refuses such a parameter by name, as the program's `--param` and Python's `wrt` do.
+    ///
     /// # Errors
     /// Option errors, an adjoint of the wrong size or count, a mode the backend cannot do;
     /// backend failures.

@@ -204,7 +204,8 @@ fn render_flat(scene: &Scene, flat: &FlatScene, options: &RenderOptions, view: &
 }
 
 /// Reverse-mode gradient on the CPU: the twin of [`crate::gpu::Renderer::backward`] (same key,
-/// same fused primal + replay per sample), accumulated in f64 per parameter value.
+/// same fused primal + replay per sample), accumulated in f64 per parameter value. Under detached
+/// sampling, as there, [`crate::attached::attached_only_params`] get 0.
 ///
 /// # Errors
 /// Scene and option errors; an adjoint image of the wrong size.
