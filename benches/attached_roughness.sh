@@ -8,7 +8,8 @@
 # and interquartile range (a spread that rare large values do not dominate), the mean seconds of a
 # gradient step (`grad --json`'s time_s), and the efficiency ratio (variance × seconds)
 # detached ÷ attached: above 1, attached wins at equal time.
-#   benches/attached_roughness.sh [PATHGRAD] [SEEDS] [SPP] [SIZE] [SCENE] [PARAM]
+#   benches/attached_roughness.sh [PATHGRAD] [SEEDS] [SPP] [SIZE] [SCENE] [PARAM] [MAX_DEPTH]
+# (MAX_DEPTH: the target's and the gradients' --max-depth; default the scene's.)
 set -euo pipefail
 bin=${1:-target/release/pathgrad}
 seeds=${2:-16}
@@ -16,6 +17,8 @@ spp=${3:-8}
 size=${4:-48}
 scene=${5:-tests/data/scenes/attached_rough.xml}
 param=${6:-ball.bsdf.alpha.value}
+depth=()
+if [[ -n "${7:-}" ]]; then depth=(--max-depth "$7"); fi
 dir=$(mktemp -d)
 trap 'rm -rf "$dir"' EXIT
 cp "$(dirname "$scene")/attached_sky.exr" "$dir/"
@@ -23,13 +26,13 @@ for alpha in 0.005 0.02 0.1 0.3; do
   target_alpha=$(python3 -c "print($alpha * 1.25)")
   sed "s/name=\"alpha\" value=\"[^\"]*\"/name=\"alpha\" value=\"$alpha\"/" "$scene" > "$dir/ball.xml"
   sed "s/name=\"alpha\" value=\"[^\"]*\"/name=\"alpha\" value=\"$target_alpha\"/" "$scene" > "$dir/target.xml"
-  "$bin" render "$dir/target.xml" --spp 256 --width "$size" --height "$size" -o "$dir/target.exr" >/dev/null 2>&1
+  "$bin" render "$dir/target.xml" --spp 256 --width "$size" --height "$size" "${depth[@]}" -o "$dir/target.exr" >/dev/null 2>&1
   : > "$dir/detached"
   : > "$dir/attached"
   for ((s = 0; s < seeds; s++)); do
     for sampling in detached attached; do
       "$bin" grad "$dir/ball.xml" --param "$param" --target "$dir/target.exr" --sampling "$sampling" \
-        --seed "$s" --spp "$spp" --width "$size" --height "$size" --json 2>/dev/null \
+        --seed "$s" --spp "$spp" --width "$size" --height "$size" "${depth[@]}" --json 2>/dev/null \
         | python3 -c 'import json,sys; j=json.load(sys.stdin); print(j["gradients"][sys.argv[1]][0], j["time_s"])' "$param" \
         >> "$dir/$sampling"
     done
