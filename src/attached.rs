@@ -745,7 +745,8 @@ pub fn differentiated(
             parameter: scene.params.entry(id).name.clone(),
             message: "a dielectric's index of refraction, which detached sampling does not differentiate (a \
                       smooth dielectric's acts only through the directions it refracts into, which detached \
-                      sampling holds fixed); differentiate it with --sampling attached (Python: \
+                      sampling holds fixed; pathgrad's detached derivative of a rough one leaves it out, \
+                      where Mitsuba's includes it); differentiate it with --sampling attached (Python: \
                       sampling=\"attached\"; the library: Sampling::Attached)"
                 .into(),
         });

@@ -444,10 +444,7 @@ fn equal_alpha_u_and_alpha_v_each_take_their_share() {
         };
         let cpu = |scene: &Scene| -> Vec<f64> {
             let g = pathgrad::cpu::backward(scene, &opts, &adjoint).unwrap();
-            names
-                .iter()
-                .map(|n| f64::from(g[scene.params.entry(scene.params.find(n).unwrap()).offset as usize]))
-                .collect()
+            names.iter().map(|n| g[scene.params.entry(scene.params.find(n).unwrap()).offset as usize]).collect()
         };
         for (back_end, at_equal, beside) in
             [("device", device(&equal), device(&near)), ("CPU", cpu(&equal), cpu(&near))]

@@ -214,9 +214,10 @@ pub(crate) struct StrategyArgs {
     pub(crate) hero_weights: Option<String>,
     /// How sampled directions relate to the parameters in gradient passes: `detached` (held
     /// fixed, Mitsuba's prb) or `attached` (they move with the parameters: the index of
-    /// refraction of smooth dielectrics becomes differentiable, and a near-specular rough
-    /// conductor's roughness gets a lower-variance gradient; scenes of smooth dielectrics and
-    /// conductors and isotropic rough conductors only, docs/gradients.md "Attached derivatives").
+    /// refraction of dielectrics becomes differentiable, and a near-specular rough conductor's
+    /// roughness gets a lower-variance gradient; scenes of smooth dielectrics and conductors and
+    /// isotropic, untextured rough conductors and rough dielectrics only, docs/gradients.md
+    /// "Attached derivatives").
     #[arg(long, value_name = "detached|attached", default_value = "detached")]
     pub(crate) sampling: String,
     /// With `--sampling attached`: the amplitude of the zero-mean noise added to each ray
