@@ -925,8 +925,28 @@ bool path_step(inout PathState st) {
                             st.jac = jac_compose(a, st.jac);
                         }
                     }
+                    // A diffuse vertex (untextured albedo): its sample follows the shading normal's
+                    // frame alone and its weight depends on nothing the ray does (h = 0); direction
+                    // noise regularises its singular direction block (src/cpu/path.rs).
+                    bool diffuse_attached = HAS(F_DIFFUSE) && !bsdf.blend && is_diffuse(bsdf.leaf0.kind);
+                    if (diffuse_attached) {
+                        vec4 u = uniform4(uvec2(globals.key0, st.key1), st.pixel, st.sample_index, vertex,
+                                          STREAM_JACOBIAN, 0u, 0u);
+                        float amplitude = globals.jac_noise > 0.0 ? globals.jac_noise : DIFFUSE_JACOBIAN_NOISE;
+                        Jac6 a = jac_plus_direction_noise(
+                            jac_completed(hit_jacobian(geometry, mat3(0.0), diffuse_direction_jacobian(frame.n, bs.wo)),
+                                          st.prev_normal, st.ray.dir, s.ng, wo_world),
+                            jac_regularisation(amplitude, u.x, u.y), st.ray.dir, wo_world);
+                        if (adjoint) {
+                            Row6 next;
+                            bool solved = jac_solve_row(a, st.gamma, next);
+                            st.gamma = solved ? next : ROW6_ZERO;
+                        } else {
+                            st.jac = jac_compose(a, st.jac);
+                        }
+                    }
                     SmoothLobe lobe;
-                    bool lobe_ok = !rough_attached && !glass_attached
+                    bool lobe_ok = !rough_attached && !glass_attached && !diffuse_attached
                         && (am.tag == MAT_CONDUCTOR
                             ? conductor_lobe(st.ray.dir, frame.n, bsdf.leaf0.eta, bsdf.leaf0.k, lobe)
                             : smooth_lobe(am.tag == MAT_THIN_DIELECTRIC, st.ray.dir, frame.n, bsdf.leaf0.eta.x,

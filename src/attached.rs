@@ -28,16 +28,16 @@ use glam::{Mat3, Vec3};
 pub use rough_dielectric::{RoughDielectricLobe, rough_dielectric_lobe};
 
 use crate::contract::{
-    MAT_CONDUCTOR, MAT_DIELECTRIC, MAT_ROUGH_CONDUCTOR, MAT_ROUGH_DIELECTRIC, MAT_THIN_DIELECTRIC, NO_PARAM,
-    SCALAR_TEXTURE,
+    MAT_CONDUCTOR, MAT_DIELECTRIC, MAT_DIFFUSE, MAT_ROUGH_CONDUCTOR, MAT_ROUGH_DIELECTRIC, MAT_THIN_DIELECTRIC,
+    NO_PARAM, SCALAR_TEXTURE,
 };
 use crate::integrator::{RenderOptions, Sampling};
 use crate::scene::flat::FlatScene;
 
 /// Refuses attached sampling (`options.sampling`) where its vertex Jacobians are not built: every
-/// material must be a smooth `dielectric`, `thindielectric` or `conductor` or an isotropic
-/// `roughconductor` or `roughdielectric` with untextured roughness (no normal map, no mask), without
-/// media; light comes from the environment or from emitters the paths hit. `forward` refuses it
+/// material must be a `diffuse` one with an untextured albedo, a smooth `dielectric`,
+/// `thindielectric` or `conductor` or an isotropic `roughconductor` or `roughdielectric` with
+/// untextured roughness (no normal map, no mask), without media; light comes from the environment or from emitters the paths hit. `forward` refuses it
 /// for forward-mode image gradients, which carry per-channel derivatives the adjoint-weighted
 /// attached sums do not.
 ///
@@ -52,8 +52,8 @@ pub fn refuse_unsupported(flat: &FlatScene, options: &RenderOptions, forward: bo
             parameter: "Sampling::Attached".into(),
             message: format!(
                 "{what}: attached derivatives are built for scenes of smooth `dielectric`, `thindielectric` and \
-                 `conductor` surfaces and isotropic `roughconductor`s and `roughdielectric`s with untextured \
-                 roughness lit by the environment or by emitters the paths hit, in reverse mode (use detached \
+                 `conductor` surfaces, isotropic `roughconductor`s and `roughdielectric`s with untextured \
+                 roughness and `diffuse` surfaces with untextured albedo, lit by the environment or by emitters the paths hit, in reverse mode (use detached \
                  sampling)"
             ),
         })
@@ -78,7 +78,12 @@ pub fn refuse_unsupported(flat: &FlatScene, options: &RenderOptions, forward: bo
     for m in &flat.materials {
         if !matches!(
             m.tag,
-            MAT_DIELECTRIC | MAT_THIN_DIELECTRIC | MAT_CONDUCTOR | MAT_ROUGH_CONDUCTOR | MAT_ROUGH_DIELECTRIC
+            MAT_DIFFUSE
+                | MAT_DIELECTRIC
+                | MAT_THIN_DIELECTRIC
+                | MAT_CONDUCTOR
+                | MAT_ROUGH_CONDUCTOR
+                | MAT_ROUGH_DIELECTRIC
         ) {
             let name = names.get(m.tag as usize).copied().unwrap_or("another BSDF");
             return refuse(format!("the scene has a `{name}` material"));
@@ -88,6 +93,9 @@ pub fn refuse_unsupported(flat: &FlatScene, options: &RenderOptions, forward: bo
         }
         if m.tag == MAT_ROUGH_DIELECTRIC && (m.p_alpha != m.p_alpha_v || m.p_alpha & SCALAR_TEXTURE != 0) {
             return refuse("the scene has an anisotropic or texture-roughened `roughdielectric`".into());
+        }
+        if m.tag == MAT_DIFFUSE && m.tex_width > 0 {
+            return refuse("the scene has a `diffuse` material with a textured albedo".into());
         }
         if m.nmap_width > 0 || m.p_opacity != NO_PARAM {
             return refuse("the scene has a normal-mapped, bump-mapped or masked material".into());
@@ -194,6 +202,18 @@ impl Jac6 {
     pub fn plus_identity(&self, y: f32) -> Jac6 {
         let yi = Mat3::from_diagonal(Vec3::splat(y));
         Jac6 { oo: self.oo + yi, od: self.od, dob: self.dob, dd: self.dd + yi }
+    }
+
+    /// `self + y·R` in the direction block, R = t_out⊗t_in + b_out⊗b_in mapping the plane across
+    /// `d` onto the plane across `d_out` (the tangents of their [`crate::sampling::Frame`]s):
+    /// the regularisation of a vertex whose outgoing direction ignores the incoming one. A
+    /// diffuse vertex's completed direction block is d_out⊗d (plus the normal's variation), so
+    /// the derivative of what follows it by the outgoing direction reaches Γ only through Y;
+    /// with |Y| ≥ amplitude/2 the block stays invertible with condition ≤ 2/amplitude, and
+    /// E[Y] = 0 keeps E[Ã] = A (ALGORITHMS.md §9's claim (1)).
+    pub fn plus_direction_noise(&self, y: f32, d: Vec3, d_out: Vec3) -> Jac6 {
+        let (fi, fo) = (crate::sampling::Frame::from_normal(d), crate::sampling::Frame::from_normal(d_out));
+        Jac6 { dd: self.dd + y * (outer(fo.t, fi.t) + outer(fo.b, fi.b)), ..*self }
     }
 
     /// The row x with x·self = b (block elimination on the transposed system: the origin block
@@ -513,6 +533,15 @@ pub fn basis_jacobians(n: Vec3) -> (Vec3, Vec3, Mat3, Mat3) {
     let b_n =
         Mat3::from_cols(db, Vec3::new(0.0, 2.0 * n.y * a, n.y * n.y * a * a), Vec3::new(0.0, -1.0, 0.0)).transpose();
     (t, bv, t_n, b_n)
+}
+
+/// ∂d′/∂n of a diffuse vertex's outgoing direction d′ = x·t(n) + y·b(n) + z·n, the cosine
+/// sample `local` = (x, y, z) in the frame of [`basis_jacobians`] around the shading normal `n`
+/// (the frame [`crate::sampling::Frame::from_normal`] builds). It ignores the incoming direction
+/// (∂d′/∂d = 0) and its weight, the untextured albedo, depends on nothing the ray does.
+pub fn diffuse_direction_jacobian(n: Vec3, local: Vec3) -> Mat3 {
+    let (_, _, t_n, b_n) = basis_jacobians(n);
+    local.x * t_n + local.y * b_n + Mat3::from_diagonal(Vec3::splat(local.z))
 }
 
 /// The slope length factor g(u) of sampling D(h)·cos θh: tan θh = α·g(u) — GGX
@@ -1008,6 +1037,39 @@ mod tests {
         }
         assert_eq!(regularisation(0.5, 0.2, 0.0), -0.25);
         assert_eq!(regularisation(0.5, 0.7, 1.0), 0.5);
+    }
+
+    /// A diffuse vertex: the cosine sample's direction by the normal against finite differences
+    /// of the frame it is drawn in, and its completed Jacobian — singular in the direction block
+    /// (the outgoing direction ignores the incoming one) — made invertible by direction noise,
+    /// whose solve undoes the row product.
+    #[test]
+    fn diffuse_vertex_jacobian_and_its_noise() {
+        let local = Vec3::new(0.3, -0.5, 0.81).normalize();
+        let out = |n: Vec3| crate::sampling::Frame::from_normal(n).to_world(local);
+        let h = 1e-3;
+        for n in [Vec3::new(0.2, -0.3, 0.93).normalize(), Vec3::new(-0.4, 0.1, -0.9).normalize()] {
+            let t_n = diffuse_direction_jacobian(n, local);
+            for axis in [Vec3::X, Vec3::Y, Vec3::Z] {
+                let fd = (out(n + h * axis) - out(n - h * axis)) / (2.0 * h);
+                assert!((fd - t_n * axis).abs().max_element() < 2e-3, "∂d′/∂n {fd} vs {}", t_n * axis);
+            }
+        }
+        let d = Vec3::new(0.2, 0.1, -1.0).normalize();
+        let g = HitGeometry { t: 1.5, d, ng: Vec3::Z, n: Vec3::Z, dn_dx: Mat3::ZERO };
+        let wo = out(Vec3::Z);
+        let a = g.jacobian(Mat3::ZERO, diffuse_direction_jacobian(Vec3::Z, local)).completed(Vec3::X, d, Vec3::Z, wo);
+        assert!(
+            a.dd.determinant().abs() < 1e-6 && a.solve_row(Row6::direction(Vec3::X)).is_none_or(|x| x.max_abs() > 1e5)
+        );
+        for y in [-1.0f32, -0.5, 0.5, 1.0] {
+            let reg = a.plus_direction_noise(y, d, wo);
+            // Zero on the manifold's complement it adds nothing to: the incoming direction's length.
+            assert!((reg.dd * d - a.dd * d).abs().max_element() < 1e-6);
+            let x = Row6 { o: Vec3::new(0.3, -1.0, 2.0), d: Vec3::new(-0.7, 0.1, 0.4) };
+            let back = reg.solve_row(x.through(&reg)).unwrap();
+            assert!((back.o - x.o).abs().max_element() < 1e-4 && (back.d - x.d).abs().max_element() < 1e-4);
+        }
     }
 
     /// The lobe's direction derivative by η and its log-weight derivatives against finite

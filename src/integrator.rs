@@ -71,8 +71,11 @@ pub enum Sampling {
     Attached {
         /// The amplitude a of the noise Y·I added to each vertex's completed ray Jacobian (PRB
         /// supplemental §2): |Y| uniform in [a/2, a], sign random; in [0, 1), 0 for none. Zero-mean
-        /// noise keeps the estimate unbiased and adds variance; the smooth vertices attached
-        /// sampling supports need none (BENCHMARKS.md "Attached derivatives").
+        /// noise keeps the estimate unbiased and adds variance; the smooth and rough vertices
+        /// need none (BENCHMARKS.md "Attached derivatives"). A diffuse vertex, whose direction
+        /// block is singular, always takes noise Y·R in that block alone
+        /// (`crate::attached::Jac6::plus_direction_noise`), of amplitude a when a > 0, else
+        /// [`crate::contract::DIFFUSE_JACOBIAN_NOISE`] (BENCHMARKS.md "Issue 34: diffuse vertices").
         noise: f32,
     },
 }

@@ -40,6 +40,15 @@ Jac6 jac_plus_identity(Jac6 a, float y) {
     return Jac6(a.oo + mat3(y), a.od, a.dob, a.dd + mat3(y));
 }
 
+// a + y·R in the direction block, R = t_out⊗t_in + b_out⊗b_in (the frames of d and d_out): the
+// regularisation of a vertex whose outgoing direction ignores the incoming one
+// (Jac6::plus_direction_noise).
+Jac6 jac_plus_direction_noise(Jac6 a, float y, vec3 d, vec3 d_out) {
+    ShadingFrame fi = shading_frame(d);
+    ShadingFrame fo = shading_frame(d_out);
+    return Jac6(a.oo, a.od, a.dob, a.dd + y * (outerProduct(fo.t, fi.t) + outerProduct(fo.b, fi.b)));
+}
+
 // The row x with x·a = b (block elimination on the transposed system); false where a block is
 // singular or the result is not finite.
 bool jac_solve_row(Jac6 a, Row6 b, out Row6 x) {
@@ -284,6 +293,17 @@ void basis_jacobians(vec3 n, out vec3 t, out vec3 b, out mat3 t_n, out mat3 b_n)
     vec3 db = vec3(n.y * a, n.x * a, n.x * n.y * a * a);
     t_n = transpose(mat3(vec3(2.0 * s * n.x * a, 0.0, s * n.x * n.x * a * a), s * db, vec3(-s, 0.0, 0.0)));
     b_n = transpose(mat3(db, vec3(0.0, 2.0 * n.y * a, n.y * n.y * a * a), vec3(0.0, -1.0, 0.0)));
+}
+
+// ∂d′/∂n of a diffuse vertex's cosine sample `local` in the frame of basis_jacobians around n
+// (diffuse_direction_jacobian).
+mat3 diffuse_direction_jacobian(vec3 n, vec3 local) {
+    vec3 t;
+    vec3 b;
+    mat3 t_n;
+    mat3 b_n;
+    basis_jacobians(n, t, b, t_n, b_n);
+    return local.x * t_n + local.y * b_n + mat3(local.z);
 }
 
 // ln G1 and its derivative by s² = α² tan² θ (ln_g1).

@@ -75,4 +75,8 @@ contract_floats! {
     LAMBERT_WM1_SMALL = -0.15;
     /// Half vectors with cos θh below this have differential density 0 (ALGORITHMS.md §4.2).
     DIFF_COS_EPSILON = 1e-9;
+
+    /// Attached sampling: the amplitude of the direction noise that regularises a diffuse vertex's
+    /// Jacobian (`crate::attached::Jac6::plus_direction_noise`) when the request sets none.
+    DIFFUSE_JACOBIAN_NOISE = 1.0;
 }

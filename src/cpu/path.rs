@@ -4,8 +4,8 @@
 use glam::{Vec2, Vec3};
 
 use crate::attached::{
-    HitGeometry, Jac6, RoughDielectricLobe, RoughLobe, Row6, conductor_lobe, regularisation, rough_conductor_lobe,
-    rough_dielectric_lobe, smooth_lobe,
+    HitGeometry, Jac6, RoughDielectricLobe, RoughLobe, Row6, conductor_lobe, diffuse_direction_jacobian,
+    regularisation, rough_conductor_lobe, rough_dielectric_lobe, smooth_lobe,
 };
 use crate::bsdf::Leaf;
 use crate::bsdf::differential::{bsdf_pdf_diff, bsdf_sample_diff};
@@ -14,9 +14,9 @@ use crate::bsdf::specular::is_smooth;
 use crate::bsdf::{Bsdf, BsdfSample, bsdf_eval, bsdf_pdf, bsdf_sample};
 use crate::bvh::{Ray, closest_hit, occluded};
 use crate::contract::{
-    DIM_DIFF_SIGN, DIM_DIRECTION, DIM_EMITTER_POS, DIM_EMITTER_SELECT, DIM_ENV_CELL, DIM_HERO, DIM_LOBE,
-    DIM_PIXEL_JITTER, DIM_ROULETTE, DIM_TECHNIQUE, Distribution, Globals, LENS_ORTHOGRAPHIC, LENS_THIN, LIGHT_SLOT,
-    MAT_BLEND, MAT_CONDUCTOR, MAT_NULL, MAT_ROUGH_CONDUCTOR, MAT_ROUGH_DIELECTRIC, MAT_ROUGH_PLASTIC,
+    DIFFUSE_JACOBIAN_NOISE, DIM_DIFF_SIGN, DIM_DIRECTION, DIM_EMITTER_POS, DIM_EMITTER_SELECT, DIM_ENV_CELL, DIM_HERO,
+    DIM_LOBE, DIM_PIXEL_JITTER, DIM_ROULETTE, DIM_TECHNIQUE, Distribution, Globals, LENS_ORTHOGRAPHIC, LENS_THIN,
+    LIGHT_SLOT, MAT_BLEND, MAT_CONDUCTOR, MAT_NULL, MAT_ROUGH_CONDUCTOR, MAT_ROUGH_DIELECTRIC, MAT_ROUGH_PLASTIC,
     MAT_THIN_DIELECTRIC, MAX_HEROES, MAX_NULL_CROSSINGS, MAX_PATH_VERTICES, NO_EMITTER, NO_MEDIUM, NO_PARAM,
     PATH_HIDE_EMITTERS, PATH_NULL_UNCOUNTED, PLACEMENT_POWER, STRATEGY_DIFF, ViewCamera,
 };
@@ -1001,6 +1001,24 @@ pub fn trace_path<const ADJOINT: bool>(
                 for log_row in log_rows.iter_mut() {
                     *log_row = log_row.add_scaled(row, 1.0);
                 }
+                jac = a.compose(&jac);
+            }
+        }
+        if let (Some(geometry), Leaf::Diffuse { .. }) = (&geometry, &bsdf.leaves[0]) {
+            // A diffuse vertex (untextured albedo): its cosine sample follows the shading normal's
+            // frame alone and its weight, the albedo, depends on nothing the ray does (h = 0). The
+            // direction block of its Jacobian is singular: direction noise regularises it, with
+            // the request's amplitude or DIFFUSE_JACOBIAN_NOISE (crate::attached::Jac6::plus_direction_noise).
+            let wo = frame.to_world(bs.wo);
+            let u = uniform4(key, pixel, sample, vertex, Stream::Jacobian, 0, 0);
+            let amplitude = if globals.jac_noise > 0.0 { globals.jac_noise } else { DIFFUSE_JACOBIAN_NOISE };
+            let a = geometry
+                .jacobian(glam::Mat3::ZERO, diffuse_direction_jacobian(frame.n, bs.wo))
+                .completed(prev_normal, ray.dir, s.ng, wo)
+                .plus_direction_noise(regularisation(amplitude, u[0], u[1]), ray.dir, wo);
+            if ADJOINT {
+                phi = a.solve_row(phi).unwrap_or(Row6::ZERO);
+            } else {
                 jac = a.compose(&jac);
             }
         }

@@ -64,6 +64,34 @@ fn ior_matches_finite_differences_on_the_cpu() {
     }
 }
 
+/// A diffuse vertex before the moving directions: a diffuse floor lit through a glass sphere
+/// (η), where the replay recovers the derivative by the ray leaving the floor through its
+/// noise-regularised Jacobian, against finite differences.
+#[test]
+fn diffuse_vertices_match_finite_differences_on_the_cpu() {
+    let scene = scenes::data_scene("attached_floor");
+    let opts = RenderOptions { width: 24, height: 24, spp: 8, ..RenderOptions::for_scene(&scene) };
+    check_cpu(&scene, "glass.bsdf.eta", 24, opts);
+}
+
+/// The regularisation noise moves the variance, not the mean (ALGORITHMS.md §9 test (c)): on a
+/// glass sphere above a diffuse table, where diffuse vertices follow the directions η moves and
+/// their noise reaches η's gradient, the default (diffuse amplitude 1, smooth vertices exact)
+/// and noise of amplitude 0.2 at every vertex estimate the same gradient (independent seeds).
+#[test]
+fn the_jacobian_noise_leaves_the_mean_alone() {
+    let scene = scenes::data_scene("attached_table");
+    let offset = scene.params.entry(scene.params.find("glass.bsdf.eta").unwrap()).offset as usize;
+    let a = weights(24, 24);
+    let gradient = |noise: f32, seed: u32| {
+        let o = RenderOptions { seed, sampling: Sampling::Attached { noise }, ..attached(&scene, 24, 64) };
+        pathgrad::cpu::backward(&scene, &o, &a).unwrap()[offset]
+    };
+    let default: Vec<f64> = (0..24).map(|seed| gradient(0.0, seed)).collect();
+    let everywhere: Vec<f64> = (100..124).map(|seed| gradient(0.2, seed)).collect();
+    crate::support::assert_fd_matches("attached_table glass.bsdf.eta: noise 0.2 vs default", &everywhere, &default);
+}
+
 /// The roughness of rough conductors (GGX and Beckmann) alone in front of the environment map and
 /// seen through a glass slab, differentiated through the attached microfacet sampler, against
 /// finite differences. (The slab's own η moves its rays little here — a flat slab only shifts
@@ -155,6 +183,8 @@ fn the_device_equals_the_cpu_reference() {
         ("attached_rough_glass", "ball.bsdf.alpha.value"),
         ("attached_rough_glass", "glass.bsdf.eta"),
         ("attached_rough_beckmann", "ball.bsdf.alpha.value"),
+        ("attached_floor", "glass.bsdf.eta"),
+        ("attached_table", "glass.bsdf.eta"),
     ] {
         let scene = scenes::data_scene(name);
         let mut renderer = Renderer::new(&gpu.ctx, &scene).unwrap();
@@ -222,22 +252,40 @@ fn optimize_recovers_the_ior_of_a_glass_sphere() {
     assert!(String::from_utf8_lossy(&detached.stderr).contains("differentiate it with --sampling attached"));
 }
 
-/// Attached sampling is refused, by name, where its Jacobians are not built: a diffuse
-/// material, adaptive pixel sampling, forward-mode image gradients, deterministic mode.
+/// Attached sampling is refused, by name, where its Jacobians are not built: a textured diffuse
+/// albedo, a plastic, adaptive pixel sampling, forward-mode image gradients, deterministic mode.
 #[test]
 fn attached_sampling_refuses_what_it_does_not_cover() {
     use pathgrad::backend::Backend;
     use pathgrad::gpu::Renderer;
     use pathgrad::gpu::renderer::GradMode;
     let gpu = crate::support::TestGpu::new();
-    let cornell = pathgrad::scene::builtin::load("cornell-box").unwrap();
-    let opts = attached(&cornell, 8, 1);
     let a = weights(8, 8);
-    let err = pathgrad::cpu::backward(&cornell, &opts, &a).unwrap_err().to_string();
-    assert!(err.contains("Sampling::Attached") && err.contains("`diffuse` material"), "{err}");
-    let mut renderer = Renderer::new(&gpu.ctx, &cornell).unwrap();
+    let data = format!("{}/tests/data/scenes", env!("CARGO_MANIFEST_DIR"));
+    let dir = tempfile::tempdir().unwrap();
+    std::fs::copy(format!("{data}/attached_sky.exr"), dir.path().join("attached_sky.exr")).unwrap();
+    // `name` with `from` replaced by `to`, loaded from a scratch copy beside the environment map.
+    let variant = |name: &str, from: &str, to: &str| {
+        let xml = std::fs::read_to_string(format!("{data}/{name}.xml")).unwrap();
+        assert!(xml.contains(from), "{name} has no {from}");
+        let path = dir.path().join(format!("{name}-variant.xml"));
+        std::fs::write(&path, xml.replace(from, to)).unwrap();
+        pathgrad::scene::load(path.to_str().unwrap(), &[]).unwrap()
+    };
+    // A diffuse floor with a textured albedo (its weight would vary along the floor) and a
+    // plastic one (no attached sampler).
+    let floor = r#"<rgb name="reflectance" value="0.5"/>"#;
+    let checker = r#"<texture type="checkerboard" name="reflectance"/>"#;
+    let textured = variant("attached_floor", floor, checker);
+    let opts = attached(&textured, 8, 1);
+    let err = pathgrad::cpu::backward(&textured, &opts, &a).unwrap_err().to_string();
+    assert!(err.contains("Sampling::Attached") && err.contains("`diffuse` material with a textured albedo"), "{err}");
+    let mut renderer = Renderer::new(&gpu.ctx, &textured).unwrap();
     let err = renderer.backward(&opts, &a, GradMode::Float).unwrap_err().to_string();
-    assert!(err.contains("`diffuse` material"), "{err}");
+    assert!(err.contains("textured albedo"), "{err}");
+    let plastic = variant("attached_floor", r#"<bsdf type="diffuse">"#, r#"<bsdf type="roughplastic">"#);
+    let err = pathgrad::cpu::backward(&plastic, &attached(&plastic, 8, 1), &a).unwrap_err().to_string();
+    assert!(err.contains("`roughplastic` material"), "{err}");
     let sphere = scenes::data_scene("attached_sphere");
     let opts = attached(&sphere, 8, 1);
     let mut renderer = Renderer::new(&gpu.ctx, &sphere).unwrap();
@@ -249,16 +297,11 @@ fn attached_sampling_refuses_what_it_does_not_cover() {
     assert!(err.contains("forward-mode"), "{err}");
     // An anisotropic rough conductor: its sampler's frame would follow ∂p/∂u, whose Jacobians are
     // not built.
-    let data = format!("{}/tests/data/scenes", env!("CARGO_MANIFEST_DIR"));
-    let xml = std::fs::read_to_string(format!("{data}/attached_rough.xml")).unwrap().replace(
+    let aniso = variant(
+        "attached_rough",
         r#"<float name="alpha" value="0.1"/>"#,
         r#"<float name="alpha_u" value="0.1"/><float name="alpha_v" value="0.3"/>"#,
     );
-    let dir = tempfile::tempdir().unwrap();
-    std::fs::copy(format!("{data}/attached_sky.exr"), dir.path().join("attached_sky.exr")).unwrap();
-    let path = dir.path().join("aniso.xml");
-    std::fs::write(&path, xml).unwrap();
-    let aniso = pathgrad::scene::load(path.to_str().unwrap(), &[]).unwrap();
     let err = pathgrad::cpu::backward(&aniso, &attached(&aniso, 8, 1), &a).unwrap_err().to_string();
     assert!(err.contains("anisotropic or texture-roughened `roughconductor`"), "{err}");
     // The differential strategy samples its vertex by ∂f/∂α: not an attached sampler.
@@ -277,7 +320,7 @@ fn attached_sampling_refuses_what_it_does_not_cover() {
 }
 
 /// The replay returns Φ to zero as it returns the radiance to zero (ALGORITHMS.md §9 test (d)):
-/// after the last vertex every term of Γ has been removed, on every path of the six scenes,
+/// after the last vertex every term of Γ has been removed, on every path of the seven scenes,
 /// up to rounding amplified by the completed Jacobians' inverses (10⁻³ of Γ's largest entry).
 #[test]
 fn the_replay_returns_gamma_to_zero() {
@@ -293,6 +336,7 @@ fn the_replay_returns_gamma_to_zero() {
         "attached_mirror",
         "attached_rough_sphere",
         "attached_rough_sphere_beckmann",
+        "attached_floor",
     ] {
         let scene = scenes::data_scene(name);
         let opts = attached(&scene, 24, 2);

@@ -215,13 +215,14 @@ pub(crate) struct StrategyArgs {
     /// How sampled directions relate to the parameters in gradient passes: `detached` (held
     /// fixed, Mitsuba's prb) or `attached` (they move with the parameters: the index of
     /// refraction of dielectrics becomes differentiable, and a near-specular rough conductor's
-    /// roughness gets a lower-variance gradient; scenes of smooth dielectrics and conductors and
-    /// isotropic, untextured rough conductors and rough dielectrics only, docs/gradients.md
-    /// "Attached derivatives").
+    /// roughness gets a lower-variance gradient; scenes of smooth dielectrics and conductors,
+    /// isotropic, untextured rough conductors and rough dielectrics and untextured diffuse
+    /// surfaces only, docs/gradients.md "Attached derivatives").
     #[arg(long, value_name = "detached|attached", default_value = "detached")]
     pub(crate) sampling: String,
     /// With `--sampling attached`: the amplitude of the zero-mean noise added to each ray
-    /// Jacobian (PRB supplemental §2), in [0, 1) [default: 0, none].
+    /// Jacobian (PRB supplemental §2), in [0, 1) [default: 0, none; diffuse vertices, which
+    /// need noise, then take amplitude 1].
     #[arg(long, value_name = "A")]
     pub(crate) jacobian_noise: Option<f32>,
 }
