@@ -610,9 +610,19 @@ bool path_step(inout PathState st) {
                 st.radiance += sign * (st.throughput * w_b * area_radiance(p_radiance, s.uv));
                 if (HAS(G_EMISSION)) { gt.hit_param = p_radiance; gt.hit = st.adj * st.throughput * w_b; gt.hit_uv = s.uv; }
 #if ATTACHED
-                // Constant radiance (attached sampling refuses textured emitters): only the weights
-                // of the vertices before depend on the ray.
-                if (!adjoint) attached_contribution(st, ROW6_ZERO, st.adj * st.throughput * w_b * area_radiance(p_radiance, s.uv));
+                {
+                    // The emitter's own row, δL·β·∂L_e/∂r: a textured radiance varies with the hit
+                    // point; the weights of the vertices before depend on the ray.
+                    vec3 weight = st.adj * st.throughput * w_b;
+                    Row6 own = ROW6_ZERO;
+                    if (area_textured(p_radiance)) {
+                        mat3 slope = area_radiance_slope(p_radiance, s.uv, surface_gradients(hit));
+                        vec3 g = slope[0] * weight.x + slope[1] * weight.y + slope[2] * weight.z;
+                        own = hit_position_row(HitGeometry(hit.t, st.ray.dir, s.ng, s.ng, mat3(0.0)), g);
+                    }
+                    if (adjoint) st.gamma = row_add_scaled(st.gamma, own, -1.0);
+                    else attached_contribution(st, row_through(own, st.jac), weight * area_radiance(p_radiance, s.uv));
+                }
 #endif
             }
             // ---- mask: the nested BSDF with probability `opacity`, else straight through ----
@@ -930,6 +940,17 @@ bool path_step(inout PathState st) {
                     // noise regularises its singular direction block (src/cpu/path.rs).
                     bool diffuse_attached = HAS(F_DIFFUSE) && !bsdf.blend && is_diffuse(bsdf.leaf0.kind);
                     if (diffuse_attached) {
+                        // Rows ∂ln a_c/∂r where the albedo is textured (src/cpu/slope.rs).
+                        Row6 row_r = ROW6_ZERO;
+                        Row6 row_g = ROW6_ZERO;
+                        Row6 row_b = ROW6_ZERO;
+                        if (am.tex_width > 0u) {
+                            mat3 slope = albedo_slope(am, tex_at(s), surface_gradients(hit));
+                            vec3 albedo = bsdf.leaf0.color;
+                            if (albedo.x > 0.0) row_r = hit_position_row(geometry, slope[0] / albedo.x);
+                            if (albedo.y > 0.0) row_g = hit_position_row(geometry, slope[1] / albedo.y);
+                            if (albedo.z > 0.0) row_b = hit_position_row(geometry, slope[2] / albedo.z);
+                        }
                         vec4 u = uniform4(uvec2(globals.key0, st.key1), st.pixel, st.sample_index, vertex,
                                           STREAM_JACOBIAN, 0u, 0u);
                         float amplitude = globals.jac_noise > 0.0 ? globals.jac_noise : DIFFUSE_JACOBIAN_NOISE;
@@ -938,10 +959,17 @@ bool path_step(inout PathState st) {
                                           st.prev_normal, st.ray.dir, s.ng, wo_world),
                             jac_regularisation(amplitude, u.x, u.y), st.ray.dir, wo_world);
                         if (adjoint) {
+                            // h = δL·(∂ln w/∂r ⊙ L_after); Φ′ = (Φ − h)·Ã⁻¹.
+                            vec3 after = st.adj * st.radiance;
+                            Row6 phi_h = row_add_scaled(row_add_scaled(row_add_scaled(st.gamma, row_r, -after.x), row_g,
+                                                                       -after.y), row_b, -after.z);
                             Row6 next;
-                            bool solved = jac_solve_row(a, st.gamma, next);
+                            bool solved = jac_solve_row(a, phi_h, next);
                             st.gamma = solved ? next : ROW6_ZERO;
                         } else {
+                            st.log_r = row_add_scaled(st.log_r, row_through(row_r, st.jac), 1.0);
+                            st.log_g = row_add_scaled(st.log_g, row_through(row_g, st.jac), 1.0);
+                            st.log_b = row_add_scaled(st.log_b, row_through(row_b, st.jac), 1.0);
                             st.jac = jac_compose(a, st.jac);
                         }
                     }

@@ -29,16 +29,18 @@ pub use rough_dielectric::{RoughDielectricLobe, rough_dielectric_lobe};
 
 use crate::contract::{
     MAT_CONDUCTOR, MAT_DIELECTRIC, MAT_DIFFUSE, MAT_ROUGH_CONDUCTOR, MAT_ROUGH_DIELECTRIC, MAT_THIN_DIELECTRIC,
-    NO_PARAM, SCALAR_TEXTURE,
+    NO_PARAM, SCALAR_TEXTURE, TEX_ATTR_FACE, TEX_CHECKER, TEX_NEAREST, TEX_VOLUME,
 };
 use crate::integrator::{RenderOptions, Sampling};
 use crate::scene::flat::FlatScene;
 
 /// Refuses attached sampling (`options.sampling`) where its vertex Jacobians are not built: every
-/// material must be a `diffuse` one with an untextured albedo, a smooth `dielectric`,
+/// material must be a `diffuse` one whose albedo is constant or varies continuously along the
+/// surface (a bilinear bitmap, a per-vertex attribute), a smooth `dielectric`,
 /// `thindielectric` or `conductor` or an isotropic `roughconductor` or `roughdielectric` with
-/// untextured roughness (no normal map, no mask), without media; light comes from the environment or from emitters the paths hit. `forward` refuses it
-/// for forward-mode image gradients, which carry per-channel derivatives the adjoint-weighted
+/// untextured roughness (no normal map, no mask), without media; light comes from the
+/// environment or from emitters the paths hit, whose radiance is constant or a bilinear bitmap.
+/// `forward` refuses it for forward-mode image gradients, which carry per-channel derivatives the adjoint-weighted
 /// attached sums do not.
 ///
 /// # Errors
@@ -53,8 +55,8 @@ pub fn refuse_unsupported(flat: &FlatScene, options: &RenderOptions, forward: bo
             message: format!(
                 "{what}: attached derivatives are built for scenes of smooth `dielectric`, `thindielectric` and \
                  `conductor` surfaces, isotropic `roughconductor`s and `roughdielectric`s with untextured \
-                 roughness and `diffuse` surfaces with untextured albedo, lit by the environment or by emitters the paths hit, in reverse mode (use detached \
-                 sampling)"
+                 roughness and `diffuse` surfaces with a constant or smoothly textured albedo, lit by the \
+                 environment or by emitters the paths hit, in reverse mode (use detached sampling)"
             ),
         })
     };
@@ -94,8 +96,12 @@ pub fn refuse_unsupported(flat: &FlatScene, options: &RenderOptions, forward: bo
         if m.tag == MAT_ROUGH_DIELECTRIC && (m.p_alpha != m.p_alpha_v || m.p_alpha & SCALAR_TEXTURE != 0) {
             return refuse("the scene has an anisotropic or texture-roughened `roughdielectric`".into());
         }
-        if m.tag == MAT_DIFFUSE && m.tex_width > 0 {
-            return refuse("the scene has a `diffuse` material with a textured albedo".into());
+        if m.tag == MAT_DIFFUSE && m.tex_width > 0 && !smooth_read(m.tex_mode) {
+            return refuse(
+                "the scene has a `diffuse` material whose albedo is a checkerboard, a nearest-filtered bitmap, a \
+                 per-face attribute or a volume (reads that jump along the surface)"
+                    .into(),
+            );
         }
         if m.nmap_width > 0 || m.p_opacity != NO_PARAM {
             return refuse("the scene has a normal-mapped, bump-mapped or masked material".into());
@@ -104,10 +110,23 @@ pub fn refuse_unsupported(flat: &FlatScene, options: &RenderOptions, forward: bo
     if !flat.media.is_empty() {
         return refuse("the scene has participating media".into());
     }
-    if flat.emitters.iter().any(|e| crate::cpu::emitter::area_textured(e.p_radiance)) {
-        return refuse("the scene has a textured area emitter".into());
+    let jumps = |p: u32| {
+        crate::cpu::emitter::area_textured(p) && {
+            let d = (p & !SCALAR_TEXTURE) as usize;
+            !smooth_read(flat.tables[d + 3].to_bits())
+        }
+    };
+    if flat.emitters.iter().any(|e| jumps(e.p_radiance)) {
+        return refuse("the scene has an area emitter whose radiance is a nearest-filtered bitmap".into());
     }
     Ok(())
+}
+
+/// Whether a texture read of mode `mode` varies continuously along the surface (a bilinear
+/// bitmap, a per-vertex attribute): its slope is the whole of its derivative by the hit point
+/// (`crate::cpu::slope`).
+fn smooth_read(mode: u32) -> bool {
+    mode & (TEX_CHECKER | TEX_NEAREST | TEX_ATTR_FACE | TEX_VOLUME) == 0
 }
 
 /// A row vector over the ray state: ∂(something)/∂o and ∂(something)/∂d.
@@ -326,19 +345,26 @@ pub fn outer(u: Vec3, v: Vec3) -> Mat3 {
 /// ∂n/∂x of the normalised interpolation of vertex normals `normals` over the triangle
 /// `v` (along its plane), at the unnormalised interpolated normal `n_raw`.
 pub fn normal_derivative(v: [Vec3; 3], normals: [Vec3; 3], n_raw: Vec3) -> Mat3 {
-    let (e0, e1) = (v[1] - v[0], v[2] - v[0]);
-    let (g00, g01, g11) = (e0.dot(e0), e0.dot(e1), e1.dot(e1));
-    let det = g00 * g11 - g01 * g01;
+    let (grad_b1, grad_b2) = barycentric_gradients(v);
     let len = n_raw.length();
-    if det == 0.0 || len == 0.0 {
+    if (grad_b1 == Vec3::ZERO && grad_b2 == Vec3::ZERO) || len == 0.0 {
         return Mat3::ZERO;
     }
-    // The barycentrics' gradients along the plane (the dual basis of e0, e1).
-    let grad_b1 = (g11 * e0 - g01 * e1) / det;
-    let grad_b2 = (g00 * e1 - g01 * e0) / det;
     let raw = outer(normals[1] - normals[0], grad_b1) + outer(normals[2] - normals[0], grad_b2);
     let n = n_raw / len;
     (Mat3::IDENTITY - outer(n, n)) * raw / len
+}
+
+/// ∇b1 and ∇b2 along the triangle `v`: the barycentric coordinates' gradients in its plane (the
+/// dual basis of its edges v1 − v0, v2 − v0); zero for a degenerate one.
+pub fn barycentric_gradients(v: [Vec3; 3]) -> (Vec3, Vec3) {
+    let (e0, e1) = (v[1] - v[0], v[2] - v[0]);
+    let (g00, g01, g11) = (e0.dot(e0), e0.dot(e1), e1.dot(e1));
+    let det = g00 * g11 - g01 * g01;
+    if det == 0.0 {
+        return (Vec3::ZERO, Vec3::ZERO);
+    }
+    ((g11 * e0 - g01 * e1) / det, (g00 * e1 - g01 * e0) / det)
 }
 
 /// ∂/∂d and ∂/∂n of the mirror direction d′ = d − 2(d·n)n.
@@ -723,6 +749,13 @@ pub fn rough_conductor_lobe(
 }
 
 impl HitGeometry {
+    /// The row over the ray reaching the hit of a quantity whose gradient along the surface, by
+    /// the hit point, is `g`: δx = P·δo + t·P·δd.
+    pub fn position_row(&self, g: Vec3) -> Row6 {
+        let w = self.projection().transpose() * g;
+        Row6 { o: w, d: self.t * w }
+    }
+
     /// The row over the incoming ray of a quantity whose derivatives by the incoming direction
     /// and by the shading normal are `by_d` and `by_n` (the normal moves with the hit point).
     pub fn row(&self, by_d: Vec3, by_n: Vec3) -> Row6 {

@@ -95,18 +95,28 @@ Jac6 hit_jacobian(HitGeometry g, mat3 t_d, mat3 t_n) {
     return Jac6(p, g.t * p, np, t_d + g.t * np);
 }
 
-// ∂n/∂x of the normalised interpolation of vertex normals over the triangle v0 v1 v2.
-mat3 normal_derivative(vec3 v0, vec3 v1, vec3 v2, vec3 n0, vec3 n1, vec3 n2, vec3 n_raw) {
+// ∇b1 and ∇b2 along the triangle v0 v1 v2 (barycentric_gradients).
+void barycentric_gradients(vec3 v0, vec3 v1, vec3 v2, out vec3 grad_b1, out vec3 grad_b2) {
     vec3 e0 = v1 - v0;
     vec3 e1 = v2 - v0;
     float g00 = dot(e0, e0);
     float g01 = dot(e0, e1);
     float g11 = dot(e1, e1);
     float det = g00 * g11 - g01 * g01;
+    grad_b1 = vec3(0.0);
+    grad_b2 = vec3(0.0);
+    if (det == 0.0) return;
+    grad_b1 = (g11 * e0 - g01 * e1) / det;
+    grad_b2 = (g00 * e1 - g01 * e0) / det;
+}
+
+// ∂n/∂x of the normalised interpolation of vertex normals over the triangle v0 v1 v2.
+mat3 normal_derivative(vec3 v0, vec3 v1, vec3 v2, vec3 n0, vec3 n1, vec3 n2, vec3 n_raw) {
+    vec3 grad_b1;
+    vec3 grad_b2;
+    barycentric_gradients(v0, v1, v2, grad_b1, grad_b2);
     float len = length(n_raw);
-    if (det == 0.0 || len == 0.0) return mat3(0.0);
-    vec3 grad_b1 = (g11 * e0 - g01 * e1) / det;
-    vec3 grad_b2 = (g00 * e1 - g01 * e0) / det;
+    if ((grad_b1 == vec3(0.0) && grad_b2 == vec3(0.0)) || len == 0.0) return mat3(0.0);
     mat3 raw = outerProduct(n1 - n0, grad_b1) + outerProduct(n2 - n0, grad_b2);
     vec3 n = n_raw / len;
     return (mat3(1.0) - outerProduct(n, n)) * raw / len;
@@ -518,6 +528,109 @@ bool rough_dielectric_lobe(vec3 d, vec3 n, float alpha, bool beckmann, vec2 u, f
 Row6 hit_row(HitGeometry g, vec3 by_d, vec3 by_n) {
     vec3 w = transpose(hit_projection(g)) * (transpose(g.dn_dx) * by_n);
     return Row6(w, by_d + g.t * w);
+}
+
+// The row over the ray reaching the hit of a quantity whose gradient along the surface is g
+// (HitGeometry::position_row).
+Row6 hit_position_row(HitGeometry geometry, vec3 g) {
+    vec3 w = transpose(hit_projection(geometry)) * g;
+    return Row6(w, geometry.t * w);
+}
+
+// ---- texture slopes along the surface (twin: src/cpu/slope.rs) ----
+struct SurfaceGradients { vec3 b1; vec3 b2; vec3 u; vec3 v; };
+
+// ∇b1, ∇b2, ∇u, ∇v along the triangle `hit` lies on (surface_gradients).
+SurfaceGradients surface_gradients(Hit hit) {
+    TriPositions tri = load_tri(hit.slot);
+    TriVertexWordArray a = TriVertexWordArray(globals.addr_tri_vertices);
+    uint id = prim_ids[hit.slot];
+    uvec2 w0 = unpackUint2x32(a.v[id].w0);
+    uvec2 w1 = unpackUint2x32(a.v[id].w1);
+    MeshShading m = MeshShadingArray(globals.addr_meshes).v[w1.y];
+    SurfaceGradients g;
+    barycentric_gradients(tri.v0, tri.v1, tri.v2, g.b1, g.b2);
+    g.u = vec3(0.0);
+    g.v = vec3(0.0);
+    if (m.uv_base != NO_ARRAY) {
+        Vec2Array uvs = Vec2Array(globals.addr_uvs);
+        vec2 uv0 = uvs.v[m.uv_base + w0.x];
+        vec2 d0 = uvs.v[m.uv_base + w0.y] - uv0;
+        vec2 d1 = uvs.v[m.uv_base + w1.x] - uv0;
+        g.u = d0.x * g.b1 + d1.x * g.b2;
+        g.v = d0.y * g.b1 + d1.y * g.b2;
+    }
+    return g;
+}
+
+// ∂w_k/∂t of texture_footprint's weights (footprint_slopes): bilinear, zero for nearest texels and
+// the checkerboard.
+void footprint_slopes(uint width, uint height, uint mode, vec2 t, out vec2 slope[4]) {
+    slope = vec2[4](vec2(0.0), vec2(0.0), vec2(0.0), vec2(0.0));
+    if ((mode & (TEX_CHECKER | TEX_NEAREST)) != 0u) return;
+    float w = float(width);
+    float h = float(height);
+    float x = t.x * w - 0.5;
+    float y = t.y * h - 0.5;
+    float fx = x - floor(x);
+    float fy = y - floor(y);
+    slope[0] = vec2(-(1.0 - fy) * w, -(1.0 - fx) * h);
+    slope[1] = vec2((1.0 - fy) * w, -fx * h);
+    slope[2] = vec2(-fy * w, (1.0 - fx) * h);
+    slope[3] = vec2(fy * w, fx * h);
+}
+
+// The weights' gradients along the surface of a bitmap read through to_uv rows row0, row1.
+void bitmap_weight_gradients(uint width, uint height, uint mode, vec3 row0, vec3 row1, vec2 at_uv,
+                             SurfaceGradients g, out vec3 dw[4]) {
+    vec3 p = vec3(at_uv, 1.0);
+    vec2 t = vec2(dot(row0, p), dot(row1, p));
+    vec3 dt0 = row0.x * g.u + row0.y * g.v;
+    vec3 dt1 = row1.x * g.u + row1.y * g.v;
+    vec2 slope[4];
+    footprint_slopes(width, height, mode, t, slope);
+    for (int k = 0; k < 4; k++) dw[k] = slope[k].x * dt0 + slope[k].y * dt1;
+}
+
+// Σ_k texel_k ⊗ ∇w_k: column c is ∂value_c/∂x.
+mat3 slope_rows(uint texel[4], vec3 dw[4]) {
+    mat3 r = mat3(0.0);
+    for (int k = 0; k < 4; k++) {
+        if (dw[k] == vec3(0.0)) continue;
+        vec3 c = param_rgb(texel[k]);
+        r[0] += c.x * dw[k];
+        r[1] += c.y * dw[k];
+        r[2] += c.z * dw[k];
+    }
+    return r;
+}
+
+// ∂albedo_c/∂x (column c) of a textured diffuse material read at `at` (albedo_slope).
+mat3 albedo_slope(Material m, TexAt at, SurfaceGradients g) {
+    uint texel[4];
+    float weight[4];
+    material_footprint(m, at, texel, weight);
+    vec3 dw[4];
+    if ((m.tex_mode & TEX_ATTR_VERTEX) != 0u) {
+        dw = vec3[4](-g.b1 - g.b2, g.b1, g.b2, vec3(0.0));
+    } else {
+        bitmap_weight_gradients(m.tex_width, m.tex_height, m.tex_mode, m.uv_row0, m.uv_row1, at.uv, g, dw);
+    }
+    return slope_rows(texel, dw);
+}
+
+// ∂L_c/∂x (column c) of textured area radiance p read at uv (area_radiance_slope).
+mat3 area_radiance_slope(uint p, vec2 uv, SurfaceGradients g) {
+    uint d = p & ~SCALAR_TEXTURE;
+    uint texel[4];
+    float weight[4];
+    area_footprint(p, uv, texel, weight);
+    vec3 row0 = vec3(coating_table(d + 4u), coating_table(d + 5u), coating_table(d + 6u));
+    vec3 row1 = vec3(coating_table(d + 7u), coating_table(d + 8u), coating_table(d + 9u));
+    vec3 dw[4];
+    bitmap_weight_gradients(texture_desc_word(d, 1u), texture_desc_word(d, 2u), texture_desc_word(d, 3u), row0, row1,
+                            uv, g, dw);
+    return slope_rows(texel, dw);
 }
 
 #endif

@@ -10,6 +10,7 @@ pub(crate) mod emitter;
 pub mod medium;
 #[doc(hidden)]
 pub mod path;
+pub(crate) mod slope;
 pub(crate) mod surface;
 
 use glam::Vec3;

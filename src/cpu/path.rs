@@ -21,10 +21,11 @@ use crate::contract::{
     PATH_HIDE_EMITTERS, PATH_NULL_UNCOUNTED, PLACEMENT_POWER, STRATEGY_DIFF, ViewCamera,
 };
 use crate::cpu::emitter::{
-    EmitterSample, area_backward, area_radiance, emitter_pdf_solid_angle, env_backward, env_radiance,
+    EmitterSample, area_backward, area_radiance, area_textured, emitter_pdf_solid_angle, env_backward, env_radiance,
     env_radiance_gradient, environment_pdf, light_backward, sample_emitter,
 };
 use crate::cpu::medium;
+use crate::cpu::slope::{albedo_slope, area_radiance_slope, surface_gradients};
 use crate::cpu::surface::{
     SHADOW_EPSILON, bsdf_backward, bsdf_backward_but_alpha, mask_opacity_at, material_anisotropic,
     material_normal_mapped, mis_power, normal_map_frame, offset_origin, opacity_backward, resolve_bsdf, safe_div,
@@ -682,11 +683,23 @@ pub fn trace_path<const ADJOINT: bool>(
             if ADJOINT {
                 area_backward(flat, p_radiance, s.uv, adj_radiance * throughput * w_b, sink);
             }
-            if attached && !ADJOINT {
-                // Constant radiance (attached sampling refuses textured emitters): only the
-                // weights of the vertices before depend on the ray.
-                let c = adj_radiance * throughput * w_b * area_radiance(flat, p_radiance, s.uv);
-                phi = add_contribution(phi, Row6::ZERO, c, &log_rows);
+            if attached {
+                // The emitter's own row, δL·β·∂L_e/∂r: a textured radiance varies with the hit
+                // point (crate::cpu::slope); the weights of the vertices before depend on the ray.
+                let weight = adj_radiance * throughput * w_b;
+                let own = if area_textured(p_radiance) {
+                    let slope = area_radiance_slope(flat, p_radiance, s.uv, &surface_gradients(flat, &hit));
+                    let g = slope[0] * weight.x + slope[1] * weight.y + slope[2] * weight.z;
+                    HitGeometry { t: hit.t, d: ray.dir, ng: s.ng, n: s.ng, dn_dx: glam::Mat3::ZERO }.position_row(g)
+                } else {
+                    Row6::ZERO
+                };
+                if ADJOINT {
+                    phi = phi.add_scaled(own, -1.0);
+                } else {
+                    let c = weight * area_radiance(flat, p_radiance, s.uv);
+                    phi = add_contribution(phi, own.through(&jac), c, &log_rows);
+                }
             }
         }
         // ---- mask: the nested BSDF with probability `opacity`, else straight through ----
@@ -1004,11 +1017,22 @@ pub fn trace_path<const ADJOINT: bool>(
                 jac = a.compose(&jac);
             }
         }
-        if let (Some(geometry), Leaf::Diffuse { .. }) = (&geometry, &bsdf.leaves[0]) {
-            // A diffuse vertex (untextured albedo): its cosine sample follows the shading normal's
-            // frame alone and its weight, the albedo, depends on nothing the ray does (h = 0). The
-            // direction block of its Jacobian is singular: direction noise regularises it, with
-            // the request's amplitude or DIFFUSE_JACOBIAN_NOISE (crate::attached::Jac6::plus_direction_noise).
+        if let (Some(geometry), Leaf::Diffuse { albedo }) = (&geometry, &bsdf.leaves[0]) {
+            // A diffuse vertex: its cosine sample follows the shading normal's frame alone and
+            // its weight is the albedo, which varies with the hit point only where it is textured
+            // (rows ∂ln a_c/∂r, crate::cpu::slope). The direction block of its Jacobian is
+            // singular: direction noise regularises it, with the request's amplitude or
+            // DIFFUSE_JACOBIAN_NOISE (crate::attached::Jac6::plus_direction_noise).
+            let m = &flat.materials[s.material as usize];
+            let mut rows = [Row6::ZERO; 3];
+            if m.tex_width > 0 {
+                let slope = albedo_slope(flat, m, s.tex_at(), &surface_gradients(flat, &hit));
+                for (c, row) in rows.iter_mut().enumerate() {
+                    if albedo[c] > 0.0 {
+                        *row = geometry.position_row(slope[c] / albedo[c]);
+                    }
+                }
+            }
             let wo = frame.to_world(bs.wo);
             let u = uniform4(key, pixel, sample, vertex, Stream::Jacobian, 0, 0);
             let amplitude = if globals.jac_noise > 0.0 { globals.jac_noise } else { DIFFUSE_JACOBIAN_NOISE };
@@ -1017,8 +1041,15 @@ pub fn trace_path<const ADJOINT: bool>(
                 .completed(prev_normal, ray.dir, s.ng, wo)
                 .plus_direction_noise(regularisation(amplitude, u[0], u[1]), ray.dir, wo);
             if ADJOINT {
-                phi = a.solve_row(phi).unwrap_or(Row6::ZERO);
+                // h = δL·(∂ln w/∂r ⊙ L_after); Φ′ = (Φ − h)·Ã⁻¹.
+                let after = adj_radiance * radiance;
+                let phi_h =
+                    phi.add_scaled(rows[0], -after.x).add_scaled(rows[1], -after.y).add_scaled(rows[2], -after.z);
+                phi = a.solve_row(phi_h).unwrap_or(Row6::ZERO);
             } else {
+                for (log_row, row) in log_rows.iter_mut().zip(rows) {
+                    *log_row = log_row.add_scaled(row.through(&jac), 1.0);
+                }
                 jac = a.compose(&jac);
             }
         }

@@ -216,8 +216,8 @@ pub(crate) struct StrategyArgs {
     /// fixed, Mitsuba's prb) or `attached` (they move with the parameters: the index of
     /// refraction of dielectrics becomes differentiable, and a near-specular rough conductor's
     /// roughness gets a lower-variance gradient; scenes of smooth dielectrics and conductors,
-    /// isotropic, untextured rough conductors and rough dielectrics and untextured diffuse
-    /// surfaces only, docs/gradients.md "Attached derivatives").
+    /// isotropic, untextured rough conductors and rough dielectrics and diffuse surfaces whose
+    /// albedo is constant or smoothly textured only, docs/gradients.md "Attached derivatives").
     #[arg(long, value_name = "detached|attached", default_value = "detached")]
     pub(crate) sampling: String,
     /// With `--sampling attached`: the amplitude of the zero-mean noise added to each ray
