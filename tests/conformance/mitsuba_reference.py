@@ -263,6 +263,18 @@ MATRIX = {
     # derivative of each channel's image mean (`sampling`: compared as image means only).
     "attached_ior_sphere": dict(features=["dielectric eta, attached sampling", "envmap", "tessellated sphere"],
                                 grads=["glass.bsdf.eta"], sampling="attached", spp=1024, seeds=32),
+    # Diffuse vertices under attached sampling: a diffuse floor lit through a glass sphere (the
+    # floor's noisy Jacobian inverted in the replay), and a glass slab over a floor whose albedo
+    # and emitted radiance are bilinear ramps (its hit points, and so its texture reads, move
+    # with η; its bounces return into the slab).
+    "attached_ior_floor": dict(features=["dielectric eta, attached sampling", "diffuse vertices", "envmap"],
+                               grads=["glass.bsdf.eta"], sampling="attached", spp=1024, seeds=32),
+    # The 200-wide slab seen obliquely draws pathgrad's conservative near_clip warning (its
+    # triangles' boxes reach the near plane; Mitsuba's clips nothing there, as the images show).
+    "attached_ior_slab_table": dict(features=["dielectric eta, attached sampling", "bitmap albedo and area radiance",
+                                              "diffuse vertices after the moving directions"],
+                                    grads=["glass.bsdf.eta"], sampling="attached", spp=1024, seeds=32,
+                                    warnings=["Mitsuba's default near_clip (0.01) clips geometry"]),
     # A rough dielectric's α and η against pathgrad's attached derivatives: Mitsuba's prb
     # differentiates both (detached, forward mode; a roughdielectric's eta, unlike a dielectric's,
     # is differentiable there); `--check` adds its central differences.
