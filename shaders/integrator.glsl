@@ -618,7 +618,7 @@ bool path_step(inout PathState st) {
                     if (area_textured(p_radiance)) {
                         mat3 slope = area_radiance_slope(p_radiance, s.uv, surface_gradients(hit));
                         vec3 g = slope[0] * weight.x + slope[1] * weight.y + slope[2] * weight.z;
-                        own = hit_position_row(HitGeometry(hit.t, st.ray.dir, s.ng, s.ng, mat3(0.0)), g);
+                        own = hit_position_row(HitGeometry(travelled + hit.t, st.ray.dir, s.ng, s.ng, mat3(0.0)), g);
                     }
                     if (adjoint) st.gamma = row_add_scaled(st.gamma, own, -1.0);
                     else attached_contribution(st, row_through(own, st.jac), weight * area_radiance(p_radiance, s.uv));
@@ -880,7 +880,7 @@ bool path_step(inout PathState st) {
                 {
                     Material am = materials[s.material];
                     bool mirrored = HAS(F_TWO_SIDED) && am.two_sided != 0u && dot(s.ns, -st.ray.dir) < 0.0;
-                    HitGeometry geometry = HitGeometry(hit.t, st.ray.dir, s.ng, frame.n,
+                    HitGeometry geometry = HitGeometry(travelled + hit.t, st.ray.dir, s.ng, frame.n,
                                                        shading_normal_gradient(hit) * (mirrored ? -1.0 : 1.0));
                     if (rough_attached) {
                         Jac6 a = attached_vertex_jacobian(st, geometry, rlobe.t_d, rlobe.t_n, s.ng, rlobe.wo, vertex);
@@ -935,8 +935,8 @@ bool path_step(inout PathState st) {
                             st.jac = jac_compose(a, st.jac);
                         }
                     }
-                    // A diffuse vertex (untextured albedo): its sample follows the shading normal's
-                    // frame alone and its weight depends on nothing the ray does (h = 0); direction
+                    // A diffuse vertex: its sample follows the shading normal's frame alone and its
+                    // weight, the albedo, varies with the hit point only where it is textured; direction
                     // noise regularises its singular direction block (src/cpu/path.rs).
                     bool diffuse_attached = HAS(F_DIFFUSE) && !bsdf.blend && is_diffuse(bsdf.leaf0.kind);
                     if (diffuse_attached) {

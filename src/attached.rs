@@ -96,6 +96,14 @@ pub fn refuse_unsupported(flat: &FlatScene, options: &RenderOptions, forward: bo
         if m.tag == MAT_ROUGH_DIELECTRIC && (m.p_alpha != m.p_alpha_v || m.p_alpha & SCALAR_TEXTURE != 0) {
             return refuse("the scene has an anisotropic or texture-roughened `roughdielectric`".into());
         }
+        // A textured specular colour would vary with the hit point too; only the diffuse albedo's
+        // slope is built (crate::cpu::slope).
+        let textured_colour = (m.tag != MAT_DIFFUSE && m.tex_width > 0)
+            || crate::gpu::variant::specular_colour_slots(m).into_iter().any(crate::gpu::variant::colour_textured);
+        if textured_colour {
+            let name = names.get(m.tag as usize).copied().unwrap_or("another BSDF");
+            return refuse(format!("the scene has a `{name}` with a textured reflectance or transmittance"));
+        }
         if m.tag == MAT_DIFFUSE && m.tex_width > 0 && !smooth_read(m.tex_mode) {
             return refuse(
                 "the scene has a `diffuse` material whose albedo is a checkerboard, a nearest-filtered bitmap, a \
@@ -117,7 +125,9 @@ pub fn refuse_unsupported(flat: &FlatScene, options: &RenderOptions, forward: bo
         }
     };
     if flat.emitters.iter().any(|e| jumps(e.p_radiance)) {
-        return refuse("the scene has an area emitter whose radiance is a nearest-filtered bitmap".into());
+        return refuse(
+            "the scene has an area emitter whose radiance is a nearest-filtered bitmap or a checkerboard".into(),
+        );
     }
     Ok(())
 }
@@ -229,7 +239,7 @@ impl Jac6 {
     /// diffuse vertex's completed direction block is d_out⊗d (plus the normal's variation), so
     /// the derivative of what follows it by the outgoing direction reaches Γ only through Y;
     /// with |Y| ≥ amplitude/2 the block stays invertible with condition ≤ 2/amplitude, and
-    /// E[Y] = 0 keeps E[Ã] = A (ALGORITHMS.md §9's claim (1)).
+    /// a zero-mean Y keeps the expectation of Ã equal to A (ALGORITHMS.md §9's claim (1)).
     pub fn plus_direction_noise(&self, y: f32, d: Vec3, d_out: Vec3) -> Jac6 {
         let (fi, fo) = (crate::sampling::Frame::from_normal(d), crate::sampling::Frame::from_normal(d_out));
         Jac6 { dd: self.dd + y * (outer(fo.t, fi.t) + outer(fo.b, fi.b)), ..*self }
@@ -564,7 +574,8 @@ pub fn basis_jacobians(n: Vec3) -> (Vec3, Vec3, Mat3, Mat3) {
 /// ∂d′/∂n of a diffuse vertex's outgoing direction d′ = x·t(n) + y·b(n) + z·n, the cosine
 /// sample `local` = (x, y, z) in the frame of [`basis_jacobians`] around the shading normal `n`
 /// (the frame [`crate::sampling::Frame::from_normal`] builds). It ignores the incoming direction
-/// (∂d′/∂d = 0) and its weight, the untextured albedo, depends on nothing the ray does.
+/// (∂d′/∂d = 0); its weight, the albedo, depends on the ray only through the hit point where it is
+/// textured (`crate::cpu::slope`).
 pub fn diffuse_direction_jacobian(n: Vec3, local: Vec3) -> Mat3 {
     let (_, _, t_n, b_n) = basis_jacobians(n);
     local.x * t_n + local.y * b_n + Mat3::from_diagonal(Vec3::splat(local.z))

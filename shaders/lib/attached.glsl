@@ -122,21 +122,27 @@ mat3 normal_derivative(vec3 v0, vec3 v1, vec3 v2, vec3 n0, vec3 n1, vec3 n2, vec
     return (mat3(1.0) - outerProduct(n, n)) * raw / len;
 }
 
-// ∂n/∂x of the unflipped shading normal of surface_at(hit): zero for a mesh without normals.
-mat3 shading_normal_gradient(Hit hit) {
-    TriPositions tri = load_tri(hit.slot);
+// The triangle `hit` lies on: its positions, its vertex indices and its mesh.
+struct HitTriangle { TriPositions tri; uvec3 index; MeshShading mesh; };
+
+HitTriangle hit_triangle(Hit hit) {
     TriVertexWordArray a = TriVertexWordArray(globals.addr_tri_vertices);
     uint id = prim_ids[hit.slot];
-    uvec2 w0 = unpackUint2x32(a.v[id].w0);
-    uvec2 w1 = unpackUint2x32(a.v[id].w1);
-    MeshShading m = MeshShadingArray(globals.addr_meshes).v[w1.y];
-    if (m.normal_base == NO_ARRAY) return mat3(0.0);
+    uvec2 w0 = unpackUint2x32(a.v[id].w0);        // i0, i1
+    uvec2 w1 = unpackUint2x32(a.v[id].w1);        // i2, mesh
+    return HitTriangle(load_tri(hit.slot), uvec3(w0, w1.x), MeshShadingArray(globals.addr_meshes).v[w1.y]);
+}
+
+// ∂n/∂x of the unflipped shading normal of surface_at(hit): zero for a mesh without normals.
+mat3 shading_normal_gradient(Hit hit) {
+    HitTriangle h = hit_triangle(hit);
+    if (h.mesh.normal_base == NO_ARRAY) return mat3(0.0);
     Vec3Array normals = Vec3Array(globals.addr_normals);
-    vec3 n0 = normals.v[m.normal_base + w0.x];
-    vec3 n1 = normals.v[m.normal_base + w0.y];
-    vec3 n2 = normals.v[m.normal_base + w1.x];
+    vec3 n0 = normals.v[h.mesh.normal_base + h.index.x];
+    vec3 n1 = normals.v[h.mesh.normal_base + h.index.y];
+    vec3 n2 = normals.v[h.mesh.normal_base + h.index.z];
     float b0 = 1.0 - hit.b1 - hit.b2;
-    return normal_derivative(tri.v0, tri.v1, tri.v2, n0, n1, n2, b0 * n0 + hit.b1 * n1 + hit.b2 * n2);
+    return normal_derivative(h.tri.v0, h.tri.v1, h.tri.v2, n0, n1, n2, b0 * n0 + hit.b1 * n1 + hit.b2 * n2);
 }
 
 // The environment's radiance toward `dir` differentiated by the direction: row c of the result
@@ -542,21 +548,16 @@ struct SurfaceGradients { vec3 b1; vec3 b2; vec3 u; vec3 v; };
 
 // ∇b1, ∇b2, ∇u, ∇v along the triangle `hit` lies on (surface_gradients).
 SurfaceGradients surface_gradients(Hit hit) {
-    TriPositions tri = load_tri(hit.slot);
-    TriVertexWordArray a = TriVertexWordArray(globals.addr_tri_vertices);
-    uint id = prim_ids[hit.slot];
-    uvec2 w0 = unpackUint2x32(a.v[id].w0);
-    uvec2 w1 = unpackUint2x32(a.v[id].w1);
-    MeshShading m = MeshShadingArray(globals.addr_meshes).v[w1.y];
+    HitTriangle h = hit_triangle(hit);
     SurfaceGradients g;
-    barycentric_gradients(tri.v0, tri.v1, tri.v2, g.b1, g.b2);
+    barycentric_gradients(h.tri.v0, h.tri.v1, h.tri.v2, g.b1, g.b2);
     g.u = vec3(0.0);
     g.v = vec3(0.0);
-    if (m.uv_base != NO_ARRAY) {
+    if (h.mesh.uv_base != NO_ARRAY) {
         Vec2Array uvs = Vec2Array(globals.addr_uvs);
-        vec2 uv0 = uvs.v[m.uv_base + w0.x];
-        vec2 d0 = uvs.v[m.uv_base + w0.y] - uv0;
-        vec2 d1 = uvs.v[m.uv_base + w1.x] - uv0;
+        vec2 uv0 = uvs.v[h.mesh.uv_base + h.index.x];
+        vec2 d0 = uvs.v[h.mesh.uv_base + h.index.y] - uv0;
+        vec2 d1 = uvs.v[h.mesh.uv_base + h.index.z] - uv0;
         g.u = d0.x * g.b1 + d1.x * g.b2;
         g.v = d0.y * g.b1 + d1.y * g.b2;
     }

@@ -690,7 +690,8 @@ pub fn trace_path<const ADJOINT: bool>(
                 let own = if area_textured(p_radiance) {
                     let slope = area_radiance_slope(flat, p_radiance, s.uv, &surface_gradients(flat, &hit));
                     let g = slope[0] * weight.x + slope[1] * weight.y + slope[2] * weight.z;
-                    HitGeometry { t: hit.t, d: ray.dir, ng: s.ng, n: s.ng, dn_dx: glam::Mat3::ZERO }.position_row(g)
+                    HitGeometry { t: travelled + hit.t, d: ray.dir, ng: s.ng, n: s.ng, dn_dx: glam::Mat3::ZERO }
+                        .position_row(g)
                 } else {
                     Row6::ZERO
                 };
@@ -948,7 +949,7 @@ pub fn trace_path<const ADJOINT: bool>(
         // for an outgoing direction d′ with ∂d′/∂d = t_d, ∂d′/∂n = t_n — regularised, with Jacobian
         // noise, from the vertex's `Jacobian` stream.
         let geometry = attached.then(|| HitGeometry {
-            t: hit.t,
+            t: travelled + hit.t, // from the vertex the ray left, across hidden emitters
             d: ray.dir,
             ng: s.ng,
             n: frame.n,

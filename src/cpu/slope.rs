@@ -127,36 +127,37 @@ mod tests {
     use crate::cpu::emitter::area_radiance;
     use crate::cpu::surface::{surface_at, texture_lookup};
 
-    /// The slopes against central differences of the lookups themselves, at hit points moved
-    /// along the floor (its barycentric coordinates moved by ∇b·δ): a bilinear bitmap albedo and
-    /// a bilinear bitmap radiance, each with its `to_uv`, on the textured floor of
-    /// `attached_slab_table.xml`.
+    /// The slopes against central differences of the lookups themselves, at the floor points
+    /// hit by rays moved by δ in world space: a bilinear bitmap albedo and a bilinear bitmap
+    /// radiance, each with its `to_uv`, on the textured floor of `attached_slab_table.xml`.
     #[test]
     fn slopes_match_the_lookups() {
         let path = format!("{}/tests/data/scenes/attached_slab_table.xml", env!("CARGO_MANIFEST_DIR"));
         let scene = crate::scene::load(&path, &[]).unwrap();
         let flat = FlatScene::new(&scene).unwrap();
         let mut checked = 0;
-        for (x, z) in [(0.03f32, 0.07f32), (-0.21, 0.13), (0.17, -0.26), (0.4, 0.31)] {
-            // Straight down onto the floor, through the slab (its hits skipped).
+        // The floor's hit of a ray straight down from (x, 5, z), through the slab (its hits skipped).
+        let floor_hit = |x: f32, z: f32| {
             let mut ray = Ray::new(Vec3::new(x, 5.0, z), Vec3::NEG_Y);
-            let hit = loop {
+            loop {
                 let hit = closest_hit(&flat.bvh, &ray, 0.0, f32::MAX).unwrap();
                 if surface_at(&flat, &hit).emitter != crate::contract::NO_EMITTER {
                     break hit;
                 }
                 ray = Ray::new(ray.origin + (hit.t + 1e-3) * ray.dir, ray.dir);
-            };
+            }
+        };
+        for (x, z) in [(0.03f32, 0.07f32), (-0.21, 0.13), (0.17, -0.26), (0.4, 0.31)] {
+            let hit = floor_hit(x, z);
             let s = surface_at(&flat, &hit);
             let m = &flat.materials[s.material as usize];
             let p_radiance = flat.emitters[s.emitter as usize].p_radiance;
             let g = surface_gradients(&flat, &hit);
             let albedo = albedo_slope(&flat, m, s.tex_at(), &g);
             let radiance = area_radiance_slope(&flat, p_radiance, s.uv, &g);
-            // Moved by δ along the floor: b += ∇b·δ.
+            // The lookups at the floor point moved by δ in world space (a vertical ray moved by δ).
             let moved = |delta: Vec3| {
-                let h = crate::bvh::Hit { b1: hit.b1 + g.b1.dot(delta), b2: hit.b2 + g.b2.dot(delta), ..hit };
-                let s = surface_at(&flat, &h);
+                let s = surface_at(&flat, &floor_hit(x + delta.x, z + delta.z));
                 (texture_lookup(&flat, m, s.tex_at()), area_radiance(&flat, p_radiance, s.uv))
             };
             let h = 1e-3;

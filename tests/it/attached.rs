@@ -196,6 +196,7 @@ fn the_device_equals_the_cpu_reference() {
         ("attached_table", "glass.bsdf.eta"),
         ("attached_slab_table", "glass.bsdf.eta"),
         ("attached_slab_albedo", "glass.bsdf.eta"),
+        ("attached_ball", "glass.bsdf.eta"),
     ] {
         let scene = scenes::data_scene(name);
         let mut renderer = Renderer::new(&gpu.ctx, &scene).unwrap();
@@ -305,6 +306,14 @@ fn attached_sampling_refuses_what_it_does_not_cover() {
     );
     let err = pathgrad::cpu::backward(&nearest, &attached(&nearest, 8, 1), &a).unwrap_err().to_string();
     assert!(err.contains("area emitter whose radiance is a nearest-filtered bitmap"), "{err}");
+    // A glass whose reflectance is a texture: its weight would vary with the hit point.
+    let tinted = variant(
+        "attached_sphere",
+        r#"<float name="int_ior" value="1.5"/>"#,
+        r#"<float name="int_ior" value="1.5"/><texture type="bitmap" name="specular_reflectance"><string name="filename" value="attached_ramp.exr"/></texture>"#,
+    );
+    let err = pathgrad::cpu::backward(&tinted, &attached(&tinted, 8, 1), &a).unwrap_err().to_string();
+    assert!(err.contains("`dielectric` with a textured reflectance or transmittance"), "{err}");
     let plastic = variant("attached_floor", r#"<bsdf type="diffuse">"#, r#"<bsdf type="roughplastic">"#);
     let err = pathgrad::cpu::backward(&plastic, &attached(&plastic, 8, 1), &a).unwrap_err().to_string();
     assert!(err.contains("`roughplastic` material"), "{err}");
@@ -342,7 +351,7 @@ fn attached_sampling_refuses_what_it_does_not_cover() {
 }
 
 /// The replay returns Φ to zero as it returns the radiance to zero (ALGORITHMS.md §9 test (d)):
-/// after the last vertex every term of Γ has been removed, on every path of the seven scenes,
+/// after the last vertex every term of Γ has been removed, on every path of the ten scenes,
 /// up to rounding amplified by the completed Jacobians' inverses (10⁻³ of Γ's largest entry).
 #[test]
 fn the_replay_returns_gamma_to_zero() {
@@ -359,6 +368,9 @@ fn the_replay_returns_gamma_to_zero() {
         "attached_rough_sphere",
         "attached_rough_sphere_beckmann",
         "attached_floor",
+        "attached_slab_table",
+        "attached_slab_albedo",
+        "attached_ball",
     ] {
         let scene = scenes::data_scene(name);
         let opts = attached(&scene, 24, 2);
