@@ -40,8 +40,8 @@ use crate::scene::flat::FlatScene;
 /// `thindielectric` or `conductor` or an isotropic `roughconductor` or `roughdielectric` with
 /// untextured roughness (no normal map, no mask), without media; light comes from the
 /// environment or from emitters the paths hit, whose radiance is constant or a bilinear bitmap.
-/// `forward` refuses it for forward-mode image gradients, which carry per-channel derivatives the adjoint-weighted
-/// attached sums do not.
+/// `forward` refuses it for forward-mode image gradients, which carry per-channel derivatives
+/// the adjoint-weighted attached sums do not.
 ///
 /// # Errors
 /// [`crate::Error::InvalidArgument`] naming `Sampling::Attached` and what the scene or request has.

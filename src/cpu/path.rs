@@ -1018,7 +1018,7 @@ pub fn trace_path<const ADJOINT: bool>(
                 jac = a.compose(&jac);
             }
         }
-        if let (Some(geometry), Leaf::Diffuse { albedo }) = (&geometry, &bsdf.leaves[0]) {
+        if let (Some(geometry), false, Leaf::Diffuse { albedo }) = (&geometry, bsdf.blend, &bsdf.leaves[0]) {
             // A diffuse vertex: its cosine sample follows the shading normal's frame alone and
             // its weight is the albedo, which varies with the hit point only where it is textured
             // (rows ∂ln a_c/∂r, crate::cpu::slope). The direction block of its Jacobian is
