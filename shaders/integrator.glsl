@@ -426,6 +426,7 @@ bool path_step(inout PathState st) {
     float shadow_tmax = 0.0;
     uint shadow_medium = NO_MEDIUM;   // where the shadow ray starts: the path's medium, or across a dielectric boundary its shape's
     bool shadow_query = false;
+    bool nee_here = false;    // whether this surface vertex estimates next events
     // A medium vertex below the maximum depth carries its NEE sample the same way: the phase
     // function's value, and (both kinds of vertex, kernels with media) the replay's weight of the
     // transmittance, so that one ratio-tracking site serves both.
@@ -579,7 +580,8 @@ bool path_step(inout PathState st) {
         } else if (event == EVENT_ESCAPE) {
             // ---- environment hit ----
             if (HAS(F_ENV) && globals.env_param != NO_PARAM && !hidden) {
-                float w_b = hit_weight(diff, st.prev_nee, st.prev_pdf_f, environment_pdf(st.ray.dir), st.mix);
+                // Attached sampling's NEE leaves the environment to BSDF samples (src/cpu/path.rs).
+                float w_b = hit_weight(diff, st.prev_nee && ATTACHED == 0, st.prev_pdf_f, environment_pdf(st.ray.dir), st.mix);
                 vec3 le = env_radiance(st.ray.dir);
                 st.radiance += sign * (st.throughput * w_b * le);
 #if ATTACHED
@@ -613,15 +615,22 @@ bool path_step(inout PathState st) {
                 {
                     // The emitter's own row, δL·β·∂L_e/∂r: a textured radiance varies with the hit
                     // point; the weights of the vertices before depend on the ray.
+                    // After a diffuse vertex that sampled emitters, the MIS weight moves with the
+                    // ray too: ∂ln w_b = −2(1 − w_b)·∂ln p_e.
                     vec3 weight = st.adj * st.throughput * w_b;
+                    vec3 le = area_radiance(p_radiance, s.uv);
+                    HitGeometry at = HitGeometry(travelled + hit.t, st.ray.dir, s.ng, s.ng, mat3(0.0));
                     Row6 own = ROW6_ZERO;
                     if (area_textured(p_radiance)) {
                         mat3 slope = area_radiance_slope(p_radiance, s.uv, surface_gradients(hit));
-                        vec3 g = slope[0] * weight.x + slope[1] * weight.y + slope[2] * weight.z;
-                        own = hit_position_row(HitGeometry(travelled + hit.t, st.ray.dir, s.ng, s.ng, mat3(0.0)), g);
+                        own = hit_position_row(at, slope[0] * weight.x + slope[1] * weight.y + slope[2] * weight.z);
+                    }
+                    if (st.prev_nee) {
+                        vec3 c = weight * le;
+                        own = row_add_scaled(own, hit_emitter_density_row(at), -2.0 * (1.0 - w_b) * (c.x + c.y + c.z));
                     }
                     if (adjoint) st.gamma = row_add_scaled(st.gamma, own, -1.0);
-                    else attached_contribution(st, row_through(own, st.jac), weight * area_radiance(p_radiance, s.uv));
+                    else attached_contribution(st, row_through(own, st.jac), weight * le);
                 }
 #endif
             }
@@ -677,10 +686,16 @@ bool path_step(inout PathState st) {
 
                 // ---- emitter sampling: the sample and its unoccluded terms; the shadow ray is pass 1's ----
                 // A BSDF of delta lobes only gets no next-event estimation: no emitter sample meets them.
-                if (nee && !bsdf_is_smooth(bsdf)) {
+                // Attached sampling estimates it at diffuse vertices alone, toward area emitters
+                // alone (src/cpu/path.rs).
+                nee_here = nee && !bsdf_is_smooth(bsdf);
+#if ATTACHED
+                nee_here = nee_here && HAS(F_DIFFUSE) && !bsdf.blend && is_diffuse(bsdf.leaf0.kind);
+#endif
+                if (nee_here) {
                     vec4 u_em = draw_block(st.key1, st.pixel, st.sample_index, vertex, DIM_EMITTER_SELECT / 4u);
                     es = sample_emitter(u_em[DIM_EMITTER_SELECT % 4u], vec2(u_em[DIM_EMITTER_POS % 4u], u_em[DIM_EMITTER_POS % 4u + 1u]), env_cell_uniforms(st.key1, st.pixel, st.sample_index, vertex), s.p);
-                    if (es.valid) {
+                    if (es.valid && !(ATTACHED != 0 && (es.environment || es.delta))) {
                         vec3 wl;
                         vec3 origin;
                         if (HAS(F_LIGHTS) && es.delta && es.distant) {
@@ -795,6 +810,29 @@ bool path_step(inout PathState st) {
         // ---- NEE's contribution, now that its transmittance is known ----
         if (max_component(tr) > 0.0) {
             st.radiance += sign * (st.throughput * tr * nee_w * nee_f * es.radiance / nee_pdf);
+#if ATTACHED
+            {
+                // Its own row: δL·C·∂ln C/∂r, through the hit point, the shading normal and the
+                // albedo's slopes (src/cpu/path.rs).
+                Material am = materials[s.material];
+                bool mirrored = HAS(F_TWO_SIDED) && am.two_sided != 0u && dot(s.ns, -st.ray.dir) < 0.0;
+                HitGeometry geometry = HitGeometry(travelled + hit.t, st.ray.dir, s.ng, frame.n,
+                                                   shading_normal_gradient(hit) * (mirrored ? -1.0 : 1.0));
+                vec3 c = st.adj * st.throughput * tr * nee_w * nee_f * es.radiance / nee_pdf;
+                float dist = length(es.point - shadow_ray.origin);
+                vec3 g = hit_nee_gradient(geometry, shadow_ray.dir, dist, es.normal, nee_w) * (c.x + c.y + c.z);
+                if (am.tex_width > 0u) {
+                    mat3 slope = albedo_slope(am, tex_at(s), surface_gradients(hit));
+                    vec3 albedo = bsdf.leaf0.color;
+                    if (albedo.x > 0.0) g += slope[0] / albedo.x * c.x;
+                    if (albedo.y > 0.0) g += slope[1] / albedo.y * c.y;
+                    if (albedo.z > 0.0) g += slope[2] / albedo.z * c.z;
+                }
+                Row6 own = hit_position_row(geometry, g);
+                if (adjoint) st.gamma = row_add_scaled(st.gamma, own, -1.0);
+                else attached_contribution(st, row_through(own, st.jac), c);
+            }
+#endif
             grad_wo[0] = nee_wo;
             grad_adj[0] = st.adj * st.throughput * tr * nee_w * es.radiance / nee_pdf;
             if (es.environment ? HAS(G_ENV) : HAS(G_EMISSION)) {
@@ -858,7 +896,7 @@ bool path_step(inout PathState st) {
             st.throughput *= bs.value / pdf_f;
             st.prev_pdf_f = pdf_f;
             // An emitter found through a delta lobe counts whole: NEE could not have sampled it.
-            st.prev_nee = nee && !bs.delta;
+            st.prev_nee = nee_here && !bs.delta;
             float sum = hero ? mixture_update_hero(st.mix, hero_here, globals.diff_q, pdf_f, pdf_d)
                              : mixture_update(st.mix, capable, use_dx, globals.diff_q, pdf_f, pdf_d);
             if (!(sum > 0.0)) ended = true; else st.throughput /= sum;

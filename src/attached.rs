@@ -118,6 +118,10 @@ pub fn refuse_unsupported(flat: &FlatScene, options: &RenderOptions, forward: bo
     if !flat.media.is_empty() {
         return refuse("the scene has participating media".into());
     }
+    // Next-event estimation's rows are built for area emitters' points (HitGeometry::nee_gradient).
+    if !flat.lights.is_empty() {
+        return refuse("the scene has a light without area (a point, spot, directional or projector light)".into());
+    }
     let jumps = |p: u32| {
         crate::cpu::emitter::area_textured(p) && {
             let d = (p & !SCALAR_TEXTURE) as usize;
@@ -773,6 +777,29 @@ impl HitGeometry {
         let w = self.projection().transpose() * (self.dn_dx.transpose() * by_n);
         Row6 { o: w, d: by_d + self.t * w }
     }
+
+    /// At an emitter's hit: the row over the ray that reaches it of ln p_e, the solid-angle
+    /// density with which next-event estimation samples the hit point (p_e ∝ t²/cos θe, the
+    /// emitter flat): ∂ln p_e/∂o = −2·ng/(t·d·ng), ∂ln p_e/∂d = −3·ng/(d·ng).
+    pub fn emitter_density_row(&self) -> Row6 {
+        let dn = self.d.dot(self.ng);
+        Row6 { o: self.ng * (-2.0 / (self.t * dn)), d: self.ng * (-3.0 / dn) }
+    }
+
+    /// Next-event estimation at a diffuse vertex, an area emitter's point y held fixed: the
+    /// gradient by the hit point x of ln(cos θo/p_e)·(2w − 1), the share of the contribution
+    /// a·cos θo·L_e·w/(π·p_e) that moves with x, where `wl` = (y − x)/`dist`, `light_normal` is
+    /// y's, cos θo = n·wl with the shading normal n moving with x, p_e ∝ dist²/cos θy and
+    /// w = p_e²/(p_e² + p_f²) the power heuristic against the cosine sample (p_f = cos θo/π):
+    /// ∂ln w = 2(1 − w)(∂ln p_e − ∂ln cos θo). (Pass it to [`HitGeometry::position_row`].)
+    pub fn nee_gradient(&self, wl: Vec3, dist: f32, light_normal: Vec3, w: f32) -> Vec3 {
+        let cos_o = self.n.dot(wl);
+        let cos_y = -light_normal.dot(wl);
+        // ∂wl/∂x = −(I − wl·wlᵀ)/dist.
+        let dln_cos_o = -(self.n - cos_o * wl) / (dist * cos_o) + self.dn_dx.transpose() * wl / cos_o;
+        let dln_p_e = -2.0 * wl / dist - (light_normal + cos_y * wl) / (dist * cos_y);
+        (2.0 * w - 1.0) * (dln_cos_o - dln_p_e)
+    }
 }
 
 /// The parameters a gradient pass sampled as `sampling` differentiates, out of `chosen`.
@@ -1060,6 +1087,75 @@ mod tests {
 
     /// Row solves undo row products exactly enough: x·(A + Y·I) then solve gives x back, for a
     /// singular A (a plane's projection) and |Y| ≥ amplitude/2.
+    /// Next-event estimation's rows against finite differences: the log-density of a flat
+    /// emitter's hit point along a moved ray (unit directions, moved across themselves), and
+    /// ln(cos θo·w/p_e) at a point moving along a curved triangle toward a fixed light point.
+    #[test]
+    fn next_event_rows_match_finite_differences() {
+        // An emitter's plane through y0 with normal ng, hit by (o, d).
+        let (y0, ng) = (Vec3::new(0.3, 2.0, -0.2), Vec3::new(0.2, -1.0, 0.3).normalize());
+        let ln_density = |o: Vec3, d: Vec3| {
+            let t = (y0 - o).dot(ng) / d.dot(ng);
+            2.0 * t.ln() - (-ng.dot(d)).ln()
+        };
+        let o = Vec3::new(-0.4, 0.1, 0.2);
+        let d = Vec3::new(0.3, 1.0, -0.1).normalize();
+        let t = (y0 - o).dot(ng) / d.dot(ng);
+        let row = HitGeometry { t, d, ng, n: ng, dn_dx: Mat3::ZERO }.emitter_density_row();
+        let h = 1e-3;
+        let (b1, b2) = (d.cross(Vec3::X).normalize(), d.cross(Vec3::Z).normalize());
+        for axis in [Vec3::X, Vec3::Y, Vec3::Z] {
+            let fd = (ln_density(o + h * axis, d) - ln_density(o - h * axis, d)) / (2.0 * h);
+            assert!((fd - row.o.dot(axis)).abs() < 2e-3, "∂ln p_e/∂o {fd} vs {}", row.o.dot(axis));
+        }
+        for axis in [b1, b2] {
+            let moved = |s: f32| ln_density(o, (d + s * axis).normalize());
+            let fd = (moved(h) - moved(-h)) / (2.0 * h);
+            assert!((fd - row.d.dot(axis)).abs() < 2e-3, "∂ln p_e/∂d {fd} vs {}", row.d.dot(axis));
+        }
+
+        // A curved triangle (interpolated normals) lit from a fixed point y with normal ny.
+        let v = [Vec3::new(-1.0, -1.0, 0.0), Vec3::new(1.0, -1.0, 0.2), Vec3::new(0.0, 1.0, -0.1)];
+        let normals = [Vec3::new(-0.3, -0.2, 1.0).normalize(), Vec3::new(0.3, -0.1, 1.0).normalize(), Vec3::Z];
+        let (y, ny) = (Vec3::new(0.8, 0.3, 1.5), Vec3::new(-0.4, 0.0, -1.0).normalize());
+        let (e0, e1) = (v[1] - v[0], v[2] - v[0]);
+        let (g00, g01, g11) = (e0.dot(e0), e0.dot(e1), e1.dot(e1));
+        let det = g00 * g11 - g01 * g01;
+        let normal_raw = |x: Vec3| {
+            let p = x - v[0];
+            let b1 = (g11 * p.dot(e0) - g01 * p.dot(e1)) / det;
+            let b2 = (g00 * p.dot(e1) - g01 * p.dot(e0)) / det;
+            (1.0 - b1 - b2) * normals[0] + b1 * normals[1] + b2 * normals[2]
+        };
+        let ln_contribution = |x: Vec3| {
+            let n = normal_raw(x).normalize();
+            let dist = (y - x).length();
+            let wl = (y - x) / dist;
+            let (cos_o, cos_y) = (n.dot(wl), -ny.dot(wl));
+            let (p_e, p_f) = (dist * dist / cos_y, cos_o / std::f32::consts::PI);
+            let w = p_e * p_e / (p_e * p_e + p_f * p_f);
+            (cos_o * w / p_e).ln()
+        };
+        let x = v[0] + 0.3 * e0 + 0.4 * e1;
+        let n_raw = normal_raw(x);
+        let geometry = HitGeometry {
+            t: 1.0,
+            d: -n_raw.normalize(),
+            ng: e0.cross(e1).normalize(),
+            n: n_raw.normalize(),
+            dn_dx: normal_derivative(v, normals, n_raw),
+        };
+        let dist = (y - x).length();
+        let wl = (y - x) / dist;
+        let p_e = dist * dist / -ny.dot(wl);
+        let p_f = geometry.n.dot(wl) / std::f32::consts::PI;
+        let g = geometry.nee_gradient(wl, dist, ny, p_e * p_e / (p_e * p_e + p_f * p_f));
+        for axis in [e0.normalize(), e1.normalize()] {
+            let fd = (ln_contribution(x + h * axis) - ln_contribution(x - h * axis)) / (2.0 * h);
+            assert!((fd - g.dot(axis)).abs() < 2e-3 * (1.0 + fd.abs()), "∂ln C/∂x {fd} vs {}", g.dot(axis));
+        }
+    }
+
     #[test]
     fn regularised_solve_inverts_the_product() {
         let g = HitGeometry {

@@ -819,9 +819,9 @@ impl RenderOptions {
             fixed_scale: FIXED_POINT_SCALE,
             forward_begin: 0,
             forward_end: 0,
-            // Attached sampling samples by the BSDF alone: a light sample's direction would move
-            // with the vertex, and those terms are not built (crate::attached).
-            nee: u32::from(self.nee && !self.sampling.is_attached()),
+            // Attached sampling estimates next events at diffuse vertices toward area emitters
+            // (crate::attached::HitGeometry::nee_gradient); the path loops pick where.
+            nee: u32::from(self.nee),
             strategy,
             diff_q,
             diff_begin,

@@ -543,6 +543,23 @@ Row6 hit_position_row(HitGeometry geometry, vec3 g) {
     return Row6(w, geometry.t * w);
 }
 
+// At an emitter's hit: the row of ln p_e, NEE's solid-angle density of the hit point
+// (HitGeometry::emitter_density_row).
+Row6 hit_emitter_density_row(HitGeometry g) {
+    float dn = dot(g.d, g.ng);
+    return Row6(g.ng * (-2.0 / (g.t * dn)), g.ng * (-3.0 / dn));
+}
+
+// NEE at a diffuse vertex toward an area emitter's fixed point: the gradient by the hit point of
+// ln(cos θo/p_e)·(2w − 1) (HitGeometry::nee_gradient).
+vec3 hit_nee_gradient(HitGeometry g, vec3 wl, float dist, vec3 light_normal, float w) {
+    float cos_o = dot(g.n, wl);
+    float cos_y = -dot(light_normal, wl);
+    vec3 dln_cos_o = -(g.n - cos_o * wl) / (dist * cos_o) + transpose(g.dn_dx) * wl / cos_o;
+    vec3 dln_p_e = -2.0 * wl / dist - (light_normal + cos_y * wl) / (dist * cos_y);
+    return (2.0 * w - 1.0) * (dln_cos_o - dln_p_e);
+}
+
 // ---- texture slopes along the surface (twin: src/cpu/slope.rs) ----
 struct SurfaceGradients { vec3 b1; vec3 b2; vec3 u; vec3 v; };
 

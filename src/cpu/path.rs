@@ -524,6 +524,9 @@ pub fn trace_path<const ADJOINT: bool>(
             Event::Escape => {
                 // ---- environment hit ----
                 if globals.env_param != NO_PARAM && !hidden {
+                    // Attached sampling's next-event estimation leaves the environment to BSDF
+                    // samples (its density jumps between the map's cells).
+                    let prev_nee = prev_nee && !attached;
                     let w_b = hit_weight(diff, prev_nee, prev_pdf_f, environment_pdf(flat, globals, ray.dir), &mix);
                     let le = env_radiance(flat, globals, ray.dir);
                     radiance += sign * (throughput * w_b * le);
@@ -686,20 +689,26 @@ pub fn trace_path<const ADJOINT: bool>(
             if attached {
                 // The emitter's own row, δL·β·∂L_e/∂r: a textured radiance varies with the hit
                 // point (crate::cpu::slope); the weights of the vertices before depend on the ray.
+                // After a diffuse vertex that sampled emitters, the MIS weight w_b = p_f²/(p_f² +
+                // p_e²) moves with the ray too (p_f, the cosine sample's density, does not):
+                // ∂ln w_b = −2(1 − w_b)·∂ln p_e.
                 let weight = adj_radiance * throughput * w_b;
-                let own = if area_textured(p_radiance) {
+                let le = area_radiance(flat, p_radiance, s.uv);
+                let at = HitGeometry { t: travelled + hit.t, d: ray.dir, ng: s.ng, n: s.ng, dn_dx: glam::Mat3::ZERO };
+                let mut own = if area_textured(p_radiance) {
                     let slope = area_radiance_slope(flat, p_radiance, s.uv, &surface_gradients(flat, &hit));
-                    let g = slope[0] * weight.x + slope[1] * weight.y + slope[2] * weight.z;
-                    HitGeometry { t: travelled + hit.t, d: ray.dir, ng: s.ng, n: s.ng, dn_dx: glam::Mat3::ZERO }
-                        .position_row(g)
+                    at.position_row(slope[0] * weight.x + slope[1] * weight.y + slope[2] * weight.z)
                 } else {
                     Row6::ZERO
                 };
+                if prev_nee {
+                    let c = weight * le;
+                    own = own.add_scaled(at.emitter_density_row(), -2.0 * (1.0 - w_b) * (c.x + c.y + c.z));
+                }
                 if ADJOINT {
                     phi = phi.add_scaled(own, -1.0);
                 } else {
-                    let c = weight * area_radiance(flat, p_radiance, s.uv);
-                    phi = add_contribution(phi, own.through(&jac), c, &log_rows);
+                    phi = add_contribution(phi, own.through(&jac), weight * le, &log_rows);
                 }
             }
         }
@@ -763,14 +772,44 @@ pub fn trace_path<const ADJOINT: bool>(
         // An anisotropic roughness's target axis (a hero set holds no anisotropic roughness).
         let target_v = !hero && diff && material_target_v(flat, globals, s.material);
 
+        // Attached sampling: where the ray meets this vertex (its Jacobians, below) and, at a
+        // diffuse vertex, the albedo's slopes ∂ln a_c/∂x where it is textured (crate::cpu::slope).
+        let geometry = attached.then(|| HitGeometry {
+            t: travelled + hit.t, // from the vertex the ray left, across hidden emitters
+            d: ray.dir,
+            ng: s.ng,
+            n: frame.n,
+            dn_dx: shading_normal_gradient(flat, &hit) * if mirrored { -1.0 } else { 1.0 },
+        });
+        let diffuse_albedo = match (bsdf.blend, &bsdf.leaves[0]) {
+            (false, Leaf::Diffuse { albedo }) if attached => Some(*albedo),
+            _ => None,
+        };
+        let mut dln_albedo = [Vec3::ZERO; 3];
+        if let Some(albedo) = diffuse_albedo {
+            let m = &flat.materials[s.material as usize];
+            if m.tex_width > 0 {
+                let slope = albedo_slope(flat, m, s.tex_at(), &surface_gradients(flat, &hit));
+                for c in 0..3 {
+                    if albedo[c] > 0.0 {
+                        dln_albedo[c] = slope[c] / albedo[c];
+                    }
+                }
+            }
+        }
+
         // ---- emitter sampling ----
         let u_em = draw_block(key, pixel, sample, vertex, DIM_EMITTER_SELECT / 4);
         let pos = (DIM_EMITTER_POS % 4) as usize;
         let u_select = u_em[(DIM_EMITTER_SELECT % 4) as usize];
         // A BSDF of delta lobes only gets no next-event estimation: no emitter sample can meet them.
-        let es = if nee && !is_smooth(&bsdf) {
+        // Attached sampling estimates it at diffuse vertices alone, toward area emitters alone
+        // (their point held fixed; the environment's density jumps between cells).
+        let nee_here = nee && !is_smooth(&bsdf) && (!attached || diffuse_albedo.is_some());
+        let es = if nee_here {
             let u_cell = env_cell_uniforms(globals, key, pixel, sample, vertex);
             sample_emitter(flat, globals, u_select, (Vec2::new(u_em[pos], u_em[pos + 1]), u_cell), s.p)
+                .filter(|es| !attached || !(es.environment || es.delta))
         } else {
             None
         };
@@ -839,6 +878,22 @@ pub fn trace_path<const ADJOINT: bool>(
                     }
                 };
                 radiance += sign * (throughput * tr * w_n * f * es.radiance / p_e);
+                if let Some(geometry) = &geometry {
+                    // Its own row: δL·C·∂ln C/∂r, through the hit point and the shading normal
+                    // (crate::attached::HitGeometry::nee_gradient) and the albedo's slopes.
+                    let c = adj_radiance * throughput * tr * w_n * f * es.radiance / p_e;
+                    let dist = (es.point - origin).length();
+                    let g = geometry.nee_gradient(wl, dist, es.normal, w_n) * (c.x + c.y + c.z)
+                        + dln_albedo[0] * c.x
+                        + dln_albedo[1] * c.y
+                        + dln_albedo[2] * c.z;
+                    let own = geometry.position_row(g);
+                    if ADJOINT {
+                        phi = phi.add_scaled(own, -1.0);
+                    } else {
+                        phi = add_contribution(phi, own.through(&jac), c, &log_rows);
+                    }
+                }
                 if ADJOINT && media {
                     let segment = (origin, wl, shadow_tmax);
                     let weight = adj_radiance * throughput * tr * w_n * f * es.radiance / p_e;
@@ -920,7 +975,7 @@ pub fn trace_path<const ADJOINT: bool>(
         throughput *= bs.value / pdf_f;
         prev_pdf_f = pdf_f;
         // An emitter found through a delta lobe counts whole: NEE could not have sampled it.
-        prev_nee = nee && !bs.delta;
+        prev_nee = nee_here && !bs.delta;
         let Some(sum) = mix.advance(hero, hero_here, capable, use_dx, globals.diff_q, pdf_f, pdf_d) else {
             break;
         };
@@ -945,16 +1000,9 @@ pub fn trace_path<const ADJOINT: bool>(
                 bsdf_backward(flat, s.material, s.tex_at(), &bsdf, wi, bs.wo, bs.delta, adj, sink);
             }
         }
-        // Attached sampling: where the ray meets this vertex, and the vertex's completed Jacobian
-        // for an outgoing direction d′ with ∂d′/∂d = t_d, ∂d′/∂n = t_n — regularised, with Jacobian
-        // noise, from the vertex's `Jacobian` stream.
-        let geometry = attached.then(|| HitGeometry {
-            t: travelled + hit.t, // from the vertex the ray left, across hidden emitters
-            d: ray.dir,
-            ng: s.ng,
-            n: frame.n,
-            dn_dx: shading_normal_gradient(flat, &hit) * if mirrored { -1.0 } else { 1.0 },
-        });
+        // Attached sampling: the vertex's completed Jacobian for an outgoing direction d′ with
+        // ∂d′/∂d = t_d, ∂d′/∂n = t_n — regularised, with Jacobian noise, from the vertex's
+        // `Jacobian` stream.
         let vertex_jacobian = |g: &HitGeometry, t_d, t_n, d_out| {
             let a = g.jacobian(t_d, t_n).completed(prev_normal, ray.dir, s.ng, d_out);
             if globals.jac_noise > 0.0 {
@@ -1018,22 +1066,13 @@ pub fn trace_path<const ADJOINT: bool>(
                 jac = a.compose(&jac);
             }
         }
-        if let (Some(geometry), false, Leaf::Diffuse { albedo }) = (&geometry, bsdf.blend, &bsdf.leaves[0]) {
+        if let (Some(geometry), Some(_)) = (&geometry, diffuse_albedo) {
             // A diffuse vertex: its cosine sample follows the shading normal's frame alone and
             // its weight is the albedo, which varies with the hit point only where it is textured
             // (rows ∂ln a_c/∂r, crate::cpu::slope). The direction block of its Jacobian is
             // singular: direction noise regularises it, with the request's amplitude or
             // DIFFUSE_JACOBIAN_NOISE (crate::attached::Jac6::plus_direction_noise).
-            let m = &flat.materials[s.material as usize];
-            let mut rows = [Row6::ZERO; 3];
-            if m.tex_width > 0 {
-                let slope = albedo_slope(flat, m, s.tex_at(), &surface_gradients(flat, &hit));
-                for (c, row) in rows.iter_mut().enumerate() {
-                    if albedo[c] > 0.0 {
-                        *row = geometry.position_row(slope[c] / albedo[c]);
-                    }
-                }
-            }
+            let rows = dln_albedo.map(|g| geometry.position_row(g));
             let wo = frame.to_world(bs.wo);
             let u = uniform4(key, pixel, sample, vertex, Stream::Jacobian, 0, 0);
             let amplitude = if globals.jac_noise > 0.0 { globals.jac_noise } else { DIFFUSE_JACOBIAN_NOISE };

@@ -267,7 +267,7 @@ pub fn scalar_slot_range(flat: &FlatScene, slot: u32) -> (u32, u32) {
 /// `kinds` (empty for the primal kernel).
 pub fn request_features(scene: u64, options: &RenderOptions, kinds: ParamKinds) -> u64 {
     let mut f = scene;
-    if options.nee && !options.sampling.is_attached() && scene & u64::from(F_EMITTERS | F_ENV | F_LIGHTS) != 0 {
+    if options.nee && scene & u64::from(F_EMITTERS | F_ENV | F_LIGHTS) != 0 {
         f |= u64::from(F_NEE);
     }
     match options.strategy {

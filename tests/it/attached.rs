@@ -83,6 +83,19 @@ fn diffuse_vertices_match_finite_differences_on_the_cpu() {
     }
 }
 
+/// Next-event estimation at diffuse vertices against finite differences of η: a floor seen
+/// through a glass sphere and lit by a small lamp (`attached_lamp.xml`), whose points move with η
+/// under the lamp's fixed sample points — the distance, both cosines, the MIS weight and the
+/// textured albedo there (`HitGeometry::nee_gradient`).
+#[test]
+fn next_event_estimation_matches_finite_differences_on_the_cpu() {
+    for name in ["attached_lamp", "attached_panel"] {
+        let scene = scenes::data_scene(name);
+        let opts = RenderOptions { width: 24, height: 24, spp: 8, ..RenderOptions::for_scene(&scene) };
+        check_cpu(&scene, "glass.bsdf.eta", 24, opts);
+    }
+}
+
 /// The regularisation noise moves the variance, not the mean (ALGORITHMS.md §9 test (c)): on a
 /// glass sphere above a diffuse table, where diffuse vertices follow the directions η moves and
 /// their noise reaches η's gradient, the default (diffuse amplitude 1, smooth vertices exact)
@@ -197,6 +210,8 @@ fn the_device_equals_the_cpu_reference() {
         ("attached_slab_table", "glass.bsdf.eta"),
         ("attached_slab_albedo", "glass.bsdf.eta"),
         ("attached_ball", "glass.bsdf.eta"),
+        ("attached_lamp", "glass.bsdf.eta"),
+        ("attached_panel", "glass.bsdf.eta"),
     ] {
         let scene = scenes::data_scene(name);
         let mut renderer = Renderer::new(&gpu.ctx, &scene).unwrap();
@@ -265,7 +280,7 @@ fn optimize_recovers_the_ior_of_a_glass_sphere() {
 }
 
 /// Attached sampling is refused, by name, where its Jacobians are not built: a textured diffuse
-/// albedo, a plastic, adaptive pixel sampling, forward-mode image gradients, deterministic mode.
+/// albedo, a point light, a plastic, adaptive pixel sampling, forward-mode image gradients, deterministic mode.
 #[test]
 fn attached_sampling_refuses_what_it_does_not_cover() {
     use pathgrad::backend::Backend;
@@ -314,6 +329,14 @@ fn attached_sampling_refuses_what_it_does_not_cover() {
     );
     let err = pathgrad::cpu::backward(&tinted, &attached(&tinted, 8, 1), &a).unwrap_err().to_string();
     assert!(err.contains("`dielectric` with a textured reflectance or transmittance"), "{err}");
+    // A point light: next-event estimation's rows are built for area emitters' points alone.
+    let point = variant(
+        "attached_floor",
+        r#"<shape type="rectangle" id="floor">"#,
+        r#"<emitter type="point"><point name="position" x="0" y="1" z="0"/><rgb name="intensity" value="1"/></emitter><shape type="rectangle" id="floor">"#,
+    );
+    let err = pathgrad::cpu::backward(&point, &attached(&point, 8, 1), &a).unwrap_err().to_string();
+    assert!(err.contains("a light without area"), "{err}");
     let plastic = variant("attached_floor", r#"<bsdf type="diffuse">"#, r#"<bsdf type="roughplastic">"#);
     let err = pathgrad::cpu::backward(&plastic, &attached(&plastic, 8, 1), &a).unwrap_err().to_string();
     assert!(err.contains("`roughplastic` material"), "{err}");
@@ -371,6 +394,8 @@ fn the_replay_returns_gamma_to_zero() {
         "attached_slab_table",
         "attached_slab_albedo",
         "attached_ball",
+        "attached_lamp",
+        "attached_panel",
     ] {
         let scene = scenes::data_scene(name);
         let opts = attached(&scene, 24, 2);
