@@ -16,10 +16,14 @@
 //! h_k is vertex k's own row: δL·β_k·∂c_k/∂r_k (what vertex k emits) plus δL·(∂ ln w_k/∂r_k ⊙
 //! L_after) (its sample weight w_k times everything after it). The primal pass cannot know
 //! L_after, so it carries S = Σ_{j<k} ∂ ln w_j/∂r_j·J̃_j per channel and adds δL·β_k·c_k ⊙ S_k at
-//! each contribution instead: the same sum, ordered by contribution.
+//! each contribution instead: the same sum, ordered by contribution. Next-event estimation at a
+//! diffuse vertex, toward a point on an area emitter that stays fixed while the vertex moves, is
+//! one more contribution of that vertex ([`HitGeometry::nee_gradient`]); the emitter hit the
+//! vertex's own sample may make carries its MIS weight's row ([`HitGeometry::emitter_density_row`]).
 //!
 //! Geometry is fixed: the hit point moves only along its triangle's plane, and no term for a
-//! visibility change is built (a moving direction that crosses an edge is not differentiated).
+//! visibility change is built (a moving direction that crosses an edge is not differentiated, nor
+//! a shadow ray that a moving vertex sends across a shadow's edge).
 
 pub mod rough_dielectric;
 
@@ -39,7 +43,8 @@ use crate::scene::flat::FlatScene;
 /// surface (a bilinear bitmap, a per-vertex attribute), a smooth `dielectric`,
 /// `thindielectric` or `conductor` or an isotropic `roughconductor` or `roughdielectric` with
 /// untextured roughness (no normal map, no mask), without media; light comes from the
-/// environment or from emitters the paths hit, whose radiance is constant or a bilinear bitmap.
+/// environment or from area emitters (no light without area), whose radiance is constant or a
+/// bilinear bitmap.
 /// `forward` refuses it for forward-mode image gradients, which carry per-channel derivatives
 /// the adjoint-weighted attached sums do not.
 ///
@@ -56,7 +61,7 @@ pub fn refuse_unsupported(flat: &FlatScene, options: &RenderOptions, forward: bo
                 "{what}: attached derivatives are built for scenes of smooth `dielectric`, `thindielectric` and \
                  `conductor` surfaces, isotropic `roughconductor`s and `roughdielectric`s with untextured \
                  roughness and `diffuse` surfaces with a constant or smoothly textured albedo, lit by the \
-                 environment or by emitters the paths hit, in reverse mode (use detached sampling)"
+                 environment or by area emitters, in reverse mode (use detached sampling)"
             ),
         })
     };
