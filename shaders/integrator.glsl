@@ -686,8 +686,8 @@ bool path_step(inout PathState st) {
 
                 // ---- emitter sampling: the sample and its unoccluded terms; the shadow ray is pass 1's ----
                 // A BSDF of delta lobes only gets no next-event estimation: no emitter sample meets them.
-                // Attached sampling estimates it at diffuse vertices alone, toward area emitters
-                // alone (src/cpu/path.rs).
+                // Attached sampling estimates it at diffuse vertices alone, not toward the
+                // environment (src/cpu/path.rs).
                 nee_here = nee && !bsdf_is_smooth(bsdf);
 #if ATTACHED
                 nee_here = nee_here && HAS(F_DIFFUSE) && !bsdf.blend && is_diffuse(bsdf.leaf0.kind);
@@ -695,7 +695,7 @@ bool path_step(inout PathState st) {
                 if (nee_here) {
                     vec4 u_em = draw_block(st.key1, st.pixel, st.sample_index, vertex, DIM_EMITTER_SELECT / 4u);
                     es = sample_emitter(u_em[DIM_EMITTER_SELECT % 4u], vec2(u_em[DIM_EMITTER_POS % 4u], u_em[DIM_EMITTER_POS % 4u + 1u]), env_cell_uniforms(st.key1, st.pixel, st.sample_index, vertex), s.p);
-                    if (es.valid && !(ATTACHED != 0 && (es.environment || es.delta))) {
+                    if (es.valid && !(ATTACHED != 0 && es.environment)) {
                         vec3 wl;
                         vec3 origin;
                         if (HAS(F_LIGHTS) && es.delta && es.distant) {
@@ -820,7 +820,9 @@ bool path_step(inout PathState st) {
                                                    shading_normal_gradient(hit) * (mirrored ? -1.0 : 1.0));
                 vec3 c = st.adj * st.throughput * tr * nee_w * nee_f * es.radiance / nee_pdf;
                 float dist = length(es.point - shadow_ray.origin);
-                vec3 g = hit_nee_gradient(geometry, shadow_ray.dir, dist, es.normal, nee_w) * (c.x + c.y + c.z);
+                vec3 by_light = es.delta ? hit_delta_light_gradient(geometry, shadow_ray.dir, es.distant ? 0.0 : 1.0 / dist)
+                                         : hit_nee_gradient(geometry, shadow_ray.dir, dist, es.normal, nee_w);
+                vec3 g = by_light * (c.x + c.y + c.z);
                 if (am.tex_width > 0u) {
                     mat3 slope = albedo_slope(am, tex_at(s), surface_gradients(hit));
                     vec3 albedo = bsdf.leaf0.color;

@@ -32,8 +32,8 @@ use glam::{Mat3, Vec3};
 pub use rough_dielectric::{RoughDielectricLobe, rough_dielectric_lobe};
 
 use crate::contract::{
-    MAT_CONDUCTOR, MAT_DIELECTRIC, MAT_DIFFUSE, MAT_ROUGH_CONDUCTOR, MAT_ROUGH_DIELECTRIC, MAT_THIN_DIELECTRIC,
-    NO_PARAM, SCALAR_TEXTURE, TEX_ATTR_FACE, TEX_CHECKER, TEX_NEAREST, TEX_VOLUME,
+    LIGHT_PROJECTOR, LIGHT_SPOT, MAT_CONDUCTOR, MAT_DIELECTRIC, MAT_DIFFUSE, MAT_ROUGH_CONDUCTOR, MAT_ROUGH_DIELECTRIC,
+    MAT_THIN_DIELECTRIC, NO_PARAM, SCALAR_TEXTURE, TEX_ATTR_FACE, TEX_CHECKER, TEX_NEAREST, TEX_VOLUME,
 };
 use crate::integrator::{RenderOptions, Sampling};
 use crate::scene::flat::FlatScene;
@@ -43,8 +43,8 @@ use crate::scene::flat::FlatScene;
 /// surface (a bilinear bitmap, a per-vertex attribute), a smooth `dielectric`,
 /// `thindielectric` or `conductor` or an isotropic `roughconductor` or `roughdielectric` with
 /// untextured roughness (no normal map, no mask), without media; light comes from the
-/// environment or from area emitters (no light without area), whose radiance is constant or a
-/// bilinear bitmap.
+/// environment, from area emitters whose radiance is constant or a bilinear bitmap, or from
+/// point and directional lights (no spot or projector).
 /// `forward` refuses it for forward-mode image gradients, which carry per-channel derivatives
 /// the adjoint-weighted attached sums do not.
 ///
@@ -61,7 +61,8 @@ pub fn refuse_unsupported(flat: &FlatScene, options: &RenderOptions, forward: bo
                 "{what}: attached derivatives are built for scenes of smooth `dielectric`, `thindielectric` and \
                  `conductor` surfaces, isotropic `roughconductor`s and `roughdielectric`s with untextured \
                  roughness and `diffuse` surfaces with a constant or smoothly textured albedo, lit by the \
-                 environment or by area emitters, in reverse mode (use detached sampling)"
+                 environment, by area emitters or by point and directional lights, in reverse mode (use detached \
+                 sampling)"
             ),
         })
     };
@@ -123,9 +124,12 @@ pub fn refuse_unsupported(flat: &FlatScene, options: &RenderOptions, forward: bo
     if !flat.media.is_empty() {
         return refuse("the scene has participating media".into());
     }
-    // Next-event estimation's rows are built for area emitters' points (HitGeometry::nee_gradient).
-    if !flat.lights.is_empty() {
-        return refuse("the scene has a light without area (a point, spot, directional or projector light)".into());
+    // Next-event estimation's rows are built for area emitters' points, point and directional
+    // lights (HitGeometry::nee_gradient, HitGeometry::delta_light_gradient).
+    if flat.lights.iter().any(|l| l.kind == LIGHT_SPOT || l.kind == LIGHT_PROJECTOR) {
+        return refuse(
+            "the scene has a spot or projector light (its falloff's and texture's slopes are not built)".into(),
+        );
     }
     let jumps = |p: u32| {
         crate::cpu::emitter::area_textured(p) && {
@@ -798,12 +802,23 @@ impl HitGeometry {
     /// w = p_e²/(p_e² + p_f²) the power heuristic against the cosine sample (p_f = cos θo/π):
     /// ∂ln w = 2(1 − w)(∂ln p_e − ∂ln cos θo). (Pass it to [`HitGeometry::position_row`].)
     pub fn nee_gradient(&self, wl: Vec3, dist: f32, light_normal: Vec3, w: f32) -> Vec3 {
-        let cos_o = self.n.dot(wl);
         let cos_y = -light_normal.dot(wl);
-        // ∂wl/∂x = −(I − wl·wlᵀ)/dist.
-        let dln_cos_o = -(self.n - cos_o * wl) / (dist * cos_o) + self.dn_dx.transpose() * wl / cos_o;
         let dln_p_e = -2.0 * wl / dist - (light_normal + cos_y * wl) / (dist * cos_y);
-        (2.0 * w - 1.0) * (dln_cos_o - dln_p_e)
+        (2.0 * w - 1.0) * (self.ln_cos_gradient(wl, 1.0 / dist) - dln_p_e)
+    }
+
+    /// Next-event estimation at a diffuse vertex toward a light without area: the gradient by
+    /// the hit point x of ln(cos θo/dist²) for a point light at distance 1/`inv_dist` along `wl`,
+    /// or (`inv_dist` = 0) of ln cos θo for a directional light, whose `wl` stays fixed.
+    pub fn delta_light_gradient(&self, wl: Vec3, inv_dist: f32) -> Vec3 {
+        self.ln_cos_gradient(wl, inv_dist) + 2.0 * inv_dist * wl
+    }
+
+    /// ∂ln cos θo/∂x, cos θo = n·wl, for wl toward a fixed point at distance 1/`inv_dist` (0: a
+    /// fixed direction): ∂wl/∂x = −(I − wl·wlᵀ)·`inv_dist`, and n turns with x.
+    fn ln_cos_gradient(&self, wl: Vec3, inv_dist: f32) -> Vec3 {
+        let cos_o = self.n.dot(wl);
+        (-(self.n - cos_o * wl) * inv_dist + self.dn_dx.transpose() * wl) / cos_o
     }
 }
 
@@ -1094,7 +1109,9 @@ mod tests {
     /// singular A (a plane's projection) and |Y| ≥ amplitude/2.
     /// Next-event estimation's rows against finite differences: the log-density of a flat
     /// emitter's hit point along a moved ray (unit directions, moved across themselves), and
-    /// ln(cos θo·w/p_e) at a point moving along a curved triangle toward a fixed light point.
+    /// ln(cos θo·w/p_e) at a point moving along a curved triangle toward a fixed light point;
+    /// ln(cos θo/dist²) toward a point light and ln cos θo along a directional light's fixed
+    /// direction there.
     #[test]
     fn next_event_rows_match_finite_differences() {
         // An emitter's plane through y0 with normal ng, hit by (o, d).
@@ -1158,6 +1175,22 @@ mod tests {
         for axis in [e0.normalize(), e1.normalize()] {
             let fd = (ln_contribution(x + h * axis) - ln_contribution(x - h * axis)) / (2.0 * h);
             assert!((fd - g.dot(axis)).abs() < 2e-3 * (1.0 + fd.abs()), "∂ln C/∂x {fd} vs {}", g.dot(axis));
+        }
+        // A point light at y: ln(cos θo/dist²); a directional light along a fixed wl: ln cos θo.
+        let ln_point = |x: Vec3| {
+            let dist = (y - x).length();
+            (normal_raw(x).normalize().dot((y - x) / dist) / (dist * dist)).ln()
+        };
+        let fixed = Vec3::new(0.3, -0.2, 1.0).normalize();
+        let ln_directional = |x: Vec3| normal_raw(x).normalize().dot(fixed).ln();
+        let g_point = geometry.delta_light_gradient(wl, 1.0 / dist);
+        let g_directional = geometry.delta_light_gradient(fixed, 0.0);
+        for axis in [e0.normalize(), e1.normalize()] {
+            let fd = (ln_point(x + h * axis) - ln_point(x - h * axis)) / (2.0 * h);
+            assert!((fd - g_point.dot(axis)).abs() < 2e-3 * (1.0 + fd.abs()), "point {fd} vs {}", g_point.dot(axis));
+            let fd = (ln_directional(x + h * axis) - ln_directional(x - h * axis)) / (2.0 * h);
+            let ours = g_directional.dot(axis);
+            assert!(fd.abs() > 1e-2 && (fd - ours).abs() < 2e-3 * (1.0 + fd.abs()), "directional {fd} vs {ours}");
         }
     }
 

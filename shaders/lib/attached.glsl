@@ -552,12 +552,22 @@ Row6 hit_emitter_density_row(HitGeometry g) {
 
 // NEE at a diffuse vertex toward an area emitter's fixed point: the gradient by the hit point of
 // ln(cos θo/p_e)·(2w − 1) (HitGeometry::nee_gradient).
-vec3 hit_nee_gradient(HitGeometry g, vec3 wl, float dist, vec3 light_normal, float w) {
+// ∂ln cos θo/∂x toward a fixed point at distance 1/inv_dist (0: a fixed direction).
+vec3 hit_ln_cos_gradient(HitGeometry g, vec3 wl, float inv_dist) {
     float cos_o = dot(g.n, wl);
+    return (-(g.n - cos_o * wl) * inv_dist + transpose(g.dn_dx) * wl) / cos_o;
+}
+
+vec3 hit_nee_gradient(HitGeometry g, vec3 wl, float dist, vec3 light_normal, float w) {
     float cos_y = -dot(light_normal, wl);
-    vec3 dln_cos_o = -(g.n - cos_o * wl) / (dist * cos_o) + transpose(g.dn_dx) * wl / cos_o;
     vec3 dln_p_e = -2.0 * wl / dist - (light_normal + cos_y * wl) / (dist * cos_y);
-    return (2.0 * w - 1.0) * (dln_cos_o - dln_p_e);
+    return (2.0 * w - 1.0) * (hit_ln_cos_gradient(g, wl, 1.0 / dist) - dln_p_e);
+}
+
+// NEE toward a point light (inv_dist = 1/dist) or a directional one (0): the gradient of
+// ln(cos θo/dist²) (HitGeometry::delta_light_gradient).
+vec3 hit_delta_light_gradient(HitGeometry g, vec3 wl, float inv_dist) {
+    return hit_ln_cos_gradient(g, wl, inv_dist) + 2.0 * inv_dist * wl;
 }
 
 // ---- texture slopes along the surface (twin: src/cpu/slope.rs) ----

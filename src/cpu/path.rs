@@ -803,13 +803,14 @@ pub fn trace_path<const ADJOINT: bool>(
         let pos = (DIM_EMITTER_POS % 4) as usize;
         let u_select = u_em[(DIM_EMITTER_SELECT % 4) as usize];
         // A BSDF of delta lobes only gets no next-event estimation: no emitter sample can meet them.
-        // Attached sampling estimates it at diffuse vertices alone, toward area emitters alone
-        // (their point held fixed; the environment's density jumps between cells).
+        // Attached sampling estimates it at diffuse vertices alone, toward area emitters (their
+        // point held fixed) and lights without area, not the environment (its density jumps
+        // between cells).
         let nee_here = nee && !is_smooth(&bsdf) && (!attached || diffuse_albedo.is_some());
         let es = if nee_here {
             let u_cell = env_cell_uniforms(globals, key, pixel, sample, vertex);
             sample_emitter(flat, globals, u_select, (Vec2::new(u_em[pos], u_em[pos + 1]), u_cell), s.p)
-                .filter(|es| !attached || !(es.environment || es.delta))
+                .filter(|es| !attached || !es.environment)
         } else {
             None
         };
@@ -880,13 +881,17 @@ pub fn trace_path<const ADJOINT: bool>(
                 radiance += sign * (throughput * tr * w_n * f * es.radiance / p_e);
                 if let Some(geometry) = &geometry {
                     // Its own row: δL·C·∂ln C/∂r, through the hit point and the shading normal
-                    // (crate::attached::HitGeometry::nee_gradient) and the albedo's slopes.
+                    // (crate::attached::HitGeometry::nee_gradient, delta_light_gradient) and the
+                    // albedo's slopes.
                     let c = adj_radiance * throughput * tr * w_n * f * es.radiance / p_e;
                     let dist = (es.point - origin).length();
-                    let g = geometry.nee_gradient(wl, dist, es.normal, w_n) * (c.x + c.y + c.z)
-                        + dln_albedo[0] * c.x
-                        + dln_albedo[1] * c.y
-                        + dln_albedo[2] * c.z;
+                    let by_light = if es.delta {
+                        geometry.delta_light_gradient(wl, if es.distant { 0.0 } else { 1.0 / dist })
+                    } else {
+                        geometry.nee_gradient(wl, dist, es.normal, w_n)
+                    };
+                    let g =
+                        by_light * (c.x + c.y + c.z) + dln_albedo[0] * c.x + dln_albedo[1] * c.y + dln_albedo[2] * c.z;
                     let own = geometry.position_row(g);
                     if ADJOINT {
                         phi = phi.add_scaled(own, -1.0);

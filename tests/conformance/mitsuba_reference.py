@@ -284,6 +284,11 @@ MATRIX = {
                                         "area emitter", "bitmap albedo"],
                               grads=["glass.bsdf.eta"], fd={"glass.bsdf.eta": 0.01}, sampling="attached",
                               spp=1024, seeds=32),
+    # The same floor under a point and a directional light (no MIS: only NEE reaches them).
+    "attached_ior_point": dict(features=["dielectric eta, attached sampling", "next-event estimation at diffuse vertices",
+                                         "point light", "directional light", "bitmap albedo"],
+                               grads=["glass.bsdf.eta"], fd={"glass.bsdf.eta": 0.01}, sampling="attached",
+                               spp=1024, seeds=32),
     # The same floor under a large tilted panel whose radiance is a bilinear bump: BSDF samples
     # share its light with next-event estimation under MIS weights that move with the floor.
     "attached_ior_panel": dict(features=["dielectric eta, attached sampling", "next-event estimation at diffuse vertices",

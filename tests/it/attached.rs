@@ -86,10 +86,12 @@ fn diffuse_vertices_match_finite_differences_on_the_cpu() {
 /// Next-event estimation at diffuse vertices against finite differences of η: a floor seen
 /// through a glass sphere and lit by a small lamp (`attached_lamp.xml`), whose points move with η
 /// under the lamp's fixed sample points — the distance, both cosines, the MIS weight and the
-/// textured albedo there (`HitGeometry::nee_gradient`).
+/// textured albedo there (`HitGeometry::nee_gradient`); the same under a large panel whose
+/// light BSDF samples share (`attached_panel.xml`); and under a point and a directional light
+/// (`attached_point.xml`, `HitGeometry::delta_light_gradient`).
 #[test]
 fn next_event_estimation_matches_finite_differences_on_the_cpu() {
-    for name in ["attached_lamp", "attached_panel"] {
+    for name in ["attached_lamp", "attached_panel", "attached_point"] {
         let scene = scenes::data_scene(name);
         let opts = RenderOptions { width: 24, height: 24, spp: 8, ..RenderOptions::for_scene(&scene) };
         check_cpu(&scene, "glass.bsdf.eta", 24, opts);
@@ -212,6 +214,7 @@ fn the_device_equals_the_cpu_reference() {
         ("attached_ball", "glass.bsdf.eta"),
         ("attached_lamp", "glass.bsdf.eta"),
         ("attached_panel", "glass.bsdf.eta"),
+        ("attached_point", "glass.bsdf.eta"),
     ] {
         let scene = scenes::data_scene(name);
         let mut renderer = Renderer::new(&gpu.ctx, &scene).unwrap();
@@ -280,7 +283,7 @@ fn optimize_recovers_the_ior_of_a_glass_sphere() {
 }
 
 /// Attached sampling is refused, by name, where its Jacobians are not built: a textured diffuse
-/// albedo, a point light, a plastic, adaptive pixel sampling, forward-mode image gradients, deterministic mode.
+/// albedo, a spot light, a plastic, adaptive pixel sampling, forward-mode image gradients, deterministic mode.
 #[test]
 fn attached_sampling_refuses_what_it_does_not_cover() {
     use pathgrad::backend::Backend;
@@ -329,14 +332,14 @@ fn attached_sampling_refuses_what_it_does_not_cover() {
     );
     let err = pathgrad::cpu::backward(&tinted, &attached(&tinted, 8, 1), &a).unwrap_err().to_string();
     assert!(err.contains("`dielectric` with a textured reflectance or transmittance"), "{err}");
-    // A point light: next-event estimation's rows are built for area emitters' points alone.
-    let point = variant(
+    // A spot light: its falloff's slope along the surface is not built.
+    let spot = variant(
         "attached_floor",
         r#"<shape type="rectangle" id="floor">"#,
-        r#"<emitter type="point"><point name="position" x="0" y="1" z="0"/><rgb name="intensity" value="1"/></emitter><shape type="rectangle" id="floor">"#,
+        r#"<emitter type="spot"><transform name="to_world"><lookat origin="0, 1, 0" target="0, 0, 0"/></transform></emitter><shape type="rectangle" id="floor">"#,
     );
-    let err = pathgrad::cpu::backward(&point, &attached(&point, 8, 1), &a).unwrap_err().to_string();
-    assert!(err.contains("a light without area"), "{err}");
+    let err = pathgrad::cpu::backward(&spot, &attached(&spot, 8, 1), &a).unwrap_err().to_string();
+    assert!(err.contains("a spot or projector light"), "{err}");
     let plastic = variant("attached_floor", r#"<bsdf type="diffuse">"#, r#"<bsdf type="roughplastic">"#);
     let err = pathgrad::cpu::backward(&plastic, &attached(&plastic, 8, 1), &a).unwrap_err().to_string();
     assert!(err.contains("`roughplastic` material"), "{err}");
@@ -396,6 +399,7 @@ fn the_replay_returns_gamma_to_zero() {
         "attached_ball",
         "attached_lamp",
         "attached_panel",
+        "attached_point",
     ] {
         let scene = scenes::data_scene(name);
         let opts = attached(&scene, 24, 2);
