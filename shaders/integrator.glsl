@@ -627,7 +627,7 @@ bool path_step(inout PathState st) {
                     }
                     if (st.prev_nee) {
                         vec3 c = weight * le;
-                        own = row_add_scaled(own, hit_emitter_density_row(at), -2.0 * (1.0 - w_b) * (c.x + c.y + c.z));
+                        own = row_add_scaled(own, hit_emitter_mis_row(at, w_b), c.x + c.y + c.z);
                     }
                     if (adjoint) st.gamma = row_add_scaled(st.gamma, own, -1.0);
                     else attached_contribution(st, row_through(own, st.jac), weight * le);
@@ -813,7 +813,8 @@ bool path_step(inout PathState st) {
 #if ATTACHED
             {
                 // Its own row: δL·C·∂ln C/∂r, through the hit point, the shading normal and the
-                // albedo's slopes (src/cpu/path.rs).
+                // albedo's slopes (src/cpu/path.rs). `hit` is still the path's: only a kernel with
+                // media writes it in the shadow ray's pass, and attached sampling refuses media.
                 Material am = materials[s.material];
                 bool mirrored = HAS(F_TWO_SIDED) && am.two_sided != 0u && dot(s.ns, -st.ray.dir) < 0.0;
                 HitGeometry geometry = HitGeometry(travelled + hit.t, st.ray.dir, s.ng, frame.n,

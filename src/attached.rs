@@ -17,9 +17,10 @@
 //! L_after) (its sample weight w_k times everything after it). The primal pass cannot know
 //! L_after, so it carries S = Σ_{j<k} ∂ ln w_j/∂r_j·J̃_j per channel and adds δL·β_k·c_k ⊙ S_k at
 //! each contribution instead: the same sum, ordered by contribution. Next-event estimation at a
-//! diffuse vertex, toward a point on an area emitter that stays fixed while the vertex moves, is
-//! one more contribution of that vertex ([`HitGeometry::nee_gradient`]); the emitter hit the
-//! vertex's own sample may make carries its MIS weight's row ([`HitGeometry::emitter_density_row`]).
+//! diffuse vertex, toward a point on an area emitter that stays fixed while the vertex moves (or a
+//! point or directional light), is one more contribution of that vertex
+//! ([`HitGeometry::nee_gradient`], [`HitGeometry::delta_light_gradient`]); the emitter hit the
+//! vertex's own sample may make carries its MIS weight's row ([`HitGeometry::emitter_mis_row`]).
 //!
 //! Geometry is fixed: the hit point moves only along its triangle's plane, and no term for a
 //! visibility change is built (a moving direction that crosses an edge is not differentiated, nor
@@ -125,11 +126,28 @@ pub fn refuse_unsupported(flat: &FlatScene, options: &RenderOptions, forward: bo
         return refuse("the scene has participating media".into());
     }
     // Next-event estimation's rows are built for area emitters' points, point and directional
-    // lights (HitGeometry::nee_gradient, HitGeometry::delta_light_gradient).
+    // lights (HitGeometry::nee_gradient, HitGeometry::delta_light_gradient), at diffuse vertices:
+    // a light without area, which only next-event estimation reaches, would be missing from the
+    // rough vertices' light, or from all of it without next-event estimation.
     if flat.lights.iter().any(|l| l.kind == LIGHT_SPOT || l.kind == LIGHT_PROJECTOR) {
         return refuse(
             "the scene has a spot or projector light (its falloff's and texture's slopes are not built)".into(),
         );
+    }
+    if !flat.lights.is_empty() {
+        if !options.nee {
+            return refuse(
+                "the scene has a point or directional light and next-event estimation is off (only it reaches them)"
+                    .into(),
+            );
+        }
+        if flat.materials.iter().any(|m| matches!(m.tag, MAT_ROUGH_CONDUCTOR | MAT_ROUGH_DIELECTRIC)) {
+            return refuse(
+                "the scene has a point or directional light and a `roughconductor` or `roughdielectric` (attached \
+                 sampling estimates next events at diffuse vertices only, and only they reach such a light)"
+                    .into(),
+            );
+        }
     }
     let jumps = |p: u32| {
         crate::cpu::emitter::area_textured(p) && {
@@ -787,6 +805,14 @@ impl HitGeometry {
         Row6 { o: w, d: by_d + self.t * w }
     }
 
+    /// At an emitter's hit after a diffuse vertex that estimated next events: the row over the
+    /// ray that reaches it of ln w_b, its MIS weight w_b = p_f²/(p_f² + p_e²) (`w_b`), where the
+    /// cosine sample's density p_f stays fixed and p_e moves: −2(1 − w_b)·∂ln p_e.
+    pub fn emitter_mis_row(&self, w_b: f32) -> Row6 {
+        let r = self.emitter_density_row();
+        Row6 { o: r.o * (-2.0 * (1.0 - w_b)), d: r.d * (-2.0 * (1.0 - w_b)) }
+    }
+
     /// At an emitter's hit: the row over the ray that reaches it of ln p_e, the solid-angle
     /// density with which next-event estimation samples the hit point (p_e ∝ t²/cos θe, the
     /// emitter flat): ∂ln p_e/∂o = −2·ng/(t·d·ng), ∂ln p_e/∂d = −3·ng/(d·ng).
@@ -1135,6 +1161,27 @@ mod tests {
             let fd = (moved(h) - moved(-h)) / (2.0 * h);
             assert!((fd - row.d.dot(axis)).abs() < 2e-3, "∂ln p_e/∂d {fd} vs {}", row.d.dot(axis));
         }
+        // The emitter hit's MIS weight ln w_b, w_b = p_f²/(p_f² + p_e²), p_f fixed (chosen so
+        // that w_b is near 0.04 here, 1 − w_b far from 0 and 1).
+        let p_f = 0.2 * ln_density(o, d).exp();
+        let ln_w_b = |o: Vec3, d: Vec3| {
+            let p_e = ln_density(o, d).exp();
+            (p_f * p_f / (p_f * p_f + p_e * p_e)).ln()
+        };
+        let p_e = ln_density(o, d).exp();
+        let w_b = p_f * p_f / (p_f * p_f + p_e * p_e);
+        let mis = HitGeometry { t, d, ng, n: ng, dn_dx: Mat3::ZERO }.emitter_mis_row(w_b);
+        for axis in [Vec3::X, Vec3::Y, Vec3::Z] {
+            let fd = (ln_w_b(o + h * axis, d) - ln_w_b(o - h * axis, d)) / (2.0 * h);
+            let ours = mis.o.dot(axis);
+            assert!((fd - ours).abs() < 2e-3 * (1.0 + fd.abs()), "∂ln w_b/∂o {fd} vs {ours}");
+        }
+        for axis in [b1, b2] {
+            let moved = |s: f32| ln_w_b(o, (d + s * axis).normalize());
+            let fd = (moved(h) - moved(-h)) / (2.0 * h);
+            let ours = mis.d.dot(axis);
+            assert!(fd.abs() > 1e-2 && (fd - ours).abs() < 2e-3 * (1.0 + fd.abs()), "∂ln w_b/∂d {fd} vs {ours}");
+        }
 
         // A curved triangle (interpolated normals) lit from a fixed point y with normal ny.
         let v = [Vec3::new(-1.0, -1.0, 0.0), Vec3::new(1.0, -1.0, 0.2), Vec3::new(0.0, 1.0, -0.1)];
@@ -1149,12 +1196,13 @@ mod tests {
             let b2 = (g00 * p.dot(e1) - g01 * p.dot(e0)) / det;
             (1.0 - b1 - b2) * normals[0] + b1 * normals[1] + b2 * normals[2]
         };
-        let ln_contribution = |x: Vec3| {
+        // `scale`: the selection probability over the emitter's area (1: w near 1; 0.1: w near 0.5).
+        let ln_contribution = |x: Vec3, scale: f32| {
             let n = normal_raw(x).normalize();
             let dist = (y - x).length();
             let wl = (y - x) / dist;
             let (cos_o, cos_y) = (n.dot(wl), -ny.dot(wl));
-            let (p_e, p_f) = (dist * dist / cos_y, cos_o / std::f32::consts::PI);
+            let (p_e, p_f) = (scale * dist * dist / cos_y, cos_o / std::f32::consts::PI);
             let w = p_e * p_e / (p_e * p_e + p_f * p_f);
             (cos_o * w / p_e).ln()
         };
@@ -1169,12 +1217,17 @@ mod tests {
         };
         let dist = (y - x).length();
         let wl = (y - x) / dist;
-        let p_e = dist * dist / -ny.dot(wl);
         let p_f = geometry.n.dot(wl) / std::f32::consts::PI;
-        let g = geometry.nee_gradient(wl, dist, ny, p_e * p_e / (p_e * p_e + p_f * p_f));
-        for axis in [e0.normalize(), e1.normalize()] {
-            let fd = (ln_contribution(x + h * axis) - ln_contribution(x - h * axis)) / (2.0 * h);
-            assert!((fd - g.dot(axis)).abs() < 2e-3 * (1.0 + fd.abs()), "∂ln C/∂x {fd} vs {}", g.dot(axis));
+        for (scale, w_range) in [(1.0, 0.9..1.0), (0.1, 0.3..0.7)] {
+            let p_e = scale * dist * dist / -ny.dot(wl);
+            let w = p_e * p_e / (p_e * p_e + p_f * p_f);
+            assert!(w_range.contains(&w), "w {w}");
+            let g = geometry.nee_gradient(wl, dist, ny, w);
+            for axis in [e0.normalize(), e1.normalize()] {
+                let fd = (ln_contribution(x + h * axis, scale) - ln_contribution(x - h * axis, scale)) / (2.0 * h);
+                let ours = g.dot(axis);
+                assert!((fd - ours).abs() < 2e-3 * (1.0 + fd.abs()), "∂ln C/∂x at w {w}: {fd} vs {ours}");
+            }
         }
         // A point light at y: ln(cos θo/dist²); a directional light along a fixed wl: ln cos θo.
         let ln_point = |x: Vec3| {

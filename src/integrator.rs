@@ -819,8 +819,8 @@ impl RenderOptions {
             fixed_scale: FIXED_POINT_SCALE,
             forward_begin: 0,
             forward_end: 0,
-            // Attached sampling estimates next events at diffuse vertices toward area emitters
-            // (crate::attached::HitGeometry::nee_gradient); the path loops pick where.
+            // Attached sampling estimates next events at diffuse vertices, toward all but the
+            // environment (crate::attached::HitGeometry::nee_gradient); the path loops pick where.
             nee: u32::from(self.nee),
             strategy,
             diff_q,

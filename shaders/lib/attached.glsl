@@ -550,6 +550,13 @@ Row6 hit_emitter_density_row(HitGeometry g) {
     return Row6(g.ng * (-2.0 / (g.t * dn)), g.ng * (-3.0 / dn));
 }
 
+// At an emitter's hit after a diffuse vertex that estimated next events: the row of ln w_b, its
+// MIS weight, p_f fixed (HitGeometry::emitter_mis_row).
+Row6 hit_emitter_mis_row(HitGeometry g, float w_b) {
+    Row6 r = hit_emitter_density_row(g);
+    return Row6(r.o * (-2.0 * (1.0 - w_b)), r.d * (-2.0 * (1.0 - w_b)));
+}
+
 // NEE at a diffuse vertex toward an area emitter's fixed point: the gradient by the hit point of
 // ln(cos θo/p_e)·(2w − 1) (HitGeometry::nee_gradient).
 // ∂ln cos θo/∂x toward a fixed point at distance 1/inv_dist (0: a fixed direction).

@@ -703,7 +703,7 @@ pub fn trace_path<const ADJOINT: bool>(
                 };
                 if prev_nee {
                     let c = weight * le;
-                    own = own.add_scaled(at.emitter_density_row(), -2.0 * (1.0 - w_b) * (c.x + c.y + c.z));
+                    own = own.add_scaled(at.emitter_mis_row(w_b), c.x + c.y + c.z);
                 }
                 if ADJOINT {
                     phi = phi.add_scaled(own, -1.0);

@@ -283,7 +283,8 @@ fn optimize_recovers_the_ior_of_a_glass_sphere() {
 }
 
 /// Attached sampling is refused, by name, where its Jacobians are not built: a textured diffuse
-/// albedo, a spot light, a plastic, adaptive pixel sampling, forward-mode image gradients, deterministic mode.
+/// albedo, a spot light, a point light beside a rough conductor or without next-event
+/// estimation, a plastic, adaptive pixel sampling, forward-mode image gradients, deterministic mode.
 #[test]
 fn attached_sampling_refuses_what_it_does_not_cover() {
     use pathgrad::backend::Backend;
@@ -340,6 +341,18 @@ fn attached_sampling_refuses_what_it_does_not_cover() {
     );
     let err = pathgrad::cpu::backward(&spot, &attached(&spot, 8, 1), &a).unwrap_err().to_string();
     assert!(err.contains("a spot or projector light"), "{err}");
+    // A point light beside a rough conductor (no next-event estimation at its vertices), and a
+    // point light without next-event estimation: its light would be missing.
+    let point = r#"<emitter type="point"><point name="position" x="0" y="3" z="0"/></emitter>"#;
+    let sky = r#"<emitter type="envmap">"#;
+    let lit = variant("attached_rough", sky, &format!("{point}{sky}"));
+    let err = pathgrad::cpu::backward(&lit, &attached(&lit, 8, 1), &a).unwrap_err().to_string();
+    assert!(err.contains("point or directional light and a `roughconductor`"), "{err}");
+    let lit = variant("attached_floor", sky, &format!("{point}{sky}"));
+    let no_nee = RenderOptions { nee: false, ..attached(&lit, 8, 1) };
+    let err = pathgrad::cpu::backward(&lit, &no_nee, &a).unwrap_err().to_string();
+    assert!(err.contains("next-event estimation is off"), "{err}");
+    pathgrad::cpu::backward(&lit, &attached(&lit, 8, 1), &a).unwrap();
     let plastic = variant("attached_floor", r#"<bsdf type="diffuse">"#, r#"<bsdf type="roughplastic">"#);
     let err = pathgrad::cpu::backward(&plastic, &attached(&plastic, 8, 1), &a).unwrap_err().to_string();
     assert!(err.contains("`roughplastic` material"), "{err}");
