@@ -807,30 +807,37 @@ bool path_step(inout PathState st) {
     }
 
     if (shade) {
+#if ATTACHED
+        // Attached sampling: where the ray meets this vertex (its Jacobians, below) and, at a
+        // diffuse vertex, the albedo's slopes ∂ln a_c/∂x where it is textured (src/cpu/path.rs).
+        // `hit` is still the path's: only a kernel with media writes it in the shadow ray's pass,
+        // and attached sampling refuses media.
+        Material am = materials[s.material];
+        bool mirrored = HAS(F_TWO_SIDED) && am.two_sided != 0u && dot(s.ns, -st.ray.dir) < 0.0;
+        HitGeometry geometry = HitGeometry(travelled + hit.t, st.ray.dir, s.ng, frame.n,
+                                           shading_normal_gradient(hit) * (mirrored ? -1.0 : 1.0));
+        bool diffuse_attached = HAS(F_DIFFUSE) && !bsdf.blend && is_diffuse(bsdf.leaf0.kind);
+        vec3 dln_albedo[3] = vec3[3](vec3(0.0), vec3(0.0), vec3(0.0));
+        if (diffuse_attached && am.tex_width > 0u) {
+            mat3 slope = albedo_slope(am, tex_at(s), surface_gradients(hit));
+            vec3 albedo = bsdf.leaf0.color;
+            if (albedo.x > 0.0) dln_albedo[0] = slope[0] / albedo.x;
+            if (albedo.y > 0.0) dln_albedo[1] = slope[1] / albedo.y;
+            if (albedo.z > 0.0) dln_albedo[2] = slope[2] / albedo.z;
+        }
+#endif
         // ---- NEE's contribution, now that its transmittance is known ----
         if (max_component(tr) > 0.0) {
             st.radiance += sign * (st.throughput * tr * nee_w * nee_f * es.radiance / nee_pdf);
 #if ATTACHED
             {
                 // Its own row: δL·C·∂ln C/∂r, through the hit point, the shading normal and the
-                // albedo's slopes (src/cpu/path.rs). `hit` is still the path's: only a kernel with
-                // media writes it in the shadow ray's pass, and attached sampling refuses media.
-                Material am = materials[s.material];
-                bool mirrored = HAS(F_TWO_SIDED) && am.two_sided != 0u && dot(s.ns, -st.ray.dir) < 0.0;
-                HitGeometry geometry = HitGeometry(travelled + hit.t, st.ray.dir, s.ng, frame.n,
-                                                   shading_normal_gradient(hit) * (mirrored ? -1.0 : 1.0));
+                // albedo's slopes (src/cpu/path.rs).
                 vec3 c = st.adj * st.throughput * tr * nee_w * nee_f * es.radiance / nee_pdf;
                 float dist = length(es.point - shadow_ray.origin);
                 vec3 by_light = es.delta ? hit_delta_light_gradient(geometry, shadow_ray.dir, es.distant ? 0.0 : 1.0 / dist)
                                          : hit_nee_gradient(geometry, shadow_ray.dir, dist, es.normal, nee_w);
-                vec3 g = by_light * (c.x + c.y + c.z);
-                if (am.tex_width > 0u) {
-                    mat3 slope = albedo_slope(am, tex_at(s), surface_gradients(hit));
-                    vec3 albedo = bsdf.leaf0.color;
-                    if (albedo.x > 0.0) g += slope[0] / albedo.x * c.x;
-                    if (albedo.y > 0.0) g += slope[1] / albedo.y * c.y;
-                    if (albedo.z > 0.0) g += slope[2] / albedo.z * c.z;
-                }
+                vec3 g = by_light * (c.x + c.y + c.z) + dln_albedo[0] * c.x + dln_albedo[1] * c.y + dln_albedo[2] * c.z;
                 Row6 own = hit_position_row(geometry, g);
                 if (adjoint) st.gamma = row_add_scaled(st.gamma, own, -1.0);
                 else attached_contribution(st, row_through(own, st.jac), c);
@@ -919,10 +926,6 @@ bool path_step(inout PathState st) {
                 vec3 wo_world = to_world(frame, bs.wo);
 #if ATTACHED
                 {
-                    Material am = materials[s.material];
-                    bool mirrored = HAS(F_TWO_SIDED) && am.two_sided != 0u && dot(s.ns, -st.ray.dir) < 0.0;
-                    HitGeometry geometry = HitGeometry(travelled + hit.t, st.ray.dir, s.ng, frame.n,
-                                                       shading_normal_gradient(hit) * (mirrored ? -1.0 : 1.0));
                     if (rough_attached) {
                         Jac6 a = attached_vertex_jacobian(st, geometry, rlobe.t_d, rlobe.t_n, s.ng, rlobe.wo, vertex);
                         // ∂ln w/∂r per channel = a row shared by the channels + (F′/F)_c · ∂c/∂r.
@@ -979,19 +982,11 @@ bool path_step(inout PathState st) {
                     // A diffuse vertex: its sample follows the shading normal's frame alone and its
                     // weight, the albedo, varies with the hit point only where it is textured; direction
                     // noise regularises its singular direction block (src/cpu/path.rs).
-                    bool diffuse_attached = HAS(F_DIFFUSE) && !bsdf.blend && is_diffuse(bsdf.leaf0.kind);
                     if (diffuse_attached) {
                         // Rows ∂ln a_c/∂r where the albedo is textured (src/cpu/slope.rs).
-                        Row6 row_r = ROW6_ZERO;
-                        Row6 row_g = ROW6_ZERO;
-                        Row6 row_b = ROW6_ZERO;
-                        if (am.tex_width > 0u) {
-                            mat3 slope = albedo_slope(am, tex_at(s), surface_gradients(hit));
-                            vec3 albedo = bsdf.leaf0.color;
-                            if (albedo.x > 0.0) row_r = hit_position_row(geometry, slope[0] / albedo.x);
-                            if (albedo.y > 0.0) row_g = hit_position_row(geometry, slope[1] / albedo.y);
-                            if (albedo.z > 0.0) row_b = hit_position_row(geometry, slope[2] / albedo.z);
-                        }
+                        Row6 row_r = hit_position_row(geometry, dln_albedo[0]);
+                        Row6 row_g = hit_position_row(geometry, dln_albedo[1]);
+                        Row6 row_b = hit_position_row(geometry, dln_albedo[2]);
                         vec4 u = uniform4(uvec2(globals.key0, st.key1), st.pixel, st.sample_index, vertex,
                                           STREAM_JACOBIAN, 0u, 0u);
                         float amplitude = globals.jac_noise > 0.0 ? globals.jac_noise : DIFFUSE_JACOBIAN_NOISE;

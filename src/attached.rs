@@ -1161,8 +1161,8 @@ mod tests {
             let fd = (moved(h) - moved(-h)) / (2.0 * h);
             assert!((fd - row.d.dot(axis)).abs() < 2e-3, "∂ln p_e/∂d {fd} vs {}", row.d.dot(axis));
         }
-        // The emitter hit's MIS weight ln w_b, w_b = p_f²/(p_f² + p_e²), p_f fixed (chosen so
-        // that w_b is near 0.04 here, 1 − w_b far from 0 and 1).
+        // The emitter hit's MIS weight ln w_b, w_b = p_f²/(p_f² + p_e²), p_f fixed (w_b ≈ 0.04
+        // here, so the row is nearly −2·∂ln p_e and a wrong factor shows).
         let p_f = 0.2 * ln_density(o, d).exp();
         let ln_w_b = |o: Vec3, d: Vec3| {
             let p_e = ln_density(o, d).exp();
