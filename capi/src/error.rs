@@ -88,6 +88,8 @@ fn c_names(text: &str) -> String {
         ("RenderOptions::spp", "PgFrameDesc.spp"),
         ("RenderOptions::max_depth", "PgFrameDesc.max_depth"),
         ("GradMode::Deterministic", "PgFrameDesc.deterministic"),
+        ("Sampling::Attached::noise", "PgFrameDesc.jacobian_noise"),
+        ("Sampling::Attached", "PgFrameDesc.attached"),
         ("DeviceChoice", "PgContextDesc.device"),
     ];
     NAMES.iter().fold(text.to_string(), |t, (rust, c)| t.replace(rust, c))

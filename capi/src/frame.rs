@@ -219,6 +219,8 @@ pub unsafe extern "C" fn pg_frame_create(
             seed: options.seed,
             max_depth: options.max_depth.map_or(-1, |d| d as i32),
             deterministic: desc.deterministic.min(1),
+            attached: desc.attached.min(1),
+            jacobian_noise: desc.jacobian_noise,
         };
         *out = Box::into_raw(Box::new(PgFrame { frame, renderer: renderer.renderer.clone(), desc }));
         Ok(())

@@ -2,7 +2,7 @@
 
 use std::ffi::{CString, c_char};
 
-use pathgrad::integrator::RenderOptions;
+use pathgrad::integrator::{RenderOptions, Sampling};
 use pathgrad::params::ParamId;
 use pathgrad::scene::Scene;
 
@@ -48,6 +48,12 @@ pub struct PgFrameDesc {
     /// Nonzero: deterministic (fixed-point, bitwise reproducible) gradients, where the device has
     /// 64-bit integer atomics; else float atomics.
     pub deterministic: u32,
+    /// Nonzero: attached sampling — the sampled directions move with the parameters, so that
+    /// parameters acting only through them (a dielectric's index of refraction) have gradients
+    /// (docs/gradients.md says what it covers); float atomics only. 0: detached, as Mitsuba's `prb`.
+    pub attached: u32,
+    /// Attached sampling's Jacobian noise amplitude, in [0, 1); 0 its default. Only with `attached`.
+    pub jacobian_noise: f32,
 }
 
 impl PgFrameDesc {
@@ -64,6 +70,13 @@ impl PgFrameDesc {
             -1 => None,
             d if d > 0 => Some(d as u32),
             d => return Err(Failure::argument(format!("desc->max_depth is {d}: 0 (the scene's), -1 or positive"))),
+        };
+        o.sampling = match (self.attached, self.jacobian_noise) {
+            (0, a) if a != 0.0 => {
+                return Err(Failure::argument(format!("desc->jacobian_noise is {a}: it applies only with attached")));
+            }
+            (0, _) => Sampling::Detached,
+            (_, noise) => Sampling::Attached { noise },
         };
         Ok(o)
     }

@@ -149,3 +149,74 @@ fn own_context_renders_and_refuses_bad_arguments() {
         pg_context_destroy(null_mut());
     }
 }
+
+/// A frame with `attached` set differentiates a glass sphere's index of refraction (over a diffuse
+/// floor: `tests/data/scenes/attached_floor.xml`), as the library's CPU reference does with the same
+/// seed and samples; a detached frame leaves it 0, and `deterministic` with `attached`, or a
+/// Jacobian noise without it, is refused by the desc's field names.
+#[test]
+fn an_attached_frame_differentiates_the_index_of_refraction() {
+    use pathgrad::integrator::{RenderOptions, Sampling};
+    let path = concat!(env!("CARGO_MANIFEST_DIR"), "/../tests/data/scenes/attached_floor.xml\0");
+    let spec = CStr::from_bytes_with_nul(path.as_bytes()).unwrap();
+    let eta = c"glass.bsdf.eta";
+    // SAFETY: every pointer below is valid; handles are destroyed once.
+    unsafe {
+        let mut scene = null_mut();
+        assert_eq!(pg_scene_load(spec.as_ptr(), null(), null(), 0, &mut scene), PgStatus::Ok, "{}", message());
+        let mut info = PgParamInfo::default();
+        assert_eq!(pg_scene_param_info(scene, eta.as_ptr(), &mut info), PgStatus::Ok, "{}", message());
+        let mut ctx = null_mut();
+        let desc = PgContextDesc { device: c"cpu".as_ptr(), validation: 1 };
+        assert_eq!(pg_context_create(&desc, &mut ctx), PgStatus::Ok, "{}", message());
+        let mut renderer = null_mut();
+        assert_eq!(pg_renderer_create(ctx, scene, &mut renderer), PgStatus::Ok, "{}", message());
+
+        let base = PgFrameDesc { width: 16, height: 12, spp: 2, seed: 5, ..PgFrameDesc::default() };
+        let mut frame = null_mut();
+        let both = PgFrameDesc { attached: 1, deterministic: 1, ..base };
+        fails(pg_frame_create(renderer, &both, &mut frame), PgStatus::InvalidArgument, "pg_frame_create", "attached");
+        assert!(message().contains("PgFrameDesc.deterministic"), "{}", message());
+        let noise = PgFrameDesc { jacobian_noise: 0.5, ..base };
+        fails(pg_frame_create(renderer, &noise, &mut frame), PgStatus::InvalidArgument, "pg_frame_create", "attached");
+
+        let n = 16 * 12 * 3;
+        let adjoint: Vec<f32> = (0..n).map(|i| 1.0 + (i % 7) as f32 / 7.0).collect();
+        let gradient_of = |desc: &PgFrameDesc| {
+            let mut frame = null_mut();
+            assert_eq!(pg_frame_create(renderer, desc, &mut frame), PgStatus::Ok, "{}", message());
+            let mut resolved = PgFrameDesc::default();
+            assert_eq!(pg_frame_desc(frame, &mut resolved), PgStatus::Ok);
+            assert_eq!(resolved.attached, desc.attached);
+            assert_eq!(pg_frame_render(frame, 0, 2), PgStatus::Ok, "{}", message());
+            assert_eq!(pg_frame_write_adjoint(frame, adjoint.as_ptr(), n), PgStatus::Ok);
+            assert_eq!(pg_frame_backward(frame, 0, 2), PgStatus::Ok, "{}", message());
+            assert_eq!(pg_frame_check_status(frame), PgStatus::Ok, "{}", message());
+            let mut gradient = vec![0.0f32; pg_scene_value_count(scene)];
+            assert_eq!(pg_frame_read_gradients(frame, gradient.as_mut_ptr(), gradient.len()), PgStatus::Ok);
+            pg_frame_destroy(frame);
+            gradient[info.offset]
+        };
+        assert_eq!(gradient_of(&base), 0.0, "detached sampling does not differentiate η");
+        let attached = gradient_of(&PgFrameDesc { attached: 1, ..base });
+
+        let loaded = pathgrad::scene::load(&path[..path.len() - 1], &[]).unwrap();
+        let options = RenderOptions {
+            width: 16,
+            height: 12,
+            spp: 2,
+            seed: 5,
+            sampling: Sampling::attached(),
+            ..RenderOptions::for_scene(&loaded)
+        };
+        let weights = pathgrad::image::Image::from_rgb(16, 12, adjoint.clone()).unwrap();
+        let reference = pathgrad::cpu::backward(&loaded, &options, &weights).unwrap()[info.offset] as f32;
+        assert!(reference.abs() > 0.1, "the CPU reference's η gradient is {reference}");
+        assert!((attached - reference).abs() <= 2e-3 * reference.abs(), "frame {attached}, CPU reference {reference}");
+
+        assert_eq!(pg_context_validation_messages(ctx), 0);
+        pg_renderer_destroy(renderer);
+        pg_context_destroy(ctx);
+        pg_scene_destroy(scene);
+    }
+}

@@ -215,8 +215,9 @@ fn view(buffer: &Buffer, layout: BufferLayout) -> BufferView {
 
 impl Renderer {
     /// Creates the resident buffers and builds the kernels for `options` (primal render, and the
-    /// fused adjoint of `mode` with the parameter kinds of `options.differentiate`) — the compile
-    /// happens here, not in a recorded call.
+    /// fused adjoint of `mode` with the parameter kinds of `options.differentiate`; attached
+    /// sampling's adjoint where `options.sampling` asks for it) — the compile happens here, not in
+    /// a recorded call.
     ///
     /// ```no_run
     /// # use pathgrad::gpu::{Context, ContextDesc, Renderer, renderer::GradMode};
@@ -237,18 +238,20 @@ impl Renderer {
     /// ```
     ///
     /// # Errors
-    /// Option errors; [`Error::InvalidArgument`] for deterministic mode without 64-bit atomics;
-    /// Vulkan and allocation failures.
+    /// Option errors; [`Error::InvalidArgument`] for deterministic mode without 64-bit atomics or
+    /// with attached sampling, and for a scene attached sampling does not cover
+    /// ([`crate::attached::refuse_unsupported`]); Vulkan and allocation failures.
     pub fn frame(&mut self, options: &RenderOptions, mode: GradMode) -> Result<Frame> {
         // The plan is made per recorded range; these requests give the checked options and constants.
         let whole = Work::Pixels { begin: 0, end: options.spp };
         let view = [View::current(self.scene())];
         let primal_request = self.request(options, &view, PassTag::Primal, whole)?;
         let backward_request = self.request(options, &view, PassTag::Gradient, whole)?;
-        if options.sampling.is_attached() {
+        crate::attached::refuse_unsupported(self.flat(), options, false)?;
+        if options.sampling.is_attached() && mode == GradMode::Deterministic {
             return Err(Error::InvalidArgument {
-                parameter: "Sampling::Attached".into(),
-                message: "a frame's gradient (the engine front door) is detached only".into(),
+                parameter: "GradMode::Deterministic".into(),
+                message: "attached sampling has a float kernel only (use GradMode::Float)".into(),
             });
         }
         if mode == GradMode::Deterministic && !self.context().info().int64_atomics {
@@ -264,7 +267,13 @@ impl Renderer {
         adjoint.clear()?;
         let n = self.flat().params.len() as u64;
         let (gradient, grad_binding, kind) = match mode {
-            GradMode::Float => (Buffer::storage(&ctx, "frame gradient", n * 4)?, BINDING_GRADS, KernelKind::Adjoint),
+            GradMode::Float => {
+                // Attached sampling's kernel runs its own primal pass per path (the attached sums
+                // need the adjoint image first), then the replay: one dispatch still.
+                let kind =
+                    if options.sampling.is_attached() { KernelKind::AdjointAttached } else { KernelKind::Adjoint };
+                (Buffer::storage(&ctx, "frame gradient", n * 4)?, BINDING_GRADS, kind)
+            }
             GradMode::Deterministic => (
                 Buffer::storage(&ctx, "frame gradient (fixed point)", n * 8)?,
                 BINDING_GRADS_FIXED,

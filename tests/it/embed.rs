@@ -160,3 +160,50 @@ fn the_recorded_path_equals_the_blocking_path() {
     drop(renderer);
     assert_eq!(ctx.validation_errors(), 0);
 }
+
+/// A frame takes attached gradients too (the index of refraction of a glass sphere over a diffuse
+/// floor, which detached sampling cannot differentiate): recorded in two sample ranges, its
+/// gradient is the one `backward` gives (float atomics: equal up to the order of their sums), its
+/// image the render's bit for bit; deterministic mode, which has no attached kernel, is refused.
+#[test]
+fn a_frame_takes_attached_gradients() {
+    use pathgrad::integrator::Sampling;
+    let gpu = TestGpu::new();
+    let ctx = &gpu.ctx;
+    let scene = crate::support::scenes::data_scene("attached_floor");
+    let options = RenderOptions {
+        width: 24,
+        height: 24,
+        spp: 4,
+        sampling: Sampling::attached(),
+        ..RenderOptions::for_scene(&scene)
+    };
+    let adjoint = crate::attached::weights(24, 24);
+    let mut renderer = Renderer::new(ctx, &scene).unwrap();
+    let image = renderer.render(&options).unwrap();
+    let gradient = renderer.backward(&options, &adjoint, GradMode::Float).unwrap();
+    let eta = gradient.get("glass.bsdf.eta").unwrap()[0];
+    assert!(eta.abs() > 1.0, "the η gradient is {eta}: attached sampling gives one");
+
+    let error = renderer.frame(&options, GradMode::Deterministic).map(|_| ()).unwrap_err().to_string();
+    assert!(error.contains("GradMode::Deterministic") && error.contains("attached"), "{error}");
+    let frame = renderer.frame(&options, GradMode::Float).unwrap();
+    frame.write_adjoint(&adjoint).unwrap();
+    ctx.submit_and_wait("recorded", |cmd| {
+        renderer.record_clear(&frame, cmd);
+        renderer.record_render(&frame, cmd, 0..4).unwrap();
+        renderer.record_backward(&frame, cmd, 0..1).unwrap();
+        renderer.record_backward(&frame, cmd, 1..4).unwrap();
+    })
+    .unwrap();
+    frame.check_status().unwrap();
+    assert_eq!(bits(frame.read_image(4).unwrap().as_slice()), bits(image.as_slice()), "recorded image");
+    let recorded = frame.read_gradients(&renderer).unwrap();
+    let scale = gradient.values().iter().fold(0.0f32, |m, v| m.max(v.abs()));
+    for (i, (a, b)) in recorded.values().iter().zip(gradient.values()).enumerate() {
+        assert!((a - b).abs() <= 1e-4 * scale, "gradient value {i}: frame {a}, backward {b}");
+    }
+    drop(frame);
+    drop(renderer);
+    assert_eq!(ctx.validation_errors(), 0);
+}
