@@ -46,12 +46,10 @@ use crate::scene::flat::FlatScene;
 /// untextured roughness (no normal map, no mask), without media; light comes from the
 /// environment, from area emitters whose radiance is constant or a bilinear bitmap, or from
 /// point and directional lights (no spot or projector).
-/// `forward` refuses it for forward-mode image gradients, which carry per-channel derivatives
-/// the adjoint-weighted attached sums do not.
 ///
 /// # Errors
 /// [`crate::Error::InvalidArgument`] naming `Sampling::Attached` and what the scene or request has.
-pub fn refuse_unsupported(flat: &FlatScene, options: &RenderOptions, forward: bool) -> crate::Result<()> {
+pub fn refuse_unsupported(flat: &FlatScene, options: &RenderOptions) -> crate::Result<()> {
     if options.sampling == Sampling::Detached {
         return Ok(());
     }
@@ -62,14 +60,10 @@ pub fn refuse_unsupported(flat: &FlatScene, options: &RenderOptions, forward: bo
                 "{what}: attached derivatives are built for scenes of smooth `dielectric`, `thindielectric` and \
                  `conductor` surfaces, isotropic `roughconductor`s and `roughdielectric`s with untextured \
                  roughness and `diffuse` surfaces with a constant or smoothly textured albedo, lit by the \
-                 environment, by area emitters or by point and directional lights, in reverse mode (use detached \
-                 sampling)"
+                 environment, by area emitters or by point and directional lights (use detached sampling)"
             ),
         })
     };
-    if forward {
-        return refuse("a forward-mode image gradient was asked for".into());
-    }
     let names = [
         "diffuse",
         "roughconductor",

@@ -460,9 +460,13 @@ def image_gradient(
     seed: int = 0,
     device: Union[None, int, str] = None,
     max_depth: Optional[int] = None,
+    sampling: str = "detached",
+    jacobian_noise: Optional[float] = None,
 ) -> np.ndarray:
     """Forward-mode image gradient ∂image/∂``name`` of the scene's sensor, summed over the
-    parameter's elements: a ``(height, width, 3)`` array (signed)."""
+    parameter's elements: a ``(height, width, 3)`` array (signed). ``sampling`` and
+    ``jacobian_noise`` as :func:`grad`'s: a smooth dielectric's index of refraction needs
+    ``sampling="attached"`` (three times the work: one pass per colour channel)."""
     scene = _check_scene(scene)
     _set_params(scene, params)
     scene.params.info(name)
@@ -470,6 +474,7 @@ def image_gradient(
         scene._native,
         name,
         *_settings(spp, seed, device, max_depth),
+        *_sampling(sampling, jacobian_noise),
     )[0]
 
 

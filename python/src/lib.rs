@@ -538,9 +538,11 @@ fn loss_and_gradient<'py>(
     Ok((value, gradient_dict(py, &gradients, names)?))
 }
 
-/// The forward-mode image gradient ∂image/∂`name` of the scene's sensor: `(height, width, 3)`.
+/// The forward-mode image gradient ∂image/∂`name` of the scene's sensor: `(height, width, 3)`;
+/// `sampling` and `jacobian_noise` as `grad`'s.
 #[pyfunction]
-#[pyo3(signature = (scene, name, spp=None, seed=0, device=None, max_depth=None))]
+#[pyo3(signature = (scene, name, spp=None, seed=0, device=None, max_depth=None, sampling="detached", jacobian_noise=None))]
+#[allow(clippy::too_many_arguments)]
 fn image_gradient<'py>(
     py: Python<'py>,
     scene: &PyScene,
@@ -549,12 +551,16 @@ fn image_gradient<'py>(
     seed: u32,
     device: Option<String>,
     max_depth: Option<i64>,
+    sampling: &str,
+    jacobian_noise: Option<f32>,
 ) -> PyResult<Bound<'py, PyAny>> {
     let device = Device::parse(device.as_deref());
+    let sampling = sampling_of(sampling, jacobian_noise)?;
     let image = py
         .detach(|| -> pathgrad::Result<Image> {
             let mut state = scene.lock();
-            let options = state.options(spp, seed, max_depth)?;
+            let mut options = state.options(spp, seed, max_depth)?;
+            options.sampling = sampling;
             state.backend(&device)?.image_gradient(&options, &name)
         })
         .map_err(to_py)?;

@@ -265,3 +265,17 @@ def test_defines_and_env(repo):
     assert np.array_equal(lit.params["env.radiance.value"], np.float32([0.25, 0.25, 0.25]))
     with pytest.raises(pg.ArgumentError, match="env"):
         pg.load("builtin:cornell-box", env=(1.0, 2.0))
+
+
+def test_attached_image_gradient_sums_to_the_gradient(glass):
+    # Forward mode with attached sampling: the image gradient weighted by an adjoint image and
+    # summed is the reverse-mode gradient with that adjoint (the same paths on the CPU reference);
+    # detached sampling refuses the index of refraction's image gradient by name.
+    weights = np.linspace(0.5, 1.5, 12 * 16 * 3, dtype=np.float32).reshape(12, 16, 3)
+    image = pg.image_gradient(glass, GLASS_ETA, spp=2, seed=4, device="cpu", sampling="attached")
+    assert image.shape == (12, 16, 3) and np.abs(image).sum() > 0
+    grads = pg.grad(glass, weights, wrt=GLASS_ETA, spp=2, seed=4, sampling="attached", device="cpu")
+    forward = float((image.astype(np.float64) * weights).sum())
+    assert np.isclose(forward, float(grads[GLASS_ETA][0]), rtol=1e-5), (forward, grads)
+    with pytest.raises(pg.ArgumentError, match=r"glass\.bsdf\.eta.*sampling=\"attached\""):
+        pg.image_gradient(glass, GLASS_ETA, spp=1, device="cpu")

@@ -223,7 +223,7 @@ fn backward_flat(
     view: &View,
     adjoint: &Image,
 ) -> Result<Vec<f64>> {
-    crate::attached::refuse_unsupported(flat, options, false)?;
+    crate::attached::refuse_unsupported(flat, options)?;
     check_size(adjoint, options, "adjoint image")?;
     let globals = options.globals(scene, flat, PassTag::Gradient);
     let camera = options.view_camera(view, PassTag::Gradient);
@@ -343,51 +343,55 @@ pub fn image_gradient(scene: &Scene, options: &RenderOptions, name: &str) -> Res
 }
 
 fn image_gradient_flat(scene: &Scene, flat: &FlatScene, options: &RenderOptions, name: &str) -> Result<Image> {
-    crate::attached::refuse_unsupported(flat, options, true)?;
+    crate::attached::refuse_unsupported(flat, options)?;
     let id = scene.params.find(name).ok_or_else(|| crate::Error::InvalidArgument {
         parameter: name.to_string(),
         message: "no such parameter".into(),
     })?;
+    // Detached sampling would give an index of refraction a gradient image of zeros: refused by name.
+    crate::attached::differentiated(scene, vec![id], &[id], options.sampling)?;
     let entry = scene.params.entry(id).clone();
     let globals = options.globals(scene, flat, PassTag::Gradient);
     let camera = options.view_camera(&View::current(scene), PassTag::Gradient);
     let pixels = (options.width * options.height) as usize;
     let drifted = std::sync::atomic::AtomicUsize::new(0);
+    let attached = options.sampling.is_attached();
     let data: Vec<f32> = (0..pixels)
         .into_par_iter()
         .flat_map_iter(|pixel| {
             let mut sum = Vec3::ZERO;
             for s in 0..options.spp {
                 let p = pixel as u32;
-                let total = path::trace_path::<false>(
-                    flat,
-                    &globals,
-                    &camera,
-                    p,
-                    s,
-                    Vec3::ZERO,
-                    Vec3::ZERO,
-                    &mut GradSink::None,
-                    &mut Row6::default(),
-                );
-                let mut sink =
-                    GradSink::Forward { begin: entry.offset, end: entry.offset + entry.len, derivative: Vec3::ZERO };
-                let left = path::trace_path::<true>(
-                    flat,
-                    &globals,
-                    &camera,
-                    p,
-                    s,
-                    Vec3::ONE,
-                    total,
-                    &mut sink,
-                    &mut Row6::default(),
-                );
-                if !path::replay_returned_to_zero(total, left) {
-                    drifted.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
-                }
-                if let GradSink::Forward { derivative, .. } = sink {
-                    sum += derivative;
+                // Attached sampling sums its rows over the channels weighted by δL (Γ, Φ): one
+                // fused sample per channel c with δL = e_c gives channel c's derivative, the sum
+                // of what that sample's terms add. Detached: one sample with δL = 1, per channel.
+                let passes: &[Vec3] = if attached { &[Vec3::X, Vec3::Y, Vec3::Z] } else { &[Vec3::ONE] };
+                for &adj in passes {
+                    let mut gamma = Row6::ZERO;
+                    let total = path::trace_path::<false>(
+                        flat,
+                        &globals,
+                        &camera,
+                        p,
+                        s,
+                        if attached { adj } else { Vec3::ZERO },
+                        Vec3::ZERO,
+                        &mut GradSink::None,
+                        &mut gamma,
+                    );
+                    let mut sink = GradSink::Forward {
+                        begin: entry.offset,
+                        end: entry.offset + entry.len,
+                        derivative: Vec3::ZERO,
+                    };
+                    let left =
+                        path::trace_path::<true>(flat, &globals, &camera, p, s, adj, total, &mut sink, &mut gamma);
+                    if !path::replay_returned_to_zero(total, left) {
+                        drifted.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+                    }
+                    if let GradSink::Forward { derivative, .. } = sink {
+                        sum += if attached { adj * (derivative.x + derivative.y + derivative.z) } else { derivative };
+                    }
                 }
             }
             (sum / options.spp as f32).to_array()

@@ -247,7 +247,7 @@ impl Renderer {
         let view = [View::current(self.scene())];
         let primal_request = self.request(options, &view, PassTag::Primal, whole)?;
         let backward_request = self.request(options, &view, PassTag::Gradient, whole)?;
-        crate::attached::refuse_unsupported(self.flat(), options, false)?;
+        crate::attached::refuse_unsupported(self.flat(), options)?;
         if options.sampling.is_attached() && mode == GradMode::Deterministic {
             return Err(Error::InvalidArgument {
                 parameter: "GradMode::Deterministic".into(),

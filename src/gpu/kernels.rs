@@ -28,6 +28,8 @@ pub(crate) enum KernelKind {
     ImageGradient,
     /// The float reverse-mode kernel with attached sampling (issue 34).
     AdjointAttached,
+    /// The forward-mode kernel with attached sampling, run once per channel.
+    ImageGradientAttached,
 }
 
 impl KernelKind {
@@ -45,6 +47,7 @@ impl KernelKind {
             }
             KernelKind::ImageGradient => ("image_gradient", &[BINDING_ADJOINT, BINDING_ACCUM]),
             KernelKind::AdjointAttached => ("adjoint_attached", &[BINDING_ADJOINT, BINDING_GRADS, BINDING_ACCUM]),
+            KernelKind::ImageGradientAttached => ("image_gradient_attached", &[BINDING_ADJOINT, BINDING_ACCUM]),
         }
     }
 

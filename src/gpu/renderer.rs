@@ -451,7 +451,7 @@ impl Backend for Renderer {
     ) -> Result<Gradients> {
         let request = self.request(options, views, PassTag::Gradient, Work::Pixels { begin: 0, end: options.spp })?;
         check_views(views, adjoints, options, "adjoint image")?;
-        crate::attached::refuse_unsupported(&self.flat, options, false)?;
+        crate::attached::refuse_unsupported(&self.flat, options)?;
         let kinds = if options.sampling.is_attached() {
             if mode == GradMode::Deterministic {
                 return Err(Error::InvalidArgument {
@@ -532,18 +532,44 @@ impl Backend for Renderer {
             parameter: name.to_string(),
             message: "no such parameter (see `pathgrad params SCENE`)".into(),
         })?;
+        // Detached sampling would give an index of refraction a gradient image of zeros: refused by name.
+        crate::attached::differentiated(&self.scene, vec![id], &[id], options.sampling)?;
         let entry = self.scene.params.entry(id).clone();
-        crate::attached::refuse_unsupported(&self.flat, options, true)?;
+        crate::attached::refuse_unsupported(&self.flat, options)?;
         let _span = tracing::info_span!("image_gradient", param = name).entered();
         request.globals.forward_begin = entry.offset;
         request.globals.forward_end = entry.offset + entry.len;
         let pixels = options.width * options.height;
-        let ones = vec![1.0f32; pixels as usize * 3];
-        let adjoint_buf = Buffer::storage_with(&self.ctx, "adjoint image (ones)", &ones)?;
         let accum = Buffer::storage(&self.ctx, "image gradient", u64::from(pixels) * 12)?;
-        accum.clear()?;
         // δL = 1 per sample: the adjoint scale must not divide by spp here; the mean is taken below.
         request.globals.adjoint_scale = 1.0;
+        let spp = options.spp as f32;
+        if options.sampling.is_attached() {
+            // Attached sampling's sums weigh the channels by δL: one run per channel c with δL = e_c,
+            // whose accumulated components sum to channel c's derivative (the CPU twin's loop).
+            let features = variant::request_features(self.scene_features, options, self.grad_kinds(options));
+            let variant = Variant { kind: KernelKind::ImageGradientAttached, features };
+            let mut data = vec![0.0f32; pixels as usize * 3];
+            for c in 0..3 {
+                let unit: Vec<f32> = (0..pixels as usize * 3).map(|i| if i % 3 == c { 1.0 } else { 0.0 }).collect();
+                let adjoint_buf = Buffer::storage_with(&self.ctx, "adjoint image (one channel)", &unit)?;
+                accum.clear()?;
+                self.run(
+                    variant,
+                    &request,
+                    &[(BINDING_ADJOINT, &adjoint_buf), (BINDING_ACCUM, &accum)],
+                    &mut |_, _| {},
+                )?;
+                let sums: Vec<f32> = accum.download(pixels as usize * 3)?;
+                for (p, rgb) in sums.chunks_exact(3).enumerate() {
+                    data[3 * p + c] = (rgb[0] + rgb[1] + rgb[2]) / spp;
+                }
+            }
+            return Image::from_rgb(options.width, options.height, data);
+        }
+        let ones = vec![1.0f32; pixels as usize * 3];
+        let adjoint_buf = Buffer::storage_with(&self.ctx, "adjoint image (ones)", &ones)?;
+        accum.clear()?;
         let kinds = variant::param_kinds(&self.flat, self.env, entry.offset, entry.offset + entry.len);
         let features = variant::request_features(self.scene_features, options, kinds);
         self.run(
@@ -553,7 +579,6 @@ impl Backend for Renderer {
             &mut |_, _| {},
         )?;
         let sums: Vec<f32> = accum.download(pixels as usize * 3)?;
-        let spp = options.spp as f32;
         Image::from_rgb(options.width, options.height, sums.into_iter().map(|v| v / spp).collect())
     }
 

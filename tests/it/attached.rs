@@ -249,6 +249,39 @@ fn the_device_equals_the_cpu_reference() {
     assert!((f64::from(gv) - cv).abs() <= 1e-3 * cv.abs(), "noise 0.2: GPU {gv} vs CPU {cv}");
 }
 
+/// Forward-mode image gradients with attached sampling (one fused sample per channel, δL = e_c):
+/// on the CPU reference, Σ A ⊙ ∂I/∂θ equals the reverse-mode gradient with adjoint A for the same
+/// seed (A weighs the channels differently, so a channel mixed up fails) — a glass sphere's η over
+/// a diffuse floor, η lit by next-event estimation from point and directional lights, a rough
+/// glass's α; and the device's image gradient equals the CPU reference's pixel for pixel.
+#[test]
+fn forward_mode_equals_reverse_mode_and_the_device() {
+    use pathgrad::backend::Backend;
+    use pathgrad::gpu::Renderer;
+    let gpu = crate::support::TestGpu::new();
+    for (name, param) in [
+        ("attached_floor", "glass.bsdf.eta"),
+        ("attached_point", "glass.bsdf.eta"),
+        ("attached_rough_glass", "ball.bsdf.alpha.value"),
+    ] {
+        let scene = scenes::data_scene(name);
+        let opts = RenderOptions { seed: 3, ..attached(&scene, 16, 2) };
+        let a = weights(opts.width, opts.height);
+        let forward = pathgrad::cpu::image_gradient(&scene, &opts, param).unwrap();
+        let e = scene.params.entry(scene.params.find(param).unwrap()).clone();
+        let reverse = pathgrad::cpu::backward(&scene, &opts, &a).unwrap()[e.offset as usize];
+        let magnitude = crate::support::assert_forward_equals_reverse(name, &forward, &a, reverse);
+        assert!(reverse.abs() > 0.05 * magnitude, "{name}: a gradient that cancels tests little");
+
+        let device = Renderer::new(&gpu.ctx, &scene).unwrap().image_gradient(&opts, param).unwrap();
+        let scale = forward.as_slice().iter().fold(0.0f32, |m, v| m.max(v.abs()));
+        let differ = device.as_slice().iter().zip(forward.as_slice()).filter(|(g, c)| (*g - *c).abs() > 1e-3 * scale);
+        let differ = differ.count();
+        println!("{name} {param}: {differ} of {} values differ between the device and the CPU", a.as_slice().len());
+        assert_eq!(differ, 0, "{name} {param}: the device's forward-mode image gradient differs from the CPU's");
+    }
+}
+
 /// `optimize` with attached sampling recovers the index of refraction of a glass sphere (1.5,
 /// Mitsuba's bk7 over air) from 1.3, a parameter detached sampling refuses by name.
 #[test]
@@ -284,7 +317,8 @@ fn optimize_recovers_the_ior_of_a_glass_sphere() {
 
 /// Attached sampling is refused, by name, where its Jacobians are not built: a textured diffuse
 /// albedo, a spot light, a point light beside a rough conductor or without next-event
-/// estimation, a plastic, adaptive pixel sampling, forward-mode image gradients, deterministic mode.
+/// estimation, a plastic (in reverse and forward mode), adaptive pixel sampling, deterministic mode;
+/// and an index of refraction's image gradient under detached sampling.
 #[test]
 fn attached_sampling_refuses_what_it_does_not_cover() {
     use pathgrad::backend::Backend;
@@ -361,10 +395,14 @@ fn attached_sampling_refuses_what_it_does_not_cover() {
     let mut renderer = Renderer::new(&gpu.ctx, &sphere).unwrap();
     let err = renderer.backward(&opts, &a, GradMode::Deterministic).unwrap_err().to_string();
     assert!(err.contains("float kernel only"), "{err}");
-    let err = renderer.image_gradient(&opts, "glass.bsdf.eta").unwrap_err().to_string();
-    assert!(err.contains("forward-mode"), "{err}");
-    let err = pathgrad::cpu::image_gradient(&sphere, &opts, "glass.bsdf.eta").unwrap_err().to_string();
-    assert!(err.contains("forward-mode"), "{err}");
+    // Detached, the index of refraction's image gradient would be zeros: refused by name.
+    let detached = RenderOptions { sampling: Sampling::Detached, ..opts };
+    let err = renderer.image_gradient(&detached, "glass.bsdf.eta").unwrap_err().to_string();
+    assert!(err.contains("glass.bsdf.eta") && err.contains("--sampling attached"), "{err}");
+    let err = pathgrad::cpu::image_gradient(&sphere, &detached, "glass.bsdf.eta").unwrap_err().to_string();
+    assert!(err.contains("glass.bsdf.eta") && err.contains("--sampling attached"), "{err}");
+    let err = pathgrad::cpu::image_gradient(&plastic, &attached(&plastic, 8, 1), "glass.bsdf.eta").unwrap_err();
+    assert!(err.to_string().contains("`roughplastic` material"), "{err}");
     // An anisotropic rough conductor: its sampler's frame would follow ∂p/∂u, whose Jacobians are
     // not built.
     let aniso = variant(

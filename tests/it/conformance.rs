@@ -39,7 +39,7 @@ use std::path::{Path, PathBuf};
 use pathgrad::backend::Backend;
 use pathgrad::gpu::Renderer;
 use pathgrad::image::Image;
-use pathgrad::integrator::RenderOptions;
+use pathgrad::integrator::{RenderOptions, Sampling};
 use serde_json::Value;
 
 use crate::support::TestGpu;
@@ -97,30 +97,6 @@ impl Stats {
     }
 
     /// Statistics over the per-seed images `images`, in blocks of `block` pixels.
-    /// The image mean alone, as one block.
-    fn image_only(&self) -> Stats {
-        Stats {
-            mean: vec![self.image_mean],
-            se: vec![self.image_se],
-            image_mean: self.image_mean,
-            image_se: self.image_se,
-        }
-    }
-
-    /// Per-seed values of one quantity, as one block.
-    fn of_values(values: &[[f64; 3]]) -> Stats {
-        let n = values.len() as f64;
-        let mut mean = [0.0; 3];
-        let mut se = [0.0; 3];
-        for c in 0..3 {
-            let m = values.iter().map(|v| v[c]).sum::<f64>() / n;
-            let var = values.iter().map(|v| (v[c] - m).powi(2)).sum::<f64>() / (n - 1.0);
-            mean[c] = m;
-            se[c] = (var / n).sqrt();
-        }
-        Stats { mean: vec![mean], se: vec![se], image_mean: mean, image_se: se }
-    }
-
     fn of_images(images: &[Image], block: u32) -> Stats {
         let (w, h) = (images[0].width(), images[0].height());
         let (bx, by) = (w.div_ceil(block), h.div_ceil(block));
@@ -278,16 +254,14 @@ impl Reference {
         let mut out = vec![(None, Stats::from_json(&self.json["primal"]))];
         if let Some(grads) = self.json["gradients"].as_object() {
             for (key, g) in grads {
-                // Attached gradients come from reverse mode: their image means are compared.
-                let stats = Stats::from_json(g);
-                out.push((Some(key.clone()), if self.attached() { stats.image_only() } else { stats }));
+                out.push((Some(key.clone()), Stats::from_json(g)));
             }
         }
         out
     }
 
-    /// Whether the row's gradients are pathgrad's attached ones (issue 34): reverse mode only,
-    /// so each is compared as the derivative of the image mean per channel, not block by block.
+    /// Whether the row's gradients are pathgrad's attached ones (issue 34), against Mitsuba's
+    /// central differences (its `prb` has none), block by block as every other gradient.
     fn attached(&self) -> bool {
         self.json["sampling"].as_str() == Some("attached")
     }
@@ -366,37 +340,12 @@ fn render_stats(
     spp: u32,
     r: &Reference,
 ) -> Stats {
-    if let (Some(k), true) = (key, r.attached()) {
-        // Attached sampling (reverse mode only): the derivative of each channel's image mean, one
-        // backward pass per channel with δL = 1/(W·H) on it.
-        use pathgrad::backend::Backend;
-        let values: Vec<[f64; 3]> = (0..SEEDS)
-            .map(|s| {
-                let opts = RenderOptions {
-                    spp,
-                    seed: 1000 + s,
-                    sampling: pathgrad::integrator::Sampling::attached(),
-                    ..RenderOptions::for_scene(scene)
-                };
-                let n = (opts.width * opts.height) as usize;
-                [0, 1, 2].map(|c| {
-                    let mut a = vec![0.0f32; 3 * n];
-                    for p in 0..n {
-                        a[3 * p + c] = 1.0 / n as f32;
-                    }
-                    let adjoint = Image::from_rgb(opts.width, opts.height, a).unwrap();
-                    let g = renderer
-                        .backward(&opts, &adjoint, pathgrad::gpu::renderer::GradMode::Float)
-                        .unwrap_or_else(|e| panic!("{}: {e}", r.name));
-                    g.get(k).unwrap().iter().map(|&v| f64::from(v)).sum::<f64>()
-                })
-            })
-            .collect();
-        return Stats::of_values(&values);
-    }
     let images: Vec<Image> = (0..SEEDS)
         .map(|s| {
             let opts = RenderOptions { spp, seed: 1000 + s, ..RenderOptions::for_scene(scene) };
+            // Attached rows (issue 34): the forward-mode image gradient with attached sampling.
+            let sampling = if r.attached() { Sampling::attached() } else { Sampling::Detached };
+            let opts = RenderOptions { sampling, ..opts };
             match key {
                 None => renderer.render(&opts),
                 Some(k) => renderer.image_gradient(&opts, k),

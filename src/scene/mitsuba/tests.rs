@@ -1314,9 +1314,9 @@ fn attached_sampling_takes_an_isotropic_rough_dielectric() {
         let s = load_ok(&format!(r#"<shape type="cube" id="g"><bsdf type="roughdielectric">{bsdf}</bsdf></shape>"#));
         let flat = crate::scene::flat::FlatScene::new(&s).unwrap();
         let detached = RenderOptions::for_scene(&s);
-        assert!(crate::attached::refuse_unsupported(&flat, &detached, false).is_ok());
+        assert!(crate::attached::refuse_unsupported(&flat, &detached).is_ok());
         let attached = RenderOptions { sampling: Sampling::attached(), ..detached };
-        let verdict = crate::attached::refuse_unsupported(&flat, &attached, false).map_err(|e| e.to_string());
+        let verdict = crate::attached::refuse_unsupported(&flat, &attached).map_err(|e| e.to_string());
         (s, flat, verdict)
     };
     let (s, flat, ok) = check(r#"<float name="alpha" value="0.2"/><float name="int_ior" value="1.33"/>"#);
