@@ -184,6 +184,46 @@ fn bad_manifest_lines_are_reported_and_the_rest_go_on() {
     assert!(out.join("second.exr").is_file());
 }
 
+/// `sampling` reaches the estimator: a glass sphere's index of refraction is in the gradients
+/// and has an image gradient with `"attached"`, is left out of the gradients with the default
+/// detached sampling (not reported as 0), and its detached image gradient fails the item by name,
+/// as does a Jacobian noise without attached sampling.
+#[test]
+fn batch_items_take_attached_sampling() {
+    let dir = tempfile::tempdir().unwrap();
+    let scene = format!("{}/tests/data/scenes/attached_sphere.xml", env!("CARGO_MANIFEST_DIR"));
+    let common = format!(r#""scene": "{scene}", "width": 8, "height": 6, "spp": 1"#);
+    let target = pathgrad::image::Image::from_rgb(8, 6, vec![0.5; 8 * 6 * 3]).unwrap();
+    target.write_exr(dir.path().join("target.exr")).unwrap();
+    let lines = [
+        format!(
+            r#"{{"id": "attached", {common}, "produce": ["gradients", "image_gradient"], "target": "target.exr", "image_gradient": "glass.bsdf.eta", "sampling": "attached"}}"#
+        ),
+        format!(r#"{{"id": "detached", {common}, "produce": ["gradients"], "target": "target.exr"}}"#),
+        format!(r#"{{"id": "refused", {common}, "produce": ["image_gradient"], "image_gradient": "glass.bsdf.eta"}}"#),
+        format!(r#"{{"id": "noisy", {common}, "produce": ["image"], "jacobian_noise": 0.1}}"#),
+    ];
+    let manifest = dir.path().join("m.jsonl");
+    std::fs::write(&manifest, lines.join("\n")).unwrap();
+    let out = dir.path().join("out");
+    let o = batch(&manifest, &out, &[], &[]);
+    assert!(!o.status.success(), "two items fail");
+    let rows = summary(&out.join("summary.jsonl"));
+    let status: Vec<&str> = rows.iter().map(|r| r["status"].as_str().unwrap()).collect();
+    assert_eq!(status, ["ok", "ok", "failed", "failed"], "{rows:?}");
+    assert!(rows[2]["error"].as_str().unwrap().contains("glass.bsdf.eta"), "{rows:?}");
+    assert!(rows[3]["error"].as_str().unwrap().contains("'jacobian_noise'"), "{rows:?}");
+    let record = |name: &str| -> serde_json::Value {
+        serde_json::from_str(&std::fs::read_to_string(out.join(format!("{name}.json"))).unwrap()).unwrap()
+    };
+    let eta = record("attached")["gradients"]["glass.bsdf.eta"][0].as_f64().unwrap();
+    assert!(eta != 0.0 && eta.is_finite(), "{eta}");
+    assert!(out.join("attached.image_gradient.exr").is_file());
+    let detached = record("detached");
+    assert!(detached["gradients"].get("glass.bsdf.eta").is_none(), "{detached}");
+    assert!(!detached["gradients"].as_object().unwrap().is_empty(), "{detached}");
+}
+
 /// A shard really killed (SIGKILL) after its first items: the rerun skips what was finished,
 /// runs the rest, and the files are those of an uninterrupted run.
 #[test]

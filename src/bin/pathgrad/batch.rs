@@ -20,7 +20,7 @@ use clap::Args;
 use pathgrad::backend::Backend;
 use pathgrad::gpu::renderer::GradMode;
 use pathgrad::image::Image;
-use pathgrad::integrator::RenderOptions;
+use pathgrad::integrator::{DEFAULT_JACOBIAN_NOISE, RenderOptions, Sampling};
 use pathgrad::output::write_bytes_atomically;
 use serde::{Deserialize, Serialize};
 use serde_json::Value;
@@ -115,6 +115,13 @@ struct Item {
     /// Fixed-point gradients (bitwise reproducible).
     #[serde(default)]
     deterministic: bool,
+    /// `detached` (the default) or `attached` (`--sampling`): attached sampling differentiates a
+    /// dielectric's index of refraction too.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    sampling: Option<String>,
+    /// Attached sampling's Jacobian noise amplitude (`--jacobian-noise`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    jacobian_noise: Option<f32>,
 }
 
 #[derive(Serialize, Deserialize, Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord)]
@@ -354,7 +361,17 @@ impl Runner {
             Some(-1) => None,
             Some(d) => Some(u32::try_from(d).map_err(|_| anyhow!("'max_depth' {d}: at least 1, or -1"))?),
         };
+        opts.sampling = match (item.sampling.as_deref().unwrap_or("detached"), item.jacobian_noise) {
+            ("detached", None) => Sampling::Detached,
+            ("detached", Some(a)) => bail!("'jacobian_noise' {a} applies only to 'sampling': \"attached\""),
+            ("attached", a) => Sampling::Attached { noise: a.unwrap_or(DEFAULT_JACOBIAN_NOISE) },
+            (other, _) => bail!("invalid 'sampling' {other:?}: expected \"detached\" or \"attached\""),
+        };
         opts.validate()?;
+        // Detached sampling leaves the parameters it cannot differentiate (an index of
+        // refraction) out of the gradients, as `grad --param '*'` does, rather than report 0;
+        // an image gradient of one is refused by the back end, by name.
+        let reported = pathgrad::attached::differentiated(scene, scene.params.select(&["*"])?, &[], opts.sampling)?;
         // (file stem, image, whether it is signed: a diverging preview)
         let mut images: Vec<(String, Image, bool)> = Vec::new();
         let mut result = serde_json::Map::new();
@@ -373,10 +390,12 @@ impl Runner {
             };
             result.insert("loss".into(), serde_json::json!(value));
             if wants(Produce::Gradients) {
-                let map: serde_json::Map<String, Value> = gradients
-                    .entries()
+                let map: serde_json::Map<String, Value> = reported
                     .iter()
-                    .map(|e| (e.name.clone(), serde_json::json!(gradients.get(&e.name).expect("its own entry"))))
+                    .map(|&id| {
+                        let name = &table.entry(id).name;
+                        (name.clone(), serde_json::json!(gradients.get(name).expect("one of the scene's")))
+                    })
                     .collect();
                 result.insert("gradients".into(), Value::Object(map));
             }
