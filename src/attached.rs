@@ -319,20 +319,6 @@ pub fn attached_only_params(scene: &crate::scene::Scene) -> Vec<crate::params::P
         .collect()
 }
 
-/// Refuses attached sampling with adaptive pixel sampling, whose kernels carry no attached sums.
-///
-/// # Errors
-/// [`crate::Error::InvalidArgument`] naming `Sampling::Attached`.
-pub fn refuse_adaptive(options: &RenderOptions) -> crate::Result<()> {
-    if options.sampling.is_attached() {
-        return Err(crate::Error::InvalidArgument {
-            parameter: "Sampling::Attached".into(),
-            message: "attached sampling is not built with adaptive pixel sampling (use uniform pixel sampling)".into(),
-        });
-    }
-    Ok(())
-}
-
 /// Where a ray meets a triangle, as the Jacobians need it.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct HitGeometry {

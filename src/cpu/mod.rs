@@ -268,7 +268,7 @@ fn backward_adaptive_flat(
     adjoint: &Image,
     sampling: &PixelSampling,
 ) -> Result<Vec<f64>> {
-    crate::attached::refuse_adaptive(options)?;
+    crate::attached::refuse_unsupported(flat, options)?;
     let stacked = options.stacked(views.len())?;
     let delta = sampling.sample_adjoint(&stacked, adjoint)?;
     let samples = sampling.sample_count(&stacked)?;

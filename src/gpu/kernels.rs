@@ -30,6 +30,8 @@ pub(crate) enum KernelKind {
     AdjointAttached,
     /// The forward-mode kernel with attached sampling, run once per channel.
     ImageGradientAttached,
+    /// The float reverse-mode kernel with adaptive pixel sampling and attached sampling.
+    AdjointAdaptiveAttached,
 }
 
 impl KernelKind {
@@ -48,6 +50,9 @@ impl KernelKind {
             KernelKind::ImageGradient => ("image_gradient", &[BINDING_ADJOINT, BINDING_ACCUM]),
             KernelKind::AdjointAttached => ("adjoint_attached", &[BINDING_ADJOINT, BINDING_GRADS, BINDING_ACCUM]),
             KernelKind::ImageGradientAttached => ("image_gradient_attached", &[BINDING_ADJOINT, BINDING_ACCUM]),
+            KernelKind::AdjointAdaptiveAttached => {
+                ("adjoint_adaptive_attached", &[BINDING_ADJOINT, BINDING_GRADS, BINDING_ALIAS])
+            }
         }
     }
 

@@ -490,7 +490,18 @@ impl Backend for Renderer {
         mode: GradMode,
     ) -> Result<Gradients> {
         check_views(views, adjoints, options, "adjoint image")?;
-        crate::attached::refuse_adaptive(options)?;
+        crate::attached::refuse_unsupported(&self.flat, options)?;
+        let kinds = if options.sampling.is_attached() {
+            if mode == GradMode::Deterministic {
+                return Err(Error::InvalidArgument {
+                    parameter: "GradMode::Deterministic".into(),
+                    message: "attached sampling has a float kernel only (use GradMode::Float)".into(),
+                });
+            }
+            [KernelKind::AdjointAdaptiveAttached; 2]
+        } else {
+            [KernelKind::AdjointAdaptive, KernelKind::AdjointAdaptiveFixed]
+        };
         let stacked = options.stacked(views.len())?;
         let count = u64::from(sampling.sample_count(&stacked)?);
         let mut request = self.request(options, views, PassTag::Gradient, Work::Samples { count })?;
@@ -510,13 +521,7 @@ impl Backend for Renderer {
             table.prob().iter().zip(table.alias()).map(|(&prob, &alias)| AliasEntry { prob, alias }).collect();
         let alias_buf = Buffer::storage_with(&self.ctx, "pixel alias table", &entries)?;
         let adjoint_buf = Buffer::storage_with(&self.ctx, "adjoint image (per-sample δL)", delta.as_slice())?;
-        self.reverse(
-            [KernelKind::AdjointAdaptive, KernelKind::AdjointAdaptiveFixed],
-            &request,
-            &adjoint_buf,
-            &[(BINDING_ALIAS, &alias_buf)],
-            mode,
-        )
+        self.reverse(kinds, &request, &adjoint_buf, &[(BINDING_ALIAS, &alias_buf)], mode)
     }
 
     /// Forward-mode image gradient ∂I/∂θ: per pixel and channel, the derivative of the image by
@@ -604,6 +609,7 @@ impl Backend for Renderer {
         let kind = match (adaptive, mode) {
             (false, GradMode::Float) if options.sampling.is_attached() => Some(KernelKind::AdjointAttached),
             (false, GradMode::Float) => Some(KernelKind::Adjoint),
+            (true, GradMode::Float) if options.sampling.is_attached() => Some(KernelKind::AdjointAdaptiveAttached),
             (true, GradMode::Float) => Some(KernelKind::AdjointAdaptive),
             // Without 64-bit atomics the gradient pass refuses the mode, by name, when it runs.
             (_, GradMode::Deterministic) if !self.ctx.info().int64_atomics => None,
