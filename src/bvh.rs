@@ -89,8 +89,9 @@ struct TmpNode {
 
 /// Builds a BVH over `triangles`: obvhs's PLOC build and reinsertion (`medium_build`'s, in less
 /// memory: `ploc`, `reinsert`; the second reinsertion pass only up to `SECOND_REINSERTION_MAX`
-/// triangles) into a binary tree of one-triangle leaves, its depth bounded, converted (obvhs's conversion
-/// with a smaller decision table, `convert`) into compressed 8-wide nodes with leaves of up to
+/// triangles, the first up to `FIRST_REINSERTION_MAX`) into a binary tree of one-triangle
+/// leaves, its depth bounded, converted (obvhs's conversion with a smaller decision table,
+/// `convert`) into compressed 8-wide nodes with leaves of up to
 /// [`BVH_LEAF_MAX`] triangles and children ordered for the ray octant. Any valid
 /// mesh builds: subtrees deeper than the traversal stack allows (a fan-triangulated 1000-gon
 /// gives PLOC depth ~270) are rebuilt below depth `REBUILD_DEPTH` by median splits.
@@ -201,9 +202,20 @@ impl std::fmt::Display for Steps {
 /// issue 38, eighth step).
 const SECOND_REINSERTION_MAX: usize = 1 << 20;
 
+/// Triangles up to which the build runs the first reinsertion pass; above, none. At 20 M
+/// triangles the pass took 3.9–4.2 s of a 12 s BVH build (its searches miss the caches), while
+/// the render that followed (256², 16 spp, depth 6) took 2.10–2.35 s with it and 2.20–2.41 s
+/// without: the whole process went from 18.9–19.8 s to 13.9–14.4 s, its CPU time to that of
+/// Mitsuba 3.9.1 (BENCHMARKS.md, issue 38: "the first reinsertion pass above 8 M triangles").
+const FIRST_REINSERTION_MAX: usize = 1 << 23;
+
 /// How many of obvhs's two reinsertion passes a build over `count` triangles runs.
 fn reinsertion_passes(count: usize) -> u32 {
-    if count <= SECOND_REINSERTION_MAX { 2 } else { 1 }
+    match count {
+        c if c <= SECOND_REINSERTION_MAX => 2,
+        c if c <= FIRST_REINSERTION_MAX => 1,
+        _ => 0,
+    }
 }
 
 /// The binary tree of one-triangle leaves that [`build_impl`] converts, with PLOC's depth and
