@@ -37,7 +37,7 @@ use crate::gpu::context::{Context, Pending, SubmitSync};
 use crate::gpu::dispatch::{self, PATHS_PER_SUBMISSION, Request, Work};
 use crate::gpu::kernels::{KernelKind, Variant};
 use crate::gpu::pipeline::{BindGroup, memory_barrier};
-use crate::gpu::renderer::{GradMode, Renderer};
+use crate::gpu::renderer::{GradMode, Renderer, reverse_kinds};
 use crate::gpu::variant;
 use crate::image::Image;
 use crate::integrator::{ParamKinds, RenderOptions, View};
@@ -247,13 +247,15 @@ impl Renderer {
         let view = [View::current(self.scene())];
         let primal_request = self.request(options, &view, PassTag::Primal, whole)?;
         let backward_request = self.request(options, &view, PassTag::Gradient, whole)?;
-        crate::attached::refuse_unsupported(self.flat(), options)?;
-        if options.sampling.is_attached() && mode == GradMode::Deterministic {
-            return Err(Error::InvalidArgument {
-                parameter: "GradMode::Deterministic".into(),
-                message: "attached sampling has a float kernel only (use GradMode::Float)".into(),
-            });
-        }
+        // Attached sampling's kernel runs its own primal pass per path (the attached sums need the
+        // adjoint image first), then the replay: one dispatch still.
+        let kinds = reverse_kinds(
+            self.flat(),
+            options,
+            mode,
+            [KernelKind::Adjoint, KernelKind::AdjointFixed],
+            KernelKind::AdjointAttached,
+        )?;
         if mode == GradMode::Deterministic && !self.context().info().int64_atomics {
             return Err(Error::InvalidArgument {
                 parameter: "GradMode::Deterministic".into(),
@@ -267,18 +269,10 @@ impl Renderer {
         adjoint.clear()?;
         let n = self.flat().params.len() as u64;
         let (gradient, grad_binding, kind) = match mode {
-            GradMode::Float => {
-                // Attached sampling's kernel runs its own primal pass per path (the attached sums
-                // need the adjoint image first), then the replay: one dispatch still.
-                let kind =
-                    if options.sampling.is_attached() { KernelKind::AdjointAttached } else { KernelKind::Adjoint };
-                (Buffer::storage(&ctx, "frame gradient", n * 4)?, BINDING_GRADS, kind)
+            GradMode::Float => (Buffer::storage(&ctx, "frame gradient", n * 4)?, BINDING_GRADS, kinds[0]),
+            GradMode::Deterministic => {
+                (Buffer::storage(&ctx, "frame gradient (fixed point)", n * 8)?, BINDING_GRADS_FIXED, kinds[1])
             }
-            GradMode::Deterministic => (
-                Buffer::storage(&ctx, "frame gradient (fixed point)", n * 8)?,
-                BINDING_GRADS_FIXED,
-                KernelKind::AdjointFixed,
-            ),
         };
         let fixed_unit = 1.0 / f64::from(backward_request.globals.fixed_scale);
         let primal_variant = Variant {

@@ -451,18 +451,13 @@ impl Backend for Renderer {
     ) -> Result<Gradients> {
         let request = self.request(options, views, PassTag::Gradient, Work::Pixels { begin: 0, end: options.spp })?;
         check_views(views, adjoints, options, "adjoint image")?;
-        crate::attached::refuse_unsupported(&self.flat, options)?;
-        let kinds = if options.sampling.is_attached() {
-            if mode == GradMode::Deterministic {
-                return Err(Error::InvalidArgument {
-                    parameter: "GradMode::Deterministic".into(),
-                    message: "attached sampling has a float kernel only (use GradMode::Float)".into(),
-                });
-            }
-            [KernelKind::AdjointAttached; 2]
-        } else {
-            [KernelKind::Adjoint, KernelKind::AdjointFixed]
-        };
+        let kinds = reverse_kinds(
+            &self.flat,
+            options,
+            mode,
+            [KernelKind::Adjoint, KernelKind::AdjointFixed],
+            KernelKind::AdjointAttached,
+        )?;
         let _span = tracing::info_span!("adjoint", spp = options.spp, ?mode, views = views.len()).entered();
         let adjoint_buf = Buffer::storage_with(&self.ctx, "adjoint image", Image::stack(adjoints)?.as_slice())?;
         // Declared by the kernel for pass 1 (`primal_only`); a replay never touches it.
@@ -490,18 +485,13 @@ impl Backend for Renderer {
         mode: GradMode,
     ) -> Result<Gradients> {
         check_views(views, adjoints, options, "adjoint image")?;
-        crate::attached::refuse_unsupported(&self.flat, options)?;
-        let kinds = if options.sampling.is_attached() {
-            if mode == GradMode::Deterministic {
-                return Err(Error::InvalidArgument {
-                    parameter: "GradMode::Deterministic".into(),
-                    message: "attached sampling has a float kernel only (use GradMode::Float)".into(),
-                });
-            }
-            [KernelKind::AdjointAdaptiveAttached; 2]
-        } else {
-            [KernelKind::AdjointAdaptive, KernelKind::AdjointAdaptiveFixed]
-        };
+        let kinds = reverse_kinds(
+            &self.flat,
+            options,
+            mode,
+            [KernelKind::AdjointAdaptive, KernelKind::AdjointAdaptiveFixed],
+            KernelKind::AdjointAdaptiveAttached,
+        )?;
         let stacked = options.stacked(views.len())?;
         let count = u64::from(sampling.sample_count(&stacked)?);
         let mut request = self.request(options, views, PassTag::Gradient, Work::Samples { count })?;
@@ -626,4 +616,27 @@ impl Backend for Renderer {
     fn param_kinds(&self, ids: &[crate::params::ParamId]) -> ParamKinds {
         variant::kinds_of(&self.scene, &self.flat, ids)
     }
+}
+
+/// The reverse-mode kernels of a request (float, fixed point): `plain` with detached sampling;
+/// with attached sampling, where the scene allows it ([`crate::attached::refuse_unsupported`]),
+/// `attached`, which has a float kernel only.
+pub(crate) fn reverse_kinds(
+    flat: &FlatScene,
+    options: &RenderOptions,
+    mode: GradMode,
+    plain: [KernelKind; 2],
+    attached: KernelKind,
+) -> Result<[KernelKind; 2]> {
+    crate::attached::refuse_unsupported(flat, options)?;
+    if !options.sampling.is_attached() {
+        return Ok(plain);
+    }
+    if mode == GradMode::Deterministic {
+        return Err(Error::InvalidArgument {
+            parameter: "GradMode::Deterministic".into(),
+            message: "attached sampling has a float kernel only (use GradMode::Float)".into(),
+        });
+    }
+    Ok([attached; 2])
 }
