@@ -102,10 +102,12 @@ pub trait Backend {
     /// compiles only their derivative code; the CPU reference computes every kind anyway).
     fn param_kinds(&self, ids: &[ParamId]) -> ParamKinds;
 
-    /// Forward-mode image gradient ∂I/∂θ by the parameter `name`.
+    /// Forward-mode image gradient ∂I/∂θ by the parameter `name` (with attached sampling,
+    /// `options.sampling`, three fused passes: one per colour channel).
     ///
     /// # Errors
-    /// An unknown parameter; as [`Backend::backward`].
+    /// An unknown parameter; an index of refraction under detached sampling, which does not
+    /// differentiate it; as [`Backend::backward`].
     fn image_gradient(&mut self, options: &RenderOptions, name: &str) -> Result<Image>;
 
     /// Renders the scene's camera ([`View::current`]) with `options` under the key of `pass`.

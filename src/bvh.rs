@@ -211,6 +211,7 @@ const FIRST_REINSERTION_MAX: usize = 1 << 23;
 
 /// How many of obvhs's two reinsertion passes a build over `count` triangles runs.
 fn reinsertion_passes(count: usize) -> u32 {
+    const _: () = assert!(SECOND_REINSERTION_MAX < FIRST_REINSERTION_MAX);
     match count {
         c if c <= SECOND_REINSERTION_MAX => 2,
         c if c <= FIRST_REINSERTION_MAX => 1,
@@ -238,20 +239,20 @@ fn binary_tree(
     // obvhs's PLOC (`PlocSearchDistance::Medium` is its search distance 14), in less memory.
     let mut nodes = ploc::build(count, triangle, params.search_depth_threshold);
     steps.lap("ploc");
-    let mut parents = reinsert::parents(&nodes);
     let passes = reinsertion_passes(count);
     if passes >= 1 {
+        // The parent links (4 bytes a node) only where a pass runs.
+        let mut parents = reinsert::parents(&nodes);
         reinsert::run(&mut nodes, &mut parents, params.reinsertion_batch_ratio);
+        steps.lap("reinsertion");
+        // obvhs's leaf collapse comes between the two passes; with leaves of one triangle it leaves
+        // the tree as it is.
+        if passes >= 2 {
+            let ratio = params.reinsertion_batch_ratio * params.post_collapse_reinsertion_batch_ratio_multiplier;
+            reinsert::run(&mut nodes, &mut parents, ratio);
+            steps.lap("reinsertion 2");
+        }
     }
-    steps.lap("reinsertion");
-    // obvhs's leaf collapse comes between the two passes; with leaves of one triangle it leaves
-    // the tree as it is.
-    if passes >= 2 {
-        let ratio = params.reinsertion_batch_ratio * params.post_collapse_reinsertion_batch_ratio_multiplier;
-        reinsert::run(&mut nodes, &mut parents, ratio);
-        steps.lap("reinsertion 2");
-    }
-    drop(parents);
     let ploc_depth = bvh2_height(&nodes);
     // A tree with one-triangle leaves is converted as PLOC left it, its subtrees too deep for the
     // stack rebuilt in place (`depth`): the rewrite below would give the same tree (same nodes,
@@ -625,6 +626,18 @@ fn traverse(bvh: &Bvh, ray: &Ray, tmin: f32, mut tmax: f32, any_hit: bool) -> Op
 
 #[cfg(test)]
 mod tests {
+    /// Both reinsertion passes up to 1 M triangles, the first alone up to 8 M, none above.
+    #[test]
+    fn reinsertion_passes_drop_with_the_size() {
+        use super::{FIRST_REINSERTION_MAX, SECOND_REINSERTION_MAX, reinsertion_passes};
+        assert_eq!(reinsertion_passes(1000), 2);
+        assert_eq!(reinsertion_passes(SECOND_REINSERTION_MAX), 2);
+        assert_eq!(reinsertion_passes(SECOND_REINSERTION_MAX + 1), 1);
+        assert_eq!(reinsertion_passes(FIRST_REINSERTION_MAX), 1);
+        assert_eq!(reinsertion_passes(FIRST_REINSERTION_MAX + 1), 0);
+        assert_eq!(reinsertion_passes(20_000_000), 0);
+    }
+
     use super::*;
 
     fn tri(x: f32) -> [Vec3; 3] {

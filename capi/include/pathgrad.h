@@ -286,7 +286,7 @@ enum PgStatus pg_frame_create(const struct PgRenderer *renderer,
                               const struct PgFrameDesc *desc,
                               struct PgFrame **out);
 
-// The frame's request with every default resolved (size, spp, seed, max depth, mode).
+// The frame's request with every default resolved (size, spp, seed, max depth, mode, sampling).
 //
 // # Safety
 // `frame` is null or live; `out` valid for writing.

@@ -227,7 +227,7 @@ pub unsafe extern "C" fn pg_frame_create(
     })
 }
 
-/// The frame's request with every default resolved (size, spp, seed, max depth, mode).
+/// The frame's request with every default resolved (size, spp, seed, max depth, mode, sampling).
 ///
 /// # Safety
 /// `frame` is null or live; `out` valid for writing.

@@ -465,7 +465,7 @@ def image_gradient(
 ) -> np.ndarray:
     """Forward-mode image gradient ∂image/∂``name`` of the scene's sensor, summed over the
     parameter's elements: a ``(height, width, 3)`` array (signed). ``sampling`` and
-    ``jacobian_noise`` as :func:`grad`'s: a smooth dielectric's index of refraction needs
+    ``jacobian_noise`` as :func:`grad`'s: a dielectric's index of refraction needs
     ``sampling="attached"`` (three times the work: one pass per colour channel)."""
     scene = _check_scene(scene)
     _set_params(scene, params)

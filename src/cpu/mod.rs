@@ -332,10 +332,12 @@ fn replay_sample(
     }
 }
 
-/// Forward-mode image gradient on the CPU: the twin of [`crate::gpu::Renderer::image_gradient`].
+/// Forward-mode image gradient on the CPU: the twin of [`crate::gpu::Renderer::image_gradient`]
+/// (with attached sampling, one fused sample per colour channel).
 ///
 /// # Errors
-/// Scene and option errors; an unknown parameter.
+/// Scene and option errors (a scene attached sampling does not cover); an unknown parameter; an
+/// index of refraction under detached sampling.
 pub fn image_gradient(scene: &Scene, options: &RenderOptions, name: &str) -> Result<Image> {
     options.validate()?;
     let flat = FlatScene::new(scene)?;

@@ -257,6 +257,8 @@ impl Renderer {
         let kind = match mode {
             GradMode::Float if options.sampling.is_attached() => KernelKind::AdjointAttached,
             GradMode::Float => KernelKind::Adjoint,
+            // Attached sampling has no fixed-point kernel: the gradient pass refuses it by name.
+            GradMode::Deterministic if options.sampling.is_attached() => return None,
             GradMode::Deterministic if self.ctx.info().int64_atomics => KernelKind::AdjointFixed,
             GradMode::Deterministic => return None,
         };
@@ -516,13 +518,16 @@ impl Backend for Renderer {
 
     /// Forward-mode image gradient ∂I/∂θ: per pixel and channel, the derivative of the image by
     /// the parameter `name` (tangent 1 on each of its values, so for an RGB parameter the
-    /// derivative along scaling all three together), through the same replay with δL = 1.
+    /// derivative along scaling all three together), through the same replay with δL = 1 — with
+    /// attached sampling, once per channel with δL on that channel alone (three times the work).
     ///
     /// # Errors
-    /// [`Error::InvalidArgument`] for an unknown parameter; as [`Renderer::backward`].
+    /// [`Error::InvalidArgument`] for an unknown parameter, or an index of refraction under
+    /// detached sampling (which does not differentiate it); as [`Renderer::backward`].
     fn image_gradient(&mut self, options: &RenderOptions, name: &str) -> Result<Image> {
         let mut request =
             self.request_current(options, PassTag::Gradient, Work::Pixels { begin: 0, end: options.spp })?;
+        crate::attached::refuse_unsupported(&self.flat, options)?;
         let id = self.scene.params.find(name).ok_or_else(|| Error::InvalidArgument {
             parameter: name.to_string(),
             message: "no such parameter (see `pathgrad params SCENE`)".into(),
@@ -530,7 +535,8 @@ impl Backend for Renderer {
         // Detached sampling would give an index of refraction a gradient image of zeros: refused by name.
         crate::attached::differentiated(&self.scene, vec![id], &[id], options.sampling)?;
         let entry = self.scene.params.entry(id).clone();
-        crate::attached::refuse_unsupported(&self.flat, options)?;
+        // The kernels carry the terms of this parameter's kinds, whatever `options.differentiate` says.
+        let kinds = variant::param_kinds(&self.flat, self.env, entry.offset, entry.offset + entry.len);
         let _span = tracing::info_span!("image_gradient", param = name).entered();
         request.globals.forward_begin = entry.offset;
         request.globals.forward_end = entry.offset + entry.len;
@@ -542,7 +548,7 @@ impl Backend for Renderer {
         if options.sampling.is_attached() {
             // Attached sampling's sums weigh the channels by δL: one run per channel c with δL = e_c,
             // whose accumulated components sum to channel c's derivative (the CPU twin's loop).
-            let features = variant::request_features(self.scene_features, options, self.grad_kinds(options));
+            let features = variant::request_features(self.scene_features, options, kinds);
             let variant = Variant { kind: KernelKind::ImageGradientAttached, features };
             let mut data = vec![0.0f32; pixels as usize * 3];
             for c in 0..3 {
@@ -565,7 +571,6 @@ impl Backend for Renderer {
         let ones = vec![1.0f32; pixels as usize * 3];
         let adjoint_buf = Buffer::storage_with(&self.ctx, "adjoint image (ones)", &ones)?;
         accum.clear()?;
-        let kinds = variant::param_kinds(&self.flat, self.env, entry.offset, entry.offset + entry.len);
         let features = variant::request_features(self.scene_features, options, kinds);
         self.run(
             Variant { kind: KernelKind::ImageGradient, features },
@@ -601,8 +606,9 @@ impl Backend for Renderer {
             (false, GradMode::Float) => Some(KernelKind::Adjoint),
             (true, GradMode::Float) if options.sampling.is_attached() => Some(KernelKind::AdjointAdaptiveAttached),
             (true, GradMode::Float) => Some(KernelKind::AdjointAdaptive),
-            // Without 64-bit atomics the gradient pass refuses the mode, by name, when it runs.
-            (_, GradMode::Deterministic) if !self.ctx.info().int64_atomics => None,
+            // Without 64-bit atomics, or with attached sampling, the gradient pass refuses the
+            // mode, by name, when it runs.
+            (_, GradMode::Deterministic) if !self.ctx.info().int64_atomics || options.sampling.is_attached() => None,
             (false, GradMode::Deterministic) => Some(KernelKind::AdjointFixed),
             (true, GradMode::Deterministic) => Some(KernelKind::AdjointAdaptiveFixed),
         };

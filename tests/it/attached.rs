@@ -251,7 +251,8 @@ fn the_device_equals_the_cpu_reference() {
 
 /// Forward-mode image gradients with attached sampling (one fused sample per channel, δL = e_c):
 /// on the CPU reference, Σ A ⊙ ∂I/∂θ equals the reverse-mode gradient with adjoint A for the same
-/// seed (A weighs the channels differently, so a channel mixed up fails) — a glass sphere's η over
+/// seed (A weighs the channels differently, so channels mixed up fail: rotating them fails on the
+/// first scene already) — a glass sphere's η over
 /// a diffuse floor, η lit by next-event estimation from point and directional lights, a rough
 /// glass's α; and the device's image gradient equals the CPU reference's pixel for pixel.
 #[test]
