@@ -626,10 +626,11 @@ fn traverse(bvh: &Bvh, ray: &Ray, tmin: f32, mut tmax: f32, any_hit: bool) -> Op
 
 #[cfg(test)]
 mod tests {
+    use super::*;
+
     /// Both reinsertion passes up to 1 M triangles, the first alone up to 8 M, none above.
     #[test]
     fn reinsertion_passes_drop_with_the_size() {
-        use super::{FIRST_REINSERTION_MAX, SECOND_REINSERTION_MAX, reinsertion_passes};
         assert_eq!(reinsertion_passes(1000), 2);
         assert_eq!(reinsertion_passes(SECOND_REINSERTION_MAX), 2);
         assert_eq!(reinsertion_passes(SECOND_REINSERTION_MAX + 1), 1);
@@ -637,8 +638,6 @@ mod tests {
         assert_eq!(reinsertion_passes(FIRST_REINSERTION_MAX + 1), 0);
         assert_eq!(reinsertion_passes(20_000_000), 0);
     }
-
-    use super::*;
 
     fn tri(x: f32) -> [Vec3; 3] {
         [Vec3::new(x, -1.0, -1.0), Vec3::new(x, 1.0, -1.0), Vec3::new(x, -1.0, 1.0)]

@@ -545,41 +545,39 @@ impl Backend for Renderer {
         // δL = 1 per sample: the adjoint scale must not divide by spp here; the mean is taken below.
         request.globals.adjoint_scale = 1.0;
         let spp = options.spp as f32;
-        if options.sampling.is_attached() {
-            // Attached sampling's sums weigh the channels by δL: one run per channel c with δL = e_c,
-            // whose accumulated components sum to channel c's derivative (the CPU twin's loop).
-            let features = variant::request_features(self.scene_features, options, kinds);
-            let variant = Variant { kind: KernelKind::ImageGradientAttached, features };
-            let mut data = vec![0.0f32; pixels as usize * 3];
-            for c in 0..3 {
-                let unit: Vec<f32> = (0..pixels as usize * 3).map(|i| if i % 3 == c { 1.0 } else { 0.0 }).collect();
-                let adjoint_buf = Buffer::storage_with(&self.ctx, "adjoint image (one channel)", &unit)?;
-                accum.clear()?;
-                self.run(
-                    variant,
-                    &request,
-                    &[(BINDING_ADJOINT, &adjoint_buf), (BINDING_ACCUM, &accum)],
-                    &mut |_, _| {},
-                )?;
-                let sums: Vec<f32> = accum.download(pixels as usize * 3)?;
-                for (p, rgb) in sums.chunks_exact(3).enumerate() {
-                    data[3 * p + c] = (rgb[0] + rgb[1] + rgb[2]) / spp;
+        let features = variant::request_features(self.scene_features, options, kinds);
+        let n = pixels as usize * 3;
+        // As the CPU twin (`cpu::image_gradient`): detached, one run with δL = 1 gives every
+        // channel's derivative; attached sampling's sums weigh the channels by δL, so one run per
+        // channel c with δL = e_c, whose accumulated components sum to channel c's derivative.
+        let (kind, runs) = if options.sampling.is_attached() {
+            (KernelKind::ImageGradientAttached, vec![Some(0), Some(1), Some(2)])
+        } else {
+            (KernelKind::ImageGradient, vec![None])
+        };
+        let mut data = vec![0.0f32; n];
+        for channel in runs {
+            let adjoint: Vec<f32> =
+                (0..n).map(|i| if channel.is_none_or(|c| i % 3 == c) { 1.0 } else { 0.0 }).collect();
+            let adjoint_buf = Buffer::storage_with(&self.ctx, "adjoint image (δL per channel)", &adjoint)?;
+            accum.clear()?;
+            self.run(
+                Variant { kind, features },
+                &request,
+                &[(BINDING_ADJOINT, &adjoint_buf), (BINDING_ACCUM, &accum)],
+                &mut |_, _| {},
+            )?;
+            let sums: Vec<f32> = accum.download(n)?;
+            match channel {
+                None => data.iter_mut().zip(&sums).for_each(|(d, s)| *d = s / spp),
+                Some(c) => {
+                    for (p, rgb) in sums.chunks_exact(3).enumerate() {
+                        data[3 * p + c] = (rgb[0] + rgb[1] + rgb[2]) / spp;
+                    }
                 }
             }
-            return Image::from_rgb(options.width, options.height, data);
         }
-        let ones = vec![1.0f32; pixels as usize * 3];
-        let adjoint_buf = Buffer::storage_with(&self.ctx, "adjoint image (ones)", &ones)?;
-        accum.clear()?;
-        let features = variant::request_features(self.scene_features, options, kinds);
-        self.run(
-            Variant { kind: KernelKind::ImageGradient, features },
-            &request,
-            &[(BINDING_ADJOINT, &adjoint_buf), (BINDING_ACCUM, &accum)],
-            &mut |_, _| {},
-        )?;
-        let sums: Vec<f32> = accum.download(pixels as usize * 3)?;
-        Image::from_rgb(options.width, options.height, sums.into_iter().map(|v| v / spp).collect())
+        Image::from_rgb(options.width, options.height, data)
     }
 
     /// Builds the gradient pass's variant, which renders pass 1 too where it can (its features
