@@ -835,7 +835,7 @@ bool path_step(inout PathState st) {
                 // albedo's slopes (src/cpu/path.rs).
                 vec3 c = st.adj * st.throughput * tr * nee_w * nee_f * es.radiance / nee_pdf;
                 float dist = length(es.point - shadow_ray.origin);
-                vec3 by_light = es.delta ? hit_delta_light_gradient(geometry, shadow_ray.dir, es.distant ? 0.0 : 1.0 / dist)
+                vec3 by_light = es.delta ? hit_delta_light_gradient(geometry, shadow_ray.dir, es.distant ? 0.0 : 1.0 / dist) + es.dln_falloff
                                          : hit_nee_gradient(geometry, shadow_ray.dir, dist, es.normal, nee_w);
                 vec3 g = by_light * (c.x + c.y + c.z) + dln_albedo[0] * c.x + dln_albedo[1] * c.y + dln_albedo[2] * c.z;
                 Row6 own = hit_position_row(geometry, g);

@@ -45,7 +45,7 @@ use crate::scene::flat::FlatScene;
 /// `thindielectric` or `conductor` or an isotropic `roughconductor` or `roughdielectric` with
 /// untextured roughness (no normal map, no mask), without media; light comes from the
 /// environment, from area emitters whose radiance is constant or a bilinear bitmap, or from
-/// point and directional lights (no spot or projector).
+/// point, directional and untextured spot lights (no textured spot, no projector).
 ///
 /// # Errors
 /// [`crate::Error::InvalidArgument`] naming `Sampling::Attached` and what the scene or request has.
@@ -60,7 +60,8 @@ pub fn refuse_unsupported(flat: &FlatScene, options: &RenderOptions) -> crate::R
                 "{what}: attached derivatives are built for scenes of smooth `dielectric`, `thindielectric` and \
                  `conductor` surfaces, isotropic `roughconductor`s and `roughdielectric`s with untextured \
                  roughness and `diffuse` surfaces with a constant or smoothly textured albedo, lit by the \
-                 environment, by area emitters or by point and directional lights (use detached sampling)"
+                 environment, by area emitters or by point, directional and untextured spot lights (use detached \
+                 sampling)"
             ),
         })
     };
@@ -119,25 +120,27 @@ pub fn refuse_unsupported(flat: &FlatScene, options: &RenderOptions) -> crate::R
     if !flat.media.is_empty() {
         return refuse("the scene has participating media".into());
     }
-    // Next-event estimation's rows are built for area emitters' points, point and directional
-    // lights (HitGeometry::nee_gradient, HitGeometry::delta_light_gradient), at diffuse vertices:
+    // Next-event estimation's rows are built for area emitters' points, point, directional and
+    // untextured spot lights (HitGeometry::nee_gradient, HitGeometry::delta_light_gradient and
+    // crate::cpu::emitter::spot_falloff_gradient), at diffuse vertices:
     // a light without area, which only next-event estimation reaches, would be missing from the
     // rough vertices' light, or from all of it without next-event estimation.
-    if flat.lights.iter().any(|l| l.kind == LIGHT_SPOT || l.kind == LIGHT_PROJECTOR) {
+    if flat.lights.iter().any(|l| l.kind == LIGHT_PROJECTOR || (l.kind == LIGHT_SPOT && l.tex != NO_PARAM)) {
         return refuse(
-            "the scene has a spot or projector light (its falloff's and texture's slopes are not built)".into(),
+            "the scene has a projector or a textured spot light (its texture's slopes are not built)".into(),
         );
     }
     if !flat.lights.is_empty() {
         if !options.nee {
             return refuse(
-                "the scene has a point or directional light and next-event estimation is off (only it reaches them)"
+                "the scene has a point, directional or spot light and next-event estimation is off (only it reaches \
+                 them)"
                     .into(),
             );
         }
         if flat.materials.iter().any(|m| matches!(m.tag, MAT_ROUGH_CONDUCTOR | MAT_ROUGH_DIELECTRIC)) {
             return refuse(
-                "the scene has a point or directional light and a `roughconductor` or `roughdielectric` (attached \
+                "the scene has a light without area and a `roughconductor` or `roughdielectric` (attached \
                  sampling estimates next events at diffuse vertices only, and only they reach such a light)"
                     .into(),
             );

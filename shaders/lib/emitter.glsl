@@ -111,6 +111,7 @@ struct EmitterSample {
     vec3 point; vec3 normal; vec3 radiance; uint param; bool environment; bool valid;
     bool delta; bool distant; float factor; float pdf;
     vec2 uv;    // a textured area emitter's texture coordinates at `point`
+    vec3 dln_falloff;   // an untextured spot: ∇ ln falloff by the shading point (0 otherwise)
 };
 
 // A spot's falloff toward unit direction `d` from its position (Mitsuba's falloff_curve).
@@ -118,6 +119,16 @@ float spot_falloff(DeltaLight l, vec3 d) {
     float c = dot(l.axis, d);
     float beam = c >= l.cos_beam ? 1.0 : (l.cutoff - atan2_poly(sqrt(max(1.0 - c * c, 0.0)), c)) * l.inv_transition;
     return c > l.cos_cutoff ? beam : 0.0;
+}
+
+// The gradient by the shading point of ln `falloff` (> 0) for a spot seen along unit `d` at
+// distance `dist`: (axis − cos θ·d)/(transition·sin θ·dist·falloff) in the transition zone, 0 in
+// the beam (twin: spot_falloff_gradient in src/cpu/emitter.rs).
+vec3 spot_falloff_gradient(DeltaLight l, vec3 d, float dist, float falloff) {
+    float c = dot(l.axis, d);
+    float s = sqrt(max(1.0 - c * c, 0.0));
+    if (c >= l.cos_beam || c <= l.cos_cutoff || s <= 0.0) return vec3(0.0);
+    return (l.axis - c * d) * (l.inv_transition / (s * dist * falloff));
 }
 
 // What a textured spot or a projector `l` sends toward point `x`, apart from its parameters: the
@@ -157,7 +168,7 @@ vec2 triangle_uv(uint tri, vec2 b);
 // the total emissive area.
 EmitterSample sample_emitter(float u_select, vec2 u_pos, vec2 u_cell, vec3 x) {
     EmitterSample s = EmitterSample(vec3(0.0), vec3(0.0), vec3(0.0), NO_PARAM, false, false, false, false, 1.0, 0.0,
-                                    vec2(0.0));
+                                    vec2(0.0), vec3(0.0));
     if (HAS(F_ENV) && u_select < globals.env_select_prob) {
         s.point = env_sample(u_cell, u_pos);
         s.radiance = env_radiance(s.point);
@@ -191,7 +202,12 @@ EmitterSample sample_emitter(float u_select, vec2 u_pos, vec2 u_cell, vec3 x) {
             vec3 d = x - l.position;
             float d2 = dot(d, d);
             s.factor = 1.0 / d2;
-            if (l.kind == LIGHT_SPOT) s.factor *= spot_falloff(l, d * inversesqrt(d2));
+            if (l.kind == LIGHT_SPOT) {
+                vec3 u = d * inversesqrt(d2);
+                float falloff = spot_falloff(l, u);
+                s.factor *= falloff;
+                if (falloff > 0.0) s.dln_falloff = spot_falloff_gradient(l, u, sqrt(d2), falloff);
+            }
         }
         s.radiance = param_rgb(l.p_intensity) * s.factor;
         s.valid = s.factor > 0.0 && s.factor < FLOAT_MAX;

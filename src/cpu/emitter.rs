@@ -40,6 +40,9 @@ pub struct EmitterSample {
     pub from: Vec3,
     /// A textured area emitter: the texture coordinates of `point`.
     pub uv: Vec2,
+    /// An untextured spot: the gradient of ln falloff by the shading point (0 in the beam and
+    /// for every other light; attached sampling's next-event rows, [`spot_falloff_gradient`]).
+    pub dln_falloff: Vec3,
 }
 
 /// Whether an area emitter's `p_radiance` is a texture's descriptor (`SCALAR_TEXTURE`).
@@ -102,6 +105,19 @@ fn spot_falloff(l: &DeltaLight, d: Vec3) -> f32 {
         (l.cutoff - atan2_poly((1.0 - c * c).max(0.0).sqrt(), c)) * l.inv_transition
     };
     if c > l.cos_cutoff { beam } else { 0.0 }
+}
+
+/// The gradient by the shading point x of ln falloff for a spot seen along unit `d` (from its
+/// position toward x) at distance `dist`, where the falloff is `falloff` > 0. In the transition
+/// zone falloff = (cutoff − θ)/transition with cos θ = axis·d, and ∂d/∂x = (I − d·dᵀ)/dist, so
+/// ∂falloff/∂x = (axis − cos θ·d)/(transition·sin θ·dist); inside the beam it is 0.
+pub fn spot_falloff_gradient(l: &DeltaLight, d: Vec3, dist: f32, falloff: f32) -> Vec3 {
+    let c = l.axis.dot(d);
+    let sin = (1.0 - c * c).max(0.0).sqrt();
+    if c >= l.cos_beam || c <= l.cos_cutoff || sin <= 0.0 {
+        return Vec3::ZERO;
+    }
+    (l.axis - c * d) * (l.inv_transition / (sin * dist * falloff))
 }
 
 /// What a textured spot or a projector `l` sends toward point `x`, apart from its parameters:
@@ -251,6 +267,7 @@ pub fn sample_emitter(
         pdf: 0.0,
         from: x,
         uv: Vec2::ZERO,
+        dln_falloff: Vec3::ZERO,
     };
     if u_select < globals.env_select_prob {
         let dir = env_sample(flat, globals, u_cell, u_pos);
@@ -281,13 +298,20 @@ pub fn sample_emitter(
                 ..none
             });
         }
-        let (point, factor) = if l.kind == LIGHT_DIRECTIONAL {
-            (-l.axis, 1.0)
+        let (point, factor, dln_falloff) = if l.kind == LIGHT_DIRECTIONAL {
+            (-l.axis, 1.0, Vec3::ZERO)
         } else {
             let d = x - l.position;
             let d2 = d.dot(d);
-            let falloff = if l.kind == LIGHT_SPOT { spot_falloff(l, d * (1.0 / d2.sqrt())) } else { 1.0 };
-            (l.position, falloff / d2)
+            let (falloff, slope) = if l.kind == LIGHT_SPOT {
+                let (dist, u) = (d2.sqrt(), d * (1.0 / d2.sqrt()));
+                let falloff = spot_falloff(l, u);
+                let slope = if falloff > 0.0 { spot_falloff_gradient(l, u, dist, falloff) } else { Vec3::ZERO };
+                (falloff, slope)
+            } else {
+                (1.0, Vec3::ZERO)
+            };
+            (l.position, falloff / d2, slope)
         };
         if !(factor > 0.0 && factor < f32::MAX) {
             return None;
@@ -300,6 +324,7 @@ pub fn sample_emitter(
             distant: l.kind == LIGHT_DIRECTIONAL,
             factor,
             pdf: globals.light_select_prob / n as f32,
+            dln_falloff,
             ..none
         });
     }
@@ -347,5 +372,50 @@ pub fn environment_pdf(flat: &FlatScene, globals: &Globals, dir: Vec3) -> f32 {
     match env_map(globals) {
         None => globals.env_select_prob * UNIFORM_SPHERE_PDF,
         Some(map) => globals.env_select_prob * map.pdf(&flat.env_cells, dir),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A spot's falloff slope against central differences of ln falloff, through the transition
+    /// zone (both sides of the axis, near the beam and near the cutoff), and 0 inside the beam.
+    #[test]
+    fn spot_falloff_gradient_matches_central_differences() {
+        let (cutoff, beam) = (30f32.to_radians(), 5f32.to_radians());
+        let l = DeltaLight {
+            kind: LIGHT_SPOT,
+            position: Vec3::new(0.2, 1.5, -0.1),
+            axis: Vec3::new(0.3, -1.0, 0.2).normalize(),
+            cos_cutoff: cutoff.cos(),
+            cos_beam: beam.cos(),
+            cutoff,
+            inv_transition: 1.0 / (cutoff - beam),
+            ..DeltaLight::default()
+        };
+        let ln_falloff = |x: Vec3| {
+            let d = x - l.position;
+            f64::from(spot_falloff(&l, d / d.length())).ln()
+        };
+        let side = l.axis.cross(Vec3::Z).normalize();
+        for (angle, turn) in [(7.0f32, 0.0f32), (12.0, 1.3), (20.0, 2.9), (27.0, 4.4), (15.0, 5.8)] {
+            let off = glam::Quat::from_axis_angle(l.axis, turn) * side;
+            let u = (l.axis * angle.to_radians().cos() + off * angle.to_radians().sin()).normalize();
+            let x = l.position + 2.3 * u;
+            let falloff = spot_falloff(&l, u);
+            let g = spot_falloff_gradient(&l, u, 2.3, falloff);
+            let h = 1e-3;
+            for (axis, got) in [(Vec3::X, g.x), (Vec3::Y, g.y), (Vec3::Z, g.z)] {
+                let fd = (ln_falloff(x + h * axis) - ln_falloff(x - h * axis)) / (2.0 * f64::from(h));
+                let scale = f64::from(g.length());
+                assert!(
+                    (f64::from(got) - fd).abs() <= 0.01 * scale,
+                    "{angle}° turn {turn}: gradient {got} vs central difference {fd} (|g| {scale})"
+                );
+            }
+        }
+        let inside = l.axis;
+        assert_eq!(spot_falloff_gradient(&l, inside, 2.0, 1.0), Vec3::ZERO);
     }
 }

@@ -886,7 +886,7 @@ pub fn trace_path<const ADJOINT: bool>(
                     let c = adj_radiance * throughput * tr * w_n * f * es.radiance / p_e;
                     let dist = (es.point - origin).length();
                     let by_light = if es.delta {
-                        geometry.delta_light_gradient(wl, if es.distant { 0.0 } else { 1.0 / dist })
+                        geometry.delta_light_gradient(wl, if es.distant { 0.0 } else { 1.0 / dist }) + es.dln_falloff
                     } else {
                         geometry.nee_gradient(wl, dist, es.normal, w_n)
                     };

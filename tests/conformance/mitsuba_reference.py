@@ -284,9 +284,10 @@ MATRIX = {
                                         "area emitter", "bitmap albedo"],
                               grads=["glass.bsdf.eta"], fd={"glass.bsdf.eta": 0.01}, sampling="attached",
                               spp=1024, seeds=32),
-    # The same floor under a point and a directional light (no MIS: only NEE reaches them).
+    # The same floor under a point, a directional and a spot light (no MIS: only NEE reaches
+    # them); the spot's transition zone covers the floor the lens shows.
     "attached_ior_point": dict(features=["dielectric eta, attached sampling", "next-event estimation at diffuse vertices",
-                                         "point light", "directional light", "bitmap albedo"],
+                                         "point light", "directional light", "spot falloff", "bitmap albedo"],
                                grads=["glass.bsdf.eta"], fd={"glass.bsdf.eta": 0.01}, sampling="attached",
                                spp=1024, seeds=32),
     # The same floor under a large tilted panel whose radiance is a bilinear bump: BSDF samples

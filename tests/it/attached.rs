@@ -379,7 +379,7 @@ fn optimize_recovers_the_ior_of_a_glass_sphere() {
 }
 
 /// Attached sampling is refused, by name, where its Jacobians are not built: a textured diffuse
-/// albedo, a spot light, a point light beside a rough conductor or without next-event
+/// albedo, a textured spot light, a point light beside a rough conductor or without next-event
 /// estimation, a plastic (in reverse and forward mode), deterministic mode;
 /// and an index of refraction's image gradient under detached sampling.
 #[test]
@@ -430,21 +430,26 @@ fn attached_sampling_refuses_what_it_does_not_cover() {
     );
     let err = pathgrad::cpu::backward(&tinted, &attached(&tinted, 8, 1), &a).unwrap_err().to_string();
     assert!(err.contains("`dielectric` with a textured reflectance or transmittance"), "{err}");
-    // A spot light: its falloff's slope along the surface is not built.
-    let spot = variant(
-        "attached_floor",
-        r#"<shape type="rectangle" id="floor">"#,
-        r#"<emitter type="spot"><transform name="to_world"><lookat origin="0, 1, 0" target="0, 0, 0"/></transform></emitter><shape type="rectangle" id="floor">"#,
+    // A textured spot light: its texture's slope along the surface is not built (an untextured
+    // one is taken).
+    let spot =
+        r#"<emitter type="spot"><transform name="to_world"><lookat origin="0, 1, 0" target="0, 0, 0"/></transform>"#;
+    let floor_shape = r#"<shape type="rectangle" id="floor">"#;
+    let plain = variant("attached_floor", floor_shape, &format!("{spot}</emitter>{floor_shape}"));
+    pathgrad::cpu::backward(&plain, &attached(&plain, 8, 1), &a).unwrap();
+    let textured_spot = format!(
+        r#"{spot}<texture type="bitmap" name="texture"><string name="filename" value="attached_ramp.exr"/></texture></emitter>{floor_shape}"#
     );
+    let spot = variant("attached_floor", floor_shape, &textured_spot);
     let err = pathgrad::cpu::backward(&spot, &attached(&spot, 8, 1), &a).unwrap_err().to_string();
-    assert!(err.contains("a spot or projector light"), "{err}");
+    assert!(err.contains("a projector or a textured spot light"), "{err}");
     // A point light beside a rough conductor (no next-event estimation at its vertices), and a
     // point light without next-event estimation: its light would be missing.
     let point = r#"<emitter type="point"><point name="position" x="0" y="3" z="0"/></emitter>"#;
     let sky = r#"<emitter type="envmap">"#;
     let lit = variant("attached_rough", sky, &format!("{point}{sky}"));
     let err = pathgrad::cpu::backward(&lit, &attached(&lit, 8, 1), &a).unwrap_err().to_string();
-    assert!(err.contains("point or directional light and a `roughconductor`"), "{err}");
+    assert!(err.contains("a light without area and a `roughconductor`"), "{err}");
     let lit = variant("attached_floor", sky, &format!("{point}{sky}"));
     let no_nee = RenderOptions { nee: false, ..attached(&lit, 8, 1) };
     let err = pathgrad::cpu::backward(&lit, &no_nee, &a).unwrap_err().to_string();
