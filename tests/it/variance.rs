@@ -294,3 +294,39 @@ fn the_pilot_measures_every_candidate_and_the_same_seed_picks_the_same_strategy(
     let e = choose_strategy(&mut renderer, &opts, param, PlacementMis::Balance, PilotBudget { runs: 1, spp: 1 }, None);
     assert!(e.unwrap_err().to_string().contains("PilotBudget::runs"));
 }
+
+/// `--strategy attached`: bsdf sampled attached, a row beside detached bsdf (here a rough
+/// conductor's roughness, which both differentiate), and the only row an index of refraction
+/// takes (detached rows are refused by name).
+#[test]
+fn cli_variance_takes_an_attached_row() {
+    let dir = tempfile::tempdir().unwrap();
+    let scenes = format!("{}/tests/data/scenes", env!("CARGO_MANIFEST_DIR"));
+    let run = |scene: &str, param: &str, strategy: &str| {
+        crate::cli::pathgrad()
+            .args(["variance", &format!("{scenes}/{scene}.xml"), "--param", param, "--strategy", strategy])
+            .args(["--runs", "3", "--spp", "1", "--width", "12", "--height", "12", "--json", "-o"])
+            .arg(dir.path().join(scene))
+            .output()
+            .unwrap()
+    };
+    let o = run("attached_rough", "ball.bsdf.alpha.value", "bsdf,attached");
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let v: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    let rows = v["techniques"].as_array().unwrap();
+    let names: Vec<_> =
+        rows.iter().map(|r| (r["technique"].as_str().unwrap(), r["sampling"].as_str().unwrap())).collect();
+    assert_eq!(names, [("bsdf", "detached"), ("attached", "attached")]);
+    assert_eq!(v["baseline"], "bsdf");
+    assert!(rows.iter().all(|r| r["variance"].as_f64().unwrap() > 0.0), "{v}");
+    // The same seeds: were the row's sampling not applied, it would repeat bsdf's figures exactly.
+    assert_ne!(rows[0]["variance"], rows[1]["variance"]);
+
+    let o = run("attached_sphere", "glass.bsdf.eta", "attached");
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let v: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    assert!(v["techniques"][0]["variance"].as_f64().unwrap() > 0.0, "{v}");
+    let o = run("attached_sphere", "glass.bsdf.eta", "attached,bsdf");
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(!o.status.success() && err.contains("--strategy bsdf") && err.contains("no detached derivative"), "{err}");
+}

@@ -7,7 +7,7 @@ use std::path::PathBuf;
 use anyhow::{Context as _, Result, bail};
 use clap::Args;
 use pathgrad::adaptive::AdaptiveEstimator;
-use pathgrad::integrator::{DEFAULT_DIFF_Q, PlacementMis, RenderOptions, Strategy};
+use pathgrad::integrator::{DEFAULT_DIFF_Q, PlacementMis, RenderOptions, Sampling, Strategy};
 use pathgrad::variance::{self, LossGradientSetup, PilotBudget};
 
 use crate::common::{
@@ -29,8 +29,10 @@ pub(crate) struct VarianceArgs {
     /// --diff-param says otherwise.
     #[arg(long, value_name = "NAME")]
     param: String,
-    /// Strategies to compare, comma-separated: bsdf, diff, auto (default: bsdf and diff). `auto` is
-    /// the strategy `--strategy auto` picks from its pilot (run once, its cost reported apart).
+    /// Strategies to compare, comma-separated: bsdf, diff, auto, attached (default: bsdf and
+    /// diff). `auto` is the strategy `--strategy auto` picks from its pilot (run once, its cost
+    /// reported apart); `attached` is bsdf with attached sampling (`--sampling attached`, the
+    /// default Jacobian noise), the only row that differentiates an index of refraction.
     /// With several --diff-param: `diff` samples by all of them, one hero per path (weights
     /// --hero-weights), `diff:NAME` by NAME alone, `diff@W/W/…` by all with hero weights W.
     #[arg(long, value_delimiter = ',')]
@@ -91,6 +93,8 @@ struct Technique {
     label: String,
     stem: String,
     strategy: Strategy,
+    /// Detached, or attached for the `attached` row.
+    sampling: Sampling,
     adaptive: bool,
     /// The row of `auto`: its strategy is the pilot's choice, set once the device is open.
     auto: bool,
@@ -141,6 +145,7 @@ fn techniques(args: &VarianceArgs, scene: &pathgrad::scene::Scene) -> Result<(Ve
                     label: label.clone(),
                     stem: stem.clone(),
                     strategy,
+                    sampling: Sampling::Detached,
                     adaptive: false,
                     auto: false,
                 });
@@ -149,6 +154,7 @@ fn techniques(args: &VarianceArgs, scene: &pathgrad::scene::Scene) -> Result<(Ve
                         label: format!("{label} adaptive"),
                         stem: format!("{stem}-adaptive"),
                         strategy,
+                        sampling: Sampling::Detached,
                         adaptive: true,
                         auto: false,
                     });
@@ -156,6 +162,9 @@ fn techniques(args: &VarianceArgs, scene: &pathgrad::scene::Scene) -> Result<(Ve
             }
             continue;
         }
+        // `attached`: the bsdf strategy, sampled attached.
+        let sampling = if name == "attached" { Sampling::attached() } else { Sampling::Detached };
+        let name = if sampling.is_attached() { "bsdf" } else { name.as_str() };
         if name != "bsdf" && heroes.len() > 1 {
             bail!("--strategy {name} takes one --diff-param (several: diff, diff:NAME or diff@W/W)");
         }
@@ -172,6 +181,7 @@ fn techniques(args: &VarianceArgs, scene: &pathgrad::scene::Scene) -> Result<(Ve
             };
             let (label, stem) = match strategy {
                 _ if auto => ("auto".to_string(), "auto".to_string()),
+                _ if sampling.is_attached() => ("attached".to_string(), "attached".to_string()),
                 Strategy::Bsdf => ("bsdf".to_string(), "bsdf".to_string()),
                 Strategy::Diff { q, placement: PlacementMis::Balance, .. } => {
                     (format!("diff q={q}"), format!("diff-q{q}"))
@@ -194,7 +204,7 @@ fn techniques(args: &VarianceArgs, scene: &pathgrad::scene::Scene) -> Result<(Ve
                 if rows.iter().any(|r: &Technique| r.stem == stem) {
                     bail!("--strategy/--q list '{label}' twice");
                 }
-                rows.push(Technique { label, stem, strategy, adaptive, auto });
+                rows.push(Technique { label, stem, strategy, sampling, adaptive, auto });
                 if auto {
                     auto_placement = first_placement;
                 }
@@ -226,6 +236,17 @@ pub(crate) fn run(args: &VarianceArgs) -> Result<()> {
         format!("invalid --param {}: no such parameter (see `pathgrad params {}`)", args.param, args.scene)
     })?;
     let (mut rows, auto_placement) = techniques(args, &scene)?;
+    // Detached sampling holds the directions an index of refraction moves: its gradient is 0.
+    if pathgrad::attached::attached_only_params(&scene).contains(&param)
+        && let Some(row) = rows.iter().find(|r| !r.sampling.is_attached())
+    {
+        bail!(
+            "invalid --strategy {}: {} acts only through sampled directions and has no detached derivative; \
+             measure it with --strategy attached",
+            row.label,
+            args.param
+        );
+    }
     let loss_mode = args.target.is_some() || !args.target_set.is_empty();
     if !loss_mode && (args.loss.is_some() || args.adaptive || args.spp_primal.is_some()) {
         bail!(
@@ -301,10 +322,18 @@ pub(crate) fn run(args: &VarianceArgs) -> Result<()> {
     let mut measured = Vec::with_capacity(rows.len());
     let mut outputs: Option<Outputs> = None;
     let mode;
+    // Each sampling the rows use has kernels of its own to warm up.
+    let mut samplings: Vec<Sampling> = Vec::new();
+    for row in &rows {
+        if !samplings.contains(&row.sampling) {
+            samplings.push(row.sampling);
+        }
+    }
     if let Some((loss, target, spp_primal)) = loss_setup {
         mode = "loss";
         // Warm-up, untimed: lavapipe compiles each kernel at its first dispatch.
-        for adaptive in [false, true].into_iter().filter(|&a| !a || args.adaptive) {
+        let warm_ups = samplings.iter().flat_map(|&s| [(s, false), (s, true)]);
+        for (sampling, adaptive) in warm_ups.filter(|&(_, a)| !a || args.adaptive) {
             let setup = LossGradientSetup {
                 target: &target,
                 loss,
@@ -314,7 +343,7 @@ pub(crate) fn run(args: &VarianceArgs) -> Result<()> {
             };
             variance::loss_gradient_variance(
                 renderer.as_mut(),
-                &RenderOptions { spp: 1, ..opts },
+                &RenderOptions { spp: 1, sampling, ..opts },
                 &setup,
                 2,
                 &mut |_| {},
@@ -333,7 +362,7 @@ pub(crate) fn run(args: &VarianceArgs) -> Result<()> {
             let base = u64::from(args.runs) * k as u64;
             let r = variance::loss_gradient_variance(
                 renderer.as_mut(),
-                &RenderOptions { strategy: row.strategy, ..opts },
+                &RenderOptions { strategy: row.strategy, sampling: row.sampling, ..opts },
                 &setup,
                 args.runs,
                 &mut |done| progress.set_position(base + u64::from(done)),
@@ -350,13 +379,15 @@ pub(crate) fn run(args: &VarianceArgs) -> Result<()> {
         mode = "image";
         let mut maps = Vec::with_capacity(rows.len());
         // Warm-up, untimed: lavapipe compiles each kernel at its first dispatch.
-        renderer.image_gradient(&RenderOptions { spp: 1, ..opts }, &args.param).context("warming up")?;
+        for &sampling in &samplings {
+            renderer.image_gradient(&RenderOptions { spp: 1, sampling, ..opts }, &args.param).context("warming up")?;
+        }
         for (k, row) in rows.iter().enumerate() {
             progress.set_message(row.label.clone());
             let base = u64::from(args.runs) * k as u64;
             let r = variance::image_gradient_variance(
                 renderer.as_mut(),
-                &RenderOptions { strategy: row.strategy, ..opts },
+                &RenderOptions { strategy: row.strategy, sampling: row.sampling, ..opts },
                 &args.param,
                 args.runs,
                 &mut |done| progress.set_position(base + u64::from(done)),
@@ -386,7 +417,10 @@ pub(crate) fn run(args: &VarianceArgs) -> Result<()> {
     }
     progress.finish_and_clear();
 
-    let baseline = rows.iter().position(|r| r.strategy == Strategy::Bsdf && !r.adaptive && !r.auto).unwrap_or(0);
+    let baseline = rows
+        .iter()
+        .position(|r| r.strategy == Strategy::Bsdf && r.sampling == Sampling::Detached && !r.adaptive && !r.auto)
+        .unwrap_or(0);
     let base = &measured[baseline];
     let ratio = |a: f64, b: f64| if b > 0.0 { a / b } else { f64::NAN };
     // Per row: variance, wall-time and CPU-time efficiency, each relative to the baseline.
@@ -412,6 +446,7 @@ pub(crate) fn run(args: &VarianceArgs) -> Result<()> {
             let mut item = serde_json::json!({
                 "technique": row.label,
                 "strategy": row.strategy.name(),
+                "sampling": row.sampling.name(),
                 "q": match row.strategy { Strategy::Diff { q, .. } | Strategy::Hero { q, .. } => Some(q), Strategy::Bsdf => None },
                 "placement_mis": match row.strategy { Strategy::Diff { placement, .. } => Some(placement.name()), Strategy::Hero { .. } => Some("balance"), Strategy::Bsdf => None },
                 "hero_weights": match row.strategy { Strategy::Hero { heroes, .. } => Some(heroes.weights().to_vec()), _ => None },
