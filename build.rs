@@ -129,6 +129,7 @@ fn main() {
     println!("cargo:rerun-if-changed=shaders");
     println!("cargo:rerun-if-changed=src/contract");
     println!("cargo:rerun-if-env-changed=PATHGRAD_GLSLC");
+    println!("cargo:rerun-if-env-changed=PATHGRAD_SHADER_CACHE");
 
     // The generated declarations live in a folder of their own, searched first for `<…>` includes.
     let include = out.join("include");
@@ -157,9 +158,22 @@ fn main() {
         println!("cargo:rerun-if-changed={}", path.display());
     }
     let kernels: Vec<&PathBuf> = sources.iter().filter(|p| p.extension().is_some_and(|e| e == "comp")).collect();
+    let names: Vec<String> = kernels
+        .iter()
+        .map(|p| p.file_stem().expect("a .comp file has a stem").to_string_lossy().into_owned())
+        .collect();
+    let cache = std::env::var_os("PATHGRAD_SHADER_CACHE").map(|dir| {
+        let key = glslc.key(&args, &include, &shader_dir, &sources, &generated_path);
+        ShaderCache { dir: PathBuf::from(dir), key }
+    });
+    if let Some(entries) = cache.as_ref().and_then(|c| c.fetch(&names, &out)) {
+        write_table(&out, &entries);
+        specialiser();
+        return;
+    }
     // Every core takes the next kernel until none is left (the adjoint variants take seconds each
     // in the optimiser); the specialiser's C++ compiles beside them. The build script runs
-    // twice in `scripts/test` (clippy's check and the test build), so this is CI time twice over.
+    // several times in `scripts/test`, which therefore keeps a ShaderCache.
     let next = std::sync::atomic::AtomicUsize::new(0);
     let workers = std::thread::available_parallelism().map_or(1, |n| n.get()).min(kernels.len().max(1));
     let entries: Vec<(String, PathBuf)> = std::thread::scope(|scope| {
@@ -181,13 +195,91 @@ fn main() {
         done.sort_by_key(|(i, _)| *i);
         done.into_iter().map(|(_, entry)| entry).collect()
     });
+    if let Some(cache) = &cache {
+        cache.store(&entries);
+    }
+    write_table(&out, &entries);
+}
+
+/// Writes `OUT_DIR/shaders.rs`, the table of (name, SPIR-V bytes) of `entries`.
+fn write_table(out: &Path, entries: &[(String, PathBuf)]) {
     let mut table =
         String::from("/// Every compiled kernel: (name, SPIR-V bytes).\npub const SHADERS: &[(&str, &[u8])] = &[\n");
-    for (name, spv) in &entries {
+    for (name, spv) in entries {
         let _ = writeln!(table, "    ({name:?}, include_bytes!({:?})),", spv.display().to_string());
     }
     table.push_str("];\n");
     std::fs::write(out.join("shaders.rs"), table).expect("OUT_DIR is writable");
+}
+
+/// Compiled kernels kept between builds, opt-in through `PATHGRAD_SHADER_CACHE` (a folder).
+///
+/// `scripts/test` builds pathgrad several times over (clippy's check, the tests, a consumer
+/// crate with other features, the packaged tarball, the C API and Python modules), and each
+/// build ran glslc on every kernel: minutes each time on two cores. An entry is a folder named
+/// by a hash of everything glslc's output depends on — its version, its arguments other than the
+/// include folders, the path and bytes of every file under `shaders/` and the generated contract
+/// — so an edit anywhere misses and compiles afresh. Entries are written to a scratch folder
+/// and renamed into place, and the newest [`ShaderCache::KEEP`] are kept.
+struct ShaderCache {
+    dir: PathBuf,
+    key: String,
+}
+
+impl ShaderCache {
+    const KEEP: usize = 4;
+
+    /// The kernels `names` copied from the entry into `out`, or None when it is missing or
+    /// incomplete (then the build compiles them).
+    fn fetch(&self, names: &[String], out: &Path) -> Option<Vec<(String, PathBuf)>> {
+        let entry = self.dir.join(&self.key);
+        names
+            .iter()
+            .map(|name| {
+                let spv = out.join(format!("{name}.spv"));
+                std::fs::copy(entry.join(format!("{name}.spv")), &spv).ok()?;
+                Some((name.clone(), spv))
+            })
+            .collect()
+    }
+
+    /// Keeps `entries` under the key; failures only cost the next build its hit.
+    fn store(&self, entries: &[(String, PathBuf)]) {
+        let nanos = std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).map_or(0, |d| d.as_nanos());
+        let scratch = self.dir.join(format!(".{}-{}-{nanos}", self.key, std::process::id()));
+        let written = std::fs::create_dir_all(&scratch).is_ok()
+            && entries.iter().all(|(name, spv)| std::fs::copy(spv, scratch.join(format!("{name}.spv"))).is_ok());
+        if !written || std::fs::rename(&scratch, self.dir.join(&self.key)).is_err() {
+            let _ = std::fs::remove_dir_all(&scratch);
+            return;
+        }
+        let Ok(read) = std::fs::read_dir(&self.dir) else { return };
+        let mut kept: Vec<(std::time::SystemTime, PathBuf)> = read
+            .flatten()
+            .filter(|e| !e.file_name().to_string_lossy().starts_with('.'))
+            .filter_map(|e| Some((e.metadata().ok()?.modified().ok()?, e.path())))
+            .collect();
+        kept.sort_by_key(|k| std::cmp::Reverse(k.0));
+        for (_, old) in kept.into_iter().skip(Self::KEEP) {
+            let _ = std::fs::remove_dir_all(old);
+        }
+    }
+}
+
+/// 64-bit FNV-1a over length-delimited fields, stable across toolchains (std's hashers promise
+/// no stability).
+struct Fnv(u64);
+
+impl Fnv {
+    fn bytes(&mut self, data: &[u8]) {
+        for &b in data {
+            self.0 = (self.0 ^ u64::from(b)).wrapping_mul(0x0000_0100_0000_01b3);
+        }
+        // The length too, so that consecutive fields cannot run into one another.
+        for &b in &(data.len() as u64).to_le_bytes() {
+            self.0 = (self.0 ^ u64::from(b)).wrapping_mul(0x0000_0100_0000_01b3);
+        }
+    }
 }
 
 /// Debian's `glslc` (package `glslc`: shaderc's command-line compiler, with glslang and
@@ -220,6 +312,27 @@ impl Glslc {
                 program.display()
             ),
         }
+    }
+
+    /// The cache key of a build: glslc's version, `args` without the two include folders (the
+    /// generated one lies in OUT_DIR, which differs between builds; what they hold is hashed
+    /// instead), and the path under `shader_dir` and bytes of every file of `sources` and of
+    /// the generated contract.
+    fn key(&self, args: &[String], include: &Path, shader_dir: &Path, sources: &[PathBuf], generated: &Path) -> String {
+        let version = std::process::Command::new(&self.program).arg("--version").output().map(|o| o.stdout);
+        let skipped = [format!("-I{}", include.display()), format!("-I{}", shader_dir.display())];
+        let mut h = Fnv(0xcbf2_9ce4_8422_2325);
+        h.bytes(&version.unwrap_or_default());
+        for arg in args.iter().filter(|a| !skipped.contains(a)) {
+            h.bytes(arg.as_bytes());
+        }
+        for path in sources {
+            let relative = path.strip_prefix(shader_dir).unwrap_or(path);
+            h.bytes(relative.to_string_lossy().as_bytes());
+            h.bytes(&std::fs::read(path).expect("a shader source is readable"));
+        }
+        h.bytes(&std::fs::read(generated).expect("the generated contract was just written"));
+        format!("{:016x}", h.0)
     }
 
     /// Compiles one `.comp` file to `out/<stem>.spv`; returns (stem, path of the SPIR-V).
