@@ -162,9 +162,15 @@ fn main() {
         .iter()
         .map(|p| p.file_stem().expect("a .comp file has a stem").to_string_lossy().into_owned())
         .collect();
-    let cache = std::env::var_os("PATHGRAD_SHADER_CACHE").map(|dir| {
-        let key = glslc.key(&args, &include, &shader_dir, &sources, &generated_path);
-        ShaderCache { dir: PathBuf::from(dir), key }
+    // Unset or empty: no cache. A relative folder would land in the package's own folder (a build
+    // script runs there), which `cargo package` refuses: it is ignored, with a warning.
+    let cache = std::env::var_os("PATHGRAD_SHADER_CACHE").filter(|dir| !dir.is_empty()).and_then(|dir| {
+        let dir = PathBuf::from(dir);
+        if dir.is_relative() {
+            println!("cargo:warning=PATHGRAD_SHADER_CACHE={} is not an absolute path: not used", dir.display());
+            return None;
+        }
+        Some(ShaderCache { dir, key: glslc.key(&args, &include, &shader_dir, &sources, &generated_path) })
     });
     if let Some(entries) = cache.as_ref().and_then(|c| c.fetch(&names, &out)) {
         write_table(&out, &entries);
@@ -220,7 +226,8 @@ fn write_table(out: &Path, entries: &[(String, PathBuf)]) {
 /// by a hash of everything glslc's output depends on — its version, its arguments other than the
 /// include folders, the path and bytes of every file under `shaders/` and the generated contract
 /// — so an edit anywhere misses and compiles afresh. Entries are written to a scratch folder
-/// and renamed into place, and the newest [`ShaderCache::KEEP`] are kept.
+/// and renamed into place; the [`ShaderCache::KEEP`] most recently written or read are kept, and
+/// only folders named as entries (16 hex digits) or scratch folders are ever removed.
 struct ShaderCache {
     dir: PathBuf,
     key: String,
@@ -233,14 +240,19 @@ impl ShaderCache {
     /// incomplete (then the build compiles them).
     fn fetch(&self, names: &[String], out: &Path) -> Option<Vec<(String, PathBuf)>> {
         let entry = self.dir.join(&self.key);
-        names
+        let entries: Option<Vec<(String, PathBuf)>> = names
             .iter()
             .map(|name| {
                 let spv = out.join(format!("{name}.spv"));
                 std::fs::copy(entry.join(format!("{name}.spv")), &spv).ok()?;
                 Some((name.clone(), spv))
             })
-            .collect()
+            .collect();
+        // Read now: the pruning keeps the entries used last.
+        if entries.is_some() {
+            let _ = std::fs::File::open(&entry).and_then(|f| f.set_modified(std::time::SystemTime::now()));
+        }
+        entries
     }
 
     /// Keeps `entries` under the key; failures only cost the next build its hit.
@@ -254,11 +266,23 @@ impl ShaderCache {
             return;
         }
         let Ok(read) = std::fs::read_dir(&self.dir) else { return };
-        let mut kept: Vec<(std::time::SystemTime, PathBuf)> = read
-            .flatten()
-            .filter(|e| !e.file_name().to_string_lossy().starts_with('.'))
-            .filter_map(|e| Some((e.metadata().ok()?.modified().ok()?, e.path())))
-            .collect();
+        let now = std::time::SystemTime::now();
+        let mut kept: Vec<(std::time::SystemTime, PathBuf)> = Vec::new();
+        for e in read.flatten() {
+            let name = e.file_name().to_string_lossy().into_owned();
+            let Some(modified) = e.metadata().ok().and_then(|m| m.modified().ok()) else { continue };
+            let is_entry = name.len() == 16 && name.bytes().all(|b| b.is_ascii_hexdigit());
+            // A scratch folder a killed build left behind (one being written is seconds old).
+            let stale_scratch = name.starts_with('.')
+                && name.len() > 17
+                && name[1..17].bytes().all(|b| b.is_ascii_hexdigit())
+                && now.duration_since(modified).is_ok_and(|age| age.as_secs() > 3600);
+            if is_entry {
+                kept.push((modified, e.path()));
+            } else if stale_scratch {
+                let _ = std::fs::remove_dir_all(e.path());
+            }
+        }
         kept.sort_by_key(|k| std::cmp::Reverse(k.0));
         for (_, old) in kept.into_iter().skip(Self::KEEP) {
             let _ = std::fs::remove_dir_all(old);
