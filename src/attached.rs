@@ -18,7 +18,7 @@
 //! L_after, so it carries S = Σ_{j<k} ∂ ln w_j/∂r_j·J̃_j per channel and adds δL·β_k·c_k ⊙ S_k at
 //! each contribution instead: the same sum, ordered by contribution. Next-event estimation at a
 //! diffuse vertex, toward a point on an area emitter that stays fixed while the vertex moves (or a
-//! point or directional light), is one more contribution of that vertex
+//! point, directional or untextured spot light), is one more contribution of that vertex
 //! ([`HitGeometry::nee_gradient`], [`HitGeometry::delta_light_gradient`]); the emitter hit the
 //! vertex's own sample may make carries its MIS weight's row ([`HitGeometry::emitter_mis_row`]).
 //!
@@ -125,16 +125,27 @@ pub fn refuse_unsupported(flat: &FlatScene, options: &RenderOptions) -> crate::R
     // crate::cpu::emitter::spot_falloff_gradient), at diffuse vertices:
     // a light without area, which only next-event estimation reaches, would be missing from the
     // rough vertices' light, or from all of it without next-event estimation.
-    if flat.lights.iter().any(|l| l.kind == LIGHT_PROJECTOR || (l.kind == LIGHT_SPOT && l.tex != NO_PARAM)) {
-        return refuse(
-            "the scene has a projector or a textured spot light (its texture's slopes are not built)".into(),
-        );
+    // A projector's frame has edges where its light jumps to 0 (a boundary term that is not
+    // built); a textured spot's texture slope is not built.
+    let unsupported =
+        |l: &crate::contract::DeltaLight| l.kind == LIGHT_PROJECTOR || (l.kind == LIGHT_SPOT && l.tex != NO_PARAM);
+    if let Some(k) = flat.lights.iter().position(unsupported) {
+        let what = if flat.lights[k].kind == LIGHT_PROJECTOR {
+            "a projector (its light jumps to 0 at its frame's edges)"
+        } else {
+            "a textured spot light (its texture's slope is not built)"
+        };
+        return refuse(format!(
+            "the scene has {what}: light {} of its {} lights without area",
+            k + 1,
+            flat.lights.len()
+        ));
     }
     if !flat.lights.is_empty() {
         if !options.nee {
             return refuse(
-                "the scene has a point, directional or spot light and next-event estimation is off (only it reaches \
-                 them)"
+                "the scene has a light without area (point, directional or spot) and next-event estimation is off \
+                 (only it reaches such a light)"
                     .into(),
             );
         }

@@ -87,8 +87,10 @@ fn diffuse_vertices_match_finite_differences_on_the_cpu() {
 /// through a glass sphere and lit by a small lamp (`attached_lamp.xml`), whose points move with η
 /// under the lamp's fixed sample points — the distance, both cosines, the MIS weight and the
 /// textured albedo there (`HitGeometry::nee_gradient`); the same under a large panel whose
-/// light BSDF samples share (`attached_panel.xml`); and under a point and a directional light
-/// (`attached_point.xml`, `HitGeometry::delta_light_gradient`).
+/// light BSDF samples share (`attached_panel.xml`); and under a point, a directional and a spot
+/// light whose transition zone covers the floor the lens shows (`attached_point.xml`,
+/// `HitGeometry::delta_light_gradient`, `spot_falloff_gradient`: without the falloff's slope
+/// this fails).
 #[test]
 fn next_event_estimation_matches_finite_differences_on_the_cpu() {
     for name in ["attached_lamp", "attached_panel", "attached_point"] {
@@ -379,7 +381,7 @@ fn optimize_recovers_the_ior_of_a_glass_sphere() {
 }
 
 /// Attached sampling is refused, by name, where its Jacobians are not built: a textured diffuse
-/// albedo, a textured spot light, a point light beside a rough conductor or without next-event
+/// albedo, a textured spot, a projector, a point light beside a rough conductor or without next-event
 /// estimation, a plastic (in reverse and forward mode), deterministic mode;
 /// and an index of refraction's image gradient under detached sampling.
 #[test]
@@ -430,19 +432,21 @@ fn attached_sampling_refuses_what_it_does_not_cover() {
     );
     let err = pathgrad::cpu::backward(&tinted, &attached(&tinted, 8, 1), &a).unwrap_err().to_string();
     assert!(err.contains("`dielectric` with a textured reflectance or transmittance"), "{err}");
-    // A textured spot light: its texture's slope along the surface is not built (an untextured
-    // one is taken).
+    // Spot lights: plain, taken; textured, and a projector (its frame's edges), refused.
     let spot =
         r#"<emitter type="spot"><transform name="to_world"><lookat origin="0, 1, 0" target="0, 0, 0"/></transform>"#;
     let floor_shape = r#"<shape type="rectangle" id="floor">"#;
-    let plain = variant("attached_floor", floor_shape, &format!("{spot}</emitter>{floor_shape}"));
-    pathgrad::cpu::backward(&plain, &attached(&plain, 8, 1), &a).unwrap();
-    let textured_spot = format!(
-        r#"{spot}<texture type="bitmap" name="texture"><string name="filename" value="attached_ramp.exr"/></texture></emitter>{floor_shape}"#
-    );
-    let spot = variant("attached_floor", floor_shape, &textured_spot);
-    let err = pathgrad::cpu::backward(&spot, &attached(&spot, 8, 1), &a).unwrap_err().to_string();
-    assert!(err.contains("a projector or a textured spot light"), "{err}");
+    let ramp = r#"<texture type="bitmap" name="texture"><string name="filename" value="attached_ramp.exr"/>"#;
+    let lit = variant("attached_floor", floor_shape, &format!("{spot}</emitter>{floor_shape}"));
+    pathgrad::cpu::backward(&lit, &attached(&lit, 8, 1), &a).unwrap();
+    let textured = format!(r#"{spot}{ramp}</texture></emitter>{floor_shape}"#);
+    let lit = variant("attached_floor", floor_shape, &textured);
+    let err = pathgrad::cpu::backward(&lit, &attached(&lit, 8, 1), &a).unwrap_err().to_string();
+    assert!(err.contains("a textured spot light (its texture's slope is not built): light 1 of its 1"), "{err}");
+    let projector = r#"<emitter type="projector"><transform name="to_world"><lookat origin="0, 1, 0" target="0, 0, 0"/></transform><texture type="bitmap" name="irradiance"><string name="filename" value="attached_ramp.exr"/></texture></emitter>"#;
+    let lit = variant("attached_floor", floor_shape, &format!("{projector}{floor_shape}"));
+    let err = pathgrad::cpu::backward(&lit, &attached(&lit, 8, 1), &a).unwrap_err().to_string();
+    assert!(err.contains("a projector (its light jumps to 0 at its frame's edges)"), "{err}");
     // A point light beside a rough conductor (no next-event estimation at its vertices), and a
     // point light without next-event estimation: its light would be missing.
     let point = r#"<emitter type="point"><point name="position" x="0" y="3" z="0"/></emitter>"#;

@@ -329,4 +329,24 @@ fn cli_variance_takes_an_attached_row() {
     let o = run("attached_sphere", "glass.bsdf.eta", "attached,bsdf");
     let err = String::from_utf8_lossy(&o.stderr);
     assert!(!o.status.success() && err.contains("--strategy bsdf") && err.contains("no detached derivative"), "{err}");
+
+    // Loss-gradient mode, uniform and adaptive pixels: η's loss gradient against a target at 1.3.
+    let o = crate::cli::pathgrad()
+        .args(["variance", &format!("{scenes}/attached_sphere.xml"), "--param", "glass.bsdf.eta"])
+        .args(["--strategy", "attached", "--target-set", "glass.bsdf.eta=1.3", "--adaptive", "--loss", "l2"])
+        .args(["--runs", "3", "--spp", "1", "--width", "12", "--height", "12", "--json", "-o"])
+        .arg(dir.path().join("loss"))
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let v: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    assert_eq!(v["mode"], "loss");
+    let rows = v["techniques"].as_array().unwrap();
+    let names: Vec<_> =
+        rows.iter().map(|r| (r["technique"].as_str().unwrap(), r["sampling"].as_str().unwrap())).collect();
+    assert_eq!(names, [("attached", "attached"), ("attached adaptive", "attached")]);
+    for r in rows {
+        let g = r["mean_gradient"][0].as_f64().unwrap();
+        assert!(g.is_finite() && g != 0.0 && r["variance"].as_f64().unwrap() > 0.0, "{r}");
+    }
 }

@@ -241,9 +241,10 @@ pub(crate) fn run(args: &VarianceArgs) -> Result<()> {
         && let Some(row) = rows.iter().find(|r| !r.sampling.is_attached())
     {
         bail!(
-            "invalid --strategy {}: {} acts only through sampled directions and has no detached derivative; \
+            "invalid --strategy {}{}: {} acts only through sampled directions and has no detached derivative; \
              measure it with --strategy attached",
             row.label,
+            if args.strategy.is_none() { " (the default is bsdf,diff)" } else { "" },
             args.param
         );
     }
