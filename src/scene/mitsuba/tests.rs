@@ -121,9 +121,23 @@ fn lookat_matches_mitsubas_frame() {
     // dir = (0, 0, −1); left = up × dir = (−1, 0, 0); up' = dir × left = (0, 1, 0).
     let m = xml_transform(r#"<lookat origin="1, 2, 3" target="1, 2, 0" up="0, 1, 0"/>"#);
     assert_eq!(m, rows([[-1., 0., 0., 1.], [0., 1., 0., 2.], [0., 0., -1., 3.], [0., 0., 0., 1.]]));
-    // Without `up` some perpendicular frame is chosen.
-    let (m, up) = look_at(Vec3::ZERO, Vec3::X, Vec3::ZERO).unwrap();
-    assert!(up.dot(Vec3::X).abs() < 1e-6 && m.z_axis.truncate() == Vec3::X);
+    // Without `up`, Mitsuba's own choice: the local x and y axes that Mitsuba 3.9.1 builds for
+    // these (a spot's `to_world`, printed by `mi.traverse(emitter)['to_world']`). glam's
+    // `any_orthonormal_vector` turned them a quarter about the view, which turned a textured
+    // spot's image (BENCHMARKS.md, issue 34, sixth session).
+    let mitsuba: [([f32; 3], [f32; 3], [f32; 3], [f32; 3]); 4] = [
+        ([0.9, 1.2, -0.6], [0.0, 0.0, 0.05], [0.289, -0.614, -0.734], [0.783, -0.289, 0.551]),
+        ([0.0, 5.0, 0.0], [0.0, 0.0, 0.0], [0.0, 0.0, -1.0], [1.0, 0.0, 0.0]),
+        ([1.0, 2.0, 3.0], [0.0, 1.0, 0.0], [-0.048, 0.952, -0.302], [0.952, -0.048, -0.302]),
+        ([0.0, 0.0, 0.0], [0.0, 0.0, -1.0], [0.0, 1.0, 0.0], [1.0, 0.0, 0.0]),
+    ];
+    for (origin, target, x, y) in mitsuba {
+        let (m, up) = look_at(Vec3::from(origin), Vec3::from(target), Vec3::ZERO).unwrap();
+        let dir = (Vec3::from(target) - Vec3::from(origin)).normalize();
+        assert!(up.dot(dir).abs() < 1e-6 && (m.z_axis.truncate() - dir).length() < 1e-6);
+        let (gx, gy) = (m.x_axis.truncate(), m.y_axis.truncate());
+        assert!((gx - Vec3::from(x)).length() < 2e-3 && (gy - Vec3::from(y)).length() < 2e-3, "{origin:?}: {gx} {gy}");
+    }
 }
 
 #[test]

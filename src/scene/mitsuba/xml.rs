@@ -742,8 +742,11 @@ pub(super) fn rotation_as_given(a: Vec3, theta: f32) -> Mat4 {
 }
 
 /// Mitsuba's look-at matrix: columns `left = up × dir`, `up' = dir × left`, `dir`, `origin`, so
-/// that local +z looks at `target` and local +y is up. A zero `up` picks one perpendicular to the
-/// view. Returns the matrix and the up vector used.
+/// that local +z looks at `target` and local +y is up. A zero `up` (the attribute left out) is
+/// Mitsuba's: the first vector of its `coordinate_system(dir)` (Duff et al.'s basis, the sign of
+/// dir.z taken as +1 at ±0, as Dr.Jit's `sign`). Another perpendicular would turn the frame about
+/// the view: a textured spot's or projector's image, or a camera's, by a quarter turn. Returns the
+/// matrix and the up vector used.
 ///
 /// # Errors
 /// Coincident origin and target, or `up` parallel to the view.
@@ -752,7 +755,14 @@ pub(super) fn look_at(origin: Vec3, target: Vec3, up: Vec3) -> std::result::Resu
     if dir == Vec3::ZERO {
         return Err("lookat: origin and target coincide".into());
     }
-    let up = if up == Vec3::ZERO { dir.any_orthonormal_vector() } else { up };
+    let up = if up == Vec3::ZERO {
+        let sign = if dir.z >= 0.0 { 1.0 } else { -1.0 };
+        let a = -1.0 / (sign + dir.z);
+        let b = dir.x * dir.y * a;
+        Vec3::new(1.0 + sign * dir.x * dir.x * a, sign * b, -sign * dir.x)
+    } else {
+        up
+    };
     let left = up.cross(dir).normalize_or_zero();
     if left == Vec3::ZERO {
         return Err("lookat: 'up' is parallel to the viewing direction".into());
