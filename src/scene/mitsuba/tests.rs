@@ -125,7 +125,8 @@ fn lookat_matches_mitsubas_frame() {
     // these (a spot's `to_world`, printed by `mi.traverse(emitter)['to_world']`). glam's
     // `any_orthonormal_vector` turned them a quarter about the view, which turned a textured
     // spot's image (BENCHMARKS.md, issue 34, sixth session).
-    let mitsuba: [([f32; 3], [f32; 3], [f32; 3], [f32; 3]); 4] = [
+    type Frame = ([f32; 3], [f32; 3], [f32; 3], [f32; 3]);
+    let mitsuba: [Frame; 4] = [
         ([0.9, 1.2, -0.6], [0.0, 0.0, 0.05], [0.289, -0.614, -0.734], [0.783, -0.289, 0.551]),
         ([0.0, 5.0, 0.0], [0.0, 0.0, 0.0], [0.0, 0.0, -1.0], [1.0, 0.0, 0.0]),
         ([1.0, 2.0, 3.0], [0.0, 1.0, 0.0], [-0.048, 0.952, -0.302], [0.952, -0.048, -0.302]),
