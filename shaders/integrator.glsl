@@ -831,13 +831,22 @@ bool path_step(inout PathState st) {
             st.radiance += sign * (st.throughput * tr * nee_w * nee_f * es.radiance / nee_pdf);
 #if ATTACHED
             {
-                // Its own row: δL·C·∂ln C/∂r, through the hit point, the shading normal and the
-                // albedo's slopes (src/cpu/path.rs).
+                // Its own row: δL·C·∂ln C/∂r, through the hit point, the shading normal, a
+                // spot's falloff and the albedo's and a textured spot's slopes (src/cpu/path.rs).
                 vec3 c = st.adj * st.throughput * tr * nee_w * nee_f * es.radiance / nee_pdf;
                 float dist = length(es.point - shadow_ray.origin);
                 vec3 by_light = es.delta ? hit_delta_light_gradient(geometry, shadow_ray.dir, es.distant ? 0.0 : 1.0 / dist) + es.dln_falloff
                                          : hit_nee_gradient(geometry, shadow_ray.dir, dist, es.normal, nee_w);
                 vec3 g = by_light * (c.x + c.y + c.z) + dln_albedo[0] * c.x + dln_albedo[1] * c.y + dln_albedo[2] * c.z;
+                if (HAS(F_LIGHT_TEXTURE) && es.delta && (es.param & LIGHT_SLOT) != 0u) {
+                    // A textured spot (projectors are refused): c_k·∂ln texture_k/∂x; `normal`
+                    // holds the shading point of its lookup.
+                    vec3 tex_value;
+                    mat3 rows = light_texture_slope(lights[es.param & ~LIGHT_SLOT], es.normal, tex_value);
+                    for (int k = 0; k < 3; k++) {
+                        if (tex_value[k] > 0.0) g += rows[k] * (c[k] / tex_value[k]);
+                    }
+                }
                 Row6 own = hit_position_row(geometry, g);
                 if (adjoint) st.gamma = row_add_scaled(st.gamma, own, -1.0);
                 else attached_contribution(st, row_through(own, st.jac), c);

@@ -18,7 +18,7 @@
 //! L_after, so it carries S = Σ_{j<k} ∂ ln w_j/∂r_j·J̃_j per channel and adds δL·β_k·c_k ⊙ S_k at
 //! each contribution instead: the same sum, ordered by contribution. Next-event estimation at a
 //! diffuse vertex, toward a point on an area emitter that stays fixed while the vertex moves (or a
-//! point, directional or untextured spot light), is one more contribution of that vertex
+//! point, directional or spot light), is one more contribution of that vertex
 //! ([`HitGeometry::nee_gradient`], [`HitGeometry::delta_light_gradient`]); the emitter hit the
 //! vertex's own sample may make carries its MIS weight's row ([`HitGeometry::emitter_mis_row`]).
 //!
@@ -45,7 +45,7 @@ use crate::scene::flat::FlatScene;
 /// `thindielectric` or `conductor` or an isotropic `roughconductor` or `roughdielectric` with
 /// untextured roughness (no normal map, no mask), without media; light comes from the
 /// environment, from area emitters whose radiance is constant or a bilinear bitmap, or from
-/// point, directional and untextured spot lights (no textured spot, no projector).
+/// point, directional and spot lights (a spot's texture bilinear; no projector).
 ///
 /// # Errors
 /// [`crate::Error::InvalidArgument`] naming `Sampling::Attached` and what the scene or request has.
@@ -60,7 +60,7 @@ pub fn refuse_unsupported(flat: &FlatScene, options: &RenderOptions) -> crate::R
                 "{what}: attached derivatives are built for scenes of smooth `dielectric`, `thindielectric` and \
                  `conductor` surfaces, isotropic `roughconductor`s and `roughdielectric`s with untextured \
                  roughness and `diffuse` surfaces with a constant or smoothly textured albedo, lit by the \
-                 environment, by area emitters or by point, directional and untextured spot lights (use detached \
+                 environment, by area emitters or by point, directional and spot lights (use detached \
                  sampling)"
             ),
         })
@@ -121,19 +121,21 @@ pub fn refuse_unsupported(flat: &FlatScene, options: &RenderOptions) -> crate::R
         return refuse("the scene has participating media".into());
     }
     // Next-event estimation's rows are built for area emitters' points, point, directional and
-    // untextured spot lights (HitGeometry::nee_gradient, HitGeometry::delta_light_gradient and
-    // crate::cpu::emitter::spot_falloff_gradient), at diffuse vertices:
+    // spot lights (HitGeometry::nee_gradient, HitGeometry::delta_light_gradient,
+    // crate::cpu::emitter::spot_falloff_gradient, crate::cpu::slope::light_texture_slope), at
+    // diffuse vertices:
     // a light without area, which only next-event estimation reaches, would be missing from the
     // rough vertices' light, or from all of it without next-event estimation.
     // A projector's frame has edges where its light jumps to 0 (a boundary term that is not
-    // built); a textured spot's texture slope is not built.
-    let unsupported =
-        |l: &crate::contract::DeltaLight| l.kind == LIGHT_PROJECTOR || (l.kind == LIGHT_SPOT && l.tex != NO_PARAM);
+    // built); a spot's texture read by nearest texels jumps between them.
+    let unsupported = |l: &crate::contract::DeltaLight| {
+        l.kind == LIGHT_PROJECTOR || (l.kind == LIGHT_SPOT && l.tex != NO_PARAM && !smooth_read(l.tex_mode))
+    };
     if let Some(k) = flat.lights.iter().position(unsupported) {
         let what = if flat.lights[k].kind == LIGHT_PROJECTOR {
             "a projector (its light jumps to 0 at its frame's edges)"
         } else {
-            "a textured spot light (its texture's slope is not built)"
+            "a spot light whose texture is read by nearest texels (it jumps between them)"
         };
         return refuse(format!(
             "the scene has {what}: light {} of its {} lights without area",

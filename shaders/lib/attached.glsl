@@ -668,4 +668,26 @@ mat3 area_radiance_slope(uint p, vec2 uv, SurfaceGradients g) {
     return slope_rows(texel, dw);
 }
 
+// ∂texture_c/∂x (column c) of a textured spot l read toward the shading point x, and in `value`
+// the texture there: through the lookup uv = 0.5 + uv_scale ⊙ (lx, ly)/lz of the light's local
+// point, then the bilinear weights (light_texture_slope in src/cpu/slope.rs).
+mat3 light_texture_slope(DeltaLight l, vec3 x, out vec3 value) {
+    float factor;
+    vec2 uv = light_lookup(l, x, factor);
+    vec3 d = x - l.position;
+    vec3 local = vec3(dot(l.row0, d), dot(l.row1, d), dot(l.row2, d));
+    vec3 du = l.uv_scale.x * (l.row0 - (local.x / local.z) * l.row2) / local.z;
+    vec3 dv = l.uv_scale.y * (l.row1 - (local.y / local.z) * l.row2) / local.z;
+    uint texel[4];
+    float weight[4];
+    texture_footprint(l.tex, l.tex_width, l.tex_height, l.tex_mode, uv, texel, weight);
+    vec2 slope[4];
+    footprint_slopes(l.tex_width, l.tex_height, l.tex_mode, uv, slope);
+    vec3 dw[4];
+    for (int k = 0; k < 4; k++) dw[k] = slope[k].x * du + slope[k].y * dv;
+    value = param_rgb(texel[0]) * weight[0] + param_rgb(texel[1]) * weight[1] + param_rgb(texel[2]) * weight[2]
+        + param_rgb(texel[3]) * weight[3];
+    return slope_rows(texel, dw);
+}
+
 #endif

@@ -111,7 +111,7 @@ struct EmitterSample {
     vec3 point; vec3 normal; vec3 radiance; uint param; bool environment; bool valid;
     bool delta; bool distant; float factor; float pdf;
     vec2 uv;    // a textured area emitter's texture coordinates at `point`
-    vec3 dln_falloff;   // an untextured spot: ∇ ln falloff by the shading point (0 otherwise)
+    vec3 dln_falloff;   // a spot: ∇ ln falloff by the shading point (0 otherwise)
 };
 
 // A spot's falloff toward unit direction `d` from its position (Mitsuba's falloff_curve).
@@ -192,6 +192,12 @@ EmitterSample sample_emitter(float u_select, vec2 u_pos, vec2 u_cell, vec3 x) {
             s.param = LIGHT_SLOT | index;
             s.valid = s.factor > 0.0 && s.factor < FLOAT_MAX;
             s.radiance = s.valid ? light_tint(l, uv) * s.factor : vec3(0.0);
+            if (l.kind == LIGHT_SPOT && s.valid) {
+                vec3 d = x - l.position;
+                float d2 = dot(d, d);
+                vec3 u = d * inversesqrt(d2);
+                s.dln_falloff = spot_falloff_gradient(l, u, sqrt(d2), spot_falloff(l, u));
+            }
             return s;
         }
         if (l.kind == LIGHT_DIRECTIONAL) {

@@ -40,8 +40,8 @@ pub struct EmitterSample {
     pub from: Vec3,
     /// A textured area emitter: the texture coordinates of `point`.
     pub uv: Vec2,
-    /// An untextured spot: the gradient of ln falloff by the shading point (0 in the beam and
-    /// for every other light; attached sampling's next-event rows, [`spot_falloff_gradient`]).
+    /// A spot: the gradient of ln falloff by the shading point (0 in the beam and for every
+    /// other light; attached sampling's next-event rows, [`spot_falloff_gradient`]).
     pub dln_falloff: Vec3,
 }
 
@@ -288,6 +288,14 @@ pub fn sample_emitter(
             if !(factor > 0.0 && factor < f32::MAX) {
                 return None;
             }
+            let dln_falloff = if l.kind == LIGHT_SPOT {
+                let d = x - l.position;
+                let d2 = d.dot(d);
+                let u = d * (1.0 / d2.sqrt());
+                spot_falloff_gradient(l, u, d2.sqrt(), spot_falloff(l, u))
+            } else {
+                Vec3::ZERO
+            };
             return Some(EmitterSample {
                 point: l.position,
                 radiance: light_tint(flat, l, uv) * factor,
@@ -295,6 +303,7 @@ pub fn sample_emitter(
                 delta: true,
                 factor,
                 pdf: globals.light_select_prob / n as f32,
+                dln_falloff,
                 ..none
             });
         }

@@ -881,8 +881,8 @@ pub fn trace_path<const ADJOINT: bool>(
                 radiance += sign * (throughput * tr * w_n * f * es.radiance / p_e);
                 if let Some(geometry) = &geometry {
                     // Its own row: δL·C·∂ln C/∂r, through the hit point and the shading normal
-                    // (crate::attached::HitGeometry::nee_gradient, delta_light_gradient) and the
-                    // albedo's slopes.
+                    // (crate::attached::HitGeometry::nee_gradient, delta_light_gradient, a
+                    // spot's falloff) and the albedo's and a textured spot's slopes.
                     let c = adj_radiance * throughput * tr * w_n * f * es.radiance / p_e;
                     let dist = (es.point - origin).length();
                     let by_light = if es.delta {
@@ -890,8 +890,18 @@ pub fn trace_path<const ADJOINT: bool>(
                     } else {
                         geometry.nee_gradient(wl, dist, es.normal, w_n)
                     };
-                    let g =
+                    let mut g =
                         by_light * (c.x + c.y + c.z) + dln_albedo[0] * c.x + dln_albedo[1] * c.y + dln_albedo[2] * c.z;
+                    if es.delta && es.param & LIGHT_SLOT != 0 {
+                        // A textured spot (projectors are refused): c_k·∂ln texture_k/∂x.
+                        let l = &flat.lights[(es.param & !LIGHT_SLOT) as usize];
+                        let (rows, texture) = crate::cpu::slope::light_texture_slope(flat, l, es.from);
+                        for k in 0..3 {
+                            if texture[k] > 0.0 {
+                                g += rows[k] * (c[k] / texture[k]);
+                            }
+                        }
+                    }
                     let own = geometry.position_row(g);
                     if ADJOINT {
                         phi = phi.add_scaled(own, -1.0);

@@ -1,6 +1,6 @@
 //! How a texture read varies along the surface it is read on: the derivatives by the hit point of
-//! a diffuse albedo and of an area emitter's radiance, for attached sampling (twin: the `*_slope`
-//! functions of `shaders/lib/attached.glsl`).
+//! a diffuse albedo, of an area emitter's radiance and of what a textured spot sends there, for
+//! attached sampling (twin: the `*_slope` functions of `shaders/lib/attached.glsl`).
 //!
 //! A hit point moves only along its triangle's plane (`crate::attached`), so each derivative is a
 //! vector in that plane: through the barycentric coordinates for a mesh attribute, through the
@@ -14,9 +14,9 @@ use glam::{Vec2, Vec3};
 use crate::attached::barycentric_gradients;
 use crate::bvh::Hit;
 use crate::contract::{
-    Material, NO_ARRAY, SCALAR_TEXTURE, TEX_ATTR_VERTEX, TEX_CHECKER, TEX_NEAREST, TEXTURE_DESC_LEN,
+    DeltaLight, Material, NO_ARRAY, SCALAR_TEXTURE, TEX_ATTR_VERTEX, TEX_CHECKER, TEX_NEAREST, TEXTURE_DESC_LEN,
 };
-use crate::cpu::surface::{TexAt, material_footprint, param_color};
+use crate::cpu::surface::{TexAt, material_footprint, param_color, texture_footprint};
 use crate::scene::flat::FlatScene;
 
 /// The gradients along a hit triangle's plane of its barycentric coordinates b1, b2 and of its
@@ -118,6 +118,22 @@ pub fn area_radiance_slope(flat: &FlatScene, p: u32, uv: Vec2, g: &SurfaceGradie
     let rows_uv = [Vec3::new(desc[4], desc[5], desc[6]), Vec3::new(desc[7], desc[8], desc[9])];
     let dw = bitmap_weight_gradients(desc[1].to_bits(), desc[2].to_bits(), desc[3].to_bits(), rows_uv, uv, g);
     rows(flat, texel, dw)
+}
+
+/// ∂texture_c/∂x (one row per channel) and the texture's value, of a textured spot `l` read
+/// toward the shading point `x`. The lookup is uv = 0.5 + uv_scale ⊙ (lx, ly)/lz of the light's
+/// local point (lx, ly, lz) = rows · (x − position), so ∂u/∂x = uv_scale.x·(row0 − (lx/lz)·row2)/lz
+/// (and v through row1), then the bilinear weights' slopes.
+pub fn light_texture_slope(flat: &FlatScene, l: &DeltaLight, x: Vec3) -> ([Vec3; 3], Vec3) {
+    let (uv, _) = crate::cpu::emitter::light_lookup(l, x);
+    let d = x - l.position;
+    let local = Vec3::new(l.row0.dot(d), l.row1.dot(d), l.row2.dot(d));
+    let du = l.uv_scale.x * (l.row0 - (local.x / local.z) * l.row2) / local.z;
+    let dv = l.uv_scale.y * (l.row1 - (local.y / local.z) * l.row2) / local.z;
+    let (texel, weight) = texture_footprint(l.tex, l.tex_width, l.tex_height, l.tex_mode, uv);
+    let dw = footprint_slopes(l.tex_width, l.tex_height, l.tex_mode, uv).map(|s| s.x * du + s.y * dv);
+    let value = (0..4).fold(Vec3::ZERO, |acc, k| acc + param_color(flat, texel[k]) * weight[k]);
+    (rows(flat, texel, dw), value)
 }
 
 #[cfg(test)]

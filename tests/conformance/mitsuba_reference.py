@@ -284,10 +284,12 @@ MATRIX = {
                                         "area emitter", "bitmap albedo"],
                               grads=["glass.bsdf.eta"], fd={"glass.bsdf.eta": 0.01}, sampling="attached",
                               spp=1024, seeds=32),
-    # The same floor under a point, a directional and a spot light (no MIS: only NEE reaches
-    # them); the spot's transition zone covers the floor the lens shows.
+    # The same floor under a point, a directional and two spot lights (no MIS: only NEE reaches
+    # them); one spot's transition zone covers the floor the lens shows, the other projects a
+    # bilinear bitmap onto it.
     "attached_ior_point": dict(features=["dielectric eta, attached sampling", "next-event estimation at diffuse vertices",
-                                         "point light", "directional light", "spot falloff", "bitmap albedo"],
+                                         "point light", "directional light", "spot falloff", "spot texture",
+                                         "bitmap albedo"],
                                grads=["glass.bsdf.eta"], fd={"glass.bsdf.eta": 0.01}, sampling="attached",
                                spp=1024, seeds=32),
     # The same floor under a large tilted panel whose radiance is a bilinear bump: BSDF samples
@@ -346,6 +348,10 @@ MATRIX = {
                                                      "directional (direction)", "NEE only"],
                                            grads=["bulb.intensity.value", "lamp.intensity.value",
                                                   "sun.irradiance.value"]),
+    # `<lookat>` without `up`: Mitsuba's frame about the view, for a camera and a textured spot.
+    "emitter_lookat_default_up": dict(features=["lookat without up (camera, spot)", "spot texture (EXR ramp)",
+                                                "NEE only"],
+                                      grads=["lamp.intensity.value", "floor.bsdf.reflectance.value"]),
     # Textured lights (issue 31): a spot's projected bitmap, projectors of a bitmap and of a constant.
     "emitter_spot_texture": dict(features=["spot texture (bitmap sRGB, bilinear)", "uv = ½ + ½ x / (z tan(cutoff))",
                                            "NEE only"],

@@ -88,9 +88,9 @@ fn diffuse_vertices_match_finite_differences_on_the_cpu() {
 /// under the lamp's fixed sample points — the distance, both cosines, the MIS weight and the
 /// textured albedo there (`HitGeometry::nee_gradient`); the same under a large panel whose
 /// light BSDF samples share (`attached_panel.xml`); and under a point, a directional and a spot
-/// light whose transition zone covers the floor the lens shows (`attached_point.xml`,
-/// `HitGeometry::delta_light_gradient`, `spot_falloff_gradient`: without the falloff's slope
-/// this fails).
+/// light whose transition zone covers the floor the lens shows and a spot projecting a bilinear
+/// bitmap onto it (`attached_point.xml`, `HitGeometry::delta_light_gradient`,
+/// `spot_falloff_gradient`, `light_texture_slope`: without the falloff's slope this fails).
 #[test]
 fn next_event_estimation_matches_finite_differences_on_the_cpu() {
     for name in ["attached_lamp", "attached_panel", "attached_point"] {
@@ -381,7 +381,7 @@ fn optimize_recovers_the_ior_of_a_glass_sphere() {
 }
 
 /// Attached sampling is refused, by name, where its Jacobians are not built: a textured diffuse
-/// albedo, a textured spot, a projector, a point light beside a rough conductor or without next-event
+/// albedo, a spot's nearest-filtered texture, a projector, a point light beside a rough conductor or without next-event
 /// estimation, a plastic (in reverse and forward mode), deterministic mode;
 /// and an index of refraction's image gradient under detached sampling.
 #[test]
@@ -432,17 +432,21 @@ fn attached_sampling_refuses_what_it_does_not_cover() {
     );
     let err = pathgrad::cpu::backward(&tinted, &attached(&tinted, 8, 1), &a).unwrap_err().to_string();
     assert!(err.contains("`dielectric` with a textured reflectance or transmittance"), "{err}");
-    // Spot lights: plain, taken; textured, and a projector (its frame's edges), refused.
+    // Spot lights: plain and with a bilinear texture, taken; a texture read by nearest texels
+    // (jumps between them), and a projector (its frame's edges), refused.
     let spot =
         r#"<emitter type="spot"><transform name="to_world"><lookat origin="0, 1, 0" target="0, 0, 0"/></transform>"#;
     let floor_shape = r#"<shape type="rectangle" id="floor">"#;
     let ramp = r#"<texture type="bitmap" name="texture"><string name="filename" value="attached_ramp.exr"/>"#;
-    let lit = variant("attached_floor", floor_shape, &format!("{spot}</emitter>{floor_shape}"));
-    pathgrad::cpu::backward(&lit, &attached(&lit, 8, 1), &a).unwrap();
-    let textured = format!(r#"{spot}{ramp}</texture></emitter>{floor_shape}"#);
-    let lit = variant("attached_floor", floor_shape, &textured);
+    for taken in [format!("{spot}</emitter>"), format!("{spot}{ramp}</texture></emitter>")] {
+        let lit = variant("attached_floor", floor_shape, &format!("{taken}{floor_shape}"));
+        pathgrad::cpu::backward(&lit, &attached(&lit, 8, 1), &a).unwrap();
+    }
+    let nearest =
+        format!(r#"{spot}{ramp}<string name="filter_type" value="nearest"/></texture></emitter>{floor_shape}"#);
+    let lit = variant("attached_floor", floor_shape, &nearest);
     let err = pathgrad::cpu::backward(&lit, &attached(&lit, 8, 1), &a).unwrap_err().to_string();
-    assert!(err.contains("a textured spot light (its texture's slope is not built): light 1 of its 1"), "{err}");
+    assert!(err.contains("read by nearest texels (it jumps between them): light 1 of its 1"), "{err}");
     let projector = r#"<emitter type="projector"><transform name="to_world"><lookat origin="0, 1, 0" target="0, 0, 0"/></transform><texture type="bitmap" name="irradiance"><string name="filename" value="attached_ramp.exr"/></texture></emitter>"#;
     let lit = variant("attached_floor", floor_shape, &format!("{projector}{floor_shape}"));
     let err = pathgrad::cpu::backward(&lit, &attached(&lit, 8, 1), &a).unwrap_err().to_string();
