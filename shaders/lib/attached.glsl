@@ -685,8 +685,7 @@ mat3 light_texture_slope(DeltaLight l, vec3 x, out vec3 value) {
     footprint_slopes(l.tex_width, l.tex_height, l.tex_mode, uv, slope);
     vec3 dw[4];
     for (int k = 0; k < 4; k++) dw[k] = slope[k].x * du + slope[k].y * dv;
-    value = param_rgb(texel[0]) * weight[0] + param_rgb(texel[1]) * weight[1] + param_rgb(texel[2]) * weight[2]
-        + param_rgb(texel[3]) * weight[3];
+    value = light_texture(l, uv);
     return slope_rows(texel, dw);
 }
 

@@ -152,7 +152,8 @@ fn light_tint(flat: &FlatScene, l: &DeltaLight, uv: Vec2) -> Vec3 {
     tint
 }
 
-fn texture_value(flat: &FlatScene, l: &DeltaLight, uv: Vec2) -> Vec3 {
+/// The bilinear (or nearest) read of a textured spot's or projector's texture at lookup `uv`.
+pub(crate) fn texture_value(flat: &FlatScene, l: &DeltaLight, uv: Vec2) -> Vec3 {
     let (texel, weight) = texture_footprint(l.tex, l.tex_width, l.tex_height, l.tex_mode, uv);
     (0..4).fold(Vec3::ZERO, |acc, k| acc + param_color(flat, texel[k]) * weight[k])
 }

@@ -130,10 +130,9 @@ pub fn light_texture_slope(flat: &FlatScene, l: &DeltaLight, x: Vec3) -> ([Vec3;
     let local = Vec3::new(l.row0.dot(d), l.row1.dot(d), l.row2.dot(d));
     let du = l.uv_scale.x * (l.row0 - (local.x / local.z) * l.row2) / local.z;
     let dv = l.uv_scale.y * (l.row1 - (local.y / local.z) * l.row2) / local.z;
-    let (texel, weight) = texture_footprint(l.tex, l.tex_width, l.tex_height, l.tex_mode, uv);
+    let (texel, _) = texture_footprint(l.tex, l.tex_width, l.tex_height, l.tex_mode, uv);
     let dw = footprint_slopes(l.tex_width, l.tex_height, l.tex_mode, uv).map(|s| s.x * du + s.y * dv);
-    let value = (0..4).fold(Vec3::ZERO, |acc, k| acc + param_color(flat, texel[k]) * weight[k]);
-    (rows(flat, texel, dw), value)
+    (rows(flat, texel, dw), crate::cpu::emitter::texture_value(flat, l, uv))
 }
 
 #[cfg(test)]
