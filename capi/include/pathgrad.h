@@ -140,7 +140,7 @@ typedef struct PgFrameDesc {
   uint32_t deterministic;
   // Nonzero: attached sampling — the sampled directions move with the parameters, so that
   // parameters acting only through them (a dielectric's index of refraction) have gradients
-  // (docs/gradients.md says what it covers); float atomics only. 0: detached, as Mitsuba's `prb`.
+  // (docs/gradients.md says what it covers); `deterministic` too. 0: detached, as Mitsuba's `prb`.
   uint32_t attached;
   // Attached sampling's Jacobian noise amplitude, in [0, 1); 0 its default. Only with `attached`.
   float jacobian_noise;

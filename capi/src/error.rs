@@ -88,7 +88,6 @@ fn c_names(text: &str) -> String {
         ("RenderOptions::spp", "PgFrameDesc.spp"),
         ("RenderOptions::max_depth", "PgFrameDesc.max_depth"),
         ("GradMode::Deterministic", "PgFrameDesc.deterministic"),
-        ("use GradMode::Float", "set PgFrameDesc.deterministic to 0"),
         ("Sampling::Attached::noise", "PgFrameDesc.jacobian_noise"),
         ("Sampling::Attached", "PgFrameDesc.attached"),
         ("DeviceChoice", "PgContextDesc.device"),

@@ -238,8 +238,8 @@ impl Renderer {
     /// ```
     ///
     /// # Errors
-    /// Option errors; [`Error::InvalidArgument`] for deterministic mode without 64-bit atomics or
-    /// with attached sampling, and for a scene attached sampling does not cover
+    /// Option errors; [`Error::InvalidArgument`] for deterministic mode without 64-bit atomics,
+    /// and for a scene attached sampling does not cover
     /// ([`crate::attached::refuse_unsupported`]); Vulkan and allocation failures.
     pub fn frame(&mut self, options: &RenderOptions, mode: GradMode) -> Result<Frame> {
         // The plan is made per recorded range; these requests give the checked options and constants.
@@ -252,9 +252,8 @@ impl Renderer {
         let kinds = reverse_kinds(
             self.flat(),
             options,
-            mode,
             [KernelKind::Adjoint, KernelKind::AdjointFixed],
-            KernelKind::AdjointAttached,
+            [KernelKind::AdjointAttached, KernelKind::AdjointAttachedFixed],
         )?;
         if mode == GradMode::Deterministic && !self.context().info().int64_atomics {
             return Err(Error::InvalidArgument {

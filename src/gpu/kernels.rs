@@ -32,6 +32,10 @@ pub(crate) enum KernelKind {
     ImageGradientAttached,
     /// The float reverse-mode kernel with adaptive pixel sampling and attached sampling.
     AdjointAdaptiveAttached,
+    /// [`KernelKind::AdjointAttached`] in 64-bit fixed point (deterministic mode).
+    AdjointAttachedFixed,
+    /// [`KernelKind::AdjointAdaptiveAttached`] in 64-bit fixed point (deterministic mode).
+    AdjointAdaptiveAttachedFixed,
 }
 
 impl KernelKind {
@@ -52,6 +56,12 @@ impl KernelKind {
             KernelKind::ImageGradientAttached => ("image_gradient_attached", &[BINDING_ADJOINT, BINDING_ACCUM]),
             KernelKind::AdjointAdaptiveAttached => {
                 ("adjoint_adaptive_attached", &[BINDING_ADJOINT, BINDING_GRADS, BINDING_ALIAS])
+            }
+            KernelKind::AdjointAttachedFixed => {
+                ("adjoint_attached_fixed", &[BINDING_ADJOINT, BINDING_GRADS_FIXED, BINDING_ACCUM])
+            }
+            KernelKind::AdjointAdaptiveAttachedFixed => {
+                ("adjoint_adaptive_attached_fixed", &[BINDING_ADJOINT, BINDING_GRADS_FIXED, BINDING_ALIAS])
             }
         }
     }

@@ -257,10 +257,9 @@ impl Renderer {
         let kind = match mode {
             GradMode::Float if options.sampling.is_attached() => KernelKind::AdjointAttached,
             GradMode::Float => KernelKind::Adjoint,
-            // Attached sampling has no fixed-point kernel: the gradient pass refuses it by name.
-            GradMode::Deterministic if options.sampling.is_attached() => return None,
-            GradMode::Deterministic if self.ctx.info().int64_atomics => KernelKind::AdjointFixed,
-            GradMode::Deterministic => return None,
+            GradMode::Deterministic if !self.ctx.info().int64_atomics => return None,
+            GradMode::Deterministic if options.sampling.is_attached() => KernelKind::AdjointAttachedFixed,
+            GradMode::Deterministic => KernelKind::AdjointFixed,
         };
         let features = variant::request_features(self.scene_features, options, self.grad_kinds(options));
         let primal = variant::request_features(self.scene_features, pass1, ParamKinds::NONE);
@@ -456,9 +455,8 @@ impl Backend for Renderer {
         let kinds = reverse_kinds(
             &self.flat,
             options,
-            mode,
             [KernelKind::Adjoint, KernelKind::AdjointFixed],
-            KernelKind::AdjointAttached,
+            [KernelKind::AdjointAttached, KernelKind::AdjointAttachedFixed],
         )?;
         let _span = tracing::info_span!("adjoint", spp = options.spp, ?mode, views = views.len()).entered();
         let adjoint_buf = Buffer::storage_with(&self.ctx, "adjoint image", Image::stack(adjoints)?.as_slice())?;
@@ -490,9 +488,8 @@ impl Backend for Renderer {
         let kinds = reverse_kinds(
             &self.flat,
             options,
-            mode,
             [KernelKind::AdjointAdaptive, KernelKind::AdjointAdaptiveFixed],
-            KernelKind::AdjointAdaptiveAttached,
+            [KernelKind::AdjointAdaptiveAttached, KernelKind::AdjointAdaptiveAttachedFixed],
         )?;
         let stacked = options.stacked(views.len())?;
         let count = u64::from(sampling.sample_count(&stacked)?);
@@ -604,10 +601,15 @@ impl Backend for Renderer {
             (false, GradMode::Float) => Some(KernelKind::Adjoint),
             (true, GradMode::Float) if options.sampling.is_attached() => Some(KernelKind::AdjointAdaptiveAttached),
             (true, GradMode::Float) => Some(KernelKind::AdjointAdaptive),
-            // Without 64-bit atomics, or with attached sampling, the gradient pass refuses the
-            // mode, by name, when it runs.
-            (_, GradMode::Deterministic) if !self.ctx.info().int64_atomics || options.sampling.is_attached() => None,
+            // Without 64-bit atomics the gradient pass refuses the mode, by name, when it runs.
+            (_, GradMode::Deterministic) if !self.ctx.info().int64_atomics => None,
+            (false, GradMode::Deterministic) if options.sampling.is_attached() => {
+                Some(KernelKind::AdjointAttachedFixed)
+            }
             (false, GradMode::Deterministic) => Some(KernelKind::AdjointFixed),
+            (true, GradMode::Deterministic) if options.sampling.is_attached() => {
+                Some(KernelKind::AdjointAdaptiveAttachedFixed)
+            }
             (true, GradMode::Deterministic) => Some(KernelKind::AdjointAdaptiveFixed),
         };
         if let Some(kind) = kind {
@@ -624,23 +626,13 @@ impl Backend for Renderer {
 
 /// The reverse-mode kernels of a request (float, fixed point): `plain` with detached sampling;
 /// with attached sampling, where the scene allows it ([`crate::attached::refuse_unsupported`]),
-/// `attached`, which has a float kernel only.
+/// `attached`.
 pub(crate) fn reverse_kinds(
     flat: &FlatScene,
     options: &RenderOptions,
-    mode: GradMode,
     plain: [KernelKind; 2],
-    attached: KernelKind,
+    attached: [KernelKind; 2],
 ) -> Result<[KernelKind; 2]> {
     crate::attached::refuse_unsupported(flat, options)?;
-    if !options.sampling.is_attached() {
-        return Ok(plain);
-    }
-    if mode == GradMode::Deterministic {
-        return Err(Error::InvalidArgument {
-            parameter: "GradMode::Deterministic".into(),
-            message: "attached sampling has a float kernel only (use GradMode::Float)".into(),
-        });
-    }
-    Ok([attached; 2])
+    Ok(if options.sampling.is_attached() { attached } else { plain })
 }

@@ -164,7 +164,8 @@ fn the_recorded_path_equals_the_blocking_path() {
 /// A frame takes attached gradients too (the index of refraction of a glass sphere over a diffuse
 /// floor, which detached sampling cannot differentiate): recorded in two sample ranges, its
 /// gradient is the one `backward` gives (float atomics: equal up to the order of their sums), its
-/// image the render's bit for bit; deterministic mode, which has no attached kernel, is refused.
+/// image the render's bit for bit; in deterministic mode (the fixed-point attached kernel) the
+/// recorded gradient is `backward`'s bit for bit.
 #[test]
 fn a_frame_takes_attached_gradients() {
     use pathgrad::integrator::Sampling;
@@ -185,8 +186,21 @@ fn a_frame_takes_attached_gradients() {
     let eta = gradient.get("glass.bsdf.eta").unwrap()[0];
     assert!(eta.abs() > 1.0, "the η gradient is {eta}: attached sampling gives one");
 
-    let error = renderer.frame(&options, GradMode::Deterministic).map(|_| ()).unwrap_err().to_string();
-    assert!(error.contains("GradMode::Deterministic") && error.contains("attached"), "{error}");
+    let fixed = renderer.backward(&options, &adjoint, GradMode::Deterministic).unwrap();
+    let frame = renderer.frame(&options, GradMode::Deterministic).unwrap();
+    frame.write_adjoint(&adjoint).unwrap();
+    ctx.submit_and_wait("recorded, deterministic", |cmd| {
+        renderer.record_clear(&frame, cmd);
+        renderer.record_render(&frame, cmd, 0..4).unwrap();
+        renderer.record_backward(&frame, cmd, 0..3).unwrap();
+        renderer.record_backward(&frame, cmd, 3..4).unwrap();
+    })
+    .unwrap();
+    frame.check_status().unwrap();
+    let recorded = frame.read_gradients(&renderer).unwrap();
+    assert_eq!(bits(recorded.values()), bits(fixed.values()), "recorded deterministic gradient");
+    assert!(recorded.get("glass.bsdf.eta").unwrap()[0].abs() > 1.0, "the deterministic η gradient");
+    drop(frame);
     let frame = renderer.frame(&options, GradMode::Float).unwrap();
     frame.write_adjoint(&adjoint).unwrap();
     ctx.submit_and_wait("recorded", |cmd| {

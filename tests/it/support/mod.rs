@@ -50,6 +50,23 @@ pub fn count_mismatches(gpu: &pathgrad::image::Image, cpu: &pathgrad::image::Ima
         .count()
 }
 
+/// Deterministic gradients (64-bit fixed point): `fixed` and `again`, two runs of the same
+/// request, are bitwise equal, not all zero, and each value agrees with the float kernel's
+/// `float` to rounding — 1e-4 of the largest |value|, as `adaptive.rs` checks the plain kernels.
+pub fn assert_fixed_matches_float(
+    fixed: &pathgrad::params::Gradients,
+    again: &pathgrad::params::Gradients,
+    float: &pathgrad::params::Gradients,
+) {
+    let bits = |g: &pathgrad::params::Gradients| g.values().iter().map(|v| v.to_bits()).collect::<Vec<_>>();
+    assert_eq!(bits(fixed), bits(again), "two deterministic runs");
+    let largest = fixed.values().iter().fold(0.0f32, |m, v| m.max(v.abs()));
+    assert!(largest > 0.0, "the deterministic gradient is all zero");
+    for (i, (x, y)) in fixed.values().iter().zip(float.values()).enumerate() {
+        assert!((x - y).abs() <= 1e-4 * largest, "value {i}: fixed point {x}, float {y}");
+    }
+}
+
 /// Forward against reverse mode (ALGORITHMS.md §10, forward/reverse consistency): for a tangent
 /// of 1 on every value of a parameter, `reverse` (its reverse-mode gradient for `adjoint`, summed
 /// over those values) equals Σ_p A_p · ∂I_p/∂θ from its forward-mode image `forward`. The two

@@ -1,0 +1,9 @@
+// Adjoint kernel with attached sampling (issue 34), deterministic: adjoint_attached.comp's fused
+// primal + replay, its gradients in 64-bit fixed point as adjoint_fixed.comp's.
+#version 460
+#extension GL_EXT_scalar_block_layout : require
+#extension GL_EXT_shader_explicit_arithmetic_types_int64 : require
+#extension GL_EXT_shader_atomic_int64 : require
+#define GRAD_MODE GRAD_MODE_FIXED
+#define ATTACHED 1
+#include "kernel.glsl"
