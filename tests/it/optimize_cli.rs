@@ -213,10 +213,11 @@ fn optimize_bad_input_names_the_flag_and_leaves_nothing_behind() {
                 "sphere.bsdf.alpha.value=0.1",
                 "--param",
                 "sphere.bsdf.alpha.value",
+                "--adaptive=false",
                 "--adaptive-estimator",
                 "pixel_mean",
             ],
-            "--adaptive",
+            "not with --adaptive=false",
         ),
     ];
     for (args, message) in cases {
@@ -317,7 +318,8 @@ fn control_variates_resume_bit_for_bit_and_match_plain_while_the_weight_is_zero(
     let cv = ["--control-variates", "--deterministic", "--seed", "3", "--lr", "0.05"];
     ok(&run(SMALL, &[&cv[..], &["--iters", "8", "-o", whole.to_str().unwrap()]].concat()));
     ok(&run(SMALL, &[&cv[..], &["--iters", "5", "-o", split.to_str().unwrap()]].concat()));
-    ok(&run(SMALL, &[&cv[1..], &["--iters", "5", "-o", plain.to_str().unwrap()]].concat()));
+    let off = ["--control-variates=false"];
+    ok(&run(SMALL, &[&off[..], &cv[1..], &["--iters", "5", "-o", plain.to_str().unwrap()]].concat()));
     assert!(split.join("control_variates.bin").is_file());
     let o = run(&["optimize", "--resume", split.to_str().unwrap(), "--iters", "5", "--json"], &[]);
     ok(&o);
@@ -366,8 +368,11 @@ fn gradient_reuse_resumes_bit_for_bit_and_matches_plain_while_the_weight_is_zero
     let reuse = ["--reuse", "--deterministic", "--seed", "3", "--lr", "0.05"];
     ok(&run(SMALL, &[&reuse[..], &["--iters", "8", "-o", whole.to_str().unwrap()]].concat()));
     ok(&run(SMALL, &[&reuse[..], &["--iters", "5", "-o", split.to_str().unwrap()]].concat()));
-    ok(&run(SMALL, &[&reuse[1..], &["--iters", "5", "-o", plain.to_str().unwrap()]].concat()));
+    let off = ["--control-variates=false"];
+    ok(&run(SMALL, &[&off[..], &reuse[1..], &["--iters", "5", "-o", plain.to_str().unwrap()]].concat()));
     assert!(split.join("gradient_reuse.bin").is_file() && !plain.join("gradient_reuse.bin").exists());
+    // --reuse replaces the control variates, which are on by default.
+    assert!(!split.join("control_variates.bin").exists());
     let saved = std::fs::read(split.join("gradient_reuse.bin")).unwrap();
     std::fs::write(split.join("gradient_reuse.bin"), &saved[..saved.len() - 1]).unwrap();
     let o = run(&["optimize", "--resume", split.to_str().unwrap(), "--iters", "8"], &[]);
@@ -453,9 +458,7 @@ fn control_variates_keep_an_estimate_per_view() {
             "-o",
         ];
         a.push(out.to_str().unwrap());
-        if cv {
-            a.push("--control-variates");
-        }
+        a.push(if cv { "--control-variates" } else { "--control-variates=false" });
         run(&a, &[])
     };
     let (with_cv, plain) = (dir.path().join("cv"), dir.path().join("plain"));

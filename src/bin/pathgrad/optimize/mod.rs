@@ -106,12 +106,14 @@ pub(super) struct OptimizeArgs {
     /// The loss: relmse, relmse_max, l2 or l1 [default: relmse].
     #[arg(long)]
     loss: Option<String>,
-    /// Loss-aware adaptive pixel sampling of the gradient pass (Su & Gkioulekas, Algorithm 2).
-    #[arg(long)]
-    adaptive: bool,
+    /// Loss-aware adaptive pixel sampling of the gradient pass (Su & Gkioulekas, Algorithm 2):
+    /// on by default, `--adaptive=false` samples every pixel alike (docs/gradients.md "Which to
+    /// use" says why it is the default).
+    #[arg(long, value_name = "BOOL", num_args = 0..=1, require_equals = true, default_missing_value = "true")]
+    adaptive: Option<bool>,
     /// Weighting of adaptive samples: importance (unbiased, A/(N·π)) or pixel_mean (the authors'
     /// per-pixel mean) [default: importance].
-    #[arg(long, requires = "adaptive", value_name = "NAME")]
+    #[arg(long, value_name = "NAME")]
     adaptive_estimator: Option<String>,
     /// Accumulate gradients in 64-bit fixed point: a run (and its resumption) is bitwise
     /// reproducible.
@@ -121,14 +123,15 @@ pub(super) struct OptimizeArgs {
     /// the current and at the previous parameters with the same random numbers, and the loss
     /// and its adjoint image are taken from a per-pixel running estimate that reuses the earlier
     /// iterations' images. Costs a second pass 1 per iteration; the gradient pass is unchanged.
-    #[arg(long)]
-    control_variates: bool,
+    /// On by default (off with `--reuse`); `--control-variates=false` turns it off.
+    #[arg(long, value_name = "BOOL", num_args = 0..=1, require_equals = true, default_missing_value = "true")]
+    control_variates: Option<bool>,
     /// Gradient reuse across iterations (after Bálint et al. 2023): each iteration takes the loss
     /// gradient at the current and at the previous parameters with the same random numbers, and
     /// Adam steps with a per-parameter running estimate that carries the earlier iterations'
     /// gradients forward along the trajectory. Costs a second gradient (both passes) per
-    /// iteration. Not with --control-variates.
-    #[arg(long, conflicts_with = "control_variates")]
+    /// iteration. It replaces the control variates (not with --control-variates).
+    #[arg(long)]
     reuse: bool,
     /// Output directory [default: optimize-out].
     #[arg(short, long, value_name = "DIR", conflicts_with = "resume")]
@@ -148,6 +151,27 @@ pub(super) struct OptimizeArgs {
     /// Print a one-line JSON summary instead of text (and no progress bar).
     #[arg(long)]
     json: bool,
+}
+
+impl OptimizeArgs {
+    /// `--adaptive`, on unless `--adaptive=false`.
+    fn adaptive(&self) -> bool {
+        self.adaptive.unwrap_or(true)
+    }
+
+    /// `--control-variates`: on unless `--control-variates=false` or `--reuse` (which replaces
+    /// them).
+    ///
+    /// # Errors
+    /// Both `--control-variates` and `--reuse` given.
+    fn control_variates(&self) -> Result<bool> {
+        match (self.control_variates, self.reuse) {
+            (Some(true), true) => {
+                bail!("--reuse replaces the control variates: give one of --reuse and --control-variates")
+            }
+            (given, reuse) => Ok(given.unwrap_or(!reuse)),
+        }
+    }
 }
 
 /// Everything that determines a run's trajectory, as stored in `state.json`.
@@ -423,6 +447,9 @@ fn start(args: &OptimizeArgs) -> Result<Session> {
             Some(heroes.targets().iter().map(|t| scene.params.entry(*t).name.as_str()).collect::<Vec<_>>().join(","))
         }
     };
+    if !args.adaptive() && args.adaptive_estimator.is_some() {
+        bail!("--adaptive-estimator weighs adaptive pixel samples: not with --adaptive=false");
+    }
     let target = args.target.as_deref().map(absolute).transpose()?;
     let target_hash = target.as_deref().map(content_hash).transpose()?;
     let mut config = RunConfig {
@@ -442,13 +469,13 @@ fn start(args: &OptimizeArgs) -> Result<Session> {
         spp_grad: args.spp_grad.unwrap_or(DEFAULT_SPP_GRAD),
         spp_final: opts.spp,
         loss: args.loss.clone().unwrap_or_else(|| "relmse".into()),
-        adaptive: args.adaptive,
+        adaptive: args.adaptive(),
         adaptive_estimator: args
             .adaptive_estimator
             .clone()
             .unwrap_or_else(|| AdaptiveEstimator::default().name().to_string()),
         deterministic: args.deterministic,
-        control_variates: args.control_variates,
+        control_variates: args.control_variates()?,
         reuse: args.reuse,
         width: opts.width,
         height: opts.height,

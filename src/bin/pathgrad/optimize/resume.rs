@@ -244,10 +244,10 @@ pub(super) fn check_unchanged(
     check("spp_primal", "--spp-primal", args.spp_primal.map(|v| text(&v)), text(&c.spp_primal));
     check("spp_grad", "--spp-grad", args.spp_grad.map(|v| text(&v)), text(&c.spp_grad));
     check("loss", "--loss", args.loss.clone(), c.loss.clone());
-    check("adaptive", "--adaptive", Some(text(&args.adaptive)), text(&c.adaptive));
+    check("adaptive", "--adaptive", Some(text(&args.adaptive())), text(&c.adaptive));
     check("adaptive_estimator", "--adaptive-estimator", args.adaptive_estimator.clone(), c.adaptive_estimator.clone());
     check("deterministic", "--deterministic", Some(text(&args.deterministic)), text(&c.deterministic));
-    check("control_variates", "--control-variates", Some(text(&args.control_variates)), text(&c.control_variates));
+    check("control_variates", "--control-variates", args.control_variates.map(|v| text(&v)), text(&c.control_variates));
     check("reuse", "--reuse", Some(text(&args.reuse)), text(&c.reuse));
     check("spp", "--spp", args.flags.spp.map(|v| text(&v)), text(&c.spp_final));
     check("width", "--width", args.flags.width.map(|v| text(&v)), text(&c.width));
