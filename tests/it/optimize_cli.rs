@@ -44,6 +44,8 @@ fn json(path: &Path) -> serde_json::Value {
     serde_json::from_str(&std::fs::read_to_string(path).unwrap()).unwrap()
 }
 
+/// A default run writes its history, curves, image, parameters and state; it runs with adaptive
+/// pixels and control variates, and `--adaptive=false --control-variates=false` turns both off.
 #[test]
 fn optimize_writes_the_history_curves_image_and_parameters() {
     let dir = tempfile::tempdir().unwrap();
@@ -53,6 +55,19 @@ fn optimize_writes_the_history_curves_image_and_parameters() {
     let summary: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
     assert_eq!(summary["iterations"], 3);
     assert_eq!(summary["stopped"], "completed");
+    // The default: adaptive pixels and control variates (docs/gradients.md "Which to use").
+    assert_eq!(
+        (&summary["adaptive"], &summary["control_variates"], &summary["reuse"]),
+        (&true.into(), &true.into(), &false.into())
+    );
+    assert!(out.join("control_variates.bin").is_file());
+    let plain_dir = dir.path().join("plain");
+    let flags = ["--adaptive=false", "--control-variates=false", "--iters", "1", "--json", "-o"];
+    let o = run(SMALL, &[&flags[..], &[plain_dir.to_str().unwrap()]].concat());
+    ok(&o);
+    let plain: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    assert_eq!((&plain["adaptive"], &plain["control_variates"]), (&false.into(), &false.into()));
+    assert!(!plain_dir.join("control_variates.bin").exists());
     let (header, rows) = rows(&out);
     assert_eq!(
         header,

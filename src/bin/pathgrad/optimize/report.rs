@@ -154,6 +154,9 @@ pub(super) fn summary(s: &Session, stopped: &str, json: bool) {
             "iterations": s.run.iteration(),
             "strategy": crate::common::strategy_json(&s.scene, &s.run.options().render.strategy),
             "pilot": s.config.pilot.as_ref().map(|p| &p.report),
+            "adaptive": s.config.adaptive,
+            "control_variates": s.config.control_variates,
+            "reuse": s.config.reuse,
             "stopped": stopped,
             "time_s": s.elapsed,
             "setup_s": s.setup_s,
@@ -178,6 +181,15 @@ pub(super) fn summary(s: &Session, stopped: &str, json: bool) {
             prior.map(|p| format!(", prior {p:.4e}")).unwrap_or_default(),
             last.and_then(|r| r.error).map(|e| format!(", parameter error {e:.4e}")).unwrap_or_default(),
             s.dir.display()
+        );
+        println!(
+            "  gradient pass: {} pixels; loss image: {}",
+            if s.config.adaptive { "adaptive" } else { "uniform" },
+            match (s.config.control_variates, s.config.reuse) {
+                (true, _) => "control variates",
+                (false, true) => "plain (gradient reuse across iterations)",
+                (false, false) => "plain",
+            }
         );
         if let Some(pilot) = &s.config.pilot {
             println!(
