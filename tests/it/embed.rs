@@ -186,38 +186,31 @@ fn a_frame_takes_attached_gradients() {
     let eta = gradient.get("glass.bsdf.eta").unwrap()[0];
     assert!(eta.abs() > 1.0, "the η gradient is {eta}: attached sampling gives one");
 
+    // A frame of `mode`, rendered in one range and differentiated in two split at `split`, then
+    // its image (after spp samples) and gradient.
+    let mut recorded = |mode: GradMode, split: u32| {
+        let frame = renderer.frame(&options, mode).unwrap();
+        frame.write_adjoint(&adjoint).unwrap();
+        ctx.submit_and_wait("recorded", |cmd| {
+            renderer.record_clear(&frame, cmd);
+            renderer.record_render(&frame, cmd, 0..4).unwrap();
+            renderer.record_backward(&frame, cmd, 0..split).unwrap();
+            renderer.record_backward(&frame, cmd, split..4).unwrap();
+        })
+        .unwrap();
+        frame.check_status().unwrap();
+        (frame.read_image(4).unwrap(), frame.read_gradients(&renderer).unwrap())
+    };
+    let (_, fixed_frame) = recorded(GradMode::Deterministic, 3);
+    let (recorded_image, recorded) = recorded(GradMode::Float, 1);
     let fixed = renderer.backward(&options, &adjoint, GradMode::Deterministic).unwrap();
-    let frame = renderer.frame(&options, GradMode::Deterministic).unwrap();
-    frame.write_adjoint(&adjoint).unwrap();
-    ctx.submit_and_wait("recorded, deterministic", |cmd| {
-        renderer.record_clear(&frame, cmd);
-        renderer.record_render(&frame, cmd, 0..4).unwrap();
-        renderer.record_backward(&frame, cmd, 0..3).unwrap();
-        renderer.record_backward(&frame, cmd, 3..4).unwrap();
-    })
-    .unwrap();
-    frame.check_status().unwrap();
-    let recorded = frame.read_gradients(&renderer).unwrap();
-    assert_eq!(bits(recorded.values()), bits(fixed.values()), "recorded deterministic gradient");
-    assert!(recorded.get("glass.bsdf.eta").unwrap()[0].abs() > 1.0, "the deterministic η gradient");
-    drop(frame);
-    let frame = renderer.frame(&options, GradMode::Float).unwrap();
-    frame.write_adjoint(&adjoint).unwrap();
-    ctx.submit_and_wait("recorded", |cmd| {
-        renderer.record_clear(&frame, cmd);
-        renderer.record_render(&frame, cmd, 0..4).unwrap();
-        renderer.record_backward(&frame, cmd, 0..1).unwrap();
-        renderer.record_backward(&frame, cmd, 1..4).unwrap();
-    })
-    .unwrap();
-    frame.check_status().unwrap();
-    assert_eq!(bits(frame.read_image(4).unwrap().as_slice()), bits(image.as_slice()), "recorded image");
-    let recorded = frame.read_gradients(&renderer).unwrap();
+    assert_eq!(bits(fixed_frame.values()), bits(fixed.values()), "recorded deterministic gradient");
+    assert!(fixed.get("glass.bsdf.eta").unwrap()[0].abs() > 1.0, "the deterministic η gradient");
+    assert_eq!(bits(recorded_image.as_slice()), bits(image.as_slice()), "recorded image");
     let scale = gradient.values().iter().fold(0.0f32, |m, v| m.max(v.abs()));
     for (i, (a, b)) in recorded.values().iter().zip(gradient.values()).enumerate() {
         assert!((a - b).abs() <= 1e-4 * scale, "gradient value {i}: frame {a}, backward {b}");
     }
-    drop(frame);
     drop(renderer);
     assert_eq!(ctx.validation_errors(), 0);
 }
