@@ -16,11 +16,14 @@ spp_grad=${6:-2}
 scene=tests/data/scenes/attached_rough_sphere.xml
 dir=$(mktemp -d)
 trap 'rm -rf "$dir"' EXIT
+# Plain PRB steps, as BENCHMARKS.md recorded them (`optimize` now adds adaptive pixels and control
+# variates by default).
+plain=(--adaptive=false --control-variates=false)
 echo "detached:"
-"$bin" optimize "$scene" --param glass.bsdf.eta=1.3 --target-set glass.bsdf.eta=1.5 --sampling detached \
+"$bin" optimize "$scene" --param glass.bsdf.eta=1.3 --target-set glass.bsdf.eta=1.5 --sampling detached "${plain[@]}" \
   --iters 1 --width 32 --height 32 -o "$dir/detached" 2>&1 | sed 's/^/  /' || true
 for ((seed = 1; seed <= seeds; seed++)); do
-  "$bin" optimize "$scene" --param glass.bsdf.eta=1.3 --target-set glass.bsdf.eta=1.5 --sampling attached \
+  "$bin" optimize "$scene" --param glass.bsdf.eta=1.3 --target-set glass.bsdf.eta=1.5 --sampling attached "${plain[@]}" \
     --iters "$iters" --lr "$lr" --spp-grad "$spp_grad" --width 32 --height 32 --seed "$seed" -o "$dir/attached-$seed" --json >/dev/null 2>&1
   python3 - "$dir/attached-$seed/history.csv" "$seed" "$stride" <<'PY'
 import csv, sys

@@ -21,7 +21,7 @@ trap 'rm -rf "$dir"' EXIT
 for ((round = 1; round <= rounds; round++)); do
   for mode in detached attached; do
     "$bin" optimize "$scene" --param "$param=0.05" \
-      --target-set "$param=0.01" --sampling "$mode" --iters "$iters" --time-budget "$budget" --lr 0.004 \
+      --target-set "$param=0.01" --sampling "$mode" --adaptive=false --control-variates=false --iters "$iters" --time-budget "$budget" --lr 0.004 \
       --width 32 --height 32 --seed "$round" -o "$dir/$mode-$round" --json >/dev/null 2>&1
     python3 - "$dir/$mode-$round/history.csv" "$mode" "$round" "$param" "$settle" <<'PY'
 import csv, sys

@@ -127,6 +127,9 @@ def main():
         cmd = [args.pathgrad, "optimize", str(scene), "--param", f"{PARAM}={args.init}", "--iters", str(args.iters),
                "--lr", str(args.lr), "--spp", "4", "--spp-primal", str(args.spp_primal), "--spp-grad",
                str(args.spp_grad), "--json", "-o", str(out)] + view_args
+        # Plain steps, as BENCHMARKS.md recorded them (`optimize` now adds adaptive pixels and
+        # control variates by default).
+        cmd += ["--adaptive=false", "--control-variates=false"]
         cmd += ["--device", args.device] if args.device else ["--cpu"]
         if weight > 0:
             cmd += ["--smooth", str(weight)]

@@ -46,8 +46,9 @@ def settled(h, e, window):
 
 
 def geomean(values):
-    values = [v for v in values if v is not None]
-    if not values:
+    """The geometric mean, or None unless every seed has a value (a cell never covers fewer seeds
+    than its row says)."""
+    if not values or any(v is None for v in values):
         return None
     return math.exp(sum(math.log(max(v, 1e-30)) for v in values) / len(values))
 

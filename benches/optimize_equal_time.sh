@@ -11,6 +11,7 @@
 # differential sampling where the parameters have a sampler, and adaptive pixels), `cv` (plain
 # with control variates), `cv+paper`, `adaptive` (plain with adaptive pixels) and `cv+adaptive`
 # (`optimize`'s default).
+# The repository's path must not contain spaces (the scenes' arguments are split into words).
 # SEEDS is a comma-separated list of base seeds (each run's iteration t uses seed + t); LR is
 # Adam's learning rate for every run; SPHERE_FROM the sphere's initial roughness (its target is
 # the scene's 0.008).
@@ -59,9 +60,12 @@ for seed in "${seed_list[@]}"; do
       dir="$out/$scene-$config-s$seed"
       rm -rf "$dir"
       # shellcheck disable=SC2086 # the scene's and the configuration's words are meant to split
-      "$bin" optimize ${args[$scene]} $flags --lr "${LR:-0.01}" --spp 128 --seed "$seed" --iters 100000 \
-        --time-budget "$budget" -o "$dir" --json >"$dir.json" 2>"$dir.log"
-      echo "$(date -u +%H:%M:%S) $scene $config seed $seed: $(grep -o '"iterations":[0-9]*' "$dir.json")"
+      if "$bin" optimize ${args[$scene]} $flags --lr "${LR:-0.01}" --spp 128 --seed "$seed" --iters 100000 \
+        --time-budget "$budget" -o "$dir" --json >"$dir.json" 2>"$dir.log"; then
+        echo "$(date -u +%H:%M:%S) $scene $config seed $seed: $(grep -o '"iterations":[0-9]*' "$dir.json")"
+      else
+        echo "$(date -u +%H:%M:%S) $scene $config seed $seed: failed, see $dir.log" >&2
+      fi
     done
   done
 done

@@ -386,8 +386,9 @@ fn optimize_recovers_the_ior_of_a_glass_sphere() {
 
 /// Attached sampling is refused, by name, where its Jacobians are not built: a textured diffuse
 /// albedo, a spot's nearest-filtered texture, a projector, a point light beside a rough conductor or without next-event
-/// estimation, a plastic (in reverse and forward mode), deterministic mode;
-/// and an index of refraction's image gradient under detached sampling.
+/// estimation, a plastic (in reverse and forward mode), and an index of refraction's image
+/// gradient under detached sampling. Deterministic mode is not refused: it gives the same bits
+/// twice and the float kernel's value to rounding.
 #[test]
 fn attached_sampling_refuses_what_it_does_not_cover() {
     use pathgrad::backend::Backend;

@@ -188,7 +188,7 @@ fn a_frame_takes_attached_gradients() {
 
     // A frame of `mode`, rendered in one range and differentiated in two split at `split`, then
     // its image (after spp samples) and gradient.
-    let mut recorded = |mode: GradMode, split: u32| {
+    let mut record = |mode: GradMode, split: u32| {
         let frame = renderer.frame(&options, mode).unwrap();
         frame.write_adjoint(&adjoint).unwrap();
         ctx.submit_and_wait("recorded", |cmd| {
@@ -201,8 +201,8 @@ fn a_frame_takes_attached_gradients() {
         frame.check_status().unwrap();
         (frame.read_image(4).unwrap(), frame.read_gradients(&renderer).unwrap())
     };
-    let (_, fixed_frame) = recorded(GradMode::Deterministic, 3);
-    let (recorded_image, recorded) = recorded(GradMode::Float, 1);
+    let (_, fixed_frame) = record(GradMode::Deterministic, 3);
+    let (recorded_image, recorded) = record(GradMode::Float, 1);
     let fixed = renderer.backward(&options, &adjoint, GradMode::Deterministic).unwrap();
     assert_eq!(bits(fixed_frame.values()), bits(fixed.values()), "recorded deterministic gradient");
     assert!(fixed.get("glass.bsdf.eta").unwrap()[0].abs() > 1.0, "the deterministic η gradient");
