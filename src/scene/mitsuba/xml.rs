@@ -755,14 +755,8 @@ pub(super) fn look_at(origin: Vec3, target: Vec3, up: Vec3) -> std::result::Resu
     if dir == Vec3::ZERO {
         return Err("lookat: origin and target coincide".into());
     }
-    let up = if up == Vec3::ZERO {
-        let sign = if dir.z >= 0.0 { 1.0 } else { -1.0 };
-        let a = -1.0 / (sign + dir.z);
-        let b = dir.x * dir.y * a;
-        Vec3::new(1.0 + sign * dir.x * dir.x * a, sign * b, -sign * dir.x)
-    } else {
-        up
-    };
+    // Mitsuba's coordinate_system is the shading frame's (crate::sampling::Frame).
+    let up = if up == Vec3::ZERO { crate::sampling::Frame::from_normal(dir).t } else { up };
     let left = up.cross(dir).normalize_or_zero();
     if left == Vec3::ZERO {
         return Err("lookat: 'up' is parallel to the viewing direction".into());
