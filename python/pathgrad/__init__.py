@@ -26,14 +26,24 @@ import numbers
 import os
 from typing import Any, Dict, Iterator, List, Mapping, NamedTuple, Optional, Sequence, Tuple, Union
 
-# lavapipe builds kernels for 128-bit vectors unless told otherwise, as the command-line program
-# does: a first kernel compiles in about 60 % of the time, renders are as fast. Other drivers
-# ignore the variable. Set before the native module opens any Vulkan instance.
-os.environ.setdefault("LP_NATIVE_VECTOR_WIDTH", "128")
+import numpy as np
 
-import numpy as np  # noqa: E402
+from . import _pathgrad as _native
 
-from . import _pathgrad as _native  # noqa: E402
+# lavapipe builds its kernels for the vector width this variable names, read when the driver
+# starts: the command-line program's choice unless the environment sets one (512 bits on an
+# AVX-512 host, 128 elsewhere; `pathgrad::gpu::lavapipe_vector_width`), with Mesa's shader cache
+# in a folder of that width's unless the environment names one (lavapipe's cache does not tell
+# widths apart). Other drivers ignore the width. Importing the native module opens no Vulkan
+# instance, so this comes in time.
+if "LP_NATIVE_VECTOR_WIDTH" not in os.environ:
+    _bits = _native.lavapipe_vector_width()
+    os.environ["LP_NATIVE_VECTOR_WIDTH"] = str(_bits)
+    if "MESA_SHADER_CACHE_DIR" not in os.environ:
+        _mesa_cache = _native.lavapipe_shader_cache_dir(_bits)
+        if _mesa_cache is not None:
+            os.environ["MESA_SHADER_CACHE_DIR"] = _mesa_cache
+
 from .errors import (  # noqa: E402
     ArgumentError,
     DeviceError,

@@ -157,6 +157,47 @@ pub fn has_loop_budget(driver_id: vk::DriverId, driver_info: &str) -> bool {
     major.is_none_or(|m| m < 25)
 }
 
+/// The vector width, in bits, that pathgrad's own programs ask lavapipe to build its kernels for
+/// (`LP_NATIVE_VECTOR_WIDTH`, read when the driver starts) when the variable is not set: 512 on an
+/// x86-64 CPU with AVX-512F, 128 elsewhere.
+///
+/// On the 2-core AVX-512 machines measured (BENCHMARKS.md, "lavapipe's vector width"), 16-lane
+/// kernels compile in the time 4-lane ones do and run 8–15 % faster; on an AVX2 host 4-lane
+/// kernels compile in about 60 % of the time of the driver's 8-lane default and render as fast.
+/// Results are the same bit for bit at every width. The `pathgrad` command and the Python module
+/// set the variable to this before any Vulkan call (with [`lavapipe_shader_cache_dir`]); an engine
+/// embedding the library keeps its own environment. Other drivers ignore the variable.
+///
+/// ```
+/// let bits = pathgrad::gpu::lavapipe_vector_width();
+/// assert!(bits == 128 || bits == 512);
+/// ```
+pub fn lavapipe_vector_width() -> u32 {
+    #[cfg(target_arch = "x86_64")]
+    if std::arch::is_x86_feature_detected!("avx512f") {
+        return 512;
+    }
+    128
+}
+
+/// The folder for Mesa's shader cache (`MESA_SHADER_CACHE_DIR`) that pathgrad's programs name,
+/// made if missing, when they choose `bits` as lavapipe's vector width themselves and the
+/// environment names no cache folder: `mesa-BITS-bit` in pathgrad's cache folder
+/// (`$XDG_CACHE_HOME/pathgrad`, else `$HOME/.cache/pathgrad`) for a width other than 128, `None`
+/// for 128 (Mesa's own folder) or when no folder can be made.
+///
+/// lavapipe's cache does not key its machine code on the vector width (Mesa 25.0.7): a process at
+/// 512 bits is handed the 128-bit code that an earlier process cached for the same kernel, and
+/// keeps its speed. A folder per width keeps each width's code apart.
+pub fn lavapipe_shader_cache_dir(bits: u32) -> Option<std::path::PathBuf> {
+    if bits == 128 {
+        return None;
+    }
+    let dir = super::specialise::pathgrad_cache()?.join(format!("mesa-{bits}-bit"));
+    std::fs::create_dir_all(&dir).ok()?;
+    Some(dir)
+}
+
 /// Lists every Vulkan device with what pathgrad needs that it lacks (the `devices` subcommand).
 ///
 /// # Errors

@@ -66,14 +66,18 @@ pub fn specialise(words: &[u32], features: u64) -> Option<Vec<u32>> {
     }
 }
 
-/// The directory of specialised modules: `$XDG_CACHE_HOME/pathgrad/kernels`, else
-/// `$HOME/.cache/pathgrad/kernels`.
-fn cache_dir() -> Option<PathBuf> {
+/// pathgrad's cache folder: `$XDG_CACHE_HOME/pathgrad`, else `$HOME/.cache/pathgrad`.
+pub(crate) fn pathgrad_cache() -> Option<PathBuf> {
     let base = std::env::var_os("XDG_CACHE_HOME")
         .filter(|v| !v.is_empty())
         .map(PathBuf::from)
         .or_else(|| std::env::var_os("HOME").filter(|v| !v.is_empty()).map(|h| PathBuf::from(h).join(".cache")))?;
-    Some(base.join("pathgrad").join("kernels"))
+    Some(base.join("pathgrad"))
+}
+
+/// The directory of specialised modules: `kernels` in [`pathgrad_cache`].
+fn cache_dir() -> Option<PathBuf> {
+    Some(pathgrad_cache()?.join("kernels"))
 }
 
 /// The most the kernel cache keeps, in bytes (a specialised module is ~100 KB): entries of older

@@ -261,16 +261,18 @@ fn host_specialised_kernels_match_the_drivers_bit_for_bit() {
     assert_eq!((&fresh.1, &fresh.2), (&driver.1, &driver.2));
 }
 
-/// The CLI has lavapipe build 128-bit kernels unless `LP_NATIVE_VECTOR_WIDTH` is set (its `main`);
-/// a render and a deterministic gradient come out bit for bit the same at the driver's own default,
-/// 256 bits (8 lanes; subgroups of 8 instead of 4 in the gradient's reductions).
+/// The CLI has lavapipe build kernels for `pathgrad::gpu::lavapipe_vector_width()` bits (512 on an
+/// AVX-512 host, 128 elsewhere) unless `LP_NATIVE_VECTOR_WIDTH` is set (its `main`); a render and
+/// a deterministic gradient come out bit for bit the same at the driver's own default, 256 bits
+/// (8 lanes; subgroups of 8 in the gradient's reductions), and at 128 bits (4 lanes). Above 128
+/// bits Mesa's shader cache is kept in a folder of the width's.
 #[test]
 fn the_clis_vector_width_changes_no_result() {
     let dir = tempfile::tempdir().unwrap();
     let run = |tag: &str, width: Option<&str>| {
         let cache = dir.path().join(format!("cache-{tag}"));
         render_and_grad(dir.path(), tag, |c| {
-            c.env("XDG_CACHE_HOME", &cache);
+            c.env("XDG_CACHE_HOME", &cache).env_remove("MESA_SHADER_CACHE_DIR");
             match width {
                 Some(w) => c.env("LP_NATIVE_VECTOR_WIDTH", w),
                 None => c.env_remove("LP_NATIVE_VECTOR_WIDTH"),
@@ -278,9 +280,20 @@ fn the_clis_vector_width_changes_no_result() {
         })
     };
     let cli_default = run("default", None);
-    let driver_default = run("w256", Some("256"));
-    assert!(cli_default.0 == driver_default.0, "the images differ");
-    assert_eq!((&cli_default.1, &cli_default.2), (&driver_default.1, &driver_default.2));
+    let mut widths = vec!["256"];
+    let bits = pathgrad::gpu::lavapipe_vector_width();
+    if bits != 128 {
+        widths.push("128");
+        // Mesa's cache went to the width's own folder (lavapipe's keys do not tell widths apart).
+        let mesa = dir.path().join(format!("cache-default/pathgrad/mesa-{bits}-bit"));
+        let entries = std::fs::read_dir(&mesa).map(|d| d.count()).unwrap_or(0);
+        assert!(entries > 0, "no shader cache in {}", mesa.display());
+    }
+    for width in widths {
+        let driver = run(&format!("w{width}"), Some(width));
+        assert!(cli_default.0 == driver.0, "the images differ at {width} bits");
+        assert_eq!((&cli_default.1, &cli_default.2), (&driver.1, &driver.2), "{width} bits");
+    }
 }
 
 #[test]

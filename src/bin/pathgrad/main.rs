@@ -66,14 +66,26 @@ impl std::io::Write for FlagWriter {
     }
 }
 
-/// lavapipe builds its kernels for 128-bit vectors (4 lanes) unless `LP_NATIVE_VECTOR_WIDTH` says
-/// otherwise: on an AVX2 host that compiles a first kernel in about 60 % of the time of its default
-/// 256 bits, with renders as fast (BENCHMARKS.md). Other drivers ignore the variable.
+/// lavapipe builds its kernels for the vector width `LP_NATIVE_VECTOR_WIDTH` names, set here to
+/// [`pathgrad::gpu::lavapipe_vector_width`] (512 bits on AVX-512 hosts, 128 elsewhere) unless the
+/// environment sets it, with Mesa's shader cache in a folder of that width's
+/// ([`pathgrad::gpu::lavapipe_shader_cache_dir`]) unless the environment names one. Other drivers
+/// ignore the width.
 fn lavapipe_vector_width() {
     if std::env::var_os("LP_NATIVE_VECTOR_WIDTH").is_none() {
+        let bits = pathgrad::gpu::lavapipe_vector_width();
+        let cache = std::env::var_os("MESA_SHADER_CACHE_DIR")
+            .is_none()
+            .then(|| pathgrad::gpu::lavapipe_shader_cache_dir(bits))
+            .flatten();
         // SAFETY: the first thing `main` does, before any thread exists that could read the
         // environment at the same time.
-        unsafe { std::env::set_var("LP_NATIVE_VECTOR_WIDTH", "128") };
+        unsafe {
+            std::env::set_var("LP_NATIVE_VECTOR_WIDTH", bits.to_string());
+            if let Some(dir) = cache {
+                std::env::set_var("MESA_SHADER_CACHE_DIR", dir);
+            }
+        }
     }
 }
 
