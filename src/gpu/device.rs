@@ -161,8 +161,9 @@ pub fn has_loop_budget(driver_id: vk::DriverId, driver_info: &str) -> bool {
 /// (`LP_NATIVE_VECTOR_WIDTH`, read when the driver starts) when the variable is not set: 512 on an
 /// x86-64 CPU with AVX-512F, 128 elsewhere.
 ///
-/// On the 2-core AVX-512 machines measured (BENCHMARKS.md, "lavapipe's vector width"), 16-lane
-/// kernels compile in the time 4-lane ones do and run 8–15 % faster; on an AVX2 host 4-lane
+/// On the 2-core AVX-512 machine measured (BENCHMARKS.md, "lavapipe's vector width"), 16-lane
+/// kernels run 8–15 % faster than 4-lane ones and a process that must compile one first takes
+/// 0.2–0.7 s longer (once per kernel and machine: the code is cached); on an AVX2 host 4-lane
 /// kernels compile in about 60 % of the time of the driver's 8-lane default and render as fast.
 /// Results are the same bit for bit at every width. The `pathgrad` command and the Python module
 /// set the variable to this before any Vulkan call (with [`lavapipe_shader_cache_dir`]); an engine
