@@ -30,19 +30,14 @@ import numpy as np
 
 from . import _pathgrad as _native
 
-# lavapipe builds its kernels for the vector width this variable names, read when the driver
-# starts: the command-line program's choice unless the environment sets one (512 bits on an
-# AVX-512 host, 128 elsewhere; `pathgrad::gpu::lavapipe_vector_width`), with Mesa's shader cache
-# in a folder of that width's unless the environment names one (lavapipe's cache does not tell
-# widths apart). Other drivers ignore the width. Importing the native module opens no Vulkan
-# instance, so this comes in time.
-if "LP_NATIVE_VECTOR_WIDTH" not in os.environ:
-    _bits = _native.lavapipe_vector_width()
-    os.environ["LP_NATIVE_VECTOR_WIDTH"] = str(_bits)
-    if "MESA_SHADER_CACHE_DIR" not in os.environ:
-        _mesa_cache = _native.lavapipe_shader_cache_dir(_bits)
-        if _mesa_cache is not None:
-            os.environ["MESA_SHADER_CACHE_DIR"] = _mesa_cache
+# lavapipe builds its kernels for the vector width `LP_NATIVE_VECTOR_WIDTH` names, read when the
+# driver starts: the command-line program's choice unless the environment sets one (512 bits on
+# an AVX-512 host, 128 elsewhere), with Mesa's shader cache in a folder of that width's unless the
+# environment names one (lavapipe's cache does not tell widths apart):
+# `pathgrad::gpu::lavapipe_environment`. Other drivers ignore the width. Importing the native
+# module opens no Vulkan instance, so this comes in time.
+for _name, _value in _native.lavapipe_environment():
+    os.environ[_name] = _value
 
 from .errors import (  # noqa: E402
     ArgumentError,

@@ -607,18 +607,11 @@ fn devices(py: Python<'_>) -> PyResult<Vec<Bound<'_, PyTuple>>> {
         .collect()
 }
 
-/// The vector width the package asks lavapipe for when `LP_NATIVE_VECTOR_WIDTH` is not set
-/// (`pathgrad::gpu::lavapipe_vector_width`).
+/// The variables the package sets before any Vulkan call (`pathgrad::gpu::lavapipe_environment`:
+/// lavapipe's vector width and Mesa's shader cache folder), as (name, value) pairs.
 #[pyfunction]
-fn lavapipe_vector_width() -> u32 {
-    pathgrad::gpu::lavapipe_vector_width()
-}
-
-/// The folder for Mesa's shader cache that goes with a vector width the package chose
-/// (`pathgrad::gpu::lavapipe_shader_cache_dir`), as a string.
-#[pyfunction]
-fn lavapipe_shader_cache_dir(bits: u32) -> Option<String> {
-    pathgrad::gpu::lavapipe_shader_cache_dir(bits).map(|d| d.to_string_lossy().into_owned())
+fn lavapipe_environment() -> Vec<(&'static str, String)> {
+    pathgrad::gpu::lavapipe_environment()
 }
 
 #[pymodule]
@@ -632,7 +625,6 @@ fn _pathgrad(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(read_image, m)?)?;
     m.add_function(wrap_pyfunction!(write_image, m)?)?;
     m.add_function(wrap_pyfunction!(devices, m)?)?;
-    m.add_function(wrap_pyfunction!(lavapipe_vector_width, m)?)?;
-    m.add_function(wrap_pyfunction!(lavapipe_shader_cache_dir, m)?)?;
+    m.add_function(wrap_pyfunction!(lavapipe_environment, m)?)?;
     Ok(())
 }

@@ -162,12 +162,12 @@ pub fn has_loop_budget(driver_id: vk::DriverId, driver_info: &str) -> bool {
 /// x86-64 CPU with AVX-512F, 128 elsewhere.
 ///
 /// On the 2-core AVX-512 machine measured (BENCHMARKS.md, "lavapipe's vector width"), 16-lane
-/// kernels run 8–15 % faster than 4-lane ones and a process that must compile one first takes
+/// kernels run 8–17 % faster than 4-lane ones and a process that must compile one first takes
 /// 0.2–0.7 s longer (once per kernel and machine: the code is cached); on an AVX2 host 4-lane
 /// kernels compile in about 60 % of the time of the driver's 8-lane default and render as fast.
 /// Results are the same bit for bit at every width. The `pathgrad` command and the Python module
-/// set the variable to this before any Vulkan call (with [`lavapipe_shader_cache_dir`]); an engine
-/// embedding the library keeps its own environment. Other drivers ignore the variable.
+/// set the variable to this before any Vulkan call ([`lavapipe_environment`]); an engine embedding
+/// the library keeps its own environment. Other drivers ignore the variable.
 ///
 /// ```
 /// let bits = pathgrad::gpu::lavapipe_vector_width();
@@ -181,11 +181,10 @@ pub fn lavapipe_vector_width() -> u32 {
     128
 }
 
-/// The folder for Mesa's shader cache (`MESA_SHADER_CACHE_DIR`) that pathgrad's programs name,
-/// made if missing, when they choose `bits` as lavapipe's vector width themselves and the
-/// environment names no cache folder: `mesa-BITS-bit` in pathgrad's cache folder
-/// (`$XDG_CACHE_HOME/pathgrad`, else `$HOME/.cache/pathgrad`) for a width other than 128, `None`
-/// for 128 (Mesa's own folder) or when no folder can be made.
+/// The folder for Mesa's shader cache (`MESA_SHADER_CACHE_DIR`) that goes with lavapipe's vector
+/// width `bits`, made if missing: `mesa-BITS-bit` in pathgrad's cache folder
+/// (`$XDG_CACHE_HOME/pathgrad`, else `$HOME/.cache/pathgrad`, absolute paths only) for a width
+/// other than 128; `None` for 128 (Mesa's own folder) or when no folder can be made.
 ///
 /// lavapipe's cache does not key its machine code on the vector width (Mesa 25.0.7): a process at
 /// 512 bits is handed the 128-bit code that an earlier process cached for the same kernel, and
@@ -197,6 +196,38 @@ pub fn lavapipe_shader_cache_dir(bits: u32) -> Option<std::path::PathBuf> {
     let dir = super::specialise::pathgrad_cache()?.join(format!("mesa-{bits}-bit"));
     std::fs::create_dir_all(&dir).ok()?;
     Some(dir)
+}
+
+/// The variables the `pathgrad` command and the Python module set before any Vulkan call, as
+/// (name, value) pairs, from the process's environment:
+/// - `LP_NATIVE_VECTOR_WIDTH`, when unset: [`lavapipe_vector_width`];
+/// - `MESA_SHADER_CACHE_DIR`, when unset and the width (chosen here or by the environment) is not
+///   128: [`lavapipe_shader_cache_dir`]. Where that folder cannot be made (or its path is not
+///   UTF-8), a width chosen here falls back to 128 bits rather than share Mesa's folder.
+///
+/// The cache folder moves the cache of any Mesa driver the process loads, which only splits it.
+///
+/// ```
+/// for (name, value) in pathgrad::gpu::lavapipe_environment() {
+///     assert!(name == "LP_NATIVE_VECTOR_WIDTH" || name == "MESA_SHADER_CACHE_DIR", "{name}={value}");
+/// }
+/// ```
+pub fn lavapipe_environment() -> Vec<(&'static str, String)> {
+    let set = std::env::var("LP_NATIVE_VECTOR_WIDTH").ok().and_then(|v| v.trim().parse::<u32>().ok());
+    let chosen = std::env::var_os("LP_NATIVE_VECTOR_WIDTH").is_none();
+    let mut bits = if chosen { lavapipe_vector_width() } else { set.unwrap_or(128) };
+    let mut out = Vec::new();
+    if std::env::var_os("MESA_SHADER_CACHE_DIR").is_none() && bits != 128 {
+        match lavapipe_shader_cache_dir(bits).and_then(|d| d.into_os_string().into_string().ok()) {
+            Some(dir) => out.push(("MESA_SHADER_CACHE_DIR", dir)),
+            None if chosen => bits = 128,
+            None => {}
+        }
+    }
+    if chosen {
+        out.push(("LP_NATIVE_VECTOR_WIDTH", bits.to_string()));
+    }
+    out
 }
 
 /// Lists every Vulkan device with what pathgrad needs that it lacks (the `devices` subcommand).

@@ -27,7 +27,9 @@ pub mod variant;
 #[doc(hidden)]
 pub use buffer::Buffer;
 pub use context::{BorrowedDevice, Context, ContextDesc, Pending, SubmitSync};
-pub use device::{DeviceChoice, DeviceInfo, lavapipe_shader_cache_dir, lavapipe_vector_width, list_devices};
+pub use device::{
+    DeviceChoice, DeviceInfo, lavapipe_environment, lavapipe_shader_cache_dir, lavapipe_vector_width, list_devices,
+};
 pub use frame::{BufferLayout, BufferView, Frame};
 #[doc(hidden)]
 pub use pipeline::{BindGroup, Kernel};

@@ -66,12 +66,14 @@ pub fn specialise(words: &[u32], features: u64) -> Option<Vec<u32>> {
     }
 }
 
-/// pathgrad's cache folder: `$XDG_CACHE_HOME/pathgrad`, else `$HOME/.cache/pathgrad`.
+/// pathgrad's cache folder: `$XDG_CACHE_HOME/pathgrad`, else `$HOME/.cache/pathgrad` (a relative
+/// value is ignored, as the XDG specification asks).
 pub(crate) fn pathgrad_cache() -> Option<PathBuf> {
+    let absolute = |v: &std::ffi::OsString| Path::new(v).is_absolute();
     let base = std::env::var_os("XDG_CACHE_HOME")
-        .filter(|v| !v.is_empty())
+        .filter(absolute)
         .map(PathBuf::from)
-        .or_else(|| std::env::var_os("HOME").filter(|v| !v.is_empty()).map(|h| PathBuf::from(h).join(".cache")))?;
+        .or_else(|| std::env::var_os("HOME").filter(absolute).map(|h| PathBuf::from(h).join(".cache")))?;
     Some(base.join("pathgrad"))
 }
 

@@ -650,11 +650,11 @@ POWER = {
 
 # Scenes the test lists by name with the reason and does not load or compare.
 PENDING = {
-    "attached_rough_sphere": "at the suite's 256 spp × 32 seeds pathgrad's attached α and η gradients on rough glass "
-                             "(α 0.2) see only an 18 % bias; at 4096 spp (28 min) η disagrees with Mitsuba's forward "
-                             "mode (t 5.4–6.3), and central differences of the shared primal put Mitsuba's η "
-                             "derivative 2.6–3.6 % high and pathgrad's 1.5–3.1 % low, cause not found; α agrees; "
-                             "BENCHMARKS.md (issue 34, 2026-12-08)",
+    "attached_rough_sphere": "at the suite's 256 spp × 32 seeds the test of pathgrad's attached α and η gradients on "
+                             "rough glass (α 0.2) can resolve only an 18 % bias, not 5 %; at 4096 spp (28 min) η "
+                             "disagrees with Mitsuba's forward mode (t 5.4–6.3), and central differences of the shared "
+                             "primal put Mitsuba's η derivative 2.6–3.6 % high and pathgrad's 1.5–3.1 % low, cause not "
+                             "found; α agrees; BENCHMARKS.md (issue 34, 2026-12-08)",
 }
 
 DEFAULT_SPP = 1024

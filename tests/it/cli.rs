@@ -272,7 +272,7 @@ fn the_clis_vector_width_changes_no_result() {
     let run = |tag: &str, width: Option<&str>| {
         let cache = dir.path().join(format!("cache-{tag}"));
         render_and_grad(dir.path(), tag, |c| {
-            c.env("XDG_CACHE_HOME", &cache).env_remove("MESA_SHADER_CACHE_DIR");
+            c.env("XDG_CACHE_HOME", &cache).env_remove("MESA_SHADER_CACHE_DIR").env_remove("MESA_SHADER_CACHE_DISABLE");
             match width {
                 Some(w) => c.env("LP_NATIVE_VECTOR_WIDTH", w),
                 None => c.env_remove("LP_NATIVE_VECTOR_WIDTH"),
@@ -282,12 +282,29 @@ fn the_clis_vector_width_changes_no_result() {
     let cli_default = run("default", None);
     let mut widths = vec!["256"];
     let bits = pathgrad::gpu::lavapipe_vector_width();
+    // The tests' device (`pathgrad()`): lavapipe unless a variable names another.
+    let device = std::env::var("PATHGRAD_DEVICE").or_else(|_| std::env::var("PATHGRAD_TEST_DEVICE")).ok();
+    let on_lavapipe = device.is_none_or(|d| d == "cpu");
     if bits != 128 {
         widths.push("128");
-        // Mesa's cache went to the width's own folder (lavapipe's keys do not tell widths apart).
-        let mesa = dir.path().join(format!("cache-default/pathgrad/mesa-{bits}-bit"));
-        let entries = std::fs::read_dir(&mesa).map(|d| d.count()).unwrap_or(0);
-        assert!(entries > 0, "no shader cache in {}", mesa.display());
+        if on_lavapipe {
+            // Mesa's cache went to the width's own folder (lavapipe's keys do not tell widths
+            // apart), and the driver took the width: its subgroups have bits/32 lanes.
+            let mesa = dir.path().join(format!("cache-default/pathgrad/mesa-{bits}-bit"));
+            let entries = std::fs::read_dir(&mesa).map(|d| d.count()).unwrap_or(0);
+            assert!(entries > 0, "no shader cache in {}", mesa.display());
+            let o = pathgrad()
+                .args(["devices", "--json"])
+                .env("XDG_CACHE_HOME", dir.path().join("cache-devices"))
+                .env_remove("LP_NATIVE_VECTOR_WIDTH")
+                .env_remove("MESA_SHADER_CACHE_DIR")
+                .output()
+                .unwrap();
+            let listed: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+            let lavapipe =
+                listed.as_array().unwrap().iter().find(|d| d["driver"].as_str().unwrap().contains("llvmpipe"));
+            assert_eq!(lavapipe.unwrap()["subgroup_size"].as_u64(), Some(u64::from(bits / 32)), "{listed}");
+        }
     }
     for width in widths {
         let driver = run(&format!("w{width}"), Some(width));

@@ -66,26 +66,15 @@ impl std::io::Write for FlagWriter {
     }
 }
 
-/// lavapipe builds its kernels for the vector width `LP_NATIVE_VECTOR_WIDTH` names, set here to
-/// [`pathgrad::gpu::lavapipe_vector_width`] (512 bits on AVX-512 hosts, 128 elsewhere) unless the
-/// environment sets it, with Mesa's shader cache in a folder of that width's
-/// ([`pathgrad::gpu::lavapipe_shader_cache_dir`]) unless the environment names one. Other drivers
-/// ignore the width.
+/// lavapipe builds its kernels for the vector width `LP_NATIVE_VECTOR_WIDTH` names, set here with
+/// Mesa's shader cache folder by [`pathgrad::gpu::lavapipe_environment`] (512 bits on AVX-512
+/// hosts, 128 elsewhere, unless the environment sets a width; a folder per width above 128).
+/// Other drivers ignore the width.
 fn lavapipe_vector_width() {
-    if std::env::var_os("LP_NATIVE_VECTOR_WIDTH").is_none() {
-        let bits = pathgrad::gpu::lavapipe_vector_width();
-        let cache = std::env::var_os("MESA_SHADER_CACHE_DIR")
-            .is_none()
-            .then(|| pathgrad::gpu::lavapipe_shader_cache_dir(bits))
-            .flatten();
+    for (name, value) in pathgrad::gpu::lavapipe_environment() {
         // SAFETY: the first thing `main` does, before any thread exists that could read the
         // environment at the same time.
-        unsafe {
-            std::env::set_var("LP_NATIVE_VECTOR_WIDTH", bits.to_string());
-            if let Some(dir) = cache {
-                std::env::set_var("MESA_SHADER_CACHE_DIR", dir);
-            }
-        }
+        unsafe { std::env::set_var(name, value) };
     }
 }
 
