@@ -17,6 +17,7 @@ import os
 import re
 import subprocess
 import sys
+import tempfile
 
 
 def main():
@@ -41,13 +42,14 @@ def main():
         with open(path, "w", encoding="utf-8") as f:
             f.write(pattern.sub(lambda m: f"{m.group(1)}{v!r}{m.group(3)}", text))
         copies[sign] = path
+    image = os.path.join(tempfile.gettempdir(), f".cd_{os.getpid()}.exr")
     diffs = []
     try:
         for seed in range(1, args.seeds + 1):
             means = {}
             for sign, path in copies.items():
                 out = subprocess.run(
-                    [args.pathgrad, "render", path, "-o", f"/tmp/.cd_{os.getpid()}.exr",
+                    [args.pathgrad, "render", path, "-o", image,
                      "--no-preview", "--spp", str(args.spp), "--seed", str(seed), "--json"],
                     check=True, capture_output=True, text=True).stdout
                 means[sign] = json.loads(out)["mean"]
@@ -55,7 +57,7 @@ def main():
             diffs.append(d)
             print(f"seed {seed}: " + " ".join(f"{x:.6f}" for x in d), flush=True)
     finally:
-        for path in list(copies.values()) + [f"/tmp/.cd_{os.getpid()}.exr"]:
+        for path in list(copies.values()) + [image]:
             if os.path.exists(path):
                 os.remove(path)
     n = len(diffs)

@@ -213,9 +213,12 @@ pub fn lavapipe_shader_cache_dir(bits: u32) -> Option<std::path::PathBuf> {
 /// }
 /// ```
 pub fn lavapipe_environment() -> Vec<(&'static str, String)> {
-    let set = std::env::var("LP_NATIVE_VECTOR_WIDTH").ok().and_then(|v| v.trim().parse::<u32>().ok());
-    let chosen = std::env::var_os("LP_NATIVE_VECTOR_WIDTH").is_none();
-    let mut bits = if chosen { lavapipe_vector_width() } else { set.unwrap_or(128) };
+    let given = std::env::var_os("LP_NATIVE_VECTOR_WIDTH");
+    let chosen = given.is_none();
+    let mut bits = match given {
+        None => lavapipe_vector_width(),
+        Some(v) => v.to_str().and_then(|v| v.trim().parse::<u32>().ok()).unwrap_or(128),
+    };
     let mut out = Vec::new();
     if std::env::var_os("MESA_SHADER_CACHE_DIR").is_none() && bits != 128 {
         match lavapipe_shader_cache_dir(bits).and_then(|d| d.into_os_string().into_string().ok()) {
